@@ -1,0 +1,43 @@
+# antalate: `make demo` flies a simulated swarm, `make test` runs the whole suite.
+# Both create .venv and install everything they need first (system packages via apt where allowed).
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: setup sysdeps demo demo-headless test lint gen bench clean
+
+setup: $(STAMP)
+
+sysdeps:
+	@bash tools/install-system-deps.sh
+
+$(STAMP): pyproject.toml
+	@bash tools/install-system-deps.sh
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[dev]'
+	@touch $(STAMP)
+
+demo: setup
+	$(VENV)/bin/antalate demo --agents 5
+
+demo-headless: setup
+	$(VENV)/bin/antalate demo --headless --agents 5
+
+test: setup sysdeps
+	$(PY) -m pytest -q
+
+lint: setup
+	$(VENV)/bin/ruff check .
+
+gen: setup
+	$(PY) -m antalate_lcm._codegen
+
+bench: setup
+	$(PY) benchmarks/bus.py
+	$(PY) benchmarks/agents.py
+	$(PY) benchmarks/station.py
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache build *.egg-info

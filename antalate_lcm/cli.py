@@ -1,0 +1,72 @@
+"""The ``antalate`` command. Each subcommand lives in the module that owns its job; this file only
+parses arguments, sets up logging and turns antalate's own errors into one clear line."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from collections.abc import Callable, Sequence
+
+from antalate_lcm.errors import AntalateError
+
+Command = Callable[[argparse.Namespace], int]
+
+
+def _setup_logging(level: str) -> None:
+    logging.basicConfig(
+        level=getattr(logging, level.upper(), logging.INFO),
+        format="%(asctime)s %(levelname)-7s %(name)s: %(message)s",
+        datefmt="%H:%M:%S",
+    )
+
+
+def _cmd_spy(args: argparse.Namespace) -> int:
+    from antalate_lcm.config import load_config
+    from antalate_lcm.spy import run_spy
+
+    config = load_config(args.config)
+    url = config.buses.get(args.bus) if args.bus else config.buses.get(config.topics.default_bus)
+    if url is None:
+        raise AntalateError(f"no bus named {args.bus!r} in {config.source}; declared: {', '.join(config.buses)}")
+    return run_spy(url)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="antalate", description="Multi-agent UAV autonomy over LCM.")
+    parser.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING, ERROR (default INFO)")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    p = sub.add_parser("spy", help="start lcm-spy with every antalate type on the classpath")
+    p.add_argument("config", nargs="?", help="config file (default: the embedded defaults)")
+    p.add_argument("--bus", help="bus name from the config (default: the default bus)")
+    p.set_defaults(func=_cmd_spy)
+
+    for register in _registrars():
+        register(sub)
+    return parser
+
+
+def _registrars() -> list[Callable[[argparse._SubParsersAction[argparse.ArgumentParser]], None]]:
+    """Subcommands registered by the modules that implement them (imported lazily to start fast)."""
+    from antalate_lcm.runtime import commands
+
+    return [commands.register]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    _setup_logging(args.log_level)
+    func: Command = args.func
+    try:
+        return func(args)
+    except AntalateError as exc:
+        print(f"antalate: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

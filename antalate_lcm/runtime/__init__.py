@@ -1,0 +1,1 @@
+"""Assembling and running nodes: one node, one agent, or many agents in one process."""

@@ -1,0 +1,53 @@
+"""Run a set of nodes until SIGINT/SIGTERM, then stop them in reverse order and close the bus."""
+
+from __future__ import annotations
+
+import logging
+import signal
+import threading
+from collections.abc import Callable, Sequence
+from types import FrameType
+
+from antalate_lcm.node import Context, Node
+
+log = logging.getLogger("antalate.launch")
+
+
+def run_until_signal(
+    context: Context, nodes: Sequence[Node], *, stop_event: threading.Event | None = None,
+    poll: Callable[[], bool] | None = None,
+) -> int:
+    """Start ``nodes`` and block until a signal, ``stop_event`` or ``poll()`` returning True.
+
+    The bus is opened before any node starts so a missing multicast route is reported up front.
+    """
+    stop = stop_event or threading.Event()
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        log.info("received %s, stopping", signal.Signals(signum).name)
+        stop.set()
+
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, on_signal)
+    started: list[Node] = []
+    try:
+        context.bus.open()
+        context.executor.start()
+        for node in nodes:
+            node.start()
+            started.append(node)
+        while not stop.wait(0.2):
+            if poll is not None and poll():
+                break
+        return 0
+    finally:
+        for node in reversed(started):
+            try:
+                node.stop()
+            except Exception:
+                log.exception("stopping %s failed", node.name)
+        context.close()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

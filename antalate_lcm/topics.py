@@ -1,0 +1,97 @@
+"""The topic table: every topic name a config can bind, its message type and default channel.
+
+Topics are the names nodes and behaviors use (``"MC_STATE"``); channels are what travels on the wire
+(``"alpha/MC_STATE"``). Keeping the table here means a config can remap any channel without code changes.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from antalate_lcm.msgs import (
+    arbiter_status_t,
+    behavior_state_t,
+    direction_cmd_t,
+    hlc_error_t,
+    hlc_state_t,
+    mc_state_t,
+    operator_cmd_t,
+    payload_t,
+    peer_detection_t,
+    telemetry_t,
+    velocity_cmd_t,
+)
+
+#: Every LCM type antalate defines, by type name (used by log readers and ``antalate spy``).
+MESSAGE_TYPES: dict[str, type] = {
+    t.__name__: t
+    for t in (
+        mc_state_t,
+        hlc_state_t,
+        telemetry_t,
+        hlc_error_t,
+        velocity_cmd_t,
+        operator_cmd_t,
+        direction_cmd_t,
+        payload_t,
+        behavior_state_t,
+        arbiter_status_t,
+        peer_detection_t,
+    )
+}
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """A topic's message type and its default channel template (``{agent}``, ``{arbiter}``, ... fields)."""
+
+    msg_type: type
+    channel: str
+
+
+TOPICS: dict[str, TopicSpec] = {
+    "MC_STATE": TopicSpec(mc_state_t, "{agent}/MC_STATE"),
+    "HLC_STATE": TopicSpec(hlc_state_t, "{agent}/HLC_STATE"),
+    "TELEMETRY": TopicSpec(telemetry_t, "{agent}/TELEMETRY"),
+    "HLC_ERROR": TopicSpec(hlc_error_t, "{agent}/HLC_ERROR"),
+    "VELOCITY_CMD": TopicSpec(velocity_cmd_t, "{agent}/VELOCITY_CMD"),
+    "OPERATOR_CMD": TopicSpec(operator_cmd_t, "{agent}/OPERATOR_CMD"),
+    "DIRECTION_CMD": TopicSpec(direction_cmd_t, "{agent}/DIRECTION_CMD"),
+    "OPERATOR_PAYLOAD": TopicSpec(payload_t, "{agent}/OPERATOR_PAYLOAD"),
+    "OPERATOR_FEEDBACK": TopicSpec(payload_t, "{agent}/OPERATOR_FEEDBACK"),
+    "ARBITER": TopicSpec(arbiter_status_t, "{agent}/ARBITER/{arbiter}"),
+    "PEER_DETECTION": TopicSpec(peer_detection_t, "{agent}/PEER_DETECTION"),
+    "SWARM_OPERATOR_CMD": TopicSpec(operator_cmd_t, "SWARM/OPERATOR_CMD"),
+    "SWARM_DIRECTION_CMD": TopicSpec(direction_cmd_t, "SWARM/DIRECTION_CMD"),
+}
+
+_FIELD = re.compile(r"\{(\w+)\}")
+
+
+def template_fields(template: str) -> set[str]:
+    return set(_FIELD.findall(template))
+
+
+def channel_regex(template: str, **known: str) -> str:
+    """An LCM-style regex matching every channel the template can produce.
+
+    Fields given in ``known`` are filled in literally; the others match one path segment and are
+    captured as named groups, so a watcher (the TUI) can recover the agent name from the channel.
+    """
+    out: list[str] = []
+    pos = 0
+    seen: set[str] = set()
+    for m in _FIELD.finditer(template):
+        out.append(re.escape(template[pos : m.start()]))
+        name = m.group(1)
+        if name in known:
+            out.append(re.escape(known[name]))
+        elif name in seen:
+            out.append(f"(?P={name})")
+        else:
+            out.append(f"(?P<{name}>[^/]+)")
+            seen.add(name)
+        pos = m.end()
+    out.append(re.escape(template[pos:]))
+    return "".join(out)

@@ -1,0 +1,1 @@
+"""Behavior plugins shipped with antalate (DESIGN §8)."""

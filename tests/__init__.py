@@ -1,0 +1,1 @@
+"""antalate test suite."""

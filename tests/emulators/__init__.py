@@ -1,0 +1,1 @@
+"""Protocol emulators (Tello SDK, ArduCopter MAVLink) that tests drive through the real client libraries."""

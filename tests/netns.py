@@ -1,0 +1,122 @@
+"""Private network namespaces for tests, so multicast never touches the host network.
+
+``NetNamespace`` starts a holder process with ``unshare -rn`` (works unprivileged, and as root in
+CI), brings ``lo`` up and adds the multicast route, then runs commands inside it with ``nsenter``.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+
+_SETUP = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && echo ready && exec sleep 100000"
+
+
+def netns_unavailable() -> str | None:
+    """The reason private namespaces cannot be made here, or None when they can."""
+    for tool in ("unshare", "nsenter", "ip"):
+        if shutil.which(tool) is None:
+            return f"{tool} is not installed (Debian/Ubuntu: apt-get install util-linux iproute2)"
+    probe = subprocess.run(["unshare", "-rn", "sh", "-c", "ip link set lo up"], capture_output=True, text=True)
+    if probe.returncode != 0:
+        return f"cannot create a network namespace (unshare -rn): {probe.stderr.strip()}"
+    return None
+
+
+class NetNamespace:
+    """A private network namespace with multicast routed on ``lo``. Use as a context manager."""
+
+    def __init__(self) -> None:
+        self._holder: subprocess.Popen[str] | None = None
+        self._children: list[subprocess.Popen[str]] = []
+
+    def __enter__(self) -> NetNamespace:
+        self._holder = subprocess.Popen(
+            ["unshare", "-rn", "sh", "-c", _SETUP], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        assert self._holder.stdout is not None
+        line = self._holder.stdout.readline().strip()
+        if line != "ready":
+            err = self._holder.stderr.read() if self._holder.stderr else ""
+            self.close()
+            raise RuntimeError(f"network namespace set-up failed: {err.strip()}")
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def pid(self) -> int:
+        assert self._holder is not None
+        return self._holder.pid
+
+    def wrap(self, argv: Sequence[str]) -> list[str]:
+        """The command line that runs ``argv`` inside this namespace."""
+        return ["nsenter", "-t", str(self.pid), "-U", "-n", "--preserve-credentials", "--", *argv]
+
+    def popen(self, argv: Sequence[str], **kwargs: object) -> subprocess.Popen[str]:
+        env = dict(os.environ)
+        env.setdefault("PYTHONUNBUFFERED", "1")
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p)
+        kwargs.setdefault("env", env)
+        kwargs.setdefault("text", True)
+        kwargs.setdefault("start_new_session", True)
+        proc: subprocess.Popen[str] = subprocess.Popen(self.wrap(argv), **kwargs)  # type: ignore[call-overload]
+        self._children.append(proc)
+        return proc
+
+    def run(self, argv: Sequence[str], timeout: float = 60, **kwargs: object) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(self.wrap(argv), timeout=timeout, capture_output=True, text=True, **kwargs)  # type: ignore[call-overload]
+
+    def python(self, *args: str, **kwargs: object) -> subprocess.Popen[str]:
+        return self.popen([sys.executable, *args], **kwargs)
+
+    def antalate(self, *args: str, **kwargs: object) -> subprocess.Popen[str]:
+        return self.python("-m", "antalate_lcm.cli", *args, **kwargs)
+
+    def close(self) -> None:
+        for proc in self._children:
+            stop_process(proc)
+        self._children.clear()
+        if self._holder is not None:
+            stop_process(self._holder)
+            self._holder = None
+
+
+def stop_process(proc: subprocess.Popen[str], timeout: float = 5.0) -> int | None:
+    """SIGTERM the process group, then SIGKILL if it does not exit: nothing is left behind."""
+    if proc.poll() is None:
+        try:
+            os.killpg(proc.pid, signal.SIGTERM)
+        except (ProcessLookupError, PermissionError):
+            proc.terminate()
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                proc.kill()
+            proc.wait(timeout)
+    for stream in (proc.stdout, proc.stderr, proc.stdin):
+        if stream is not None:
+            stream.close()
+    return proc.returncode
+
+
+def wait_for(predicate, timeout: float, interval: float = 0.05):  # type: ignore[no-untyped-def]
+    """Poll ``predicate`` until it returns a truthy value (returned) or ``timeout`` passes (None)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value or time.monotonic() > deadline:
+            return value
+        time.sleep(interval)

@@ -1,0 +1,154 @@
+"""The autopilot contract (DESIGN §7): what the HLC needs from any vehicle, and nothing more.
+
+The HLC is written against `Autopilot` only, so a simulator, a Tello and an ArduCopter are
+interchangeable by config. An adapter is a class registered under the entry-point group
+``antalate.autopilots`` (see `antalate_lcm.autopilot.load_autopilot`).
+
+Constructor contract
+--------------------
+Every adapter is constructed as ``Cls(params, *, clock=time.monotonic)``:
+
+* ``params`` is the ``[hlc.autopilot]`` table of the config as a plain ``dict`` (unknown keys should
+  raise `ValueError` naming the key, so a typo does not silently fall back to a default);
+* ``clock`` is a monotonic clock in seconds. Adapters must take every timestamp from it (link age,
+  dead reckoning, simulation), never from `time` directly, so tests can drive them with a fake clock.
+
+The constructor must not do I/O; `connect()` does.
+
+Threading contract
+------------------
+The HLC node calls `connect()` once, then `state()` at 10 Hz or more, and the commands (`arm`,
+`takeoff`, `land`, `rtl`, `set_velocity`, `disarm`) -- all from the one executor thread of its
+process. Adapters may run their own receive threads; `state()` must then return a consistent
+snapshot and must not block for long (it is on the control loop). A command that the vehicle refuses
+or does not acknowledge raises `AutopilotError` (except `arm()`, which returns ``False`` on a plain
+refusal); the node reports it as an ``hlc_error_t`` and feeds the failure to the HLC machine.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from antalate_lcm.msgs import velocity_cmd_t
+
+Clock = Callable[[], float]
+
+
+class AutopilotError(RuntimeError):
+    """A command the vehicle refused, did not acknowledge, or cannot perform in its current state."""
+
+
+class Frame(enum.IntEnum):
+    """Reference frame of a velocity set-point; values are the ``velocity_cmd_t`` constants."""
+
+    BODY = velocity_cmd_t.BODY  # x forward, y right, z down (heading-relative)
+    NED = velocity_cmd_t.NED  # x north, y east, z down
+
+
+class FlightMode(enum.Enum):
+    """What the autopilot is doing, classified for the HLC (the raw mode name is in `mode`).
+
+    The HLC needs this to resynchronise after a restart (DESIGN §6, INIT row) and to notice that
+    the autopilot or a pilot took over; it cannot interpret each vendor's mode names itself.
+    """
+
+    GUIDED = "GUIDED"  # on the ground or flying under our commands (arm, takeoff, velocity)
+    LANDING = "LANDING"  # the autopilot is landing on its own logic (ArduCopter LAND)
+    RTL = "RTL"  # the autopilot is returning to launch (and will land there)
+    MANUAL = "MANUAL"  # a human pilot has control (LOITER, STABILIZE, ALT_HOLD, ...)
+
+
+@dataclass(frozen=True)
+class AutopilotState:
+    """One consistent snapshot of the vehicle as the adapter knows it.
+
+    The defaults describe "nothing known yet": not connected, infinitely stale link, unknown battery.
+
+    `autonomous` means the vehicle is under computer control (our GUIDED commands, or a LAND/RTL the
+    autopilot runs itself); ``False`` means a pilot has control and the HLC must not fight them.
+    `flight_mode` refines it; when an adapter leaves it out it is derived from `autonomous`
+    (GUIDED or MANUAL), which is all a simple vehicle can say.
+    """
+
+    connected: bool = False
+    link_age: float = math.inf  # s since the last heartbeat/state from the vehicle
+    lat: float = math.nan  # deg WGS84
+    lon: float = math.nan  # deg WGS84
+    alt: float = 0.0  # m above home
+    heading: float = 0.0  # deg from north, clockwise, [0, 360)
+    vn: float = 0.0  # m/s north
+    ve: float = 0.0  # m/s east
+    vd: float = 0.0  # m/s down
+    battery: float = -1.0  # percent, -1 = unknown
+    armed: bool = False
+    in_air: bool = False
+    autonomous: bool = True
+    mode: str = ""  # the autopilot's own mode name, shown to people
+    flight_mode: FlightMode | None = None
+
+    def __post_init__(self) -> None:
+        if self.flight_mode is None:
+            derived = FlightMode.GUIDED if self.autonomous else FlightMode.MANUAL
+            object.__setattr__(self, "flight_mode", derived)
+
+    @property
+    def landed(self) -> bool:
+        """On the ground with motors disarmed: the only state from which the HLC may be READY again."""
+        return not self.in_air and not self.armed
+
+    @property
+    def battery_known(self) -> bool:
+        return self.battery >= 0.0
+
+
+class Autopilot(ABC):
+    """Base class of every vehicle adapter (see the module docstring for the call contract)."""
+
+    #: Registry name, also published in ``hlc_state_t.autopilot``.
+    name: ClassVar[str] = ""
+
+    def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
+        self.params: dict[str, Any] = dict(params or {})
+        self.clock: Clock = clock
+
+    @abstractmethod
+    def connect(self) -> None:
+        """Open the link to the vehicle. Raises `AutopilotError` if it cannot be opened at all."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the link and any threads; idempotent."""
+
+    @abstractmethod
+    def arm(self) -> bool:
+        """Enter the mode that accepts our commands and arm; ``False`` if the vehicle refused."""
+
+    @abstractmethod
+    def disarm(self) -> None:
+        """Disarm the motors (on the ground)."""
+
+    @abstractmethod
+    def takeoff(self, alt: float) -> None:
+        """Climb to `alt` metres above home and hold there."""
+
+    @abstractmethod
+    def land(self) -> None:
+        """Land where the vehicle is, then disarm."""
+
+    @abstractmethod
+    def rtl(self) -> None:
+        """Return to the launch point and land there."""
+
+    @abstractmethod
+    def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
+        """Velocity set-point in m/s (z down) and yaw rate in deg/s (clockwise), in `frame`."""
+
+    @abstractmethod
+    def state(self) -> AutopilotState:
+        """A snapshot of the vehicle; cheap and non-blocking (called at 10 Hz or more)."""

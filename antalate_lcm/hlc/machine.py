@@ -1,0 +1,483 @@
+"""The High-Level Control state machine (DESIGN §6) as an explicit transition table.
+
+Pure logic: no I/O, no clock. The HLC node feeds it three kinds of input and performs what comes out:
+
+* `HighLevelControl.on_mc_state(state, now, takeoff_altitude=...)` -- every ``mc_state_t`` heard;
+* `HighLevelControl.on_autopilot(snapshot, now)` -- every `AutopilotState` polled (10 Hz or more);
+* `HighLevelControl.on_action_result(kind, ok, now)` -- the result of an `Action` the node performed;
+* `HighLevelControl.tick(now)` -- periodically, for timeouts.
+
+Each call returns an `HlcOutcome`: at most one `HlcTransition`, the `Action` s to perform on the
+autopilot, in order, and the `HlcError` s to publish as ``hlc_error_t``.
+
+How inputs become events
+------------------------
+* **MC TAKEOFF is edge-triggered**: it fires once, when the MC state *changes* to TAKEOFF. The MC
+  republishes its state at 5 Hz; were it level-triggered, an HLC that just fell back to READY after a
+  failed arm would re-arm on the next republish, before the MC had seen the failure. It also means an
+  HLC that starts while the MC is already in TAKEOFF does not take off on a stale command (the MC
+  times out to STANDBY and the operator asks again).
+* **MC LAND / MC RTL are level-triggered**: every observation counts, so a safety command cannot be
+  lost because it arrived while the HLC was busy (e.g. arming) -- it is honoured in the next state.
+* Autopilot observations yield at most one event each, the first with a matching row, in this
+  priority order: LINK_LOST, LANDED, PILOT_TAKEOVER, INIT resync / LINK_UP, AUTOPILOT_LAND,
+  AUTOPILOT_RTL, LOW_BATTERY, ALTITUDE_REACHED.
+
+Rows beyond DESIGN §6, and why
+------------------------------
+* GAINING_ALTITUDE + MC LAND/RTL -> LANDING/RTL: the MC accepts LAND/RTL in its TAKEOFF state
+  (DESIGN §5), which maps to our TAKEOFF and GAINING_ALTITUDE; the HLC must follow.
+* TAKEOFF + armed while the MC is no longer in TAKEOFF -> READY with DISARM (an INFO error): the
+  operator cancelled while we were arming; taking off just to land again would be absurd.
+* AIRBORNE + landed and disarmed -> READY (WARNING): the vehicle came down on its own (e.g. a Tello's
+  own low-battery landing); the HLC must not stay "airborne" on the ground.
+* GAINING_ALTITUDE/AIRBORNE + the autopilot switched to its own RTL / LAND (a failsafe) -> RTL /
+  LANDING, with no action (it is already doing it) and a WARNING; and RTL + autopilot LAND mode ->
+  LANDING, for adapters that report the final descent of an RTL as a landing. This keeps the
+  published state truthful, and lets the MC follow (its "RTL + HLC LANDING -> LAND" row).
+
+Interpretation of DESIGN §6 where it leaves room
+-----------------------------------------------
+* LLC_DOWN applies to every state except INIT (at start-up a vehicle that is not powered yet is
+  normal: INIT simply waits) and LLC_DOWN itself.
+* "Autonomous states" for the pilot-takeover row are GAINING_ALTITUDE, AIRBORNE, RTL, LANDING and
+  LOW_BATTERY; TAKEOFF is left out because the vehicle is on the ground and the adapter's ``arm()``
+  is what switches it into its autonomous mode. A takeover needs the vehicle armed and not under
+  computer control, so a stale snapshot from before the arm cannot fake one.
+* "Flying states" for the low-battery row are GAINING_ALTITUDE and AIRBORNE: in RTL and LANDING the
+  vehicle is already coming down (re-commanding RTL there would waste the remaining charge), and in
+  MANUAL a pilot has control. The row fires once because LOW_BATTERY has no low-battery row.
+* An unknown battery level (-1) is never "low".
+* The takeoff target is the altitude requested with the MC's TAKEOFF (``takeoff_altitude``; 0 means
+  `HlcParams.default_takeoff_altitude`), latched when the HLC leaves READY.
+
+Error codes are the `ErrorCode` enum below (``hlc_error_t.code``).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+from antalate_lcm.autopilot.base import AutopilotState, FlightMode
+from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
+
+if TYPE_CHECKING:
+    from antalate_lcm.mc.machine import McState
+
+
+class HlcState(enum.IntEnum):
+    """HLC states; values are the ``hlc_state_t`` constants (shared with the MC machine)."""
+
+    INIT = hlc_state_t.INIT
+    READY = hlc_state_t.READY
+    TAKEOFF = hlc_state_t.TAKEOFF
+    GAINING_ALTITUDE = hlc_state_t.GAINING_ALTITUDE
+    AIRBORNE = hlc_state_t.AIRBORNE
+    RTL = hlc_state_t.RTL
+    LANDING = hlc_state_t.LANDING
+    MANUAL = hlc_state_t.MANUAL
+    LOW_BATTERY = hlc_state_t.LOW_BATTERY
+    LLC_DOWN = hlc_state_t.LLC_DOWN
+
+
+class Severity(enum.IntEnum):
+    """``hlc_error_t`` severities."""
+
+    INFO = hlc_error_t.INFO
+    WARNING = hlc_error_t.WARNING
+    ERROR = hlc_error_t.ERROR
+    CRITICAL = hlc_error_t.CRITICAL
+
+
+class ErrorCode(enum.IntEnum):
+    """``hlc_error_t.code`` values raised by the HLC; stable, so operators' tools can match on them."""
+
+    TAKEOFF_REFUSED_LOW_BATTERY = 1
+    ARM_FAILED = 2
+    GAIN_ALTITUDE_TIMEOUT = 3
+    LOW_BATTERY = 4
+    PILOT_TAKEOVER = 5
+    LINK_LOST = 6
+    ACTION_FAILED = 7
+    UNEXPECTED_LANDING = 8
+    TAKEOFF_CANCELLED = 9
+    AUTOPILOT_TOOK_OVER = 10
+
+
+@dataclass(frozen=True)
+class HlcError:
+    """An ``hlc_error_t`` to publish."""
+
+    code: ErrorCode
+    severity: Severity
+    text: str
+
+
+class ActionKind(enum.Enum):
+    """Autopilot calls the node performs for the machine (`Autopilot` method of the same name)."""
+
+    ARM = "ARM"
+    DISARM = "DISARM"
+    TAKEOFF = "TAKEOFF"
+    LAND = "LAND"
+    RTL = "RTL"
+    HOVER = "HOVER"  # set_velocity(0, 0, 0, 0, Frame.BODY)
+
+
+@dataclass(frozen=True)
+class Action:
+    """One autopilot call; `altitude` is only meaningful for TAKEOFF (metres above home)."""
+
+    kind: ActionKind
+    altitude: float = 0.0
+
+    ARM: ClassVar[Action]
+    DISARM: ClassVar[Action]
+    LAND: ClassVar[Action]
+    RTL: ClassVar[Action]
+    HOVER: ClassVar[Action]
+
+    @classmethod
+    def takeoff(cls, altitude: float) -> Action:
+        return cls(ActionKind.TAKEOFF, altitude)
+
+    def __str__(self) -> str:
+        if self.kind is ActionKind.TAKEOFF:
+            return f"TAKEOFF({self.altitude:g} m)"
+        return self.kind.value
+
+
+Action.ARM = Action(ActionKind.ARM)
+Action.DISARM = Action(ActionKind.DISARM)
+Action.LAND = Action(ActionKind.LAND)
+Action.RTL = Action(ActionKind.RTL)
+Action.HOVER = Action(ActionKind.HOVER)
+
+
+class HlcEvent(enum.Enum):
+    """Inputs of the table, derived from observations (see the module docstring)."""
+
+    LINK_UP = "LINK_UP"  # INIT: autopilot connected, link fresh, MC heard, vehicle on the ground
+    RESYNC_AIRBORNE = "RESYNC_AIRBORNE"  # INIT: armed and in air, autopilot in GUIDED
+    RESYNC_LANDING = "RESYNC_LANDING"  # INIT: armed and in air, autopilot landing
+    RESYNC_RTL = "RESYNC_RTL"  # INIT: armed and in air, autopilot returning
+    RESYNC_MANUAL = "RESYNC_MANUAL"  # INIT: armed and in air, a pilot in control
+    MC_TAKEOFF = "MC_TAKEOFF"  # MC changed to TAKEOFF (edge)
+    MC_LAND = "MC_LAND"  # MC is in LAND (level)
+    MC_RTL = "MC_RTL"  # MC is in RTL (level)
+    ARMED = "ARMED"  # result of Action.ARM
+    ARM_FAILED = "ARM_FAILED"  # result of Action.ARM
+    ALTITUDE_REACHED = "ALTITUDE_REACHED"
+    GAIN_ALTITUDE_TIMEOUT = "GAIN_ALTITUDE_TIMEOUT"
+    LANDED = "LANDED"  # on the ground and disarmed
+    PILOT_TAKEOVER = "PILOT_TAKEOVER"  # armed and no longer under computer control
+    LOW_BATTERY = "LOW_BATTERY"
+    LINK_LOST = "LINK_LOST"  # link_age >= link_timeout
+    AUTOPILOT_LAND = "AUTOPILOT_LAND"  # the autopilot reports it is landing on its own
+    AUTOPILOT_RTL = "AUTOPILOT_RTL"  # the autopilot reports it is returning on its own
+
+
+@dataclass(frozen=True)
+class HlcParams:
+    """HLC tunables (the ``[hlc]`` config table)."""
+
+    default_takeoff_altitude: float = 10.0  # m above home, when the MC's TAKEOFF carries 0
+    airborne_fraction: float = 0.95  # of the target altitude, to count as AIRBORNE
+    gain_altitude_timeout: float = 30.0  # s in GAINING_ALTITUDE before giving up and landing
+    low_battery: float = 20.0  # percent; at or below: refuse takeoff / return home
+    link_timeout: float = 3.0  # s without autopilot heartbeat -> LLC_DOWN
+
+    def __post_init__(self) -> None:
+        for name in ("default_takeoff_altitude", "gain_altitude_timeout", "link_timeout"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"HlcParams.{name} must be a positive number, got {value!r}")
+        if not (0.0 < self.airborne_fraction <= 1.0):
+            raise ValueError(f"HlcParams.airborne_fraction must be in (0, 1], got {self.airborne_fraction!r}")
+        if not (0.0 <= self.low_battery < 100.0):
+            raise ValueError(f"HlcParams.low_battery must be in [0, 100), got {self.low_battery!r}")
+
+
+@dataclass(frozen=True)
+class HlcTransition:
+    """A state change, with the event and a human-readable reason, for the node's log."""
+
+    from_state: HlcState
+    to_state: HlcState
+    event: HlcEvent
+    reason: str
+    at: float
+
+
+@dataclass(frozen=True)
+class HlcOutcome:
+    """What one input did: the transition (if any), actions to perform in order, errors to publish."""
+
+    transition: HlcTransition | None = None
+    actions: tuple[Action, ...] = ()
+    errors: tuple[HlcError, ...] = ()
+    reason: str = ""
+
+    @property
+    def changed(self) -> bool:
+        return self.transition is not None
+
+
+_Effect = Callable[["HighLevelControl", str], tuple[tuple[Action, ...], tuple[HlcError, ...]]]
+_Guard = Callable[["HighLevelControl"], bool]
+
+
+@dataclass(frozen=True)
+class HlcRow:
+    """One table row. `target` None means "stay" (a refusal that only reports an error)."""
+
+    sources: frozenset[HlcState]
+    event: HlcEvent
+    target: HlcState | None
+    why: str
+    guard: _Guard | None = None
+    effect: _Effect | None = None
+    extra: bool = False  # not in DESIGN §6 (see the module docstring)
+
+
+def _fx(*actions: Action, error: tuple[ErrorCode, Severity] | None = None) -> _Effect:
+    """An effect that performs `actions` and, optionally, reports an error whose text is the detail."""
+
+    def effect(_m: HighLevelControl, detail: str) -> tuple[tuple[Action, ...], tuple[HlcError, ...]]:
+        errors = () if error is None else (HlcError(error[0], error[1], detail),)
+        return actions, errors
+
+    return effect
+
+
+def _fx_start_takeoff(m: HighLevelControl, _detail: str) -> tuple[tuple[Action, ...], tuple[HlcError, ...]]:
+    m._target_altitude = m._requested_altitude()
+    return (Action.ARM,), ()
+
+
+def _fx_climb(m: HighLevelControl, _detail: str) -> tuple[tuple[Action, ...], tuple[HlcError, ...]]:
+    return (Action.takeoff(m.target_altitude),), ()
+
+
+def _battery_low(m: HighLevelControl) -> bool:
+    return m._battery_is_low()
+
+
+def _mc_left_takeoff(m: HighLevelControl) -> bool:
+    return m.mc_state != mc_state_t.TAKEOFF
+
+
+def _s(*states: HlcState) -> frozenset[HlcState]:
+    return frozenset(states)
+
+
+S = HlcState
+E = HlcEvent
+_AUTONOMOUS = _s(S.GAINING_ALTITUDE, S.AIRBORNE, S.RTL, S.LANDING, S.LOW_BATTERY)
+_ALL_BUT_INIT = frozenset(S) - {S.INIT, S.LLC_DOWN}
+
+#: The HLC transition table, in priority order (the first row matching state, event and guard wins).
+HLC_TABLE: tuple[HlcRow, ...] = (
+    HlcRow(_ALL_BUT_INIT, E.LINK_LOST, S.LLC_DOWN, "autopilot link lost",
+           effect=_fx(error=(ErrorCode.LINK_LOST, Severity.CRITICAL))),
+    HlcRow(_s(S.INIT), E.LINK_UP, S.READY, "autopilot connected and MC heard"),
+    HlcRow(_s(S.INIT), E.RESYNC_AIRBORNE, S.AIRBORNE, "restart resync: vehicle flying under our control"),
+    HlcRow(_s(S.INIT), E.RESYNC_LANDING, S.LANDING, "restart resync: vehicle landing"),
+    HlcRow(_s(S.INIT), E.RESYNC_RTL, S.RTL, "restart resync: vehicle returning to launch"),
+    HlcRow(_s(S.INIT), E.RESYNC_MANUAL, S.MANUAL, "restart resync: pilot in control"),
+    HlcRow(_s(S.READY), E.MC_TAKEOFF, None, "takeoff refused: battery low", guard=_battery_low,
+           effect=_fx(error=(ErrorCode.TAKEOFF_REFUSED_LOW_BATTERY, Severity.ERROR))),
+    HlcRow(_s(S.READY), E.MC_TAKEOFF, S.TAKEOFF, "MC TAKEOFF: arming", effect=_fx_start_takeoff),
+    HlcRow(_s(S.TAKEOFF), E.ARMED, S.READY, "takeoff cancelled by the MC while arming",
+           guard=_mc_left_takeoff,
+           effect=_fx(Action.DISARM, error=(ErrorCode.TAKEOFF_CANCELLED, Severity.INFO)), extra=True),
+    HlcRow(_s(S.TAKEOFF), E.ARMED, S.GAINING_ALTITUDE, "armed: taking off", effect=_fx_climb),
+    HlcRow(_s(S.TAKEOFF), E.ARM_FAILED, S.READY, "arming failed",
+           effect=_fx(error=(ErrorCode.ARM_FAILED, Severity.ERROR))),
+    HlcRow(_s(S.GAINING_ALTITUDE), E.ALTITUDE_REACHED, S.AIRBORNE, "altitude reached",
+           effect=_fx(Action.HOVER)),
+    HlcRow(_s(S.GAINING_ALTITUDE), E.GAIN_ALTITUDE_TIMEOUT, S.LANDING, "altitude not gained in time: landing",
+           effect=_fx(Action.LAND, error=(ErrorCode.GAIN_ALTITUDE_TIMEOUT, Severity.WARNING))),
+    HlcRow(_s(S.AIRBORNE), E.MC_RTL, S.RTL, "MC RTL", effect=_fx(Action.RTL)),
+    HlcRow(_s(S.AIRBORNE), E.MC_LAND, S.LANDING, "MC LAND", effect=_fx(Action.LAND)),
+    HlcRow(_s(S.GAINING_ALTITUDE), E.MC_RTL, S.RTL, "MC RTL during takeoff", effect=_fx(Action.RTL),
+           extra=True),
+    HlcRow(_s(S.GAINING_ALTITUDE), E.MC_LAND, S.LANDING, "MC LAND during takeoff", effect=_fx(Action.LAND),
+           extra=True),
+    HlcRow(_s(S.RTL, S.LANDING, S.LOW_BATTERY, S.MANUAL), E.LANDED, S.READY, "landed and disarmed"),
+    HlcRow(_s(S.AIRBORNE), E.LANDED, S.READY, "vehicle landed on its own",
+           effect=_fx(error=(ErrorCode.UNEXPECTED_LANDING, Severity.WARNING)), extra=True),
+    HlcRow(_AUTONOMOUS, E.PILOT_TAKEOVER, S.MANUAL, "pilot took over",
+           effect=_fx(error=(ErrorCode.PILOT_TAKEOVER, Severity.WARNING))),
+    HlcRow(_s(S.GAINING_ALTITUDE, S.AIRBORNE), E.AUTOPILOT_LAND, S.LANDING, "autopilot landing on its own",
+           effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)), extra=True),
+    HlcRow(_s(S.RTL), E.AUTOPILOT_LAND, S.LANDING, "RTL final descent", extra=True),
+    HlcRow(_s(S.GAINING_ALTITUDE, S.AIRBORNE), E.AUTOPILOT_RTL, S.RTL, "autopilot returning on its own",
+           effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)), extra=True),
+    HlcRow(_s(S.GAINING_ALTITUDE, S.AIRBORNE), E.LOW_BATTERY, S.LOW_BATTERY, "battery low: returning home",
+           effect=_fx(Action.RTL, error=(ErrorCode.LOW_BATTERY, Severity.WARNING))),
+)
+del S, E
+
+
+class HighLevelControl:
+    """The HLC machine. Read `state`; feed observations; perform the returned actions."""
+
+    def __init__(self, params: HlcParams | None = None, *, table: tuple[HlcRow, ...] = HLC_TABLE) -> None:
+        self.params = params or HlcParams()
+        self._table = table
+        self.state: HlcState = HlcState.INIT
+        self.entered_at: float | None = None  # `now` of the last transition
+        self.mc_state: int | None = None  # last MC state heard (an McState value), None = never
+        self.autopilot: AutopilotState | None = None  # last snapshot
+        self._mc_takeoff_altitude = 0.0
+        self._target_altitude = 0.0
+
+    # ----------------------------------------------------------------- queries
+
+    @property
+    def target_altitude(self) -> float:
+        """The altitude of the current/last takeoff (m above home), 0 before the first one."""
+        return self._target_altitude
+
+    @property
+    def mc_heard(self) -> bool:
+        return self.mc_state is not None
+
+    def _requested_altitude(self) -> float:
+        requested = self._mc_takeoff_altitude
+        if math.isfinite(requested) and requested > 0.0:
+            return requested
+        return self.params.default_takeoff_altitude
+
+    def _battery_is_low(self) -> bool:
+        ap = self.autopilot
+        return ap is not None and ap.battery_known and ap.battery <= self.params.low_battery
+
+    # ----------------------------------------------------------------- inputs
+
+    def on_mc_state(self, state: McState | int, now: float, *, takeoff_altitude: float = 0.0) -> HlcOutcome:
+        """An ``mc_state_t`` was heard. `takeoff_altitude` is the MC's requested altitude (0 = default)."""
+        previous, self.mc_state = self.mc_state, int(state)
+        events: list[tuple[HlcEvent, str]] = []
+        if state == mc_state_t.TAKEOFF:
+            self._mc_takeoff_altitude = takeoff_altitude
+            if previous != mc_state_t.TAKEOFF:
+                events.append((HlcEvent.MC_TAKEOFF, self._takeoff_detail()))
+        elif state == mc_state_t.LAND:
+            events.append((HlcEvent.MC_LAND, "MC is in LAND"))
+        elif state == mc_state_t.RTL:
+            events.append((HlcEvent.MC_RTL, "MC is in RTL"))
+        events.extend(self._init_events())
+        return self._fire(events, now)
+
+    def on_autopilot(self, snapshot: AutopilotState, now: float) -> HlcOutcome:
+        """A fresh autopilot snapshot (the node polls `Autopilot.state()`)."""
+        self.autopilot = snapshot
+        return self._fire(self._autopilot_events(snapshot), now)
+
+    def on_action_result(self, kind: ActionKind, ok: bool, now: float, detail: str = "") -> HlcOutcome:
+        """The outcome of an `Action` the node performed (``arm()`` False or `AutopilotError` = not ok).
+
+        ARM results drive the table; any other failed action is reported as an error, and the
+        table's timeouts and observations take it from there.
+        """
+        suffix = f": {detail}" if detail else ""
+        if kind is ActionKind.ARM:
+            event = HlcEvent.ARMED if ok else HlcEvent.ARM_FAILED
+            return self._fire([(event, f"arm {'succeeded' if ok else 'failed'}{suffix}")], now)
+        if ok:
+            return HlcOutcome()
+        text = f"autopilot {kind.value} failed{suffix}"
+        return HlcOutcome(errors=(HlcError(ErrorCode.ACTION_FAILED, Severity.ERROR, text),), reason=text)
+
+    def tick(self, now: float) -> HlcOutcome:
+        """Time passes: fires GAIN_ALTITUDE_TIMEOUT."""
+        timeout = self.params.gain_altitude_timeout
+        if (
+            self.state is HlcState.GAINING_ALTITUDE
+            and self.entered_at is not None
+            and now - self.entered_at >= timeout
+        ):
+            detail = f"still below {self.params.airborne_fraction:g} x {self._target_altitude:g} m after {timeout:g} s"
+            return self._fire([(HlcEvent.GAIN_ALTITUDE_TIMEOUT, detail)], now)
+        return HlcOutcome()
+
+    # ----------------------------------------------------------------- event derivation
+
+    def _takeoff_detail(self) -> str:
+        ap = self.autopilot
+        battery = f"{ap.battery:.1f}%" if ap is not None and ap.battery_known else "unknown"
+        return (f"MC TAKEOFF to {self._requested_altitude():g} m, battery {battery}"
+                f" (low_battery {self.params.low_battery:g}%)")
+
+    def _link_fresh(self, ap: AutopilotState) -> bool:
+        return ap.connected and ap.link_age < self.params.link_timeout
+
+    def _init_events(self) -> list[tuple[HlcEvent, str]]:
+        ap = self.autopilot
+        if self.state is not HlcState.INIT or ap is None or not self.mc_heard or not self._link_fresh(ap):
+            return []
+        if not (ap.armed and ap.in_air):
+            return [(HlcEvent.LINK_UP, f"autopilot link {ap.link_age:.2f} s old, vehicle on the ground")]
+        detail = f"vehicle armed and in air, mode {ap.mode or '?'} at {ap.alt:.1f} m"
+        if not ap.autonomous or ap.flight_mode is FlightMode.MANUAL:
+            return [(HlcEvent.RESYNC_MANUAL, detail)]
+        resync = {
+            FlightMode.GUIDED: HlcEvent.RESYNC_AIRBORNE,
+            FlightMode.LANDING: HlcEvent.RESYNC_LANDING,
+            FlightMode.RTL: HlcEvent.RESYNC_RTL,
+        }
+        assert ap.flight_mode is not None  # filled in by AutopilotState.__post_init__
+        return [(resync[ap.flight_mode], detail)]
+
+    def _autopilot_events(self, ap: AutopilotState) -> list[tuple[HlcEvent, str]]:
+        p = self.params
+        if ap.link_age >= p.link_timeout:
+            # Nothing else the snapshot says can be trusted.
+            return [(HlcEvent.LINK_LOST, f"no autopilot heartbeat for {ap.link_age:.1f} s"
+                                         f" (link_timeout {p.link_timeout:g} s)")]
+        events: list[tuple[HlcEvent, str]] = []
+        if ap.landed:
+            events.append((HlcEvent.LANDED, f"on the ground and disarmed (mode {ap.mode or '?'})"))
+        if ap.armed and (not ap.autonomous or ap.flight_mode is FlightMode.MANUAL):
+            events.append((HlcEvent.PILOT_TAKEOVER, f"autopilot left autonomous control (mode {ap.mode or '?'})"))
+        events.extend(self._init_events())
+        if ap.flight_mode is FlightMode.LANDING:
+            events.append((HlcEvent.AUTOPILOT_LAND, f"autopilot switched to {ap.mode or 'LAND'}"))
+        if ap.flight_mode is FlightMode.RTL:
+            events.append((HlcEvent.AUTOPILOT_RTL, f"autopilot switched to {ap.mode or 'RTL'}"))
+        if self._battery_is_low():
+            events.append((HlcEvent.LOW_BATTERY, f"battery {ap.battery:.1f}% <= low_battery {p.low_battery:g}%"))
+        threshold = p.airborne_fraction * self._target_altitude
+        if ap.alt >= threshold:
+            events.append((HlcEvent.ALTITUDE_REACHED, f"altitude {ap.alt:.2f} m >= {p.airborne_fraction:g}"
+                                                      f" x {self._target_altitude:g} m"))
+        return events
+
+    # ----------------------------------------------------------------- the table
+
+    def _match(self, event: HlcEvent) -> HlcRow | None:
+        for row in self._table:
+            if row.event is event and self.state in row.sources and (row.guard is None or row.guard(self)):
+                return row
+        return None
+
+    def _fire(self, events: Iterable[tuple[HlcEvent, str]], now: float) -> HlcOutcome:
+        for event, detail in events:
+            row = self._match(event)
+            if row is None:
+                continue
+            reason = f"{row.why} ({detail})" if detail else row.why
+            actions, errors = row.effect(self, reason) if row.effect is not None else ((), ())
+            if row.target is None:
+                return HlcOutcome(actions=actions, errors=errors, reason=reason)
+            transition = HlcTransition(self.state, row.target, event, reason, now)
+            self.state = row.target
+            self.entered_at = now
+            return HlcOutcome(transition, actions, errors, reason)
+        return HlcOutcome()

@@ -1,0 +1,45 @@
+"""Load plugins by entry-point name or ``module:Class`` — the one way antalate finds extensions.
+
+Used for behaviors (group ``antalate.behaviors``) and autopilot adapters (``antalate.autopilots``).
+"""
+
+from __future__ import annotations
+
+import importlib
+from importlib.metadata import entry_points
+
+from antalate_lcm.errors import PluginNotFound
+
+BEHAVIORS = "antalate.behaviors"
+AUTOPILOTS = "antalate.autopilots"
+
+
+def available(group: str) -> list[str]:
+    return sorted(ep.name for ep in entry_points(group=group))
+
+
+def load_plugin(group: str, name: str, base: type | None = None) -> type:
+    """The class registered as ``name`` in ``group``, or named ``module:Class``.
+
+    Raises :class:`PluginNotFound` listing what is available, so a typo in a config is a one-line fix.
+    """
+    if ":" in name:
+        module_name, _, attr = name.partition(":")
+        try:
+            obj = getattr(importlib.import_module(module_name), attr)
+        except (ImportError, AttributeError) as exc:
+            raise PluginNotFound(f"cannot load {name!r}: {exc}") from None
+    else:
+        matches = [ep for ep in entry_points(group=group) if ep.name == name]
+        if not matches:
+            raise PluginNotFound(
+                f"no plugin {name!r} in {group}; available: {', '.join(available(group)) or 'none'} "
+                "(or give 'module:Class')"
+            )
+        try:
+            obj = matches[0].load()
+        except Exception as exc:  # noqa: BLE001 - a broken plugin must not look like a missing one
+            raise PluginNotFound(f"plugin {name!r} in {group} failed to import: {exc!r}") from None
+    if base is not None and not (isinstance(obj, type) and issubclass(obj, base)):
+        raise PluginNotFound(f"{name!r} is not a subclass of {base.__module__}.{base.__qualname__}")
+    return obj

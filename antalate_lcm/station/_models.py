@@ -1,0 +1,231 @@
+"""The station's JSON wire format (DESIGN §9), as pydantic models.
+
+These models are the protocol: the station validates every request with them, the OSC can import
+them to build its reports and to read replies, and FastAPI turns them into the OpenAPI document
+(``docs/openapi.json``). ``docs/station-protocol.md`` explains the semantics in prose.
+
+Validation is strict on purpose. A station that silently turned ``"12"`` into ``12.0`` or
+``NaN`` into a position would hide a broken client until an aircraft is placed at the wrong spot;
+a 422 with the offending field tells the author of the client at once. Unknown *fields* are
+ignored, though, so an OSC built against a newer protocol revision still talks to an older station.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import math
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+#: State names, exactly the constant names of ``mc_state_t`` / ``hlc_state_t`` (a test keeps them in sync).
+McStateName = Literal["INIT", "STANDBY", "TAKEOFF", "MISSION", "RTL", "LAND", "MANUAL", "ERROR"]
+HlcStateName = Literal[
+    "INIT", "READY", "TAKEOFF", "GAINING_ALTITUDE", "AIRBORNE", "RTL", "LANDING", "MANUAL", "LOW_BATTERY", "LLC_DOWN"
+]
+#: Operator commands, the constant names of ``operator_cmd_t``.
+CommandName = Literal["TAKEOFF", "LAND", "RTL"]
+
+
+class _Wire(BaseModel):
+    """Common config: strict types, no NaN/inf, unknown fields ignored (forward compatibility)."""
+
+    model_config = ConfigDict(strict=True, allow_inf_nan=False, extra="ignore", frozen=True)
+
+
+def _wrap_360(angle: float) -> float:
+    """Headings/azimuths are accepted in any turn (e.g. -10 or 370) and stored in [0, 360)."""
+    wrapped = math.fmod(angle, 360.0)
+    if wrapped < 0.0:
+        wrapped += 360.0
+    return 0.0 if wrapped >= 360.0 else wrapped
+
+
+class Telemetry(_Wire):
+    """``telemetry_t`` without its header, keyed by the field names; ``agent`` is the header's name.
+
+    Only the position and heading are required (the sector test needs them); the rest default to the
+    values ``telemetry_t`` uses for "unknown", so a minimal script can report with three numbers.
+    """
+
+    lat: float = Field(ge=-90.0, le=90.0, description="degrees, WGS84")
+    lon: float = Field(ge=-180.0, le=180.0, description="degrees, WGS84")
+    alt: float = Field(0.0, description="metres above the home point (not used by the sector test)")
+    heading: float = Field(description="degrees from true north, clockwise; any value, wrapped to [0, 360)")
+    vn: float = Field(0.0, description="m/s, north")
+    ve: float = Field(0.0, description="m/s, east")
+    vd: float = Field(0.0, description="m/s, down")
+    battery: float = Field(-1.0, description="percent; -1 = unknown")
+    armed: bool = False
+    in_air: bool = False
+    mode: str = Field("", max_length=64, description="the autopilot's own mode name")
+    agent: str | None = Field(
+        None, max_length=128, description="agent name from the message header (may be an anonymous token)"
+    )
+
+    @field_validator("heading")
+    @classmethod
+    def _heading_in_one_turn(cls, value: float) -> float:
+        return _wrap_360(value)
+
+
+class Feedback(_Wire):
+    """Agent → station payload (``payload_t`` on ``{agent}/OPERATOR_FEEDBACK``), stored with the report.
+
+    ``data`` is text. Binary content travels base64-encoded with ``encoding: "base64"``; the station
+    checks that it decodes, so a client bug shows up at the source rather than in a later reader.
+    """
+
+    content_type: str = Field(min_length=1, max_length=255, description='MIME type, e.g. "image/jpeg"')
+    data: str
+    encoding: Literal["utf-8", "base64"] = Field(
+        "utf-8", description='"utf-8": data is the content itself; "base64": data is base64 (RFC 4648) of the bytes'
+    )
+
+    @model_validator(mode="after")
+    def _base64_decodes(self) -> Feedback:
+        if self.encoding == "base64":
+            try:
+                base64.b64decode(self.data, validate=True)
+            except (binascii.Error, ValueError) as exc:
+                raise ValueError(f"data is not valid base64: {exc}") from None
+        return self
+
+    def content(self) -> bytes:
+        """The payload bytes, whatever the encoding: what an LCM ``payload_t.data`` holds."""
+        return base64.b64decode(self.data) if self.encoding == "base64" else self.data.encode("utf-8")
+
+
+class Payload(_Wire):
+    """Station → agent payload (``payload_t`` on ``{agent}/OPERATOR_PAYLOAD``); same shape as feedback."""
+
+    content_type: str = Field(description='MIME type; the reference station sends "application/json"')
+    data: str
+    encoding: Literal["utf-8", "base64"] = "utf-8"
+
+    def content(self) -> bytes:
+        """The payload bytes, whatever the encoding: what an LCM ``payload_t.data`` holds."""
+        return base64.b64decode(self.data) if self.encoding == "base64" else self.data.encode("utf-8")
+
+
+class PeerDetection(_Wire):
+    """The reference station's payload JSON: the fields of ``peer_detection_t`` (without header)."""
+
+    detected: bool
+    count: int = Field(ge=0, description="peers inside the front sector")
+    nearest_range: float = Field(ge=0.0, description="metres to the nearest of them; 0 when none")
+    nearest_bearing: float = Field(
+        description="degrees relative to the reporter's heading, clockwise positive, in (-180, 180]; 0 when none"
+    )
+
+
+class ReportRequest(_Wire):
+    """What the OSC POSTs to ``/api/report`` every ``1/rate`` seconds.
+
+    Everything but the token may be null: an OSC that has not heard the MC, the HLC or any telemetry
+    yet still reports, to get its token and any queued commands.
+    """
+
+    token: str | None = Field(None, max_length=128, description="null/absent on first contact")
+    mc_state: McStateName | None = None
+    hlc_state: HlcStateName | None = None
+    telemetry: Telemetry | None = None
+    feedback: Feedback | None = None
+
+
+class OperatorCommand(_Wire):
+    """One queued ``operator_cmd_t``; ``seq`` goes into its header so the MC can acknowledge it."""
+
+    command: CommandName
+    altitude: float | None = Field(None, gt=0.0, description="takeoff altitude in m; absent = the agent's default")
+    seq: int = Field(ge=1, le=2**31 - 1)
+
+
+class DirectionCommand(_Wire):
+    """One queued ``direction_cmd_t``."""
+
+    active: bool
+    azimuth: float = Field(description="degrees from true north, [0, 360)")
+    speed: float = Field(ge=0.0, description="m/s")
+    seq: int = Field(ge=1, le=2**31 - 1)
+
+
+class ReportReply(_Wire):
+    """The station's answer to a report. Absent optional fields mean "nothing for you"."""
+
+    token: str = Field(description="keep it and send it with every later report")
+    operator_cmd: OperatorCommand | None = None
+    direction_cmd: DirectionCommand | None = None
+    payload: Payload | None = None
+
+
+class Direction(_Wire):
+    """The ``direction`` part of a command request."""
+
+    azimuth: float = Field(description="degrees from true north; any value, wrapped to [0, 360)")
+    speed: float = Field(ge=0.0, le=100.0, description="m/s")
+    active: bool = True
+
+    @field_validator("azimuth")
+    @classmethod
+    def _azimuth_in_one_turn(cls, value: float) -> float:
+        return _wrap_360(value)
+
+
+class CommandRequest(_Wire):
+    """``POST /api/commands``: exactly one of ``command`` and ``direction``; no target = every agent."""
+
+    command: CommandName | None = None
+    altitude: float | None = Field(None, gt=0.0, le=10_000.0, description="only with TAKEOFF")
+    direction: Direction | None = None
+    target: str | None = Field(
+        None, min_length=1, max_length=128, description="an agent's token or name; absent = every known agent"
+    )
+
+    @model_validator(mode="after")
+    def _exactly_one(self) -> CommandRequest:
+        if (self.command is None) == (self.direction is None):
+            raise ValueError('give exactly one of "command" and "direction"')
+        if self.altitude is not None and self.command != "TAKEOFF":
+            raise ValueError('"altitude" only goes with "command": "TAKEOFF"')
+        return self
+
+
+class QueuedCommand(BaseModel):
+    """One delivery the station queued: which agent will get which command."""
+
+    token: str
+    name: str
+    seq: int
+    operator_cmd: OperatorCommand | None = None
+    direction_cmd: DirectionCommand | None = None
+
+
+class CommandResponse(BaseModel):
+    """What ``POST /api/commands`` queued: one entry per agent (empty when no agent is known yet)."""
+
+    seq: int = Field(description="the command's sequence number, the same for every agent it was queued for")
+    target: str | None
+    queued: list[QueuedCommand]
+
+
+class AgentInfo(BaseModel):
+    """One agent as ``GET /api/agents`` lists it."""
+
+    token: str
+    name: str
+    first_seen: float = Field(description="UNIX time (s) of the first report")
+    last_seen: float | None = Field(description="UNIX time (s) of the latest report")
+    stale: bool = Field(description="no report for longer than the station's stale_after_s")
+    mc_state: str | None
+    hlc_state: str | None
+    telemetry: Telemetry | None
+    pending_commands: int
+
+
+class ErrorResponse(BaseModel):
+    """Every 4xx the station sends: a sentence for a person and, for invalid input, where it is wrong."""
+
+    detail: str
+    errors: list[dict[str, object]] = Field(default_factory=list)

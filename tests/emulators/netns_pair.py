@@ -1,0 +1,219 @@
+"""Two private network namespaces joined by a veth pair: how tests run djitellopy against the emulator.
+
+Why two namespaces: djitellopy 2.5 binds UDP 8889 (commands) and 8890 (state) on *all* addresses, once
+per process, without ``SO_REUSEADDR``. A Tello emulator must also receive on port 8889, and Linux refuses
+to bind ``127.0.0.2:8889`` while ``0.0.0.0:8889`` is bound in the same namespace (``EADDRINUSE``). So the
+client and the emulator must live in different network namespaces, connected by a link.
+
+The arrangement (no host interface is touched, and it also works unprivileged):
+
+* side ``"a"`` (the drone side): a holder process made by ``unshare -rn`` (new user + network namespace);
+* side ``"b"`` (the ground side): a holder made *inside* a's user namespace with ``unshare -n``, so the
+  process in a has ``CAP_NET_ADMIN`` over both namespaces and can create a veth pair between them;
+* ``veth_a`` in a carries ``addr_a`` (default ``192.168.10.1``, the real Tello's address, so
+  ``Tello()`` needs no host argument), ``veth_b`` in b carries ``addr_b`` (``192.168.10.2``).
+
+Commands run inside either side through ``nsenter`` (``popen``/``run``). The emulator itself usually
+runs *in the test process*, so tests can read its state and inject faults with plain method calls: its
+UDP socket is created inside side a by a short-lived helper and handed back over a Unix socket
+(``SCM_RIGHTS``). A socket keeps the namespace it was created in, so the emulator thread in the test
+process sends and receives on side a's network::
+
+    with NetnsPair() as net:
+        sock = net.udp_socket("a", (net.addr_a, 8889))
+        with TelloEmulator(sock=sock) as tello:
+            result = net.run_python("b", DJITELLOPY_SCRIPT, timeout=30)
+            assert tello.snapshot().z > 0.5 ...
+
+Extra addresses (``extra_addrs_a``) let several emulators (a swarm of Tellos) share side a. Everything
+started here is stopped by ``close()`` (also on exceptions, through the context manager); the holders
+also exit by themselves when the test process dies, because they block reading a pipe from it.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Literal
+
+from tests.netns import stop_process
+
+REPO = Path(__file__).resolve().parents[2]
+
+Side = Literal["a", "b"]
+
+_READY = "echo ready && exec cat"
+
+# Runs inside a namespace: bind a socket there and hand its descriptor back to the test process.
+_SOCKET_HELPER = """
+import socket, sys
+kind, host, port, unix_fd = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+unix = socket.socket(fileno=unix_fd)
+if kind == "udp":
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+else:
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+s.bind((host, port))
+if kind == "tcp":
+    s.listen(8)
+socket.send_fds(unix, [b"ok"], [s.fileno()])
+"""
+
+
+def netns_pair_unavailable() -> str | None:
+    """Why a veth-joined namespace pair cannot be made here, or None when it can (tests skip on it)."""
+    for tool in ("unshare", "nsenter", "ip"):
+        if shutil.which(tool) is None:
+            return f"{tool} is not installed (Debian/Ubuntu: apt-get install util-linux iproute2)"
+    probe = subprocess.run(
+        ["unshare", "-rn", "sh", "-c", "ip link add t0 type veth peer name t1"],
+        capture_output=True,
+        text=True,
+    )
+    if probe.returncode != 0:
+        return f"cannot create a veth pair in a private namespace: {probe.stderr.strip()}"
+    return None
+
+
+class NetnsPair:
+    """Namespaces ``a`` and ``b`` joined by ``veth_a``/``veth_b`` on one subnet. Use as a context manager."""
+
+    def __init__(
+        self,
+        addr_a: str = "192.168.10.1",
+        addr_b: str = "192.168.10.2",
+        prefix_len: int = 24,
+        extra_addrs_a: Sequence[str] = (),
+        extra_addrs_b: Sequence[str] = (),
+    ) -> None:
+        self.addr_a = addr_a
+        self.addr_b = addr_b
+        self.prefix_len = prefix_len
+        self.extra_addrs = {"a": list(extra_addrs_a), "b": list(extra_addrs_b)}
+        self._holders: dict[str, subprocess.Popen[str]] = {}
+        self._children: list[subprocess.Popen[str]] = []
+
+    # -- lifecycle ---------------------------------------------------------------------------------
+
+    def start(self) -> NetnsPair:
+        try:
+            self._holders["a"] = self._spawn_holder(["unshare", "-rn", "sh", "-c", _READY])
+            self._holders["b"] = self._spawn_holder(self.wrap("a", ["unshare", "-n", "sh", "-c", _READY]))
+            self._check(
+                "a",
+                f"ip link set lo up && ip link add veth_a type veth peer name veth_b netns {self.pid('b')}",
+            )
+            for side, dev, addr in (("a", "veth_a", self.addr_a), ("b", "veth_b", self.addr_b)):
+                script = [f"ip link set lo up && ip addr add {addr}/{self.prefix_len} dev {dev}"]
+                script += [f"ip addr add {extra}/{self.prefix_len} dev {dev}" for extra in self.extra_addrs[side]]
+                script.append(f"ip link set {dev} up")
+                self._check(side, " && ".join(script))  # type: ignore[arg-type]
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def close(self) -> None:
+        """Stop every process started here, then the holders (which takes the namespaces and veth down)."""
+        for proc in self._children:
+            stop_process(proc)
+        self._children.clear()
+        for side in ("b", "a"):
+            holder = self._holders.pop(side, None)
+            if holder is not None:
+                stop_process(holder)
+
+    def __enter__(self) -> NetnsPair:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- running things inside -------------------------------------------------------------------
+
+    def pid(self, side: Side) -> int:
+        return self._holders[side].pid
+
+    def wrap(self, side: Side, argv: Sequence[str]) -> list[str]:
+        """The command line that runs ``argv`` inside ``side``."""
+        return ["nsenter", "-t", str(self.pid(side)), "-U", "-n", "--preserve-credentials", "--", *argv]
+
+    def popen(self, side: Side, argv: Sequence[str], **kwargs: object) -> subprocess.Popen[str]:
+        """Start ``argv`` inside ``side``; it is stopped by ``close()``. The repo is on PYTHONPATH."""
+        kwargs.setdefault("env", _env(kwargs.pop("extra_env", None)))  # type: ignore[arg-type]
+        kwargs.setdefault("text", True)
+        kwargs.setdefault("start_new_session", True)
+        kwargs.setdefault("cwd", str(REPO))
+        proc: subprocess.Popen[str] = subprocess.Popen(self.wrap(side, argv), **kwargs)  # type: ignore[call-overload]
+        self._children.append(proc)
+        return proc
+
+    def run(self, side: Side, argv: Sequence[str], timeout: float = 60, **kwargs: object) -> subprocess.CompletedProcess[str]:
+        """Run ``argv`` inside ``side`` to completion (stdout/stderr captured as text)."""
+        kwargs.setdefault("env", _env(kwargs.pop("extra_env", None)))  # type: ignore[arg-type]
+        kwargs.setdefault("cwd", str(REPO))
+        return subprocess.run(  # type: ignore[call-overload, no-any-return]
+            self.wrap(side, argv), timeout=timeout, capture_output=True, text=True, **kwargs
+        )
+
+    def run_python(self, side: Side, code: str, timeout: float = 60, **kwargs: object) -> subprocess.CompletedProcess[str]:
+        """Run a Python snippet inside ``side`` with this interpreter (djitellopy scripts, adapters...)."""
+        return self.run(side, [sys.executable, "-c", code], timeout=timeout, **kwargs)
+
+    def udp_socket(self, side: Side, bind: tuple[str, int]) -> socket.socket:
+        """A UDP socket bound to ``bind`` inside ``side``, usable from this process (see module doc)."""
+        return self._socket(side, "udp", bind)
+
+    def tcp_listener(self, side: Side, bind: tuple[str, int]) -> socket.socket:
+        """A listening TCP socket bound to ``bind`` inside ``side``, usable from this process."""
+        return self._socket(side, "tcp", bind)
+
+    # -- internals -------------------------------------------------------------------------------
+
+    def _socket(self, side: Side, kind: str, bind: tuple[str, int]) -> socket.socket:
+        mine, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_DGRAM)
+        try:
+            argv = [sys.executable, "-c", _SOCKET_HELPER, kind, bind[0], str(bind[1]), str(theirs.fileno())]
+            done = subprocess.run(
+                self.wrap(side, argv), pass_fds=[theirs.fileno()], capture_output=True, text=True, timeout=30
+            )
+            theirs.close()
+            if done.returncode != 0:
+                raise RuntimeError(f"cannot bind {kind} {bind} in namespace {side}: {done.stderr.strip()}")
+            _msg, fds, _flags, _addr = socket.recv_fds(mine, 16, 1)
+            return socket.socket(fileno=fds[0])
+        finally:
+            theirs.close()
+            mine.close()
+
+    def _spawn_holder(self, argv: list[str]) -> subprocess.Popen[str]:
+        holder = subprocess.Popen(
+            argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            start_new_session=True,
+        )
+        assert holder.stdout is not None
+        if holder.stdout.readline().strip() != "ready":
+            err = holder.stderr.read() if holder.stderr else ""
+            stop_process(holder)
+            raise RuntimeError(f"cannot create a network namespace ({' '.join(argv)}): {err.strip()}")
+        return holder
+
+    def _check(self, side: Side, script: str) -> None:
+        done = self.run(side, ["sh", "-c", script], timeout=30)
+        if done.returncode != 0:
+            raise RuntimeError(f"namespace {side} set-up failed ({script}): {done.stderr.strip()}")
+
+
+def _env(extra: Mapping[str, str] | None = None) -> dict[str, str]:
+    env = dict(os.environ)
+    env.setdefault("PYTHONUNBUFFERED", "1")
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p)
+    if extra:
+        env.update(extra)
+    return env

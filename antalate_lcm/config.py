@@ -161,6 +161,9 @@ class BmaConfig(_Section):
     #: The state topic this arbiter follows: MC_STATE or a behavior_state_t topic.
     state_topic: str = "MC_STATE"
     republish_hz: Positive = 5.0
+    #: For a behavior_state_t-driven (cascaded) arbiter: the states its behaviors may name, so a
+    #: typo fails at load. Empty = any string. MC_STATE arbiters always check mc_state_t's names.
+    states: list[str] = Field(default_factory=list)
     behaviors: list[BehaviorConfig] = Field(default_factory=list)
 
 

@@ -112,17 +112,33 @@ class Node:
     def channel(self, topic: str, **fields: str) -> str:
         return self.topic_spec(topic).channel.format(**{"agent": self.agent, **fields})
 
-    def publish(self, topic: str, msg: Any, **fields: str) -> bool:
-        """Stamp ``msg.header`` (time, agent, per-topic seq) and send it on every bus of the topic."""
+    def publish(
+        self,
+        topic: str,
+        msg: Any,
+        *,
+        seq: int | None = None,
+        before_encode: Callable[[Any], None] | None = None,
+        **fields: str,
+    ) -> bool:
+        """Stamp ``msg.header`` (time, agent, per-topic seq) and send it on every bus of the topic.
+
+        ``seq`` overrides the counter (a resend must carry the seq of the original: it is the
+        acknowledgement key); ``before_encode`` runs on the stamped message (to sign it).
+        """
         key = (topic, tuple(sorted(fields.items())))
         pub = self._publishers.get(key)
         if pub is None:
             pub = self._publishers[key] = _Publisher(self.config.topic_buses(topic), self.channel(topic, **fields))
-        pub.seq += 1
+        if seq is None:
+            pub.seq += 1
+            seq = pub.seq
         header = msg.header
         header.utime = now_utime()
         header.agent = self.agent
-        header.seq = pub.seq
+        header.seq = seq
+        if before_encode is not None:
+            before_encode(msg)
         data = msg.encode()
         ok = True
         for bus in pub.buses:

@@ -3,17 +3,19 @@
 Adapters are found by name in the entry-point group ``antalate.autopilots`` (so third-party packages
 can add vehicles without touching this code) or given directly as ``"package.module:ClassName"``.
 Only the chosen adapter's module is imported: a missing optional library (djitellopy, pymavlink)
-only matters for the adapter that needs it.
+only matters for the adapter that needs it. Lookup goes through `antalate_lcm.plugins`, the one
+loader shared with behaviors, so both kinds of plugin fail the same way.
 """
 
 from __future__ import annotations
 
-import importlib
 from importlib.metadata import entry_points
 
 from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, FlightMode, Frame
+from antalate_lcm.errors import PluginNotFound
+from antalate_lcm.plugins import AUTOPILOTS, load_plugin
 
-ENTRY_POINT_GROUP = "antalate.autopilots"
+ENTRY_POINT_GROUP = AUTOPILOTS
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -28,14 +30,16 @@ __all__ = [
 ]
 
 
-class UnknownAutopilotError(LookupError):
-    """The configured autopilot name matches no registered adapter, or it cannot be loaded."""
+class UnknownAutopilotError(PluginNotFound, LookupError):
+    """The configured autopilot matches no registered adapter, or cannot be loaded.
+
+    A `PluginNotFound` (the CLI prints it without a traceback) and a `LookupError`.
+    """
 
 
 def available_autopilots() -> dict[str, str]:
     """Registered adapter names mapped to their ``module:Class`` targets, sorted by name."""
-    found = {ep.name: ep.value for ep in entry_points(group=ENTRY_POINT_GROUP)}
-    return dict(sorted(found.items()))
+    return dict(sorted((ep.name, ep.value) for ep in entry_points(group=ENTRY_POINT_GROUP)))
 
 
 def load_autopilot(name: str) -> type[Autopilot]:
@@ -43,23 +47,9 @@ def load_autopilot(name: str) -> type[Autopilot]:
 
     Raises `UnknownAutopilotError` naming the available adapters, so a config typo is a one-line fix.
     """
-    registered = available_autopilots()
-    if name in registered:
-        target = registered[name]
-    elif ":" in name:
-        target = name
-    else:
-        choices = ", ".join(registered) or "(none registered: is the 'antalate' package installed?)"
-        raise UnknownAutopilotError(
-            f"unknown autopilot {name!r}; available: {choices}; or give 'package.module:ClassName'"
-        )
-    module_name, _, attr = target.partition(":")
     try:
-        obj: object = importlib.import_module(module_name)
-        for part in attr.split("."):
-            obj = getattr(obj, part)
-    except (ImportError, AttributeError) as exc:
-        raise UnknownAutopilotError(f"autopilot {name!r} ({target}) cannot be loaded: {exc}") from exc
-    if not (isinstance(obj, type) and issubclass(obj, Autopilot)):
-        raise UnknownAutopilotError(f"autopilot {name!r} ({target}) is not an Autopilot subclass")
-    return obj
+        cls = load_plugin(ENTRY_POINT_GROUP, name, Autopilot)
+    except PluginNotFound as exc:
+        raise UnknownAutopilotError(f"autopilot: {exc}") from exc.__cause__
+    assert issubclass(cls, Autopilot)  # checked by load_plugin; narrows the type
+    return cls

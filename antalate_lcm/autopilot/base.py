@@ -68,7 +68,9 @@ class FlightMode(enum.Enum):
 class AutopilotState:
     """One consistent snapshot of the vehicle as the adapter knows it.
 
-    The defaults describe "nothing known yet": not connected, infinitely stale link, unknown battery.
+    The defaults describe "nothing known yet": not connected, infinitely stale link, unknown battery;
+    `autonomous` defaults to True because a vehicle without a pilot's radio (Tello, sim) is always
+    under computer control.
 
     `autonomous` means the vehicle is under computer control (our GUIDED commands, or a LAND/RTL the
     autopilot runs itself); ``False`` means a pilot has control and the HLC must not fight them.
@@ -112,6 +114,10 @@ class Autopilot(ABC):
 
     #: Registry name, also published in ``hlc_state_t.autopilot``.
     name: ClassVar[str] = ""
+    #: Whether commands may block (waiting for acknowledgements over a radio link). The HLC node
+    #: then runs them on a worker thread of its own, so one slow vehicle never stalls the executor
+    #: that every agent in the process shares. Only an in-process adapter should set it False.
+    blocking: ClassVar[bool] = True
 
     def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
         self.params: dict[str, Any] = dict(params or {})

@@ -28,7 +28,7 @@ class hlc_error_t(object):
         """ LCM Type: antalate_lcm.msgs.header_t """
         self.code = 0
         """
-        Machine-readable error code; see antalate_lcm.hlc.errors for the list.
+        Machine-readable error code; see antalate_lcm.hlc.machine.ErrorCode for the list.
         LCM Type: int16_t
         """
 

@@ -12,11 +12,11 @@ import antalate_lcm.msgs
 class mc_state_t(object):
     """ Mission Control state (DESIGN §5). Republished periodically (default 5 Hz) and on every change. """
 
-    __slots__ = ["header", "state", "last_command_seq"]
+    __slots__ = ["header", "state", "last_command_seq", "takeoff_altitude"]
 
-    __typenames__ = ["antalate_lcm.msgs.header_t", "int8_t", "int32_t"]
+    __typenames__ = ["antalate_lcm.msgs.header_t", "int8_t", "int32_t", "float"]
 
-    __dimensions__ = [None, None, None]
+    __dimensions__ = [None, None, None, None]
 
     INIT = 0
     STANDBY = 1
@@ -38,6 +38,13 @@ class mc_state_t(object):
         LCM Type: int32_t
         """
 
+        self.takeoff_altitude = 0.0
+        """
+        Added: the altitude (m above home) the accepted TAKEOFF asked for, 0 = the HLC's default.
+        The HLC hears only the MC, not the operator, so the MC must pass the request on.
+        LCM Type: float
+        """
+
 
     def encode(self):
         buf = BytesIO()
@@ -48,7 +55,7 @@ class mc_state_t(object):
     def _encode_one(self, buf):
         assert self.header._get_packed_fingerprint() == antalate_lcm.msgs.header_t._get_packed_fingerprint()
         self.header._encode_one(buf)
-        buf.write(struct.pack(">bi", self.state, self.last_command_seq))
+        buf.write(struct.pack(">bif", self.state, self.last_command_seq, self.takeoff_altitude))
 
     @staticmethod
     def decode(data: bytes):
@@ -64,14 +71,14 @@ class mc_state_t(object):
     def _decode_one(buf):
         self = mc_state_t()
         self.header = antalate_lcm.msgs.header_t._decode_one(buf)
-        self.state, self.last_command_seq = struct.unpack(">bi", buf.read(5))
+        self.state, self.last_command_seq, self.takeoff_altitude = struct.unpack(">bif", buf.read(9))
         return self
 
     @staticmethod
     def _get_hash_recursive(parents):
         if mc_state_t in parents: return 0
         newparents = parents + [mc_state_t]
-        tmphash = (0x8dde592bcacddc29+ antalate_lcm.msgs.header_t._get_hash_recursive(newparents)) & 0xffffffffffffffff
+        tmphash = (0x56660670d3fac30d+ antalate_lcm.msgs.header_t._get_hash_recursive(newparents)) & 0xffffffffffffffff
         tmphash  = (((tmphash<<1)&0xffffffffffffffff) + (tmphash>>63)) & 0xffffffffffffffff
         return tmphash
     _packed_fingerprint = None

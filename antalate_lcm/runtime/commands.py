@@ -1,12 +1,109 @@
-"""Subcommands that run nodes: ``mc``, ``hlc``, ``bma``, ``osc``, ``agent``, ``station``, ``demo``, ...
+"""Subcommands that run nodes: ``mc``, ``hlc``, ``bma``, ``agent``, ``demo`` (and more as they exist).
 
-Each is added here as the node it runs exists; none prints "not implemented".
+Every command loads and validates its whole config (plugins included) before any node starts.
 """
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
+
+from antalate_lcm.config import Config, load_config
+from antalate_lcm.errors import AntalateError
+from antalate_lcm.node import Context, Node
+
+
+def _run_single(args: argparse.Namespace, make: Callable[[Config, Context], list[Node]]) -> int:
+    from antalate_lcm.runtime.agent import validate
+    from antalate_lcm.runtime.launch import run_until_signal
+
+    config = load_config(args.config)
+    validate(config)
+    context = Context.create(config)
+    return run_until_signal(context, make(config, context))
+
+
+def _cmd_mc(args: argparse.Namespace) -> int:
+    from antalate_lcm.mc.node import McNode
+
+    return _run_single(args, lambda cfg, ctx: [McNode(cfg, ctx)])
+
+
+def _cmd_hlc(args: argparse.Namespace) -> int:
+    from antalate_lcm.hlc.node import HlcNode
+
+    return _run_single(args, lambda cfg, ctx: [HlcNode(cfg, ctx)])
+
+
+def _cmd_bma(args: argparse.Namespace) -> int:
+    from antalate_lcm.bma.node import BmaNode
+
+    def make(cfg: Config, ctx: Context) -> list[Node]:
+        for bma in cfg.bma:
+            if bma.name == args.name:
+                return [BmaNode(cfg, ctx, bma)]
+        names = ", ".join(b.name for b in cfg.bma) or "none"
+        raise AntalateError(f"no [[bma]] named {args.name!r} in {cfg.source}; declared: {names}")
+
+    return _run_single(args, make)
+
+
+def _cmd_agent(args: argparse.Namespace) -> int:
+    from antalate_lcm.bus import Bus
+    from antalate_lcm.executor import Executor
+    from antalate_lcm.runtime.agent import agent_nodes, shared_buses, swarm_configs, validate
+    from antalate_lcm.runtime.launch import run_until_signal
+
+    configs: list[Config] = []
+    for path in args.config:
+        configs.extend(swarm_configs(load_config(path), args.agents, spacing=args.spacing))
+    names = [c.agent.name for c in configs]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise AntalateError(f"two agents share the name(s) {', '.join(dup)}: give each config its own [agent] name")
+    for cfg in configs:
+        validate(cfg)
+    context = Context(Bus(shared_buses(configs)), Executor())
+    nodes = [node for cfg in configs for node in agent_nodes(cfg, context)]
+    return run_until_signal(context, nodes)
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from antalate_lcm.runtime import demo
+
+    direction = (args.azimuth, args.speed) if args.azimuth is not None else None
+    if args.headless:
+        return demo.run_headless(args.agents, mission_time=args.mission_time, direction=direction)
+    from antalate_lcm.runtime.interactive import run_interactive
+
+    return run_interactive(args.agents)
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the node-running subcommands to the ``antalate`` parser."""
+    for name, func, help_text in (
+        ("mc", _cmd_mc, "run the Mission Control node of an agent"),
+        ("hlc", _cmd_hlc, "run the High-Level Control node (and its autopilot) of an agent"),
+    ):
+        p = sub.add_parser(name, help=help_text)
+        p.add_argument("config", help="agent config file (TOML)")
+        p.set_defaults(func=func)
+
+    p = sub.add_parser("bma", help="run one Behavior Module Arbiter of an agent")
+    p.add_argument("config", help="agent config file (TOML)")
+    p.add_argument("--name", required=True, help="the [[bma]] name in the config")
+    p.set_defaults(func=_cmd_bma)
+
+    p = sub.add_parser("agent", help="run every node of one or more agents in one process")
+    p.add_argument("config", nargs="+", help="agent config file(s): one per vehicle")
+    p.add_argument("--agents", type=int, default=1, help="N simulated agents from each config (sim only)")
+    p.add_argument("--spacing", type=float, default=8.0, help="metres between simulated homes (default 8)")
+    p.set_defaults(func=_cmd_agent)
+
+    p = sub.add_parser("demo", help="fly a simulated swarm (the template application)")
+    p.add_argument("--agents", type=int, default=5, help="number of simulated agents (default 5)")
+    p.add_argument("--headless", action="store_true", help="no console: a scripted operator flies one mission")
+    p.add_argument("--mission-time", type=float, default=20.0, help="seconds in MISSION before RTL (headless)")
+    p.add_argument("--azimuth", type=float, help="direction command during the mission, deg (headless)")
+    p.add_argument("--speed", type=float, default=1.0, help="direction command speed, m/s (headless)")
+    p.set_defaults(func=_cmd_demo)

@@ -6,10 +6,12 @@ heading (both edges included). Distances and azimuths come from geographiclib's 
 as in the AntAlate paper's station, so the answer is exact at any latitude and any range.
 
 An inverse geodesic costs ~50 µs in pure Python, which matters at thousands of reports a second
-with dozens of neighbours each. `detect` therefore rejects the plainly-outside peers first with a
-local tangent-plane estimate whose error bound is known (`_FlatPrefilter`), and solves the
-geodesic only for the rest. The prefilter only ever *keeps* borderline peers, so the result is
-identical to solving every peer exactly (a test checks that on random swarms).
+with dozens of neighbours each. `detect` therefore sorts peers with a local tangent-plane
+estimate whose error bound is known (`_Flat`): certainly outside, certainly inside, or near an
+edge; only the last kind, and the few certainly-inside peers that could be the nearest, are
+solved on the ellipsoid. Every borderline case is solved exactly, so the answer is the one
+solving every peer would give (a test checks that on random swarms). `search_box` gives the
+spatial index the region to scan.
 """
 
 from __future__ import annotations
@@ -24,6 +26,11 @@ _WGS84 = Geodesic.WGS84
 _MASK = Geodesic.DISTANCE | Geodesic.AZIMUTH
 _A = 6378137.0
 _E2 = (1.0 / 298.257223563) * (2.0 - 1.0 / 298.257223563)
+#: Metres per degree of latitude at the equator, the smallest anywhere on WGS84.
+_MIN_M_PER_DEG_LAT = 110_574.0
+#: Relative widening of the search box beyond the planar sector: covers the planar approximation's
+#: error (≤ 0.5 %) and the difference between a geodesic and a straight line on the chart.
+_BOX_SLACK = 0.02
 #: Below this distance the azimuth between two points is numerically meaningless: a peer this close
 #: counts as dead ahead (bearing 0) and is always inside the sector when within range.
 COINCIDENT_M = 1e-3
@@ -70,60 +77,71 @@ def in_sector(
     return dist <= range_m and abs(rel) <= fov_deg / 2.0, dist, rel
 
 
-class _FlatPrefilter:
-    """Cheap, conservative rejection of peers that are clearly out of range or out of the field of view.
+class _Flat:
+    """Planar estimates around the reporter, with error bounds, to avoid most geodesic solutions.
 
-    Uses the meridional and prime-vertical radii of curvature at the reporter. For the short ranges
-    it is enabled for (≤ `MAX_RANGE_M`, away from the poles) the planar distance and azimuth differ
-    from the geodesic ones by far less than the margins below, so a peer it rejects is outside the
-    sector for certain; anything near an edge goes on to the exact test.
+    Uses the meridional and prime-vertical radii of curvature at the reporter. Within the limits it
+    is enabled for (range ≤ `MAX_RANGE_M`, latitude within ±`MAX_ABS_LAT`) the planar distance is
+    within 0.5 % of the geodesic one and the planar azimuth within 0.3° of the geodesic initial
+    azimuth (the scale change across the range and half the meridian convergence; a test checks
+    the bounds on random samples). With margins twice as wide, each peer falls in one of three
+    classes: certainly outside, certainly inside (counted without solving), or near an edge (solved
+    exactly). Closer than `NEAR_M` the azimuth is always solved exactly.
     """
 
-    # At 5 km and 80° of latitude the planar scale is off by < 0.5 % and the azimuth by < 0.3°,
-    # well inside the margins; beyond that the exact test runs on every candidate.
     MAX_RANGE_M = 5_000.0
     MAX_ABS_LAT = 80.0
-    _RANGE_MARGIN = 1.01  # relative
-    _RANGE_SLACK_M = 1.0
-    _FOV_MARGIN_DEG = 1.0
-    #: Closer than this the planar azimuth is not trusted enough to reject on the field of view.
-    _NEAR_M = 10.0
+    REL_MARGIN = 0.01
+    SLACK_M = 1.0
+    FOV_MARGIN_DEG = 1.0
+    NEAR_M = 10.0
 
-    __slots__ = ("_lat", "_lon", "_k_north", "_k_east", "_max_d2", "_cos_half", "_omni")
+    __slots__ = ("lat", "lon", "k_north", "k_east", "hn", "he", "out_d2", "in_d2", "cos_out", "cos_in", "omni")
 
-    def __init__(self, lat: float, lon: float, range_m: float, fov_deg: float) -> None:
+    def __init__(self, lat: float, lon: float, heading: float, range_m: float, fov_deg: float) -> None:
         phi = math.radians(lat)
         w = 1.0 - _E2 * math.sin(phi) ** 2
-        self._lat = lat
-        self._lon = lon
-        self._k_north = math.radians(1.0) * _A * (1.0 - _E2) / w**1.5  # metres per degree of latitude
-        self._k_east = math.radians(1.0) * _A / math.sqrt(w) * math.cos(phi)  # per degree of longitude
-        max_d = range_m * self._RANGE_MARGIN + self._RANGE_SLACK_M
-        self._max_d2 = max_d * max_d
-        half = fov_deg / 2.0 + self._FOV_MARGIN_DEG
-        self._omni = half >= 180.0
-        self._cos_half = math.cos(math.radians(half))
+        self.lat = lat
+        self.lon = lon
+        self.k_north = math.radians(1.0) * _A * (1.0 - _E2) / w**1.5  # metres per degree of latitude
+        self.k_east = math.radians(1.0) * _A / math.sqrt(w) * math.cos(phi)  # per degree of longitude
+        self.hn = math.cos(math.radians(heading))
+        self.he = math.sin(math.radians(heading))
+        out_d = range_m * (1.0 + self.REL_MARGIN) + self.SLACK_M
+        in_d = range_m * (1.0 - self.REL_MARGIN) - self.SLACK_M
+        self.out_d2 = out_d * out_d
+        self.in_d2 = in_d * in_d if in_d > 0.0 else -1.0
+        half = fov_deg / 2.0
+        self.omni = half - self.FOV_MARGIN_DEG >= 180.0
+        self.cos_out = -2.0 if half + self.FOV_MARGIN_DEG >= 180.0 else math.cos(math.radians(half + self.FOV_MARGIN_DEG))
+        self.cos_in = math.cos(math.radians(half - self.FOV_MARGIN_DEG)) if half > self.FOV_MARGIN_DEG else 2.0
 
     @classmethod
     def usable(cls, lat: float, range_m: float) -> bool:
         return range_m <= cls.MAX_RANGE_M and abs(lat) <= cls.MAX_ABS_LAT
 
-    def may_be_inside(self, peer_lat: float, peer_lon: float, hn: float, he: float) -> bool:
-        """False only when the peer is certainly outside; (hn, he) is the heading's unit vector."""
-        dlon = peer_lon - self._lon
+    def classify(self, peer_lat: float, peer_lon: float) -> float:
+        """Planar distance when the peer is certainly inside, -1 when certainly outside, -2 to solve."""
+        dlon = peer_lon - self.lon
         if dlon > 180.0:
             dlon -= 360.0
         elif dlon < -180.0:
             dlon += 360.0
-        north = (peer_lat - self._lat) * self._k_north
-        east = dlon * self._k_east
+        north = (peer_lat - self.lat) * self.k_north
+        east = dlon * self.k_east
         d2 = north * north + east * east
-        if d2 > self._max_d2:
-            return False
-        if self._omni or d2 < self._NEAR_M * self._NEAR_M:
-            return True
-        # cos(angle off the heading) compared without a square root or an atan2.
-        return north * hn + east * he >= self._cos_half * math.sqrt(d2)
+        if d2 > self.out_d2:
+            return -1.0
+        if d2 < self.NEAR_M * self.NEAR_M:
+            return -2.0
+        d = math.sqrt(d2)
+        # cos(angle off the heading), compared without an atan2.
+        cos_off = (north * self.hn + east * self.he) / d
+        if cos_off < self.cos_out:
+            return -1.0
+        if d2 <= self.in_d2 and (self.omni or cos_off >= self.cos_in):
+            return d
+        return -2.0
 
 
 def detect(
@@ -136,18 +154,51 @@ def detect(
 ) -> Detection:
     """Count the peers inside the front sector and give the nearest one's range and bearing.
 
-    ``peers`` are (lat, lon) pairs, not including the reporter itself. Ties for the nearest are
-    broken by the order of ``peers``.
+    ``peers`` are (lat, lon) pairs, not including the reporter itself. The answer equals calling
+    `in_sector` on every peer (ties for the nearest aside); the reported range and bearing always
+    come from the geodesic solution.
     """
-    prefilter = _FlatPrefilter(lat, lon, range_m, fov_deg) if _FlatPrefilter.usable(lat, range_m) else None
-    hn = math.cos(math.radians(heading))
-    he = math.sin(math.radians(heading))
+    if not _Flat.usable(lat, range_m):
+        return _detect_exact(lat, lon, heading, peers, range_m, fov_deg)
+    flat = _Flat(lat, lon, heading, range_m, fov_deg)
+    count = 0
+    best_d = math.inf
+    best_rel = 0.0
+    sure: list[tuple[float, float, float]] = []  # planar distance, lat, lon of certainly-inside peers
+    for peer_lat, peer_lon in peers:
+        cls = flat.classify(peer_lat, peer_lon)
+        if cls == -1.0:
+            continue
+        if cls >= 0.0:
+            sure.append((cls, peer_lat, peer_lon))
+            continue
+        inside, dist, rel = in_sector(lat, lon, heading, peer_lat, peer_lon, range_m, fov_deg)
+        if inside:
+            count += 1
+            if dist < best_d:
+                best_d, best_rel = dist, rel
+    if sure:
+        count += len(sure)
+        # Only the peers that could be the nearest, given the planar error, need their exact range.
+        limit = min(p[0] for p in sure) * (1.0 + _Flat.REL_MARGIN) + _Flat.SLACK_M
+        for planar, peer_lat, peer_lon in sure:
+            if planar <= limit:
+                _, dist, rel = in_sector(lat, lon, heading, peer_lat, peer_lon, range_m, fov_deg)
+                if dist < best_d:
+                    best_d, best_rel = dist, rel
+    if count == 0:
+        return NO_DETECTION
+    return Detection(True, count, best_d, best_rel)
+
+
+def _detect_exact(
+    lat: float, lon: float, heading: float, peers: Iterable[tuple[float, float]], range_m: float, fov_deg: float
+) -> Detection:
+    """`detect` without shortcuts: long ranges and polar regions, where the planar bounds do not hold."""
     count = 0
     best_d = math.inf
     best_rel = 0.0
     for peer_lat, peer_lon in peers:
-        if prefilter is not None and not prefilter.may_be_inside(peer_lat, peer_lon, hn, he):
-            continue
         inside, dist, rel = in_sector(lat, lon, heading, peer_lat, peer_lon, range_m, fov_deg)
         if inside:
             count += 1
@@ -156,3 +207,57 @@ def detect(
     if count == 0:
         return NO_DETECTION
     return Detection(True, count, best_d, best_rel)
+
+
+def search_box(lat: float, lon: float, heading: float, range_m: float, fov_deg: float
+               ) -> tuple[float, float, float, float]:
+    """(south, north, west, east) in degrees enclosing the sector, generously: what the index scans.
+
+    A narrow sector needs a box a quarter the size of the circle's, so the index hands over a
+    quarter of the candidates. ``west`` may exceed ``east`` (the box crosses the antimeridian), and
+    the box becomes every longitude when it reaches a pole.
+    """
+    reach = range_m * (1.0 + _Flat.REL_MARGIN) + _Flat.SLACK_M
+    half = fov_deg / 2.0 + _Flat.FOV_MARGIN_DEG
+    # Extremes of the sector in a local north/east plane: the apex, the two arc ends, and every
+    # compass point the arc sweeps through.
+    norths, easts = [0.0], [0.0]
+    if not _Flat.usable(lat, range_m):
+        # Beyond the planar bounds: the box of the whole circle, from bounds that hold anywhere
+        # (a degree of latitude is ≥ 110,574 m; a parallel's radius is ≥ a·cos(latitude)).
+        reach = range_m
+        half = 180.0
+    if half >= 180.0:
+        norths += [reach, -reach]
+        easts += [reach, -reach]
+    else:
+        for az in (heading - half, heading + half):
+            norths.append(reach * math.cos(math.radians(az)))
+            easts.append(reach * math.sin(math.radians(az)))
+        for compass in (0.0, 90.0, 180.0, 270.0):
+            if abs(relative_bearing(compass, heading)) <= half:
+                norths.append(reach * math.cos(math.radians(compass)))
+                easts.append(reach * math.sin(math.radians(compass)))
+    # Conservative metres-per-degree: the equator's for latitude (the smallest), and for longitude
+    # the parallel of the most poleward latitude the box reaches, with the sphere of radius a
+    # (smaller than the ellipsoid's parallels there).
+    slack = 1.0 + _BOX_SLACK
+    south = lat + min(norths) * slack / _MIN_M_PER_DEG_LAT
+    north = lat + max(norths) * slack / _MIN_M_PER_DEG_LAT
+    south, north = max(-90.0, south), min(90.0, north)
+    cos_pole = math.cos(math.radians(max(abs(south), abs(north))))
+    if cos_pole < 1e-9:
+        return south, north, -180.0, 180.0
+    m_per_deg_lon = math.radians(1.0) * _A * cos_pole
+    west = lon + min(easts) * slack / m_per_deg_lon
+    east = lon + max(easts) * slack / m_per_deg_lon
+    if east - west >= 360.0:
+        return south, north, -180.0, 180.0
+    return south, north, _wrap_lon(west), _wrap_lon(east)
+
+
+def _wrap_lon(lon: float) -> float:
+    wrapped = math.fmod(lon + 180.0, 360.0)
+    if wrapped < 0.0:
+        wrapped += 360.0
+    return wrapped - 180.0

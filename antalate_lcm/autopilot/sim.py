@@ -1,0 +1,440 @@
+"""`SimAutopilot`: an in-process kinematic quadcopter, the default vehicle (DESIGN §7, ``sim``).
+
+It is meant for running the whole framework (and swarms of 200 agents) on one laptop, and for
+testing the HLC against faults that are hard to provoke on real hardware.
+
+The model
+---------
+* Position is kept in metres north/east of home and altitude above home; lat/lon are derived with
+  `antalate_lcm.geo.FlatFrame` (a tangent-plane approximation: centimetres off at 1 km, plenty
+  for a flying field, and a few multiplications per call).
+* Velocity set-points (GUIDED, `set_velocity`) are followed with a first-order lag of time constant
+  ``tau``; the horizontal set-point is limited to ``max_speed``, the vertical one to ``climb_rate`` up
+  and ``descent_rate`` down. Like ArduCopter, a set-point expires after ``velocity_hold`` seconds.
+* Manoeuvres the autopilot runs itself -- takeoff climb, landing descent, the RTL return leg -- are
+  rate-limited kinematics (exactly ``climb_rate``, ``descent_rate``, ``rtl_speed``, stopping exactly on
+  target), which keeps their timing predictable; horizontal drift is braked with the same lag.
+* Modes are reported as ArduCopter names: ``GUIDED``, ``LAND``, ``RTL``, and ``LOITER`` for a pilot.
+  RTL flies home at the current altitude (or first climbs to ``rtl_altitude`` if that is higher),
+  then lands, still in RTL mode. Landing disarms ``land_disarm_delay`` s after touchdown; an armed
+  vehicle that does not take off within ``auto_disarm_delay`` s disarms itself. An empty battery in
+  the air forces a LAND (the autopilot's own failsafe).
+* Battery drains ``drain_flying`` %/min in the air and ``drain_idle`` %/min on the ground.
+
+Time
+----
+The simulation advances lazily: whenever `state()` or a command is called, it integrates from the
+previous call to ``clock()`` (scaled by ``time_scale``) in steps of at most ``max_step`` seconds
+(in one go while idle on the ground). Nothing runs between calls, so hundreds of sims cost nothing
+while idle, and tests drive time with a fake clock. Autopilot timers (auto-disarm, velocity hold, ...)
+run on simulated time; `AutopilotState.link_age` is in real (clock) seconds, as the HLC perceives it.
+
+Fault injection (params at construction, and methods at run time)
+-----------------------------------------------------------------
+``link_loss`` / `set_link_loss`: the vehicle stops answering: `state()` repeats the last snapshot
+with a growing ``link_age`` and commands raise `AutopilotError` (the vehicle itself flies on).
+``refuse_arm`` / `set_refuse_arm`: `arm()` returns False. ``battery`` / `set_battery`: the level.
+`pilot_takeover`: mode LOITER, not autonomous; with ``takeover_autoland`` the "pilot" lands after
+``takeover_land_delay`` s. ``time_scale`` / `set_time_scale`: simulated seconds per real second.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import replace
+from typing import Any
+
+from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, Clock, FlightMode, Frame
+from antalate_lcm.geo import FlatFrame, wrap_360
+
+#: Parameters and their defaults (``[hlc.autopilot]`` with ``autopilot = "sim"``).
+DEFAULTS: dict[str, Any] = {
+    "home_lat": 32.7767,  # deg; Technion, Haifa
+    "home_lon": 35.0231,  # deg
+    "heading": 0.0,  # deg, initial
+    "tau": 0.5,  # s, time constant of the velocity response
+    "climb_rate": 2.5,  # m/s
+    "descent_rate": 1.5,  # m/s
+    "max_speed": 10.0,  # m/s horizontal
+    "max_yaw_rate": 180.0,  # deg/s
+    "rtl_speed": 5.0,  # m/s
+    "rtl_altitude": 0.0,  # m; 0 = return at the current altitude
+    "battery": 100.0,  # percent, initial
+    "drain_flying": 4.0,  # percent per minute in the air
+    "drain_idle": 0.1,  # percent per minute on the ground
+    "auto_disarm_delay": 10.0,  # s armed on the ground before disarming
+    "land_disarm_delay": 0.5,  # s after touchdown
+    "velocity_hold": 3.0,  # s a velocity set-point stays valid
+    "takeover_autoland": True,  # after pilot_takeover(), the pilot lands
+    "takeover_land_delay": 2.0,  # s
+    "link_loss": False,
+    "refuse_arm": False,
+    "time_scale": 1.0,
+    "max_step": 0.05,  # s of simulated time per integration step
+}
+
+_AUTONOMOUS_MODES = {"GUIDED": FlightMode.GUIDED, "LAND": FlightMode.LANDING, "RTL": FlightMode.RTL}
+_HOME_RADIUS = 0.05  # m: close enough to home to start the RTL descent
+
+
+class _Phase(enum.Enum):
+    GROUND = "ground"
+    CLIMB = "climb"  # takeoff
+    GUIDED = "guided"  # following velocity set-points (hover without)
+    RETURN = "return"  # RTL leg home
+    DESCEND = "descend"  # LAND, end of RTL, or the pilot landing
+    PILOT = "pilot"  # a pilot holds the vehicle
+
+
+class SimAutopilot(Autopilot):
+    """A kinematic quadcopter; see the module docstring for the model and the fault injection."""
+
+    name = "sim"
+    blocking = False  # in-process: every command returns at once
+
+    def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
+        super().__init__(params, clock=clock)
+        unknown = sorted(set(self.params) - set(DEFAULTS))
+        if unknown:
+            raise ValueError(f"unknown sim autopilot parameter(s) {unknown}; known: {sorted(DEFAULTS)}")
+        p = {**DEFAULTS, **self.params}
+        self._p = p
+        for key in ("tau", "climb_rate", "descent_rate", "max_speed", "rtl_speed", "max_step", "time_scale"):
+            if not (math.isfinite(float(p[key])) and float(p[key]) > 0.0):
+                raise ValueError(f"sim autopilot parameter {key!r} must be > 0, got {p[key]!r}")
+        self.home = FlatFrame(float(p["home_lat"]), float(p["home_lon"]))
+        self._tau = float(p["tau"])
+        self._time_scale = float(p["time_scale"])
+        self._max_step = float(p["max_step"])
+        # Vehicle state (local frame: metres north/east of home, altitude above home).
+        self.north = 0.0
+        self.east = 0.0
+        self.alt = 0.0
+        self.vn = 0.0
+        self.ve = 0.0
+        self.vd = 0.0
+        self.heading = wrap_360(float(p["heading"]))
+        self.battery = self._check_battery(float(p["battery"]))
+        self.armed = False
+        self.in_air = False
+        self.mode = "GUIDED"
+        self._phase = _Phase.GROUND
+        self._takeoff_alt = 0.0
+        self._cmd: tuple[float, float, float, float, Frame] | None = None  # vx, vy, vz, yaw_rate, frame
+        self._cmd_time = 0.0
+        self._armed_since: float | None = None  # sim time the vehicle was armed on the ground
+        self._disarm_at: float | None = None  # sim time of a pending post-landing disarm
+        self._takeover_time = 0.0
+        self._pilot_autoland = bool(p["takeover_autoland"])
+        # Time and link.
+        self._sim_time = 0.0
+        self._t_last = clock()
+        self._connected = False
+        self._refuse_arm = bool(p["refuse_arm"])
+        self._link_lost_at: float | None = None
+        self._frozen: AutopilotState | None = None
+        if p["link_loss"]:
+            self._link_lost_at = self._t_last
+            self._frozen = AutopilotState(connected=True, link_age=math.inf)
+
+    # ----------------------------------------------------------------- Autopilot contract
+
+    def connect(self) -> None:
+        self._advance()
+        self._connected = True
+
+    def close(self) -> None:
+        self._connected = False
+
+    def arm(self) -> bool:
+        self._command("arm")
+        if self._refuse_arm or self.battery <= 0.0:
+            return False
+        if not self.armed:
+            self.mode = "GUIDED"
+            self.armed = True
+            self._armed_since = self._sim_time
+            self._disarm_at = None
+        return True
+
+    def disarm(self) -> None:
+        self._command("disarm")
+        if self.in_air:
+            raise AutopilotError("disarm refused: vehicle in the air")
+        self._disarm()
+
+    def takeoff(self, alt: float) -> None:
+        self._command("takeoff")
+        if not (math.isfinite(alt) and alt > 0.0):
+            raise AutopilotError(f"takeoff refused: altitude {alt!r} must be > 0")
+        if not self.armed:
+            raise AutopilotError("takeoff refused: not armed")
+        if self.mode != "GUIDED":
+            raise AutopilotError(f"takeoff refused: mode {self.mode}, needs GUIDED")
+        if self.in_air:
+            raise AutopilotError("takeoff refused: already flying")
+        self.in_air = True
+        self._takeoff_alt = alt
+        self._armed_since = None
+        self._phase = _Phase.CLIMB
+
+    def land(self) -> None:
+        self._command("land")
+        self.mode = "LAND"
+        self._cmd = None
+        if self.in_air:
+            self._phase = _Phase.DESCEND
+        elif self.armed:
+            self._disarm()
+
+    def rtl(self) -> None:
+        self._command("rtl")
+        self.mode = "RTL"
+        self._cmd = None
+        if self.in_air:
+            self._phase = _Phase.RETURN
+        elif self.armed:
+            self._disarm()
+
+    def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
+        self._command("set_velocity")
+        values = (vx, vy, vz, yaw_rate)
+        if not all(math.isfinite(v) for v in values):
+            raise AutopilotError(f"velocity refused: non-finite value in {values}")
+        if self.mode != "GUIDED" or self._phase is not _Phase.GUIDED:
+            return  # like ArduCopter: velocity targets are ignored outside GUIDED flight
+        self._cmd = (vx, vy, vz, yaw_rate, Frame(frame))
+        self._cmd_time = self._sim_time
+
+    def state(self) -> AutopilotState:
+        self._advance()
+        if not self._connected:
+            return AutopilotState(connected=False, link_age=math.inf)
+        if self._link_lost_at is not None:
+            frozen = self._frozen if self._frozen is not None else self._snapshot()
+            if math.isinf(frozen.link_age):
+                return frozen  # never heard from at all
+            return replace(frozen, link_age=max(0.0, self.clock() - self._link_lost_at))
+        return self._snapshot()
+
+    # ----------------------------------------------------------------- fault injection
+
+    def set_link_loss(self, lost: bool) -> None:
+        """Stop (or resume) answering. The vehicle keeps flying either way."""
+        self._advance()
+        if lost and self._link_lost_at is None:
+            self._frozen = self._snapshot() if self._connected else AutopilotState(connected=True)
+            self._link_lost_at = self.clock()
+        elif not lost:
+            self._link_lost_at = None
+            self._frozen = None
+
+    def set_refuse_arm(self, refuse: bool) -> None:
+        self._refuse_arm = refuse
+
+    def set_battery(self, percent: float) -> None:
+        self._advance()
+        self.battery = self._check_battery(percent)
+
+    def set_time_scale(self, scale: float) -> None:
+        if not (math.isfinite(scale) and scale > 0.0):
+            raise ValueError(f"time_scale must be > 0, got {scale!r}")
+        self._advance()  # time so far runs at the old scale
+        self._time_scale = scale
+
+    def pilot_takeover(self, auto_land: bool | None = None) -> None:
+        """A pilot flips the mode switch: LOITER, no longer autonomous; optionally lands after a delay."""
+        self._advance()
+        self.mode = "LOITER"
+        self._cmd = None
+        if auto_land is not None:
+            self._pilot_autoland = auto_land
+        if self.in_air:
+            self._phase = _Phase.PILOT
+            self._takeover_time = self._sim_time
+
+    # ----------------------------------------------------------------- helpers
+
+    @property
+    def sim_time(self) -> float:
+        """Simulated seconds since construction."""
+        return self._sim_time
+
+    @staticmethod
+    def _check_battery(percent: float) -> float:
+        if not (math.isfinite(percent) and 0.0 <= percent <= 100.0):
+            raise ValueError(f"battery must be in [0, 100] percent, got {percent!r}")
+        return percent
+
+    def _command(self, what: str) -> None:
+        self._advance()
+        if not self._connected:
+            raise AutopilotError(f"{what}: not connected")
+        if self._link_lost_at is not None:
+            raise AutopilotError(f"{what}: no response from the vehicle (link lost)")
+
+    def _disarm(self) -> None:
+        self.armed = False
+        self._armed_since = None
+        self._disarm_at = None
+
+    def _snapshot(self) -> AutopilotState:
+        lat, lon = self.home.to_latlon(self.north, self.east)
+        flight_mode = _AUTONOMOUS_MODES.get(self.mode, FlightMode.MANUAL)
+        return AutopilotState(
+            connected=True,
+            link_age=0.0,
+            lat=lat,
+            lon=lon,
+            alt=self.alt,
+            heading=self.heading,
+            vn=self.vn,
+            ve=self.ve,
+            vd=self.vd,
+            battery=self.battery,
+            armed=self.armed,
+            in_air=self.in_air,
+            autonomous=flight_mode is not FlightMode.MANUAL,
+            mode=self.mode,
+            flight_mode=flight_mode,
+        )
+
+    # ----------------------------------------------------------------- integration
+
+    def _advance(self) -> None:
+        now = self.clock()
+        dt = max(0.0, now - self._t_last) * self._time_scale
+        self._t_last = now
+        while dt > 0.0:
+            if self._phase is _Phase.GROUND:
+                self._step(dt)  # nothing moves: one step, however long
+                return
+            h = min(dt, self._max_step)
+            self._step(h)
+            dt -= h
+
+    def _step(self, h: float) -> None:
+        p = self._p
+        self._sim_time += h
+        t = self._sim_time
+        drain = float(p["drain_flying"] if self.in_air else p["drain_idle"])
+        self.battery = max(0.0, self.battery - drain * h / 60.0)
+        if self.in_air and self.battery <= 0.0 and self._phase is not _Phase.DESCEND:
+            self.mode = "LAND"  # the autopilot's own empty-battery failsafe
+            self._cmd = None
+            self._phase = _Phase.DESCEND
+
+        phase = self._phase
+        if phase is _Phase.GROUND:
+            self.vn = self.ve = self.vd = 0.0
+            landed_long_enough = self._disarm_at is not None and t >= self._disarm_at
+            idle_too_long = (
+                self._armed_since is not None and t - self._armed_since >= float(p["auto_disarm_delay"])
+            )
+            if landed_long_enough or idle_too_long:
+                self._disarm()
+        elif phase is _Phase.CLIMB:
+            self._brake(h)
+            self._vertical_to(self._takeoff_alt, float(p["climb_rate"]), h)
+            if self.alt >= self._takeoff_alt:
+                self._phase = _Phase.GUIDED
+        elif phase is _Phase.GUIDED:
+            self._follow_setpoint(h)
+        elif phase is _Phase.RETURN:
+            self._return_home(h)
+        elif phase is _Phase.DESCEND:
+            self._brake(h)
+            self._vertical_to(0.0, float(p["descent_rate"]), h)
+        elif phase is _Phase.PILOT:
+            self._brake(h)
+            self.vd = 0.0
+            if self._pilot_autoland and t - self._takeover_time >= float(p["takeover_land_delay"]):
+                self._phase = _Phase.DESCEND
+        if self.in_air and self.alt <= 0.0 and self._phase is not _Phase.CLIMB:
+            self._touchdown()
+
+    def _lag(self, v0: float, target: float, h: float) -> tuple[float, float]:
+        """Velocity after `h` s and distance covered, following `target` with the time constant.
+
+        Exact for a set-point held constant over the step, so results do not depend on the step size.
+        """
+        decay = math.exp(-h / self._tau)
+        v1 = target + (v0 - target) * decay
+        return v1, target * h + (v0 - target) * self._tau * (1.0 - decay)
+
+    def _brake(self, h: float) -> None:
+        self.vn, dn = self._lag(self.vn, 0.0, h)
+        self.ve, de = self._lag(self.ve, 0.0, h)
+        self.north += dn
+        self.east += de
+
+    def _vertical_to(self, target_alt: float, rate: float, h: float) -> None:
+        """Move altitude toward `target_alt` at `rate`, stopping exactly on it."""
+        gap = target_alt - self.alt
+        step = min(abs(gap), rate * h)
+        self.alt += math.copysign(step, gap)
+        self.vd = -math.copysign(rate, gap) if step < abs(gap) else 0.0
+
+    def _follow_setpoint(self, h: float) -> None:
+        p = self._p
+        tn = te = td = 0.0
+        yaw_rate = 0.0
+        if self._cmd is not None and self._sim_time - self._cmd_time <= float(p["velocity_hold"]):
+            vx, vy, vz, yaw_rate, frame = self._cmd
+            if frame is Frame.BODY:
+                psi = math.radians(self.heading)
+                tn = vx * math.cos(psi) - vy * math.sin(psi)
+                te = vx * math.sin(psi) + vy * math.cos(psi)
+            else:
+                tn, te = vx, vy
+            td = vz
+        speed = math.hypot(tn, te)
+        max_speed = float(p["max_speed"])
+        if speed > max_speed:
+            tn, te = tn * max_speed / speed, te * max_speed / speed
+        td = max(-float(p["climb_rate"]), min(float(p["descent_rate"]), td))
+        max_yaw = float(p["max_yaw_rate"])
+        yaw_rate = max(-max_yaw, min(max_yaw, yaw_rate))
+        self.vn, dn = self._lag(self.vn, tn, h)
+        self.ve, de = self._lag(self.ve, te, h)
+        self.vd, dd = self._lag(self.vd, td, h)
+        self.north += dn
+        self.east += de
+        self.alt = max(0.0, self.alt - dd)
+        self.heading = wrap_360(self.heading + yaw_rate * h)
+
+    def _return_home(self, h: float) -> None:
+        p = self._p
+        rtl_alt = float(p["rtl_altitude"])
+        if self.alt < rtl_alt:
+            self.vn = self.ve = 0.0
+            self._vertical_to(rtl_alt, float(p["climb_rate"]), h)
+            return
+        self.vd = 0.0
+        dist = math.hypot(self.north, self.east)
+        speed = float(p["rtl_speed"])
+        if dist <= max(_HOME_RADIUS, speed * h):
+            # Arrive exactly (within one step's travel), stop, and descend.
+            self.north = self.east = 0.0
+            self.vn = self.ve = 0.0
+            self._phase = _Phase.DESCEND
+            return
+        self.vn, self.ve = -self.north / dist * speed, -self.east / dist * speed
+        self.north += self.vn * h
+        self.east += self.ve * h
+        self.heading = wrap_360(math.degrees(math.atan2(self.ve, self.vn)))
+
+    def _touchdown(self) -> None:
+        self.alt = 0.0
+        self.vn = self.ve = self.vd = 0.0
+        self.in_air = False
+        self._phase = _Phase.GROUND
+        self._cmd = None
+        if self.armed:
+            if self.mode == "GUIDED":
+                self._armed_since = self._sim_time  # ArduCopter: disarm if left idle on the ground
+            else:
+                self._disarm_at = self._sim_time + float(self._p["land_disarm_delay"])

@@ -1,0 +1,213 @@
+"""The Behavior Module Arbiter node: follows one state topic and switches behaviors on and off.
+
+The activation rules live in :mod:`antalate_lcm.bma.arbiter` (pure); this module carries out the
+arbiter's decisions, contains behavior failures and publishes ``arbiter_status_t``.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from antalate_lcm._ratelimit import RateLimitedLog
+from antalate_lcm.behavior import Behavior, BehaviorContext, failure_reason
+from antalate_lcm.bma.arbiter import Arbiter, mc_state_name
+from antalate_lcm.bma.plan import BehaviorPlan, plan_bma
+from antalate_lcm.config import BmaConfig, Config
+from antalate_lcm.msgs import arbiter_status_t, mc_state_t
+from antalate_lcm.node import Context, Node
+
+
+class _Slot:
+    """A behavior instance with its context and the plan it came from."""
+
+    def __init__(self, plan: BehaviorPlan) -> None:
+        self.plan = plan
+        self.ctx: BehaviorContext | None = None
+        self.behavior: Behavior | None = None
+
+
+class BmaNode(Node):
+    """One ``[[bma]]`` of the config.
+
+    Construction resolves the plan (loads plugins, validates params) and raises
+    :class:`~antalate_lcm.errors.ConfigError` on a bad config; behaviors are instantiated in
+    :meth:`start`, on the executor thread, where a failing constructor is contained like any other
+    behavior failure.
+    """
+
+    kind = "bma"
+
+    def __init__(self, config: Config, context: Context, bma: BmaConfig) -> None:
+        super().__init__(config, context, name=bma.name)
+        self.bma = bma
+        self.plan = plan_bma(config, bma)
+        self.log = logging.getLogger(f"antalate.bma.{self.agent}.{bma.name}")
+        self._slots: dict[str, _Slot] = {p.name: _Slot(p) for p in self.plan.behaviors}
+        self._arbiter = Arbiter({p.name: p.rule for p in self.plan.behaviors})
+        self._reading_mc = self.plan.state_type is mc_state_t
+        self._bad_state_log = RateLimitedLog(self.log)
+        self._publish_status = lambda: None
+
+    # ------------------------------------------------------------------ views (executor thread or tests)
+    @property
+    def state(self) -> str:
+        return self._arbiter.state
+
+    def active(self) -> list[str]:
+        return self._arbiter.active()
+
+    def failures(self) -> dict[str, str]:
+        return self._arbiter.failures()
+
+    def behavior(self, name: str) -> Behavior | None:
+        """The instance of behavior ``name`` (None if its constructor failed or the node is not started)."""
+        return self._slots[name].behavior
+
+    # ------------------------------------------------------------------ lifecycle
+    def on_start(self) -> None:
+        for name, slot in self._slots.items():
+            self._construct(name, slot)
+        self._publish_status = self.state_publisher(
+            "ARBITER", self._status, self.bma.republish_hz, arbiter=self.bma.name
+        )
+        self.subscribe(self.bma.state_topic, self._on_state_msg)
+        self._publish_status()
+        self.log.info(
+            "arbiter %s follows %s with %s",
+            self.bma.name,
+            self.bma.state_topic,
+            ", ".join(f"{p.name} ({p.plugin}) on {'/'.join(sorted(p.rule.activate_on))}" for p in self.plan.behaviors)
+            or "no behaviors",
+        )
+
+    def on_stop(self) -> None:
+        for name in reversed(self._arbiter.active()):
+            self._deactivate(name, why="arbiter stopping")
+        for slot in self._slots.values():
+            if slot.ctx is not None:
+                slot.ctx._close()
+        self._publish_status()
+
+    def _construct(self, name: str, slot: _Slot) -> None:
+        plan = slot.plan
+        ctx = BehaviorContext(
+            self,
+            name,
+            plan.params,
+            plan.topics,
+            state=lambda: self._arbiter.state,
+            on_error=lambda where, exc, _n=name: self._fail(_n, where, exc),
+        )
+        slot.ctx = ctx
+        try:
+            slot.behavior = plan.cls(ctx)
+        except Exception as exc:  # noqa: BLE001 - a broken plugin must not take the BMA down
+            reason = f"{failure_reason(exc)} (in __init__)"
+            self.log.error("behavior %s cannot be constructed, it will never run: %s", name, reason, exc_info=True)
+            self._arbiter.failed(name, reason, permanent=True)
+            ctx._close()
+
+    # ------------------------------------------------------------------ state
+    def _on_state_msg(self, msg: Any) -> None:
+        if self._reading_mc:
+            state = mc_state_name(msg.state)
+            if state is None:
+                self._bad_state_log.log(
+                    ("state", msg.state), logging.WARNING,
+                    "ignoring mc_state_t with undefined state value %d on %s", msg.state, self.bma.state_topic,
+                )
+                return
+        else:
+            state = msg.state
+        self.apply_state(state)
+
+    def apply_state(self, state: str) -> None:
+        """Carry out the arbiter's decision for ``state`` (what a state message does)."""
+        decision = self._arbiter.on_state(state)
+        if decision.state_changed:
+            self.log.info("state %s", state)
+        for name in decision.unblocked:
+            self.log.info("%s failed earlier; it will be tried again the next time a state activates it", name)
+        changed = False
+        for name in decision.deactivate:
+            self._deactivate(name, why=f"state {state}")
+            changed = True
+        for name in decision.activate:
+            self._activate(name)
+            changed = True
+        for name in decision.notify:
+            slot = self._slots[name]
+            if slot.behavior is not None and self._arbiter.is_active(name) and slot.ctx is not None:
+                slot.ctx.guard("on_state", slot.behavior.on_state, state)
+        if changed or decision.state_changed:
+            self._publish_status()
+
+    # ------------------------------------------------------------------ activation
+    def _activate(self, name: str) -> None:
+        slot = self._slots[name]
+        behavior, ctx = slot.behavior, slot.ctx
+        if behavior is None or ctx is None:
+            return
+        ctx._begin_activation()
+        # Active in the arbiter's eyes before the hook runs, so a failure inside it is handled as
+        # "deactivate an active behavior" (on_deactivate attempted to release a half-done start).
+        self._arbiter.activated(name)
+        if not ctx.guard("on_activate", behavior.on_activate):
+            return
+        self.log.info("activated %s", name)
+        if slot.plan.tick_hz > 0:
+            self._start_ticking(ctx, behavior, slot.plan.tick_hz)
+
+    def _start_ticking(self, ctx: BehaviorContext, behavior: Behavior, hz: float) -> None:
+        last = [self.now]
+
+        def tick() -> None:
+            now = self.now
+            dt, last[0] = now - last[0], now
+            behavior.tick(dt)
+
+        ctx._timer(tick, lambda f: self.context.executor.create_timer(1.0 / hz, f), "tick")
+
+    def _deactivate(self, name: str, *, why: str) -> None:
+        slot = self._slots[name]
+        self._arbiter.deactivated(name)
+        if slot.ctx is not None:
+            slot.ctx._end_activation()
+        if slot.behavior is not None:
+            try:
+                slot.behavior.on_deactivate()
+            except Exception as exc:  # noqa: BLE001 - reported, the BMA carries on
+                reason = f"{failure_reason(exc)} (in on_deactivate)"
+                self.log.error("behavior %s raised while deactivating: %s", name, reason, exc_info=True)
+                self._arbiter.failed(name, reason)
+                return
+        self.log.info("deactivated %s (%s)", name, why)
+
+    def _fail(self, name: str, where: str, exc: BaseException) -> None:
+        """A hook, handler or timer of ``name`` raised: deactivate it, report it, carry on."""
+        slot = self._slots[name]
+        reason = f"{failure_reason(exc)} (in {where})"
+        self.log.error("behavior %s failed and is deactivated: %s", name, reason, exc_info=exc)
+        if self._arbiter.is_active(name):
+            self._arbiter.deactivated(name)
+            if slot.ctx is not None:
+                slot.ctx._end_activation()
+            if slot.behavior is not None:
+                try:
+                    slot.behavior.on_deactivate()
+                except Exception:  # noqa: BLE001 - already failing; the first reason is the one reported
+                    self.log.warning("%s: on_deactivate after the failure raised too", name, exc_info=True)
+        self._arbiter.failed(name, reason)
+        self._publish_status()
+
+    # ------------------------------------------------------------------ status
+    def _status(self) -> arbiter_status_t:
+        msg = arbiter_status_t()
+        msg.arbiter = self.bma.name
+        msg.state = self._arbiter.state
+        msg.active = self._arbiter.active()
+        msg.n = len(msg.active)
+        msg.failed = [f"{name}: {reason}" for name, reason in self._arbiter.failures().items()]
+        msg.n_failed = len(msg.failed)
+        return msg

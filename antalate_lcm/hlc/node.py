@@ -1,0 +1,252 @@
+"""The High-Level Control node: wires `HighLevelControl` and `VelocityGuard` to the bus and an autopilot.
+
+A control loop polls the autopilot at ``control_hz`` and feeds the machine; the actions it returns are
+performed in order, on a worker thread when the adapter's commands may block (see
+`Autopilot.blocking`), and their results fed back. Telemetry goes out at ``telemetry_hz``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+from antalate_lcm._ratelimit import RateLimitedLog
+from antalate_lcm.autopilot import Autopilot, AutopilotError, AutopilotState, Frame, load_autopilot
+from antalate_lcm.config import Config
+from antalate_lcm.hlc.machine import (
+    Action,
+    ActionKind,
+    ErrorCode,
+    HighLevelControl,
+    HlcError,
+    HlcOutcome,
+    HlcParams,
+    HlcState,
+    Severity,
+)
+from antalate_lcm.hlc.velocity_guard import (
+    GuardDecision,
+    Velocity,
+    VelocityCommand,
+    VelocityGuard,
+    VelocityLimits,
+    Verdict,
+)
+from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t, velocity_cmd_t
+from antalate_lcm.node import Context, Node
+
+_CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
+
+
+def make_autopilot(config: Config, context: Context) -> Autopilot:
+    cls = load_autopilot(config.hlc.autopilot)
+    return cls(config.hlc.autopilot_params, clock=context.executor.clock)
+
+
+class HlcNode(Node):
+    kind = "hlc"
+
+    def __init__(self, config: Config, context: Context, autopilot: Autopilot | None = None) -> None:
+        super().__init__(config, context)
+        h = config.hlc
+        self.autopilot = autopilot or make_autopilot(config, context)
+        self.machine = HighLevelControl(
+            HlcParams(
+                default_takeoff_altitude=h.default_takeoff_altitude,
+                airborne_fraction=h.airborne_fraction,
+                gain_altitude_timeout=h.gain_altitude_timeout,
+                low_battery=h.low_battery,
+                link_timeout=h.link_timeout,
+            )
+        )
+        self.guard = VelocityGuard(
+            VelocityLimits(
+                max_horizontal=h.max_horizontal_speed,
+                max_vertical=h.max_vertical_speed,
+                max_yaw_rate=h.max_yaw_rate,
+                velocity_timeout=h.velocity_timeout,
+            )
+        )
+        self.mc_state: int | None = None
+        self.snapshot = AutopilotState()
+        self.connected = False
+        self._io: ThreadPoolExecutor | None = None
+        self._reject_log = RateLimitedLog(self.log, period=5.0)
+        self._publish_state = lambda: None
+
+    @property
+    def state(self) -> HlcState:
+        return self.machine.state
+
+    # ------------------------------------------------------------------ lifecycle
+    def on_start(self) -> None:
+        if self.autopilot.blocking:
+            self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"hlc-io-{self.agent}")
+        self.subscribe("MC_STATE", self._on_mc_state)
+        self.subscribe("VELOCITY_CMD", self._on_velocity)
+        self._publish_state = self.state_publisher("HLC_STATE", self._state_msg, self.config.hlc.republish_hz)
+        self.create_timer(1.0 / self.config.hlc.control_hz, self._control)
+        self.create_timer(1.0 / self.config.hlc.telemetry_hz, self._publish_telemetry)
+        self._publish_state()
+        self._connect()
+
+    def on_stop(self) -> None:
+        io, self._io = self._io, None
+        if io is not None:
+            io.shutdown(wait=False, cancel_futures=True)
+        try:
+            self.autopilot.close()
+        except Exception:
+            self.log.exception("closing the %s autopilot failed", self.autopilot.name)
+
+    def _connect(self) -> None:
+        def done(ok: bool, detail: str) -> None:
+            if not self.started:
+                return
+            if ok:
+                self.connected = True
+                self.log.info("autopilot %s connected", self.autopilot.name)
+                return
+            self._error(
+                HlcError(
+                    ErrorCode.LINK_LOST,
+                    Severity.ERROR,
+                    f"cannot connect the {self.autopilot.name} "
+                    f"autopilot: {detail}; retrying in {_CONNECT_RETRY:g} s",
+                )
+            )
+            self.call_later(_CONNECT_RETRY, self._connect)
+
+        self._run(self.autopilot.connect, done)
+
+    # ------------------------------------------------------------------ running autopilot calls
+    def _run(self, call: Any, done: Any) -> None:
+        """Run ``call()``; then ``done(ok, detail)`` on the executor thread (inline for non-blocking adapters)."""
+
+        def attempt() -> tuple[bool, str]:
+            try:
+                result = call()
+            except AutopilotError as exc:
+                return False, str(exc)
+            except Exception as exc:  # noqa: BLE001 - an adapter bug must not kill the HLC
+                self.log.exception("autopilot %s raised", self.autopilot.name)
+                return False, f"{type(exc).__name__}: {exc}"
+            return (result is not False), ("refused" if result is False else "")
+
+        if self._io is None:
+            done(*attempt())
+        else:
+            post = self.context.executor.call_soon
+            self._io.submit(lambda: post(done, *attempt()))
+
+    def _perform(self, action: Action) -> None:
+        ap = self.autopilot
+        calls = {
+            ActionKind.ARM: ap.arm,
+            ActionKind.DISARM: ap.disarm,
+            ActionKind.TAKEOFF: lambda: ap.takeoff(action.altitude),
+            ActionKind.LAND: ap.land,
+            ActionKind.RTL: ap.rtl,
+            ActionKind.HOVER: lambda: ap.set_velocity(0.0, 0.0, 0.0, 0.0, Frame.BODY),
+        }
+        self.log.info(
+            "autopilot %s%s",
+            action.kind.name,
+            f" to {action.altitude:g} m" if action.kind is ActionKind.TAKEOFF else "",
+        )
+
+        def done(ok: bool, detail: str) -> None:
+            if not self.started:
+                return
+            if not ok:
+                self.log.warning("autopilot %s failed: %s", action.kind.name, detail or "refused")
+            self._handle(self.machine.on_action_result(action.kind, ok, self.now, detail))
+
+        self._run(calls[action.kind], done)
+
+    # ------------------------------------------------------------------ inputs
+    def _on_mc_state(self, msg: mc_state_t) -> None:
+        self.mc_state = msg.state
+        alt = (
+            msg.takeoff_altitude if math.isfinite(msg.takeoff_altitude) and msg.takeoff_altitude > 0 else 0.0
+        )
+        self._handle(self.machine.on_mc_state(msg.state, self.now, takeoff_altitude=alt))
+
+    def _on_velocity(self, msg: velocity_cmd_t) -> None:
+        cmd = VelocityCommand(msg.vx, msg.vy, msg.vz, msg.yaw_rate, msg.frame, self.now)
+        self._apply(self.guard.on_command(cmd, self.now, self.machine.state, self.mc_state), msg.header.agent)
+
+    def _control(self) -> None:
+        try:
+            self.snapshot = self.autopilot.state()
+        except Exception:
+            self.log.exception("autopilot %s state() raised", self.autopilot.name)
+        now = self.now
+        self._handle(self.machine.on_autopilot(self.snapshot, now))
+        self._handle(self.machine.tick(now))
+        stale = self.guard.tick(now, self.machine.state, self.mc_state)
+        if stale is not None:
+            self._apply(stale, "velocity timeout")
+
+    # ------------------------------------------------------------------ outputs
+    def _apply(self, decision: GuardDecision, source: str) -> None:
+        if decision.verdict is Verdict.REJECT:
+            self._reject_log.log(
+                ("reject", decision.reason),
+                logging.WARNING,
+                "rejected velocity command from %s: %s",
+                source,
+                decision.reason,
+            )
+            return
+        v = decision.send or Velocity.hover()
+        if decision.verdict is Verdict.HOVER:
+            self.log.info("hover: %s", decision.reason)
+        elif decision.clamped:
+            self._reject_log.log(("clamp",), logging.INFO, "velocity command clamped: %s", decision.reason)
+        try:
+            self.autopilot.set_velocity(v.vx, v.vy, v.vz, v.yaw_rate, Frame(v.frame))
+        except Exception as exc:
+            self._reject_log.log(("set_velocity",), logging.WARNING, "set_velocity failed: %s", exc)
+
+    def _handle(self, outcome: HlcOutcome) -> None:
+        t = outcome.transition
+        if t is not None:
+            level = logging.ERROR if t.to_state is HlcState.LLC_DOWN else logging.INFO
+            self.log.log(
+                level, "%s -> %s on %s: %s", t.from_state.name, t.to_state.name, t.event.name, t.reason
+            )
+            self._publish_state()
+        for err in outcome.errors:
+            self._error(err)
+        for action in outcome.actions:
+            self._perform(action)
+
+    def _error(self, err: HlcError) -> None:
+        level = {Severity.INFO: logging.INFO, Severity.WARNING: logging.WARNING}.get(
+            err.severity, logging.ERROR
+        )
+        self.log.log(level, "error %d (%s): %s", int(err.code), err.code.name, err.text)
+        msg = hlc_error_t()
+        msg.code = int(err.code)
+        msg.severity = int(err.severity)
+        msg.text = err.text
+        self.publish("HLC_ERROR", msg)
+
+    def _state_msg(self) -> hlc_state_t:
+        msg = hlc_state_t()
+        msg.state = int(self.machine.state)
+        msg.autopilot = self.autopilot.name
+        return msg
+
+    def _publish_telemetry(self) -> None:
+        s = self.snapshot
+        if not s.connected:
+            return
+        msg = telemetry_t()
+        msg.lat, msg.lon, msg.alt = s.lat, s.lon, s.alt
+        msg.heading, msg.vn, msg.ve, msg.vd = s.heading, s.vn, s.ve, s.vd
+        msg.battery, msg.armed, msg.in_air, msg.mode = s.battery, s.armed, s.in_air, s.mode
+        self.publish("TELEMETRY", msg)

@@ -1,0 +1,191 @@
+"""The filter between behaviors' velocity commands and the autopilot (DESIGN §6, last paragraph).
+
+Behaviors are plugins: the HLC cannot trust them to be in the right state, to produce finite
+numbers, to respect the vehicle's limits, or to keep talking. This module decides, for each command
+and on each tick, what (if anything) goes to `Autopilot.set_velocity` and why:
+
+* a command is only passed on while the HLC is AIRBORNE **and** the MC is in MISSION (otherwise the
+  autopilot is taking off, landing or returning, or a pilot flies, and must not be disturbed);
+* NaN or infinite components reject the whole command (a partly-applied command is worse than none);
+* the horizontal velocity is scaled down, direction preserved, to ``max_horizontal`` (the norm, so a
+  diagonal is not faster than a straight line); vertical speed and yaw rate are clamped per component;
+* a command whose age (now - receive time) exceeds ``velocity_timeout`` is replaced by zero velocity
+  (hover); when behaviors fall silent, `VelocityGuard.tick` sends that hover once.
+
+Receive time, not the sender's ``header.utime``, is what ages a command: clocks of different
+machines are not synchronised, the HLC's own monotonic clock is.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+from antalate_lcm.autopilot.base import Frame
+from antalate_lcm.hlc.machine import HlcState
+from antalate_lcm.mc.machine import McState
+
+
+@dataclass(frozen=True)
+class VelocityLimits:
+    """Velocity limits and staleness (``[hlc]`` config)."""
+
+    max_horizontal: float = 5.0  # m/s, norm of the horizontal vector
+    max_vertical: float = 2.0  # m/s, up or down
+    max_yaw_rate: float = 90.0  # deg/s, either way
+    velocity_timeout: float = 0.5  # s after receipt before a command counts as stale
+
+    def __post_init__(self) -> None:
+        for name in ("max_horizontal", "max_vertical", "max_yaw_rate", "velocity_timeout"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"VelocityLimits.{name} must be a finite number >= 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class Velocity:
+    """A set-point to pass to `Autopilot.set_velocity` (m/s, z down; deg/s clockwise)."""
+
+    vx: float
+    vy: float
+    vz: float
+    yaw_rate: float
+    frame: Frame = Frame.BODY
+
+    @classmethod
+    def hover(cls) -> Velocity:
+        return cls(0.0, 0.0, 0.0, 0.0, Frame.BODY)
+
+
+@dataclass(frozen=True)
+class VelocityCommand:
+    """A velocity command as received; `received_at` is the HLC's monotonic clock at receipt."""
+
+    vx: float
+    vy: float
+    vz: float
+    yaw_rate: float
+    frame: Frame | int
+    received_at: float
+
+
+class Verdict(enum.Enum):
+    SEND = "SEND"  # pass `send` on (possibly clamped)
+    HOVER = "HOVER"  # stale: send zero velocity
+    REJECT = "REJECT"  # send nothing
+
+
+@dataclass(frozen=True)
+class GuardDecision:
+    """What to send (None = nothing) and why; `clamped` tells the node to mention it in its log."""
+
+    verdict: Verdict
+    send: Velocity | None
+    reason: str = ""
+    clamped: bool = False
+
+    @property
+    def accepted(self) -> bool:
+        return self.verdict is Verdict.SEND
+
+
+def _state_name(enum_cls: type[HlcState] | type[McState], value: int | None) -> str:
+    try:
+        return enum_cls(value).name
+    except ValueError:
+        return repr(value)
+
+
+def mission_flight(hlc_state: HlcState | int, mc_state: McState | int | None) -> bool:
+    """The only situation in which behaviors may steer the vehicle."""
+    return hlc_state == HlcState.AIRBORNE and mc_state == McState.MISSION
+
+
+def check_velocity(
+    cmd: VelocityCommand,
+    now: float,
+    hlc_state: HlcState | int,
+    mc_state: McState | int | None,
+    limits: VelocityLimits,
+) -> GuardDecision:
+    """Stateless verdict on one command (see the module docstring for the rules)."""
+    if not mission_flight(hlc_state, mc_state):
+        return GuardDecision(
+            Verdict.REJECT,
+            None,
+            f"velocity ignored: HLC {_state_name(HlcState, hlc_state)}, MC {_state_name(McState, mc_state)}"
+            " (needs HLC AIRBORNE and MC MISSION)",
+        )
+    components = {"vx": cmd.vx, "vy": cmd.vy, "vz": cmd.vz, "yaw_rate": cmd.yaw_rate}
+    bad = [f"{name}={value!r}" for name, value in components.items() if not math.isfinite(value)]
+    if bad:
+        return GuardDecision(Verdict.REJECT, None, f"velocity rejected: non-finite {', '.join(bad)}")
+    try:
+        frame = Frame(cmd.frame)
+    except ValueError:
+        return GuardDecision(Verdict.REJECT, None, f"velocity rejected: unknown frame {cmd.frame!r}")
+    age = now - cmd.received_at
+    if age > limits.velocity_timeout:
+        return GuardDecision(
+            Verdict.HOVER, Velocity.hover(),
+            f"velocity stale: {age:.2f} s old > velocity_timeout {limits.velocity_timeout:g} s: hover",
+        )
+
+    notes: list[str] = []
+    vx, vy = cmd.vx, cmd.vy
+    horizontal = math.hypot(vx, vy)
+    if horizontal > limits.max_horizontal:
+        scale = limits.max_horizontal / horizontal
+        vx, vy = vx * scale, vy * scale
+        notes.append(f"horizontal {horizontal:.2f} -> {limits.max_horizontal:g} m/s")
+    vz = _clamp(cmd.vz, limits.max_vertical)
+    if vz != cmd.vz:
+        notes.append(f"vertical {cmd.vz:.2f} -> {vz:g} m/s")
+    yaw_rate = _clamp(cmd.yaw_rate, limits.max_yaw_rate)
+    if yaw_rate != cmd.yaw_rate:
+        notes.append(f"yaw rate {cmd.yaw_rate:.1f} -> {yaw_rate:g} deg/s")
+    reason = f"velocity clamped: {'; '.join(notes)}" if notes else ""
+    return GuardDecision(Verdict.SEND, Velocity(vx, vy, vz, yaw_rate, frame), reason, clamped=bool(notes))
+
+
+def _clamp(value: float, limit: float) -> float:
+    return max(-limit, min(limit, value))
+
+
+class VelocityGuard:
+    """`check_velocity` plus the memory needed to hover once when commands stop arriving."""
+
+    def __init__(self, limits: VelocityLimits | None = None) -> None:
+        self.limits = limits or VelocityLimits()
+        self._last_received: float | None = None  # receipt time of the last command passed on
+        self._hovering = False
+
+    def on_command(
+        self, cmd: VelocityCommand, now: float, hlc_state: HlcState | int, mc_state: McState | int | None
+    ) -> GuardDecision:
+        decision = check_velocity(cmd, now, hlc_state, mc_state, self.limits)
+        if decision.verdict is Verdict.SEND:
+            self._last_received = cmd.received_at
+            self._hovering = False
+        elif decision.verdict is Verdict.HOVER:
+            self._hovering = True
+        elif not mission_flight(hlc_state, mc_state):
+            self._last_received = None  # nothing of ours is flying any more
+        return decision
+
+    def tick(self, now: float, hlc_state: HlcState | int, mc_state: McState | int | None) -> GuardDecision | None:
+        """Call periodically: returns a HOVER decision once after the last command went stale."""
+        if not mission_flight(hlc_state, mc_state):
+            self._last_received = None
+            return None
+        if self._last_received is None or self._hovering:
+            return None
+        age = now - self._last_received
+        if age <= self.limits.velocity_timeout:
+            return None
+        self._hovering = True
+        return GuardDecision(
+            Verdict.HOVER, Velocity.hover(),
+            f"no velocity command for {age:.2f} s > velocity_timeout {self.limits.velocity_timeout:g} s: hover",
+        )

@@ -1,0 +1,96 @@
+"""The Mission Control node: wires `MissionControl` to the bus.
+
+Hears operator commands on its own channel and the broadcast ``SWARM/OPERATOR_CMD``, and the HLC
+state; publishes ``mc_state_t`` on every change and periodically. Every transition and every rejected
+command is logged with its reason.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from antalate_lcm.config import Config
+from antalate_lcm.mc.machine import McOutcome, McParams, McState, MissionControl, OperatorCommand
+from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
+from antalate_lcm.node import Context, Node
+from antalate_lcm.security import verify
+
+_TICK_PERIOD = 0.1  # s: resolution of the takeoff-acknowledgement timeout
+
+
+class McNode(Node):
+    kind = "mc"
+
+    def __init__(self, config: Config, context: Context) -> None:
+        super().__init__(config, context)
+        self.machine = MissionControl(McParams(takeoff_ack_timeout=config.mc.takeoff_ack_timeout))
+        self._publish_state = lambda: None
+
+    def on_start(self) -> None:
+        self.subscribe("OPERATOR_CMD", self._on_command)
+        self.subscribe("SWARM_OPERATOR_CMD", self._on_command)
+        self.subscribe("HLC_STATE", self._on_hlc_state)
+        self.create_timer(_TICK_PERIOD, self._tick)
+        self._publish_state = self.state_publisher("MC_STATE", self._state_msg, self.config.mc.republish_hz)
+        self._publish_state()
+        self.log.info("MC started in %s", self.machine.state.name)
+
+    @property
+    def state(self) -> McState:
+        return self.machine.state
+
+    def _state_msg(self) -> mc_state_t:
+        msg = mc_state_t()
+        msg.state = int(self.machine.state)
+        msg.last_command_seq = self.machine.last_command_seq
+        msg.takeoff_altitude = float(self.machine.takeoff_altitude)
+        return msg
+
+    # ------------------------------------------------------------------ inputs
+    def _on_command(self, cmd: operator_cmd_t) -> None:
+        if cmd.target and cmd.target != self.agent:
+            return
+        sender = cmd.header.agent
+        key = self.config.security.swarm_key
+        if key:
+            problem = verify(cmd, key, self.config.security.window)
+            if problem:
+                self.log.warning("rejected command seq %d from %r: %s", cmd.header.seq, sender, problem)
+                return
+        try:
+            name = OperatorCommand(cmd.command).name
+        except ValueError:
+            name = f"#{cmd.command}"
+        outcome = self.machine.on_command(
+            cmd.command, cmd.header.seq, self.now, altitude=_finite_or_zero(cmd.altitude), sender=sender
+        )
+        self._report(outcome, f"operator {name} (seq {cmd.header.seq} from {sender or '?'})")
+
+    def _on_hlc_state(self, msg: hlc_state_t) -> None:
+        self._report(self.machine.on_hlc_state(msg.state, self.now), "HLC state")
+
+    def _tick(self) -> None:
+        self._report(self.machine.tick(self.now), "timer")
+
+    # ------------------------------------------------------------------ outputs
+    def _report(self, outcome: McOutcome, what: str) -> None:
+        if outcome.transition is not None:
+            t = outcome.transition
+            level = logging.ERROR if t.to_state is McState.ERROR else logging.INFO
+            self.log.log(level, "%s -> %s on %s: %s", t.from_state.name, t.to_state.name, what, t.reason)
+            self._publish_state()
+        elif not outcome.accepted:
+            self.log.warning("rejected %s in %s: %s", what, self.machine.state.name, outcome.reason)
+            self._publish_state()  # the operator sees at once that it was not acknowledged
+        elif outcome.duplicate:
+            self.log.debug("duplicate %s ignored", what)
+            self._publish_state()  # re-acknowledge: the first ack may have been lost
+
+
+def _finite_or_zero(x: Any) -> float:
+    try:
+        value = float(x)
+    except (TypeError, ValueError):
+        return 0.0
+    return value if value == value and abs(value) != float("inf") and value >= 0 else 0.0

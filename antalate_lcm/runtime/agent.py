@@ -1,0 +1,91 @@
+"""Assemble the nodes of one agent, or of many agents, to run in one process.
+
+An agent is an MC, an HLC, its BMAs and (optionally) an OSC. Running them in one process or each in
+its own (``antalate mc|hlc|bma|osc``) changes nothing for behaviors or configs: they meet on the bus.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from antalate_lcm.autopilot.sim import DEFAULTS as SIM_DEFAULTS
+from antalate_lcm.config import AgentConfig, Config
+from antalate_lcm.errors import ConfigError
+from antalate_lcm.geo import offset
+from antalate_lcm.hlc.node import HlcNode
+from antalate_lcm.mc.node import McNode
+from antalate_lcm.node import Context, Node
+
+
+def validate(config: Config) -> None:
+    """Every check that needs plugins loaded (behaviors, their params): before any node starts."""
+    from antalate_lcm.bma import validate_bma_config
+
+    validate_bma_config(config)
+
+
+def agent_nodes(config: Config, context: Context) -> list[Node]:
+    """The nodes of one agent, in start order: HLC first so the MC hears its state at once."""
+    from antalate_lcm.bma.node import BmaNode
+
+    nodes: list[Node] = [HlcNode(config, context), McNode(config, context)]
+    nodes.extend(BmaNode(config, context, bma) for bma in config.bma)
+    if config.osc.enabled:
+        from antalate_lcm.osc.node import OscNode
+
+        nodes.append(OscNode(config, context))
+    return nodes
+
+
+def swarm_configs(
+    config: Config, n: int, *, spacing: float = 8.0, base_name: str | None = None
+) -> list[Config]:
+    """``n`` copies of a simulated agent's config with distinct names and homes on a square grid.
+
+    Homes are ``spacing`` metres apart so the vehicles never start inside each other.
+    """
+    if n < 1:
+        raise ConfigError(config.source, "--agents", "a number of agents >= 1")
+    if n == 1:
+        return [config]
+    if config.hlc.autopilot != "sim":
+        raise ConfigError(
+            config.source,
+            "hlc.autopilot",
+            f"'sim' for --agents N (each {config.hlc.autopilot!r} vehicle needs its own config: "
+            "pass several config files to `antalate agent` instead)",
+        )
+    name = base_name or config.agent.name
+    if name.startswith("anon-"):
+        name = "sim"
+    params = config.hlc.autopilot_params
+    lat0 = float(params.get("home_lat", SIM_DEFAULTS["home_lat"]))
+    lon0 = float(params.get("home_lon", SIM_DEFAULTS["home_lon"]))
+    side = math.ceil(math.sqrt(n))
+    out = []
+    for i in range(n):
+        north, east = (i // side) * spacing, (i % side) * spacing
+        lat, lon = offset(lat0, lon0, north, east)
+        hlc = config.hlc.model_copy(update={"autopilot_params": {**params, "home_lat": lat, "home_lon": lon}})
+        out.append(
+            config.model_copy(
+                update={
+                    "agent": AgentConfig(name=f"{name}-{i + 1:02d}" if n < 100 else f"{name}-{i + 1:03d}"),
+                    "hlc": hlc,
+                }
+            )
+        )
+    return out
+
+
+def shared_buses(configs: Sequence[Config]) -> dict[str, str]:
+    """The union of the configs' buses; one name must mean one URL in a process."""
+    buses: dict[str, str] = {}
+    for cfg in configs:
+        for name, url in cfg.buses.items():
+            if buses.setdefault(name, url) != url:
+                raise ConfigError(
+                    cfg.source, f"buses.{name}", f"the same URL as in the other configs ({buses[name]!r})"
+                )
+    return buses

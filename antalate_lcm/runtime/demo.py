@@ -1,0 +1,93 @@
+"""``antalate demo``: a simulated swarm running the template application, in one process.
+
+The swarm flies the paper's template application (``dovrat_swarm`` active in MISSION). With
+``--headless`` a scripted operator takes off all, lets the mission run, commands RTL and prints each
+agent's state timeline; the exit status is 0 only when every agent came back to STANDBY.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from antalate_lcm.bus import Bus
+from antalate_lcm.config import Config, parse_config
+from antalate_lcm.errors import MulticastUnavailable
+from antalate_lcm.executor import Executor
+from antalate_lcm.node import Context, Node
+from antalate_lcm.runtime.agent import agent_nodes, swarm_configs, validate
+from antalate_lcm.runtime.launch import run_until_signal
+from antalate_lcm.runtime.scripted_operator import Phase, ScriptedOperator
+
+log = logging.getLogger("antalate.demo")
+
+#: The demo runs in one process, but on real multicast when it can, so lcm-spy and
+#: `antalate tui` in another terminal see it too; ttl=0 keeps it on this host.
+DEMO_URL = "udpm://239.255.76.67:7667?ttl=0"
+
+
+def demo_document(url: str, *, station: str | None = None) -> dict[str, Any]:
+    """The config of one demo agent (as a TOML-like dict): the template swarm application."""
+    doc: dict[str, Any] = {
+        "agent": {"name": "sim"},
+        "buses": {"lan": url},
+        "hlc": {"autopilot": "sim", "default_takeoff_altitude": 10.0},
+        "bma": [
+            {
+                "name": "swarm",
+                "behaviors": [
+                    {
+                        "plugin": "dovrat_swarm",
+                        "activate_on": ["MISSION"],
+                        "params": {"forward_speed": 2.0},
+                    }
+                ],
+            }
+        ],
+    }
+    if station:
+        doc["osc"] = {"enabled": True, "server": station, "rate": 2.0}
+    return doc
+
+
+def open_context(url: str) -> tuple[Context, str]:
+    """A context on ``url``, or on ``memq://`` when this host has no multicast route (said once)."""
+    bus = Bus({"lan": url})
+    try:
+        bus.open()
+    except MulticastUnavailable as exc:
+        bus.close()
+        log.warning("%s\nThe demo carries on in one process on memq:// (invisible to other processes).", exc)
+        url = "memq://"
+        bus = Bus({"lan": url})
+    return Context(bus, Executor()), url
+
+
+def build_swarm(n: int, url: str, *, station: str | None = None) -> list[Config]:
+    base = parse_config(demo_document(url, station=station), "<demo>")
+    configs = swarm_configs(base, n)
+    for cfg in configs:
+        validate(cfg)
+    return configs
+
+
+def run_headless(
+    n: int, *, mission_time: float = 20.0, url: str = DEMO_URL, direction: tuple[float, float] | None = None,
+    station: str | None = None, on_report: Callable[[str], None] = print,
+) -> int:
+    context, url = open_context(url)
+    configs = build_swarm(n, url, station=station)
+    nodes: list[Node] = [node for cfg in configs for node in agent_nodes(cfg, context)]
+    operator = ScriptedOperator(
+        configs[0].with_agent_name("operator"),
+        context,
+        expected_agents=n,
+        mission_time=mission_time,
+        direction=direction,
+    )
+    nodes.append(operator)
+    run_until_signal(context, nodes, stop_event=threading.Event(), poll=lambda: operator.finished)
+    on_report(operator.report())
+    return 0 if operator.phase is Phase.DONE else 1

@@ -1,0 +1,161 @@
+"""A scripted operator for the headless demo and tests: take off all, fly a mission, RTL all.
+
+It talks to the swarm only through the broadcast channels and learns the agents from their
+``MC_STATE`` channels, as a human operator would; it records every agent's MC state timeline.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+from antalate_lcm.config import Config
+from antalate_lcm.mc.machine import McState, OperatorCommand
+from antalate_lcm.msgs import direction_cmd_t, mc_state_t, operator_cmd_t
+from antalate_lcm.node import Context, Node, TopicMatch
+from antalate_lcm.security import sign
+
+_RESEND = 1.0  # s between repeats of a broadcast command while some agent has not followed
+
+
+class Phase(enum.Enum):
+    WAITING = "waiting for every agent in STANDBY"
+    TAKING_OFF = "taking off"
+    MISSION = "mission"
+    RETURNING = "returning"
+    DONE = "done"
+    FAILED = "failed"
+
+
+@dataclass
+class Timeline:
+    """One agent's MC states with the time (s since the script started) each was first seen."""
+
+    entries: list[tuple[float, McState]] = field(default_factory=list)
+
+    @property
+    def current(self) -> McState | None:
+        return self.entries[-1][1] if self.entries else None
+
+    def add(self, t: float, state: McState) -> None:
+        if self.current is not state:
+            self.entries.append((t, state))
+
+    def reached(self, state: McState) -> bool:
+        return any(s is state for _, s in self.entries)
+
+    def render(self) -> str:
+        return " -> ".join(f"{s.name}@{t:.1f}s" for t, s in self.entries)
+
+
+class ScriptedOperator(Node):
+    kind = "operator"
+
+    def __init__(
+        self,
+        config: Config,
+        context: Context,
+        *,
+        expected_agents: int,
+        mission_time: float = 20.0,
+        altitude: float = 0.0,
+        direction: tuple[float, float] | None = None,
+        timeout: float = 180.0,
+    ) -> None:
+        super().__init__(config, context)
+        self.expected_agents = expected_agents
+        self.mission_time = mission_time
+        self.altitude = altitude
+        self.direction = direction
+        self.timeout = timeout
+        self.timelines: dict[str, Timeline] = {}
+        self.phase = Phase.WAITING
+        self.reason = ""
+        self._t0 = 0.0
+        self._phase_at = 0.0
+        self._last_sent = -1e9
+
+    def on_start(self) -> None:
+        self._t0 = self._phase_at = self.now
+        self.subscribe_all("MC_STATE", self._on_mc_state)
+        self.create_timer(0.1, self._step)
+
+    @property
+    def finished(self) -> bool:
+        return self.phase in (Phase.DONE, Phase.FAILED)
+
+    @property
+    def elapsed(self) -> float:
+        return self.now - self._t0
+
+    def _on_mc_state(self, msg: mc_state_t, match: TopicMatch) -> None:
+        agent = match.fields.get("agent", msg.header.agent)
+        try:
+            state = McState(msg.state)
+        except ValueError:
+            return
+        self.timelines.setdefault(agent, Timeline()).add(self.elapsed, state)
+
+    def _states(self) -> list[McState | None]:
+        return [t.current for t in self.timelines.values()]
+
+    def _enter(self, phase: Phase) -> None:
+        self.log.info("phase: %s (%.1f s)", phase.value, self.elapsed)
+        self.phase = phase
+        self._phase_at = self.now
+        self._last_sent = -1e9
+
+    def _broadcast(self, command: OperatorCommand) -> None:
+        if self.now - self._last_sent < _RESEND:
+            return
+        self._last_sent = self.now
+        msg = operator_cmd_t()
+        msg.command = int(command)
+        msg.altitude = self.altitude
+        self._send("SWARM_OPERATOR_CMD", msg)
+
+    def _send(self, topic: str, msg: operator_cmd_t | direction_cmd_t) -> None:
+        key = self.config.security.swarm_key
+        self.publish(topic, msg, before_encode=(lambda m: sign(m, key)) if key else None)
+
+    def _step(self) -> None:
+        if self.finished:
+            return
+        if self.elapsed > self.timeout:
+            self.reason = f"timed out after {self.timeout:g} s in phase '{self.phase.value}'"
+            self._enter(Phase.FAILED)
+            return
+        states = self._states()
+        if any(s is McState.ERROR for s in states):
+            self.reason = "an agent is in ERROR"
+            self._enter(Phase.FAILED)
+            return
+        if self.phase is Phase.WAITING:
+            if len(states) >= self.expected_agents and all(s is McState.STANDBY for s in states):
+                self._enter(Phase.TAKING_OFF)
+        elif self.phase is Phase.TAKING_OFF:
+            if all(s is McState.MISSION for s in states):
+                self._enter(Phase.MISSION)
+                if self.direction is not None:
+                    d = direction_cmd_t()
+                    d.active, (d.azimuth, d.speed) = True, self.direction
+                    self._send("SWARM_DIRECTION_CMD", d)
+            elif any(s is McState.STANDBY for s in states):
+                self._broadcast(OperatorCommand.TAKEOFF)
+        elif self.phase is Phase.MISSION:
+            if self.now - self._phase_at >= self.mission_time:
+                self._enter(Phase.RETURNING)
+        elif self.phase is Phase.RETURNING:
+            if all(s is McState.STANDBY for s in states):
+                self._enter(Phase.DONE)
+            elif any(s in (McState.MISSION, McState.TAKEOFF) for s in states):
+                self._broadcast(OperatorCommand.RTL)
+
+    def report(self) -> str:
+        lines = [f"{name}: {tl.render()}" for name, tl in sorted(self.timelines.items())]
+        ok = self.phase is Phase.DONE
+        lines.append(
+            f"{'OK' if ok else 'FAILED'}: {len(self.timelines)} agent(s), "
+            f"{'all back in STANDBY' if ok else self.reason} after {self.elapsed:.1f} s"
+        )
+        return "\n".join(lines)

@@ -1,0 +1,142 @@
+"""Running the station: blocking for the CLI, or in a background thread for tests, demos and benchmarks."""
+
+from __future__ import annotations
+
+import logging
+import socket
+import threading
+from types import TracebackType
+
+import uvicorn
+from pydantic import ValidationError
+
+from antalate_lcm.errors import AntalateError
+
+from ._app import create_app
+from ._settings import DEFAULT_HOST, DEFAULT_PORT, StationSettings
+
+log = logging.getLogger("antalate.station")
+
+
+def _config(settings: StationSettings, log_level: str) -> uvicorn.Config:
+    # loop/http "auto" pick uvloop and httptools when installed (uvicorn[standard]): about twice the
+    # reports per second of the pure-Python asyncio + h11 pair.
+    return uvicorn.Config(
+        create_app(settings), log_level=log_level.lower(), access_log=False, loop="auto", http="auto",
+        lifespan="on", timeout_keep_alive=30,
+    )
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    """Bind before uvicorn starts, so port 0 works and a busy port is a clear error, not a log line."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        raise AntalateError(f"station cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+    sock.listen(2048)
+    sock.set_inheritable(True)
+    return sock
+
+
+def run_station(
+    host: str = DEFAULT_HOST,
+    port: int = DEFAULT_PORT,
+    db_path: str | None = None,
+    range_m: float = 100.0,
+    fov_deg: float = 60.0,
+    *,
+    stale_after_s: float = 5.0,
+    command_ttl_s: float | None = 60.0,
+    history_retention_s: float | None = 24 * 3600.0,
+    log_level: str = "info",
+) -> None:
+    """Serve the station until SIGINT/SIGTERM (what ``antalate station`` calls).
+
+    ``db_path`` None means the per-user default (`default_db_path`); ``":memory:"`` keeps nothing.
+    The other parameters are `StationSettings` fields. Raises `AntalateError` for a port that
+    cannot be bound, a database that cannot be used or parameters out of range.
+    """
+    fields: dict[str, object] = {
+        "range_m": range_m, "fov_deg": fov_deg, "stale_after_s": stale_after_s, "command_ttl_s": command_ttl_s,
+        "history_retention_s": history_retention_s,
+    }
+    if db_path is not None:
+        fields["db_path"] = db_path
+    try:
+        settings = StationSettings.model_validate(fields)
+    except ValidationError as exc:
+        raise AntalateError(f"invalid station parameters: {exc}") from None
+    sock = _bind(host, port)
+    actual = sock.getsockname()[1]
+    log.info("station listening on http://%s:%d (database %s)", host, actual, settings.db_path)
+    server = uvicorn.Server(_config(settings, log_level))
+    try:
+        server.run(sockets=[sock])
+    finally:
+        sock.close()
+    if not server.started:
+        raise AntalateError(f"station did not start (database {settings.db_path}); see the log above")
+
+
+class StationServer:
+    """The station in a background thread of this process, e.g. ``with StationServer(s) as srv: srv.url``.
+
+    Port 0 (the default) picks a free port. Used by the tests, the benchmark and the demo; a real
+    deployment runs ``antalate station``.
+    """
+
+    def __init__(
+        self, settings: StationSettings | None = None, host: str = "127.0.0.1", port: int = 0,
+        log_level: str = "warning",
+    ) -> None:
+        self.settings = settings if settings is not None else StationSettings()
+        self.host = host
+        self._sock = _bind(host, port)
+        self.port: int = self._sock.getsockname()[1]
+        self._server = uvicorn.Server(_config(self.settings, log_level))
+        self._thread = threading.Thread(target=self._run, name="station-server", daemon=True)
+        self._error: BaseException | None = None
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.host}:{self.port}"
+
+    def _run(self) -> None:
+        try:
+            # Server.run sets up the configured loop (uvloop when installed) and skips signal
+            # handling outside the main thread, so it is safe here.
+            self._server.run(sockets=[self._sock])
+        except BaseException as exc:  # surfaced by start()
+            self._error = exc
+
+    def start(self, timeout: float = 10.0) -> StationServer:
+        self._thread.start()
+        deadline = threading.Event()
+        waited = 0.0
+        while not self._server.started and self._thread.is_alive() and waited < timeout:
+            deadline.wait(0.01)
+            waited += 0.01
+        if not self._server.started:
+            self.stop()
+            raise AntalateError(f"station did not start on {self.url}: {self._error!r}")
+        return self
+
+    def stop(self, timeout: float = 10.0) -> None:
+        """Graceful stop: in-flight requests finish, buffered history is written, the database closed."""
+        self._server.should_exit = True
+        if self._thread.is_alive():
+            self._thread.join(timeout)
+        self._sock.close()
+
+    def __enter__(self) -> StationServer:
+        return self.start()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
+

@@ -1,0 +1,166 @@
+"""``dovrat_swarm``: the template swarm algorithm wired to topics (the rule is in ``logic.py``).
+
+Inputs, as in the paper's template application: the heading from TELEMETRY, the operator's
+direction from DIRECTION_CMD and the broadcast SWARM_DIRECTION_CMD, and peer detection from
+PEER_DETECTION (a sensor) and/or OPERATOR_PAYLOAD (the station's JSON answer). Output: a BODY-frame
+velocity_cmd_t on VELOCITY_CMD at the tick rate, and one zero command on deactivation so the
+vehicle hovers at once instead of waiting for the HLC's command timeout.
+
+Inputs are subscribed for the life of the BMA (not only while active), so a direction set while
+the swarm is still on the ground, and the latest heading, are known from the first tick.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from antalate_lcm._ratelimit import RateLimitedLog
+from antalate_lcm.behavior import Behavior, BehaviorContext
+from antalate_lcm.msgs import (
+    direction_cmd_t,
+    payload_t,
+    peer_detection_t,
+    telemetry_t,
+    velocity_cmd_t,
+)
+from behaviors.dovrat_swarm.logic import (
+    Detection,
+    DetectionTracker,
+    OperatorDirection,
+    SwarmCommand,
+    SwarmParams,
+    parse_detection_payload,
+    swarm_command,
+)
+
+
+class DovratSwarm(Behavior):
+    """Fly forward, turn gently while a peer is ahead and sharply while none is, drift with the operator."""
+
+    class Params(BaseModel):
+        model_config = ConfigDict(extra="forbid", frozen=True)
+
+        #: m/s along the heading.
+        forward_speed: float = Field(default=2.0, ge=0, allow_inf_nan=False)
+        #: deg/s while a peer is detected in the front sector.
+        gentle_turn_rate: float = Field(default=10.0, ge=0, allow_inf_nan=False)
+        #: deg/s while no peer is detected.
+        sharp_turn_rate: float = Field(default=40.0, ge=0, allow_inf_nan=False)
+        #: 1 = turn clockwise, -1 = counter-clockwise (both rates turn the same way).
+        turn_direction: Literal[1, -1] = 1
+        #: Scale of the operator's direction drift; 0 ignores direction commands.
+        direction_weight: float = Field(default=1.0, ge=0, allow_inf_nan=False)
+        #: Cap on the blended horizontal speed (m/s); 0 = none (the HLC clamps anyway).
+        max_speed: float = Field(default=0.0, ge=0, allow_inf_nan=False)
+        #: A detection older than this (s) counts as "no peer".
+        detection_timeout: float = Field(default=2.0, gt=0, allow_inf_nan=False)
+        #: Heading older than this (s) is unknown: the operator's drift is left out meanwhile.
+        telemetry_timeout: float = Field(default=1.0, gt=0, allow_inf_nan=False)
+        #: Where detections come from: a sensor's PEER_DETECTION, the station's OPERATOR_PAYLOAD, or both.
+        detection_source: Literal["any", "peer_detection", "payload"] = "any"
+
+    params: Params
+    topics = {
+        "TELEMETRY": telemetry_t,
+        "DIRECTION_CMD": direction_cmd_t,
+        "SWARM_DIRECTION_CMD": direction_cmd_t,
+        "PEER_DETECTION": peer_detection_t,
+        "OPERATOR_PAYLOAD": payload_t,
+        "VELOCITY_CMD": velocity_cmd_t,
+    }
+    activate_on = ("MISSION",)
+    tick_hz = 10.0
+
+    def __init__(self, ctx: BehaviorContext) -> None:
+        super().__init__(ctx)
+        p = self.params
+        self.rule = SwarmParams(
+            forward_speed=p.forward_speed,
+            gentle_turn_rate=p.gentle_turn_rate,
+            sharp_turn_rate=p.sharp_turn_rate,
+            turn_direction=p.turn_direction,
+            direction_weight=p.direction_weight,
+            max_speed=p.max_speed,
+        )
+        self.detections = DetectionTracker(p.detection_timeout)
+        self.direction: OperatorDirection | None = None
+        self._heading: float | None = None
+        self._heading_at = 0.0
+        self.last_command: SwarmCommand | None = None
+        self._reject_log = RateLimitedLog(self.log, period=10.0)
+        ctx.subscribe("TELEMETRY", self._on_telemetry)
+        ctx.subscribe("DIRECTION_CMD", self._on_direction)
+        ctx.subscribe("SWARM_DIRECTION_CMD", self._on_direction)
+        if p.detection_source in ("any", "peer_detection"):
+            ctx.subscribe("PEER_DETECTION", self._on_peer_detection)
+        if p.detection_source in ("any", "payload"):
+            ctx.subscribe("OPERATOR_PAYLOAD", self._on_payload)
+
+    # ------------------------------------------------------------------ inputs
+    def _on_telemetry(self, msg: telemetry_t) -> None:
+        self._heading = float(msg.heading)
+        self._heading_at = self.ctx.now
+
+    def _on_direction(self, msg: direction_cmd_t) -> None:
+        if msg.target not in ("", self.ctx.agent):
+            return
+        why = self.ctx.verify(msg)
+        if why is not None:
+            self._reject_log.log("direction", logging.WARNING, "rejected a direction command from %r: %s",
+                                 msg.header.agent, why)
+            return
+        self.direction = OperatorDirection(bool(msg.active), float(msg.azimuth), float(msg.speed))
+        self.log.info(
+            "operator direction: %s",
+            f"{msg.azimuth:.0f} deg at {msg.speed:g} m/s" if msg.active else "none",
+        )
+
+    def _on_peer_detection(self, msg: peer_detection_t) -> None:
+        detection = Detection(bool(msg.detected), int(msg.count), float(msg.nearest_range), float(msg.nearest_bearing))
+        self.detections.update(detection, self.ctx.now)
+
+    def _on_payload(self, msg: payload_t) -> None:
+        detection = parse_detection_payload(bytes(msg.data))
+        if detection is None:
+            self._reject_log.log("payload", logging.DEBUG, "operator payload (%s) holds no detection; ignored",
+                                 msg.content_type)
+            return
+        self.detections.update(detection, self.ctx.now)
+
+    # ------------------------------------------------------------------ control
+    def heading(self) -> float | None:
+        if self._heading is None or self.ctx.now - self._heading_at > self.params.telemetry_timeout:
+            return None
+        return self._heading
+
+    def on_activate(self) -> None:
+        self.log.info("swarming: %g m/s, turning %s", self.rule.forward_speed,
+                      "clockwise" if self.rule.turn_direction > 0 else "counter-clockwise")
+
+    def tick(self, dt: float) -> None:
+        now = self.ctx.now
+        command = swarm_command(self.heading(), self.detections.detected(now), self.direction, self.rule)
+        self.last_command = command
+        self._publish(command.vx, command.vy, command.yaw_rate)
+
+    def on_deactivate(self) -> None:
+        self.last_command = None
+        self._publish(0.0, 0.0, 0.0)
+
+    def _publish(self, vx: float, vy: float, yaw_rate: float) -> None:
+        msg = velocity_cmd_t()
+        msg.frame = velocity_cmd_t.BODY
+        msg.vx, msg.vy, msg.vz, msg.yaw_rate = vx, vy, 0.0, yaw_rate
+        self.ctx.publish("VELOCITY_CMD", msg)
+
+    def status(self) -> dict[str, Any]:
+        """A snapshot for tests and debugging."""
+        return {
+            "heading": self.heading(),
+            "detected": self.detections.detected(self.ctx.now),
+            "direction": self.direction,
+            "command": self.last_command,
+        }

@@ -1,0 +1,337 @@
+"""What the console knows about the swarm, built only from decoded messages (pure: no Textual, no LCM I/O).
+
+Keeping this apart from the UI means the rules an operator relies on — when an agent is *stale*,
+which transitions reach the event log, what "last error" means — are tested without a terminal,
+and the UI only formats what is here. Time is always passed in (``now`` on a monotonic clock for
+ages and staleness, ``wall`` in Unix seconds for the log's timestamps), so tests drive it with a
+fake clock.
+
+An agent is never removed once seen: a vehicle that falls silent is exactly the one the operator
+must keep looking at, so it is marked stale instead.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections import deque
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+from antalate_lcm.geo import FlatFrame, wrap_360
+from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
+
+
+def _names(cls: type) -> dict[int, str]:
+    return {v: k for k, v in vars(cls).items() if k.isupper() and isinstance(v, int)}
+
+
+#: State names by wire value (from the generated constants, so a new state needs no edit here).
+MC_STATES: dict[int, str] = _names(mc_state_t)
+HLC_STATES: dict[int, str] = _names(hlc_state_t)
+ERROR_SEVERITIES: dict[int, str] = _names(hlc_error_t)
+
+#: The topics the model understands (config topic names).
+WATCHED_TOPICS: tuple[str, ...] = ("MC_STATE", "HLC_STATE", "TELEMETRY", "HLC_ERROR", "ARBITER")
+
+
+def state_name(table: dict[int, str], value: int) -> str:
+    """A state's name; an unknown value (a newer agent) is shown as a number rather than dropped."""
+    return table.get(value, f"?{value}")
+
+
+class Severity(enum.IntEnum):
+    """Event severities; the values of INFO..CRITICAL match ``hlc_error_t``'s constants."""
+
+    INFO = hlc_error_t.INFO
+    WARNING = hlc_error_t.WARNING
+    ERROR = hlc_error_t.ERROR
+    CRITICAL = hlc_error_t.CRITICAL
+
+
+class EventKind(enum.Enum):
+    DISCOVERED = "discovered"
+    MC = "mc"
+    HLC = "hlc"
+    ERROR = "error"
+    STALE = "stale"
+    ALIVE = "alive"
+    BEHAVIOR = "behavior"
+    COMMAND = "command"
+
+
+@dataclass(frozen=True)
+class Event:
+    """One line of the event log."""
+
+    wall: float
+    agent: str
+    kind: EventKind
+    text: str
+    severity: Severity = Severity.INFO
+
+
+@dataclass(frozen=True, slots=True)
+class Telemetry:
+    """The fields of ``telemetry_t`` the console shows (copied: the message object may be reused)."""
+
+    lat: float
+    lon: float
+    alt: float
+    heading: float
+    vn: float
+    ve: float
+    vd: float
+    battery: float
+    armed: bool
+    in_air: bool
+    mode: str
+
+    @classmethod
+    def from_msg(cls, msg: Any) -> Telemetry:
+        return cls(
+            msg.lat, msg.lon, msg.alt, msg.heading, msg.vn, msg.ve, msg.vd, msg.battery, msg.armed, msg.in_air, msg.mode
+        )
+
+    @property
+    def ground_speed(self) -> float:
+        return math.hypot(self.vn, self.ve)
+
+    @property
+    def has_fix(self) -> bool:
+        """False for (0, 0) and non-finite positions, which autopilots send before they have one."""
+        return math.isfinite(self.lat) and math.isfinite(self.lon) and not (self.lat == 0.0 and self.lon == 0.0)
+
+
+@dataclass(frozen=True)
+class ErrorReport:
+    """The latest ``hlc_error_t`` of an agent."""
+
+    code: int
+    severity: Severity
+    text: str
+    wall: float
+    at: float
+
+
+@dataclass
+class ArbiterView:
+    state: str = ""
+    active: tuple[str, ...] = ()
+    failed: tuple[str, ...] = ()
+
+
+@dataclass
+class AgentView:
+    """Everything known about one agent; ``None`` fields have not been heard yet."""
+
+    name: str
+    first_heard: float
+    last_heard: float
+    mc_state: str | None = None
+    last_command_seq: int | None = None
+    hlc_state: str | None = None
+    autopilot: str = ""
+    telemetry: Telemetry | None = None
+    arbiters: dict[str, ArbiterView] = field(default_factory=dict)
+    last_error: ErrorReport | None = None
+    errors: int = 0
+    stale: bool = False
+    #: Last time each topic was heard from this agent (so the detail view can say *what* went quiet).
+    heard: dict[str, float] = field(default_factory=dict)
+    messages: int = 0
+
+    def link_age(self, now: float) -> float:
+        return max(0.0, now - self.last_heard)
+
+    @property
+    def active_behaviors(self) -> tuple[str, ...]:
+        """Active behaviors of every arbiter, in arbiter-name order (what the table's column shows)."""
+        return tuple(b for _, arb in sorted(self.arbiters.items()) for b in arb.active)
+
+    @property
+    def failed_behaviors(self) -> tuple[str, ...]:
+        return tuple(b for _, arb in sorted(self.arbiters.items()) for b in arb.failed)
+
+
+class SwarmModel:
+    """Agents by name, plus the event log, updated from decoded messages.
+
+    The UI calls :meth:`apply` for every message it drains, :meth:`tick` on its refresh timer, and
+    reads :attr:`dirty` (names whose row must be redrawn) and :meth:`take_events`.
+    """
+
+    def __init__(self, *, stale_after: float = 3.0, max_events: int = 2000) -> None:
+        if not stale_after > 0:
+            raise ValueError("stale_after must be > 0")
+        self.stale_after = stale_after
+        self.agents: dict[str, AgentView] = {}
+        self.events: deque[Event] = deque(maxlen=max_events)
+        self._new_events: list[Event] = []
+        #: Agents whose shown values changed since the UI last cleared this set.
+        self.dirty: set[str] = set()
+        #: Set when an agent appears, so the UI re-sorts its table only then.
+        self.roster_changed = False
+        #: The map's reference point: the first position fix heard (stable, unlike a mean).
+        self.origin: FlatFrame | None = None
+        self.messages = 0
+
+    # ------------------------------------------------------------------ input
+    def apply(self, topic: str, agent: str, msg: Any, now: float, wall: float, fields: dict[str, str] | None = None) -> None:
+        """Fold one decoded message from ``agent`` (the name recovered from its channel) into the model."""
+        view = self.agents.get(agent)
+        if view is None:
+            view = self.agents[agent] = AgentView(agent, now, now)
+            self.roster_changed = True
+            self._event(wall, agent, EventKind.DISCOVERED, f"discovered (first heard on {topic})")
+        elif view.stale:
+            view.stale = False
+            self._event(wall, agent, EventKind.ALIVE, f"heard again after {now - view.last_heard:.1f} s of silence")
+        view.last_heard = now
+        view.heard[topic] = now
+        view.messages += 1
+        self.messages += 1
+        self.dirty.add(agent)
+        handler = self._handlers.get(topic)
+        if handler is not None:
+            handler(self, view, msg, now, wall, fields or {})
+
+    def _on_mc(self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]) -> None:
+        name = state_name(MC_STATES, msg.state)
+        if name != view.mc_state:
+            old = view.mc_state
+            view.mc_state = name
+            sev = Severity.ERROR if name == "ERROR" else Severity.INFO
+            self._event(wall, view.name, EventKind.MC, f"MC {old or '—'} → {name}", sev)
+        view.last_command_seq = msg.last_command_seq
+
+    def _on_hlc(self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]) -> None:
+        name = state_name(HLC_STATES, msg.state)
+        view.autopilot = msg.autopilot
+        if name != view.hlc_state:
+            old = view.hlc_state
+            view.hlc_state = name
+            sev = {"LLC_DOWN": Severity.CRITICAL, "LOW_BATTERY": Severity.WARNING}.get(name, Severity.INFO)
+            self._event(wall, view.name, EventKind.HLC, f"HLC {old or '—'} → {name}", sev)
+
+    def _on_telemetry(self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]) -> None:
+        tel = Telemetry.from_msg(msg)
+        view.telemetry = tel
+        if self.origin is None and tel.has_fix:
+            self.origin = FlatFrame(tel.lat, tel.lon)
+
+    def _on_error(self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]) -> None:
+        try:
+            sev = Severity(msg.severity)
+        except ValueError:
+            sev = Severity.ERROR
+        view.last_error = ErrorReport(msg.code, sev, msg.text, wall, now)
+        view.errors += 1
+        self._event(wall, view.name, EventKind.ERROR, f"[{sev.name} {msg.code}] {msg.text}", sev)
+
+    def _on_arbiter(self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]) -> None:
+        name = msg.arbiter or fields.get("arbiter", "")
+        arb = view.arbiters.get(name)
+        if arb is None:
+            arb = view.arbiters[name] = ArbiterView()
+        active = tuple(msg.active[: msg.n])
+        failed = tuple(getattr(msg, "failed", ())[: getattr(msg, "n_failed", 0)])
+        for fail in failed:
+            if fail not in arb.failed:
+                self._event(wall, view.name, EventKind.BEHAVIOR, f"behavior failed in {name}: {fail}", Severity.ERROR)
+        arb.state, arb.active, arb.failed = msg.state, active, failed
+
+    _handlers = {
+        "MC_STATE": _on_mc,
+        "HLC_STATE": _on_hlc,
+        "TELEMETRY": _on_telemetry,
+        "HLC_ERROR": _on_error,
+        "ARBITER": _on_arbiter,
+    }
+
+    # ------------------------------------------------------------------ time
+    def tick(self, now: float, wall: float) -> None:
+        """Mark agents silent for longer than ``stale_after`` as stale (once, with an event)."""
+        limit = now - self.stale_after
+        for view in self.agents.values():
+            if not view.stale and view.last_heard < limit:
+                view.stale = True
+                self.dirty.add(view.name)
+                self._event(
+                    wall, view.name, EventKind.STALE, f"silent for {now - view.last_heard:.1f} s: marked stale", Severity.WARNING
+                )
+
+    # ------------------------------------------------------------------ output
+    def log(self, wall: float, agent: str, text: str, severity: Severity = Severity.INFO) -> None:
+        """Add a console event (commands sent, acknowledged, failed) to the same log."""
+        self._event(wall, agent, EventKind.COMMAND, text, severity)
+
+    def _event(self, wall: float, agent: str, kind: EventKind, text: str, severity: Severity = Severity.INFO) -> None:
+        ev = Event(wall, agent, kind, text, severity)
+        self.events.append(ev)
+        self._new_events.append(ev)
+
+    def take_events(self) -> list[Event]:
+        """Events added since the last call (the UI appends them to its log widget)."""
+        out, self._new_events = self._new_events, []
+        return out
+
+    def take_dirty(self) -> set[str]:
+        out, self.dirty = self.dirty, set()
+        return out
+
+    def names(self) -> list[str]:
+        """Agent names in natural order (``a2`` before ``a10``), the table's order."""
+        return sorted(self.agents, key=natural_key)
+
+    def live_names(self) -> list[str]:
+        return [n for n in self.names() if not self.agents[n].stale]
+
+    @property
+    def stale_count(self) -> int:
+        return sum(1 for v in self.agents.values() if v.stale)
+
+    def positions(self) -> Iterator[tuple[AgentView, float, float]]:
+        """(agent, north m, east m) from :attr:`origin` for every agent with a position fix."""
+        if self.origin is None:
+            return
+        for view in self.agents.values():
+            tel = view.telemetry
+            if tel is not None and tel.has_fix:
+                north, east = self.origin.to_ne(tel.lat, tel.lon)
+                yield view, north, east
+
+
+def natural_key(name: str) -> tuple[Any, ...]:
+    """Sort key that orders embedded numbers numerically (``uav2`` < ``uav10``)."""
+    out: list[Any] = []
+    num = ""
+    text = ""
+    for ch in name:
+        if ch.isdigit():
+            if text:
+                out.append((1, text))
+                text = ""
+            num += ch
+        else:
+            if num:
+                out.append((0, int(num)))
+                num = ""
+            text += ch
+    if num:
+        out.append((0, int(num)))
+    if text:
+        out.append((1, text))
+    return tuple(out)
+
+
+def heading_arrow(heading: float) -> str:
+    """One of eight arrows for a heading (deg from north, clockwise): how the map and table draw it."""
+    return "↑↗→↘↓↙←↖"[int((wrap_360(heading) + 22.5) // 45) % 8]
+
+
+def join_limited(items: Iterable[str], width: int) -> str:
+    """Comma-join, cut with an ellipsis to ``width`` characters (table cells have fixed widths)."""
+    text = ", ".join(items)
+    return text if len(text) <= width else text[: max(0, width - 1)] + "…"

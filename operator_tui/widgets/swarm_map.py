@@ -1,0 +1,140 @@
+"""A top-down map: every agent as an arrow pointing along its heading, coloured by MC state.
+
+North is up. Positions are metres east/north of the first position fix heard (a fixed origin, so the
+picture does not drift as agents move), and the view zooms to fit every agent. Terminal cells are
+about twice as tall as wide, so one row spans two columns' worth of metres and circles look round.
+Several agents in one cell show as their count; the selected agent is highlighted and labelled.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+from rich.text import Text
+from textual.widget import Widget
+
+from operator_tui.model import AgentView, heading_arrow
+from operator_tui.widgets.palette import STALE_STYLE, mc_style
+
+#: Candidate scale-bar lengths (m): the map picks the longest that fits a quarter of its width.
+_NICE = (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10000, 20000, 50000)
+CELL_ASPECT = 2.0  # columns per row for equal metres
+
+
+@dataclass(frozen=True, slots=True)
+class MapPoint:
+    name: str
+    north: float
+    east: float
+    heading: float
+    mc_state: str | None
+    stale: bool
+
+
+def fit_scale(points: list[MapPoint], cols: int, rows: int, min_span: float = 20.0) -> tuple[float, float, float]:
+    """(metres per column, centre north, centre east) so every point fits with a margin."""
+    if points:
+        north = [p.north for p in points]
+        east = [p.east for p in points]
+        cn, ce = (max(north) + min(north)) / 2, (max(east) + min(east)) / 2
+        span_n, span_e = max(north) - min(north), max(east) - min(east)
+    else:
+        cn = ce = span_n = span_e = 0.0
+    usable_cols = max(1, cols - 2)
+    usable_rows = max(1, rows - 2)
+    m_per_col = max(span_e / usable_cols, span_n / (usable_rows * CELL_ASPECT), min_span / usable_cols)
+    return m_per_col * 1.1, cn, ce
+
+
+def render_map(points: list[MapPoint], selected: str | None, cols: int, rows: int) -> Text:
+    """The map as styled text, ``rows`` lines of ``cols`` cells (pure, so tests can read it)."""
+    if cols < 8 or rows < 3:
+        return Text("")
+    grid_rows = rows - 1  # the last line holds the scale bar
+    m_per_col, cn, ce = fit_scale(points, cols, grid_rows)
+    m_per_row = m_per_col * CELL_ASPECT
+    cells: dict[tuple[int, int], list[MapPoint]] = {}
+    for p in points:
+        col = int(round((p.east - ce) / m_per_col + (cols - 1) / 2))
+        row = int(round((cn - p.north) / m_per_row + (grid_rows - 1) / 2))
+        if 0 <= col < cols and 0 <= row < grid_rows:
+            cells.setdefault((row, col), []).append(p)
+    labels: dict[tuple[int, int], tuple[str, str]] = {}
+    for (row, col), here in cells.items():
+        if any(p.name == selected for p in here):
+            label = f" {selected}"
+            start = col + 1 if col + 1 + len(label) <= cols else max(0, col - len(label))
+            for i, ch in enumerate(label):
+                labels[(row, start + i)] = (ch, "bold reverse")
+    lines: list[Text] = []
+    for row in range(grid_rows):
+        line = Text()
+        for col in range(cols):
+            here = cells.get((row, col))
+            if here:
+                if len(here) == 1:
+                    p = here[0]
+                    glyph = "×" if p.stale else heading_arrow(p.heading)
+                    style = mc_style(p.mc_state) + (f" {STALE_STYLE}" if p.stale else "")
+                else:
+                    glyph = str(len(here)) if len(here) < 10 else "+"
+                    style = "bold white"
+                if any(p.name == selected for p in here):
+                    style = "bold reverse " + mc_style(next(p for p in here if p.name == selected).mc_state)
+                line.append(glyph, style)
+            elif (row, col) in labels:
+                ch, style = labels[(row, col)]
+                line.append(ch, style)
+            elif row == (grid_rows - 1) // 2 and col == (cols - 1) // 2:
+                line.append("+", "grey35")
+            else:
+                line.append(" ")
+        lines.append(line)
+    lines.append(_scale_bar(m_per_col, cols, len(points)))
+    return Text("\n").join(lines)
+
+
+def _scale_bar(m_per_col: float, cols: int, n: int) -> Text:
+    budget = max(2, cols // 4)
+    length = next((m for m in reversed(_NICE) if m / m_per_col <= budget), _NICE[0])
+    width = max(2, int(round(length / m_per_col)))
+    unit = f"{length / 1000:g} km" if length >= 1000 else f"{length:g} m"
+    bar = Text("├" + "─" * (width - 2) + "┤", "grey70")
+    bar.append(f" {unit}  N↑  {n} shown", "grey70")
+    bar.truncate(cols)
+    return bar
+
+
+class SwarmMap(Widget):
+    """Draws what :meth:`update_points` gave it; redraws on resize (the fit depends on the size)."""
+
+    DEFAULT_CSS = """
+    SwarmMap { height: 1fr; }
+    """
+
+    def __init__(self, *, id: str | None = None) -> None:  # noqa: A002 - Textual's name
+        super().__init__(id=id)
+        self.points: list[MapPoint] = []
+        self.selected: str | None = None
+
+    def update_points(self, points: list[MapPoint], selected: str | None) -> None:
+        if points != self.points or selected != self.selected:
+            self.points = points
+            self.selected = selected
+            self.refresh()
+
+    def render(self) -> Text:
+        return render_map(self.points, self.selected, self.size.width, self.size.height)
+
+
+def points_from(positions: Iterable[tuple[AgentView, float, float]]) -> list[MapPoint]:
+    """MapPoints from :meth:`SwarmModel.positions` (kept here so the model stays UI-free)."""
+    out: list[MapPoint] = []
+    for view, north, east in positions:
+        tel = view.telemetry
+        heading = tel.heading if tel is not None and math.isfinite(tel.heading) else 0.0
+        out.append(MapPoint(view.name, north, east, heading, view.mc_state, view.stale))
+    out.sort(key=lambda p: p.name)
+    return out

@@ -1,0 +1,562 @@
+"""HLC state machine: every row of DESIGN §6 (written out here), the documented extra rows, actions,
+errors, edge/level triggering of MC states, timeouts with injected time, and one closed loop with the
+MC machine and the simulator."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+
+from antalate_lcm.autopilot.base import AutopilotState, FlightMode, Frame
+from antalate_lcm.autopilot.sim import SimAutopilot
+from antalate_lcm.hlc.machine import (
+    HLC_TABLE,
+    Action,
+    ActionKind,
+    ErrorCode,
+    HighLevelControl,
+    HlcEvent,
+    HlcOutcome,
+    HlcParams,
+    HlcState,
+    Severity,
+)
+from antalate_lcm.mc.machine import McState, MissionControl, OperatorCommand
+from antalate_lcm.msgs import hlc_error_t, hlc_state_t
+
+H = HlcState
+M = McState
+T0 = 500.0
+
+GROUND = AutopilotState(connected=True, link_age=0.1, lat=32.7, lon=35.0, battery=80.0, mode="GUIDED")
+FLYING = replace(GROUND, armed=True, in_air=True, alt=10.0)
+
+
+def flying(**changes: object) -> AutopilotState:
+    return replace(FLYING, **changes)  # type: ignore[arg-type]
+
+
+def hlc_in(state: HlcState, params: HlcParams | None = None) -> HighLevelControl:
+    """An HLC driven into `state` through legitimate inputs."""
+    h = HighLevelControl(params)
+    if state is H.INIT:
+        return h
+    h.on_mc_state(M.STANDBY, T0)
+    h.on_autopilot(GROUND, T0)
+    assert h.state is H.READY
+    if state is H.LLC_DOWN:
+        h.on_autopilot(replace(GROUND, link_age=60.0), T0 + 1)
+    elif state is not H.READY:
+        h.on_mc_state(M.TAKEOFF, T0 + 1)
+        if state is not H.TAKEOFF:
+            h.on_action_result(ActionKind.ARM, True, T0 + 1)
+            h.on_autopilot(flying(alt=1.0), T0 + 2)
+            if state is not H.GAINING_ALTITUDE:
+                h.on_autopilot(FLYING, T0 + 5)
+                h.on_mc_state(M.MISSION, T0 + 5)
+                if state is H.RTL:
+                    h.on_mc_state(M.RTL, T0 + 6)
+                elif state is H.LANDING:
+                    h.on_mc_state(M.LAND, T0 + 6)
+                elif state is H.LOW_BATTERY:
+                    h.on_autopilot(flying(battery=15.0), T0 + 6)
+                elif state is H.MANUAL:
+                    h.on_autopilot(flying(autonomous=False, mode="LOITER"), T0 + 6)
+    assert h.state is state
+    return h
+
+
+# An input is one of: ("mc", McState), ("ap", AutopilotState), ("arm", bool), ("tick", seconds later).
+Input = tuple[str, object]
+
+
+def feed(h: HighLevelControl, what: Input, now: float = T0 + 10) -> HlcOutcome:
+    kind, value = what
+    if kind == "mc":
+        assert isinstance(value, McState)
+        return h.on_mc_state(value, now)
+    if kind == "ap":
+        assert isinstance(value, AutopilotState)
+        return h.on_autopilot(value, now)
+    if kind == "arm":
+        assert isinstance(value, bool)
+        return h.on_action_result(ActionKind.ARM, value, now)
+    assert isinstance(value, float)
+    return h.tick(now + value)
+
+
+LANDED = replace(GROUND, mode="LAND")
+TAKEN_OVER = flying(autonomous=False, mode="LOITER")
+LOW = flying(battery=20.0)  # <= low_battery (20) counts
+LOST = flying(link_age=3.0)
+AUTONOMOUS = (H.GAINING_ALTITUDE, H.AIRBORNE, H.RTL, H.LANDING, H.LOW_BATTERY)
+NO_ERROR: tuple[ErrorCode, ...] = ()
+
+# DESIGN §6 row by row: (from, input, to, actions, error codes).
+DESIGN_ROWS: list[tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[ErrorCode, ...]]] = [
+    (H.READY, ("mc", M.TAKEOFF), H.TAKEOFF, (Action.ARM,), NO_ERROR),
+    (H.TAKEOFF, ("arm", True), H.GAINING_ALTITUDE, (Action.takeoff(10.0),), NO_ERROR),
+    (H.TAKEOFF, ("arm", False), H.READY, (), (ErrorCode.ARM_FAILED,)),
+    (H.GAINING_ALTITUDE, ("ap", flying(alt=9.5)), H.AIRBORNE, (Action.HOVER,), NO_ERROR),
+    (H.GAINING_ALTITUDE, ("tick", 30.0), H.LANDING, (Action.LAND,), (ErrorCode.GAIN_ALTITUDE_TIMEOUT,)),
+    (H.AIRBORNE, ("mc", M.RTL), H.RTL, (Action.RTL,), NO_ERROR),
+    (H.AIRBORNE, ("mc", M.LAND), H.LANDING, (Action.LAND,), NO_ERROR),
+    *[(s, ("ap", LANDED), H.READY, (), NO_ERROR) for s in (H.RTL, H.LANDING, H.LOW_BATTERY, H.MANUAL)],
+    *[(s, ("ap", TAKEN_OVER), H.MANUAL, (), (ErrorCode.PILOT_TAKEOVER,)) for s in AUTONOMOUS],
+    *[(s, ("ap", LOW), H.LOW_BATTERY, (Action.RTL,), (ErrorCode.LOW_BATTERY,))
+      for s in (H.GAINING_ALTITUDE, H.AIRBORNE)],
+    *[(s, ("ap", LOST), H.LLC_DOWN, (), (ErrorCode.LINK_LOST,)) for s in HlcState if s not in (H.INIT, H.LLC_DOWN)],
+]
+
+EXTRA_ROWS: list[tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[ErrorCode, ...]]] = [
+    (H.GAINING_ALTITUDE, ("mc", M.LAND), H.LANDING, (Action.LAND,), NO_ERROR),
+    (H.GAINING_ALTITUDE, ("mc", M.RTL), H.RTL, (Action.RTL,), NO_ERROR),
+    (H.AIRBORNE, ("ap", LANDED), H.READY, (), (ErrorCode.UNEXPECTED_LANDING,)),
+    (H.AIRBORNE, ("ap", flying(mode="RTL", flight_mode=FlightMode.RTL)), H.RTL, (), (ErrorCode.AUTOPILOT_TOOK_OVER,)),
+    (H.GAINING_ALTITUDE, ("ap", flying(alt=3.0, mode="RTL", flight_mode=FlightMode.RTL)), H.RTL, (),
+     (ErrorCode.AUTOPILOT_TOOK_OVER,)),
+    (H.AIRBORNE, ("ap", flying(mode="LAND", flight_mode=FlightMode.LANDING)), H.LANDING, (),
+     (ErrorCode.AUTOPILOT_TOOK_OVER,)),
+    (H.RTL, ("ap", flying(mode="LAND", flight_mode=FlightMode.LANDING)), H.LANDING, (), NO_ERROR),
+]
+
+
+def _row_id(row: tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[ErrorCode, ...]]) -> str:
+    frm, (kind, value), to, _, _ = row
+    detail = getattr(value, "name", None) or (value.mode if isinstance(value, AutopilotState) else value)
+    return f"{frm.name}-{kind}_{detail}-{to.name}"
+
+
+def test_state_values_match_the_lcm_constants() -> None:
+    for s in HlcState:
+        assert getattr(hlc_state_t, s.name) == s.value
+    for sev in Severity:
+        assert getattr(hlc_error_t, sev.name) == sev.value
+
+
+@pytest.mark.parametrize("row", DESIGN_ROWS + EXTRA_ROWS, ids=_row_id)
+def test_row(row: tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[ErrorCode, ...]]) -> None:
+    frm, what, to, actions, codes = row
+    h = hlc_in(frm)
+    outcome = feed(h, what)
+    assert h.state is to, outcome.reason
+    assert outcome.transition is not None
+    assert (outcome.transition.from_state, outcome.transition.to_state) == (frm, to)
+    assert outcome.actions == actions
+    assert tuple(e.code for e in outcome.errors) == codes
+    assert outcome.reason and outcome.transition.reason == outcome.reason
+    for error in outcome.errors:
+        assert error.text
+
+
+def test_extra_rows_are_flagged_in_the_table() -> None:
+    extra_events = {row.event for row in HLC_TABLE if row.extra}
+    assert extra_events == {
+        HlcEvent.MC_LAND, HlcEvent.MC_RTL, HlcEvent.ARMED, HlcEvent.LANDED,
+        HlcEvent.AUTOPILOT_LAND, HlcEvent.AUTOPILOT_RTL,
+    }
+
+
+# -------------------------------------------------------------------------------- INIT
+
+
+def test_init_to_ready_needs_both_autopilot_and_mc() -> None:
+    h = HighLevelControl()
+    assert h.on_autopilot(GROUND, T0).transition is None  # no MC yet
+    assert h.state is H.INIT
+    outcome = h.on_mc_state(M.STANDBY, T0 + 1)  # the MC arrives second
+    assert h.state is H.READY and outcome.actions == ()
+
+    h = HighLevelControl()
+    assert h.on_mc_state(M.INIT, T0).transition is None  # no autopilot yet
+    assert h.on_autopilot(GROUND, T0 + 1).transition is not None
+    assert h.state is H.READY
+
+
+@pytest.mark.parametrize(
+    "snapshot",
+    [replace(GROUND, connected=False), replace(GROUND, link_age=3.0), AutopilotState()],
+    ids=["not-connected", "stale", "nothing-known"],
+)
+def test_init_waits_for_a_fresh_link_and_never_declares_llc_down(snapshot: AutopilotState) -> None:
+    h = HighLevelControl()
+    h.on_mc_state(M.STANDBY, T0)
+    for i in range(5):
+        assert h.on_autopilot(replace(snapshot, link_age=snapshot.link_age + i), T0 + i).transition is None
+    assert h.state is H.INIT
+
+
+@pytest.mark.parametrize(
+    "snapshot, expected",
+    [
+        (flying(mode="GUIDED"), H.AIRBORNE),
+        (flying(mode="LAND", flight_mode=FlightMode.LANDING), H.LANDING),
+        (flying(mode="RTL", flight_mode=FlightMode.RTL), H.RTL),
+        (flying(mode="LOITER", autonomous=False), H.MANUAL),
+        (flying(mode="POSHOLD", flight_mode=FlightMode.MANUAL), H.MANUAL),
+    ],
+    ids=lambda v: getattr(v, "mode", None) or v.name,
+)
+def test_init_resync_from_a_flying_vehicle(snapshot: AutopilotState, expected: HlcState) -> None:
+    h = HighLevelControl()
+    h.on_mc_state(M.MISSION, T0)
+    outcome = h.on_autopilot(snapshot, T0)
+    assert h.state is expected
+    assert outcome.actions == ()  # a resync commands nothing
+    assert outcome.transition is not None and "resync" in outcome.reason
+
+
+def test_init_armed_on_the_ground_is_ready() -> None:
+    h = HighLevelControl()
+    h.on_mc_state(M.STANDBY, T0)
+    h.on_autopilot(replace(GROUND, armed=True), T0)
+    assert h.state is H.READY
+
+
+# -------------------------------------------------------------------------------- takeoff
+
+
+def test_takeoff_refused_on_low_battery_stays_ready_with_error() -> None:
+    h = hlc_in(H.READY)
+    h.on_autopilot(replace(GROUND, battery=20.0), T0 + 1)
+    outcome = h.on_mc_state(M.TAKEOFF, T0 + 2)
+    assert h.state is H.READY
+    assert outcome.transition is None and outcome.actions == ()
+    assert [(e.code, e.severity) for e in outcome.errors] == [(ErrorCode.TAKEOFF_REFUSED_LOW_BATTERY, Severity.ERROR)]
+    assert "20" in outcome.errors[0].text
+    # The MC republishes TAKEOFF: no second refusal (edge-triggered), no arming.
+    assert h.on_mc_state(M.TAKEOFF, T0 + 2.2) == HlcOutcome()
+
+
+def test_unknown_battery_is_never_low() -> None:
+    h = hlc_in(H.READY)
+    h.on_autopilot(replace(GROUND, battery=-1.0), T0 + 1)
+    assert h.on_mc_state(M.TAKEOFF, T0 + 2).actions == (Action.ARM,)
+    h = hlc_in(H.AIRBORNE)
+    assert h.on_autopilot(flying(battery=-1.0), T0 + 20).transition is None
+
+
+def test_requested_takeoff_altitude_is_used_and_latched() -> None:
+    h = hlc_in(H.READY)
+    h.on_mc_state(M.TAKEOFF, T0 + 1, takeoff_altitude=25.0)
+    outcome = h.on_action_result(ActionKind.ARM, True, T0 + 2)
+    assert outcome.actions == (Action.takeoff(25.0),)
+    assert h.target_altitude == 25.0
+    h.on_mc_state(M.TAKEOFF, T0 + 2.2, takeoff_altitude=50.0)  # a later request does not move the goal
+    assert h.on_autopilot(flying(alt=23.0), T0 + 9).transition is None
+    assert h.on_autopilot(flying(alt=23.75), T0 + 10).transition is not None  # 0.95 x 25
+    assert h.state is H.AIRBORNE
+
+
+def test_zero_altitude_means_the_default() -> None:
+    h = hlc_in(H.READY, HlcParams(default_takeoff_altitude=7.0))
+    h.on_mc_state(M.TAKEOFF, T0 + 1, takeoff_altitude=0.0)
+    assert h.on_action_result(ActionKind.ARM, True, T0 + 2).actions == (Action.takeoff(7.0),)
+
+
+def test_altitude_threshold_is_the_airborne_fraction() -> None:
+    h = hlc_in(H.GAINING_ALTITUDE)
+    assert h.on_autopilot(flying(alt=9.49), T0 + 3).transition is None
+    assert h.on_autopilot(flying(alt=9.5), T0 + 4).transition is not None
+
+
+def test_failed_arm_does_not_rearm_on_mc_republish_but_on_the_next_command() -> None:
+    h = hlc_in(H.TAKEOFF)
+    h.on_action_result(ActionKind.ARM, False, T0 + 2, "pre-arm: compass")
+    assert h.state is H.READY
+    for i in range(5):  # the MC still says TAKEOFF until it sees READY
+        assert h.on_mc_state(M.TAKEOFF, T0 + 2.2 + i * 0.2) == HlcOutcome()
+    h.on_mc_state(M.STANDBY, T0 + 4)
+    assert h.on_mc_state(M.TAKEOFF, T0 + 5).actions == (Action.ARM,)
+    assert h.state is H.TAKEOFF
+
+
+def test_arm_failure_detail_reaches_the_error_text() -> None:
+    h = hlc_in(H.TAKEOFF)
+    outcome = h.on_action_result(ActionKind.ARM, False, T0 + 2, "pre-arm: compass")
+    assert outcome.errors[0].severity is Severity.ERROR
+    assert "compass" in outcome.errors[0].text
+
+
+def test_hlc_started_while_mc_already_in_takeoff_does_not_take_off() -> None:
+    h = HighLevelControl()
+    h.on_autopilot(GROUND, T0)
+    h.on_mc_state(M.TAKEOFF, T0)
+    assert h.state is H.READY
+    assert h.on_mc_state(M.TAKEOFF, T0 + 0.2) == HlcOutcome()
+    assert h.state is H.READY
+
+
+def test_takeoff_cancelled_while_arming() -> None:
+    h = hlc_in(H.TAKEOFF)
+    h.on_mc_state(M.LAND, T0 + 1.5)  # the operator changed their mind before the arm result
+    assert h.state is H.TAKEOFF
+    outcome = h.on_action_result(ActionKind.ARM, True, T0 + 2)
+    assert h.state is H.READY
+    assert outcome.actions == (Action.DISARM,)
+    assert [(e.code, e.severity) for e in outcome.errors] == [(ErrorCode.TAKEOFF_CANCELLED, Severity.INFO)]
+
+
+def test_gain_altitude_timeout_counts_from_entering_the_state() -> None:
+    h = hlc_in(H.GAINING_ALTITUDE, HlcParams(gain_altitude_timeout=12.0))  # entered at T0 + 1
+    assert h.tick(T0 + 12.9).transition is None
+    outcome = h.tick(T0 + 13.0)
+    assert h.state is H.LANDING and outcome.actions == (Action.LAND,)
+    assert outcome.errors[0].severity is Severity.WARNING
+
+
+def test_tick_does_nothing_in_other_states() -> None:
+    for s in HlcState:
+        if s is not H.GAINING_ALTITUDE:
+            assert hlc_in(s).tick(T0 + 1e6) == HlcOutcome()
+
+
+# -------------------------------------------------------------------------------- flight
+
+
+def test_low_battery_fires_once() -> None:
+    h = hlc_in(H.AIRBORNE)
+    first = h.on_autopilot(flying(battery=19.0), T0 + 20)
+    assert first.actions == (Action.RTL,)
+    for i in range(10):
+        again = h.on_autopilot(flying(battery=18.0 - i), T0 + 21 + i)
+        assert again == HlcOutcome()
+    assert h.state is H.LOW_BATTERY
+
+
+@pytest.mark.parametrize("state", [H.RTL, H.LANDING, H.MANUAL, H.READY, H.TAKEOFF])
+def test_low_battery_does_not_reroute_a_vehicle_already_coming_down(state: HlcState) -> None:
+    h = hlc_in(state)
+    snapshot = flying(battery=5.0, mode=h.autopilot.mode if h.autopilot else "")
+    if state is H.MANUAL:
+        snapshot = replace(snapshot, autonomous=False, flight_mode=FlightMode.MANUAL)
+    if state in (H.READY, H.TAKEOFF):
+        snapshot = replace(GROUND, battery=5.0)
+    assert h.on_autopilot(snapshot, T0 + 30).transition is None
+    assert h.state is state
+
+
+def test_mc_land_and_rtl_are_level_triggered() -> None:
+    """A LAND first heard while the HLC could not act is honoured in the next state."""
+    h = hlc_in(H.GAINING_ALTITUDE)
+    h.on_mc_state(M.TAKEOFF, T0 + 2)
+    h.on_autopilot(FLYING, T0 + 3)
+    assert h.state is H.AIRBORNE
+    assert h.on_mc_state(M.LAND, T0 + 4).actions == (Action.LAND,)
+    assert h.on_mc_state(M.LAND, T0 + 4.2) == HlcOutcome()  # already LANDING: no repeat
+
+
+@pytest.mark.parametrize("state", [H.READY, H.TAKEOFF, H.MANUAL, H.LOW_BATTERY, H.RTL])
+def test_mc_land_ignored_where_no_row(state: HlcState) -> None:
+    h = hlc_in(state)
+    assert h.on_mc_state(M.LAND, T0 + 30).transition is None
+    assert h.state is state
+
+
+def test_no_takeover_without_armed_vehicle_or_in_takeoff() -> None:
+    h = hlc_in(H.GAINING_ALTITUDE)
+    # A stale snapshot from before arming (disarmed, pilot mode) is not a takeover.
+    stale = replace(GROUND, mode="STABILIZE", autonomous=False, armed=True, in_air=False)
+    assert h.on_autopilot(replace(stale, armed=False), T0 + 2).transition is None
+    h = hlc_in(H.TAKEOFF)
+    assert h.on_autopilot(stale, T0 + 2).transition is None
+    assert h.state is H.TAKEOFF
+
+
+def test_landed_in_manual_returns_to_ready_even_in_a_pilot_mode() -> None:
+    h = hlc_in(H.MANUAL)
+    outcome = h.on_autopilot(replace(GROUND, mode="LOITER", autonomous=False), T0 + 30)
+    assert h.state is H.READY and outcome.errors == ()
+
+
+def test_llc_down_is_terminal() -> None:
+    h = hlc_in(H.AIRBORNE)
+    outcome = h.on_autopilot(LOST, T0 + 20)
+    assert h.state is H.LLC_DOWN
+    assert outcome.errors[0].severity is Severity.CRITICAL and "3.0 s" in outcome.errors[0].text
+    for snapshot in (FLYING, GROUND, LANDED):
+        assert h.on_autopilot(snapshot, T0 + 30) == HlcOutcome()
+    for mc_state in McState:
+        assert h.on_mc_state(mc_state, T0 + 31) == HlcOutcome()
+    assert h.on_action_result(ActionKind.ARM, True, T0 + 32) == HlcOutcome()
+    assert h.tick(T0 + 1e6) == HlcOutcome()
+    assert h.state is H.LLC_DOWN
+
+
+def test_link_timeout_is_a_parameter() -> None:
+    h = hlc_in(H.AIRBORNE, HlcParams(link_timeout=1.0))
+    assert h.on_autopilot(flying(link_age=0.99), T0 + 20).transition is None
+    assert h.on_autopilot(flying(link_age=1.0), T0 + 21).transition is not None
+
+
+def test_failed_non_arm_action_reports_an_error_only() -> None:
+    h = hlc_in(H.LANDING)
+    outcome = h.on_action_result(ActionKind.LAND, False, T0 + 20, "no ACK")
+    assert outcome.transition is None and h.state is H.LANDING
+    assert [(e.code, e.severity) for e in outcome.errors] == [(ErrorCode.ACTION_FAILED, Severity.ERROR)]
+    assert "LAND" in outcome.errors[0].text and "no ACK" in outcome.errors[0].text
+    assert h.on_action_result(ActionKind.LAND, True, T0 + 21) == HlcOutcome()
+
+
+def test_action_helpers() -> None:
+    assert Action.takeoff(12.0) == Action(ActionKind.TAKEOFF, 12.0)
+    assert str(Action.takeoff(12.0)) == "TAKEOFF(12 m)"
+    assert str(Action.HOVER) == "HOVER"
+    assert {Action.ARM.kind, Action.DISARM.kind, Action.LAND.kind, Action.RTL.kind} == {
+        ActionKind.ARM, ActionKind.DISARM, ActionKind.LAND, ActionKind.RTL}
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [{"default_takeoff_altitude": 0.0}, {"airborne_fraction": 0.0}, {"airborne_fraction": 1.5},
+     {"gain_altitude_timeout": -1.0}, {"low_battery": 100.0}, {"link_timeout": float("nan")}],
+)
+def test_params_validated(changes: dict[str, float]) -> None:
+    with pytest.raises(ValueError):
+        HlcParams(**changes)
+
+
+# -------------------------------------------------------------------------------- closed loop
+
+
+class FakeClock:
+    def __init__(self, t: float = 0.0) -> None:
+        self.t = t
+
+    def __call__(self) -> float:
+        return self.t
+
+
+class Loop:
+    """A minimal stand-in for the MC and HLC nodes: wires the two machines and a sim by hand."""
+
+    def __init__(self, sim_params: dict[str, object] | None = None) -> None:
+        self.clock = FakeClock(10.0)
+        self.sim = SimAutopilot(sim_params or {}, clock=self.clock)
+        self.sim.connect()
+        self.mc = MissionControl()
+        self.hlc = HighLevelControl()
+        self.hlc_log: list[tuple[HlcState, HlcState]] = []
+        self.mc_log: list[tuple[McState, McState]] = []
+        self.errors: list[ErrorCode] = []
+
+    def _hlc(self, outcome: HlcOutcome) -> None:
+        if outcome.transition:
+            self.hlc_log.append((outcome.transition.from_state, outcome.transition.to_state))
+            # The node publishes hlc_state_t on every change, so the MC hears every state.
+            self._mc(self.mc.on_hlc_state(outcome.transition.to_state, self.clock.t))
+        self.errors.extend(e.code for e in outcome.errors)
+        for action in outcome.actions:
+            if action.kind is ActionKind.ARM:
+                self._hlc(self.hlc.on_action_result(ActionKind.ARM, self.sim.arm(), self.clock.t))
+            elif action.kind is ActionKind.TAKEOFF:
+                self.sim.takeoff(action.altitude)
+            elif action.kind is ActionKind.LAND:
+                self.sim.land()
+            elif action.kind is ActionKind.RTL:
+                self.sim.rtl()
+            elif action.kind is ActionKind.DISARM:
+                self.sim.disarm()
+            else:
+                self.sim.set_velocity(0.0, 0.0, 0.0, 0.0, Frame.BODY)
+
+    def _mc(self, outcome: object) -> None:
+        transition = getattr(outcome, "transition", None)
+        if transition:
+            self.mc_log.append((transition.from_state, transition.to_state))
+
+    def command(self, command: OperatorCommand, seq: int, altitude: float = 0.0) -> None:
+        outcome = self.mc.on_command(command, seq, self.clock.t, altitude=altitude)
+        assert outcome.accepted, outcome.reason
+        self._mc(outcome)
+
+    def run(self, seconds: float, dt: float = 0.1) -> None:
+        for _ in range(round(seconds / dt)):
+            now = self.clock.t
+            self._mc(self.mc.on_hlc_state(self.hlc.state, now))
+            self._mc(self.mc.tick(now))
+            self._hlc(self.hlc.on_mc_state(self.mc.state, now, takeoff_altitude=self.mc.takeoff_altitude))
+            self._hlc(self.hlc.on_autopilot(self.sim.state(), now))
+            self._hlc(self.hlc.tick(now))
+            self.clock.t += dt
+
+
+def test_closed_loop_takeoff_mission_rtl() -> None:
+    loop = Loop()
+    loop.run(1.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
+    loop.command(OperatorCommand.TAKEOFF, 1, altitude=15.0)
+    loop.run(10.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.MISSION, H.AIRBORNE)
+    assert loop.sim.state().alt == pytest.approx(15.0, abs=0.01)
+    loop.sim.set_velocity(5.0, 0.0, 0.0, 0.0, Frame.NED)
+    loop.run(2.0)
+    loop.command(OperatorCommand.RTL, 2)
+    loop.run(30.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
+    assert loop.hlc_log == [(H.INIT, H.READY), (H.READY, H.TAKEOFF), (H.TAKEOFF, H.GAINING_ALTITUDE),
+                            (H.GAINING_ALTITUDE, H.AIRBORNE), (H.AIRBORNE, H.RTL), (H.RTL, H.READY)]
+    assert loop.mc_log == [(M.INIT, M.STANDBY), (M.STANDBY, M.TAKEOFF), (M.TAKEOFF, M.MISSION),
+                           (M.MISSION, M.RTL), (M.RTL, M.STANDBY)]
+    assert loop.sim.state().landed and loop.errors == []
+
+
+def test_closed_loop_arm_refused_returns_everyone_to_standby() -> None:
+    loop = Loop({"refuse_arm": True})
+    loop.run(1.0)
+    loop.command(OperatorCommand.TAKEOFF, 1)
+    loop.run(2.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
+    assert loop.errors == [ErrorCode.ARM_FAILED]
+    assert loop.mc_log[-2:] == [(M.STANDBY, M.TAKEOFF), (M.TAKEOFF, M.STANDBY)]
+
+
+def test_closed_loop_pilot_takeover_and_link_loss() -> None:
+    loop = Loop({"takeover_land_delay": 1.0})
+    loop.run(1.0)
+    loop.command(OperatorCommand.TAKEOFF, 1)
+    loop.run(6.0)
+    loop.sim.pilot_takeover()
+    loop.run(0.5)
+    assert (loop.mc.state, loop.hlc.state) == (M.MANUAL, H.MANUAL)
+    loop.run(10.0)  # the pilot lands and disarms
+    assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
+    loop.sim.set_link_loss(True)
+    loop.run(4.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.ERROR, H.LLC_DOWN)
+    assert loop.errors == [ErrorCode.PILOT_TAKEOVER, ErrorCode.LINK_LOST]
+
+
+def test_closed_loop_low_battery_brings_it_home() -> None:
+    loop = Loop({"battery": 25.0, "drain_flying": 30.0})  # 0.5 %/s: low after ~10 s in the air
+    loop.run(1.0)
+    loop.command(OperatorCommand.TAKEOFF, 1)
+    loop.run(9.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.MISSION, H.AIRBORNE)
+    loop.run(2.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.RTL, H.LOW_BATTERY)
+    assert loop.sim.state().mode == "RTL"
+    loop.run(10.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
+    assert loop.hlc_log[-2:] == [(H.AIRBORNE, H.LOW_BATTERY), (H.LOW_BATTERY, H.READY)]
+    assert loop.errors == [ErrorCode.LOW_BATTERY]
+
+
+def test_closed_loop_restarts_resync_without_commands() -> None:
+    loop = Loop()
+    loop.run(1.0)
+    loop.command(OperatorCommand.TAKEOFF, 1)
+    loop.run(6.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.MISSION, H.AIRBORNE)
+    loop.sim.rtl()  # e.g. the autopilot's own failsafe
+    loop.run(0.3)
+    assert (loop.mc.state, loop.hlc.state) == (M.RTL, H.RTL)
+    loop.mc, loop.hlc = MissionControl(), HighLevelControl()  # both processes restart mid-flight
+    loop.hlc_log.clear()
+    loop.run(0.5)
+    assert (loop.mc.state, loop.hlc.state) == (M.RTL, H.RTL)
+    assert loop.hlc_log == [(H.INIT, H.RTL)]
+    assert loop.sim.state().in_air  # nothing was commanded: still flying its RTL
+    loop.run(15.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)

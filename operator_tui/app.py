@@ -19,6 +19,7 @@ from typing import ClassVar
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
+from textual.css.query import NoMatches
 from textual.screen import Screen
 from textual.widgets import Footer
 
@@ -238,6 +239,12 @@ class OperatorApp(App[None]):
         screen = self._main_screen()
         if screen is None or not screen.is_mounted:
             return
+        try:
+            self._render_on(screen, now)
+        except NoMatches:  # the screen is being torn down (the app is exiting)
+            return
+
+    def _render_on(self, screen: MainScreen, now: float) -> None:
         model = self.model
         screen.query_one(AgentTable).sync(model, now)
         model.take_dirty()

@@ -95,6 +95,11 @@ class TrackedCommand:
         return self.acked | self.superseded
 
     @property
+    def progress(self) -> str:
+        """'2/3': how many of the expected agents have acknowledged (or moved past) it."""
+        return f"{len(self.expected & self.settled)}/{len(self.expected)}"
+
+    @property
     def missing(self) -> list[str]:
         return sorted(self.expected - self.settled)
 
@@ -233,7 +238,7 @@ class CommandTracker:
             else:
                 why.append(f"{agent}: no ack (lost, or rejected)")
         more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
-        head = f"{len(cmd.settled)}/{len(cmd.expected)} acked; " if cmd.broadcast else ""
+        head = f"{cmd.progress} acked; " if cmd.broadcast else ""
         return f"{head}no ack in {self.timeout:g} s after {cmd.sends} sends — " + "; ".join(why) + more
 
     def recent(self, n: int) -> list[TrackedCommand]:

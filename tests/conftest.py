@@ -64,8 +64,8 @@ class Probe:
         reply = self.call(op="wait", channel=channel, type=type_name, where=where, timeout=timeout, since=since)
         return reply.get("msg") if reply["ok"] else None
 
-    def history(self, channel: str, type_name: str) -> list[dict[str, Any]]:
-        return self.call(op="history", channel=channel, type=type_name)["msgs"]
+    def history(self, channel: str, type_name: str, since: int = 0) -> list[dict[str, Any]]:
+        return self.call(op="history", channel=channel, type=type_name, since=since)["msgs"]
 
     def mark(self) -> int:
         return self.call(op="mark")["index"]

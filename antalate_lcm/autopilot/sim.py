@@ -41,7 +41,9 @@ with a growing ``link_age`` and commands raise `AutopilotError` (the vehicle its
 from __future__ import annotations
 
 import enum
+import json
 import math
+import os
 import time
 from collections.abc import Mapping
 from dataclasses import replace
@@ -74,6 +76,13 @@ DEFAULTS: dict[str, Any] = {
     "refuse_arm": False,
     "time_scale": 1.0,
     "max_step": 0.05,  # s of simulated time per integration step
+    # Scheduled faults, in s of flight after takeoff (0 = never), for tests that run the sim in
+    # another process where the fault-injection methods cannot be called.
+    "link_loss_after": 0.0,
+    "takeover_after": 0.0,
+    # A file where the vehicle's state is kept, so that a restarted HLC process finds the vehicle
+    # where it was (a real vehicle outlives the software that flies it); "" = none.
+    "state_file": "",
 }
 
 _AUTONOMOUS_MODES = {"GUIDED": FlightMode.GUIDED, "LAND": FlightMode.LANDING, "RTL": FlightMode.RTL}
@@ -136,6 +145,10 @@ class SimAutopilot(Autopilot):
         self._refuse_arm = bool(p["refuse_arm"])
         self._link_lost_at: float | None = None
         self._frozen: AutopilotState | None = None
+        self._airborne_since: float | None = None
+        self._fired: set[str] = set()
+        self._state_file = str(p["state_file"])
+        self._saved_at = 0.0
         if p["link_loss"]:
             self._link_lost_at = self._t_last
             self._frozen = AutopilotState(connected=True, link_age=math.inf)
@@ -143,6 +156,8 @@ class SimAutopilot(Autopilot):
     # ----------------------------------------------------------------- Autopilot contract
 
     def connect(self) -> None:
+        if self._state_file:
+            self._restore()
         self._advance()
         self._connected = True
 
@@ -179,6 +194,7 @@ class SimAutopilot(Autopilot):
         self.in_air = True
         self._takeoff_alt = alt
         self._armed_since = None
+        self._airborne_since = self._sim_time
         self._phase = _Phase.CLIMB
 
     def land(self) -> None:
@@ -211,6 +227,9 @@ class SimAutopilot(Autopilot):
 
     def state(self) -> AutopilotState:
         self._advance()
+        self._scheduled_faults()
+        if self._state_file and self._connected:
+            self._persist()
         if not self._connected:
             return AutopilotState(connected=False, link_age=math.inf)
         if self._link_lost_at is not None:
@@ -255,6 +274,53 @@ class SimAutopilot(Autopilot):
         if self.in_air:
             self._phase = _Phase.PILOT
             self._takeover_time = self._sim_time
+
+    def _scheduled_faults(self) -> None:
+        if self._airborne_since is None or not self.in_air:
+            return
+        flown = self._sim_time - self._airborne_since
+        for name, fire in (("takeover_after", self.pilot_takeover), ("link_loss_after", lambda: self.set_link_loss(True))):
+            after = float(self._p[name])
+            if after > 0.0 and flown >= after and name not in self._fired:
+                self._fired.add(name)
+                fire()
+
+    # ----------------------------------------------------------------- persistence across restarts
+
+    _PERSISTED = ("north", "east", "alt", "vn", "ve", "vd", "heading", "battery", "armed", "in_air", "mode", "_takeoff_alt")
+
+    def _persist(self) -> None:
+        wall = time.time()
+        if wall - self._saved_at < 0.2:
+            return
+        self._saved_at = wall
+        data = {k: getattr(self, k) for k in self._PERSISTED}
+        data["phase"] = self._phase.name
+        data["saved_at"] = wall
+        tmp = f"{self._state_file}.tmp"
+        with open(tmp, "w", encoding="utf-8") as f:
+            json.dump(data, f)
+        os.replace(tmp, self._state_file)
+
+    def _restore(self) -> None:
+        try:
+            with open(self._state_file, encoding="utf-8") as f:
+                data = json.load(f)
+        except FileNotFoundError:
+            return
+        except (OSError, ValueError):
+            return  # unreadable: start on the ground, as a vehicle that was never flown
+        gap = time.time() - float(data.get("saved_at", 0.0))
+        if not 0.0 <= gap <= 60.0:
+            return
+        for k in self._PERSISTED:
+            if k in data:
+                setattr(self, k, data[k])
+        self._phase = _Phase[data.get("phase", "GROUND")]
+        if self.in_air:
+            self._airborne_since = self._sim_time
+        # The vehicle flew on while nobody was listening.
+        self._t_last = self.clock() - gap / self._time_scale
 
     # ----------------------------------------------------------------- helpers
 

@@ -13,7 +13,8 @@ from pydantic import ValidationError
 from antalate_lcm.errors import AntalateError
 
 from ._app import create_app
-from ._settings import DEFAULT_HOST, DEFAULT_PORT, StationSettings
+from ._db import StationDB
+from ._settings import DEFAULT_HOST, DEFAULT_PORT, MEMORY, StationSettings
 
 log = logging.getLogger("antalate.station")
 
@@ -25,6 +26,12 @@ def _config(settings: StationSettings, log_level: str) -> uvicorn.Config:
         create_app(settings), log_level=log_level.lower(), access_log=False, loop="auto", http="auto",
         lifespan="on", timeout_keep_alive=30,
     )
+
+
+def _check_db(path: str) -> None:
+    """Open the database once up front: a bad path or a newer schema then fails with its own message
+    (`StationDBError`) instead of uvicorn's generic "Application startup failed"."""
+    StationDB(path).close()
 
 
 def _bind(host: str, port: int) -> socket.socket:
@@ -70,6 +77,7 @@ def run_station(
         settings = StationSettings.model_validate(fields)
     except ValidationError as exc:
         raise AntalateError(f"invalid station parameters: {exc}") from None
+    _check_db(settings.db_path)
     sock = _bind(host, port)
     actual = sock.getsockname()[1]
     log.info("station listening on http://%s:%d (database %s)", host, actual, settings.db_path)
@@ -94,6 +102,8 @@ class StationServer:
         log_level: str = "warning",
     ) -> None:
         self.settings = settings if settings is not None else StationSettings()
+        if self.settings.db_path != MEMORY:
+            _check_db(self.settings.db_path)
         self.host = host
         self._sock = _bind(host, port)
         self.port: int = self._sock.getsockname()[1]

@@ -15,6 +15,7 @@ from textual.binding import Binding, BindingType
 from textual.coordinate import Coordinate
 from textual.message import Message
 from textual.widgets import DataTable
+from textual.widgets.data_table import CellDoesNotExist
 
 from operator_tui.model import AgentView, SwarmModel, heading_arrow, join_limited, natural_key
 from operator_tui.widgets.palette import (
@@ -158,7 +159,7 @@ class AgentTable(DataTable[Text], inherit_bindings=False):
     def _select_row(self, index: int) -> None:
         try:
             key = self.coordinate_to_cell_key(Coordinate(index, 0)).row_key.value
-        except Exception:  # noqa: BLE001 - an empty table has no key
+        except CellDoesNotExist:  # an empty table
             key = None
         if key != self.selected:
             self._announce(key)
@@ -171,6 +172,6 @@ class AgentTable(DataTable[Text], inherit_bindings=False):
 
     def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
         event.stop()
-        key = event.row_key.value
-        if key != self.selected:
-            self._announce(key)
+        # The cursor, not the event, is the truth: an event queued before a re-sort names the
+        # row that *was* under the cursor.
+        self._select_row(self.cursor_row)

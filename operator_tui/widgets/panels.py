@@ -120,7 +120,7 @@ def command_line(cmd: TrackedCommand, now: float, mc_state_of: Callable[[str], s
         if cmd.sends > 1:
             t.append(f" ×{cmd.sends}", "yellow")
         if cmd.broadcast and cmd.expected:
-            t.append(f" {len(cmd.settled)}/{len(cmd.expected)}", "yellow")
+            t.append(f" {cmd.progress}", "yellow")
         if cmd.target and applies(cmd.command, mc_state_of(cmd.target)) is False:
             t.append(f" (MC {mc_state_of(cmd.target)}: rejected?)", "bold red")
     elif cmd.status is Status.ACKED:

@@ -1,0 +1,257 @@
+"""The console's pure parts: the swarm model, the command tracker, direction control, row and map formats."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+
+from antalate_lcm.msgs import arbiter_status_t, hlc_error_t, hlc_state_t, mc_state_t, telemetry_t
+from operator_tui.commands import CommandTracker, DirectionControl, Status, applies
+from operator_tui.model import EventKind, Severity, SwarmModel, heading_arrow, natural_key
+from operator_tui.widgets.agent_table import format_age, row_cells
+from operator_tui.widgets.swarm_map import MapPoint, render_map
+
+
+def mc(state: int, last: int = 0) -> mc_state_t:
+    m = mc_state_t()
+    m.state, m.last_command_seq = state, last
+    return m
+
+
+def hlc(state: int) -> hlc_state_t:
+    m = hlc_state_t()
+    m.state, m.autopilot = state, "sim"
+    return m
+
+
+def tel(lat: float = 47.0, lon: float = 8.0, alt: float = 10.0, heading: float = 90.0, battery: float = 80.0) -> telemetry_t:
+    m = telemetry_t()
+    m.lat, m.lon, m.alt, m.heading, m.vn, m.ve, m.battery, m.mode = lat, lon, alt, heading, 3.0, 4.0, battery, "SIM"
+    return m
+
+
+# ---------------------------------------------------------------------- model
+def test_model_folds_messages_and_logs_only_transitions() -> None:
+    model = SwarmModel()
+    for t in (0.0, 0.2, 0.4):  # periodic republish: one transition, not three
+        model.apply("MC_STATE", "a", mc(mc_state_t.STANDBY, last=7), t, 1000 + t)
+    model.apply("HLC_STATE", "a", hlc(hlc_state_t.READY), 0.5, 1000.5)
+    model.apply("MC_STATE", "a", mc(mc_state_t.TAKEOFF, last=8), 0.6, 1000.6)
+    view = model.agents["a"]
+    assert (view.mc_state, view.hlc_state, view.last_command_seq, view.autopilot) == ("TAKEOFF", "READY", 8, "sim")
+    texts = [(e.kind, e.text) for e in model.take_events()]
+    assert texts == [
+        (EventKind.DISCOVERED, "discovered (first heard on MC_STATE)"),
+        (EventKind.MC, "MC — → STANDBY"),
+        (EventKind.HLC, "HLC — → READY"),
+        (EventKind.MC, "MC STANDBY → TAKEOFF"),
+    ]
+    assert model.take_events() == []
+    assert model.take_dirty() == {"a"} and model.roster_changed
+
+
+def test_model_errors_arbiters_and_unknown_states() -> None:
+    model = SwarmModel()
+    err = hlc_error_t()
+    err.code, err.severity, err.text = 12, hlc_error_t.ERROR, "arming refused"
+    model.apply("HLC_ERROR", "a", err, 1.0, 1001.0)
+    arb = arbiter_status_t()
+    arb.arbiter, arb.state, arb.n, arb.active = "main", "MISSION", 2, ["swarm", "video"]
+    arb.n_failed, arb.failed = 1, ["camera: ffmpeg died"]
+    model.apply("ARBITER", "a", arb, 1.1, 1001.1, {"agent": "a", "arbiter": "main"})
+    model.apply("HLC_STATE", "a", hlc(42), 1.2, 1001.2)  # a newer agent's state is shown, not dropped
+    view = model.agents["a"]
+    assert view.last_error is not None and (view.last_error.code, view.last_error.text) == (12, "arming refused")
+    assert view.last_error.severity is Severity.ERROR
+    assert view.active_behaviors == ("swarm", "video") and view.failed_behaviors == ("camera: ffmpeg died",)
+    assert view.hlc_state == "?42"
+    kinds = [e.kind for e in model.take_events()]
+    assert kinds.count(EventKind.ERROR) == 1 and kinds.count(EventKind.BEHAVIOR) == 1
+    model.apply("ARBITER", "a", arb, 1.3, 1001.3)  # the same failure republished is not logged again
+    assert not [e for e in model.take_events() if e.kind is EventKind.BEHAVIOR]
+
+
+def test_stale_agents_are_marked_once_and_kept() -> None:
+    model = SwarmModel(stale_after=3.0)
+    model.apply("MC_STATE", "a", mc(1), 0.0, 1000.0)
+    model.apply("MC_STATE", "b", mc(1), 0.0, 1000.0)
+    model.take_events()
+    model.apply("MC_STATE", "b", mc(1), 2.9, 1002.9)
+    model.tick(3.1, 1003.1)
+    model.tick(5.0, 1005.0)
+    assert model.agents["a"].stale and not model.agents["b"].stale
+    assert [(e.agent, e.kind) for e in model.take_events()] == [("a", EventKind.STALE)]
+    assert model.live_names() == ["b"] and model.names() == ["a", "b"] and model.stale_count == 1
+    model.apply("TELEMETRY", "a", tel(), 6.0, 1006.0)
+    assert not model.agents["a"].stale
+    assert [e.kind for e in model.take_events()] == [EventKind.ALIVE]
+
+
+def test_positions_are_metres_from_the_first_fix() -> None:
+    model = SwarmModel()
+    model.apply("TELEMETRY", "a", tel(lat=0.0, lon=0.0), 0.0, 0.0)  # no fix yet: not the origin
+    model.apply("TELEMETRY", "b", tel(lat=47.0, lon=8.0), 0.0, 0.0)
+    model.apply("TELEMETRY", "c", tel(lat=47.001, lon=8.0), 0.0, 0.0)
+    pos = {v.name: (round(n), round(e)) for v, n, e in model.positions()}
+    assert pos == {"b": (0, 0), "c": (111, 0)}
+    assert model.agents["b"].telemetry is not None and model.agents["b"].telemetry.ground_speed == pytest.approx(5.0)
+
+
+def test_natural_order_and_arrows() -> None:
+    assert sorted(["uav10", "uav2", "uav1", "alpha"], key=natural_key) == ["alpha", "uav1", "uav2", "uav10"]
+    assert [heading_arrow(h) for h in (0, 44, 46, 90, 180, 270, 359, -90)] == ["↑", "↗", "↗", "→", "↓", "←", "↑", "←"]
+
+
+# ---------------------------------------------------------------------- command tracker
+def test_ack_is_equality_of_last_command_seq() -> None:
+    tr = CommandTracker(first_seq=500)
+    cmd = tr.new("TAKEOFF", "a", 0.0, expected=[])
+    assert cmd.seq == 500 and cmd.expected == {"a"}
+    assert tr.observe("a", 900, 0.1) == []  # another sender's larger seq proves nothing about ours
+    assert tr.observe("b", 500, 0.1) == []  # not the target
+    (update,) = tr.observe("a", 500, 0.3)
+    assert cmd.status is Status.ACKED and "acknowledged after 0.3 s" in update.text
+    assert tr.pending == {} and list(tr.done) == [cmd]
+
+
+def test_resend_keeps_the_seq_then_fails_with_a_likely_reason() -> None:
+    tr = CommandTracker(resend_interval=1.0, timeout=3.0, first_seq=10)
+    cmd = tr.new("LAND", "a", 0.0, expected=[])
+    assert tr.tick(0.5) == ([], [])
+    resend, _ = tr.tick(1.0)
+    assert resend == [cmd] and cmd.seq == 10 and cmd.sends == 2
+    assert tr.tick(1.5) == ([], [])
+    assert tr.tick(2.0)[0] == [cmd]
+    _, (update,) = tr.tick(3.0, mc_state_of=lambda a: "STANDBY")
+    assert cmd.status is Status.FAILED and update.failed
+    assert "a likely rejected it (MC STANDBY; LAND applies in MISSION/TAKEOFF)" in cmd.reason
+    assert "3 sends" in cmd.reason
+    other = tr.new("LAND", "b", 10.0, expected=[])
+    tr.tick(13.0, mc_state_of=lambda a: "MISSION", is_stale=lambda a: True)
+    assert "b is silent" in other.reason
+    third = tr.new("RTL", "c", 20.0, expected=[])
+    tr.tick(23.0, mc_state_of=lambda a: "MISSION")
+    assert "c: no ack (lost, or rejected)" in third.reason
+
+
+def test_broadcast_waits_for_every_live_agent() -> None:
+    tr = CommandTracker(timeout=5.0, first_seq=1)
+    cmd = tr.new("RTL", "", 0.0, expected=["a", "b", "c"])
+    assert cmd.broadcast and cmd.label == "RTL → ALL (3)"
+    tr.observe("a", 1, 0.1)
+    tr.observe("z", 1, 0.1)  # an agent unknown when sent: counted, not required
+    assert cmd.status is Status.PENDING and cmd.missing == ["b", "c"]
+    tr.observe("b", 1, 0.2)
+    _, (update,) = tr.tick(5.0)
+    assert cmd.status is Status.FAILED
+    assert cmd.reason.startswith("2/3 acked") and "c: no ack" in cmd.reason and update.failed
+    ok = tr.new("LAND", "", 6.0, expected=["a", "b"])
+    tr.observe("a", ok.seq, 6.1)
+    tr.observe("b", ok.seq, 6.2)
+    assert ok.status is Status.ACKED
+
+
+def test_broadcast_with_no_known_agent_counts_whoever_acks() -> None:
+    tr = CommandTracker(timeout=2.0, first_seq=1)
+    cmd = tr.new("TAKEOFF", "", 0.0, expected=[])
+    tr.observe("a", 1, 0.5)
+    assert cmd.status is Status.PENDING
+    tr.tick(2.0)
+    assert cmd.status is Status.ACKED
+    lonely = tr.new("TAKEOFF", "", 3.0, expected=[])
+    tr.tick(5.0)
+    assert lonely.status is Status.FAILED and "none was known" in lonely.reason
+
+
+def test_a_later_ack_supersedes_an_earlier_command() -> None:
+    tr = CommandTracker(first_seq=1)
+    first = tr.new("TAKEOFF", "a", 0.0, expected=[])
+    second = tr.new("LAND", "a", 0.5, expected=[])
+    updates = tr.observe("a", second.seq, 0.6)
+    assert first.status is Status.ACKED and first.reason == "superseded by #2"
+    assert second.status is Status.ACKED and len(updates) == 2
+
+
+def test_first_seq_is_random_and_seqs_increase() -> None:
+    a = CommandTracker(rng=random.Random(1))
+    b = CommandTracker(rng=random.Random(2))
+    sa = [a.new("RTL", "x", 0.0, expected=[]).seq for _ in range(3)]
+    assert sa[1] == sa[0] + 1 and sa[2] == sa[0] + 2
+    assert b.new("RTL", "x", 0.0, expected=[]).seq != sa[0]
+    with pytest.raises(ValueError):
+        a.new("FLIP", "x", 0.0, expected=[])
+
+
+def test_recent_lists_finished_then_pending() -> None:
+    tr = CommandTracker(first_seq=1)
+    done = tr.new("RTL", "a", 0.0, expected=[])
+    tr.observe("a", 1, 0.1)
+    pending = tr.new("LAND", "b", 0.2, expected=[])
+    assert tr.recent(5) == [done, pending] and tr.recent(1) == [pending] and tr.recent(0) == []
+    assert tr.counts() == {Status.PENDING: 1, Status.ACKED: 1, Status.FAILED: 0}
+
+
+def test_applies_follows_the_mc_table() -> None:
+    assert applies("TAKEOFF", "STANDBY") is True
+    assert applies("TAKEOFF", "MISSION") is False
+    assert applies("LAND", None) is None
+
+
+def test_direction_control() -> None:
+    d = DirectionControl(speed=1.0, max_speed=2.0, repeat_interval=1.0)
+    assert not d.active and not d.due(100.0)
+    d.rotate(-1)
+    assert d.azimuth == 345.0 and d.active
+    d.rotate(2)
+    assert d.azimuth == 15.0
+    for _ in range(5):
+        d.change_speed(1)
+    assert d.speed == 2.0
+    for _ in range(6):
+        d.change_speed(-1)
+    assert d.speed == 0.0
+    d.stop()
+    assert not d.active
+    d.sent("", 10.0)
+    assert not d.due(10.5) and d.due(11.0)
+    assert d.describe() == "stopped 015° 0.0 m/s → ALL"
+
+
+# ---------------------------------------------------------------------- formats
+def test_row_cells_colour_states_and_dim_stale_agents() -> None:
+    model = SwarmModel(stale_after=3.0)
+    model.apply("MC_STATE", "a", mc(mc_state_t.MISSION), 0.0, 0.0)
+    model.apply("HLC_STATE", "a", hlc(hlc_state_t.GAINING_ALTITUDE), 0.0, 0.0)
+    model.apply("TELEMETRY", "a", tel(battery=15.0, heading=92.0), 0.0, 0.0)
+    cells = dict(zip(("agent", "mc", "hlc", "batt", "alt", "spd", "hdg", "link"), row_cells(model.agents["a"], 0.5, 3.0), strict=False))
+    assert cells["mc"] == ("MISSION", "bold green")
+    assert cells["hlc"] == ("GAINING_ALT", "yellow")
+    assert cells["batt"] == ("15%", "bold red")
+    assert cells["alt"][0] == "10.0" and cells["spd"][0] == "5.0" and cells["hdg"][0] == "092→"
+    assert cells["link"] == ("ok", "green")
+    model.tick(4.0, 4.0)
+    stale = row_cells(model.agents["a"], 4.0, 3.0)
+    assert stale[1] == ("MISSION", "bold green dim") and stale[7] == ("4s", "bold red")
+    assert [format_age(x) for x in (0.2, 1.4, 59, 600, 7200)] == ["ok", "1s", "59s", "10m", "2h"]
+
+
+def test_map_draws_arrows_counts_label_and_scale() -> None:
+    points = [
+        MapPoint("a", 0.0, 0.0, 90.0, "MISSION", False),
+        MapPoint("b", 100.0, 100.0, 0.0, "STANDBY", False),
+        MapPoint("c", 100.0, 100.0, 0.0, "STANDBY", False),
+        MapPoint("d", -100.0, -100.0, 0.0, "RTL", True),
+    ]
+    text = render_map(points, "a", 40, 12)
+    lines = text.plain.split("\n")
+    assert len(lines) == 12 and all(len(line) <= 40 for line in lines)
+    body = "\n".join(lines[:-1])
+    assert "→ a" in body  # the selected agent, labelled
+    assert "2" in body  # b and c share a cell
+    assert "×" in body  # d is stale
+    row_b = next(i for i, line in enumerate(lines) if "2" in line)
+    row_d = next(i for i, line in enumerate(lines) if "×" in line)
+    assert row_b < row_d and lines[row_b].index("2") > lines[row_d].index("×")  # NE is up and right of SW
+    assert lines[-1].startswith("├") and " m  N↑  4 shown" in lines[-1]
+    assert render_map([], None, 5, 2).plain == ""

@@ -183,7 +183,12 @@ class Node:
         return timer
 
     def call_later(self, delay: float, fn: Callable[[], Any]) -> Timer:
-        timer = self.context.executor.call_later(delay, fn)
+        def fire() -> None:
+            if timer in self._timers:  # a one-shot leaves the list once it ran, so it never grows
+                self._timers.remove(timer)
+            fn()
+
+        timer = self.context.executor.call_later(delay, fire)
         self._timers.append(timer)
         return timer
 

@@ -150,7 +150,10 @@ def peers(apis: list[str], role: str) -> Iterator[dict[str, subprocess.Popen[str
     try:
         for api in apis:
             procs[api] = subprocess.Popen(
-                [sys.executable, __file__, "--peer", api, role], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+                [sys.executable, __file__, "--peer", api, role],
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                text=True,
             )
         for api, proc in procs.items():
             assert proc.stdout is not None
@@ -354,7 +357,9 @@ def throughput(apis: list[str], seconds: float, burst: int, deadline: float) -> 
                     achieved, end = stream(pubs[api][0], n, rate)
                     got, last = ask(sinks[api], "count")
                     lag = last - end
-                    out[api]["steps"].append({"rate": rate, "achieved": achieved, "n": n, "received": got, "lag": lag})
+                    out[api]["steps"].append(
+                        {"rate": rate, "achieved": achieved, "n": n, "received": got, "lag": lag}
+                    )
                     if got < n or lag > KEEP_UP:
                         climbing.remove(api)
                         continue
@@ -378,11 +383,15 @@ def inside(args: argparse.Namespace) -> int:
     deadline = start + TIME_LIMIT - 6
     apis = ["raw", "bus", *(["proto"] if args.proto else [])]
     size = len(make_msg().encode())
-    print(f"message: telemetry_t, {size} bytes; URL {url('raw')} (one port per API); queue capacity {DEFAULT_QUEUE_CAPACITY}")
+    print(
+        f"message: telemetry_t, {size} bytes; URL {url('raw')} (one port per API); queue capacity {DEFAULT_QUEUE_CAPACITY}"
+    )
     print(f"CPUs: {os.cpu_count()}; load average {os.getloadavg()[0]:.2f} at start")
     rt: dict[str, dict[str, Any]] = {}
     if args.only in (None, "latency"):
-        print(f"round trip: {args.n} pings per API at 1 kHz, in turns of {BLOCK}, ping and echo in two processes")
+        print(
+            f"round trip: {args.n} pings per API at 1 kHz, in turns of {BLOCK}, ping and echo in two processes"
+        )
         rt = round_trip(apis, args.n)
         for api, r in rt.items():
             print(
@@ -420,7 +429,12 @@ def inside(args: argparse.Namespace) -> int:
         for name, value, target, ok in (
             (f"p50 {api}/raw", p50_ratio, f"<= {TARGETS['p50 ratio']}", p50_ratio <= TARGETS["p50 ratio"]),
             (f"p99 {api} (us)", p99, f"<= {TARGETS['p99 bus us']:.0f}", p99 <= TARGETS["p99 bus us"]),
-            (f"throughput {api}/raw", tp_ratio, f">= {TARGETS['throughput ratio']}", tp_ratio >= TARGETS["throughput ratio"]),
+            (
+                f"throughput {api}/raw",
+                tp_ratio,
+                f">= {TARGETS['throughput ratio']}",
+                tp_ratio >= TARGETS["throughput ratio"],
+            ),
         ):
             print(f"  {name:22s} {value:8.2f}   target {target:8s} {'met' if ok else 'MISSED'}")
     print(f"({time.monotonic() - start:.1f} s; load average {os.getloadavg()[0]:.2f} at the end)")
@@ -430,9 +444,13 @@ def inside(args: argparse.Namespace) -> int:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--n", type=int, default=5000, help="round trips per API (default 5000)")
-    parser.add_argument("--seconds", type=float, default=1.0, help="length of each throughput stream (default 1)")
+    parser.add_argument(
+        "--seconds", type=float, default=1.0, help="length of each throughput stream (default 1)"
+    )
     parser.add_argument("--burst", type=int, default=10_000, help="messages in the back-to-back burst")
     parser.add_argument("--proto", action="store_true", help="also measure benchmarks/bus_proto.py")
     parser.add_argument("--only", choices=("latency", "throughput"), help="run one half only")
@@ -452,7 +470,16 @@ def main() -> int:
     if reason:
         print(f"cannot run: no private network namespace: {reason}", file=sys.stderr)
         return 2
-    argv = [__file__, "--inside", "--n", str(args.n), "--seconds", str(args.seconds), "--burst", str(args.burst)]
+    argv = [
+        __file__,
+        "--inside",
+        "--n",
+        str(args.n),
+        "--seconds",
+        str(args.seconds),
+        "--burst",
+        str(args.burst),
+    ]
     argv += ["--only", args.only] if args.only else []
     argv += ["--proto"] if args.proto else []
     argv += ["--json"] if args.json else []

@@ -230,7 +230,9 @@ class Bus(_BaseBus):
             link.publish(channel, data)
         except OSError as exc:
             self.publish_errors += 1
-            self._publish_log.log((bus, channel), logging.WARNING, "cannot send on %s %s: %s", bus, channel, exc)
+            self._publish_log.log(
+                (bus, channel), logging.WARNING, "cannot send on %s %s: %s", bus, channel, exc
+            )
             return False
         return True
 

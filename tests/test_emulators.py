@@ -170,7 +170,7 @@ def test_tello_rc_moves_without_reply(tello: TelloEmulator, tello_client: TelloC
     assert tello_client.no_reply("rc 0 100 0 0")  # rc is never answered
     assert tello.wait_until(lambda s: s.x > 0.4, timeout=3)
     state = Tello.parse_state(tello_client.state_packets(0.25)[-1])
-    assert state["vgx"] == 10 and state["vgy"] == 0  # full stick = 1 m/s = 10 dm/s along the initial heading
+    assert state["vgx"] in (9, 10) and state["vgy"] == 0  # full stick = 1 m/s = 10 dm/s along the initial heading
     assert tello_client.no_reply("rc 50 0 -20 100")
     assert tello.wait_until(lambda s: s.yaw > 45, timeout=2)
     assert tello.snapshot().vz < 0
@@ -182,13 +182,13 @@ def test_tello_rc_moves_without_reply(tello: TelloEmulator, tello_client: TelloC
     assert not tello.snapshot().flying
 
 
-@pytest.mark.parametrize("tello", [{"auto_land_timeout": 0.4}], indirect=True)
+@pytest.mark.parametrize("tello", [{"auto_land_timeout": 0.6}], indirect=True)
 def test_tello_auto_lands_without_commands(tello: TelloEmulator, tello_client: TelloClient) -> None:
     assert tello_client.ask("command") == "ok"
     assert tello_client.ask("takeoff") == "ok"
-    for _ in range(5):  # commands keep it up (rc counts)
+    for _ in range(8):  # commands keep it up (rc counts)
         tello_client.send("rc 0 0 0 0")
-        time.sleep(0.15)
+        time.sleep(0.1)
     assert tello.snapshot().flying
     assert tello.wait_until(lambda s: not s.flying, timeout=3)
     assert tello.snapshot().z == 0.0
@@ -358,7 +358,10 @@ def test_mavlink_boot_mode_revert_and_arming_gate() -> None:
     client = mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=255)
     try:
         port = client.port.getsockname()[1]
-        params = {"boot_delay": 0.6, "ekf_delay": 1.3, "gps_delay": 1.3, "heartbeat_rate": 8.0}
+        params = {
+            "boot_delay": 0.6, "ekf_delay": 1.3, "gps_delay": 1.3, "heartbeat_rate": 8.0,
+            "stream_rates": {"GPS_RAW_INT": 5.0, "EKF_STATUS_REPORT": 5.0},
+        }
         with MavlinkVehicle("127.0.0.1", 0, udp_target=("127.0.0.1", port), **params) as vehicle:
             first = client.wait_heartbeat(timeout=2)
             assert first is not None and first.system_status == mav2.MAV_STATE_BOOT
@@ -392,7 +395,7 @@ def test_mavlink_boot_mode_revert_and_arming_gate() -> None:
         client.close()
 
 
-@pytest.mark.parametrize("vehicle", [{"guided_timeout": 0.6}], indirect=True)
+@pytest.mark.parametrize("vehicle", [{"guided_timeout": 0.4}], indirect=True)
 def test_mavlink_guided_takeoff_velocity_land(vehicle: MavlinkVehicle, gcs: Any) -> None:
     assert arm(gcs) == mav2.MAV_RESULT_ACCEPTED  # STABILIZE can arm ...
     assert command(gcs, mav2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 3) == mav2.MAV_RESULT_FAILED  # ... not take off
@@ -404,11 +407,11 @@ def test_mavlink_guided_takeoff_velocity_land(vehicle: MavlinkVehicle, gcs: Any)
     assert recv(gcs, "EXTENDED_SYS_STATE", lambda m: m.landed_state == mav2.MAV_LANDED_STATE_IN_AIR, timeout=2)
     assert gcs.motors_armed()
 
-    for _ in range(10):  # 2 m/s east for one second
-        velocity(gcs, 0.0, 2.0, 0.0, yaw_rate=0.5)
+    for _ in range(6):  # 3 m/s east for 0.6 s
+        velocity(gcs, 0.0, 3.0, 0.0, yaw_rate=0.5)
         time.sleep(0.1)
     snap = vehicle.snapshot()
-    assert snap.east > 1.0 and abs(snap.north) < 0.05 and snap.ve > 1.5 and snap.yaw > 10
+    assert snap.east > 1.0 and abs(snap.north) < 0.05 and snap.ve > 2.5 and snap.yaw > 10
     pos = recv(gcs, "GLOBAL_POSITION_INT", lambda m: m.vy > 100)
     assert pos is not None and pos.lon > round(snap.lon * 1e7) - 200 and pos.hdg > 0
     # no new target: ArduCopter stops after its guided timeout
@@ -481,10 +484,10 @@ def test_mavlink_streams_and_requests(vehicle: MavlinkVehicle, gcs: Any) -> None
     assert recv(gcs, "GLOBAL_POSITION_INT", timeout=1) is not None
     assert command(gcs, mav2.MAV_CMD_SET_MESSAGE_INTERVAL, mav2.MAVLINK_MSG_ID_ATTITUDE, 50_000) == 0
     start, count = time.monotonic(), 0
-    while time.monotonic() - start < 1.0:
-        if gcs.recv_match(type="ATTITUDE", blocking=True, timeout=0.2) is not None:
+    while time.monotonic() - start < 0.5:
+        if gcs.recv_match(type="ATTITUDE", blocking=True, timeout=0.1) is not None:
             count += 1
-    assert 15 <= count <= 25, f"{count} ATTITUDE in 1 s at 20 Hz"
+    assert 7 <= count <= 13, f"{count} ATTITUDE in 0.5 s at 20 Hz"
     assert command(gcs, mav2.MAV_CMD_SET_MESSAGE_INTERVAL, mav2.MAVLINK_MSG_ID_ATTITUDE, -1) == 0
     assert command(gcs, mav2.MAV_CMD_REQUEST_MESSAGE, mav2.MAVLINK_MSG_ID_HOME_POSITION) == 0
     home = recv(gcs, "HOME_POSITION", timeout=1)

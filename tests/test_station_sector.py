@@ -174,7 +174,7 @@ def test_index_and_shortcuts_give_the_brute_force_answer(
         via_index = detect(lat, lon, heading, index.candidates(*box, exclude=i), range_m, fov)
         assert same(via_index, expected), (i, via_index, expected)
         detected += expected.detected
-    assert 0 < detected  # the swarm is dense enough for the comparison to mean something
+    assert detected > 0  # the swarm is dense enough for the comparison to mean something
 
 
 def test_planar_error_stays_inside_the_margins_the_shortcut_assumes() -> None:

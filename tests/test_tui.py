@@ -226,8 +226,8 @@ async def test_agent_messages_appear_as_rows(context: Context, swarm: FakeSwarm,
             "spd": "5.0",
             "hdg": "271←",
             "link": "ok",
-            "beh": "dovrat_swarm, v…",
-            "err": "arming refused: battery…",
+            "beh": "dovrat_swarm, …",
+            "err": "arming refused: batte…",
         }
         mc_cell = table.get_row("uav10")[1]
         assert "green" in str(mc_cell.style)  # coloured by state

@@ -35,6 +35,22 @@ def _cmd_hlc(args: argparse.Namespace) -> int:
     return _run_single(args, lambda cfg, ctx: [HlcNode(cfg, ctx)])
 
 
+def _cmd_osc(args: argparse.Namespace) -> int:
+    from antalate_lcm.osc import OscNode
+
+    return _run_single(args, lambda cfg, ctx: [OscNode(cfg, ctx)])
+
+
+def _cmd_station(args: argparse.Namespace) -> int:
+    from antalate_lcm.station import run_station
+
+    run_station(
+        host=args.host, port=args.port, db_path=args.db, range_m=args.range, fov_deg=args.fov,
+        stale_after_s=args.stale_after,
+    )
+    return 0
+
+
 def _cmd_bma(args: argparse.Namespace) -> int:
     from antalate_lcm.bma.node import BmaNode
 
@@ -84,6 +100,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     for name, func, help_text in (
         ("mc", _cmd_mc, "run the Mission Control node of an agent"),
         ("hlc", _cmd_hlc, "run the High-Level Control node (and its autopilot) of an agent"),
+        ("osc", _cmd_osc, "run the Operator Station Client of an agent (needs [osc] server)"),
     ):
         p = sub.add_parser(name, help=help_text)
         p.add_argument("config", help="agent config file (TOML)")
@@ -99,6 +116,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--agents", type=int, default=1, help="N simulated agents from each config (sim only)")
     p.add_argument("--spacing", type=float, default=8.0, help="metres between simulated homes (default 8)")
     p.set_defaults(func=_cmd_agent)
+
+    from antalate_lcm.station import DEFAULT_HOST, DEFAULT_PORT
+
+    p = sub.add_parser("station", help="run the reference operator station (HTTP + SQLite)")
+    p.add_argument("--db", help="SQLite file (default: in the user's data directory; ':memory:' keeps nothing)")
+    p.add_argument("--host", default=DEFAULT_HOST, help=f"address to listen on (default {DEFAULT_HOST})")
+    p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"port (default {DEFAULT_PORT})")
+    p.add_argument("--range", type=float, default=100.0, help="front-sector sensing range, m (default 100)")
+    p.add_argument("--fov", type=float, default=60.0, help="front-sector field of view, deg (default 60)")
+    p.add_argument("--stale-after", type=float, default=5.0, help="s without a report before an agent is stale")
+    p.set_defaults(func=_cmd_station)
 
     p = sub.add_parser("demo", help="fly a simulated swarm (the template application)")
     p.add_argument("--agents", type=int, default=5, help="number of simulated agents (default 5)")

@@ -20,6 +20,7 @@ from antalate_lcm.node import Context, Node
 from antalate_lcm.runtime.agent import agent_nodes, swarm_configs, validate
 from antalate_lcm.runtime.launch import run_until_signal
 from antalate_lcm.runtime.scripted_operator import Phase, ScriptedOperator
+from antalate_lcm.station import StationServer, StationSettings
 
 log = logging.getLogger("antalate.demo")
 
@@ -73,9 +74,29 @@ def build_swarm(n: int, url: str, *, station: str | None = None) -> list[Config]
     return configs
 
 
+def start_station() -> StationServer:
+    """The reference station in this process (in-memory database): the swarm's peer sensing."""
+    server = StationServer(StationSettings(db_path=":memory:", range_m=30.0, fov_deg=90.0, stale_after_s=3.0))
+    server.start()
+    log.info("station serving on %s", server.url)
+    return server
+
+
 def run_headless(
     n: int, *, mission_time: float = 20.0, url: str = DEMO_URL, direction: tuple[float, float] | None = None,
-    station: str | None = None, on_report: Callable[[str], None] = print,
+    with_station: bool = True, on_report: Callable[[str], None] = print,
+) -> int:
+    station = start_station() if with_station else None
+    try:
+        return _fly_headless(n, mission_time, url, direction, station.url if station else None, on_report)
+    finally:
+        if station is not None:
+            station.stop()
+
+
+def _fly_headless(
+    n: int, mission_time: float, url: str, direction: tuple[float, float] | None, station: str | None,
+    on_report: Callable[[str], None],
 ) -> int:
     context, url = open_context(url)
     configs = build_swarm(n, url, station=station)

@@ -1,30 +1,84 @@
 """The reference operator station (``antalate station``): HTTP + SQLite + geodesic sector sensing.
 
-Public API (everything else in this package is private):
+Public API (the underscored modules are private):
 
 * `create_app` — the FastAPI app, for embedding in another ASGI server;
-* `StationSettings`, `default_db_path` — parameters and the default database location;
-* `run_station` — serve until interrupted (the CLI's entry);
+* `StationSettings`, `default_db_path`, `DEFAULT_HOST`, `DEFAULT_PORT` — parameters and defaults;
+* `run_station` — serve until interrupted (what ``antalate station`` calls);
 * `StationServer` — the station in a background thread (tests, demos, benchmarks);
-* `models` — the wire format as pydantic models, for clients such as the OSC.
+* the wire models (`ReportRequest`, `ReportReply`, `Telemetry`, `Feedback`, `Payload`,
+  `OperatorCommand`, `DirectionCommand`, `PeerDetection`, `CommandRequest`, …), also as the
+  namespace `models`, for clients such as the OSC;
+* `sector` — the pure front-sector geometry.
 
-The protocol is described in ``docs/station-protocol.md``.
+The server half (FastAPI, uvicorn) is imported on first use, so a client that only needs the wire
+models does not pay for it. The protocol is described in ``docs/station-protocol.md`` and
+``docs/openapi.json``.
 """
 
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from . import _models as models
-from ._app import create_app
-from ._server import StationServer, run_station
+from . import sector
+from ._models import (
+    AgentInfo,
+    CommandRequest,
+    CommandResponse,
+    Direction,
+    DirectionCommand,
+    ErrorResponse,
+    Feedback,
+    OperatorCommand,
+    Payload,
+    PeerDetection,
+    QueuedCommand,
+    ReportReply,
+    ReportRequest,
+    Telemetry,
+)
 from ._settings import DEFAULT_HOST, DEFAULT_PORT, StationSettings, default_db_path
+
+if TYPE_CHECKING:
+    from ._app import create_app
+    from ._server import StationServer, run_station
+
+_LAZY = {"create_app": "._app", "run_station": "._server", "StationServer": "._server"}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "DEFAULT_HOST",
     "DEFAULT_PORT",
+    "AgentInfo",
+    "CommandRequest",
+    "CommandResponse",
+    "Direction",
+    "DirectionCommand",
+    "ErrorResponse",
+    "Feedback",
+    "OperatorCommand",
+    "Payload",
+    "PeerDetection",
+    "QueuedCommand",
+    "ReportReply",
+    "ReportRequest",
     "StationServer",
     "StationSettings",
+    "Telemetry",
     "create_app",
     "default_db_path",
     "models",
     "run_station",
+    "sector",
 ]

@@ -18,16 +18,26 @@ from typing import Any
 from fastapi import FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
-from pydantic import ValidationError
+from pydantic import TypeAdapter, ValidationError
+from pydantic.json_schema import models_json_schema
 
 from ._db import StationDB
-from ._models import AgentInfo, CommandRequest, CommandResponse, ErrorResponse, ReportReply, ReportRequest
+from ._models import (
+    AgentInfo,
+    CommandRequest,
+    CommandResponse,
+    ErrorResponse,
+    PeerDetection,
+    ReportReply,
+    ReportRequest,
+)
 from ._settings import StationSettings
 from ._station import Station, UnknownTarget
 
 log = logging.getLogger("antalate.station")
 
 API_VERSION = "1.0"
+_AGENT_LIST = TypeAdapter(list[AgentInfo])
 
 _DESCRIPTION = """\
 The reference operator station of antalate (DESIGN §9). Agents' Operator Station Clients POST a
@@ -57,7 +67,10 @@ class _BodyLimit:
             return
         for name, value in scope["headers"]:
             if name == b"content-length":
-                if not value.isdigit() or int(value) > self.max_bytes:
+                if not value.isdigit():
+                    await _send_error(send, 400, "invalid Content-Length header")
+                    return
+                if int(value) > self.max_bytes:
                     await _send_error(send, 413, f"request body larger than {self.max_bytes} bytes")
                     return
                 break
@@ -235,32 +248,34 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
         responses={415: {"model": ErrorResponse, "description": "the body is not JSON"}},
     )
     async def report(request: Request) -> Response:
-        """An agent's periodic report; the reply carries its token, due commands and the peer detection.
-
-        Served by `_ReportFastPath`; this route documents it and answers the same way without it.
-        """
+        """An agent's periodic report; the reply carries its token, due commands and the peer detection."""
+        # Normally `_ReportFastPath` answers before this route is reached; the route documents the
+        # endpoint and answers identically when the app is mounted without the middleware stack.
         status, payload = handle_report(
             request.app.state.station, await request.body(), request.headers.get("content-type"), clock()
         )
         return Response(payload, status_code=status, media_type="application/json")
 
     @app.get("/api/agents", response_model=list[AgentInfo], tags=["operators"])
-    async def agents(request: Request) -> list[AgentInfo]:
+    async def agents(request: Request) -> Response:
         """Every agent the station knows, with its latest report, sorted by name."""
-        result: list[AgentInfo] = request.app.state.station.agents(clock())
-        return result
+        # Serialised directly: FastAPI would validate the list against response_model once more.
+        listing = request.app.state.station.agents(clock())
+        return Response(_AGENT_LIST.dump_json(listing), media_type="application/json")
 
     @app.post(
         "/api/commands", response_model=CommandResponse, tags=["operators"],
-        responses={404: {"model": ErrorResponse, "description": "no agent has that token or name"}},
+        responses={404: {"model": ErrorResponse, "description": "no agent has the token or name"}},
     )
-    async def commands(body: CommandRequest, request: Request) -> CommandResponse:
+    async def commands(body: CommandRequest, request: Request) -> Response:
         """Queue an operator or direction command for one agent (token or name) or for every known agent."""
         try:
             result: CommandResponse = request.app.state.station.queue(body, clock())
         except UnknownTarget as exc:
             raise HTTPException(404, f"no agent has the token or name {exc.args[0]!r}") from None
-        return result
+        return Response(result.model_dump_json(), media_type="application/json")
+
+    _document_wire_models(app)
 
     @app.get("/api/station", tags=["operators"])
     async def station_info(request: Request) -> dict[str, object]:
@@ -276,6 +291,29 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
         }
 
     return app
+
+
+def _document_wire_models(app: FastAPI) -> None:
+    """Put every wire model in the OpenAPI components, also those no route names: ``ReportRequest``
+    (the fast path reads the body itself) and ``PeerDetection`` (it travels as JSON text inside
+    ``Payload.data``). A client generator or a person writing their own server needs both."""
+    base_openapi = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is not None:
+            return app.openapi_schema
+        schema = base_openapi()
+        _, defs = models_json_schema(
+            [(ReportRequest, "validation"), (PeerDetection, "serialization")],
+            ref_template="#/components/schemas/{model}",
+        )
+        components = schema.setdefault("components", {}).setdefault("schemas", {})
+        for name, definition in defs.get("$defs", {}).items():
+            components.setdefault(name, definition)
+        app.openapi_schema = schema
+        return schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
 
 
 async def _upkeep(station: Station, clock: Callable[[], float], period: float) -> None:

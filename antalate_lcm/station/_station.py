@@ -227,17 +227,21 @@ class Station:
                 if (q := self._queues.get(tok)) is not None and q.direction is not None
             ]
         seq = self.db.queue_command(now, req.target, kind, body, tokens, replaced)
+        # One immutable command object shared by every agent's queue; the per-agent entries are
+        # built without re-validation (a broadcast to thousands of agents must not stall reports).
         queued = []
-        for agent in targets:
-            q = self._queues.setdefault(agent.token, _Queue())
-            if kind == "operator":
-                op = OperatorCommand.model_validate({**body, "seq": seq})
-                q.operator.append((seq, now, op))
-                queued.append(QueuedCommand(token=agent.token, name=agent.name, seq=seq, operator_cmd=op))
-            else:
-                dc = DirectionCommand.model_validate({**body, "seq": seq})
-                q.direction = (seq, now, dc)
-                queued.append(QueuedCommand(token=agent.token, name=agent.name, seq=seq, direction_cmd=dc))
+        if kind == "operator":
+            op = OperatorCommand.model_validate({**body, "seq": seq})
+            for agent in targets:
+                self._queues.setdefault(agent.token, _Queue()).operator.append((seq, now, op))
+                queued.append(QueuedCommand.model_construct(
+                    token=agent.token, name=agent.name, seq=seq, operator_cmd=op, direction_cmd=None))
+        else:
+            dc = DirectionCommand.model_validate({**body, "seq": seq})
+            for agent in targets:
+                self._queues.setdefault(agent.token, _Queue()).direction = (seq, now, dc)
+                queued.append(QueuedCommand.model_construct(
+                    token=agent.token, name=agent.name, seq=seq, operator_cmd=None, direction_cmd=dc))
         log.info("queued %s seq %d for %s (%d agent(s))", body, seq, req.target or "every agent", len(queued))
         return CommandResponse(seq=seq, target=req.target, queued=queued)
 
@@ -248,9 +252,11 @@ class Station:
         return len(self._agents)
 
     def agents(self, now: float) -> list[AgentInfo]:
+        """Every agent, sorted by name. Built without re-validation: the data was validated on the
+        way in, and listing thousands of agents must not hold up their reports."""
         stale_before = now - self.settings.stale_after_s
         return [
-            AgentInfo(
+            AgentInfo.model_construct(
                 token=a.token, name=a.name, first_seen=a.first_seen, last_seen=a.last_seen,
                 stale=a.last_seen is None or a.last_seen < stale_before,
                 mc_state=a.mc_state, hlc_state=a.hlc_state, telemetry=a.telemetry,

@@ -37,9 +37,12 @@ COLUMNS: tuple[tuple[str, str, int], ...] = (
     ("spd", "Spd", 4),
     ("hdg", "Hdg", 4),
     ("link", "Link", 4),
-    ("beh", "Behaviors", 16),
-    ("err", "Last error", 24),
+    ("beh", "Behaviors", 15),
+    ("err", "Last error", 22),
 )
+#: One space between columns instead of DataTable's two (cell_padding=0, width + 1): the whole
+#: row fits a 150-column terminal beside the map.
+GAP = 1
 _WIDTH = {key: width for key, _, width in COLUMNS}
 
 #: Names longer than the HLC column, shortened in the table only (the detail view spells them out).
@@ -120,13 +123,13 @@ class AgentTable(DataTable[Text], inherit_bindings=False):
             self.agent = agent
 
     def __init__(self, *, id: str | None = None) -> None:  # noqa: A002 - Textual's name
-        super().__init__(id=id, cursor_type="row", zebra_stripes=True)
+        super().__init__(id=id, cursor_type="row", zebra_stripes=True, cell_padding=0)
         self._shown: dict[str, tuple[Cell, ...]] = {}
         self.selected: str | None = None
 
     def on_mount(self) -> None:
-        for key, label, width in COLUMNS:
-            self.add_column(label, width=width, key=key)
+        for i, (key, label, width) in enumerate(COLUMNS):
+            self.add_column(label, width=width + (GAP if i < len(COLUMNS) - 1 else 0), key=key)
 
     def sync(self, model: SwarmModel, now: float) -> None:
         """Bring every row up to date with the model (new agents are inserted in name order)."""

@@ -87,8 +87,6 @@ def render_map(points: list[MapPoint], selected: str | None, cols: int, rows: in
             elif (row, col) in labels:
                 ch, style = labels[(row, col)]
                 line.append(ch, style)
-            elif row == (grid_rows - 1) // 2 and col == (cols - 1) // 2:
-                line.append("+", "grey35")
             else:
                 line.append(" ")
         lines.append(line)

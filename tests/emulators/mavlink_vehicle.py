@@ -54,6 +54,8 @@ pushes to a fixed address like SITL's ``udpclient`` (pymavlink ``udpin:HOST:PORT
 accepts any number of TCP clients (pymavlink ``tcp:HOST:PORT``). Ports are read back from
 ``udp_port``/``tcp_port`` after ``start()``.
 
+Not emulated: missions, parameters, RC input, GCS/battery failsafes, message signing.
+
 Faults: ``stop_heartbeats()`` (the link goes silent both ways: nothing is sent, nothing is received)
 and ``resume_heartbeats()``; ``refuse_arm = True``; ``pilot_switch_mode("LOITER")`` (an RC mode switch:
 no COMMAND_ACK, guided targets dropped); ``set_battery(pct)``.
@@ -195,6 +197,20 @@ class _Peer:
         return [m for m in msgs if m.get_type() != "BAD_DATA"]
 
 
+class _WireBuffer:
+    """The "file" pymavlink's encoder writes framed messages to; the I/O thread sends them on."""
+
+    def __init__(self) -> None:
+        self.frames: list[bytes] = []
+
+    def write(self, buf: bytes) -> None:
+        self.frames.append(bytes(buf))
+
+    def take(self) -> list[bytes]:
+        frames, self.frames = self.frames, []
+        return frames
+
+
 class MavlinkVehicle:
     """The emulated copter; ``start()``/``stop()`` or ``with``. Every public method is thread-safe."""
 
@@ -266,10 +282,10 @@ class MavlinkVehicle:
         self._tcp: socket.socket | None = None
         self._udp_peers: dict[Address, _Peer] = {}
         self._tcp_peers: list[_Peer] = []
-        self._encoder = mav2.MAVLink(self, srcSystem=sysid, srcComponent=compid)
+        self._wire = _WireBuffer()
+        self._encoder = mav2.MAVLink(self._wire, srcSystem=sysid, srcComponent=compid)
         self._outbox: list[Any] = []
         self._after_ack: list[Any] = []  # messages a command asked for go out after its COMMAND_ACK
-        self._wire: list[bytes] = []
 
         self._rates: dict[str, float] = {"HEARTBEAT": heartbeat_rate, **DEFAULT_RATES, **(stream_rates or {})}
         self._default_rates = dict(self._rates)
@@ -917,17 +933,13 @@ class MavlinkVehicle:
                 # keep the cadence without bursts after a stall
                 self._next_send[name] = max(due + 1.0 / rate, now)
 
-    def write(self, buf: bytes) -> None:
-        """File interface for pymavlink's encoder: collect the framed bytes for the I/O thread."""
-        self._wire.append(bytes(buf))
-
     def _flush(self) -> None:
         with self._lock:
             outbox, self._outbox = self._outbox, []
             link_up = self._link_up
             for msg in outbox:
                 self._encoder.send(msg)
-            wire, self._wire = self._wire, []
+            wire = self._wire.take()
         if not link_up or not wire:
             return
         data = b"".join(wire)

@@ -37,6 +37,7 @@ import shutil
 import socket
 import subprocess
 import sys
+import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Literal
@@ -114,6 +115,7 @@ class NetnsPair:
                 script += [f"ip addr add {extra}/{self.prefix_len} dev {dev}" for extra in self.extra_addrs[side]]
                 script.append(f"ip link set {dev} up")
                 self._check(side, " && ".join(script))  # type: ignore[arg-type]
+            self._wait_link_up()
         except BaseException:
             self.close()
             raise
@@ -203,6 +205,15 @@ class NetnsPair:
             stop_process(holder)
             raise RuntimeError(f"cannot create a network namespace ({' '.join(argv)}): {err.strip()}")
         return holder
+
+    def _wait_link_up(self, timeout: float = 5.0) -> None:
+        """Carrier takes a moment after ``ip link set up``; packets sent before it are lost."""
+        deadline = time.monotonic() + timeout
+        for side, dev in (("a", "veth_a"), ("b", "veth_b")):
+            while "state UP" not in self.run(side, ["ip", "-o", "link", "show", "dev", dev], timeout=10).stdout:  # type: ignore[arg-type]
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"{dev} in namespace {side} did not come up")
+                time.sleep(0.01)
 
     def _check(self, side: Side, script: str) -> None:
         done = self.run(side, ["sh", "-c", script], timeout=30)

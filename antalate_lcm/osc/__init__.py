@@ -1,0 +1,5 @@
+"""The Operator Station Client (DESIGN §9): the agent's HTTP link to an operator station."""
+
+from antalate_lcm.osc.node import OscNode
+
+__all__ = ["OscNode"]

@@ -1,0 +1,104 @@
+"""Between LCM messages and the station's JSON (pure: no I/O), using the station's own wire models."""
+
+from __future__ import annotations
+
+import base64
+import json
+from typing import Any
+
+from pydantic import ValidationError
+
+from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, operator_cmd_t, payload_t, telemetry_t
+from antalate_lcm.station import models
+
+_MC_NAMES = {v: k for k, v in vars(mc_state_t).items() if k.isupper() and isinstance(v, int)}
+_HLC_NAMES = {v: k for k, v in vars(hlc_state_t).items() if k.isupper() and isinstance(v, int)}
+_TELEMETRY_FIELDS = ("lat", "lon", "alt", "heading", "vn", "ve", "vd", "battery", "armed", "in_air", "mode")
+
+
+class ReplyError(ValueError):
+    """A reply the OSC will not act on; the message says what was wrong with it."""
+
+
+def report_body(
+    token: str | None,
+    mc: mc_state_t | None,
+    hlc: hlc_state_t | None,
+    telemetry: telemetry_t | None,
+    feedback: payload_t | None,
+) -> dict[str, Any]:
+    body: dict[str, Any] = {
+        "token": token,
+        "mc_state": _MC_NAMES.get(mc.state) if mc is not None else None,
+        "hlc_state": _HLC_NAMES.get(hlc.state) if hlc is not None else None,
+        "telemetry": None,
+        "feedback": None,
+    }
+    if telemetry is not None and telemetry.lat == telemetry.lat and telemetry.lon == telemetry.lon:
+        t = {k: getattr(telemetry, k) for k in _TELEMETRY_FIELDS}
+        t = {k: (v if not isinstance(v, float) or v == v else None) for k, v in t.items()}
+        body["telemetry"] = {k: v for k, v in t.items() if v is not None} | {"agent": telemetry.header.agent}
+    if feedback is not None:
+        data = bytes(feedback.data)
+        try:
+            body["feedback"] = {
+                "content_type": feedback.content_type or "application/octet-stream",
+                "data": data.decode("utf-8"),
+                "encoding": "utf-8",
+            }
+        except UnicodeDecodeError:
+            body["feedback"] = {
+                "content_type": feedback.content_type or "application/octet-stream",
+                "data": base64.b64encode(data).decode("ascii"),
+                "encoding": "base64",
+            }
+    return body
+
+
+def parse_reply(raw: bytes) -> models.ReportReply:
+    """Validate a reply completely before anything in it is acted on."""
+    try:
+        doc = json.loads(raw)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ReplyError(f"not JSON: {exc}") from None
+    try:
+        return models.ReportReply.model_validate(doc)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or "reply"
+        raise ReplyError(f"{where}: {first['msg']}") from None
+
+
+def operator_cmd(reply: models.ReportReply, agent: str) -> operator_cmd_t | None:
+    c = reply.operator_cmd
+    if c is None:
+        return None
+    msg = operator_cmd_t()
+    msg.command = getattr(operator_cmd_t, c.command)
+    msg.target = agent
+    msg.altitude = float(c.altitude or 0.0)
+    return msg
+
+
+def direction_cmd(reply: models.ReportReply, agent: str) -> direction_cmd_t | None:
+    d = reply.direction_cmd
+    if d is None:
+        return None
+    msg = direction_cmd_t()
+    msg.active, msg.azimuth, msg.speed, msg.target = d.active, d.azimuth, d.speed, agent
+    return msg
+
+
+def payload(reply: models.ReportReply) -> payload_t | None:
+    p = reply.payload
+    if p is None:
+        return None
+    try:
+        data = p.content()
+    except ValueError as exc:
+        raise ReplyError(f"payload.data: {exc}") from None
+    msg = payload_t()
+    msg.content_type = p.content_type
+    msg.data = data
+    msg.size = len(data)
+    return msg

@@ -33,6 +33,7 @@ from antalate_lcm.hlc.velocity_guard import (
     VelocityGuard,
     VelocityLimits,
     Verdict,
+    mission_flight,
 )
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t, velocity_cmd_t
 from antalate_lcm.node import Context, Node
@@ -193,9 +194,12 @@ class HlcNode(Node):
     # ------------------------------------------------------------------ outputs
     def _apply(self, decision: GuardDecision, source: str) -> None:
         if decision.verdict is Verdict.REJECT:
+            # Outside mission flight a velocity command is expected (a behavior's last "stop"),
+            # so it is noted; a malformed one in flight is a warning.
+            in_mission = mission_flight(self.machine.state, self.mc_state)
             self._reject_log.log(
                 ("reject", decision.reason),
-                logging.WARNING,
+                logging.WARNING if in_mission else logging.INFO,
                 "rejected velocity command from %s: %s",
                 source,
                 decision.reason,

@@ -49,7 +49,7 @@ import lcm  # noqa: E402
 from antalate_lcm.bus import DEFAULT_QUEUE_CAPACITY  # noqa: E402
 from antalate_lcm.msgs import header_t, telemetry_t  # noqa: E402
 
-PORTS = {"raw": 7667, "bus": 7668, "proto": 7669}
+PORTS = {"raw": 7667, "bus": 7668, "proto": 7669, "raw-thread": 7670}
 BUS_MODULES = {"bus": "antalate_lcm.bus", "proto": "bus_proto"}
 TIME_LIMIT = 88.0  # seconds for the whole run, namespace included
 RATES = (10_000, 20_000, 30_000, 40_000, 50_000, 60_000, 80_000, 100_000, 120_000, 150_000)
@@ -88,7 +88,7 @@ class Peer:
         self.last = 0.0
         self.api = api
         self.stop = threading.Event()
-        if api == "raw":
+        if api.startswith("raw"):
             self.lc = lcm.LCM(url(api))
             if role == "echo":
                 sub = self.lc.subscribe("PING", self._echo_raw)
@@ -140,7 +140,7 @@ class Peer:
                 self.count = 0
                 print(json.dumps("ok"), flush=True)
         self.stop.set()
-        if self.api != "raw":
+        if not self.api.startswith("raw"):
             self.bus.close()
 
 
@@ -211,6 +211,45 @@ class RawPinger:
         del self.lc
 
 
+class RawThreadPinger:
+    """Raw lcm with the Bus's threading: a dispatcher thread runs the handler, the sender waits on an Event."""
+
+    def __init__(self, api: str) -> None:
+        self.lc = lcm.LCM(url(api))
+        self.got: tuple[int, int] = (-1, 0)
+        self.event = threading.Event()
+        self.stop = threading.Event()
+        self.lc.subscribe("PONG", self._on_pong).set_queue_capacity(DEFAULT_QUEUE_CAPACITY)
+        self.thread = threading.Thread(target=self._loop, daemon=True)
+        self.thread.start()
+
+    def _loop(self) -> None:
+        while not self.stop.is_set():
+            self.lc.handle_timeout(100)
+
+    def _on_pong(self, _channel: str, data: bytes) -> None:
+        msg = telemetry_t.decode(data)
+        self.got = (msg.header.seq, time.perf_counter_ns())
+        self.event.set()
+
+    def ping(self, msg: telemetry_t, timeout: float) -> int | None:
+        seq = msg.header.seq
+        self.event.clear()
+        t0 = time.perf_counter_ns()
+        self.lc.publish("PING", msg.encode())
+        deadline = time.monotonic() + timeout
+        while self.got[0] != seq:
+            left = deadline - time.monotonic()
+            if left <= 0 or not self.event.wait(left):
+                return None
+            self.event.clear()
+        return self.got[1] - t0
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join()
+
+
 class BusPinger:
     def __init__(self, api: str) -> None:
         self.bus = bus_class(api)({"b": url(api)})
@@ -243,7 +282,8 @@ class BusPinger:
 def round_trip(apis: list[str], n: int, period: float = 0.001, warmup: int = 20) -> dict[str, dict[str, Any]]:
     """``n`` round trips per API at one per ``period``, the APIs taking turns in blocks of BLOCK."""
     msg = make_msg()
-    pingers = {api: RawPinger(api) if api == "raw" else BusPinger(api) for api in apis}
+    kinds: dict[str, Any] = {"raw": RawPinger, "raw-thread": RawThreadPinger}
+    pingers = {api: kinds.get(api, BusPinger)(api) for api in apis}
     rtts: dict[str, list[int]] = {api: [] for api in apis}
     lost = dict.fromkeys(apis, 0)
     seq = 0
@@ -382,6 +422,7 @@ def inside(args: argparse.Namespace) -> int:
     start = time.monotonic()
     deadline = start + TIME_LIMIT - 6
     apis = ["raw", "bus", *(["proto"] if args.proto else [])]
+    latency_apis = ["raw", "bus", *(["raw-thread", "proto"] if args.proto else [])]
     size = len(make_msg().encode())
     print(
         f"message: telemetry_t, {size} bytes; URL {url('raw')} (one port per API); queue capacity {DEFAULT_QUEUE_CAPACITY}"
@@ -392,11 +433,17 @@ def inside(args: argparse.Namespace) -> int:
         print(
             f"round trip: {args.n} pings per API at 1 kHz, in turns of {BLOCK}, ping and echo in two processes"
         )
-        rt = round_trip(apis, args.n)
+        rt = round_trip(latency_apis, args.n)
         for api, r in rt.items():
             print(
-                f"  {api:5s}  p50 {r['p50']:6.1f} us  p90 {r['p90']:6.1f} us  p99 {r['p99']:7.1f} us  "
+                f"  {api:10s}  p50 {r['p50']:6.1f} us  p90 {r['p90']:6.1f} us  p99 {r['p99']:7.1f} us  "
                 f"max {r['max']:7.1f} us  mean {r['mean']:6.1f} us  lost {r['lost']}"
+            )
+        if "raw-thread" in rt:
+            print(
+                "  (raw-thread: raw lcm with the Bus's threading on the ping side -- a dispatcher thread runs the "
+                f"handler -- p50 {rt['raw-thread']['p50'] / rt['raw']['p50']:.2f}x raw: the floor for any "
+                "design with a dispatcher thread)"
             )
     tp: dict[str, dict[str, Any]] = {}
     if args.only in (None, "throughput"):
@@ -408,18 +455,18 @@ def inside(args: argparse.Namespace) -> int:
         for api, t in tp.items():
             b = t["burst"]
             print(
-                f"  {api:5s}  burst {b['received']}/{b['n']} received, sent at {b['rate'] / 1000:.0f}k msg/s, "
+                f"  {api:10s}  burst {b['received']}/{b['n']} received, sent at {b['rate'] / 1000:.0f}k msg/s, "
                 f"drained {b['drain'] * 1000:.0f} ms later;  sustained lossless: {t['lossless'] / 1000:.0f}k msg/s"
             )
             for s in t["steps"]:
                 print(
-                    f"         {s['rate'] / 1000:5.0f}k/s asked, {s['achieved'] / 1000:6.1f}k/s sent, "
+                    f"              {s['rate'] / 1000:5.0f}k/s asked, {s['achieved'] / 1000:6.1f}k/s sent, "
                     f"{s['received']}/{s['n']} received, sink done {s['lag'] * 1000:+6.0f} ms after the last send"
                 )
             if t.get("publisher_bound"):
-                print("         (the publisher, not the sink, was the limit)")
+                print("              (the publisher, not the sink, was the limit)")
             if t.get("cut_short"):
-                print("         (ladder cut short by the time limit)")
+                print("              (ladder cut short by the time limit)")
     nan = float("nan")
     print("against the targets:")
     for api in apis[1:]:

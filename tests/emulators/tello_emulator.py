@@ -12,11 +12,13 @@ Protocol (what the real Tello does, and so what this emulates):
       h:0;bat:100;baro:100.00;time:0;agx:0.00;agy:0.00;agz:-1000.00;\\r\\n
 
   (one line; the ``mid..mpry`` mission-pad block is dropped with ``mission_pad_fields=False``, as on a
-  non-EDU Tello). Before SDK mode every other command is answered ``error`` (an emulator choice).
+  non-EDU Tello). Before SDK mode other commands are answered ``error`` (an emulator choice; ``rc`` and
+  ``emergency`` never get a reply).
 * ``takeoff`` climbs to ``takeoff_height`` (0.8 m) in ``takeoff_time`` (2.5 s) and answers ``ok`` only
   once there; ``land`` descends at ``land_speed`` and answers when down. ``up/down/left/right/forward/back
-  x`` (20..500 cm) and ``go x y z speed`` (body frame: x forward, y left, z up, cm; 10..100 cm/s) fly at
-  the ``speed`` setting and answer when done; ``cw/ccw x`` turn at ``rotate_rate``. While one of these is
+  x`` (20..500 cm) fly at the ``speed`` setting and ``go x y z speed`` (body frame: x forward, y left,
+  z up, cm; 10..100 cm/s) at its own speed, answering when done; out-of-range values get ``out of
+  range``, motion on the ground ``error Motor stop``, unknown words ``unknown command: WORD``; ``cw/ccw x`` turn at ``rotate_rate``. While one of these is
   running other motion commands get ``error``; ``stop`` cancels it (the cancelled command is never
   answered) and answers ``ok``. ``emergency`` stops the motors (the drone drops to the ground) and, like
   ``rc``, gets **no reply** (djitellopy sends both without waiting; a reply would be taken as the answer

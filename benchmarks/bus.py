@@ -392,20 +392,29 @@ def throughput(apis: list[str], seconds: float, burst: int, deadline: float) -> 
                         out[api]["cut_short"] = True
                         climbing.remove(api)
                         continue
-                    ask(sinks[api], "reset")
                     n = int(rate * seconds)
-                    achieved, end = stream(pubs[api][0], n, rate)
-                    got, last = ask(sinks[api], "count")
-                    lag = last - end
-                    out[api]["steps"].append(
-                        {"rate": rate, "achieved": achieved, "n": n, "received": got, "lag": lag}
-                    )
-                    if got < n or lag > KEEP_UP:
-                        climbing.remove(api)
-                        continue
-                    out[api]["lossless"] = max(out[api]["lossless"], achieved)
-                    if achieved < 0.97 * rate:
-                        out[api]["publisher_bound"] = True  # the publisher, not the sink, is the limit
+                    kept_up = passed = False
+                    for attempt in (1, 2):  # one retry: a step can fail because of load from elsewhere
+                        ask(sinks[api], "reset")
+                        achieved, end = stream(pubs[api][0], n, rate)
+                        got, last = ask(sinks[api], "count")
+                        step = {
+                            "rate": rate,
+                            "achieved": achieved,
+                            "n": n,
+                            "received": got,
+                            "lag": last - end,
+                        }
+                        out[api]["steps"].append({**step, "attempt": attempt})
+                        if got == n and last - end <= KEEP_UP:
+                            kept_up = True
+                            out[api]["lossless"] = max(out[api]["lossless"], achieved)
+                            passed = achieved >= 0.97 * rate
+                            if passed:
+                                break
+                    if not passed:
+                        if kept_up:
+                            out[api]["publisher_bound"] = True  # the publisher, not the sink, was the limit
                         climbing.remove(api)
                 if not climbing:
                     break
@@ -459,8 +468,9 @@ def inside(args: argparse.Namespace) -> int:
                 f"drained {b['drain'] * 1000:.0f} ms later;  sustained lossless: {t['lossless'] / 1000:.0f}k msg/s"
             )
             for s in t["steps"]:
+                retry = "retry" if s["attempt"] > 1 else ""
                 print(
-                    f"              {s['rate'] / 1000:5.0f}k/s asked, {s['achieved'] / 1000:6.1f}k/s sent, "
+                    f"         {retry:5s}{s['rate'] / 1000:5.0f}k/s asked, {s['achieved'] / 1000:6.1f}k/s sent, "
                     f"{s['received']}/{s['n']} received, sink done {s['lag'] * 1000:+6.0f} ms after the last send"
                 )
             if t.get("publisher_bound"):

@@ -176,6 +176,7 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=20.0, help="measurement window")
     parser.add_argument("--size", default="160x50", help="terminal COLSxROWS")
     parser.add_argument("--arbiter", action="store_true", help="also publish arbiter_status_t at --hz")
+    parser.add_argument("--profile", metavar="PATH", help="run the console under cProfile (UI thread), write stats")
     parser.add_argument("--role", choices=["main", "publisher"], default="main", help=argparse.SUPPRESS)
     parser.add_argument("--url", default=URL, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -202,7 +203,8 @@ def main() -> int:
         env = dict(os.environ, TERM="xterm-256color", COLORTERM="truecolor", PYTHONPATH=str(REPO))
         env.pop("NO_COLOR", None)
         env.pop("TEXTUAL", None)
-        tui = ns.popen([sys.executable, "-m", "operator_tui", str(config)], stdin=term.slave, stdout=term.slave,
+        profile = ["-m", "cProfile", "-o", str(Path(args.profile).resolve())] if args.profile else []
+        tui = ns.popen([sys.executable, *profile, "-m", "operator_tui", str(config)], stdin=term.slave, stdout=term.slave,
                        stderr=term.slave, env=env, text=False)
         try:
             seen = term.expect(f"agents {args.agents}".encode())
@@ -232,7 +234,11 @@ def main() -> int:
             pub.stdin.close()
             report = json.loads(pub.stdout.readline() or "{}")
         finally:
-            tui.send_signal(signal.SIGTERM)
+            term.press("q")  # a clean exit (lets --profile write its stats)
+            try:
+                tui.wait(10)
+            except subprocess.TimeoutExpired:
+                tui.send_signal(signal.SIGTERM)
             stop_process(tui)
             stop_process(pub)
             term.close()

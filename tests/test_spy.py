@@ -71,6 +71,7 @@ def known_mc_state() -> mc_state_t:
     msg.header = header(-1, "swarm-7", -2)
     msg.state = mc_state_t.MISSION
     msg.last_command_seq = 2_147_483_647
+    msg.takeoff_altitude = 12.5
     return msg
 
 
@@ -217,6 +218,7 @@ def test_java_decodes_what_python_encodes(java_cp: str, tmp_path: Path) -> None:
         "header": {"utime": -1, "agent": "swarm-7", "seq": -2},
         "state": 3,
         "last_command_seq": 2_147_483_647,
+        "takeoff_altitude": 12.5,
     }
     assert mc["state"] == mc_state_t.MISSION
 

@@ -439,6 +439,11 @@ def test_run_station_reports_a_busy_port_and_an_unusable_database(tmp_path: Path
     not_a_db.write_bytes(b"this is not sqlite" * 100)
     with pytest.raises(AntalateError, match="junk.sqlite"):
         run_station("127.0.0.1", 0, str(not_a_db))
+    newer = tmp_path / "newer.sqlite"
+    with sqlite3.connect(newer) as conn:
+        conn.execute("PRAGMA user_version=99")
+    with pytest.raises(AntalateError, match="schema version 99"):
+        run_station("127.0.0.1", 0, str(newer))
     with pytest.raises(AntalateError, match="fov_deg"):
         run_station("127.0.0.1", 0, str(tmp_path / "s.sqlite"), fov_deg=400.0)
 

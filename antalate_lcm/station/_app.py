@@ -120,12 +120,21 @@ def _error_list(raw: Sequence[Any], prefix: tuple[str, ...] = ()) -> list[dict[s
     return out
 
 
+def _summary(errors: list[dict[str, object]]) -> str:
+    parts = []
+    for e in errors[:3]:
+        loc = ".".join(str(p) for p in e["loc"] if p != "body")  # type: ignore[attr-defined]
+        parts.append(f"{loc}: {e['msg']}" if loc else str(e["msg"]))
+    more = f" (and {len(errors) - 3} more)" if len(errors) > 3 else ""
+    return "invalid request: " + "; ".join(parts) + more
+
+
 def _error_body(errors: list[dict[str, object]]) -> bytes:
     return ErrorResponse(detail=_summary(errors), errors=errors).model_dump_json().encode()
 
 
 def _json_content_type(content_type: str | None) -> bool:
-    """Absent counts as JSON (curl -d, minimal clients); anything else must say application/json."""
+    """Absent counts as JSON (minimal clients); anything else must say application/json (or +json)."""
     if content_type is None:
         return True
     mime = content_type.split(";", 1)[0].strip().lower()
@@ -153,9 +162,9 @@ class _ReportFastPath:
     """Serve ``POST /api/report`` directly, in front of FastAPI's routing and dependency machinery.
 
     FastAPI spends more time per request than the station's own work (routing, dependency solving,
-    content-type parsing); skipping it nearly doubles the reports a second. The FastAPI route of
-    the same path calls the same `handle_report`, documents the endpoint in the OpenAPI schema and
-    answers identically when the app is mounted in a way that bypasses this middleware.
+    content-type parsing); skipping it cuts the station's time per report by more than half
+    (≈200 → ≈85 µs in process). The FastAPI route of the same path exists for the OpenAPI document
+    and calls the same `handle_report`, so the two cannot drift apart.
     """
 
     def __init__(self, app: ASGIApp, clock: Callable[[], float]) -> None:
@@ -186,15 +195,6 @@ class _ReportFastPath:
             "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(payload)).encode())],
         })
         await send({"type": "http.response.body", "body": payload})
-
-
-def _summary(errors: list[dict[str, object]]) -> str:
-    parts = []
-    for e in errors[:3]:
-        loc = ".".join(str(p) for p in e["loc"] if p != "body")  # type: ignore[attr-defined]
-        parts.append(f"{loc}: {e['msg']}" if loc else str(e["msg"]))
-    more = f" (and {len(errors) - 3} more)" if len(errors) > 3 else ""
-    return "invalid request: " + "; ".join(parts) + more
 
 
 def create_app(settings: StationSettings | None = None, *, clock: Callable[[], float] = time.time) -> FastAPI:
@@ -249,8 +249,7 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
     )
     async def report(request: Request) -> Response:
         """An agent's periodic report; the reply carries its token, due commands and the peer detection."""
-        # Normally `_ReportFastPath` answers before this route is reached; the route documents the
-        # endpoint and answers identically when the app is mounted without the middleware stack.
+        # `_ReportFastPath` answers before this route is reached; see its docstring.
         status, payload = handle_report(
             request.app.state.station, await request.body(), request.headers.get("content-type"), clock()
         )
@@ -275,8 +274,6 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
             raise HTTPException(404, f"no agent has the token or name {exc.args[0]!r}") from None
         return Response(result.model_dump_json(), media_type="application/json")
 
-    _document_wire_models(app)
-
     @app.get("/api/station", tags=["operators"])
     async def station_info(request: Request) -> dict[str, object]:
         """The sensing parameters and how many agents are known: what a client may want to show."""
@@ -290,6 +287,7 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
             "agents": st.agent_count,
         }
 
+    _document_wire_models(app)
     return app
 
 

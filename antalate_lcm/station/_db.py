@@ -130,8 +130,14 @@ class StationDB:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
         try:
             self._conn = sqlite3.connect(path, check_same_thread=False, isolation_level=None)
-            self._init_schema()
         except sqlite3.Error as exc:
+            raise StationDBError(f"cannot open {path} as the station database: {exc}") from exc
+        try:
+            self._init_schema()
+        except (sqlite3.Error, StationDBError) as exc:
+            self._conn.close()
+            if isinstance(exc, StationDBError):
+                raise
             raise StationDBError(f"cannot use {path} as the station database: {exc}") from exc
         self._lock = threading.Lock()
         self._buffer_lock = threading.Lock()
@@ -293,14 +299,6 @@ class StationDB:
         finally:
             with self._lock:
                 self._conn.close()
-
-    # -- read helpers for tests and tools ---------------------------------------------------------
-
-    def count_reports(self, token: str | None = None) -> int:
-        with self._lock:
-            if token is None:
-                return int(self._conn.execute("SELECT COUNT(*) FROM reports").fetchone()[0])
-            return int(self._conn.execute("SELECT COUNT(*) FROM reports WHERE token = ?", (token,)).fetchone()[0])
 
 
 class _Transaction:

@@ -22,9 +22,12 @@ log = logging.getLogger("antalate.station")
 def _config(settings: StationSettings, log_level: str) -> uvicorn.Config:
     # loop/http "auto" pick uvloop and httptools when installed (uvicorn[standard]): about twice the
     # reports per second of the pure-Python asyncio + h11 pair.
+    # log_config=None: uvicorn's records go to the root logger, formatted like antalate's own,
+    # instead of uvicorn installing handlers of its own. No access log: one line per report would
+    # cost more than the report.
     return uvicorn.Config(
-        create_app(settings), log_level=log_level.lower(), access_log=False, loop="auto", http="auto",
-        lifespan="on", timeout_keep_alive=30,
+        create_app(settings), log_level=log_level.lower(), log_config=None, access_log=False,
+        loop="auto", http="auto", lifespan="on", timeout_keep_alive=30,
     )
 
 

@@ -145,13 +145,6 @@ class Station:
         peers = self.index.candidates(*box, since=now - s.stale_after_s, exclude=token)
         return sector.detect(lat, lon, heading, peers, s.range_m, s.fov_deg)
 
-    def detect(self, token: str, now: float) -> sector.Detection:
-        """What a report from this agent's latest position would be answered (for tests and tools)."""
-        tel = self._agents[token].telemetry
-        if tel is None:
-            return sector.NO_DETECTION
-        return self._sense(token, tel.lat, tel.lon, tel.heading, now)
-
     def _history_row(self, token: str, req: ReportRequest, now: float) -> tuple[object, ...] | None:
         if not self.settings.history:
             return None

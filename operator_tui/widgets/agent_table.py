@@ -1,21 +1,29 @@
 """The agent table: one row per agent, coloured by state, like htop's process list.
 
-Rows are recomputed from the model on every refresh, but a cell is only pushed to the DataTable
-when its text or style changed, and columns have fixed widths (no re-measuring), so 200 agents
-cost a few hundred string comparisons per refresh. Selection leaves the table as an
-:class:`AgentTable.Selected` message; the table never reaches into other widgets.
+Why not Textual's DataTable: with 200 flying agents nearly every row changes on every refresh, and
+DataTable renders each cell through Rich's layout engine and drops its whole line cache on any
+cell update; profiling showed it alone would take about a third of a core. This widget uses the
+Line API instead: a row is a handful of pre-padded segments, built only for rows on screen and
+cached until that row's text or style changes. The header is pinned; the cursor is the selection.
+
+Selection leaves the table as an :class:`AgentTable.Selected` message; the table never reaches
+into other widgets.
 """
 
 from __future__ import annotations
 
+from bisect import bisect_left
+from functools import lru_cache
 from typing import ClassVar
 
-from rich.text import Text
+from rich.segment import Segment
+from rich.style import Style
+from textual import events
 from textual.binding import Binding, BindingType
-from textual.coordinate import Coordinate
+from textual.geometry import Size
 from textual.message import Message
-from textual.widgets import DataTable
-from textual.widgets.data_table import CellDoesNotExist
+from textual.scroll_view import ScrollView
+from textual.strip import Strip
 
 from operator_tui.model import AgentView, SwarmModel, heading_arrow, join_limited, natural_key
 from operator_tui.widgets.palette import (
@@ -40,10 +48,10 @@ COLUMNS: tuple[tuple[str, str, int], ...] = (
     ("beh", "Behaviors", 15),
     ("err", "Last error", 22),
 )
-#: One space between columns instead of DataTable's two (cell_padding=0, width + 1): the whole
-#: row fits a 150-column terminal beside the map.
+#: Spaces between columns: the whole row fits a 150-column terminal beside the map.
 GAP = 1
 _WIDTH = {key: width for key, _, width in COLUMNS}
+TABLE_WIDTH = sum(w for _, _, w in COLUMNS) + GAP * (len(COLUMNS) - 1)
 
 #: Names longer than the HLC column, shortened in the table only (the detail view spells them out).
 HLC_SHORT = {"GAINING_ALTITUDE": "GAINING_ALT"}
@@ -79,9 +87,11 @@ def row_cells(view: AgentView, now: float, stale_after: float) -> tuple[Cell, ..
         alt = (f"{tel.alt:.1f}", "")
         spd = (f"{tel.ground_speed:.1f}", "")
         hdg = (f"{tel.heading:03.0f}{heading_arrow(tel.heading)}", "")
-    active = join_limited(view.active_behaviors, _WIDTH["beh"])
     failed = view.failed_behaviors
-    beh: Cell = (join_limited(["!" + f.split(":")[0] for f in failed], _WIDTH["beh"]), "bold red") if failed else (active, "")
+    if failed:
+        beh: Cell = (join_limited(["!" + f.split(":")[0] for f in failed], _WIDTH["beh"]), "bold red")
+    else:
+        beh = (join_limited(view.active_behaviors, _WIDTH["beh"]), "")
     err = view.last_error
     err_cell: Cell = ("", "") if err is None else (join_limited([err.text], _WIDTH["err"]), SEVERITY_STYLE[err.severity])
     hlc = view.hlc_state
@@ -103,16 +113,48 @@ def row_cells(view: AgentView, now: float, stale_after: float) -> tuple[Cell, ..
     return cells
 
 
-class AgentTable(DataTable[Text], inherit_bindings=False):
-    """DataTable of agents. Left/right are left to the screen (they steer the direction)."""
+@lru_cache(maxsize=256)
+def _style(spec: str) -> Style:
+    return Style.parse(spec) if spec else Style()
+
+
+def _fit(text: str, width: int) -> str:
+    return text[:width].ljust(width)
+
+
+class AgentTable(ScrollView, can_focus=True):
+    """Agents in natural name order; ↑/↓/PgUp/PgDn/Home/End or a click move the selection."""
+
+    COMPONENT_CLASSES: ClassVar[set[str]] = {"agent-table--header", "agent-table--cursor", "agent-table--odd"}
+
+    DEFAULT_CSS = """
+    AgentTable {
+        overflow-x: hidden;
+        overflow-y: auto;
+        scrollbar-size-vertical: 1;
+    }
+    AgentTable > .agent-table--header {
+        text-style: bold;
+        background: $panel;
+    }
+    AgentTable > .agent-table--cursor {
+        background: $block-cursor-blurred-background;
+    }
+    AgentTable:focus > .agent-table--cursor {
+        background: $block-cursor-background;
+    }
+    AgentTable > .agent-table--odd {
+        background: $surface-lighten-1;
+    }
+    """
 
     BINDINGS: ClassVar[list[BindingType]] = [
-        Binding("up", "cursor_up", "Up", show=False),
-        Binding("down", "cursor_down", "Down", show=False),
-        Binding("pageup", "page_up", "Page up", show=False),
-        Binding("pagedown", "page_down", "Page down", show=False),
-        Binding("home", "scroll_top", "First", show=False),
-        Binding("end", "scroll_bottom", "Last", show=False),
+        Binding("up", "move(-1)", "Up", show=False),
+        Binding("down", "move(1)", "Down", show=False),
+        Binding("pageup", "page(-1)", "Page up", show=False),
+        Binding("pagedown", "page(1)", "Page down", show=False),
+        Binding("home", "first", "First", show=False),
+        Binding("end", "last", "Last", show=False),
     ]
 
     class Selected(Message):
@@ -123,58 +165,126 @@ class AgentTable(DataTable[Text], inherit_bindings=False):
             self.agent = agent
 
     def __init__(self, *, id: str | None = None) -> None:  # noqa: A002 - Textual's name
-        super().__init__(id=id, cursor_type="row", zebra_stripes=True, cell_padding=0)
-        self._shown: dict[str, tuple[Cell, ...]] = {}
+        super().__init__(id=id)
+        self.order: list[str] = []
+        self._keys: list[tuple[object, ...]] = []
+        self.cells: dict[str, tuple[Cell, ...]] = {}
+        self._strips: dict[str, tuple[tuple[object, ...], Strip]] = {}
+        self.cursor_row = 0
         self.selected: str | None = None
 
-    def on_mount(self) -> None:
-        for i, (key, label, width) in enumerate(COLUMNS):
-            self.add_column(label, width=width + (GAP if i < len(COLUMNS) - 1 else 0), key=key)
+    @property
+    def row_count(self) -> int:
+        return len(self.order)
 
+    # ------------------------------------------------------------------ data
     def sync(self, model: SwarmModel, now: float) -> None:
         """Bring every row up to date with the model (new agents are inserted in name order)."""
-        new = [name for name in model.agents if name not in self._shown]
+        cells_of = self.cells
+        new = [name for name in model.agents if name not in cells_of]
         for name in new:
+            key = natural_key(name)
+            i = bisect_left(self._keys, key)
+            self._keys.insert(i, key)
+            self.order.insert(i, name)
+            cells_of[name] = ()
+        changed = bool(new)
+        first = self.scroll_offset.y
+        last = first + self.size.height
+        for i, name in enumerate(self.order):
             cells = row_cells(model.agents[name], now, model.stale_after)
-            self._shown[name] = cells
-            self.add_row(*(Text(t, style=s) for t, s in cells), key=name)
+            if cells != cells_of[name]:
+                cells_of[name] = cells
+                changed = changed or first <= i < last
         if new:
-            self.sort("agent", key=lambda cell: natural_key(cell.plain))
-            if self.selected in self._shown:
-                self.move_cursor(row=self.get_row_index(self.selected))
-            elif self.row_count:
-                self.move_cursor(row=0)
-                self._select_row(0)
-        for name, view in model.agents.items():
-            cells = row_cells(view, now, model.stale_after)
-            shown = self._shown[name]
-            if cells == shown:
-                continue
-            for (key, _, _), cell, old in zip(COLUMNS, cells, shown, strict=True):
-                if cell != old:
-                    self.update_cell(name, key, Text(cell[0], style=cell[1]))
-            self._shown[name] = cells
+            self.virtual_size = Size(TABLE_WIDTH, len(self.order) + 1)
+            if self.selected in cells_of:
+                self._set_cursor(self.order.index(self.selected))  # the selection follows its agent
+            else:
+                self._set_cursor(0)
+        if changed:
+            self.refresh()
+
+    # ------------------------------------------------------------------ cursor
+    def _set_cursor(self, row: int) -> None:
+        if not self.order:
+            return
+        row = max(0, min(row, len(self.order) - 1))
+        self.cursor_row = row
+        visible = max(1, self.size.height - 1)
+        top = self.scroll_offset.y
+        if row < top:
+            self.scroll_to(y=row, animate=False)
+        elif row >= top + visible:
+            self.scroll_to(y=row - visible + 1, animate=False)
+        self.refresh()
+        name = self.order[row]
+        if name != self.selected:
+            self.selected = name
+            # Sent "by the table" even when sync() runs on the app's timer: Textual does not bubble
+            # a message to the node that is its sender, so an app-sent message never reaches the app.
+            self.post_message(self.Selected(name).set_sender(self))
 
     def select_agent(self, name: str) -> None:
-        if name in self._shown:
-            self.move_cursor(row=self.get_row_index(name))
+        if name in self.cells:
+            self._set_cursor(self.order.index(name))
 
-    def _select_row(self, index: int) -> None:
-        try:
-            key = self.coordinate_to_cell_key(Coordinate(index, 0)).row_key.value
-        except CellDoesNotExist:  # an empty table
-            key = None
-        if key != self.selected:
-            self._announce(key)
+    def action_move(self, delta: int) -> None:
+        self._set_cursor(self.cursor_row + delta)
 
-    def _announce(self, key: str | None) -> None:
-        self.selected = key
-        # Sent "by the table" even when sync() runs on the app's timer: Textual does not bubble a
-        # message to the node that is its sender, so an app-sent message would never reach the app.
-        self.post_message(self.Selected(key).set_sender(self))
+    def action_page(self, direction: int) -> None:
+        self._set_cursor(self.cursor_row + direction * max(1, self.size.height - 2))
 
-    def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
-        event.stop()
-        # The cursor, not the event, is the truth: an event queued before a re-sort names the
-        # row that *was* under the cursor.
-        self._select_row(self.cursor_row)
+    def action_first(self) -> None:
+        self._set_cursor(0)
+
+    def action_last(self) -> None:
+        self._set_cursor(len(self.order) - 1)
+
+    def on_click(self, event: events.Click) -> None:
+        offset = event.get_content_offset(self)
+        if offset is not None and offset.y >= 1:
+            self._set_cursor(self.scroll_offset.y + offset.y - 1)
+
+    # ------------------------------------------------------------------ rendering (Line API)
+    def render_line(self, y: int) -> Strip:
+        width = self.size.width
+        if y == 0:
+            style = self.get_component_rich_style("agent-table--header")
+            text = (" " * GAP).join(_fit(label, w) for _, label, w in COLUMNS)
+            return Strip([Segment(_fit(text, width), style)], width)
+        row = self.scroll_offset.y + y - 1
+        if row >= len(self.order):
+            return Strip.blank(width, self.rich_style)
+        name = self.order[row]
+        cells = self.cells[name]
+        is_cursor = row == self.cursor_row
+        odd = row % 2 == 1
+        key = (cells, is_cursor, odd, width, self.has_focus)
+        cached = self._strips.get(name)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        if is_cursor:
+            base = self.get_component_rich_style("agent-table--cursor")
+        elif odd:
+            base = self.get_component_rich_style("agent-table--odd")
+        else:
+            base = self.rich_style
+        segments: list[Segment] = []
+        gap = " " * GAP
+        for i, ((_, _, w), (text, spec)) in enumerate(zip(COLUMNS, cells, strict=False)):
+            segments.append(Segment(_fit(text, w), base + _style(spec)))
+            if i < len(COLUMNS) - 1:
+                segments.append(Segment(gap, base))
+        used = TABLE_WIDTH
+        if width > used:
+            segments.append(Segment(" " * (width - used), base))
+        strip = Strip(segments).crop(0, width)
+        self._strips[name] = (key, strip)
+        return strip
+
+    def on_focus(self) -> None:
+        self.refresh()
+
+    def on_blur(self) -> None:
+        self.refresh()

@@ -11,8 +11,12 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from functools import lru_cache
 
+from rich.segment import Segment
+from rich.style import Style
 from rich.text import Text
+from textual.strip import Strip
 from textual.widget import Widget
 
 from operator_tui.model import AgentView, heading_arrow
@@ -48,10 +52,13 @@ def fit_scale(points: list[MapPoint], cols: int, rows: int, min_span: float = 20
     return m_per_col * 1.1, cn, ce
 
 
-def render_map(points: list[MapPoint], selected: str | None, cols: int, rows: int) -> Text:
-    """The map as styled text, ``rows`` lines of ``cols`` cells (pure, so tests can read it)."""
+Run = tuple[str, str]  # (text, style)
+
+
+def map_rows(points: list[MapPoint], selected: str | None, cols: int, rows: int) -> list[list[Run]]:
+    """The map as ``rows`` lines of styled runs, ``cols`` cells wide (pure: tests read its text)."""
     if cols < 8 or rows < 3:
-        return Text("")
+        return []
     grid_rows = rows - 1  # the last line holds the scale bar
     m_per_col, cn, ce = fit_scale(points, cols, grid_rows)
     m_per_row = m_per_col * CELL_ASPECT
@@ -61,52 +68,62 @@ def render_map(points: list[MapPoint], selected: str | None, cols: int, rows: in
         row = int(round((cn - p.north) / m_per_row + (grid_rows - 1) / 2))
         if 0 <= col < cols and 0 <= row < grid_rows:
             cells.setdefault((row, col), []).append(p)
-    labels: dict[tuple[int, int], tuple[str, str]] = {}
+    grid: list[list[Run]] = [[(" ", "")] * cols for _ in range(grid_rows)]
     for (row, col), here in cells.items():
-        if any(p.name == selected for p in here):
+        if len(here) == 1:
+            p = here[0]
+            glyph = "×" if p.stale else heading_arrow(p.heading)
+            style = mc_style(p.mc_state) + (f" {STALE_STYLE}" if p.stale else "")
+        else:
+            glyph = str(len(here)) if len(here) < 10 else "+"
+            style = "bold white"
+        chosen = next((p for p in here if p.name == selected), None)
+        if chosen is not None:
+            style = "bold reverse " + mc_style(chosen.mc_state)
+        grid[row][col] = (glyph, style)
+    for (row, col), here in cells.items():  # the selected agent's label, where it does not hide agents
+        if any(p.name == selected for p in here) and selected:
             label = f" {selected}"
             start = col + 1 if col + 1 + len(label) <= cols else max(0, col - len(label))
             for i, ch in enumerate(label):
-                labels[(row, start + i)] = (ch, "bold reverse")
-    lines: list[Text] = []
-    for row in range(grid_rows):
-        line = Text()
-        for col in range(cols):
-            here = cells.get((row, col))
-            if here:
-                if len(here) == 1:
-                    p = here[0]
-                    glyph = "×" if p.stale else heading_arrow(p.heading)
-                    style = mc_style(p.mc_state) + (f" {STALE_STYLE}" if p.stale else "")
-                else:
-                    glyph = str(len(here)) if len(here) < 10 else "+"
-                    style = "bold white"
-                if any(p.name == selected for p in here):
-                    style = "bold reverse " + mc_style(next(p for p in here if p.name == selected).mc_state)
-                line.append(glyph, style)
-            elif (row, col) in labels:
-                ch, style = labels[(row, col)]
-                line.append(ch, style)
-            else:
-                line.append(" ")
-        lines.append(line)
+                if (row, start + i) not in cells:
+                    grid[row][start + i] = (ch, "bold reverse")
+    lines = [_merge(line) for line in grid]
     lines.append(_scale_bar(m_per_col, cols, len(points)))
-    return Text("\n").join(lines)
+    return lines
 
 
-def _scale_bar(m_per_col: float, cols: int, n: int) -> Text:
+def _merge(line: list[Run]) -> list[Run]:
+    out: list[Run] = []
+    for text, style in line:
+        if out and out[-1][1] == style:
+            out[-1] = (out[-1][0] + text, style)
+        else:
+            out.append((text, style))
+    return out
+
+
+def render_map(points: list[MapPoint], selected: str | None, cols: int, rows: int) -> Text:
+    """:func:`map_rows` as one Rich Text (for tests and text captures)."""
+    return Text("\n").join(Text.assemble(*line) for line in map_rows(points, selected, cols, rows))
+
+
+def _scale_bar(m_per_col: float, cols: int, n: int) -> list[Run]:
     budget = max(2, cols // 4)
     length = next((m for m in reversed(_NICE) if m / m_per_col <= budget), _NICE[0])
     width = max(2, int(round(length / m_per_col)))
     unit = f"{length / 1000:g} km" if length >= 1000 else f"{length:g} m"
-    bar = Text("├" + "─" * (width - 2) + "┤", "grey70")
-    bar.append(f" {unit}  N↑  {n} shown", "grey70")
-    bar.truncate(cols)
-    return bar
+    text = ("├" + "─" * (width - 2) + "┤" + f" {unit}  N↑  {n} shown")[:cols]
+    return [(text, "grey70")]
+
+
+@lru_cache(maxsize=128)
+def _style(spec: str) -> Style:
+    return Style.parse(spec) if spec else Style()
 
 
 class SwarmMap(Widget):
-    """Draws what :meth:`update_points` gave it; redraws on resize (the fit depends on the size)."""
+    """Draws what :meth:`update_points` gave it (Line API: lines are built once per change, not per frame)."""
 
     DEFAULT_CSS = """
     SwarmMap { height: 1fr; }
@@ -116,15 +133,31 @@ class SwarmMap(Widget):
         super().__init__(id=id)
         self.points: list[MapPoint] = []
         self.selected: str | None = None
+        self._lines: list[Strip] = []
+        self._built_for: tuple[int, int] | None = None
 
     def update_points(self, points: list[MapPoint], selected: str | None) -> None:
         if points != self.points or selected != self.selected:
             self.points = points
             self.selected = selected
+            self._built_for = None
             self.refresh()
 
-    def render(self) -> Text:
-        return render_map(self.points, self.selected, self.size.width, self.size.height)
+    def _build(self) -> None:
+        width, height = self.size
+        base = self.rich_style
+        self._lines = [
+            Strip([Segment(text, base + _style(spec)) for text, spec in line], width).extend_cell_length(width, base)
+            for line in map_rows(self.points, self.selected, width, height)
+        ]
+        self._built_for = (width, height)
+
+    def render_line(self, y: int) -> Strip:
+        if self._built_for != tuple(self.size):
+            self._build()
+        if y < len(self._lines):
+            return self._lines[y]
+        return Strip.blank(self.size.width, self.rich_style)
 
 
 def points_from(positions: Iterable[tuple[AgentView, float, float]]) -> list[MapPoint]:

@@ -372,8 +372,11 @@ def stream(send: Callable[[telemetry_t], object], n: int, rate: float | None) ->
 
 def throughput(apis: list[str], seconds: float, burst: int, deadline: float) -> dict[str, dict[str, Any]]:
     pubs = {api: publisher(api) for api in apis}
-    out: dict[str, dict[str, Any]] = {api: {"steps": [], "lossless": 0.0} for api in apis}
+    out: dict[str, dict[str, Any]] = {api: {"steps": [], "lossless": 0.0, "alone": 0.0} for api in apis}
     try:
+        for _ in range(2):  # the publisher alone, nobody listening: what it can send at most
+            for api in apis:
+                out[api]["alone"] = max(out[api]["alone"], stream(pubs[api][0], 30_000, None)[0])
         with peers(apis, "sink") as sinks:
             for api in apis:
                 for _ in range(100):  # until the sink's group membership is in place
@@ -461,6 +464,10 @@ def inside(args: argparse.Namespace) -> int:
             f"and the sink done <= {KEEP_UP * 1000:.0f} ms after the last send); burst of {args.burst}"
         )
         tp = throughput(apis, args.seconds, args.burst, deadline)
+        print(
+            "  publisher alone, nobody listening: "
+            + ", ".join(f"{a} {t['alone'] / 1000:.0f}k" for a, t in tp.items())
+        )
         for api, t in tp.items():
             b = t["burst"]
             print(

@@ -119,4 +119,6 @@ def test_parse_config_keeps_a_given_name() -> None:
 
 @pytest.mark.parametrize("example", sorted((REPO / "examples").glob("*.toml")), ids=lambda p: p.name)
 def test_examples_are_valid(example: Path) -> None:
-    load_config(example)
+    from antalate_lcm.runtime.agent import validate
+
+    validate(load_config(example))  # plugins and their params too

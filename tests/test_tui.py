@@ -15,7 +15,6 @@ from collections.abc import AsyncIterator, Callable, Iterator
 from typing import Any
 
 import pytest
-from textual.coordinate import Coordinate
 
 from antalate_lcm.bus import Bus
 from antalate_lcm.config import Config, parse_config
@@ -34,7 +33,7 @@ from antalate_lcm.security import verify
 from operator_tui.app import ConsoleSettings, OperatorApp
 from operator_tui.commands import Status
 from operator_tui.screens import ConfirmScreen, HelpScreen
-from operator_tui.widgets.agent_table import AgentTable
+from operator_tui.widgets.agent_table import COLUMNS, AgentTable
 
 FIRST_SEQ = 1000
 WALL0 = 1_800_000_000.0
@@ -199,8 +198,7 @@ async def two_agents(context: Context, swarm: FakeSwarm, clock: FakeClock) -> As
 
 def table_row(app: OperatorApp, agent: str) -> dict[str, str]:
     table = app.screen.query_one(AgentTable)
-    keys = [str(c.key.value) for c in table.ordered_columns]
-    return dict(zip(keys, (cell.plain for cell in table.get_row(agent)), strict=True))
+    return {key: text for (key, _, _), (text, _) in zip(COLUMNS, table.cells[agent], strict=True)}
 
 
 # ---------------------------------------------------------------------- discovery and display
@@ -216,7 +214,7 @@ async def test_agent_messages_appear_as_rows(context: Context, swarm: FakeSwarm,
         swarm.error("uav10", "arming refused: battery low", code=12)
         await until(pilot, app, lambda: table.row_count == 2 and app.model.agents["uav10"].last_error is not None)
         await pilot.pause()
-        assert [table.coordinate_to_cell_key(Coordinate(i, 0)).row_key.value for i in range(2)] == ["uav2", "uav10"]
+        assert table.order == ["uav2", "uav10"]
         assert table_row(app, "uav10") == {
             "agent": "uav10",
             "mc": "MISSION",
@@ -229,11 +227,10 @@ async def test_agent_messages_appear_as_rows(context: Context, swarm: FakeSwarm,
             "beh": "dovrat_swarm, …",
             "err": "arming refused: batte…",
         }
-        mc_cell = table.get_row("uav10")[1]
-        assert "green" in str(mc_cell.style)  # coloured by state
-        assert "cyan" in str(table.get_row("uav2")[1].style)
+        assert table.cells["uav10"][1] == ("MISSION", "bold green")  # coloured by state
+        assert table.cells["uav2"][1] == ("STANDBY", "cyan")
         # The selection is the agent under the cursor; the detail follows it; the map shows both.
-        assert app.selected == table.coordinate_to_cell_key(Coordinate(table.cursor_row, 0)).row_key.value
+        assert app.selected == table.order[table.cursor_row]
         assert len(app.screen.query_one("#map").points) == 2  # type: ignore[attr-defined]
         await pilot.press("end")
         await until(pilot, app, lambda: app.selected == "uav10")
@@ -258,9 +255,9 @@ async def test_silent_agents_are_marked_stale_not_removed(two_agents: tuple[Oper
     assert app.model.agents["alpha"].stale and not app.model.agents["bravo"].stale
     table = app.screen.query_one(AgentTable)
     assert table.row_count == 2
-    row = table.get_row("alpha")
-    assert row[7].plain == "4s" and "red" in str(row[7].style)
-    assert "dim" in str(row[1].style)
+    row = table.cells["alpha"]
+    assert row[7] == ("4s", "bold red")
+    assert "dim" in row[1][1]
     assert table_row(app, "bravo")["link"] == "2s"
     assert any(e.kind.value == "stale" and e.agent == "alpha" for e in app.model.events)
     swarm.mc("alpha")

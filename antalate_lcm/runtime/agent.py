@@ -19,10 +19,21 @@ from antalate_lcm.node import Context, Node
 
 
 def validate(config: Config) -> None:
-    """Every check that needs plugins loaded (behaviors, their params): before any node starts."""
+    """Every check that needs plugins loaded (behaviors, the autopilot, their params), before any node
+    starts, so a typo never surfaces mid-flight."""
+    from antalate_lcm.autopilot import load_autopilot
     from antalate_lcm.bma import validate_bma_config
+    from antalate_lcm.errors import PluginNotFound
 
     validate_bma_config(config)
+    try:
+        cls = load_autopilot(config.hlc.autopilot)
+    except PluginNotFound as exc:
+        raise ConfigError(config.source, "hlc.autopilot", str(exc)) from None
+    try:
+        cls(config.hlc.autopilot_params)  # adapters do no I/O until connect(): this only checks params
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(config.source, "hlc.autopilot_params", str(exc)) from None
 
 
 def agent_nodes(config: Config, context: Context) -> list[Node]:

@@ -20,7 +20,7 @@ from rich.segment import Segment
 from rich.style import Style
 from textual import events
 from textual.binding import Binding, BindingType
-from textual.geometry import Size
+from textual.geometry import Region, Size
 from textual.message import Message
 from textual.scroll_view import ScrollView
 from textual.strip import Strip
@@ -172,6 +172,7 @@ class AgentTable(ScrollView, can_focus=True):
         self._strips: dict[str, tuple[tuple[object, ...], Strip]] = {}
         self.cursor_row = 0
         self.selected: str | None = None
+        self._frame_styles: tuple[Style, Style, Style] | None = None
 
     @property
     def row_count(self) -> int:
@@ -264,12 +265,7 @@ class AgentTable(ScrollView, can_focus=True):
         cached = self._strips.get(name)
         if cached is not None and cached[0] == key:
             return cached[1]
-        if is_cursor:
-            base = self.get_component_rich_style("agent-table--cursor")
-        elif odd:
-            base = self.get_component_rich_style("agent-table--odd")
-        else:
-            base = self.rich_style
+        base = self._row_styles()[0 if is_cursor else 1 if odd else 2]
         segments: list[Segment] = []
         gap = " " * GAP
         for i, ((_, _, w), (text, spec)) in enumerate(zip(COLUMNS, cells, strict=False)):
@@ -282,6 +278,21 @@ class AgentTable(ScrollView, can_focus=True):
         strip = Strip(segments).crop(0, width)
         self._strips[name] = (key, strip)
         return strip
+
+    def _row_styles(self) -> tuple[Style, Style, Style]:
+        """(cursor, odd, even) row backgrounds, resolved once per frame rather than once per row."""
+        styles = self._frame_styles
+        if styles is None:
+            styles = self._frame_styles = (
+                self.get_component_rich_style("agent-table--cursor"),
+                self.get_component_rich_style("agent-table--odd"),
+                self.rich_style,
+            )
+        return styles
+
+    def render_lines(self, crop: Region) -> list[Strip]:
+        self._frame_styles = None  # the theme or the focus may have changed since the last frame
+        return super().render_lines(crop)
 
     def on_focus(self) -> None:
         self.refresh()

@@ -53,7 +53,7 @@ class StatusBar(Static):
     def show(self, text: Text) -> None:
         if text != getattr(self, "_last", None):
             self._last = text
-            self.update(text)
+            self.update(text, layout=False)  # fixed-size panels: no re-layout of the screen
 
 
 # ---------------------------------------------------------------------- detail
@@ -104,7 +104,7 @@ class AgentDetail(Static):
     def show(self, text: Text) -> None:
         if text != getattr(self, "_last", None):
             self._last = text
-            self.update(text)
+            self.update(text, layout=False)  # fixed-size panels: no re-layout of the screen
 
 
 # ---------------------------------------------------------------------- commands
@@ -142,7 +142,7 @@ class CommandPanel(Static):
     def show(self, text: Text) -> None:
         if text != getattr(self, "_last", None):
             self._last = text
-            self.update(text)
+            self.update(text, layout=False)  # fixed-size panels: no re-layout of the screen
 
 
 # ---------------------------------------------------------------------- events

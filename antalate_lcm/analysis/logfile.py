@@ -1,0 +1,167 @@
+"""Reading LCM log files (``lcm-logger``, ``antalate log``) into a :class:`SwarmRecord`.
+
+This is the only module of the package that touches files. Messages are recognised by their
+channel (the default channel templates of :data:`antalate_lcm.topics.TOPICS`, e.g.
+``uav-1/TELEMETRY``) and decoded with their LCM type. A log is what a logger happened to hear, so
+nothing in it is trusted: an event that does not decode, or a channel that is not antalate's, is
+counted and skipped, never fatal. Only a file that is not an LCM log at all is an error.
+"""
+
+from __future__ import annotations
+
+import re
+import struct
+from pathlib import Path
+from typing import Any
+
+import lcm
+
+from antalate_lcm.analysis.model import DirectionCommand, SwarmRecord, TelemetrySample
+from antalate_lcm.bus import _captured_stderr
+from antalate_lcm.errors import AntalateError
+from antalate_lcm.hlc.machine import HlcState
+from antalate_lcm.mc.machine import McState
+from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, telemetry_t
+from antalate_lcm.topics import TOPICS, channel_regex
+
+#: Every LCM log event starts with this sync word (big-endian), so a file that does not is no log.
+LOG_SYNC_WORD = 0xEDA1DA01
+
+#: Topics the analysis decodes; the broadcast channel is tried first because ``SWARM/DIRECTION_CMD``
+#: would also match ``{agent}/DIRECTION_CMD`` with an agent called "SWARM".
+_USED = ("SWARM_DIRECTION_CMD", "MC_STATE", "HLC_STATE", "TELEMETRY", "DIRECTION_CMD")
+_ROUTES: list[tuple[str, re.Pattern[str]]] = [
+    (topic, re.compile(channel_regex(TOPICS[topic].channel)))
+    for topic in (*_USED, *(t for t in TOPICS if t not in _USED))
+]
+
+
+def _route(channel: str) -> tuple[str, str] | None:
+    """``(topic, agent)`` for an antalate channel, None for any other channel."""
+    for topic, pattern in _ROUTES:
+        m = pattern.fullmatch(channel)
+        if m is not None:
+            return topic, m.groupdict().get("agent", "")
+    return None
+
+
+def _state_name(enum: type[McState] | type[HlcState], value: int) -> str:
+    try:
+        return enum(value).name
+    except ValueError:
+        return f"?{value}"
+
+
+def check_log_file(path: str | Path) -> Path:
+    """The path, if it names a readable LCM log; else an :class:`AntalateError` saying what is wrong.
+
+    liblcm would silently read zero events from any file that is not a log, which would surface
+    later as a confusing "no agents"; checking the first sync word turns that into a clear message.
+    """
+    p = Path(path)
+    try:
+        with p.open("rb") as f:
+            head = f.read(4)
+    except FileNotFoundError:
+        raise AntalateError(f"{p}: no such file") from None
+    except IsADirectoryError:
+        raise AntalateError(f"{p}: is a directory, not an LCM log file") from None
+    except OSError as exc:
+        raise AntalateError(f"{p}: cannot be read: {exc.strerror or exc}") from None
+    if not head:
+        raise AntalateError(f"{p}: empty file, not an LCM log (did the logger hear anything?)")
+    if len(head) < 4 or struct.unpack(">I", head)[0] != LOG_SYNC_WORD:
+        raise AntalateError(f"{p}: not an LCM log file (it does not start with an LCM event header)")
+    return p
+
+
+def read_log(path: str | Path) -> SwarmRecord:
+    """Decode every antalate state, telemetry and direction message of an LCM log.
+
+    Raises :class:`AntalateError` for a missing, unreadable or non-LCM file. A log that ends in
+    garbage (a logger killed mid-write, a damaged copy) yields what precedes the damage, with
+    :attr:`SwarmRecord.truncated` saying where reading stopped.
+    """
+    p = check_log_file(path)
+    record = SwarmRecord(path=str(p))
+    routes: dict[str, tuple[str, str] | None] = {}
+    last_direction: dict[str, tuple[bool, float, float, str]] = {}
+    try:
+        log = lcm.EventLog(str(p), "r")
+    except (OSError, RuntimeError, ValueError) as exc:
+        raise AntalateError(f"{p}: cannot be opened as an LCM log: {exc}") from None
+    # liblcm prints "Invalid header after log data" on fd 2 when it meets damage; we report it ourselves.
+    with _captured_stderr():
+        try:
+            size = log.size()
+            while True:
+                event = log.read_next_event()
+                if event is None:
+                    break
+                if record.events == 0:
+                    record.start_utime = int(event.timestamp)
+                record.events += 1
+                t = (int(event.timestamp) - record.start_utime) / 1e6
+                record.duration = max(record.duration, t)
+                channel = event.channel
+                if isinstance(channel, bytes):
+                    channel = channel.decode("utf-8", "replace")
+                if channel not in routes:
+                    routes[channel] = _route(channel)
+                route = routes[channel]
+                if route is None:
+                    record.unknown[channel] = record.unknown.get(channel, 0) + 1
+                    continue
+                _decode_into(record, route, channel, t, event.data, last_direction)
+            position = log.tell()
+        finally:
+            log.close()
+    if position < size:
+        record.truncated = (
+            f"reading stopped at byte {position} of {size}: the rest is not valid LCM events "
+            "(a truncated or damaged log)"
+        )
+    return record
+
+
+def _decode_into(
+    record: SwarmRecord,
+    route: tuple[str, str],
+    channel: str,
+    t: float,
+    data: bytes,
+    last_direction: dict[str, tuple[bool, float, float, str]],
+) -> None:
+    topic, agent = route
+    msg_type = TOPICS[topic].msg_type
+    if topic not in _USED:
+        record.unused[topic] = record.unused.get(topic, 0) + 1
+        return
+    try:
+        msg: Any = msg_type.decode(data)
+    except Exception:  # noqa: BLE001 - any garbage is counted, never fatal
+        record.undecodable[channel] = record.undecodable.get(channel, 0) + 1
+        return
+    if isinstance(msg, direction_cmd_t):
+        target = "" if topic == "SWARM_DIRECTION_CMD" else (msg.target or "")
+        key = (bool(msg.active), float(msg.azimuth), float(msg.speed), target)
+        # A console repeats its direction every second (it is a state, like a stick): keep changes only.
+        if last_direction.get(channel) != key:
+            last_direction[channel] = key
+            record.directions.append(
+                DirectionCommand(t, key[0], key[1], key[2], target, str(msg.header.agent))
+            )
+        return
+    rec = record.agent(agent or str(msg.header.agent))
+    rec.last_heard = t
+    if isinstance(msg, telemetry_t):
+        rec.telemetry.append(
+            TelemetrySample(
+                t, float(msg.lat), float(msg.lon), float(msg.alt), float(msg.heading), bool(msg.in_air),
+                float(msg.battery),
+            )
+        )
+    elif isinstance(msg, mc_state_t):
+        rec.add_state(rec.mc_states, t, _state_name(McState, msg.state))
+    elif isinstance(msg, hlc_state_t):
+        rec.add_state(rec.hlc_states, t, _state_name(HlcState, msg.state))

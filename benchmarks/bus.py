@@ -19,8 +19,13 @@ at most 50 ms after the last was sent (it kept up, rather than filling its queue
 highest rate that passes. Burst: ``--burst`` messages back to back at the publisher's full speed. Raw
 and Bus use the same URL options (``recv_buf_size``) and subscription queue capacity (the Bus's default).
 
-``--proto`` adds ``benchmarks/bus_proto.py``, a prototype of a faster Bus dispatch path, as a third API.
-Figures only: nothing here is a timed assertion (DESIGN §12).
+Before the streams, each publisher sends alone (nobody listening) to show what it can send at most.
+
+``--proto`` adds ``benchmarks/bus_proto.py``, a prototype of a faster Bus dispatch path, as a third API,
+and to the round trip ``raw-thread``: raw lcm with the Bus's threading on the ping side (a dispatcher
+thread runs the handler while the sender waits), the floor for any design with a dispatcher thread.
+Takes about 40 s (65 s with ``--proto``); never more than 88 s. Figures only: nothing here is a timed
+assertion (DESIGN §12).
 """
 
 from __future__ import annotations

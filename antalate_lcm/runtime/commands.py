@@ -84,6 +84,13 @@ def _cmd_agent(args: argparse.Namespace) -> int:
     return run_until_signal(context, nodes)
 
 
+def _cmd_tui(args: argparse.Namespace) -> int:
+    import operator_tui
+
+    config = load_config(args.config) if args.config else load_config(None).with_agent_name("operator")
+    return operator_tui.run(config, name=args.name or config.agent.name)
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from antalate_lcm.runtime import demo
 
@@ -93,6 +100,71 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     from antalate_lcm.runtime.interactive import run_interactive
 
     return run_interactive(args.agents)
+
+
+def _cmd_analyze(args: argparse.Namespace) -> int:
+    import json
+
+    from antalate_lcm.analysis import analyze_log, format_summary
+
+    result = analyze_log(args.log, azimuth=args.azimuth, bin_s=args.bin, max_age=args.max_age)
+    if args.json:
+        print(json.dumps(result.to_json(), indent=1))
+    else:
+        print(format_summary(result))
+    return 0
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from antalate_lcm.analysis import format_summary, plot_log
+
+    path, result = plot_log(args.log, args.output, azimuth=args.azimuth, bin_s=args.bin, max_age=args.max_age)
+    if not args.quiet:
+        print(format_summary(result))
+    print(f"wrote {path}")
+    return 0
+
+
+def _cmd_log(args: argparse.Namespace) -> int:
+    """``lcm-logger`` on a bus of the config: the stock tool, so the log replays with ``lcm-logplayer``."""
+    import subprocess
+    import time
+
+    from antalate_lcm._codegen import lcm_tool
+    from antalate_lcm.bus import open_lcm
+
+    config = load_config(args.config)
+    bus = args.bus or ("lan" if "lan" in config.buses else config.topics.default_bus)
+    url = config.buses.get(bus)
+    if url is None:
+        raise AntalateError(f"no bus named {bus!r} in {config.source}; declared: {', '.join(config.buses)}")
+    open_lcm(url)  # a missing multicast route is reported with the fix, not as LCM's one-liner
+    out = args.output or time.strftime("antalate-%Y%m%d-%H%M%S.lcm")
+    try:
+        logger = lcm_tool("lcm-logger")
+    except FileNotFoundError as exc:
+        raise AntalateError(str(exc)) from None
+    argv = [logger, f"--lcm-url={url}", "--channel", args.channel, *(["--force"] if args.force else []), out]
+    print(f"logging bus {bus!r} ({url}) to {out}; Ctrl-C stops", flush=True)
+    proc = subprocess.Popen(argv)
+    try:
+        return proc.wait()
+    except KeyboardInterrupt:
+        # The terminal's Ctrl-C reached lcm-logger too (same process group): let it flush and close.
+        try:
+            return proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            return proc.wait()
+
+
+def _add_analysis_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("log", help="LCM log file (lcm-logger, antalate log)")
+    p.add_argument("--azimuth", type=float, help="compare the drift with this direction (deg) instead of "
+                   "the direction commands in the log")
+    p.add_argument("--bin", type=float, default=1.0, help="cohesion sampling period, s (default 1)")
+    p.add_argument("--max-age", type=float, default=2.0,
+                   help="s after which an agent's last position no longer counts (default 2)")
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -128,6 +200,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--stale-after", type=float, default=5.0, help="s without a report before an agent is stale")
     p.set_defaults(func=_cmd_station)
 
+    p = sub.add_parser("tui", help="the operator console (a Textual app on the LAN bus)")
+    p.add_argument("config", nargs="?", help="config with the LAN bus (default: the embedded defaults)")
+    p.add_argument("--name", help="the console's own name on the bus (default: the config's agent name)")
+    p.set_defaults(func=_cmd_tui)
+
     p = sub.add_parser("demo", help="fly a simulated swarm (the template application)")
     p.add_argument("--agents", type=int, default=5, help="number of simulated agents (default 5)")
     p.add_argument("--headless", action="store_true", help="no console: a scripted operator flies one mission")
@@ -135,3 +212,22 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--azimuth", type=float, help="direction command during the mission, deg (headless)")
     p.add_argument("--speed", type=float, default=1.0, help="direction command speed, m/s (headless)")
     p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("analyze", help="swarm metrics from an LCM log: cohesion, drift vs the command")
+    _add_analysis_options(p)
+    p.add_argument("--json", action="store_true", help="print every number as JSON instead of the summary")
+    p.set_defaults(func=_cmd_analyze)
+
+    p = sub.add_parser("plot", help="PNG of trajectories, state timelines and cohesion from an LCM log")
+    _add_analysis_options(p)
+    p.add_argument("-o", "--output", help="PNG file (default: the log's name with .png)")
+    p.add_argument("-q", "--quiet", action="store_true", help="do not print the analysis summary")
+    p.set_defaults(func=_cmd_plot)
+
+    p = sub.add_parser("log", help="record a bus to an LCM log file (lcm-logger on the config's bus)")
+    p.add_argument("config", nargs="?", help="config file (default: the embedded defaults)")
+    p.add_argument("-o", "--output", help="log file (default: antalate-YYYYmmdd-HHMMSS.lcm)")
+    p.add_argument("--bus", help="bus name from the config (default: 'lan' if declared, else the default bus)")
+    p.add_argument("--channel", default=".*", help="channel regex to record (default: every channel)")
+    p.add_argument("-f", "--force", action="store_true", help="overwrite the log file if it exists")
+    p.set_defaults(func=_cmd_log)

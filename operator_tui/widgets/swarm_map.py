@@ -147,7 +147,7 @@ class SwarmMap(Widget):
         width, height = self.size
         base = self.rich_style
         self._lines = [
-            Strip([Segment(text, base + _style(spec)) for text, spec in line], width).extend_cell_length(width, base)
+            Strip([Segment(text, base + _style(spec)) for text, spec in line]).extend_cell_length(width, base).crop(0, width)
             for line in map_rows(self.points, self.selected, width, height)
         ]
         self._built_for = (width, height)

@@ -1,0 +1,150 @@
+"""``antalate plot``: one PNG with every trajectory, every agent's state timeline and the cohesion.
+
+matplotlib is driven through its object API on the Agg backend, never pyplot's global state, so
+plotting works without a display (vehicle computers, CI) and from any thread.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
+
+from antalate_lcm.analysis.metrics import Analysis, Track
+from antalate_lcm.analysis.model import SwarmRecord
+from antalate_lcm.errors import AntalateError
+
+#: MC state colours: calm for the ground, green for the mission, warm for the way home, red for trouble.
+STATE_COLORS: dict[str, str] = {
+    "INIT": "#bdbdbd",
+    "STANDBY": "#9ecae1",
+    "TAKEOFF": "#fdae6b",
+    "MISSION": "#74c476",
+    "RTL": "#9e9ac8",
+    "LAND": "#c49c94",
+    "MANUAL": "#ffd92f",
+    "ERROR": "#de2d26",
+}
+#: HLC states in the same spirit (the thin bar under each agent's MC bar).
+HLC_COLORS: dict[str, str] = {
+    "INIT": "#bdbdbd",
+    "READY": "#9ecae1",
+    "TAKEOFF": "#fdd0a2",
+    "GAINING_ALTITUDE": "#fdae6b",
+    "AIRBORNE": "#74c476",
+    "RTL": "#9e9ac8",
+    "LANDING": "#c49c94",
+    "MANUAL": "#ffd92f",
+    "LOW_BATTERY": "#fd8d3c",
+    "LLC_DOWN": "#de2d26",
+}
+_UNKNOWN_STATE = "#636363"
+
+
+def plot(record: SwarmRecord, analysis: Analysis, tracks: dict[str, Track], out: str | Path) -> Path:
+    """Write the figure to ``out`` (PNG) and return its path."""
+    fig = Figure(figsize=(15, 8), dpi=100, layout="constrained")
+    grid = fig.add_gridspec(2, 2, width_ratios=(1.05, 1.0), height_ratios=(1.0, 1.0))
+    _trajectories(fig.add_subplot(grid[:, 0]), analysis, tracks)
+    _timelines(fig.add_subplot(grid[0, 1]), record, analysis)
+    _cohesion(fig.add_subplot(grid[1, 1]), analysis)
+    title = f"{Path(record.path).name}: {len(tracks)} agent(s), {record.duration:.0f} s"
+    ratio = analysis.cohesion_ratio
+    if ratio is not None:
+        title += f"; peak radius {ratio:.2f}x the start"
+    if analysis.drift and analysis.drift[0].error is not None:
+        title += f"; drift error {analysis.drift[0].error:+.1f}°"
+    fig.suptitle(title)
+    path = Path(out)
+    try:
+        FigureCanvasAgg(fig).print_png(str(path))
+    except OSError as exc:
+        raise AntalateError(f"cannot write {path}: {exc.strerror or exc}") from None
+    return path
+
+
+def _trajectories(ax, analysis: Analysis, tracks: dict[str, Track]) -> None:  # type: ignore[no-untyped-def]
+    cmap = _agent_colors(len(tracks))
+    for (name, tr), color in zip(sorted(tracks.items()), cmap, strict=True):
+        ax.plot(tr.east, tr.north, "-", lw=0.8, color=color, label=name)
+        ax.plot(tr.east[0], tr.north[0], "o", ms=5, color=color, mec="black", mew=0.5)
+        ax.plot(tr.east[-1], tr.north[-1], "s", ms=4, color=color, mec="black", mew=0.5)
+    w = analysis.window
+    inside = [c for c in analysis.cohesion if w is None or w.start <= c.t <= w.end]
+    if inside:
+        ax.plot([c.centroid_east for c in inside], [c.centroid_north for c in inside], "k--", lw=1.6,
+                label="centroid (mission)")
+    for d in analysis.drift:
+        # The commanded direction, drawn from the centroid at the span's start, as long as the drift.
+        start = min(analysis.cohesion, key=lambda c: abs(c.t - d.start), default=None)
+        if start is None:
+            continue
+        length = max(d.distance, 5.0)
+        rad = math.radians(d.azimuth)
+        ax.annotate(
+            "", xy=(start.centroid_east + length * math.sin(rad), start.centroid_north + length * math.cos(rad)),
+            xytext=(start.centroid_east, start.centroid_north),
+            arrowprops={"arrowstyle": "->", "color": "crimson", "lw": 1.8},
+        )
+        ax.plot([], [], color="crimson", lw=1.8, label=f"commanded {d.azimuth:.0f}°")
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, lw=0.3)
+    ax.set_title("trajectories (○ start, □ end)")
+    ax.legend(fontsize=7, loc="best", ncol=2 if len(tracks) > 8 else 1)
+
+
+def _timelines(ax, record: SwarmRecord, analysis: Analysis) -> None:  # type: ignore[no-untyped-def]
+    names = sorted(record.agents)
+    end = record.duration
+    seen: set[str] = set()
+    for row, name in enumerate(names):
+        rec = record.agents[name]
+        bars = ((rec.mc_states, STATE_COLORS, row + 0.05, 0.6), (rec.hlc_states, HLC_COLORS, row + 0.68, 0.22))
+        for states, colors, y, h in bars:
+            for i, change in enumerate(states):
+                # A state lasts until the next one, or until the agent was last heard (a silent
+                # agent's bar stops where the log lost it instead of running on to the end).
+                stop = states[i + 1].t if i + 1 < len(states) else min(end, rec.last_heard)
+                color = colors.get(change.state, _UNKNOWN_STATE)
+                if states is rec.mc_states:
+                    seen.add(change.state)
+                ax.broken_barh([(change.t, max(stop - change.t, 1e-3))], (y, h), facecolors=color, edgecolors="none")
+    if analysis.window is not None:
+        ax.axvspan(analysis.window.start, analysis.window.end, color="black", alpha=0.06, lw=0)
+    for d in record.directions:
+        if not d.target:
+            ax.axvline(d.t, color="crimson", lw=0.8, ls=":")
+    ax.set_yticks([i + 0.45 for i in range(len(names))], names, fontsize=7)
+    ax.set_ylim(len(names), 0)
+    ax.set_xlim(0, max(end, 1e-3))
+    ax.set_xlabel("time since the log's start (s)")
+    ax.set_title("MC state per agent (thin bar: HLC state; dotted: direction commands)")
+    order = [s for s in STATE_COLORS if s in seen]
+    ax.legend(handles=[Patch(color=STATE_COLORS[s], label=s) for s in order], fontsize=7, ncol=4, loc="lower right")
+
+
+def _cohesion(ax, analysis: Analysis) -> None:  # type: ignore[no-untyped-def]
+    c = analysis.cohesion
+    ax.plot([s.t for s in c], [s.max_distance for s in c], color="tab:red", lw=1.0, label="max (radius)")
+    ax.plot([s.t for s in c], [s.mean_distance for s in c], color="tab:blue", lw=1.0, label="mean")
+    if analysis.window is not None:
+        ax.axvspan(analysis.window.start, analysis.window.end, color="black", alpha=0.06, lw=0, label="mission")
+        if analysis.start_radius:
+            ax.axhline(2 * analysis.start_radius, color="tab:red", lw=0.8, ls="--", label="2 × starting radius")
+    ax.set_xlabel("time since the log's start (s)")
+    ax.set_ylabel("distance to the centroid (m)")
+    ax.set_title("swarm cohesion")
+    ax.grid(True, lw=0.3)
+    ax.legend(fontsize=7, loc="upper left")
+
+
+def _agent_colors(n: int) -> list[tuple[float, float, float, float]]:
+    from matplotlib import colormaps
+
+    cmap = colormaps["tab10" if n <= 10 else "tab20"]
+    return [cmap(i % cmap.N) for i in range(n)]

@@ -1,0 +1,65 @@
+"""``antalate demo`` with the operator console: station, simulated swarm and console in one process.
+
+The agents and the station run on background threads; the console owns the terminal. Their logs go
+to a file (the console shows warnings and errors in its event log), whose path is printed on exit.
+Quitting the console stops everything the demo started: it starts no other process.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import tempfile
+from collections.abc import Iterator
+
+from antalate_lcm.node import Node
+from antalate_lcm.runtime.agent import agent_nodes
+from antalate_lcm.runtime.demo import DEMO_URL, build_swarm, open_context, start_station
+
+
+@contextlib.contextmanager
+def _log_to_file(path: str) -> Iterator[None]:
+    root = logging.getLogger()
+    saved = list(root.handlers)
+    handler = logging.FileHandler(path, encoding="utf-8")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)-7s %(name)s: %(message)s"))
+    for h in saved:
+        root.removeHandler(h)
+    root.addHandler(handler)
+    try:
+        yield
+    finally:
+        root.removeHandler(handler)
+        handler.close()
+        for h in saved:
+            root.addHandler(h)
+
+
+def run_interactive(n: int, *, url: str = DEMO_URL) -> int:
+    from operator_tui.app import OperatorApp
+
+    fd, log_path = tempfile.mkstemp(prefix="antalate-demo-", suffix=".log")
+    os.close(fd)
+    nodes: list[Node] = []
+    with _log_to_file(log_path):
+        station = start_station()
+        context, url = open_context(url)
+        try:
+            configs = build_swarm(n, url, station=station.url)
+            context.executor.start()
+            for cfg in configs:
+                for node in agent_nodes(cfg, context):
+                    node.start()
+                    nodes.append(node)
+            app = OperatorApp(configs[0], context=context, name="operator")
+            app.run()
+            code = app.return_code or 0
+        finally:
+            for node in reversed(nodes):
+                with contextlib.suppress(Exception):
+                    node.stop()
+            context.close()
+            station.stop()
+    print(f"antalate demo: {n} agents flown; the log is in {log_path}")
+    return code

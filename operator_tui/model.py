@@ -6,6 +6,10 @@ and the UI only formats what is here. Time is always passed in (``now`` on a mon
 ages and staleness, ``wall`` in Unix seconds for the log's timestamps), so tests drive it with a
 fake clock.
 
+The log holds what changed, not what is: an agent's first states are in the table, so only its
+discovery is logged (and a first state that is already bad: ERROR, LLC_DOWN, LOW_BATTERY) — with
+200 agents, the start would otherwise push 600 lines through the log.
+
 An agent is never removed once seen: a vehicle that falls silent is exactly the one the operator
 must keep looking at, so it is marked stale instead.
 """
@@ -203,7 +207,8 @@ class SwarmModel:
             old = view.mc_state
             view.mc_state = name
             sev = Severity.ERROR if name == "ERROR" else Severity.INFO
-            self._event(wall, view.name, EventKind.MC, f"MC {old or '—'} → {name}", sev)
+            if old is not None or sev is not Severity.INFO:  # a first state is news only when it is bad
+                self._event(wall, view.name, EventKind.MC, f"MC {old or '—'} → {name}", sev)
         view.last_command_seq = msg.last_command_seq
 
     def _on_hlc(self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]) -> None:
@@ -213,7 +218,8 @@ class SwarmModel:
             old = view.hlc_state
             view.hlc_state = name
             sev = {"LLC_DOWN": Severity.CRITICAL, "LOW_BATTERY": Severity.WARNING}.get(name, Severity.INFO)
-            self._event(wall, view.name, EventKind.HLC, f"HLC {old or '—'} → {name}", sev)
+            if old is not None or sev is not Severity.INFO:
+                self._event(wall, view.name, EventKind.HLC, f"HLC {old or '—'} → {name}", sev)
 
     def _on_telemetry(self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]) -> None:
         tel = Telemetry.from_msg(msg)

@@ -42,10 +42,12 @@ def test_model_folds_messages_and_logs_only_transitions() -> None:
     assert (view.mc_state, view.hlc_state, view.last_command_seq, view.autopilot) == ("TAKEOFF", "READY", 8, "sim")
     texts = [(e.kind, e.text) for e in model.take_events()]
     assert texts == [
-        (EventKind.DISCOVERED, "discovered (first heard on MC_STATE)"),
-        (EventKind.MC, "MC — → STANDBY"),
-        (EventKind.HLC, "HLC — → READY"),
+        (EventKind.DISCOVERED, "discovered (first heard on MC_STATE)"),  # first states: in the table only
         (EventKind.MC, "MC STANDBY → TAKEOFF"),
+    ]
+    model.apply("HLC_STATE", "b", hlc(hlc_state_t.LLC_DOWN), 0.7, 1000.7)  # a bad first state is news
+    assert [(e.kind, e.text, e.severity) for e in model.take_events()][1:] == [
+        (EventKind.HLC, "HLC — → LLC_DOWN", Severity.CRITICAL)
     ]
     assert model.take_events() == []
     assert model.take_dirty() == {"a"} and model.roster_changed

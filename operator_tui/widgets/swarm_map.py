@@ -89,7 +89,7 @@ def map_rows(points: list[MapPoint], selected: str | None, cols: int, rows: int)
                 if (row, start + i) not in cells:
                     grid[row][start + i] = (ch, "bold reverse")
     lines = [_merge(line) for line in grid]
-    lines.append(_scale_bar(m_per_col, cols, len(points)))
+    lines.append(_scale_bar(m_per_col, cols, len(points), selected if selected and any(p.name == selected for p in points) else None))
     return lines
 
 
@@ -108,13 +108,18 @@ def render_map(points: list[MapPoint], selected: str | None, cols: int, rows: in
     return Text("\n").join(Text.assemble(*line) for line in map_rows(points, selected, cols, rows))
 
 
-def _scale_bar(m_per_col: float, cols: int, n: int) -> list[Run]:
+def _scale_bar(m_per_col: float, cols: int, n: int, selected: str | None) -> list[Run]:
+    """Scale, north, count, and the selected agent's name (its label may be hidden in a crowd)."""
     budget = max(2, cols // 4)
     length = next((m for m in reversed(_NICE) if m / m_per_col <= budget), _NICE[0])
     width = max(2, int(round(length / m_per_col)))
     unit = f"{length / 1000:g} km" if length >= 1000 else f"{length:g} m"
-    text = ("├" + "─" * (width - 2) + "┤" + f" {unit}  N↑  {n} shown")[:cols]
-    return [(text, "grey70")]
+    text = "├" + "─" * (width - 2) + "┤" + f" {unit}  N↑  {n} shown"
+    runs: list[Run] = [(text[:cols], "grey70")]
+    if selected and len(text) + 3 < cols:
+        runs.append(("  ", ""))
+        runs.append((f" {selected} "[: cols - len(text) - 2], "bold reverse"))
+    return runs
 
 
 @lru_cache(maxsize=128)

@@ -1,10 +1,17 @@
 """The bus: named LCM instances with typed publish/subscribe and one dispatcher thread each.
 
-Why one LCM subscription per instance (``.*``) and a Python dict for routing: LCM matches every
-datagram against every subscription's regex in C, so 200 agents x 6 subscriptions in one process
-would cost a regex scan per message; a dict lookup is O(1). It also sidesteps two lcm 1.5.x
-pitfalls: the per-subscription queue (default 30 messages, silently dropping bursts) is raised once,
-and unsubscribing never touches LCM from inside a handler, which can crash it.
+How it uses LCM, and why (measured with lcm 1.5.3, see ``benchmarks/bus.py``):
+
+- One LCM subscription per exact channel, plus one shared ``.*`` only while a regex subscription
+  exists. liblcm caches channel -> handlers, so 1,200 subscriptions cost the same per message as one,
+  and a datagram nobody in this process listens to -- above all the process's own publications,
+  which multicast loops back -- is dropped in C without waking Python.
+- Each LCM subscription's queue is raised (the library default of 30 messages silently drops bursts).
+- LCM subscriptions are added from the subscribing thread (liblcm guards its handler table) but
+  removed only by the dispatcher thread between two ``handle`` calls: unsubscribing from inside a
+  handler can crash lcm 1.5.x.
+- The dispatcher thread starts with the first subscription, so a publish-only bus never reads its
+  own traffic.
 """
 
 from __future__ import annotations
@@ -17,6 +24,7 @@ import tempfile
 import threading
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import lcm
@@ -72,75 +80,126 @@ def open_lcm(url: str) -> lcm.LCM:
         raise
 
 
+#: Characters with a meaning in LCM's channel regular expressions.
+_REGEX_SPECIAL = re.compile(r"([.^$*+?()\[\]{}|\\])")
+
+
+def lcm_literal(channel: str) -> str:
+    """An LCM channel regex matching exactly ``channel``."""
+    return _REGEX_SPECIAL.sub(r"\\\1", channel)
+
+
+class _Route:
+    """The subscribers of one exact channel and the LCM subscription that feeds them."""
+
+    __slots__ = ("subs", "lcm_sub", "retired")
+
+    def __init__(self) -> None:
+        self.subs: tuple[Subscription, ...] = ()
+        self.lcm_sub: Any = None
+        self.retired = False
+
+
 class _Link:
     """One LCM instance and its dispatcher thread."""
 
     def __init__(self, url: str, queue_capacity: int, decode_log: RateLimitedLog) -> None:
         self.url = url
         self._lcm: lcm.LCM | None = open_lcm(url)
-        self._exact: dict[str, tuple[Subscription, ...]] = {}
+        self._capacity = queue_capacity
+        # Routing tables are replaced, never mutated, so the dispatcher reads them without a lock.
+        self._routes: dict[str, _Route] = {}
         self._patterns: tuple[Subscription, ...] = ()
+        self._star: Any = None
+        self._retire: list[Any] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
         self._decode_log = decode_log
         self.decode_errors: dict[str, int] = {}
         self.handler_errors = 0
+        #: Datagrams delivered to at least one subscriber.
         self.received = 0
-        sub = self._lcm.subscribe(".*", self._on_datagram)
-        sub.set_queue_capacity(queue_capacity)
-        self._thread = threading.Thread(target=self._run, name=f"lcm-dispatch {url}", daemon=True)
-        self._thread.start()
 
-    # -- routing tables are replaced, never mutated, so the dispatcher reads them without a lock
     def add(self, sub: Subscription) -> None:
+        lc = self._lcm
+        assert lc is not None, "bus is closed"
         with self._lock:
             if sub.regex is None:
-                self._exact = {**self._exact, sub.channel: (*self._exact.get(sub.channel, ()), sub)}
+                route = self._routes.get(sub.channel)
+                if route is None:
+                    route = _Route()
+                    route.lcm_sub = lc.subscribe(lcm_literal(sub.channel), partial(self._on_exact, route))
+                    route.lcm_sub.set_queue_capacity(self._capacity)
+                    self._routes = {**self._routes, sub.channel: route}
+                route.subs = (*route.subs, sub)
             else:
                 self._patterns = (*self._patterns, sub)
+                if self._star is None:
+                    self._star = lc.subscribe(".*", self._on_pattern)
+                    self._star.set_queue_capacity(self._capacity)
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name=f"lcm-dispatch {self.url}", daemon=True)
+                self._thread.start()
 
     def remove(self, sub: Subscription) -> None:
         sub.active = False
         with self._lock:
             if sub.regex is None:
-                rest = tuple(s for s in self._exact.get(sub.channel, ()) if s is not sub)
-                exact = dict(self._exact)
-                if rest:
-                    exact[sub.channel] = rest
-                else:
-                    exact.pop(sub.channel, None)
-                self._exact = exact
+                route = self._routes.get(sub.channel)
+                if route is None:
+                    return
+                route.subs = tuple(s for s in route.subs if s is not sub)
+                if not route.subs:
+                    route.retired = True  # a late datagram must not reach a re-subscribed channel twice
+                    self._retire.append(route.lcm_sub)
+                    self._routes = {k: v for k, v in self._routes.items() if v is not route}
             else:
                 self._patterns = tuple(s for s in self._patterns if s is not sub)
+                if not self._patterns and self._star is not None:
+                    self._retire.append(self._star)
+                    self._star = None
 
     def publish(self, channel: str, data: bytes) -> None:
-        assert self._lcm is not None, "bus is closed"
-        self._lcm.publish(channel, data)
+        lc = self._lcm
+        assert lc is not None, "bus is closed"
+        lc.publish(channel, data)
 
     def _run(self) -> None:
         lc = self._lcm
         assert lc is not None
         while not self._stop.is_set():
             lc.handle_timeout(100)
+            if self._retire:
+                with self._lock:
+                    retire, self._retire = self._retire, []
+                for lcm_sub in retire:
+                    lc.unsubscribe(lcm_sub)
 
-    def _on_datagram(self, channel: str, data: bytes) -> None:
+    def _on_exact(self, route: _Route, channel: str, data: bytes) -> None:
+        if not route.retired:
+            self._deliver(channel, data, route.subs)
+
+    def _on_pattern(self, channel: str, data: bytes) -> None:
+        subs = tuple(s for s in self._patterns if s.regex is not None and s.regex.fullmatch(channel))
+        if subs:
+            self._deliver(channel, data, subs)
+
+    def _deliver(self, channel: str, data: bytes, subs: tuple[Subscription, ...]) -> None:
         self.received += 1
-        subs = self._exact.get(channel, ())
-        if self._patterns:
-            subs = subs + tuple(s for s in self._patterns if s.regex is not None and s.regex.fullmatch(channel))
         decoded: dict[type, Any] = {}
         for sub in subs:
             if not sub.active:
                 continue
             msg: Any = data
-            if sub.msg_type is not None:
-                if sub.msg_type in decoded:
-                    msg = decoded[sub.msg_type]
-                else:
+            msg_type = sub.msg_type
+            if msg_type is not None:
+                msg = decoded.get(msg_type)
+                if msg is None:
                     try:
-                        msg = decoded[sub.msg_type] = sub.msg_type.decode(data)
+                        msg = decoded[msg_type] = msg_type.decode(data)
                     except Exception as exc:  # noqa: BLE001 - any garbage must not kill the node
-                        self._count_decode_error(channel, sub.msg_type, data, exc)
+                        self._count_decode_error(channel, msg_type, data, exc)
                         continue
             try:
                 sub.handler(channel, msg)
@@ -164,7 +223,7 @@ class _Link:
 
     def close(self) -> None:
         self._stop.set()
-        if self._thread is not threading.current_thread():
+        if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join()
         # liblcm frees its sockets when the object is deallocated; drop our only reference.
         self._lcm = None
@@ -181,6 +240,7 @@ class Bus:
         self.urls = dict(urls)
         self._queue_capacity = queue_capacity
         self._links: dict[str, _Link] = {}
+        self._by_name: dict[str, _Link] = {}
         self._lock = threading.Lock()
         self._decode_log = RateLimitedLog(log)
         self._publish_log = RateLimitedLog(log, period=10.0)
@@ -188,6 +248,9 @@ class Bus:
         self._closed = False
 
     def _link(self, bus: str) -> _Link:
+        link = self._by_name.get(bus)
+        if link is not None:
+            return link
         try:
             url = self.urls[bus]
         except KeyError:
@@ -198,6 +261,7 @@ class Bus:
             link = self._links.get(url)
             if link is None:
                 link = self._links[url] = _Link(url, self._queue_capacity, self._decode_log)
+            self._by_name[bus] = link
             return link
 
     def open(self) -> None:
@@ -207,7 +271,7 @@ class Bus:
 
     def publish(self, bus: str, channel: str, msg: Any) -> bool:
         """Encode and send; a send error (link down) is logged at a limited rate and returns False."""
-        data = msg if isinstance(msg, bytes | bytearray) else msg.encode()
+        data = msg if isinstance(msg, (bytes, bytearray)) else msg.encode()  # noqa: UP038 - faster than a union
         try:
             self._link(bus).publish(channel, data)
         except OSError as exc:
@@ -230,7 +294,7 @@ class Bus:
     def unsubscribe(self, sub: Subscription) -> None:
         """Stop delivery; safe from inside a handler (the current delivery completes, no further one)."""
         sub.active = False
-        link = self._links.get(self.urls.get(sub.bus, ""))
+        link = self._by_name.get(sub.bus)
         if link is not None:
             link.remove(sub)
 
@@ -245,7 +309,7 @@ class Bus:
         """Stop every dispatcher thread and release the sockets. Idempotent."""
         with self._lock:
             self._closed = True
-            links, self._links = list(self._links.values()), {}
+            links, self._links, self._by_name = list(self._links.values()), {}, {}
         for link in links:
             link.close()
 

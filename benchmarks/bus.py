@@ -1,6 +1,6 @@
 """The antalate Bus against raw lcm: round trip at 1 kHz and lossless throughput, two processes.
 
-    .venv/bin/python benchmarks/bus.py [--n 5000] [--seconds 1.0] [--proto] [--json]
+    .venv/bin/python benchmarks/bus.py [--n 5000] [--seconds 1.0] [--json]
 
 Everything runs inside a private network namespace (tests/netns.py), never on the host's network:
 the outer process only makes the namespace and waits for the inner one, which prints the figures.
@@ -21,10 +21,9 @@ and Bus use the same URL options (``recv_buf_size``) and subscription queue capa
 
 Before the streams, each publisher sends alone (nobody listening) to show what it can send at most.
 
-``--proto`` adds ``benchmarks/bus_proto.py``, a prototype of a faster Bus dispatch path, as a third API,
-and to the round trip ``raw-thread``: raw lcm with the Bus's threading on the ping side (a dispatcher
-thread runs the handler while the sender waits), the floor for any design with a dispatcher thread.
-Takes about 40 s (65 s with ``--proto``); never more than 88 s. Figures only: nothing here is a timed
+The round trip is also measured for ``raw-thread``: raw lcm with the Bus's threading on the ping side
+(a dispatcher thread runs the handler while the sender waits), the floor for any design with a
+dispatcher thread. Takes about 50 s; never more than 88 s. Figures only: nothing here is a timed
 assertion (DESIGN §12).
 """
 
@@ -54,8 +53,8 @@ import lcm  # noqa: E402
 from antalate_lcm.bus import DEFAULT_QUEUE_CAPACITY  # noqa: E402
 from antalate_lcm.msgs import header_t, telemetry_t  # noqa: E402
 
-PORTS = {"raw": 7667, "bus": 7668, "proto": 7669, "raw-thread": 7670}
-BUS_MODULES = {"bus": "antalate_lcm.bus", "proto": "bus_proto"}
+PORTS = {"raw": 7667, "bus": 7668, "raw-thread": 7670}
+BUS_MODULES = {"bus": "antalate_lcm.bus"}
 TIME_LIMIT = 88.0  # seconds for the whole run, namespace included
 RATES = (10_000, 20_000, 30_000, 40_000, 50_000, 60_000, 80_000, 100_000, 120_000, 150_000)
 KEEP_UP = 0.05  # s: the sink must finish this soon after the last message was sent
@@ -438,8 +437,8 @@ def throughput(apis: list[str], seconds: float, burst: int, deadline: float) -> 
 def inside(args: argparse.Namespace) -> int:
     start = time.monotonic()
     deadline = start + TIME_LIMIT - 6
-    apis = ["raw", "bus", *(["proto"] if args.proto else [])]
-    latency_apis = ["raw", "bus", *(["raw-thread", "proto"] if args.proto else [])]
+    apis = ["raw", "bus"]
+    latency_apis = ["raw", "bus", "raw-thread"]
     size = len(make_msg().encode())
     print(
         f"message: telemetry_t, {size} bytes; URL {url('raw')} (one port per API); queue capacity {DEFAULT_QUEUE_CAPACITY}"
@@ -521,7 +520,6 @@ def main() -> int:
         "--seconds", type=float, default=1.0, help="length of each throughput stream (default 1)"
     )
     parser.add_argument("--burst", type=int, default=10_000, help="messages in the back-to-back burst")
-    parser.add_argument("--proto", action="store_true", help="also measure benchmarks/bus_proto.py")
     parser.add_argument("--only", choices=("latency", "throughput"), help="run one half only")
     parser.add_argument("--json", action="store_true", help="also print every figure as one JSON line")
     parser.add_argument("--inside", action="store_true", help=argparse.SUPPRESS)
@@ -550,7 +548,6 @@ def main() -> int:
         str(args.burst),
     ]
     argv += ["--only", args.only] if args.only else []
-    argv += ["--proto"] if args.proto else []
     argv += ["--json"] if args.json else []
     with NetNamespace() as ns:
         proc = ns.python(*argv)

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import importlib.util
 import json
 import math
 import multiprocessing as mp
@@ -300,9 +301,12 @@ def main() -> int:
     kinds = ("httpx", "raw") if args.client == "both" else (args.client,)
     rng = random.Random(42)
 
+    stack = " + ".join(
+        name if importlib.util.find_spec(name) else f"no {name}" for name in ("uvloop", "httptools")
+    )
     print(f"station benchmark: field {FIELD_M / 1000:.0f} km × {FIELD_M / 1000:.0f} km, range {RANGE_M:.0f} m, "
           f"fov {FOV_DEG:.0f}°, {args.seconds:g} s per size and client, {os.cpu_count()} CPUs, "
-          f"load average {os.getloadavg()[0]:.2f}")
+          f"load average {os.getloadavg()[0]:.2f}, uvicorn with {stack}")
     print("\nsensing alone, in this process (µs per report; brute = exact test of every agent):")
     print(f"{'agents':>7} {'field':>8} {'index':>8} {'brute':>9} {'candidates':>11}")
     for label, field_of in (("fixed", lambda n: FIELD_M), ("density", lambda n: FIELD_M * math.sqrt(n / sizes[-1]))):

@@ -22,6 +22,7 @@ written to the terminal until the command arrives at the publisher) shows the UI
 from __future__ import annotations
 
 import argparse
+import contextlib
 import fcntl
 import json
 import math
@@ -106,8 +107,17 @@ def run_publisher(url: str, agents: int, hz: float, arbiter: bool) -> int:
                 published += 1
         time.sleep(max(0.0, min(min(due) - time.monotonic(), 0.005)))
     usage = os.times()
-    print(json.dumps({"published": published, "seconds": time.monotonic() - t0,
-                      "cpu": usage.user + usage.system, "received": received}), flush=True)
+    print(
+        json.dumps(
+            {
+                "published": published,
+                "seconds": time.monotonic() - t0,
+                "cpu": usage.user + usage.system,
+                "received": received,
+            }
+        ),
+        flush=True,
+    )
     bus.close()
     return 0
 
@@ -163,10 +173,8 @@ class Terminal:
         self._stop.set()
         self._thread.join(timeout=2)
         for fd in (self.master, self.slave):
-            try:
+            with contextlib.suppress(OSError):
                 os.close(fd)
-            except OSError:
-                pass
 
 
 def main() -> int:
@@ -176,7 +184,9 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=20.0, help="measurement window")
     parser.add_argument("--size", default="160x50", help="terminal COLSxROWS")
     parser.add_argument("--arbiter", action="store_true", help="also publish arbiter_status_t at --hz")
-    parser.add_argument("--profile", metavar="PATH", help="run the console under cProfile (UI thread), write stats")
+    parser.add_argument(
+        "--profile", metavar="PATH", help="run the console under cProfile (UI thread), write stats"
+    )
     parser.add_argument("--role", choices=["main", "publisher"], default="main", help=argparse.SUPPRESS)
     parser.add_argument("--url", default=URL, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -191,26 +201,46 @@ def main() -> int:
         return 2
     cols, rows = (int(x) for x in args.size.split("x"))
     topics = 4 if args.arbiter else 3
-    print(f"operator console: {args.agents} agents x {topics} topics at {args.hz:g} Hz "
-          f"= {args.agents * topics * args.hz:.0f} msg/s, terminal {cols}x{rows}, {args.seconds:g} s window")
+    print(
+        f"operator console: {args.agents} agents x {topics} topics at {args.hz:g} Hz "
+        f"= {args.agents * topics * args.hz:.0f} msg/s, terminal {cols}x{rows}, {args.seconds:g} s window"
+    )
     with tempfile.TemporaryDirectory() as tmp, NetNamespace() as ns:
         config = Path(tmp) / "tui.toml"
         config.write_text(f'[buses]\nlan = "{URL}"\n')
-        pub = ns.python(__file__, "--role", "publisher", "--agents", str(args.agents), "--hz", str(args.hz),
-                        *(["--arbiter"] if args.arbiter else []),
-                        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        pub = ns.python(
+            __file__,
+            "--role",
+            "publisher",
+            "--agents",
+            str(args.agents),
+            "--hz",
+            str(args.hz),
+            *(["--arbiter"] if args.arbiter else []),
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
         term = Terminal(cols, rows)
         env = dict(os.environ, TERM="xterm-256color", COLORTERM="truecolor", PYTHONPATH=str(REPO))
         env.pop("NO_COLOR", None)
         env.pop("TEXTUAL", None)
         profile = ["-m", "cProfile", "-o", str(Path(args.profile).resolve())] if args.profile else []
-        tui = ns.popen([sys.executable, *profile, "-m", "operator_tui", str(config)], stdin=term.slave, stdout=term.slave,
-                       stderr=term.slave, env=env, text=False)
+        tui = ns.popen(
+            [sys.executable, *profile, "-m", "operator_tui", str(config)],
+            stdin=term.slave,
+            stdout=term.slave,
+            stderr=term.slave,
+            env=env,
+            text=False,
+        )
         try:
             seen = term.expect(f"agents {args.agents}".encode())
             if not seen.wait(60):
-                print(f"the console never showed {args.agents} agents (publisher alive: {pub.poll() is None})",
-                      file=sys.stderr)
+                print(
+                    f"the console never showed {args.agents} agents (publisher alive: {pub.poll() is None})",
+                    file=sys.stderr,
+                )
                 return 1
             time.sleep(3.0)  # let the first-seen burst (table inserts, event log) settle
             cpu0, t0, out0 = cpu_seconds(tui.pid), time.monotonic(), term.bytes
@@ -255,8 +285,10 @@ def main() -> int:
     print(f"console CPU: {share * 100:.1f} % of one core (target < 30 %)")
     print(f"console output: {(out1 - out0) / (t1 - t0) / 1024:.0f} KiB/s to the terminal")
     if lat:
-        print(f"key -> command on the wire: median {statistics.median(lat) * 1000:.1f} ms, "
-              f"max {max(lat) * 1000:.1f} ms over {len(lat)} key presses")
+        print(
+            f"key -> command on the wire: median {statistics.median(lat) * 1000:.1f} ms, "
+            f"max {max(lat) * 1000:.1f} ms over {len(lat)} key presses"
+        )
     else:
         print("key -> command on the wire: no command arrived (keys not delivered?)")
     return 0

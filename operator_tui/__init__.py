@@ -37,7 +37,9 @@ def _logging_off_the_terminal() -> Iterator[None]:
     root = logging.getLogger()
     streams = (sys.stderr, sys.stdout, sys.__stderr__, sys.__stdout__)
     detached = [
-        h for h in root.handlers if isinstance(h, logging.StreamHandler) and getattr(h, "stream", None) in streams
+        h
+        for h in root.handlers
+        if isinstance(h, logging.StreamHandler) and getattr(h, "stream", None) in streams
     ]
     for handler in detached:
         root.removeHandler(handler)
@@ -70,7 +72,9 @@ def run(
     try:
         context.bus.open()
         context.executor.start()
-        app = OperatorApp(config, context=context, name=name, settings=settings, exit_after=headless_exit_after)
+        app = OperatorApp(
+            config, context=context, name=name, settings=settings, exit_after=headless_exit_after
+        )
         with _logging_off_the_terminal():
             app.run(headless=headless_exit_after is not None)
         return app.return_code or 0

@@ -13,8 +13,12 @@ from operator_tui import run
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m operator_tui", description="antalate operator console")
     parser.add_argument("config", nargs="?", help="config file (default: the embedded defaults, LAN bus)")
-    parser.add_argument("--name", default="operator", help="the console's agent name on the bus (default operator)")
-    parser.add_argument("--headless", type=float, metavar="SECONDS", help="run without a terminal for SECONDS")
+    parser.add_argument(
+        "--name", default="operator", help="the console's agent name on the bus (default operator)"
+    )
+    parser.add_argument(
+        "--headless", type=float, metavar="SECONDS", help="run without a terminal for SECONDS"
+    )
     args = parser.parse_args(argv)
     try:
         return run(load_config(args.config), name=args.name, headless_exit_after=args.headless)

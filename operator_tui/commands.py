@@ -35,7 +35,11 @@ from dataclasses import dataclass, field
 from antalate_lcm.msgs import operator_cmd_t
 
 #: Operator commands by name (wire values from the generated constants).
-COMMANDS: dict[str, int] = {"TAKEOFF": operator_cmd_t.TAKEOFF, "LAND": operator_cmd_t.LAND, "RTL": operator_cmd_t.RTL}
+COMMANDS: dict[str, int] = {
+    "TAKEOFF": operator_cmd_t.TAKEOFF,
+    "LAND": operator_cmd_t.LAND,
+    "RTL": operator_cmd_t.RTL,
+}
 
 #: MC states in which each command is accepted (DESIGN §5). Only a *hint* for failure reasons and
 #: for the warning shown when sending: the MC is the authority and the console never refuses to send.
@@ -136,8 +140,14 @@ class CommandTracker:
             raise ValueError("resend_interval and timeout must be > 0")
         self.resend_interval = resend_interval
         self.timeout = timeout
-        self._next_seq = first_seq if first_seq is not None else (rng or random.SystemRandom()).randint(1, 2**30)
+        self._next_seq = (
+            first_seq if first_seq is not None else (rng or random.SystemRandom()).randint(1, 2**30)
+        )
         self.pending: dict[int, TrackedCommand] = {}
+        #: Recently failed commands by seq: an ack may still come (the MC republishes its
+        #: last_command_seq at 5 Hz, so a link back up after the timeout shows it was accepted).
+        self._failed: dict[int, TrackedCommand] = {}
+        self._history = history
         #: Finished commands, newest last (bounded: the panel shows the recent ones).
         self.done: deque[TrackedCommand] = deque(maxlen=history)
         self.changed = True
@@ -147,7 +157,9 @@ class CommandTracker:
         self._next_seq = 1 if seq >= SEQ_MAX else seq + 1
         return seq
 
-    def new(self, command: str, target: str, now: float, *, expected: Iterable[str], altitude: float = 0.0) -> TrackedCommand:
+    def new(
+        self, command: str, target: str, now: float, *, expected: Iterable[str], altitude: float = 0.0
+    ) -> TrackedCommand:
         """Register a command about to be sent; ``expected`` are the agents whose ack completes it."""
         if command not in COMMANDS:
             raise ValueError(f"unknown operator command {command!r}; known: {', '.join(COMMANDS)}")
@@ -167,7 +179,10 @@ class CommandTracker:
     def observe(self, agent: str, last_command_seq: int, now: float) -> list[CommandUpdate]:
         """An ``mc_state_t`` from ``agent``: acknowledge the command it names, supersede older ones."""
         cmd = self.pending.get(last_command_seq)
-        if cmd is None or agent in cmd.acked or not (cmd.broadcast or cmd.target == agent):
+        if cmd is None:
+            late = self._failed.get(last_command_seq)
+            return [] if late is None else self._late_ack(late, agent, now)
+        if agent in cmd.acked or not (cmd.broadcast or cmd.target == agent):
             return []
         cmd.acked.add(agent)
         updates: list[CommandUpdate] = []
@@ -179,7 +194,9 @@ class CommandTracker:
         self.changed = True
         return updates
 
-    def _maybe_complete(self, cmd: TrackedCommand, now: float, superseded_by: TrackedCommand | None = None) -> list[CommandUpdate]:
+    def _maybe_complete(
+        self, cmd: TrackedCommand, now: float, superseded_by: TrackedCommand | None = None
+    ) -> list[CommandUpdate]:
         if cmd.status is not Status.PENDING or not cmd.expected or cmd.missing:
             return []
         if not cmd.acked and superseded_by is not None:
@@ -192,15 +209,39 @@ class CommandTracker:
         self._finish(cmd, Status.ACKED, now)
         return [CommandUpdate(cmd, text)]
 
+    def _late_ack(self, cmd: TrackedCommand, agent: str, now: float) -> list[CommandUpdate]:
+        if agent in cmd.acked or not (cmd.broadcast or cmd.target == agent):
+            return []
+        cmd.acked.add(agent)
+        if cmd.missing:
+            return []
+        self._failed.pop(cmd.seq, None)
+        cmd.status = Status.ACKED
+        cmd.reason = f"acked late ({now - cmd.sent_at:.1f} s)"
+        self.changed = True
+        return [
+            CommandUpdate(
+                cmd, f"{cmd.label} #{cmd.seq} acknowledged late, {now - cmd.sent_at:.1f} s after sending"
+            )
+        ]
+
     def _finish(self, cmd: TrackedCommand, status: Status, now: float) -> None:
         cmd.status = status
         cmd.done_at = now
         self.pending.pop(cmd.seq, None)
         self.done.append(cmd)
+        if status is Status.FAILED:
+            self._failed[cmd.seq] = cmd
+            while len(self._failed) > self._history:
+                del self._failed[next(iter(self._failed))]
         self.changed = True
 
-    def tick(self, now: float, mc_state_of: Callable[[str], str | None] = lambda _a: None,
-             is_stale: Callable[[str], bool] = lambda _a: False) -> tuple[list[TrackedCommand], list[CommandUpdate]]:
+    def tick(
+        self,
+        now: float,
+        mc_state_of: Callable[[str], str | None] = lambda _a: None,
+        is_stale: Callable[[str], bool] = lambda _a: False,
+    ) -> tuple[list[TrackedCommand], list[CommandUpdate]]:
         """Commands due for a resend (the caller sends them, same seq) and failures to report."""
         resend: list[TrackedCommand] = []
         updates: list[CommandUpdate] = []
@@ -209,11 +250,17 @@ class CommandTracker:
                 if cmd.broadcast and not cmd.expected and cmd.acked:
                     # Nobody was known when it was sent: whoever acknowledged is the swarm.
                     self._finish(cmd, Status.ACKED, now)
-                    updates.append(CommandUpdate(cmd, f"{cmd.label} #{cmd.seq} acknowledged by {len(cmd.acked)} agent(s)"))
+                    updates.append(
+                        CommandUpdate(
+                            cmd, f"{cmd.label} #{cmd.seq} acknowledged by {len(cmd.acked)} agent(s)"
+                        )
+                    )
                     continue
                 cmd.reason = self._failure_reason(cmd, mc_state_of, is_stale)
                 self._finish(cmd, Status.FAILED, now)
-                updates.append(CommandUpdate(cmd, f"{cmd.label} #{cmd.seq} FAILED: {cmd.reason}", failed=True))
+                updates.append(
+                    CommandUpdate(cmd, f"{cmd.label} #{cmd.seq} FAILED: {cmd.reason}", failed=True)
+                )
             elif now - cmd.last_sent >= self.resend_interval:
                 cmd.last_sent = now
                 cmd.sends += 1
@@ -295,7 +342,11 @@ class DirectionControl:
 
     def due(self, now: float) -> bool:
         """Whether the latest direction should be repeated now."""
-        return self.target is not None and self.last_sent is not None and now - self.last_sent >= self.repeat_interval
+        return (
+            self.target is not None
+            and self.last_sent is not None
+            and now - self.last_sent >= self.repeat_interval
+        )
 
     def describe(self) -> str:
         if self.target is None:

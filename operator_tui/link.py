@@ -3,7 +3,7 @@
 Receiving (measured with 200 agents × 3 topics × 5 Hz, benchmarks/tui.py): the usual node path —
 decode on the bus thread, hop to the executor thread, then hand to the UI — cost about 15 % of a
 core in thread hand-offs alone. The console has no node logic to run on the executor, so it
-subscribes to raw datagrams and the bus thread only appends ``(topic, channel, bytes, time)`` to a
+subscribes to raw datagrams and the bus thread only appends ``(channel, bytes, time)`` to a
 deque (atomic, no lock); the UI thread drains it on its refresh timer, a few batches per second
 instead of thousands of cross-thread calls, and decodes there. A telemetry sample superseded by a
 newer one from the same agent within one batch is never shown, so it is not even decoded. State
@@ -24,7 +24,6 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import partial
 from typing import Any
 
 from antalate_lcm._ratelimit import RateLimitedLog
@@ -41,6 +40,11 @@ log = logging.getLogger("antalate.operator")
 
 #: Topics where only the latest message per channel matters (samples, not events).
 COALESCED = frozenset({"TELEMETRY"})
+
+
+def _any_fields(template: str) -> str:
+    """A group-free regex for every channel a template can produce (for one combined pattern)."""
+    return re.sub(r"\\\{\w+\\\}", "[^/]+", re.escape(template))
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,12 +74,12 @@ class OperatorNode(Node):
         super().__init__(config, context)
         self.clock = clock
         self.wallclock = wallclock
-        self.inbox: deque[tuple[str, str, bytes, float]] = deque()
+        self.inbox: deque[tuple[str, bytes, float]] = deque()
         self.swarm_key = config.security.swarm_key
         self._direction_seq = 0
         self._raw_subs: list[Subscription] = []
         self._decoders: dict[str, tuple[type, re.Pattern[str]]] = {}
-        self._fields: dict[str, dict[str, str]] = {}
+        self._channels: dict[str, tuple[str, dict[str, str]] | None] = {}
         self._decode_log = RateLimitedLog(log)
         self.sent = 0
         self.received = 0
@@ -83,56 +87,82 @@ class OperatorNode(Node):
         self.decode_errors = 0
 
     def on_start(self) -> None:
+        by_bus: dict[str, list[str]] = {}
         for topic in WATCHED_TOPICS:
             spec = self.topic_spec(topic)
-            pattern = re.compile(channel_regex(spec.channel))
-            self._decoders[topic] = (spec.msg_type, pattern)
-            bus = self.config.topic_buses(topic)[0]
-            self._raw_subs.append(
-                self.context.bus.subscribe(bus, pattern.pattern, None, partial(self._enqueue, topic), regex=True)
-            )
+            self._decoders[topic] = (spec.msg_type, re.compile(channel_regex(spec.channel)))
+            by_bus.setdefault(self.config.topic_buses(topic)[0], []).append(topic)
+        for bus, topics in by_bus.items():
+            # One regex per bus, not one per topic: the bus matches every datagram against every
+            # pattern subscription; which topic a channel is gets worked out once per channel.
+            combined = "|".join(f"(?:{_any_fields(self.topic_spec(t).channel)})" for t in topics)
+            self._raw_subs.append(self.context.bus.subscribe(bus, combined, None, self._enqueue, regex=True))
 
     def on_stop(self) -> None:
         for sub in self._raw_subs:
             self.context.bus.unsubscribe(sub)
         self._raw_subs.clear()
 
-    def _enqueue(self, topic: str, channel: str, data: bytes) -> None:
+    def _enqueue(self, channel: str, data: bytes) -> None:
         """On the bus thread: timestamp and queue, nothing else."""
-        self.inbox.append((topic, channel, data, self.clock()))
+        self.inbox.append((channel, data, self.clock()))
+
+    def _classify(self, channel: str) -> tuple[str, dict[str, str]] | None:
+        """(topic, template fields) of a channel, remembered: there are only agents × topics of them."""
+        try:
+            return self._channels[channel]
+        except KeyError:
+            pass
+        found: tuple[str, dict[str, str]] | None = None
+        for topic, (_, pattern) in self._decoders.items():
+            m = pattern.fullmatch(channel)
+            if m is not None:
+                found = (topic, m.groupdict())
+                break
+        self._channels[channel] = found
+        return found
 
     def drain(self) -> list[Incoming]:
         """Decode everything received since the last call (on the UI thread)."""
-        raw: list[tuple[str, str, bytes, float]] = []
+        raw: list[tuple[str, bytes, float]] = []
         pop = self.inbox.popleft
         try:
             while True:
                 raw.append(pop())
         except IndexError:
             pass
+        self.received += len(raw)
+        classify = self._classify
         latest: dict[str, int] = {}
-        for i, (topic, channel, _, _) in enumerate(raw):
-            if topic in COALESCED:
+        for i, (channel, _, _) in enumerate(raw):
+            kind = classify(channel)
+            if kind is not None and kind[0] in COALESCED:
                 latest[channel] = i
         out: list[Incoming] = []
-        for i, (topic, channel, data, received) in enumerate(raw):
+        for i, (channel, data, received) in enumerate(raw):
+            kind = classify(channel)
+            if kind is None:
+                continue
+            topic, fields = kind
             if topic in COALESCED and latest[channel] != i:
                 self.skipped += 1
                 continue
-            msg_type, pattern = self._decoders[topic]
+            msg_type = self._decoders[topic][0]
             try:
                 msg = msg_type.decode(data)
             except Exception as exc:  # noqa: BLE001 - garbage on the bus must not take the console down
                 self.decode_errors += 1
-                self._decode_log.log(channel, logging.WARNING, "dropped a %d-byte datagram on %s that is not a valid %s (%s)",
-                                     len(data), channel, msg_type.__name__, exc)
+                self._decode_log.log(
+                    channel,
+                    logging.WARNING,
+                    "dropped a %d-byte datagram on %s that is not a valid %s (%s)",
+                    len(data),
+                    channel,
+                    msg_type.__name__,
+                    exc,
+                )
                 continue
-            fields = self._fields.get(channel)
-            if fields is None:
-                m = pattern.fullmatch(channel)
-                fields = self._fields[channel] = m.groupdict() if m else {}
             out.append(Incoming(topic, fields.get("agent") or msg.header.agent, msg, received, fields))
-        self.received += len(raw)
         return out
 
     # ------------------------------------------------------------------ sending (any thread)

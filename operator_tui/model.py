@@ -95,7 +95,17 @@ class Telemetry:
     @classmethod
     def from_msg(cls, msg: Any) -> Telemetry:
         return cls(
-            msg.lat, msg.lon, msg.alt, msg.heading, msg.vn, msg.ve, msg.vd, msg.battery, msg.armed, msg.in_air, msg.mode
+            msg.lat,
+            msg.lon,
+            msg.alt,
+            msg.heading,
+            msg.vn,
+            msg.ve,
+            msg.vd,
+            msg.battery,
+            msg.armed,
+            msg.in_air,
+            msg.mode,
         )
 
     @property
@@ -105,7 +115,9 @@ class Telemetry:
     @property
     def has_fix(self) -> bool:
         """False for (0, 0) and non-finite positions, which autopilots send before they have one."""
-        return math.isfinite(self.lat) and math.isfinite(self.lon) and not (self.lat == 0.0 and self.lon == 0.0)
+        return (
+            math.isfinite(self.lat) and math.isfinite(self.lon) and not (self.lat == 0.0 and self.lon == 0.0)
+        )
 
 
 @dataclass(frozen=True)
@@ -163,7 +175,7 @@ class SwarmModel:
     """Agents by name, plus the event log, updated from decoded messages.
 
     The UI calls :meth:`apply` for every message it drains, :meth:`tick` on its refresh timer, and
-    reads :attr:`dirty` (names whose row must be redrawn) and :meth:`take_events`.
+    reads :attr:`agents` and :meth:`take_events`.
     """
 
     def __init__(self, *, stale_after: float = 3.0, max_events: int = 2000) -> None:
@@ -173,30 +185,28 @@ class SwarmModel:
         self.agents: dict[str, AgentView] = {}
         self.events: deque[Event] = deque(maxlen=max_events)
         self._new_events: list[Event] = []
-        #: Agents whose shown values changed since the UI last cleared this set.
-        self.dirty: set[str] = set()
-        #: Set when an agent appears, so the UI re-sorts its table only then.
-        self.roster_changed = False
         #: The map's reference point: the first position fix heard (stable, unlike a mean).
         self.origin: FlatFrame | None = None
         self.messages = 0
 
     # ------------------------------------------------------------------ input
-    def apply(self, topic: str, agent: str, msg: Any, now: float, wall: float, fields: dict[str, str] | None = None) -> None:
+    def apply(
+        self, topic: str, agent: str, msg: Any, now: float, wall: float, fields: dict[str, str] | None = None
+    ) -> None:
         """Fold one decoded message from ``agent`` (the name recovered from its channel) into the model."""
         view = self.agents.get(agent)
         if view is None:
             view = self.agents[agent] = AgentView(agent, now, now)
-            self.roster_changed = True
             self._event(wall, agent, EventKind.DISCOVERED, f"discovered (first heard on {topic})")
         elif view.stale:
             view.stale = False
-            self._event(wall, agent, EventKind.ALIVE, f"heard again after {now - view.last_heard:.1f} s of silence")
+            self._event(
+                wall, agent, EventKind.ALIVE, f"heard again after {now - view.last_heard:.1f} s of silence"
+            )
         view.last_heard = now
         view.heard[topic] = now
         view.messages += 1
         self.messages += 1
-        self.dirty.add(agent)
         handler = self._handlers.get(topic)
         if handler is not None:
             handler(self, view, msg, now, wall, fields or {})
@@ -221,7 +231,9 @@ class SwarmModel:
             if old is not None or sev is not Severity.INFO:
                 self._event(wall, view.name, EventKind.HLC, f"HLC {old or '—'} → {name}", sev)
 
-    def _on_telemetry(self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]) -> None:
+    def _on_telemetry(
+        self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]
+    ) -> None:
         tel = Telemetry.from_msg(msg)
         view.telemetry = tel
         if self.origin is None and tel.has_fix:
@@ -245,7 +257,9 @@ class SwarmModel:
         failed = tuple(getattr(msg, "failed", ())[: getattr(msg, "n_failed", 0)])
         for fail in failed:
             if fail not in arb.failed:
-                self._event(wall, view.name, EventKind.BEHAVIOR, f"behavior failed in {name}: {fail}", Severity.ERROR)
+                self._event(
+                    wall, view.name, EventKind.BEHAVIOR, f"behavior failed in {name}: {fail}", Severity.ERROR
+                )
         arb.state, arb.active, arb.failed = msg.state, active, failed
 
     _handlers = {
@@ -263,9 +277,12 @@ class SwarmModel:
         for view in self.agents.values():
             if not view.stale and view.last_heard < limit:
                 view.stale = True
-                self.dirty.add(view.name)
                 self._event(
-                    wall, view.name, EventKind.STALE, f"silent for {now - view.last_heard:.1f} s: marked stale", Severity.WARNING
+                    wall,
+                    view.name,
+                    EventKind.STALE,
+                    f"silent for {now - view.last_heard:.1f} s: marked stale",
+                    Severity.WARNING,
                 )
 
     # ------------------------------------------------------------------ output
@@ -273,7 +290,9 @@ class SwarmModel:
         """Add a console event (commands sent, acknowledged, failed) to the same log."""
         self._event(wall, agent, EventKind.COMMAND, text, severity)
 
-    def _event(self, wall: float, agent: str, kind: EventKind, text: str, severity: Severity = Severity.INFO) -> None:
+    def _event(
+        self, wall: float, agent: str, kind: EventKind, text: str, severity: Severity = Severity.INFO
+    ) -> None:
         ev = Event(wall, agent, kind, text, severity)
         self.events.append(ev)
         self._new_events.append(ev)
@@ -281,10 +300,6 @@ class SwarmModel:
     def take_events(self) -> list[Event]:
         """Events added since the last call (the UI appends them to its log widget)."""
         out, self._new_events = self._new_events, []
-        return out
-
-    def take_dirty(self) -> set[str]:
-        out, self.dirty = self.dirty, set()
         return out
 
     def names(self) -> list[str]:
@@ -334,6 +349,8 @@ def natural_key(name: str) -> tuple[Any, ...]:
 
 def heading_arrow(heading: float) -> str:
     """One of eight arrows for a heading (deg from north, clockwise): how the map and table draw it."""
+    if not math.isfinite(heading):
+        return "?"
     return "↑↗→↘↓↙←↖"[int((wrap_360(heading) + 22.5) // 45) % 8]
 
 

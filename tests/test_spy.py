@@ -246,6 +246,10 @@ def test_lcm_spy_headless_finds_every_antalate_type(types_jar: Path, tmp_path: P
         pytest.skip("xvfb-run not found (Debian/Ubuntu: apt-get install xvfb xauth)")
     if shutil.which("xauth") is None:
         pytest.skip("xauth not found, which xvfb-run needs (Debian/Ubuntu: apt-get install xauth)")
+    if _jdk_is_headless():
+        pytest.skip(
+            "this Java has no AWT for X11 (libawt_xawt.so), which lcm-spy's window needs (Debian: default-jre)"
+        )
     reason = netns_unavailable()
     if reason:
         pytest.skip(f"no private network namespace: {reason}")
@@ -288,6 +292,16 @@ def test_lcm_spy_headless_finds_every_antalate_type(types_jar: Path, tmp_path: P
     assert wait_for(lambda: not _group_alive(pgid), 5), "lcm-spy's process group outlived stop_process"
     assert wait_for(lambda: not _marked_processes(marker), 5), "lcm-spy's JVM outlived the test"
     assert not list(tmp_path.glob("xvfb-run.*")), "xvfb-run did not clean up: it was killed, not stopped"
+
+
+def _jdk_is_headless() -> bool:
+    """Debian's *-jre-headless packages lack the X11 toolkit; lcm-spy then dies opening its window."""
+    java = shutil.which("java")
+    if java is None:
+        return True
+    home = Path(os.path.realpath(java)).parent.parent
+    libs = list(home.glob("lib/libawt_xawt.*")) + list(home.glob("lib/*/libawt_xawt.*"))
+    return sys.platform.startswith("linux") and not libs
 
 
 def _read_until(proc: subprocess.Popen[str], out: list[str], done: Any, timeout: float) -> None:

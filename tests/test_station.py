@@ -448,6 +448,18 @@ def test_run_station_reports_a_busy_port_and_an_unusable_database(tmp_path: Path
         run_station("127.0.0.1", 0, str(tmp_path / "s.sqlite"), fov_deg=400.0)
 
 
+def test_listening_socket_is_declared_tcp() -> None:
+    """asyncio's own loop turns Nagle off on accepted connections only for sockets whose proto is
+    IPPROTO_TCP; without it every reply waits ~40 ms for a delayed ACK (uvloop hides this)."""
+    from antalate_lcm.station._server import _bind
+
+    sock = _bind("127.0.0.1", 0)
+    try:
+        assert sock.proto == socket.IPPROTO_TCP
+    finally:
+        sock.close()
+
+
 def test_station_info(client: httpx.Client) -> None:
     info = client.get("/api/station").json()
     assert info["range_m"] == 100.0 and info["fov_deg"] == 60.0 and info["agents"] == 0

@@ -9,6 +9,8 @@ clock: staleness, resends and timeouts advance only when a test says so, and no 
 from __future__ import annotations
 
 import asyncio
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import AsyncIterator, Callable, Iterator
@@ -34,6 +36,7 @@ from operator_tui.app import ConsoleSettings, OperatorApp
 from operator_tui.commands import Status
 from operator_tui.screens import ConfirmScreen, HelpScreen
 from operator_tui.widgets.agent_table import COLUMNS, AgentTable
+from tests.netns import NetNamespace, netns_unavailable
 
 FIRST_SEQ = 1000
 WALL0 = 1_800_000_000.0
@@ -87,8 +90,19 @@ class FakeSwarm:
         m.state, m.autopilot = state, "sim"
         self._pub(f"{agent}/HLC_STATE", m, agent)
 
-    def tel(self, agent: str, *, lat: float = 47.3977, lon: float = 8.5456, alt: float = 0.0, heading: float = 0.0,
-            vn: float = 0.0, ve: float = 0.0, battery: float = 100.0, in_air: bool = False) -> None:
+    def tel(
+        self,
+        agent: str,
+        *,
+        lat: float = 47.3977,
+        lon: float = 8.5456,
+        alt: float = 0.0,
+        heading: float = 0.0,
+        vn: float = 0.0,
+        ve: float = 0.0,
+        battery: float = 100.0,
+        in_air: bool = False,
+    ) -> None:
         m = telemetry_t()
         m.lat, m.lon, m.alt, m.heading, m.vn, m.ve, m.battery = lat, lon, alt, heading, vn, ve, battery
         m.armed = m.in_air = in_air
@@ -105,7 +119,9 @@ class FakeSwarm:
         m.arbiter, m.state, m.n, m.active = name, state, len(active), active
         self._pub(f"{agent}/ARBITER/{name}", m, agent)
 
-    def agent(self, name: str, mc: int = mc_state_t.STANDBY, hlc: int = hlc_state_t.READY, last: int = 0, **tel: Any) -> None:
+    def agent(
+        self, name: str, mc: int = mc_state_t.STANDBY, hlc: int = hlc_state_t.READY, last: int = 0, **tel: Any
+    ) -> None:
         self.mc(name, mc, last)
         self.hlc(name, hlc)
         self.tel(name, **tel)
@@ -145,7 +161,9 @@ def utc_hms(wall: float) -> str:
     return time.strftime("%H:%M:%S", time.gmtime(wall))
 
 
-def make_app(context: Context, clock: FakeClock, config: Config | None = None, **settings: Any) -> OperatorApp:
+def make_app(
+    context: Context, clock: FakeClock, config: Config | None = None, **settings: Any
+) -> OperatorApp:
     base = {"first_seq": FIRST_SEQ, "stale_after": 3.0, "resend_interval": 1.0, "command_timeout": 5.0}
     wall = lambda: WALL0 + clock()  # noqa: E731 - the wall clock moves with the fake clock
     return OperatorApp(
@@ -171,11 +189,15 @@ async def until(pilot: Any, app: OperatorApp, cond: Callable[[], Any], timeout: 
         await pilot.pause(0.02)
 
 
-async def wait_sent(pilot: Any, app: OperatorApp, swarm: FakeSwarm, n: int) -> list[tuple[str, operator_cmd_t]]:
+async def wait_sent(
+    pilot: Any, app: OperatorApp, swarm: FakeSwarm, n: int
+) -> list[tuple[str, operator_cmd_t]]:
     return await until(pilot, app, lambda: (sent := swarm.sent()) and len(sent) >= n and sent)
 
 
-async def wait_dirs(pilot: Any, app: OperatorApp, swarm: FakeSwarm, n: int) -> list[tuple[str, direction_cmd_t]]:
+async def wait_dirs(
+    pilot: Any, app: OperatorApp, swarm: FakeSwarm, n: int
+) -> list[tuple[str, direction_cmd_t]]:
     return await until(pilot, app, lambda: (sent := swarm.sent_directions()) and len(sent) >= n and sent)
 
 
@@ -186,12 +208,24 @@ async def settle(pilot: Any) -> None:
 
 
 @pytest.fixture
-async def two_agents(context: Context, swarm: FakeSwarm, clock: FakeClock) -> AsyncIterator[tuple[OperatorApp, Any]]:
+async def two_agents(
+    context: Context, swarm: FakeSwarm, clock: FakeClock
+) -> AsyncIterator[tuple[OperatorApp, Any]]:
     app = make_app(context, clock)
     async with app.run_test(size=(160, 44)) as pilot:
         swarm.agent("alpha", lat=47.3977, lon=8.5456)
-        swarm.agent("bravo", mc=mc_state_t.MISSION, hlc=hlc_state_t.AIRBORNE, lat=47.3980, lon=8.5460, alt=12.5,
-                    heading=90.0, ve=2.0, battery=35.0, in_air=True)
+        swarm.agent(
+            "bravo",
+            mc=mc_state_t.MISSION,
+            hlc=hlc_state_t.AIRBORNE,
+            lat=47.3980,
+            lon=8.5460,
+            alt=12.5,
+            heading=90.0,
+            ve=2.0,
+            battery=35.0,
+            in_air=True,
+        )
         await until(pilot, app, lambda: len(app.model.agents) == 2 and app.selected == "alpha")
         yield app, pilot
 
@@ -207,12 +241,23 @@ async def test_agent_messages_appear_as_rows(context: Context, swarm: FakeSwarm,
     async with app.run_test(size=(160, 44)) as pilot:
         table = app.screen.query_one(AgentTable)
         assert table.row_count == 0
-        swarm.agent("uav10", mc=mc_state_t.MISSION, hlc=hlc_state_t.AIRBORNE, alt=12.34, heading=271.0, vn=3.0,
-                    ve=4.0, battery=55.0, in_air=True)
+        swarm.agent(
+            "uav10",
+            mc=mc_state_t.MISSION,
+            hlc=hlc_state_t.AIRBORNE,
+            alt=12.34,
+            heading=271.0,
+            vn=3.0,
+            ve=4.0,
+            battery=55.0,
+            in_air=True,
+        )
         swarm.agent("uav2")
         swarm.arbiter("uav10", "main", "MISSION", ["dovrat_swarm", "video_capture"])
         swarm.error("uav10", "arming refused: battery low", code=12)
-        await until(pilot, app, lambda: table.row_count == 2 and app.model.agents["uav10"].last_error is not None)
+        await until(
+            pilot, app, lambda: table.row_count == 2 and app.model.agents["uav10"].last_error is not None
+        )
         await pilot.pause()
         assert table.order == ["uav2", "uav10"]
         assert table_row(app, "uav10") == {
@@ -245,7 +290,9 @@ async def test_agent_messages_appear_as_rows(context: Context, swarm: FakeSwarm,
         assert app.selected == "uav2" and table.cursor_row == 1
 
 
-async def test_silent_agents_are_marked_stale_not_removed(two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm, clock: FakeClock) -> None:
+async def test_silent_agents_are_marked_stale_not_removed(
+    two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm, clock: FakeClock
+) -> None:
     app, pilot = two_agents
     clock.advance(2.0)
     swarm.mc("bravo", mc_state_t.MISSION)
@@ -266,7 +313,9 @@ async def test_silent_agents_are_marked_stale_not_removed(two_agents: tuple[Oper
 
 
 # ---------------------------------------------------------------------- commands
-async def test_each_key_sends_the_right_command_to_the_right_channel(two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm) -> None:
+async def test_each_key_sends_the_right_command_to_the_right_channel(
+    two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm
+) -> None:
     app, pilot = two_agents
     await pilot.press("down")
     await until(pilot, app, lambda: app.selected == "bravo")
@@ -288,7 +337,9 @@ async def test_each_key_sends_the_right_command_to_the_right_channel(two_agents:
     assert len(app.tracker.pending) == 6
 
 
-async def test_all_agent_commands_are_not_sent_without_confirmation(two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm) -> None:
+async def test_all_agent_commands_are_not_sent_without_confirmation(
+    two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm
+) -> None:
     app, pilot = two_agents
     await pilot.press("T")
     assert isinstance(app.screen, ConfirmScreen)
@@ -303,10 +354,12 @@ async def test_all_agent_commands_are_not_sent_without_confirmation(two_agents: 
     assert swarm.sent() == [] and not app.tracker.pending
 
 
-async def test_ack_through_last_command_seq_clears_pending(two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm, clock: FakeClock) -> None:
+async def test_ack_through_last_command_seq_clears_pending(
+    two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm, clock: FakeClock
+) -> None:
     app, pilot = two_agents
     await pilot.press("t")
-    (_, msg), = await wait_sent(pilot, app, swarm, 1)
+    ((_, msg),) = await wait_sent(pilot, app, swarm, 1)
     cmd = app.tracker.pending[msg.header.seq]
     assert "pending" in str(app.screen.query_one("#commands").render())
     swarm.mc("alpha", mc_state_t.STANDBY, last=FIRST_SEQ + 77)  # someone else's command: not ours
@@ -326,7 +379,7 @@ async def test_unacknowledged_command_is_resent_with_the_same_seq_then_fails(
 ) -> None:
     app, pilot = two_agents
     await pilot.press("down", "t")  # bravo is in MISSION: TAKEOFF will be rejected
-    (channel, first), = await wait_sent(pilot, app, swarm, 1)
+    ((channel, first),) = await wait_sent(pilot, app, swarm, 1)
     assert channel == "bravo/OPERATOR_CMD"
     clock.advance(1.0)
     sent = await wait_sent(pilot, app, swarm, 2)
@@ -347,10 +400,12 @@ async def test_unacknowledged_command_is_resent_with_the_same_seq_then_fails(
     assert app.tracker.counts()[Status.FAILED] == 1
 
 
-async def test_all_agent_command_waits_for_every_agent(two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm) -> None:
+async def test_all_agent_command_waits_for_every_agent(
+    two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm
+) -> None:
     app, pilot = two_agents
     await pilot.press("R", "y")
-    (channel, msg), = await wait_sent(pilot, app, swarm, 1)
+    ((channel, msg),) = await wait_sent(pilot, app, swarm, 1)
     assert channel == "SWARM/OPERATOR_CMD" and msg.target == ""
     cmd = app.tracker.pending[msg.header.seq]
     assert cmd.expected == {"alpha", "bravo"}
@@ -370,7 +425,9 @@ async def test_no_selection_sends_nothing(context: Context, swarm: FakeSwarm, cl
 
 
 # ---------------------------------------------------------------------- direction
-async def test_direction_keys(two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm, clock: FakeClock) -> None:
+async def test_direction_keys(
+    two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm, clock: FakeClock
+) -> None:
     app, pilot = two_agents
     await pilot.press("d", "d", "a", "right", "w", "w", "s", "space")
     dirs = await wait_dirs(pilot, app, swarm, 8)
@@ -391,7 +448,9 @@ async def test_direction_keys(two_agents: tuple[OperatorApp, Any], swarm: FakeSw
     assert isinstance(app.screen, ConfirmScreen)
     await pilot.press("y", "a")
     dirs = await wait_dirs(pilot, app, swarm, 9)
-    assert dirs[-1][0] == "SWARM/DIRECTION_CMD" and dirs[-1][1].target == "" and round(dirs[-1][1].azimuth) == 15
+    assert (
+        dirs[-1][0] == "SWARM/DIRECTION_CMD" and dirs[-1][1].target == "" and round(dirs[-1][1].azimuth) == 15
+    )
     assert dirs[-1][1].active
     # The latest direction is repeated (no ack exists for directions).
     clock.advance(1.0)
@@ -402,7 +461,9 @@ async def test_direction_keys(two_agents: tuple[OperatorApp, Any], swarm: FakeSw
 
 
 # ---------------------------------------------------------------------- security, help
-async def test_commands_are_signed_when_a_swarm_key_is_configured(context: Context, swarm: FakeSwarm, clock: FakeClock) -> None:
+async def test_commands_are_signed_when_a_swarm_key_is_configured(
+    context: Context, swarm: FakeSwarm, clock: FakeClock
+) -> None:
     key = "correct horse battery staple"
     app = make_app(context, clock, memq_config(security={"swarm_key": key}))
     async with app.run_test(size=(160, 44)) as pilot:
@@ -430,3 +491,36 @@ async def test_help_screen_and_footer(two_agents: tuple[OperatorApp, Any], swarm
     assert not isinstance(app.screen, HelpScreen)
     await settle(pilot)
     assert swarm.sent() == []
+
+
+# ---------------------------------------------------------------------- robustness and the entry point
+async def test_garbage_on_a_watched_channel_is_reported_not_fatal(
+    two_agents: tuple[OperatorApp, Any], context: Context
+) -> None:
+    app, pilot = two_agents
+    context.bus.publish("lan", "alpha/MC_STATE", b"\x00garbage")
+    await until(pilot, app, lambda: any("not a valid mc_state_t" in e.text for e in app.model.events))
+    assert app.node.decode_errors == 1 and app.is_running
+
+
+def test_run_reports_a_missing_multicast_route() -> None:
+    """`antalate tui` on a host without a multicast route: one clear error, exit status 2, no UI."""
+    reason = netns_unavailable()
+    if reason:
+        pytest.skip(reason)
+    proc = subprocess.run(
+        ["unshare", "-rn", sys.executable, "-m", "operator_tui", "--headless", "1"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert proc.returncode == 2
+    assert "no route for multicast" in proc.stderr and "Traceback" not in proc.stderr
+
+
+@pytest.mark.netns
+def test_run_headless_on_udp_multicast(netns: NetNamespace) -> None:
+    """The entry the CLI calls, on real UDP multicast in a private namespace: starts and exits cleanly."""
+    proc = netns.run([sys.executable, "-m", "operator_tui", "--headless", "1"], timeout=30)
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr

@@ -25,9 +25,20 @@ def hlc(state: int) -> hlc_state_t:
     return m
 
 
-def tel(lat: float = 47.0, lon: float = 8.0, alt: float = 10.0, heading: float = 90.0, battery: float = 80.0) -> telemetry_t:
+def tel(
+    lat: float = 47.0, lon: float = 8.0, alt: float = 10.0, heading: float = 90.0, battery: float = 80.0
+) -> telemetry_t:
     m = telemetry_t()
-    m.lat, m.lon, m.alt, m.heading, m.vn, m.ve, m.battery, m.mode = lat, lon, alt, heading, 3.0, 4.0, battery, "SIM"
+    m.lat, m.lon, m.alt, m.heading, m.vn, m.ve, m.battery, m.mode = (
+        lat,
+        lon,
+        alt,
+        heading,
+        3.0,
+        4.0,
+        battery,
+        "SIM",
+    )
     return m
 
 
@@ -39,7 +50,12 @@ def test_model_folds_messages_and_logs_only_transitions() -> None:
     model.apply("HLC_STATE", "a", hlc(hlc_state_t.READY), 0.5, 1000.5)
     model.apply("MC_STATE", "a", mc(mc_state_t.TAKEOFF, last=8), 0.6, 1000.6)
     view = model.agents["a"]
-    assert (view.mc_state, view.hlc_state, view.last_command_seq, view.autopilot) == ("TAKEOFF", "READY", 8, "sim")
+    assert (view.mc_state, view.hlc_state, view.last_command_seq, view.autopilot) == (
+        "TAKEOFF",
+        "READY",
+        8,
+        "sim",
+    )
     texts = [(e.kind, e.text) for e in model.take_events()]
     assert texts == [
         (EventKind.DISCOVERED, "discovered (first heard on MC_STATE)"),  # first states: in the table only
@@ -50,7 +66,6 @@ def test_model_folds_messages_and_logs_only_transitions() -> None:
         (EventKind.HLC, "HLC — → LLC_DOWN", Severity.CRITICAL)
     ]
     assert model.take_events() == []
-    assert model.take_dirty() == {"a"} and model.roster_changed
 
 
 def test_model_errors_arbiters_and_unknown_states() -> None:
@@ -64,7 +79,10 @@ def test_model_errors_arbiters_and_unknown_states() -> None:
     model.apply("ARBITER", "a", arb, 1.1, 1001.1, {"agent": "a", "arbiter": "main"})
     model.apply("HLC_STATE", "a", hlc(42), 1.2, 1001.2)  # a newer agent's state is shown, not dropped
     view = model.agents["a"]
-    assert view.last_error is not None and (view.last_error.code, view.last_error.text) == (12, "arming refused")
+    assert view.last_error is not None and (view.last_error.code, view.last_error.text) == (
+        12,
+        "arming refused",
+    )
     assert view.last_error.severity is Severity.ERROR
     assert view.active_behaviors == ("swarm", "video") and view.failed_behaviors == ("camera: ffmpeg died",)
     assert view.hlc_state == "?42"
@@ -97,12 +115,24 @@ def test_positions_are_metres_from_the_first_fix() -> None:
     model.apply("TELEMETRY", "c", tel(lat=47.001, lon=8.0), 0.0, 0.0)
     pos = {v.name: (round(n), round(e)) for v, n, e in model.positions()}
     assert pos == {"b": (0, 0), "c": (111, 0)}
-    assert model.agents["b"].telemetry is not None and model.agents["b"].telemetry.ground_speed == pytest.approx(5.0)
+    assert model.agents["b"].telemetry is not None and model.agents[
+        "b"
+    ].telemetry.ground_speed == pytest.approx(5.0)
 
 
 def test_natural_order_and_arrows() -> None:
     assert sorted(["uav10", "uav2", "uav1", "alpha"], key=natural_key) == ["alpha", "uav1", "uav2", "uav10"]
-    assert [heading_arrow(h) for h in (0, 44, 46, 90, 180, 270, 359, -90)] == ["↑", "↗", "↗", "→", "↓", "←", "↑", "←"]
+    assert [heading_arrow(h) for h in (0, 44, 46, 90, 180, 270, 359, -90)] == [
+        "↑",
+        "↗",
+        "↗",
+        "→",
+        "↓",
+        "←",
+        "↑",
+        "←",
+    ]
+    assert heading_arrow(float("nan")) == "?"
 
 
 # ---------------------------------------------------------------------- command tracker
@@ -129,6 +159,9 @@ def test_resend_keeps_the_seq_then_fails_with_a_likely_reason() -> None:
     assert cmd.status is Status.FAILED and update.failed
     assert "a likely rejected it (MC STANDBY; LAND applies in MISSION/TAKEOFF)" in cmd.reason
     assert "3 sends" in cmd.reason
+    (late,) = tr.observe("a", 10, 7.0)  # the link came back: it had been accepted after all
+    assert cmd.status is Status.ACKED and cmd.reason == "acked late (7.0 s)" and "late" in late.text
+    assert tr.observe("a", 10, 7.2) == []
     other = tr.new("LAND", "b", 10.0, expected=[])
     tr.tick(13.0, mc_state_of=lambda a: "MISSION", is_stale=lambda a: True)
     assert "b is silent" in other.reason
@@ -226,7 +259,13 @@ def test_row_cells_colour_states_and_dim_stale_agents() -> None:
     model.apply("MC_STATE", "a", mc(mc_state_t.MISSION), 0.0, 0.0)
     model.apply("HLC_STATE", "a", hlc(hlc_state_t.GAINING_ALTITUDE), 0.0, 0.0)
     model.apply("TELEMETRY", "a", tel(battery=15.0, heading=92.0), 0.0, 0.0)
-    cells = dict(zip(("agent", "mc", "hlc", "batt", "alt", "spd", "hdg", "link"), row_cells(model.agents["a"], 0.5, 3.0), strict=False))
+    cells = dict(
+        zip(
+            ("agent", "mc", "hlc", "batt", "alt", "spd", "hdg", "link"),
+            row_cells(model.agents["a"], 0.5, 3.0),
+            strict=False,
+        )
+    )
     assert cells["mc"] == ("MISSION", "bold green")
     assert cells["hlc"] == ("GAINING_ALT", "yellow")
     assert cells["batt"] == ("15%", "bold red")
@@ -236,6 +275,10 @@ def test_row_cells_colour_states_and_dim_stale_agents() -> None:
     stale = row_cells(model.agents["a"], 4.0, 3.0)
     assert stale[1] == ("MISSION", "bold green dim") and stale[7] == ("4s", "bold red")
     assert [format_age(x) for x in (0.2, 1.4, 59, 600, 7200)] == ["ok", "1s", "59s", "10m", "2h"]
+    nan = float("nan")
+    model.apply("TELEMETRY", "n", tel(lat=nan, lon=nan, alt=nan, heading=nan, battery=nan), 5.0, 5.0)
+    assert row_cells(model.agents["n"], 5.0, 3.0)[6] == ("nan?", "")  # shown, never a crash
+    assert [v.name for v, _, _ in model.positions()] == ["a"]
 
 
 def test_map_draws_arrows_counts_label_and_scale() -> None:

@@ -21,8 +21,13 @@ from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
 from antalate_lcm.node import Context
 from operator_tui.app import OperatorApp
 from operator_tui.commands import Status
+from tests import test_tui
 from tests.test_tui import FakeClock, FakeSwarm, make_app, until, wait_dirs, wait_sent
-from tests.test_tui import clock, context, swarm  # noqa: F401 - fixtures shared with the pilot tests
+
+# The pilot tests' fixtures (a memq bus shared with fake agents, a fake clock), reused as they are.
+context = test_tui.context
+swarm = test_tui.swarm
+clock = test_tui.clock
 
 SNAPSHOT = Path(__file__).parent / "snapshots" / "tui_main_screen.txt"
 SIZE = (150, 42)
@@ -31,8 +36,16 @@ SIZE = (150, 42)
 def screen_text(app: OperatorApp) -> str:
     """The screen as plain text (what export_screenshot draws, without the SVG wrapping)."""
     width, height = app.size
-    console = Console(width=width, height=height, file=io.StringIO(), force_terminal=True, color_system="truecolor",
-                      record=True, legacy_windows=False, safe_box=False)
+    console = Console(
+        width=width,
+        height=height,
+        file=io.StringIO(),
+        force_terminal=True,
+        color_system="truecolor",
+        record=True,
+        legacy_windows=False,
+        safe_box=False,
+    )
     console.print(app.screen._compositor.render_update(full=True, screen_stack=app._background_screens))
     return "\n".join(line.rstrip() for line in console.export_text().splitlines()) + "\n"
 
@@ -41,13 +54,37 @@ async def test_main_screen_snapshot(context: Context, swarm: FakeSwarm, clock: F
     app = make_app(context, clock)
     async with app.run_test(size=SIZE) as pilot:
         swarm.agent("alpha", lat=47.39770, lon=8.54560)
-        swarm.agent("bravo", mc=mc_state_t.MISSION, hlc=hlc_state_t.AIRBORNE, lat=47.39810, lon=8.54640, alt=15.2,
-                    heading=45.0, vn=1.4, ve=1.4, battery=76.0, in_air=True)
+        swarm.agent(
+            "bravo",
+            mc=mc_state_t.MISSION,
+            hlc=hlc_state_t.AIRBORNE,
+            lat=47.39810,
+            lon=8.54640,
+            alt=15.2,
+            heading=45.0,
+            vn=1.4,
+            ve=1.4,
+            battery=76.0,
+            in_air=True,
+        )
         swarm.arbiter("bravo", "main", "MISSION", ["dovrat_swarm", "video_capture"])
-        swarm.agent("charlie", mc=mc_state_t.RTL, hlc=hlc_state_t.LOW_BATTERY, lat=47.39740, lon=8.54700, alt=22.0,
-                    heading=200.0, vn=-2.0, ve=-0.7, battery=18.0, in_air=True)
+        swarm.agent(
+            "charlie",
+            mc=mc_state_t.RTL,
+            hlc=hlc_state_t.LOW_BATTERY,
+            lat=47.39740,
+            lon=8.54700,
+            alt=22.0,
+            heading=200.0,
+            vn=-2.0,
+            ve=-0.7,
+            battery=18.0,
+            in_air=True,
+        )
         swarm.error("charlie", "battery 18% <= 20%: returning home", code=21, severity=hlc_error_t.WARNING)
-        swarm.agent("delta", mc=mc_state_t.ERROR, hlc=hlc_state_t.LLC_DOWN, lat=47.39700, lon=8.54520, battery=-1.0)
+        swarm.agent(
+            "delta", mc=mc_state_t.ERROR, hlc=hlc_state_t.LLC_DOWN, lat=47.39700, lon=8.54520, battery=-1.0
+        )
         swarm.error("delta", "no autopilot heartbeat for 3.0 s", code=2, severity=hlc_error_t.CRITICAL)
         swarm.agent("echo", lat=47.39790, lon=8.54480, heading=300.0)
         await until(pilot, app, lambda: len(app.model.agents) == 5 and app.model.agents["delta"].last_error)
@@ -66,12 +103,21 @@ async def test_main_screen_snapshot(context: Context, swarm: FakeSwarm, clock: F
         # Four seconds on: everybody but echo keeps publishing, so echo goes stale.
         clock.advance(0.5)
         for name in ("alpha", "bravo", "charlie", "delta"):
-            swarm.mc(name, app.model.agents[name].mc_state and mc_state_t.__dict__[app.model.agents[name].mc_state],
-                     last=takeoff.header.seq if name == "alpha" else 0)
-        await until(pilot, app, lambda: all(app.model.agents[n].last_heard == clock() for n in ("alpha", "delta")))
+            swarm.mc(
+                name,
+                app.model.agents[name].mc_state and mc_state_t.__dict__[app.model.agents[name].mc_state],
+                last=takeoff.header.seq if name == "alpha" else 0,
+            )
+        await until(
+            pilot, app, lambda: all(app.model.agents[n].last_heard == clock() for n in ("alpha", "delta"))
+        )
         clock.advance(3.0)
         swarm.mc("bravo", mc_state_t.MISSION)
-        await until(pilot, app, lambda: app.model.agents["echo"].stale and app.model.agents["bravo"].last_heard == clock())
+        await until(
+            pilot,
+            app,
+            lambda: app.model.agents["echo"].stale and app.model.agents["bravo"].last_heard == clock(),
+        )
         app.refresh_now()
         await pilot.pause()
         text = screen_text(app)

@@ -33,7 +33,13 @@ from antalate_lcm.analysis.metrics import (
     local_tracks,
     mission_window,
 )
-from antalate_lcm.analysis.model import AgentRecord, DirectionCommand, StateChange, SwarmRecord, TelemetrySample
+from antalate_lcm.analysis.model import (
+    AgentRecord,
+    DirectionCommand,
+    StateChange,
+    SwarmRecord,
+    TelemetrySample,
+)
 
 
 def default_plot_path(log: str | Path) -> Path:

@@ -93,7 +93,9 @@ def row_cells(view: AgentView, now: float, stale_after: float) -> tuple[Cell, ..
     else:
         beh = (join_limited(view.active_behaviors, _WIDTH["beh"]), "")
     err = view.last_error
-    err_cell: Cell = ("", "") if err is None else (join_limited([err.text], _WIDTH["err"]), SEVERITY_STYLE[err.severity])
+    err_cell: Cell = (
+        ("", "") if err is None else (join_limited([err.text], _WIDTH["err"]), SEVERITY_STYLE[err.severity])
+    )
     hlc = view.hlc_state
     cells: tuple[Cell, ...] = (
         (view.name, "bold"),
@@ -109,7 +111,10 @@ def row_cells(view: AgentView, now: float, stale_after: float) -> tuple[Cell, ..
     )
     if view.stale:
         # Keep the last known values readable but clearly old; the link column says how old.
-        cells = tuple((text, f"{style} {STALE_STYLE}".strip()) if i != 7 else (text, style) for i, (text, style) in enumerate(cells))
+        cells = tuple(
+            (text, f"{style} {STALE_STYLE}".strip()) if i != 7 else (text, style)
+            for i, (text, style) in enumerate(cells)
+        )
     return cells
 
 

@@ -28,9 +28,22 @@ def _age(seconds: float) -> str:
     return f"{seconds:.1f}s" if seconds < 100 else f"{seconds / 60:.0f}m"
 
 
+def _link_age(seconds: float) -> str:
+    """Per-topic link age in the detail view: "ok" while fresh, so the panel is not redrawn for nothing."""
+    return "ok" if seconds < 1.0 else _age(seconds)
+
+
 # ---------------------------------------------------------------------- status bar
 def status_text(
-    *, bus: str, agents: int, stale: int, pending: int, failed: int, direction: DirectionControl, scope_all: bool, selected: str | None
+    *,
+    bus: str,
+    agents: int,
+    stale: int,
+    pending: int,
+    failed: int,
+    direction: DirectionControl,
+    scope_all: bool,
+    selected: str | None,
 ) -> Text:
     t = Text()
     t.append(" antalate operator ", "bold reverse")
@@ -57,7 +70,14 @@ class StatusBar(Static):
 
 
 # ---------------------------------------------------------------------- detail
-_TOPIC_SHORT = {"MC_STATE": "MC", "HLC_STATE": "HLC", "TELEMETRY": "TEL", "HLC_ERROR": "ERR", "ARBITER": "BMA"}
+_TOPIC_SHORT = {
+    "MC_STATE": "MC",
+    "HLC_STATE": "HLC",
+    "TELEMETRY": "TEL",
+    "HLC_ERROR": "ERR",
+    "ARBITER": "BMA",
+}
+
 
 def detail_text(view: AgentView | None, now: float, time_format: TimeFormat = clock_hms) -> Text:
     """Everything about one agent: the table's row spelled out, per-topic link ages, arbiters."""
@@ -78,14 +98,20 @@ def detail_text(view: AgentView | None, now: float, time_format: TimeFormat = cl
         t.append("\nno telemetry yet", "grey62")
     else:
         t.append(f"\npos {tel.lat:.6f}, {tel.lon:.6f}  alt {tel.alt:.1f} m")
-        t.append(f"\nhdg {tel.heading:03.0f}°{heading_arrow(tel.heading)}  gs {tel.ground_speed:.1f} m/s  vd {tel.vd:+.1f}")
+        t.append(
+            f"\nhdg {tel.heading:03.0f}°{heading_arrow(tel.heading)}  gs {tel.ground_speed:.1f} m/s  vd {tel.vd:+.1f}"
+        )
         t.append("\nbatt ")
         t.append("?" if tel.battery < 0 else f"{tel.battery:.0f}%", battery_style(tel.battery))
         t.append(f"  {'armed' if tel.armed else 'disarmed'}  {'in air' if tel.in_air else 'on ground'}")
         t.append(f"\nmode {tel.mode or '—'}")
-    heard = "  ".join(f"{_TOPIC_SHORT.get(topic, topic)} {_age(now - at)}" for topic, at in sorted(view.heard.items()))
+    heard = "  ".join(
+        f"{_TOPIC_SHORT.get(topic, topic)} {_link_age(now - at)}" for topic, at in sorted(view.heard.items())
+    )
     t.append(f"\nlink {heard}", "bold red" if view.stale else "")
-    t.append(f"\nmsgs {view.messages}  ack seq {view.last_command_seq if view.last_command_seq is not None else '—'}")
+    t.append(
+        f"\nmsgs {view.messages}  ack seq {view.last_command_seq if view.last_command_seq is not None else '—'}"
+    )
     for name, arb in sorted(view.arbiters.items()):
         t.append(f"\nBMA {name or '?'} [{arb.state}]: ")
         t.append(", ".join(arb.active) or "(none active)", "green" if arb.active else "grey62")
@@ -94,7 +120,10 @@ def detail_text(view: AgentView | None, now: float, time_format: TimeFormat = cl
     err = view.last_error
     if err is not None:
         t.append("\nerr ")
-        t.append(f"{time_format(err.wall)} [{err.severity.name} {err.code}] {err.text}", SEVERITY_STYLE[err.severity])
+        t.append(
+            f"{time_format(err.wall)} [{err.severity.name} {err.code}] {err.text}",
+            SEVERITY_STYLE[err.severity],
+        )
         if view.errors > 1:
             t.append(f" ({view.errors} total)", "grey62")
     return t
@@ -111,7 +140,9 @@ class AgentDetail(Static):
 _STATUS_STYLE = {Status.PENDING: "bold yellow", Status.ACKED: "green", Status.FAILED: "bold red"}
 
 
-def command_line(cmd: TrackedCommand, now: float, mc_state_of: Callable[[str], str | None] = lambda _a: None) -> Text:
+def command_line(
+    cmd: TrackedCommand, now: float, mc_state_of: Callable[[str], str | None] = lambda _a: None
+) -> Text:
     t = Text()
     t.append(f"#{cmd.seq} ", "grey62")
     t.append(f"{cmd.label:<18} ")
@@ -131,7 +162,9 @@ def command_line(cmd: TrackedCommand, now: float, mc_state_of: Callable[[str], s
     return t
 
 
-def commands_text(cmds: Iterable[TrackedCommand], now: float, mc_state_of: Callable[[str], str | None] = lambda _a: None) -> Text:
+def commands_text(
+    cmds: Iterable[TrackedCommand], now: float, mc_state_of: Callable[[str], str | None] = lambda _a: None
+) -> Text:
     lines = [command_line(c, now, mc_state_of) for c in reversed(list(cmds))]
     if not lines:
         return Text("No commands sent yet.\nt/l/r: selected agent, T/L/R: all agents.", "grey62")

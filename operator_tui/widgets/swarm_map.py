@@ -37,7 +37,9 @@ class MapPoint:
     stale: bool
 
 
-def fit_scale(points: list[MapPoint], cols: int, rows: int, min_span: float = 20.0) -> tuple[float, float, float]:
+def fit_scale(
+    points: list[MapPoint], cols: int, rows: int, min_span: float = 20.0
+) -> tuple[float, float, float]:
     """(metres per column, centre north, centre east) so every point fits with a margin."""
     if points:
         north = [p.north for p in points]
@@ -89,7 +91,14 @@ def map_rows(points: list[MapPoint], selected: str | None, cols: int, rows: int)
                 if (row, start + i) not in cells:
                     grid[row][start + i] = (ch, "bold reverse")
     lines = [_merge(line) for line in grid]
-    lines.append(_scale_bar(m_per_col, cols, len(points), selected if selected and any(p.name == selected for p in points) else None))
+    lines.append(
+        _scale_bar(
+            m_per_col,
+            cols,
+            len(points),
+            selected if selected and any(p.name == selected for p in points) else None,
+        )
+    )
     return lines
 
 
@@ -152,7 +161,9 @@ class SwarmMap(Widget):
         width, height = self.size
         base = self.rich_style
         self._lines = [
-            Strip([Segment(text, base + _style(spec)) for text, spec in line]).extend_cell_length(width, base).crop(0, width)
+            Strip([Segment(text, base + _style(spec)) for text, spec in line])
+            .extend_cell_length(width, base)
+            .crop(0, width)
             for line in map_rows(self.points, self.selected, width, height)
         ]
         self._built_for = (width, height)

@@ -1,0 +1,318 @@
+"""A simulated LAN: K hosts (network namespaces) plugged into one switch (a bridge in its own namespace).
+
+    with Lan(["uav-1", "uav-2", "operator"]) as lan:
+        proc = lan["uav-1"].popen(["antalate", "agent", "uav-1.toml"], log=path)
+        lan.set_loss(20)          # drop 20 % of the frames the switch forwards
+        lan.cut("uav-2")          # take uav-2's network interface down (cable pulled)
+        lan.restore("uav-2")
+
+Layout (DESIGN §12, §13)::
+
+    namespace <prefix>-sw:  br0 ── p1 ─┐ ── p2 ─┐ ...            (the switch; multicast snooping off)
+                                       │        │
+    namespace <prefix>-h1:  lan0 10.77.0.11/24  │               (a host: lo up, multicast routes)
+    namespace <prefix>-h2:           lan0 10.77.0.12/24
+
+Every interface is created directly inside its namespace (``ip -n``), so nothing ever appears on the
+host's own network, and 10.77.0.0/24 exists only behind the private bridge. Each host gets:
+
+* ``224.0.0.0/4 dev lan0``: the LAN bus (``ttl=1``) goes to the switch;
+* ``239.255.76.68/32 dev lo`` (:data:`LOCAL_GROUP`): an agent's own bus stays on ``lo``. Without
+  it the local bus would also be routed to ``lan0``, and taking ``lan0`` down deletes that route:
+  every send on the local bus would fail with ENETUNREACH and the agent's nodes would lose each other
+  exactly when the LAN is gone (measured; see docs/lan.md).
+
+Packet loss is an nftables rule on the switch's bridge ``forward`` hook
+(``numgen random mod 100 < N drop``): ``tc netem`` is missing on some kernels, and dropping at a
+sender's own output makes its ``publish`` raise EPERM instead of losing the datagram silently.
+
+Names are ``antalate-lan-<pid>-<random>-<role>``: parallel runs never collide, and
+:func:`sweep_stale` removes the namespaces of runs whose process is gone (a crash, a SIGKILL),
+only those of this harness. Teardown (also on an exception) kills every process started in the
+hosts, then any process left in the namespaces, then deletes the namespaces.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import os
+import re
+import secrets
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import IO, Any
+
+from tests.netns import stop_process
+
+REPO = Path(__file__).resolve().parents[2]
+PREFIX = "antalate-lan"
+SUBNET = "10.77.0"
+#: The multicast group of the agents' own (``local``) bus in the LAN example configs.
+LOCAL_GROUP = "239.255.76.68"
+_NAME = re.compile(rf"^{PREFIX}-(\d+)-([0-9a-f]+)-")
+_LOSS_TABLE = "antalate_loss"
+
+
+class LanError(RuntimeError):
+    """A set-up command failed; the message holds the command and what it printed."""
+
+
+def _run(argv: Sequence[str], *, check: bool = True, timeout: float = 20) -> subprocess.CompletedProcess[str]:
+    proc = subprocess.run(list(argv), capture_output=True, text=True, timeout=timeout)
+    if check and proc.returncode != 0:
+        raise LanError(f"{' '.join(argv)} failed ({proc.returncode}): {proc.stderr.strip() or proc.stdout.strip()}")
+    return proc
+
+
+def lan_unavailable() -> str | None:
+    """Why a simulated LAN cannot be built here (None when it can): the reason a test skips with."""
+    if sys.platform != "linux":
+        return "network namespaces need Linux"
+    if os.geteuid() != 0:
+        return "needs root (ip netns add, veth, bridges, nftables)"
+    for tool, pkg in (("ip", "iproute2"), ("nft", "nftables")):
+        if shutil.which(tool) is None:
+            return f"{tool} is not installed (apt-get install {pkg}; tools/install-system-deps.sh does it)"
+    try:
+        with Lan(1):
+            pass
+    except (LanError, OSError, subprocess.SubprocessError) as exc:
+        return f"cannot build a test LAN: {exc}"
+    return None
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _namespaces() -> list[str]:
+    out = _run(["ip", "netns", "list"], check=False).stdout
+    return [line.split()[0] for line in out.splitlines() if line.strip()]
+
+
+def _kill_namespace_processes(ns: str) -> None:
+    """SIGKILL whatever still runs in ``ns`` (only ever one of this harness's namespaces)."""
+    for _ in range(3):
+        pids = [int(p) for p in _run(["ip", "netns", "pids", ns], check=False).stdout.split() if p.isdigit()]
+        if not pids:
+            return
+        for pid in pids:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        time.sleep(0.1)
+
+
+def delete_namespace(ns: str) -> None:
+    _kill_namespace_processes(ns)
+    _run(["ip", "netns", "delete", ns], check=False)
+
+
+def sweep_stale() -> list[str]:
+    """Delete the namespaces left by runs of this harness whose process no longer exists."""
+    removed = []
+    for ns in _namespaces():
+        m = _NAME.match(ns)
+        if m and int(m.group(1)) != os.getpid() and not _pid_alive(int(m.group(1))):
+            delete_namespace(ns)
+            removed.append(ns)
+    return removed
+
+
+class Host:
+    """One simulated machine: a network namespace with one interface (``lan0``) on the switch."""
+
+    def __init__(self, lan: Lan, name: str, index: int) -> None:
+        self.lan = lan
+        self.name = name
+        self.index = index
+        self.ns = f"{lan.prefix}-h{index}"
+        #: The switch-side end of this host's cable (in the switch namespace).
+        self.port = f"p{index}"
+        self.address = f"{SUBNET}.{10 + index}"
+        self.procs: list[subprocess.Popen[str]] = []
+        self._files: list[IO[str]] = []
+
+    def __repr__(self) -> str:
+        return f"Host({self.name!r}, {self.ns}, {self.address})"
+
+    # ------------------------------------------------------------------ set-up
+    def build(self) -> None:
+        ns, sw = self.ns, self.lan.switch
+        _run(["ip", "netns", "add", ns])
+        _run(["ip", "-n", ns, "link", "set", "lo", "up"])
+        _run(["ip", "-n", sw, "link", "add", self.port, "type", "veth", "peer", "name", "lan0", "netns", ns])
+        _run(["ip", "-n", sw, "link", "set", self.port, "master", "br0"])
+        _run(["ip", "-n", sw, "link", "set", self.port, "up"])
+        _run(["ip", "-n", ns, "addr", "add", f"{self.address}/24", "dev", "lan0"])
+        _run(["ip", "-n", ns, "link", "set", "lan0", "up"])
+        self._routes()
+
+    def _routes(self) -> None:
+        _run(["ip", "-n", self.ns, "route", "replace", "224.0.0.0/4", "dev", "lan0"])
+        _run(["ip", "-n", self.ns, "route", "replace", f"{LOCAL_GROUP}/32", "dev", "lo"])
+
+    def link_down(self) -> None:
+        """The host's own interface down: like pulling its cable and the OS noticing.
+
+        This is the harsh case: the kernel deletes every route through ``lan0`` (the multicast one
+        too), so sends to the LAN fail at once with ENETUNREACH.
+        """
+        _run(["ip", "-n", self.ns, "link", "set", "lan0", "down"])
+
+    def link_up(self) -> None:
+        _run(["ip", "-n", self.ns, "link", "set", "lan0", "up"])
+        self._routes()  # the kernel dropped them with the link
+
+    def routes(self) -> str:
+        return _run(["ip", "-n", self.ns, "route", "show"]).stdout
+
+    # ------------------------------------------------------------------ processes
+    def wrap(self, argv: Sequence[str]) -> list[str]:
+        return ["ip", "netns", "exec", self.ns, *argv]
+
+    def popen(self, argv: Sequence[str], *, log: Path | None = None, **kwargs: Any) -> subprocess.Popen[str]:
+        """Start ``argv`` in this host (its own process group, so teardown can kill its children)."""
+        env = dict(os.environ)
+        env.setdefault("PYTHONUNBUFFERED", "1")
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p)
+        kwargs.setdefault("env", env)
+        kwargs.setdefault("text", True)
+        kwargs.setdefault("start_new_session", True)
+        kwargs.setdefault("cwd", str(REPO))
+        if log is not None:
+            out = open(log, "w")  # noqa: SIM115 - closed at teardown
+            self._files.append(out)
+            kwargs.setdefault("stdout", out)
+            kwargs.setdefault("stderr", subprocess.STDOUT)
+        proc: subprocess.Popen[str] = subprocess.Popen(self.wrap(argv), **kwargs)
+        self.procs.append(proc)
+        return proc
+
+    def antalate(self, *args: str, log: Path | None = None, **kwargs: Any) -> subprocess.Popen[str]:
+        return self.popen([sys.executable, "-m", "antalate_lcm.cli", *args], log=log, **kwargs)
+
+    def run(self, argv: Sequence[str], timeout: float = 30, check: bool = False) -> subprocess.CompletedProcess[str]:
+        return _run(self.wrap(argv), check=check, timeout=timeout)
+
+    def stop(self, timeout: float = 5.0) -> dict[int, int | None]:
+        """SIGTERM every process started here (then SIGKILL the stubborn), newest first."""
+        codes = {}
+        for proc in reversed(self.procs):
+            codes[proc.pid] = stop_process(proc, timeout)
+        self.procs.clear()
+        for f in self._files:
+            f.close()
+        self._files.clear()
+        return codes
+
+
+class Lan:
+    """K hosts on one switch. A context manager: everything it made is gone after ``with``."""
+
+    def __init__(self, hosts: int | Iterable[str]) -> None:
+        names = [f"h{i + 1}" for i in range(hosts)] if isinstance(hosts, int) else list(hosts)
+        if not names or len(set(names)) != len(names):
+            raise ValueError("a LAN needs at least one host and unique host names")
+        if len(names) > 200:
+            raise ValueError("at most 200 hosts (one /24)")
+        self.prefix = f"{PREFIX}-{os.getpid()}-{secrets.token_hex(3)}"
+        self.switch = f"{self.prefix}-sw"
+        self.hosts: dict[str, Host] = {n: Host(self, n, i + 1) for i, n in enumerate(names)}
+        self.loss = 0
+        self._built: list[str] = []
+        self._closed = False
+
+    def __getitem__(self, name: str) -> Host:
+        return self.hosts[name]
+
+    def __enter__(self) -> Lan:
+        sweep_stale()
+        atexit.register(self.close)
+        try:
+            self._build()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _build(self) -> None:
+        _run(["ip", "netns", "add", self.switch])
+        self._built.append(self.switch)
+        sw = self.switch
+        _run(["ip", "-n", sw, "link", "set", "lo", "up"])
+        # Snooping off: a bridge that snoops forwards a group only to ports it saw an IGMP report on
+        # (and floods only while no querier exists), so delivery would hinge on report timing and
+        # membership timeouts. A small flat LAN switch floods multicast; so does this one.
+        _run(["ip", "-n", sw, "link", "add", "br0", "type", "bridge", "mcast_snooping", "0"])
+        _run(["ip", "-n", sw, "link", "set", "br0", "up"])
+        self._nft(f"add table bridge {_LOSS_TABLE}\n"
+                  f"add chain bridge {_LOSS_TABLE} forward {{ type filter hook forward priority 0; policy accept; }}\n")
+        for host in self.hosts.values():
+            self._built.append(host.ns)
+            host.build()
+
+    def _nft(self, script: str) -> str:
+        proc = subprocess.run(
+            ["ip", "netns", "exec", self.switch, "nft", "-f", "-"], input=script, capture_output=True, text=True,
+            timeout=20,
+        )
+        if proc.returncode != 0:
+            raise LanError(f"nft in {self.switch} failed: {proc.stderr.strip()}")
+        return proc.stdout
+
+    # ------------------------------------------------------------------ faults
+    def set_loss(self, percent: int) -> None:
+        """Drop ``percent`` % of the frames the switch forwards (each frame drawn independently)."""
+        if not 0 <= percent <= 100:
+            raise ValueError("loss is a percentage, 0..100")
+        script = f"flush chain bridge {_LOSS_TABLE} forward\n"
+        if percent:
+            script += f"add rule bridge {_LOSS_TABLE} forward numgen random mod 100 < {percent} counter drop\n"
+        self._nft(script)
+        self.loss = percent
+
+    def dropped(self) -> int:
+        """Frames dropped by the loss rule since it was last set."""
+        out = _run(["ip", "netns", "exec", self.switch, "nft", "list", "chain", "bridge", _LOSS_TABLE, "forward"]).stdout
+        m = re.search(r"counter packets (\d+)", out)
+        return int(m.group(1)) if m else 0
+
+    def cut(self, name: str) -> None:
+        """Cut a host off the switch: its interface goes down (see :meth:`Host.link_down`)."""
+        self.hosts[name].link_down()
+
+    def restore(self, name: str) -> None:
+        self.hosts[name].link_up()
+
+    # ------------------------------------------------------------------ teardown
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for host in self.hosts.values():
+            with contextlib.suppress(Exception):  # teardown carries on whatever happens
+                host.stop()
+        for ns in reversed(self._built):
+            delete_namespace(ns)
+        self._built.clear()
+        atexit.unregister(self.close)
+
+    def namespaces(self) -> list[str]:
+        """This LAN's namespaces that exist now (empty after teardown)."""
+        return [ns for ns in _namespaces() if ns.startswith(self.prefix + "-")]
+

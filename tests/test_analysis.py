@@ -1,0 +1,307 @@
+"""Log analysis (``antalate analyze`` / ``antalate plot``) on small logs with known trajectories.
+
+Each log is written with ``lcm.EventLog`` exactly as ``lcm-logger`` would write it, so the reader is
+tested against the real file format, and every expected number is computed by hand.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import lcm
+import pytest
+
+from antalate_lcm.analysis import (
+    Track,
+    analyze,
+    analyze_log,
+    cohesion_at,
+    default_plot_path,
+    read_log,
+)
+from antalate_lcm.cli import main
+from antalate_lcm.errors import AntalateError
+from antalate_lcm.geo import offset
+from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, telemetry_t, velocity_cmd_t
+
+LAT0, LON0 = 32.7767, 35.0231
+T0 = 1_700_000_000_000_000  # µs: the log's first event
+CORNERS = {"a-1": (10.0, 10.0), "a-2": (10.0, -10.0), "a-3": (-10.0, -10.0), "a-4": (-10.0, 10.0)}
+
+
+class LogWriter:
+    """Events for a test log, sorted by time on :meth:`write` (a logger writes them in arrival order)."""
+
+    def __init__(self) -> None:
+        self.events: list[tuple[float, str, bytes]] = []
+
+    def add(self, t: float, channel: str, data: bytes) -> None:
+        self.events.append((t, channel, data))
+
+    def telemetry(self, t: float, agent: str, north: float, east: float, *, in_air: bool = True) -> None:
+        msg = telemetry_t()
+        msg.header.agent = agent
+        msg.lat, msg.lon = offset(LAT0, LON0, north, east)
+        msg.alt, msg.in_air, msg.mode = 5.0, in_air, "GUIDED"
+        self.add(t, f"{agent}/TELEMETRY", msg.encode())
+
+    def mc(self, t: float, agent: str, state: int) -> None:
+        msg = mc_state_t()
+        msg.header.agent = agent
+        msg.state = state
+        self.add(t, f"{agent}/MC_STATE", msg.encode())
+
+    def hlc(self, t: float, agent: str, state: int) -> None:
+        msg = hlc_state_t()
+        msg.header.agent = agent
+        msg.state = state
+        msg.autopilot = "sim"
+        self.add(t, f"{agent}/HLC_STATE", msg.encode())
+
+    def direction(self, t: float, azimuth: float, speed: float = 1.0, active: bool = True,
+                  channel: str = "SWARM/DIRECTION_CMD", target: str = "") -> None:
+        msg = direction_cmd_t()
+        msg.header.agent = "operator"
+        msg.active, msg.azimuth, msg.speed, msg.target = active, azimuth, speed, target
+        self.add(t, channel, msg.encode())
+
+    def write(self, path: Path) -> Path:
+        log = lcm.EventLog(str(path), "w", overwrite=True)
+        for t, channel, data in sorted(self.events, key=lambda e: e[0]):
+            log.write_event(T0 + round(t * 1e6), channel, data)
+        log.close()
+        return path
+
+
+def square_swarm(
+    position: Callable[[str, float], tuple[float, float]] | None = None, *, until: float = 20.0,
+    rtl_at: float = 18.0, azimuth: float | None = 80.0,
+) -> LogWriter:
+    """Four agents on the corners of a 20 m square flying east at 1 m/s (or along ``position``).
+
+    MC: STANDBY at 0 s, MISSION at 2 s (a-4 at 3 s), a-1 RTL at ``rtl_at``: the window is 3..rtl_at.
+    The operator broadcasts ``azimuth`` at 1 m/s every second from 2.5 s on (repeats are folded).
+    """
+    w = LogWriter()
+    for name in CORNERS:
+        w.mc(0.0, name, mc_state_t.STANDBY)
+        w.hlc(0.0, name, hlc_state_t.READY)
+        w.mc(3.0 if name == "a-4" else 2.0, name, mc_state_t.MISSION)
+        w.hlc(2.0, name, hlc_state_t.AIRBORNE)
+        for k in range(int(until * 10) + 1):
+            t = k / 10
+            n, e = position(name, t) if position else (CORNERS[name][0], CORNERS[name][1] + t)
+            w.telemetry(t + 0.001, name, n, e)
+        for k in range(int(until * 5)):  # MC republishes at 5 Hz: repeats must fold into one change
+            w.mc(k / 5 + 0.05, name, mc_state_t.RTL if name == "a-1" and k / 5 >= rtl_at else mc_state_t.MISSION
+                 if k / 5 >= (3.0 if name == "a-4" else 2.0) else mc_state_t.STANDBY)
+    if azimuth is not None:
+        for k in range(3, int(until)):
+            w.direction(k - 0.5, azimuth)
+    return w
+
+
+# ----------------------------------------------------------------------------- reading
+def test_reads_agents_states_and_folds_repeats(tmp_path: Path) -> None:
+    record = read_log(square_swarm().write(tmp_path / "swarm.lcm"))
+    assert sorted(record.agents) == sorted(CORNERS)
+    a1 = record.agents["a-1"]
+    assert [c.state for c in a1.mc_states] == ["STANDBY", "MISSION", "RTL"]
+    assert a1.mc_states[1].t == pytest.approx(2.0)
+    assert a1.mc_states[2].t == pytest.approx(18.05)
+    assert [c.state for c in a1.hlc_states] == ["READY", "AIRBORNE"]
+    assert len(a1.telemetry) == 201
+    assert len(record.directions) == 1  # sent 17 times, one change
+    d = record.directions[0]
+    assert (d.active, d.azimuth, d.speed, d.target, d.sender) == (True, 80.0, 1.0, "", "operator")
+    assert record.duration == pytest.approx(20.001)
+    assert record.skipped == 0 and not record.truncated
+
+
+def test_garbage_and_unknown_channels_are_counted_not_fatal(tmp_path: Path) -> None:
+    w = square_swarm()
+    w.add(5.0, "a-1/TELEMETRY", b"\x00garbage")
+    w.add(5.0, "a-2/MC_STATE", b"")
+    w.add(6.0, "SOMEONE_ELSES_CHANNEL", b"hello")
+    w.add(6.0, "SOMEONE_ELSES_CHANNEL", b"hello")
+    vel = velocity_cmd_t()
+    w.add(7.0, "a-1/VELOCITY_CMD", vel.encode())
+    record = read_log(w.write(tmp_path / "dirty.lcm"))
+    assert record.undecodable == {"a-1/TELEMETRY": 1, "a-2/MC_STATE": 1}
+    assert record.unknown == {"SOMEONE_ELSES_CHANNEL": 2}
+    assert record.unused == {"VELOCITY_CMD": 1}
+    assert record.skipped == 4
+    result = analyze(record)
+    assert result.drift and result.drift[0].error == pytest.approx(10.0, abs=1e-3)
+    assert any("skipped 4 event(s)" in n for n in result.notes)
+
+
+def test_a_damaged_tail_keeps_what_precedes_it(tmp_path: Path) -> None:
+    path = square_swarm().write(tmp_path / "swarm.lcm")
+    data = path.read_bytes()
+    damaged = tmp_path / "damaged.lcm"
+    damaged.write_bytes(data[: len(data) // 2] + b"\x00" * 64 + data[len(data) // 2 :])
+    record = read_log(damaged)
+    assert record.agents and 0 < record.events < read_log(path).events
+    assert "truncated or damaged" in record.truncated
+    assert any("truncated or damaged" in note for note in analyze(record, azimuth=0.0).notes)
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (None, "no such file"),
+        (b"", "empty file"),
+        (b"this is a text file, not a log\n", "not an LCM log file"),
+        (b"\xed\xa1", "not an LCM log file"),
+    ],
+)
+def test_bad_files_are_one_line_errors(tmp_path: Path, content: bytes | None, message: str) -> None:
+    path = tmp_path / "bad.lcm"
+    if content is not None:
+        path.write_bytes(content)
+    with pytest.raises(AntalateError, match=message) as info:
+        analyze_log(path)
+    assert "\n" not in str(info.value)
+
+
+def test_directory_and_log_without_telemetry(tmp_path: Path) -> None:
+    with pytest.raises(AntalateError, match="is a directory"):
+        read_log(tmp_path)
+    w = LogWriter()
+    w.add(0.0, "SOMEONE_ELSES_CHANNEL", b"x")
+    with pytest.raises(AntalateError, match="no telemetry in this log"):
+        analyze_log(w.write(tmp_path / "empty.lcm"))
+
+
+# ----------------------------------------------------------------------------- metrics
+def test_rigid_swarm_cohesion_and_drift_by_hand(tmp_path: Path) -> None:
+    result = analyze(read_log(square_swarm().write(tmp_path / "swarm.lcm")))
+    # the window: the last agent (a-4) entered MISSION at 3 s, the first (a-1) left at 18.05 s
+    assert result.window is not None
+    assert result.window.start == pytest.approx(3.0)
+    assert result.window.end == pytest.approx(18.05)
+    # corners of a 20 m square: every agent is 10*sqrt(2) from the centroid, all the time
+    r = 10 * math.sqrt(2)
+    assert result.start_radius == pytest.approx(r, abs=1e-3)
+    assert result.peak_radius == pytest.approx(r, abs=1e-3)
+    assert result.cohesion_ratio == pytest.approx(1.0, abs=1e-4)
+    assert result.average_mean == pytest.approx(r, abs=1e-3)
+    # moving east (90 deg) at 1 m/s while 80 deg was commanded (from 3 s: the window's start)
+    (d,) = result.drift
+    assert (d.start, d.end) == (pytest.approx(3.0), pytest.approx(18.05))
+    assert d.heading == pytest.approx(90.0, abs=1e-3)
+    assert d.error == pytest.approx(10.0, abs=1e-3)
+    assert d.distance == pytest.approx(15.05, abs=1e-3)
+    assert d.speed == pytest.approx(1.0, abs=1e-4)
+    assert (d.azimuth, d.commanded_speed, d.agents, d.source) == (80.0, 1.0, 4, "log")
+
+
+def test_expanding_swarm_ratio_by_hand(tmp_path: Path) -> None:
+    # each agent flies straight away from the centre at 0.5 m/s: radius 10*sqrt(2) + 0.5 t
+    def away(name: str, t: float) -> tuple[float, float]:
+        n, e = CORNERS[name]
+        k = 1 + 0.5 * t / (10 * math.sqrt(2))
+        return n * k, e * k
+
+    result = analyze(read_log(square_swarm(away).write(tmp_path / "out.lcm")), azimuth=0.0)
+    r0 = 10 * math.sqrt(2)
+    assert result.start_radius == pytest.approx(r0 + 1.5, abs=1e-3)  # at 3 s
+    assert result.peak_radius == pytest.approx(r0 + 9.0, abs=1e-3)  # the last bin inside, 18 s
+    assert result.cohesion_ratio == pytest.approx((r0 + 9.0) / (r0 + 1.5), abs=1e-4)
+    (d,) = result.drift
+    assert d.heading is None and d.error is None  # the centroid never moved
+    assert d.distance == pytest.approx(0.0, abs=1e-3)
+    assert d.source == "option"
+
+
+def test_direction_changes_make_spans_and_azimuth_option_wins(tmp_path: Path) -> None:
+    w = square_swarm(azimuth=None)
+    w.direction(2.5, 80.0)
+    w.direction(8.0, 100.0)
+    w.direction(12.0, 0.0, active=False)  # stop: no drift measured from here
+    w.direction(13.0, 30.0, target="a-2", channel="a-2/DIRECTION_CMD")  # one agent's: not the swarm's
+    path = w.write(tmp_path / "turns.lcm")
+    result = analyze_log(path)
+    assert [(round(d.start, 3), round(d.end, 3), d.azimuth) for d in result.drift] == [
+        (3.0, 8.0, 80.0), (8.0, 12.0, 100.0)
+    ]
+    assert [round(d.error, 3) for d in result.drift if d.error is not None] == [10.0, -10.0]
+    forced = analyze_log(path, azimuth=350.0)
+    (d,) = forced.drift
+    assert d.error == pytest.approx(100.0, abs=1e-3)  # 90 is 100 deg clockwise of 350
+
+
+def test_a_silent_agent_leaves_the_cohesion_and_the_drift(tmp_path: Path) -> None:
+    w = LogWriter()
+    for name, (n, e) in CORNERS.items():
+        w.mc(0.0, name, mc_state_t.MISSION)
+        stop = 10.0 if name == "a-4" else 20.0  # a-4 is cut off at 10 s
+        for k in range(int(stop * 10) + 1):
+            w.telemetry(k / 10, name, n + 0.5 * k / 10, e)
+    result = analyze(read_log(w.write(tmp_path / "cut.lcm")), azimuth=0.0)
+    by_t = {round(c.t): c for c in result.cohesion}
+    assert by_t[5].agents == 4 and by_t[11].agents == 4  # still within max_age (2 s)
+    assert by_t[13].agents == 3 and by_t[19].agents == 3
+    # three corners (10,10), (10,-10), (-10,-10): centroid (10/3, -10/3) + the drift north;
+    # the radius is the distance to (10,10) or (-10,-10): hypot(20/3, 40/3)
+    c = by_t[15]
+    assert c.centroid_north - 0.5 * 15 == pytest.approx(10 / 3, abs=1e-3)
+    assert c.centroid_east == pytest.approx(-10 / 3, abs=1e-3)
+    assert c.max_distance == pytest.approx(math.hypot(20 / 3, 40 / 3), abs=1e-3)
+    (d,) = result.drift  # over the three heard at both ends: exactly north at 0.5 m/s
+    assert d.agents == 3 and d.heading == pytest.approx(0.0, abs=1e-3) and d.speed == pytest.approx(0.5, abs=1e-3)
+
+
+def test_track_interpolation_and_staleness() -> None:
+    tr = Track([0.0, 1.0, 5.0], [0.0, 10.0, 10.0], [0.0, 0.0, 40.0], [0.0, 0.0, 0.0])
+    assert tr.position_at(-0.1, 2.0) is None
+    assert tr.position_at(0.25, 2.0) == pytest.approx((2.5, 0.0))
+    assert tr.position_at(2.0, 2.0) == pytest.approx((10.0, 0.0))  # gap of 4 s: no interpolation
+    assert tr.position_at(3.5, 2.0) is None  # last heard 2.5 s ago
+    assert tr.position_at(6.0, 2.0) == pytest.approx((10.0, 40.0))
+    assert tr.position_at(7.5, 2.0) is None
+    sample = cohesion_at({"x": tr, "y": Track([0.0], [0.0], [0.0], [0.0])}, 0.5, 2.0)
+    assert sample is not None
+    assert (sample.agents, sample.centroid_north, sample.max_distance) == (2, pytest.approx(2.5), pytest.approx(2.5))
+
+
+# ----------------------------------------------------------------------------- the commands
+def test_cli_analyze_text_and_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = square_swarm().write(tmp_path / "swarm.lcm")
+    assert main(["analyze", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert "a-1: STANDBY@0.0 -> MISSION@2.0 -> RTL@18.1" in text
+    assert "= 1.00 x the starting radius" in text
+    assert "error +10.0 deg" in text
+    assert main(["analyze", str(path), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["drift"][0]["error"] == pytest.approx(10.0, abs=1e-3)
+    assert data["cohesion_ratio"] == pytest.approx(1.0, abs=1e-4)
+    assert data["window"]["start"] == pytest.approx(3.0)
+    assert len(data["cohesion"]) == 21
+
+
+def test_cli_plot_writes_a_png(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = square_swarm().write(tmp_path / "swarm.lcm")
+    out = tmp_path / "figure.png"
+    assert main(["plot", str(path), "-o", str(out), "-q"]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert out.stat().st_size > 20_000
+    assert f"wrote {out}" in capsys.readouterr().out
+    assert main(["plot", str(path), "-q"]) == 0
+    assert default_plot_path(path) == tmp_path / "swarm.png" and (tmp_path / "swarm.png").exists()
+    assert default_plot_path("lcmlog-2026-11-22.00").name == "lcmlog-2026-11-22.00.png"
+
+
+def test_cli_bad_file_is_one_line_and_status_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "notes.txt"
+    bad.write_text("not a log")
+    assert main(["plot", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not an LCM log file" in err
+    assert main(["analyze", str(tmp_path / "missing.lcm")]) == 2
+    assert "no such file" in capsys.readouterr().err

@@ -1,0 +1,349 @@
+"""Whole agents flying the ArduCopter-like emulator through `MavlinkAutopilot` (DESIGN §5, §6, §7).
+
+Two set-ups:
+
+* **In process** (the failsafes): MC + HLC(``mavlink``) + a BMA running ``auto_operator`` on one
+  ``memq://`` bus in the test process, the emulator on 127.0.0.1 -- so the test can inject faults
+  straight into the vehicle (``refuse_arm``, ``set_battery``, ``stop_heartbeats``,
+  ``pilot_switch_mode``) and watch the MC and HLC states.
+* **Separate processes in a private network namespace**: ``antalate agent`` / ``antalate hlc`` +
+  ``antalate mc`` over real multicast, the emulator as its own process (``python -m
+  tests.emulators.mavlink_vehicle``) in the same namespace -- a whole mission, and an HLC killed and
+  restarted mid-flight that resynchronises to AIRBORNE without arming or taking off again.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from antalate_lcm.bus import Bus
+from antalate_lcm.config import parse_config
+from antalate_lcm.executor import Executor
+from antalate_lcm.hlc.machine import ErrorCode
+from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t
+from antalate_lcm.msgs import hlc_state_t as H
+from antalate_lcm.msgs import mc_state_t as M
+from antalate_lcm.msgs import operator_cmd_t as O
+from antalate_lcm.node import Context, Node
+from antalate_lcm.runtime.agent import agent_nodes
+from tests.agent_harness import AgentProcesses
+from tests.conftest import MCAST_URL, Probe
+from tests.emulators.mavlink_vehicle import MavlinkVehicle
+from tests.netns import NetNamespace, stop_process
+
+# The emulated copter: short start-up, brisk kinematics, heartbeats at 10 Hz.
+FAST: dict[str, Any] = {
+    "boot_delay": 0.2, "ekf_delay": 0.3, "gps_delay": 0.3, "heartbeat_rate": 10.0, "climb_rate": 4.0,
+    "max_climb_rate": 4.0, "land_speed": 2.5, "land_speed_high": 3.0, "max_descent_rate": 3.0,
+    "rtl_speed": 8.0, "velocity_tau": 0.15, "land_detect_time": 0.2,
+}
+AP: dict[str, Any] = {"stream_rate_hz": 20.0, "connect_timeout": 5.0, "ready_timeout": 5.0, "ack_timeout": 0.5}
+AUTO_OPERATOR: dict[str, Any] = {"altitude": 3.0, "max_flights": 1, "retry": 0.5}
+
+
+def _bma(**operator: Any) -> list[dict[str, Any]]:
+    return [{
+        "name": "operator",
+        "behaviors": [{"plugin": "auto_operator", "activate_on": ["STANDBY", "MISSION"],
+                       "params": {**AUTO_OPERATOR, **operator}}],
+    }]
+
+
+@dataclass
+class Seen:
+    t: float
+    state: int
+
+
+class InProcessAgent:
+    """MC + HLC + auto_operator BMA on memq://, flying `vehicle`; records every MC/HLC state and error."""
+
+    def __init__(self, vehicle: MavlinkVehicle, *, hlc: dict[str, Any] | None = None,
+                 operator: dict[str, Any] | None = None) -> None:
+        doc = {
+            "agent": {"name": "copter"},
+            "buses": {"lan": "memq://"},
+            "hlc": {"autopilot": "mavlink", "default_takeoff_altitude": 3.0, "link_timeout": 1.5, **(hlc or {}),
+                    "autopilot_params": {"connection": vehicle.udp_url, **AP}},
+            "bma": _bma(**(operator or {})),
+        }
+        self.vehicle = vehicle
+        self.config = parse_config(doc, "mavlink-e2e.toml")
+        self.context = Context(Bus(self.config.buses), Executor())
+        self.mc: list[Seen] = []
+        self.hlc: list[Seen] = []
+        self.errors: list[hlc_error_t] = []
+        self.telemetry: list[telemetry_t] = []
+        self.probe = Node(self.config, self.context, name="probe")
+        self.nodes = agent_nodes(self.config, self.context)
+
+    def start(self) -> InProcessAgent:
+        self.context.executor.start()
+        self.probe.start()
+        self.probe.subscribe("MC_STATE", lambda m: self._seen(self.mc, m))
+        self.probe.subscribe("HLC_STATE", lambda m: self._seen(self.hlc, m))
+        self.probe.subscribe("HLC_ERROR", self.errors.append)
+        self.probe.subscribe("TELEMETRY", self.telemetry.append)
+        for node in self.nodes:
+            node.start()
+        return self
+
+    def stop(self) -> None:
+        for node in reversed([self.probe, *self.nodes]):
+            node.stop()
+        self.context.close()
+
+    @staticmethod
+    def _seen(into: list[Seen], msg: mc_state_t | hlc_state_t) -> None:
+        if not into or into[-1].state != msg.state:
+            into.append(Seen(time.monotonic(), msg.state))
+
+    def wait(self, which: str, state: int, timeout: float = 10.0, since: float = 0.0) -> Seen:
+        seen = self.mc if which == "mc" else self.hlc
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            hit = next((s for s in list(seen) if s.state == state and s.t >= since), None)
+            if hit is not None:
+                return hit
+            time.sleep(0.02)
+        raise AssertionError(f"{which} never reached state {state} (seen {[s.state for s in seen]})")
+
+    def error(self, code: ErrorCode, timeout: float = 5.0) -> hlc_error_t:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            hit = next((e for e in list(self.errors) if e.code == code), None)
+            if hit is not None:
+                return hit
+            time.sleep(0.02)
+        raise AssertionError(f"no hlc_error {code.name}; got {[(e.code, e.text) for e in self.errors]}")
+
+    def states(self, which: str) -> list[int]:
+        return [s.state for s in (self.mc if which == "mc" else self.hlc)]
+
+
+@pytest.fixture
+def copter() -> Iterator[Callable[..., InProcessAgent]]:
+    made: list[tuple[MavlinkVehicle, InProcessAgent]] = []
+
+    def make(vehicle: dict[str, Any] | None = None, **kw: Any) -> InProcessAgent:
+        v = MavlinkVehicle("127.0.0.1", 0, **{**FAST, **(vehicle or {})}).start()
+        agent = InProcessAgent(v, **kw)
+        made.append((v, agent))
+        return agent.start()
+
+    yield make
+    for v, agent in made:
+        agent.stop()
+        v.stop()
+
+
+def flying(agent: InProcessAgent) -> float:
+    """Wait for the auto-operator's sortie to reach MISSION; the time it did."""
+    agent.wait("mc", M.STANDBY)
+    agent.wait("hlc", H.AIRBORNE, timeout=10)
+    return agent.wait("mc", M.MISSION).t
+
+
+# -- the failsafes of DESIGN §6, in process ----------------------------------------------------------
+
+
+def test_arming_refused_back_to_ready_with_an_error_then_flies(copter: Callable[..., InProcessAgent]) -> None:
+    agent = copter()
+    agent.vehicle.refuse_arm = True
+    agent.wait("mc", M.STANDBY)
+    agent.wait("mc", M.TAKEOFF)
+    err = agent.error(ErrorCode.ARM_FAILED)
+    assert err.severity == hlc_error_t.ERROR and "arm" in err.text
+    back = agent.wait("mc", M.STANDBY, since=agent.wait("mc", M.TAKEOFF).t)
+    assert H.READY in agent.states("hlc")[agent.states("hlc").index(H.TAKEOFF):]
+    assert not agent.vehicle.snapshot().armed
+    # the pre-arm problem cleared: the auto-operator's retry flies
+    agent.vehicle.refuse_arm = False
+    agent.wait("mc", M.MISSION, timeout=10, since=back.t)
+    assert agent.vehicle.snapshot().armed and agent.vehicle.snapshot().mode == "GUIDED"
+
+
+def test_low_battery_returns_home(copter: Callable[..., InProcessAgent]) -> None:
+    agent = copter(hlc={"low_battery": 20.0})
+    flying(agent)
+    agent.vehicle.set_battery(18)
+    agent.wait("hlc", H.LOW_BATTERY, timeout=3)
+    agent.error(ErrorCode.LOW_BATTERY)
+    agent.wait("mc", M.RTL)
+    assert agent.vehicle.snapshot().mode == "RTL"
+    agent.wait("mc", M.STANDBY, timeout=10, since=agent.wait("mc", M.RTL).t)
+    assert agent.wait("hlc", H.READY, since=agent.wait("hlc", H.LOW_BATTERY).t)
+    snap = agent.vehicle.snapshot()
+    assert not snap.armed and math.hypot(snap.north, snap.east) < 0.5
+
+
+def test_link_loss_is_llc_down_and_mc_error(copter: Callable[..., InProcessAgent]) -> None:
+    agent = copter(hlc={"link_timeout": 1.0})
+    flying(agent)
+    lost = time.monotonic()
+    agent.vehicle.stop_heartbeats()
+    down = agent.wait("hlc", H.LLC_DOWN, timeout=3)
+    assert 0.9 <= down.t - lost < 2.5
+    agent.error(ErrorCode.LINK_LOST)
+    agent.wait("mc", M.ERROR)
+    agent.vehicle.resume_heartbeats()  # unrecoverable: the link coming back changes nothing
+    time.sleep(0.5)
+    assert agent.states("hlc")[-1] == H.LLC_DOWN and agent.states("mc")[-1] == M.ERROR
+
+
+def test_pilot_takeover_is_manual_until_the_pilot_lands(copter: Callable[..., InProcessAgent]) -> None:
+    agent = copter()
+    flying(agent)
+    assert agent.vehicle.pilot_switch_mode("LOITER")
+    manual = agent.wait("hlc", H.MANUAL, timeout=3)
+    agent.error(ErrorCode.PILOT_TAKEOVER)
+    agent.wait("mc", M.MANUAL)
+    time.sleep(0.5)  # the HLC leaves the pilot alone: no mode change, no velocity target
+    snap = agent.vehicle.snapshot()
+    assert snap.mode == "LOITER" and snap.armed
+    assert not [r for r in agent.vehicle.received_of("SET_POSITION_TARGET_LOCAL_NED") if r.t > manual.t + 0.3]
+    assert agent.vehicle.pilot_switch_mode("LAND")  # the pilot lands
+    agent.wait("hlc", H.READY, timeout=8, since=manual.t)
+    agent.wait("mc", M.STANDBY, since=manual.t)
+    time.sleep(0.5)  # max_flights = 1: it stays down
+    assert agent.states("mc")[-1] == M.STANDBY and not agent.vehicle.snapshot().armed
+
+
+def test_altitude_not_gained_lands(copter: Callable[..., InProcessAgent]) -> None:
+    agent = copter(vehicle={"climb_rate": 0.2}, hlc={"gain_altitude_timeout": 1.5})
+    agent.wait("mc", M.STANDBY)
+    climbing = agent.wait("hlc", H.GAINING_ALTITUDE, timeout=10)
+    landing = agent.wait("hlc", H.LANDING, timeout=4)
+    assert 1.4 <= landing.t - climbing.t < 2.5
+    assert "not gained" in agent.error(ErrorCode.GAIN_ALTITUDE_TIMEOUT).text
+    agent.wait("mc", M.LAND)
+    assert agent.vehicle.snapshot().mode == "LAND"
+    agent.wait("hlc", H.READY, timeout=8, since=landing.t)
+    agent.wait("mc", M.STANDBY, since=landing.t)
+    assert M.MISSION not in agent.states("mc")
+
+
+# -- separate processes in a private namespace ---------------------------------------------------------
+
+
+class EmulatorProcess:
+    """``python -m tests.emulators.mavlink_vehicle`` inside the namespace; its final JSON snapshot on stop."""
+
+    def __init__(self, netns: NetNamespace, *args: str) -> None:
+        self.proc = netns.python(
+            "-m", "tests.emulators.mavlink_vehicle", "--host", "127.0.0.1", "--udp-port", "0", "--tcp-port", "0",
+            "--boot-delay", "0.3", "--ekf-delay", "0.6", "--gps-delay", "0.5", *args,
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        )
+        assert self.proc.stdout is not None
+        ready = self.proc.stdout.readline().split()
+        assert ready and ready[0] == "READY", ready
+        self.udp_port = int(ready[1].removeprefix("udp="))
+        self.tcp_port = int(ready[2].removeprefix("tcp="))
+        self.final: dict[str, Any] | None = None
+
+    def stop(self) -> dict[str, Any]:
+        if self.final is None:
+            self.proc.send_signal(15)
+            out, _err = self.proc.communicate(timeout=5)
+            self.final = json.loads(out.strip().splitlines()[-1])
+        return self.final
+
+
+@pytest.fixture
+def emulator(netns: NetNamespace) -> Iterator[EmulatorProcess]:
+    emu = EmulatorProcess(netns)
+    yield emu
+    if emu.proc.poll() is None:
+        stop_process(emu.proc)
+
+
+def process_doc(name: str, connection: str, bma: list[dict[str, Any]] | None = None) -> dict[str, Any]:
+    doc: dict[str, Any] = {
+        "agent": {"name": name},
+        "buses": {"lan": MCAST_URL},
+        "hlc": {"autopilot": "mavlink", "default_takeoff_altitude": 3.0,
+                "autopilot_params": {"connection": connection, "ack_timeout": 1.0, "stream_rate_hz": 10.0}},
+    }
+    if bma:
+        doc["bma"] = bma
+    return doc
+
+
+@pytest.mark.netns
+def test_agent_process_flies_a_whole_mission_over_tcp(
+    netns: NetNamespace, probe: Probe, emulator: EmulatorProcess, tmp_path: Path
+) -> None:
+    doc = process_doc("sitl", f"tcp:127.0.0.1:{emulator.tcp_port}", _bma(rtl_after=3.0))
+    agent = AgentProcesses(netns, tmp_path, doc)
+    agent.start("agent")
+    try:
+        for state in (M.STANDBY, M.TAKEOFF, M.MISSION):
+            assert probe.wait("sitl/MC_STATE", "mc_state_t", timeout=15, state=state), f"never reached {state}"
+        # velocity commands reach the copter in MISSION: east at 3 m/s for a second
+        mark = probe.mark()
+        for _ in range(10):
+            probe.publish("sitl/VELOCITY_CMD", "velocity_cmd_t", frame=1, vx=0.0, vy=3.0)
+            time.sleep(0.1)
+        moving = probe.wait("sitl/TELEMETRY", "telemetry_t", since=mark, timeout=3, mode="GUIDED")
+        assert moving is not None
+        east = [t["ve"] for t in probe.history("sitl/TELEMETRY", "telemetry_t", since=mark)]
+        assert max(east) > 2.0, east
+        assert probe.wait("sitl/MC_STATE", "mc_state_t", timeout=10, since=mark, state=M.RTL)
+        mark = probe.mark()
+        assert probe.wait("sitl/MC_STATE", "mc_state_t", timeout=20, since=mark, state=M.STANDBY)
+        last = probe.history("sitl/TELEMETRY", "telemetry_t")[-1]
+        assert not last["armed"] and not last["in_air"] and last["mode"] == "RTL"
+        assert probe.wait("sitl/HLC_STATE", "hlc_state_t", since=mark, state=H.READY)["autopilot"] == "mavlink"
+        assert agent.alive("agent")
+    finally:
+        codes = agent.stop()
+    final = emulator.stop()
+    assert not final["armed"] and final["alt"] == 0.0
+    assert math.hypot(final["north"], final["east"]) < 0.5  # RTL brought it home
+    assert codes["agent"] in (0, -15), codes
+    log = agent.log("agent")
+    assert "connected to autopilot (1, 1)" in log and "mode GUIDED confirmed" in log
+
+
+@pytest.mark.netns
+def test_hlc_restart_mid_flight_resyncs_without_arming_or_taking_off(
+    netns: NetNamespace, probe: Probe, emulator: EmulatorProcess, tmp_path: Path
+) -> None:
+    agent = AgentProcesses(netns, tmp_path, process_doc("copter", f"udpout:127.0.0.1:{emulator.udp_port}"))
+    agent.start("hlc")
+    agent.start("mc")
+    try:
+        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.STANDBY)
+        probe.publish("copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 1, "agent": "op"}, command=O.TAKEOFF)
+        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.MISSION)
+        assert "autopilot ARM" in agent.log("hlc")
+        agent.kill("hlc")  # SIGKILL: the real vehicle flies on, hovering in GUIDED
+        time.sleep(1.0)
+        mark = probe.mark()
+        agent.start("hlc")
+        assert probe.wait("copter/HLC_STATE", "hlc_state_t", timeout=15, since=mark, state=H.AIRBORNE)
+        log = agent.log("hlc")
+        assert "INIT -> AIRBORNE" in log
+        assert "autopilot ARM" not in log and "autopilot TAKEOFF" not in log
+        assert {m["state"] for m in probe.history("copter/MC_STATE", "mc_state_t", since=mark)} == {M.MISSION}
+        airborne = probe.wait("copter/TELEMETRY", "telemetry_t", since=mark, timeout=5, in_air=True)
+        assert airborne is not None and airborne["alt"] > 2.0 and airborne["mode"] == "GUIDED"
+        # and it still obeys: RTL brings it home and down
+        probe.publish("copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 2, "agent": "op"}, command=O.RTL)
+        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=10, since=mark, state=M.RTL)
+        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=20, since=probe.mark(), state=M.STANDBY)
+    finally:
+        codes = agent.stop()
+    final = emulator.stop()
+    assert not final["armed"] and final["alt"] == 0.0
+    assert all(c in (0, -15, None) for c in codes.values()), codes

@@ -1,0 +1,321 @@
+"""A whole autonomous mission with a Tello, and every DESIGN §6 failsafe that applies to one.
+
+MC + HLC (``autopilot = "tello"``, the real djitellopy) + BMAs (``auto_operator``, ``dovrat_swarm``)
+run in one agent process in namespace ``b`` of a `NetnsPair`, on a ``memq://`` bus; the Tello SDK
+emulator runs in this process on a socket in namespace ``a`` (192.168.10.1). The agent process is a
+small driver that builds the nodes exactly as ``antalate agent`` does (`agent_nodes`) plus a
+recorder node, and prints every MC/HLC state change, every ``hlc_error_t`` and the telemetry (1 Hz)
+as JSON lines; the test follows that timeline and injects faults into the emulator.
+
+Failsafes covered: low battery (LOW_BATTERY -> RTL), link loss (LLC_DOWN -> MC ERROR), a refused
+take-off, and altitude not gained in time (LANDING). Pilot takeover does not apply: a Tello has no
+pilot radio. Arming failure does not apply either: a Tello has no arming step, so a refusal shows
+as the TAKEOFF action failing (see `test_refused_takeoff`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.emulators.netns_pair import NetnsPair, netns_pair_unavailable
+from tests.emulators.tello_emulator import TelloEmulator
+
+pytestmark = pytest.mark.netns
+
+AGENT = r"""
+import json, logging, sys, threading, time
+from antalate_lcm.config import parse_config
+from antalate_lcm.hlc.machine import ErrorCode, HlcState
+from antalate_lcm.mc.machine import McState
+from antalate_lcm.node import Context, Node
+from antalate_lcm.runtime.agent import agent_nodes, validate
+
+logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(name)s %(message)s")
+T0 = time.monotonic()
+OUT = threading.Lock()
+
+def emit(**event):
+    event["t"] = round(time.monotonic() - T0, 3)
+    with OUT:
+        sys.stdout.write(json.dumps(event) + "\n")
+        sys.stdout.flush()
+
+class Recorder(Node):
+    kind = "recorder"
+    def on_start(self):
+        self.last = {}
+        self.telemetry_at = 0.0
+        self.subscribe("MC_STATE", lambda m: self.state("mc", McState(m.state).name))
+        self.subscribe("HLC_STATE", lambda m: self.state("hlc", HlcState(m.state).name))
+        self.subscribe("HLC_ERROR", lambda m: emit(kind="error", code=ErrorCode(m.code).name, text=m.text))
+        self.subscribe("TELEMETRY", self.telemetry)
+    def state(self, kind, name):
+        if self.last.get(kind) != name:
+            self.last[kind] = name
+            emit(kind=kind, state=name)
+    def telemetry(self, m):
+        if self.now - self.telemetry_at >= 1.0:
+            self.telemetry_at = self.now
+            emit(kind="telemetry", lat=m.lat, lon=m.lon, alt=m.alt, heading=m.heading, battery=m.battery,
+                 mode=m.mode, in_air=m.in_air)
+
+config = parse_config(json.loads(sys.argv[1]), "<test>")
+validate(config)
+context = Context.create(config)
+nodes = [*agent_nodes(config, context), Recorder(config, context)]
+context.bus.open()
+context.executor.start()
+for node in nodes:
+    node.start()
+emit(kind="started")
+for line in sys.stdin:
+    if line.strip() == "stop":
+        break
+for node in reversed(nodes):
+    node.stop()
+context.close()
+emit(kind="stopped")
+"""
+
+#: The emulator: brisk takeoff and landing, auto-landing after 3 s without commands.
+EMU: dict[str, Any] = {"takeoff_time": 0.5, "land_speed": 2.0, "auto_land_timeout": 3.0}
+
+
+def config(*, operator: dict[str, Any] | None = None, swarm: bool = False, **hlc: Any) -> dict[str, Any]:
+    """One Tello agent on memq://, flown by auto_operator (and dovrat_swarm in MISSION if `swarm`)."""
+    bma: list[dict[str, Any]] = [{
+        "name": "operator",
+        "behaviors": [{
+            "plugin": "auto_operator", "activate_on": ["STANDBY", "MISSION"],
+            "params": {"max_flights": 1, "altitude": 1.2, "retry": 1.0, **(operator or {})},
+        }],
+    }]
+    if swarm:
+        bma.append({
+            "name": "mission",
+            "behaviors": [{
+                "plugin": "dovrat_swarm", "activate_on": ["MISSION"],
+                "params": {"forward_speed": 0.5, "sharp_turn_rate": 30.0},
+            }],
+        })
+    autopilot = {
+        "home_lat": 32.7767, "home_lon": 35.0231, "home_heading": 45.0, "command_timeout": 2,
+        "takeoff_timeout": 10, "keepalive_s": 1.0, "rtl_speed": 0.8, "rtl_tolerance": 0.25,
+        "link_loss_timeout": 1.0, **hlc.pop("autopilot_params", {}),
+    }
+    return {
+        "agent": {"name": "tello1"},
+        "buses": {"lan": "memq://"},
+        "mc": {"takeoff_ack_timeout": 3.0},
+        "hlc": {
+            "autopilot": "tello", "default_takeoff_altitude": 1.2, "gain_altitude_timeout": 6.0,
+            "link_timeout": 1.5, "low_battery": 20.0, "max_horizontal_speed": 1.0, **hlc,
+            "autopilot_params": autopilot,
+        },
+        "bma": bma,
+    }
+
+
+class Agent:
+    """The agent process in namespace b and its timeline of events."""
+
+    def __init__(self, proc: subprocess.Popen[str], log_path: Path) -> None:
+        self.proc = proc
+        self.log_path = log_path
+        self.events: list[dict[str, Any]] = []
+        self._cursor = 0
+        self._cond = threading.Condition()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            with self._cond:
+                self.events.append(json.loads(line))
+                self._cond.notify_all()
+        with self._cond:
+            self.events.append({"kind": "exit"})
+            self._cond.notify_all()
+
+    def wait(self, kind: str, timeout: float, *, poll: Callable[[], None] | None = None,
+             **where: Any) -> dict[str, Any]:
+        """The next event of `kind` matching `where` after the one the previous `wait` returned.
+
+        Waits follow the timeline in order, so ``wait("hlc", state="READY")`` after a take-off finds
+        the READY of the landing, not the one at start-up.
+        """
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for i in range(self._cursor, len(self.events)):
+                    event = self.events[i]
+                    if event["kind"] == kind and all(event.get(k) == v for k, v in where.items()):
+                        self._cursor = i + 1
+                        return event
+                left = deadline - time.monotonic()
+                if left <= 0 or self.events[-1:] == [{"kind": "exit"}]:
+                    raise AssertionError(f"no {kind} {where} within {timeout} s; timeline:\n{self.timeline()}"
+                                         f"\nlog:\n{self.log_tail()}")
+                self._cond.wait(min(left, 0.05))
+                if poll is not None:
+                    poll()
+
+    def states(self, kind: str) -> list[str]:
+        with self._cond:
+            return [e["state"] for e in self.events if e["kind"] == kind]
+
+    def errors(self) -> list[dict[str, Any]]:
+        with self._cond:
+            return [e for e in self.events if e["kind"] == "error"]
+
+    def timeline(self) -> str:
+        with self._cond:
+            return "\n".join(json.dumps(e) for e in self.events if e["kind"] != "telemetry")
+
+    def log_tail(self, n: int = 40) -> str:
+        return "\n".join(self.log_path.read_text().splitlines()[-n:])
+
+    def stop(self) -> None:
+        if self.proc.poll() is None and self.proc.stdin is not None:
+            try:
+                self.proc.stdin.write("stop\n")
+                self.proc.stdin.flush()
+                self.proc.wait(10)
+            except (BrokenPipeError, subprocess.TimeoutExpired):
+                self.proc.kill()
+
+
+@pytest.fixture(scope="module")
+def net() -> Iterator[NetnsPair]:
+    reason = netns_pair_unavailable()
+    if reason:
+        pytest.skip(reason)
+    with NetnsPair() as pair:
+        yield pair
+
+
+@pytest.fixture
+def fly(net: NetnsPair, tmp_path: Path) -> Iterator[Callable[..., tuple[Agent, TelloEmulator]]]:
+    """Start an emulator (with `emu` settings) and then an agent process with `doc` as its config."""
+    started: list[tuple[Agent, TelloEmulator]] = []
+
+    def start(doc: dict[str, Any], setup: Callable[[TelloEmulator], None] | None = None,
+              **emu_kw: Any) -> tuple[Agent, TelloEmulator]:
+        emu = TelloEmulator(sock=net.udp_socket("a", (net.addr_a, 8889)), **{**EMU, **emu_kw}).start()
+        if setup is not None:
+            setup(emu)
+        log_path = tmp_path / "agent.log"
+        log = open(log_path, "w")  # noqa: SIM115 - the child process holds it; closed below
+        proc = net.popen("b", [sys.executable, "-c", AGENT, json.dumps(doc)], stdin=subprocess.PIPE,
+                         stdout=subprocess.PIPE, stderr=log)
+        log.close()
+        agent = Agent(proc, log_path)
+        started.append((agent, emu))
+        return agent, emu
+
+    yield start
+    for agent, emu in started:
+        agent.stop()
+        emu.stop()
+
+
+def distance(snap: Any) -> float:
+    return math.hypot(snap.x, snap.y)
+
+
+def test_whole_mission(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+    """auto_operator takes off, dovrat_swarm flies a curve, RTL brings the Tello back and lands it."""
+    agent, emu = fly(config(operator={"rtl_after": 3.0}, swarm=True))
+    farthest = [0.0]
+
+    def watch() -> None:
+        farthest[0] = max(farthest[0], distance(emu.snapshot()))
+
+    agent.wait("mc", 10, state="MISSION")
+    assert emu.snapshot().z == pytest.approx(1.2, abs=0.15)
+    agent.wait("mc", 8, state="RTL", poll=watch)
+    agent.wait("hlc", 10, state="READY", poll=watch)
+    agent.wait("mc", 3, state="STANDBY")
+    snap = emu.snapshot()
+    assert not snap.flying
+    assert farthest[0] > 0.8, "the swarm behavior's velocity commands did not move the Tello"
+    assert distance(snap) < 0.5, f"landed {distance(snap):.2f} m from the take-off point"
+    assert agent.states("mc") == ["STANDBY", "TAKEOFF", "MISSION", "RTL", "LAND", "STANDBY"]
+    assert agent.states("hlc") == ["INIT", "READY", "TAKEOFF", "GAINING_ALTITUDE", "AIRBORNE", "RTL", "LANDING",
+                                   "READY"]
+    assert not agent.errors(), agent.errors()
+    texts = emu.command_texts()
+    assert any(t.startswith("rc ") and t.split()[4] != "0" for t in texts), "no yaw from the BODY commands"
+    time.sleep(1.5)  # max_flights = 1: it stays down
+    assert agent.states("mc")[-1] == "STANDBY" and not emu.snapshot().flying
+
+
+def test_low_battery_returns_home(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+    agent, emu = fly(config(swarm=True))
+    agent.wait("mc", 10, state="MISSION")
+    time.sleep(1.0)  # fly away a little
+    emu.set_battery(15.0)  # <= low_battery 20, above the Tello's own 5% auto-landing
+    agent.wait("hlc", 3, state="LOW_BATTERY")
+    agent.wait("mc", 2, state="RTL")
+    agent.wait("hlc", 10, state="READY")
+    agent.wait("mc", 2, state="STANDBY")
+    snap = emu.snapshot()
+    assert not snap.flying and distance(snap) < 0.5
+    assert [e["code"] for e in agent.errors()] == ["LOW_BATTERY"]
+    assert agent.states("hlc")[-3:] == ["AIRBORNE", "LOW_BATTERY", "READY"]
+
+
+def test_link_loss_is_llc_down(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+    agent, emu = fly(config())
+    agent.wait("mc", 10, state="MISSION")
+    emu.stop_state()
+    agent.wait("hlc", 4, state="LLC_DOWN")
+    agent.wait("mc", 2, state="ERROR")
+    assert "LINK_LOST" in [e["code"] for e in agent.errors()]
+    # The adapter stops commanding a Tello it cannot see: its own failsafe lands it.
+    assert emu.wait_until(lambda s: not s.flying, timeout=6)
+
+
+def test_refused_takeoff(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+    """No arming on a Tello: the refusal is the TAKEOFF action failing.
+
+    The HLC machine has no row for a failed TAKEOFF action: it reports the error and stays in
+    GAINING_ALTITUDE until ``gain_altitude_timeout``, then LANDING (the Tello is on the ground, so at
+    once READY); the MC follows TAKEOFF -> LAND -> STANDBY. DESIGN §6's "arming failed -> READY"
+    path is never taken.
+    """
+    agent, emu = fly(config(gain_altitude_timeout=2.0), setup=lambda e: setattr(e, "refuse_takeoff", True))
+    error = agent.wait("error", 10, code="ACTION_FAILED")
+    assert "takeoff" in error["text"]
+    agent.wait("hlc", 4, state="LANDING")
+    agent.wait("hlc", 3, state="READY")
+    agent.wait("mc", 3, state="STANDBY")
+    # auto_operator asks again at once (the flight never reached MISSION): compare the first round.
+    assert agent.states("hlc")[:6] == ["INIT", "READY", "TAKEOFF", "GAINING_ALTITUDE", "LANDING", "READY"]
+    assert agent.states("mc")[:4] == ["STANDBY", "TAKEOFF", "LAND", "STANDBY"]
+    assert [e["code"] for e in agent.errors()][:2] == ["ACTION_FAILED", "GAIN_ALTITUDE_TIMEOUT"]
+    assert not emu.snapshot().flying
+
+
+def test_altitude_not_gained_lands(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+    """The Tello climbs far slower than its rc scale says: the HLC gives up and lands."""
+    agent, emu = fly(config(gain_altitude_timeout=2.5), max_vertical_speed=0.05)
+    agent.wait("hlc", 10, state="GAINING_ALTITUDE")
+    agent.wait("hlc", 5, state="LANDING")
+    agent.wait("mc", 2, state="LAND")
+    agent.wait("hlc", 5, state="READY")
+    agent.wait("mc", 2, state="STANDBY")
+    assert [e["code"] for e in agent.errors()][:1] == ["GAIN_ALTITUDE_TIMEOUT"]
+    assert agent.states("mc")[:5] == ["STANDBY", "TAKEOFF", "LAND", "STANDBY", "TAKEOFF"][:len(agent.states("mc")[:5])]
+    assert "MISSION" not in agent.states("mc")

@@ -3,7 +3,8 @@
 #   python3-venv        the virtual environment `make` creates
 #   iproute2, util-linux private network namespaces for multicast tests (ip, unshare, nsenter)
 #   nftables            packet loss on the simulated LAN bridge
-#   default-jdk-headless, xvfb   lcm-spy and the cross-language (Java) decoding test
+#   default-jdk-headless, default-jre, xvfb, xauth   lcm-spy (a Swing window: the JRE's X11
+#                       library) and the cross-language (Java) decoding test
 #   ffmpeg              the video_capture behavior
 #   tmux                the real-terminal test of the operator console
 # Without root (and without passwordless sudo) it says what to install and carries on: the tests
@@ -18,6 +19,8 @@ need nsenter util-linux
 need nft nftables
 need javac default-jdk-headless
 need xvfb-run xvfb
+need xauth xauth
+compgen -G '/usr/lib/jvm/*/lib/libawt_xawt.so' >/dev/null || want+=(default-jre)
 need ffmpeg ffmpeg
 need tmux tmux
 [ ${#want[@]} -eq 0 ] && exit 0

@@ -38,6 +38,7 @@ bench: setup
 	$(PY) benchmarks/bus.py
 	$(PY) benchmarks/agents.py
 	$(PY) benchmarks/station.py
+	$(PY) benchmarks/tui.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache build *.egg-info

@@ -113,7 +113,7 @@ class TrackedCommand:
 
 @dataclass(frozen=True)
 class CommandUpdate:
-    """Something the UI should log about a command (ack, failure, resend)."""
+    """Something the UI should log about a command: acknowledged, superseded, failed."""
 
     command: TrackedCommand
     text: str
@@ -150,7 +150,6 @@ class CommandTracker:
         self._history = history
         #: Finished commands, newest last (bounded: the panel shows the recent ones).
         self.done: deque[TrackedCommand] = deque(maxlen=history)
-        self.changed = True
 
     def _take_seq(self) -> int:
         seq = self._next_seq
@@ -173,7 +172,6 @@ class CommandTracker:
             expected=frozenset([target] if target else expected),
         )
         self.pending[cmd.seq] = cmd
-        self.changed = True
         return cmd
 
     def observe(self, agent: str, last_command_seq: int, now: float) -> list[CommandUpdate]:
@@ -191,7 +189,6 @@ class CommandTracker:
                 older.superseded.add(agent)
                 updates.extend(self._maybe_complete(older, now, superseded_by=cmd))
         updates.extend(self._maybe_complete(cmd, now))
-        self.changed = True
         return updates
 
     def _maybe_complete(
@@ -218,7 +215,6 @@ class CommandTracker:
         self._failed.pop(cmd.seq, None)
         cmd.status = Status.ACKED
         cmd.reason = f"acked late ({now - cmd.sent_at:.1f} s)"
-        self.changed = True
         return [
             CommandUpdate(
                 cmd, f"{cmd.label} #{cmd.seq} acknowledged late, {now - cmd.sent_at:.1f} s after sending"
@@ -234,7 +230,6 @@ class CommandTracker:
             self._failed[cmd.seq] = cmd
             while len(self._failed) > self._history:
                 del self._failed[next(iter(self._failed))]
-        self.changed = True
 
     def tick(
         self,
@@ -265,7 +260,6 @@ class CommandTracker:
                 cmd.last_sent = now
                 cmd.sends += 1
                 resend.append(cmd)
-                self.changed = True
         return resend, updates
 
     def _failure_reason(

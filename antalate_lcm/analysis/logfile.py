@@ -109,6 +109,10 @@ def read_log(path: str | Path) -> SwarmRecord:
                 if channel not in routes:
                     routes[channel] = _route(channel)
                 route = routes[channel]
+                if route is None and channel == "LCM_SELF_TEST":
+                    # Every LCM instance multicasts one when it starts: the library's, not garbage.
+                    record.unused[channel] = record.unused.get(channel, 0) + 1
+                    continue
                 if route is None:
                     record.unknown[channel] = record.unknown.get(channel, 0) + 1
                     continue

@@ -231,6 +231,7 @@ class Lan:
         self.switch = f"{self.prefix}-sw"
         self.hosts: dict[str, Host] = {n: Host(self, n, i + 1) for i, n in enumerate(names)}
         self.loss = 0
+        self._loss: dict[str | None, int] = {}
         self._built: list[str] = []
         self._closed = False
 
@@ -276,21 +277,37 @@ class Lan:
         return proc.stdout
 
     # ------------------------------------------------------------------ faults
-    def set_loss(self, percent: int) -> None:
-        """Drop ``percent`` % of the frames the switch forwards (each frame drawn independently)."""
-        if not 0 <= percent <= 100:
+    def set_loss(self, percent: int | None, host: str | None = None) -> None:
+        """Drop ``percent`` % of the frames the switch forwards, each frame copy drawn independently.
+
+        With ``host``, only the frames the switch forwards *to* that host (a bad port or cable
+        towards it); that rule comes first, so it overrides the LAN-wide one for that host, and
+        ``percent=None`` removes it again.
+        """
+        if host is not None and host not in self.hosts:
+            raise KeyError(host)
+        if percent is None:
+            if host is None:
+                raise ValueError("percent=None only removes a host's own loss rule")
+            self._loss.pop(host, None)
+        elif not 0 <= percent <= 100:
             raise ValueError("loss is a percentage, 0..100")
+        else:
+            self._loss[host] = percent
         script = f"flush chain bridge {_LOSS_TABLE} forward\n"
-        if percent:
-            script += f"add rule bridge {_LOSS_TABLE} forward numgen random mod 100 < {percent} counter drop\n"
+        for target, pct in sorted(self._loss.items(), key=lambda kv: kv[0] is None):
+            if not pct and target is None:
+                continue
+            match = f'oifname "{self.hosts[target].port}" ' if target is not None else ""
+            verdict = "accept" if not pct else "counter drop" if pct >= 100 else f"numgen random mod 100 < {pct} counter drop"
+            script += f"add rule bridge {_LOSS_TABLE} forward {match}{verdict}\n"
         self._nft(script)
-        self.loss = percent
+        self.loss = self._loss.get(None, 0)
 
     def dropped(self) -> int:
-        """Frames dropped by the loss rule since it was last set."""
+        """Frames dropped by the loss rules since they were last set."""
         out = _run(["ip", "netns", "exec", self.switch, "nft", "list", "chain", "bridge", _LOSS_TABLE, "forward"]).stdout
-        m = re.search(r"counter packets (\d+)", out)
-        return int(m.group(1)) if m else 0
+        return sum(int(n) for n in re.findall(r"counter packets (\d+)", out))
 
     def cut(self, name: str) -> None:
         """Cut a host off the switch: its interface goes down (see :meth:`Host.link_down`)."""

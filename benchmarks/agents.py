@@ -79,9 +79,12 @@ def run(n: int, tmp: Path) -> dict[str, float]:
                     standby.add(agent)
                 elif st == mc_state_t.TAKEOFF and agent not in mc_takeoff:
                     mc_takeoff[agent] = now
-            elif topic == "HLC_STATE":
-                if hlc_state_t.decode(data).state == hlc_state_t.TAKEOFF and agent not in hlc_takeoff:
-                    hlc_takeoff[agent] = now
+            elif (
+                topic == "HLC_STATE"
+                and hlc_state_t.decode(data).state == hlc_state_t.TAKEOFF
+                and agent not in hlc_takeoff
+            ):
+                hlc_takeoff[agent] = now
 
     lc.subscribe(".*", on_msg).set_queue_capacity(1_000_000)
     stop = threading.Event()

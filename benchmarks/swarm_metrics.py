@@ -67,15 +67,14 @@ def main() -> int:
     args = parser.parse_args()
     ensure_private_netns()
 
-    from antalate_lcm._codegen import lcm_tool
     from antalate_lcm.analysis import analyze_log, format_summary, plot_log
+    from antalate_lcm.runtime.commands import native_lcm_tool
     from antalate_lcm.runtime.demo import DEMO_URL
 
     tmp = tempfile.TemporaryDirectory()
     log = Path(args.log) if args.log else Path(tmp.name) / "swarm.lcm"
-    logger = subprocess.Popen(
-        [lcm_tool("lcm-logger"), "--quiet", "--force", f"--lcm-url={DEMO_URL}", str(log)],
-    )
+    # The compiled logger itself (the lcm-logger on PATH is a wrapper that would not pass SIGTERM on).
+    logger = subprocess.Popen([native_lcm_tool("lcm-logger"), "--quiet", "--force", f"--lcm-url={DEMO_URL}", str(log)])
     time.sleep(0.5)
     started = time.monotonic()
     try:

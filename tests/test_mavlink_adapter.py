@@ -173,8 +173,11 @@ def test_tcp_link_is_reopened_after_the_autopilot_restarts() -> None:
         ap.connect()
     try:
         state_until(ap, lambda s: s.link_age > 0.6, 3)  # silence after the "reboot"
-        with MavlinkVehicle("127.0.0.1", None, port, **FAST):
+        with MavlinkVehicle("127.0.0.1", None, port, **FAST) as second:
             state_until(ap, lambda s: s.link_age < 0.5, 5)
+            # a rebooted autopilot starts with its default rates: telemetry is asked for again
+            assert wait_for(lambda: second.received_of("COMMAND_LONG"), 2)
+            assert (mav2.MAV_CMD_SET_MESSAGE_INTERVAL, mav2.MAV_RESULT_ACCEPTED) in second.acks
     finally:
         ap.close()
 
@@ -365,8 +368,12 @@ def test_heartbeat_silence_is_link_loss(vehicle: MavlinkVehicle, ap: MavlinkAuto
     with pytest.raises(AutopilotError, match="no COMMAND_ACK"):
         ap.land()
     assert time.monotonic() - start < 1.5  # two attempts of ack_timeout 0.5 s
+    state_until(ap, lambda s: s.link_age > 2.1, 2)
+    requests = len(vehicle.received_of("COMMAND_LONG"))
     vehicle.resume_heartbeats()
     state_until(ap, lambda s: s.link_age < 0.5, 2)
+    # after more than 2 s of silence the autopilot may have rebooted: telemetry is asked for again
+    assert wait_for(lambda: len(vehicle.received_of("COMMAND_LONG")) > requests, 2)
 
 
 def test_battery(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
@@ -385,3 +392,19 @@ def test_close_is_idempotent_and_final(vehicle: MavlinkVehicle) -> None:
         ap.set_velocity(0.0, 0.0, 0.0, 0.0, Frame.NED)
     with pytest.raises(AutopilotError, match="not connected"):
         ap.land()
+
+
+def test_params_documented_and_example_valid() -> None:
+    """Every parameter is in docs/ardupilot.md and examples/arducopter_sitl.toml, and the example loads."""
+    from antalate_lcm.config import load_config
+    from antalate_lcm.runtime.agent import validate
+    from tests.netns import REPO
+
+    doc = (REPO / "docs" / "ardupilot.md").read_text()
+    config = load_config(REPO / "examples" / "arducopter_sitl.toml")
+    validate(config)
+    assert config.hlc.autopilot == "mavlink"
+    params = config.hlc.autopilot_params
+    MavlinkAutopilot(params)
+    missing = [k for k in DEFAULTS if f"`{k}`" not in doc or k not in params]
+    assert not missing, missing

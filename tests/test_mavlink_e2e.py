@@ -301,8 +301,8 @@ def test_agent_process_flies_a_whole_mission_over_tcp(
         assert probe.wait("sitl/MC_STATE", "mc_state_t", timeout=10, since=mark, state=M.RTL)
         mark = probe.mark()
         assert probe.wait("sitl/MC_STATE", "mc_state_t", timeout=20, since=mark, state=M.STANDBY)
-        last = probe.history("sitl/TELEMETRY", "telemetry_t")[-1]
-        assert not last["armed"] and not last["in_air"] and last["mode"] == "RTL"
+        down = probe.wait("sitl/TELEMETRY", "telemetry_t", since=mark, timeout=2, armed=False, in_air=False)
+        assert down is not None and down["mode"] == "RTL" and down["alt"] == 0.0
         assert probe.wait("sitl/HLC_STATE", "hlc_state_t", since=mark, state=H.READY)["autopilot"] == "mavlink"
         assert agent.alive("agent")
     finally:

@@ -72,7 +72,7 @@ class Recorder(Node):
 config = parse_config(json.loads(sys.argv[1]), "<test>")
 validate(config)
 context = Context.create(config)
-nodes = [*agent_nodes(config, context), Recorder(config, context)]
+nodes = [Recorder(config, context), *agent_nodes(config, context)]  # first: it hears INIT
 context.bus.open()
 context.executor.start()
 for node in nodes:

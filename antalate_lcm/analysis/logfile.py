@@ -147,7 +147,8 @@ def _decode_into(
         record.undecodable[channel] = record.undecodable.get(channel, 0) + 1
         return
     if isinstance(msg, direction_cmd_t):
-        target = "" if topic == "SWARM_DIRECTION_CMD" else (msg.target or "")
+        # On an agent's own channel only that agent hears it, whatever its (possibly empty) target says.
+        target = "" if topic == "SWARM_DIRECTION_CMD" else (msg.target or agent)
         key = (bool(msg.active), float(msg.azimuth), float(msg.speed), target)
         # A console repeats its direction every second (it is a state, like a stick): keep changes only.
         if last_direction.get(channel) != key:

@@ -12,7 +12,8 @@ Definitions (also printed by ``antalate analyze``):
   Without MC states in the log, the span in which every agent's telemetry says ``in_air``.
 * **Cohesion** at time t: the centroid of the agents heard within ``max_age`` s, and the mean and
   the maximum distance of those agents to it. The maximum is the swarm's *radius* (the smallest
-  circle around the centroid holding every agent). Sampled every ``bin_s`` seconds.
+  circle around the centroid holding every agent). Sampled every ``bin_s`` seconds, from the moment
+  every agent in the log had been heard once.
 * **Cohesion ratio**: the largest radius in the mission window over the radius at its start.
 * **Drift**: the centroid's displacement over each span of one commanded direction inside the
   window (its heading, distance and speed), against the commanded azimuth; the error is signed,
@@ -293,7 +294,9 @@ def analyze(
     """
     origin = frame_origin(record)
     tracks = local_tracks(record, origin)
-    t_first = min(tr.t[0] for tr in tracks.values())
+    # From the moment every agent had been heard: before that the "swarm" is whoever spoke first
+    # (one agent has radius 0), which says nothing about cohesion.
+    t_first = max(tr.t[0] for tr in tracks.values())
     t_last = max(tr.t[-1] for tr in tracks.values())
     result = Analysis(
         path=record.path, origin=origin, agents=sorted(tracks), duration=record.duration,

@@ -146,6 +146,7 @@ _ZERO_RESEND = 1.0  # s a zero (hover) set-point is still resent, against a lost
 _REOPEN_DELAY = 1.0  # s between attempts to reopen a dropped TCP/serial link
 _RX_POLL = 0.1  # s the receive thread blocks at most, so close() is prompt
 _SETTLE = 3.0  # s connect() waits at most for the first position and landed-state reports
+_REBOOT_GAP = 2.0  # s of HEARTBEAT silence after which the autopilot may have rebooted: ask for streams again
 
 
 def _result_name(result: int | None) -> str:
@@ -595,6 +596,7 @@ class MavlinkAutopilot(Autopilot):
                 new.close()
                 return
             log.info("link %s reopened", self.connection)
+            self._rerequest_streams()  # a reopened stream link usually means a rebooted autopilot
             return
 
     def _is_our_autopilot(self, msg: Any) -> bool:
@@ -637,8 +639,12 @@ class MavlinkAutopilot(Autopilot):
 
     def _on_heartbeat(self, v: _Vehicle, msg: Any) -> None:
         previous = v.custom_mode
+        now = self.clock()
+        if v.heartbeat_at is not None and now - v.heartbeat_at > _REBOOT_GAP:
+            log.info("HEARTBEAT back after %.1f s: asking for telemetry again", now - v.heartbeat_at)
+            self._rerequest_streams()
         v.heartbeats += 1
-        v.heartbeat_at = self.clock()
+        v.heartbeat_at = now
         v.base_mode = msg.base_mode
         v.custom_mode = msg.custom_mode
         v.system_status = msg.system_status
@@ -830,6 +836,19 @@ class MavlinkAutopilot(Autopilot):
             with self._cond:
                 reasons = self._v.not_ready()
             raise AutopilotError(f"not ready to arm after {timeout:g} s: {'; '.join(reasons)}")
+
+    def _rerequest_streams(self) -> None:
+        """Ask for the streams again, off the receive thread (the requests wait for ACKs it delivers)."""
+        if not self._connected:
+            return  # connect() is asking anyway
+
+        def run() -> None:
+            try:
+                self._request_streams()
+            except AutopilotError as exc:
+                self._rate_log.log(("streams",), logging.WARNING, "telemetry request failed: %s", exc)
+
+        threading.Thread(target=run, name=f"mavlink-streams {self.connection}", daemon=True).start()
 
     def _request_streams(self) -> None:
         """Ask for the telemetry `state` needs: SET_MESSAGE_INTERVAL, or REQUEST_DATA_STREAM if unsupported."""

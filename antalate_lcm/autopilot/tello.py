@@ -28,7 +28,9 @@ What the adapter adds, and why
   djitellopy's single reply queue with the HLC's blocking commands, where a late reply is taken as
   the answer to the next command. When no state has arrived for ``link_loss_timeout`` s the thread
   sends one ``rc 0 0 0 0`` (hover) and then stays silent, so that the Tello's own 15 s failsafe
-  lands it instead of it hovering on our keepalives while nobody can see it.
+  lands it instead of it hovering on our keepalives while nobody can see it; if the state comes
+  back first, the adapter lands it (a link loss in flight ends the flight: the HLC's LLC_DOWN is
+  final, and nobody would command the Tello again).
 * **RTL** = fly back to the take-off point (the dead-reckoned position where the last take-off
   began) at ``rtl_speed`` with ``rc``, slowing down over the last metre, then ``land`` within
   ``rtl_tolerance``. It is asynchronous: `rtl` returns at once, the mode is ``RTL`` on the way and
@@ -256,7 +258,7 @@ class TelloAutopilot(Autopilot):
             _HOSTS_IN_USE.add(self.host)
             self._owns_host = True
         try:
-            self._open(Tello, TelloException)
+            self._open(Tello)
         except BaseException:
             self._release()
             raise
@@ -323,6 +325,8 @@ class TelloAutopilot(Autopilot):
             raise
         if self._p["takeoff_altitude_mode"] == "up":
             self._climb_with_up(alt)
+        else:
+            self._wait_fresh_state()  # the height when "ok" came, not from a packet sent mid-climb
         with self._lock:
             if self._phase is _Phase.TAKEOFF:
                 if abs(alt - self._height) <= _CLIMB_TOLERANCE:
@@ -418,8 +422,13 @@ class TelloAutopilot(Autopilot):
 
     # ================================================================= link and commands
 
-    def _open(self, tello_cls: Any, tello_error: type[Exception]) -> None:
-        """Make the djitellopy client, enter SDK mode, wait for state (connect's I/O)."""
+    def _open(self, tello_cls: Any) -> None:
+        """Make the djitellopy client, enter SDK mode, wait for state (connect's I/O).
+
+        This is ``Tello.connect()`` done by hand: djitellopy's own waits 3 x 7 s for an answer and
+        1 s for state, fixed; a dead host must fail in ``command_timeout`` x ``retry_count`` s, and
+        each failure must say what to check.
+        """
         p = self._p
         try:
             tello = tello_cls(self.host, retry_count=p["retry_count"])
@@ -462,7 +471,7 @@ class TelloAutopilot(Autopilot):
             # end() runs again from Tello.__del__, whenever the object is collected; by then a new
             # adapter may have registered the same host, whose entry it would delete. Point this
             # object at no host so that second end() finds nothing to remove.
-            tello.address = ("", tello.address[1])
+            tello.address = ("closed", tello.address[1])
         with _HOSTS_LOCK:
             if self._owns_host:
                 _HOSTS_IN_USE.discard(self.host)
@@ -500,6 +509,8 @@ class TelloAutopilot(Autopilot):
             tello.send_control_command(text, timeout=int(timeout))
         except self._tello_error as exc:
             raise AutopilotError(f"the Tello at {self.host} refused or did not answer {text!r}: {exc}") from exc
+        except (KeyError, OSError) as exc:  # closed under us (djitellopy forgot the host), or no route
+            raise AutopilotError(f"{text!r} to the Tello at {self.host} failed: {exc!r}") from exc
         finally:
             self._last_sent = self.clock()
 
@@ -510,8 +521,12 @@ class TelloAutopilot(Autopilot):
             raise AutopilotError(f"{text}: not connected")
         with self._cmd_lock:
             self._clear_replies()
-            answer = str(tello.send_command_with_return(text, timeout=int(self._p["command_timeout"])))
-            self._last_sent = self.clock()
+            try:
+                answer = str(tello.send_command_with_return(text, timeout=int(self._p["command_timeout"])))
+            except (KeyError, OSError) as exc:
+                raise AutopilotError(f"{text!r} to the Tello at {self.host} failed: {exc!r}") from exc
+            finally:
+                self._last_sent = self.clock()
         return answer.strip()
 
     def _send_rc(self, rc: tuple[int, int, int, int]) -> None:
@@ -719,6 +734,16 @@ class TelloAutopilot(Autopilot):
             return None
         if self._silenced:
             self._silenced = False
+            if self._in_air() and self._phase is not _Phase.LAND:
+                # The HLC has given up on this flight (LLC_DOWN is final) or will see it end: nobody
+                # would command the Tello again, and our keepalives would hold it up until its battery
+                # ran out. End the flight where it is.
+                log.warning("Tello %s: state packets are back after a link loss in flight: landing", self.host)
+                self._phase = _Phase.LAND
+                self._setpoint = None
+                self._climb_target = None
+                self._land_due = now
+                return (0, 0, 0, 0)
             log.info("Tello %s: state packets are back", self.host)
         phase = self._phase
         rc: tuple[int, int, int, int] | None = None

@@ -1,4 +1,5 @@
-"""Subcommands that run nodes: ``mc``, ``hlc``, ``bma``, ``agent``, ``demo`` (and more as they exist).
+"""Subcommands that run nodes: ``mc``, ``hlc``, ``bma``, ``agent``, ``demo`` (and more as they exist),
+and the ones that record and look at a flight: ``log``, ``analyze``, ``plot`` (docs/logging.md).
 
 Every command loads and validates its whole config (plugins included) before any node starts.
 """
@@ -6,6 +7,7 @@ Every command loads and validates its whole config (plugins included) before any
 from __future__ import annotations
 
 import argparse
+import os
 from collections.abc import Callable
 
 from antalate_lcm.config import Config, load_config
@@ -126,11 +128,14 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 
 def _cmd_log(args: argparse.Namespace) -> int:
-    """``lcm-logger`` on a bus of the config: the stock tool, so the log replays with ``lcm-logplayer``."""
-    import subprocess
+    """``lcm-logger`` on a bus of the config: the stock tool, so the log replays with ``lcm-logplayer``.
+
+    This process *becomes* lcm-logger (exec), so Ctrl-C or SIGTERM reach the logger itself and it
+    closes the file cleanly; the ``lcm-logger`` on PATH is a Python wrapper that would not pass a
+    SIGTERM on.
+    """
     import time
 
-    from antalate_lcm._codegen import lcm_tool
     from antalate_lcm.bus import open_lcm
 
     config = load_config(args.config)
@@ -140,30 +145,48 @@ def _cmd_log(args: argparse.Namespace) -> int:
         raise AntalateError(f"no bus named {bus!r} in {config.source}; declared: {', '.join(config.buses)}")
     open_lcm(url)  # a missing multicast route is reported with the fix, not as LCM's one-liner
     out = args.output or time.strftime("antalate-%Y%m%d-%H%M%S.lcm")
+    if os.path.exists(out) and not args.force:
+        raise AntalateError(f"{out} exists: pass --force to overwrite it, or -o another file")
+    logger = native_lcm_tool("lcm-logger")
+    argv = [logger, f"--lcm-url={url}", f"--channel={args.channel}", "--force", out]
+    print(f"logging bus {bus!r} ({url}) to {out}; Ctrl-C stops", flush=True)
+    os.execv(logger, argv)
+    return 0  # pragma: no cover - execv does not return
+
+
+def native_lcm_tool(name: str) -> str:
+    """The compiled LCM tool the ``lcm`` wheel ships (its PATH entry is a Python wrapper around it)."""
+    from pathlib import Path
+
+    import lcm
+
+    from antalate_lcm._codegen import lcm_tool
+
+    native = Path(lcm.__file__).resolve().parent.parent / "bin" / name
+    if native.is_file() and os.access(native, os.X_OK):
+        return str(native)
     try:
-        logger = lcm_tool("lcm-logger")
+        return lcm_tool(name)
     except FileNotFoundError as exc:
         raise AntalateError(str(exc)) from None
-    argv = [logger, f"--lcm-url={url}", "--channel", args.channel, *(["--force"] if args.force else []), out]
-    print(f"logging bus {bus!r} ({url}) to {out}; Ctrl-C stops", flush=True)
-    proc = subprocess.Popen(argv)
+
+
+def _positive(text: str) -> float:
     try:
-        return proc.wait()
-    except KeyboardInterrupt:
-        # The terminal's Ctrl-C reached lcm-logger too (same process group): let it flush and close.
-        try:
-            return proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            return proc.wait()
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
+    return value
 
 
 def _add_analysis_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", help="LCM log file (lcm-logger, antalate log)")
     p.add_argument("--azimuth", type=float, help="compare the drift with this direction (deg) instead of "
                    "the direction commands in the log")
-    p.add_argument("--bin", type=float, default=1.0, help="cohesion sampling period, s (default 1)")
-    p.add_argument("--max-age", type=float, default=2.0,
+    p.add_argument("--bin", type=_positive, default=1.0, help="cohesion sampling period, s (default 1)")
+    p.add_argument("--max-age", type=_positive, default=2.0,
                    help="s after which an agent's last position no longer counts (default 2)")
 
 

@@ -23,7 +23,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from antalate_lcm._codegen import lcm_tool
+from antalate_lcm.runtime.commands import native_lcm_tool
 from tests.agent_harness import FAST_SIM, to_toml
 from tests.lan.topology import REPO, Lan, stop_process
 
@@ -172,7 +172,7 @@ class LanSwarm:
             assert station in text, f"examples/lan/{name}.toml must report to the operator host {station}"
         if self.loss:
             self.lan.set_loss(self.loss)
-        logger = lcm_tool("lcm-logger")
+        logger = native_lcm_tool("lcm-logger")
         operator.antalate("--log-level", "WARNING", "station", "--host", operator.address, "--port",
                           str(STATION_PORT), "--db", ":memory:", "--range", "30", "--fov", "90",
                           log=self._log("station"))

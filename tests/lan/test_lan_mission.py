@@ -21,7 +21,7 @@ import pytest
 from antalate_lcm.analysis import analyze, read_log
 from tests.lan.swarm import VEHICLES, LanSwarm
 
-pytestmark = [pytest.mark.lan, pytest.mark.timeout(150)]
+pytestmark = [pytest.mark.lan, pytest.mark.timeout(150), pytest.mark.usefixtures("need_lan")]
 
 DIRECTIONS = ((90.0, 2.0, 5.0), (0.0, 2.0, 5.0))  # azimuth (deg), speed (m/s), seconds
 

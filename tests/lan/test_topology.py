@@ -13,7 +13,7 @@ import pytest
 from tests.lan.swarm import LAN_URL, LOCAL_URL
 from tests.lan.topology import PREFIX, Host, Lan, _namespaces, sweep_stale
 
-pytestmark = pytest.mark.lan
+pytestmark = [pytest.mark.lan, pytest.mark.timeout(60)]
 
 #: The naive layout: the agent's own bus on the LAN's multicast route (ttl=0 still keeps it home).
 NAIVE_LOCAL_URL = "udpm://239.255.76.67:7668?ttl=0"

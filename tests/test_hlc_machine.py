@@ -154,8 +154,24 @@ def test_extra_rows_are_flagged_in_the_table() -> None:
     extra_events = {row.event for row in HLC_TABLE if row.extra}
     assert extra_events == {
         HlcEvent.MC_LAND, HlcEvent.MC_RTL, HlcEvent.ARMED, HlcEvent.LANDED,
-        HlcEvent.AUTOPILOT_LAND, HlcEvent.AUTOPILOT_RTL,
+        HlcEvent.AUTOPILOT_LAND, HlcEvent.AUTOPILOT_RTL, HlcEvent.TAKEOFF_FAILED,
     }
+
+
+def test_a_refused_takeoff_lands_at_once() -> None:
+    """A vehicle with no arming step (a Tello) refuses at takeoff: land now, not after the timeout."""
+    h = HighLevelControl()
+    h.on_mc_state(M.STANDBY, T0)
+    h.on_autopilot(GROUND, T0)
+    h.on_mc_state(M.TAKEOFF, T0 + 1)
+    h.on_action_result(ActionKind.ARM, True, T0 + 1.1)
+    assert h.state is H.GAINING_ALTITUDE
+    outcome = h.on_action_result(ActionKind.TAKEOFF, False, T0 + 1.2, "error")
+    assert h.state is H.LANDING
+    assert Action.LAND in outcome.actions
+    assert [e.code for e in outcome.errors] == [ErrorCode.TAKEOFF_REFUSED]
+    assert h.on_autopilot(GROUND, T0 + 1.3).transition is not None
+    assert h.state is H.READY
 
 
 # -------------------------------------------------------------------------------- INIT

@@ -25,6 +25,10 @@ How inputs become events
 
 Rows beyond DESIGN §6, and why
 ------------------------------
+* GAINING_ALTITUDE + the TAKEOFF action failed -> LANDING with LAND (an ERROR): a vehicle with no
+  separate arming step (a Tello) refuses at takeoff, not at arm; waiting out gain_altitude_timeout
+  for a takeoff that was refused would only delay the operator. LAND is harmless on the ground and
+  disarms, so the LANDED row then brings the HLC back to READY.
 * GAINING_ALTITUDE + MC LAND/RTL -> LANDING/RTL: the MC accepts LAND/RTL in its TAKEOFF state
   (DESIGN §5), which maps to our TAKEOFF and GAINING_ALTITUDE; the HLC must follow.
 * TAKEOFF + armed while the MC is no longer in TAKEOFF -> READY with DISARM (an INFO error): the
@@ -106,6 +110,7 @@ class ErrorCode(enum.IntEnum):
     UNEXPECTED_LANDING = 8
     TAKEOFF_CANCELLED = 9
     AUTOPILOT_TOOK_OVER = 10
+    TAKEOFF_REFUSED = 11
 
 
 @dataclass(frozen=True)
@@ -171,6 +176,7 @@ class HlcEvent(enum.Enum):
     MC_RTL = "MC_RTL"  # MC is in RTL (level)
     ARMED = "ARMED"  # result of Action.ARM
     ARM_FAILED = "ARM_FAILED"  # result of Action.ARM
+    TAKEOFF_FAILED = "TAKEOFF_FAILED"  # result of Action.TAKEOFF
     ALTITUDE_REACHED = "ALTITUDE_REACHED"
     GAIN_ALTITUDE_TIMEOUT = "GAIN_ALTITUDE_TIMEOUT"
     LANDED = "LANDED"  # on the ground and disarmed
@@ -300,6 +306,8 @@ HLC_TABLE: tuple[HlcRow, ...] = (
            effect=_fx(error=(ErrorCode.ARM_FAILED, Severity.ERROR))),
     HlcRow(_s(S.GAINING_ALTITUDE), E.ALTITUDE_REACHED, S.AIRBORNE, "altitude reached",
            effect=_fx(Action.HOVER)),
+    HlcRow(_s(S.GAINING_ALTITUDE), E.TAKEOFF_FAILED, S.LANDING, "the autopilot refused the takeoff: landing",
+           effect=_fx(Action.LAND, error=(ErrorCode.TAKEOFF_REFUSED, Severity.ERROR)), extra=True),
     HlcRow(_s(S.GAINING_ALTITUDE), E.GAIN_ALTITUDE_TIMEOUT, S.LANDING, "altitude not gained in time: landing",
            effect=_fx(Action.LAND, error=(ErrorCode.GAIN_ALTITUDE_TIMEOUT, Severity.WARNING))),
     HlcRow(_s(S.AIRBORNE), E.MC_RTL, S.RTL, "MC RTL", effect=_fx(Action.RTL)),
@@ -383,13 +391,15 @@ class HighLevelControl:
     def on_action_result(self, kind: ActionKind, ok: bool, now: float, detail: str = "") -> HlcOutcome:
         """The outcome of an `Action` the node performed (``arm()`` False or `AutopilotError` = not ok).
 
-        ARM results drive the table; any other failed action is reported as an error, and the
+        ARM results and a failed TAKEOFF drive the table; any other failed action is reported as an error, and the
         table's timeouts and observations take it from there.
         """
         suffix = f": {detail}" if detail else ""
         if kind is ActionKind.ARM:
             event = HlcEvent.ARMED if ok else HlcEvent.ARM_FAILED
             return self._fire([(event, f"arm {'succeeded' if ok else 'failed'}{suffix}")], now)
+        if kind is ActionKind.TAKEOFF and not ok and self.state is HlcState.GAINING_ALTITUDE:
+            return self._fire([(HlcEvent.TAKEOFF_FAILED, f"autopilot TAKEOFF failed{suffix}")], now)
         if ok:
             return HlcOutcome()
         text = f"autopilot {kind.value} failed{suffix}"

@@ -290,21 +290,19 @@ def test_link_loss_is_llc_down(fly: Callable[..., tuple[Agent, TelloEmulator]]) 
 def test_refused_takeoff(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
     """No arming on a Tello: the refusal is the TAKEOFF action failing.
 
-    The HLC machine has no row for a failed TAKEOFF action: it reports the error and stays in
-    GAINING_ALTITUDE until ``gain_altitude_timeout``, then LANDING (the Tello is on the ground, so at
-    once READY); the MC follows TAKEOFF -> LAND -> STANDBY. DESIGN §6's "arming failed -> READY"
-    path is never taken.
+    The HLC lands at once (TAKEOFF_REFUSED; the Tello is on the ground, so at once READY) rather than
+    waiting out ``gain_altitude_timeout``; the MC follows TAKEOFF -> LAND -> STANDBY.
     """
-    agent, emu = fly(config(gain_altitude_timeout=2.0), setup=lambda e: setattr(e, "refuse_takeoff", True))
-    error = agent.wait("error", 10, code="ACTION_FAILED")
-    assert "takeoff" in error["text"]
+    agent, emu = fly(config(gain_altitude_timeout=20.0), setup=lambda e: setattr(e, "refuse_takeoff", True))
+    error = agent.wait("error", 10, code="TAKEOFF_REFUSED")
+    assert "takeoff" in error["text"].lower()
     agent.wait("hlc", 4, state="LANDING")
     agent.wait("hlc", 3, state="READY")
     agent.wait("mc", 3, state="STANDBY")
     # auto_operator asks again at once (the flight never reached MISSION): compare the first round.
     assert agent.states("hlc")[:6] == ["INIT", "READY", "TAKEOFF", "GAINING_ALTITUDE", "LANDING", "READY"]
     assert agent.states("mc")[:5] == ["INIT", "STANDBY", "TAKEOFF", "LAND", "STANDBY"]
-    assert [e["code"] for e in agent.errors()][:2] == ["ACTION_FAILED", "GAIN_ALTITUDE_TIMEOUT"]
+    assert [e["code"] for e in agent.errors()][:1] == ["TAKEOFF_REFUSED"]
     assert not emu.snapshot().flying
 
 

@@ -201,6 +201,7 @@ class _Vehicle:
     messages: int = 0  # count of messages accepted from the vehicle: marks "after" for waits
     heartbeats: int = 0
     heartbeat_at: float | None = None  # clock time of the last HEARTBEAT
+    heartbeat_msg: int = 0  # `messages` count at the last HEARTBEAT: "a HEARTBEAT after the ACK"
     base_mode: int = 0
     custom_mode: int | None = None
     system_status: int | None = None
@@ -365,9 +366,7 @@ class MavlinkAutopilot(Autopilot):
                 self.last_refusal = reason
                 log.warning("arming refused (%s)%s", _result_name(result), f": {reason}" if reason else "")
                 return False
-            with self._cond:
-                mark = self._v.heartbeats
-            if not self._wait(lambda v: v.heartbeats > mark and v.armed, self._mode_timeout):
+            if not self._wait(lambda v: v.armed, self._mode_timeout):  # disarmed before: a fresh HEARTBEAT
                 raise AutopilotError(f"arming acknowledged but no HEARTBEAT showed the motors armed "
                                      f"within {self._mode_timeout:g} s")
             with self._cond:
@@ -496,7 +495,7 @@ class MavlinkAutopilot(Autopilot):
             )
         except (OSError, ValueError) as exc:
             raise AutopilotError(f"cannot open {self.connection}: {exc}") from exc
-        if self.connection.startswith(("tcp:", "uds:")):
+        if self.connection.startswith(("tcp:", "uds:", "unix:")):
             # pymavlink only prints on EOF and keeps returning nothing: make it an error we handle.
             def closed_by_peer() -> None:
                 raise _PeerClosed(f"{self.connection} closed by the peer")
@@ -645,6 +644,7 @@ class MavlinkAutopilot(Autopilot):
             self._rerequest_streams()
         v.heartbeats += 1
         v.heartbeat_at = now
+        v.heartbeat_msg = v.messages
         v.base_mode = msg.base_mode
         v.custom_mode = msg.custom_mode
         v.system_status = msg.system_status
@@ -803,8 +803,10 @@ class MavlinkAutopilot(Autopilot):
         if result != mav.MAV_RESULT_ACCEPTED:
             raise AutopilotError(f"mode {name} refused ({_result_name(result)}){self._because(mark)}")
         with self._cond:
-            after = self._v.heartbeats
-        if not self._wait(lambda v: v.heartbeats > after and v.custom_mode == number, self._mode_timeout):
+            acks = self._v.acks
+            ack_at = max(at for cmd, (_, at) in acks.items()
+                         if cmd in (mav.MAV_CMD_DO_SET_MODE, mav.MAVLINK_MSG_ID_SET_MODE) and at > mark)
+        if not self._wait(lambda v: v.heartbeat_msg > ack_at and v.custom_mode == number, self._mode_timeout):
             with self._cond:
                 shown = self._v.mode
             raise AutopilotError(f"mode {name} acknowledged but HEARTBEAT still shows {shown} after "

@@ -150,7 +150,6 @@ class HlcNode(Node):
             ActionKind.TAKEOFF: lambda: ap.takeoff(action.altitude),
             ActionKind.LAND: ap.land,
             ActionKind.RTL: ap.rtl,
-            ActionKind.HOVER: lambda: ap.set_velocity(0.0, 0.0, 0.0, 0.0, Frame.BODY),
         }
         self.log.info(
             "autopilot %s%s",
@@ -165,6 +164,11 @@ class HlcNode(Node):
                 self.log.warning("autopilot %s failed: %s", action.kind.name, detail or "refused")
             self._handle(self.machine.on_action_result(action.kind, ok, self.now, detail))
 
+        if action.kind is ActionKind.HOVER:
+            # Like every velocity set-point, inline: queued behind a slow command on the worker it
+            # could arrive after, and override, a newer velocity command.
+            self._apply(GuardDecision(Verdict.HOVER, Velocity.hover(), "HLC action"), "HLC")
+            return
         self._run(calls[action.kind], done)
 
     # ------------------------------------------------------------------ inputs

@@ -169,7 +169,12 @@ class _Link:
         lc = self._lcm
         assert lc is not None
         while not self._stop.is_set():
-            lc.handle_timeout(100)
+            try:
+                lc.handle_timeout(100)
+            except OSError as exc:
+                # A finished file:// log (replay) ends here; a socket error would repeat forever.
+                log.info("LCM provider %s stopped delivering: %s", self.url, exc)
+                return
             if self._retire:
                 with self._lock:
                     retire, self._retire = self._retire, []

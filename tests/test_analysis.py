@@ -349,9 +349,7 @@ def test_antalate_log_records_and_lcm_logplayer_replays(netns, probe, tmp_path: 
     assert len(replayed) == 20 and replayed[-1]["lat"] == pytest.approx(offset(LAT0, LON0, 0.0, 19.0)[0])
 
 
-# At the end of a file:// log liblcm's handle_timeout returns -1 and the bus's dispatcher thread
-# ends with an OSError (antalate_lcm/bus.py does not expect a provider to run dry): harmless here.
-@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
+@pytest.mark.filterwarnings("error::pytest.PytestUnhandledThreadExceptionWarning")
 def test_file_provider_replays_a_log_into_a_bus(tmp_path: Path) -> None:
     """LCM's ``file://`` provider as a bus URL: any antalate node (the console too) reads a log as if live."""
     import time

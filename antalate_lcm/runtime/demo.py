@@ -107,6 +107,7 @@ def _fly_headless(
         expected_agents=n,
         mission_time=mission_time,
         direction=direction,
+        timeout=mission_time + 180.0,  # take-off and the return flight get three minutes together
     )
     nodes.append(operator)
     run_until_signal(context, nodes, stop_event=threading.Event(), poll=lambda: operator.finished)

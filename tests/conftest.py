@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -10,6 +9,7 @@ from typing import Any
 
 import pytest
 
+from tests.jsonl import JsonLinesProcess
 from tests.netns import NetNamespace, netns_unavailable
 
 MCAST_URL = "udpm://239.255.76.67:7667?ttl=0"
@@ -32,27 +32,11 @@ def netns() -> Iterator[NetNamespace]:
         yield ns
 
 
-class Probe:
+class Probe(JsonLinesProcess):
     """Client side of tests/probe.py: publish, wait for and list messages inside a namespace."""
 
     def __init__(self, proc: subprocess.Popen[str]) -> None:
-        self.proc = proc
-        first = self._read()
-        assert first.get("ready"), first
-
-    def _read(self) -> dict[str, Any]:
-        assert self.proc.stdout is not None
-        line = self.proc.stdout.readline()
-        if not line:
-            err = self.proc.stderr.read() if self.proc.stderr else ""
-            raise RuntimeError(f"probe exited: {err}")
-        return json.loads(line)
-
-    def call(self, **req: Any) -> dict[str, Any]:
-        assert self.proc.stdin is not None
-        self.proc.stdin.write(json.dumps(req) + "\n")
-        self.proc.stdin.flush()
-        return self._read()
+        super().__init__(proc, "the LCM probe")
 
     def publish(self, channel: str, type_name: str, **fields: Any) -> None:
         assert self.call(op="publish", channel=channel, type=type_name, fields=fields)["ok"]

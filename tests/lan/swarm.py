@@ -15,7 +15,6 @@ altitude, a slow forward speed so the direction command dominates the motion), a
 from __future__ import annotations
 
 import copy
-import json
 import subprocess
 import sys
 import time
@@ -25,6 +24,7 @@ from typing import Any
 
 from antalate_lcm.runtime.commands import native_lcm_tool
 from tests.agent_harness import FAST_SIM, to_toml
+from tests.jsonl import JsonLinesProcess
 from tests.lan.topology import REPO, Lan, stop_process
 
 if sys.version_info >= (3, 11):
@@ -61,26 +61,11 @@ def vehicle_config(name: str, out_dir: Path, forward_speed: float = 0.3) -> Path
     return path
 
 
-class OperatorClient:
+class OperatorClient(JsonLinesProcess):
     """Talks to :mod:`tests.lan.lan_operator` running in the operator host."""
 
     def __init__(self, proc: subprocess.Popen[str]) -> None:
-        self.proc = proc
-        assert self._read().get("ready")
-
-    def _read(self) -> dict[str, Any]:
-        assert self.proc.stdout is not None
-        line = self.proc.stdout.readline()
-        if not line:
-            err = self.proc.stderr.read() if self.proc.stderr else ""
-            raise RuntimeError(f"the operator console exited: {err[-2000:]}")
-        return json.loads(line)
-
-    def call(self, **req: Any) -> dict[str, Any]:
-        assert self.proc.stdin is not None
-        self.proc.stdin.write(json.dumps(req) + "\n")
-        self.proc.stdin.flush()
-        return self._read()
+        super().__init__(proc, "the operator console")
 
     def status(self) -> dict[str, Any]:
         return self.call(op="status")

@@ -6,6 +6,7 @@ dotted key and what was expected, so a typo never surfaces as a crash in the mid
 
 from __future__ import annotations
 
+import re
 import secrets
 import sys
 from pathlib import Path
@@ -21,6 +22,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - exercised only on 3.10
     import tomli as tomllib
 
+_AGENT_NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 DEFAULT_LAN_URL = "udpm://239.255.76.67:7667?ttl=1"
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -37,9 +39,13 @@ class AgentConfig(_Section):
 
     @field_validator("name")
     @classmethod
-    def _no_slash(cls, v: str) -> str:
-        if "/" in v or any(c.isspace() for c in v):
-            raise ValueError("an agent name may not contain '/' or white space (it is part of channel names)")
+    def _channel_safe(cls, v: str) -> str:
+        # Part of every channel name, and lcm-spy (Java) reads strings byte by byte: plain ASCII only.
+        if v and not _AGENT_NAME.fullmatch(v):
+            raise ValueError(
+                "an agent name is part of channel names: ASCII letters, digits, '-', '_' and '.' only "
+                "(no '/' or white space)"
+            )
         return v
 
 

@@ -72,6 +72,7 @@ def test_design_style_autopilot_table(tmp_path: Path) -> None:
         ("[hlc]\nairborne_fraction = nan\n", "hlc.airborne_fraction", ""),
         ("[mc]\ntakeof_ack_timeout = 3\n", "mc.takeof_ack_timeout", "Extra inputs"),
         ("[agent]\nname = 'a b'\n", "agent.name", "white space"),
+        ("[agent]\nname = 'drône'\n", "agent.name", "ASCII"),
         ("[buses]\nlan = 'localhost:7667'\n", "buses", "LCM URL"),
         ("[topics]\nMC_STATE = 'wan'\n", "topics.MC_STATE.bus", "declared in [buses]"),
         ("[topics]\ndefault_bus = 'wan'\n", "topics.default_bus", "declared in [buses]"),

@@ -134,7 +134,10 @@ class HlcNode(Node):
             except Exception as exc:  # noqa: BLE001 - an adapter bug must not kill the HLC
                 self.log.exception("autopilot %s raised", self.autopilot.name)
                 return False, f"{type(exc).__name__}: {exc}"
-            return (result is not False), ("refused" if result is False else "")
+            if result is False:
+                # An adapter may say why (ArduCopter's PreArm text): it goes into the hlc_error_t.
+                return False, str(getattr(self.autopilot, "last_refusal", "") or "refused")
+            return True, ""
 
         if self._io is None:
             done(*attempt())

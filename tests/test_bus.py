@@ -102,6 +102,28 @@ def test_unsubscribe_inside_a_handler(bus: Bus) -> None:
     assert got == [0]
 
 
+def test_the_last_subscriber_leaving_from_its_handler_releases_the_channel(bus: Bus) -> None:
+    """The LCM subscription itself goes (on the dispatcher thread, after the handler); a new
+    subscriber on the same channel then gets each message exactly once."""
+    first: list[int] = []
+    holder: dict[str, object] = {}
+
+    def once(ch: str, m: mc_state_t) -> None:
+        first.append(m.header.seq)
+        bus.unsubscribe(holder["sub"])  # type: ignore[arg-type]
+
+    holder["sub"] = bus.subscribe("test", "a/MC_STATE", mc_state_t, once)
+    bus.publish("test", "a/MC_STATE", _mc(1, 0))
+    assert wait_for(lambda: first == [0], 2)
+    again: list[int] = []
+    bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: again.append(m.header.seq))
+    for i in range(1, 11):
+        bus.publish("test", "a/MC_STATE", _mc(1, i))
+    assert wait_for(lambda: len(again) >= 10, 2)
+    time.sleep(0.2)
+    assert again == list(range(1, 11)) and first == [0]
+
+
 def test_a_raising_handler_does_not_stop_the_bus(bus: Bus) -> None:
     got: list[int] = []
 

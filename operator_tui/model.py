@@ -25,16 +25,12 @@ from typing import Any
 
 from antalate_lcm.geo import FlatFrame, wrap_360
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
-
-
-def _names(cls: type) -> dict[int, str]:
-    return {v: k for k, v in vars(cls).items() if k.isupper() and isinstance(v, int)}
-
+from antalate_lcm.topics import constant_names
 
 #: State names by wire value (from the generated constants, so a new state needs no edit here).
-MC_STATES: dict[int, str] = _names(mc_state_t)
-HLC_STATES: dict[int, str] = _names(hlc_state_t)
-ERROR_SEVERITIES: dict[int, str] = _names(hlc_error_t)
+MC_STATES: dict[int, str] = constant_names(mc_state_t)
+HLC_STATES: dict[int, str] = constant_names(hlc_state_t)
+ERROR_SEVERITIES: dict[int, str] = constant_names(hlc_error_t)
 
 #: The topics the model understands (config topic names).
 WATCHED_TOPICS: tuple[str, ...] = ("MC_STATE", "HLC_STATE", "TELEMETRY", "HLC_ERROR", "ARBITER")

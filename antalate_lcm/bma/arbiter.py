@@ -23,18 +23,10 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
 from antalate_lcm.msgs import mc_state_t
-
-
-def _constants(msg_type: type) -> dict[int, str]:
-    return {
-        value: name
-        for name, value in vars(msg_type).items()
-        if name.isupper() and isinstance(value, int) and not isinstance(value, bool)
-    }
-
+from antalate_lcm.topics import constant_names
 
 #: mc_state_t's state values by number, from the generated type (so the .lcm stays the only source).
-MC_STATE_NAMES: dict[int, str] = _constants(mc_state_t)
+MC_STATE_NAMES: dict[int, str] = constant_names(mc_state_t)
 
 
 def mc_state_name(value: int) -> str | None:

@@ -10,9 +10,10 @@ from pydantic import ValidationError
 
 from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, operator_cmd_t, payload_t, telemetry_t
 from antalate_lcm.station import models
+from antalate_lcm.topics import constant_names
 
-_MC_NAMES = {v: k for k, v in vars(mc_state_t).items() if k.isupper() and isinstance(v, int)}
-_HLC_NAMES = {v: k for k, v in vars(hlc_state_t).items() if k.isupper() and isinstance(v, int)}
+_MC_NAMES = constant_names(mc_state_t)
+_HLC_NAMES = constant_names(hlc_state_t)
 _TELEMETRY_FIELDS = ("lat", "lon", "alt", "heading", "vn", "ve", "vd", "battery", "armed", "in_air", "mode")
 
 

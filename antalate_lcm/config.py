@@ -103,7 +103,7 @@ class McConfig(_Section):
 class HlcConfig(_Section):
     autopilot: str = "sim"
     #: Parameters handed to the autopilot adapter, as written ([hlc.autopilot] table).
-    autopilot_params: dict[str, Any] = Field(default_factory=dict, alias="autopilot_params")
+    autopilot_params: dict[str, Any] = Field(default_factory=dict)
     telemetry_hz: Positive = 10.0
     republish_hz: Positive = 5.0
     control_hz: Positive = 20.0
@@ -116,8 +116,6 @@ class HlcConfig(_Section):
     max_horizontal_speed: Positive = 5.0
     max_vertical_speed: Positive = 2.0
     max_yaw_rate: Positive = 90.0
-
-    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
 
     @model_validator(mode="before")
     @classmethod

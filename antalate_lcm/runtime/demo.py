@@ -8,7 +8,6 @@ agent's state timeline; the exit status is 0 only when every agent came back to 
 from __future__ import annotations
 
 import logging
-import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -110,6 +109,6 @@ def _fly_headless(
         timeout=mission_time + 180.0,  # take-off and the return flight get three minutes together
     )
     nodes.append(operator)
-    run_until_signal(context, nodes, stop_event=threading.Event(), poll=lambda: operator.finished)
+    run_until_signal(context, nodes, poll=lambda: operator.finished)
     on_report(operator.report())
     return 0 if operator.phase is Phase.DONE else 1

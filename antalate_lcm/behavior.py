@@ -1,4 +1,4 @@
-"""The behavior contract (DESIGN §8): what a plugin implements and what it is given.
+"""The behavior contract (docs/design.md §8): what a plugin implements and what it is given.
 
 A behavior is a small class the Behavior Module Arbiter (BMA) switches on and off by state. It never
 sees LCM, channels or threads: it names topics (``"VELOCITY_CMD"``), the config decides where they
@@ -21,6 +21,7 @@ from pydantic import BaseModel, ConfigDict
 from antalate_lcm import security
 from antalate_lcm.bus import Subscription
 from antalate_lcm.executor import Timer
+from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
 
 if TYPE_CHECKING:
     from antalate_lcm.node import Node
@@ -149,14 +150,14 @@ class BehaviorContext:
     def publish(self, topic: str, msg: Any, **fields: str) -> bool:
         """Publish on the behavior's ``topic``; the header is stamped for you.
 
-        Commands (messages with a ``mac`` field) are signed with the swarm key when one is
-        configured, so a behavior acting as an operator works under authentication unchanged.
+        Operator commands and directions are signed with the swarm key when one is configured, so
+        a behavior acting as an operator works under authentication unchanged.
         """
         mapped = self.topic(topic)
         expected = self._node.topic_spec(mapped).msg_type
         if not isinstance(msg, expected):
             raise TypeError(f"topic {mapped!r} carries {expected.__name__}, not {type(msg).__name__}")
-        if self._swarm_key and hasattr(msg, "mac"):
+        if self._swarm_key and isinstance(msg, (operator_cmd_t, direction_cmd_t)):
             msg = _SignOnEncode(msg, self._swarm_key)
         return self._node.publish(mapped, msg, **fields)
 

@@ -1,4 +1,4 @@
-"""The TOML config (DESIGN §11), validated in full before any node starts.
+"""The TOML config (docs/design.md §11), validated in full before any node starts.
 
 ``load_config(path)`` returns a :class:`Config` or raises :class:`ConfigError` naming the file, the
 dotted key and what was expected, so a typo never surfaces as a crash in the middle of a flight.
@@ -10,7 +10,7 @@ import re
 import secrets
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
@@ -98,6 +98,11 @@ class TopicsConfig(BaseModel):
 class McConfig(_Section):
     takeoff_ack_timeout: Positive = 5.0
     republish_hz: Positive = 5.0
+    #: s without an hlc_state_t before the MC reports HLC_LOST (the HLC republishes at 5 Hz).
+    hlc_timeout: Positive = 2.0
+    #: What the MC does when the HLC's autopilot link comes back after LLC_DOWN with the vehicle
+    #: in the air: "rtl" (return home), "land" (land where it is) or "hold" (hover, wait for the operator).
+    on_link_regained: Literal["rtl", "land", "hold"] = "rtl"
 
 
 class HlcConfig(_Section):
@@ -111,6 +116,9 @@ class HlcConfig(_Section):
     airborne_fraction: Annotated[float, Field(gt=0, le=1)] = 0.95
     gain_altitude_timeout: Positive = 30.0
     low_battery: Percent = 20.0
+    #: V per cell at or below which the battery is low (LiPo: 3.5 V loaded is about 15-20% left).
+    #: Used when the adapter reports the voltage and the cell count.
+    low_cell_voltage: Annotated[float, Field(gt=0, le=5, allow_inf_nan=False)] = 3.5
     link_timeout: Positive = 3.0
     velocity_timeout: Positive = 0.5
     max_horizontal_speed: Positive = 5.0
@@ -176,6 +184,9 @@ class SecurityConfig(_Section):
     swarm_key: str = ""
     #: Accepted age of a signed command (s), against replay.
     window: Positive = 5.0
+    #: Allow internal topics (MC_STATE, HLC_STATE, VELOCITY_CMD, ...) on a network-reachable bus with
+    #: no swarm key. Anyone on that network can then move the vehicle; the node says so loudly.
+    insecure: bool = False
 
 
 class Config(BaseModel):

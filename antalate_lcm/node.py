@@ -200,7 +200,7 @@ class Node:
     def state_publisher(self, topic: str, build: Callable[[], Any], hz: float, **fields: str) -> Callable[[], None]:
         """Publish ``build()`` every ``1/hz`` s, and whenever the returned function is called.
 
-        State messages go out periodically as well as on change (DESIGN §4) so a node that starts
+        State messages go out periodically as well as on change (docs/design.md §4) so a node that starts
         late or loses a packet converges within one period.
         """
 

@@ -1,1 +1,1 @@
-"""Behavior plugins shipped with antalate (DESIGN §8)."""
+"""Behavior plugins shipped with antalate (docs/design.md §8)."""

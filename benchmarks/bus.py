@@ -24,7 +24,7 @@ Before the streams, each publisher sends alone (nobody listening) to show what i
 The round trip is also measured for ``raw-thread``: raw lcm with the Bus's threading on the ping side
 (a dispatcher thread runs the handler while the sender waits), the floor for any design with a
 dispatcher thread. Takes about 50 s; never more than 88 s. Figures only: nothing here is a timed
-assertion (DESIGN §12).
+assertion (docs/design.md §12).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Operator commands until acknowledged, and the operator's direction (pure: no Textual, no LCM I/O).
 
-Acknowledgement (DESIGN §5, §10)
+Acknowledgement (docs/design.md §5, §10)
 --------------------------------
 Every TAKEOFF/LAND/RTL the console sends gets a ``seq`` of its own (``header.seq``). The MC
 acknowledges by publishing ``mc_state_t.last_command_seq == seq`` once it *accepted* the command.
@@ -41,7 +41,7 @@ COMMANDS: dict[str, int] = {
     "RTL": operator_cmd_t.RTL,
 }
 
-#: MC states in which each command is accepted (DESIGN §5). Only a *hint* for failure reasons and
+#: MC states in which each command is accepted (docs/design.md §5). Only a *hint* for failure reasons and
 #: for the warning shown when sending: the MC is the authority and the console never refuses to send.
 APPLIES_IN: dict[str, frozenset[str]] = {
     "TAKEOFF": frozenset({"STANDBY"}),

@@ -13,7 +13,7 @@ Sending happens on the caller's (UI) thread straight to :meth:`Bus.publish` (thr
 key press reaches the wire without waiting for either thread. The console owns the ``header.seq``
 of operator commands (a resend must repeat it, see :mod:`operator_tui.commands`), so it does not
 use :meth:`Node.publish`, which stamps a fresh seq on every message; it builds the header itself
-and signs the final message when a swarm key is configured (DESIGN §10).
+and signs the final message when a swarm key is configured (docs/design.md §10).
 """
 
 from __future__ import annotations

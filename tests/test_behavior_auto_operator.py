@@ -108,6 +108,6 @@ def test_commands_are_signed_when_a_swarm_key_is_configured() -> None:
         h.mc_state("STANDBY")
         assert wait_for(lambda: len(cmds) >= 2)
         for cmd in cmds:
-            assert cmd.mac_len == 32
+            assert cmd.header.mac_len == 32
             assert security.verify(cmd, key, window=5.0) is None
         assert security.verify(cmds[0], "another key", window=5.0) is not None

@@ -1,4 +1,4 @@
-"""HLC state machine: every row of DESIGN §6 (written out here), the documented extra rows, actions,
+"""HLC state machine: every row of docs/design.md §6 (written out here), the documented extra rows, actions,
 errors, edge/level triggering of MC states, timeouts with injected time, and one closed loop with the
 MC machine and the simulator."""
 
@@ -93,7 +93,7 @@ LOST = flying(link_age=3.0)
 AUTONOMOUS = (H.GAINING_ALTITUDE, H.AIRBORNE, H.RTL, H.LANDING, H.LOW_BATTERY)
 NO_ERROR: tuple[ErrorCode, ...] = ()
 
-# DESIGN §6 row by row: (from, input, to, actions, error codes).
+# docs/design.md §6 row by row: (from, input, to, actions, error codes).
 DESIGN_ROWS: list[tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[ErrorCode, ...]]] = [
     (H.READY, ("mc", M.TAKEOFF), H.TAKEOFF, (Action.ARM,), NO_ERROR),
     (H.TAKEOFF, ("arm", True), H.GAINING_ALTITUDE, (Action.takeoff(10.0),), NO_ERROR),

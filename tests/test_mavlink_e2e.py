@@ -1,4 +1,4 @@
-"""Whole agents flying the ArduCopter-like emulator through `MavlinkAutopilot` (DESIGN §5, §6, §7).
+"""Whole agents flying the ArduCopter-like emulator through `MavlinkAutopilot` (docs/design.md §5, §6, §7).
 
 Two set-ups:
 
@@ -153,7 +153,7 @@ def flying(agent: InProcessAgent) -> float:
     return agent.wait("mc", M.MISSION).t
 
 
-# -- the failsafes of DESIGN §6, in process ----------------------------------------------------------
+# -- the failsafes of docs/design.md §6, in process ----------------------------------------------------------
 
 
 def test_arming_refused_back_to_ready_with_an_error_then_flies(copter: Callable[..., InProcessAgent]) -> None:

@@ -1,4 +1,4 @@
-"""Mission Control state machine: every row of DESIGN §5 (written out here independently of the
+"""Mission Control state machine: every row of docs/design.md §5 (written out here independently of the
 implementation's table), the documented extra rows, rejections, duplicates and the takeoff timeout."""
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ def op(c: OperatorCommand) -> Input:
 TIMEOUT: Input = ("timeout", None)
 FLYING_MC = (M.TAKEOFF, M.MISSION, M.RTL, M.LAND)
 
-# DESIGN §5, row by row, expanded to (from, input, to).
+# docs/design.md §5, row by row, expanded to (from, input, to).
 DESIGN_ROWS: list[tuple[McState, Input, McState]] = [
     (M.INIT, hlc(H.READY), M.STANDBY),
     (M.INIT, hlc(H.GAINING_ALTITUDE), M.TAKEOFF),

@@ -1,5 +1,5 @@
 """A whole mission and every failsafe, with the MC and the HLC as separate processes over real UDP
-multicast inside a private network namespace (DESIGN §5, §6, §12)."""
+multicast inside a private network namespace (docs/design.md §5, §6, §12)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""`TelloAutopilot` through the real djitellopy against the Tello SDK emulator (DESIGN §7, §12).
+"""`TelloAutopilot` through the real djitellopy against the Tello SDK emulator (docs/design.md §7, §12).
 
 djitellopy binds UDP 8889/8890 on all addresses once per process, so the emulator cannot share a
 network namespace with it (see tests/emulators/netns_pair.py). The emulator runs in this process on a

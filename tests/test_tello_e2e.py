@@ -1,4 +1,4 @@
-"""A whole autonomous mission with a Tello, and every DESIGN §6 failsafe that applies to one.
+"""A whole autonomous mission with a Tello, and every docs/design.md §6 failsafe that applies to one.
 
 MC + HLC (``autopilot = "tello"``, the real djitellopy) + BMAs (``auto_operator``, ``dovrat_swarm``)
 run in one agent process in namespace ``b`` of a `NetnsPair`, on a ``memq://`` bus; the Tello SDK

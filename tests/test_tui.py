@@ -333,7 +333,7 @@ async def test_each_key_sends_the_right_command_to_the_right_channel(
     assert [(ch, names[m.command], m.target) for ch, m in sent] == expected
     assert [m.header.seq for _, m in sent] == list(range(FIRST_SEQ, FIRST_SEQ + 6))
     assert {m.header.agent for _, m in sent} == {"operator"}
-    assert all(m.mac_len == 0 for _, m in sent)  # no swarm key configured
+    assert all(m.header.mac_len == 0 for _, m in sent)  # no swarm key configured
     assert len(app.tracker.pending) == 6
 
 
@@ -474,10 +474,10 @@ async def test_commands_are_signed_when_a_swarm_key_is_configured(
         sent = await wait_sent(pilot, app, swarm, 2)
         dirs = await wait_dirs(pilot, app, swarm, 1)
     for msg in [m for _, m in sent] + [m for _, m in dirs]:
-        assert msg.mac_len == 32
+        assert msg.header.mac_len == 32
         assert verify(msg, key, 5.0, now=msg.header.utime / 1e6) is None
         assert verify(msg, "another key", 5.0, now=msg.header.utime / 1e6) is not None
-    assert sent[0][1].header.seq == sent[1][1].header.seq and bytes(sent[0][1].mac) != bytes(sent[1][1].mac)
+    assert sent[0][1].header.seq == sent[1][1].header.seq and bytes(sent[0][1].header.mac) != bytes(sent[1][1].header.mac)
 
 
 async def test_help_screen_and_footer(two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm) -> None:

@@ -1,4 +1,4 @@
-"""The autopilot contract (DESIGN §7): what the HLC needs from any vehicle, and nothing more.
+"""The autopilot contract (docs/design.md §7): what the HLC needs from any vehicle, and nothing more.
 
 The HLC is written against `Autopilot` only, so a simulator, a Tello and an ArduCopter are
 interchangeable by config. An adapter is a class registered under the entry-point group
@@ -54,7 +54,7 @@ class Frame(enum.IntEnum):
 class FlightMode(enum.Enum):
     """What the autopilot is doing, classified for the HLC (the raw mode name is in `mode`).
 
-    The HLC needs this to resynchronise after a restart (DESIGN §6, INIT row) and to notice that
+    The HLC needs this to resynchronise after a restart (docs/design.md §6, INIT row) and to notice that
     the autopilot or a pilot took over; it cannot interpret each vendor's mode names itself.
     """
 
@@ -62,6 +62,7 @@ class FlightMode(enum.Enum):
     LANDING = "LANDING"  # the autopilot is landing on its own logic (ArduCopter LAND)
     RTL = "RTL"  # the autopilot is returning to launch (and will land there)
     MANUAL = "MANUAL"  # a human pilot has control (LOITER, STABILIZE, ALT_HOLD, ...)
+    HOLD = "HOLD"  # the autopilot holds position on its own logic (ArduCopter BRAKE on a fence breach)
 
 
 @dataclass(frozen=True)
@@ -93,6 +94,16 @@ class AutopilotState:
     autonomous: bool = True
     mode: str = ""  # the autopilot's own mode name, shown to people
     flight_mode: FlightMode | None = None
+    #: Why the autopilot took control on its own ("fence breach", "battery failsafe", "EKF failsafe",
+    #: "GCS failsafe"); empty when no failsafe is active. With `flight_mode` RTL, LANDING or HOLD it
+    #: tells the HLC that the mode change was the autopilot's, not a pilot's.
+    failsafe: str = ""
+    voltage: float = math.nan  # battery voltage (V), NaN = unknown
+    cells: int = 0  # battery cells in series, 0 = unknown (voltage per cell needs both)
+    #: The vehicle's own verdict that the battery is low or critical (BATTERY_STATUS charge_state,
+    #: ArduPilot's "Battery Failsafe"); empty when it has none. Any one of percentage, voltage per
+    #: cell and this makes the HLC's battery low, whichever comes first.
+    battery_warning: str = ""
 
     def __post_init__(self) -> None:
         if self.flight_mode is None:
@@ -107,6 +118,13 @@ class AutopilotState:
     @property
     def battery_known(self) -> bool:
         return self.battery >= 0.0
+
+    @property
+    def cell_voltage(self) -> float:
+        """Volts per cell, NaN when the voltage or the cell count is unknown."""
+        if self.cells > 0 and math.isfinite(self.voltage) and self.voltage > 0.0:
+            return self.voltage / self.cells
+        return math.nan
 
 
 class Autopilot(ABC):

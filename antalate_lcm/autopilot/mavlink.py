@@ -1,4 +1,4 @@
-"""`MavlinkAutopilot`: ArduCopter over MAVLink -- SITL or a real flight controller (DESIGN §7, ``mavlink``).
+"""`MavlinkAutopilot`: ArduCopter over MAVLink -- SITL or a real flight controller (docs/design.md §7, ``mavlink``).
 
 The adapter is a small ground station: it speaks pymavlink over serial, UDP or TCP, keeps its own
 picture of the vehicle from the telemetry the autopilot streams, and turns the HLC's few verbs into

@@ -1,4 +1,4 @@
-"""`SimAutopilot`: an in-process kinematic quadcopter, the default vehicle (DESIGN §7, ``sim``).
+"""`SimAutopilot`: an in-process kinematic quadcopter, the default vehicle (docs/design.md §7, ``sim``).
 
 It is meant for running the whole framework (and swarms of 200 agents) on one laptop, and for
 testing the HLC against faults that are hard to provoke on real hardware.

@@ -1,4 +1,4 @@
-"""`TelloAutopilot`: a DJI/Ryze Tello over Wi-Fi through djitellopy (DESIGN §7, ``tello``).
+"""`TelloAutopilot`: a DJI/Ryze Tello over Wi-Fi through djitellopy (docs/design.md §7, ``tello``).
 
 The Tello speaks the SDK text protocol: commands to UDP 8889 (most answered ``ok``/``error`` once
 *done*, ``rc`` never answered), and a state line pushed to UDP 8890 about ten times a second. It

@@ -1,4 +1,4 @@
-"""The Behavior Module Arbiter (DESIGN §8): activation rules, config validation and the node.
+"""The Behavior Module Arbiter (docs/design.md §8): activation rules, config validation and the node.
 
 ``validate_bma_config(config)`` checks every ``[[bma]]`` before nodes start; ``BmaNode`` runs one.
 """

@@ -3,7 +3,7 @@
 Which behaviors run is a function of the state alone (plus whether each is running and whether it
 failed), so it is tested here without sockets and the node only carries out the decisions.
 
-Rules, per behavior (DESIGN §8):
+Rules, per behavior (docs/design.md §8):
 
 - state ∈ ``activate_on``  → active;
 - state ∈ ``deactivate_on`` → inactive;

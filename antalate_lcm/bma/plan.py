@@ -2,7 +2,7 @@
 
 Everything a BMA could trip on at run time because of the config (an unknown plugin, a bad param,
 a misspelt state, a topic remap to nowhere or to the wrong type) is checked here, before any node
-starts (DESIGN §11). The BMA node uses the same plan, so what was validated is what runs.
+starts (docs/design.md §11). The BMA node uses the same plan, so what was validated is what runs.
 """
 
 from __future__ import annotations

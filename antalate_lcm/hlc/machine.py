@@ -1,4 +1,4 @@
-"""The High-Level Control state machine (DESIGN §6) as an explicit transition table.
+"""The High-Level Control state machine (docs/design.md §6) as an explicit transition table.
 
 Pure logic: no I/O, no clock. The HLC node feeds it three kinds of input and performs what comes out:
 
@@ -23,14 +23,14 @@ How inputs become events
   priority order: LINK_LOST, LANDED, PILOT_TAKEOVER, INIT resync / LINK_UP, AUTOPILOT_LAND,
   AUTOPILOT_RTL, LOW_BATTERY, ALTITUDE_REACHED.
 
-Rows beyond DESIGN §6, and why
+Rows beyond docs/design.md §6, and why
 ------------------------------
 * GAINING_ALTITUDE + the TAKEOFF action failed -> LANDING with LAND (an ERROR): a vehicle with no
   separate arming step (a Tello) refuses at takeoff, not at arm; waiting out gain_altitude_timeout
   for a takeoff that was refused would only delay the operator. LAND is harmless on the ground and
   disarms, so the LANDED row then brings the HLC back to READY.
 * GAINING_ALTITUDE + MC LAND/RTL -> LANDING/RTL: the MC accepts LAND/RTL in its TAKEOFF state
-  (DESIGN §5), which maps to our TAKEOFF and GAINING_ALTITUDE; the HLC must follow.
+  (docs/design.md §5), which maps to our TAKEOFF and GAINING_ALTITUDE; the HLC must follow.
 * TAKEOFF + armed while the MC is no longer in TAKEOFF -> READY with DISARM (an INFO error): the
   operator cancelled while we were arming; taking off just to land again would be absurd.
 * AIRBORNE + landed and disarmed -> READY (WARNING): the vehicle came down on its own (e.g. a Tello's
@@ -40,7 +40,7 @@ Rows beyond DESIGN §6, and why
   LANDING, for adapters that report the final descent of an RTL as a landing. This keeps the
   published state truthful, and lets the MC follow (its "RTL + HLC LANDING -> LAND" row).
 
-Interpretation of DESIGN §6 where it leaves room
+Interpretation of docs/design.md §6 where it leaves room
 -----------------------------------------------
 * LLC_DOWN applies to every state except INIT (at start-up a vehicle that is not powered yet is
   normal: INIT simply waits) and LLC_DOWN itself.
@@ -247,7 +247,7 @@ class HlcRow:
     why: str
     guard: _Guard | None = None
     effect: _Effect | None = None
-    extra: bool = False  # not in DESIGN §6 (see the module docstring)
+    extra: bool = False  # not in docs/design.md §6 (see the module docstring)
 
 
 def _fx(*actions: Action, error: tuple[ErrorCode, Severity] | None = None) -> _Effect:

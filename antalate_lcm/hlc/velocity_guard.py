@@ -1,4 +1,4 @@
-"""The filter between behaviors' velocity commands and the autopilot (DESIGN §6, last paragraph).
+"""The filter between behaviors' velocity commands and the autopilot (docs/design.md §6, last paragraph).
 
 Behaviors are plugins: the HLC cannot trust them to be in the right state, to produce finite
 numbers, to respect the vehicle's limits, or to keep talking. This module decides, for each command

@@ -1,4 +1,4 @@
-"""The Mission Control state machine (DESIGN §5) as an explicit transition table.
+"""The Mission Control state machine (docs/design.md §5) as an explicit transition table.
 
 Pure logic: no I/O, no clock. The MC node feeds it:
 
@@ -19,7 +19,7 @@ seq matters because seqs are per-sender counters: two operators (a console and a
 will reuse each other's numbers. The window (rather than "seq <= last") lets a restarted operator,
 whose counter starts again from zero, be heard.
 
-Rows beyond DESIGN §5, and why
+Rows beyond docs/design.md §5, and why
 ------------------------------
 * INIT + HLC LOW_BATTERY -> RTL: restart resync, like the other INIT rows; a low-battery HLC is
   flying home.
@@ -145,7 +145,7 @@ class McRow:
     target: McState
     why: str
     guard: _Guard | None = None
-    extra: bool = False  # not in DESIGN §5 (see the module docstring)
+    extra: bool = False  # not in docs/design.md §5 (see the module docstring)
 
 
 def _hlc_left_ready(mc: MissionControl) -> bool:

@@ -10,7 +10,7 @@ import struct
 import antalate_lcm.msgs
 
 class behavior_state_t(object):
-    """ A state published by a behavior to drive a cascaded BMA (DESIGN §8). """
+    """ A state published by a behavior to drive a cascaded BMA (docs/design.md §8). """
 
     __slots__ = ["header", "state"]
 

@@ -12,11 +12,11 @@ import antalate_lcm.msgs
 class direction_cmd_t(object):
     """ The operator's desired swarm direction, blended into behaviors such as dovrat_swarm. """
 
-    __slots__ = ["header", "active", "azimuth", "speed", "target", "mac_len", "mac"]
+    __slots__ = ["header", "active", "azimuth", "speed", "target"]
 
-    __typenames__ = ["antalate_lcm.msgs.header_t", "boolean", "float", "float", "string", "int16_t", "byte"]
+    __typenames__ = ["antalate_lcm.msgs.header_t", "boolean", "float", "float", "string"]
 
-    __dimensions__ = [None, None, None, None, None, None, ["mac_len"]]
+    __dimensions__ = [None, None, None, None, None]
 
     def __init__(self):
         self.header = antalate_lcm.msgs.header_t()
@@ -45,14 +45,6 @@ class direction_cmd_t(object):
         LCM Type: string
         """
 
-        self.mac_len = 0
-        """
-        HMAC-SHA256 over the encoded message with mac_len = 0 (DESIGN §10); empty when unsigned.
-        LCM Type: int16_t
-        """
-
-        self.mac = b""
-        """ LCM Type: byte[mac_len] """
 
     def encode(self):
         buf = BytesIO()
@@ -68,8 +60,6 @@ class direction_cmd_t(object):
         buf.write(struct.pack('>I', len(__target_encoded)+1))
         buf.write(__target_encoded)
         buf.write(b"\0")
-        buf.write(struct.pack(">h", self.mac_len))
-        buf.write(bytearray(self.mac[:self.mac_len]))
 
     @staticmethod
     def decode(data: bytes):
@@ -89,15 +79,13 @@ class direction_cmd_t(object):
         self.azimuth, self.speed = struct.unpack(">ff", buf.read(8))
         __target_len = struct.unpack('>I', buf.read(4))[0]
         self.target = buf.read(__target_len)[:-1].decode('utf-8', 'replace')
-        self.mac_len = struct.unpack(">h", buf.read(2))[0]
-        self.mac = buf.read(self.mac_len)
         return self
 
     @staticmethod
     def _get_hash_recursive(parents):
         if direction_cmd_t in parents: return 0
         newparents = parents + [direction_cmd_t]
-        tmphash = (0xd5636bb3eb206e1f+ antalate_lcm.msgs.header_t._get_hash_recursive(newparents)) & 0xffffffffffffffff
+        tmphash = (0x13a2e7a6a57bfbb6+ antalate_lcm.msgs.header_t._get_hash_recursive(newparents)) & 0xffffffffffffffff
         tmphash  = (((tmphash<<1)&0xffffffffffffffff) + (tmphash>>63)) & 0xffffffffffffffff
         return tmphash
     _packed_fingerprint = None

@@ -10,11 +10,11 @@ import struct
 class header_t(object):
     """ Common header that starts every antalate message. """
 
-    __slots__ = ["utime", "agent", "seq"]
+    __slots__ = ["utime", "agent", "seq", "mac_len", "mac"]
 
-    __typenames__ = ["int64_t", "string", "int32_t"]
+    __typenames__ = ["int64_t", "string", "int32_t", "int16_t", "byte"]
 
-    __dimensions__ = [None, None, None]
+    __dimensions__ = [None, None, None, None, ["mac_len"]]
 
     def __init__(self):
         self.utime = 0
@@ -35,6 +35,17 @@ class header_t(object):
         LCM Type: int32_t
         """
 
+        self.mac_len = 0
+        """
+        HMAC-SHA256 over the whole encoded message with mac_len = 0 (docs/design.md §10); empty when
+        unsigned. Moved here from operator_cmd_t/direction_cmd_t so that every message that can move a
+        vehicle or change a state machine (states, velocity set-points, payloads) can be authenticated
+        by one mechanism.
+        LCM Type: int16_t
+        """
+
+        self.mac = b""
+        """ LCM Type: byte[mac_len] """
 
     def encode(self):
         buf = BytesIO()
@@ -48,7 +59,8 @@ class header_t(object):
         buf.write(struct.pack('>I', len(__agent_encoded)+1))
         buf.write(__agent_encoded)
         buf.write(b"\0")
-        buf.write(struct.pack(">i", self.seq))
+        buf.write(struct.pack(">ih", self.seq, self.mac_len))
+        buf.write(bytearray(self.mac[:self.mac_len]))
 
     @staticmethod
     def decode(data: bytes):
@@ -66,13 +78,14 @@ class header_t(object):
         self.utime = struct.unpack(">q", buf.read(8))[0]
         __agent_len = struct.unpack('>I', buf.read(4))[0]
         self.agent = buf.read(__agent_len)[:-1].decode('utf-8', 'replace')
-        self.seq = struct.unpack(">i", buf.read(4))[0]
+        self.seq, self.mac_len = struct.unpack(">ih", buf.read(6))
+        self.mac = buf.read(self.mac_len)
         return self
 
     @staticmethod
     def _get_hash_recursive(parents):
         if header_t in parents: return 0
-        tmphash = (0x2cb92dd73b2826de) & 0xffffffffffffffff
+        tmphash = (0xc18cca2f52f79572) & 0xffffffffffffffff
         tmphash  = (((tmphash<<1)&0xffffffffffffffff) + (tmphash>>63)) & 0xffffffffffffffff
         return tmphash
     _packed_fingerprint = None

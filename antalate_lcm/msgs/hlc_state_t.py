@@ -10,13 +10,13 @@ import struct
 import antalate_lcm.msgs
 
 class hlc_state_t(object):
-    """ High-Level Control state (DESIGN §6). Republished periodically (default 5 Hz) and on every change. """
+    """ High-Level Control state (docs/design.md §6). Republished periodically (default 5 Hz) and on every change. """
 
-    __slots__ = ["header", "state", "autopilot"]
+    __slots__ = ["header", "state", "autopilot", "reason"]
 
-    __typenames__ = ["antalate_lcm.msgs.header_t", "int8_t", "string"]
+    __typenames__ = ["antalate_lcm.msgs.header_t", "int8_t", "string", "string"]
 
-    __dimensions__ = [None, None, None]
+    __dimensions__ = [None, None, None, None]
 
     INIT = 0
     READY = 1
@@ -28,6 +28,12 @@ class hlc_state_t(object):
     MANUAL = 7
     LOW_BATTERY = 8
     LLC_DOWN = 9
+    HOLD = 10
+    """
+    Added: the vehicle holds position under computer control: the autopilot's own failsafe
+    braked (ArduCopter BRAKE), or the link came back with the vehicle in the air and the HLC
+    stopped it until the MC decides (on_link_regained).
+    """
 
     def __init__(self):
         self.header = antalate_lcm.msgs.header_t()
@@ -37,6 +43,12 @@ class hlc_state_t(object):
         self.autopilot = ""
         """
         Name of the autopilot adapter in use ("sim", "tello", "mavlink", ...).
+        LCM Type: string
+        """
+
+        self.reason = ""
+        """
+        Added: why the HLC is in this state (the reason of its last transition), for the operator.
         LCM Type: string
         """
 
@@ -54,6 +66,10 @@ class hlc_state_t(object):
         __autopilot_encoded = self.autopilot.encode('utf-8')
         buf.write(struct.pack('>I', len(__autopilot_encoded)+1))
         buf.write(__autopilot_encoded)
+        buf.write(b"\0")
+        __reason_encoded = self.reason.encode('utf-8')
+        buf.write(struct.pack('>I', len(__reason_encoded)+1))
+        buf.write(__reason_encoded)
         buf.write(b"\0")
 
     @staticmethod
@@ -73,13 +89,15 @@ class hlc_state_t(object):
         self.state = struct.unpack(">b", buf.read(1))[0]
         __autopilot_len = struct.unpack('>I', buf.read(4))[0]
         self.autopilot = buf.read(__autopilot_len)[:-1].decode('utf-8', 'replace')
+        __reason_len = struct.unpack('>I', buf.read(4))[0]
+        self.reason = buf.read(__reason_len)[:-1].decode('utf-8', 'replace')
         return self
 
     @staticmethod
     def _get_hash_recursive(parents):
         if hlc_state_t in parents: return 0
         newparents = parents + [hlc_state_t]
-        tmphash = (0xc84f78b136281d1e+ antalate_lcm.msgs.header_t._get_hash_recursive(newparents)) & 0xffffffffffffffff
+        tmphash = (0xbcba1c3a1c84e6af+ antalate_lcm.msgs.header_t._get_hash_recursive(newparents)) & 0xffffffffffffffff
         tmphash  = (((tmphash<<1)&0xffffffffffffffff) + (tmphash>>63)) & 0xffffffffffffffff
         return tmphash
     _packed_fingerprint = None

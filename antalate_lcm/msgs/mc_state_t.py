@@ -10,13 +10,13 @@ import struct
 import antalate_lcm.msgs
 
 class mc_state_t(object):
-    """ Mission Control state (DESIGN §5). Republished periodically (default 5 Hz) and on every change. """
+    """ Mission Control state (docs/design.md §5). Republished periodically (default 5 Hz) and on every change. """
 
-    __slots__ = ["header", "state", "last_command_seq", "takeoff_altitude"]
+    __slots__ = ["header", "state", "last_command_seq", "takeoff_altitude", "reason"]
 
-    __typenames__ = ["antalate_lcm.msgs.header_t", "int8_t", "int32_t", "float"]
+    __typenames__ = ["antalate_lcm.msgs.header_t", "int8_t", "int32_t", "float", "string"]
 
-    __dimensions__ = [None, None, None, None]
+    __dimensions__ = [None, None, None, None, None]
 
     INIT = 0
     STANDBY = 1
@@ -26,6 +26,14 @@ class mc_state_t(object):
     LAND = 5
     MANUAL = 6
     ERROR = 7
+    HOLD = 8
+    """
+    Added: the vehicle holds position under computer control, behaviors stopped, waiting for the
+    operator's RTL or LAND (after a regained link with on_link_regained = "hold", or an autopilot
+    failsafe that brakes, e.g. ArduCopter BRAKE on a fence breach).
+    """
+    HLC_LOST = 9
+    """ Added: no hlc_state_t heard for [mc] hlc_timeout; the vehicle is on its own GCS failsafe. """
 
     def __init__(self):
         self.header = antalate_lcm.msgs.header_t()
@@ -45,6 +53,13 @@ class mc_state_t(object):
         LCM Type: float
         """
 
+        self.reason = ""
+        """
+        Added: why the MC is in this state (the reason of its last transition, e.g. "vehicle failsafe:
+        fence breach", "HLC silent for 2.1 s"), so the operator sees it without reading the agent's log.
+        LCM Type: string
+        """
+
 
     def encode(self):
         buf = BytesIO()
@@ -56,6 +71,10 @@ class mc_state_t(object):
         assert self.header._get_packed_fingerprint() == antalate_lcm.msgs.header_t._get_packed_fingerprint()
         self.header._encode_one(buf)
         buf.write(struct.pack(">bif", self.state, self.last_command_seq, self.takeoff_altitude))
+        __reason_encoded = self.reason.encode('utf-8')
+        buf.write(struct.pack('>I', len(__reason_encoded)+1))
+        buf.write(__reason_encoded)
+        buf.write(b"\0")
 
     @staticmethod
     def decode(data: bytes):
@@ -72,13 +91,15 @@ class mc_state_t(object):
         self = mc_state_t()
         self.header = antalate_lcm.msgs.header_t._decode_one(buf)
         self.state, self.last_command_seq, self.takeoff_altitude = struct.unpack(">bif", buf.read(9))
+        __reason_len = struct.unpack('>I', buf.read(4))[0]
+        self.reason = buf.read(__reason_len)[:-1].decode('utf-8', 'replace')
         return self
 
     @staticmethod
     def _get_hash_recursive(parents):
         if mc_state_t in parents: return 0
         newparents = parents + [mc_state_t]
-        tmphash = (0x56660670d3fac30d+ antalate_lcm.msgs.header_t._get_hash_recursive(newparents)) & 0xffffffffffffffff
+        tmphash = (0xea26f856ebc5a5ce+ antalate_lcm.msgs.header_t._get_hash_recursive(newparents)) & 0xffffffffffffffff
         tmphash  = (((tmphash<<1)&0xffffffffffffffff) + (tmphash>>63)) & 0xffffffffffffffff
         return tmphash
     _packed_fingerprint = None

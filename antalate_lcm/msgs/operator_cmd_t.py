@@ -12,13 +12,14 @@ import antalate_lcm.msgs
 class operator_cmd_t(object):
     """ Operator command to Mission Control, on {agent}/OPERATOR_CMD or the broadcast SWARM/OPERATOR_CMD. """
 
-    __slots__ = ["header", "command", "target", "altitude", "mac_len", "mac"]
+    __slots__ = ["header", "command", "target", "altitude"]
 
-    __typenames__ = ["antalate_lcm.msgs.header_t", "int8_t", "string", "float", "int16_t", "byte"]
+    __typenames__ = ["antalate_lcm.msgs.header_t", "int8_t", "string", "float"]
 
-    __dimensions__ = [None, None, None, None, None, ["mac_len"]]
+    __dimensions__ = [None, None, None, None]
 
     TAKEOFF = 0
+    """ Authentication: header.mac (docs/design.md §10). """
     LAND = 1
     RTL = 2
 
@@ -39,14 +40,6 @@ class operator_cmd_t(object):
         LCM Type: float
         """
 
-        self.mac_len = 0
-        """
-        HMAC-SHA256 over the encoded message with mac_len = 0 (DESIGN §10); empty when unsigned.
-        LCM Type: int16_t
-        """
-
-        self.mac = b""
-        """ LCM Type: byte[mac_len] """
 
     def encode(self):
         buf = BytesIO()
@@ -62,8 +55,7 @@ class operator_cmd_t(object):
         buf.write(struct.pack('>I', len(__target_encoded)+1))
         buf.write(__target_encoded)
         buf.write(b"\0")
-        buf.write(struct.pack(">fh", self.altitude, self.mac_len))
-        buf.write(bytearray(self.mac[:self.mac_len]))
+        buf.write(struct.pack(">f", self.altitude))
 
     @staticmethod
     def decode(data: bytes):
@@ -82,15 +74,14 @@ class operator_cmd_t(object):
         self.command = struct.unpack(">b", buf.read(1))[0]
         __target_len = struct.unpack('>I', buf.read(4))[0]
         self.target = buf.read(__target_len)[:-1].decode('utf-8', 'replace')
-        self.altitude, self.mac_len = struct.unpack(">fh", buf.read(6))
-        self.mac = buf.read(self.mac_len)
+        self.altitude = struct.unpack(">f", buf.read(4))[0]
         return self
 
     @staticmethod
     def _get_hash_recursive(parents):
         if operator_cmd_t in parents: return 0
         newparents = parents + [operator_cmd_t]
-        tmphash = (0x6335ef68d056e0a6+ antalate_lcm.msgs.header_t._get_hash_recursive(newparents)) & 0xffffffffffffffff
+        tmphash = (0x9e9ce5c24e966561+ antalate_lcm.msgs.header_t._get_hash_recursive(newparents)) & 0xffffffffffffffff
         tmphash  = (((tmphash<<1)&0xffffffffffffffff) + (tmphash>>63)) & 0xffffffffffffffff
         return tmphash
     _packed_fingerprint = None

@@ -1,4 +1,4 @@
-"""The Operator Station Client (DESIGN §9): the agent's HTTP link to an operator station."""
+"""The Operator Station Client (docs/design.md §9): the agent's HTTP link to an operator station."""
 
 from antalate_lcm.osc.node import OscNode
 

@@ -17,7 +17,7 @@ import httpx
 
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.config import Config
-from antalate_lcm.msgs import hlc_state_t, mc_state_t, payload_t, telemetry_t
+from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, operator_cmd_t, payload_t, telemetry_t
 from antalate_lcm.node import Context, Node
 from antalate_lcm.osc import wire
 from antalate_lcm.security import sign
@@ -164,7 +164,7 @@ class OscNode(Node):
         if not self.started:
             return
         key = self.config.security.swarm_key
-        signer = (lambda m: sign(m, key)) if key and hasattr(msg, "mac") else None
+        signer = (lambda m: sign(m, key)) if key and isinstance(msg, (operator_cmd_t, direction_cmd_t)) else None
         self.publish(topic, msg, seq=seq, before_encode=signer)
         level = logging.INFO if seq is not None else logging.DEBUG
         self.log.log(level, "from the station: %s%s", topic, f" (seq {seq})" if seq is not None else "")

@@ -40,7 +40,7 @@ API_VERSION = "1.0"
 _AGENT_LIST = TypeAdapter(list[AgentInfo])
 
 _DESCRIPTION = """\
-The reference operator station of antalate (DESIGN §9). Agents' Operator Station Clients POST a
+The reference operator station of antalate (docs/design.md §9). Agents' Operator Station Clients POST a
 report every 1/rate seconds and receive their token, any queued commands and a payload saying
 whether another agent is inside their front sector. People and scripts list agents and queue
 commands. The semantics (tokens, delivery, sector geometry) are in `docs/station-protocol.md`.

@@ -1,4 +1,4 @@
-"""The station's JSON wire format (DESIGN §9), as pydantic models.
+"""The station's JSON wire format (docs/design.md §9), as pydantic models.
 
 These models are the protocol: the station validates every request with them, the OSC can import
 them to build its reports and to read replies, and FastAPI turns them into the OpenAPI document

@@ -6,7 +6,7 @@
         lan.cut("uav-2")          # take uav-2's network interface down (cable pulled)
         lan.restore("uav-2")
 
-Layout (DESIGN §12, §13)::
+Layout (docs/design.md §12, §13)::
 
     namespace <prefix>-sw:  br0 ── p1 ─┐ ── p2 ─┐ ...            (the switch; multicast snooping off)
                                        │        │

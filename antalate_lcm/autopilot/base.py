@@ -127,6 +127,26 @@ class AutopilotState:
         return math.nan
 
 
+#: Slack in `altitude_reached` for floating-point noise only (a height of exactly the threshold counts).
+_ALTITUDE_EPSILON = 1e-6
+
+
+def altitude_reached(alt: float, target: float, fraction: float) -> bool:
+    """The one rule for "the take-off altitude is reached", used by the HLC and by adapters.
+
+    The HLC counts a vehicle AIRBORNE once ``alt >= fraction * target`` (its ``airborne_fraction``,
+    0.95 by default): a barometer wanders, and a vehicle that holds 95% of the altitude is flying.
+    An adapter that climbs to the target itself (the Tello's rc climb) must not stop earlier than the
+    HLC demands, so it stops on this same test of its *reading* with ``fraction = 1`` (the strictest
+    value the HLC can be configured to), never on "within the sensor's resolution of the target":
+    a Tello reports its height in whole decimetres, so "within 0.1 m of 1.2 m" stops at a reading of
+    1.1 m, below the HLC's 1.14 m, and the HLC's GAIN_ALTITUDE_TIMEOUT lands it. A coarse sensor's
+    reading only moves in steps, so an adapter keeps climbing until the reading itself crosses the
+    threshold; the only tolerance here is for floating-point noise (``0.95 * 1.2`` is 1.1399999...).
+    """
+    return alt >= fraction * target - _ALTITUDE_EPSILON
+
+
 class Autopilot(ABC):
     """Base class of every vehicle adapter (see the module docstring for the call contract)."""
 

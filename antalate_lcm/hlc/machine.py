@@ -66,7 +66,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from antalate_lcm.autopilot.base import AutopilotState, FlightMode
+from antalate_lcm.autopilot.base import AutopilotState, FlightMode, altitude_reached
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
 
 if TYPE_CHECKING:
@@ -463,8 +463,7 @@ class HighLevelControl:
             events.append((HlcEvent.AUTOPILOT_RTL, f"autopilot switched to {ap.mode or 'RTL'}"))
         if self._battery_is_low():
             events.append((HlcEvent.LOW_BATTERY, f"battery {ap.battery:.1f}% <= low_battery {p.low_battery:g}%"))
-        threshold = p.airborne_fraction * self._target_altitude
-        if ap.alt >= threshold:
+        if altitude_reached(ap.alt, self._target_altitude, p.airborne_fraction):
             events.append((HlcEvent.ALTITUDE_REACHED, f"altitude {ap.alt:.2f} m >= {p.airborne_fraction:g}"
                                                       f" x {self._target_altitude:g} m"))
         return events

@@ -1,0 +1,114 @@
+"""The attacker suite (issue 13): one shared swarm for the session, and the tally of attacks tried.
+
+Every test is one attack, tagged ``@pytest.mark.attack("name")``; it passes only when the attack
+failed *and* nothing moved. The terminal summary counts them: ``attacks tried N, succeeded M``
+(a failed test, or an xfail, is an attack that succeeded).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+
+from antalate_lcm.geo import offset
+from tests.conftest import _netns_reason
+from tests.netns import NetNamespace
+from tests.security.harness import HOME, SWARM_KEY, PeerClient, Swarm, agent_doc
+
+_RESULTS: dict[str, str] = {}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "attack(name): the attack a security test tries (tests/security)")
+
+
+def _attack(item: pytest.Item) -> str | None:
+    mark = item.get_closest_marker("attack")
+    return str(mark.args[0]) if mark is not None else None
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[None]:
+    outcome = yield
+    report = outcome.get_result()
+    name = _attack(item)
+    if name is None:
+        return
+    if report.when == "call" or (report.when == "setup" and not report.passed):
+        if hasattr(report, "wasxfail"):
+            _RESULTS[name] = "succeeded (defence missing, xfail)"
+        elif report.passed:
+            _RESULTS[name] = "held"
+        elif report.skipped:
+            _RESULTS[name] = "skipped"
+        else:
+            _RESULTS[name] = "succeeded"
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    if not _RESULTS:
+        return
+    tried = {k: v for k, v in _RESULTS.items() if v != "skipped"}
+    won = sorted(k for k, v in tried.items() if v.startswith("succeeded"))
+    tr = terminalreporter
+    tr.section("attacks")
+    tr.write_line(f"attacks tried {len(tried)}, succeeded {len(won)}, skipped {len(_RESULTS) - len(tried)}")
+    for name in won:
+        tr.write_line(f"  SUCCEEDED: {name} ({tried[name]})")
+
+
+@pytest.fixture(scope="session")
+def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
+    """The station, four agents and the two peers, started once for the whole directory.
+
+    * ``alpha`` and ``delta``: one ``antalate agent`` process, OSC reporting to the station,
+      ``dovrat_swarm`` on MISSION; alpha stays on the ground (the station attacks' target), the
+      tests fly delta.
+    * ``bravo`` and ``charlie``: MC and HLC as separate processes, so their internal topics cross
+      processes on the (host-only, ttl=0) ``local`` bus, signed. bravo stays on the ground, charlie
+      is flown.
+    """
+    reason = _netns_reason()
+    if reason:
+        pytest.skip(f"no private network namespace: {reason}")
+    tmp = tmp_path_factory.mktemp("security")
+    ns = NetNamespace().__enter__()
+    s = Swarm(ns, tmp)
+    try:
+        s.start_station()
+        osc = {"enabled": True, "server": "http://127.0.0.1:18080", "rate": 5.0}
+        bma = [{"name": "swarm", "behaviors": [{
+            "plugin": "dovrat_swarm", "activate_on": ["MISSION"],
+            "params": {"forward_speed": 1.0, "detection_source": "any"},
+        }]}]
+        for name, north in (("alpha", 0.0), ("delta", 40.0)):
+            s.agent(name, agent_doc(name, home=_home(north), osc=osc, bma=bma))
+        s.start_agents_process("alpha-delta", ["alpha", "delta"])
+        for name, north in (("bravo", 80.0), ("charlie", 120.0)):
+            run = s.agent(name, agent_doc(name, home=_home(north)))
+            run.start("hlc")
+            run.start("mc")
+        s.attacker = s.peer("the attacker", None)
+        s.operator = s.peer("the operator", SWARM_KEY)
+        for run in s.agents.values():
+            run.wait_mc("STANDBY", timeout=60)
+        yield s
+    finally:
+        s.close()
+
+
+def _home(north_m: float) -> tuple[float, float]:
+    return offset(HOME[0], HOME[1], north_m, 0.0)
+
+
+@pytest.fixture(scope="session")
+def attacker(swarm: Swarm) -> PeerClient:
+    assert swarm.attacker is not None
+    return swarm.attacker
+
+
+@pytest.fixture(scope="session")
+def operator(swarm: Swarm) -> PeerClient:
+    assert swarm.operator is not None
+    return swarm.operator

@@ -1,0 +1,347 @@
+"""The security suite's swarm: a real station, real agents and two peers in one private network namespace.
+
+Everything here is what a defender would run in the field, started the way a user starts it
+(``antalate station``, ``antalate agent``, ``antalate mc``/``hlc`` as separate processes), plus:
+
+* ``attacker``: a process on the same network that knows no key (tests/security/peer.py);
+* ``operator``: the legitimate, keyed operator, also the witness of genuine (signed) messages.
+
+What "nothing moved" is judged by never comes from the network an attacker can write to: the
+simulated vehicle's own state file (position, armed, in air) and the nodes' logs (every MC and HLC
+transition is logged with its cause).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import secrets
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tests.agent_harness import FAST_SIM, to_toml
+from tests.jsonl import JsonLinesProcess
+from tests.netns import NetNamespace, stop_process, wait_for
+
+LAN = "udpm://239.255.76.67:7667?ttl=0"
+LOCAL = "udpm://239.255.76.68:7668?ttl=0"
+STATION_PORT = 18080
+STATION_URL = f"http://127.0.0.1:{STATION_PORT}"
+#: The swarm key the defenders share. Never given to the attacker process.
+SWARM_KEY = "swarm-" + secrets.token_hex(16)
+#: Replay window of every node. Generous on purpose: a replay guard must not rely on the window being
+#: shorter than an MC restart, and a loaded test machine must not make genuine commands look stale.
+WINDOW = 30.0
+HOME = (32.7767, 35.0231)
+
+_TRANSITION = re.compile(r"antalate\.(mc|hlc)\.([\w.-]+): (\w+) -> (\w+) on (.*)$")
+
+
+class PeerClient(JsonLinesProcess):
+    """Client side of tests/security/peer.py."""
+
+    def __init__(self, proc: subprocess.Popen[str], what: str) -> None:
+        super().__init__(proc, what)
+
+    def _ok(self, **req: Any) -> dict[str, Any]:
+        reply = self.call(**req)
+        assert reply["ok"], f"{self.what}: {req['op']} failed: {reply.get('error')}"
+        return reply
+
+    def publish(self, channel: str, type_name: str, *, sign: bool = False, count: int = 1,
+                stamp: bool = True, **fields: Any) -> bytes:
+        """Encode and send a message; returns its bytes. ``stamp`` sets header.utime to now."""
+        reply = self._ok(op="publish", channel=channel, type=type_name, fields=fields, sign=sign,
+                         count=count, stamp=stamp)
+        return bytes.fromhex(reply["hex"])
+
+    def raw(self, channel: str, data: bytes, count: int = 1) -> None:
+        self._ok(op="raw", channel=channel, hex=data.hex(), count=count)
+
+    def replay(self, channel: str, type_name: str, pick: str = "last", since: int = 0, **where: Any) -> dict[str, Any]:
+        """Resend, byte for byte, a message recorded off the network."""
+        return self._ok(op="replay", channel=channel, type=type_name, where=where, pick=pick, since=since)["msg"]
+
+    def wait(self, channel: str, type_name: str, timeout: float = 15, since: int = 0, genuine: bool = False,
+             **where: Any) -> dict[str, Any] | None:
+        reply = self.call(op="wait", channel=channel, type=type_name, where=where, timeout=timeout, since=since,
+                          genuine=genuine)
+        return reply.get("msg") if reply["ok"] else None
+
+    def history(self, channel: str, type_name: str, since: int = 0, genuine: bool = False) -> list[dict[str, Any]]:
+        return self._ok(op="history", channel=channel, type=type_name, since=since, genuine=genuine)["msgs"]
+
+    def mark(self) -> int:
+        return int(self._ok(op="mark")["index"])
+
+    def http(self, method: str, path: str, json_body: Any = None, *, headers: dict[str, str] | None = None,
+             bodies: list[Any] | None = None, content: str | None = None) -> list[dict[str, Any]]:
+        url = path if path.startswith("http") else STATION_URL + path
+        reply = self._ok(op="http", method=method, url=url, json=json_body, headers=headers, bodies=bodies,
+                         content=content)
+        return reply["responses"]
+
+    def http1(self, method: str, path: str, json_body: Any = None, **kw: Any) -> dict[str, Any]:
+        return self.http(method, path, json_body, **kw)[0]
+
+
+@dataclass
+class Vehicle:
+    """The simulated vehicle as its autopilot keeps it (the sim's state file), not as anyone reports it."""
+
+    north: float
+    east: float
+    alt: float
+    armed: bool
+    in_air: bool
+    mode: str
+    phase: str
+    saved_at: float
+
+    def distance(self, other: Vehicle) -> float:
+        return ((self.north - other.north) ** 2 + (self.east - other.east) ** 2 + (self.alt - other.alt) ** 2) ** 0.5
+
+
+class AgentRun:
+    """One agent: its config file, its node processes (or a share of an ``antalate agent`` process)."""
+
+    def __init__(self, swarm: Swarm, name: str, doc: dict[str, Any]) -> None:
+        self.swarm = swarm
+        self.name = name
+        self.state_file = swarm.tmp / f"{name}-vehicle.json"
+        doc.setdefault("hlc", {}).setdefault("autopilot_params", {})["state_file"] = str(self.state_file)
+        self.doc = doc
+        self.path = swarm.tmp / f"{name}.toml"
+        self.path.write_text(to_toml(doc))
+        self.procs: dict[str, subprocess.Popen[str]] = {}
+        self.logs: list[Path] = []
+
+    def start(self, node: str) -> None:
+        log = self.swarm.tmp / f"{self.name}-{node}-{len(self.logs)}.log"
+        self.logs.append(log)
+        out = open(log, "w")  # noqa: SIM115 - the process owns it
+        self.procs[node] = self.swarm.netns.antalate(node, str(self.path), stdout=out, stderr=subprocess.STDOUT)
+
+    def kill(self, node: str) -> None:
+        proc = self.procs.pop(node)
+        proc.kill()
+        proc.wait(10)
+
+    def alive(self, node: str) -> bool:
+        return self.procs[node].poll() is None
+
+    def log(self) -> str:
+        own = "".join(p.read_text(errors="replace") for p in self.logs)
+        return own + self.swarm.shared_log(self.name)
+
+    def lines(self) -> list[str]:
+        """This agent's log lines (a shared ``antalate agent`` log holds several agents)."""
+        tag = re.compile(rf"antalate\.\w+\.{re.escape(self.name)}[:.]")
+        return [ln for ln in self.log().splitlines() if tag.search(ln)]
+
+    def transitions(self, node: str = "mc") -> list[tuple[str, str, str]]:
+        """(from, to, cause) of every logged transition of this agent's MC (or HLC), in order."""
+        out = []
+        for line in self.log().splitlines():
+            m = _TRANSITION.search(line)
+            if m and m.group(1) == node and m.group(2) == self.name:
+                out.append((m.group(3), m.group(4), m.group(5)))
+        return out
+
+    def mc_state(self) -> str | None:
+        t = self.transitions("mc")
+        return t[-1][1] if t else None
+
+    def wait_mc(self, state: str, timeout: float = 30.0, after: int = 0) -> list[tuple[str, str, str]]:
+        """Poll the MC log until it has entered ``state`` (at transition index >= ``after``)."""
+        hit = wait_for(lambda: any(to == state for _, to, _ in self.transitions("mc")[after:]), timeout, 0.1)
+        assert hit, f"{self.name}: MC never reached {state}; transitions {self.transitions('mc')}"
+        return self.transitions("mc")
+
+    def vehicle(self) -> Vehicle:
+        """The vehicle's state, read from the sim's state file (fresh within a second)."""
+        def read() -> dict[str, Any] | None:
+            try:
+                data = json.loads(self.state_file.read_text())
+            except (OSError, ValueError):
+                return None
+            return data if time.time() - data["saved_at"] < 3.0 else None
+
+        data = wait_for(read, 15.0, 0.1)
+        assert data, f"{self.name}: no fresh vehicle state in {self.state_file}"
+        return Vehicle(data["north"], data["east"], data["alt"], bool(data["armed"]), bool(data["in_air"]),
+                       data["mode"], data["phase"], data["saved_at"])
+
+    def vehicle_after(self, t: float) -> Vehicle:
+        """The vehicle's state as saved after wall time ``t`` (so it reflects what happened until then)."""
+        v = wait_for(lambda: (lambda s: s if s.saved_at > t else None)(self.vehicle()), 15.0, 0.1)
+        assert v, f"{self.name}: the vehicle state was not saved after {t}"
+        return v
+
+
+class Swarm:
+    """The station, the agents, the attacker and the operator in one namespace."""
+
+    def __init__(self, netns: NetNamespace, tmp: Path) -> None:
+        self.netns = netns
+        self.tmp = tmp
+        self.agents: dict[str, AgentRun] = {}
+        self._shared: dict[str, Path] = {}
+        self.station: subprocess.Popen[str] | None = None
+        self.station_log = tmp / "station.log"
+        self.peers: list[PeerClient] = []
+        self.attacker: PeerClient | None = None
+        self.operator: PeerClient | None = None
+        self._op_seq = int(time.time()) % 100_000 * 10
+
+    # -- processes ------------------------------------------------------------------------------
+    def start_station(self, *extra: str) -> None:
+        out = open(self.station_log, "w")  # noqa: SIM115 - the process owns it
+        self.station = self.netns.antalate(
+            "station", "--db", str(self.tmp / "station.sqlite"), "--port", str(STATION_PORT), *extra,
+            stdout=out, stderr=subprocess.STDOUT,
+        )
+
+    def station_text(self) -> str:
+        return self.station_log.read_text(errors="replace")
+
+    def agent(self, name: str, doc: dict[str, Any]) -> AgentRun:
+        run = AgentRun(self, name, doc)
+        self.agents[name] = run
+        return run
+
+    def start_agents_process(self, label: str, names: list[str]) -> subprocess.Popen[str]:
+        """``antalate agent A.toml B.toml``: several agents, every node of each, in one process."""
+        log = self.tmp / f"{label}.log"
+        for name in names:
+            self._shared[name] = log
+        out = open(log, "w")  # noqa: SIM115 - the process owns it
+        proc = self.netns.antalate("agent", *(str(self.agents[n].path) for n in names),
+                                   stdout=out, stderr=subprocess.STDOUT)
+        return proc
+
+    def shared_log(self, name: str) -> str:
+        path = self._shared.get(name)
+        return path.read_text(errors="replace") if path is not None else ""
+
+    def peer(self, what: str, key: str | None) -> PeerClient:
+        args = ["-m", "tests.security.peer", LAN, LOCAL, "--window", str(WINDOW)]
+        if key is not None:
+            args += ["--key", key]
+        proc = self.netns.python(*args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        client = PeerClient(proc, what)
+        self.peers.append(client)
+        return client
+
+    def close(self) -> None:
+        for run in self.agents.values():
+            for proc in run.procs.values():
+                stop_process(proc)
+        if self.station is not None:
+            stop_process(self.station)
+        self.netns.close()
+
+    # -- the legitimate operator ----------------------------------------------------------------
+    def next_seq(self) -> int:
+        self._op_seq += 1
+        return self._op_seq
+
+
+def agent_doc(name: str, *, sim: dict[str, Any] | None = None, home: tuple[float, float] = HOME,
+              internal: str = "local", **sections: Any) -> dict[str, Any]:
+    """An agent's config as a field user writes it: internal topics on the host-only ``local`` bus,
+    what the operator sees also on ``lan``, a swarm key."""
+    hlc = {"autopilot": "sim", "default_takeoff_altitude": 3.0, "link_timeout": 2.0, **sections.pop("hlc", {})}
+    hlc["autopilot_params"] = {**FAST_SIM, "home_lat": home[0], "home_lon": home[1], **(sim or {})}
+    doc: dict[str, Any] = {
+        "agent": {"name": name},
+        "buses": {"lan": LAN, "local": LOCAL},
+        "topics": {
+            "default_bus": internal,
+            "MC_STATE": [internal, "lan"], "HLC_STATE": [internal, "lan"], "TELEMETRY": [internal, "lan"],
+            "HLC_ERROR": [internal, "lan"], "ARBITER": [internal, "lan"],
+            "OPERATOR_CMD": ["lan", internal], "DIRECTION_CMD": ["lan", internal],
+            "SWARM_OPERATOR_CMD": "lan", "SWARM_DIRECTION_CMD": "lan",
+        },
+        "hlc": hlc,
+        "security": {"swarm_key": SWARM_KEY, "window": WINDOW},
+    }
+    doc.update(sections)
+    return doc
+
+
+# ---------------------------------------------------------------------------------------------- helpers
+OPERATOR = "operator"
+MC_NAMES = {"TAKEOFF": 0, "LAND": 1, "RTL": 2}
+
+
+def command(operator: PeerClient, swarm: Swarm, target: str, name: str, *, altitude: float = 0.0,
+            channel: str | None = None, seq: int | None = None) -> bytes:
+    """A genuine, signed operator command (what the operator console sends); returns its bytes."""
+    return operator.publish(
+        channel or f"{target}/OPERATOR_CMD", "operator_cmd_t", sign=True,
+        header={"agent": OPERATOR, "seq": seq if seq is not None else swarm.next_seq()},
+        command=MC_NAMES[name], target=target, altitude=altitude,
+    )
+
+
+def direction(operator: PeerClient, swarm: Swarm, target: str, azimuth: float, speed: float,
+              active: bool = True) -> bytes:
+    return operator.publish(
+        f"{target}/DIRECTION_CMD", "direction_cmd_t", sign=True,
+        header={"agent": OPERATOR, "seq": swarm.next_seq()}, active=active, azimuth=azimuth, speed=speed,
+        target=target,
+    )
+
+
+@dataclass
+class Baseline:
+    """What an agent looked like before an attack: its vehicle and how many transitions were logged."""
+
+    vehicle: Vehicle
+    mc: int
+    hlc: int
+    t: float
+
+
+def baseline(run: AgentRun) -> Baseline:
+    return Baseline(run.vehicle_after(time.time()), len(run.transitions("mc")), len(run.transitions("hlc")),
+                    time.time())
+
+
+def settle(run: AgentRun, seconds: float = 1.5) -> Vehicle:
+    """The vehicle once the attack had ``seconds`` to act (a takeoff climbs metres in that time)."""
+    time.sleep(seconds)
+    return run.vehicle_after(time.time())
+
+
+def assert_unmoved(run: AgentRun, before: Baseline, *, tolerance: float = 0.3, still: bool = True) -> Vehicle:
+    """The attack changed nothing: the vehicle is where it was (armed/in air as it was) and neither the
+    MC nor the HLC made a transition since ``before``. ``still=False`` only checks arm/air state and
+    transitions (for a vehicle that legitimately moves on its own)."""
+    after = settle(run)
+    new_mc = run.transitions("mc")[before.mc:]
+    new_hlc = run.transitions("hlc")[before.hlc:]
+    assert not new_mc, f"{run.name}: the MC made transitions during the attack: {new_mc}"
+    assert not new_hlc, f"{run.name}: the HLC made transitions during the attack: {new_hlc}"
+    assert (after.armed, after.in_air) == (before.vehicle.armed, before.vehicle.in_air), (
+        f"{run.name}: vehicle armed/in-air changed: before {before.vehicle}, after {after}"
+    )
+    if still:
+        moved = after.distance(before.vehicle)
+        assert moved <= tolerance, f"{run.name}: the vehicle moved {moved:.2f} m: before {before.vehicle}, after {after}"
+    return after
+
+
+def fly(swarm: Swarm, operator: PeerClient, name: str) -> None:
+    """Take ``name`` to MISSION with a genuine signed TAKEOFF (no-op when it already is)."""
+    run = swarm.agents[name]
+    if run.mc_state() == "MISSION":
+        return
+    n = len(run.transitions("mc"))
+    command(operator, swarm, name, "TAKEOFF")
+    run.wait_mc("MISSION", timeout=30, after=n)
+    assert wait_for(lambda: run.vehicle().in_air, 15.0, 0.1), f"{name}: in MISSION but not in the air"

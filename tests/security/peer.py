@@ -1,0 +1,179 @@
+"""A peer on the swarm's network, run inside the test's network namespace and driven by JSON lines.
+
+Two roles, one program, so each role is a separate process with only what it should know:
+
+* the **attacker** (no ``--key``): records every datagram on the multicast group, publishes forged,
+  truncated or replayed raw bytes, and speaks raw HTTP to the station. It cannot sign anything.
+* the **operator** (``--key K``): the legitimate keyed operator the tests fly the swarm with, and a
+  witness that tells genuine (correctly signed) messages from spoofed ones.
+
+Requests, one JSON object a line, one JSON reply line each (``{"ok": bool, ...}``):
+
+``publish``  {channel, type, fields, sign?, count?}: encode and send (``sign`` needs ``--key``)
+``raw``      {channel, hex, count?}: send bytes as they are
+``replay``   {channel (regex), type, where, pick: "first"|"last", since?}: resend the recorded bytes of a
+             matching message unchanged (what a replay attacker does); replies with the message
+``wait``     {channel, type, where, timeout, since?, genuine?}: the first matching message
+``history``  {channel, type, since?, genuine?}: every matching message
+``mark``     the index of the next datagram (a "since" for later requests)
+``http``     {method, url, json?, content?, headers?, bodies?}: one request, or one per entry of ``bodies``
+             (a flood); replies with ``responses: [{status, body}]``
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+import threading
+import time
+from typing import Any
+
+import httpx
+import lcm
+
+from antalate_lcm.security import sign, verify
+from antalate_lcm.topics import MESSAGE_TYPES
+from tests.probe import fill, matches, to_dict
+
+
+class Peer:
+    def __init__(self, urls: list[str], key: str | None, window: float) -> None:
+        # Every bus the swarm uses (the LAN group and the agents' "local" ttl=0 group): on one host,
+        # or on a LAN where the attacker sends with a larger ttl, both reach the agents' sockets.
+        self.buses = [lcm.LCM(url) for url in urls]
+        self.key = key
+        self.window = window
+        self.seen: list[tuple[float, str, bytes]] = []
+        self.cond = threading.Condition()
+        for lc in self.buses:
+            lc.subscribe(".*", self._on_msg).set_queue_capacity(1_000_000)
+            threading.Thread(target=self._loop, args=(lc,), daemon=True).start()
+        self.http = httpx.Client(timeout=10.0)
+
+    def _on_msg(self, channel: str, data: bytes) -> None:
+        with self.cond:
+            self.seen.append((time.time(), channel, data))
+            self.cond.notify_all()
+
+    @staticmethod
+    def _loop(lc: lcm.LCM) -> None:
+        while True:
+            lc.handle_timeout(50)
+
+    def send(self, channel: str, data: bytes, count: int = 1) -> None:
+        for _ in range(count):
+            for lc in self.buses:
+                lc.publish(channel, data)
+
+    def _decoded(self, pattern: str, type_name: str, start: int, genuine: bool) -> list[tuple[int, dict[str, Any]]]:
+        rx = re.compile(pattern)
+        msg_type = MESSAGE_TYPES[type_name]
+        out = []
+        for i in range(start, len(self.seen)):
+            t, channel, data = self.seen[i]
+            if not rx.fullmatch(channel):
+                continue
+            try:
+                msg = msg_type.decode(data)
+            except Exception:  # noqa: BLE001 - another type on the channel, or garbage
+                continue
+            # Genuine = signed with the swarm key; freshness is judged at arrival, not now.
+            if genuine and (self.key is None or verify(msg, self.key, self.window, now=t) is not None):
+                continue
+            d = to_dict(msg)
+            d["_channel"], d["_index"], d["_t"] = channel, i, t
+            out.append((i, d))
+        return out
+
+    def handle(self, req: dict[str, Any]) -> dict[str, Any]:
+        op = req["op"]
+        if op == "publish":
+            msg = fill(MESSAGE_TYPES[req["type"]](), req.get("fields", {}))
+            if req.get("stamp", True):
+                msg.header.utime = int(time.time() * 1e6)
+            if req.get("sign"):
+                if self.key is None:
+                    return {"ok": False, "error": "this peer holds no key"}
+                sign(msg, self.key)
+            data = msg.encode()
+            self.send(req["channel"], data, req.get("count", 1))
+            return {"ok": True, "hex": data.hex()}
+        if op == "raw":
+            self.send(req["channel"], bytes.fromhex(req["hex"]), req.get("count", 1))
+            return {"ok": True}
+        if op == "replay":
+            with self.cond:
+                hits = [
+                    (i, d) for i, d in self._decoded(req["channel"], req["type"], req.get("since", 0), False)
+                    if matches(d, req.get("where", {}))
+                ]
+            if not hits:
+                return {"ok": False, "error": "nothing recorded matches"}
+            i, d = hits[0] if req.get("pick", "last") == "first" else hits[-1]
+            _, channel, data = self.seen[i]
+            self.send(channel, data, req.get("count", 1))
+            return {"ok": True, "msg": d}
+        if op == "wait":
+            deadline = time.time() + req.get("timeout", 10)
+            with self.cond:
+                while True:
+                    hits = [
+                        d for _, d in self._decoded(req["channel"], req["type"], req.get("since", 0),
+                                                    req.get("genuine", False))
+                        if matches(d, req.get("where", {}))
+                    ]
+                    if hits:
+                        return {"ok": True, "msg": hits[0]}
+                    remaining = deadline - time.time()
+                    if remaining <= 0:
+                        return {"ok": False}
+                    self.cond.wait(min(remaining, 0.2))
+        if op == "history":
+            with self.cond:
+                hits = self._decoded(req["channel"], req["type"], req.get("since", 0), req.get("genuine", False))
+            return {"ok": True, "msgs": [d for _, d in hits]}
+        if op == "mark":
+            with self.cond:
+                return {"ok": True, "index": len(self.seen)}
+        if op == "http":
+            bodies = req.get("bodies")
+            responses = []
+            for body in bodies if bodies is not None else [req.get("json")]:
+                try:
+                    r = self.http.request(
+                        req["method"], req["url"], json=body if req.get("content") is None else None,
+                        content=req.get("content"), headers=req.get("headers"),
+                    )
+                except httpx.HTTPError as exc:
+                    responses.append({"status": 0, "body": f"{type(exc).__name__}: {exc}"})
+                    continue
+                try:
+                    parsed: Any = r.json()
+                except ValueError:
+                    parsed = r.text[:2000]
+                responses.append({"status": r.status_code, "body": parsed})
+            return {"ok": True, "responses": responses}
+        return {"ok": False, "error": f"unknown op {op}"}
+
+
+def main() -> None:
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    parser.add_argument("url", nargs="+")
+    parser.add_argument("--key", default=None)
+    parser.add_argument("--window", type=float, default=5.0)
+    args = parser.parse_args()
+    peer = Peer(args.url, args.key, args.window)
+    print(json.dumps({"ok": True, "ready": True}), flush=True)
+    for line in sys.stdin:
+        try:
+            reply = peer.handle(json.loads(line))
+        except Exception as exc:  # noqa: BLE001 - report to the test, keep serving
+            reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
+        print(json.dumps(reply), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,86 @@
+"""Issue 13, attack 1: one datagram moves a vehicle. A spoofed ``mc_state_t`` TAKEOFF, a spoofed
+``hlc_state_t`` LLC_DOWN and an injected ``velocity_cmd_t`` from a host that knows no key, on the LAN
+group and on the agents' ttl=0 "local" group alike (ttl=0 only limits the sender, not who may send).
+
+bravo and charlie run their MC and HLC as separate processes (internal topics cross processes,
+signed); alpha and delta run in one ``antalate agent`` process (internal topics in-process).
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from antalate_lcm.msgs import hlc_state_t, mc_state_t, velocity_cmd_t
+from tests.security.harness import AgentRun, PeerClient, Swarm, assert_unmoved, baseline, fly
+
+pytestmark = pytest.mark.netns
+
+SPOOF_SECONDS = 2.0
+RATE_HZ = 20.0
+
+
+def stream(attacker: PeerClient, channel: str, type_name: str, **fields: object) -> None:
+    """Publish a freshly stamped spoof at RATE_HZ for SPOOF_SECONDS, out-shouting the genuine 5 Hz state."""
+    end = time.monotonic() + SPOOF_SECONDS
+    seq = 900_000
+    while time.monotonic() < end:
+        seq += 1
+        attacker.publish(channel, type_name, header={"agent": channel.split("/", 1)[0], "seq": seq}, **fields)
+        time.sleep(1.0 / RATE_HZ)
+
+
+def alive(run: AgentRun) -> None:
+    for node, proc in run.procs.items():
+        assert proc.poll() is None, f"{run.name}'s {node} died: {run.log()[-3000:]}"
+
+
+@pytest.mark.attack("spoofed mc_state_t TAKEOFF, MC and HLC in separate processes")
+def test_spoofed_mc_takeoff_does_not_launch_a_separate_process_hlc(swarm: Swarm, attacker: PeerClient) -> None:
+    bravo = swarm.agents["bravo"]
+    before = baseline(bravo)
+    assert not before.vehicle.armed and bravo.mc_state() == "STANDBY"
+    stream(attacker, "bravo/MC_STATE", "mc_state_t", state=mc_state_t.TAKEOFF, takeoff_altitude=2.1)
+    assert_unmoved(bravo, before)
+    alive(bravo)
+
+
+@pytest.mark.attack("spoofed mc_state_t TAKEOFF, antalate agent (one process)")
+def test_spoofed_mc_takeoff_does_not_launch_an_in_process_agent(swarm: Swarm, attacker: PeerClient) -> None:
+    alpha = swarm.agents["alpha"]
+    before = baseline(alpha)
+    assert not before.vehicle.armed and alpha.mc_state() == "STANDBY"
+    stream(attacker, "alpha/MC_STATE", "mc_state_t", state=mc_state_t.TAKEOFF, takeoff_altitude=2.1)
+    assert_unmoved(alpha, before)
+
+
+@pytest.mark.attack("injected velocity_cmd_t north 3.2 m/s to a flying vehicle")
+def test_injected_velocity_does_not_move_a_flying_vehicle(
+    swarm: Swarm, operator: PeerClient, attacker: PeerClient
+) -> None:
+    fly(swarm, operator, "charlie")
+    charlie = swarm.agents["charlie"]
+    before = baseline(charlie)
+    stream(attacker, "charlie/VELOCITY_CMD", "velocity_cmd_t", frame=velocity_cmd_t.NED, vx=3.2)
+    after = assert_unmoved(charlie, before, tolerance=0.5)
+    assert after.in_air
+    alive(charlie)
+
+
+@pytest.mark.attack("spoofed hlc_state_t LLC_DOWN to the MC of a flying vehicle")
+def test_spoofed_llc_down_does_not_put_the_mc_in_error(
+    swarm: Swarm, operator: PeerClient, attacker: PeerClient
+) -> None:
+    fly(swarm, operator, "charlie")
+    charlie = swarm.agents["charlie"]
+    before = baseline(charlie)
+    stream(attacker, "charlie/HLC_STATE", "hlc_state_t", state=hlc_state_t.LLC_DOWN, autopilot="sim")
+    after = assert_unmoved(charlie, before, tolerance=0.5)
+    assert after.in_air and charlie.mc_state() == "MISSION"
+    # The genuine (signed) MC state still says MISSION: what an operator console trusts.
+    mark = operator.mark()
+    genuine = operator.wait("charlie/MC_STATE", "mc_state_t", since=mark, genuine=True, timeout=5)
+    assert genuine is not None, "charlie's MC publishes no signed mc_state_t"
+    assert genuine["state"] == mc_state_t.MISSION
+    alive(charlie)

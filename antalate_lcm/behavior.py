@@ -18,10 +18,8 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict
 
-from antalate_lcm import security
 from antalate_lcm.bus import Subscription
 from antalate_lcm.executor import Timer
-from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
 
 if TYPE_CHECKING:
     from antalate_lcm.node import Node
@@ -115,8 +113,6 @@ class BehaviorContext:
         self.params = params
         self.agent: str = node.agent
         self.log = logging.getLogger(f"antalate.behavior.{node.agent}.{name}")
-        self._swarm_key = node.config.security.swarm_key
-        self._window = node.config.security.window
         #: Bumped on every activation and deactivation: a callback from an earlier activation that
         #: was already queued on the executor when its subscription was dropped is discarded.
         self._generation = 0
@@ -148,17 +144,12 @@ class BehaviorContext:
 
     # ------------------------------------------------------------------ messaging
     def publish(self, topic: str, msg: Any, **fields: str) -> bool:
-        """Publish on the behavior's ``topic``; the header is stamped for you.
-
-        Operator commands and directions are signed with the swarm key when one is configured, so
-        a behavior acting as an operator works under authentication unchanged.
-        """
+        """Publish on the behavior's ``topic``; the header is stamped (and, with a swarm key, the
+        message signed) by the node, so a behavior acting as an operator works under authentication."""
         mapped = self.topic(topic)
         expected = self._node.topic_spec(mapped).msg_type
         if not isinstance(msg, expected):
             raise TypeError(f"topic {mapped!r} carries {expected.__name__}, not {type(msg).__name__}")
-        if self._swarm_key and isinstance(msg, (operator_cmd_t, direction_cmd_t)):
-            msg = _SignOnEncode(msg, self._swarm_key)
         return self._node.publish(mapped, msg, **fields)
 
     def subscribe(self, topic: str, handler: Callable[[Any], None], **fields: str) -> Subscription:
@@ -187,13 +178,12 @@ class BehaviorContext:
                 subs.remove(sub)
 
     def verify(self, msg: Any) -> str | None:
-        """Check an operator/direction command against the swarm key: None if acceptable, else why not.
+        """Kept for plugins written before the node authenticated every input: always None.
 
-        Always None when no key is configured (authentication off).
+        Every message a handler receives has already passed the node's checks (MAC, replay window,
+        replay guard, input validation: docs/security.md); a rejected one never reaches the handler.
         """
-        if not self._swarm_key:
-            return None
-        return security.verify(msg, self._swarm_key, self._window)
+        return None
 
     # ------------------------------------------------------------------ time
     def call_later(self, delay: float, fn: Callable[[], Any]) -> Timer:
@@ -264,22 +254,6 @@ class BehaviorContext:
 
 def _name(fn: Callable[..., Any]) -> str:
     return getattr(fn, "__name__", None) or type(fn).__name__
-
-
-class _SignOnEncode:
-    """Lets ``Node.publish`` stamp the header first and sign last: the MAC must cover the final header."""
-
-    def __init__(self, msg: Any, key: str) -> None:
-        self._msg = msg
-        self._key = key
-
-    @property
-    def header(self) -> Any:
-        return self._msg.header
-
-    def encode(self) -> bytes:
-        security.sign(self._msg, self._key)
-        return self._msg.encode()
 
 
 def failure_reason(exc: BaseException) -> str:

@@ -30,11 +30,14 @@ from typing import Any
 import lcm
 
 from antalate_lcm._ratelimit import RateLimitedLog
-from antalate_lcm.errors import MulticastUnavailable
+from antalate_lcm.lcm_url import open_failure
 
 log = logging.getLogger("antalate.bus")
 
 Handler = Callable[[str, Any], None]
+
+#: Marks a type that failed to decode this datagram (so later subscribers skip it silently).
+_UNDECODABLE = object()
 
 #: Messages LCM may queue for us before dropping (the library default of 30 drops bursts).
 DEFAULT_QUEUE_CAPACITY = 10_000
@@ -75,9 +78,8 @@ def open_lcm(url: str) -> lcm.LCM:
             return lcm.LCM(url)
     except (RuntimeError, OSError):
         log.debug("liblcm said: %s", " | ".join(noise))
-        if url.startswith("udpm://"):
-            raise MulticastUnavailable(url) from None
-        raise
+        # "no multicast route" only when the routing table says so; else what was wrong.
+        raise open_failure(url, noise) from None
 
 
 #: Characters with a meaning in LCM's channel regular expressions.
@@ -192,6 +194,8 @@ class _Link:
 
     def _deliver(self, channel: str, data: bytes, subs: tuple[Subscription, ...]) -> None:
         self.received += 1
+        # One decode per type per datagram, failures included: a bad datagram is one decode error
+        # however many subscribers the channel has.
         decoded: dict[type, Any] = {}
         for sub in subs:
             if not sub.active:
@@ -204,8 +208,11 @@ class _Link:
                     try:
                         msg = decoded[msg_type] = msg_type.decode(data)
                     except Exception as exc:  # noqa: BLE001 - any garbage must not kill the node
+                        decoded[msg_type] = _UNDECODABLE
                         self._count_decode_error(channel, msg_type, data, exc)
                         continue
+                elif msg is _UNDECODABLE:
+                    continue
             try:
                 sub.handler(channel, msg)
             except Exception:

@@ -217,6 +217,11 @@ class Config(BaseModel):
     def _cross_checks(self) -> Config:
         known = set(self.buses)
         if self.topics.default_bus not in known:
+    #: Former keys, accepted for verification only (never for signing) during a key rotation.
+    previous_keys: list[str] = Field(default_factory=list)
+    #: Directory of the replay memory (per-sender high-water utime of accepted operator inputs).
+    #: Empty = $XDG_STATE_HOME/antalate, or nothing at all when every bus is memq:// or file://.
+    state_dir: str = ""
             raise _KeyedError("topics.default_bus", f"a bus declared in [buses] ({', '.join(sorted(known))})")
         for topic, binding in self.topics.bindings().items():
             for bus in binding.bus or []:

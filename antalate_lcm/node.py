@@ -2,6 +2,13 @@
 
 A node never talks to LCM directly. It names topics (``"MC_STATE"``); the config says which bus and
 channel each topic uses, so moving a node to another machine is a config change (the paper's proxies).
+
+Security lives here, in one place (docs/security.md): with a swarm key, :meth:`Node.publish` signs
+every message after stamping its header, and every message a node consumes through
+:meth:`Node.subscribe` / :meth:`Node.subscribe_all` is authenticated (MAC, window, sender, replay)
+and validated (:mod:`antalate_lcm.validation`) on the executor thread before the handler sees it.
+When an agent's nodes share a process (:meth:`Context.in_process`), its internal topics travel
+between them on an in-process bus, so no datagram from the network reaches them.
 """
 
 from __future__ import annotations
@@ -9,26 +16,65 @@ from __future__ import annotations
 import logging
 import re
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
+from antalate_lcm import validation
+from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.bus import Bus, Subscription
 from antalate_lcm.config import Config
+from antalate_lcm.errors import AntalateError
 from antalate_lcm.executor import Executor, Timer
-from antalate_lcm.topics import TopicSpec, channel_regex
+from antalate_lcm.security import (
+    Authenticator,
+    HighWaterStore,
+    ReplayGuard,
+    SecurityPolicy,
+    default_state_dir,
+    network_reachable,
+    sign,
+)
+from antalate_lcm.topics import OPERATOR_INPUTS, PERSISTED_TYPES, TopicSpec, channel_regex, is_internal
+
+#: The bus name of :meth:`Context.in_process` (memq://, one per process).
+INPROC_BUS = "_inproc"
+#: s between the reminders an insecure node logs.
+INSECURE_REMINDER = 60.0
+
+
+class InsecureBus(AntalateError):
+    """A node would consume an internal topic from a network-reachable bus with no swarm key."""
 
 
 @dataclass
 class Context:
-    """What the nodes of one process share: the bus connections and the executor thread."""
+    """What the nodes of one process share: the bus connections and the executor thread.
+
+    ``inproc_bus`` names a memq:// bus that carries the agents' internal topics between the nodes
+    of this process (see :meth:`in_process`); None when each node runs in its own process.
+    """
 
     bus: Bus
     executor: Executor
+    inproc_bus: str | None = None
 
     @classmethod
     def create(cls, config: Config) -> Context:
         return cls(Bus(config.buses), Executor())
+
+    @classmethod
+    def in_process(cls, buses: Mapping[str, str]) -> Context:
+        """A context for every node of one or more agents in this process (``antalate agent``, demo).
+
+        Internal topics (MC_STATE, HLC_STATE, VELOCITY_CMD, ...) are delivered between this
+        process's nodes over memq:// and still published on the configured buses for the operator
+        and the tools; a spoofed datagram on the LAN never reaches the MC or the HLC.
+        """
+        if INPROC_BUS in buses:
+            raise AntalateError(f"bus name {INPROC_BUS!r} is reserved for the in-process bus")
+        return cls(Bus({**buses, INPROC_BUS: "memq://"}), Executor(), inproc_bus=INPROC_BUS)
 
     def close(self) -> None:
         self.executor.stop()
@@ -58,10 +104,15 @@ class Node:
     """Base class of MC, HLC, BMA, OSC and the operator console.
 
     Lifecycle: construct (no I/O) → :meth:`start` (subscribe, start timers, ``on_start``) →
-    :meth:`stop` (``on_stop``, cancel timers, unsubscribe). Callbacks run on the executor thread.
+    :meth:`stop` (cancel timers, unsubscribe, then ``on_stop``). Callbacks run on the executor thread.
+
+    A node whose ``kind`` is ``"operator"`` watches agents rather than flying one: it may consume
+    agents' state from a network bus without a swarm key (what it reads moves no vehicle).
     """
 
     kind = "node"
+    #: Wall clock for ``header.utime`` and the replay window (tests and the console inject theirs).
+    wallclock: Callable[[], float] = staticmethod(time.time)
 
     def __init__(self, config: Config, context: Context, *, name: str | None = None) -> None:
         self.config = config
@@ -74,6 +125,15 @@ class Node:
         self._subs: list[Subscription] = []
         self._timers: list[Timer] = []
         self.started = False
+        sec = config.security
+        self.security = SecurityPolicy(sec.swarm_key, tuple(sec.previous_keys), sec.window)
+        self._auth: Authenticator | None = None
+        self._last_utime = 0
+        self._invalid_log = RateLimitedLog(self.log, period=10.0)
+        #: Messages dropped by input validation (the authenticator counts its own rejections).
+        self.invalid = 0
+        self._insecure: dict[str, str] = {}
+        self._open_inputs: dict[str, str] = {}
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -86,18 +146,95 @@ class Node:
         if not self.started:
             return
         self.started = False
-        try:
-            self.context.executor.run_sync(self.on_stop)
-        finally:
+
+        def shutdown() -> None:
+            # Timers and subscriptions go first, on the executor thread (so none is mid-run): a
+            # timer that ran after on_stop would meet a closed adapter (a false LINK_LOST).
             for timer in self._timers:
                 timer.cancel()
             for sub in self._subs:
                 self.context.bus.unsubscribe(sub)
             self._timers.clear()
             self._subs.clear()
+            self.on_stop()
+
+        self.context.executor.run_sync(shutdown)
 
     def on_start(self) -> None:
         """Subscribe and create timers here (runs on the executor thread)."""
+
+    # ------------------------------------------------------------------ security
+    @property
+    def authenticator(self) -> Authenticator | None:
+        """The checks every consumed message passes with a swarm key (None without one)."""
+        if self._auth is None and self.security.enabled:
+            store = None
+            state_dir = self.replay_state_dir()
+            if state_dir is not None:
+                store = HighWaterStore(state_dir / f"{self.agent}.{self.name}.replay.json")
+            self._auth = Authenticator(
+                self.security, self.log, guard=ReplayGuard(store, PERSISTED_TYPES), wallclock=self.wallclock
+            )
+        return self._auth
+
+    def replay_state_dir(self) -> Path | None:
+        """Where this node keeps its replay memory: ``[security] state_dir``, else the user's state
+        directory, else (every bus memq:// or file://, nothing survives the process anyway) nowhere."""
+        if self.config.security.state_dir:
+            return Path(self.config.security.state_dir).expanduser()
+        if any(network_reachable(url) for url in self.config.buses.values()):
+            return default_state_dir()
+        return None
+
+    def _check_exposure(self, topic: str, bus: str) -> None:
+        """Refuse (or, with ``insecure``, loudly accept) an unauthenticated input from the network."""
+        url = self.context.bus.urls.get(bus, "")
+        if self.security.enabled or not network_reachable(url):
+            return
+        if topic in OPERATOR_INPUTS:
+            if not self._open_inputs:
+                self.log.warning(
+                    "no [security] swarm_key: anyone who can send to bus %r (%s) can command %s "
+                    "(take off, land, steer); see docs/security.md", bus, url, self.agent,
+                )
+            self._open_inputs[topic] = bus
+            return
+        if self.kind == "operator" or not is_internal(topic):
+            return
+        if not self.config.security.insecure:
+            raise InsecureBus(
+                f"{self.kind} of {self.agent} would take {topic} from bus {bus!r} ({url}), which any host on "
+                "the network can send to, with no swarm key: set [security] swarm_key (`antalate keygen`) "
+                "in every config of the swarm, or run the agent's nodes in one process (`antalate agent`, "
+                "internal topics then stay in memory); [security] insecure = true accepts the risk"
+            )
+        first = not self._insecure
+        self._insecure[topic] = bus
+        if first:
+            self._warn_insecure()
+            self.create_timer(INSECURE_REMINDER, self._warn_insecure, first_delay=INSECURE_REMINDER)
+
+    def _warn_insecure(self) -> None:
+        where = ", ".join(f"{t} on {b!r}" for t, b in sorted(self._insecure.items()))
+        self.log.warning(
+            "INSECURE ([security] insecure = true, no swarm key): anyone on the network can spoof %s of %s "
+            "(launch it, fly it, ground it, put it in ERROR)", where, self.agent,
+        )
+
+    def _admit(self, channel: str, msg: Any, expected_sender: str | None) -> bool:
+        """Authenticate (with a key) and validate one consumed message; False = dropped, logged."""
+        auth = self.authenticator
+        if auth is not None and auth.check(msg, channel, expected_sender=expected_sender) is not None:
+            return False
+        problem = validation.problem(msg)
+        if problem is not None:
+            self.invalid += 1
+            self._invalid_log.log(
+                ("invalid", channel), logging.WARNING, "rejected %s on %s from %r seq %d: %s (%d invalid so far)",
+                type(msg).__name__, channel, msg.header.agent, msg.header.seq, problem, self.invalid,
+            )
+            return False
+        return True
 
     def on_stop(self) -> None:
         """Release what ``on_start`` acquired beyond subscriptions and timers."""
@@ -121,51 +258,96 @@ class Node:
         before_encode: Callable[[Any], None] | None = None,
         **fields: str,
     ) -> bool:
-        """Stamp ``msg.header`` (time, agent, per-topic seq) and send it on every bus of the topic.
+        """Stamp ``msg.header`` (time, agent, per-topic seq), sign it with the swarm key, send it on
+        every bus of the topic.
 
         ``seq`` overrides the counter (a resend must carry the seq of the original: it is the
-        acknowledgement key); ``before_encode`` runs on the stamped message (to sign it).
+        acknowledgement key; its ``utime`` is fresh, so the receivers' replay guard lets it through).
+        ``before_encode`` runs on the stamped message before signing (kept for old callers: signing
+        is done here for every message, there is no need to sign in a hook).
         """
         key = (topic, tuple(sorted(fields.items())))
         pub = self._publishers.get(key)
         if pub is None:
-            pub = self._publishers[key] = _Publisher(self.config.topic_buses(topic), self.channel(topic, **fields))
+            pub = self._publishers[key] = _Publisher(self._publish_buses(topic), self.channel(topic, **fields))
         if seq is None:
             pub.seq += 1
             seq = pub.seq
+        # Strictly increasing per node, so two messages in one microsecond are not a "replay".
+        utime = max(int(self.wallclock() * 1_000_000), self._last_utime + 1)
+        self._last_utime = utime
         header = msg.header
-        header.utime = now_utime()
+        header.utime = utime
         header.agent = self.agent
         header.seq = seq
         if before_encode is not None:
             before_encode(msg)
+        if self.security.enabled:
+            sign(msg, self.security.key)
         data = msg.encode()
         ok = True
         for bus in pub.buses:
             ok = self.context.bus.publish(bus, pub.channel, data) and ok
         return ok
 
+    def _publish_buses(self, topic: str) -> list[str]:
+        """The topic's buses (plus the in-process bus for an internal topic), one per distinct URL."""
+        names = self.config.topic_buses(topic)
+        inproc = self.context.inproc_bus
+        if inproc is not None and is_internal(topic):
+            names = [inproc, *names]
+        out: list[str] = []
+        seen: set[str] = set()
+        for name in names:
+            url = self.context.bus.urls.get(name, name)
+            if url not in seen:  # two names for one URL are one LCM instance: send once
+                seen.add(url)
+                out.append(name)
+        return out
+
+    def _subscribe_bus(self, topic: str) -> str:
+        inproc = self.context.inproc_bus
+        if inproc is not None and is_internal(topic):
+            return inproc
+        return self.config.topic_buses(topic)[0]
+
     def subscribe(self, topic: str, handler: Callable[[Any], None], **fields: str) -> Subscription:
-        """Deliver this agent's ``topic`` (decoded) to ``handler`` on the executor thread."""
+        """Deliver this agent's ``topic`` (decoded, authenticated, validated) to ``handler`` on the
+        executor thread."""
         spec = self.topic_spec(topic)
-        bus = self.config.topic_buses(topic)[0]
+        bus = self._subscribe_bus(topic)
+        self._check_exposure(topic, bus)
+        channel = self.channel(topic, **fields)
+        sender = fields.get("agent", self.agent) if is_internal(topic) and "{agent}" in spec.channel else None
         post = self.context.executor.call_soon
-        sub = self.context.bus.subscribe(
-            bus, self.channel(topic, **fields), spec.msg_type, lambda _ch, msg: post(handler, msg)
-        )
+
+        def deliver(msg: Any) -> None:
+            if self._admit(channel, msg, sender):
+                handler(msg)
+
+        sub = self.context.bus.subscribe(bus, channel, spec.msg_type, lambda _ch, msg: post(deliver, msg))
         self._subs.append(sub)
         return sub
 
     def subscribe_all(self, topic: str, handler: Callable[[Any, TopicMatch], None], **fields: str) -> Subscription:
-        """Deliver ``topic`` from every agent (template fields not given match anything)."""
+        """Deliver ``topic`` from every agent (template fields not given match anything).
+
+        Always from the configured bus, never the in-process one: peers may be other processes.
+        """
         spec = self.topic_spec(topic)
         bus = self.config.topic_buses(topic)[0]
+        self._check_exposure(topic, bus)
         pattern = re.compile(channel_regex(spec.channel, **fields))
+        bound = is_internal(topic) and "{agent}" in spec.channel
         post = self.context.executor.call_soon
+
+        def admit(channel: str, msg: Any, match: TopicMatch) -> None:
+            if self._admit(channel, msg, match.fields.get("agent") if bound else None):
+                handler(msg, match)
 
         def deliver(channel: str, msg: Any) -> None:
             m = pattern.fullmatch(channel)
-            post(handler, msg, TopicMatch(channel, m.groupdict() if m else {}))
+            post(admit, channel, msg, TopicMatch(channel, m.groupdict() if m else {}))
 
         sub = self.context.bus.subscribe(bus, pattern.pattern, spec.msg_type, deliver, regex=True)
         self._subs.append(sub)

@@ -1,15 +1,32 @@
-"""Message authentication (docs/design.md §10): HMAC-SHA256 with a swarm key and a replay window.
+"""Message authentication (docs/design.md §10, docs/security.md): HMAC-SHA256 with a swarm key, a
+replay window and a per-sender replay guard whose memory of operator inputs survives restarts.
 
 The MAC lives in ``header.mac`` of every message and covers the whole encoded message with the MAC
 empty, so any LCM implementation (C, Java, Go) can sign and verify it with a plain HMAC.
+
+Pure apart from :class:`HighWaterStore` (one small JSON file): :class:`Authenticator` is what a node
+runs on every message it consumes; it is single-threaded by design (the node calls it on its
+executor thread).
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import hmac
+import json
+import logging
+import os
+import secrets
+import tempfile
 import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
 from typing import Any, Protocol
+
+log = logging.getLogger("antalate.security")
 
 
 class SignedMsg(Protocol):
@@ -30,20 +47,257 @@ def _unsigned_bytes(msg: SignedMsg) -> bytes:
         header.mac_len, header.mac = saved_len, saved_mac
 
 
+def _digest(key: str, data: bytes) -> bytes:
+    return hmac.new(key.encode(), data, hashlib.sha256).digest()
+
+
 def sign(msg: SignedMsg, key: str) -> None:
     """Fill ``mac`` in place; call after the header (utime, seq) is final."""
-    digest = hmac.new(key.encode(), _unsigned_bytes(msg), hashlib.sha256).digest()
+    digest = _digest(key, _unsigned_bytes(msg))
     msg.header.mac_len, msg.header.mac = len(digest), digest
 
 
-def verify(msg: SignedMsg, key: str, window: float, *, now: float | None = None) -> str | None:
-    """Return None if authentic and fresh, else the reason to reject (for the log)."""
+def generate_key() -> str:
+    """A new random swarm key: 32 random bytes, URL-safe text (what ``antalate keygen`` prints)."""
+    return secrets.token_urlsafe(32)
+
+
+class Reason(Enum):
+    """Why a message was dropped (the counters' keys)."""
+
+    UNSIGNED = "unsigned"
+    FORGED = "forged"
+    STALE = "stale"
+    REPLAYED = "replayed"
+    WRONG_SENDER = "wrong sender"
+
+
+@dataclass(frozen=True)
+class Rejection:
+    reason: Reason
+    text: str
+
+    def __str__(self) -> str:
+        return self.text
+
+
+def check_mac(msg: SignedMsg, keys: Iterable[str]) -> Rejection | None:
+    """None if ``msg`` carries a valid MAC under one of ``keys`` (the current key first)."""
     if msg.header.mac_len == 0:
-        return "unsigned message while a swarm key is configured"
-    expected = hmac.new(key.encode(), _unsigned_bytes(msg), hashlib.sha256).digest()
-    if not hmac.compare_digest(expected, bytes(msg.header.mac)):
-        return "bad MAC (forged, or signed with another key)"
-    age = (time.time() if now is None else now) - msg.header.utime / 1e6
-    if abs(age) > window:
-        return f"outside the {window:g} s replay window (age {age:+.1f} s)"
-    return None
+        return Rejection(Reason.UNSIGNED, "unsigned message while a swarm key is configured")
+    data = _unsigned_bytes(msg)
+    mac = bytes(msg.header.mac)
+    for key in keys:
+        if key and hmac.compare_digest(_digest(key, data), mac):
+            return None
+    return Rejection(Reason.FORGED, "bad MAC (forged, or signed with another key)")
+
+
+def check_window(msg: SignedMsg, window: float, now: float) -> Rejection | None:
+    """None if ``header.utime`` is within ``window`` s of ``now`` (wall clock, s)."""
+    age = now - msg.header.utime / 1e6
+    if abs(age) <= window:
+        return None
+    if age < 0:
+        text = f"from the future: the sender's clock is {-age:.1f} s ahead of ours (window {window:g} s)"
+    else:
+        text = f"outside the {window:g} s replay window (age {age:+.1f} s: replayed, or clocks {age:.1f} s apart)"
+    return Rejection(Reason.STALE, text)
+
+
+def verify(
+    msg: SignedMsg, key: str, window: float, *, now: float | None = None, previous_keys: Iterable[str] = ()
+) -> str | None:
+    """Return None if authentic and fresh, else the reason to reject (for the log).
+
+    No replay guard here: see :class:`Authenticator` for what a node does with every message.
+    """
+    problem = check_mac(msg, (key, *previous_keys)) or check_window(msg, window, time.time() if now is None else now)
+    return None if problem is None else problem.text
+
+
+# ---------------------------------------------------------------------------------------------- replay
+class HighWaterStore:
+    """Per-sender high-water ``utime`` of accepted operator inputs, in one small JSON file.
+
+    Written atomically (temporary file, fsync, rename) after every change, so a power cut leaves
+    the old or the new file, never half of one. A missing file is an empty memory; an unreadable
+    one is reported and replaced (the replay window still bounds what could be replayed then).
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.writes = 0
+        self._marks: dict[str, int] = {}
+        try:
+            raw = json.loads(self.path.read_text(encoding="utf-8"))
+            if not isinstance(raw, dict):
+                raise ValueError("not a JSON object")
+            self._marks = {str(k): int(v) for k, v in raw.items()}
+        except FileNotFoundError:
+            pass
+        except (OSError, ValueError, TypeError) as exc:
+            log.warning("replay memory %s is unreadable (%s): starting empty", self.path, exc)
+
+    def load(self) -> dict[str, int]:
+        return dict(self._marks)
+
+    def save(self, marks: dict[str, int]) -> None:
+        self._marks = dict(marks)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=self.path.name + ".", suffix=".tmp", dir=self.path.parent)
+            try:
+                with os.fdopen(fd, "w", encoding="utf-8") as f:
+                    json.dump(self._marks, f, sort_keys=True)
+                    f.flush()
+                    os.fsync(f.fileno())
+                os.replace(tmp, self.path)
+            except BaseException:
+                with contextlib.suppress(OSError):
+                    os.unlink(tmp)
+                raise
+            self.writes += 1
+        except OSError as exc:
+            log.warning("cannot write the replay memory %s: %s (kept in memory only)", self.path, exc)
+
+
+class ReplayGuard:
+    """Per (sender, message type) strictly increasing ``header.utime``.
+
+    A resend by the console re-stamps ``utime`` (and keeps ``seq``), so it passes; the MC's seq
+    logic makes it idempotent. The same decoded object handed to several subscriptions of one node
+    (one datagram) is one delivery, not a replay: the last accepted object per key is remembered.
+    Keys whose message type is in ``persisted`` are written to ``store`` on every acceptance.
+    """
+
+    def __init__(self, store: HighWaterStore | None = None, persisted: Iterable[str] = ()) -> None:
+        self._store = store
+        self._persisted = frozenset(persisted)
+        self._marks: dict[str, int] = store.load() if store is not None else {}
+        self._last: dict[str, Any] = {}
+
+    @staticmethod
+    def key(sender: str, type_name: str) -> str:
+        return f"{type_name}/{sender}"
+
+    def check(self, msg: Any, sender: str, type_name: str) -> Rejection | None:
+        key = self.key(sender, type_name)
+        mark = self._marks.get(key)
+        utime = int(msg.header.utime)
+        if mark is not None and utime <= mark:
+            if self._last.get(key) is msg:
+                return None
+            return Rejection(
+                Reason.REPLAYED,
+                f"replayed or out of order: utime {utime} is not after the last accepted {mark} "
+                f"({(mark - utime) / 1e6:.3f} s earlier)",
+            )
+        self._marks[key] = utime
+        self._last[key] = msg
+        if self._store is not None and type_name in self._persisted:
+            self._store.save({k: v for k, v in self._marks.items() if k.split("/", 1)[0] in self._persisted})
+        return None
+
+
+# ---------------------------------------------------------------------------------------------- policy
+@dataclass(frozen=True)
+class SecurityPolicy:
+    """The ``[security]`` settings a node needs, in one value (keys first: the current one signs)."""
+
+    key: str = ""
+    previous_keys: tuple[str, ...] = ()
+    window: float = 5.0
+
+    @property
+    def enabled(self) -> bool:
+        return bool(self.key)
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        return (self.key, *self.previous_keys)
+
+
+class Authenticator:
+    """What a node runs on every message it consumes: MAC, window, sender binding, replay guard.
+
+    Rejections are counted by reason and logged once per (reason, channel) per ``log_period``.
+    """
+
+    def __init__(
+        self,
+        policy: SecurityPolicy,
+        logger: logging.Logger,
+        *,
+        guard: ReplayGuard | None = None,
+        wallclock: Callable[[], float] = time.time,
+        log_period: float = 10.0,
+    ) -> None:
+        from antalate_lcm._ratelimit import RateLimitedLog
+
+        self.policy = policy
+        self.guard = guard or ReplayGuard()
+        self._wallclock = wallclock
+        self._log = RateLimitedLog(logger, period=log_period)
+        self.rejected: dict[Reason, int] = {}
+        self.accepted = 0
+
+    def check(self, msg: Any, channel: str, *, expected_sender: str | None = None) -> Rejection | None:
+        """None to deliver ``msg``; else the rejection (already counted and logged)."""
+        problem = check_mac(msg, self.policy.keys)
+        if problem is None:
+            problem = check_window(msg, self.policy.window, self._wallclock())
+        sender = str(msg.header.agent)
+        if problem is None and expected_sender is not None and sender != expected_sender:
+            problem = Rejection(
+                Reason.WRONG_SENDER, f"signed by {sender!r} but {channel} carries only {expected_sender!r}'s messages"
+            )
+        if problem is None:
+            problem = self.guard.check(msg, sender, type(msg).__name__)
+        if problem is None:
+            self.accepted += 1
+            return None
+        n = self.rejected.get(problem.reason, 0) + 1
+        self.rejected[problem.reason] = n
+        self._log.log(
+            (problem.reason, channel),
+            logging.WARNING,
+            "dropped %s on %s from %r seq %d: %s (%d %s so far)",
+            type(msg).__name__,
+            channel,
+            sender,
+            msg.header.seq,
+            problem.text,
+            n,
+            problem.reason.value,
+        )
+        return problem
+
+
+def network_reachable(url: str) -> bool:
+    """Whether a bus URL can carry datagrams from other hosts (anything but memq:// and file://)."""
+    scheme = url.split("://", 1)[0].lower()
+    return scheme not in ("memq", "file")
+
+
+def default_state_dir() -> Path:
+    """``$XDG_STATE_HOME/antalate`` (``~/.local/state/antalate`` when unset)."""
+    base = os.environ.get("XDG_STATE_HOME") or os.path.join(os.path.expanduser("~"), ".local", "state")
+    return Path(base) / "antalate"
+
+
+__all__ = [
+    "Authenticator",
+    "HighWaterStore",
+    "Reason",
+    "Rejection",
+    "ReplayGuard",
+    "SecurityPolicy",
+    "check_mac",
+    "check_window",
+    "default_state_dir",
+    "generate_key",
+    "network_reachable",
+    "sign",
+    "verify",
+]

@@ -78,6 +78,24 @@ TOPICS: dict[str, TopicSpec] = {
     "SWARM_DIRECTION_CMD": TopicSpec(direction_cmd_t, "SWARM/DIRECTION_CMD"),
 }
 
+#: Topics whose messages come from outside the agent (an operator, the station via the OSC, a tool):
+#: any sender may publish them, so they are authenticated by the swarm key alone.
+OPERATOR_INPUTS = frozenset(
+    {"OPERATOR_CMD", "DIRECTION_CMD", "OPERATOR_PAYLOAD", "SWARM_OPERATOR_CMD", "SWARM_DIRECTION_CMD"}
+)
+
+#: Message types whose replay memory (per-sender high-water utime) survives a restart: the ones an
+#: operator sends. State and velocity messages are superseded within a period anyway.
+PERSISTED_TYPES = frozenset({"operator_cmd_t", "direction_cmd_t", "payload_t"})
+
+
+def is_internal(topic: str) -> bool:
+    """Whether ``topic`` is published by the agent's own nodes (MC_STATE, HLC_STATE, TELEMETRY,
+    VELOCITY_CMD, a cascaded behavior state, ...): its sender must be the agent its channel names,
+    and between nodes of one process it travels in memory."""
+    return topic not in OPERATOR_INPUTS
+
+
 _FIELD = re.compile(r"\{(\w+)\}")
 
 

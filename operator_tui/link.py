@@ -9,11 +9,11 @@ instead of thousands of cross-thread calls, and decodes there. A telemetry sampl
 newer one from the same agent within one batch is never shown, so it is not even decoded. State
 messages are all decoded: each ``mc_state_t`` may carry an acknowledgement, each HLC change an event.
 
-Sending happens on the caller's (UI) thread straight to :meth:`Bus.publish` (thread-safe), so a
+Sending happens on the caller's (UI) thread, and only there, through :meth:`Node.publish` (which
+stamps the header, signs with the swarm key and hands the datagram to the thread-safe bus), so a
 key press reaches the wire without waiting for either thread. The console owns the ``header.seq``
-of operator commands (a resend must repeat it, see :mod:`operator_tui.commands`), so it does not
-use :meth:`Node.publish`, which stamps a fresh seq on every message; it builds the header itself
-and signs the final message when a swarm key is configured (docs/design.md §10).
+of operator commands (a resend must repeat it, see :mod:`operator_tui.commands`) and passes it to
+``publish``; ``utime`` is fresh on every send, so a resend passes the agents' replay guard.
 """
 
 from __future__ import annotations
@@ -31,7 +31,6 @@ from antalate_lcm.bus import Subscription
 from antalate_lcm.config import Config
 from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
 from antalate_lcm.node import Context, Node
-from antalate_lcm.security import sign
 from antalate_lcm.topics import channel_regex
 from operator_tui.commands import COMMANDS
 from operator_tui.model import WATCHED_TOPICS
@@ -165,21 +164,12 @@ class OperatorNode(Node):
             out.append(Incoming(topic, fields.get("agent") or msg.header.agent, msg, received, fields))
         return out
 
-    # ------------------------------------------------------------------ sending (any thread)
-    def _header(self, msg: Any, seq: int) -> None:
-        msg.header.utime = int(self.wallclock() * 1_000_000)
-        msg.header.agent = self.agent
-        msg.header.seq = seq
-
-    def _send(self, topic: str, msg: Any, target: str) -> str:
-        if self.swarm_key:
-            sign(msg, self.swarm_key)
-        data = msg.encode()
-        channel = self.channel(topic, agent=target) if target else self.channel(topic)
-        for bus in self.config.topic_buses(topic):
-            self.context.bus.publish(bus, channel, data)
+    # ------------------------------------------------------------------ sending (the UI thread)
+    def _send(self, topic: str, msg: Any, target: str, seq: int) -> str:
+        fields = {"agent": target} if target else {}
+        self.publish(topic, msg, seq=seq, **fields)
         self.sent += 1
-        return channel
+        return self.channel(topic, **fields)
 
     def send_operator_cmd(self, command: str, target: str, seq: int, *, altitude: float = 0.0) -> str:
         """Send (or resend: same seq, fresh utime and MAC) an operator command; returns the channel.
@@ -187,22 +177,20 @@ class OperatorNode(Node):
         ``target`` "" goes to every agent on SWARM_OPERATOR_CMD, otherwise on the agent's OPERATOR_CMD.
         """
         msg = operator_cmd_t()
-        self._header(msg, seq)
         msg.command = COMMANDS[command]
         msg.target = target
         msg.altitude = altitude
-        return self._send("OPERATOR_CMD" if target else "SWARM_OPERATOR_CMD", msg, target)
+        return self._send("OPERATOR_CMD" if target else "SWARM_OPERATOR_CMD", msg, target, seq)
 
     def send_direction(self, *, active: bool, azimuth: float, speed: float, target: str) -> str:
         """Send a direction command to one agent, or to every agent when ``target`` is ""."""
         self._direction_seq += 1
         msg = direction_cmd_t()
-        self._header(msg, self._direction_seq)
         msg.active = active
         msg.azimuth = azimuth
         msg.speed = speed
         msg.target = target
-        return self._send("DIRECTION_CMD" if target else "SWARM_DIRECTION_CMD", msg, target)
+        return self._send("DIRECTION_CMD" if target else "SWARM_DIRECTION_CMD", msg, target, self._direction_seq)
 
     def bus_summary(self) -> str:
         """'lan=udpm://…' for the topics the console watches (shown in the status bar)."""

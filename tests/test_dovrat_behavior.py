@@ -8,7 +8,6 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.behavior import _SignOnEncode
 from antalate_lcm.msgs import direction_cmd_t, payload_t, peer_detection_t, telemetry_t, velocity_cmd_t
 from tests.bma_support import AGENT, Harness, harness, make_config, wait_for
 
@@ -40,11 +39,13 @@ def _payload(h: Harness, obj: Any) -> None:
 
 
 def _direction(h: Harness, azimuth: float, speed: float, *, target: str = "", topic: str = "SWARM_DIRECTION_CMD",
-               active: bool = True, key: str = "") -> None:
+               active: bool = True, unsigned: bool = False) -> None:
+    """A direction from the probe node (signed by Node.publish when the config has a key)."""
     msg = direction_cmd_t()
     msg.active, msg.azimuth, msg.speed, msg.target = active, azimuth, speed, target
-    if key:  # signed after Node.publish stamps the header, as an operator console would
-        h.probe.publish(topic, _SignOnEncode(msg, key))
+    if unsigned:  # what an attacker without the key can send: a fresh header, no MAC
+        msg.header.utime, msg.header.agent, msg.header.seq = int(time.time() * 1e6), "attacker", 1
+        h.context.bus.publish("lan", h.probe.channel(topic), msg.encode())
     else:
         h.probe.publish(topic, msg)
 
@@ -152,8 +153,8 @@ def test_unsigned_direction_rejected_when_a_swarm_key_is_set() -> None:
         h.bma("swarm")
         h.mc_state("MISSION")
         _heading(h, 0.0)
-        _direction(h, 90.0, 3.0)
+        _direction(h, 90.0, 3.0, unsigned=True)
         time.sleep(0.15)
         assert _latest(cmds, h).vy == 0.0
-        _direction(h, 90.0, 3.0, key=key)
+        _direction(h, 90.0, 3.0)
         assert wait_for(lambda: cmds[-1].vy == pytest.approx(3.0))

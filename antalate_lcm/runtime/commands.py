@@ -67,8 +67,6 @@ def _cmd_bma(args: argparse.Namespace) -> int:
 
 
 def _cmd_agent(args: argparse.Namespace) -> int:
-    from antalate_lcm.bus import Bus
-    from antalate_lcm.executor import Executor
     from antalate_lcm.runtime.agent import agent_nodes, shared_buses, swarm_configs, validate
     from antalate_lcm.runtime.launch import run_until_signal
 
@@ -81,7 +79,8 @@ def _cmd_agent(args: argparse.Namespace) -> int:
         raise AntalateError(f"two agents share the name(s) {', '.join(dup)}: give each config its own [agent] name")
     for cfg in configs:
         validate(cfg)
-    context = Context(Bus(shared_buses(configs)), Executor())
+    # Internal topics between this process's nodes in memory: a spoofed LAN datagram never reaches them.
+    context = Context.in_process(shared_buses(configs))
     nodes = [node for cfg in configs for node in agent_nodes(cfg, context)]
     return run_until_signal(context, nodes)
 

@@ -14,11 +14,11 @@ from typing import Any
 from antalate_lcm.bus import Bus
 from antalate_lcm.config import Config, parse_config
 from antalate_lcm.errors import MulticastUnavailable
-from antalate_lcm.executor import Executor
 from antalate_lcm.node import Context, Node
 from antalate_lcm.runtime.agent import agent_nodes, swarm_configs, validate
 from antalate_lcm.runtime.launch import run_until_signal
 from antalate_lcm.runtime.scripted_operator import Phase, ScriptedOperator
+from antalate_lcm.security import generate_key
 from antalate_lcm.station import StationServer, StationSettings
 
 log = logging.getLogger("antalate.demo")
@@ -28,11 +28,17 @@ log = logging.getLogger("antalate.demo")
 DEMO_URL = "udpm://239.255.76.67:7667?ttl=0"
 
 
-def demo_document(url: str, *, station: str | None = None) -> dict[str, Any]:
-    """The config of one demo agent (as a TOML-like dict): the template swarm application."""
+def demo_document(url: str, *, station: str | None = None, swarm_key: str = "") -> dict[str, Any]:
+    """The config of one demo agent (as a TOML-like dict): the template swarm application.
+
+    The demo's operator is in the same process, so it signs with a key made for this run: ttl=0
+    limits what the demo sends, not what it receives (docs/security.md), and an unsigned demo would
+    take off for any datagram from the LAN. Other processes can watch it, not command it.
+    """
     doc: dict[str, Any] = {
         "agent": {"name": "sim"},
         "buses": {"lan": url},
+        "security": {"swarm_key": swarm_key or generate_key()},
         "hlc": {"autopilot": "sim", "default_takeoff_altitude": 10.0},
         "bma": [
             {
@@ -54,15 +60,15 @@ def demo_document(url: str, *, station: str | None = None) -> dict[str, Any]:
 
 def open_context(url: str) -> tuple[Context, str]:
     """A context on ``url``, or on ``memq://`` when this host has no multicast route (said once)."""
-    bus = Bus({"lan": url})
+    probe = Bus({"lan": url})
     try:
-        bus.open()
+        probe.open()
     except MulticastUnavailable as exc:
-        bus.close()
         log.warning("%s\nThe demo carries on in one process on memq:// (invisible to other processes).", exc)
         url = "memq://"
-        bus = Bus({"lan": url})
-    return Context(bus, Executor()), url
+    finally:
+        probe.close()
+    return Context.in_process({"lan": url}), url
 
 
 def build_swarm(n: int, url: str, *, station: str | None = None) -> list[Config]:

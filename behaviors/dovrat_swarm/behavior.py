@@ -13,6 +13,7 @@ the swarm is still on the ground, and the latest heading, are known from the fir
 from __future__ import annotations
 
 import logging
+import math
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -32,6 +33,7 @@ from behaviors.dovrat_swarm.logic import (
     OperatorDirection,
     SwarmCommand,
     SwarmParams,
+    finite_direction,
     parse_detection_payload,
     swarm_command,
 )
@@ -101,25 +103,31 @@ class DovratSwarm(Behavior):
 
     # ------------------------------------------------------------------ inputs
     def _on_telemetry(self, msg: telemetry_t) -> None:
-        self._heading = float(msg.heading)
+        heading = float(msg.heading)
+        if not math.isfinite(heading):  # unknown (an adapter without a compass), not an error
+            return
+        self._heading = heading
         self._heading_at = self.ctx.now
 
     def _on_direction(self, msg: direction_cmd_t) -> None:
         if msg.target not in ("", self.ctx.agent):
             return
-        why = self.ctx.verify(msg)
-        if why is not None:
-            self._reject_log.log("direction", logging.WARNING, "rejected a direction command from %r: %s",
-                                 msg.header.agent, why)
+        # Authenticated and range-checked by the node already (docs/security.md); this guard keeps
+        # the rule safe if the behavior is ever fed by something else.
+        direction = OperatorDirection(bool(msg.active), float(msg.azimuth), float(msg.speed))
+        if not finite_direction(direction):
+            self._reject_log.log("direction", logging.WARNING, "ignored a direction from %r: azimuth %r, speed %r",
+                                 msg.header.agent, msg.azimuth, msg.speed)
             return
-        self.direction = OperatorDirection(bool(msg.active), float(msg.azimuth), float(msg.speed))
+        self.direction = direction
         self.log.info(
             "operator direction: %s",
             f"{msg.azimuth:.0f} deg at {msg.speed:g} m/s" if msg.active else "none",
         )
 
     def _on_peer_detection(self, msg: peer_detection_t) -> None:
-        detection = Detection(bool(msg.detected), int(msg.count), float(msg.nearest_range), float(msg.nearest_bearing))
+        detection = Detection(bool(msg.detected), max(0, int(msg.count)), float(msg.nearest_range),
+                              float(msg.nearest_bearing))
         self.detections.update(detection, self.ctx.now)
 
     def _on_payload(self, msg: payload_t) -> None:

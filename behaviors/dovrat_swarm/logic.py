@@ -92,6 +92,10 @@ def swarm_command(
     ``heading`` is degrees from north, clockwise; None when unknown (the drift is then omitted).
     """
     vx, vy = params.forward_speed, 0.0
+    if heading is not None and not math.isfinite(heading):
+        heading = None
+    if direction is not None and not finite_direction(direction):
+        direction = None
     if direction is not None and direction.active and heading is not None and params.direction_weight:
         speed = direction.speed if direction.speed > 0 else params.forward_speed
         rel = math.radians(direction.azimuth - heading)
@@ -137,20 +141,34 @@ def parse_detection_payload(data: bytes) -> Detection | None:
     """The station's operator payload ``{"detected": bool, "count", "nearest_range", "nearest_bearing"}``.
 
     Returns None for a payload that is not such an object (other applications may use the payload
-    topic for other things: those are not errors, only not detections).
+    topic for other things: those are not errors, only not detections) and for one whose fields
+    have the wrong type or are not finite (``Infinity``, ``NaN``, ``"3"``, ``true`` as a count):
+    a signed payload proves who sent it, not that it makes sense.
     """
     try:
-        obj: Any = json.loads(bytes(data).decode("utf-8"))
+        obj: Any = json.loads(bytes(data).decode("utf-8"), parse_constant=_no_constant)
     except (UnicodeDecodeError, ValueError):
         return None
     if not isinstance(obj, dict) or not isinstance(obj.get("detected"), bool):
         return None
-    try:
-        count = int(obj.get("count", 1 if obj["detected"] else 0))
-        rng = float(obj.get("nearest_range", 0.0))
-        bearing = float(obj.get("nearest_bearing", 0.0))
-    except (TypeError, ValueError):
+    count = obj.get("count", 1 if obj["detected"] else 0)
+    rng = obj.get("nearest_range", 0.0)
+    bearing = obj.get("nearest_bearing", 0.0)
+    if not (isinstance(count, int) and not isinstance(count, bool) and 0 <= count <= 1_000_000):
         return None
-    if not (math.isfinite(rng) and math.isfinite(bearing)):
+    if not all(_finite_number(v) for v in (rng, bearing)):
         return None
-    return Detection(obj["detected"], count, rng, bearing)
+    return Detection(obj["detected"], count, float(rng), float(bearing))
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not JSON")
+
+
+def _finite_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def finite_direction(direction: OperatorDirection) -> bool:
+    """Whether a direction can enter the arithmetic (the node validates too; this is the rule's own guard)."""
+    return math.isfinite(direction.azimuth) and math.isfinite(direction.speed) and direction.speed >= 0

@@ -1,0 +1,90 @@
+"""Input validation at the boundary: what a node refuses to hand to its logic, and why.
+
+Every operator command, direction, velocity command and payload a node consumes passes here first
+(``Node.subscribe`` calls :func:`problem`), signed or not: a valid MAC proves who sent a message,
+not that its numbers make sense, and one infinite azimuth must not reach a behavior's arithmetic.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from typing import Any
+
+from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t, payload_t, velocity_cmd_t
+
+#: m: a takeoff altitude above this is a typo or an attack (legal ceilings are ~120 m).
+MAX_TAKEOFF_ALTITUDE = 1000.0
+#: m/s: no multirotor flies a direction faster; the HLC clamps to its own, lower limits anyway.
+MAX_DIRECTION_SPEED = 100.0
+#: m/s and deg/s: beyond these a velocity command is nonsense, not merely fast (the HLC clamps).
+MAX_VELOCITY = 100.0
+MAX_YAW_RATE = 3600.0
+#: Content types parsed as JSON at the boundary.
+JSON_TYPES = frozenset({"application/json", "text/json"})
+
+
+def _finite(name: str, value: float, low: float, high: float) -> str | None:
+    if not math.isfinite(value):
+        return f"{name} is {value!r}, not a finite number"
+    if not low <= value <= high:
+        return f"{name} {value:g} is outside [{low:g}, {high:g}]"
+    return None
+
+
+def _operator_cmd(msg: operator_cmd_t) -> str | None:
+    return _finite("altitude", float(msg.altitude), 0.0, MAX_TAKEOFF_ALTITUDE)
+
+
+def _direction(msg: direction_cmd_t) -> str | None:
+    return _finite("azimuth", float(msg.azimuth), -360.0, 360.0) or _finite(
+        "speed", float(msg.speed), 0.0, MAX_DIRECTION_SPEED
+    )
+
+
+def _velocity(msg: velocity_cmd_t) -> str | None:
+    if msg.frame not in (velocity_cmd_t.BODY, velocity_cmd_t.NED):
+        return f"frame {msg.frame} is neither BODY nor NED"
+    for name in ("vx", "vy", "vz"):
+        problem = _finite(name, float(getattr(msg, name)), -MAX_VELOCITY, MAX_VELOCITY)
+        if problem:
+            return problem
+    return _finite("yaw_rate", float(msg.yaw_rate), -MAX_YAW_RATE, MAX_YAW_RATE)
+
+
+def _reject_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not JSON (RFC 8259 has no {name})")
+
+
+def strict_json(data: bytes) -> Any:
+    """``json.loads`` that refuses ``Infinity``, ``-Infinity`` and ``NaN`` (Python accepts them)."""
+    return json.loads(bytes(data).decode("utf-8"), parse_constant=_reject_constant)
+
+
+def _payload(msg: payload_t) -> str | None:
+    if msg.size != len(msg.data):
+        return f"size {msg.size} but {len(msg.data)} bytes of data"
+    if msg.content_type.split(";", 1)[0].strip().lower() in JSON_TYPES:
+        try:
+            strict_json(msg.data)
+        except (UnicodeDecodeError, ValueError) as exc:
+            return f"{msg.content_type} payload is not valid JSON: {exc}"
+    return None
+
+
+_CHECKS: dict[type, Callable[[Any], str | None]] = {
+    operator_cmd_t: _operator_cmd,
+    direction_cmd_t: _direction,
+    velocity_cmd_t: _velocity,
+    payload_t: _payload,
+}
+
+
+def problem(msg: Any) -> str | None:
+    """None if ``msg`` may reach node or behavior logic, else why not (one line, for the log)."""
+    check = _CHECKS.get(type(msg))
+    return None if check is None else check(msg)
+
+
+__all__ = ["MAX_TAKEOFF_ALTITUDE", "problem", "strict_json"]

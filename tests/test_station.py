@@ -21,10 +21,32 @@ import pytest
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
 from antalate_lcm.station import StationServer, StationSettings, default_db_path, models, run_station
+from antalate_lcm.station._auth import sha256_hex
+from antalate_lcm.station._settings import ApiKey
 from tests.test_station_sector import place
 
 ORIGIN = (32.7767, 35.0231)
 REPO = Path(__file__).resolve().parents[1]
+OPERATOR_KEY = "antk_test-operator-key-0123456789abcdefghijklmnopq"
+READER_KEY = "antk_test-reader-key-0123456789abcdefghijklmnopqrs"
+API_KEYS = (
+    ApiKey(name="op", role="operator", sha256=sha256_hex(OPERATOR_KEY)),
+    ApiKey(name="viewer", role="read-only", sha256=sha256_hex(READER_KEY)),
+)
+AUTH = {"Authorization": f"Bearer {OPERATOR_KEY}"}
+
+
+def settings_for(db_path: str, **fields: Any) -> StationSettings:
+    """Station settings with the test API keys (every test station has them)."""
+    return StationSettings(db_path=db_path, api_keys=API_KEYS, **fields)
+
+
+def operator_client(url: str, **kw: Any) -> httpx.Client:
+    return httpx.Client(base_url=url, timeout=5.0, headers=AUTH, **kw)
+
+
+def agent_ids(c: httpx.Client) -> dict[str, str]:
+    return {a["name"]: a["id"] for a in c.get("/api/agents").json()}
 
 
 @pytest.fixture
@@ -34,14 +56,14 @@ def db_path(tmp_path: Path) -> str:
 
 @pytest.fixture
 def server(db_path: str) -> Iterator[StationServer]:
-    settings = StationSettings(db_path=db_path, range_m=100.0, fov_deg=60.0, stale_after_s=30.0)
+    settings = settings_for(db_path, range_m=100.0, fov_deg=60.0, stale_after_s=30.0)
     with StationServer(settings) as srv:
         yield srv
 
 
 @pytest.fixture
 def client(server: StationServer) -> Iterator[httpx.Client]:
-    with httpx.Client(base_url=server.url, timeout=5.0) as c:
+    with operator_client(server.url) as c:
         yield c
 
 
@@ -81,24 +103,26 @@ def test_first_contact_gets_a_token_that_is_kept(client: httpx.Client) -> None:
     other = client.post("/api/report", json={"telemetry": tel(*ORIGIN, agent="uav2")}).json()
     assert other["token"] != token
     agents = client.get("/api/agents").json()
-    assert [(a["name"], a["token"]) for a in agents] == [("uav1", token), ("uav2", other["token"])]
+    assert [a["name"] for a in agents] == ["uav1", "uav2"]
+    assert all("token" not in a for a in agents), "tokens are secrets, never listed"
+    assert token not in client.get("/api/agents").text and other["token"] not in client.get("/api/agents").text
     uav1 = agents[0]
     assert uav1["mc_state"] == "MISSION" and uav1["hlc_state"] == "AIRBORNE" and not uav1["stale"]
     assert uav1["telemetry"]["lat"] == ORIGIN[0] and uav1["telemetry"]["battery"] == 90.0
     assert uav1["first_seen"] <= uav1["last_seen"] and uav1["pending_commands"] == 0
 
 
-def test_unknown_token_is_given_a_new_one(client: httpx.Client) -> None:
-    reply = report(client, "not-a-token-this-station-issued", tel(*ORIGIN, agent="uav1"))
-    assert reply["token"] != "not-a-token-this-station-issued"
-    assert [a["token"] for a in client.get("/api/agents").json()] == [reply["token"]]
+def test_unknown_token_is_401_and_never_adopted(client: httpx.Client) -> None:
+    r = client.post("/api/report", json={"token": "not-a-token-this-station-issued", "telemetry": tel(*ORIGIN)})
+    assert r.status_code == 401 and "unknown token" in r.json()["detail"]
+    assert client.get("/api/agents").json() == []
 
 
 def test_report_without_telemetry_registers_but_has_no_payload(client: httpx.Client) -> None:
     reply = report(client, None, None, mc_state="STANDBY", hlc_state=None)
     assert "payload" not in reply
     (agent,) = client.get("/api/agents").json()
-    assert agent["name"] == reply["token"]  # no name heard yet: the token stands in
+    assert agent["name"] == agent["id"]  # no name heard: the public id stands in
     assert agent["mc_state"] == "STANDBY" and agent["hlc_state"] is None and agent["telemetry"] is None
 
 
@@ -110,7 +134,7 @@ def test_command_to_one_agent_is_delivered_once(client: httpx.Client) -> None:
     r = client.post("/api/commands", json={"command": "TAKEOFF", "altitude": 15.0, "target": "a"})
     assert r.status_code == 200, r.text
     queued = r.json()
-    assert queued["target"] == "a" and [q["token"] for q in queued["queued"]] == [a]
+    assert queued["target"] == "a" and [q["name"] for q in queued["queued"]] == ["a"]
     seq = queued["seq"]
     assert client.get("/api/agents").json()[0]["pending_commands"] == 1
     assert "operator_cmd" not in report(client, b, tel(*ORIGIN))
@@ -119,9 +143,9 @@ def test_command_to_one_agent_is_delivered_once(client: httpx.Client) -> None:
     assert "operator_cmd" not in report(client, a, tel(*ORIGIN))
 
 
-def test_command_by_token_and_without_altitude(client: httpx.Client) -> None:
+def test_command_by_id_and_without_altitude(client: httpx.Client) -> None:
     a = report(client, None, tel(*ORIGIN, agent="a"))["token"]
-    r = client.post("/api/commands", json={"command": "RTL", "target": a})
+    r = client.post("/api/commands", json={"command": "RTL", "target": agent_ids(client)["a"]})
     assert r.status_code == 200
     assert report(client, a, None)["operator_cmd"] == {"command": "RTL", "seq": r.json()["seq"]}
 
@@ -131,7 +155,7 @@ def test_command_for_all_reaches_each_known_agent_once_and_not_later_ones(client
     r = client.post("/api/commands", json={"command": "LAND"})
     assert r.status_code == 200
     body = r.json()
-    assert body["target"] is None and sorted(q["token"] for q in body["queued"]) == sorted(tokens)
+    assert body["target"] is None and sorted(q["name"] for q in body["queued"]) == ["u0", "u1", "u2"]
     late = report(client, None, tel(*ORIGIN, agent="late"))
     assert "operator_cmd" not in late
     for tok in tokens:
@@ -179,8 +203,8 @@ def test_commands_for_all_with_no_agent_queue_nothing(client: httpx.Client) -> N
 
 
 def test_commands_not_collected_in_time_expire(db_path: str) -> None:
-    settings = StationSettings(db_path=db_path, command_ttl_s=0.2)
-    with StationServer(settings) as srv, httpx.Client(base_url=srv.url) as c:
+    settings = settings_for(db_path, command_ttl_s=0.2)
+    with StationServer(settings) as srv, operator_client(srv.url) as c:
         a = report(c, None, tel(*ORIGIN, agent="a"))["token"]
         c.post("/api/commands", json={"command": "TAKEOFF", "target": "a"})
         c.post("/api/commands", json={"direction": {"azimuth": 1, "speed": 1}, "target": "a"})
@@ -250,8 +274,8 @@ def test_count_and_nearest_among_several_peers(client: httpx.Client) -> None:
 
 
 def test_stale_agents_are_not_detected(db_path: str) -> None:
-    settings = StationSettings(db_path=db_path, stale_after_s=0.4)
-    with StationServer(settings) as srv, httpx.Client(base_url=srv.url) as c:
+    settings = settings_for(db_path, stale_after_s=0.4)
+    with StationServer(settings) as srv, operator_client(srv.url) as c:
         register_peer(c, 30.0, 0.0)
         me = report(c, None, tel(*ORIGIN, 0.0))
         assert detection(me)["detected"] is True
@@ -263,17 +287,17 @@ def test_stale_agents_are_not_detected(db_path: str) -> None:
 # -- persistence -------------------------------------------------------------------------------------
 
 def test_restart_with_the_same_database_keeps_agents_tokens_and_commands(db_path: str) -> None:
-    settings = StationSettings(db_path=db_path, stale_after_s=60.0)
-    with StationServer(settings) as srv, httpx.Client(base_url=srv.url) as c:
+    settings = settings_for(db_path, stale_after_s=60.0)
+    with StationServer(settings) as srv, operator_client(srv.url) as c:
         register_peer(c, 40.0, 0.0)
         me = report(c, None, tel(*ORIGIN, 0.0, agent="me"), feedback={"content_type": "text/plain", "data": "hi"})
         token = me["token"]
         seq = c.post("/api/commands", json={"command": "TAKEOFF", "target": "me"}).json()["seq"]
         before = c.get("/api/agents").json()
-    with StationServer(settings) as srv, httpx.Client(base_url=srv.url) as c:
+    with StationServer(settings) as srv, operator_client(srv.url) as c:
         after = c.get("/api/agents").json()
-        assert [(a["token"], a["name"], a["telemetry"]) for a in after] == \
-            [(a["token"], a["name"], a["telemetry"]) for a in before]
+        assert [(a["id"], a["name"], a["telemetry"]) for a in after] == \
+            [(a["id"], a["name"], a["telemetry"]) for a in before]
         assert {a["name"]: a["pending_commands"] for a in after}["me"] == 1
         again = report(c, token, tel(*ORIGIN, 0.0))
         assert again["token"] == token
@@ -283,9 +307,10 @@ def test_restart_with_the_same_database_keeps_agents_tokens_and_commands(db_path
         seq2 = c.post("/api/commands", json={"command": "LAND"}).json()["seq"]
         assert seq2 > seq  # sequence numbers are never reused across restarts
     with sqlite3.connect(db_path) as conn:
-        rows = conn.execute("SELECT token, lat, feedback_type, feedback_data FROM reports ORDER BY id").fetchall()
+        rows = conn.execute("SELECT agent_id, lat, feedback_type, feedback_data FROM reports ORDER BY id").fetchall()
     assert len(rows) == 3  # every report is in the history, flushed on shutdown
-    assert rows[1] == (token, ORIGIN[0], "text/plain", "hi")
+    me_id = {a["name"]: a["id"] for a in before}["me"]
+    assert rows[1] == (me_id, ORIGIN[0], "text/plain", "hi")
 
 
 def test_feedback_in_base64(client: httpx.Client) -> None:
@@ -296,9 +321,9 @@ def test_feedback_in_base64(client: httpx.Client) -> None:
 
 
 def test_memory_database_works(tmp_path: Path) -> None:
-    with StationServer(StationSettings(db_path=":memory:")) as srv, httpx.Client(base_url=srv.url) as c:
-        token = report(c, None, tel(*ORIGIN))["token"]
-        assert c.post("/api/commands", json={"command": "RTL"}).json()["queued"][0]["token"] == token
+    with StationServer(settings_for(":memory:")) as srv, operator_client(srv.url) as c:
+        report(c, None, tel(*ORIGIN, agent="m"))
+        assert c.post("/api/commands", json={"command": "RTL"}).json()["queued"][0]["name"] == "m"
 
 
 # -- bad input -----------------------------------------------------------------------------------------
@@ -338,8 +363,8 @@ def test_report_needs_a_json_content_type(client: httpx.Client) -> None:
 
 
 def test_oversized_request_is_413(db_path: str) -> None:
-    settings = StationSettings(db_path=db_path, max_body_bytes=4096)
-    with StationServer(settings) as srv, httpx.Client(base_url=srv.url) as c:
+    settings = settings_for(db_path, max_body_bytes=4096)
+    with StationServer(settings) as srv, operator_client(srv.url) as c:
         big = {"feedback": {"content_type": "text/plain", "data": "x" * 10_000}}
         r = c.post("/api/report", json=big)
         assert r.status_code == 413 and "4096" in r.json()["detail"]
@@ -367,6 +392,8 @@ def test_oversized_request_is_413(db_path: str) -> None:
         ({"direction": {"azimuth": "north", "speed": 1}}, "direction.azimuth"),
         ({"direction": {"speed": 1}}, "direction.azimuth"),
         ({"command": "RTL", "target": ""}, "target"),
+        ({"direction": {"azimuth": 0, "speed": 101}}, "direction.speed"),
+        ({"command": "TAKEOFF", "altitude": 1e9}, "altitude"),
     ],
 )
 def test_bad_commands_get_422(client: httpx.Client, body: dict[str, Any], words: str) -> None:
@@ -463,3 +490,4 @@ def test_listening_socket_is_declared_tcp() -> None:
 def test_station_info(client: httpx.Client) -> None:
     info = client.get("/api/station").json()
     assert info["range_m"] == 100.0 and info["fov_deg"] == 60.0 and info["agents"] == 0
+    assert info["registration_proof"] is False

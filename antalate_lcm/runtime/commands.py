@@ -10,7 +10,7 @@ import argparse
 import os
 from collections.abc import Callable
 
-from antalate_lcm.config import Config, load_config
+from antalate_lcm.config import Config, check_unique_agent_names, load_config
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.node import Context, Node
 
@@ -43,16 +43,6 @@ def _cmd_osc(args: argparse.Namespace) -> int:
     return _run_single(args, lambda cfg, ctx: [OscNode(cfg, ctx)])
 
 
-def _cmd_station(args: argparse.Namespace) -> int:
-    from antalate_lcm.station import run_station
-
-    run_station(
-        host=args.host, port=args.port, db_path=args.db, range_m=args.range, fov_deg=args.fov,
-        stale_after_s=args.stale_after,
-    )
-    return 0
-
-
 def _cmd_bma(args: argparse.Namespace) -> int:
     from antalate_lcm.bma.node import BmaNode
 
@@ -73,10 +63,7 @@ def _cmd_agent(args: argparse.Namespace) -> int:
     configs: list[Config] = []
     for path in args.config:
         configs.extend(swarm_configs(load_config(path), args.agents, spacing=args.spacing))
-    names = [c.agent.name for c in configs]
-    dup = sorted({n for n in names if names.count(n) > 1})
-    if dup:
-        raise AntalateError(f"two agents share the name(s) {', '.join(dup)}: give each config its own [agent] name")
+    check_unique_agent_names(configs, agents=args.agents)  # names the file and agent.name
     for cfg in configs:
         validate(cfg)
     # Internal topics between this process's nodes in memory: a spoofed LAN datagram never reaches them.
@@ -210,17 +197,6 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--agents", type=int, default=1, help="N simulated agents from each config (sim only)")
     p.add_argument("--spacing", type=float, default=8.0, help="metres between simulated homes (default 8)")
     p.set_defaults(func=_cmd_agent)
-
-    from antalate_lcm.station import DEFAULT_HOST, DEFAULT_PORT
-
-    p = sub.add_parser("station", help="run the reference operator station (HTTP + SQLite)")
-    p.add_argument("--db", help="SQLite file (default: in the user's data directory; ':memory:' keeps nothing)")
-    p.add_argument("--host", default=DEFAULT_HOST, help=f"address to listen on (default {DEFAULT_HOST})")
-    p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"port (default {DEFAULT_PORT})")
-    p.add_argument("--range", type=float, default=100.0, help="front-sector sensing range, m (default 100)")
-    p.add_argument("--fov", type=float, default=60.0, help="front-sector field of view, deg (default 60)")
-    p.add_argument("--stale-after", type=float, default=5.0, help="s without a report before an agent is stale")
-    p.set_defaults(func=_cmd_station)
 
     p = sub.add_parser("tui", help="the operator console (a Textual app on the LAN bus)")
     p.add_argument("config", nargs="?", help="config with the LAN bus (default: the embedded defaults)")

@@ -13,14 +13,16 @@ import contextlib
 import logging
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, MutableMapping, Sequence
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import FastAPI, HTTPException, Request
+from fastapi import Depends, FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from pydantic import TypeAdapter, ValidationError
 from pydantic.json_schema import models_json_schema
 
+from ._auth import Operator, Role, retry_after_header, sha256_hex
 from ._db import StationDB
 from ._models import (
     AgentInfo,
@@ -32,18 +34,20 @@ from ._models import (
     ReportRequest,
 )
 from ._settings import StationSettings
-from ._station import Station, UnknownTarget
+from ._station import Refused, Station, UnknownTarget
 
 log = logging.getLogger("antalate.station")
 
-API_VERSION = "1.0"
+API_VERSION = "2.0"
 _AGENT_LIST = TypeAdapter(list[AgentInfo])
 
 _DESCRIPTION = """\
 The reference operator station of antalate (docs/design.md §9). Agents' Operator Station Clients POST a
 report every 1/rate seconds and receive their token, any queued commands and a payload saying
 whether another agent is inside their front sector. People and scripts list agents and queue
-commands. The semantics (tokens, delivery, sector geometry) are in `docs/station-protocol.md`.
+commands with an API key (`Authorization: Bearer KEY`; roles `read-only` and `operator`). The
+semantics (tokens, registration, signed commands, delivery, rate limits, sector geometry) are in
+`docs/station-protocol.md`.
 """
 
 Scope = MutableMapping[str, Any]
@@ -95,12 +99,12 @@ class _TooLarge(Exception):
     pass
 
 
-async def _send_error(send: Send, status: int, detail: str) -> None:
+async def _send_error(send: Send, status: int, detail: str, retry_after: float | None = None) -> None:
     body = ErrorResponse(detail=detail).model_dump_json().encode()
-    await send({
-        "type": "http.response.start", "status": status,
-        "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())],
-    })
+    headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
+    if retry_after is not None:
+        headers.append((b"retry-after", retry_after_header(retry_after).encode()))
+    await send({"type": "http.response.start", "status": status, "headers": headers})
     await send({"type": "http.response.body", "body": body})
 
 
@@ -141,21 +145,38 @@ def _json_content_type(content_type: str | None) -> bool:
     return mime == "application/json" or mime.endswith("+json")
 
 
-def handle_report(station: Station, body: bytes, content_type: str | None, now: float) -> tuple[int, bytes]:
-    """The whole of ``POST /api/report`` minus HTTP framing: (status, JSON body).
+def handle_report(
+    station: Station, body: bytes, content_type: str | None, now: float, address: str = ""
+) -> tuple[int, bytes, float | None]:
+    """The whole of ``POST /api/report`` minus HTTP framing: (status, JSON body, Retry-After or None).
 
     Parsing and validating straight from bytes (pydantic-core) is a third of the cost of FastAPI's
     json.loads-then-validate, which matters on the one endpoint every agent calls at 1–10 Hz.
     """
     if not _json_content_type(content_type):
         detail = f"expected Content-Type: application/json, got {content_type!r}"
-        return 415, ErrorResponse(detail=detail).model_dump_json().encode()
+        return 415, ErrorResponse(detail=detail).model_dump_json().encode(), None
     try:
         req = ReportRequest.model_validate_json(body)
     except ValidationError as exc:
-        return 422, _error_body(_error_list(exc.errors(), ("body",)))
-    reply = station.report(req, now)
-    return 200, reply.model_dump_json(exclude_none=True).encode()
+        return 422, _error_body(_error_list(exc.errors(), ("body",))), None
+    try:
+        reply = station.report(req, now, address)
+    except Refused as exc:
+        return exc.status, ErrorResponse(detail=exc.detail).model_dump_json().encode(), exc.retry_after
+    return 200, reply.model_dump_json(exclude_none=True).encode(), None
+
+
+def _address(scope: Scope) -> str:
+    client = scope.get("client")
+    return str(client[0]) if client else ""
+
+
+def _headers(payload: bytes, retry_after: float | None) -> list[tuple[bytes, bytes]]:
+    headers = [(b"content-type", b"application/json"), (b"content-length", str(len(payload)).encode())]
+    if retry_after is not None:
+        headers.append((b"retry-after", retry_after_header(retry_after).encode()))
+    return headers
 
 
 class _ReportFastPath:
@@ -172,7 +193,17 @@ class _ReportFastPath:
         self.clock = clock
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http" or scope["path"] != "/api/report" or scope["method"] != "POST":
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        station: Station | None = getattr(scope["app"].state, "station", None)
+        if station is not None:  # every request counts against its address, before any parsing
+            try:
+                station.admit(_address(scope), self.clock())
+            except Refused as exc:
+                await _send_error(send, exc.status, exc.detail, exc.retry_after)
+                return
+        if scope["path"] != "/api/report" or scope["method"] != "POST" or station is None:
             await self.app(scope, receive, send)
             return
         chunks = []
@@ -188,13 +219,41 @@ class _ReportFastPath:
             if name == b"content-type":
                 content_type = value.decode("latin-1")
                 break
-        station: Station = scope["app"].state.station
-        status, payload = handle_report(station, b"".join(chunks), content_type, self.clock())
-        await send({
-            "type": "http.response.start", "status": status,
-            "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(payload)).encode())],
-        })
+        status, payload, retry = handle_report(station, b"".join(chunks), content_type, self.clock(), _address(scope))
+        await send({"type": "http.response.start", "status": status, "headers": _headers(payload, retry)})
         await send({"type": "http.response.body", "body": payload})
+
+
+_BEARER = HTTPBearer(auto_error=False, description="an API key (antalate station-key api)")
+
+
+def _authorise(request: Request, credentials: HTTPAuthorizationCredentials | None, role: Role) -> Operator:
+    """The operator whose API key came with the request, if its role allows ``role``; else 401/403.
+
+    Keys are looked up by their SHA-256: the station never holds a key itself, and the look-up
+    time does not depend on how much of a guessed key is right.
+    """
+    if credentials is None:
+        raise HTTPException(401, "an API key is needed: Authorization: Bearer KEY",
+                            headers={"WWW-Authenticate": "Bearer"})
+    who: Operator | None = request.app.state.api_keys.get(sha256_hex(credentials.credentials))
+    if who is None:
+        raise HTTPException(401, "unknown API key", headers={"WWW-Authenticate": "Bearer"})
+    if not who.may(role):
+        raise HTTPException(403, f"API key {who.name!r} is {who.role}; this needs {role}")
+    return who
+
+
+def _reader(
+    request: Request, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_BEARER)]
+) -> Operator:
+    return _authorise(request, credentials, "read-only")
+
+
+def _operator(
+    request: Request, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_BEARER)]
+) -> Operator:
+    return _authorise(request, credentials, "operator")
 
 
 def create_app(settings: StationSettings | None = None, *, clock: Callable[[], float] = time.time) -> FastAPI:
@@ -225,11 +284,13 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
             db.close()
             log.info("station stopped; database %s closed", cfg.db_path)
 
+    keys = {k.sha256: Operator(k.name, k.role) for k in cfg.api_keys}
     app = FastAPI(
         title="antalate station", version=API_VERSION, description=_DESCRIPTION, lifespan=lifespan,
         responses={422: {"model": ErrorResponse, "description": "invalid request"}},
     )
     # Starlette wraps the last added outermost: the size limit sees the request before the fast path.
+    app.state.api_keys = keys
     app.add_middleware(_ReportFastPath, clock=clock)
     app.add_middleware(_BodyLimit, max_bytes=cfg.max_body_bytes)
 
@@ -239,24 +300,47 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
 
     @app.exception_handler(HTTPException)
     async def _http_error(request: Request, exc: HTTPException) -> JSONResponse:
-        return JSONResponse(status_code=exc.status_code, content={"detail": str(exc.detail), "errors": []})
+        return JSONResponse(
+            status_code=exc.status_code, content={"detail": str(exc.detail), "errors": []},
+            headers=getattr(exc, "headers", None),
+        )
+
+    @app.exception_handler(Refused)
+    async def _refused(request: Request, exc: Refused) -> Response:
+        payload = ErrorResponse(detail=exc.detail).model_dump_json().encode()
+        headers = {"Retry-After": retry_after_header(exc.retry_after)} if exc.retry_after is not None else None
+        return Response(payload, status_code=exc.status, media_type="application/json", headers=headers)
+
+    auth_errors: dict[int | str, dict[str, Any]] = {
+        401: {"model": ErrorResponse, "description": "no API key, or an unknown one"},
+        403: {"model": ErrorResponse, "description": "the API key's role does not allow this"},
+        429: {"model": ErrorResponse, "description": "too many requests from this address (see Retry-After)"},
+    }
 
     @app.post(
         "/api/report", response_model=ReportReply, response_model_exclude_none=True, tags=["agents"],
         openapi_extra={"requestBody": {"required": True, "content": {"application/json": {
             "schema": {"$ref": "#/components/schemas/ReportRequest"}}}}},
-        responses={415: {"model": ErrorResponse, "description": "the body is not JSON"}},
+        responses={
+            401: {"model": ErrorResponse, "description": "unknown token, or registration without a valid proof"},
+            409: {"model": ErrorResponse, "description": "the name is registered to another token"},
+            415: {"model": ErrorResponse, "description": "the body is not JSON"},
+            429: {"model": ErrorResponse, "description": "over a rate limit (see Retry-After)"},
+        },
     )
     async def report(request: Request) -> Response:
-        """An agent's periodic report; the reply carries its token, due commands and the peer detection."""
+        """An agent's periodic report; the reply carries its token, due commands and the peer detection.
+        Agents authenticate with their token (no API key); a report without one registers."""
         # `_ReportFastPath` answers before this route is reached; see its docstring.
-        status, payload = handle_report(
-            request.app.state.station, await request.body(), request.headers.get("content-type"), clock()
+        client = request.client.host if request.client else ""
+        status, payload, retry = handle_report(
+            request.app.state.station, await request.body(), request.headers.get("content-type"), clock(), client
         )
-        return Response(payload, status_code=status, media_type="application/json")
+        headers = {"Retry-After": retry_after_header(retry)} if retry is not None else None
+        return Response(payload, status_code=status, media_type="application/json", headers=headers)
 
-    @app.get("/api/agents", response_model=list[AgentInfo], tags=["operators"])
-    async def agents(request: Request) -> Response:
+    @app.get("/api/agents", response_model=list[AgentInfo], tags=["operators"], responses=auth_errors)
+    async def agents(request: Request, _who: Annotated[Operator, Depends(_reader)]) -> Response:
         """Every agent the station knows, with its latest report, sorted by name."""
         # Serialised directly: FastAPI would validate the list against response_model once more.
         listing = request.app.state.station.agents(clock())
@@ -264,14 +348,18 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
 
     @app.post(
         "/api/commands", response_model=CommandResponse, tags=["operators"],
-        responses={404: {"model": ErrorResponse, "description": "no agent has the token or name"}},
+        responses={404: {"model": ErrorResponse, "description": "no agent has the id or name"}, **auth_errors},
     )
-    async def commands(body: CommandRequest, request: Request) -> Response:
-        """Queue an operator or direction command for one agent (token or name) or for every known agent."""
+    async def commands(
+        body: CommandRequest, request: Request, who: Annotated[Operator, Depends(_operator)]
+    ) -> Response:
+        """Queue an operator or direction command for one agent (id or name) or for every known agent.
+        Signed commands (`operator_cmd`, `direction_cmd`) are forwarded to the agents exactly."""
         try:
             result: CommandResponse = request.app.state.station.queue(body, clock())
         except UnknownTarget as exc:
-            raise HTTPException(404, f"no agent has the token or name {exc.args[0]!r}") from None
+            raise HTTPException(404, f"no agent has the id or name {exc.args[0]!r}") from None
+        log.info("command seq %d queued by API key %r", result.seq, who.name)
         return Response(result.model_dump_json(), media_type="application/json")
 
     @app.get("/api/station", tags=["operators"])
@@ -285,6 +373,7 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
             "stale_after_s": cfg.stale_after_s,
             "command_ttl_s": cfg.command_ttl_s,
             "agents": st.agent_count,
+            "registration_proof": cfg.registration_key is not None,
         }
 
     _document_wire_models(app)
@@ -302,7 +391,7 @@ def _document_wire_models(app: FastAPI) -> None:
             return app.openapi_schema
         schema = base_openapi()
         _, defs = models_json_schema(
-            [(ReportRequest, "validation"), (PeerDetection, "serialization")],
+            [(ReportRequest, "validation"), (ReportReply, "serialization"), (PeerDetection, "serialization")],
             ref_template="#/components/schemas/{model}",
         )
         components = schema.setdefault("components", {}).setdefault("schemas", {})

@@ -32,13 +32,14 @@ from ._settings import MEMORY
 
 log = logging.getLogger("antalate.station")
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 _PRUNE_EVERY_S = 60.0
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS agents (
-    token       TEXT PRIMARY KEY,
-    name        TEXT NOT NULL,
+    id          TEXT PRIMARY KEY,               -- public: listed, a command may target it
+    token_hash  TEXT NOT NULL UNIQUE,           -- hex SHA-256 of the agent's token (never the token)
+    name        TEXT NOT NULL UNIQUE,           -- claimed at registration; never taken over
     first_seen  REAL NOT NULL,
     last_seen   REAL,
     mc_state    TEXT,
@@ -47,7 +48,7 @@ CREATE TABLE IF NOT EXISTS agents (
 );
 CREATE TABLE IF NOT EXISTS reports (
     id                INTEGER PRIMARY KEY,
-    token             TEXT NOT NULL,
+    agent_id          TEXT NOT NULL,
     t                 REAL NOT NULL,  -- station clock, UNIX seconds
     mc_state          TEXT,
     hlc_state         TEXT,
@@ -57,27 +58,28 @@ CREATE TABLE IF NOT EXISTS reports (
     feedback_encoding TEXT,
     feedback_data     TEXT
 );
-CREATE INDEX IF NOT EXISTS reports_by_agent ON reports (token, t);
+CREATE INDEX IF NOT EXISTS reports_by_agent ON reports (agent_id, t);
 CREATE INDEX IF NOT EXISTS reports_by_time ON reports (t);
 CREATE TABLE IF NOT EXISTS commands (
     seq     INTEGER PRIMARY KEY AUTOINCREMENT,  -- never reused, so an MC never mistakes a new command for a duplicate
     t       REAL NOT NULL,
     target  TEXT,                               -- as requested; NULL = every agent
     kind    TEXT NOT NULL CHECK (kind IN ('operator', 'direction')),
-    body    TEXT NOT NULL                       -- JSON of the command without its seq
+    body    TEXT NOT NULL                       -- JSON of the command without the station's seq (a signed
+                                                -- command keeps the operator's header, MAC included)
 );
 CREATE TABLE IF NOT EXISTS deliveries (
-    seq     INTEGER NOT NULL REFERENCES commands (seq),
-    token   TEXT NOT NULL REFERENCES agents (token),
-    state   TEXT NOT NULL CHECK (state IN ('pending', 'delivered', 'replaced', 'expired')),
-    t_done  REAL,
-    PRIMARY KEY (token, seq)
+    seq       INTEGER NOT NULL REFERENCES commands (seq),
+    agent_id  TEXT NOT NULL REFERENCES agents (id),
+    state     TEXT NOT NULL CHECK (state IN ('pending', 'delivered', 'replaced', 'expired')),
+    t_done    REAL,
+    PRIMARY KEY (agent_id, seq)
 );
 CREATE INDEX IF NOT EXISTS deliveries_pending ON deliveries (state) WHERE state = 'pending';
 """
 
 _REPORT_COLUMNS = (
-    "token, t, mc_state, hlc_state, lat, lon, alt, heading, vn, ve, vd, battery, armed, in_air, mode, agent, "
+    "agent_id, t, mc_state, hlc_state, lat, lon, alt, heading, vn, ve, vd, battery, armed, in_air, mode, agent, "
     "feedback_type, feedback_encoding, feedback_data"
 )
 _INSERT_REPORT = f"INSERT INTO reports ({_REPORT_COLUMNS}) VALUES ({', '.join('?' * 19)})"
@@ -88,7 +90,8 @@ ReportRow = tuple[object, ...]
 
 @dataclass(frozen=True, slots=True)
 class AgentRow:
-    token: str
+    id: str
+    token_hash: str
     name: str
     first_seen: float
     last_seen: float | None
@@ -100,7 +103,7 @@ class AgentRow:
 @dataclass(frozen=True, slots=True)
 class PendingRow:
     seq: int
-    token: str
+    agent_id: str
     t: float
     kind: str
     body: dict[str, object]
@@ -158,44 +161,75 @@ class StationDB:
             raise StationDBError(
                 f"{self.path} has station schema version {version}; this antalate knows up to {SCHEMA_VERSION}"
             )
+        if version == 1:
+            self._retire_v1()
         conn.executescript(_SCHEMA)
         conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
+
+    def _retire_v1(self) -> None:
+        """Version 1 kept agents' tokens in clear and listed them to anyone: they cannot be trusted.
+        Its tables are kept under ``*_v1`` names (the history stays readable) and every agent
+        registers afresh."""
+        conn = self._conn
+        conn.execute("PRAGMA foreign_keys=OFF")
+        try:
+            conn.execute("BEGIN IMMEDIATE")
+            for table in ("deliveries", "commands", "reports", "agents"):
+                conn.execute(f"ALTER TABLE {table} RENAME TO {table}_v1")
+            for index in ("reports_by_agent", "reports_by_time", "deliveries_pending"):
+                conn.execute(f"DROP INDEX IF EXISTS {index}")
+            conn.execute("COMMIT")
+        except sqlite3.Error:
+            conn.execute("ROLLBACK")
+            raise
+        finally:
+            conn.execute("PRAGMA foreign_keys=ON")
+        log.warning(
+            "%s was a version-1 station database (tokens in clear): its tables are kept as *_v1 and every "
+            "agent registers again", self.path,
+        )
 
     # -- startup ---------------------------------------------------------------------------------
 
     def load_agents(self) -> list[AgentRow]:
         with self._lock:
             rows = self._conn.execute(
-                "SELECT token, name, first_seen, last_seen, mc_state, hlc_state, telemetry FROM agents"
+                "SELECT id, token_hash, name, first_seen, last_seen, mc_state, hlc_state, telemetry FROM agents"
             ).fetchall()
         return [
-            AgentRow(token, name, first, last, mc, hlc, Telemetry.model_validate_json(tel) if tel else None)
-            for token, name, first, last, mc, hlc, tel in rows
+            AgentRow(aid, th, name, first, last, mc, hlc, Telemetry.model_validate_json(tel) if tel else None)
+            for aid, th, name, first, last, mc, hlc, tel in rows
         ]
 
     def load_pending(self) -> list[PendingRow]:
         with self._lock:
             rows = self._conn.execute(
-                "SELECT c.seq, d.token, c.t, c.kind, c.body FROM deliveries d JOIN commands c USING (seq) "
+                "SELECT c.seq, d.agent_id, c.t, c.kind, c.body FROM deliveries d JOIN commands c USING (seq) "
                 "WHERE d.state = 'pending' ORDER BY c.seq"
             ).fetchall()
-        return [PendingRow(seq, token, t, kind, json.loads(body)) for seq, token, t, kind, body in rows]
+        return [PendingRow(seq, aid, t, kind, json.loads(body)) for seq, aid, t, kind, body in rows]
 
     # -- synchronous writes ----------------------------------------------------------------------
 
-    def add_agent(self, token: str, name: str, t: float) -> None:
+    def add_agent(self, agent_id: str, token_hash: str, name: str, t: float) -> None:
         with self._lock:
             self._conn.execute(
-                "INSERT INTO agents (token, name, first_seen) VALUES (?, ?, ?)", (token, name, t)
+                "INSERT INTO agents (id, token_hash, name, first_seen) VALUES (?, ?, ?, ?)",
+                (agent_id, token_hash, name, t),
             )
 
+    def set_token_hash(self, agent_id: str, token_hash: str) -> None:
+        """A re-registration (with proof) replaces the agent's token; the old one stops working."""
+        with self._lock:
+            self._conn.execute("UPDATE agents SET token_hash = ? WHERE id = ?", (token_hash, agent_id))
+
     def queue_command(
-        self, t: float, target: str | None, kind: str, body: dict[str, object], tokens: Sequence[str],
+        self, t: float, target: str | None, kind: str, body: dict[str, object], agent_ids: Sequence[str],
         replaced: Iterable[tuple[int, str]] = (),
     ) -> int:
-        """Store a command and one pending delivery per token in one transaction; returns its seq.
+        """Store a command and one pending delivery per agent in one transaction; returns its seq.
 
-        ``replaced`` are (seq, token) deliveries the new command supersedes (an older direction).
+        ``replaced`` are (seq, agent id) deliveries the new command supersedes (an older direction).
         """
         with self._lock, self._transaction():
             cur = self._conn.execute(
@@ -204,21 +238,21 @@ class StationDB:
             )
             seq = int(cur.lastrowid or 0)
             self._conn.executemany(
-                "UPDATE deliveries SET state = 'replaced', t_done = ? WHERE seq = ? AND token = ?",
-                [(t, s, tok) for s, tok in replaced],
+                "UPDATE deliveries SET state = 'replaced', t_done = ? WHERE seq = ? AND agent_id = ?",
+                [(t, s, aid) for s, aid in replaced],
             )
             self._conn.executemany(
-                "INSERT INTO deliveries (seq, token, state) VALUES (?, ?, 'pending')",
-                [(seq, tok) for tok in tokens],
+                "INSERT INTO deliveries (seq, agent_id, state) VALUES (?, ?, 'pending')",
+                [(seq, aid) for aid in agent_ids],
             )
         return seq
 
     def finish_deliveries(self, done: Iterable[tuple[int, str, str]], t: float) -> None:
-        """Mark (seq, token, state) deliveries as delivered/expired: they leave the queue for good."""
+        """Mark (seq, agent id, state) deliveries as delivered/expired: they leave the queue for good."""
         with self._lock, self._transaction():
             self._conn.executemany(
-                "UPDATE deliveries SET state = ?, t_done = ? WHERE seq = ? AND token = ? AND state = 'pending'",
-                [(state, t, seq, token) for seq, token, state in done],
+                "UPDATE deliveries SET state = ?, t_done = ? WHERE seq = ? AND agent_id = ? AND state = 'pending'",
+                [(state, t, seq, aid) for seq, aid, state in done],
             )
 
     def _transaction(self) -> _Transaction:
@@ -226,12 +260,12 @@ class StationDB:
 
     # -- buffered writes -------------------------------------------------------------------------
 
-    def buffer_report(self, token: str, row: ReportRow | None, latest: LatestState) -> None:
+    def buffer_report(self, agent_id: str, row: ReportRow | None, latest: LatestState) -> None:
         """Queue a history row (None = history off) and the agent's newest state; no I/O here."""
         with self._buffer_lock:
             if row is not None:
                 self._rows.append(row)
-            self._latest[token] = latest
+            self._latest[agent_id] = latest
 
     def flush(self) -> int:
         """Write everything buffered so far in one transaction; returns the number of history rows."""
@@ -243,15 +277,15 @@ class StationDB:
         updates = [
             (
                 s.name, s.last_seen, s.mc_state, s.hlc_state,
-                s.telemetry.model_dump_json() if s.telemetry is not None else None, token,
+                s.telemetry.model_dump_json() if s.telemetry is not None else None, aid,
             )
-            for token, s in latest.items()
+            for aid, s in latest.items()
         ]
         with self._lock, self._transaction():
             self._conn.executemany(_INSERT_REPORT, rows)
             self._conn.executemany(
                 "UPDATE agents SET name = ?, last_seen = ?, mc_state = ?, hlc_state = ?, telemetry = ? "
-                "WHERE token = ?",
+                "WHERE id = ?",
                 updates,
             )
         return len(rows)

@@ -15,17 +15,26 @@ from __future__ import annotations
 import base64
 import binascii
 import math
+import re
 from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 #: State names, exactly the constant names of ``mc_state_t`` / ``hlc_state_t`` (a test keeps them in sync).
-McStateName = Literal["INIT", "STANDBY", "TAKEOFF", "MISSION", "RTL", "LAND", "MANUAL", "ERROR"]
+McStateName = Literal["INIT", "STANDBY", "TAKEOFF", "MISSION", "RTL", "LAND", "MANUAL", "ERROR", "HOLD", "HLC_LOST"]
 HlcStateName = Literal[
-    "INIT", "READY", "TAKEOFF", "GAINING_ALTITUDE", "AIRBORNE", "RTL", "LANDING", "MANUAL", "LOW_BATTERY", "LLC_DOWN"
+    "INIT", "READY", "TAKEOFF", "GAINING_ALTITUDE", "AIRBORNE", "RTL", "LANDING", "MANUAL", "LOW_BATTERY", "LLC_DOWN",
+    "HOLD",
 ]
 #: Operator commands, the constant names of ``operator_cmd_t``.
 CommandName = Literal["TAKEOFF", "LAND", "RTL"]
+#: An agent name as the config allows it (it is part of LCM channel names).
+AGENT_NAME = r"^[A-Za-z0-9_.-]{1,64}$"
+_HEX64 = r"^[0-9a-fA-F]{64}$"
+_INT32_MAX = 2**31 - 1
+_INT64_MAX = 2**63 - 1
+MAX_ALTITUDE = 10_000.0
+MAX_SPEED = 100.0
 
 
 class _Wire(BaseModel):
@@ -100,9 +109,20 @@ class Feedback(_Wire):
 class Payload(_Wire):
     """Station → agent payload (``payload_t`` on ``{agent}/OPERATOR_PAYLOAD``); same shape as feedback."""
 
-    content_type: str = Field(description='MIME type; the reference station sends "application/json"')
+    content_type: str = Field(
+        min_length=1, max_length=255, description='MIME type; the reference station sends "application/json"'
+    )
     data: str
     encoding: Literal["utf-8", "base64"] = "utf-8"
+
+    @model_validator(mode="after")
+    def _base64_decodes(self) -> Payload:
+        if self.encoding == "base64":
+            try:
+                base64.b64decode(self.data, validate=True)
+            except (binascii.Error, ValueError) as exc:
+                raise ValueError(f"data is not valid base64: {exc}") from None
+        return self
 
     def content(self) -> bytes:
         """The payload bytes, whatever the encoding: what an LCM ``payload_t.data`` holds."""
@@ -120,6 +140,15 @@ class PeerDetection(_Wire):
     )
 
 
+class Registration(_Wire):
+    """Proof that a registering agent holds the swarm key: a MAC with the registration key
+    (derived from the swarm key) over the name, the time and a nonce; see docs/station-protocol.md."""
+
+    utime: int = Field(ge=0, le=_INT64_MAX, description="agent clock, microseconds since the epoch")
+    nonce: str = Field(pattern=r"^[A-Za-z0-9_-]{16,64}$", description="random, never reused")
+    mac: str = Field(pattern=_HEX64, description="hex HMAC-SHA256(registration key, message)")
+
+
 class ReportRequest(_Wire):
     """What the OSC POSTs to ``/api/report`` every ``1/rate`` seconds.
 
@@ -127,28 +156,60 @@ class ReportRequest(_Wire):
     yet still reports, to get its token and any queued commands.
     """
 
-    token: str | None = Field(None, max_length=128, description="null/absent on first contact")
+    token: str | None = Field(None, max_length=128, description="null/absent on first contact (registration)")
+    agent: str | None = Field(
+        None, pattern=AGENT_NAME,
+        description="the agent's name; at registration it claims the name (else telemetry.agent does)",
+    )
+    registration: Registration | None = Field(
+        None, description="proof of the swarm key, needed at registration when the station has a registration key"
+    )
     mc_state: McStateName | None = None
     hlc_state: HlcStateName | None = None
     telemetry: Telemetry | None = None
     feedback: Feedback | None = None
 
 
-class OperatorCommand(_Wire):
+class _Signature(_Wire):
+    """The header of an operator-signed LCM command, forwarded untouched so the agent can verify it.
+
+    All four are absent for a command the station made itself (unsigned).
+    """
+
+    target: str | None = Field(None, max_length=64, description='the signed target: "" = every agent')
+    utime: int | None = Field(None, ge=0, le=_INT64_MAX, description="header.utime set by the operator, µs")
+    sender: str | None = Field(None, max_length=64, description="header.agent: the operator's name")
+    mac: str | None = Field(None, pattern=_HEX64, description="header.mac (hex): HMAC-SHA256 with the swarm key")
+
+    @model_validator(mode="after")
+    def _all_or_none(self) -> _Signature:
+        parts = (self.target, self.utime, self.sender, self.mac)
+        if any(p is not None for p in parts) and any(p is None for p in parts):
+            raise ValueError("a signed command carries all of target, utime, sender and mac")
+        return self
+
+    @property
+    def signed(self) -> bool:
+        return self.mac is not None
+
+
+class OperatorCommand(_Signature):
     """One queued ``operator_cmd_t``; ``seq`` goes into its header so the MC can acknowledge it."""
 
     command: CommandName
-    altitude: float | None = Field(None, gt=0.0, description="takeoff altitude in m; absent = the agent's default")
-    seq: int = Field(ge=1, le=2**31 - 1)
+    altitude: float | None = Field(
+        None, ge=0.0, le=MAX_ALTITUDE, description="takeoff altitude in m; absent or 0 = the agent's default"
+    )
+    seq: int = Field(ge=1, le=_INT32_MAX)
 
 
-class DirectionCommand(_Wire):
+class DirectionCommand(_Signature):
     """One queued ``direction_cmd_t``."""
 
     active: bool
-    azimuth: float = Field(description="degrees from true north, [0, 360)")
-    speed: float = Field(ge=0.0, description="m/s")
-    seq: int = Field(ge=1, le=2**31 - 1)
+    azimuth: float = Field(ge=0.0, lt=360.0, description="degrees from true north, [0, 360)")
+    speed: float = Field(ge=0.0, le=MAX_SPEED, description="m/s")
+    seq: int = Field(ge=1, le=_INT32_MAX)
 
 
 class ReportReply(_Wire):
@@ -173,29 +234,72 @@ class Direction(_Wire):
         return _wrap_360(value)
 
 
+class _SignedHeader(_Wire):
+    target: str = Field(
+        max_length=64, description='the command\'s target field as signed: an agent name, "" = every agent'
+    )
+    utime: int = Field(gt=0, le=_INT64_MAX, description="header.utime, µs since the epoch (operator clock)")
+    sender: str = Field(min_length=1, max_length=64, description="header.agent: the operator's name")
+    seq: int = Field(ge=1, le=_INT32_MAX, description="header.seq: the MC acknowledges it")
+    mac: str = Field(pattern=_HEX64, description="header.mac, hex: HMAC-SHA256 over the encoded message")
+
+    @field_validator("target")
+    @classmethod
+    def _name_or_empty(cls, value: str) -> str:
+        if value and not re.fullmatch(AGENT_NAME, value):
+            raise ValueError("an agent name (letters, digits, '-', '_', '.') or \"\" for every agent")
+        return value
+
+
+class SignedOperatorCommand(_SignedHeader):
+    """An ``operator_cmd_t`` signed by the operator (``antalate_lcm.security.sign``), field by field."""
+
+    command: CommandName
+    altitude: float = Field(0.0, ge=0.0, le=MAX_ALTITUDE, description="m; 0 = the agent's default")
+
+
+class SignedDirectionCommand(_SignedHeader):
+    """A ``direction_cmd_t`` signed by the operator, field by field."""
+
+    active: bool = True
+    azimuth: float = Field(ge=0.0, lt=360.0, description="degrees from true north, [0, 360): not wrapped once signed")
+    speed: float = Field(ge=0.0, le=MAX_SPEED, description="m/s")
+
+
 class CommandRequest(_Wire):
-    """``POST /api/commands``: exactly one of ``command`` and ``direction``; no target = every agent."""
+    """``POST /api/commands``: exactly one of ``command``, ``direction``, ``operator_cmd`` and
+    ``direction_cmd``. The last two are signed by the operator and forwarded exactly; their own
+    ``target`` decides who gets them. The first two are unsigned: ``target`` absent = every agent."""
 
     command: CommandName | None = None
-    altitude: float | None = Field(None, gt=0.0, le=10_000.0, description="only with TAKEOFF")
+    altitude: float | None = Field(None, gt=0.0, le=MAX_ALTITUDE, description="only with TAKEOFF")
     direction: Direction | None = None
+    operator_cmd: SignedOperatorCommand | None = None
+    direction_cmd: SignedDirectionCommand | None = None
     target: str | None = Field(
-        None, min_length=1, max_length=128, description="an agent's token or name; absent = every known agent"
+        None, min_length=1, max_length=128, description="an agent's id or name; absent = every known agent"
     )
 
     @model_validator(mode="after")
     def _exactly_one(self) -> CommandRequest:
-        if (self.command is None) == (self.direction is None):
-            raise ValueError('give exactly one of "command" and "direction"')
+        given = [x for x in (self.command, self.direction, self.operator_cmd, self.direction_cmd) if x is not None]
+        if len(given) != 1:
+            raise ValueError('give exactly one of "command", "direction", "operator_cmd" and "direction_cmd"')
         if self.altitude is not None and self.command != "TAKEOFF":
             raise ValueError('"altitude" only goes with "command": "TAKEOFF"')
+        if self.target is not None and self.signed:
+            raise ValueError('a signed command carries its own target: leave "target" out')
         return self
+
+    @property
+    def signed(self) -> bool:
+        return self.operator_cmd is not None or self.direction_cmd is not None
 
 
 class QueuedCommand(BaseModel):
     """One delivery the station queued: which agent will get which command."""
 
-    token: str
+    id: str = Field(description="the agent's public id")
     name: str
     seq: int
     operator_cmd: OperatorCommand | None = None
@@ -211,9 +315,9 @@ class CommandResponse(BaseModel):
 
 
 class AgentInfo(BaseModel):
-    """One agent as ``GET /api/agents`` lists it."""
+    """One agent as ``GET /api/agents`` lists it (never with its token: tokens are secrets)."""
 
-    token: str
+    id: str = Field(description="public id: a command may target it; not a credential")
     name: str
     first_seen: float = Field(description="UNIX time (s) of the first report")
     last_seen: float | None = Field(description="UNIX time (s) of the latest report")

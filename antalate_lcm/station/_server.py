@@ -20,7 +20,9 @@ from ._settings import DEFAULT_HOST, DEFAULT_PORT, MEMORY, StationSettings
 log = logging.getLogger("antalate.station")
 
 
-def _config(settings: StationSettings, log_level: str) -> uvicorn.Config:
+def _config(
+    settings: StationSettings, log_level: str, tls_cert: str | None = None, tls_key: str | None = None
+) -> uvicorn.Config:
     # loop/http "auto" pick uvloop and httptools when installed (uvicorn[standard]): about twice the
     # reports per second of the pure-Python asyncio + h11 pair.
     # log_config=None: uvicorn's records go to the root logger, formatted like antalate's own,
@@ -29,7 +31,22 @@ def _config(settings: StationSettings, log_level: str) -> uvicorn.Config:
     return uvicorn.Config(
         create_app(settings), log_level=log_level.lower(), log_config=None, access_log=False,
         loop="auto", http="auto", lifespan="on", timeout_keep_alive=30,
+        ssl_certfile=tls_cert, ssl_keyfile=tls_key,
     )
+
+
+def _check_tls(tls_cert: str | None, tls_key: str | None) -> None:
+    """Both or neither, readable, and a pair that loads: a typo fails here, not at the first client."""
+    if (tls_cert is None) != (tls_key is None):
+        raise AntalateError("TLS needs both a certificate (--tls-cert) and its private key (--tls-key)")
+    if tls_cert is None:
+        return
+    import ssl
+
+    try:
+        ssl.create_default_context(ssl.Purpose.CLIENT_AUTH).load_cert_chain(tls_cert, tls_key)
+    except (OSError, ssl.SSLError) as exc:
+        raise AntalateError(f"cannot use TLS certificate {tls_cert} with key {tls_key}: {exc}") from None
 
 
 def _check_db(path: str) -> None:
@@ -66,28 +83,41 @@ def run_station(
     command_ttl_s: float | None = 60.0,
     history_retention_s: float | None = 24 * 3600.0,
     log_level: str = "info",
+    settings: StationSettings | None = None,
+    tls_cert: str | None = None,
+    tls_key: str | None = None,
 ) -> None:
     """Serve the station until SIGINT/SIGTERM (what ``antalate station`` calls).
 
     ``db_path`` None means the per-user default (`default_db_path`); ``":memory:"`` keeps nothing.
-    The other parameters are `StationSettings` fields. Raises `AntalateError` for a port that
-    cannot be bound, a database that cannot be used or parameters out of range.
+    The other parameters are `StationSettings` fields; ``settings``, when given, replaces them all
+    (what a station config file gives). ``tls_cert``/``tls_key`` (PEM files) serve HTTPS. Raises
+    `AntalateError` for a port that cannot be bound, a database that cannot be used, a TLS pair that
+    does not load or parameters out of range.
     """
-    fields: dict[str, object] = {
-        "range_m": range_m, "fov_deg": fov_deg, "stale_after_s": stale_after_s, "command_ttl_s": command_ttl_s,
-        "history_retention_s": history_retention_s,
-    }
-    if db_path is not None:
-        fields["db_path"] = db_path
-    try:
-        settings = StationSettings.model_validate(fields)
-    except ValidationError as exc:
-        raise AntalateError(f"invalid station parameters: {exc}") from None
+    if settings is None:
+        fields: dict[str, object] = {
+            "range_m": range_m, "fov_deg": fov_deg, "stale_after_s": stale_after_s,
+            "command_ttl_s": command_ttl_s, "history_retention_s": history_retention_s,
+        }
+        if db_path is not None:
+            fields["db_path"] = db_path
+        try:
+            settings = StationSettings.model_validate(fields)
+        except ValidationError as exc:
+            raise AntalateError(f"invalid station parameters: {exc}") from None
+    _check_tls(tls_cert, tls_key)
     _check_db(settings.db_path)
     sock = _bind(host, port)
     actual = sock.getsockname()[1]
-    log.info("station listening on http://%s:%d (database %s)", host, actual, settings.db_path)
-    server = uvicorn.Server(_config(settings, log_level))
+    scheme = "https" if tls_cert else "http"
+    log.info("station listening on %s://%s:%d (database %s)", scheme, host, actual, settings.db_path)
+    if not settings.api_keys:
+        log.warning("no API keys configured: /api/agents and /api/commands answer 401 (antalate station-key api)")
+    if settings.registration_key is None:
+        log.warning("no registration key: any host that reaches the station can register an agent "
+                    "(antalate station-key registration)")
+    server = uvicorn.Server(_config(settings, log_level, tls_cert, tls_key))
     try:
         server.run(sockets=[sock])
     finally:
@@ -105,22 +135,24 @@ class StationServer:
 
     def __init__(
         self, settings: StationSettings | None = None, host: str = "127.0.0.1", port: int = 0,
-        log_level: str = "warning",
+        log_level: str = "warning", *, tls_cert: str | None = None, tls_key: str | None = None,
     ) -> None:
         self.settings = settings if settings is not None else StationSettings()
         if self.settings.db_path != MEMORY:
             _check_db(self.settings.db_path)
+        _check_tls(tls_cert, tls_key)
         self.host = host
+        self.scheme = "https" if tls_cert else "http"
         self._sock = _bind(host, port)
         self.port: int = self._sock.getsockname()[1]
-        self._server = uvicorn.Server(_config(self.settings, log_level))
+        self._server = uvicorn.Server(_config(self.settings, log_level, tls_cert, tls_key))
         self._thread = threading.Thread(target=self._run, name="station-server", daemon=True)
         self._error: BaseException | None = None
 
     @property
     def url(self) -> str:
         host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}"
+        return f"{self.scheme}://{host}:{self.port}"
 
     def _run(self) -> None:
         try:

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from ._auth import Role
 
 MEMORY = ":memory:"
 DEFAULT_HOST = "127.0.0.1"
@@ -20,6 +23,40 @@ def default_db_path() -> Path:
     """
     base = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
     return Path(base) / "antalate" / "station.sqlite"
+
+
+class ApiKey(BaseModel):
+    """One operator credential as the config holds it: a name, a role and SHA-256 of the key."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: str = Field(min_length=1, max_length=64, description="who holds the key (for the log)")
+    role: Role
+    sha256: str = Field(description="hex SHA-256 of the key (antalate station-key api prints it)")
+
+    @field_validator("sha256")
+    @classmethod
+    def _hex(cls, value: str) -> str:
+        if not re.fullmatch(r"[0-9a-fA-F]{64}", value):
+            raise ValueError("64 hex digits (the SHA-256 of the key, not the key itself)")
+        return value.lower()
+
+
+class RateLimits(BaseModel):
+    """Per source address and per agent; None turns a limit off (benchmarks, trusted test rigs)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    registrations_per_minute: float | None = Field(
+        60.0, gt=0.0, description="first-contact reports per source address, sustained"
+    )
+    registration_burst: int = Field(60, ge=1, description="first-contact reports per source address at once")
+    reports_per_second: float | None = Field(20.0, gt=0.0, description="reports per agent, sustained")
+    report_burst: int = Field(40, ge=1, description="reports per agent at once")
+    address_reports_per_second: float | None = Field(
+        2000.0, gt=0.0, description="requests of any kind per source address, sustained"
+    )
+    address_burst: int = Field(4000, ge=1)
 
 
 class StationSettings(BaseModel):
@@ -48,6 +85,23 @@ class StationSettings(BaseModel):
         description="delete history rows older than this (a row is ~200 bytes); None = keep everything",
     )
     max_body_bytes: int = Field(1 << 20, ge=1024, description="larger requests get 413")
+    api_keys: tuple[ApiKey, ...] = Field(
+        (), description="operator credentials; none = the operator endpoints answer 401 to everyone"
+    )
+    registration_key: str | None = Field(
+        None, description="hex key derived from the swarm key; set = registration needs proof of the swarm key"
+    )
+    registration_window_s: float = Field(
+        60.0, gt=0.0, description="accepted clock difference of a registration proof, seconds"
+    )
+    rate_limits: RateLimits = Field(default_factory=RateLimits)
+
+    @field_validator("registration_key")
+    @classmethod
+    def _reg_hex(cls, value: str | None) -> str | None:
+        if value is not None and not re.fullmatch(r"[0-9a-fA-F]{64}", value):
+            raise ValueError("64 hex digits (antalate station-key registration prints it)")
+        return value.lower() if value is not None else None
 
     @field_validator("db_path", mode="before")
     @classmethod

@@ -46,9 +46,23 @@ Frames and units of the emulated state (documented because the SDK guide leaves 
   cosmetic tilt that follows the horizontal velocity. The community has reported inconsistent signs of
   ``vgx/vgy`` on real units; adapters should keep the sign convention configurable.
 
-Faults for tests: ``stop_state()`` / ``resume_state()`` (state packets stop: link loss as djitellopy
-sees it), ``set_battery(pct)``, ``refuse_takeoff = True`` (``takeoff`` answers ``error``),
-``mute_replies = True`` (commands are executed but never answered).
+Faults and dynamics for tests (all settable while running):
+
+* ``stop_state()`` / ``resume_state()``: state packets stop (only the state port is lost).
+* ``silence(seconds)``: the Wi-Fi link is down both ways for that long: datagrams to the Tello are
+  lost (they do not count as commands for the 15 s auto-landing), and no reply or state comes back.
+  With ``forget_sdk_on_silence = True`` the Tello has left SDK mode when the link returns (as after a
+  reboot) and sends state again only after a new ``command``.
+* ``lose_reply(command, count=1)``: the next `count` answers to `command` (``"takeoff"``, ``"land"``,
+  ...) are lost on the way back; the command itself is carried out.
+* ``mute_replies = True`` (every command executed, none answered), ``refuse_takeoff = True``
+  (``takeoff`` answers ``error``), ``set_battery(pct)``.
+* ``vertical_tau``: the time constant of the vertical response to ``rc`` (s; default
+  ``response_tau``): 0.15 s is a brisk Tello, 0.6 s a sluggish one.
+* ``height_resolution_cm`` (10: the Tello reports ``h`` in whole decimetres, as cm) and
+  ``height_rounding`` (``"round"`` to the nearest step, or ``"floor"``).
+* ``auto_land_timeout``: the Tello lands itself this long after the last command it received, counted
+  from the end of the command it was executing (15 s: SDK 3.0 user guide, "Safety Function").
 
 Running it next to djitellopy: djitellopy binds 8889/8890 on all addresses once per process, so the
 emulator cannot bind 8889 in the same network namespace. Use :class:`tests.emulators.netns_pair.NetnsPair`
@@ -168,6 +182,9 @@ class TelloEmulator:
         sdk_version: str = "20",
         wifi_snr: int = 90,
         mission_pad_fields: bool = True,
+        vertical_tau: float | None = None,
+        height_resolution_cm: int = 10,
+        height_rounding: str = "round",
     ) -> None:
         """Bind ``host:port`` (``port=0``: a free port) or adopt ``sock`` (already bound, e.g. in a netns).
 
@@ -196,10 +213,20 @@ class TelloEmulator:
         self.sdk_version = sdk_version
         self.wifi_snr = wifi_snr
         self.mission_pad_fields = mission_pad_fields
+        self.vertical_tau = vertical_tau
+        self.height_resolution_cm = height_resolution_cm
+        if height_rounding not in ("round", "floor"):
+            raise ValueError(f"height_rounding must be 'round' or 'floor', got {height_rounding!r}")
+        self.height_rounding = height_rounding
 
         # Fault switches: plain attributes so a test can flip them at any time.
         self.refuse_takeoff = False
         self.mute_replies = False
+        self.forget_sdk_on_silence = False
+        self._lose: dict[str, int] = {}
+        self._silent_until = -math.inf
+        self._silence_pending_reset = False
+        self._lost_replies: list[tuple[str, str]] = []
 
         self._lock = threading.RLock()
         self._stop_evt = threading.Event()
@@ -313,6 +340,35 @@ class TelloEmulator:
         with self._lock:
             self._state_enabled = True
 
+    def silence(self, seconds: float) -> None:
+        """The link is down both ways for `seconds` (see the module docstring)."""
+        with self._lock:
+            self._silent_until = time.monotonic() + seconds
+            self._silence_pending_reset = self.forget_sdk_on_silence
+
+    def silent(self) -> bool:
+        with self._lock:
+            return time.monotonic() < self._silent_until
+
+    def lose_reply(self, command: str, count: int = 1) -> None:
+        """Lose the next `count` answers to `command` (the command is still carried out)."""
+        with self._lock:
+            self._lose[command] = self._lose.get(command, 0) + count
+
+    @property
+    def lost_replies(self) -> list[tuple[str, str]]:
+        """(command, answer) of every reply lost on purpose so far."""
+        with self._lock:
+            return list(self._lost_replies)
+
+    def height_cm(self) -> int:
+        """The state's ``h``: cm, in steps of ``height_resolution_cm``."""
+        with self._lock:
+            step = max(1, int(self.height_resolution_cm))
+            cm = self._z * 100.0
+            steps = math.floor(cm / step + 1e-9) if self.height_rounding == "floor" else round(cm / step)
+            return int(steps * step)
+
     def set_battery(self, pct: float) -> None:
         """Set the battery level; at or below ``auto_land_battery`` a flying Tello lands itself."""
         with self._lock:
@@ -333,7 +389,7 @@ class TelloEmulator:
                 f"pitch:{pitch}", f"roll:{roll}", f"yaw:{round(_wrap180(self._yaw))}",
                 f"vgx:{round(self._vx * 10)}", f"vgy:{round(self._vy * 10)}", f"vgz:{round(-self._vz * 10)}",
                 f"templ:{templ}", f"temph:{templ + 2}",
-                f"tof:{round(self._z * 100) + 10}", f"h:{round(self._z * 10) * 10}",
+                f"tof:{round(self._z * 100) + 10}", f"h:{self.height_cm()}",
                 f"bat:{int(self._battery)}", f"baro:{100.0 + self._z:.2f}", f"time:{int(self._motor_time)}",
                 f"agx:{round(-1000.0 * math.sin(math.radians(pitch)), 2) + 0.0:.2f}",
                 f"agy:{round(1000.0 * math.sin(math.radians(roll)), 2) + 0.0:.2f}",
@@ -381,15 +437,24 @@ class TelloEmulator:
         except OSError as exc:  # unreachable peer etc.: a real Tello does not care either
             LOG.debug("send to %s failed: %s", dest, exc)
 
-    def _reply(self, text: str, dest: Address) -> None:
+    def _reply(self, text: str, dest: Address, command: str = "") -> None:
         with self._lock:
-            if self.mute_replies:
+            if self.mute_replies or time.monotonic() < self._silent_until:
+                return
+            if self._lose.get(command, 0) > 0:
+                self._lose[command] -= 1
+                self._lost_replies.append((command, text))
                 return
             self._replies.append((text, dest))
         self._send(text.encode("utf-8"), dest)
 
     def _send_state(self) -> None:
         with self._lock:
+            if time.monotonic() < self._silent_until:
+                return
+            if self._silence_pending_reset:
+                self._silence_pending_reset = False
+                self._sdk_mode = False  # came back as after a reboot: state only after "command"
             if not (self._sdk_mode and self._state_enabled):
                 return
             dest = self.state_target
@@ -410,11 +475,13 @@ class TelloEmulator:
             return
         now = time.monotonic()
         with self._lock:
+            if now < self._silent_until:
+                return  # lost on the way: not a command the Tello heard
             self._commands.append(TelloCommand(now, text, sender))
             self._last_command = now
             reply = self._handle(text, sender, now)
         if reply is not None:
-            self._reply(reply, sender)
+            self._reply(reply, sender, text.split()[0] if text.split() else "")
 
     def _handle(self, text: str, sender: Address, now: float) -> str | None:
         """Apply one command (lock held); the immediate reply, or None (no reply, or a deferred one)."""
@@ -616,7 +683,7 @@ class TelloEmulator:
     # -- physics ---------------------------------------------------------------------------------
 
     def _step(self, dt: float, now: float) -> None:
-        done: tuple[str, Address] | None = None
+        done: tuple[str, Address, str] | None = None
         with self._lock:
             if self._flying:
                 self._motor_time += dt
@@ -635,7 +702,7 @@ class TelloEmulator:
         if done is not None:
             self._reply(*done)
 
-    def _step_maneuver(self, dt: float, now: float) -> tuple[str, Address] | None:
+    def _step_maneuver(self, dt: float, now: float) -> tuple[str, Address, str] | None:
         m = self._maneuver
         assert m is not None
         dx, dy, dz = m.target[0] - self._x, m.target[1] - self._y, m.target[2] - self._z
@@ -667,7 +734,7 @@ class TelloEmulator:
         if m.lands:
             self._flying = False
             self._z = 0.0
-        return ("ok", m.reply_to) if m.reply_to is not None else None
+        return ("ok", m.reply_to, m.name) if m.reply_to is not None else None
 
     def _step_rc(self, dt: float) -> None:
         lr, fb, ud, yw = self._rc
@@ -678,9 +745,11 @@ class TelloEmulator:
         cmd_vx = fwd * math.cos(yaw) - right * math.sin(yaw)
         cmd_vy = fwd * math.sin(yaw) + right * math.cos(yaw)
         alpha = 1.0 - math.exp(-dt / self.response_tau) if self.response_tau > 0 else 1.0
+        tau_z = self.response_tau if self.vertical_tau is None else self.vertical_tau
+        alpha_z = 1.0 - math.exp(-dt / tau_z) if tau_z > 0 else 1.0
         self._vx += (cmd_vx - self._vx) * alpha
         self._vy += (cmd_vy - self._vy) * alpha
-        self._vz += (up - self._vz) * alpha
+        self._vz += (up - self._vz) * alpha_z
         self._x += self._vx * dt
         self._y += self._vy * dt
         self._z += self._vz * dt

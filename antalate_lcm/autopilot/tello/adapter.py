@@ -3,118 +3,90 @@
 The Tello speaks the SDK text protocol: commands to UDP 8889 (most answered ``ok``/``error`` once
 *done*, ``rc`` never answered), and a state line pushed to UDP 8890 about ten times a second. It
 has no GPS, no arming step and no return-to-home, so this adapter supplies what the HLC expects on
-top of it. The user-facing description (set-up, several Tellos, limits) is ``docs/tello.md``.
+top of it. The user-facing description (set-up, several Tellos, limits) is ``docs/tello.md``; the
+arithmetic is in `antalate_lcm.autopilot.tello.maths`, the parameters in `.params`.
 
 What the adapter adds, and why
 ------------------------------
 * **Position by dead reckoning.** The state line carries ground velocities ``vgx/vgy`` (dm/s) and
-  ``yaw`` (deg, 0 at power-on). They are rotated into north/east by ``home_heading`` (the compass
-  heading the Tello faced at power-on) and integrated (trapezoid rule, only while flying) from the
-  configured ``home_lat``/``home_lon``. Heading = ``home_heading + yaw``. Altitude is the state's
-  ``h`` (cm above the take-off point, decimetre resolution) or, with ``altitude_source = "tof"``, the
-  downward range finder. The frame of ``vgx/vgy`` follows the test emulator's reading of the SDK
-  (``tests/emulators/tello_emulator.py``: a ground frame fixed at power-on, x along yaw 0, y to the
-  right); real units have been reported with other signs and frames, hence ``vgx_sign``,
-  ``vgy_sign`` and ``velocity_frame``. Dead reckoning drifts: it is for a flying field, not a route.
+  ``yaw`` (deg, 0 at power-on). They are rotated into north/east by ``home_heading`` and integrated
+  (trapezoid rule, only while flying) from ``home_lat``/``home_lon``. Heading = ``home_heading +
+  yaw``. Altitude is the state's ``h`` (cm, decimetre resolution) or the ``tof`` range finder.
+  Signs and frame of ``vgx/vgy`` are configurable (``vgx_sign``, ``vgy_sign``, ``velocity_frame``).
+* **Its own command path.** djitellopy sends an answered command and then blocks on the one reply
+  list it keeps per drone, resending on a timeout (a second ``takeoff``!). The Tello's replies carry
+  no id, so a late ``ok`` is taken as the answer to the next command. Here an answered command is
+  sent once (djitellopy's socket, no retry) and its wait is a loop that also reads the state
+  packets: a lost ``ok`` to ``takeoff`` is settled once the state shows the Tello in the air and
+  holding its height, a lost ``ok`` to ``land`` once it shows it on the ground; a read (``battery?``)
+  skips a stray ``ok``. ``land``, ``rtl`` and `emergency` pre-empt a command that is still waiting.
 * **Link age.** djitellopy's receiver thread replaces the per-drone state dict on every packet, so a
-  new dict object means a new packet. Both `state()` and the control thread poll for that and
-  stamp it with the adapter's clock; ``link_age`` is the age of the newest stamp. Polling from both
-  keeps the stamps fresh while the control thread is blocked in a ``land`` (which only answers
-  once the Tello is down).
-* **A control thread** (``control_hz``) that streams ``rc`` while a velocity set-point, the take-off
-  climb or the RTL leg is active, and sends ``rc 0 0 0 0`` every ``keepalive_s`` while the Tello
-  hovers idle: a Tello lands itself 15 s after the last command. ``rc`` is used as the keepalive,
-  not the ``keepalive`` command, because ``rc`` is never answered: an answered command would share
-  djitellopy's single reply queue with the HLC's blocking commands, where a late reply is taken as
-  the answer to the next command. When no state has arrived for ``link_loss_timeout`` s the thread
-  sends one ``rc 0 0 0 0`` (hover) and then stays silent, so that the Tello's own 15 s failsafe
-  lands it instead of it hovering on our keepalives while nobody can see it; if the state comes
-  back first, the adapter lands it (a link loss in flight ends the flight: the HLC's LLC_DOWN is
-  final, and nobody would command the Tello again).
-* **RTL** = fly back to the take-off point (the dead-reckoned position where the last take-off
-  began) at ``rtl_speed`` with ``rc``, slowing down over the last metre, then ``land`` within
-  ``rtl_tolerance``. It is asynchronous: `rtl` returns at once, the mode is ``RTL`` on the way and
-  ``LAND`` for the final descent. If the distance grows instead of shrinking (a wrong sign
-  convention) or the leg takes far longer than it should, the Tello lands where it is.
+  new dict object means a new packet; it is stamped with the adapter's clock when first seen.
+* **A control thread** at ``control_hz`` (a fixed schedule: rc goes out at that rate and no other)
+  streams ``rc`` while a velocity set-point, the take-off climb or the RTL leg is active, and sends
+  ``rc 0 0 0 0`` every ``keepalive_s`` whenever the Tello is in the air and not landing -- also while
+  a command waits for its answer -- because a Tello lands itself 15 s after the last command.
+* **Link loss.** With no state for ``link_loss_timeout`` s the thread sends one hover and then stays
+  silent, so that the Tello's own 15 s failsafe lands it instead of our keepalives holding it up
+  unseen. Once it must have landed (15 s after our last command, or at once if it was on the
+  ground) the thread sends ``command`` once a second, which re-enters SDK mode on a Tello that
+  rebooted or forgot us. When state comes back the adapter re-reads the vehicle: on the ground it is
+  GROUND; in the air it hovers for ``link_back_hover`` s waiting for a command (the HLC recovering
+  from LLC_DOWN) and then lands it, so a Tello nobody commands any more is not held up forever.
+* **RTL** = fly back to the take-off point at ``rtl_speed`` with ``rc``, then ``land``. `rtl`
+  returns once the distance is shrinking (a few seconds at most) or raises `AutopilotError` when it
+  grows or does not shrink (a wrong sign convention or heading): the Tello then lands where it is,
+  and the HLC reports the reason as an ``hlc_error_t``. Later failures of the leg (it grows by
+  ``2 m``, or it takes far longer than it should) also land it where it is, with the reason in
+  ``AutopilotState.failsafe``.
 * **Take-off to an altitude.** The Tello's own ``takeoff`` stops at about 0.8 m. With
   ``takeoff_altitude_mode = "rc"`` (default) `takeoff` returns once that is done and the control
-  thread climbs (or descends) to the target with ``rc`` (mode ``TAKEOFF`` until within 0.1 m, then
-  ``GUIDED``); the HLC watches the altitude as for any vehicle, and a velocity set-point ends the
-  climb. With ``"up"`` `takeoff` also sends ``up``/``down`` (20..500 cm each, answered once done)
-  and returns only at the altitude; a remainder under 20 cm is trimmed with ``rc``.
-* **No arming.** The motors start with ``takeoff``. `arm` checks that the link is alive, that a
-  command is answered (``battery?``) and that the battery is above ``min_battery``; `disarm` is a
-  no-op on the ground (it never sends ``emergency``, which cuts the motors in flight).
-
-The ``rc`` scale: an ``rc`` value of 100 is taken to mean ``max_speed`` m/s horizontally,
-``max_vertical_speed`` m/s vertically and ``max_yaw_rate`` deg/s, linearly; set-points are scaled by
-these and clamped to ±100 (horizontal components together, so the direction is kept). The defaults
-match the test emulator; measure your Tello's and set them (see ``docs/tello.md``).
+  thread climbs (or descends) with ``rc`` until `maths.climb_done`: the reading at or above the target
+  (`base.altitude_reached` at fraction 1, so the HLC's ``airborne_fraction`` test holds whatever it
+  is) and at most a decimetre above it. With ``"up"`` `takeoff` also sends ``up``/``down`` and returns
+  only at the altitude.
+* **No arming.** The motors start with ``takeoff``. `arm` checks the link, that a command is
+  answered (``battery?``) and the battery; `disarm` is a no-op on the ground.
 
 One process, several Tellos: djitellopy binds UDP 8889 and 8890 on all addresses once per process
 and files replies and state packets by the sender's IP. Several Tellos are therefore several agents
-of one ``antalate agent`` process, each with its own ``host``; a second process on the same machine
-cannot bind the ports, and two adapters in one process cannot share a host.
+of one ``antalate agent`` process, each with its own ``host``.
 """
 
 from __future__ import annotations
 
-import contextlib
 import enum
-import ipaddress
 import logging
 import math
 import threading
 import time
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar
+
+from pydantic import BaseModel
 
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, Clock, FlightMode, Frame
+from antalate_lcm.autopilot.tello import maths
+from antalate_lcm.autopilot.tello.params import TELLO_AUTOLAND_S, Params, validated
 from antalate_lcm.geo import FlatFrame, wrap_360
 
 log = logging.getLogger("antalate.autopilot.tello")
 
-#: Parameters and their defaults (``[hlc.autopilot_params]`` with ``autopilot = "tello"``).
-DEFAULTS: dict[str, Any] = {
-    "host": "192.168.10.1",  # the Tello's IP (192.168.10.1 in its own access-point mode)
-    "home_lat": 32.7767,  # deg: where the Tello was powered on (dead-reckoning origin)
-    "home_lon": 35.0231,  # deg
-    "home_heading": 0.0,  # deg from north: where the Tello faced at power-on (its yaw 0)
-    "max_speed": 1.0,  # m/s horizontally at rc 100
-    "max_vertical_speed": 1.0,  # m/s at rc 100
-    "max_yaw_rate": 100.0,  # deg/s at rc 100
-    "control_hz": 20.0,  # rate of the control thread (rc streaming, RTL, climb)
-    "keepalive_s": 5.0,  # s between keepalive rc while hovering idle (the Tello lands after 15 s)
-    "velocity_hold": 1.0,  # s a velocity set-point is streamed without being renewed
-    "rtl_speed": 0.5,  # m/s on the way back to the take-off point
-    "rtl_tolerance": 0.3,  # m from the take-off point at which the RTL lands
-    "vgx_sign": 1,  # +1 or -1: sign of the state's vgx (forward along yaw 0 is positive)
-    "vgy_sign": 1,  # +1 or -1: sign of the state's vgy (right of yaw 0 is positive)
-    "velocity_frame": "ground",  # "ground": vgx/vgy in the power-on frame; "body": along the current yaw
-    "altitude_source": "h",  # "h": the state's height; "tof": the downward range finder
-    "takeoff_altitude_mode": "rc",  # "rc": climb with rc in the background; "up": blocking up/down
-    "min_battery": 10.0,  # percent: arm() refuses at or below (the Tello refuses takeoff near 10%)
-    "command_timeout": 7,  # s (integer, djitellopy's unit) to wait for a command's answer
-    "takeoff_timeout": 20,  # s (integer) for takeoff, land and up/down, answered only when done
-    "retry_count": 3,  # attempts per answered command (djitellopy resends on error or timeout)
-    "state_timeout": 2.0,  # s connect() waits for the first state packet
-    "link_loss_timeout": 2.0,  # s without state before the adapter stops commanding the Tello
-    "djitellopy_log_level": "WARNING",  # djitellopy logs every command at INFO (rc at 20 Hz...)
-}
-
-_CLIMB_TOLERANCE = 0.1  # m: the climb to the take-off altitude is done within this
-_CLIMB_GAIN = 1.5  # 1/s: vertical speed per metre of remaining climb
-_MIN_CLIMB_SPEED = 0.2  # m/s: so the last centimetres do not take forever
 _APPROACH_GAIN = 1.0  # 1/s: RTL speed per metre of remaining distance (below rtl_speed)
 _MIN_APPROACH_SPEED = 0.2  # m/s
-_RTL_DIVERGENCE = 2.0  # m: farther than the start distance by this much -> give up and land here
-_GROUND_CONFIRM = 0.5  # s of zero height before a flying Tello counts as landed on its own
+_RTL_DIVERGENCE = 2.0  # m: farther than the start distance by this much during the leg -> land here
+_RTL_PROGRESS = 0.5  # m: rtl() returns once the distance shrank by this (or by half, when shorter)
+_RTL_EARLY_DIVERGENCE = 0.5  # m: rtl() fails when the distance grew by this before shrinking
+_GROUND_CONFIRM = 0.5  # s an in-air flag must hold before it is believed
+_SETTLED = 1.0  # s of unchanged height (and zero vertical speed) that end a take-off or up/down
 _LAND_RETRY = 2.0  # s between attempts when a land command failed in the air
 _STOP_REPEAT = 3  # zero rc sent this many ticks in a row when motion stops (UDP may drop one)
+_PROBE_PERIOD = 1.0  # s between "command" probes while the link is lost
 _UP_MIN_CM, _UP_MAX_CM = 20, 500  # the SDK's range for up/down
 _TOF_GROUND_CM = 10  # the range finder reads this on the ground
 _TOF_INVALID_CM = 6000  # and implausibly large values out of range
+_POLL = 0.02  # s between looks at the reply list and the state while a command waits
 
 #: Hosts with a live adapter in this process: djitellopy keeps one reply queue per IP.
 _HOSTS_IN_USE: set[str] = set()
@@ -134,60 +106,8 @@ class _Phase(enum.Enum):
 _FLIGHT_MODES = {_Phase.RTL: FlightMode.RTL, _Phase.LAND: FlightMode.LANDING}
 
 
-def _validated(params: Mapping[str, Any]) -> dict[str, Any]:
-    """Defaults merged with `params`, every value checked; `ValueError` names the offending key."""
-    unknown = sorted(set(params) - set(DEFAULTS))
-    if unknown:
-        raise ValueError(f"unknown tello autopilot parameter(s) {unknown}; known: {sorted(DEFAULTS)}")
-    p = {**DEFAULTS, **params}
-
-    def number(key: str, *, positive: bool = True) -> float:
-        value = p[key]
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            raise ValueError(f"tello autopilot parameter {key!r} must be a finite number, got {value!r}")
-        if positive and value <= 0:
-            raise ValueError(f"tello autopilot parameter {key!r} must be > 0, got {value!r}")
-        return float(value)
-
-    try:
-        ipaddress.IPv4Address(str(p["host"]))
-    except ValueError:
-        raise ValueError(
-            f"tello autopilot parameter 'host' must be an IPv4 address, got {p['host']!r} "
-            "(djitellopy matches replies to drones by the sender's IP)"
-        ) from None
-    p["host"] = str(p["host"])
-    for key in ("home_lat", "home_lon", "home_heading", "min_battery"):
-        p[key] = number(key, positive=False)
-    if not -90.0 <= p["home_lat"] <= 90.0:
-        raise ValueError(f"tello autopilot parameter 'home_lat' must be in [-90, 90], got {p['home_lat']!r}")
-    for key in ("max_speed", "max_vertical_speed", "max_yaw_rate", "control_hz", "keepalive_s", "velocity_hold",
-                "rtl_speed", "rtl_tolerance", "state_timeout", "link_loss_timeout"):
-        p[key] = number(key)
-    if p["keepalive_s"] >= 15.0:
-        raise ValueError(f"tello autopilot parameter 'keepalive_s' must be < 15 (the Tello lands after 15 s "
-                         f"without a command), got {p['keepalive_s']!r}")
-    for key in ("command_timeout", "takeoff_timeout", "retry_count"):
-        value = p[key]
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ValueError(f"tello autopilot parameter {key!r} must be an integer >= 1 "
-                             f"(djitellopy takes whole seconds), got {value!r}")
-    for key in ("vgx_sign", "vgy_sign"):
-        if p[key] not in (1, -1) or isinstance(p[key], bool):
-            raise ValueError(f"tello autopilot parameter {key!r} must be 1 or -1, got {p[key]!r}")
-    choices = {
-        "velocity_frame": ("ground", "body"),
-        "altitude_source": ("h", "tof"),
-        "takeoff_altitude_mode": ("rc", "up"),
-    }
-    for key, allowed in choices.items():
-        if p[key] not in allowed:
-            raise ValueError(f"tello autopilot parameter {key!r} must be one of {list(allowed)}, got {p[key]!r}")
-    level = p["djitellopy_log_level"]
-    if not isinstance(level, str) or not isinstance(logging.getLevelName(level.upper()), int):
-        raise ValueError(f"tello autopilot parameter 'djitellopy_log_level' must be a logging level name, "
-                         f"got {level!r}")
-    return p
+class _Preempted(AutopilotError):
+    """A waiting command was overtaken by land, rtl or emergency."""
 
 
 class TelloAutopilot(Autopilot):
@@ -195,46 +115,54 @@ class TelloAutopilot(Autopilot):
 
     name = "tello"
     blocking = True  # takeoff/land/up wait for the Tello's answer, which comes when the move is done
+    params_model: ClassVar[type[BaseModel]] = Params
 
     def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
         super().__init__(params, clock=clock)
-        p = _validated(self.params)
+        p = validated(self.params)
         self._p = p
-        self.host: str = p["host"]
-        self.home = FlatFrame(p["home_lat"], p["home_lon"])
-        self._home_heading = wrap_360(p["home_heading"])
+        self.host: str = p.host
+        self.home = FlatFrame(p.home_lat, p.home_lon)
+        self._home_heading = wrap_360(p.home_heading)
         self._tello: Any = None  # djitellopy.Tello once connected
-        self._tello_error: type[Exception] = Exception  # djitellopy.TelloException once imported
         self._lock = threading.RLock()  # adapter state, shared by the HLC, control and caller threads
-        self._cmd_lock = threading.Lock()  # one answered command at a time (one reply queue per host)
+        self._cmd_lock = threading.RLock()  # one answered command at a time (replies carry no id)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._lander: threading.Thread | None = None
         self._connected = False
         self._owns_host = False
-        self._ratelog = RateLimitedLog(log, period=10.0)
+        self._ratelog = RateLimitedLog(log, period=10.0, clock=clock)
         # Telemetry from the newest state packet.
         self._raw: dict[str, Any] | None = None  # the dict object of the last packet (identity = packet)
         self._state_time: float | None = None  # clock() when it was first seen
         self._yaw = 0.0  # deg, the Tello's own (0 at power-on)
         self._vn = self._ve = self._vd = 0.0  # m/s
         self._height = 0.0  # m above the take-off point
+        self._height_changed = -math.inf  # clock() of the last change of the height reading
         self._h_cm = 0  # the raw height, the in-air test
+        self._air = maths.Debounced(_GROUND_CONFIRM)  # the in-air flag, believed once it held
         self._battery = -1.0
         # Dead reckoning (metres north/east of home).
         self._north = self._east = 0.0
         self._takeoff_point = (0.0, 0.0)
         # What the adapter is doing.
         self._phase = _Phase.GROUND
+        self._pending: str | None = None  # the answered command waiting for its reply
+        self._preempt = 0  # bumped by land/rtl/emergency: a waiting command gives up
         self._climb_target: float | None = None  # m; set while the rc climb is active
         self._setpoint: tuple[float, float, float, float, Frame] | None = None  # vx, vy, vz, yaw_rate, frame
         self._setpoint_time = 0.0
         self._rtl_start = 0.0
         self._rtl_dist0 = 0.0
+        self._failsafe = ""  # why the adapter is landing on its own (a failed RTL, nobody commanding)
         self._land_due: float | None = None  # clock() at which the control thread (re)tries land
-        self._ground_since: float | None = None  # first zero-height packet while flying
         self._last_sent = -math.inf  # clock() of the last datagram sent to the Tello
         self._stop_ticks = 0  # zero rc still to send after motion stopped
         self._silenced = False  # link lost: no more commands until state comes back
+        self._lost_in_air = False  # the Tello was flying when the link was lost
+        self._last_probe = -math.inf
+        self._unattended_until: float | None = None  # after a link loss: land unless commanded by then
 
     # ================================================================= the Autopilot contract
 
@@ -242,14 +170,13 @@ class TelloAutopilot(Autopilot):
         if self._connected:
             return
         try:
-            from djitellopy import Tello, TelloException
+            from djitellopy import Tello
         except ImportError as exc:  # pragma: no cover - djitellopy is a dependency of antalate
             raise AutopilotError(f"djitellopy is not installed ({exc}): pip install djitellopy") from exc
-        Tello.LOGGER.setLevel(self._p["djitellopy_log_level"].upper())
+        Tello.LOGGER.setLevel(self._p.djitellopy_log_level)
         # djitellopy prints through a handler of its own *and* propagates to the root logger, so
         # every line appeared twice; the application's logging configuration is the one to keep.
         Tello.LOGGER.removeHandler(Tello.HANDLER)
-        self._tello_error = TelloException
         with _HOSTS_LOCK:
             if not self._owns_host and self.host in _HOSTS_IN_USE:
                 raise AutopilotError(
@@ -271,6 +198,8 @@ class TelloAutopilot(Autopilot):
 
     def close(self) -> None:
         self._stop.set()
+        with self._lock:
+            self._preempt += 1
         thread, self._thread = self._thread, None
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout=2.0)
@@ -288,13 +217,13 @@ class TelloAutopilot(Autopilot):
 
     def arm(self) -> bool:
         self._require_link("arm")
-        answer = self._ask("battery?")
+        answer = self._exchange("battery?", self._p.command_timeout)
         try:
             battery = float(answer)
         except ValueError:
             raise AutopilotError(f"arm: the Tello at {self.host} did not answer 'battery?' ({answer!r})") from None
-        if battery <= self._p["min_battery"]:
-            log.warning("arm refused: battery %.0f%% <= min_battery %g%%", battery, self._p["min_battery"])
+        if battery <= self._p.min_battery:
+            log.warning("arm refused: battery %.0f%% <= min_battery %g%%", battery, self._p.min_battery)
             return False
         return True
 
@@ -313,23 +242,43 @@ class TelloAutopilot(Autopilot):
             if self._phase is not _Phase.GROUND or self._in_air():
                 raise AutopilotError(f"takeoff refused: already {self._phase.value.lower()} "
                                      f"at {self._height:.1f} m")
+            self._commanded()
             self._phase = _Phase.TAKEOFF
             self._takeoff_point = (self._north, self._east)
             self._setpoint = None
             self._climb_target = None
+            self._failsafe = ""
+            sent = self.clock()
         try:
-            self._command("takeoff", self._p["takeoff_timeout"])
+            answer = self._exchange("takeoff", self._p.takeoff_timeout, settled=lambda: self._move_settled(sent),
+                                    done_in_air=True)
+        except _Preempted:
+            raise AutopilotError("takeoff interrupted (land, rtl or emergency)") from None
         except AutopilotError:
             with self._lock:
-                self._phase = _Phase.GUIDED if self._in_air() else _Phase.GROUND
+                if self._phase is _Phase.TAKEOFF:
+                    self._phase = _Phase.GUIDED if self._in_air() else _Phase.GROUND
             raise
-        if self._p["takeoff_altitude_mode"] == "up":
-            self._climb_with_up(alt)
+        if answer not in ("ok", ""):
+            with self._lock:
+                if self._phase is _Phase.TAKEOFF:
+                    self._phase = _Phase.GUIDED if self._in_air() else _Phase.GROUND
+            raise AutopilotError(f"the Tello at {self.host} refused 'takeoff': {answer!r}")
+        with self._lock:
+            self._air.reset(True)  # it said so (or the packets did): no half second of doubt
+        if not answer:
+            log.warning("Tello %s: no answer to 'takeoff', but the state shows it up at %.1f m: going on",
+                        self.host, self._height)
+        if self._p.takeoff_altitude_mode == "up":
+            try:
+                self._climb_with_up(alt)
+            except _Preempted:
+                raise AutopilotError("climb interrupted (land, rtl or emergency)") from None
         else:
             self._wait_fresh_state()  # the height when "ok" came, not from a packet sent mid-climb
         with self._lock:
             if self._phase is _Phase.TAKEOFF:
-                if abs(alt - self._height) <= _CLIMB_TOLERANCE:
+                if maths.climb_done(self._height, alt):
                     self._phase = _Phase.GUIDED
                 else:
                     self._climb_target = alt  # the control thread takes it from here
@@ -337,8 +286,10 @@ class TelloAutopilot(Autopilot):
     def land(self) -> None:
         self._require_connected("land")
         with self._lock:
+            self._commanded()
             self._setpoint = None
             self._climb_target = None
+            self._preempt += 1  # a waiting takeoff/up gives up at once
             if self._phase is _Phase.GROUND and not self._in_air():
                 return  # nothing to land
             self._phase = _Phase.LAND
@@ -349,17 +300,21 @@ class TelloAutopilot(Autopilot):
     def rtl(self) -> None:
         self._require_link("rtl")
         with self._lock:
+            self._commanded()
             if not self._in_air() and self._phase in (_Phase.GROUND, _Phase.TAKEOFF):
                 return  # on the ground there is nowhere to return from
             if self._phase in (_Phase.RTL, _Phase.LAND):
                 return  # already on the way (or down)
+            self._preempt += 1
             self._setpoint = None
             self._climb_target = None
+            self._failsafe = ""
             self._phase = _Phase.RTL
             self._rtl_start = self.clock()
             tn, te = self._takeoff_point
-            self._rtl_dist0 = math.hypot(tn - self._north, te - self._east)
-            log.info("Tello %s RTL: %.1f m to the take-off point", self.host, self._rtl_dist0)
+            self._rtl_dist0 = dist0 = math.hypot(tn - self._north, te - self._east)
+            log.info("Tello %s RTL: %.1f m to the take-off point", self.host, dist0)
+        self._verify_rtl(dist0)
 
     def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
         values = (vx, vy, vz, yaw_rate)
@@ -373,10 +328,11 @@ class TelloAutopilot(Autopilot):
                 self._phase = _Phase.GUIDED
             if self._phase is not _Phase.GUIDED:
                 return  # like ArduCopter: velocity targets are ignored outside guided flight
+            self._commanded()
+            # Streamed by the control thread on its schedule: sending here too made the rc rate
+            # control_hz plus the HLC's command rate.
             self._setpoint = (vx, vy, vz, yaw_rate, Frame(frame))
             self._setpoint_time = self.clock()
-            rc = self._setpoint_rc()
-        self._send_rc(rc)
 
     def state(self) -> AutopilotState:
         with self._lock:
@@ -404,9 +360,23 @@ class TelloAutopilot(Autopilot):
                 autonomous=True,  # no pilot radio: always under computer control
                 mode=self._phase.value,
                 flight_mode=_FLIGHT_MODES.get(self._phase, FlightMode.GUIDED),
+                failsafe=self._failsafe if self._phase is _Phase.LAND else "",
             )
 
     # ================================================================= extras (tests, tools)
+
+    def emergency(self) -> None:
+        """Stop the motors at once (the Tello drops): pre-empts any command still waiting."""
+        self._require_connected("emergency")
+        with self._lock:
+            self._preempt += 1
+            self._setpoint = None
+            self._climb_target = None
+            self._phase = _Phase.GROUND
+            self._air.reset(False)  # it drops: not "flying though we did not take off"
+            self._land_due = None
+        self._send_raw("emergency")
+        log.warning("Tello %s: emergency (motors stopped)", self.host)
 
     @property
     def position_ne(self) -> tuple[float, float]:
@@ -431,34 +401,42 @@ class TelloAutopilot(Autopilot):
         """
         p = self._p
         try:
-            tello = tello_cls(self.host, retry_count=p["retry_count"])
+            tello = tello_cls(self.host, retry_count=p.retry_count)
         except OSError as exc:
             raise AutopilotError(
                 f"cannot bind UDP {tello_cls.CONTROL_UDP_PORT} for djitellopy ({exc}): another process on "
                 "this machine talks to a Tello; run every Tello agent in one process "
                 "(antalate agent tello-a.toml tello-b.toml)") from exc
         self._tello = tello
-        try:
-            self._command("command", p["command_timeout"])
-        except AutopilotError as exc:
+        answer = ""
+        for _ in range(p.retry_count):
+            try:
+                answer = self._exchange("command", p.command_timeout, preemptible=False)
+            except AutopilotError as exc:
+                answer = str(exc)
+                continue
+            if answer == "ok":
+                break
+        else:
             raise AutopilotError(
                 f"no answer from the Tello at {self.host}:{tello_cls.CONTROL_UDP_PORT} to 'command' "
-                f"({p['retry_count']} x {p['command_timeout']} s): is it on, and is this machine on its "
-                f"Wi-Fi (or it on yours, in station mode)? ({exc})") from exc
-        deadline = time.monotonic() + p["state_timeout"]
+                f"({p.retry_count} x {p.command_timeout:g} s): is it on, and is this machine on its "
+                f"Wi-Fi (or it on yours, in station mode)? ({answer})")
+        deadline = self.clock() + p.state_timeout
         while True:
             with self._lock:
                 self._ingest()
                 if self._state_time is not None:
+                    self._air.reset(self._in_air())
                     self._phase = _Phase.GUIDED if self._in_air() else _Phase.GROUND
                     self._takeoff_point = (self._north, self._east)
                     return
-            if time.monotonic() >= deadline:
+            if self.clock() >= deadline:
                 raise AutopilotError(
                     f"the Tello at {self.host} entered SDK mode but sent no state packet to UDP "
-                    f"{tello_cls.STATE_UDP_PORT} within {p['state_timeout']:g} s (a firewall, or another "
+                    f"{tello_cls.STATE_UDP_PORT} within {p.state_timeout:g} s (a firewall, or another "
                     "program bound to that port?)")
-            time.sleep(0.02)
+            time.sleep(_POLL)
 
     def _release(self) -> None:
         tello, self._tello = self._tello, None
@@ -486,109 +464,205 @@ class TelloAutopilot(Autopilot):
         with self._lock:
             self._ingest()
             age = self._link_age()
-        if age > self._p["link_loss_timeout"]:
+        if age > self._p.link_loss_timeout:
             raise AutopilotError(f"{what}: no state from the Tello at {self.host} for {age:.1f} s (link lost)")
 
-    def _clear_replies(self) -> None:
-        """Drop late replies to earlier commands, which djitellopy would take as this command's answer."""
-        with contextlib.suppress(KeyError, AttributeError, TypeError):
-            self._tello.get_own_udp_object()["responses"].clear()
+    def _commanded(self) -> None:
+        """The HLC commanded the Tello (lock held): someone is flying it after a link loss."""
+        self._unattended_until = None
 
-    def _command(self, text: str, timeout: int) -> None:
-        """Send an answered control command; `AutopilotError` unless the Tello says ``ok``."""
-        with self._cmd_lock:
-            self._command_locked(text, timeout)
+    def _replies(self) -> list[bytes]:
+        try:
+            replies: list[bytes] = self._tello.get_own_udp_object()["responses"]
+        except (KeyError, AttributeError, TypeError) as exc:  # closed under us
+            raise AutopilotError(f"the link to the Tello at {self.host} is closed") from exc
+        return replies
 
-    def _command_locked(self, text: str, timeout: int) -> None:
+    def _send_raw(self, text: str) -> None:
+        """One datagram to the Tello through djitellopy's socket (no wait, no retry)."""
         tello = self._tello
         if tello is None:
-            raise AutopilotError(f"{text}: not connected")
-        self._clear_replies()
-        self._last_sent = self.clock()
+            raise AutopilotError(f"{text!r}: not connected to the Tello at {self.host}")
         try:
-            tello.send_control_command(text, timeout=int(timeout))
-        except self._tello_error as exc:
-            raise AutopilotError(f"the Tello at {self.host} refused or did not answer {text!r}: {exc}") from exc
-        except (KeyError, OSError) as exc:  # closed under us (djitellopy forgot the host), or no route
+            tello.send_command_without_return(text)
+        except OSError as exc:
             raise AutopilotError(f"{text!r} to the Tello at {self.host} failed: {exc!r}") from exc
         finally:
             self._last_sent = self.clock()
 
-    def _ask(self, text: str) -> str:
-        """Send a read command (``battery?``) and return the answer."""
-        tello = self._tello
-        if tello is None:
-            raise AutopilotError(f"{text}: not connected")
+    def _exchange(self, text: str, timeout: float, *, settled: Callable[[], bool] | None = None,
+                  done_in_air: bool = False, preemptible: bool = True) -> str:
+        """Send an answered command once and wait for its answer; ``""`` when `settled` said done first.
+
+        `settled` (called with the state lock held, after each state packet is taken in) lets the state
+        packets answer for a reply that was lost. A timeout raises `AutopilotError`, except that with
+        `done_in_air` a Tello seen flying at the deadline counts as done (a take-off whose ``ok`` was lost
+        while the height kept wandering). land/rtl/emergency raise `_Preempted` in a `preemptible` wait.
+        """
+        with self._lock:
+            generation = self._preempt
         with self._cmd_lock:
-            self._clear_replies()
+            with self._lock:
+                if preemptible and self._preempt != generation:
+                    raise _Preempted(f"{text!r} pre-empted before it was sent")
+                self._pending = text
             try:
-                answer = str(tello.send_command_with_return(text, timeout=int(self._p["command_timeout"])))
-            except (KeyError, OSError) as exc:
-                raise AutopilotError(f"{text!r} to the Tello at {self.host} failed: {exc!r}") from exc
+                replies = self._replies()
+                replies.clear()  # late replies to earlier commands, which would pass for this one's
+                self._send_raw(text)
+                deadline = self.clock() + timeout
+                while True:
+                    while replies:
+                        answer = replies.pop(0).decode("utf-8", "replace").strip()
+                        if text.endswith("?") and answer.lower() == "ok":
+                            continue  # a read is never answered "ok": a late reply to a control command
+                        return answer
+                    with self._lock:
+                        self._ingest()
+                        if preemptible and self._preempt != generation:
+                            raise _Preempted(f"{text!r} pre-empted")
+                        if settled is not None and settled():
+                            return ""
+                        if self.clock() >= deadline:
+                            if done_in_air and self._air.value:
+                                return ""
+                            raise AutopilotError(f"the Tello at {self.host} did not answer {text!r} "
+                                                 f"within {timeout:g} s")
+                    if self._stop.is_set():
+                        raise AutopilotError(f"{text!r}: the adapter is closing")
+                    time.sleep(_POLL)
             finally:
-                self._last_sent = self.clock()
-        return answer.strip()
+                with self._lock:
+                    self._pending = None
+
+    def _move_settled(self, sent: float) -> bool:
+        """A take-off or up/down whose answer was lost is over (lock held): flying, height steady."""
+        now = self.clock()
+        return (self._air.value and now - sent >= _SETTLED and now - self._height_changed >= _SETTLED
+                and abs(self._vd) < 0.05)
+
+    def _landed(self) -> bool:
+        """The state packets have shown the Tello on the ground for `_GROUND_CONFIRM` (lock held)."""
+        return not self._air.value and not self._in_air()
 
     def _send_rc(self, rc: tuple[int, int, int, int]) -> None:
-        """Send ``rc`` (never answered, so no lock: it cannot confuse the reply queue)."""
-        tello = self._tello
-        if tello is None:
-            return
+        """Send ``rc`` (never answered: it cannot be mistaken for a reply)."""
         try:
-            tello.send_rc_control(*rc)
-        except Exception as exc:  # noqa: BLE001 - a failed send is a lost datagram, not a crash
+            self._send_raw("rc {} {} {} {}".format(*rc))
+        except AutopilotError as exc:  # a failed send is a lost datagram, not a crash
             self._ratelog.log(("rc",), logging.WARNING, "Tello %s: rc not sent: %s", self.host, exc)
-            return
-        self._last_sent = self.clock()
 
     def _land_now(self) -> None:
-        """Send ``land`` unless the Tello is already down; on failure the control thread retries.
+        """Send ``land`` unless the Tello is already down; settled by its answer or by the state packets.
 
         The check is made holding the command lock, so when the HLC's `land` and the end of an RTL
-        meet, the second finds the Tello on the ground instead of sending a second ``land``.
+        meet, the second finds the Tello on the ground instead of sending a second ``land``. On a
+        failure in the air the control thread retries.
         """
         with self._cmd_lock:
             with self._lock:
                 self._ingest()
                 if self._phase is not _Phase.LAND:
                     return
-                if not self._in_air():
+                if self._landed():
                     self._phase = _Phase.GROUND
                     return
             try:
-                self._command_locked("land", self._p["takeoff_timeout"])
+                answer = self._exchange("land", self._p.takeoff_timeout, settled=self._landed, preemptible=False)
             except AutopilotError:
-                with self._lock:
-                    self._ingest()
-                    if not self._in_air():
-                        self._phase = _Phase.GROUND  # came down anyway
-                        return
-                    self._land_due = self.clock() + _LAND_RETRY
-                raise
+                answer = "no answer"
+        with self._lock:
+            if self._phase is not _Phase.LAND:
+                return  # emergency, or the Tello was seen on the ground meanwhile
+            if answer == "ok" and not self._in_air():
+                self._air.reset(False)  # down, by its answer and the newest packet
+            if answer == "ok" or self._landed():
+                # "ok" comes once it is down; the next packets say so, and until they have the HLC
+                # sees the landing still in progress (state() keeps in_air while LAND). Should they
+                # never say so (an "ok" that answered something else), land is sent again.
+                self._land_due = self.clock() + 2.0 * _LAND_RETRY
+                if self._landed():
+                    self._phase = _Phase.GROUND
+                return
+            self._land_due = self.clock() + _LAND_RETRY
+        raise AutopilotError(f"the Tello at {self.host} did not land ({answer!r}); retrying every "
+                             f"{_LAND_RETRY:g} s")
+
+    def _land_in_background(self) -> None:
+        """Land from a thread of its own, so the control thread keeps its rc schedule."""
+        if self._lander is not None and self._lander.is_alive():
+            return
+
+        def run() -> None:
+            try:
+                self._land_now()
+            except AutopilotError as exc:
+                self._ratelog.log(("land", str(exc)), logging.WARNING, "Tello %s: %s", self.host, exc)
+
+        self._lander = threading.Thread(target=run, name=f"tello-land-{self.host}", daemon=True)
+        self._lander.start()
+
+    def _verify_rtl(self, dist0: float) -> None:
+        """Wait until the RTL leg is seen closing in; raise (and land here) when it is not."""
+        p = self._p
+        progress = min(_RTL_PROGRESS, dist0 / 2.0)
+        deadline = self.clock() + 1.0 + 3.0 * _RTL_PROGRESS / p.rtl_speed
+        while True:
             with self._lock:
-                self._phase = _Phase.GROUND
-                self._land_due = None
+                self._ingest()
+                if self._phase is not _Phase.RTL:
+                    if self._failsafe:
+                        raise AutopilotError(f"RTL failed: {self._failsafe}")
+                    return  # arrived (landing) or overtaken by a land/emergency
+                tn, te = self._takeoff_point
+                dist = math.hypot(tn - self._north, te - self._east)
+                if dist <= p.rtl_tolerance or dist <= dist0 - progress:
+                    return
+                reason = ""
+                if dist > dist0 + _RTL_EARLY_DIVERGENCE:
+                    reason = (f"getting farther ({dist:.1f} m, started at {dist0:.1f} m): check vgx_sign, "
+                              "vgy_sign, velocity_frame and home_heading; landing here")
+                elif self.clock() >= deadline:
+                    reason = (f"not getting closer ({dist:.1f} m, started at {dist0:.1f} m) after "
+                              f"{deadline - self._rtl_start:.0f} s; landing here")
+                if reason:
+                    self._rtl_abort(reason)
+                    break
+            time.sleep(0.05)
+        raise AutopilotError(f"RTL failed: {reason}")
+
+    def _rtl_abort(self, reason: str) -> None:
+        """End the RTL where the Tello is (lock held): land here, and say why."""
+        log.warning("Tello %s RTL: %s", self.host, reason)
+        self._failsafe = f"RTL failed: {reason}"
+        self._phase = _Phase.LAND
+        self._land_due = self.clock()  # the control thread lands (outside the state lock)
 
     def _climb_with_up(self, alt: float) -> None:
-        """``takeoff_altitude_mode = "up"``: blocking up/down to within 20 cm; rc trims the rest."""
+        """``takeoff_altitude_mode = "up"``: blocking up/down until the climb is done (or 20 cm short)."""
         for _ in range(4):
             self._wait_fresh_state()
             with self._lock:
-                delta = alt - self._height
-            cm = round(abs(delta) * 100)
-            if cm < _UP_MIN_CM:
-                return
-            self._command(f"{'up' if delta > 0 else 'down'} {min(cm, _UP_MAX_CM)}", self._p["takeoff_timeout"])
+                delta = alt + maths.CLIMB_BAND / 2.0 - self._height
+                if maths.climb_done(self._height, alt):
+                    return
+            cm = max(_UP_MIN_CM, round(abs(delta) * 100))
+            sent = self.clock()
+            answer = self._exchange(f"{'up' if delta > 0 else 'down'} {min(cm, _UP_MAX_CM)}",
+                                    self._p.takeoff_timeout, settled=lambda s=sent: self._move_settled(s),
+                                    done_in_air=True)
+            if answer not in ("ok", ""):
+                raise AutopilotError(f"the Tello at {self.host} refused the climb: {answer!r}")
 
     def _wait_fresh_state(self, timeout: float = 0.5) -> None:
+        """Until a state packet newer than the call arrives (or `timeout` s, all on the adapter's clock)."""
         start = self.clock()
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
+        while self.clock() - start < timeout:
             with self._lock:
                 self._ingest()
                 if self._state_time is not None and self._state_time > start:
                     return
-            time.sleep(0.02)
+            time.sleep(_POLL)
 
     # ================================================================= state packets, dead reckoning
 
@@ -607,57 +681,59 @@ class TelloAutopilot(Autopilot):
         self._raw = raw
         previous = self._state_time
         self._state_time = now
-        vn0, ve0 = self._vn, self._ve
+        v0 = (self._vn, self._ve)
         p = self._p
         self._yaw = float(raw.get("yaw", self._yaw))
-        gx = p["vgx_sign"] * float(raw.get("vgx", 0)) / 10.0
-        gy = p["vgy_sign"] * float(raw.get("vgy", 0)) / 10.0
-        if p["velocity_frame"] == "body":
-            yaw = math.radians(self._yaw)
-            gx, gy = gx * math.cos(yaw) - gy * math.sin(yaw), gx * math.sin(yaw) + gy * math.cos(yaw)
-        psi0 = math.radians(self._home_heading)
-        self._vn = gx * math.cos(psi0) - gy * math.sin(psi0)
-        self._ve = gx * math.sin(psi0) + gy * math.cos(psi0)
+        gx = p.vgx_sign * float(raw.get("vgx", 0)) / 10.0
+        gy = p.vgy_sign * float(raw.get("vgy", 0)) / 10.0
+        if p.velocity_frame == "body":
+            gx, gy = maths.body_to_ground(gx, gy, self._yaw)
+        self._vn, self._ve = maths.ground_to_ne(gx, gy, self._home_heading)
         self._vd = float(raw.get("vgz", 0)) / 10.0
         self._h_cm = int(raw.get("h", self._h_cm))
         height = self._h_cm / 100.0
-        if p["altitude_source"] == "tof":
+        if p.altitude_source == "tof":
             tof = int(raw.get("tof", 0))
             if 0 < tof < _TOF_INVALID_CM:
                 height = max(0.0, (tof - _TOF_GROUND_CM) / 100.0)
-        self._height = max(0.0, height)
+        height = max(0.0, height)
+        if height != self._height:
+            self._height_changed = now
+        self._height = height
         if "bat" in raw:
             self._battery = float(raw["bat"])
         if previous is not None and self._in_air():
-            dt = now - previous
-            self._north += 0.5 * (vn0 + self._vn) * dt
-            self._east += 0.5 * (ve0 + self._ve) * dt
-        self._track_ground(now)
+            self._north, self._east = maths.dead_reckon(self._north, self._east, v0, (self._vn, self._ve),
+                                                        now - previous)
+        self._air.update(self._in_air(), now)
+        self._track_ground()
 
-    def _track_ground(self, now: float) -> None:
-        """Notice a Tello that landed (or took off) without us: its own failsafes, another client."""
-        flying_phase = self._phase in (_Phase.GUIDED, _Phase.RTL, _Phase.LAND)
-        if flying_phase and not self._in_air() and not self._cmd_lock.locked():
-            if self._ground_since is None:
-                self._ground_since = now
-            elif now - self._ground_since >= _GROUND_CONFIRM:
-                if self._phase is not _Phase.LAND:
-                    log.warning("Tello %s is on the ground (landed by itself: battery, or 15 s without a "
-                                "command?)", self.host)
-                self._phase = _Phase.GROUND
-                self._setpoint = None
-                self._land_due = None
-        elif self._phase is _Phase.GROUND and self._in_air() and not self._cmd_lock.locked():
-            if self._ground_since is None:
-                self._ground_since = now
-            elif now - self._ground_since >= _GROUND_CONFIRM:
-                log.warning("Tello %s is flying though we did not take off: hovering under our control", self.host)
-                self._phase = _Phase.GUIDED
-        else:
-            self._ground_since = None
+    def _track_ground(self) -> None:
+        """Notice a Tello that landed (or took off) without us: its own failsafes, another client.
+
+        Not while a command waits for its answer (that wait settles its own outcome) nor while the
+        link is lost (the control thread re-reads the vehicle when it is back).
+        """
+        if self._pending is not None or self._silenced:
+            return
+        if self._phase is not _Phase.GROUND and not self._air.value:
+            if self._phase is not _Phase.LAND:
+                log.warning("Tello %s is on the ground (landed by itself: battery, or 15 s without a "
+                            "command?)", self.host)
+            self._to_ground()
+        elif self._phase is _Phase.GROUND and self._air.value:
+            log.warning("Tello %s is flying though we did not take off: hovering under our control", self.host)
+            self._phase = _Phase.GUIDED
+
+    def _to_ground(self) -> None:
+        self._phase = _Phase.GROUND
+        self._setpoint = None
+        self._climb_target = None
+        self._land_due = None
+        self._unattended_until = None
 
     def _in_air(self) -> bool:
-        """What the state packets say (height above zero); `state` adds the landing in progress."""
+        """What the newest packet says (height above zero); `state` adds the landing in progress."""
         return self._h_cm > 0
 
     def _link_age(self) -> float:
@@ -669,24 +745,12 @@ class TelloAutopilot(Autopilot):
     # ================================================================= rc
 
     def _rc(self, fwd: float, right: float, up: float, yaw_rate: float) -> tuple[int, int, int, int]:
-        """Body-frame m/s (and deg/s) to rc sticks; horizontal scaled together so the direction holds."""
         p = self._p
-        lr = right / p["max_speed"] * 100.0
-        fb = fwd / p["max_speed"] * 100.0
-        biggest = max(abs(lr), abs(fb))
-        if biggest > 100.0:
-            lr, fb = lr * 100.0 / biggest, fb * 100.0 / biggest
-
-        def stick(value: float) -> int:
-            return int(round(max(-100.0, min(100.0, value))))
-
-        return (stick(lr), stick(fb), stick(up / p["max_vertical_speed"] * 100.0),
-                stick(yaw_rate / p["max_yaw_rate"] * 100.0))
+        return maths.rc_sticks(fwd, right, up, yaw_rate, max_speed=p.max_speed,
+                               max_vertical_speed=p.max_vertical_speed, max_yaw_rate=p.max_yaw_rate)
 
     def _ned_rc(self, vn: float, ve: float, up: float, yaw_rate: float) -> tuple[int, int, int, int]:
-        psi = math.radians(self._heading())
-        fwd = vn * math.cos(psi) + ve * math.sin(psi)
-        right = -vn * math.sin(psi) + ve * math.cos(psi)
+        fwd, right = maths.ne_to_body(vn, ve, self._heading())
         return self._rc(fwd, right, up, yaw_rate)
 
     def _setpoint_rc(self) -> tuple[int, int, int, int]:
@@ -700,8 +764,17 @@ class TelloAutopilot(Autopilot):
     # ================================================================= the control thread
 
     def _control_loop(self) -> None:
-        period = 1.0 / self._p["control_hz"]
-        while not self._stop.wait(period):
+        """Tick at ``control_hz`` on a fixed schedule (a late tick does not delay the next ones)."""
+        period = 1.0 / self._p.control_hz
+        due = self.clock()
+        while True:
+            due += period
+            delay = due - self.clock()
+            if delay < -period:  # fell behind (a stalled machine): restart the schedule, no burst
+                due = self.clock()
+                delay = 0.0
+            if self._stop.wait(max(0.0, delay)):
+                return
             try:
                 self._control_tick()
             except AutopilotError as exc:
@@ -711,40 +784,68 @@ class TelloAutopilot(Autopilot):
 
     def _control_tick(self) -> None:
         now = self.clock()
-        land = False
+        land = probe = False
         with self._lock:
             self._ingest()
             rc = self._tick_rc(now)
-            if self._phase is _Phase.LAND and self._land_due is not None and now >= self._land_due:
+            if self._silenced:
+                probe = self._probe_due(now)
+            elif self._phase is _Phase.LAND and self._land_due is not None and now >= self._land_due:
                 self._land_due = None
-                land = not self._silenced
+                land = True
         if rc is not None:
             self._send_rc(rc)
+        if probe:
+            self._probe()
         if land:
-            self._land_now()
+            self._land_in_background()
+
+    def _probe_due(self, now: float) -> bool:
+        """While the link is lost: time to send ``command``? (lock held)
+
+        Not while the Tello may still be flying on its own: a probe that reaches it resets its 15 s
+        auto-landing, and our keepalives are what the silence is there to stop.
+        """
+        if now - self._last_probe < _PROBE_PERIOD or self._pending is not None:
+            return False  # (its "ok" would pass for the waiting command's answer)
+        if self._lost_in_air and now - self._last_sent < TELLO_AUTOLAND_S:
+            return False
+        self._last_probe = now
+        return True
+
+    def _probe(self) -> None:
+        """``command`` again: a Tello that rebooted or dropped us sends state only in SDK mode."""
+        tello = self._tello
+        if tello is None:
+            return
+        try:
+            tello.send_command_without_return("command")  # the "ok" is dropped by the next exchange
+        except OSError as exc:
+            self._ratelog.log(("probe",), logging.WARNING, "Tello %s: probe not sent: %s", self.host, exc)
 
     def _tick_rc(self, now: float) -> tuple[int, int, int, int] | None:
         """What to send this tick (lock held): streaming rc, a stop, a keepalive, or nothing."""
-        if self._link_age() > self._p["link_loss_timeout"]:
+        p = self._p
+        if self._link_age() > p.link_loss_timeout:
             if not self._silenced:
                 self._silenced = True
+                self._lost_in_air = self._in_air() or self._phase is not _Phase.GROUND
+                self._last_probe = now
                 log.warning("Tello %s: no state for %.1f s; stopped commanding it (it lands itself 15 s after "
                             "the last command)", self.host, self._link_age())
-                return (0, 0, 0, 0) if self._in_air() else None
+                return (0, 0, 0, 0) if self._lost_in_air else None
             return None
         if self._silenced:
-            self._silenced = False
-            if self._in_air() and self._phase is not _Phase.LAND:
-                # The HLC has given up on this flight (LLC_DOWN is final) or will see it end: nobody
-                # would command the Tello again, and our keepalives would hold it up until its battery
-                # ran out. End the flight where it is.
-                log.warning("Tello %s: state packets are back after a link loss in flight: landing", self.host)
-                self._phase = _Phase.LAND
-                self._setpoint = None
-                self._climb_target = None
-                self._land_due = now
-                return (0, 0, 0, 0)
-            log.info("Tello %s: state packets are back", self.host)
+            self._link_back(now)
+        if self._unattended_until is not None and now >= self._unattended_until and self._phase is _Phase.GUIDED:
+            self._unattended_until = None
+            self._failsafe = (f"nobody commanded the Tello for {p.link_back_hover:g} s after a link loss: "
+                              "landing")
+            log.warning("Tello %s: %s", self.host, self._failsafe)
+            self._phase = _Phase.LAND
+            self._setpoint = None
+            self._land_due = now
+            return (0, 0, 0, 0)
         phase = self._phase
         rc: tuple[int, int, int, int] | None = None
         if phase is _Phase.TAKEOFF and self._climb_target is not None:
@@ -752,7 +853,7 @@ class TelloAutopilot(Autopilot):
         elif phase is _Phase.RTL:
             rc = self._rtl_rc(now)
         elif phase is _Phase.GUIDED and self._setpoint is not None:
-            if now - self._setpoint_time <= self._p["velocity_hold"]:
+            if now - self._setpoint_time <= p.velocity_hold:
                 rc = self._setpoint_rc()
             else:
                 self._setpoint = None
@@ -762,40 +863,57 @@ class TelloAutopilot(Autopilot):
         if self._stop_ticks > 0 and phase is not _Phase.LAND:
             self._stop_ticks -= 1
             return (0, 0, 0, 0)
-        if phase is _Phase.GUIDED and self._in_air() and now - self._last_sent >= self._p["keepalive_s"]:
-            return (0, 0, 0, 0)
+        if phase is not _Phase.LAND and self._in_air() and now - self._last_sent >= p.keepalive_s:
+            return (0, 0, 0, 0)  # also while a takeoff or up waits for its answer
         return None
+
+    def _link_back(self, now: float) -> None:
+        """State packets are back after a link loss: re-read the vehicle (lock held)."""
+        self._silenced = False
+        self._air.reset(self._in_air())
+        if not self._in_air():
+            if self._phase is not _Phase.GROUND:
+                log.warning("Tello %s: state is back; it landed during the link loss", self.host)
+            else:
+                log.info("Tello %s: state is back", self.host)
+            self._to_ground()
+            return
+        if self._phase is _Phase.LAND:
+            log.warning("Tello %s: state is back; still landing", self.host)
+            self._land_due = now
+            return
+        self._phase = _Phase.GUIDED
+        self._setpoint = None
+        self._climb_target = None
+        self._unattended_until = now + self._p.link_back_hover
+        log.warning("Tello %s: state is back with the Tello in the air at %.1f m: hovering; it lands in "
+                    "%g s unless commanded", self.host, self._height, self._p.link_back_hover)
 
     def _climb_rc(self) -> tuple[int, int, int, int]:
         assert self._climb_target is not None
-        error = self._climb_target - self._height
-        if abs(error) <= _CLIMB_TOLERANCE:
+        speed = maths.climb_speed(self._height, self._climb_target, self._p.max_vertical_speed)
+        if speed == 0.0:
             log.info("Tello %s reached %.2f m (target %.2f m)", self.host, self._height, self._climb_target)
             self._climb_target = None
             self._phase = _Phase.GUIDED
             return (0, 0, 0, 0)
-        limit = self._p["max_vertical_speed"]
-        speed = max(_MIN_CLIMB_SPEED, min(limit, _CLIMB_GAIN * abs(error)))
-        return self._rc(0.0, 0.0, math.copysign(speed, error), 0.0)
+        return self._rc(0.0, 0.0, speed, 0.0)
 
     def _rtl_rc(self, now: float) -> tuple[int, int, int, int]:
-        tn, te = self._takeoff_point
-        dn, de = tn - self._north, te - self._east
-        dist = math.hypot(dn, de)
         p = self._p
-        deadline = 10.0 + 3.0 * self._rtl_dist0 / p["rtl_speed"]
-        reason = ""
-        if dist <= p["rtl_tolerance"]:
-            reason = f"at the take-off point ({dist:.2f} m)"
-        elif dist > self._rtl_dist0 + _RTL_DIVERGENCE:
-            reason = (f"getting farther ({dist:.1f} m, started at {self._rtl_dist0:.1f} m): check vgx_sign, "
-                      "vgy_sign, velocity_frame and home_heading; landing here")
-        elif now - self._rtl_start > deadline:
-            reason = f"not back after {deadline:.0f} s ({dist:.1f} m to go): landing here"
-        if reason:
-            (log.info if dist <= p["rtl_tolerance"] else log.warning)("Tello %s RTL: %s", self.host, reason)
+        vn, ve, dist = maths.rtl_leg(self._north, self._east, self._takeoff_point, speed=p.rtl_speed,
+                                     gain=_APPROACH_GAIN, min_speed=_MIN_APPROACH_SPEED)
+        deadline = 10.0 + 3.0 * self._rtl_dist0 / p.rtl_speed
+        if dist <= p.rtl_tolerance:
+            log.info("Tello %s RTL: at the take-off point (%.2f m): landing", self.host, dist)
             self._phase = _Phase.LAND
             self._land_due = now  # the control thread lands (outside the state lock)
             return (0, 0, 0, 0)
-        speed = max(_MIN_APPROACH_SPEED, min(p["rtl_speed"], _APPROACH_GAIN * dist))
-        return self._ned_rc(dn / dist * speed, de / dist * speed, 0.0, 0.0)
+        if dist > self._rtl_dist0 + _RTL_DIVERGENCE:
+            self._rtl_abort(f"getting farther ({dist:.1f} m, started at {self._rtl_dist0:.1f} m): check "
+                            "vgx_sign, vgy_sign, velocity_frame and home_heading; landing here")
+            return (0, 0, 0, 0)
+        if now - self._rtl_start > deadline:
+            self._rtl_abort(f"not back after {deadline:.0f} s ({dist:.1f} m to go): landing here")
+            return (0, 0, 0, 0)
+        return self._ned_rc(vn, ve, 0.0, 0.0)

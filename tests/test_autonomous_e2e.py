@@ -30,7 +30,9 @@ AUTONOMOUS_BMA = [
 
 @pytest.mark.parametrize("layout", ["separate", "one_process"])
 def test_autonomous_agent_flies_a_whole_mission(netns: NetNamespace, probe: Probe, tmp_path: Path, layout: str) -> None:
-    agent = AgentProcesses(netns, tmp_path, agent_config("auto", bma=AUTONOMOUS_BMA))
+    # Signed: nodes in separate processes on multicast must authenticate each other (docs/security.md).
+    doc = agent_config("auto", bma=AUTONOMOUS_BMA, security={"swarm_key": "e2e-autonomous-key", "state_dir": str(tmp_path)})
+    agent = AgentProcesses(netns, tmp_path, doc)
     try:
         if layout == "separate":
             agent.start("hlc")

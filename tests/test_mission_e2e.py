@@ -25,6 +25,9 @@ def launch(netns: NetNamespace, tmp_path: Path) -> Iterator[Callable[..., AgentP
     started: list[AgentProcesses] = []
 
     def start(name: str = "alpha", nodes: tuple[str, ...] = ("hlc", "mc"), **kw: Any) -> AgentProcesses:
+        # Separate processes on multicast with no key: the probe plays unsigned operator and
+        # behavior, so the agent runs insecure (tests/test_security_*.py fly the signed path).
+        kw.setdefault("security", {"insecure": True})
         agent = AgentProcesses(netns, tmp_path, agent_config(name, **kw))
         for node in nodes:
             agent.start(node)

@@ -39,6 +39,9 @@ LAN_URL = "udpm://239.255.76.67:7667?ttl=1"
 LOCAL_URL = "udpm://239.255.76.68:7668?ttl=0"
 STATION_PORT = 8080
 ALTITUDE = 3.0
+#: The swarm key of the test LAN (every vehicle and the operator): split hosts run each node in its
+#: own process on multicast, which needs one (docs/security.md).
+SWARM_KEY = "lan-test-swarm-key"
 
 
 def _merge(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
@@ -51,7 +54,8 @@ def _merge(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
 def vehicle_config(name: str, out_dir: Path, forward_speed: float = 0.3) -> Path:
     """The example config of ``name``, with only the test's speed-ups, written to ``out_dir``."""
     doc = tomllib.loads((EXAMPLES / f"{name}.toml").read_text())
-    doc = _merge(doc, {"hlc": {"default_takeoff_altitude": ALTITUDE, "autopilot_params": FAST_SIM}})
+    doc = _merge(doc, {"hlc": {"default_takeoff_altitude": ALTITUDE, "autopilot_params": FAST_SIM},
+                       "security": {"swarm_key": SWARM_KEY, "state_dir": str(out_dir / f"{name}-state")}})
     for bma in doc.get("bma", []):
         for behavior in bma.get("behaviors", []):
             if behavior["plugin"] == "dovrat_swarm":
@@ -176,7 +180,8 @@ class LanSwarm:
             else:
                 host.antalate("agent", cfg, log=self._log(f"{name}-agent"))
         op_cfg = self.tmp / "operator.toml"
-        op_cfg.write_text((EXAMPLES / "operator.toml").read_text())
+        op_doc = _merge(tomllib.loads((EXAMPLES / "operator.toml").read_text()), {"security": {"swarm_key": SWARM_KEY}})
+        op_cfg.write_text(to_toml(op_doc))
         proc = operator.popen(
             [sys.executable, "-m", "tests.lan.lan_operator", str(op_cfg), "--stale-after", "2"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

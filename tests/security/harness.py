@@ -14,6 +14,7 @@ transition is logged with its cause).
 from __future__ import annotations
 
 import json
+import os
 import re
 import secrets
 import subprocess
@@ -36,6 +37,10 @@ SWARM_KEY = "swarm-" + secrets.token_hex(16)
 #: shorter than an MC restart, and a loaded test machine must not make genuine commands look stale.
 WINDOW = 30.0
 HOME = (32.7767, 35.0231)
+#: Self-check of the suite: ``ANTALATE_SECURITY_DISARMED=1`` runs the same swarm with no swarm key
+#: (``[security] insecure = true``). Every attack must then succeed, i.e. every test fail: a test
+#: that passes disarmed proves nothing about the defence it claims to test.
+DISARMED = os.environ.get("ANTALATE_SECURITY_DISARMED") == "1"
 
 _TRANSITION = re.compile(r"antalate\.(mc|hlc)\.([\w.-]+): (\w+) -> (\w+) on (.*)$")
 
@@ -61,9 +66,17 @@ class PeerClient(JsonLinesProcess):
     def raw(self, channel: str, data: bytes, count: int = 1) -> None:
         self._ok(op="raw", channel=channel, hex=data.hex(), count=count)
 
+    def batch(self, items: list[tuple[str, bytes]], gap: float = 0.0) -> None:
+        self._ok(op="batch", items=[{"channel": c, "hex": d.hex()} for c, d in items], gap=gap)
+
     def replay(self, channel: str, type_name: str, pick: str = "last", since: int = 0, **where: Any) -> dict[str, Any]:
         """Resend, byte for byte, a message recorded off the network."""
         return self._ok(op="replay", channel=channel, type=type_name, where=where, pick=pick, since=since)["msg"]
+
+    def capture(self, channel: str, type_name: str, since: int = 0, **where: Any) -> bytes:
+        """The bytes of the last message recorded on ``channel`` matching ``where``."""
+        reply = self._ok(op="capture", channel=channel, type=type_name, where=where, pick="last", since=since)
+        return bytes.fromhex(reply["hex"])
 
     def wait(self, channel: str, type_name: str, timeout: float = 15, since: int = 0, genuine: bool = False,
              **where: Any) -> dict[str, Any] | None:
@@ -267,7 +280,7 @@ def agent_doc(name: str, *, sim: dict[str, Any] | None = None, home: tuple[float
             "SWARM_OPERATOR_CMD": "lan", "SWARM_DIRECTION_CMD": "lan",
         },
         "hlc": hlc,
-        "security": {"swarm_key": SWARM_KEY, "window": WINDOW},
+        "security": {"swarm_key": "", "insecure": True} if DISARMED else {"swarm_key": SWARM_KEY, "window": WINDOW},
     }
     doc.update(sections)
     return doc

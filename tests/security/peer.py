@@ -11,8 +11,10 @@ Requests, one JSON object a line, one JSON reply line each (``{"ok": bool, ...}`
 
 ``publish``  {channel, type, fields, sign?, count?}: encode and send (``sign`` needs ``--key``)
 ``raw``      {channel, hex, count?}: send bytes as they are
+``batch``    {items: [{channel, hex}], gap?}: send many datagrams (``gap`` s apart)
 ``replay``   {channel (regex), type, where, pick: "first"|"last", since?}: resend the recorded bytes of a
              matching message unchanged (what a replay attacker does); replies with the message
+``capture``  like ``replay`` without sending: the recorded bytes (``hex``), for an attacker to edit
 ``wait``     {channel, type, where, timeout, since?, genuine?}: the first matching message
 ``history``  {channel, type, since?, genuine?}: every matching message
 ``mark``     the index of the next datagram (a "since" for later requests)
@@ -102,7 +104,13 @@ class Peer:
         if op == "raw":
             self.send(req["channel"], bytes.fromhex(req["hex"]), req.get("count", 1))
             return {"ok": True}
-        if op == "replay":
+        if op == "batch":
+            for item in req["items"]:
+                self.send(item["channel"], bytes.fromhex(item["hex"]))
+                if req.get("gap"):
+                    time.sleep(req["gap"])
+            return {"ok": True, "sent": len(req["items"])}
+        if op in ("replay", "capture"):
             with self.cond:
                 hits = [
                     (i, d) for i, d in self._decoded(req["channel"], req["type"], req.get("since", 0), False)
@@ -112,8 +120,9 @@ class Peer:
                 return {"ok": False, "error": "nothing recorded matches"}
             i, d = hits[0] if req.get("pick", "last") == "first" else hits[-1]
             _, channel, data = self.seen[i]
-            self.send(channel, data, req.get("count", 1))
-            return {"ok": True, "msg": d}
+            if op == "replay":
+                self.send(channel, data, req.get("count", 1))
+            return {"ok": True, "msg": d, "hex": data.hex()}
         if op == "wait":
             deadline = time.time() + req.get("timeout", 10)
             with self.cond:

@@ -148,6 +148,12 @@ class OscConfig(_Section):
     timeout: Positive = 2.0
     max_backoff: Positive = 30.0
     max_reply_bytes: Annotated[int, Field(gt=0)] = 65536
+    #: PEM file of the CA that signed the station's TLS certificate (https:// servers); empty = the
+    #: system's trusted CAs.
+    ca_file: str = ""
+    #: File where the OSC keeps its station token (mode 0600) so a restarted agent reports under the
+    #: same token; empty = memory only (a restart then re-registers: with a swarm key, by proof).
+    token_file: str = ""
 
 
 class BehaviorConfig(_Section):

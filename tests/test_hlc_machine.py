@@ -1,6 +1,7 @@
 """HLC state machine: every row of docs/design.md §6 (written out here), the documented extra rows, actions,
-errors, edge/level triggering of MC states, timeouts with injected time, and one closed loop with the
-MC machine and the simulator."""
+errors, edge/level triggering of MC states, timeouts with injected time, the failsafe rows (link
+regained, autopilot failsafes, HOLD, battery by %/V/warning), and closed loops with the MC machine and
+the simulator."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from antalate_lcm.hlc.machine import (
     HLC_TABLE,
     Action,
     ActionKind,
+    Control,
     ErrorCode,
     HighLevelControl,
     HlcEvent,
@@ -21,6 +23,8 @@ from antalate_lcm.hlc.machine import (
     HlcParams,
     HlcState,
     Severity,
+    classify,
+    pilot_in_control,
 )
 from antalate_lcm.mc.machine import McState, MissionControl, OperatorCommand
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t
@@ -41,6 +45,7 @@ def hlc_in(state: HlcState, params: HlcParams | None = None) -> HighLevelControl
     """An HLC driven into `state` through legitimate inputs."""
     h = HighLevelControl(params)
     if state is H.INIT:
+        h.on_mc_state(M.STANDBY, T0)  # the MC is heard; the autopilot not yet
         return h
     h.on_mc_state(M.STANDBY, T0)
     h.on_autopilot(GROUND, T0)
@@ -63,6 +68,8 @@ def hlc_in(state: HlcState, params: HlcParams | None = None) -> HighLevelControl
                     h.on_autopilot(flying(battery=15.0), T0 + 6)
                 elif state is H.MANUAL:
                     h.on_autopilot(flying(autonomous=False, mode="LOITER"), T0 + 6)
+                elif state is H.HOLD:
+                    h.on_mc_state(M.HOLD, T0 + 6)
     assert h.state is state
     return h
 
@@ -90,7 +97,17 @@ LANDED = replace(GROUND, mode="LAND")
 TAKEN_OVER = flying(autonomous=False, mode="LOITER")
 LOW = flying(battery=20.0)  # <= low_battery (20) counts
 LOST = flying(link_age=3.0)
-AUTONOMOUS = (H.GAINING_ALTITUDE, H.AIRBORNE, H.RTL, H.LANDING, H.LOW_BATTERY)
+AUTONOMOUS = (H.GAINING_ALTITUDE, H.AIRBORNE, H.RTL, H.LANDING, H.LOW_BATTERY, H.HOLD)
+FLYING_STATES = (*AUTONOMOUS, H.MANUAL)
+AP_RTL = flying(mode="RTL", flight_mode=FlightMode.RTL)
+AP_LAND = flying(mode="LAND", flight_mode=FlightMode.LANDING)
+# Autopilot failsafes, reported the way a MAVLink adapter may: the vehicle left our control.
+FS_RTL = flying(mode="RTL", flight_mode=FlightMode.RTL, autonomous=False, failsafe="fence breach")
+FS_LAND = flying(mode="LAND", flight_mode=FlightMode.LANDING, autonomous=False, failsafe="EKF failsafe")
+FS_HOLD = flying(mode="BRAKE", flight_mode=FlightMode.HOLD, autonomous=False, failsafe="fence breach")
+PILOT_BRAKE = flying(mode="BRAKE", flight_mode=FlightMode.HOLD)  # no failsafe: a pilot's switch
+LOW_VOLTS = flying(voltage=13.6, cells=4)  # 3.4 V per cell <= 3.5, battery % still 80
+LOW_WARNING = flying(battery_warning="BATTERY_STATUS charge_state LOW")
 NO_ERROR: tuple[ErrorCode, ...] = ()
 
 # docs/design.md §6 row by row: (from, input, to, actions, error codes).
@@ -107,6 +124,41 @@ DESIGN_ROWS: list[tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[Err
     *[(s, ("ap", LOW), H.LOW_BATTERY, (Action.RTL,), (ErrorCode.LOW_BATTERY,))
       for s in (H.GAINING_ALTITUDE, H.AIRBORNE)],
     *[(s, ("ap", LOST), H.LLC_DOWN, (), (ErrorCode.LINK_LOST,)) for s in HlcState if s not in (H.INIT, H.LLC_DOWN)],
+    # INIT (restart resync), with the MC heard
+    (H.INIT, ("ap", GROUND), H.READY, (), NO_ERROR),
+    (H.INIT, ("ap", FLYING), H.AIRBORNE, (), NO_ERROR),
+    (H.INIT, ("ap", AP_LAND), H.LANDING, (), NO_ERROR),
+    (H.INIT, ("ap", AP_RTL), H.RTL, (), NO_ERROR),
+    (H.INIT, ("ap", TAKEN_OVER), H.MANUAL, (), NO_ERROR),
+    (H.INIT, ("ap", FS_HOLD), H.HOLD, (), NO_ERROR),
+    # LLC_DOWN is recoverable: the vehicle is re-read as it is
+    (H.LLC_DOWN, ("ap", GROUND), H.READY, (), (ErrorCode.LINK_REGAINED,)),
+    (H.LLC_DOWN, ("ap", FLYING), H.HOLD, (Action.HOVER,), (ErrorCode.LINK_REGAINED,)),
+    (H.LLC_DOWN, ("ap", AP_RTL), H.RTL, (), (ErrorCode.LINK_REGAINED,)),
+    (H.LLC_DOWN, ("ap", FS_RTL), H.RTL, (), (ErrorCode.LINK_REGAINED,)),
+    (H.LLC_DOWN, ("ap", AP_LAND), H.LANDING, (), (ErrorCode.LINK_REGAINED,)),
+    (H.LLC_DOWN, ("ap", FS_HOLD), H.HOLD, (), (ErrorCode.LINK_REGAINED,)),
+    (H.LLC_DOWN, ("ap", TAKEN_OVER), H.MANUAL, (), (ErrorCode.LINK_REGAINED,)),
+    (H.LLC_DOWN, ("ap", PILOT_BRAKE), H.MANUAL, (), (ErrorCode.LINK_REGAINED,)),
+    # autopilot failsafes: follow the vehicle, never MANUAL
+    *[(s, ("ap", FS_RTL), H.RTL, (), (ErrorCode.AUTOPILOT_FAILSAFE,))
+      for s in FLYING_STATES if s not in (H.RTL, H.LOW_BATTERY)],
+    *[(s, ("ap", FS_LAND), H.LANDING, (), (ErrorCode.AUTOPILOT_FAILSAFE,)) for s in FLYING_STATES if s is not H.LANDING],
+    *[(s, ("ap", FS_HOLD), H.HOLD, (), (ErrorCode.AUTOPILOT_FAILSAFE,)) for s in FLYING_STATES if s is not H.HOLD],
+    # HOLD waits for the MC (an MC state new since HOLD began)
+    (H.HOLD, ("mc", M.RTL), H.RTL, (Action.RTL,), NO_ERROR),
+    (H.HOLD, ("mc", M.LAND), H.LANDING, (Action.LAND,), NO_ERROR),
+    (H.AIRBORNE, ("mc", M.HOLD), H.HOLD, (Action.HOVER,), NO_ERROR),
+    (H.HOLD, ("ap", AP_RTL), H.RTL, (), (ErrorCode.AUTOPILOT_TOOK_OVER,)),
+    (H.HOLD, ("ap", AP_LAND), H.LANDING, (), (ErrorCode.AUTOPILOT_TOOK_OVER,)),
+    # land now rather than fly home
+    (H.RTL, ("mc", M.LAND), H.LANDING, (Action.LAND,), NO_ERROR),
+    (H.LOW_BATTERY, ("mc", M.LAND), H.LANDING, (Action.LAND,), NO_ERROR),
+    # low battery by volts per cell or by the vehicle's own warning, and in HOLD
+    (H.AIRBORNE, ("ap", LOW_VOLTS), H.LOW_BATTERY, (Action.RTL,), (ErrorCode.LOW_BATTERY,)),
+    (H.AIRBORNE, ("ap", LOW_WARNING), H.LOW_BATTERY, (Action.RTL,), (ErrorCode.LOW_BATTERY,)),
+    (H.HOLD, ("ap", LOW), H.LOW_BATTERY, (Action.RTL,), (ErrorCode.LOW_BATTERY,)),
+    (H.HOLD, ("ap", LANDED), H.READY, (), NO_ERROR),
 ]
 
 EXTRA_ROWS: list[tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[ErrorCode, ...]]] = [
@@ -119,13 +171,24 @@ EXTRA_ROWS: list[tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[Erro
     (H.AIRBORNE, ("ap", flying(mode="LAND", flight_mode=FlightMode.LANDING)), H.LANDING, (),
      (ErrorCode.AUTOPILOT_TOOK_OVER,)),
     (H.RTL, ("ap", flying(mode="LAND", flight_mode=FlightMode.LANDING)), H.LANDING, (), NO_ERROR),
+    (H.GAINING_ALTITUDE, ("ap", flying(alt=3.0, mode="LAND", flight_mode=FlightMode.LANDING)), H.LANDING, (),
+     (ErrorCode.AUTOPILOT_TOOK_OVER,)),
 ]
 
 
 def _row_id(row: tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[ErrorCode, ...]]) -> str:
     frm, (kind, value), to, _, _ = row
     detail = getattr(value, "name", None) or (value.mode if isinstance(value, AutopilotState) else value)
+    if isinstance(value, AutopilotState) and value.failsafe:
+        detail = f"{detail}-failsafe"
     return f"{frm.name}-{kind}_{detail}-{to.name}"
+
+
+def _fired(row: tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[ErrorCode, ...]]) -> tuple[object, ...]:
+    frm, what, to, _, _ = row
+    outcome = feed(hlc_in(frm), what)
+    assert outcome.transition is not None, _row_id(row)
+    return (frm, outcome.transition.event, to)
 
 
 def test_state_values_match_the_lcm_constants() -> None:
@@ -148,6 +211,25 @@ def test_row(row: tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[Err
     assert outcome.reason and outcome.transition.reason == outcome.reason
     for error in outcome.errors:
         assert error.text
+
+
+def test_every_table_row_is_a_listed_row() -> None:
+    """Each (source, event, target) of HLC_TABLE is exercised by a DESIGN or EXTRA row above (or, for the
+    three rows that need a sequence of inputs, by a named test below), and flagged extra only if EXTRA."""
+    design = {_fired(row) for row in DESIGN_ROWS}
+    extra = {_fired(row) for row in EXTRA_ROWS}
+    elsewhere = {
+        (H.TAKEOFF, HlcEvent.ARMED, H.READY),  # test_takeoff_cancelled_while_arming
+        (H.GAINING_ALTITUDE, HlcEvent.TAKEOFF_FAILED, H.LANDING),  # test_a_refused_takeoff_lands_at_once
+    }
+    for row in HLC_TABLE:
+        if row.target is None:
+            continue  # refusals: test_takeoff_refused_on_low_battery_stays_ready_with_error
+        for frm in row.sources:
+            key = (frm, row.event, row.target)
+            if key in elsewhere:
+                continue
+            assert key in (extra if row.extra else design), row
 
 
 def test_extra_rows_are_flagged_in_the_table() -> None:
@@ -363,11 +445,39 @@ def test_mc_land_and_rtl_are_level_triggered() -> None:
     assert h.on_mc_state(M.LAND, T0 + 4.2) == HlcOutcome()  # already LANDING: no repeat
 
 
-@pytest.mark.parametrize("state", [H.READY, H.TAKEOFF, H.MANUAL, H.LOW_BATTERY, H.RTL])
+@pytest.mark.parametrize("state", [H.READY, H.TAKEOFF, H.MANUAL])
 def test_mc_land_ignored_where_no_row(state: HlcState) -> None:
     h = hlc_in(state)
     assert h.on_mc_state(M.LAND, T0 + 30).transition is None
     assert h.state is state
+
+
+@pytest.mark.parametrize("mc_state", [M.RTL, M.LAND])
+def test_an_mc_state_republished_since_before_a_failsafe_does_not_override_it(mc_state: McState) -> None:
+    """The MC republishes RTL at 5 Hz; one sent before it heard the fence BRAKE must not undo the BRAKE."""
+    h = hlc_in(H.AIRBORNE)
+    h.on_mc_state(mc_state, T0 + 10)
+    assert h.state in (H.RTL, H.LANDING)
+    assert h.on_autopilot(FS_HOLD, T0 + 11).transition is not None
+    assert h.state is H.HOLD
+    for i in range(5):
+        assert h.on_mc_state(mc_state, T0 + 11.1 + i * 0.2) == HlcOutcome()
+    assert h.state is H.HOLD
+    h.on_mc_state(M.HOLD, T0 + 12)  # the MC follows the vehicle
+    outcome = h.on_mc_state(M.RTL, T0 + 13)  # the operator's RTL: new since HOLD began
+    assert h.state is H.RTL and outcome.actions == (Action.RTL,)
+
+
+def test_a_failsafe_rtl_then_the_operators_land() -> None:
+    h = hlc_in(H.AIRBORNE)
+    outcome = h.on_autopilot(FS_RTL, T0 + 10)
+    assert h.state is H.RTL
+    assert [(e.code, e.severity) for e in outcome.errors] == [(ErrorCode.AUTOPILOT_FAILSAFE, Severity.WARNING)]
+    assert "fence breach" in outcome.errors[0].text and "fence breach" in h.reason
+    assert h.on_mc_state(M.MISSION, T0 + 10.1) == HlcOutcome()  # republished before the MC heard
+    assert h.on_mc_state(M.RTL, T0 + 10.3) == HlcOutcome()  # the MC follows
+    assert h.on_mc_state(M.LAND, T0 + 11).actions == (Action.LAND,)
+    assert h.state is H.LANDING
 
 
 def test_no_takeover_without_armed_vehicle_or_in_takeoff() -> None:
@@ -386,18 +496,50 @@ def test_landed_in_manual_returns_to_ready_even_in_a_pilot_mode() -> None:
     assert h.state is H.READY and outcome.errors == ()
 
 
-def test_llc_down_is_terminal() -> None:
+def test_llc_down_waits_while_the_link_is_stale_and_commands_nothing() -> None:
     h = hlc_in(H.AIRBORNE)
     outcome = h.on_autopilot(LOST, T0 + 20)
     assert h.state is H.LLC_DOWN
     assert outcome.errors[0].severity is Severity.CRITICAL and "3.0 s" in outcome.errors[0].text
-    for snapshot in (FLYING, GROUND, LANDED):
-        assert h.on_autopilot(snapshot, T0 + 30) == HlcOutcome()
+    for age in (3.0, 10.0, float("inf")):
+        assert h.on_autopilot(flying(link_age=age), T0 + 30) == HlcOutcome()
+    assert h.on_autopilot(replace(FLYING, connected=False), T0 + 30) == HlcOutcome()
     for mc_state in McState:
         assert h.on_mc_state(mc_state, T0 + 31) == HlcOutcome()
     assert h.on_action_result(ActionKind.ARM, True, T0 + 32) == HlcOutcome()
     assert h.tick(T0 + 1e6) == HlcOutcome()
     assert h.state is H.LLC_DOWN
+
+
+def test_link_regained_in_guided_holds_then_follows_the_mc() -> None:
+    h = hlc_in(H.AIRBORNE)
+    h.on_autopilot(LOST, T0 + 20)
+    outcome = h.on_autopilot(flying(link_age=0.2), T0 + 25)
+    assert h.state is H.HOLD and outcome.actions == (Action.HOVER,)
+    assert outcome.errors[0].severity is Severity.WARNING and "GUIDED" in outcome.errors[0].text
+    assert "link regained" in h.reason
+    assert h.on_mc_state(M.ERROR, T0 + 25.1) == HlcOutcome()  # the MC has not decided yet
+    assert h.on_mc_state(M.RTL, T0 + 25.3).actions == (Action.RTL,)  # its on_link_regained policy
+    assert h.state is H.RTL
+
+
+def test_state_raising_is_a_stale_link_with_the_fault_as_reason() -> None:
+    h = hlc_in(H.AIRBORNE)
+    fault = "autopilot sim state() raised RuntimeError: boom"
+    assert h.on_autopilot(flying(link_age=1.0), T0 + 20, fault=fault).transition is None
+    outcome = h.on_autopilot(flying(link_age=3.1), T0 + 22, fault=fault)
+    assert h.state is H.LLC_DOWN
+    assert "boom" in outcome.reason and "boom" in outcome.errors[0].text and "boom" in h.reason
+
+
+def test_reason_is_the_last_transitions() -> None:
+    h = HighLevelControl()
+    assert h.reason  # says what INIT waits for
+    h.on_mc_state(M.STANDBY, T0)
+    outcome = h.on_autopilot(GROUND, T0)
+    assert h.reason == outcome.reason and "connected" in h.reason
+    h.on_mc_state(M.TAKEOFF, T0 + 1)
+    assert "arming" in h.reason
 
 
 def test_link_timeout_is_a_parameter() -> None:
@@ -576,3 +718,111 @@ def test_closed_loop_restarts_resync_without_commands() -> None:
     assert loop.sim.state().in_air  # nothing was commanded: still flying its RTL
     loop.run(15.0)
     assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
+
+
+# -------------------------------------------------------------------------------- failsafes
+
+
+@pytest.mark.parametrize(
+    "snapshot, pilot",
+    [
+        (FLYING, False),
+        (TAKEN_OVER, True),
+        (flying(flight_mode=FlightMode.MANUAL), True),
+        (PILOT_BRAKE, True),  # HOLD without a failsafe: a pilot's BRAKE
+        (FS_HOLD, False),
+        (FS_RTL, False),
+        (FS_LAND, False),
+        (flying(mode="LOITER", autonomous=False, failsafe="battery failsafe", flight_mode=FlightMode.MANUAL), True),
+        (flying(mode="RTL", flight_mode=FlightMode.RTL, autonomous=False), True),  # a pilot's RTL switch
+    ],
+    ids=lambda v: v if isinstance(v, bool) else f"{v.mode}-{v.flight_mode.name}-{v.failsafe or 'nofs'}",
+)
+def test_pilot_is_only_a_real_pilot(snapshot: AutopilotState, pilot: bool) -> None:
+    assert pilot_in_control(snapshot) is pilot
+
+
+def test_classify() -> None:
+    assert classify(GROUND) is Control.GROUND
+    assert classify(replace(GROUND, armed=True)) is Control.GROUND
+    assert classify(FLYING) is Control.GUIDED
+    assert classify(FS_RTL) is Control.RTL and classify(AP_RTL) is Control.RTL
+    assert classify(FS_LAND) is Control.LANDING
+    assert classify(FS_HOLD) is Control.HOLD
+    assert classify(PILOT_BRAKE) is Control.PILOT and classify(TAKEN_OVER) is Control.PILOT
+
+
+@pytest.mark.parametrize(
+    "snapshot, words",
+    [
+        (flying(battery=19.0, voltage=16.0, cells=4), "19.0% <= low_battery 20%"),
+        (LOW_VOLTS, "3.40 V per cell"),
+        (LOW_WARNING, "charge_state LOW"),
+    ],
+    ids=["percent", "volts", "warning"],
+)
+def test_low_battery_reason_says_which(snapshot: AutopilotState, words: str) -> None:
+    h = hlc_in(H.AIRBORNE)
+    outcome = h.on_autopilot(snapshot, T0 + 20)
+    assert h.state is H.LOW_BATTERY
+    assert words in outcome.reason and words in outcome.errors[0].text
+
+
+@pytest.mark.parametrize(
+    "snapshot",
+    [flying(voltage=float("nan"), cells=4), flying(voltage=13.6, cells=0), flying(voltage=14.4, cells=4)],
+    ids=["nan-volts", "no-cells", "3.6V"],
+)
+def test_unknown_or_healthy_voltage_is_not_low(snapshot: AutopilotState) -> None:
+    h = hlc_in(H.AIRBORNE)
+    assert h.on_autopilot(snapshot, T0 + 20).transition is None
+
+
+def test_takeoff_refused_on_low_cell_voltage_says_so() -> None:
+    h = hlc_in(H.READY, HlcParams(low_cell_voltage=3.7))
+    h.on_autopilot(replace(GROUND, voltage=14.6, cells=4), T0 + 1)  # 3.65 V per cell
+    outcome = h.on_mc_state(M.TAKEOFF, T0 + 2)
+    assert h.state is H.READY and outcome.errors[0].code is ErrorCode.TAKEOFF_REFUSED_LOW_BATTERY
+    assert "V per cell" in outcome.errors[0].text
+
+
+@pytest.mark.parametrize("value", [0.0, -1.0, float("nan"), float("inf")])
+def test_low_cell_voltage_validated(value: float) -> None:
+    with pytest.raises(ValueError, match="low_cell_voltage"):
+        HlcParams(low_cell_voltage=value)
+
+
+def test_closed_loop_link_regained_in_the_air_returns_home_by_policy() -> None:
+    loop = Loop()
+    loop.run(1.0)
+    loop.command(OperatorCommand.TAKEOFF, 1)
+    loop.run(6.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.MISSION, H.AIRBORNE)
+    loop.sim.set_link_loss(True)
+    loop.run(4.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.ERROR, H.LLC_DOWN)
+    loop.sim.set_link_loss(False)
+    loop.run(0.3)
+    assert (H.LLC_DOWN, H.HOLD) in loop.hlc_log and (M.ERROR, M.RTL) in loop.mc_log
+    assert "on_link_regained = rtl" in loop.mc.reason
+    assert (loop.mc.state, loop.hlc.state) == (M.RTL, H.RTL)
+    assert loop.sim.state().mode == "RTL"
+    loop.run(20.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
+    assert loop.errors == [ErrorCode.LINK_LOST, ErrorCode.LINK_REGAINED]
+
+
+def test_closed_loop_fence_brake_holds_until_the_operator_lands() -> None:
+    loop = Loop()
+    loop.run(1.0)
+    loop.command(OperatorCommand.TAKEOFF, 1)
+    loop.run(6.0)
+    loop.sim.trigger_failsafe("brake", "fence breach")
+    loop.run(2.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.HOLD, H.HOLD)
+    assert "fence breach" in loop.hlc.reason and loop.sim.state().in_air
+    loop.command(OperatorCommand.LAND, 2)
+    loop.run(10.0)
+    assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
+    assert loop.errors == [ErrorCode.AUTOPILOT_FAILSAFE]
+    assert (M.MANUAL not in {to for _, to in loop.mc_log})

@@ -22,6 +22,7 @@ from antalate_lcm.node import Context
 from antalate_lcm.osc import OscNode
 from antalate_lcm.station import StationServer, StationSettings
 from tests.netns import wait_for
+from tests.test_station import API_KEYS, AUTH
 
 
 def make_osc(server: str, **osc: Any) -> tuple[OscNode, Context, dict[str, list[Any]]]:
@@ -55,7 +56,8 @@ def feed_state(ctx: Context, lat: float = 32.0, heading: float = 0.0) -> None:
 
 @pytest.fixture
 def station(tmp_path: Path) -> Iterator[StationServer]:
-    with StationServer(StationSettings(db_path=str(tmp_path / "station.sqlite"), range_m=100, fov_deg=60)) as srv:
+    settings = StationSettings(db_path=str(tmp_path / "station.sqlite"), range_m=100, fov_deg=60, api_keys=API_KEYS)
+    with StationServer(settings) as srv:
         yield srv
 
 
@@ -64,15 +66,17 @@ def test_reports_get_a_token_and_deliver_commands_once(station: StationServer) -
     try:
         feed_state(ctx)
         assert wait_for(lambda: node.token, 5)
-        agents = httpx.get(f"{station.url}/api/agents").json()
-        assert wait_for(lambda: any(a.get("mc_state") == "MISSION" for a in httpx.get(f"{station.url}/api/agents").json()), 5), agents
-        r = httpx.post(f"{station.url}/api/commands", json={"command": "RTL", "target": "alpha"})
+        def listed() -> list[dict[str, Any]]:
+            return list(httpx.get(f"{station.url}/api/agents", headers=AUTH).json())
+
+        assert wait_for(lambda: any(a.get("mc_state") == "MISSION" for a in listed()), 5), listed()
+        r = httpx.post(f"{station.url}/api/commands", json={"command": "RTL", "target": "alpha"}, headers=AUTH)
         assert r.status_code == 200, r.text
         seq = r.json()["seq"]
         assert wait_for(lambda: got["cmd"], 5)
         cmd = got["cmd"][0]
         assert cmd.command == operator_cmd_t.RTL and cmd.header.seq == seq and cmd.target == "alpha"
-        httpx.post(f"{station.url}/api/commands", json={"direction": {"azimuth": 90, "speed": 1.5}})
+        httpx.post(f"{station.url}/api/commands", json={"direction": {"azimuth": 90, "speed": 1.5}}, headers=AUTH)
         assert wait_for(lambda: got["dir"], 5)
         d = got["dir"][0]
         assert d.active and d.azimuth == 90 and d.speed == 1.5
@@ -94,7 +98,7 @@ def test_token_is_kept_across_reports(station: StationServer) -> None:
         first = wait_for(lambda: node.token, 5)
         assert wait_for(lambda: node.reports_ok > 5, 5)
         assert node.token == first
-        assert len(httpx.get(f"{station.url}/api/agents").json()) == 1
+        assert len(httpx.get(f"{station.url}/api/agents", headers=AUTH).json()) == 1
     finally:
         node.stop()
         ctx.close()

@@ -36,6 +36,22 @@ with a growing ``link_age`` and commands raise `AutopilotError` (the vehicle its
 ``refuse_arm`` / `set_refuse_arm`: `arm()` returns False. ``battery`` / `set_battery`: the level.
 `pilot_takeover`: mode LOITER, not autonomous; with ``takeover_autoland`` the "pilot" lands after
 ``takeover_land_delay`` s. ``time_scale`` / `set_time_scale`: simulated seconds per real second.
+`trigger_failsafe(mode, reason)`: the autopilot's own failsafe (fence, battery, EKF, GCS) switches to
+``RTL``, ``LAND`` or ``BRAKE`` (holds position) and reports `AutopilotState.failsafe` = reason until
+it touches down or is commanded another mode. `set_state_error(text)`: `state()` raises
+``RuntimeError(text)`` (an adapter bug) until called with None; the vehicle flies on meanwhile.
+
+Battery voltage: a ``cells``-cell pack whose voltage per cell falls linearly from 4.2 V (100%) to
+3.4 V (0%), minus ``voltage_sag`` V per cell in the air (a tired or cold pack sags under load while
+its percentage still reads well); ``cells = 0`` reports no voltage. ``battery_warning_at`` (percent,
+0 = never): at or below it the vehicle sets `AutopilotState.battery_warning` (its own low-battery
+verdict, like ArduPilot's BATT_LOW_VOLT/BATT_LOW_MAH). An empty battery in the air forces LAND with
+failsafe "battery empty".
+
+Scheduled faults, in s of simulated flight after takeoff (0 = never), for tests that run the sim in
+another process: ``link_loss_after`` (lasting ``link_loss_for`` s, 0 = for good), ``takeover_after``,
+``failsafe_after`` (``failsafe_mode`` rtl|land|brake, ``failsafe_reason``), ``state_error_after``
+(lasting ``state_error_for`` s, 0 = for good). Each fires once per sim.
 """
 
 from __future__ import annotations
@@ -79,13 +95,33 @@ DEFAULTS: dict[str, Any] = {
     # Scheduled faults, in s of flight after takeoff (0 = never), for tests that run the sim in
     # another process where the fault-injection methods cannot be called.
     "link_loss_after": 0.0,
+    "link_loss_for": 0.0,  # s the scheduled link loss lasts; 0 = for good
     "takeover_after": 0.0,
+    "failsafe_after": 0.0,
+    "failsafe_mode": "rtl",  # rtl | land | brake
+    "failsafe_reason": "fence breach",
+    "state_error_after": 0.0,
+    "state_error_for": 0.0,  # s state() keeps raising; 0 = for good
+    # Battery voltage model (see the module docstring).
+    "cells": 4,  # cells in series; 0 = the vehicle reports no voltage
+    "voltage_sag": 0.0,  # V per cell lost under load in the air
+    "battery_warning_at": 0.0,  # percent at or below which the vehicle warns; 0 = never
     # A file where the vehicle's state is kept, so that a restarted HLC process finds the vehicle
     # where it was (a real vehicle outlives the software that flies it); "" = none.
     "state_file": "",
 }
 
-_AUTONOMOUS_MODES = {"GUIDED": FlightMode.GUIDED, "LAND": FlightMode.LANDING, "RTL": FlightMode.RTL}
+
+
+_AUTONOMOUS_MODES = {
+    "GUIDED": FlightMode.GUIDED,
+    "LAND": FlightMode.LANDING,
+    "RTL": FlightMode.RTL,
+    "BRAKE": FlightMode.HOLD,  # ArduCopter's fence action: stop and hold
+}
+#: `trigger_failsafe` modes: the autopilot mode each switches to.
+FAILSAFE_MODES = {"rtl": "RTL", "land": "LAND", "brake": "BRAKE"}
+_CELL_FULL, _CELL_EMPTY = 4.2, 3.4  # V per cell at 100% and 0%
 _HOME_RADIUS = 0.05  # m: close enough to home to start the RTL descent
 
 
@@ -96,6 +132,7 @@ class _Phase(enum.Enum):
     RETURN = "return"  # RTL leg home
     DESCEND = "descend"  # LAND, end of RTL, or the pilot landing
     PILOT = "pilot"  # a pilot holds the vehicle
+    HOLD = "hold"  # the autopilot brakes and holds position (failsafe BRAKE)
 
 
 class SimAutopilot(Autopilot):
@@ -114,6 +151,15 @@ class SimAutopilot(Autopilot):
         for key in ("tau", "climb_rate", "descent_rate", "max_speed", "rtl_speed", "max_step", "time_scale"):
             if not (math.isfinite(float(p[key])) and float(p[key]) > 0.0):
                 raise ValueError(f"sim autopilot parameter {key!r} must be > 0, got {p[key]!r}")
+        for key in ("link_loss_for", "failsafe_after", "state_error_after", "state_error_for", "voltage_sag",
+                    "battery_warning_at"):
+            if not (math.isfinite(float(p[key])) and float(p[key]) >= 0.0):
+                raise ValueError(f"sim autopilot parameter {key!r} must be >= 0, got {p[key]!r}")
+        if str(p["failsafe_mode"]) not in FAILSAFE_MODES:
+            raise ValueError(f"sim autopilot parameter 'failsafe_mode' must be one of {sorted(FAILSAFE_MODES)},"
+                             f" got {p['failsafe_mode']!r}")
+        if not (isinstance(p["cells"], int) and 0 <= p["cells"] <= 14):
+            raise ValueError(f"sim autopilot parameter 'cells' must be an integer in [0, 14], got {p['cells']!r}")
         self.home = FlatFrame(float(p["home_lat"]), float(p["home_lon"]))
         self._tau = float(p["tau"])
         self._time_scale = float(p["time_scale"])
@@ -147,6 +193,9 @@ class SimAutopilot(Autopilot):
         self._frozen: AutopilotState | None = None
         self._airborne_since: float | None = None
         self._fired: set[str] = set()
+        self._ends: dict[str, float] = {}  # scheduled fault -> sim time it ends
+        self._failsafe = ""  # the active failsafe's reason
+        self._state_error: str | None = None
         self._state_file = str(p["state_file"])
         self._saved_at = 0.0
         if p["link_loss"]:
@@ -170,6 +219,7 @@ class SimAutopilot(Autopilot):
             return False
         if not self.armed:
             self.mode = "GUIDED"
+            self._failsafe = ""
             self.armed = True
             self._armed_since = self._sim_time
             self._disarm_at = None
@@ -200,6 +250,7 @@ class SimAutopilot(Autopilot):
     def land(self) -> None:
         self._command("land")
         self.mode = "LAND"
+        self._failsafe = ""
         self._cmd = None
         if self.in_air:
             self._phase = _Phase.DESCEND
@@ -209,6 +260,7 @@ class SimAutopilot(Autopilot):
     def rtl(self) -> None:
         self._command("rtl")
         self.mode = "RTL"
+        self._failsafe = ""
         self._cmd = None
         if self.in_air:
             self._phase = _Phase.RETURN
@@ -230,6 +282,8 @@ class SimAutopilot(Autopilot):
         self._scheduled_faults()
         if self._state_file and self._connected:
             self._persist()
+        if self._state_error is not None:
+            raise RuntimeError(self._state_error)
         if not self._connected:
             return AutopilotState(connected=False, link_age=math.inf)
         if self._link_lost_at is not None:
@@ -251,6 +305,23 @@ class SimAutopilot(Autopilot):
             self._link_lost_at = None
             self._frozen = None
 
+    def trigger_failsafe(self, mode: str = "rtl", reason: str = "fence breach") -> None:
+        """The autopilot's own failsafe takes over: ``rtl``, ``land`` or ``brake`` (hold position)."""
+        if mode not in FAILSAFE_MODES:
+            raise ValueError(f"failsafe mode must be one of {sorted(FAILSAFE_MODES)}, got {mode!r}")
+        self._advance()
+        self.mode = FAILSAFE_MODES[mode]
+        self._failsafe = reason or mode
+        self._cmd = None
+        if self.in_air:
+            self._phase = {"rtl": _Phase.RETURN, "land": _Phase.DESCEND, "brake": _Phase.HOLD}[mode]
+        elif self.armed:
+            self._disarm()
+
+    def set_state_error(self, text: str | None) -> None:
+        """Make `state()` raise ``RuntimeError(text)`` (None: stop). The vehicle flies on."""
+        self._state_error = text
+
     def set_refuse_arm(self, refuse: bool) -> None:
         self._refuse_arm = refuse
 
@@ -268,6 +339,7 @@ class SimAutopilot(Autopilot):
         """A pilot flips the mode switch: LOITER, no longer autonomous; optionally lands after a delay."""
         self._advance()
         self.mode = "LOITER"
+        self._failsafe = ""
         self._cmd = None
         if auto_land is not None:
             self._pilot_autoland = auto_land
@@ -276,18 +348,37 @@ class SimAutopilot(Autopilot):
             self._takeover_time = self._sim_time
 
     def _scheduled_faults(self) -> None:
+        p = self._p
+        for name, end in list(self._ends.items()):
+            if self._sim_time >= end:
+                del self._ends[name]
+                if name == "link_loss_after":
+                    self.set_link_loss(False)
+                else:
+                    self.set_state_error(None)
         if self._airborne_since is None or not self.in_air:
             return
         flown = self._sim_time - self._airborne_since
-        for name, fire in (("takeover_after", self.pilot_takeover), ("link_loss_after", lambda: self.set_link_loss(True))):
-            after = float(self._p[name])
+        faults = (
+            ("takeover_after", self.pilot_takeover, 0.0),
+            ("link_loss_after", lambda: self.set_link_loss(True), float(p["link_loss_for"])),
+            ("failsafe_after", lambda: self.trigger_failsafe(str(p["failsafe_mode"]), str(p["failsafe_reason"])),
+             0.0),
+            ("state_error_after", lambda: self.set_state_error("simulated adapter fault: state() failed"),
+             float(p["state_error_for"])),
+        )
+        for name, fire, lasts in faults:
+            after = float(p[name])
             if after > 0.0 and flown >= after and name not in self._fired:
                 self._fired.add(name)
                 fire()
+                if lasts > 0.0:
+                    self._ends[name] = self._sim_time + lasts
 
     # ----------------------------------------------------------------- persistence across restarts
 
-    _PERSISTED = ("north", "east", "alt", "vn", "ve", "vd", "heading", "battery", "armed", "in_air", "mode", "_takeoff_alt")
+    _PERSISTED = ("north", "east", "alt", "vn", "ve", "vd", "heading", "battery", "armed", "in_air", "mode", "_takeoff_alt",
+                  "_failsafe")
 
     def _persist(self) -> None:
         wall = time.time()
@@ -350,7 +441,19 @@ class SimAutopilot(Autopilot):
     def _snapshot(self) -> AutopilotState:
         lat, lon = self.home.to_latlon(self.north, self.east)
         flight_mode = _AUTONOMOUS_MODES.get(self.mode, FlightMode.MANUAL)
+        p = self._p
+        cells = int(p["cells"])
+        voltage = math.nan
+        if cells:
+            sag = float(p["voltage_sag"]) if self.in_air else 0.0
+            voltage = cells * (_CELL_EMPTY + (_CELL_FULL - _CELL_EMPTY) * self.battery / 100.0 - sag)
+        warn_at = float(p["battery_warning_at"])
+        warning = f"battery low ({self.battery:.0f}% <= {warn_at:g}%)" if warn_at and self.battery <= warn_at else ""
         return AutopilotState(
+            failsafe=self._failsafe,
+            voltage=voltage,
+            cells=cells,
+            battery_warning=warning,
             connected=True,
             link_age=0.0,
             lat=lat,
@@ -390,6 +493,7 @@ class SimAutopilot(Autopilot):
         self.battery = max(0.0, self.battery - drain * h / 60.0)
         if self.in_air and self.battery <= 0.0 and self._phase is not _Phase.DESCEND:
             self.mode = "LAND"  # the autopilot's own empty-battery failsafe
+            self._failsafe = "battery empty"
             self._cmd = None
             self._phase = _Phase.DESCEND
 
@@ -414,6 +518,9 @@ class SimAutopilot(Autopilot):
         elif phase is _Phase.DESCEND:
             self._brake(h)
             self._vertical_to(0.0, float(p["descent_rate"]), h)
+        elif phase is _Phase.HOLD:
+            self._brake(h)
+            self.vd = 0.0
         elif phase is _Phase.PILOT:
             self._brake(h)
             self.vd = 0.0
@@ -498,6 +605,7 @@ class SimAutopilot(Autopilot):
         self.vn = self.ve = self.vd = 0.0
         self.in_air = False
         self._phase = _Phase.GROUND
+        self._failsafe = ""
         self._cmd = None
         if self.armed:
             if self.mode == "GUIDED":

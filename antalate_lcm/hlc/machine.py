@@ -20,8 +20,29 @@ How inputs become events
 * **MC LAND / MC RTL are level-triggered**: every observation counts, so a safety command cannot be
   lost because it arrived while the HLC was busy (e.g. arming) -- it is honoured in the next state.
 * Autopilot observations yield at most one event each, the first with a matching row, in this
-  priority order: LINK_LOST, LANDED, PILOT_TAKEOVER, INIT resync / LINK_UP, AUTOPILOT_LAND,
-  AUTOPILOT_RTL, LOW_BATTERY, ALTITUDE_REACHED.
+  priority order: LINK_LOST, (in LLC_DOWN only) LINK_REGAINED_*, LANDED, PILOT_TAKEOVER, INIT resync
+  / LINK_UP, FAILSAFE_*, AUTOPILOT_LAND, AUTOPILOT_RTL, LOW_BATTERY, ALTITUDE_REACHED.
+
+Failsafe rows (docs/design.md §6 and docs/failsafes.md), and the choices behind them
+-------------------------------------------------------------------------------
+* **LLC_DOWN is recoverable.** When the link is fresh again (``link_age < link_timeout``) the HLC
+  re-reads the vehicle with `classify`, as INIT does: on the ground -> READY; in the air the
+  autopilot's RTL/LAND/failsafe-HOLD or a pilot -> RTL/LANDING/HOLD/MANUAL; still in GUIDED -> HOLD
+  with a HOVER action: the vehicle stops until the MC decides (its ``on_link_regained`` policy).
+  Every such row publishes a LINK_REGAINED ``hlc_error_t`` saying what the vehicle does.
+* **Autopilot failsafes are not pilots.** `AutopilotState.failsafe` with flight_mode RTL, LANDING or
+  HOLD is the autopilot's decision (fence, battery, EKF, GCS failsafe): the HLC follows the vehicle
+  from any flying state (FAILSAFE_RTL/LAND/HOLD rows, a WARNING AUTOPILOT_FAILSAFE error carrying
+  the reason), never MANUAL. Only a real pilot (`pilot_in_control`) makes MANUAL; HOLD without a
+  failsafe is a pilot's BRAKE. A failsafe RTL does not move LOW_BATTERY (already returning).
+* **HOLD** waits for the MC: MC RTL / MC LAND -> RTL / LANDING with the action, but only when the
+  MC has been in another state since HOLD began (`mc_moved`): an MC RTL republished before the MC
+  heard the autopilot's fence BRAKE must not override that BRAKE. The same guard applies to the
+  new RTL/LOW_BATTERY + MC LAND rows (land now instead of flying home). AIRBORNE + MC HOLD -> HOLD
+  with HOVER (an MC holding by policy after an HLC restart). HOLD counts as a flying, autonomous
+  state for the low-battery, pilot-takeover, landed and link-lost rows.
+* **Low battery** is the first of: percentage <= ``low_battery``, volts per cell <= ``low_cell_voltage``,
+  or the vehicle's own `AutopilotState.battery_warning`; the reason says which.
 
 Rows beyond docs/design.md §6, and why
 ------------------------------
@@ -86,6 +107,7 @@ class HlcState(enum.IntEnum):
     MANUAL = hlc_state_t.MANUAL
     LOW_BATTERY = hlc_state_t.LOW_BATTERY
     LLC_DOWN = hlc_state_t.LLC_DOWN
+    HOLD = hlc_state_t.HOLD
 
 
 class Severity(enum.IntEnum):
@@ -111,6 +133,8 @@ class ErrorCode(enum.IntEnum):
     TAKEOFF_CANCELLED = 9
     AUTOPILOT_TOOK_OVER = 10
     TAKEOFF_REFUSED = 11
+    AUTOPILOT_FAILSAFE = 12  # the autopilot's own failsafe changed the mode; the text carries its reason
+    LINK_REGAINED = 13  # the autopilot answers again after LLC_DOWN; the text says what the vehicle does
 
 
 @dataclass(frozen=True)
@@ -185,6 +209,56 @@ class HlcEvent(enum.Enum):
     LINK_LOST = "LINK_LOST"  # link_age >= link_timeout
     AUTOPILOT_LAND = "AUTOPILOT_LAND"  # the autopilot reports it is landing on its own
     AUTOPILOT_RTL = "AUTOPILOT_RTL"  # the autopilot reports it is returning on its own
+    RESYNC_HOLD = "RESYNC_HOLD"  # INIT: armed and in air, autopilot holding on a failsafe
+    MC_HOLD = "MC_HOLD"  # MC is in HOLD (level)
+    FAILSAFE_RTL = "FAILSAFE_RTL"  # AutopilotState.failsafe set, flight_mode RTL
+    FAILSAFE_LAND = "FAILSAFE_LAND"  # AutopilotState.failsafe set, flight_mode LANDING
+    FAILSAFE_HOLD = "FAILSAFE_HOLD"  # AutopilotState.failsafe set, flight_mode HOLD
+    LINK_REGAINED_GROUND = "LINK_REGAINED_GROUND"  # LLC_DOWN: fresh again, vehicle on the ground
+    LINK_REGAINED_GUIDED = "LINK_REGAINED_GUIDED"  # LLC_DOWN: fresh again, flying in GUIDED
+    LINK_REGAINED_RTL = "LINK_REGAINED_RTL"  # LLC_DOWN: fresh again, autopilot returning
+    LINK_REGAINED_LANDING = "LINK_REGAINED_LANDING"  # LLC_DOWN: fresh again, autopilot landing
+    LINK_REGAINED_HOLD = "LINK_REGAINED_HOLD"  # LLC_DOWN: fresh again, autopilot holding on a failsafe
+    LINK_REGAINED_MANUAL = "LINK_REGAINED_MANUAL"  # LLC_DOWN: fresh again, a pilot in control
+
+
+class Control(enum.Enum):
+    """Who flies the vehicle and how, read from one snapshot (`classify`)."""
+
+    GROUND = "GROUND"  # not (armed and in the air)
+    GUIDED = "GUIDED"  # flying under our commands
+    RTL = "RTL"  # the autopilot returns on its own (failsafe or not)
+    LANDING = "LANDING"  # the autopilot lands on its own
+    HOLD = "HOLD"  # the autopilot holds position on a failsafe (fence BRAKE)
+    PILOT = "PILOT"  # a human pilot
+
+
+_FAILSAFE_MODES = (FlightMode.RTL, FlightMode.LANDING, FlightMode.HOLD)
+
+
+def pilot_in_control(ap: AutopilotState) -> bool:
+    """A human pilot has the vehicle: not autonomous, or a pilot's mode, unless a failsafe explains it.
+
+    An autopilot failsafe (`AutopilotState.failsafe` with RTL, LANDING or HOLD) is the autopilot's
+    own decision, never a pilot's, even when the adapter says the vehicle left our control. HOLD
+    without a failsafe is a pilot's BRAKE.
+    """
+    if ap.failsafe and ap.flight_mode in _FAILSAFE_MODES:
+        return False
+    return not ap.autonomous or ap.flight_mode in (FlightMode.MANUAL, FlightMode.HOLD)
+
+
+def classify(ap: AutopilotState) -> Control:
+    """What the vehicle is doing, for the resync rows (INIT, and LLC_DOWN when the link is back)."""
+    if not (ap.armed and ap.in_air):
+        return Control.GROUND
+    if pilot_in_control(ap):
+        return Control.PILOT
+    return {
+        FlightMode.RTL: Control.RTL,
+        FlightMode.LANDING: Control.LANDING,
+        FlightMode.HOLD: Control.HOLD,
+    }.get(ap.flight_mode, Control.GUIDED)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
@@ -196,9 +270,10 @@ class HlcParams:
     gain_altitude_timeout: float = 30.0  # s in GAINING_ALTITUDE before giving up and landing
     low_battery: float = 20.0  # percent; at or below: refuse takeoff / return home
     link_timeout: float = 3.0  # s without autopilot heartbeat -> LLC_DOWN
+    low_cell_voltage: float = 3.5  # V per cell; at or below: low battery (when the adapter knows it)
 
     def __post_init__(self) -> None:
-        for name in ("default_takeoff_altitude", "gain_altitude_timeout", "link_timeout"):
+        for name in ("default_takeoff_altitude", "gain_altitude_timeout", "link_timeout", "low_cell_voltage"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"HlcParams.{name} must be a positive number, got {value!r}")
@@ -277,13 +352,21 @@ def _mc_left_takeoff(m: HighLevelControl) -> bool:
     return m.mc_state != mc_state_t.TAKEOFF
 
 
+def _mc_changed_since_entry(m: HighLevelControl) -> bool:
+    """The MC has been in another state since this HLC state began (see the module docstring)."""
+    return m.mc_moved
+
+
 def _s(*states: HlcState) -> frozenset[HlcState]:
     return frozenset(states)
 
 
 S = HlcState
 E = HlcEvent
-_AUTONOMOUS = _s(S.GAINING_ALTITUDE, S.AIRBORNE, S.RTL, S.LANDING, S.LOW_BATTERY)
+_AUTONOMOUS = _s(S.GAINING_ALTITUDE, S.AIRBORNE, S.RTL, S.LANDING, S.LOW_BATTERY, S.HOLD)
+_FLYING = _AUTONOMOUS | {S.MANUAL}
+_FAILSAFE = (ErrorCode.AUTOPILOT_FAILSAFE, Severity.WARNING)
+_REGAINED = (ErrorCode.LINK_REGAINED, Severity.WARNING)
 _ALL_BUT_INIT = frozenset(S) - {S.INIT, S.LLC_DOWN}
 
 #: The HLC transition table, in priority order (the first row matching state, event and guard wins).
@@ -295,6 +378,19 @@ HLC_TABLE: tuple[HlcRow, ...] = (
     HlcRow(_s(S.INIT), E.RESYNC_LANDING, S.LANDING, "restart resync: vehicle landing"),
     HlcRow(_s(S.INIT), E.RESYNC_RTL, S.RTL, "restart resync: vehicle returning to launch"),
     HlcRow(_s(S.INIT), E.RESYNC_MANUAL, S.MANUAL, "restart resync: pilot in control"),
+    HlcRow(_s(S.INIT), E.RESYNC_HOLD, S.HOLD, "restart resync: autopilot holding on a failsafe"),
+    HlcRow(_s(S.LLC_DOWN), E.LINK_REGAINED_GROUND, S.READY, "autopilot link regained, vehicle on the ground",
+           effect=_fx(error=(ErrorCode.LINK_REGAINED, Severity.INFO))),
+    HlcRow(_s(S.LLC_DOWN), E.LINK_REGAINED_GUIDED, S.HOLD, "autopilot link regained in the air: stop and wait"
+           " for the MC", effect=_fx(Action.HOVER, error=_REGAINED)),
+    HlcRow(_s(S.LLC_DOWN), E.LINK_REGAINED_RTL, S.RTL, "autopilot link regained, vehicle returning",
+           effect=_fx(error=_REGAINED)),
+    HlcRow(_s(S.LLC_DOWN), E.LINK_REGAINED_LANDING, S.LANDING, "autopilot link regained, vehicle landing",
+           effect=_fx(error=_REGAINED)),
+    HlcRow(_s(S.LLC_DOWN), E.LINK_REGAINED_HOLD, S.HOLD, "autopilot link regained, vehicle holding",
+           effect=_fx(error=_REGAINED)),
+    HlcRow(_s(S.LLC_DOWN), E.LINK_REGAINED_MANUAL, S.MANUAL, "autopilot link regained, pilot in control",
+           effect=_fx(error=_REGAINED)),
     HlcRow(_s(S.READY), E.MC_TAKEOFF, None, "takeoff refused: battery low", guard=_battery_low,
            effect=_fx(error=(ErrorCode.TAKEOFF_REFUSED_LOW_BATTERY, Severity.ERROR))),
     HlcRow(_s(S.READY), E.MC_TAKEOFF, S.TAKEOFF, "MC TAKEOFF: arming", effect=_fx_start_takeoff),
@@ -316,17 +412,33 @@ HLC_TABLE: tuple[HlcRow, ...] = (
            extra=True),
     HlcRow(_s(S.GAINING_ALTITUDE), E.MC_LAND, S.LANDING, "MC LAND during takeoff", effect=_fx(Action.LAND),
            extra=True),
-    HlcRow(_s(S.RTL, S.LANDING, S.LOW_BATTERY, S.MANUAL), E.LANDED, S.READY, "landed and disarmed"),
+    HlcRow(_s(S.RTL, S.LANDING, S.LOW_BATTERY, S.MANUAL, S.HOLD), E.LANDED, S.READY, "landed and disarmed"),
     HlcRow(_s(S.AIRBORNE), E.LANDED, S.READY, "vehicle landed on its own",
            effect=_fx(error=(ErrorCode.UNEXPECTED_LANDING, Severity.WARNING)), extra=True),
     HlcRow(_AUTONOMOUS, E.PILOT_TAKEOVER, S.MANUAL, "pilot took over",
            effect=_fx(error=(ErrorCode.PILOT_TAKEOVER, Severity.WARNING))),
+    # The autopilot's failsafes: follow the vehicle, never MANUAL (the failsafe's reason is in the error).
+    HlcRow(_FLYING - {S.RTL, S.LOW_BATTERY}, E.FAILSAFE_RTL, S.RTL, "autopilot failsafe: returning", effect=_fx(error=_FAILSAFE)),
+    HlcRow(_FLYING - {S.LANDING}, E.FAILSAFE_LAND, S.LANDING, "autopilot failsafe: landing",
+           effect=_fx(error=_FAILSAFE)),
+    HlcRow(_FLYING - {S.HOLD}, E.FAILSAFE_HOLD, S.HOLD, "autopilot failsafe: holding position",
+           effect=_fx(error=_FAILSAFE)),
+    # HOLD waits for the MC; the MC's RTL/LAND must be new since HOLD began (not a republish).
+    HlcRow(_s(S.HOLD), E.MC_RTL, S.RTL, "MC RTL", guard=_mc_changed_since_entry, effect=_fx(Action.RTL)),
+    HlcRow(_s(S.HOLD), E.MC_LAND, S.LANDING, "MC LAND", guard=_mc_changed_since_entry, effect=_fx(Action.LAND)),
+    HlcRow(_s(S.RTL, S.LOW_BATTERY), E.MC_LAND, S.LANDING, "MC LAND while returning",
+           guard=_mc_changed_since_entry, effect=_fx(Action.LAND)),
+    HlcRow(_s(S.AIRBORNE), E.MC_HOLD, S.HOLD, "MC HOLD: stop and wait", effect=_fx(Action.HOVER)),
+    HlcRow(_s(S.HOLD), E.AUTOPILOT_LAND, S.LANDING, "autopilot landing on its own",
+           effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING))),
+    HlcRow(_s(S.HOLD), E.AUTOPILOT_RTL, S.RTL, "autopilot returning on its own",
+           effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING))),
     HlcRow(_s(S.GAINING_ALTITUDE, S.AIRBORNE), E.AUTOPILOT_LAND, S.LANDING, "autopilot landing on its own",
            effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)), extra=True),
     HlcRow(_s(S.RTL), E.AUTOPILOT_LAND, S.LANDING, "RTL final descent", extra=True),
     HlcRow(_s(S.GAINING_ALTITUDE, S.AIRBORNE), E.AUTOPILOT_RTL, S.RTL, "autopilot returning on its own",
            effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)), extra=True),
-    HlcRow(_s(S.GAINING_ALTITUDE, S.AIRBORNE), E.LOW_BATTERY, S.LOW_BATTERY, "battery low: returning home",
+    HlcRow(_s(S.GAINING_ALTITUDE, S.AIRBORNE, S.HOLD), E.LOW_BATTERY, S.LOW_BATTERY, "battery low: returning home",
            effect=_fx(Action.RTL, error=(ErrorCode.LOW_BATTERY, Severity.WARNING))),
 )
 del S, E
@@ -342,6 +454,9 @@ class HighLevelControl:
         self.entered_at: float | None = None  # `now` of the last transition
         self.mc_state: int | None = None  # last MC state heard (an McState value), None = never
         self.autopilot: AutopilotState | None = None  # last snapshot
+        self.mc_state_at_entry: int | None = None  # the MC's state when `state` began
+        self.mc_moved = False  # the MC has been in another state than `mc_state_at_entry` since
+        self.reason = "waiting for the autopilot and the MC"  # why the HLC is in `state` (hlc_state_t.reason)
         self._mc_takeoff_altitude = 0.0
         self._target_altitude = 0.0
 
@@ -363,14 +478,31 @@ class HighLevelControl:
         return self.params.default_takeoff_altitude
 
     def _battery_is_low(self) -> bool:
-        ap = self.autopilot
-        return ap is not None and ap.battery_known and ap.battery <= self.params.low_battery
+        return bool(self.battery_low_reason())
+
+    def battery_low_reason(self) -> str:
+        """Why the battery counts as low ("" if it does not): percentage, volts per cell or the vehicle's
+        own warning, whichever comes first. Unknown values (-1 %, NaN V) are never low."""
+        ap, p = self.autopilot, self.params
+        if ap is None:
+            return ""
+        if ap.battery_known and ap.battery <= p.low_battery:
+            return f"battery {ap.battery:.1f}% <= low_battery {p.low_battery:g}%"
+        cell = ap.cell_voltage
+        if math.isfinite(cell) and cell <= p.low_cell_voltage:
+            return (f"battery {cell:.2f} V per cell ({ap.voltage:.1f} V / {ap.cells} cells)"
+                    f" <= low_cell_voltage {p.low_cell_voltage:g} V")
+        if ap.battery_warning:
+            return f"the autopilot reports the battery low: {ap.battery_warning}"
+        return ""
 
     # ----------------------------------------------------------------- inputs
 
     def on_mc_state(self, state: McState | int, now: float, *, takeoff_altitude: float = 0.0) -> HlcOutcome:
         """An ``mc_state_t`` was heard. `takeoff_altitude` is the MC's requested altitude (0 = default)."""
         previous, self.mc_state = self.mc_state, int(state)
+        if self.mc_state != self.mc_state_at_entry:
+            self.mc_moved = True
         events: list[tuple[HlcEvent, str]] = []
         if state == mc_state_t.TAKEOFF:
             self._mc_takeoff_altitude = takeoff_altitude
@@ -380,13 +512,19 @@ class HighLevelControl:
             events.append((HlcEvent.MC_LAND, "MC is in LAND"))
         elif state == mc_state_t.RTL:
             events.append((HlcEvent.MC_RTL, "MC is in RTL"))
+        elif state == mc_state_t.HOLD:
+            events.append((HlcEvent.MC_HOLD, "MC is in HOLD"))
         events.extend(self._init_events())
         return self._fire(events, now)
 
-    def on_autopilot(self, snapshot: AutopilotState, now: float) -> HlcOutcome:
-        """A fresh autopilot snapshot (the node polls `Autopilot.state()`)."""
+    def on_autopilot(self, snapshot: AutopilotState, now: float, *, fault: str = "") -> HlcOutcome:
+        """An autopilot snapshot (the node polls `Autopilot.state()`).
+
+        `fault` says why the snapshot is not fresh when the node knows (``state()`` raised: the node
+        passes the last good snapshot with its `link_age` grown); it goes into the LLC_DOWN reason.
+        """
         self.autopilot = snapshot
-        return self._fire(self._autopilot_events(snapshot), now)
+        return self._fire(self._autopilot_events(snapshot, fault), now)
 
     def on_action_result(self, kind: ActionKind, ok: bool, now: float, detail: str = "") -> HlcOutcome:
         """The outcome of an `Action` the node performed (``arm()`` False or `AutopilotError` = not ok).
@@ -422,8 +560,9 @@ class HighLevelControl:
     def _takeoff_detail(self) -> str:
         ap = self.autopilot
         battery = f"{ap.battery:.1f}%" if ap is not None and ap.battery_known else "unknown"
-        return (f"MC TAKEOFF to {self._requested_altitude():g} m, battery {battery}"
-                f" (low_battery {self.params.low_battery:g}%)")
+        low = self.battery_low_reason()
+        return f"MC TAKEOFF to {self._requested_altitude():g} m, " + (
+            low or f"battery {battery} (low_battery {self.params.low_battery:g}%)")
 
     def _link_fresh(self, ap: AutopilotState) -> bool:
         return ap.connected and ap.link_age < self.params.link_timeout
@@ -432,37 +571,63 @@ class HighLevelControl:
         ap = self.autopilot
         if self.state is not HlcState.INIT or ap is None or not self.mc_heard or not self._link_fresh(ap):
             return []
-        if not (ap.armed and ap.in_air):
+        control = classify(ap)
+        if control is Control.GROUND:
             return [(HlcEvent.LINK_UP, f"autopilot link {ap.link_age:.2f} s old, vehicle on the ground")]
-        detail = f"vehicle armed and in air, mode {ap.mode or '?'} at {ap.alt:.1f} m"
-        if not ap.autonomous or ap.flight_mode is FlightMode.MANUAL:
-            return [(HlcEvent.RESYNC_MANUAL, detail)]
         resync = {
-            FlightMode.GUIDED: HlcEvent.RESYNC_AIRBORNE,
-            FlightMode.LANDING: HlcEvent.RESYNC_LANDING,
-            FlightMode.RTL: HlcEvent.RESYNC_RTL,
+            Control.GUIDED: HlcEvent.RESYNC_AIRBORNE,
+            Control.LANDING: HlcEvent.RESYNC_LANDING,
+            Control.RTL: HlcEvent.RESYNC_RTL,
+            Control.HOLD: HlcEvent.RESYNC_HOLD,
+            Control.PILOT: HlcEvent.RESYNC_MANUAL,
         }
-        assert ap.flight_mode is not None  # filled in by AutopilotState.__post_init__
-        return [(resync[ap.flight_mode], detail)]
+        return [(resync[control], self._vehicle_detail(ap))]
 
-    def _autopilot_events(self, ap: AutopilotState) -> list[tuple[HlcEvent, str]]:
+    def _regained_events(self, ap: AutopilotState) -> list[tuple[HlcEvent, str]]:
+        regained = {
+            Control.GROUND: HlcEvent.LINK_REGAINED_GROUND,
+            Control.GUIDED: HlcEvent.LINK_REGAINED_GUIDED,
+            Control.LANDING: HlcEvent.LINK_REGAINED_LANDING,
+            Control.RTL: HlcEvent.LINK_REGAINED_RTL,
+            Control.HOLD: HlcEvent.LINK_REGAINED_HOLD,
+            Control.PILOT: HlcEvent.LINK_REGAINED_MANUAL,
+        }
+        control = classify(ap)
+        where = "on the ground" if control is Control.GROUND else self._vehicle_detail(ap)
+        return [(regained[control], f"link {ap.link_age:.2f} s old after LLC_DOWN, {where}")]
+
+    @staticmethod
+    def _vehicle_detail(ap: AutopilotState) -> str:
+        failsafe = f", failsafe: {ap.failsafe}" if ap.failsafe else ""
+        return f"vehicle armed and in air, mode {ap.mode or '?'} at {ap.alt:.1f} m{failsafe}"
+
+    def _autopilot_events(self, ap: AutopilotState, fault: str = "") -> list[tuple[HlcEvent, str]]:
         p = self.params
         if ap.link_age >= p.link_timeout:
             # Nothing else the snapshot says can be trusted.
+            why = f"; {fault}" if fault else ""
             return [(HlcEvent.LINK_LOST, f"no autopilot heartbeat for {ap.link_age:.1f} s"
-                                         f" (link_timeout {p.link_timeout:g} s)")]
+                                         f" (link_timeout {p.link_timeout:g} s){why}")]
+        if self.state is HlcState.LLC_DOWN:
+            return self._regained_events(ap) if self._link_fresh(ap) else []
         events: list[tuple[HlcEvent, str]] = []
         if ap.landed:
             events.append((HlcEvent.LANDED, f"on the ground and disarmed (mode {ap.mode or '?'})"))
-        if ap.armed and (not ap.autonomous or ap.flight_mode is FlightMode.MANUAL):
+        if ap.armed and pilot_in_control(ap):
             events.append((HlcEvent.PILOT_TAKEOVER, f"autopilot left autonomous control (mode {ap.mode or '?'})"))
         events.extend(self._init_events())
+        if ap.failsafe and ap.flight_mode in _FAILSAFE_MODES:
+            failsafe = {FlightMode.RTL: HlcEvent.FAILSAFE_RTL, FlightMode.LANDING: HlcEvent.FAILSAFE_LAND,
+                        FlightMode.HOLD: HlcEvent.FAILSAFE_HOLD}
+            events.append((failsafe[ap.flight_mode],  # type: ignore[index]
+                           f"{ap.failsafe}; autopilot switched to {ap.mode or ap.flight_mode.name}"))  # type: ignore[union-attr]
         if ap.flight_mode is FlightMode.LANDING:
             events.append((HlcEvent.AUTOPILOT_LAND, f"autopilot switched to {ap.mode or 'LAND'}"))
         if ap.flight_mode is FlightMode.RTL:
             events.append((HlcEvent.AUTOPILOT_RTL, f"autopilot switched to {ap.mode or 'RTL'}"))
-        if self._battery_is_low():
-            events.append((HlcEvent.LOW_BATTERY, f"battery {ap.battery:.1f}% <= low_battery {p.low_battery:g}%"))
+        low = self.battery_low_reason()
+        if low:
+            events.append((HlcEvent.LOW_BATTERY, low))
         if altitude_reached(ap.alt, self._target_altitude, p.airborne_fraction):
             events.append((HlcEvent.ALTITUDE_REACHED, f"altitude {ap.alt:.2f} m >= {p.airborne_fraction:g}"
                                                       f" x {self._target_altitude:g} m"))
@@ -488,5 +653,8 @@ class HighLevelControl:
             transition = HlcTransition(self.state, row.target, event, reason, now)
             self.state = row.target
             self.entered_at = now
+            self.mc_state_at_entry = self.mc_state
+            self.mc_moved = False
+            self.reason = reason
             return HlcOutcome(transition, actions, errors, reason)
         return HlcOutcome()

@@ -3,6 +3,11 @@
 A control loop polls the autopilot at ``control_hz`` and feeds the machine; the actions it returns are
 performed in order, on a worker thread when the adapter's commands may block (see
 `Autopilot.blocking`), and their results fed back. Telemetry goes out at ``telemetry_hz``.
+
+An adapter whose ``state()`` raises is a stale link, not a crash: the machine gets the last good
+snapshot with its ``link_age`` grown by the time since (so LLC_DOWN follows after ``link_timeout``,
+with the exception as the reason, and the recoverable LLC_DOWN row applies once ``state()`` works
+again), and the log gets one rate-limited line, not a traceback per tick.
 """
 
 from __future__ import annotations
@@ -10,6 +15,7 @@ from __future__ import annotations
 import logging
 import math
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 from typing import Any
 
 from antalate_lcm._ratelimit import RateLimitedLog
@@ -60,6 +66,7 @@ class HlcNode(Node):
                 gain_altitude_timeout=h.gain_altitude_timeout,
                 low_battery=h.low_battery,
                 link_timeout=h.link_timeout,
+                low_cell_voltage=h.low_cell_voltage,
             )
         )
         self.guard = VelocityGuard(
@@ -68,10 +75,15 @@ class HlcNode(Node):
                 max_vertical=h.max_vertical_speed,
                 max_yaw_rate=h.max_yaw_rate,
                 velocity_timeout=h.velocity_timeout,
+                max_link_age=h.link_timeout / 2,
             )
         )
         self.mc_state: int | None = None
         self.snapshot = AutopilotState()
+        self._good = AutopilotState()  # the last snapshot state() returned
+        self._good_at: float | None = None  # `now` when it did
+        self._state_fault = ""  # why state() failed on the last tick, "" when it worked
+        self._fault_log = RateLimitedLog(self.log, period=30.0)
         self.connected = False
         self._io: ThreadPoolExecutor | None = None
         self._reject_log = RateLimitedLog(self.log, period=5.0)
@@ -176,6 +188,8 @@ class HlcNode(Node):
 
     # ------------------------------------------------------------------ inputs
     def _on_mc_state(self, msg: mc_state_t) -> None:
+        if not self.started:
+            return  # delivered after stop(): the autopilot is closed
         self.mc_state = msg.state
         alt = (
             msg.takeoff_altitude if math.isfinite(msg.takeoff_altitude) and msg.takeoff_altitude > 0 else 0.0
@@ -183,18 +197,42 @@ class HlcNode(Node):
         self._handle(self.machine.on_mc_state(msg.state, self.now, takeoff_altitude=alt))
 
     def _on_velocity(self, msg: velocity_cmd_t) -> None:
+        if not self.started:
+            return
         cmd = VelocityCommand(msg.vx, msg.vy, msg.vz, msg.yaw_rate, msg.frame, self.now)
-        self._apply(self.guard.on_command(cmd, self.now, self.machine.state, self.mc_state), msg.header.agent)
+        decision = self.guard.on_command(cmd, self.now, self.machine.state, self.mc_state, self._link_age())
+        self._apply(decision, msg.header.agent)
+
+    def _link_age(self) -> float:
+        return self.snapshot.link_age
+
+    def _poll(self, now: float) -> AutopilotState:
+        """The adapter's snapshot, or the last good one aged by the time since when ``state()`` raises."""
+        try:
+            snapshot = self.autopilot.state()
+        except Exception as exc:  # noqa: BLE001 - an adapter bug is a stale link, not a dead HLC
+            fault = f"autopilot {self.autopilot.name} state() raised {type(exc).__name__}: {exc}"
+            if fault != self._state_fault:
+                self.log.debug("%s", fault, exc_info=True)
+            self._state_fault = fault
+            self._fault_log.log(("state",), logging.WARNING, "%s", fault)
+            if self._good_at is None:
+                return replace(self._good, link_age=math.inf)
+            return replace(self._good, link_age=self._good.link_age + max(0.0, now - self._good_at))
+        if self._state_fault:
+            self.log.warning("autopilot %s state() works again", self.autopilot.name)
+            self._state_fault = ""
+        self._good, self._good_at = snapshot, now
+        return snapshot
 
     def _control(self) -> None:
-        try:
-            self.snapshot = self.autopilot.state()
-        except Exception:
-            self.log.exception("autopilot %s state() raised", self.autopilot.name)
+        if not self.started:
+            return
         now = self.now
-        self._handle(self.machine.on_autopilot(self.snapshot, now))
+        self.snapshot = self._poll(now)
+        self._handle(self.machine.on_autopilot(self.snapshot, now, fault=self._state_fault))
         self._handle(self.machine.tick(now))
-        stale = self.guard.tick(now, self.machine.state, self.mc_state)
+        stale = self.guard.tick(now, self.machine.state, self.mc_state, self._link_age())
         if stale is not None:
             self._apply(stale, "velocity timeout")
 
@@ -225,7 +263,11 @@ class HlcNode(Node):
     def _handle(self, outcome: HlcOutcome) -> None:
         t = outcome.transition
         if t is not None:
-            level = logging.ERROR if t.to_state is HlcState.LLC_DOWN else logging.INFO
+            level = logging.INFO
+            if t.to_state is HlcState.LLC_DOWN:
+                level = logging.ERROR
+            elif t.from_state is HlcState.LLC_DOWN or t.to_state is HlcState.HOLD:
+                level = logging.WARNING
             self.log.log(
                 level, "%s -> %s on %s: %s", t.from_state.name, t.to_state.name, t.event.name, t.reason
             )
@@ -250,6 +292,7 @@ class HlcNode(Node):
         msg = hlc_state_t()
         msg.state = int(self.machine.state)
         msg.autopilot = self.autopilot.name
+        msg.reason = self.machine.reason
         return msg
 
     def _publish_telemetry(self) -> None:

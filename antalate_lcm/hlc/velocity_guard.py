@@ -10,7 +10,12 @@ and on each tick, what (if anything) goes to `Autopilot.set_velocity` and why:
 * the horizontal velocity is scaled down, direction preserved, to ``max_horizontal`` (the norm, so a
   diagonal is not faster than a straight line); vertical speed and yaw rate are clamped per component;
 * a command whose age (now - receive time) exceeds ``velocity_timeout`` is replaced by zero velocity
-  (hover); when behaviors fall silent, `VelocityGuard.tick` sends that hover once.
+  (hover); when behaviors fall silent, `VelocityGuard.tick` sends that hover once;
+* nothing is sent while the autopilot link is stale (the last snapshot older than ``max_link_age``,
+  the HLC node's ``link_timeout / 2``: more than one missed 1 Hz MAVLink heartbeat): a set-point
+  queued into a dead link could be delivered late, and a vehicle that just got its link back must
+  not fly on a behavior's old wish. LLC_DOWN and HOLD are not mission flight, so nothing passes
+  there either; the hover owed by `VelocityGuard.tick` waits until the link is fresh again.
 
 Receive time, not the sender's ``header.utime``, is what ages a command: clocks of different
 machines are not synchronised, the HLC's own monotonic clock is.
@@ -35,9 +40,10 @@ class VelocityLimits:
     max_vertical: float = 2.0  # m/s, up or down
     max_yaw_rate: float = 90.0  # deg/s, either way
     velocity_timeout: float = 0.5  # s after receipt before a command counts as stale
+    max_link_age: float = 1.5  # s: an older autopilot snapshot means a stale link, nothing is sent
 
     def __post_init__(self) -> None:
-        for name in ("max_horizontal", "max_vertical", "max_yaw_rate", "velocity_timeout"):
+        for name in ("max_horizontal", "max_vertical", "max_yaw_rate", "velocity_timeout", "max_link_age"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"VelocityLimits.{name} must be a finite number >= 0, got {value!r}")
@@ -108,14 +114,23 @@ def check_velocity(
     hlc_state: HlcState | int,
     mc_state: McState | int | None,
     limits: VelocityLimits,
+    link_age: float = 0.0,
 ) -> GuardDecision:
-    """Stateless verdict on one command (see the module docstring for the rules)."""
+    """Stateless verdict on one command (see the module docstring for the rules).
+
+    `link_age` is the age of the autopilot's last snapshot (`AutopilotState.link_age`).
+    """
     if not mission_flight(hlc_state, mc_state):
         return GuardDecision(
             Verdict.REJECT,
             None,
             f"velocity ignored: HLC {_state_name(HlcState, hlc_state)}, MC {_state_name(McState, mc_state)}"
             " (needs HLC AIRBORNE and MC MISSION)",
+        )
+    if not link_age <= limits.max_link_age:  # NaN is stale too
+        return GuardDecision(
+            Verdict.REJECT, None,
+            f"velocity withheld: autopilot link {link_age:.1f} s old > {limits.max_link_age:g} s",
         )
     components = {"vx": cmd.vx, "vy": cmd.vy, "vz": cmd.vz, "yaw_rate": cmd.yaw_rate}
     bad = [f"{name}={value!r}" for name, value in components.items() if not math.isfinite(value)]
@@ -162,9 +177,14 @@ class VelocityGuard:
         self._hovering = False
 
     def on_command(
-        self, cmd: VelocityCommand, now: float, hlc_state: HlcState | int, mc_state: McState | int | None
+        self,
+        cmd: VelocityCommand,
+        now: float,
+        hlc_state: HlcState | int,
+        mc_state: McState | int | None,
+        link_age: float = 0.0,
     ) -> GuardDecision:
-        decision = check_velocity(cmd, now, hlc_state, mc_state, self.limits)
+        decision = check_velocity(cmd, now, hlc_state, mc_state, self.limits, link_age)
         if decision.verdict is Verdict.SEND:
             self._last_received = cmd.received_at
             self._hovering = False
@@ -174,12 +194,14 @@ class VelocityGuard:
             self._last_received = None  # nothing of ours is flying any more
         return decision
 
-    def tick(self, now: float, hlc_state: HlcState | int, mc_state: McState | int | None) -> GuardDecision | None:
+    def tick(
+        self, now: float, hlc_state: HlcState | int, mc_state: McState | int | None, link_age: float = 0.0
+    ) -> GuardDecision | None:
         """Call periodically: returns a HOVER decision once after the last command went stale."""
         if not mission_flight(hlc_state, mc_state):
             self._last_received = None
             return None
-        if self._last_received is None or self._hovering:
+        if self._last_received is None or self._hovering or not link_age <= self.limits.max_link_age:
             return None
         age = now - self._last_received
         if age <= self.limits.velocity_timeout:

@@ -4,7 +4,8 @@ Pure logic: no I/O, no clock. The MC node feeds it:
 
 * `MissionControl.on_command(command, seq, now, altitude=..., sender=...)` -- an operator command;
 * `MissionControl.on_hlc_state(state, now)` -- every ``hlc_state_t`` heard;
-* `MissionControl.tick(now)` -- periodically, for the takeoff acknowledgement timeout.
+* `MissionControl.tick(now)` -- periodically, for the takeoff acknowledgement timeout and the HLC
+  watchdog (`McParams.hlc_timeout`).
 
 Every call returns a `McOutcome` so the node can log each transition and each rejection with its
 reason, and publish ``mc_state_t`` with `MissionControl.last_command_seq` as the operator's ack.
@@ -28,6 +29,27 @@ Rows beyond docs/design.md §5, and why
   the mission state follows what the vehicle does.
 * MISSION + HLC READY -> STANDBY: the vehicle landed and disarmed on its own (e.g. a Tello's own
   low-battery landing); without it the MC would sit in MISSION on the ground.
+
+Failsafe rows (docs/design.md §5, "failsafes" rows), and the choices behind them
+------------------------------------------------------------------------------
+* **Link regained** (ERROR + any HLC state but LLC_DOWN): the vehicle is reachable again. On the
+  ground (HLC READY) the MC is simply STANDBY. If the vehicle is already doing something on its own
+  (HLC RTL, LANDING, MANUAL, LOW_BATTERY) the MC follows it. If it waits for a decision (HLC HOLD, or
+  AIRBORNE after an HLC restart) `McParams.on_link_regained` decides: RTL, LAND or HOLD; the reason
+  names the policy so the operator knows why the vehicle moves.
+* **Operator RTL/LAND in ERROR** are accepted only while the HLC reports a state other than
+  LLC_DOWN/INIT (someone can execute them); otherwise the rejection says the autopilot is unreachable.
+* **HOLD** (the vehicle stopped and waits: an autopilot fence BRAKE, or the hold policy) accepts
+  operator RTL and LAND, and follows whatever the vehicle does next.
+* **RTL + operator LAND -> LAND**: landing where it is beats flying home on a failing battery or
+  after a failsafe; the HLC follows.
+* **HLC watchdog**: no ``hlc_state_t`` for `McParams.hlc_timeout` past INIT -> HLC_LOST. Nobody can
+  execute a command then, so HLC_LOST rejects every command with that reason (the vehicle is on its
+  own GCS failsafe). When the HLC is heard again the MC resyncs exactly as from INIT (the INIT rows
+  apply to HLC_LOST as well): the matching state, no command.
+* "Follow the vehicle" rows into HOLD and LAND + HLC RTL fire only on the HLC's *change* of state
+  (`MissionControl.hlc_changed`): the HLC republishes its state at 5 Hz, and a republished HOLD that
+  was sent before the HLC heard the MC's new RTL must not pull the MC back to HOLD.
 
 The TAKEOFF -> STANDBY rows need to know whether the HLC *left* READY since the command: the HLC
 is READY when the command is accepted, so "HLC READY" alone would cancel every takeoff at once.
@@ -55,6 +77,8 @@ class McState(enum.IntEnum):
     LAND = mc_state_t.LAND
     MANUAL = mc_state_t.MANUAL
     ERROR = mc_state_t.ERROR
+    HOLD = mc_state_t.HOLD
+    HLC_LOST = mc_state_t.HLC_LOST
 
 
 class OperatorCommand(enum.IntEnum):
@@ -81,7 +105,9 @@ class McEvent(enum.Enum):
     HLC_MANUAL = "HLC_MANUAL"
     HLC_LOW_BATTERY = "HLC_LOW_BATTERY"
     HLC_LLC_DOWN = "HLC_LLC_DOWN"
+    HLC_HOLD = "HLC_HOLD"
     TAKEOFF_ACK_TIMEOUT = "TAKEOFF_ACK_TIMEOUT"
+    HLC_TIMEOUT = "HLC_TIMEOUT"  # no hlc_state_t for McParams.hlc_timeout
 
     @classmethod
     def of_hlc(cls, state: HlcState) -> McEvent:
@@ -98,12 +124,23 @@ class McParams:
 
     takeoff_ack_timeout: float = 5.0  # s the HLC may stay READY after an accepted TAKEOFF
     duplicate_window: float = 60.0  # s an accepted (sender, seq, command) is remembered
+    hlc_timeout: float = 2.0  # s without an hlc_state_t before HLC_LOST
+    on_link_regained: str = "rtl"  # rtl | land | hold: what to do when the HLC's link comes back in the air
 
     def __post_init__(self) -> None:
-        for name in ("takeoff_ack_timeout", "duplicate_window"):
+        for name in ("takeoff_ack_timeout", "duplicate_window", "hlc_timeout"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"McParams.{name} must be a positive number, got {value!r}")
+        if self.on_link_regained not in LINK_REGAINED_POLICIES:
+            raise ValueError(
+                f"McParams.on_link_regained must be one of {', '.join(LINK_REGAINED_POLICIES)},"
+                f" got {self.on_link_regained!r}"
+            )
+
+
+#: `McParams.on_link_regained` values and the MC state each leads to.
+LINK_REGAINED_POLICIES: dict[str, McState] = {"rtl": McState.RTL, "land": McState.LAND, "hold": McState.HOLD}
 
 
 @dataclass(frozen=True)
@@ -152,38 +189,75 @@ def _hlc_left_ready(mc: MissionControl) -> bool:
     return mc.hlc_left_ready
 
 
+def _hlc_changed(mc: MissionControl) -> bool:
+    return mc.hlc_changed
+
+
+def _hlc_link_up(mc: MissionControl) -> bool:
+    return mc.hlc_state not in (None, HlcState.LLC_DOWN, HlcState.INIT)
+
+
+def _policy(target: McState) -> _Guard:
+    def guard(mc: MissionControl) -> bool:
+        return LINK_REGAINED_POLICIES[mc.params.on_link_regained] is target
+
+    return guard
+
+
 def _s(*states: McState) -> frozenset[McState]:
     return frozenset(states)
 
 
 S = McState
 E = McEvent
+_RESYNC = frozenset({S.INIT, S.HLC_LOST})  # where the MC takes the HLC's word for what is going on
 
 #: The MC transition table, in priority order (the first row matching state, event and guard wins).
 MC_TABLE: tuple[McRow, ...] = (
-    McRow(frozenset(S) - {S.ERROR}, E.HLC_LLC_DOWN, S.ERROR, "HLC lost its autopilot (unrecoverable)"),
-    McRow(_s(S.INIT), E.HLC_READY, S.STANDBY, "HLC ready"),
-    McRow(_s(S.INIT), E.HLC_GAINING_ALTITUDE, S.TAKEOFF, "restart resync: HLC gaining altitude"),
-    McRow(_s(S.INIT), E.HLC_AIRBORNE, S.MISSION, "restart resync: HLC airborne"),
-    McRow(_s(S.INIT), E.HLC_RTL, S.RTL, "restart resync: HLC returning"),
-    McRow(_s(S.INIT), E.HLC_LANDING, S.LAND, "restart resync: HLC landing"),
-    McRow(_s(S.INIT), E.HLC_MANUAL, S.MANUAL, "restart resync: pilot in control"),
-    McRow(_s(S.INIT), E.HLC_LOW_BATTERY, S.RTL, "restart resync: HLC returning on low battery", extra=True),
+    McRow(frozenset(S) - {S.ERROR}, E.HLC_LLC_DOWN, S.ERROR, "HLC lost its autopilot"),
+    McRow(frozenset(S) - {S.INIT, S.HLC_LOST}, E.HLC_TIMEOUT, S.HLC_LOST, "HLC lost"),
+    McRow(_RESYNC, E.HLC_READY, S.STANDBY, "HLC ready"),
+    McRow(_RESYNC, E.HLC_GAINING_ALTITUDE, S.TAKEOFF, "restart resync: HLC gaining altitude"),
+    McRow(_RESYNC, E.HLC_AIRBORNE, S.MISSION, "restart resync: HLC airborne"),
+    McRow(_RESYNC, E.HLC_RTL, S.RTL, "restart resync: HLC returning"),
+    McRow(_RESYNC, E.HLC_LANDING, S.LAND, "restart resync: HLC landing"),
+    McRow(_RESYNC, E.HLC_MANUAL, S.MANUAL, "restart resync: pilot in control"),
+    McRow(_RESYNC, E.HLC_HOLD, S.HOLD, "restart resync: vehicle holding"),
+    McRow(_RESYNC, E.HLC_LOW_BATTERY, S.RTL, "restart resync: HLC returning on low battery", extra=True),
     McRow(_s(S.STANDBY), E.OP_TAKEOFF, S.TAKEOFF, "operator TAKEOFF"),
     McRow(_s(S.TAKEOFF), E.HLC_AIRBORNE, S.MISSION, "HLC airborne"),
     McRow(_s(S.TAKEOFF), E.HLC_READY, S.STANDBY, "HLC back to READY: takeoff failed", guard=_hlc_left_ready),
     McRow(_s(S.TAKEOFF), E.TAKEOFF_ACK_TIMEOUT, S.STANDBY, "HLC never left READY: takeoff not acknowledged"),
     McRow(_s(S.TAKEOFF), E.HLC_LANDING, S.LAND, "HLC landing: altitude not gained"),
-    McRow(_s(S.TAKEOFF, S.MISSION), E.OP_LAND, S.LAND, "operator LAND"),
-    McRow(_s(S.TAKEOFF, S.MISSION), E.OP_RTL, S.RTL, "operator RTL"),
-    McRow(_s(S.TAKEOFF, S.MISSION), E.HLC_LOW_BATTERY, S.RTL, "HLC low battery: returning"),
-    McRow(_s(S.RTL), E.HLC_LANDING, S.LAND, "HLC landing"),
-    McRow(_s(S.RTL, S.LAND), E.HLC_READY, S.STANDBY, "landed and disarmed"),
-    McRow(_s(S.TAKEOFF, S.MISSION, S.RTL, S.LAND), E.HLC_MANUAL, S.MANUAL, "pilot override"),
+    McRow(_s(S.TAKEOFF, S.MISSION, S.RTL, S.HOLD), E.OP_LAND, S.LAND, "operator LAND"),
+    McRow(_s(S.TAKEOFF, S.MISSION, S.HOLD), E.OP_RTL, S.RTL, "operator RTL"),
+    McRow(_s(S.ERROR), E.OP_LAND, S.LAND, "operator LAND with the HLC reporting its link up", guard=_hlc_link_up),
+    McRow(_s(S.ERROR), E.OP_RTL, S.RTL, "operator RTL with the HLC reporting its link up", guard=_hlc_link_up),
+    McRow(_s(S.TAKEOFF, S.MISSION, S.HOLD), E.HLC_LOW_BATTERY, S.RTL, "HLC low battery: returning"),
+    McRow(_s(S.RTL, S.HOLD), E.HLC_LANDING, S.LAND, "HLC landing"),
+    McRow(_s(S.RTL, S.LAND, S.HOLD), E.HLC_READY, S.STANDBY, "landed and disarmed"),
+    McRow(_s(S.TAKEOFF, S.MISSION, S.RTL, S.LAND, S.HOLD), E.HLC_MANUAL, S.MANUAL, "pilot override"),
     McRow(_s(S.MANUAL), E.HLC_READY, S.STANDBY, "pilot landed and disarmed"),
     McRow(_s(S.TAKEOFF, S.MISSION), E.HLC_RTL, S.RTL, "vehicle returning on its own", extra=True),
     McRow(_s(S.MISSION), E.HLC_LANDING, S.LAND, "vehicle landing on its own", extra=True),
     McRow(_s(S.MISSION), E.HLC_READY, S.STANDBY, "vehicle landed on its own", extra=True),
+    # The vehicle's own failsafes: follow what it does (never MANUAL for an autopilot's decision).
+    McRow(_s(S.TAKEOFF, S.MISSION, S.RTL, S.LAND, S.MANUAL), E.HLC_HOLD, S.HOLD, "vehicle holding on its own",
+          guard=_hlc_changed),
+    McRow(_s(S.LAND, S.MANUAL, S.HOLD), E.HLC_RTL, S.RTL, "vehicle returning on its own", guard=_hlc_changed),
+    McRow(_s(S.MANUAL), E.HLC_LANDING, S.LAND, "vehicle landing on its own"),
+    # The autopilot link is back (ERROR is only entered on HLC LLC_DOWN).
+    McRow(_s(S.ERROR), E.HLC_READY, S.STANDBY, "autopilot link regained, vehicle on the ground"),
+    McRow(_s(S.ERROR), E.HLC_RTL, S.RTL, "autopilot link regained, vehicle returning on its own"),
+    McRow(_s(S.ERROR), E.HLC_LANDING, S.LAND, "autopilot link regained, vehicle landing on its own"),
+    McRow(_s(S.ERROR), E.HLC_LOW_BATTERY, S.RTL, "autopilot link regained, vehicle returning on low battery"),
+    McRow(_s(S.ERROR), E.HLC_MANUAL, S.MANUAL, "autopilot link regained, pilot in control"),
+    *(
+        McRow(_s(S.ERROR), event, target, f"autopilot link regained in the air: on_link_regained = {policy}",
+              guard=_policy(target))
+        for event in (E.HLC_HOLD, E.HLC_AIRBORNE)
+        for policy, target in LINK_REGAINED_POLICIES.items()
+    ),
 )
 del S, E
 
@@ -205,7 +279,10 @@ class MissionControl:
         self.last_command_seq: int = 0
         self.takeoff_altitude: float = 0.0  # m requested by the accepted TAKEOFF; 0 = HLC default
         self.hlc_state: HlcState | None = None  # last heard
+        self.hlc_heard_at: float | None = None  # `now` of the last hlc_state_t, None = never
+        self.hlc_changed = False  # the last hlc_state_t heard differs from the one before
         self.hlc_left_ready = False  # since entering TAKEOFF
+        self.reason = "waiting for the HLC"  # why the MC is in `state` (mc_state_t.reason)
         self._accepted: dict[tuple[str, int, OperatorCommand], float] = {}
 
     # ----------------------------------------------------------------- inputs
@@ -235,7 +312,13 @@ class MissionControl:
         row = self._match(event)
         if row is None:
             allowed = ", ".join(s.name for s in _ACCEPTED_IN[event])
-            return McOutcome(False, reason=f"{label} rejected in {self.state.name} (accepted in {allowed})")
+            why = f"accepted in {allowed}"
+            if self.state is McState.HLC_LOST:
+                why = f"the HLC is silent: nobody can execute it, the vehicle is on its own GCS failsafe; {why}"
+            elif self.state is McState.ERROR and event is not McEvent.OP_TAKEOFF:
+                heard = self.hlc_state.name if self.hlc_state is not None else "nothing"
+                why = f"the HLC reports {heard}: the autopilot cannot be reached; {why} (ERROR: once the link is up)"
+            return McOutcome(False, reason=f"{label} rejected in {self.state.name} ({why})")
         self._accepted[key] = now
         self.last_command_seq = seq
         if cmd is OperatorCommand.TAKEOFF:
@@ -252,7 +335,9 @@ class MissionControl:
             hlc = HlcState(state)
         except ValueError:
             return McOutcome(False, reason=f"unknown HLC state {state!r}")
+        self.hlc_changed = hlc is not self.hlc_state
         self.hlc_state = hlc
+        self.hlc_heard_at = now
         if self.state is McState.TAKEOFF and hlc is not HlcState.READY:
             self.hlc_left_ready = True
         event = McEvent.of_hlc(hlc)
@@ -263,7 +348,14 @@ class MissionControl:
         return McOutcome(True, transition, reason=transition.reason)
 
     def tick(self, now: float) -> McOutcome:
-        """Time passes: fires TAKEOFF_ACK_TIMEOUT when the HLC ignored an accepted TAKEOFF."""
+        """Time passes: fires HLC_TIMEOUT when the HLC fell silent, TAKEOFF_ACK_TIMEOUT when it ignored a TAKEOFF."""
+        silent = None if self.hlc_heard_at is None else now - self.hlc_heard_at
+        if silent is not None and silent >= self.params.hlc_timeout:
+            row = self._match(McEvent.HLC_TIMEOUT)
+            if row is not None:
+                detail = f"HLC silent for {silent:.1f} s; the vehicle is on its own GCS failsafe"
+                transition = self._apply(row, McEvent.HLC_TIMEOUT, detail, now)
+                return McOutcome(True, transition, reason=transition.reason)
         timeout = self.params.takeoff_ack_timeout
         if (
             self.state is McState.TAKEOFF
@@ -289,6 +381,7 @@ class MissionControl:
     def _apply(self, row: McRow, event: McEvent, detail: str, now: float) -> McTransition:
         transition = McTransition(self.state, row.target, event, f"{row.why} ({detail})", now)
         self.state = row.target
+        self.reason = transition.reason
         self.entered_at = now
         if row.target is McState.TAKEOFF:
             # A resync into TAKEOFF comes from an HLC that already left READY.

@@ -16,7 +16,7 @@ from antalate_lcm.mc.machine import McOutcome, McParams, McState, MissionControl
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
 from antalate_lcm.node import Context, Node
 
-_TICK_PERIOD = 0.1  # s: resolution of the takeoff-acknowledgement timeout and the HLC watchdog
+_TICK_PERIOD = 0.1  # s: resolution of the takeoff-acknowledgement timeout and the HLC watchdog and the HLC watchdog
 
 
 class McNode(Node):
@@ -24,7 +24,14 @@ class McNode(Node):
 
     def __init__(self, config: Config, context: Context) -> None:
         super().__init__(config, context)
-        self.machine = MissionControl(McParams(takeoff_ack_timeout=config.mc.takeoff_ack_timeout))
+        m = config.mc
+        self.machine = MissionControl(
+            McParams(
+                takeoff_ack_timeout=m.takeoff_ack_timeout,
+                hlc_timeout=m.hlc_timeout,
+                on_link_regained=m.on_link_regained,
+            )
+        )
         self._publish_state = lambda: None
 
     def on_start(self) -> None:
@@ -48,6 +55,7 @@ class McNode(Node):
         msg.state = int(self.machine.state)
         msg.last_command_seq = self.machine.last_command_seq
         msg.takeoff_altitude = float(self.machine.takeoff_altitude)
+        msg.reason = self.machine.reason
         return msg
 
     # ------------------------------------------------------------------ inputs
@@ -76,7 +84,11 @@ class McNode(Node):
     def _report(self, outcome: McOutcome, what: str) -> None:
         if outcome.transition is not None:
             t = outcome.transition
-            level = logging.ERROR if t.to_state is McState.ERROR else logging.INFO
+            level = logging.INFO
+            if t.to_state in (McState.ERROR, McState.HLC_LOST):
+                level = logging.ERROR
+            elif t.from_state in (McState.ERROR, McState.HLC_LOST) or t.to_state is McState.HOLD:
+                level = logging.WARNING  # recovered, or stopped by a failsafe: the operator must look
             self.log.log(level, "%s -> %s on %s: %s", t.from_state.name, t.to_state.name, what, t.reason)
             self._publish_state()
         elif not outcome.accepted:

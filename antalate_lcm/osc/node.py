@@ -1,30 +1,52 @@
-"""The OSC node: reports the agent's state to the station over HTTP and publishes what comes back.
+"""The OSC node: reports the agent's state to the station over HTTP(S) and publishes what comes back.
 
 The HTTP exchange runs on a thread of its own, so a slow or dead server never stalls the executor
 the agent's other nodes share. A server that is down, slow or answers garbage is logged (at a limited
 rate) and retried with exponential backoff; nothing is published from a reply that did not validate
 completely.
+
+The OSC never signs for the station. An operator command arrives as the operator signed it and is
+published exactly so (header and MAC untouched); with a swarm key the OSC verifies it first (MAC,
+window, replay, target) and drops what fails, so a station that is compromised can delay or drop
+commands but not make one up. The station's own payload (peer detection) is published as this
+node's message, like anything else the agent says.
 """
 
 from __future__ import annotations
 
+import contextlib
+import json
 import logging
+import os
 import random
 import threading
+from pathlib import Path
 from typing import Any
 
 import httpx
 
+from antalate_lcm import validation
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.config import Config
-from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, operator_cmd_t, payload_t, telemetry_t
+from antalate_lcm.errors import ConfigError
+from antalate_lcm.msgs import hlc_state_t, mc_state_t, payload_t, telemetry_t
 from antalate_lcm.node import Context, Node
 from antalate_lcm.osc import wire
-from antalate_lcm.security import sign
 
 
 class ServerProblem(Exception):
     """One failed exchange with the station (down, timeout, wrong status, oversized or invalid reply)."""
+
+    def __init__(self, text: str, retry_after: float = 0.0) -> None:
+        super().__init__(text)
+        self.retry_after = retry_after
+
+
+def _retry_after(response: httpx.Response) -> float:
+    try:
+        return max(0.0, float(response.headers.get("retry-after", "0")))
+    except ValueError:
+        return 0.0
 
 
 class OscNode(Node):
@@ -36,10 +58,15 @@ class OscNode(Node):
         super().__init__(config, context)
         self.osc = config.osc
         self.url = self.osc.server.rstrip("/") + "/api/report"
-        self.token: str | None = None
+        if self.osc.ca_file and not os.access(self.osc.ca_file, os.R_OK):
+            raise ConfigError(config.source, "osc.ca_file", f"a readable PEM file, {self.osc.ca_file!r} is not")
+        self._token_file = Path(self.osc.token_file).expanduser() if self.osc.token_file else None
+        self.token: str | None = self._load_token()
         self.reports_ok = 0
         self.failures = 0
         self.consecutive_failures = 0
+        #: Commands from the station not published, by reason (unsigned, forged, stale, ...).
+        self.dropped: dict[str, int] = {}
         self._latest: dict[str, Any] = {}
         self._feedback: payload_t | None = None
         self._lock = threading.Lock()
@@ -47,6 +74,39 @@ class OscNode(Node):
         self._thread: threading.Thread | None = None
         self._transport = transport
         self._problems = RateLimitedLog(self.log, period=30.0)
+        self._drops = RateLimitedLog(self.log, period=10.0)
+
+    # ------------------------------------------------------------------ the token
+    def _load_token(self) -> str | None:
+        if self._token_file is None:
+            return None
+        try:
+            token = self._token_file.read_text(encoding="utf-8").strip()
+        except FileNotFoundError:
+            return None
+        except OSError as exc:
+            self.log.warning("cannot read the station token from %s: %s; registering anew", self._token_file, exc)
+            return None
+        return token or None
+
+    def _set_token(self, token: str | None) -> None:
+        """Keep the token (in the file too, mode 0600, written atomically), or forget it (None)."""
+        self.token = token
+        path = self._token_file
+        if path is None:
+            return
+        try:
+            if token is None:
+                path.unlink(missing_ok=True)
+                return
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(path.name + ".tmp")
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                f.write(token + "\n")
+            os.replace(tmp, path)
+        except OSError as exc:
+            self._problems.log(("token-file",), logging.WARNING, "cannot keep the station token in %s: %s", path, exc)
 
     # ------------------------------------------------------------------ lifecycle
     def on_start(self) -> None:
@@ -58,6 +118,12 @@ class OscNode(Node):
         self._thread = threading.Thread(target=self._run, name=f"osc-{self.agent}", daemon=True)
         self._thread.start()
         self.log.info("reporting to %s every %.2f s", self.url, 1.0 / self.osc.rate)
+        host = httpx.URL(self.url).host
+        if self.url.startswith("http://") and host not in ("127.0.0.1", "localhost", "::1"):
+            self.log.warning(
+                "the station link %s is not encrypted: the agent's token and reports travel in clear "
+                "(use https:// with [osc] ca_file)", self.url,
+            )
 
     def on_stop(self) -> None:
         self._stop.set()
@@ -77,7 +143,8 @@ class OscNode(Node):
     # ------------------------------------------------------------------ the HTTP loop (own thread)
     def _run(self) -> None:
         period = 1.0 / self.osc.rate
-        with httpx.Client(timeout=self.osc.timeout, transport=self._transport) as client:
+        verify: Any = self.osc.ca_file or True
+        with httpx.Client(timeout=self.osc.timeout, transport=self._transport, verify=verify) as client:
             delay = 0.0
             while not self._stop.wait(delay):
                 try:
@@ -86,7 +153,7 @@ class OscNode(Node):
                     self.failures += 1
                     self.consecutive_failures += 1
                     backoff = min(self.osc.max_backoff, period * 2 ** min(self.consecutive_failures, 16))
-                    delay = backoff * random.uniform(0.8, 1.2)
+                    delay = max(backoff * random.uniform(0.8, 1.2), exc.retry_after)
                     self._problems.log(
                         ("problem", type(exc.__cause__).__name__ if exc.__cause__ else str(exc)[:40]),
                         logging.WARNING,
@@ -110,11 +177,14 @@ class OscNode(Node):
             hlc: hlc_state_t | None = self._latest.get("hlc")
             telemetry: telemetry_t | None = self._latest.get("telemetry")
             feedback, self._feedback = self._feedback, None
-        body = wire.report_body(self.token, mc, hlc, telemetry, feedback)
+        body = wire.report_body(
+            self.token, mc, hlc, telemetry, feedback, agent=self.agent, swarm_key=self.config.security.swarm_key
+        )
         try:
             with client.stream("POST", self.url, json=body) as response:
                 raw = self._read_capped(response)
                 status = response.status_code
+                retry_after = _retry_after(response)
         except httpx.TimeoutException as exc:
             self._requeue(feedback)
             raise ServerProblem(f"no answer within {self.osc.timeout:g} s") from exc
@@ -123,7 +193,15 @@ class OscNode(Node):
             raise ServerProblem(f"cannot reach it ({exc.__class__.__name__}: {exc})") from exc
         if status != 200:
             self._requeue(feedback)
-            raise ServerProblem(f"HTTP {status}: {raw[:200].decode('utf-8', 'replace')}")
+            text = raw[:300].decode("utf-8", "replace")
+            with contextlib.suppress(ValueError, AttributeError):
+                text = str(json.loads(raw)["detail"])[:300]
+            if status in (401, 409) and self.token is not None:
+                # The station does not know this token (reset, or it was replaced by a proven
+                # re-registration): forget it and register at the next report.
+                self._set_token(None)
+                raise ServerProblem(f"HTTP {status}: {text}; registering again", retry_after=0.0)
+            raise ServerProblem(f"HTTP {status}: {text}", retry_after=retry_after)
         try:
             reply = wire.parse_reply(raw)
             messages = (
@@ -134,13 +212,13 @@ class OscNode(Node):
         except wire.ReplyError as exc:
             raise ServerProblem(f"invalid reply, ignored: {exc}") from None
         if reply.token != self.token:
-            if self.token is not None:
-                self.log.info("the station gave a new token (it did not know %s)", self.token)
-            self.token = reply.token
+            self.log.info("registered with the station as %r", self.agent)
+            self._set_token(reply.token)
         for topic, msg, original in messages:
             if msg is not None:
                 seq = original.seq if original is not None else None
-                self.context.executor.call_soon(self._publish, topic, msg, seq)
+                signed = original is not None and original.mac is not None
+                self.context.executor.call_soon(self._publish, topic, msg, seq, signed)
 
     def _read_capped(self, response: httpx.Response) -> bytes:
         limit = self.osc.max_reply_bytes
@@ -160,11 +238,47 @@ class OscNode(Node):
             if self._feedback is None:
                 self._feedback = feedback
 
-    def _publish(self, topic: str, msg: Any, seq: int | None) -> None:
+    def _drop(self, reason: str, topic: str, msg: Any, text: str) -> None:
+        self.dropped[reason] = self.dropped.get(reason, 0) + 1
+        self._drops.log(
+            (reason, topic), logging.WARNING, "dropped %s from the station (sender %r, seq %d): %s (%d %s so far)",
+            topic, msg.header.agent, msg.header.seq, text, self.dropped[reason], reason,
+        )
+
+    def _publish(self, topic: str, msg: Any, seq: int | None, signed: bool = False) -> None:
         if not self.started:
             return
-        key = self.config.security.swarm_key
-        signer = (lambda m: sign(m, key)) if key and isinstance(msg, (operator_cmd_t, direction_cmd_t)) else None
-        self.publish(topic, msg, seq=seq, before_encode=signer)
-        level = logging.INFO if seq is not None else logging.DEBUG
-        self.log.log(level, "from the station: %s%s", topic, f" (seq {seq})" if seq is not None else "")
+        if topic == "OPERATOR_PAYLOAD":
+            self.publish(topic, msg)  # the station's own payload: this node's message
+            self.log.debug("from the station: %s", topic)
+            return
+        if not signed:
+            if self.security.enabled:
+                self._drop("unsigned", topic, msg, "the station sent it unsigned and this agent has a swarm key")
+                return
+            problem = validation.problem(msg)
+            if problem is not None:
+                self._drop("invalid", topic, msg, problem)
+                return
+            self.publish(topic, msg, seq=seq)
+            self.log.info("from the station: %s (seq %s, unsigned)", topic, seq)
+            return
+        if msg.target and msg.target != self.agent:
+            self._drop("retargeted", topic, msg, f"signed for {msg.target!r}, not for {self.agent!r}")
+            return
+        auth = self.authenticator
+        if auth is not None:
+            rejection = auth.check(msg, self.channel(topic))
+            if rejection is not None:
+                self.dropped[rejection.reason.value] = self.dropped.get(rejection.reason.value, 0) + 1
+                return  # counted and logged (rate-limited) by the authenticator
+        problem = validation.problem(msg)
+        if problem is not None:
+            self._drop("invalid", topic, msg, problem)
+            return
+        # As the operator signed it: no new header, no signature of ours.
+        data = msg.encode()
+        channel = self.channel(topic)
+        for bus in self._publish_buses(topic):
+            self.context.bus.publish(bus, channel, data)
+        self.log.info("from the station: %s signed by %r (seq %d)", topic, msg.header.agent, msg.header.seq)

@@ -33,7 +33,7 @@ AGENT_NAME = r"^[A-Za-z0-9_.-]{1,64}$"
 _HEX64 = r"^[0-9a-fA-F]{64}$"
 _INT32_MAX = 2**31 - 1
 _INT64_MAX = 2**63 - 1
-MAX_ALTITUDE = 10_000.0
+MAX_ALTITUDE = 1000.0  # m, as antalate_lcm.validation.MAX_TAKEOFF_ALTITUDE: above it is a typo or an attack
 MAX_SPEED = 100.0
 
 

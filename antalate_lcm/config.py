@@ -6,15 +6,21 @@ dotted key and what was expected, so a typo never surfaces as a crash in the mid
 
 from __future__ import annotations
 
+import json
 import re
 import secrets
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated, Any, Literal
+from urllib.parse import urlsplit
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from antalate_lcm.errors import ConfigError
+from antalate_lcm.lcm_url import EXAMPLES as LCM_URL_EXAMPLES
+from antalate_lcm.lcm_url import parse_lcm_url
+from antalate_lcm.strict import StrictError, describe, dotted, find_datetime
 from antalate_lcm.topics import MESSAGE_TYPES, TOPICS, TopicSpec
 
 if sys.version_info >= (3, 11):
@@ -29,8 +35,20 @@ NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Percent = Annotated[float, Field(ge=0, le=100, allow_inf_nan=False)]
 
 
+class _KeyedError(ValueError):
+    """Raised inside a validator to name the dotted key itself (pydantic's location stops at the field)."""
+
+    def __init__(self, key: str, expected: str, *, plain: bool = False) -> None:
+        super().__init__(expected)
+        self.key = key
+        #: What was expected, or with ``plain`` the whole message (pydantic's own words).
+        self.expected = expected
+        self.plain = plain
+
+
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # strict: "5" is not a number and "yes" not a boolean (an int still fills a float).
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
 
 class AgentConfig(_Section):
@@ -69,7 +87,7 @@ class TopicBinding(_Section):
 
 
 class TopicsConfig(BaseModel):
-    model_config = ConfigDict(extra="allow", frozen=True)
+    model_config = ConfigDict(extra="allow", frozen=True, strict=True)
 
     #: Bus for every topic the config does not bind explicitly.
     default_bus: str = "lan"
@@ -86,12 +104,16 @@ class TopicsConfig(BaseModel):
         for key, value in data.items():
             if key == "default_bus":
                 out[key] = value
-            elif isinstance(value, str | list):
-                out[key] = TopicBinding(bus=value)
-            elif isinstance(value, dict):
-                out[key] = TopicBinding.model_validate(value)
+            elif isinstance(value, str | list | dict):
+                try:
+                    out[key] = TopicBinding.model_validate(value if isinstance(value, dict) else {"bus": value})
+                except ValidationError as exc:
+                    err = describe(exc)
+                    sub = err.key if isinstance(value, dict) else err.key.removeprefix("bus").lstrip(".")
+                    where = f"topics.{key}{'' if not sub or sub.startswith('[') else '.'}{sub}"
+                    raise _KeyedError(where, err.message, plain=True) from None
             else:
-                raise ValueError(f"{key}: expected a bus name or a table {{bus, channel, type}}")
+                raise _KeyedError(f"topics.{key}", f"a bus name, a list of bus names or a table {{bus, channel, type}}, got {value!r}")
         return out
 
 
@@ -142,7 +164,7 @@ class HlcConfig(_Section):
 
 class OscConfig(_Section):
     enabled: bool = False
-    #: Base URL of the station, e.g. "http://127.0.0.1:8080".
+    #: Base URL of the station, e.g. "http://127.0.0.1:8080" (the OSC POSTs to {server}/api/report).
     server: str = "http://127.0.0.1:8080"
     rate: Positive = 2.0
     timeout: Positive = 2.0
@@ -154,6 +176,14 @@ class OscConfig(_Section):
     #: File where the OSC keeps its station token (mode 0600) so a restarted agent reports under the
     #: same token; empty = memory only (a restart then re-registers: with a swarm key, by proof).
     token_file: str = ""
+
+    @field_validator("server")
+    @classmethod
+    def _station_url(cls, v: str) -> str:
+        problem = station_url_problem(v)
+        if problem:
+            raise _KeyedError("osc.server", f"{problem}, got {v!r}")
+        return v
 
 
 class BehaviorConfig(_Section):
@@ -193,10 +223,15 @@ class SecurityConfig(_Section):
     #: Allow internal topics (MC_STATE, HLC_STATE, VELOCITY_CMD, ...) on a network-reachable bus with
     #: no swarm key. Anyone on that network can then move the vehicle; the node says so loudly.
     insecure: bool = False
+    #: Former keys, accepted for verification only (never for signing) during a key rotation.
+    previous_keys: list[str] = Field(default_factory=list)
+    #: Directory of the replay memory (per-sender high-water utime of accepted operator inputs).
+    #: Empty = $XDG_STATE_HOME/antalate, or nothing at all when every bus is memq:// or file://.
+    state_dir: str = ""
 
 
 class Config(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
     agent: AgentConfig = Field(default_factory=AgentConfig)
     buses: dict[str, str] = Field(default_factory=lambda: {"lan": DEFAULT_LAN_URL})
@@ -212,22 +247,20 @@ class Config(BaseModel):
     @field_validator("buses")
     @classmethod
     def _urls(cls, v: dict[str, str]) -> dict[str, str]:
+        # Checked here, not left to liblcm: its answer to any mistake is "Couldn't create LCM".
         for name, url in v.items():
-            if "://" not in url:
-                raise ValueError(f"bus {name!r}: expected an LCM URL such as {DEFAULT_LAN_URL!r} or 'memq://'")
+            try:
+                parse_lcm_url(url)
+            except ValueError as exc:
+                raise _KeyedError(f"buses.{name}", str(exc)) from None
         if not v:
-            raise ValueError("at least one bus is needed")
+            raise _KeyedError("buses", f"at least one bus, e.g. lan = {DEFAULT_LAN_URL!r} ({LCM_URL_EXAMPLES})")
         return v
 
     @model_validator(mode="after")
     def _cross_checks(self) -> Config:
         known = set(self.buses)
         if self.topics.default_bus not in known:
-    #: Former keys, accepted for verification only (never for signing) during a key rotation.
-    previous_keys: list[str] = Field(default_factory=list)
-    #: Directory of the replay memory (per-sender high-water utime of accepted operator inputs).
-    #: Empty = $XDG_STATE_HOME/antalate, or nothing at all when every bus is memq:// or file://.
-    state_dir: str = ""
             raise _KeyedError("topics.default_bus", f"a bus declared in [buses] ({', '.join(sorted(known))})")
         for topic, binding in self.topics.bindings().items():
             for bus in binding.bus or []:
@@ -270,11 +303,22 @@ class Config(BaseModel):
         return self.model_copy(update={"agent": AgentConfig(name=name)})
 
 
-class _KeyedError(ValueError):
-    def __init__(self, key: str, expected: str) -> None:
-        super().__init__(expected)
-        self.key = key
-        self.expected = expected
+def station_url_problem(url: str) -> str | None:
+    """Why ``url`` cannot be the OSC's station base URL, or None (http(s)://HOST[:PORT][/PATH])."""
+    try:
+        parts = urlsplit(url)
+        port = parts.port
+    except ValueError:
+        return "an http:// or https:// URL with a port 1-65535"
+    if parts.scheme not in ("http", "https"):
+        return "an http:// or https:// URL such as 'http://127.0.0.1:8080'"
+    if not parts.hostname:
+        return "an http:// or https:// URL with a host, such as 'http://127.0.0.1:8080'"
+    if port is not None and not 1 <= port <= 65535:
+        return "an http:// or https:// URL with a port 1-65535"
+    if parts.query or parts.fragment:
+        return "a base URL without ?query or #fragment (the OSC appends /api/report)"
+    return None
 
 
 def anonymous_token() -> str:
@@ -282,34 +326,91 @@ def anonymous_token() -> str:
     return "anon-" + secrets.token_hex(4)
 
 
-def _dotted(loc: tuple[Any, ...]) -> str:
-    parts: list[str] = []
-    for item in loc:
-        if isinstance(item, int):
-            parts[-1:] = [f"{parts[-1]}[{item}]"] if parts else [f"[{item}]"]
-        elif item in ("function-after", "function-before") or str(item).startswith("function-"):
-            continue
-        else:
-            parts.append(str(item))
-    return ".".join(parts)
-
-
 def parse_config(data: dict[str, Any], source: str = "<config>") -> Config:
-    """Validate an already-parsed TOML document; see :func:`load_config`."""
+    """Validate an already-parsed TOML document; see :func:`load_config`.
+
+    Strict throughout: values are taken as TOML typed them (see `antalate_lcm.strict`). The
+    autopilot adapter is loaded and its params validated by its own model, so a config that loads
+    is one the HLC can start with.
+    """
+    where = find_datetime(data)
+    if where is not None:
+        raise ConfigError(source, dotted(where), "a TOML date/time is not a valid value here")
+    if "source" in data:
+        raise ConfigError(source, "source", "Extra inputs are not permitted (not a config key)")
     try:
-        config = Config.model_validate({**data, "source": source})
+        text = json.dumps({**data, "source": source})
+    except (TypeError, ValueError) as exc:  # only a Python caller can get here
+        raise ConfigError(source, "", f"not a TOML document: {exc}") from None
+    try:
+        config = Config.model_validate_json(text, strict=True)
     except ValidationError as exc:
-        err = exc.errors()[0]
-        ctx_err = (err.get("ctx") or {}).get("error")
+        ctx_err = (exc.errors()[0].get("ctx") or {}).get("error")
         if isinstance(ctx_err, _KeyedError):
-            raise ConfigError(source, ctx_err.key, f"expected {ctx_err.expected}") from None
-        key = _dotted(tuple(err["loc"]))
-        got = err.get("input")
-        shown = "" if isinstance(got, dict) else f", got {got!r}"
-        raise ConfigError(source, key, f"{err['msg']}{shown}") from None
+            message = ctx_err.expected if ctx_err.plain else f"expected {ctx_err.expected}"
+            raise ConfigError(source, ctx_err.key, message) from None
+        err = describe(exc)
+        raise ConfigError(source, err.key, err.message) from None
+    _check_autopilot(config, data)
     if not config.agent.name:
         config = config.with_agent_name(anonymous_token())
     return config
+
+
+def _check_autopilot(config: Config, data: dict[str, Any]) -> None:
+    """Load the configured adapter and validate its params with its own model (``params_model``).
+
+    Errors name the table the user wrote: ``[hlc.autopilot]`` (design style) or
+    ``[hlc.autopilot_params]``.
+    """
+    from antalate_lcm.autopilot import UnknownAutopilotError, load_autopilot
+
+    hlc = data.get("hlc")
+    table = hlc.get("autopilot") if isinstance(hlc, dict) else None
+    design_style = isinstance(table, dict)
+    try:
+        cls = load_autopilot(config.hlc.autopilot)
+    except UnknownAutopilotError as exc:
+        key = "hlc.autopilot.name" if design_style and "name" in table else "hlc.autopilot"  # type: ignore[operator]
+        raise ConfigError(config.source, key, str(exc)) from None
+    params = config.hlc.autopilot_params
+    try:
+        if cls.params_model is not None:
+            cls.validate_params(params)
+        else:
+            cls(params)  # the contract: no I/O before connect(); unknown keys raise ValueError
+    except StrictError as exc:
+        field = exc.key.split(".", 1)[0].split("[", 1)[0]
+        in_table = design_style and (field in table or field not in params)  # type: ignore[operator]
+        prefix = "hlc.autopilot" if in_table else "hlc.autopilot_params"
+        raise ConfigError(config.source, f"{prefix}.{exc.key}" if exc.key else prefix, exc.message) from None
+    except (ValueError, TypeError) as exc:
+        prefix = "hlc.autopilot" if design_style else "hlc.autopilot_params"
+        raise ConfigError(config.source, prefix, str(exc)) from None
+
+
+def check_unique_agent_names(configs: Sequence[Config], *, agents: int = 1) -> None:
+    """One process, one name per agent: two agents with the same name would share every channel.
+
+    Raises `ConfigError` naming the second file and ``agent.name``, and where the first came from.
+    ``agents`` is ``antalate agent --agents N``, which names the copies of a config NAME-01, NAME-02...
+    """
+    seen: dict[str, Config] = {}
+    for cfg in configs:
+        name = cfg.agent.name
+        first = seen.get(name)
+        if first is None:
+            seen[name] = cfg
+            continue
+        how = ""
+        if agents > 1:
+            how = f" (--agents {agents} names the copies of each config NAME-01, NAME-02, ...; an unnamed agent's are sim-01, ...)"
+        same = " (the same file twice?)" if first.source == cfg.source else ""
+        raise ConfigError(
+            cfg.source,
+            "agent.name",
+            f"a name no other agent of this process has: {name!r} is also an agent of {first.source}{same}{how}",
+        )
 
 
 def load_config(path: str | Path | None) -> Config:
@@ -344,7 +445,9 @@ __all__ = [
     "TopicBinding",
     "TopicsConfig",
     "anonymous_token",
+    "check_unique_agent_names",
     "load_config",
     "parse_config",
+    "station_url_problem",
 ]
 

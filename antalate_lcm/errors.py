@@ -18,13 +18,26 @@ class ConfigError(AntalateError):
         super().__init__(f"invalid config {where}: {expected}")
 
 
-class MulticastUnavailable(AntalateError):
-    """LCM could not open a UDP multicast socket, nearly always for lack of a multicast route."""
+class BusUnavailable(AntalateError):
+    """liblcm could not create an instance for a bus URL; says why when that is known."""
+
+    def __init__(self, url: str, reason: str) -> None:
+        self.url = url
+        self.reason = reason
+        super().__init__(f"cannot open the LCM bus {url!r}: {reason}")
+
+
+class MulticastUnavailable(BusUnavailable):
+    """LCM could not open a UDP multicast socket because this host has no route to the group.
+
+    Raised only when the routing table says so (`antalate_lcm.lcm_url.open_failure`): its fix
+    would be the wrong advice for a bad URL or a busy socket.
+    """
 
     def __init__(self, url: str) -> None:
-        self.url = url
         super().__init__(
-            f"cannot open the LCM bus {url!r}: this host has no route for multicast (224.0.0.0/4).\n"
+            url,
+            "this host has no route for multicast (224.0.0.0/4).\n"
             "  fix, for a single host with no network:  sudo ip route add 224.0.0.0/4 dev lo\n"
             "  (and, if lo is down: sudo ip link set lo up)\n"
             "  on a LAN, route multicast to the interface that faces the other hosts, e.g.\n"

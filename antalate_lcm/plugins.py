@@ -6,12 +6,17 @@ Used for behaviors (group ``antalate.behaviors``) and autopilot adapters (``anta
 from __future__ import annotations
 
 import importlib
+import re
 from importlib.metadata import entry_points
 
 from antalate_lcm.errors import PluginNotFound
 
 BEHAVIORS = "antalate.behaviors"
 AUTOPILOTS = "antalate.autopilots"
+
+#: ``package.module`` (absolute: there is no package to be relative to) and ``ClassName``.
+_MODULE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*")
+_CLASS = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
 def available(group: str) -> list[str]:
@@ -25,10 +30,14 @@ def load_plugin(group: str, name: str, base: type | None = None) -> type:
     """
     if ":" in name:
         module_name, _, attr = name.partition(":")
+        if not (_MODULE.fullmatch(module_name) and _CLASS.fullmatch(attr)):
+            raise PluginNotFound(f"cannot load {name!r}: expected 'package.module:ClassName' (an absolute module path)")
         try:
             obj = getattr(importlib.import_module(module_name), attr)
         except (ImportError, AttributeError) as exc:
             raise PluginNotFound(f"cannot load {name!r}: {exc}") from None
+        except Exception as exc:  # noqa: BLE001 - a module that breaks on import is a config error too
+            raise PluginNotFound(f"cannot load {name!r}: importing {module_name} failed: {exc!r}") from None
     else:
         matches = [ep for ep in entry_points(group=group) if ep.name == name]
         if not matches:

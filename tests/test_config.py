@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm.config import load_config, parse_config
+from antalate_lcm.config import Config, check_unique_agent_names, load_config, parse_config
 from antalate_lcm.errors import ConfigError
 
 REPO = Path(__file__).resolve().parent.parent
@@ -73,7 +73,7 @@ def test_design_style_autopilot_table(tmp_path: Path) -> None:
         ("[mc]\ntakeof_ack_timeout = 3\n", "mc.takeof_ack_timeout", "Extra inputs"),
         ("[agent]\nname = 'a b'\n", "agent.name", "white space"),
         ("[agent]\nname = 'drône'\n", "agent.name", "ASCII"),
-        ("[buses]\nlan = 'localhost:7667'\n", "buses", "LCM URL"),
+        ("[buses]\nlan = 'localhost:7667'\n", "buses.lan", "LCM URL"),
         ("[topics]\nMC_STATE = 'wan'\n", "topics.MC_STATE.bus", "declared in [buses]"),
         ("[topics]\ndefault_bus = 'wan'\n", "topics.default_bus", "declared in [buses]"),
         ("[topics]\nFOO = 'lan'\n", "topics.FOO", "known topic"),
@@ -123,3 +123,379 @@ def test_examples_are_valid(example: Path) -> None:
     from antalate_lcm.runtime.agent import validate
 
     validate(load_config(example))  # plugins and their params too
+
+
+# ------------------------------------------------------------------ strict: no silent coercion
+
+BEHAVIOR = "[[bma]]\nname = 'a'\n[[bma.behaviors]]\nplugin = 'auto_operator'\n"
+
+
+def assert_config_error(path: Path, key: str, *expected: str) -> ConfigError:
+    """``path`` fails to load with one line naming the file, ``key`` and each ``expected`` phrase."""
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    err = info.value
+    assert (err.file, err.key) == (str(path), key), str(err)
+    for phrase in expected:
+        assert phrase in err.expected, str(err)
+    text = str(err)
+    assert "\n" not in text and text.startswith(f"invalid config {path}: {key}: "), text
+    return err
+
+
+@pytest.mark.parametrize(
+    ("text", "key", "expected"),
+    [
+        # a string is not a number, a boolean is not a number, a number is not a boolean or a string
+        ("[hlc]\ntelemetry_hz = '5'\n", "hlc.telemetry_hz", "valid number, got '5'"),
+        ("[hlc]\nlow_battery = true\n", "hlc.low_battery", "valid number, got True"),
+        ("[mc]\nhlc_timeout = '2.0'\n", "mc.hlc_timeout", "valid number"),
+        ("[mc]\non_link_regained = 1\n", "mc.on_link_regained", "'rtl', 'land' or 'hold'"),
+        ("[osc]\nenabled = 'yes'\n", "osc.enabled", "valid boolean, got 'yes'"),
+        ("[osc]\nenabled = 1\n", "osc.enabled", "valid boolean, got 1"),
+        ("[osc]\nmax_reply_bytes = '65536'\n", "osc.max_reply_bytes", "valid integer"),
+        ("[osc]\nmax_reply_bytes = 65536.0\n", "osc.max_reply_bytes", "valid integer"),
+        ("[osc]\nserver = 8080\n", "osc.server", "valid string"),
+        ("[security]\ninsecure = 'false'\n", "security.insecure", "valid boolean, got 'false'"),
+        ("[security]\nwindow = '5'\n", "security.window", "valid number"),
+        ("[security]\nswarm_key = 1234\n", "security.swarm_key", "valid string"),
+        ("[agent]\nname = 7\n", "agent.name", "valid string, got 7"),
+        ("[buses]\nlan = 7667\n", "buses.lan", "valid string"),
+        ("[topics]\ndefault_bus = 1\n", "topics.default_bus", "valid string"),
+        ("[topics]\nMC_STATE = 5\n", "topics.MC_STATE", "a bus name"),
+        ("[topics]\nMC_STATE = ['lan', 5]\n", "topics.MC_STATE[1]", "valid string"),
+        ("[topics]\nMC_STATE = { bus = 'lan', chanel = 'x' }\n", "topics.MC_STATE.chanel", "Extra inputs"),
+        ("[[bma]]\nname = 5\n", "bma[0].name", "valid string"),
+        ("[[bma]]\nname = 'a'\nrepublish_hz = '5'\n", "bma[0].republish_hz", "valid number"),
+        (BEHAVIOR + "tick_hz = '5'\n", "bma[0].behaviors[0].tick_hz", "valid number"),
+        (BEHAVIOR + "activate_on = 'MISSION'\n", "bma[0].behaviors[0].activate_on", "valid array"),
+        ("[hlc]\nautopilot = 5\n", "hlc.autopilot", "valid string"),
+        # TOML dates and times fit no setting; as strings they would slip into a text field
+        ("[agent]\nname = 1979-05-27\n", "agent.name", "date/time"),
+        ("[hlc.autopilot_params]\nstate_file = 07:32:00\n", "hlc.autopilot_params.state_file", "date/time"),
+        ('source = "elsewhere.toml"\n', "source", "not a config key"),
+    ],
+)
+def test_no_silent_coercion_in_any_section(tmp_path: Path, text: str, key: str, expected: str) -> None:
+    assert_config_error(write(tmp_path, text), key, expected)
+
+
+def test_an_integer_still_fills_a_float(tmp_path: Path) -> None:
+    cfg = load_config(write(tmp_path, "[hlc]\ntelemetry_hz = 5\n[osc]\nrate = 1\n[security]\nwindow = 3\n"))
+    assert cfg.hlc.telemetry_hz == 5.0 and isinstance(cfg.hlc.telemetry_hz, float)
+    assert cfg.osc.rate == 1.0 and cfg.security.window == 3.0
+
+
+# ------------------------------------------------------------------ bus URLs (LCM's providers)
+
+@pytest.mark.parametrize(
+    "url",
+    [
+        "udpm://",  # liblcm's default group and port
+        "udpm://239.255.76.67:7667",
+        "udpm://239.255.76.67:7667?ttl=0",
+        "udpm://224.0.0.251:1?ttl=255&recv_buf_size=2097152",
+        "udpm://239.255.76.67:7667?ttl=1?recv_buf_size=1048576",  # liblcm also splits at every '?'
+        "memq://",
+        "file:///tmp/flight.lcm",
+        "file://logs/flight.lcm?mode=w",
+        "file:///tmp/flight.lcm?mode=r&speed=0&start_timestamp=1700000000000000",
+        "file:///tmp/flight.lcm?mode=a",
+        "file:///tmp/flight.lcm?speed=-1.5",
+        "mpudpm://239.255.76.67:7667?nports=16&ttl=1",
+        "tcpq://",
+        "tcpq://127.0.0.1:7700",
+        "tcpq://lcm-server.local:7700",
+    ],
+)
+def test_every_lcm_provider_is_accepted(tmp_path: Path, url: str) -> None:
+    assert load_config(write(tmp_path, f'[buses]\nlan = "{url}"\n')).buses["lan"] == url
+
+
+@pytest.mark.parametrize(
+    ("url", "expected"),
+    [
+        ("http://127.0.0.1:8080", "an LCM provider (udpm://, mpudpm://, memq://, file://, tcpq://), not 'http://'"),
+        ("udp://239.255.76.67:7667", "not 'udp://'"),
+        ("localhost:7667", "provider://network"),
+        ("://239.255.76.67:7667", "provider://network"),
+        ("udpm://239.255.76.67:99999", "a port 1-65535 after the group, not '99999'"),
+        ("udpm://239.255.76.67:0", "a port 1-65535"),
+        ("udpm://239.255.76.67:76x7", "a port 1-65535"),
+        ("udpm://239.255.76.67", "a port after the group"),
+        ("udpm://239.255.76:7667", "dotted IPv4 multicast group"),
+        ("udpm://239.255.76.300:7667", "dotted IPv4 multicast group"),
+        ("udpm://lcm.local:7667", "dotted IPv4 multicast group"),
+        ("udpm://:7667", "dotted IPv4 multicast group"),
+        ("udpm://192.168.1.20:7667", "multicast group (224.0.0.0/4); 192.168.1.20 is a unicast address"),
+        ("udpm://240.0.0.1:7667", "unicast"),
+        ("udpm://239.255.76.67:7667?ttl=256", "an integer 0-255"),
+        ("udpm://239.255.76.67:7667?ttl=-1", "an integer 0-255"),
+        ("udpm://239.255.76.67:7667?ttl=yes", "an integer 0-255 (0 = this host only, 1 = the local network) for option ttl, not 'yes'"),
+        ("udpm://239.255.76.67:7667?ttl=0x1", "for option ttl"),
+        ("udpm://239.255.76.67:7667?recv_buf_size=0", "a size in bytes"),
+        ("udpm://239.255.76.67:7667?recv_buf_size=2MB", "a size in bytes"),
+        ("udpm://239.255.76.67:7667?tll=1", "a known option of udpm:// (ttl, recv_buf_size), not 'tll'"),
+        ("udpm://239.255.76.67:7667?transmit_only=1", "obsolete"),
+        ("udpm://239.255.76.67:7667?ttl=1&ttl=0", "once"),
+        ("mpudpm://239.255.76.67:65530?nports=10", "ports up to 65535"),
+        ("mpudpm://239.255.76.67:7667?nports=0", "a number of ports"),
+        ("memq://bus", "nothing after memq://"),
+        ("memq://?ttl=0", "a known option of memq:// (none)"),
+        ("file://", "the path of an LCM log"),
+        ("file:///tmp/flight.lcm?mode=x", "r (read), w (write) or a (append) for option mode, not 'x'"),
+        ("file:///tmp/flight.lcm?speed=fast", "a number for option speed"),
+        ("file:///tmp/flight.lcm?speed=nan", "a number for option speed"),
+        ("file:///tmp/flight.lcm?start_timestamp=-5", "microseconds"),
+        ("file:///tmp/flight.lcm?ttl=0", "a known option of file://"),
+        ("tcpq://127.0.0.1:70000", "a port 1-65535 after the host"),
+        ("tcpq://bad host:7700", "a server HOST:PORT"),
+    ],
+)
+def test_bad_bus_urls_name_the_bus(tmp_path: Path, url: str, expected: str) -> None:
+    path = write(tmp_path, f'[buses]\nlocal = "memq://"\nlan = "{url}"\n')
+    err = assert_config_error(path, "buses.lan", expected)
+    assert err.expected.startswith("expected "), err.expected
+
+
+def test_no_bus_at_all(tmp_path: Path) -> None:
+    assert_config_error(write(tmp_path, "[buses]\n"), "buses", "at least one bus")
+
+
+# ------------------------------------------------------------------ [osc] server
+
+@pytest.mark.parametrize(
+    "server", ["http://127.0.0.1:8080", "https://station.example", "http://[::1]:8080/", "https://op:8443/antalate"]
+)
+def test_station_urls_accepted(tmp_path: Path, server: str) -> None:
+    assert load_config(write(tmp_path, f'[osc]\nserver = "{server}"\n')).osc.server == server
+
+
+@pytest.mark.parametrize(
+    ("server", "expected"),
+    [
+        ("127.0.0.1:8080", "an http:// or https:// URL"),
+        ("ftp://station:21", "an http:// or https:// URL"),
+        ("udpm://239.255.76.67:7667", "an http:// or https:// URL"),
+        ("http://", "with a host"),
+        ("http://:8080", "with a host"),
+        ("http://station:99999", "a port 1-65535"),
+        ("http://station:0", "a port 1-65535"),
+        ("http://station:http", "a port 1-65535"),
+        ("http://station:8080/?x=1", "without ?query"),
+        ("", "an http:// or https:// URL"),
+    ],
+)
+def test_bad_station_urls(tmp_path: Path, server: str, expected: str) -> None:
+    err = assert_config_error(write(tmp_path, f'[osc]\nserver = "{server}"\n'), "osc.server", expected)
+    assert err.expected.startswith("expected ") and err.expected.endswith(f"got {server!r}"), err.expected
+
+
+# ------------------------------------------------------------------ autopilot names
+
+def _installed_listed(message: str) -> None:
+    from antalate_lcm.autopilot import available_autopilots
+
+    installed = available_autopilots()
+    assert {"sim", "tello", "mavlink"} <= set(installed)
+    assert f"an installed adapter ({', '.join(installed)})" in message, message
+
+
+@pytest.fixture
+def plugin_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A directory on sys.path for throw-away adapter modules (unique names: imports are cached)."""
+    d = tmp_path / "plugins"
+    d.mkdir()
+    monkeypatch.syspath_prepend(str(d))
+    return d
+
+
+@pytest.mark.parametrize(
+    ("name", "detail"),
+    [
+        (":Foo", "'package.module:ClassName'"),
+        (".sim:X", "an absolute module path"),
+        ("sim:", "'package.module:ClassName'"),
+        ("antalate_lcm.autopilot.sim:Sim Autopilot", "'package.module:ClassName'"),
+        ("nope", "there is no adapter 'nope'"),
+        ("Sim", "there is no adapter 'Sim'"),
+        ("", "there is no adapter ''"),
+        ("antalate_lcm.no_such_module:Foo", "No module named 'antalate_lcm.no_such_module'"),
+        ("antalate_lcm.autopilot.sim:Nope", "has no attribute 'Nope'"),
+        ("antalate_lcm.autopilot.base:AutopilotState", "not a subclass of antalate_lcm.autopilot.base.Autopilot"),
+        ("antalate_lcm.autopilot.base:Autopilot", "abstract"),
+    ],
+)
+def test_bad_autopilot_names_list_the_installed_adapters(tmp_path: Path, name: str, detail: str) -> None:
+    err = assert_config_error(write(tmp_path, f'[hlc]\nautopilot = "{name}"\n'), "hlc.autopilot", detail)
+    _installed_listed(err.expected)
+
+
+def test_an_adapter_module_that_breaks_on_import(tmp_path: Path, plugin_dir: Path) -> None:
+    (plugin_dir / "h4_broken_adapter.py").write_text("raise RuntimeError('needs a serial port at import')\n")
+    (plugin_dir / "h4_syntax_adapter.py").write_text("class Broken(:\n")
+    for module, detail in (("h4_broken_adapter", "needs a serial port at import"), ("h4_syntax_adapter", "SyntaxError")):
+        err = assert_config_error(
+            write(tmp_path, f'[hlc]\nautopilot = "{module}:Adapter"\n'), "hlc.autopilot", f"importing {module} failed", detail
+        )
+        _installed_listed(err.expected)
+
+
+def test_design_style_table_names_its_name_key(tmp_path: Path) -> None:
+    err = assert_config_error(write(tmp_path, '[hlc.autopilot]\nname = "simm"\n'), "hlc.autopilot.name", "'simm'")
+    _installed_listed(err.expected)
+
+
+# ------------------------------------------------------------------ adapter params, by the adapter's own model
+
+@pytest.mark.parametrize(
+    ("params", "field", "expected"),
+    [
+        ("land_disarm_delay = -1", "land_disarm_delay", "greater than or equal to 0, got -1"),
+        ("auto_disarm_delay = 0", "auto_disarm_delay", "greater than 0"),
+        ("takeover_land_delay = -0.5", "takeover_land_delay", "greater than or equal to 0"),
+        ("link_loss_after = -3", "link_loss_after", "greater than or equal to 0"),
+        ("climb_rate = -1.0", "climb_rate", "greater than 0"),
+        ("drain_flying = -4", "drain_flying", "greater than or equal to 0"),
+        ("tau = 0", "tau", "greater than 0"),
+        ("time_scale = inf", "time_scale", "finite number"),
+        ("battery = 120", "battery", "less than or equal to 100"),
+        ("home_lat = 95.0", "home_lat", "less than or equal to 90"),
+        ("home_lat = '32.7'", "home_lat", "valid number, got '32.7'"),
+        ("link_loss = 'yes'", "link_loss", "valid boolean, got 'yes'"),
+        ("refuse_arm = 1", "refuse_arm", "valid boolean, got 1"),
+        ("state_file = 5", "state_file", "valid string"),
+        ("hom_lat = 32.1", "hom_lat", "Extra inputs are not permitted"),
+    ],
+)
+@pytest.mark.parametrize("table", ["autopilot", "autopilot_params"])
+def test_sim_params_are_validated_at_load(tmp_path: Path, table: str, params: str, field: str, expected: str) -> None:
+    name = 'name = "sim"\n' if table == "autopilot" else ""
+    path = write(tmp_path, f"[hlc.{table}]\n{name}{params}\n")
+    assert_config_error(path, f"hlc.{table}.{field}", expected)
+
+
+def test_sim_params_model_covers_every_key_the_sim_accepts() -> None:
+    """One truth: a knob added to the sim's DEFAULTS without its Params field fails here."""
+    from antalate_lcm.autopilot.sim import DEFAULTS, Params, SimAutopilot
+
+    assert SimAutopilot.params_model is Params
+    assert Params().model_dump() == DEFAULTS
+    assert Params.model_config.get("extra") == "forbid" and Params.model_config.get("strict") is True
+    SimAutopilot(dict(DEFAULTS))  # the documented defaults pass the adapter's own check
+
+
+def test_sim_rejects_the_same_params_when_constructed_directly() -> None:
+    from antalate_lcm.autopilot.sim import SimAutopilot
+    from antalate_lcm.strict import StrictError
+
+    with pytest.raises(StrictError) as info:
+        SimAutopilot({"land_disarm_delay": -1.0})
+    assert isinstance(info.value, ValueError) and info.value.key == "land_disarm_delay"
+
+
+def test_any_adapter_declares_its_params_model(tmp_path: Path, plugin_dir: Path) -> None:
+    """The mechanism, not just the sim: a third-party adapter's model names its own fields."""
+    (plugin_dir / "h4_custom_adapter.py").write_text(
+        "from pydantic import BaseModel, ConfigDict, Field\n"
+        "from antalate_lcm.autopilot.sim import SimAutopilot\n"
+        "class Params(BaseModel):\n"
+        "    model_config = ConfigDict(extra='forbid', strict=True)\n"
+        "    port: int = Field(default=14550, ge=1, le=65535)\n"
+        "    mode: str = 'GUIDED'\n"
+        "class Custom(SimAutopilot):\n"
+        "    params_model = Params\n"
+        "    def __init__(self, params=None, **kw):\n"
+        "        super(SimAutopilot, self).__init__(params, **kw)\n"
+        "class Unchecked(SimAutopilot):\n"
+        "    params_model = None\n"
+        "    def __init__(self, params=None, **kw):\n"
+        "        if set(params or {}) - {'home_lat'}:\n"
+        "            raise ValueError(f'unknown parameter(s) {sorted(params)}')\n"
+        "        super().__init__(params, **kw)\n"
+    )
+    ok = load_config(write(tmp_path, '[hlc]\nautopilot = "h4_custom_adapter:Custom"\n[hlc.autopilot_params]\nport = 5760\n'))
+    assert ok.hlc.autopilot_params == {"port": 5760}
+    for params, field, expected in (
+        ("port = '5760'", "port", "valid integer, got '5760'"),
+        ("port = 70000", "port", "less than or equal to 65535"),
+        ("prot = 5760", "prot", "Extra inputs"),
+    ):
+        text = f'[hlc.autopilot]\nname = "h4_custom_adapter:Custom"\n{params}\n'
+        assert_config_error(write(tmp_path, text), f"hlc.autopilot.{field}", expected)
+    # without a model, the adapter's constructor is the check (no I/O before connect())
+    err = assert_config_error(
+        write(tmp_path, '[hlc]\nautopilot = "h4_custom_adapter:Unchecked"\n[hlc.autopilot_params]\nnope = 1\n'),
+        "hlc.autopilot_params",
+    )
+    assert "nope" in err.expected
+
+
+# ------------------------------------------------------------------ behaviors' params are strict too
+
+@pytest.mark.parametrize(
+    ("params", "key", "expected"),
+    [
+        ("{ retry = '2' }", "retry", "valid number, got '2'"),
+        ("{ max_flights = 1.0 }", "max_flights", "valid integer"),
+        ("{ max_flights = '1' }", "max_flights", "valid integer"),
+        ("{ altitude = true }", "altitude", "valid number"),
+    ],
+)
+def test_behavior_params_are_strict(tmp_path: Path, params: str, key: str, expected: str) -> None:
+    from antalate_lcm.runtime.agent import validate
+
+    config = load_config(write(tmp_path, BEHAVIOR + f"params = {params}\n"))
+    with pytest.raises(ConfigError) as info:
+        validate(config)
+    assert info.value.key == f"bma[0].behaviors[0].params.{key}" and expected in info.value.expected
+
+
+def test_behavior_params_accept_what_toml_can_say(tmp_path: Path) -> None:
+    """Strict JSON-like validation: an int fills a float, an array fills a list."""
+    from antalate_lcm.bma import plan_bma
+
+    config = load_config(write(tmp_path, BEHAVIOR + "params = { retry = 3, max_flights = 1 }\n"))
+    params = plan_bma(config, config.bma[0]).behaviors[0].params
+    assert params.retry == 3.0 and params.max_flights == 1  # type: ignore[attr-defined]
+
+
+# ------------------------------------------------------------------ agent names, unique per process
+
+def _named(tmp_path: Path, file: str, name: str) -> Config:
+    p = tmp_path / file
+    p.write_text(f'[agent]\nname = "{name}"\n[buses]\nlan = "memq://"\n' if name else '[buses]\nlan = "memq://"\n')
+    return load_config(p)
+
+
+def test_duplicate_agent_names_name_the_file_and_key(tmp_path: Path) -> None:
+    a, b = _named(tmp_path, "a.toml", "uav"), _named(tmp_path, "b.toml", "uav")
+    with pytest.raises(ConfigError) as info:
+        check_unique_agent_names([a, b])
+    err = info.value
+    assert (err.file, err.key) == (b.source, "agent.name")
+    assert "'uav' is also an agent of " + a.source in err.expected and "\n" not in str(err)
+    with pytest.raises(ConfigError, match="the same file twice"):
+        check_unique_agent_names([a, a])
+
+
+def test_agents_n_naming_can_collide(tmp_path: Path) -> None:
+    from antalate_lcm.runtime.agent import swarm_configs
+
+    a, b = _named(tmp_path, "a.toml", "uav"), _named(tmp_path, "b.toml", "uav-02")
+    configs = [*swarm_configs(a, 3), *swarm_configs(b, 1)]
+    with pytest.raises(ConfigError) as info:
+        check_unique_agent_names(configs, agents=3)
+    assert info.value.file == b.source and info.value.key == "agent.name"
+    assert "'uav-02'" in info.value.expected and "--agents 3" in info.value.expected
+    # two unnamed configs copied N times both become sim-01, sim-02, ...
+    anon = [*swarm_configs(_named(tmp_path, "c.toml", ""), 2), *swarm_configs(_named(tmp_path, "d.toml", ""), 2)]
+    with pytest.raises(ConfigError, match="'sim-01' is also an agent of .*c.toml"):
+        check_unique_agent_names(anon, agents=2)
+    check_unique_agent_names([*swarm_configs(a, 3), *swarm_configs(_named(tmp_path, "e.toml", "ugv"), 3)], agents=3)
+
+
+def test_lan_examples_have_distinct_agent_names() -> None:
+    configs = [load_config(p) for p in sorted((REPO / "examples" / "lan").glob("*.toml"))]
+    assert len(configs) >= 6
+    check_unique_agent_names(configs)

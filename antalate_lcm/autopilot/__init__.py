@@ -9,6 +9,7 @@ loader shared with behaviors, so both kinds of plugin fail the same way.
 
 from __future__ import annotations
 
+import inspect
 from importlib.metadata import entry_points
 
 from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, FlightMode, Frame
@@ -45,11 +46,25 @@ def available_autopilots() -> dict[str, str]:
 def load_autopilot(name: str) -> type[Autopilot]:
     """The adapter class for `name` (a registered name or ``module:Class``).
 
-    Raises `UnknownAutopilotError` naming the available adapters, so a config typo is a one-line fix.
+    Raises `UnknownAutopilotError` -- whatever went wrong: an unknown or malformed name, a module
+    that does not import, a class that is not an `Autopilot` -- with one line that lists the
+    installed adapters, so a config typo is a one-line fix and never a traceback.
     """
+    installed = available_autopilots()
+    expected = (
+        f"expected an installed adapter ({', '.join(installed) or 'none'}) or 'package.module:Class' "
+        "naming an Autopilot subclass"
+    )
+    if ":" not in name and name not in installed:
+        raise UnknownAutopilotError(f"{expected}; there is no adapter {name!r}")
     try:
         cls = load_plugin(ENTRY_POINT_GROUP, name, Autopilot)
     except PluginNotFound as exc:
-        raise UnknownAutopilotError(f"autopilot: {exc}") from exc.__cause__
+        raise UnknownAutopilotError(f"{expected}; {exc}") from None
+    except Exception as exc:  # noqa: BLE001 - an entry point's module may fail in any way
+        raise UnknownAutopilotError(f"{expected}; {name!r} failed to load: {exc!r}") from None
     assert issubclass(cls, Autopilot)  # checked by load_plugin; narrows the type
+    if inspect.isabstract(cls):
+        missing = ", ".join(sorted(getattr(cls, "__abstractmethods__", ())))
+        raise UnknownAutopilotError(f"{expected}; {name!r} is abstract (it lacks {missing})")
     return cls

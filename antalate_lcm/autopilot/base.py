@@ -10,6 +10,10 @@ Every adapter is constructed as ``Cls(params, *, clock=time.monotonic)``:
 
 * ``params`` is the ``[hlc.autopilot]`` table of the config as a plain ``dict`` (unknown keys should
   raise `ValueError` naming the key, so a typo does not silently fall back to a default);
+  an adapter declares them as a pydantic model in `Autopilot.params_model`
+  (``ConfigDict(extra="forbid", strict=True)``), which the config loader validates before anything
+  starts, so an error names ``hlc.autopilot.<field>``; `Autopilot.validate_params` applies the same
+  rules in the constructor;
 * ``clock`` is a monotonic clock in seconds. Adapters must take every timestamp from it (link age,
   dead reckoning, simulation), never from `time` directly, so tests can drive them with a fake clock.
 
@@ -35,7 +39,10 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+from pydantic import BaseModel
+
 from antalate_lcm.msgs import velocity_cmd_t
+from antalate_lcm.strict import validate_strict
 
 Clock = Callable[[], float]
 
@@ -156,6 +163,23 @@ class Autopilot(ABC):
     #: then runs them on a worker thread of its own, so one slow vehicle never stalls the executor
     #: that every agent in the process shares. Only an in-process adapter should set it False.
     blocking: ClassVar[bool] = True
+    #: The params (``[hlc.autopilot]`` table) as a pydantic model with ``extra="forbid"`` and
+    #: ``strict=True``: validated when the config is loaded, so a typo, a wrong type or an
+    #: out-of-range value stops the program naming ``hlc.autopilot.<field>`` before any node starts.
+    #: None = the adapter checks its params in its constructor only.
+    params_model: ClassVar[type[BaseModel] | None] = None
+
+    @classmethod
+    def validate_params(cls, params: Mapping[str, Any] | None) -> BaseModel | None:
+        """``params`` validated by `params_model` exactly as the config loader does, or None without one.
+
+        Strict as TOML types values (`antalate_lcm.strict`): "5" is not a number, "yes" not a
+        boolean, an int fills a float. Raises `antalate_lcm.strict.StrictError` (a `ValueError`)
+        whose ``key`` is the field.
+        """
+        if cls.params_model is None:
+            return None
+        return validate_strict(cls.params_model, dict(params or {}))
 
     def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
         self.params: dict[str, Any] = dict(params or {})

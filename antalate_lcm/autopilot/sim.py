@@ -63,7 +63,9 @@ import os
 import time
 from collections.abc import Mapping
 from dataclasses import replace
-from typing import Any
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
 
 from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, Clock, FlightMode, Frame
 from antalate_lcm.geo import FlatFrame, wrap_360
@@ -112,6 +114,55 @@ DEFAULTS: dict[str, Any] = {
 }
 
 
+def _num(key: str, **bounds: float) -> Any:
+    return Field(default=DEFAULTS[key], allow_inf_nan=False, **bounds)
+
+
+class Params(BaseModel):
+    """The ``[hlc.autopilot]`` table of ``autopilot = "sim"``: every key of `DEFAULTS`, typed and bounded.
+
+    Validated when the config is loaded (`Autopilot.params_model`): a negative delay or rate, a
+    battery over 100 % or ``link_loss = "yes"`` stops the program naming the key.
+    """
+
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+    home_lat: float = _num("home_lat", ge=-90, le=90)
+    home_lon: float = _num("home_lon", ge=-180, le=180)
+    heading: float = _num("heading")
+    tau: float = _num("tau", gt=0)
+    climb_rate: float = _num("climb_rate", gt=0)
+    descent_rate: float = _num("descent_rate", gt=0)
+    max_speed: float = _num("max_speed", gt=0)
+    max_yaw_rate: float = _num("max_yaw_rate", ge=0)
+    rtl_speed: float = _num("rtl_speed", gt=0)
+    rtl_altitude: float = _num("rtl_altitude", ge=0)
+    battery: float = _num("battery", ge=0, le=100)
+    drain_flying: float = _num("drain_flying", ge=0)
+    drain_idle: float = _num("drain_idle", ge=0)
+    #: > 0: at 0 the vehicle would disarm between arm() and takeoff().
+    auto_disarm_delay: float = _num("auto_disarm_delay", gt=0)
+    land_disarm_delay: float = _num("land_disarm_delay", ge=0)
+    velocity_hold: float = _num("velocity_hold", gt=0)
+    takeover_autoland: bool = DEFAULTS["takeover_autoland"]
+    takeover_land_delay: float = _num("takeover_land_delay", ge=0)
+    link_loss: bool = DEFAULTS["link_loss"]
+    refuse_arm: bool = DEFAULTS["refuse_arm"]
+    time_scale: float = _num("time_scale", gt=0)
+    max_step: float = _num("max_step", gt=0)
+    link_loss_after: float = _num("link_loss_after", ge=0)
+    link_loss_for: float = _num("link_loss_for", ge=0)
+    takeover_after: float = _num("takeover_after", ge=0)
+    failsafe_after: float = _num("failsafe_after", ge=0)
+    failsafe_mode: Literal["rtl", "land", "brake"] = DEFAULTS["failsafe_mode"]
+    failsafe_reason: str = DEFAULTS["failsafe_reason"]
+    state_error_after: float = _num("state_error_after", ge=0)
+    state_error_for: float = _num("state_error_for", ge=0)
+    cells: int = Field(default=DEFAULTS["cells"], ge=0, le=14)
+    voltage_sag: float = _num("voltage_sag", ge=0)
+    battery_warning_at: float = _num("battery_warning_at", ge=0, le=100)
+    state_file: str = DEFAULTS["state_file"]
+
 
 _AUTONOMOUS_MODES = {
     "GUIDED": FlightMode.GUIDED,
@@ -140,17 +191,13 @@ class SimAutopilot(Autopilot):
 
     name = "sim"
     blocking = False  # in-process: every command returns at once
+    params_model = Params
 
     def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
         super().__init__(params, clock=clock)
-        unknown = sorted(set(self.params) - set(DEFAULTS))
-        if unknown:
-            raise ValueError(f"unknown sim autopilot parameter(s) {unknown}; known: {sorted(DEFAULTS)}")
+        self.validate_params(self.params)  # ValueError naming the key, as at config load
         p = {**DEFAULTS, **self.params}
         self._p = p
-        for key in ("tau", "climb_rate", "descent_rate", "max_speed", "rtl_speed", "max_step", "time_scale"):
-            if not (math.isfinite(float(p[key])) and float(p[key]) > 0.0):
-                raise ValueError(f"sim autopilot parameter {key!r} must be > 0, got {p[key]!r}")
         for key in ("link_loss_for", "failsafe_after", "state_error_after", "state_error_for", "voltage_sag",
                     "battery_warning_at"):
             if not (math.isfinite(float(p[key])) and float(p[key]) >= 0.0):

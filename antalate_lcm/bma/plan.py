@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel
 
 from antalate_lcm.behavior import Behavior
 from antalate_lcm.bma.arbiter import MC_STATE_NAMES, ActivationRule
@@ -18,6 +18,7 @@ from antalate_lcm.config import BehaviorConfig, BmaConfig, Config
 from antalate_lcm.errors import ConfigError, PluginNotFound
 from antalate_lcm.msgs import behavior_state_t, mc_state_t
 from antalate_lcm.plugins import BEHAVIORS, load_plugin
+from antalate_lcm.strict import StrictError, validate_strict
 
 MC_STATES: tuple[str, ...] = tuple(MC_STATE_NAMES.values())
 
@@ -111,13 +112,10 @@ def _plan_behavior(
     if not (isinstance(params_model, type) and issubclass(params_model, BaseModel)):
         raise fail("plugin", f"a plugin whose Params is a pydantic BaseModel subclass ({beh.plugin!r})")
     try:
-        params = params_model.model_validate(beh.params)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        loc = _dotted(err["loc"])
-        got = err.get("input")
-        shown = "" if isinstance(got, dict) or err["type"] == "missing" else f", got {got!r}"
-        raise raw(f"params.{loc}" if loc else "params", f"{err['msg']}{shown}") from None
+        # Strict as the rest of the config, whatever the plugin's model says: "5" is not 5.
+        params = validate_strict(params_model, beh.params)
+    except StrictError as exc:
+        raise raw(f"params.{exc.key}" if exc.key else "params", exc.message) from None
 
     activate_on = list(beh.activate_on) or list(cls.activate_on)
     deactivate_on = list(beh.deactivate_on) or ([] if beh.activate_on else list(cls.deactivate_on))
@@ -188,13 +186,6 @@ def _bma_key(config: Config, bma: BmaConfig) -> str:
         if candidate is bma or candidate.name == bma.name:
             return f"bma[{i}]"
     return f"bma({bma.name})"
-
-
-def _dotted(loc: tuple[Any, ...]) -> str:
-    out = ""
-    for item in loc:
-        out += f"[{item}]" if isinstance(item, int) else (f".{item}" if out else str(item))
-    return out
 
 
 __all__ = ["MC_STATES", "BehaviorPlan", "BmaPlan", "plan_bma", "validate_bma_config"]

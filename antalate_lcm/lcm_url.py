@@ -1,0 +1,221 @@
+"""LCM provider URLs: checked when the config is loaded, and diagnosed when liblcm refuses one.
+
+liblcm (1.5) accepts ``provider://network?key=value&key=value`` for the providers below, warns on
+stderr about an option it does not know and goes on, and answers every other mistake with the same
+"Couldn't create LCM". So antalate checks a URL itself, with liblcm's own parsing rules (split at
+``://``, then ``?``, ``&`` and ``=``; no percent-decoding), and says what was expected:
+
+=========  ============================  ===================================================
+provider   network                       options
+=========  ============================  ===================================================
+udpm       ``GROUP:PORT`` (empty: the    ``ttl`` (0-255; 0 = this host only), ``recv_buf_size``
+           default 239.255.76.67:7667)   (bytes)
+mpudpm     ``GROUP:FIRST_PORT``          ``ttl``, ``recv_buf_size``, ``nports`` (ports used)
+memq       empty                         none (in-process only)
+file       ``PATH`` of an LCM log        ``mode`` (r, w or a), ``speed`` (replay factor; <= 0
+                                         as fast as possible), ``start_timestamp`` (µs)
+tcpq       ``HOST:PORT`` (empty:         none (needs an LCM TCP queue server)
+           127.0.0.1:7700)
+=========  ============================  ===================================================
+
+GROUP is a dotted IPv4 multicast address (224.0.0.0/4), PORT 1-65535 (sources: liblcm's
+``lcm.h``, ``lcm.c``, ``lcm_udpm.c``, ``lcm_mpudpm.c``, ``lcm_file.c``, ``lcm_tcpq.c``).
+"""
+
+from __future__ import annotations
+
+import errno
+import ipaddress
+import math
+import re
+import socket
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from antalate_lcm.errors import AntalateError, BusUnavailable, MulticastUnavailable
+
+DEFAULT_UDPM = "239.255.76.67:7667"
+DEFAULT_TCPQ = "127.0.0.1:7700"
+EXAMPLES = "udpm://239.255.76.67:7667?ttl=1, memq:// or file:///path/to/log.lcm?mode=r"
+_MULTICAST = ipaddress.IPv4Network("224.0.0.0/4")
+_DECIMAL = re.compile(r"[0-9]+")
+_HOSTNAME = re.compile(r"(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*")
+
+
+@dataclass(frozen=True)
+class LcmUrl:
+    """A URL split the way liblcm splits it; ``host``/``port`` are set for the network providers."""
+
+    url: str
+    provider: str
+    network: str
+    options: dict[str, str] = field(default_factory=dict)
+    host: str = ""
+    port: int = 0
+
+    @property
+    def multicast(self) -> bool:
+        return self.provider in ("udpm", "mpudpm")
+
+
+def _int(name: str, low: int, high: int, what: str) -> Callable[[str], str | None]:
+    def check(value: str) -> str | None:
+        if _DECIMAL.fullmatch(value) and low <= int(value) <= high:
+            return None
+        return f"{what} for option {name}, not {value!r}"
+
+    return check
+
+
+def _speed(value: str) -> str | None:
+    try:
+        if math.isfinite(float(value)) and value.strip() == value:
+            return None
+    except ValueError:
+        pass
+    return f"a number for option speed (replay factor; <= 0 = as fast as possible), not {value!r}"
+
+
+def _mode(value: str) -> str | None:
+    return None if value in ("r", "w", "a") else f"r (read), w (write) or a (append) for option mode, not {value!r}"
+
+
+_TTL = _int("ttl", 0, 255, "an integer 0-255 (0 = this host only, 1 = the local network)")
+_RECV_BUF = _int("recv_buf_size", 1, 2**31 - 1, "a size in bytes, 1 to 2147483647")
+
+#: Options each provider knows, each with its check (value -> problem or None).
+OPTIONS: dict[str, dict[str, Callable[[str], str | None]]] = {
+    "udpm": {"ttl": _TTL, "recv_buf_size": _RECV_BUF},
+    "mpudpm": {"ttl": _TTL, "recv_buf_size": _RECV_BUF, "nports": _int("nports", 1, 65535, "a number of ports >= 1")},
+    "memq": {},
+    "file": {
+        "mode": _mode,
+        "speed": _speed,
+        "start_timestamp": _int("start_timestamp", 0, 2**63 - 1, "microseconds since 1970, >= 0"),
+    },
+    "tcpq": {},
+}
+PROVIDERS = tuple(OPTIONS)
+
+
+def _split(url: str) -> LcmUrl:
+    provider, sep, rest = url.partition("://")
+    if not sep or not provider:
+        raise ValueError(f"an LCM URL provider://network?options such as {EXAMPLES}")
+    network, *queries = rest.split("?")
+    options: dict[str, str] = {}
+    for query in queries:
+        for pair in query.split("&"):
+            key, _, value = pair.partition("=")
+            if not key:
+                continue
+            if key in options:
+                raise ValueError(f"option {key} once (it is given twice)")
+            options[key] = value
+    return LcmUrl(url, provider, network, options)
+
+
+def _group_and_port(u: LcmUrl, default: str) -> LcmUrl:
+    network = u.network or default
+    group, sep, port = network.partition(":")
+    try:
+        address = ipaddress.IPv4Address(group)
+    except ValueError:
+        raise ValueError(
+            f"a dotted IPv4 multicast group (224.0.0.0 to 239.255.255.255) before the port, not {group!r}"
+        ) from None
+    if address not in _MULTICAST:
+        raise ValueError(f"a multicast group (224.0.0.0/4); {group} is a unicast address")
+    if not sep:
+        raise ValueError(f"a port after the group ({group}:7667)")
+    if not (_DECIMAL.fullmatch(port) and 1 <= int(port) <= 65535):
+        raise ValueError(f"a port 1-65535 after the group, not {port!r}")
+    return LcmUrl(u.url, u.provider, u.network, u.options, str(address), int(port))
+
+
+def _host_and_port(u: LcmUrl) -> LcmUrl:
+    network = u.network or DEFAULT_TCPQ
+    host, sep, port = network.partition(":")
+    if not _HOSTNAME.fullmatch(host):
+        raise ValueError(f"a server HOST:PORT (an IPv4 address or a host name), not {network!r}")
+    if sep and not (_DECIMAL.fullmatch(port) and 1 <= int(port) <= 65535):
+        raise ValueError(f"a port 1-65535 after the host, not {port!r}")
+    return LcmUrl(u.url, u.provider, u.network, u.options, host, int(port) if sep else 7700)
+
+
+def parse_lcm_url(url: str) -> LcmUrl:
+    """Split and check ``url``; raises ValueError saying what was expected (a phrase after 'expected')."""
+    u = _split(url)
+    known = OPTIONS.get(u.provider)
+    if known is None:
+        raise ValueError(
+            f"an LCM provider ({', '.join(p + '://' for p in PROVIDERS)}), not {u.provider + '://'!r}: "
+            f"e.g. {EXAMPLES}"
+        )
+    for key, value in u.options.items():
+        check = known.get(key)
+        if check is None:
+            names = ", ".join(known) or "none"
+            hint = " (obsolete: liblcm ignores it; remove it)" if key == "transmit_only" else ""
+            raise ValueError(f"a known option of {u.provider}:// ({names}), not {key!r}{hint}")
+        problem = check(value)
+        if problem:
+            raise ValueError(problem)
+    if u.provider == "udpm":
+        return _group_and_port(u, DEFAULT_UDPM)
+    if u.provider == "mpudpm":
+        u = _group_and_port(u, DEFAULT_UDPM)
+        if u.port + int(u.options.get("nports", "1")) - 1 > 65535:
+            raise ValueError(f"ports up to 65535: {u.port} + nports={u.options['nports']} goes beyond")
+        return u
+    if u.provider == "memq":
+        if u.network:
+            raise ValueError(f"nothing after memq:// (it is private to the process), not {u.network!r}")
+        return u
+    if u.provider == "file":
+        if not u.network:
+            raise ValueError("the path of an LCM log after file:// (file:///abs/path.lcm or file://rel/path.lcm)")
+        return u
+    return _host_and_port(u)
+
+
+def multicast_route_missing(u: LcmUrl) -> bool:
+    """Whether this host has no route to ``u``'s multicast group (what liblcm's test connect() hits).
+
+    A UDP connect() sends nothing: it only looks the destination up in the routing table.
+    """
+    if not u.multicast:
+        return False
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        try:
+            sock.connect((u.host, u.port))
+        except OSError as exc:
+            return exc.errno in (errno.ENETUNREACH, errno.EHOSTUNREACH, errno.ENODEV)
+    return False
+
+
+def open_failure(url: str, liblcm_said: Sequence[str] = ()) -> AntalateError:
+    """The error to raise when liblcm could not create an instance for ``url``.
+
+    Says "no multicast route" (with the fix) only when the routing table really has none; an
+    invalid URL says what was expected; anything else repeats liblcm's own words.
+    """
+    try:
+        u = parse_lcm_url(url)
+    except ValueError as exc:
+        return BusUnavailable(url, f"expected {exc}")
+    if multicast_route_missing(u):
+        return MulticastUnavailable(url)
+    said = " | ".join(line.strip() for line in liblcm_said if line.strip())
+    return BusUnavailable(url, f"liblcm refused it ({said})" if said else "liblcm refused it")
+
+
+__all__ = [
+    "DEFAULT_UDPM",
+    "OPTIONS",
+    "PROVIDERS",
+    "LcmUrl",
+    "multicast_route_missing",
+    "open_failure",
+    "parse_lcm_url",
+]

@@ -1,0 +1,91 @@
+"""Validate config tables the way TOML types them: no silent coercion, one error naming the key.
+
+A field trial showed ``'5'`` becoming 5 and ``'yes'`` becoming True: pydantic's default (lax) mode
+guesses, and a guess in a flight config is a vehicle doing something nobody wrote. Every table of the
+config -- antalate's own sections, an autopilot adapter's params, a behavior's params -- goes
+through :func:`validate_strict`, which validates in pydantic's *strict JSON* mode:
+
+- a string is never a number or a boolean, a number never a boolean or a string;
+- an integer is still fine where a float is expected (``rate = 2``);
+- a TOML array fills a ``list`` or a ``tuple``, a string fills an ``Enum`` or a ``Path``: what a
+  TOML (like a JSON) document can express is accepted as written, whatever the model's own mode;
+- a TOML date or time is refused anywhere (no antalate setting is one; as a string it would slip
+  into a text field unnoticed).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+from collections.abc import Mapping
+from typing import Any, TypeVar
+
+from pydantic import BaseModel, ValidationError
+
+M = TypeVar("M", bound=BaseModel)
+
+
+class StrictError(ValueError):
+    """One invalid value: ``key`` is the dotted path inside the validated table ('' = the table)."""
+
+    def __init__(self, key: str, message: str) -> None:
+        super().__init__(f"{key}: {message}" if key else message)
+        self.key = key
+        self.message = message
+
+
+def dotted(loc: tuple[Any, ...] | list[Any]) -> str:
+    """``("bma", 0, "name")`` -> ``"bma[0].name"``; pydantic's validator tags are left out."""
+    parts: list[str] = []
+    for item in loc:
+        if isinstance(item, int):
+            parts[-1:] = [f"{parts[-1]}[{item}]"] if parts else [f"[{item}]"]
+        elif str(item).startswith("function-"):
+            continue
+        else:
+            parts.append(str(item))
+    return ".".join(parts)
+
+
+def find_datetime(data: Any, path: tuple[Any, ...] = ()) -> tuple[Any, ...] | None:
+    """The location of the first TOML date/time in ``data``, or None."""
+    if isinstance(data, _dt.date | _dt.time):  # datetime is a date
+        return path
+    if isinstance(data, Mapping):
+        items: Any = data.items()
+    elif isinstance(data, list | tuple):
+        items = enumerate(data)
+    else:
+        return None
+    for key, value in items:
+        found = find_datetime(value, (*path, key))
+        if found is not None:
+            return found
+    return None
+
+
+def describe(exc: ValidationError) -> StrictError:
+    """The first error of ``exc`` as a :class:`StrictError` (one line: key, what is wrong, the value)."""
+    err = exc.errors()[0]
+    key = dotted(tuple(err["loc"]))
+    got = err.get("input")
+    shown = "" if isinstance(got, dict) or err["type"] == "missing" else f", got {got!r}"
+    return StrictError(key, f"{err['msg']}{shown}")
+
+
+def validate_strict(model: type[M], data: Mapping[str, Any]) -> M:
+    """``model`` validated from ``data`` (a TOML table) in strict JSON mode; raises :class:`StrictError`."""
+    where = find_datetime(data)
+    if where is not None:
+        raise StrictError(dotted(where), "a TOML date/time is not a valid value here")
+    try:
+        text = json.dumps(dict(data), allow_nan=True)
+    except (TypeError, ValueError) as exc:  # a Python caller's object that TOML cannot hold
+        raise StrictError("", f"not a TOML table: {exc}") from None
+    try:
+        return model.model_validate_json(text, strict=True)
+    except ValidationError as exc:
+        raise describe(exc) from None
+
+
+__all__ = ["StrictError", "describe", "dotted", "find_datetime", "validate_strict"]

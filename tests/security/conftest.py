@@ -83,10 +83,10 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
             "params": {"forward_speed": 1.0, "detection_source": "any"},
         }]}]
         for name, north in (("alpha", 0.0), ("delta", 40.0)):
-            s.agent(name, agent_doc(name, home=_home(north), osc=osc, bma=bma))
+            s.agent(name, agent_doc(name, tmp / "state", home=_home(north), osc=osc, bma=bma))
         s.start_agents_process("alpha-delta", ["alpha", "delta"])
         for name, north in (("bravo", 80.0), ("charlie", 120.0)):
-            run = s.agent(name, agent_doc(name, home=_home(north)))
+            run = s.agent(name, agent_doc(name, tmp / "state", home=_home(north)))
             run.start("hlc")
             run.start("mc")
         s.attacker = s.peer("the attacker", None)

@@ -263,10 +263,10 @@ class Swarm:
         return self._op_seq
 
 
-def agent_doc(name: str, *, sim: dict[str, Any] | None = None, home: tuple[float, float] = HOME,
+def agent_doc(name: str, state_dir: Path, *, sim: dict[str, Any] | None = None, home: tuple[float, float] = HOME,
               internal: str = "local", **sections: Any) -> dict[str, Any]:
     """An agent's config as a field user writes it: internal topics on the host-only ``local`` bus,
-    what the operator sees also on ``lan``, a swarm key."""
+    what the operator sees also on ``lan``, a swarm key; the replay memory in ``state_dir``."""
     hlc = {"autopilot": "sim", "default_takeoff_altitude": 3.0, "link_timeout": 2.0, **sections.pop("hlc", {})}
     hlc["autopilot_params"] = {**FAST_SIM, "home_lat": home[0], "home_lon": home[1], **(sim or {})}
     doc: dict[str, Any] = {
@@ -280,7 +280,10 @@ def agent_doc(name: str, *, sim: dict[str, Any] | None = None, home: tuple[float
             "SWARM_OPERATOR_CMD": "lan", "SWARM_DIRECTION_CMD": "lan",
         },
         "hlc": hlc,
-        "security": {"swarm_key": "", "insecure": True} if DISARMED else {"swarm_key": SWARM_KEY, "window": WINDOW},
+        "security": (
+            {"swarm_key": "", "insecure": True} if DISARMED
+            else {"swarm_key": SWARM_KEY, "window": WINDOW, "state_dir": str(state_dir)}
+        ),
     }
     doc.update(sections)
     return doc

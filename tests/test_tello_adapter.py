@@ -41,13 +41,21 @@ FAST: dict[str, Any] = {
 EMU: dict[str, Any] = {"takeoff_time": 0.5, "land_speed": 2.0}
 
 DRIVER = r"""
-import json, logging, sys, time
+import json, logging, sys, threading, time
 from dataclasses import asdict
 logging.basicConfig(level=logging.WARNING, stream=sys.stderr, format="%(asctime)s %(name)s %(message)s")
 from antalate_lcm.autopilot.base import Frame
 from antalate_lcm.autopilot.tello import TelloAutopilot
 
 adapters = {}
+background = {}
+
+def run_call(name, method, args):
+    try:
+        return {"ok": True, "result": getattr(adapters[name], method)(*args)}
+    except Exception as exc:
+        return {"ok": False, "type": type(exc).__name__, "error": str(exc)}
+
 for line in sys.stdin:
     req = json.loads(line)
     name = req.get("name", "main")
@@ -65,6 +73,19 @@ for line in sys.stdin:
             if req["method"] == "set_velocity":
                 args[4] = Frame[args[4]]
             result = getattr(adapters[name], req["method"])(*args)
+        elif op == "start":  # a call on a thread of its own (another caller while one blocks)
+            box = {"t0": time.monotonic()}
+            def target(box=box, name=name, req=req):
+                box.update(run_call(name, req["method"], list(req.get("args", []))))
+                box["elapsed"] = time.monotonic() - box["t0"]
+            box["thread"] = threading.Thread(target=target, daemon=True)
+            background[req["tag"]] = box
+            box["thread"].start()
+            result = None
+        elif op == "result":
+            box = background.pop(req["tag"])
+            box["thread"].join(req.get("timeout", 30))
+            result = {k: v for k, v in box.items() if k not in ("thread", "t0")}
         elif op == "state":
             s = adapters[name].state()
             result = {**asdict(s), "flight_mode": s.flight_mode.value}
@@ -472,6 +493,143 @@ def test_port_in_use_by_another_process(net: NetnsPair, driver: Driver) -> None:
     )
     done = net.run_python("b", script, timeout=30)
     assert done.stdout.startswith("AutopilotError") and "8889" in done.stdout, done.stdout + done.stderr
+
+
+# ------------------------------------------------------------------------------ field faults (issue 12)
+
+
+def rc_commands(emu: TelloEmulator, since: float, until: float) -> list[str]:
+    return [c.text for c in emu.commands if c.text.startswith("rc ") and since <= c.t < until]
+
+
+@pytest.mark.netns
+def test_lost_ok_to_takeoff_is_settled_by_the_state_and_kept_alive(driver: Driver,
+                                                                   emulator: Callable[..., TelloEmulator]) -> None:
+    """The Tello took off but its "ok" was lost: takeoff() returns once the state shows it hovering.
+
+    djitellopy waited out its 20 s timeout (and then sent a second ``takeoff``) while nothing kept the
+    Tello from landing itself. Here the emulator lands itself 0.6 s after a command ends, shorter than
+    the settling second, so only the keepalives sent during the wait hold it up.
+    """
+    emu = emulator(takeoff_time=1.0, auto_land_timeout=0.6)
+    emu.lose_reply("takeoff")
+    driver.new(takeoff_timeout=20, keepalive_s=0.2)
+    driver.call("connect")
+    reply = driver.request(op="call", name="main", method="takeoff", args=[0.8])
+    assert reply["ok"], reply
+    assert reply["elapsed"] < 5.0, reply  # takeoff 1 s + a settled second, not 20 s
+    assert emu.lost_replies == [("takeoff", "ok")]
+    assert emu.command_texts().count("takeoff") == 1  # never sent twice
+    s = driver.state()
+    assert s["mode"] == "GUIDED" and s["in_air"]
+    time.sleep(1.5)
+    assert emu.snapshot().flying, "auto-landed: no keepalive while takeoff waited for its answer"
+    driver.call("land")
+
+
+@pytest.mark.netns
+def test_lost_ok_to_land_is_settled_by_the_state(driver: Driver, emulator: Callable[..., TelloEmulator]) -> None:
+    emu = emulator()
+    driver.new(takeoff_timeout=20)
+    driver.call("connect")
+    driver.call("takeoff", 0.8)
+    emu.lose_reply("land")
+    reply = driver.request(op="call", name="main", method="land", args=[])
+    assert reply["ok"], reply
+    assert reply["elapsed"] < 3.0, reply  # 0.4 s of descent and half a second on the ground, not 20 s
+    assert emu.lost_replies == [("land", "ok")] and not emu.snapshot().flying
+    s = driver.state()
+    assert s["mode"] == "GROUND" and not s["in_air"] and s["flight_mode"] == "GUIDED"
+
+
+@pytest.mark.netns
+@pytest.mark.parametrize("method", ["land", "emergency"])
+def test_land_and_emergency_preempt_a_waiting_takeoff(driver: Driver, emulator: Callable[..., TelloEmulator],
+                                                      method: str) -> None:
+    emu = emulator(takeoff_time=3.0)
+    driver.new(takeoff_timeout=20)
+    driver.call("connect")
+    emu.mute_replies = True  # takeoff's answer never comes; nor does land's
+    driver.request(op="start", tag="takeoff", method="takeoff", args=[1.0])
+    assert emu.wait_until(lambda s: s.flying and s.z > 0.3, timeout=5)
+    reply = driver.request(op="call", name="main", method=method, args=[])
+    assert reply["ok"], reply
+    done = driver.request(op="result", tag="takeoff")["result"]
+    assert not done["ok"] and "interrupted" in done["error"], done
+    assert done["elapsed"] < 4.0, done  # given up at once, not after takeoff_timeout
+    assert emu.wait_until(lambda s: not s.flying, timeout=5)
+    driver.wait(lambda s: s["mode"] == "GROUND" and not s["in_air"], timeout=3)
+    texts = emu.command_texts()
+    assert texts.count("takeoff") == 1 and method in texts
+
+
+@pytest.mark.netns
+@pytest.mark.parametrize("control_hz", [20.0, 10.0])
+def test_rc_goes_out_at_the_configured_rate(driver: Driver, emulator: Callable[..., TelloEmulator],
+                                            control_hz: float) -> None:
+    """Set-points arrive at 10 Hz; rc leaves at control_hz (it was control_hz + 10: each set-point sent twice)."""
+    emu = emulator()
+    driver.new(control_hz=control_hz)
+    driver.call("connect")
+    driver.call("takeoff", 0.8)
+    driver.wait(lambda s: s["mode"] == "GUIDED", timeout=3)
+    start = time.monotonic()
+    driver.fly(0.3, 0.0, 0.0, 10.0, "BODY", 3.0)
+    end = time.monotonic()
+    window = (start + 0.5, end - 0.5)  # the steady part
+    moving = [t for t in rc_commands(emu, *window) if t != "rc 0 0 0 0"]
+    rate = len(moving) / (window[1] - window[0])
+    assert 0.7 * control_hz <= rate <= 1.05 * control_hz, f"{rate:.1f} rc/s for control_hz {control_hz:g}"
+    driver.call("land")
+
+
+@pytest.mark.netns
+def test_rtl_getting_farther_raises_and_lands_here(driver: Driver, emulator: Callable[..., TelloEmulator]) -> None:
+    """Wrong sign conventions: the RTL flies away from home. rtl() says so (hlc_error_t) and it lands."""
+    emu = emulator()
+    driver.new(vgx_sign=-1, vgy_sign=-1, rtl_speed=0.8)  # the emulator's true signs are +1
+    driver.call("connect")
+    driver.call("takeoff", 0.8)
+    driver.wait(lambda s: s["mode"] == "GUIDED", timeout=3)
+    driver.fly(0.6, 0.0, 0.0, 0.0, "BODY", 1.5)
+    err = driver.fails("rtl")
+    assert err["type"] == "AutopilotError" and "RTL failed: getting farther" in err["error"], err
+    assert "vgx_sign" in err["error"] and err["elapsed"] < 5.0
+    s = driver.state()
+    assert s["mode"] in ("LAND", "GROUND")
+    if s["mode"] == "LAND":
+        assert s["flight_mode"] == "LANDING" and "getting farther" in s["failsafe"]
+    assert emu.wait_until(lambda s: not s.flying, timeout=5)
+    driver.wait(lambda s: s["mode"] == "GROUND", timeout=3)
+
+
+@pytest.mark.netns
+def test_six_second_link_loss_in_flight_recovers_without_a_restart(driver: Driver,
+                                                                   emulator: Callable[..., TelloEmulator]) -> None:
+    """Wi-Fi down both ways for 6 s; the Tello lands itself and comes back out of SDK mode.
+
+    The adapter stops commanding it, probes with ``command`` once it must have landed (``autoland_s``
+    after our last command), and reports a fresh link and a Tello on the ground: no restart needed.
+    """
+    emu = emulator(auto_land_timeout=2.0)
+    emu.forget_sdk_on_silence = True
+    driver.new(link_loss_timeout=0.5, autoland_s=2.0, keepalive_s=0.5)
+    driver.call("connect")
+    driver.call("takeoff", 0.8)
+    driver.wait(lambda s: s["mode"] == "GUIDED", timeout=3)
+    emu.silence(6.0)
+    s = driver.wait(lambda s: s["link_age"] > 1.0, timeout=3)
+    assert s["connected"] and "link lost" in driver.fails("rtl")["error"]
+    assert emu.wait_until(lambda s: not s.flying, timeout=6), "the Tello's own failsafe did not land it"
+    assert emu.silent()  # it landed during the loss
+    s = driver.wait(lambda s: s["link_age"] < 0.5, timeout=10)
+    assert s["mode"] == "GROUND" and not s["in_air"]
+    assert emu.snapshot().sdk_mode
+    assert "command" in [c.text for c in emu.commands if c.t > emu.commands[0].t + 1.0]  # re-entered SDK mode
+    assert driver.call("arm") is True  # and it flies again
+    driver.call("takeoff", 0.8)
+    driver.wait(lambda s: s["mode"] == "GUIDED", timeout=3)
+    driver.call("land")
 
 
 def test_params_documented_and_example_valid() -> None:

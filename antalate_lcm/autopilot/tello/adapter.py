@@ -68,7 +68,7 @@ from pydantic import BaseModel
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, Clock, FlightMode, Frame
 from antalate_lcm.autopilot.tello import maths
-from antalate_lcm.autopilot.tello.params import TELLO_AUTOLAND_S, Params, validated
+from antalate_lcm.autopilot.tello.params import Params, validated
 from antalate_lcm.geo import FlatFrame, wrap_360
 
 log = logging.getLogger("antalate.autopilot.tello")
@@ -808,7 +808,7 @@ class TelloAutopilot(Autopilot):
         """
         if now - self._last_probe < _PROBE_PERIOD or self._pending is not None:
             return False  # (its "ok" would pass for the waiting command's answer)
-        if self._lost_in_air and now - self._last_sent < TELLO_AUTOLAND_S:
+        if self._lost_in_air and now - self._last_sent < self._p.autoland_s:
             return False
         self._last_probe = now
         return True

@@ -48,6 +48,7 @@ class Params(BaseModel):
     retry_count: int = Field(default=3, ge=1)  # attempts of `command` at connect
     state_timeout: float = Field(default=2.0, gt=0, allow_inf_nan=False)  # s connect() waits for state
     link_loss_timeout: float = Field(default=2.0, gt=0, allow_inf_nan=False)  # s without state: stop commanding
+    autoland_s: float = Field(default=TELLO_AUTOLAND_S, gt=0, allow_inf_nan=False)  # the Tello's own auto-landing
     link_back_hover: float = Field(default=10.0, gt=0, allow_inf_nan=False)  # s hovering uncommanded after a loss
     djitellopy_log_level: str = "WARNING"  # djitellopy logs every command (and rc) at INFO
 
@@ -75,16 +76,11 @@ class Params(BaseModel):
             raise ValueError("must be a logging level name (DEBUG, INFO, WARNING, ERROR)")
         return value.upper()
 
-    @field_validator("keepalive_s")
-    @classmethod
-    def _keepalive(cls, value: float) -> float:
-        if value >= TELLO_AUTOLAND_S:
-            raise ValueError(f"must be < {TELLO_AUTOLAND_S:g} (the Tello lands {TELLO_AUTOLAND_S:g} s after "
-                             "the last command)")
-        return value
-
     @model_validator(mode="after")
     def _rates(self) -> Params:
+        if self.keepalive_s >= self.autoland_s:
+            raise ValueError(f"keepalive_s must be < autoland_s {self.autoland_s:g} (the Tello lands that long "
+                             f"after the last command), got {self.keepalive_s!r}")
         if self.keepalive_s < 1.0 / self.control_hz:
             raise ValueError(f"keepalive_s {self.keepalive_s:g} is shorter than one control tick "
                              f"(control_hz {self.control_hz:g})")
@@ -99,6 +95,9 @@ def validated(params: dict[str, Any]) -> Params:
         problems = []
         for err in exc.errors():
             key = ".".join(str(part) for part in err["loc"]) or "(parameters)"
+            if not err["loc"] and str(err.get("msg", "")).startswith("Value error, "):
+                problems.append(str(err["msg"])[len("Value error, "):])  # names its keys itself
+                continue
             if err["type"] == "extra_forbidden":
                 problems.append(f"unknown key {key!r} (known: {sorted(Params.model_fields)})")
             else:

@@ -1,0 +1,84 @@
+"""The Tello adapter's arithmetic (`antalate_lcm.autopilot.tello.maths`) and the shared altitude rule."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from antalate_lcm.autopilot.base import altitude_reached
+from antalate_lcm.autopilot.tello import maths
+
+
+def test_altitude_reached_is_the_hlc_rule_with_float_slack_only() -> None:
+    assert altitude_reached(1.14, 1.2, 0.95)  # 0.95 * 1.2 is 1.1399999...: exactly the threshold counts
+    assert altitude_reached(1.2, 1.2, 1.0)
+    assert not altitude_reached(1.1, 1.2, 0.95)  # a decimetre reading one step short: not reached
+    assert not altitude_reached(1.199, 1.2, 1.0)
+
+
+@pytest.mark.parametrize("target", [0.5, 0.8, 1.0, 1.2, 1.25, 1.5, 2.33, 3.0])
+@pytest.mark.parametrize("fraction", [0.8, 0.95, 1.0])
+def test_the_climb_never_stops_where_the_hlc_would_not_count_it(target: float, fraction: float) -> None:
+    """On a decimetre grid, whatever reading ends the climb satisfies the HLC for any fraction <= 1."""
+    readings = [dm / 10.0 for dm in range(0, 60)]
+    done = [h for h in readings if maths.climb_done(h, target)]
+    assert done, f"no decimetre reading ends a climb to {target} m"
+    assert all(altitude_reached(h, target, fraction) for h in done)
+    for h in readings:  # and the controller moves towards the band from anywhere outside it
+        speed = maths.climb_speed(h, target, 1.0)
+        if h in done:
+            assert speed == 0.0
+        else:
+            assert abs(speed) >= maths.MIN_CLIMB_SPEED and (speed > 0) == (h < target)
+
+
+def test_the_field_failure_climb_stopped_at_1_1_m() -> None:
+    """The issue: a climb to 1.2 m ended at a reading of 1.1 m (within 0.1 m), below the HLC's 1.14 m."""
+    assert not maths.climb_done(1.1, 1.2)
+    assert maths.climb_speed(1.1, 1.2, 1.0) > 0.0
+    assert maths.climb_done(1.2, 1.2) and maths.climb_done(1.3, 1.2)
+    assert maths.climb_speed(1.4, 1.2, 1.0) < 0.0
+
+
+def test_frames() -> None:
+    assert maths.ground_to_ne(1.0, 0.0, 90.0) == pytest.approx((0.0, 1.0), abs=1e-12)  # yaw 0 faced east
+    assert maths.ground_to_ne(0.0, 1.0, 90.0) == pytest.approx((-1.0, 0.0), abs=1e-12)  # its right: south
+    assert maths.body_to_ground(1.0, 0.0, 90.0) == pytest.approx((0.0, 1.0), abs=1e-12)
+    fwd, right = maths.ne_to_body(1.0, 0.0, 90.0)  # north, seen by a vehicle facing east: to its left
+    assert (fwd, right) == pytest.approx((0.0, -1.0), abs=1e-12)
+    for heading in (0.0, 37.0, 200.0):  # ne_to_body undoes ground_to_ne∘body_to_ground at yaw 0
+        n, e = maths.ground_to_ne(0.3, -0.4, heading)
+        assert maths.ne_to_body(n, e, heading) == pytest.approx((0.3, -0.4), abs=1e-12)
+
+
+def test_dead_reckoning_trapezoid_and_gaps() -> None:
+    assert maths.dead_reckon(1.0, 2.0, (0.0, 0.0), (1.0, -1.0), 0.1) == pytest.approx((1.05, 1.95))
+    assert maths.dead_reckon(1.0, 2.0, (1.0, 1.0), (1.0, 1.0), 0.0) == (1.0, 2.0)
+    assert maths.dead_reckon(1.0, 2.0, (1.0, 1.0), (1.0, 1.0), -0.1) == (1.0, 2.0)
+    assert maths.dead_reckon(1.0, 2.0, (1.0, 1.0), (1.0, 1.0), 6.0) == (1.0, 2.0)  # a link loss: no guess
+
+
+def test_rc_sticks_scale_and_direction() -> None:
+    kw = {"max_speed": 2.0, "max_vertical_speed": 0.5, "max_yaw_rate": 90.0}
+    assert maths.rc_sticks(1.0, -0.5, 0.25, 45.0, **kw) == (-25, 50, 50, 50)
+    assert maths.rc_sticks(8.0, 4.0, -3.0, -500.0, **kw) == (50, 100, -100, -100)
+
+
+def test_debounced_flag() -> None:
+    d = maths.Debounced(0.5)
+    assert not d.update(True, 0.0) and not d.value
+    assert not d.update(False, 0.2)  # the blip is forgotten
+    assert not d.update(True, 0.3) and not d.update(True, 0.7)
+    assert d.update(True, 0.8) and d.value
+    d.reset(False)
+    assert not d.value
+
+
+def test_rtl_leg_slows_down_near_home() -> None:
+    vn, ve, dist = maths.rtl_leg(3.0, 4.0, (0.0, 0.0), speed=0.5, gain=1.0, min_speed=0.2)
+    assert dist == pytest.approx(5.0) and math.hypot(vn, ve) == pytest.approx(0.5)
+    assert (vn, ve) == pytest.approx((-0.3, -0.4))
+    vn, ve, dist = maths.rtl_leg(0.3, 0.0, (0.0, 0.0), speed=0.5, gain=1.0, min_speed=0.2)
+    assert vn == pytest.approx(-0.3) and dist == pytest.approx(0.3)
+    assert maths.rtl_leg(0.0, 0.0, (0.0, 0.0), speed=0.5, gain=1.0, min_speed=0.2) == (0.0, 0.0, 0.0)

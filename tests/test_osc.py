@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import http.server
 import json
+import shutil
 import socket
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -16,21 +19,30 @@ import pytest
 
 from antalate_lcm.bus import Bus
 from antalate_lcm.config import parse_config
+from antalate_lcm.errors import AntalateError, ConfigError
 from antalate_lcm.executor import Executor
 from antalate_lcm.msgs import direction_cmd_t, mc_state_t, operator_cmd_t, payload_t, telemetry_t
 from antalate_lcm.node import Context
-from antalate_lcm.osc import OscNode
+from antalate_lcm.osc import OscNode, wire
+from antalate_lcm.security import generate_key
 from antalate_lcm.station import StationServer, StationSettings
-from tests.netns import wait_for
-from tests.test_station import API_KEYS, AUTH
+from antalate_lcm.station._auth import registration_key, sha256_hex
+from antalate_lcm.station.client import StationClient, build_operator_cmd, operator_cmd_wire
+from tests.agent_harness import AgentProcesses, agent_config
+from tests.conftest import Probe
+from tests.netns import NetNamespace, wait_for
+from tests.test_station import API_KEYS, AUTH, OPERATOR_KEY
 
 
-def make_osc(server: str, **osc: Any) -> tuple[OscNode, Context, dict[str, list[Any]]]:
+def make_osc(
+    server: str, *, security: dict[str, Any] | None = None, **osc: Any
+) -> tuple[OscNode, Context, dict[str, list[Any]]]:
     cfg = parse_config(
         {
             "agent": {"name": "alpha"},
             "buses": {"lan": "memq://"},
             "osc": {"enabled": True, "server": server, "rate": 20.0, "timeout": 0.5, "max_backoff": 0.5, **osc},
+            "security": security or {},
         }
     )
     ctx = Context(Bus(cfg.buses), Executor())
@@ -195,3 +207,283 @@ def test_server_that_hangs_times_out() -> None:
             ctx.close()
     finally:
         listener.close()
+
+
+# ----------------------------------------------------------------------------- a station that lies
+
+
+class _Liar(http.server.BaseHTTPRequestHandler):
+    """A compromised station: its replies come from ``server.replies`` in turn, then empty ones."""
+
+    def log_message(self, *args: Any) -> None:
+        pass
+
+    def do_POST(self) -> None:  # noqa: N802 - http.server's API
+        self.rfile.read(int(self.headers.get("Content-Length", 0)))
+        replies: list[dict[str, Any]] = self.server.replies  # type: ignore[attr-defined]
+        body = json.dumps(replies.pop(0) if replies else {"token": "t"}).encode()
+        self.send_response(200)
+        self.send_header("Content-Type", "application/json")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+
+@pytest.fixture
+def liar() -> Iterator[http.server.ThreadingHTTPServer]:
+    srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _Liar)
+    srv.replies = []  # type: ignore[attr-defined]
+    th = threading.Thread(target=srv.serve_forever, daemon=True)
+    th.start()
+    yield srv
+    srv.shutdown()
+    srv.server_close()
+
+
+KEY = generate_key()
+
+
+def signed_cmd(command: str = "LAND", *, target: str = "alpha", age: float = 0.0, key: str = KEY,
+               seq: int = 7) -> dict[str, Any]:
+    msg = build_operator_cmd(command, target=target, sender="console", seq=seq,
+                             utime=int((time.time() - age) * 1e6), key=key)
+    return operator_cmd_wire(msg)
+
+
+def test_a_lying_station_cannot_make_up_retarget_or_replay_commands(
+    liar: http.server.ThreadingHTTPServer, caplog: pytest.LogCaptureFixture
+) -> None:
+    good = signed_cmd("LAND", seq=7)
+    forged = {**signed_cmd("TAKEOFF", seq=8), "mac": "00" * 32}
+    tampered = {**signed_cmd("TAKEOFF", seq=9), "command": "RTL"}  # valid MAC of another message
+    retargeted = signed_cmd("TAKEOFF", target="bravo", seq=10)
+    stale = signed_cmd("TAKEOFF", age=60.0, seq=11)
+    other_swarm = signed_cmd("TAKEOFF", key=generate_key(), seq=12)
+    unsigned = {"command": "TAKEOFF", "seq": 13}
+    unsigned_dir = {"active": True, "azimuth": 90.0, "speed": 5.0, "seq": 14}
+    liar.replies = [{"token": "t", "operator_cmd": c} for c in (  # type: ignore[attr-defined]
+        unsigned, forged, tampered, retargeted, stale, other_swarm, good, good)]
+    liar.replies.append({"token": "t", "direction_cmd": unsigned_dir})  # type: ignore[attr-defined]
+    node, ctx, got = make_osc(f"http://127.0.0.1:{liar.server_address[1]}", security={"swarm_key": KEY})
+    try:
+        assert wait_for(lambda: not liar.replies and node.reports_ok >= 10, 10)  # type: ignore[attr-defined]
+        time.sleep(0.3)
+        assert [(m.header.seq, m.header.agent, m.command) for m in got["cmd"]] == \
+            [(7, "console", operator_cmd_t.LAND)], "only the operator's own command, once"
+        assert got["cmd"][0].header.mac == bytes.fromhex(good["mac"]), "published exactly as signed"
+        assert got["dir"] == []
+        assert node.dropped == {"unsigned": 2, "forged": 3, "retargeted": 1, "stale": 1, "replayed": 1}
+        assert node._thread is not None and node._thread.is_alive()
+    finally:
+        node.stop()
+        ctx.close()
+
+
+def test_without_a_key_station_commands_pass_unsigned(liar: http.server.ThreadingHTTPServer) -> None:
+    liar.replies = [{"token": "t", "operator_cmd": {"command": "RTL", "seq": 3}}]  # type: ignore[attr-defined]
+    node, ctx, got = make_osc(f"http://127.0.0.1:{liar.server_address[1]}")
+    try:
+        assert wait_for(lambda: got["cmd"], 5)
+        assert got["cmd"][0].header.mac_len == 0, "the OSC does not sign for the station"
+        assert got["cmd"][0].header.seq == 3 and got["cmd"][0].header.agent == "alpha"
+    finally:
+        node.stop()
+        ctx.close()
+
+
+@pytest.mark.parametrize(
+    ("reply", "words"),
+    [
+        ({"operator_cmd": {"command": "TAKEOFF", "altitude": 1e9, "seq": 1}}, "altitude"),
+        ({"direction_cmd": {"active": True, "azimuth": 400.0, "speed": 1.0, "seq": 1}}, "azimuth"),
+        ({"direction_cmd": {"active": True, "azimuth": 10.0, "speed": 1e6, "seq": 1}}, "speed"),
+        ({"operator_cmd": {"command": "LAND", "seq": 1, "mac": "ab" * 32}}, "signed command carries all"),
+        ({"payload": {"content_type": "", "data": "x"}}, "content_type"),
+        ({"payload": {"content_type": "a/b", "data": "!!", "encoding": "base64"}}, "base64"),
+    ],
+)
+def test_out_of_range_replies_are_rejected_with_a_reason(reply: dict[str, Any], words: str) -> None:
+    with pytest.raises(wire.ReplyError, match=words):
+        wire.parse_reply(json.dumps({"token": "t", **reply}).encode())
+
+
+# ----------------------------------------------------------------------------- registration and tokens
+
+
+def test_registration_with_proof_and_token_file(tmp_path: Path) -> None:
+    settings = StationSettings(db_path=str(tmp_path / "s.sqlite"), api_keys=API_KEYS,
+                               registration_key=registration_key(KEY))
+    token_file = tmp_path / "osc" / "alpha.token"
+    with StationServer(settings) as srv:
+        node, ctx, _ = make_osc(srv.url, security={"swarm_key": KEY}, token_file=str(token_file))
+        try:
+            assert wait_for(lambda: node.token, 5)
+            first = node.token
+        finally:
+            node.stop()
+            ctx.close()
+        assert token_file.read_text().strip() == first and token_file.stat().st_mode & 0o777 == 0o600
+        # A restart with the file: same token, no new registration.
+        node, ctx, _ = make_osc(srv.url, security={"swarm_key": KEY}, token_file=str(token_file))
+        try:
+            assert node.token == first
+            assert wait_for(lambda: node.reports_ok >= 3, 5) and node.token == first
+        finally:
+            node.stop()
+            ctx.close()
+        # A restart that lost the file proves the key again and gets a new token for the same agent.
+        token_file.unlink()
+        node, ctx, _ = make_osc(srv.url, security={"swarm_key": KEY}, token_file=str(token_file))
+        try:
+            assert wait_for(lambda: node.token and node.token != first, 5)
+        finally:
+            node.stop()
+            ctx.close()
+        assert [a["name"] for a in httpx.get(f"{srv.url}/api/agents", headers=AUTH).json()] == ["alpha"]
+        # Without the key the name cannot be taken: 401 (no proof), never a token.
+        node, ctx, _ = make_osc(srv.url)
+        try:
+            assert wait_for(lambda: node.failures >= 2, 5) and node.token is None
+        finally:
+            node.stop()
+            ctx.close()
+
+
+def test_a_void_token_is_dropped_and_the_osc_registers_again(tmp_path: Path) -> None:
+    settings = StationSettings(db_path=str(tmp_path / "s.sqlite"), registration_key=registration_key(KEY))
+    token_file = tmp_path / "alpha.token"
+    token_file.write_text("a-token-from-a-station-whose-database-was-reset\n")
+    with StationServer(settings) as srv:
+        node, ctx, _ = make_osc(srv.url, security={"swarm_key": KEY}, token_file=str(token_file))
+        try:
+            assert wait_for(lambda: node.reports_ok >= 1, 10), "re-registered after the 401"
+            assert node.failures >= 1 and token_file.read_text().strip() == node.token
+        finally:
+            node.stop()
+            ctx.close()
+
+
+def test_the_osc_waits_as_long_as_retry_after_says(tmp_path: Path) -> None:
+    from antalate_lcm.station._settings import RateLimits
+
+    limits = RateLimits(reports_per_second=0.5, report_burst=1)
+    with StationServer(StationSettings(db_path=str(tmp_path / "s.sqlite"), rate_limits=limits)) as srv:
+        node, ctx, _ = make_osc(srv.url)  # reports at 20 Hz, max_backoff 0.5 s
+        try:
+            assert wait_for(lambda: node.failures >= 1, 5)
+            t0, failures = time.monotonic(), node.failures
+            assert wait_for(lambda: node.failures > failures or node.reports_ok >= 3, 10)
+            assert time.monotonic() - t0 >= 0.9, "Retry-After (whole seconds) outweighs a shorter backoff"
+        finally:
+            node.stop()
+            ctx.close()
+
+
+# ----------------------------------------------------------------------------- TLS
+
+
+def _make_tls(tmp: Path) -> tuple[Path, Path, Path]:
+    """A CA and a certificate for 127.0.0.1 signed by it, made with the openssl CLI."""
+    ca_key, ca, key, csr, cert = (tmp / n for n in ("ca.key", "ca.pem", "srv.key", "srv.csr", "srv.pem"))
+    ext = tmp / "ext.cnf"
+    ext.write_text("subjectAltName = IP:127.0.0.1\nbasicConstraints = CA:FALSE\n")
+
+    def run(*args: str) -> None:
+        subprocess.run(["openssl", *args], check=True, capture_output=True)
+
+    run("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", str(ca_key), "-out", str(ca), "-days", "2",
+        "-subj", "/CN=antalate test CA")
+    run("req", "-newkey", "rsa:2048", "-nodes", "-keyout", str(key), "-out", str(csr), "-subj", "/CN=127.0.0.1")
+    run("x509", "-req", "-in", str(csr), "-CA", str(ca), "-CAkey", str(ca_key), "-CAcreateserial",
+        "-out", str(cert), "-days", "2", "-extfile", str(ext))
+    return ca, cert, key
+
+
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="needs the openssl CLI")
+def test_tls_station_and_osc_with_a_ca_file(tmp_path: Path) -> None:
+    ca, cert, key = _make_tls(tmp_path)
+    settings = StationSettings(db_path=str(tmp_path / "s.sqlite"), api_keys=API_KEYS)
+    with StationServer(settings, tls_cert=str(cert), tls_key=str(key)) as srv:
+        assert srv.url.startswith("https://127.0.0.1:")
+        node, ctx, got = make_osc(srv.url, ca_file=str(ca))
+        try:
+            feed_state(ctx)
+            assert wait_for(lambda: node.token, 5), "the OSC trusts the station through its CA"
+            with StationClient(srv.url, OPERATOR_KEY, ca_file=str(ca)) as c:
+                assert [a["name"] for a in c.agents()] == ["alpha"]
+                c.command("RTL", target="alpha")
+            assert wait_for(lambda: got["cmd"], 5)
+        finally:
+            node.stop()
+            ctx.close()
+        stranger, ctx2, _ = make_osc(srv.url)  # no ca_file: the system CAs do not know this one
+        try:
+            assert wait_for(lambda: stranger.failures >= 2, 5) and stranger.token is None
+        finally:
+            stranger.stop()
+            ctx2.close()
+        with pytest.raises(httpx.ConnectError, match="CERTIFICATE_VERIFY_FAILED"):
+            httpx.get(f"{srv.url}/api/station")
+    with pytest.raises(AntalateError, match="TLS"):
+        StationServer(settings, tls_cert=str(cert))
+    with pytest.raises(AntalateError, match="cannot use TLS certificate"):
+        StationServer(settings, tls_cert=str(ca), tls_key=str(key))  # a key that is not the certificate's
+
+
+def test_a_missing_ca_file_is_a_config_error(tmp_path: Path) -> None:
+    cfg = parse_config({"agent": {"name": "alpha"}, "buses": {"lan": "memq://"},
+                        "osc": {"enabled": True, "server": "https://127.0.0.1:1", "ca_file": str(tmp_path / "no.pem")}})
+    ctx = Context(Bus(cfg.buses), Executor())
+    with pytest.raises(ConfigError, match="osc.ca_file"):
+        OscNode(cfg, ctx)
+    ctx.close()
+
+
+# ----------------------------------------------------------------------------- end to end over multicast
+
+
+@pytest.mark.netns
+def test_a_signed_command_through_the_station_flies_a_real_agent(
+    netns: NetNamespace, probe: Probe, tmp_path: Path
+) -> None:
+    """Station, agent (MC, HLC, OSC) and `antalate command` as separate processes on real multicast."""
+    api_key, swarm_file, key_file = "antk_e2e-operator-key-0123456789abcdefghijklmn", tmp_path / "swarm.key", \
+        tmp_path / "api.key"
+    swarm_file.write_text(KEY)
+    key_file.write_text(api_key)
+    station_cfg = tmp_path / "station.toml"
+    station_cfg.write_text(
+        f'[station]\nhost = "127.0.0.1"\nport = 8080\ndb = ":memory:"\nregistration_key = "{registration_key(KEY)}"\n'
+        f'[[api_keys]]\nname = "e2e"\nrole = "operator"\nsha256 = "{sha256_hex(api_key)}"\n'
+    )
+    station_log = open(tmp_path / "station.log", "w")  # noqa: SIM115 - closed below
+    netns.antalate("station", "--config", str(station_cfg), stdout=station_log, stderr=subprocess.STDOUT)
+    agent = AgentProcesses(netns, tmp_path, agent_config(
+        "alpha", security={"swarm_key": KEY}, osc={"enabled": True, "server": "http://127.0.0.1:8080", "rate": 5.0},
+    ))
+    agent.start("agent")
+    base = [sys.executable, "-m", "antalate_lcm.cli", "command", "--station", "http://127.0.0.1:8080",
+            "--api-key-file", str(key_file)]
+    try:
+        assert probe.wait("alpha/MC_STATE", "mc_state_t", timeout=20, state=mc_state_t.STANDBY)
+
+        def queued() -> dict[str, Any] | None:
+            r = netns.run([*base, "TAKEOFF", "--target", "alpha", "--swarm-key-file", str(swarm_file)])
+            return json.loads(r.stdout) if r.returncode == 0 else None  # 404 until the OSC registered
+
+        reply = wait_for(queued, 20)
+        assert reply, "the station never knew alpha"
+        seq = reply["queued"][0]["operator_cmd"]["seq"]
+        msg = probe.wait("alpha/MC_STATE", "mc_state_t", timeout=20, last_command_seq=seq)
+        assert msg is not None, "the MC never accepted the signed command"
+        assert msg["state"] in (mc_state_t.TAKEOFF, mc_state_t.MISSION)
+        # An unsigned command does not even get queued on a station whose agents hold a key.
+        r = netns.run([*base, "LAND", "--target", "alpha"])
+        assert r.returncode == 2 and "sign" in r.stderr
+        listing = netns.run([*base, "agents"])
+        assert listing.returncode == 0 and '"token"' not in listing.stdout
+    finally:
+        codes = agent.stop()
+        station_log.close()
+    assert all(c in (0, -15, None) for c in codes.values()), codes
+    assert "Traceback" not in agent.log("agent")

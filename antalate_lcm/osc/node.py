@@ -19,6 +19,7 @@ import json
 import logging
 import os
 import random
+import ssl
 import threading
 from pathlib import Path
 from typing import Any
@@ -58,8 +59,14 @@ class OscNode(Node):
         super().__init__(config, context)
         self.osc = config.osc
         self.url = self.osc.server.rstrip("/") + "/api/report"
-        if self.osc.ca_file and not os.access(self.osc.ca_file, os.R_OK):
-            raise ConfigError(config.source, "osc.ca_file", f"a readable PEM file, {self.osc.ca_file!r} is not")
+        self._verify: ssl.SSLContext | bool = True
+        if self.osc.ca_file:
+            try:
+                self._verify = ssl.create_default_context(cafile=self.osc.ca_file)
+            except (OSError, ssl.SSLError) as exc:
+                raise ConfigError(
+                    config.source, "osc.ca_file", f"a readable PEM file of CA certificates ({self.osc.ca_file}: {exc})"
+                ) from None
         self._token_file = Path(self.osc.token_file).expanduser() if self.osc.token_file else None
         self.token: str | None = self._load_token()
         self.reports_ok = 0
@@ -143,8 +150,7 @@ class OscNode(Node):
     # ------------------------------------------------------------------ the HTTP loop (own thread)
     def _run(self) -> None:
         period = 1.0 / self.osc.rate
-        verify: Any = self.osc.ca_file or True
-        with httpx.Client(timeout=self.osc.timeout, transport=self._transport, verify=verify) as client:
+        with httpx.Client(timeout=self.osc.timeout, transport=self._transport, verify=self._verify) as client:
             delay = 0.0
             while not self._stop.wait(delay):
                 try:

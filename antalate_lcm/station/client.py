@@ -16,6 +16,7 @@ Without a swarm key the commands go unsigned (for swarms that run without one).
 from __future__ import annotations
 
 import math
+import ssl
 import time
 from typing import Any
 
@@ -110,7 +111,7 @@ class StationClient:
         self.swarm_key = swarm_key or None
         self.sender = sender
         self._seq = 0
-        verify: Any = ca_file if ca_file else True
+        verify: Any = ssl.create_default_context(cafile=ca_file) if ca_file else True
         self._http = httpx.Client(
             base_url=self.url, timeout=timeout, verify=verify, transport=transport,
             headers={"Authorization": f"Bearer {api_key}"},

@@ -190,10 +190,12 @@ class _Link:
     def _on_pattern(self, channel: str, data: bytes) -> None:
         subs = tuple(s for s in self._patterns if s.regex is not None and s.regex.fullmatch(channel))
         if subs:
-            self._deliver(channel, data, subs)
+            # A channel that also has an exact route is counted there: one datagram, one count.
+            self._deliver(channel, data, subs, count=channel not in self._routes)
 
-    def _deliver(self, channel: str, data: bytes, subs: tuple[Subscription, ...]) -> None:
-        self.received += 1
+    def _deliver(self, channel: str, data: bytes, subs: tuple[Subscription, ...], *, count: bool = True) -> None:
+        if count:
+            self.received += 1
         # One decode per type per datagram, failures included: a bad datagram is one decode error
         # however many subscribers the channel has.
         decoded: dict[type, Any] = {}
@@ -209,7 +211,8 @@ class _Link:
                         msg = decoded[msg_type] = msg_type.decode(data)
                     except Exception as exc:  # noqa: BLE001 - any garbage must not kill the node
                         decoded[msg_type] = _UNDECODABLE
-                        self._count_decode_error(channel, msg_type, data, exc)
+                        if count:
+                            self._count_decode_error(channel, msg_type, data, exc)
                         continue
                 elif msg is _UNDECODABLE:
                     continue

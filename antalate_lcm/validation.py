@@ -57,9 +57,17 @@ def _reject_constant(name: str) -> Any:
     raise ValueError(f"{name} is not JSON (RFC 8259 has no {name})")
 
 
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"{text} overflows a double")
+    return value
+
+
 def strict_json(data: bytes) -> Any:
-    """``json.loads`` that refuses ``Infinity``, ``-Infinity`` and ``NaN`` (Python accepts them)."""
-    return json.loads(bytes(data).decode("utf-8"), parse_constant=_reject_constant)
+    """``json.loads`` that refuses ``Infinity``, ``NaN`` and numbers that overflow to them (``1e999``),
+    which Python's parser accepts."""
+    return json.loads(bytes(data).decode("utf-8"), parse_constant=_reject_constant, parse_float=_finite_float)
 
 
 def _payload(msg: payload_t) -> str | None:

@@ -241,3 +241,15 @@ def test_no_multicast_route_gives_the_fix() -> None:
     assert "memq://" in proc.stderr
     assert "Couldn't create LCM" not in proc.stderr, "liblcm's own noise is replaced by ours"
     assert issubclass(MulticastUnavailable, Exception)
+
+
+def test_a_bad_datagram_is_one_decode_error_however_many_subscribers(bus: Bus) -> None:
+    """Counted per datagram, not per subscriber: three subscribers of a channel, one garbage datagram."""
+    good: list[int] = []
+    for _ in range(3):
+        bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: good.append(m.state))
+    bus.subscribe("test", r"a/.*", mc_state_t, lambda ch, m: good.append(m.state), regex=True)
+    bus.publish("test", "a/MC_STATE", b"\x00garbage\x01")
+    bus.publish("test", "a/MC_STATE", _mc(3))
+    assert wait_for(lambda: len(good) == 4, 2)
+    assert bus.decode_errors() == {"a/MC_STATE": 1}

@@ -57,11 +57,54 @@ def test_unknown_arbiter_name() -> None:
     assert proc.returncode == 2 and "no [[bma]] named 'nope'" in proc.stderr and "swarm" in proc.stderr
 
 
+def one_line_error(proc: subprocess.CompletedProcess[str], *needles: str) -> str:
+    """The run failed with exit code 2 and one ``antalate: ...`` line holding every needle."""
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("antalate: "), proc.stderr
+    assert "Traceback" not in proc.stderr
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+    return lines[0]
+
+
 def test_duplicate_agent_names(tmp_path: Path) -> None:
-    cfg = tmp_path / "a.toml"
-    cfg.write_text('[agent]\nname = "same"\n[buses]\nlan = "memq://"\n')
-    proc = antalate("agent", str(cfg), str(cfg))
-    assert proc.returncode == 2 and "share the name" in proc.stderr
+    a, b, c = tmp_path / "a.toml", tmp_path / "b.toml", tmp_path / "c.toml"
+    a.write_text('[agent]\nname = "same"\n[buses]\nlan = "memq://"\n')
+    b.write_text('[buses]\nlan = "memq://"\n')
+    c.write_text('[buses]\nlan = "memq://"\n')
+    one_line_error(antalate("agent", str(a), str(a)), f"invalid config {a}: agent.name: ", "'same'", "the same file twice")
+    # --agents 2 names the copies of an unnamed agent sim-01, sim-02: two such configs collide
+    one_line_error(
+        antalate("agent", str(b), str(c), "--agents", "2"),
+        f"invalid config {c}: agent.name: ", "'sim-01' is also an agent of", str(b), "--agents 2",
+    )
+
+
+@pytest.mark.parametrize(
+    ("text", "key", "expected"),
+    [
+        ('[hlc]\ntelemetry_hz = "5"\n', "hlc.telemetry_hz", "valid number, got '5'"),
+        ('[osc]\nenabled = "yes"\n', "osc.enabled", "valid boolean, got 'yes'"),
+        ('[buses]\nlan = "http://127.0.0.1:8080"\n', "buses.lan", "not 'http://'"),
+        ('[buses]\nlan = "udpm://239.255.76.67:99999"\n', "buses.lan", "a port 1-65535"),
+        ('[buses]\nlan = "udpm://10.0.0.7:7667"\n', "buses.lan", "multicast group"),
+        ('[hlc]\nautopilot = ":Foo"\n', "hlc.autopilot", "an installed adapter (mavlink, sim, tello)"),
+        ('[hlc]\nautopilot = ".sim:X"\n', "hlc.autopilot", "an installed adapter (mavlink, sim, tello)"),
+        ('[hlc]\nautopilot = "nope"\n', "hlc.autopilot", "there is no adapter 'nope'"),
+        ('[hlc.autopilot]\nname = "sim"\nland_disarm_delay = -1\n', "hlc.autopilot.land_disarm_delay", "greater than or equal to 0"),
+        ('[osc]\nserver = "ftp://station"\n', "osc.server", "an http:// or https:// URL"),
+        ('[[bma]]\nname = "x"\n[[bma.behaviors]]\nplugin = "auto_operator"\nparams = { retry = "2" }\n',
+         "bma[0].behaviors[0].params.retry", "valid number"),
+        ('[[bma]]\nname = "x"\n[[bma.behaviors]]\nplugin = ".auto_operator:X"\n', "bma[0].behaviors[0].plugin", "package.module:ClassName"),
+    ],
+)
+def test_config_mistakes_are_one_line_naming_file_key_and_expectation(
+    tmp_path: Path, text: str, key: str, expected: str
+) -> None:
+    cfg = tmp_path / "field.toml"
+    cfg.write_text(text if "[buses]" in text else '[buses]\nlan = "memq://"\n' + text)
+    one_line_error(antalate("agent", str(cfg)), f"antalate: invalid config {cfg}: {key}: ", expected)
 
 
 def test_agents_n_needs_the_sim(tmp_path: Path) -> None:
@@ -100,3 +143,66 @@ def test_agent_runs_and_stops_cleanly_on_sigterm(tmp_path: Path) -> None:
     out, err = proc.communicate(timeout=20)
     assert proc.returncode == 0, err
     assert "INIT -> STANDBY" in err and "solo-03" in err
+
+
+_OPEN_BUSES = """
+import json, sys
+from antalate_lcm.bus import open_lcm
+from antalate_lcm.errors import AntalateError
+from antalate_lcm.lcm_url import open_failure
+out = {}
+for url in sys.argv[1:]:
+    try:
+        open_lcm(url).fileno()
+        out[url] = "opened"
+    except AntalateError as exc:
+        out[url] = type(exc).__name__ + ": " + str(exc).splitlines()[0]
+# liblcm failing for another reason on a routed group must not be blamed on the route
+out["routed group, liblcm refused"] = type(open_failure("udpm://239.255.76.68:7668", ["Couldn't create LCM"])).__name__
+print(json.dumps(out))
+"""
+
+
+def test_no_multicast_route_message_only_when_the_route_is_missing() -> None:
+    """In a namespace that routes only 239.255.76.68 (an agent's own bus, docs/lan.md) to lo."""
+    import json
+
+    reason = netns_unavailable()
+    if reason:
+        pytest.skip(f"no private network namespace: {reason}")
+    urls = [
+        "udpm://239.255.76.67:7667?ttl=0",  # valid, not routed: the route message
+        "udpm://239.255.76.68:7668?ttl=0",  # valid, routed: opens
+        "udpm://239.255.76.68:99999",  # routed group, impossible port
+        "udpm://10.0.0.1:7667",  # not a multicast group (and not routed either)
+        "http://127.0.0.1:8080",
+        "file:///nonexistent/flight.lcm",
+    ]
+    script = "ip link set lo up && ip route add 239.255.76.68/32 dev lo && exec \"$0\" -c \"$1\" \"$@\""
+    proc = subprocess.run(
+        ["unshare", "-rn", "sh", "-c", script, sys.executable, _OPEN_BUSES, *urls],
+        capture_output=True, text=True, timeout=60, cwd=REPO,
+    )
+    assert proc.returncode == 0, proc.stderr
+    got = json.loads(proc.stdout)
+    assert got[urls[0]].startswith("MulticastUnavailable: ") and "no route for multicast" in got[urls[0]]
+    assert got[urls[1]] == "opened"
+    assert got[urls[2]].startswith("BusUnavailable: ") and "a port 1-65535" in got[urls[2]]
+    assert got[urls[3]].startswith("BusUnavailable: ") and "multicast group" in got[urls[3]]
+    assert got[urls[4]].startswith("BusUnavailable: ") and "not 'http://'" in got[urls[4]]
+    assert got[urls[5]].startswith("BusUnavailable: ") and "No such file or directory" in got[urls[5]]
+    assert got["routed group, liblcm refused"] == "BusUnavailable"
+
+
+def test_a_bad_bus_url_without_a_route_is_a_config_error(tmp_path: Path) -> None:
+    reason = netns_unavailable()
+    if reason:
+        pytest.skip(f"no private network namespace: {reason}")
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text('[buses]\nlan = "udpm://239.255.76.67:99999?ttl=1"\n')
+    proc = subprocess.run(
+        ["unshare", "-rn", sys.executable, "-m", "antalate_lcm.cli", "mc", str(cfg)],
+        capture_output=True, text=True, timeout=60,
+    )
+    line = one_line_error(proc, f"invalid config {cfg}: buses.lan: expected a port 1-65535")
+    assert "ip route" not in line and "route" not in proc.stderr

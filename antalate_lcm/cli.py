@@ -32,6 +32,14 @@ def _cmd_spy(args: argparse.Namespace) -> int:
     return run_spy(url)
 
 
+def _cmd_keygen(args: argparse.Namespace) -> int:
+    """Print a new random swarm key (docs/security.md: generating and rotating keys)."""
+    from antalate_lcm.security import generate_key
+
+    print(generate_key())
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="antalate", description="Multi-agent UAV autonomy over LCM.")
     parser.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING, ERROR (default INFO)")
@@ -41,6 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("config", nargs="?", help="config file (default: the embedded defaults)")
     p.add_argument("--bus", help="bus name from the config (default: the default bus)")
     p.set_defaults(func=_cmd_spy)
+
+    p = sub.add_parser("keygen", help="print a new random swarm key for [security] swarm_key (docs/security.md)")
+    p.set_defaults(func=_cmd_keygen)
 
     for register in _registrars():
         register(sub)

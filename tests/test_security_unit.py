@@ -221,3 +221,13 @@ def test_dovrat_payload_with_wrong_types_is_not_a_detection(body: str) -> None:
 def test_dovrat_payload_that_is_right_is_a_detection() -> None:
     d = parse_detection_payload(b'{"detected": true, "count": 2, "nearest_range": 12.5, "nearest_bearing": -3}')
     assert d is not None and d.count == 2 and d.nearest_range == 12.5
+
+
+def test_antalate_keygen_prints_a_fresh_key_each_time() -> None:
+    import subprocess
+    import sys
+
+    run = [sys.executable, "-m", "antalate_lcm.cli", "keygen"]
+    a, b = (subprocess.run(run, capture_output=True, text=True, timeout=30) for _ in range(2))
+    assert a.returncode == 0 and b.returncode == 0, a.stderr
+    assert a.stdout.strip() != b.stdout.strip() and len(a.stdout.strip()) >= 43

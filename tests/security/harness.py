@@ -81,11 +81,12 @@ class PeerClient(JsonLinesProcess):
     def wait(self, channel: str, type_name: str, timeout: float = 15, since: int = 0, genuine: bool = False,
              **where: Any) -> dict[str, Any] | None:
         reply = self.call(op="wait", channel=channel, type=type_name, where=where, timeout=timeout, since=since,
-                          genuine=genuine)
+                          genuine=genuine and not DISARMED)
         return reply.get("msg") if reply["ok"] else None
 
     def history(self, channel: str, type_name: str, since: int = 0, genuine: bool = False) -> list[dict[str, Any]]:
-        return self._ok(op="history", channel=channel, type=type_name, since=since, genuine=genuine)["msgs"]
+        return self._ok(op="history", channel=channel, type=type_name, since=since,
+                        genuine=genuine and not DISARMED)["msgs"]
 
     def mark(self) -> int:
         return int(self._ok(op="mark")["index"])

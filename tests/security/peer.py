@@ -36,7 +36,20 @@ import lcm
 
 from antalate_lcm.security import sign, verify
 from antalate_lcm.topics import MESSAGE_TYPES
-from tests.probe import fill, matches, to_dict
+from tests.probe import matches, to_dict
+
+
+def fill(msg: Any, fields: dict[str, Any]) -> Any:
+    """Set fields from JSON: nested structs as objects, byte fields as hex strings."""
+    for key, value in fields.items():
+        current = getattr(msg, key)
+        if isinstance(value, dict) and hasattr(current, "__slots__"):
+            fill(current, value)
+        elif isinstance(current, bytes) and isinstance(value, str):
+            setattr(msg, key, bytes.fromhex(value))
+        else:
+            setattr(msg, key, value)
+    return msg
 
 
 class Peer:

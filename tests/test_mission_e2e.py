@@ -174,7 +174,11 @@ def test_altitude_not_gained_lands(launch: Callable[..., AgentProcesses], probe:
     mc(probe, M.STANDBY, since=probe.mark(), timeout=20)
 
 
-def test_link_loss_is_unrecoverable(launch: Callable[..., AgentProcesses], probe: Probe) -> None:
+def test_link_lost_for_good_rejects_commands_nobody_can_execute(
+    launch: Callable[..., AgentProcesses], probe: Probe
+) -> None:
+    """The link never comes back (tests/test_failsafes_e2e.py has it coming back): ERROR, and an RTL
+    is rejected with the reason while the HLC reports LLC_DOWN (the vehicle is on its own failsafe)."""
     agent = launch(sim={"link_loss_after": 1.5}, hlc={"link_timeout": 1.0})
     mc(probe, M.STANDBY)
     command(probe, O.TAKEOFF, seq=1)
@@ -183,6 +187,7 @@ def test_link_loss_is_unrecoverable(launch: Callable[..., AgentProcesses], probe
     command(probe, O.RTL, seq=2)
     mark = probe.mark()
     assert mc(probe, M.ERROR, since=mark)["last_command_seq"] == 1
+    assert "the autopilot cannot be reached" in agent.log("mc")
     assert agent.alive("mc") and agent.alive("hlc")
 
 

@@ -214,7 +214,8 @@ _RESYNC = frozenset({S.INIT, S.HLC_LOST})  # where the MC takes the HLC's word f
 
 #: The MC transition table, in priority order (the first row matching state, event and guard wins).
 MC_TABLE: tuple[McRow, ...] = (
-    McRow(frozenset(S) - {S.ERROR}, E.HLC_LLC_DOWN, S.ERROR, "HLC lost its autopilot"),
+    McRow(frozenset(S) - {S.ERROR}, E.HLC_LLC_DOWN, S.ERROR,
+          "HLC lost its autopilot link: the vehicle is on its own failsafe until the link is back"),
     McRow(frozenset(S) - {S.INIT, S.HLC_LOST}, E.HLC_TIMEOUT, S.HLC_LOST, "HLC lost"),
     McRow(_RESYNC, E.HLC_READY, S.STANDBY, "HLC ready"),
     McRow(_RESYNC, E.HLC_GAINING_ALTITUDE, S.TAKEOFF, "restart resync: HLC gaining altitude"),

@@ -14,7 +14,7 @@ import pytest
 from antalate_lcm.geo import offset
 from tests.conftest import _netns_reason
 from tests.netns import NetNamespace
-from tests.security.harness import HOME, SWARM_KEY, PeerClient, Swarm, agent_doc
+from tests.security.harness import HOME, STATION_URL, SWARM_KEY, PeerClient, Swarm, agent_doc
 
 _RESULTS: dict[str, str] = {}
 
@@ -77,19 +77,22 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
     s = Swarm(ns, tmp)
     try:
         s.start_station()
-        osc = {"enabled": True, "server": "http://127.0.0.1:18080", "rate": 5.0}
+        osc = {"enabled": True, "server": STATION_URL, "rate": 5.0}
         bma = [{"name": "swarm", "behaviors": [{
             "plugin": "dovrat_swarm", "activate_on": ["MISSION"],
             "params": {"forward_speed": 1.0, "detection_source": "any"},
         }]}]
         for name, north in (("alpha", 0.0), ("delta", 40.0)):
-            s.agent(name, agent_doc(name, tmp / "state", home=_home(north), osc=osc, bma=bma))
+            token_file = str(tmp / f"{name}.token")
+            s.agent(name, agent_doc(name, tmp / "state", home=_home(north), osc={**osc, "token_file": token_file},
+                                    bma=bma))
         s.start_agents_process("alpha-delta", ["alpha", "delta"])
         for name, north in (("bravo", 80.0), ("charlie", 120.0)):
             run = s.agent(name, agent_doc(name, tmp / "state", home=_home(north)))
             run.start("hlc")
             run.start("mc")
-        s.attacker = s.peer("the attacker", None)
+        # The attacker is another host as far as the station can tell (its own source address).
+        s.attacker = s.peer("the attacker", None, source="127.0.0.2")
         s.operator = s.peer("the operator", SWARM_KEY)
         for run in s.agents.values():
             run.wait_mc("STANDBY", timeout=60)

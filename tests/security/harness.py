@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from antalate_lcm.station._auth import new_api_key, registration_key, sha256_hex
 from tests.agent_harness import FAST_SIM, to_toml
 from tests.jsonl import JsonLinesProcess
 from tests.netns import NetNamespace, stop_process, wait_for
@@ -206,18 +207,32 @@ class Swarm:
         self._shared: dict[str, Path] = {}
         self.station: subprocess.Popen[str] | None = None
         self.station_log = tmp / "station.log"
+        self.station_db = tmp / "station.sqlite"
+        self.api_keys: dict[str, str] = {}
         self.peers: list[PeerClient] = []
         self.attacker: PeerClient | None = None
         self.operator: PeerClient | None = None
         self._op_seq = int(time.time()) % 100_000 * 10
 
     # -- processes ------------------------------------------------------------------------------
-    def start_station(self, *extra: str) -> None:
+    def start_station(self) -> None:
+        """``antalate station --config station.toml``: an operator key, a read-only key, the
+        registration key derived from the swarm key, the default rate limits."""
+        self.api_keys = {"operator": new_api_key(), "read-only": new_api_key()}
+        doc: dict[str, Any] = {
+            "station": {"host": "127.0.0.1", "port": STATION_PORT, "db": str(self.station_db)},
+            "api_keys": [{"name": f"{role}-person", "role": role, "sha256": sha256_hex(key)}
+                         for role, key in self.api_keys.items()],
+        }
+        if not DISARMED:
+            doc["station"]["registration_key"] = registration_key(SWARM_KEY)
+        path = self.tmp / "station.toml"
+        path.write_text(to_toml(doc))
         out = open(self.station_log, "w")  # noqa: SIM115 - the process owns it
-        self.station = self.netns.antalate(
-            "station", "--db", str(self.tmp / "station.sqlite"), "--port", str(STATION_PORT), *extra,
-            stdout=out, stderr=subprocess.STDOUT,
-        )
+        self.station = self.netns.antalate("station", "--config", str(path), stdout=out, stderr=subprocess.STDOUT)
+
+    def auth(self, role: str) -> dict[str, str]:
+        return {"Authorization": f"Bearer {self.api_keys[role]}"}
 
     def station_text(self) -> str:
         return self.station_log.read_text(errors="replace")
@@ -241,10 +256,12 @@ class Swarm:
         path = self._shared.get(name)
         return path.read_text(errors="replace") if path is not None else ""
 
-    def peer(self, what: str, key: str | None) -> PeerClient:
+    def peer(self, what: str, key: str | None, source: str | None = None) -> PeerClient:
         args = ["-m", "tests.security.peer", LAN, LOCAL, "--window", str(WINDOW)]
         if key is not None:
             args += ["--key", key]
+        if source is not None:
+            args += ["--source", source]
         proc = self.netns.python(*args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         client = PeerClient(proc, what)
         self.peers.append(client)

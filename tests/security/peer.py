@@ -53,7 +53,7 @@ def fill(msg: Any, fields: dict[str, Any]) -> Any:
 
 
 class Peer:
-    def __init__(self, urls: list[str], key: str | None, window: float) -> None:
+    def __init__(self, urls: list[str], key: str | None, window: float, source: str | None = None) -> None:
         # Every bus the swarm uses (the LAN group and the agents' "local" ttl=0 group): on one host,
         # or on a LAN where the attacker sends with a larger ttl, both reach the agents' sockets.
         self.buses = [lcm.LCM(url) for url in urls]
@@ -64,7 +64,9 @@ class Peer:
         for lc in self.buses:
             lc.subscribe(".*", self._on_msg).set_queue_capacity(1_000_000)
             threading.Thread(target=self._loop, args=(lc,), daemon=True).start()
-        self.http = httpx.Client(timeout=10.0)
+        # ``source``: the address HTTP requests come from (the attacker is another host than the agents).
+        transport = httpx.HTTPTransport(local_address=source) if source else None
+        self.http = httpx.Client(timeout=10.0, transport=transport)
 
     def _on_msg(self, channel: str, data: bytes) -> None:
         with self.cond:
@@ -186,8 +188,9 @@ def main() -> None:
     parser.add_argument("url", nargs="+")
     parser.add_argument("--key", default=None)
     parser.add_argument("--window", type=float, default=5.0)
+    parser.add_argument("--source", default=None, help="local address of HTTP requests")
     args = parser.parse_args()
-    peer = Peer(args.url, args.key, args.window)
+    peer = Peer(args.url, args.key, args.window, args.source)
     print(json.dumps({"ok": True, "ready": True}), flush=True)
     for line in sys.stdin:
         try:

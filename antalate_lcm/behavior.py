@@ -45,7 +45,8 @@ class Behavior(ABC):
     Subclasses declare, as class attributes:
 
     - ``Params``: a pydantic model of the ``params`` table. It is validated when the config is
-      loaded, so a bad value stops the program before any node starts, naming the key.
+      loaded, strictly (`antalate_lcm.strict`: "5" is not a number), so a bad value stops the
+      program before any node starts, naming the key.
     - ``topics``: the topic names the behavior uses, each with the message type it expects (or
       ``None`` for any). A config may remap them (``topics = {MODE = "SWARM_MODE"}``); the remap and
       the types are checked at load.

@@ -213,6 +213,9 @@ class BmaConfig(_Section):
     #: typo fails at load. Empty = any string. MC_STATE arbiters always check mc_state_t's names.
     states: list[str] = Field(default_factory=list)
     behaviors: list[BehaviorConfig] = Field(default_factory=list)
+    #: s before a behavior that raised is restarted while the state still activates it; doubled
+    #: for each failure in a row (up to 60 s). 0 = it stays down until the state leaves and comes back.
+    restart_backoff: NonNegative = 2.0
 
 
 class SecurityConfig(_Section):

@@ -200,7 +200,7 @@ def test_a_raising_behavior_is_deactivated_and_reported_while_others_run(where: 
     config = make_config([_bma([
         {"plugin": RAISER, "activate_on": ["TAKEOFF", "MISSION"], "tick_hz": 50.0, "params": {"where": where}},
         {"plugin": REC, "activate_on": ["TAKEOFF", "MISSION"], "tick_hz": 50.0},
-    ])])
+    ], restart_backoff=0)])
     with harness(config) as h:
         status = h.record("ARBITER", arbiter="main")
         node = h.bma("main")
@@ -244,7 +244,7 @@ def test_failing_constructor_and_on_deactivate_are_reported() -> None:
 def test_failed_behavior_is_retried_only_after_the_state_leaves() -> None:
     config = make_config([_bma([
         {"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "on_activate"}},
-    ], republish_hz=50.0)])
+    ], republish_hz=50.0, restart_backoff=0)])
     with harness(config) as h:
         node = h.bma("main")
         raiser = h.sync(lambda: node.behavior("Raiser"))
@@ -255,6 +255,43 @@ def test_failed_behavior_is_retried_only_after_the_state_leaves() -> None:
         h.mc_state("RTL")
         h.mc_state("MISSION")
         assert wait_for(lambda: raiser.deactivations == 2)
+
+
+def test_failed_behavior_is_restarted_after_a_back_off_that_doubles() -> None:
+    """A behavior that met one bad input flies again in the same mission; a broken one is not
+    restarted in a tight loop: 0.2 s, then 0.4 s, then 0.8 s (the default is 2 s)."""
+    config = make_config([_bma([
+        {"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "on_activate"}},
+    ], restart_backoff=0.2)])
+    with harness(config) as h:
+        node = h.bma("main")
+        raiser = h.sync(lambda: node.behavior("Raiser"))
+        started = time.monotonic()
+        h.mc_state("MISSION")
+        assert wait_for(lambda: raiser.deactivations >= 3, 5)
+        # three failures: the first at once, then after 0.2 s and 0.4 s of back-off
+        assert time.monotonic() - started >= 0.6
+        assert h.sync(node.failures) == {"Raiser": "ValueError: cannot start (in on_activate)"}
+        h.mc_state("RTL")  # leaving the state: no restart is pending any more
+        n = raiser.deactivations
+        assert wait_for(lambda: h.sync(lambda: node.state) == "RTL")
+        time.sleep(1.0)  # longer than the pending 0.8 s back-off: it must not start in RTL
+        h.settle()
+        assert raiser.deactivations == n and h.sync(node.active) == []
+
+
+def test_a_behavior_that_fails_once_runs_again_in_the_same_state() -> None:
+    config = make_config([_bma([
+        {"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "handler"}},
+    ], restart_backoff=0.1)])
+    with harness(config) as h:
+        node = h.bma("main")
+        h.mc_state("MISSION")
+        assert wait_for(lambda: h.sync(node.active) == ["Raiser"])
+        h.probe.publish("TELEMETRY", telemetry_t())  # one bad message
+        assert wait_for(lambda: h.sync(node.failures))
+        assert wait_for(lambda: h.sync(node.active) == ["Raiser"], 5)  # back, still in MISSION
+        assert h.sync(node.failures) == {}
 
 
 # ---------------------------------------------------------------------- cascading

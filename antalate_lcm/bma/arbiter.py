@@ -11,10 +11,11 @@ Rules, per behavior (docs/design.md §8):
   e.g. keep a video recording through RTL after it started in MISSION).
 
 A failed behavior is not re-activated by the periodic republication of the state it failed in:
-it is *blocked* until the arbiter receives a state outside its ``activate_on``, and the next
-activating state then tries it again. That keeps a broken behavior from being restarted at 5 Hz,
-while a new flight (STANDBY → … → MISSION) gives it a fresh chance. A behavior that could not even
-be constructed is blocked for good.
+it is *blocked* until the arbiter receives a state outside its ``activate_on`` (the next activating
+state then tries it again) or until the node lifts the block with :meth:`Arbiter.retry` after a
+back-off (``[[bma]] restart_backoff``). That keeps a broken behavior from being restarted at 5 Hz,
+while one that met a bad input once flies again in the same mission. A behavior that could not
+even be constructed is blocked for good.
 """
 
 from __future__ import annotations
@@ -114,6 +115,14 @@ class Arbiter:
         # on_deactivate, or in a hold state) is retried at the next activating state anyway.
         slot.blocked = permanent or self.state in slot.rule.activate_on
         slot.permanent = slot.permanent or permanent
+
+    def retry(self, name: str) -> bool:
+        """Lift a failure block while the state still activates ``name``; True if it should start now."""
+        slot = self._slots[name]
+        if slot.active or slot.permanent or not slot.blocked or self.state not in slot.rule.activate_on:
+            return False
+        slot.blocked = False
+        return True
 
     # ------------------------------------------------------------------ views
     def is_active(self, name: str) -> bool:

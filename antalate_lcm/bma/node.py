@@ -17,6 +17,10 @@ from antalate_lcm.config import BmaConfig, Config
 from antalate_lcm.msgs import arbiter_status_t, mc_state_t
 from antalate_lcm.node import Context, Node
 
+#: s: the longest restart back-off, and how long a behavior must run for its failures to be forgotten.
+_MAX_BACKOFF = 60.0
+_STREAK_RESET = 60.0
+
 
 class _Slot:
     """A behavior instance with its context and the plan it came from."""
@@ -48,6 +52,10 @@ class BmaNode(Node):
         self._reading_mc = self.plan.state_type is mc_state_t
         self._bad_state_log = RateLimitedLog(self.log)
         self._publish_status = lambda: None
+        #: Per behavior: failures in a row and when it last started (a restart back-off doubles per
+        #: failure, and forgets them once the behavior has run for ``_STREAK_RESET`` s).
+        self._streak: dict[str, int] = {}
+        self._started_at: dict[str, float] = {}
 
     # ------------------------------------------------------------------ views (executor thread or tests)
     @property
@@ -153,6 +161,7 @@ class BmaNode(Node):
         # Active in the arbiter's eyes before the hook runs, so a failure inside it is handled as
         # "deactivate an active behavior" (on_deactivate attempted to release a half-done start).
         self._arbiter.activated(name)
+        self._started_at[name] = self.now
         if not ctx.guard("on_activate", behavior.on_activate):
             return
         self.log.info("activated %s", name)
@@ -185,10 +194,15 @@ class BmaNode(Node):
         self.log.info("deactivated %s (%s)", name, why)
 
     def _fail(self, name: str, where: str, exc: BaseException) -> None:
-        """A hook, handler or timer of ``name`` raised: deactivate it, report it, carry on."""
+        """A hook, handler or timer of ``name`` raised: deactivate it, report it, restart it after a
+        back-off if the state still wants it (docs/behaviors.md), carry on."""
         slot = self._slots[name]
         reason = f"{failure_reason(exc)} (in {where})"
-        self.log.error("behavior %s failed and is deactivated: %s", name, reason, exc_info=exc)
+        if self.now - self._started_at.get(name, self.now) >= _STREAK_RESET:
+            self._streak[name] = 0
+        streak = self._streak[name] = self._streak.get(name, 0) + 1
+        self.log.error("behavior %s failed and is deactivated (failure %d in a row): %s", name, streak, reason,
+                       exc_info=exc)
         if self._arbiter.is_active(name):
             self._arbiter.deactivated(name)
             if slot.ctx is not None:
@@ -200,6 +214,16 @@ class BmaNode(Node):
                     self.log.warning("%s: on_deactivate after the failure raised too", name, exc_info=True)
         self._arbiter.failed(name, reason)
         self._publish_status()
+        backoff = self.bma.restart_backoff
+        if backoff > 0 and self._arbiter.state in slot.plan.rule.activate_on:
+            delay = min(backoff * 2 ** (streak - 1), _MAX_BACKOFF)
+            self.log.warning("%s will be restarted in %g s if the state still activates it", name, delay)
+            self.call_later(delay, lambda: self._retry(name))
+
+    def _retry(self, name: str) -> None:
+        if self.started and self._arbiter.retry(name):
+            self.log.info("restarting %s after its failure", name)
+            self.apply_state(self._arbiter.state)
 
     # ------------------------------------------------------------------ status
     def _status(self) -> arbiter_status_t:

@@ -16,7 +16,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
 from antalate_lcm.autopilot import AutopilotError, AutopilotState, FlightMode, Frame, load_autopilot
-from antalate_lcm.autopilot.mavlink import DEFAULTS, VELOCITY_TYPE_MASK, MavlinkAutopilot
+from antalate_lcm.autopilot.mavlink import DEFAULTS, VELOCITY_TYPE_MASK, MavlinkAutopilot, Params
 from tests.emulators.mavlink_vehicle import MavlinkVehicle, VehicleSnapshot
 
 # Short delays and brisk kinematics; heartbeats at 10 Hz so mode confirmations are quick.
@@ -87,14 +87,19 @@ def fly(ap: MavlinkAutopilot, vehicle: MavlinkVehicle, alt: float = 2.0) -> None
 def test_registered_and_parameters_are_validated() -> None:
     assert load_autopilot("mavlink") is MavlinkAutopilot
     assert MavlinkAutopilot.name == "mavlink" and MavlinkAutopilot.blocking
-    with pytest.raises(ValueError, match="conection"):
+    assert MavlinkAutopilot.params_model is Params
+    assert isinstance(MavlinkAutopilot.validate_params({"cells": 4}), Params)  # what the config loader calls
+    with pytest.raises(ValueError, match="parameter 'conection': Extra inputs are not permitted"):
         MavlinkAutopilot({"conection": "tcp:127.0.0.1:5760"})
+    with pytest.raises(ValueError, match="parameter 'velocity_hold': Extra"):  # renamed: setpoint_timeout
+        MavlinkAutopilot({"velocity_hold": 3.0})
     for bad in ({"source_system": 0}, {"source_system": 256}, {"target_component": -1}, {"baud": "fast"},
                 {"ack_timeout": 0}, {"stream_rate_hz": math.nan}, {"velocity_resend_hz": -1}, {"connection": ""},
-                {"heartbeat_hz": True}):
-        with pytest.raises(ValueError, match=next(iter(bad))):
+                {"heartbeat_hz": True}, {"setpoint_timeout": 0}, {"setpoint_timeout": 11.0}, {"cells": -1},
+                {"configure_vehicle": "yes"}, {"link_stale_after": math.inf}, {"signing_key": 7}):
+        with pytest.raises(ValueError, match=rf"parameter '{next(iter(bad))}': "):
             MavlinkAutopilot(bad)
-    ap = MavlinkAutopilot({"velocity_resend_hz": 0, "velocity_hold": 0})  # 0 = off / no limit: allowed
+    ap = MavlinkAutopilot({"velocity_resend_hz": 0, "connect_timeout": 10})  # 0 = never resend; an int is a float
     assert ap.source_system == DEFAULTS["source_system"] == 245
     # the constructor does no I/O; before connect() nothing is known
     assert ap.state() == AutopilotState(connected=False, link_age=math.inf)
@@ -267,39 +272,44 @@ def test_velocity_in_ned_and_body_frames(vehicle: MavlinkVehicle, ap: MavlinkAut
     vehicle_until(vehicle, lambda s: s.east > east0 + 1.0, 2)
     snap = vehicle.snapshot()
     assert snap.vd > 0.3 and abs(snap.vn) < 0.5
+    # deg/s in the API, rad/s on the wire only
+    rates = {round(r.fields["yaw_rate"], 6) for r in vehicle.received_of("SET_POSITION_TARGET_LOCAL_NED")}
+    assert round(math.radians(90.0), 6) in rates and max(rates) <= math.radians(90.0) + 1e-6
     frames = {r.fields["coordinate_frame"] for r in vehicle.received_of("SET_POSITION_TARGET_LOCAL_NED")}
     assert frames == {mav2.MAV_FRAME_LOCAL_NED, mav2.MAV_FRAME_BODY_OFFSET_NED}
     with pytest.raises(AutopilotError, match="non-finite"):
         ap.set_velocity(math.inf, 0.0, 0.0, 0.0, Frame.NED)
 
 
-@pytest.mark.parametrize("ap", [{"velocity_hold": 0.0}], indirect=True)
-def test_velocity_is_resent_beyond_the_guided_timeout_until_hover(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+@pytest.mark.parametrize("vehicle", [{"guided_timeout": 0.4}], indirect=True)
+@pytest.mark.parametrize("ap", [{"setpoint_timeout": 0.8}], indirect=True)
+def test_no_setpoint_older_than_the_setpoint_timeout_is_sent(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
     fly(ap, vehicle, alt=1.5)
     ap.set_velocity(1.0, 0.0, 0.0, 0.0, Frame.NED)  # once
-    time.sleep(3.6)  # the emulator's guided timeout is ArduCopter's 3 s
-    snap = vehicle.snapshot()
-    assert snap.guided_submode == "velocity" and snap.vn > 0.9, snap
-    assert ap.resending
-    sent = [r for r in vehicle.received_of("SET_POSITION_TARGET_LOCAL_NED") if r.fields["vx"] == 1.0]
-    assert 10 <= len(sent) <= 20  # 4 Hz
+    time.sleep(0.7)
+    assert vehicle.snapshot().guided_submode == "velocity"  # kept alive past the 0.4 s GUID_TIMEOUT
+    assert wait_for(lambda: not ap.resending, 1.0)
+    vehicle_until(vehicle, lambda s: s.guided_submode == "hover" and abs(s.vn) < 0.1, 2)
+    sent = [r.t for r in vehicle.received_of("SET_POSITION_TARGET_LOCAL_NED") if r.fields["vx"] == 1.0]
+    assert 3 <= len(sent) <= 5, sent  # the call plus resends at 4 Hz for 0.8 s
+    assert sent[-1] - sent[0] < 0.8  # the vehicle clock sees the age the adapter's clock allowed
+    count = len(vehicle.received_of("SET_POSITION_TARGET_LOCAL_NED"))
+    time.sleep(0.5)
+    assert len(vehicle.received_of("SET_POSITION_TARGET_LOCAL_NED")) == count
+
+
+@pytest.mark.parametrize("ap", [{"setpoint_timeout": 5.0}], indirect=True)
+def test_hover_is_resent_for_a_second_then_let_go(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+    fly(ap, vehicle, alt=1.5)
+    ap.set_velocity(1.0, 0.0, 0.0, 0.0, Frame.NED)
+    time.sleep(1.2)
+    assert ap.resending and vehicle.snapshot().vn > 0.9
     ap.set_velocity(0.0, 0.0, 0.0, 0.0, Frame.BODY)  # the HLC's hover: sent, kept for a second, then let go
     vehicle_until(vehicle, lambda s: abs(s.vn) < 0.05, 2)
     assert wait_for(lambda: not ap.resending, 2)
     count = len(vehicle.received_of("SET_POSITION_TARGET_LOCAL_NED"))
     time.sleep(0.6)
     assert len(vehicle.received_of("SET_POSITION_TARGET_LOCAL_NED")) == count
-
-
-@pytest.mark.parametrize("vehicle", [{"guided_timeout": 0.4}], indirect=True)
-@pytest.mark.parametrize("ap", [{"velocity_hold": 0.8}], indirect=True)
-def test_velocity_hold_caps_resending_without_fresh_commands(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
-    fly(ap, vehicle, alt=1.5)
-    ap.set_velocity(1.0, 0.0, 0.0, 0.0, Frame.NED)
-    time.sleep(0.7)
-    assert vehicle.snapshot().guided_submode == "velocity"  # kept alive past the 0.4 s guided timeout
-    assert wait_for(lambda: not ap.resending, 1.0)
-    vehicle_until(vehicle, lambda s: s.guided_submode == "hover" and abs(s.vn) < 0.1, 2)
 
 
 def test_land_lands_and_disarms(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
@@ -348,6 +358,7 @@ def test_pilot_switching_to_loiter_is_a_manual_override(vehicle: MavlinkVehicle,
     assert vehicle.pilot_switch_mode("LOITER")
     s = state_until(ap, lambda s: s.mode == "LOITER", 1)
     assert not s.autonomous and s.flight_mode is FlightMode.MANUAL and s.armed and s.in_air
+    assert s.failsafe == ""  # no failsafe explains it: a pilot
     assert not ap.resending  # a pilot has it: never fight them with an old target
     ap.set_velocity(2.0, 0.0, 0.0, 0.0, Frame.NED)  # ignored outside GUIDED, not kept
     assert not ap.resending

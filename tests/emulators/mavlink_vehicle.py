@@ -28,7 +28,7 @@ Flying
     ``climb_rate``. SET_POSITION_TARGET_LOCAL_NED in GUIDED: velocity targets (+ yaw rate or yaw) in
     LOCAL_NED / LOCAL_OFFSET_NED or, rotated by the heading, BODY_NED / BODY_OFFSET_NED; position
     targets too. The velocity follows with a first-order lag (``velocity_tau``); without a new target
-    for ``guided_timeout`` (3 s) the copter stops. A velocity target during the takeoff climb ends the
+    for GUID_TIMEOUT (``guided_timeout``, 3 s) the copter stops. A velocity target during the takeoff climb ends the
     takeoff, as in ArduCopter. Targets are ignored on the ground and outside GUIDED. RTL climbs to
     ``rtl_alt`` if set (0 = return at the current altitude), flies home at ``rtl_speed``, lands and
     disarms; LAND descends (``land_speed_high`` above ``land_alt_low``, then ``land_speed``) and
@@ -54,11 +54,38 @@ pushes to a fixed address like SITL's ``udpclient`` (pymavlink ``udpin:HOST:PORT
 accepts any number of TCP clients (pymavlink ``tcp:HOST:PORT``). Ports are read back from
 ``udp_port``/``tcp_port`` after ``start()``.
 
-Not emulated: missions, parameters, RC input, GCS/battery failsafes, message signing.
+Parameters (:data:`PARAMS`, ArduCopter 4.x names, defaults and types; ``params={...}`` overrides)
+    PARAM_REQUEST_READ (by name or index), PARAM_REQUEST_LIST and PARAM_SET answered with PARAM_VALUE,
+    as ArduPilot does (an unknown name gets no answer). They drive the failsafes below.
+    ``gcs_sysid_param="MAV_GCS_SYSID"`` names the GCS id parameter as Copter 4.7 does.
+Failsafes (modelled on ArduCopter's events.cpp, fence.cpp, ekf_check.cpp and AP_BattMonitor)
+    GCS: with FS_GCS_ENABLE != 0, once a HEARTBEAT from system SYSID_MYGCS was heard, FS_GCS_TIMEOUT s
+    without one -> "GCS Failsafe" and the FS_GCS_ENABLE action (1 RTL, 5 LAND, 7 BRAKE; 3/4/6 -> RTL),
+    disarm if armed on the ground; "GCS Failsafe Cleared" when heartbeats return. GUID_TIMEOUT: a
+    velocity target older than it -> the copter stops. Fence: FENCE_ENABLE with a circle of FENCE_RADIUS
+    around home and FENCE_ALT_MAX; a new breach while armed -> FENCE_STATUS breach, the SYS_STATUS
+    GEOFENCE health bit cleared, "Fence Breached" and the FENCE_ACTION (1/3/5 RTL, 2 LAND, 4 BRAKE,
+    0 report only). Battery: voltage below BATT_LOW_VOLT for BATT_LOW_TIMER s (or below BATT_CRT_VOLT)
+    -> BATTERY_STATUS charge_state LOW/CRITICAL, SYS_STATUS BATTERY unhealthy, "Battery 1 is low
+    10.40V used 0 mAh" and the BATT_FS_LOW_ACT / BATT_FS_CRT_ACT action (1 LAND, 2/3/4 RTL, 5 disarm).
+    EKF: ``fail_ekf()`` -> variances above FS_EKF_THRESH, SYS_STATUS AHRS unhealthy, after 1 s
+    "EKF variance" and the FS_EKF_ACTION (1 LAND if the mode needs a position, 2 ALT_HOLD, 3 LAND).
+Battery telemetry
+    SYS_STATUS ``voltage_battery`` and BATTERY_STATUS: the pack voltage in ``voltages[0]`` (ArduPilot's
+    analog monitors) or, with ``per_cell_monitor=True``, one entry per cell of ``battery_cells``;
+    ``report_remaining=False`` sends ``battery_remaining`` -1 as many real vehicles do.
+MAVLink 2 signing
+    ``signing_key=<32 bytes>``: everything sent is signed; unsigned or badly signed messages are dropped
+    and counted (``signing_rejected``), except RADIO_STATUS, as ArduPilot does.
+
+Not emulated: missions, RC input, SmartRTL (its failsafe options fly RTL).
 
 Faults: ``stop_heartbeats()`` (the link goes silent both ways: nothing is sent, nothing is received)
-and ``resume_heartbeats()``; ``refuse_arm = True``; ``pilot_switch_mode("LOITER")`` (an RC mode switch:
-no COMMAND_ACK, guided targets dropped); ``set_battery(pct)``.
+and ``resume_heartbeats()``; ``cut_link()`` / ``restore_link()`` (a TCP link or buffering radio: during
+the cut nothing is delivered either way but everything is kept, and delivered at once on restore);
+``refuse_arm = True``; ``pilot_switch_mode("LOITER")`` (an RC mode switch: no COMMAND_ACK, guided
+targets dropped); ``set_battery(pct)``; ``set_voltage(volts)``; ``fail_ekf()``; ``inject(msg, key)``
+(a message from someone else on the link: unsigned, or signed with another key).
 
 CLI (to run it as a separate process, e.g. in a network namespace)::
 
@@ -110,20 +137,35 @@ NOT_ARMABLE = frozenset(
 DEFAULT_RATES: dict[str, float] = {
     "GLOBAL_POSITION_INT": 5.0, "ATTITUDE": 5.0, "SYS_STATUS": 1.0, "EXTENDED_SYS_STATE": 1.0,
     "GPS_RAW_INT": 1.0, "EKF_STATUS_REPORT": 1.0, "VFR_HUD": 2.0, "LOCAL_POSITION_NED": 0.0,
-    "HOME_POSITION": 0.0, "SYSTEM_TIME": 0.0,
+    "HOME_POSITION": 0.0, "SYSTEM_TIME": 0.0, "BATTERY_STATUS": 1.0, "FENCE_STATUS": 1.0,
 }
 # REQUEST_DATA_STREAM groups (ArduCopter's grouping, restricted to the messages emulated here).
 DATA_STREAMS: dict[int, tuple[str, ...]] = {
-    mav2.MAV_DATA_STREAM_EXTENDED_STATUS: ("SYS_STATUS", "GPS_RAW_INT", "EXTENDED_SYS_STATE"),
+    mav2.MAV_DATA_STREAM_EXTENDED_STATUS: ("SYS_STATUS", "GPS_RAW_INT", "EXTENDED_SYS_STATE", "FENCE_STATUS"),
     mav2.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),
     mav2.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
     mav2.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
-    mav2.MAV_DATA_STREAM_EXTRA3: ("EKF_STATUS_REPORT", "SYSTEM_TIME"),
+    mav2.MAV_DATA_STREAM_EXTRA3: ("EKF_STATUS_REPORT", "SYSTEM_TIME", "BATTERY_STATUS"),
     mav2.MAV_DATA_STREAM_RAW_SENSORS: (),
     mav2.MAV_DATA_STREAM_RC_CHANNELS: (),
     mav2.MAV_DATA_STREAM_RAW_CONTROLLER: (),
 }
 FORCE_MAGIC = 21196  # param2 of ARM_DISARM that bypasses checks (ArduPilot convention)
+
+_I8, _I16, _R32 = mav2.MAV_PARAM_TYPE_INT8, mav2.MAV_PARAM_TYPE_INT16, mav2.MAV_PARAM_TYPE_REAL32
+#: ArduCopter 4.x parameters the emulator keeps: name -> (default, MAV_PARAM_TYPE).
+PARAMS: dict[str, tuple[float, int]] = {
+    "SYSID_THISMAV": (1, _I16), "SYSID_MYGCS": (255, _I16), "FS_GCS_ENABLE": (0, _I8),
+    "FS_GCS_TIMEOUT": (5.0, _R32), "GUID_TIMEOUT": (3.0, _R32), "FENCE_ENABLE": (0, _I8),
+    "FENCE_ACTION": (1, _I8), "FENCE_RADIUS": (300.0, _R32), "FENCE_ALT_MAX": (100.0, _R32),
+    "BATT_MONITOR": (4, _I8), "BATT_LOW_VOLT": (10.5, _R32), "BATT_CRT_VOLT": (0.0, _R32),
+    "BATT_LOW_TIMER": (10, _I8), "BATT_FS_LOW_ACT": (0, _I8), "BATT_FS_CRT_ACT": (0, _I8),
+    "FS_EKF_ACTION": (1, _I8), "FS_EKF_THRESH": (0.8, _R32), "DISARM_DELAY": (10, _I8),
+}
+_FS_GCS_MODES = {1: "RTL", 2: "RTL", 3: "RTL", 4: "RTL", 5: "LAND", 6: "RTL", 7: "BRAKE"}
+_FENCE_MODES = {1: "RTL", 2: "LAND", 3: "RTL", 4: "BRAKE", 5: "RTL"}
+_BATT_MODES = {1: "LAND", 2: "RTL", 3: "RTL", 4: "RTL", 6: "RTL"}
+_EKF_BAD_FOR = 1.0  # s of bad variances before ArduCopter's EKF failsafe (ekf_check: 10 checks at 10 Hz)
 EARTH_RADIUS = 6378137.0
 
 _EKF_GOOD = (
@@ -186,14 +228,21 @@ class Received:
 class _Peer:
     """One transport endpoint with its own parser (MAVLink framing state is per stream)."""
 
-    def __init__(self, sysid: int, compid: int, sock: socket.socket | None = None, addr: Address | None = None):
+    def __init__(self, sysid: int, compid: int, sock: socket.socket | None = None, addr: Address | None = None,
+                 key: bytes | None = None):
         self.sock = sock  # TCP client socket, None for UDP peers
         self.addr = addr
         self.parser = mav2.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         self.parser.robust_parsing = True
+        self.rejected = 0  # messages dropped for their signature
+        if key is not None:
+            self.parser.signing.secret_key = key
+            self.parser.signing.allow_unsigned_callback = lambda _mav, msg_id: msg_id == mav2.MAVLINK_MSG_ID_RADIO_STATUS
 
     def parse(self, data: bytes) -> list[Any]:
         msgs = self.parser.parse_buffer(data) or []
+        bad = [m for m in msgs if m.get_type() == "BAD_DATA"]
+        self.rejected += sum(1 for m in bad if "signature" in str(getattr(m, "reason", "")))
         return [m for m in msgs if m.get_type() != "BAD_DATA"]
 
 
@@ -249,6 +298,12 @@ class MavlinkVehicle:
         heartbeat_rate: float = 1.0,
         stream_rates: dict[str, float] | None = None,
         tick_rate: float = 50.0,
+        params: dict[str, float] | None = None,
+        gcs_sysid_param: str = "SYSID_MYGCS",
+        battery_cells: int = 3,
+        per_cell_monitor: bool = False,
+        report_remaining: bool = True,
+        signing_key: bytes | None = None,
     ) -> None:
         """Nothing is bound until ``start()``. ``udp_port``/``tcp_port``: None = off, 0 = a free port."""
         if initial_mode not in COPTER_MODES:
@@ -267,13 +322,29 @@ class MavlinkVehicle:
         self.max_speed, self.max_climb_rate, self.max_descent_rate = max_speed, max_climb_rate, max_descent_rate
         self.velocity_tau = velocity_tau
         self.yaw_rate_max = yaw_rate_max
-        self.guided_timeout = guided_timeout
         self.disarm_delay = disarm_delay
         self.land_detect_time = land_detect_time
         self.battery_drain = battery_drain
         self.tick_rate = tick_rate
 
         self.refuse_arm = False  # fault switch: arming answers FAILED while set
+        if gcs_sysid_param not in ("SYSID_MYGCS", "MAV_GCS_SYSID"):
+            raise ValueError(f"gcs_sysid_param must be SYSID_MYGCS or MAV_GCS_SYSID, not {gcs_sysid_param!r}")
+        table = dict(PARAMS)
+        table[gcs_sysid_param] = table.pop("SYSID_MYGCS")
+        self._params: dict[str, float] = {name: float(default) for name, (default, _t) in table.items()}
+        self._param_types: dict[str, int] = {name: ptype for name, (_d, ptype) in table.items()}
+        self._params["GUID_TIMEOUT"] = float(guided_timeout)
+        self._params["SYSID_THISMAV"] = float(sysid)
+        for name, value in (params or {}).items():
+            if name not in self._params:
+                raise ValueError(f"unknown emulated parameter {name!r}; known: {sorted(self._params)}")
+            self._params[name] = float(value)
+        self.gcs_sysid_param = gcs_sysid_param
+        self.battery_cells = battery_cells
+        self.per_cell_monitor = per_cell_monitor
+        self.report_remaining = report_remaining
+        self.signing_key = signing_key
 
         self._lock = threading.RLock()
         self._stop_evt = threading.Event()
@@ -284,6 +355,10 @@ class MavlinkVehicle:
         self._tcp_peers: list[_Peer] = []
         self._wire = _WireBuffer()
         self._encoder = mav2.MAVLink(self._wire, srcSystem=sysid, srcComponent=compid)
+        if signing_key is not None:
+            self._encoder.signing.secret_key = signing_key
+            self._encoder.signing.sign_outgoing = True
+            self._encoder.signing.timestamp = int((time.time() - 1420070400) * 1e5)
         self._outbox: list[Any] = []
         self._after_ack: list[Any] = []  # messages a command asked for go out after its COMMAND_ACK
 
@@ -315,6 +390,26 @@ class MavlinkVehicle:
         self._received: deque[Received] = deque(maxlen=20000)
         self._acks: list[tuple[int, int]] = []
         self._texts: list[str] = []
+        self._signing_rejected_gone = 0  # rejections counted by peers since dropped
+        # failsafes
+        self._gcs_seen = 0.0  # time.monotonic() of the last HEARTBEAT from the GCS id (0: never)
+        self._gcs_failsafe = False
+        self._fence_breached = False
+        self._fence_breaches = 0
+        self._fence_breach_type = mav2.FENCE_BREACH_NONE
+        self._fence_breach_time = 0
+        self._voltage_override: float | None = None
+        self._batt_low_since: float | None = None
+        self._batt_failsafe = 0  # 0 none, 1 low, 2 critical (latched, as AP_BattMonitor does)
+        self._ekf_bad_since: float | None = None
+        self._ekf_failsafe = False
+        self.failsafe_modes: list[tuple[str, str]] = []  # (failsafe, mode) actions taken, for assertions
+        # link cut with buffering (cut_link / restore_link)
+        self._cut = False
+        self._release = False
+        self._held_in: list[tuple[_Peer, bytes]] = []
+        self._held_out: list[bytes] = []
+        self._injected: list[bytes] = []
 
     # -- lifecycle ---------------------------------------------------------------------------------
 
@@ -337,7 +432,7 @@ class MavlinkVehicle:
             self._close_sockets()
             raise
         if self.udp_target is not None:
-            self._udp_peers[self.udp_target] = _Peer(self.sysid, self.compid, addr=self.udp_target)
+            self._udp_peers[self.udp_target] = self._peer(addr=self.udp_target)
         with self._lock:
             self._t0 = time.monotonic()
             self._ground_since = self._t0
@@ -360,6 +455,14 @@ class MavlinkVehicle:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+    def _peer(self, sock: socket.socket | None = None, addr: Address | None = None) -> _Peer:
+        return _Peer(self.sysid, self.compid, sock=sock, addr=addr, key=self.signing_key)
+
+    @property
+    def encoder(self) -> Any:
+        """A pymavlink encoder for building messages to `inject` (its ``*_encode`` methods)."""
+        return mav2.MAVLink(_WireBuffer(), srcSystem=self.sysid, srcComponent=self.compid)
 
     @property
     def udp_url(self) -> str:
@@ -417,6 +520,31 @@ class MavlinkVehicle:
         with self._lock:
             return list(self._texts)
 
+    def param(self, name: str) -> float:
+        with self._lock:
+            return self._params[name]
+
+    @property
+    def signing_rejected(self) -> int:
+        """Messages dropped for a missing or wrong signature (with ``signing_key``)."""
+        with self._lock:
+            peers = [*self._udp_peers.values(), *self._tcp_peers]
+            return self._signing_rejected_gone + sum(p.rejected for p in peers)
+
+    @property
+    def fence_breached(self) -> bool:
+        with self._lock:
+            return self._fence_breached
+
+    @property
+    def gcs_failsafe(self) -> bool:
+        with self._lock:
+            return self._gcs_failsafe
+
+    def voltage(self) -> float:
+        with self._lock:
+            return self._voltage()
+
     # -- fault injection -------------------------------------------------------------------------
 
     def stop_heartbeats(self) -> None:
@@ -427,6 +555,41 @@ class MavlinkVehicle:
     def resume_heartbeats(self) -> None:
         with self._lock:
             self._link_up = True
+
+    def cut_link(self) -> None:
+        """A TCP link or buffering radio cut: nothing is delivered either way, everything is kept."""
+        with self._lock:
+            self._cut = True
+
+    def restore_link(self) -> None:
+        """End the cut: the backlog of both directions is delivered at once (by the I/O thread)."""
+        with self._lock:
+            self._cut = False
+            self._release = True
+
+    def set_voltage(self, volts: float | None) -> None:
+        """Pin the pack voltage (None: follow the percentage again, 12.6 V full to 9.6 V empty for 3S)."""
+        with self._lock:
+            self._voltage_override = None if volts is None else float(volts)
+
+    def fail_ekf(self, failed: bool = True) -> None:
+        """EKF variances above FS_EKF_THRESH (True) or back to normal (False)."""
+        with self._lock:
+            self._ekf_bad_since = time.monotonic() if failed else None
+            if not failed:
+                self._ekf_failsafe = False
+
+    def inject(self, msg: Any, key: bytes | None = None, sysid: int | None = None) -> None:
+        """Send `msg` as someone else on the link would: unsigned, or signed with `key` (not ours)."""
+        wire = _WireBuffer()
+        enc = mav2.MAVLink(wire, srcSystem=self.sysid if sysid is None else sysid, srcComponent=self.compid)
+        if key is not None:
+            enc.signing.secret_key = key
+            enc.signing.sign_outgoing = True
+            enc.signing.timestamp = int((time.time() - 1420070400) * 1e5)
+        enc.send(msg)
+        with self._lock:
+            self._injected.extend(wire.take())
 
     def pilot_switch_mode(self, mode: str) -> bool:
         """A pilot's RC mode switch: no COMMAND_ACK; GUIDED targets are dropped. False if refused."""
@@ -656,7 +819,10 @@ class MavlinkVehicle:
             return mav2.MAV_RESULT_UNSUPPORTED
         if name == "HOME_POSITION" and self._home is None:
             return mav2.MAV_RESULT_FAILED
-        self._after_ack.append(self._make(name, now))
+        msg = self._make(name, now)
+        if msg is None:
+            return mav2.MAV_RESULT_DENIED
+        self._after_ack.append(msg)
         return mav2.MAV_RESULT_ACCEPTED
 
     def _on_request_data_stream(self, msg: Any, now: float) -> None:
@@ -717,7 +883,56 @@ class MavlinkVehicle:
         self._takeoff_alt = None  # a new target ends a guided takeoff, as in ArduCopter
         self._last_target = now
 
+    def _on_heartbeat(self, msg: Any, now: float) -> None:
+        # GCS_MAVLINK::handle_heartbeat: only the GCS id's heartbeats feed the GCS failsafe
+        if msg.get_srcSystem() == round(self._params[self.gcs_sysid_param]):
+            self._gcs_seen = now
+
+    def _param_value(self, name: str) -> Any:
+        names = list(self._params)
+        return self._encoder.param_value_encode(
+            name.encode(), self._params[name], self._param_types[name], len(names), names.index(name)
+        )
+
+    @staticmethod
+    def _param_name(raw: Any) -> str:
+        text = raw if isinstance(raw, str) else bytes(raw).decode("ascii", "replace")
+        return text.rstrip("\x00")
+
+    def _on_param_request_read(self, msg: Any, now: float) -> None:
+        if not self._for_me(msg):
+            return
+        names = list(self._params)
+        if msg.param_index >= 0:
+            if msg.param_index < len(names):
+                self._outbox.append(self._param_value(names[msg.param_index]))
+            return
+        name = self._param_name(msg.param_id)
+        if name in self._params:  # ArduPilot does not answer for a parameter it does not have
+            self._outbox.append(self._param_value(name))
+
+    def _on_param_request_list(self, msg: Any, now: float) -> None:
+        if self._for_me(msg):
+            self._outbox.extend(self._param_value(name) for name in self._params)
+
+    def _on_param_set(self, msg: Any, now: float) -> None:
+        if not self._for_me(msg):
+            return
+        name = self._param_name(msg.param_id)
+        if name not in self._params or not math.isfinite(msg.param_value):
+            return
+        value = float(msg.param_value)
+        if self._param_types[name] != _R32:
+            value = float(round(value))
+        self._params[name] = value
+        LOG.info("parameter %s = %g (PARAM_SET from %d)", name, value, msg.get_srcSystem())
+        self._outbox.append(self._param_value(name))
+
     _HANDLERS: dict[str, Callable[[MavlinkVehicle, Any, float], None]] = {
+        "HEARTBEAT": _on_heartbeat,
+        "PARAM_REQUEST_READ": _on_param_request_read,
+        "PARAM_REQUEST_LIST": _on_param_request_list,
+        "PARAM_SET": _on_param_set,
         "SET_MODE": _on_set_mode,
         "COMMAND_LONG": _on_command,
         "COMMAND_INT": _on_command,
@@ -742,6 +957,7 @@ class MavlinkVehicle:
                 self._set_home_here()
         if self._armed:
             self._battery = max(0.0, self._battery - self.battery_drain * dt)
+        self._failsafes(now)
         target_vel, yaw_rate = self._control(now)
         alpha = 1.0 - math.exp(-dt / self.velocity_tau) if self.velocity_tau > 0 else 1.0
         self._vn += (target_vel[0] - self._vn) * alpha
@@ -756,6 +972,107 @@ class MavlinkVehicle:
             self._yaw += yaw_rate * dt
         self._yaw_rate = yaw_rate
         self._ground_contact(now)
+
+    # -- failsafes (I/O thread, lock held) ----------------------------------------------------------
+
+    def _failsafe_mode(self, failsafe: str, mode: str, now: float) -> None:
+        """Switch to the failsafe's mode as ArduCopter's set_mode_or_land does (LAND if it is refused)."""
+        if self._mode == mode or (self._mode == "LAND" and mode != "LAND"):
+            return  # already doing it, or landing: a failsafe never interrupts a landing
+        if self._set_mode(mode, now, source=failsafe) != mav2.MAV_RESULT_ACCEPTED:
+            self._set_mode("LAND", now, source=failsafe)
+        self.failsafe_modes.append((failsafe, self._mode))
+
+    def _failsafes(self, now: float) -> None:
+        self._gcs_check(now)
+        self._fence_check(now)
+        self._battery_check(now)
+        self._ekf_check(now)
+
+    def _gcs_check(self, now: float) -> None:
+        action = round(self._params["FS_GCS_ENABLE"])
+        if action == 0 or self._gcs_seen == 0.0:
+            return
+        lost = now - self._gcs_seen > self._params["FS_GCS_TIMEOUT"]
+        if lost and not self._gcs_failsafe:
+            self._gcs_failsafe = True
+            if self._armed and self._on_ground and self._takeoff_alt is None:
+                self._text("GCS Failsafe - Disarming", mav2.MAV_SEVERITY_WARNING)
+                self._disarm("GCS failsafe")
+            else:
+                self._text("GCS Failsafe", mav2.MAV_SEVERITY_WARNING)
+                if self._armed:
+                    self._failsafe_mode("GCS failsafe", _FS_GCS_MODES.get(action, "RTL"), now)
+        elif not lost and self._gcs_failsafe:
+            self._gcs_failsafe = False
+            self._text("GCS Failsafe Cleared", mav2.MAV_SEVERITY_WARNING)
+
+    def _fence_check(self, now: float) -> None:
+        if not round(self._params["FENCE_ENABLE"]) or not self._armed:
+            self._fence_breached = False
+            return
+        hn, he = self._home_ned()
+        outside = math.hypot(self._n - hn, self._e - he) > self._params["FENCE_RADIUS"]
+        too_high = -self._d > self._params["FENCE_ALT_MAX"]
+        breached = outside or too_high
+        if breached and not self._fence_breached:
+            self._fence_breaches += 1
+            self._fence_breach_type = mav2.FENCE_BREACH_BOUNDARY if outside else mav2.FENCE_BREACH_MAXALT
+            self._fence_breach_time = int((now - self._t0) * 1000)
+            self._text(f"Fence Breached: {'Circle' if outside else 'Max Alt'}", mav2.MAV_SEVERITY_CRITICAL)
+            action = round(self._params["FENCE_ACTION"])
+            if action in _FENCE_MODES:
+                self._failsafe_mode("fence breach", _FENCE_MODES[action], now)
+        self._fence_breached = breached
+
+    def _voltage(self) -> float:
+        if self._voltage_override is not None:
+            return self._voltage_override
+        return self.battery_cells * (3.2 + 0.01 * self._battery)  # 4.2 V a cell full, 3.2 V empty
+
+    def _battery_check(self, now: float) -> None:
+        if not round(self._params["BATT_MONITOR"]):
+            return
+        volts = self._voltage()
+        critical = self._params["BATT_CRT_VOLT"] > 0 and volts < self._params["BATT_CRT_VOLT"]
+        low = self._params["BATT_LOW_VOLT"] > 0 and volts < self._params["BATT_LOW_VOLT"]
+        if not (low or critical):
+            self._batt_low_since = None
+            return
+        if self._batt_low_since is None:
+            self._batt_low_since = now
+        if now - self._batt_low_since < self._params["BATT_LOW_TIMER"]:
+            return
+        level = 2 if critical else 1
+        if level <= self._batt_failsafe:
+            return  # AP_BattMonitor latches the worst failsafe seen
+        self._batt_failsafe = level
+        word = "critical" if level == 2 else "low"
+        self._text(f"Battery 1 is {word} {volts:.2f}V used 0 mAh", mav2.MAV_SEVERITY_WARNING)
+        action = round(self._params["BATT_FS_CRT_ACT" if level == 2 else "BATT_FS_LOW_ACT"])
+        if not self._armed or action == 0:
+            return
+        if action == 5:
+            self._disarm("battery failsafe: terminate")
+        elif action in _BATT_MODES:
+            self._failsafe_mode("battery failsafe", _BATT_MODES[action], now)
+
+    def _ekf_bad(self) -> bool:
+        return self._ekf_bad_since is not None
+
+    def _ekf_check(self, now: float) -> None:
+        if self._ekf_bad_since is None or self._ekf_failsafe or now - self._ekf_bad_since < _EKF_BAD_FOR:
+            return
+        self._ekf_failsafe = True
+        self._text("EKF variance", mav2.MAV_SEVERITY_CRITICAL)
+        action = round(self._params["FS_EKF_ACTION"])
+        if not self._armed or action == 0:
+            return
+        needs_position = self._mode in POSITION_MODES
+        if action == 3 or (action == 1 and needs_position):
+            self._failsafe_mode("EKF failsafe", "LAND", now)
+        elif action == 2 and needs_position:
+            self._failsafe_mode("EKF failsafe", "ALT_HOLD", now)
 
     def _control(self, now: float) -> tuple[tuple[float, float, float], float]:
         """The velocity (NED, m/s) and yaw rate (deg/s) the flight controller asks for now."""
@@ -772,7 +1089,7 @@ class MavlinkVehicle:
                     self._takeoff_alt = None
                     self._guided = "hover"
             elif self._guided in ("velocity", "position"):
-                if now - self._last_target > self.guided_timeout:
+                if now - self._last_target > self._params["GUID_TIMEOUT"]:
                     self._guided = "hover"  # ArduCopter's guided timeout: stop
                     self._target_yaw_rate, self._target_yaw = 0.0, None
                 elif self._guided == "position" and self._target_pos is not None:
@@ -838,7 +1155,7 @@ class MavlinkVehicle:
 
     # -- outgoing messages ---------------------------------------------------------------------------
 
-    def _make(self, name: str, now: float) -> Any:
+    def _make(self, name: str, now: float) -> Any | None:
         """Encode one telemetry message from the current state (lock held)."""
         enc = self._encoder
         boot_ms = int((now - self._t0) * 1000) & 0xFFFFFFFF
@@ -872,14 +1189,46 @@ class MavlinkVehicle:
                 math.radians(self._yaw_rate),
             )
         if name == "SYS_STATUS":
-            health = _SENSORS if self._gps_fix(now) else _SENSORS & ~mav2.MAV_SYS_STATUS_SENSOR_GPS
-            if pos_ok and not self.refuse_arm:
-                health |= mav2.MAV_SYS_STATUS_PREARM_CHECK
-            volts = 12.6 - 0.03 * (100.0 - self._battery)
+            # GCS_MAVLINK::update_sensor_status_flags: a sensor is present/enabled, and healthy or not
+            present = _SENSORS | mav2.MAV_SYS_STATUS_PREARM_CHECK | mav2.MAV_SYS_STATUS_AHRS
+            if round(self._params["BATT_MONITOR"]):
+                present |= mav2.MAV_SYS_STATUS_SENSOR_BATTERY
+            if round(self._params["FENCE_ENABLE"]):
+                present |= mav2.MAV_SYS_STATUS_GEOFENCE
+            health = present if self._gps_fix(now) else present & ~mav2.MAV_SYS_STATUS_SENSOR_GPS
+            if not pos_ok or self.refuse_arm:
+                health &= ~mav2.MAV_SYS_STATUS_PREARM_CHECK
+            if self._batt_failsafe:
+                health &= ~mav2.MAV_SYS_STATUS_SENSOR_BATTERY
+            if self._fence_breached:
+                health &= ~mav2.MAV_SYS_STATUS_GEOFENCE
+            if self._ekf_bad():
+                health &= ~mav2.MAV_SYS_STATUS_AHRS
             current = 1500 if self._armed else 50  # cA
+            remaining = round(self._battery) if self.report_remaining else -1
             return enc.sys_status_encode(
-                _SENSORS | mav2.MAV_SYS_STATUS_PREARM_CHECK, _SENSORS | mav2.MAV_SYS_STATUS_PREARM_CHECK,
-                health, 150, round(volts * 1000), current, round(self._battery), 0, 0, 0, 0, 0, 0,
+                present, present, health, 150, round(self._voltage() * 1000), current, remaining, 0, 0, 0, 0, 0, 0,
+            )
+        if name == "BATTERY_STATUS":
+            volts = self._voltage()
+            if self.per_cell_monitor:
+                cells = [round(volts / self.battery_cells * 1000)] * self.battery_cells
+            else:
+                cells = [min(round(volts * 1000), 65534)]  # ArduPilot's analog monitors: the pack in cell 1
+            voltages = (cells + [65535] * 10)[:10]
+            charge = {0: mav2.MAV_BATTERY_CHARGE_STATE_OK, 1: mav2.MAV_BATTERY_CHARGE_STATE_LOW,
+                      2: mav2.MAV_BATTERY_CHARGE_STATE_CRITICAL}[self._batt_failsafe]
+            remaining = round(self._battery) if self.report_remaining else -1
+            return enc.battery_status_encode(
+                0, mav2.MAV_BATTERY_FUNCTION_UNKNOWN, mav2.MAV_BATTERY_TYPE_LIPO, 32767, voltages,
+                1500 if self._armed else 50, -1, -1, remaining, 0, charge, [0, 0, 0, 0],
+            )
+        if name == "FENCE_STATUS":
+            if not round(self._params["FENCE_ENABLE"]):
+                return None  # ArduPilot sends it only with the fence enabled
+            return enc.fence_status_encode(
+                1 if self._fence_breached else 0, self._fence_breaches, self._fence_breach_type,
+                self._fence_breach_time,
             )
         if name == "EXTENDED_SYS_STATE":
             return enc.extended_sys_state_encode(mav2.MAV_VTOL_STATE_UNDEFINED, self._landed_state())
@@ -894,6 +1243,8 @@ class MavlinkVehicle:
             return enc.gps_raw_int_encode(int((now - self._t0) * 1e6), mav2.GPS_FIX_TYPE_NO_GPS, 0, 0, 0,
                                           65535, 65535, 0, 65535, 0)
         if name == "EKF_STATUS_REPORT":
+            if self._ekf_bad():
+                return enc.ekf_status_report_encode(_EKF_GOOD, 1.2, 1.3, 0.9, 0.5, 0.0)
             if not self._booted:
                 return enc.ekf_status_report_encode(mav2.EKF_UNINITIALIZED, 1.0, 1.0, 1.0, 1.0, 0.0)
             if pos_ok:
@@ -929,7 +1280,9 @@ class MavlinkVehicle:
                 continue
             due = self._next_send.get(name, now)
             if now >= due:
-                self._outbox.append(self._make(name, now))
+                msg = self._make(name, now)
+                if msg is not None:
+                    self._outbox.append(msg)
                 # keep the cadence without bursts after a stall
                 self._next_send[name] = max(due + 1.0 / rate, now)
 
@@ -939,7 +1292,13 @@ class MavlinkVehicle:
             link_up = self._link_up
             for msg in outbox:
                 self._encoder.send(msg)
-            wire = self._wire.take()
+            wire = self._wire.take() + self._injected
+            self._injected = []
+            if self._cut:
+                self._held_out.extend(wire)  # the link keeps it: delivered when restored
+                return
+            if self._release:
+                wire, self._held_out = self._held_out + wire, []
         if not link_up or not wire:
             return
         data = b"".join(wire)
@@ -974,6 +1333,7 @@ class MavlinkVehicle:
                 self._tcp_peers = [p for p in self._tcp_peers if p.sock is not None and p.sock.fileno() >= 0]
             for sock in ready:
                 self._read(sock)
+            self._release_backlog()
             now = time.monotonic()
             if now >= next_tick:
                 with self._lock:
@@ -992,7 +1352,7 @@ class MavlinkVehicle:
                 return
             conn.settimeout(1.0)
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._tcp_peers.append(_Peer(self.sysid, self.compid, sock=conn))
+            self._tcp_peers.append(self._peer(sock=conn))
             return
         if sock is self._udp:
             try:
@@ -1003,7 +1363,7 @@ class MavlinkVehicle:
             if peer is None:
                 if len(self._udp_peers) >= 16:
                     return
-                peer = self._udp_peers[addr] = _Peer(self.sysid, self.compid, addr=addr)
+                peer = self._udp_peers[addr] = self._peer(addr=addr)
         else:
             peer = next((p for p in self._tcp_peers if p.sock is sock), None)
             if peer is None:
@@ -1018,12 +1378,30 @@ class MavlinkVehicle:
         with self._lock:
             if not self._link_up:
                 return
+            if self._cut:
+                self._held_in.append((peer, data))  # in the link's buffer, not yet at the autopilot
+                return
             for msg in peer.parse(data):
                 self._handle(msg, now)
+
+    def _release_backlog(self) -> None:
+        """The cut ended: what the link kept reaches the autopilot now, all at once (a TCP flush)."""
+        with self._lock:
+            if not self._release:
+                return
+            held, self._held_in = self._held_in, []
+            now = time.monotonic()
+            for peer, data in held:
+                for msg in peer.parse(data):
+                    self._handle(msg, now)
+        self._flush()  # sends the held output, then clears the flag
+        with self._lock:
+            self._release = False
 
     def _drop_tcp(self, peer: _Peer) -> None:
         if peer in self._tcp_peers:
             self._tcp_peers.remove(peer)
+            self._signing_rejected_gone += peer.rejected
         if peer.sock is not None:
             peer.sock.close()
 
@@ -1055,6 +1433,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--gps-delay", type=float, default=1.0)
     parser.add_argument("--battery", type=float, default=100.0)
     parser.add_argument("--refuse-arm", action="store_true")
+    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                        help="an ArduCopter parameter (FS_GCS_ENABLE=1, SYSID_MYGCS=245, ...); repeatable")
+    parser.add_argument("--signing-key", default=None, help="MAVLink 2 signing key, 64 hex digits")
     parser.add_argument("--log-level", default="WARNING")
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
@@ -1065,6 +1446,10 @@ def main(argv: list[str] | None = None) -> int:
         kwargs.update(home_lat=parts[0], home_lon=parts[1])
         if len(parts) > 2:
             kwargs["home_alt"] = parts[2]
+    if args.param:
+        kwargs["params"] = {k: float(v) for k, _, v in (item.partition("=") for item in args.param)}
+    if args.signing_key:
+        kwargs["signing_key"] = bytes.fromhex(args.signing_key)
     if args.udp_target:
         host, _, port = args.udp_target.rpartition(":")
         kwargs["udp_target"] = (host, int(port))

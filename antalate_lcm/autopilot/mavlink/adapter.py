@@ -14,31 +14,43 @@ ArduCopter facts it is built around
   position mode) and a GPS_RAW_INT 3D fix before it touches the mode or the motors.
 * **MAV_CMD_NAV_TAKEOFF is refused outside GUIDED**, and an armed copter that does not take off disarms
   itself after ~10 s (DISARM_DELAY): the HLC takes off right after a successful arm, so that is enough.
-* **Velocity targets expire after ~3 s** in GUIDED. The HLC sends a set-point only when a behavior
-  sends one, so a background thread resends the last non-zero set-point ``velocity_resend_hz`` times
-  a second while the copter flies in GUIDED, until the HLC replaces it, stops it (zero velocity: the
-  hover is resent for one more second, then ArduCopter holds position by itself), or commands
-  LAND/RTL, or the mode leaves GUIDED. ``velocity_hold`` caps how long one set-point is resent
-  without a fresh call, so a stalled HLC cannot keep the copter flying away.
+* **Velocity targets expire after GUID_TIMEOUT (3 s)** in GUIDED. A background thread resends the current
+  set-point ``velocity_resend_hz`` times a second while the copter flies in GUIDED -- but **never one
+  older than ``setpoint_timeout``** (counted from the HLC's `set_velocity` call) and **never while the
+  link is stale** (no message from the vehicle for ``link_stale_after``): a TCP link or a buffering radio
+  keeps what is written during a cut and delivers it all when the link returns, and a field trial flew
+  6.1 m on such a backlog while the HLC said LLC_DOWN. When messages flow again after a stale spell,
+  a zero set-point goes out at once, so it reaches the vehicle right behind any backlog and stops it.
 * A zero set-point while EXTENDED_SYS_STATE says TAKEOFF is not sent: the HLC's "hover once
   airborne" would otherwise cut the takeoff climb short a little below its target.
-* **The pilot switching out of GUIDED is a manual override**; ArduCopter's own LAND and RTL (including
-  SMART_RTL/AUTO_RTL, which its failsafes choose) are still computer control. Every other mode (LOITER,
-  ALT_HOLD, AUTO, BRAKE, ...) reports ``autonomous=False``, ``FlightMode.MANUAL``: the HLC then
-  leaves the vehicle alone.
+* **A mode change is a pilot's or a failsafe's**: ArduCopter's fence, battery, EKF and GCS failsafes
+  switch modes exactly like a pilot's switch. `failsafe.FailsafeTracker` attributes a mode change the
+  adapter did not command to the failsafe ArduPilot reported around it (SYS_STATUS health, FENCE_STATUS,
+  BATTERY_STATUS, STATUSTEXT): `AutopilotState.failsafe` names it and RTL/LAND/BRAKE stay computer
+  control (BRAKE = `FlightMode.HOLD`). Without such evidence LAND and the RTL family are still computer
+  control; every other mode is a pilot's (``FlightMode.MANUAL``) and the HLC leaves the vehicle alone.
 * **Link loss is HEARTBEAT silence**: `AutopilotState.link_age` is the age of the autopilot's last
   HEARTBEAT on the adapter's clock; the HLC compares it with ``link_timeout``.
 * Every COMMAND_LONG is matched to its COMMAND_ACK by command id (only one command is in flight at a
   time); a command without ACK is sent once more (``confirmation`` 1) before `AutopilotError`.
 
-Identity
---------
+Vehicle pre-flight checks
+-------------------------
+On connect the adapter reads the vehicle's own failsafe parameters (`vehicle_checks`: FS_GCS_ENABLE,
+SYSID_MYGCS, GUID_TIMEOUT, FENCE_*, BATT_*) with PARAM_REQUEST_READ. Each one that leaves the vehicle
+unprotected is written (PARAM_SET, confirmed by PARAM_VALUE) when ``configure_vehicle`` is set, and
+otherwise logged as a warning with the exact value to set; with ``require_vehicle_failsafes`` `arm`
+returns False and `last_refusal` names the parameter (the HLC puts it into its ``hlc_error_t``).
+
+Identity and signing
+--------------------
 The adapter sends a GCS HEARTBEAT (``heartbeat_hz``) as system ``source_system`` (default **245**),
 component ``source_component`` (default 191, MAV_COMP_ID_ONBOARD_COMPUTER). 245 rather than the
 ground-station-typical 255 so that the adapter and a ground station (Mission Planner, QGroundControl,
 MAVProxy: all 255) can share a link without mixing up their acknowledgements. ArduCopter's GCS failsafe
-(``FS_GCS_ENABLE``) only watches heartbeats from ``SYSID_MYGCS`` (default 255): set ``SYSID_MYGCS = 245``
-if the vehicle should fail safe when antalate's link dies (see docs/ardupilot.md).
+only watches heartbeats from ``SYSID_MYGCS`` (default 255): the pre-flight check says so.
+With ``signing_key`` every message is MAVLink 2 signed and unsigned or badly signed messages from the
+link are dropped and counted (`signing_rejected`).
 
 The vehicle is found by its first HEARTBEAT from an autopilot component (MAV_COMP_ID_AUTOPILOT1, not a
 GCS or a gimbal) unless ``target_system``/``target_component`` pin it; messages from anyone else are
@@ -57,59 +69,35 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import os
 import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
+from pydantic import BaseModel
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from antalate_lcm._ratelimit import RateLimitedLog
-from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, Clock, FlightMode, Frame
+from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, Clock, Frame
+from antalate_lcm.autopilot.mavlink import failsafe as fs
+from antalate_lcm.autopilot.mavlink import vehicle_checks
+from antalate_lcm.autopilot.mavlink.failsafe import FLIGHT_MODES, FailsafeTracker
+from antalate_lcm.autopilot.mavlink.params import DEFAULTS, Params, parse_params
+from antalate_lcm.autopilot.mavlink.signing import allow_unsigned, signing_key
+from antalate_lcm.autopilot.mavlink.vehicle_checks import Finding
 from antalate_lcm.geo import wrap_360
 
 log = logging.getLogger("antalate.autopilot.mavlink")
 
-#: Parameters and their defaults (``[hlc.autopilot]`` with ``autopilot = "mavlink"``).
-DEFAULTS: dict[str, Any] = {
-    # pymavlink connection string: "tcp:127.0.0.1:5760" (SITL), "udpin:0.0.0.0:14550" (the vehicle
-    # sends to us), "udpout:HOST:PORT" (we send first), "/dev/ttyACM0" (serial, with `baud`).
-    "connection": "tcp:127.0.0.1:5760",
-    "baud": 115200,
-    "source_system": 245,  # our MAVLink system id (see the module docstring)
-    "source_component": 191,  # MAV_COMP_ID_ONBOARD_COMPUTER
-    "target_system": 0,  # 0 = learn from the first autopilot HEARTBEAT
-    "target_component": 0,  # 0 = MAV_COMP_ID_AUTOPILOT1
-    "connect_timeout": 10.0,  # s connect() waits for the link to open and the first HEARTBEAT
-    "ready_timeout": 30.0,  # s arm() waits for STANDBY + EKF position + GPS 3D fix
-    "ack_timeout": 1.5,  # s per COMMAND_ACK attempt (two attempts)
-    "mode_timeout": 3.0,  # s for a HEARTBEAT to confirm a mode change or arming (they come at 1 Hz)
-    "stream_rate_hz": 5.0,  # telemetry rate asked of the autopilot
-    "velocity_resend_hz": 4.0,  # resend rate of the last velocity set-point in GUIDED flight; 0 = off
-    "velocity_hold": 3.0,  # s one set-point is resent without a new set_velocity(); 0 = no limit
-    "heartbeat_hz": 1.0,  # our GCS HEARTBEAT
-}
-
-_POSITIVE = (
-    "connect_timeout", "ready_timeout", "ack_timeout", "mode_timeout", "stream_rate_hz", "heartbeat_hz",
-)
-_NON_NEGATIVE = ("velocity_resend_hz", "velocity_hold")
+__all__ = ["DEFAULTS", "FLIGHT_MODES", "MavlinkAutopilot", "Params", "VELOCITY_TYPE_MASK", "mode_name"]
 
 #: ArduCopter mode numbers (HEARTBEAT custom_mode) by name, from pymavlink's table.
 COPTER_MODES: dict[str, int] = {name: number for number, name in mavutil.mode_mapping_acm.items()}
 _MODE_NAMES: dict[int, str] = dict(mavutil.mode_mapping_acm)
-
-#: How each ArduCopter mode is classified for the HLC; anything else is a pilot's (MANUAL).
-FLIGHT_MODES: dict[str, FlightMode] = {
-    "GUIDED": FlightMode.GUIDED,
-    "LAND": FlightMode.LANDING,
-    "RTL": FlightMode.RTL,
-    "SMART_RTL": FlightMode.RTL,
-    "AUTO_RTL": FlightMode.RTL,
-}
 
 # Velocity + yaw rate: ignore position, acceleration and yaw (bits set = ignored).
 VELOCITY_TYPE_MASK = (
@@ -131,10 +119,27 @@ _NOT_AUTOPILOT_TYPES = frozenset({
     mav.MAV_TYPE_CAMERA, mav.MAV_TYPE_ANTENNA_TRACKER,
 })
 
+#: SYS_STATUS sensors whose health bit dropping is a failsafe (ArduPilot clears GEOFENCE on a breach,
+#: BATTERY on a battery failsafe, AHRS when the EKF is unhealthy).
+_HEALTH_FAILSAFES = (
+    (mav.MAV_SYS_STATUS_GEOFENCE, fs.FENCE),
+    (mav.MAV_SYS_STATUS_SENSOR_BATTERY, fs.BATTERY),
+    (mav.MAV_SYS_STATUS_AHRS, fs.EKF),
+)
+#: BATTERY_STATUS charge_state -> `AutopilotState.battery_warning`.
+_CHARGE_WARNINGS = {
+    mav.MAV_BATTERY_CHARGE_STATE_LOW: "low",
+    mav.MAV_BATTERY_CHARGE_STATE_CRITICAL: "critical",
+    mav.MAV_BATTERY_CHARGE_STATE_EMERGENCY: "emergency",
+    mav.MAV_BATTERY_CHARGE_STATE_FAILED: "failed",
+}
+_WARNING_RANK = {"": 0, "low": 1, "failsafe": 1, "critical": 2, "emergency": 3, "failed": 4}
+
 #: Telemetry asked for with MAV_CMD_SET_MESSAGE_INTERVAL: (message, rate as a factor of stream_rate_hz).
 STREAMS: tuple[tuple[str, float], ...] = (
     ("GLOBAL_POSITION_INT", 1.0), ("ATTITUDE", 1.0), ("VFR_HUD", 1.0), ("SYS_STATUS", 1.0),
     ("EXTENDED_SYS_STATE", 1.0), ("EKF_STATUS_REPORT", 1.0), ("GPS_RAW_INT", 1.0), ("HOME_POSITION", 0.1),
+    ("BATTERY_STATUS", 0.4), ("FENCE_STATUS", 0.4),
 )
 #: The REQUEST_DATA_STREAM groups that carry the same messages (the fallback for old firmware).
 DATA_STREAMS = (
@@ -147,6 +152,7 @@ _REOPEN_DELAY = 1.0  # s between attempts to reopen a dropped TCP/serial link
 _RX_POLL = 0.1  # s the receive thread blocks at most, so close() is prompt
 _SETTLE = 3.0  # s connect() waits at most for the first position and landed-state reports
 _REBOOT_GAP = 2.0  # s of HEARTBEAT silence after which the autopilot may have rebooted: ask for streams again
+_PER_CELL_MAX_MV = 5000  # BATTERY_STATUS voltages[] below this are single cells (a per-cell monitor)
 
 
 def _result_name(result: int | None) -> str:
@@ -185,8 +191,8 @@ class _Setpoint:
     vx: float
     vy: float
     vz: float
-    yaw_rate: float  # rad/s
-    set_at: float  # clock time of the set_velocity() call
+    yaw_rate: float  # deg/s, clockwise, like every yaw rate in antalate; rad/s only on the wire
+    set_at: float  # clock time of the set_velocity() call: the set-point's age counts from here
     next_send: float
 
     @property
@@ -199,6 +205,7 @@ class _Vehicle:
     """What the autopilot last told us; guarded by `MavlinkAutopilot._cond`."""
 
     messages: int = 0  # count of messages accepted from the vehicle: marks "after" for waits
+    rx_at: float | None = None  # clock time of the last message accepted from the vehicle (link staleness)
     heartbeats: int = 0
     heartbeat_at: float | None = None  # clock time of the last HEARTBEAT
     heartbeat_msg: int = 0  # `messages` count at the last HEARTBEAT: "a HEARTBEAT after the ACK"
@@ -215,6 +222,15 @@ class _Vehicle:
     vd: float = 0.0
     position_seen: bool = False
     battery: float = -1.0
+    voltage: float = math.nan  # V, SYS_STATUS voltage_battery or the BATTERY_STATUS sum
+    cells_seen: int = 0  # cells counted in BATTERY_STATUS (a per-cell monitor), 0 = not seen
+    battery_warning: str = ""  # worst seen since arming: "low", "critical", "emergency", "failed", "failsafe"
+    health: int | None = None  # SYS_STATUS onboard_control_sensors_health
+    fence_breached: bool = False
+    failsafes: FailsafeTracker = field(default_factory=FailsafeTracker)
+    params: dict[str, float] = field(default_factory=dict)  # PARAM_VALUE by name
+    param_types: dict[str, int] = field(default_factory=dict)
+    param_at: dict[str, int] = field(default_factory=dict)  # name -> `messages` count when it arrived
     landed_state: int | None = None
     ekf_flags: int | None = None
     gps_fix: int | None = None
@@ -262,36 +278,21 @@ class MavlinkAutopilot(Autopilot):
 
     name = "mavlink"
     blocking = True
+    params_model: ClassVar[type[BaseModel]] = Params
 
     def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
         super().__init__(params, clock=clock)
-        unknown = sorted(set(self.params) - set(DEFAULTS))
-        if unknown:
-            raise ValueError(f"unknown mavlink autopilot parameter(s) {unknown}; known: {sorted(DEFAULTS)}")
-        p = {**DEFAULTS, **self.params}
-        if not isinstance(p["connection"], str) or not p["connection"].strip():
-            raise ValueError(f"mavlink autopilot parameter 'connection' must be a pymavlink connection string, "
-                             f"got {p['connection']!r}")
-        self.connection: str = p["connection"].strip()
-        ids = {"baud": (1, 10_000_000), "source_system": (1, 255), "source_component": (0, 255),
-               "target_system": (0, 255), "target_component": (0, 255)}
-        for key, (lo, hi) in ids.items():
-            value = p[key]
-            if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-                raise ValueError(f"mavlink autopilot parameter {key!r} must be an integer in [{lo}, {hi}], got {value!r}")
-        for key in (*_POSITIVE, *_NON_NEGATIVE):
-            value = p[key]
-            ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-            if not ok or value < 0 or (key in _POSITIVE and value == 0):
-                bound = "> 0" if key in _POSITIVE else ">= 0"
-                raise ValueError(f"mavlink autopilot parameter {key!r} must be a number {bound}, got {value!r}")
+        p = parse_params(self.params)
         self._p = p
-        self.source_system = int(p["source_system"])
-        self._ack_timeout = float(p["ack_timeout"])
-        self._mode_timeout = float(p["mode_timeout"])
-        self._resend_period = 1.0 / float(p["velocity_resend_hz"]) if p["velocity_resend_hz"] > 0 else 0.0
-        self._velocity_hold = float(p["velocity_hold"])
-        self._heartbeat_period = 1.0 / float(p["heartbeat_hz"])
+        self.connection: str = p.connection
+        self.source_system = p.source_system
+        self._ack_timeout = p.ack_timeout
+        self._mode_timeout = p.mode_timeout
+        self._resend_period = 1.0 / p.velocity_resend_hz if p.velocity_resend_hz > 0 else 0.0
+        self._setpoint_timeout = p.setpoint_timeout
+        self._stale_after = p.link_stale_after
+        self._heartbeat_period = 1.0 / p.heartbeat_hz
+        self._key: bytes | None = signing_key(p.signing_key) if p.signing_key.strip() else None
 
         self._conn: Any = None  # the pymavlink connection (mavutil.mavfile)
         self._cond = threading.Condition()  # guards _v, _setpoint, _target; notified on every message
@@ -300,14 +301,22 @@ class MavlinkAutopilot(Autopilot):
         self._v = _Vehicle()
         self._setpoint: _Setpoint | None = None
         self._target: tuple[int, int] | None = None  # (system, component) of the autopilot
+        self._commanded: tuple[str, float] | None = None  # (mode, clock time) of our last mode command
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._connected = False
         self._closed = False
         self._warned_autopilot = False
-        self._rate_log = RateLimitedLog(log, period=10.0)
-        #: The last arming refusal's reason (STATUSTEXT), for callers and tests.
+        self._rate_log = RateLimitedLog(log, period=10.0, clock=clock)
+        #: The last arming refusal's reason (STATUSTEXT, or the failed pre-flight check), for the HLC.
         self.last_refusal = ""
+        #: What the last vehicle pre-flight check found (empty: the vehicle's failsafes protect it).
+        self.vehicle_findings: list[Finding] = []
+        #: Messages dropped for a missing or wrong MAVLink 2 signature (with ``signing_key``).
+        self.signing_rejected = 0
+        #: Set-points not sent because they were too old or the link was stale.
+        self.setpoints_withheld = 0
+        self._vehicle_ok = False  # the last pre-flight check found nothing
 
     # ----------------------------------------------------------------- Autopilot contract
 
@@ -321,15 +330,17 @@ class MavlinkAutopilot(Autopilot):
             return
         self._closed = False
         self._stop = threading.Event()
-        timeout = float(self._p["connect_timeout"])
+        timeout = self._p.connect_timeout
         deadline = self.clock() + timeout
         try:
             self._conn = self._open_until(deadline)
             self._start_threads()
             if not self._wait(lambda v: v.heartbeats > 0, deadline - self.clock()):
+                rejected = (f"; {self.signing_rejected} message(s) dropped for a missing or wrong MAVLink 2 "
+                            "signature: does the vehicle have the same signing key?") if self.signing_rejected else ""
                 raise AutopilotError(
                     f"no HEARTBEAT from {self.connection} within {timeout:g} s: "
-                    "is SITL/the autopilot running, and is this the right port?"
+                    f"is SITL/the autopilot running, and is this the right port?{rejected}"
                 )
             self._request_streams()
             self._wait(lambda v: v.position_seen and v.landed_state is not None, _SETTLE)
@@ -341,7 +352,14 @@ class MavlinkAutopilot(Autopilot):
             target = self._target
             summary = f"mode {v.mode}, {_status_name(v.system_status)}, {'armed' if v.armed else 'disarmed'}"
             self._connected = True
-        log.info("connected to autopilot %s over %s: %s", target, self.connection, summary)
+        log.info("connected to autopilot %s over %s: %s%s", target, self.connection, summary,
+                 ", MAVLink 2 signed" if self._key else "")
+        if self._p.check_vehicle:
+            try:
+                with self._cmd_lock:
+                    self._check_vehicle()
+            except AutopilotError as exc:  # the check must never cost the connection
+                log.warning("vehicle pre-flight check failed: %s", exc)
 
     def close(self) -> None:
         self._closed = True
@@ -356,6 +374,12 @@ class MavlinkAutopilot(Autopilot):
                 ready = self._v.armed and self._v.mode == "GUIDED"
             if ready:
                 return True
+            if self._p.require_vehicle_failsafes:
+                findings = [] if self._vehicle_ok else self._check_vehicle()
+                if findings:
+                    self.last_refusal = "vehicle pre-flight check: " + "; ".join(f.text() for f in findings)
+                    log.warning("arming refused: %s", self.last_refusal)
+                    return False
             self._wait_ready()
             self._set_mode("GUIDED")
             with self._cond:
@@ -419,12 +443,18 @@ class MavlinkAutopilot(Autopilot):
             raise AutopilotError(f"velocity refused: non-finite value in {values}")
         self._require_link("set_velocity")
         now = self.clock()
-        sp = _Setpoint(_FRAMES[Frame(frame)], float(vx), float(vy), float(vz), math.radians(yaw_rate), now,
+        sp = _Setpoint(_FRAMES[Frame(frame)], float(vx), float(vy), float(vz), float(yaw_rate), now,
                        now + self._resend_period)
         with self._cond:
             v = self._v
             if not (v.armed and v.mode == "GUIDED"):
                 self._setpoint = None  # ArduCopter ignores targets outside GUIDED: nothing to keep alive
+                return
+            if self._stale(now):
+                self._setpoint = None  # it would wait in a socket buffer and fly when the link returns
+                self.setpoints_withheld += 1
+                self._rate_log.log(("stale",), logging.WARNING, "velocity set-point withheld: nothing heard "
+                                   "from the vehicle for %.1f s", now - (v.rx_at or now))
                 return
             if sp.zero and v.landed_state == mav.MAV_LANDED_STATE_TAKEOFF:
                 self._setpoint = None  # let the takeoff finish; it ends in a hover anyway
@@ -439,7 +469,7 @@ class MavlinkAutopilot(Autopilot):
                 return AutopilotState(connected=False, link_age=math.inf)
             link_age = math.inf if v.heartbeat_at is None else max(0.0, self.clock() - v.heartbeat_at)
             mode = v.mode
-            flight_mode = FLIGHT_MODES.get(mode, FlightMode.MANUAL)
+            flight_mode, autonomous, failsafe = fs.classify(mode, v.failsafes.reason)
             heading = v.heading if v.heading is not None else (v.yaw if v.yaw is not None else 0.0)
             return AutopilotState(
                 connected=True,
@@ -454,9 +484,13 @@ class MavlinkAutopilot(Autopilot):
                 battery=v.battery,
                 armed=v.armed,
                 in_air=v.in_air,
-                autonomous=flight_mode is not FlightMode.MANUAL,
+                autonomous=autonomous,
                 mode=mode,
                 flight_mode=flight_mode,
+                failsafe=failsafe,
+                voltage=v.voltage,
+                cells=self._p.cells or v.cells_seen,
+                battery_warning=v.battery_warning,
             )
 
     # ----------------------------------------------------------------- extras (tools, tests)
@@ -488,13 +522,24 @@ class MavlinkAutopilot(Autopilot):
 
     def _open(self) -> Any:
         p = self._p
+        if self._key is not None and "MAVLINK20" not in os.environ:
+            # Signing needs MAVLink 2 from the first byte: pymavlink's switch on the first v2 frame it
+            # hears replaces its codec and would drop the signing state. (pymavlink sets the same
+            # process-wide switch itself as soon as it hears MAVLink 2.)
+            os.environ["MAVLINK20"] = "1"
+            mavutil.set_dialect("ardupilotmega")
         try:
             conn = mavutil.mavlink_connection(
-                self.connection, baud=int(p["baud"]), source_system=self.source_system,
-                source_component=int(p["source_component"]), autoreconnect=False, retries=0,
+                self.connection, baud=p.baud, source_system=self.source_system,
+                source_component=p.source_component, autoreconnect=False, retries=0,
             )
         except (OSError, ValueError) as exc:
             raise AutopilotError(f"cannot open {self.connection}: {exc}") from exc
+        if self._key is not None:
+            if conn.WIRE_PROTOCOL_VERSION != "2.0":
+                conn.close()
+                raise AutopilotError("MAVLink 2 signing needs MAVLink 2, but pymavlink opened a MAVLink 1 codec")
+            conn.setup_signing(self._key, sign_outgoing=True, allow_unsigned_callback=allow_unsigned)
         if self.connection.startswith(("tcp:", "uds:", "unix:")):
             # pymavlink only prints on EOF and keeps returning nothing: make it an error we handle.
             def closed_by_peer() -> None:
@@ -599,8 +644,8 @@ class MavlinkAutopilot(Autopilot):
             return
 
     def _is_our_autopilot(self, msg: Any) -> bool:
-        want_sys = int(self._p["target_system"])
-        want_comp = int(self._p["target_component"]) or mav.MAV_COMP_ID_AUTOPILOT1
+        want_sys = self._p.target_system
+        want_comp = self._p.target_component or mav.MAV_COMP_ID_AUTOPILOT1
         return (
             msg.autopilot != mav.MAV_AUTOPILOT_INVALID
             and msg.type not in _NOT_AUTOPILOT_TYPES
@@ -611,8 +656,13 @@ class MavlinkAutopilot(Autopilot):
     def _on_message(self, msg: Any) -> None:
         mtype = msg.get_type()
         if mtype == "BAD_DATA":
+            if "signature" in str(getattr(msg, "reason", "")):
+                self.signing_rejected += 1
+                self._rate_log.log(("signature",), logging.WARNING, "message with a missing or wrong MAVLink 2 "
+                                   "signature dropped (%d so far)", self.signing_rejected)
             return
         source = (msg.get_srcSystem(), msg.get_srcComponent())
+        stop: _Setpoint | None = None
         with self._cond:
             if self._target is None:
                 if mtype != "HEARTBEAT" or not self._is_our_autopilot(msg):
@@ -622,11 +672,29 @@ class MavlinkAutopilot(Autopilot):
             if source != self._target:
                 return
             v = self._v
+            now = self.clock()
+            if self._stale(now) and v.armed and v.mode == "GUIDED" and v.in_air:
+                # Back after a stale spell: whatever we wrote before noticing may be flushed to the vehicle
+                # right now. A stop sent at once arrives right behind it.
+                stop = _Setpoint(_FRAMES[Frame.NED], 0.0, 0.0, 0.0, 0.0, now, now + self._resend_period)
+                self._setpoint = None
+            v.rx_at = now
             v.messages += 1
             handler = _HANDLERS.get(mtype)
             if handler is not None:
                 handler(self, v, msg)
             self._cond.notify_all()
+        if stop is not None:
+            log.warning("link back after a stale spell: stopping the vehicle (zero velocity) until the HLC commands")
+            try:
+                self._send_setpoint(stop)
+            except AutopilotError as exc:
+                self._rate_log.log(("resend",), logging.WARNING, "stop not sent: %s", exc)
+
+    def _stale(self, now: float) -> bool:
+        """Nothing heard from the vehicle for ``link_stale_after`` (lock held)."""
+        rx_at = self._v.rx_at
+        return rx_at is None or now - rx_at > self._stale_after
 
     def _check_autopilot_kind(self, msg: Any) -> None:
         if self._warned_autopilot:
@@ -648,6 +716,13 @@ class MavlinkAutopilot(Autopilot):
         v.base_mode = msg.base_mode
         v.custom_mode = msg.custom_mode
         v.system_status = msg.system_status
+        commanded = self._commanded is not None and self._commanded[0] == v.mode \
+            and now - self._commanded[1] <= 2 * self._ack_timeout + self._mode_timeout + 1.0
+        v.failsafes.on_mode(v.mode, now, commanded=commanded)
+        if previous != msg.custom_mode and v.failsafes.reason:
+            log.warning("autopilot failsafe (%s): mode %s", v.failsafes.reason, v.mode)
+        if not v.armed and not v.in_air:
+            v.battery_warning = ""  # a new pack, or the same one rested: ArduPilot resets at arming too
         if previous != msg.custom_mode:
             if previous is not None:
                 log.info("autopilot mode %s -> %s", mode_name(previous), mode_name(msg.custom_mode))
@@ -670,6 +745,52 @@ class MavlinkAutopilot(Autopilot):
 
     def _on_sys_status(self, v: _Vehicle, msg: Any) -> None:
         v.battery = float(msg.battery_remaining) if 0 <= msg.battery_remaining <= 100 else -1.0
+        if 0 < msg.voltage_battery < 0xFFFF:
+            v.voltage = msg.voltage_battery / 1000.0
+        now = self.clock()
+        v.health = msg.onboard_control_sensors_health
+        for bit, reason in _HEALTH_FAILSAFES:
+            enabled = msg.onboard_control_sensors_enabled & bit and msg.onboard_control_sensors_present & bit
+            unhealthy = bool(enabled) and not msg.onboard_control_sensors_health & bit
+            v.failsafes.set_active(reason, unhealthy, now)
+            if reason == fs.BATTERY and unhealthy:
+                self._battery_warning(v, "failsafe")
+
+    def _on_battery_status(self, v: _Vehicle, msg: Any) -> None:
+        if msg.id != 0:
+            return  # the first battery is the one SYS_STATUS describes
+        cells = [mv for mv in msg.voltages if mv != 0xFFFF]
+        cells += [mv for mv in getattr(msg, "voltages_ext", []) or [] if mv not in (0, 0xFFFF)]
+        if cells:
+            v.voltage = sum(cells) / 1000.0
+            if len(cells) >= 2 and all(0 < mv < _PER_CELL_MAX_MV for mv in cells):
+                v.cells_seen = len(cells)  # a per-cell monitor (SMBus, DroneCAN); ArduPilot's analog splits
+        if 0 <= msg.battery_remaining <= 100:
+            v.battery = float(msg.battery_remaining)
+        warning = _CHARGE_WARNINGS.get(getattr(msg, "charge_state", 0), "")
+        v.failsafes.set_active(fs.BATTERY, bool(warning), self.clock())
+        if warning:
+            self._battery_warning(v, warning)
+
+    def _battery_warning(self, v: _Vehicle, warning: str) -> None:
+        if _WARNING_RANK.get(warning, 1) > _WARNING_RANK.get(v.battery_warning, 1) or not v.battery_warning:
+            if v.battery_warning != warning:
+                log.warning("autopilot battery warning: %s (%.2f V)", warning, v.voltage)
+            v.battery_warning = warning
+
+    def _on_fence_status(self, v: _Vehicle, msg: Any) -> None:
+        breached = bool(msg.breach_status)
+        if breached and not v.fence_breached:
+            log.warning("autopilot reports a fence breach (type %d, %d so far)", msg.breach_type, msg.breach_count)
+        v.fence_breached = breached
+        v.failsafes.set_active(fs.FENCE, breached, self.clock())
+
+    def _on_param_value(self, v: _Vehicle, msg: Any) -> None:
+        name = msg.param_id if isinstance(msg.param_id, str) else bytes(msg.param_id).decode("ascii", "replace")
+        name = name.rstrip("\x00")
+        v.params[name] = float(msg.param_value)
+        v.param_types[name] = int(msg.param_type)
+        v.param_at[name] = v.messages
 
     def _on_extended_sys_state(self, v: _Vehicle, msg: Any) -> None:
         v.landed_state = msg.landed_state
@@ -693,6 +814,10 @@ class MavlinkAutopilot(Autopilot):
         text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode("utf-8", "replace")
         text = text.rstrip("\x00").strip()
         v.texts.append((v.messages, msg.severity, text))
+        v.failsafes.event(fs.text_failsafe(text), self.clock())
+        level = fs.text_battery_level(text)
+        if level:
+            self._battery_warning(v, level)
         level = logging.WARNING if msg.severity <= mav.MAV_SEVERITY_WARNING else logging.INFO
         log.log(level, "autopilot says: %s", text)
 
@@ -727,10 +852,14 @@ class MavlinkAutopilot(Autopilot):
             if sp is None or now < sp.next_send:
                 return None
             v = self._v
-            hold = _ZERO_RESEND if sp.zero else self._velocity_hold
-            expired = hold > 0 and now - sp.set_at >= hold
+            hold = min(_ZERO_RESEND, self._setpoint_timeout) if sp.zero else self._setpoint_timeout
+            expired = now - sp.set_at >= hold
             if expired or not (v.armed and v.mode == "GUIDED" and v.in_air):
                 self._setpoint = None
+                return None
+            if self._stale(now):
+                self._setpoint = None  # never queue a set-point into a cut link (see the module docstring)
+                self.setpoints_withheld += 1
                 return None
             sp.next_send = max(sp.next_send + self._resend_period, now)
             return sp
@@ -739,7 +868,8 @@ class MavlinkAutopilot(Autopilot):
         ts, tc = self._target or (1, 1)
         boot_ms = int(self.clock() * 1000) & 0xFFFFFFFF
         self._send(lambda m: m.set_position_target_local_ned_send(
-            boot_ms, ts, tc, sp.frame, VELOCITY_TYPE_MASK, 0, 0, 0, sp.vx, sp.vy, sp.vz, 0, 0, 0, 0, sp.yaw_rate,
+            boot_ms, ts, tc, sp.frame, VELOCITY_TYPE_MASK, 0, 0, 0, sp.vx, sp.vy, sp.vz, 0, 0, 0, 0,
+            math.radians(sp.yaw_rate),
         ))
 
     def _clear_setpoint(self) -> None:
@@ -794,6 +924,7 @@ class MavlinkAutopilot(Autopilot):
         number = COPTER_MODES[name]
         with self._cond:
             mark = self._v.messages
+            self._commanded = (name, self.clock())
         result = self._command_result(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, number)
         if result == mav.MAV_RESULT_UNSUPPORTED:
             result = self._set_mode_message(number)  # the SET_MODE message: older firmware
@@ -829,7 +960,7 @@ class MavlinkAutopilot(Autopilot):
         return None
 
     def _wait_ready(self) -> None:
-        timeout = float(self._p["ready_timeout"])
+        timeout = self._p.ready_timeout
         with self._cond:
             reasons = self._v.not_ready()
         if reasons:
@@ -854,7 +985,7 @@ class MavlinkAutopilot(Autopilot):
 
     def _request_streams(self) -> None:
         """Ask for the telemetry `state` needs: SET_MESSAGE_INTERVAL, or REQUEST_DATA_STREAM if unsupported."""
-        rate = float(self._p["stream_rate_hz"])
+        rate = self._p.stream_rate_hz
         for i, (name, factor) in enumerate(STREAMS):
             msg_id = getattr(mav, f"MAVLINK_MSG_ID_{name}")
             result = self._command_result(mav.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / (rate * factor),
@@ -871,6 +1002,81 @@ class MavlinkAutopilot(Autopilot):
         ts, tc = self._target or (1, 1)
         for stream in DATA_STREAMS:
             self._send(lambda m, s=stream: m.request_data_stream_send(ts, tc, s, hz, 1))
+
+    # ----------------------------------------------------------------- vehicle parameters
+
+    def read_params(self, names: tuple[str, ...] | list[str],
+                    groups: tuple[tuple[str, ...], ...] | None = None) -> dict[str, float]:
+        """The named parameters the vehicle reports (PARAM_REQUEST_READ, two rounds); absent ones are left out.
+
+        All requests go out at once and the answers are collected together, so a slow radio costs two
+        ``ack_timeout`` at most, not one per parameter. The read is complete when one name of each of
+        `groups` arrived (default: every name); a firmware without a parameter never answers for it.
+        """
+        groups = tuple((n,) for n in names) if groups is None else groups
+        with self._cond:
+            mark = self._v.messages
+
+        def complete(v: _Vehicle) -> bool:
+            return all(any(v.param_at.get(n, -1) > mark for n in group) for group in groups)
+
+        wanted = list(names)
+        for _ in range(2):
+            ts, tc = self._target or (1, 1)
+            for name in wanted:
+                self._send(lambda m, n=name, ts=ts, tc=tc: m.param_request_read_send(ts, tc, n.encode("ascii"), -1))
+            self._wait(complete, self._ack_timeout)
+            with self._cond:
+                if complete(self._v):
+                    break
+                wanted = [n for n in names if self._v.param_at.get(n, -1) <= mark]
+        with self._cond:
+            return {n: self._v.params[n] for n in names if self._v.param_at.get(n, -1) > mark}
+
+    def set_param(self, name: str, value: float) -> None:
+        """PARAM_SET `name` and wait for the PARAM_VALUE that confirms it; `AutopilotError` otherwise."""
+        with self._cond:
+            ptype = self._v.param_types.get(name, mav.MAV_PARAM_TYPE_REAL32)
+        for _ in range(2):
+            with self._cond:
+                mark = self._v.messages
+                ts, tc = self._target or (1, 1)
+            self._send(lambda m, ts=ts, tc=tc: m.param_set_send(ts, tc, name.encode("ascii"), float(value), ptype))
+
+            def confirmed(v: _Vehicle, mark: int = mark) -> bool:
+                return v.param_at.get(name, -1) > mark and abs(v.params[name] - value) <= 1e-3 * max(1.0, abs(value))
+
+            if self._wait(confirmed, self._ack_timeout):
+                log.warning("vehicle parameter %s set to %g (configure_vehicle)", name, value)
+                return
+        with self._cond:
+            shown = self._v.params.get(name)
+        raise AutopilotError(f"PARAM_SET {name} = {value:g} not confirmed by the vehicle (it reports {shown})")
+
+    def _check_vehicle(self) -> list[Finding]:
+        """The pre-flight check of the vehicle's own failsafes (module docstring); the findings left."""
+        p = self._p
+        values = self.read_params(vehicle_checks.READ, vehicle_checks.REQUIRED_GROUPS)
+        findings = vehicle_checks.check(values, source_system=self.source_system,
+                                        max_guid_timeout=p.max_guid_timeout, cells=p.cells)
+        if p.configure_vehicle and any(f.settable for f in findings):
+            for f in findings:
+                if f.settable and f.want is not None:
+                    try:
+                        self.set_param(f.param, f.want)
+                    except AutopilotError as exc:
+                        log.warning("%s", exc)
+            values = self.read_params(vehicle_checks.READ, vehicle_checks.REQUIRED_GROUPS)
+            findings = vehicle_checks.check(values, source_system=self.source_system,
+                                            max_guid_timeout=p.max_guid_timeout, cells=p.cells)
+        for f in findings:
+            log.warning("vehicle pre-flight check: %s", f.text())
+        if not findings:
+            log.info("vehicle pre-flight check: failsafe parameters OK (%s)",
+                     ", ".join(f"{k}={v:g}" for k, v in sorted(values.items())))
+        self.vehicle_findings = findings
+        self._vehicle_ok = not findings
+        return findings
 
     # ----------------------------------------------------------------- STATUSTEXT reasons
 
@@ -898,5 +1104,8 @@ _HANDLERS: dict[str, Callable[[MavlinkAutopilot, _Vehicle, Any], None]] = {
     "GPS_RAW_INT": MavlinkAutopilot._on_gps,
     "HOME_POSITION": MavlinkAutopilot._on_home,
     "COMMAND_ACK": MavlinkAutopilot._on_ack,
+    "BATTERY_STATUS": MavlinkAutopilot._on_battery_status,
+    "FENCE_STATUS": MavlinkAutopilot._on_fence_status,
+    "PARAM_VALUE": MavlinkAutopilot._on_param_value,
     "STATUSTEXT": MavlinkAutopilot._on_statustext,
 }

@@ -1,0 +1,101 @@
+"""The ``[hlc.autopilot_params]`` of the ``mavlink`` adapter, validated before any I/O.
+
+A typo in a field config must fail at start-up naming the key, not fall back to a default in the air:
+unknown keys are refused (``extra="forbid"``) and types are strict (``"5"`` is not 5, ``true`` is not 1).
+TOML integers are accepted where a float is expected (``connect_timeout = 10``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from antalate_lcm.strict import StrictError, validate_strict
+
+
+class Params(BaseModel):
+    """Every adapter parameter with its default; docs/ardupilot.md has the same table for people."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+    connection: str = Field(
+        "tcp:127.0.0.1:5760",
+        description='pymavlink connection string: "tcp:HOST:PORT", "udpin:HOST:PORT", "udpout:HOST:PORT", '
+        'or a serial device such as "/dev/ttyACM0" (with `baud`)',
+    )
+    baud: int = Field(115200, ge=1, le=10_000_000, description="serial baud rate (serial links only)")
+    source_system: int = Field(245, ge=1, le=255, description="our MAVLink system id (see SYSID_MYGCS)")
+    source_component: int = Field(191, ge=0, le=255, description="our component id (MAV_COMP_ID_ONBOARD_COMPUTER)")
+    target_system: int = Field(0, ge=0, le=255, description="the autopilot's system id; 0 = the first heard")
+    target_component: int = Field(0, ge=0, le=255, description="the autopilot's component id; 0 = AUTOPILOT1")
+    connect_timeout: float = Field(10.0, gt=0, description="s to open the link and hear the first HEARTBEAT")
+    ready_timeout: float = Field(30.0, gt=0, description="s arm() waits for STANDBY, EKF position and 3D fix")
+    ack_timeout: float = Field(1.5, gt=0, description="s per COMMAND_ACK / PARAM_VALUE attempt (two attempts)")
+    mode_timeout: float = Field(3.0, gt=0, description="s for a HEARTBEAT to confirm a mode change or arming")
+    stream_rate_hz: float = Field(5.0, gt=0, description="telemetry rate asked of the autopilot")
+    velocity_resend_hz: float = Field(
+        4.0, ge=0, description="resend rate of the current velocity set-point in GUIDED flight; 0 = never resend"
+    )
+    setpoint_timeout: float = Field(
+        1.0, gt=0, le=10.0,
+        description="s after the HLC's set_velocity() call beyond which that set-point is never sent again",
+    )
+    link_stale_after: float = Field(
+        1.0, gt=0,
+        description="s without any message from the vehicle after which no set-point is sent (none is "
+        "queued in a socket buffer during a cut); when the link returns a stop is sent at once",
+    )
+    heartbeat_hz: float = Field(1.0, gt=0, description="our GCS HEARTBEAT rate")
+    cells: int = Field(
+        0, ge=0, le=24,
+        description="battery cells in series; 0 = learn from BATTERY_STATUS per-cell voltages, else unknown",
+    )
+    check_vehicle: bool = Field(True, description="read the vehicle's failsafe parameters on connect")
+    configure_vehicle: bool = Field(
+        False, description="write the failsafe parameters the pre-flight check finds wrong (PARAM_SET)"
+    )
+    require_vehicle_failsafes: bool = Field(
+        False, description="refuse to arm while a failsafe parameter is wrong or unread"
+    )
+    max_guid_timeout: float = Field(
+        3.0, gt=0, le=5.0, description="largest GUID_TIMEOUT (s) the pre-flight check accepts"
+    )
+    signing_key: str = Field(
+        "", description="MAVLink 2 signing: 64 hex digits (the key) or a passphrase (key = SHA-256 of it, "
+        "as MAVProxy's `signing setup`); empty = no signing"
+    )
+
+    @field_validator("connection")
+    @classmethod
+    def _connection(cls, value: str) -> str:
+        value = value.strip()
+        if not value:
+            raise ValueError("must be a pymavlink connection string, got an empty string")
+        return value
+
+    @field_validator(
+        "connect_timeout", "ready_timeout", "ack_timeout", "mode_timeout", "stream_rate_hz", "velocity_resend_hz",
+        "setpoint_timeout", "link_stale_after", "heartbeat_hz", "max_guid_timeout",
+    )
+    @classmethod
+    def _finite(cls, value: float) -> float:
+        if not math.isfinite(value):
+            raise ValueError(f"must be a finite number, got {value!r}")
+        return value
+
+
+def parse_params(raw: Any) -> Params:
+    """`Params` from the config table, validated as the config loader does (`antalate_lcm.strict`).
+
+    Raises `ValueError` naming the key, so a typo in the field is a one-line fix.
+    """
+    try:
+        return validate_strict(Params, dict(raw or {}))
+    except StrictError as exc:
+        raise ValueError(f"mavlink autopilot parameter {exc.key!r}: {exc.message}") from None
+
+
+#: Defaults by name (tools and docs checks).
+DEFAULTS: dict[str, Any] = Params().model_dump()

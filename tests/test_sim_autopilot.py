@@ -1,4 +1,5 @@
-"""SimAutopilot kinematics and faults on a fake clock; the autopilot contract and registry."""
+"""SimAutopilot kinematics and faults (link loss with a duration, autopilot failsafes, state() raising,
+voltage per cell, battery warning) on a fake clock; the autopilot contract and registry."""
 
 from __future__ import annotations
 
@@ -375,6 +376,113 @@ def test_link_loss_from_the_start() -> None:
     clock.advance(5.0)
     s = sim.state()
     assert s.connected and s.link_age == math.inf
+
+
+@pytest.mark.parametrize("mode, name, flight_mode", [("rtl", "RTL", FlightMode.RTL), ("land", "LAND", FlightMode.LANDING),
+                                                ("brake", "BRAKE", FlightMode.HOLD)])
+def test_autopilot_failsafe_reports_its_reason_until_commanded_or_landed(
+    mode: str, name: str, flight_mode: FlightMode
+) -> None:
+    sim, clock = airborne()
+    sim.set_velocity(3.0, 0.0, 0.0, 0.0, Frame.NED)
+    run(sim, clock, 1.0)
+    sim.trigger_failsafe(mode, "fence breach")
+    s = run(sim, clock, 2.0)
+    assert (s.mode, s.flight_mode, s.failsafe) == (name, flight_mode, "fence breach")
+    assert s.autonomous  # the autopilot's own logic, not a pilot
+    if mode == "brake":
+        assert s.in_air and abs(s.vd) < 1e-9 and math.hypot(s.vn, s.ve) < 0.1  # stopped, holding
+        sim.set_velocity(3.0, 0.0, 0.0, 0.0, Frame.NED)  # ignored outside GUIDED
+        assert math.hypot(run(sim, clock, 1.0).vn, 0.0) < 0.1
+        sim.land()  # the operator's LAND clears it
+        assert sim.state().failsafe == "" and sim.state().mode == "LAND"
+    else:
+        s = run(sim, clock, 20.0)
+        assert s.landed and s.failsafe == ""  # touched down: over
+
+
+def test_failsafe_on_the_ground_disarms_and_unknown_modes_refused() -> None:
+    sim, clock = make()
+    assert sim.arm()
+    sim.trigger_failsafe("land", "EKF failsafe")
+    assert not sim.state().armed
+    with pytest.raises(ValueError, match="failsafe mode"):
+        sim.trigger_failsafe("loiter", "x")
+
+
+def test_scheduled_failsafe() -> None:
+    sim, clock = airborne(1.0, failsafe_after=2.0, failsafe_mode="brake", failsafe_reason="fence breach")
+    assert sim.state().failsafe == ""
+    s = run(sim, clock, 2.0)
+    assert s.failsafe == "fence breach" and s.mode == "BRAKE"
+
+
+def test_scheduled_link_loss_with_a_duration_comes_back() -> None:
+    sim, clock = airborne(1.0, link_loss_after=1.0, link_loss_for=3.0)  # 0.6 s flown
+    s = run(sim, clock, 2.0)
+    assert s.link_age > 0.5
+    s = run(sim, clock, 2.5)
+    assert s.link_age == 0.0 and s.in_air
+    s = run(sim, clock, 10.0)
+    assert s.link_age == 0.0  # fires once
+
+
+def test_state_error_raises_until_cleared_and_the_vehicle_flies_on() -> None:
+    sim, clock = airborne()
+    sim.set_velocity(3.0, 0.0, 0.0, 0.0, Frame.NED)
+    before = run(sim, clock, 0.5)
+    sim.set_state_error("bus error")
+    for _ in range(10):
+        clock.advance(0.1)
+        with pytest.raises(RuntimeError, match="bus error"):
+            sim.state()
+    sim.set_state_error(None)
+    after = sim.state()
+    assert geo.distance(before.lat, before.lon, after.lat, after.lon) > 1.0
+
+
+def test_scheduled_state_error_for_a_while() -> None:
+    sim, clock = airborne(1.0, state_error_after=1.0, state_error_for=2.0)  # 0.6 s flown
+    run(sim, clock, 0.3)
+    raised = 0
+    for _ in range(30):
+        clock.advance(0.1)
+        try:
+            sim.state()
+        except RuntimeError as exc:
+            assert "simulated adapter fault" in str(exc)
+            raised += 1
+    assert 18 <= raised <= 21
+    assert sim.state().in_air
+
+
+def test_voltage_per_cell_and_sag() -> None:
+    sim, clock = make(battery=50.0, cells=4, voltage_sag=0.3)
+    s = sim.state()
+    assert s.cells == 4 and s.cell_voltage == pytest.approx(3.8)  # 3.4 + 0.8 x 50%
+    assert sim.arm()
+    sim.takeoff(5.0)
+    s = run(sim, clock, 0.5)
+    assert s.in_air and s.cell_voltage == pytest.approx(3.5, abs=0.01)  # sagging under load
+    sim, _ = make(cells=0)
+    assert math.isnan(sim.state().voltage) and math.isnan(sim.state().cell_voltage)
+
+
+def test_battery_warning_at() -> None:
+    sim, clock = make(battery=31.0, battery_warning_at=30.0)
+    assert sim.state().battery_warning == ""
+    sim.set_battery(30.0)
+    assert "battery low" in sim.state().battery_warning
+
+
+@pytest.mark.parametrize(
+    "params, match",
+    [({"failsafe_mode": "loiter"}, "failsafe_mode"), ({"link_loss_for": -1.0}, "link_loss_for"),
+     ({"cells": -2}, "cells"), ({"voltage_sag": float("nan")}, "voltage_sag")],
+)
+def test_bad_fault_params_raise(params: dict[str, Any], match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        SimAutopilot(params, clock=FakeClock())
 
 
 def test_refuse_arm_from_params_and_api() -> None:

@@ -82,6 +82,7 @@ class HlcNode(Node):
         self.snapshot = AutopilotState()
         self._good = AutopilotState()  # the last snapshot state() returned
         self._good_at: float | None = None  # `now` when it did
+        self._polled_at: float | None = None  # `now` of `snapshot`
         self._state_fault = ""  # why state() failed on the last tick, "" when it worked
         self._fault_log = RateLimitedLog(self.log, period=30.0)
         self.connected = False
@@ -204,7 +205,10 @@ class HlcNode(Node):
         self._apply(decision, msg.header.agent)
 
     def _link_age(self) -> float:
-        return self.snapshot.link_age
+        """The link's age now: the last snapshot's, plus the time since it was taken (20 Hz is coarse)."""
+        if self._polled_at is None:
+            return math.inf
+        return self.snapshot.link_age + max(0.0, self.now - self._polled_at)
 
     def _poll(self, now: float) -> AutopilotState:
         """The adapter's snapshot, or the last good one aged by the time since when ``state()`` raises."""
@@ -230,6 +234,7 @@ class HlcNode(Node):
             return
         now = self.now
         self.snapshot = self._poll(now)
+        self._polled_at = now
         self._handle(self.machine.on_autopilot(self.snapshot, now, fault=self._state_fault))
         self._handle(self.machine.tick(now))
         stale = self.guard.tick(now, self.machine.state, self.mc_state, self._link_age())
@@ -243,7 +248,7 @@ class HlcNode(Node):
             # so it is noted; a malformed one in flight is a warning.
             in_mission = mission_flight(self.machine.state, self.mc_state)
             self._reject_log.log(
-                ("reject", decision.reason),
+                ("reject", decision.reason.split(":")[0]),  # per kind: a stale link's age changes every time
                 logging.WARNING if in_mission else logging.INFO,
                 "rejected velocity command from %s: %s",
                 source,

@@ -10,15 +10,18 @@ through :func:`validate_strict`, which validates in pydantic's *strict JSON* mod
 - a TOML array fills a ``list`` or a ``tuple``, a string fills an ``Enum`` or a ``Path``: what a
   TOML (like a JSON) document can express is accepted as written, whatever the model's own mode;
 - a TOML date or time is refused anywhere (no antalate setting is one; as a string it would slip
-  into a text field unnoticed).
+  into a text field unnoticed);
+- a boolean does not fill an integer ``Literal`` (pydantic takes ``true`` for ``Literal[1, -1]``
+  because ``True == 1``: a ``turn_direction = true`` would turn clockwise without a word).
 """
 
 from __future__ import annotations
 
 import datetime as _dt
 import json
+import types
 from collections.abc import Mapping
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar, Union, get_args, get_origin
 
 from pydantic import BaseModel, ValidationError
 
@@ -73,11 +76,39 @@ def describe(exc: ValidationError) -> StrictError:
     return StrictError(key, f"{err['msg']}{shown}")
 
 
+def _int_literals(annotation: Any) -> tuple[Any, ...]:
+    """The members of the ``Literal``s in ``annotation`` (through ``X | None``) if some are ints and none bools."""
+    origin = get_origin(annotation)
+    if origin is Literal:
+        members: tuple[Any, ...] = get_args(annotation)
+    elif origin in (Union, types.UnionType):
+        members = tuple(m for arg in get_args(annotation) for m in _int_literals(arg))
+    else:
+        return ()
+    has_int = any(isinstance(m, int) and not isinstance(m, bool) for m in members)
+    return members if has_int and not any(isinstance(m, bool) for m in members) else ()
+
+
+def _bool_for_int_literal(model: type[BaseModel], data: Mapping[str, Any], path: tuple[Any, ...] = ()) -> None:
+    for name, info in model.model_fields.items():
+        key = info.alias or name
+        if key not in data:
+            continue
+        value = data[key]
+        members = _int_literals(info.annotation)
+        if isinstance(value, bool) and members:
+            expected = " or ".join(repr(m) for m in members)
+            raise StrictError(dotted((*path, key)), f"Input should be {expected}, got {value!r}")
+        if isinstance(value, Mapping) and isinstance(info.annotation, type) and issubclass(info.annotation, BaseModel):
+            _bool_for_int_literal(info.annotation, value, (*path, key))
+
+
 def validate_strict(model: type[M], data: Mapping[str, Any]) -> M:
     """``model`` validated from ``data`` (a TOML table) in strict JSON mode; raises :class:`StrictError`."""
     where = find_datetime(data)
     if where is not None:
         raise StrictError(dotted(where), "a TOML date/time is not a valid value here")
+    _bool_for_int_literal(model, data)
     try:
         text = json.dumps(dict(data), allow_nan=True)
     except (TypeError, ValueError) as exc:  # a Python caller's object that TOML cannot hold

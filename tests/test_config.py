@@ -128,6 +128,7 @@ def test_examples_are_valid(example: Path) -> None:
 # ------------------------------------------------------------------ strict: no silent coercion
 
 BEHAVIOR = "[[bma]]\nname = 'a'\n[[bma.behaviors]]\nplugin = 'auto_operator'\n"
+DOVRAT = "[[bma]]\nname = 'a'\n[[bma.behaviors]]\nplugin = 'dovrat_swarm'\nactivate_on = ['MISSION']\n"
 
 
 def assert_config_error(path: Path, key: str, *expected: str) -> ConfigError:
@@ -397,12 +398,14 @@ def test_sim_rejects_the_same_params_when_constructed_directly() -> None:
 def test_any_adapter_declares_its_params_model(tmp_path: Path, plugin_dir: Path) -> None:
     """The mechanism, not just the sim: a third-party adapter's model names its own fields."""
     (plugin_dir / "h4_custom_adapter.py").write_text(
+        "from typing import Literal\n"
         "from pydantic import BaseModel, ConfigDict, Field\n"
         "from antalate_lcm.autopilot.sim import SimAutopilot\n"
         "class Params(BaseModel):\n"
         "    model_config = ConfigDict(extra='forbid', strict=True)\n"
         "    port: int = Field(default=14550, ge=1, le=65535)\n"
         "    mode: str = 'GUIDED'\n"
+        "    sign: Literal[1, -1] | None = None\n"
         "class Custom(SimAutopilot):\n"
         "    params_model = Params\n"
         "    def __init__(self, params=None, **kw):\n"
@@ -420,6 +423,7 @@ def test_any_adapter_declares_its_params_model(tmp_path: Path, plugin_dir: Path)
         ("port = '5760'", "port", "valid integer, got '5760'"),
         ("port = 70000", "port", "less than or equal to 65535"),
         ("prot = 5760", "prot", "Extra inputs"),
+        ("sign = true", "sign", "Input should be 1 or -1, got True"),  # pydantic alone takes True for 1
     ):
         text = f'[hlc.autopilot]\nname = "h4_custom_adapter:Custom"\n{params}\n'
         assert_config_error(write(tmp_path, text), f"hlc.autopilot.{field}", expected)
@@ -440,12 +444,15 @@ def test_any_adapter_declares_its_params_model(tmp_path: Path, plugin_dir: Path)
         ("{ max_flights = 1.0 }", "max_flights", "valid integer"),
         ("{ max_flights = '1' }", "max_flights", "valid integer"),
         ("{ altitude = true }", "altitude", "valid number"),
+        ("{ turn_direction = true }", "turn_direction", "Input should be 1 or -1, got True"),
+        ("{ detection_source = 1 }", "detection_source", "Input should be 'any', 'peer_detection' or 'payload'"),
     ],
 )
 def test_behavior_params_are_strict(tmp_path: Path, params: str, key: str, expected: str) -> None:
     from antalate_lcm.runtime.agent import validate
 
-    config = load_config(write(tmp_path, BEHAVIOR + f"params = {params}\n"))
+    behavior = DOVRAT if "turn_direction" in params or "detection_source" in params else BEHAVIOR
+    config = load_config(write(tmp_path, behavior + f"params = {params}\n"))
     with pytest.raises(ConfigError) as info:
         validate(config)
     assert info.value.key == f"bma[0].behaviors[0].params.{key}" and expected in info.value.expected
@@ -499,3 +506,41 @@ def test_lan_examples_have_distinct_agent_names() -> None:
     configs = [load_config(p) for p in sorted((REPO / "examples" / "lan").glob("*.toml"))]
     assert len(configs) >= 6
     check_unique_agent_names(configs)
+
+
+def test_strict_validation_takes_toml_values_as_written() -> None:
+    """What TOML can say fills any model (tuple, Enum, Path, nested); nothing is guessed."""
+    import enum
+    from typing import Literal
+
+    from pydantic import BaseModel, ConfigDict
+
+    from antalate_lcm.strict import StrictError, validate_strict
+
+    class Mode(enum.Enum):
+        FAST = "fast"
+
+    class Inner(BaseModel):
+        sign: Literal[1, -1] = 1
+
+    class Model(BaseModel):
+        model_config = ConfigDict(extra="forbid", strict=True)
+        pair: tuple[int, int] = (0, 0)
+        mode: Mode = Mode.FAST
+        path: Path = Path(".")
+        rate: float = 1.0
+        inner: Inner = Inner()
+
+    m = validate_strict(Model, {"pair": [1, 2], "mode": "fast", "path": "/tmp/x", "rate": 3, "inner": {"sign": -1}})
+    assert (m.pair, m.mode, m.path, m.rate, m.inner.sign) == ((1, 2), Mode.FAST, Path("/tmp/x"), 3.0, -1)
+    for data, key, message in (
+        ({"pair": ["1", 2]}, "pair[0]", "valid integer"),
+        ({"mode": "slow"}, "mode", "'fast'"),
+        ({"rate": "3"}, "rate", "valid number"),
+        ({"inner": {"sign": True}}, "inner.sign", "1 or -1, got True"),
+        ({"inner": {"sign": 2}}, "inner.sign", "1 or -1"),
+        ({"rate": float("nan"), "extra": 1}, "extra", "Extra inputs"),
+    ):
+        with pytest.raises(StrictError) as info:
+            validate_strict(Model, data)
+        assert info.value.key == key and message in info.value.message, (data, str(info.value))

@@ -128,21 +128,43 @@ def test_no_multicast_route_is_one_clear_message(tmp_path: Path) -> None:
 
 
 def test_agent_runs_and_stops_cleanly_on_sigterm(tmp_path: Path) -> None:
+    import queue
     import signal
+    import threading
     import time
 
     cfg = tmp_path / "a.toml"
     cfg.write_text('[agent]\nname = "solo"\n[buses]\nlan = "memq://"\n')
     proc = subprocess.Popen(
         [sys.executable, "-m", "antalate_lcm.cli", "agent", str(cfg), "--agents", "3"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )
-    time.sleep(3)
-    assert proc.poll() is None
-    proc.send_signal(signal.SIGTERM)
-    out, err = proc.communicate(timeout=20)
-    assert proc.returncode == 0, err
-    assert "INIT -> STANDBY" in err and "solo-03" in err
+    lines: queue.Queue[str] = queue.Queue()
+    assert proc.stderr is not None
+    reader = threading.Thread(target=lambda: [lines.put(ln) for ln in proc.stderr], daemon=True)  # type: ignore[union-attr]
+    reader.start()
+    standby: set[str] = set()
+    seen: list[str] = []
+    deadline = time.monotonic() + 60
+    try:
+        # every agent reaches STANDBY (its MC heard its HLC): the whole process is up
+        while standby != {"solo-01", "solo-02", "solo-03"} and time.monotonic() < deadline:
+            try:
+                line = lines.get(timeout=0.5)
+            except queue.Empty:
+                assert proc.poll() is None, "".join(seen)
+                continue
+            seen.append(line)
+            if "INIT -> STANDBY" in line:
+                standby.update(n for n in ("solo-01", "solo-02", "solo-03") if n in line)
+        assert standby == {"solo-01", "solo-02", "solo-03"}, "".join(seen)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=20) == 0, "".join(seen)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    reader.join(timeout=5)
 
 
 _OPEN_BUSES = """

@@ -49,6 +49,7 @@ import httpx
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from antalate_lcm.station import StationServer, StationSettings  # noqa: E402
+from antalate_lcm.station._settings import RateLimits  # noqa: E402
 from antalate_lcm.station._spatial import GridIndex  # noqa: E402
 from antalate_lcm.station.sector import detect, search_box  # noqa: E402
 
@@ -100,7 +101,12 @@ class _Walk:
 
 
 def _serve(db_path: str, conn: Connection) -> None:
-    settings = StationSettings(db_path=db_path, range_m=RANGE_M, fov_deg=FOV_DEG, stale_after_s=120.0)
+    # Every simulated agent registers and reports from 127.0.0.1: the per-address and per-agent
+    # limits (which a real deployment keeps) would measure the limiter, not the station.
+    no_limits = RateLimits(registrations_per_minute=None, reports_per_second=None, address_reports_per_second=None)
+    settings = StationSettings(
+        db_path=db_path, range_m=RANGE_M, fov_deg=FOV_DEG, stale_after_s=120.0, rate_limits=no_limits
+    )
     with StationServer(settings) as server:
         conn.send(server.url)
         conn.recv()  # any message = stop

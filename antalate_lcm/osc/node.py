@@ -34,6 +34,9 @@ from antalate_lcm.msgs import hlc_state_t, mc_state_t, payload_t, telemetry_t
 from antalate_lcm.node import Context, Node
 from antalate_lcm.osc import wire
 
+# httpx logs every request at INFO: one line per report per agent would drown an agent's log.
+logging.getLogger("httpx").setLevel(logging.WARNING)
+
 
 class ServerProblem(Exception):
     """One failed exchange with the station (down, timeout, wrong status, oversized or invalid reply)."""

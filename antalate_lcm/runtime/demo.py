@@ -71,17 +71,30 @@ def open_context(url: str) -> tuple[Context, str]:
     return Context.in_process({"lan": url}), url
 
 
-def build_swarm(n: int, url: str, *, station: str | None = None) -> list[Config]:
-    base = parse_config(demo_document(url, station=station), "<demo>")
+def build_swarm(n: int, url: str, *, station: str | None = None, swarm_key: str = "") -> list[Config]:
+    base = parse_config(demo_document(url, station=station, swarm_key=swarm_key), "<demo>")
     configs = swarm_configs(base, n)
     for cfg in configs:
         validate(cfg)
     return configs
 
 
-def start_station() -> StationServer:
-    """The reference station in this process (in-memory database): the swarm's peer sensing."""
-    server = StationServer(StationSettings(db_path=":memory:", range_m=30.0, fov_deg=90.0, stale_after_s=3.0))
+def start_station(swarm_key: str = "", api_key: str = "") -> StationServer:
+    """The reference station in this process (in-memory database): the swarm's peer sensing.
+
+    With the demo's swarm key the agents register by proof (the station holds only the derived
+    key); ``api_key`` lets the demo's operator use the station's API (``antalate command``). Every
+    agent registers from 127.0.0.1 at once, so the per-address registration limit is off.
+    """
+    from antalate_lcm.station._auth import registration_key, sha256_hex
+    from antalate_lcm.station._settings import ApiKey, RateLimits
+
+    server = StationServer(StationSettings(
+        db_path=":memory:", range_m=30.0, fov_deg=90.0, stale_after_s=3.0,
+        registration_key=registration_key(swarm_key) if swarm_key else None,
+        api_keys=(ApiKey(name="demo-operator", role="operator", sha256=sha256_hex(api_key)),) if api_key else (),
+        rate_limits=RateLimits(registrations_per_minute=None),
+    ))
     server.start()
     log.info("station serving on %s", server.url)
     return server
@@ -91,9 +104,12 @@ def run_headless(
     n: int, *, mission_time: float = 20.0, url: str = DEMO_URL, direction: tuple[float, float] | None = None,
     with_station: bool = True, on_report: Callable[[str], None] = print,
 ) -> int:
-    station = start_station() if with_station else None
+    swarm_key = generate_key()
+    station = start_station(swarm_key) if with_station else None
     try:
-        return _fly_headless(n, mission_time, url, direction, station.url if station else None, on_report)
+        return _fly_headless(
+            n, mission_time, url, direction, station.url if station else None, on_report, swarm_key
+        )
     finally:
         if station is not None:
             station.stop()
@@ -101,10 +117,10 @@ def run_headless(
 
 def _fly_headless(
     n: int, mission_time: float, url: str, direction: tuple[float, float] | None, station: str | None,
-    on_report: Callable[[str], None],
+    on_report: Callable[[str], None], swarm_key: str = "",
 ) -> int:
     context, url = open_context(url)
-    configs = build_swarm(n, url, station=station)
+    configs = build_swarm(n, url, station=station, swarm_key=swarm_key)
     nodes: list[Node] = [node for cfg in configs for node in agent_nodes(cfg, context)]
     operator = ScriptedOperator(
         configs[0].with_agent_name("operator"),

@@ -16,6 +16,8 @@ from collections.abc import Iterator
 from antalate_lcm.node import Node
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.runtime.demo import DEMO_URL, build_swarm, open_context, start_station
+from antalate_lcm.security import generate_key
+from antalate_lcm.station._auth import new_api_key
 
 
 @contextlib.contextmanager
@@ -42,11 +44,20 @@ def run_interactive(n: int, *, url: str = DEMO_URL) -> int:
     fd, log_path = tempfile.mkstemp(prefix="antalate-demo-", suffix=".log")
     os.close(fd)
     nodes: list[Node] = []
+    swarm_key, api_key = generate_key(), new_api_key()
+    key_path = log_path.removesuffix(".log") + ".api-key"
+    fd = os.open(key_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(api_key + "\n")
     with _log_to_file(log_path):
-        station = start_station()
+        station = start_station(swarm_key, api_key)
+        logging.getLogger("antalate.demo").info(
+            "station on %s; its API key (role operator) is in %s: antalate command agents --station %s "
+            "--api-key-file %s", station.url, key_path, station.url, key_path,
+        )
         context, url = open_context(url)
         try:
-            configs = build_swarm(n, url, station=station.url)
+            configs = build_swarm(n, url, station=station.url, swarm_key=swarm_key)
             context.executor.start()
             for cfg in configs:
                 for node in agent_nodes(cfg, context):
@@ -61,5 +72,7 @@ def run_interactive(n: int, *, url: str = DEMO_URL) -> int:
                     node.stop()
             context.close()
             station.stop()
+    with contextlib.suppress(OSError):
+        os.unlink(key_path)  # the station it opened is gone
     print(f"antalate demo: {n} agents flown; the log is in {log_path}")
     return code

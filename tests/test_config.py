@@ -544,3 +544,20 @@ def test_strict_validation_takes_toml_values_as_written() -> None:
         with pytest.raises(StrictError) as info:
             validate_strict(Model, data)
         assert info.value.key == key and message in info.value.message, (data, str(info.value))
+
+
+@pytest.mark.parametrize("adapter", ["sim", "tello", "mavlink"])
+def test_every_shipped_adapter_declares_a_strict_params_model(tmp_path: Path, adapter: str) -> None:
+    from antalate_lcm.autopilot import load_autopilot
+
+    model = load_autopilot(adapter).params_model
+    assert model is not None, f"{adapter}: no params_model"
+    assert model.model_config.get("extra") == "forbid" and model.model_config.get("strict") is True
+    number = next(n for n, f in model.model_fields.items() if f.annotation in (int, float))
+    for value, expected in (("'1'", "valid "), ("true", "valid ")):
+        text = f'[hlc.autopilot]\nname = "{adapter}"\n{number} = {value}\n'
+        assert_config_error(write(tmp_path, text), f"hlc.autopilot.{number}", expected)
+    assert_config_error(
+        write(tmp_path, f'[hlc]\nautopilot = "{adapter}"\n[hlc.autopilot_params]\nno_such_key = 1\n'),
+        "hlc.autopilot_params.no_such_key", "Extra inputs",
+    )

@@ -13,7 +13,7 @@ import pytest
 
 from antalate_lcm.geo import offset
 from tests.conftest import _netns_reason
-from tests.netns import NetNamespace
+from tests.netns import NetNamespace, wait_for
 from tests.security.harness import HOME, STATION_URL, SWARM_KEY, PeerClient, Swarm, agent_doc
 
 _RESULTS: dict[str, str] = {}
@@ -96,6 +96,12 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
         s.operator = s.peer("the operator", SWARM_KEY)
         for run in s.agents.values():
             run.wait_mc("STANDBY", timeout=60)
+
+        def registered() -> bool:
+            r = s.operator.http1("GET", "/api/agents", headers=s.auth("read-only"))  # type: ignore[union-attr]
+            return r["status"] == 200 and {a["name"] for a in r["body"]} >= {"alpha", "delta"}
+
+        assert wait_for(registered, 30.0, 0.2), f"the OSCs did not register: {s.station_text()[-2000:]}"
         yield s
     finally:
         s.close()

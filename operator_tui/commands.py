@@ -45,8 +45,8 @@ COMMANDS: dict[str, int] = {
 #: for the warning shown when sending: the MC is the authority and the console never refuses to send.
 APPLIES_IN: dict[str, frozenset[str]] = {
     "TAKEOFF": frozenset({"STANDBY"}),
-    "LAND": frozenset({"TAKEOFF", "MISSION"}),
-    "RTL": frozenset({"TAKEOFF", "MISSION"}),
+    "LAND": frozenset({"TAKEOFF", "MISSION", "RTL", "HOLD"}),  # and ERROR once the HLC's link is up
+    "RTL": frozenset({"TAKEOFF", "MISSION", "HOLD"}),
 }
 
 SEQ_MAX = 2**31 - 1

@@ -142,8 +142,10 @@ class AgentView:
     first_heard: float
     last_heard: float
     mc_state: str | None = None
+    mc_reason: str = ""  # mc_state_t.reason: why the MC is in its state
     last_command_seq: int | None = None
     hlc_state: str | None = None
+    hlc_reason: str = ""  # hlc_state_t.reason
     autopilot: str = ""
     telemetry: Telemetry | None = None
     arbiters: dict[str, ArbiterView] = field(default_factory=dict)
@@ -209,23 +211,31 @@ class SwarmModel:
 
     def _on_mc(self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]) -> None:
         name = state_name(MC_STATES, msg.state)
+        view.mc_reason = getattr(msg, "reason", "")
         if name != view.mc_state:
             old = view.mc_state
             view.mc_state = name
-            sev = Severity.ERROR if name == "ERROR" else Severity.INFO
+            sev = {"ERROR": Severity.ERROR, "HLC_LOST": Severity.ERROR, "HOLD": Severity.WARNING}.get(
+                name, Severity.INFO
+            )
             if old is not None or sev is not Severity.INFO:  # a first state is news only when it is bad
-                self._event(wall, view.name, EventKind.MC, f"MC {old or '—'} → {name}", sev)
+                why = f": {view.mc_reason}" if view.mc_reason else ""
+                self._event(wall, view.name, EventKind.MC, f"MC {old or '—'} → {name}{why}", sev)
         view.last_command_seq = msg.last_command_seq
 
     def _on_hlc(self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]) -> None:
         name = state_name(HLC_STATES, msg.state)
         view.autopilot = msg.autopilot
+        view.hlc_reason = getattr(msg, "reason", "")
         if name != view.hlc_state:
             old = view.hlc_state
             view.hlc_state = name
-            sev = {"LLC_DOWN": Severity.CRITICAL, "LOW_BATTERY": Severity.WARNING}.get(name, Severity.INFO)
+            sev = {"LLC_DOWN": Severity.CRITICAL, "LOW_BATTERY": Severity.WARNING, "HOLD": Severity.WARNING}.get(
+                name, Severity.INFO
+            )
             if old is not None or sev is not Severity.INFO:
-                self._event(wall, view.name, EventKind.HLC, f"HLC {old or '—'} → {name}", sev)
+                why = f": {view.hlc_reason}" if view.hlc_reason else ""
+                self._event(wall, view.name, EventKind.HLC, f"HLC {old or '—'} → {name}{why}", sev)
 
     def _on_telemetry(
         self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]

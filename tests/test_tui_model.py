@@ -157,7 +157,7 @@ def test_resend_keeps_the_seq_then_fails_with_a_likely_reason() -> None:
     assert tr.tick(2.0)[0] == [cmd]
     _, (update,) = tr.tick(3.0, mc_state_of=lambda a: "STANDBY")
     assert cmd.status is Status.FAILED and update.failed
-    assert "a likely rejected it (MC STANDBY; LAND applies in MISSION/TAKEOFF)" in cmd.reason
+    assert "a likely rejected it (MC STANDBY; LAND applies in HOLD/MISSION/RTL/TAKEOFF)" in cmd.reason
     assert "3 sends" in cmd.reason
     (late,) = tr.observe("a", 10, 7.0)  # the link came back: it had been accepted after all
     assert cmd.status is Status.ACKED and cmd.reason == "acked late (7.0 s)" and "late" in late.text

@@ -17,6 +17,8 @@ MC_STYLE: dict[str, str] = {
     "LAND": "yellow",
     "MANUAL": "dark_orange",
     "ERROR": "bold white on red",
+    "HOLD": "bold yellow",  # stopped by a failsafe or the hold policy: waits for RTL/LAND
+    "HLC_LOST": "bold white on red",
 }
 
 HLC_STYLE: dict[str, str] = {
@@ -30,6 +32,7 @@ HLC_STYLE: dict[str, str] = {
     "MANUAL": "dark_orange",
     "LOW_BATTERY": "bold red",
     "LLC_DOWN": "bold white on red",
+    "HOLD": "bold yellow",
 }
 
 SEVERITY_STYLE: dict[Severity, str] = {

@@ -93,6 +93,9 @@ def detail_text(view: AgentView | None, now: float, time_format: TimeFormat = cl
     t.append(view.hlc_state or "—", hlc_style(view.hlc_state))
     if view.autopilot:
         t.append(f"   ({view.autopilot})", "grey62")
+    for who, why in (("MC", view.mc_reason), ("HLC", view.hlc_reason)):
+        if why:  # why it is in that state (a failsafe, the link-regained policy, ...)
+            t.append(f"\n{who}: {why}", "grey62")
     tel = view.telemetry
     if tel is None:
         t.append("\nno telemetry yet", "grey62")

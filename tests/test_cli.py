@@ -68,6 +68,20 @@ def one_line_error(proc: subprocess.CompletedProcess[str], *needles: str) -> str
     return lines[0]
 
 
+def test_an_adapter_module_that_fails_to_import(tmp_path: Path) -> None:
+    import os
+
+    (tmp_path / "field_adapter.py").write_text("import serial_port_that_is_not_here\n")
+    cfg = tmp_path / "field.toml"
+    cfg.write_text('[buses]\nlan = "memq://"\n[hlc]\nautopilot = "field_adapter:Adapter"\n')
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(REPO)])}
+    one_line_error(
+        antalate("agent", str(cfg), env=env),
+        f"invalid config {cfg}: hlc.autopilot: expected an installed adapter (mavlink, sim, tello)",
+        "No module named 'serial_port_that_is_not_here'",
+    )
+
+
 def test_duplicate_agent_names(tmp_path: Path) -> None:
     a, b, c = tmp_path / "a.toml", tmp_path / "b.toml", tmp_path / "c.toml"
     a.write_text('[agent]\nname = "same"\n[buses]\nlan = "memq://"\n')
@@ -92,6 +106,10 @@ def test_duplicate_agent_names(tmp_path: Path) -> None:
         ('[hlc]\nautopilot = ":Foo"\n', "hlc.autopilot", "an installed adapter (mavlink, sim, tello)"),
         ('[hlc]\nautopilot = ".sim:X"\n', "hlc.autopilot", "an installed adapter (mavlink, sim, tello)"),
         ('[hlc]\nautopilot = "nope"\n', "hlc.autopilot", "there is no adapter 'nope'"),
+        ('[hlc]\nautopilot = "antalate_lcm.no_such:X"\n', "hlc.autopilot", "No module named 'antalate_lcm.no_such'"),
+        ('[hlc]\nautopilot = "antalate_lcm.autopilot.base:AutopilotState"\n', "hlc.autopilot", "not a subclass"),
+        ('[security]\nwindow = "5"\n', "security.window", "valid number, got '5'"),
+        ('[topics]\nMC_STATE = { bus = "lan", channel = 7 }\n', "topics.MC_STATE.channel", "valid string"),
         ('[hlc.autopilot]\nname = "sim"\nland_disarm_delay = -1\n', "hlc.autopilot.land_disarm_delay", "greater than or equal to 0"),
         ('[osc]\nserver = "ftp://station"\n', "osc.server", "an http:// or https:// URL"),
         ('[[bma]]\nname = "x"\n[[bma.behaviors]]\nplugin = "auto_operator"\nparams = { retry = "2" }\n',

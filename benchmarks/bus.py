@@ -23,8 +23,15 @@ Before the streams, each publisher sends alone (nobody listening) to show what i
 
 The round trip is also measured for ``raw-thread``: raw lcm with the Bus's threading on the ping side
 (a dispatcher thread runs the handler while the sender waits), the floor for any design with a
-dispatcher thread. Takes about 50 s; never more than 88 s. Figures only: nothing here is a timed
-assertion (docs/design.md §12).
+dispatcher thread.
+
+Signing (docs/security.md): ``bus-signed`` is the Bus with what a node does under a swarm key on
+every message, in the same run: the sender stamps ``header.utime`` and signs (HMAC-SHA256 into
+``header.mac``), the receiver runs the node's :class:`~antalate_lcm.security.Authenticator` (MAC,
+window, replay guard) before counting or echoing; the echo re-stamps and re-signs its pong. So one
+round trip holds two signatures and two checks. The cost of one ``sign`` and one check is also timed
+alone, in this process. Takes about 70 s; never more than 118 s. Figures only: nothing here is a
+timed assertion (docs/design.md §12).
 """
 
 from __future__ import annotations
@@ -48,14 +55,18 @@ for _p in (str(REPO), str(Path(__file__).resolve().parent)):
     if _p not in sys.path:
         sys.path.insert(0, _p)
 
+import logging  # noqa: E402
+
 import lcm  # noqa: E402
 
 from antalate_lcm.bus import DEFAULT_QUEUE_CAPACITY  # noqa: E402
 from antalate_lcm.msgs import header_t, telemetry_t  # noqa: E402
+from antalate_lcm.security import Authenticator, SecurityPolicy, sign  # noqa: E402
 
-PORTS = {"raw": 7667, "bus": 7668, "raw-thread": 7670}
-BUS_MODULES = {"bus": "antalate_lcm.bus"}
-TIME_LIMIT = 88.0  # seconds for the whole run, namespace included
+PORTS = {"raw": 7667, "bus": 7668, "raw-thread": 7670, "bus-signed": 7671}
+BUS_MODULES = {"bus": "antalate_lcm.bus", "bus-signed": "antalate_lcm.bus"}
+SWARM_KEY = "benchmark-swarm-key-0123456789abcdef"
+TIME_LIMIT = 118.0  # seconds for the whole run, namespace included
 RATES = (10_000, 20_000, 30_000, 40_000, 50_000, 60_000, 80_000, 100_000, 120_000, 150_000)
 KEEP_UP = 0.05  # s: the sink must finish this soon after the last message was sent
 BLOCK = 100  # pings per turn
@@ -81,6 +92,24 @@ def make_msg() -> telemetry_t:
     return msg
 
 
+class Signer:
+    """What ``Node.publish`` does under a swarm key: a strictly increasing utime, then the MAC."""
+
+    def __init__(self) -> None:
+        self.last = 0
+
+    def __call__(self, msg: telemetry_t) -> telemetry_t:
+        self.last = max(int(time.time() * 1e6), self.last + 1)
+        msg.header.utime = self.last
+        sign(msg, SWARM_KEY)
+        return msg
+
+
+def checker() -> Authenticator:
+    """What ``Node.subscribe`` runs on every message under a swarm key (MAC, window, replay guard)."""
+    return Authenticator(SecurityPolicy(SWARM_KEY, (), 5.0), logging.getLogger("benchmark"))
+
+
 # -- the other process -----------------------------------------------------------------------------
 
 
@@ -102,11 +131,23 @@ class Peer:
             threading.Thread(target=self._loop_raw, daemon=True).start()
         else:
             self.bus = bus_class(api)({"b": url(api)})
+            signed = api.endswith("-signed")
+            self.sign, self.auth = Signer(), checker()
             if role == "echo":
-                self.bus.subscribe("b", "PING", telemetry_t, lambda _ch, m: self.bus.publish("b", "PONG", m))
+                echo = self._echo_signed if signed else (lambda _ch, m: self.bus.publish("b", "PONG", m))
+                self.bus.subscribe("b", "PING", telemetry_t, echo)
             else:
-                self.bus.subscribe("b", "FLOOD", telemetry_t, self._count_bus)
+                self.bus.subscribe("b", "FLOOD", telemetry_t, self._count_signed if signed else self._count_bus)
             self.bus.open()
+
+    def _echo_signed(self, channel: str, msg: telemetry_t) -> None:
+        if self.auth.check(msg, channel) is None:
+            self.bus.publish("b", "PONG", self.sign(msg))
+
+    def _count_signed(self, channel: str, msg: telemetry_t) -> None:
+        if self.auth.check(msg, channel) is None:
+            self.count += 1
+            self.last = time.perf_counter()
 
     def _echo_raw(self, _channel: str, data: bytes) -> None:
         self.lc.publish("PONG", telemetry_t.decode(data).encode())
@@ -283,10 +324,53 @@ class BusPinger:
         self.bus.close()
 
 
+class SignedBusPinger(BusPinger):
+    """The Bus as a node uses it under a swarm key: sign the ping, check the pong."""
+
+    def __init__(self, api: str) -> None:
+        self.sign, self.auth = Signer(), checker()
+        super().__init__(api)
+
+    def _on_pong(self, channel: str, msg: telemetry_t) -> None:
+        if self.auth.check(msg, channel) is None:
+            super()._on_pong(channel, msg)
+
+    def ping(self, msg: telemetry_t, timeout: float) -> int | None:
+        seq = msg.header.seq
+        self.event.clear()
+        t0 = time.perf_counter_ns()
+        self.bus.publish("b", "PING", self.sign(msg))
+        deadline = time.monotonic() + timeout
+        while self.got[0] != seq:
+            left = deadline - time.monotonic()
+            if left <= 0 or not self.event.wait(left):
+                return None
+            self.event.clear()
+        return self.got[1] - t0
+
+
+def signing_cost(n: int = 20_000) -> dict[str, float]:
+    """Microseconds for one sign and one full check of a telemetry_t, alone in this process."""
+    signer, auth, msgs = Signer(), checker(), []
+    t0 = time.perf_counter()
+    for _ in range(n):
+        msgs.append(signer(make_msg()))
+    t1 = time.perf_counter()
+    made = time.perf_counter()
+    for _ in range(n):
+        make_msg()
+    t_make = time.perf_counter() - made
+    t2 = time.perf_counter()
+    ok = sum(auth.check(m, "BENCH") is None for m in msgs)
+    t3 = time.perf_counter()
+    assert ok == n, f"{n - ok} of the benchmark's own messages were rejected"
+    return {"sign_us": (t1 - t0 - t_make) / n * 1e6, "check_us": (t3 - t2) / n * 1e6}
+
+
 def round_trip(apis: list[str], n: int, period: float = 0.001, warmup: int = 20) -> dict[str, dict[str, Any]]:
     """``n`` round trips per API at one per ``period``, the APIs taking turns in blocks of BLOCK."""
     msg = make_msg()
-    kinds: dict[str, Any] = {"raw": RawPinger, "raw-thread": RawThreadPinger}
+    kinds: dict[str, Any] = {"raw": RawPinger, "raw-thread": RawThreadPinger, "bus-signed": SignedBusPinger}
     pingers = {api: kinds.get(api, BusPinger)(api) for api in apis}
     rtts: dict[str, list[int]] = {api: [] for api in apis}
     lost = dict.fromkeys(apis, 0)
@@ -355,6 +439,9 @@ def publisher(api: str) -> tuple[Callable[[telemetry_t], object], Callable[[], N
         return (lambda m: lc.publish("FLOOD", m.encode())), (lambda: None)
     bus = bus_class(api)({"b": url(api)})
     bus.open()
+    if api.endswith("-signed"):
+        signer = Signer()
+        return (lambda m: bus.publish("b", "FLOOD", signer(m))), bus.close
     return (lambda m: bus.publish("b", "FLOOD", m)), bus.close
 
 
@@ -437,8 +524,8 @@ def throughput(apis: list[str], seconds: float, burst: int, deadline: float) -> 
 def inside(args: argparse.Namespace) -> int:
     start = time.monotonic()
     deadline = start + TIME_LIMIT - 6
-    apis = ["raw", "bus"]
-    latency_apis = ["raw", "bus", "raw-thread"]
+    apis = ["raw", "bus", "bus-signed"]
+    latency_apis = ["raw", "bus", "bus-signed", "raw-thread"]
     size = len(make_msg().encode())
     print(
         f"message: telemetry_t, {size} bytes; URL {url('raw')} (one port per API); queue capacity {DEFAULT_QUEUE_CAPACITY}"
@@ -489,8 +576,23 @@ def inside(args: argparse.Namespace) -> int:
             if t.get("cut_short"):
                 print("              (ladder cut short by the time limit)")
     nan = float("nan")
+    cost = signing_cost()
+    print(
+        f"signing, alone: sign {cost['sign_us']:.1f} us, check (MAC + window + replay guard) "
+        f"{cost['check_us']:.1f} us per message"
+    )
+    if rt:
+        print(
+            f"  round trip p50 signed {rt['bus-signed']['p50']:.1f} us vs unsigned {rt['bus']['p50']:.1f} us "
+            f"({rt['bus-signed']['p50'] - rt['bus']['p50']:+.1f} us for two signatures and two checks)"
+        )
+    if tp and tp["bus"]["lossless"]:
+        print(
+            f"  lossless throughput signed {tp['bus-signed']['lossless'] / 1000:.0f}k vs unsigned "
+            f"{tp['bus']['lossless'] / 1000:.0f}k msg/s ({tp['bus-signed']['lossless'] / tp['bus']['lossless']:.2f}x)"
+        )
     print("against the targets:")
-    for api in apis[1:]:
+    for api in apis[1:2]:
         p50_ratio = rt[api]["p50"] / rt["raw"]["p50"] if rt else nan
         p99 = rt[api]["p99"] if rt else nan
         tp_ratio = tp[api]["lossless"] / tp["raw"]["lossless"] if tp and tp["raw"]["lossless"] else nan
@@ -507,7 +609,7 @@ def inside(args: argparse.Namespace) -> int:
             print(f"  {name:22s} {value:8.2f}   target {target:8s} {'met' if ok else 'MISSED'}")
     print(f"({time.monotonic() - start:.1f} s; load average {os.getloadavg()[0]:.2f} at the end)")
     if args.json:
-        print(json.dumps({"round_trip": rt, "throughput": tp}))
+        print(json.dumps({"round_trip": rt, "throughput": tp, "signing": cost}))
     return 0
 
 

@@ -24,8 +24,12 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def _attack(item: pytest.Item) -> str | None:
+    """The attack's name, with the parameters of a parametrized test (each is an attack of its own)."""
     mark = item.get_closest_marker("attack")
-    return str(mark.args[0]) if mark is not None else None
+    if mark is None:
+        return None
+    callspec = getattr(item, "callspec", None)
+    return f"{mark.args[0]} [{callspec.id}]" if callspec is not None else str(mark.args[0])
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -67,7 +71,7 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
       tests fly delta.
     * ``bravo`` and ``charlie``: MC and HLC as separate processes, so their internal topics cross
       processes on the (host-only, ttl=0) ``local`` bus, signed. bravo stays on the ground, charlie
-      is flown.
+      is flown; charlie's OSC is a third process of its own.
     """
     reason = _netns_reason()
     if reason:
@@ -88,9 +92,12 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
                                     bma=bma))
         s.start_agents_process("alpha-delta", ["alpha", "delta"])
         for name, north in (("bravo", 80.0), ("charlie", 120.0)):
-            run = s.agent(name, agent_doc(name, tmp / "state", home=_home(north)))
+            extra = {"osc": {**osc, "token_file": str(tmp / f"{name}.token")}} if name == "charlie" else {}
+            run = s.agent(name, agent_doc(name, tmp / "state", home=_home(north), **extra))
             run.start("hlc")
             run.start("mc")
+            if extra:
+                run.start("osc")  # an OSC in its own process: telemetry reaches it across processes, signed
         # The attacker is another host as far as the station can tell (its own source address).
         s.attacker = s.peer("the attacker", None, source="127.0.0.2")
         s.operator = s.peer("the operator", SWARM_KEY)
@@ -99,7 +106,7 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
 
         def registered() -> bool:
             r = s.operator.http1("GET", "/api/agents", headers=s.auth("read-only"))  # type: ignore[union-attr]
-            return r["status"] == 200 and {a["name"] for a in r["body"]} >= {"alpha", "delta"}
+            return r["status"] == 200 and {a["name"] for a in r["body"]} >= {"alpha", "delta", "charlie"}
 
         assert wait_for(registered, 30.0, 0.2), f"the OSCs did not register: {s.station_text()[-2000:]}"
         yield s

@@ -390,6 +390,9 @@ def _check_autopilot(config: Config, data: dict[str, Any]) -> None:
     except (ValueError, TypeError) as exc:
         prefix = "hlc.autopilot" if design_style else "hlc.autopilot_params"
         raise ConfigError(config.source, prefix, str(exc)) from None
+    except Exception as exc:  # noqa: BLE001 - a third-party constructor breaking its contract
+        prefix = "hlc.autopilot" if design_style else "hlc.autopilot_params"
+        raise ConfigError(config.source, prefix, f"params the adapter accepts; its constructor failed: {exc!r}") from None
 
 
 def check_unique_agent_names(configs: Sequence[Config], *, agents: int = 1) -> None:

@@ -416,6 +416,9 @@ def test_any_adapter_declares_its_params_model(tmp_path: Path, plugin_dir: Path)
         "        if set(params or {}) - {'home_lat'}:\n"
         "            raise ValueError(f'unknown parameter(s) {sorted(params)}')\n"
         "        super().__init__(params, **kw)\n"
+        "class Rude(Unchecked):\n"
+        "    def __init__(self, params=None, **kw):\n"
+        "        raise OSError('opened /dev/ttyACM0 in the constructor')\n"
     )
     ok = load_config(write(tmp_path, '[hlc]\nautopilot = "h4_custom_adapter:Custom"\n[hlc.autopilot_params]\nport = 5760\n'))
     assert ok.hlc.autopilot_params == {"port": 5760}
@@ -433,6 +436,8 @@ def test_any_adapter_declares_its_params_model(tmp_path: Path, plugin_dir: Path)
         "hlc.autopilot_params",
     )
     assert "nope" in err.expected
+    err = assert_config_error(write(tmp_path, '[hlc]\nautopilot = "h4_custom_adapter:Rude"\n'), "hlc.autopilot_params")
+    assert "its constructor failed" in err.expected and "/dev/ttyACM0" in err.expected
 
 
 # ------------------------------------------------------------------ behaviors' params are strict too

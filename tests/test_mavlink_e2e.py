@@ -8,8 +8,12 @@ Two set-ups:
   ``pilot_switch_mode``) and watch the MC and HLC states.
 * **Separate processes in a private network namespace**: ``antalate agent`` / ``antalate hlc`` +
   ``antalate mc`` over real multicast, the emulator as its own process (``python -m
-  tests.emulators.mavlink_vehicle``) in the same namespace -- a whole mission, and an HLC killed and
-  restarted mid-flight that resynchronises to AIRBORNE without arming or taking off again.
+  tests.emulators.mavlink_vehicle``) in the same namespace -- a whole mission, an HLC killed and
+  restarted mid-flight that resynchronises to AIRBORNE without arming or taking off again, and an HLC
+  killed for good: the vehicle's own GCS failsafe (set up as docs/ardupilot.md says) brings it home.
+
+In process too: a link cut for 5 s that buffers and flushes (RTL home with no operator action), and a
+fence breach that ArduCopter answers with BRAKE (the HLC holds, the operator's LAND is accepted).
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ from antalate_lcm.bus import Bus
 from antalate_lcm.config import parse_config
 from antalate_lcm.executor import Executor
 from antalate_lcm.hlc.machine import ErrorCode
-from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t
+from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, operator_cmd_t, telemetry_t
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
@@ -186,18 +190,50 @@ def test_low_battery_returns_home(copter: Callable[..., InProcessAgent]) -> None
     assert not snap.armed and math.hypot(snap.north, snap.east) < 0.5
 
 
-def test_link_loss_is_llc_down_and_mc_error(copter: Callable[..., InProcessAgent]) -> None:
-    agent = copter(hlc={"link_timeout": 1.0})
+def test_link_cut_5_s_then_restored_returns_home_without_the_operator(copter: Callable[..., InProcessAgent]) -> None:
+    """A TCP-like cut that keeps everything written to it and flushes it when the link returns."""
+    agent = copter(hlc={"link_timeout": 1.5})
     flying(agent)
-    lost = time.monotonic()
-    agent.vehicle.stop_heartbeats()
-    down = agent.wait("hlc", H.LLC_DOWN, timeout=3)
-    assert 0.9 <= down.t - lost < 2.5
+    cut = time.monotonic()
+    agent.vehicle.cut_link()
+    down = agent.wait("hlc", H.LLC_DOWN, timeout=4)
+    assert 1.4 <= down.t - cut < 3.0
     agent.error(ErrorCode.LINK_LOST)
-    agent.wait("mc", M.ERROR)
-    agent.vehicle.resume_heartbeats()  # unrecoverable: the link coming back changes nothing
+    time.sleep(max(0.0, cut + 5.0 - time.monotonic()))
+    before = agent.vehicle.snapshot()
+    agent.vehicle.restore_link()
+    back = agent.wait("hlc", H.HOLD, timeout=4, since=down.t)
+    assert "regained" in agent.error(ErrorCode.LINK_REGAINED).text
+    agent.wait("mc", M.RTL, timeout=4, since=back.t)  # [mc] on_link_regained = "rtl": nobody pressed anything
+    agent.wait("hlc", H.RTL, timeout=4, since=back.t)
+    assert agent.vehicle.wait_until(lambda s: s.mode == "RTL", 4)
+    agent.wait("mc", M.STANDBY, timeout=15, since=back.t)
+    agent.wait("hlc", H.READY, timeout=5, since=back.t)
+    after = agent.vehicle.snapshot()
+    assert not after.armed and math.hypot(after.north, after.east) < 0.5
+    assert abs(before.alt - 3.0) < 0.5  # it hovered through the cut (GUIDED holds after GUID_TIMEOUT)
+    assert not [e for e in agent.errors if e.code == ErrorCode.PILOT_TAKEOVER]
+
+
+def test_fence_breach_holds_and_the_operator_lands(copter: Callable[..., InProcessAgent]) -> None:
+    """FENCE_ACTION 4: ArduCopter brakes at the fence; the HLC holds with it (not MANUAL); LAND from the operator."""
+    agent = copter(vehicle={"params": {"FENCE_ENABLE": 1, "FENCE_ALT_MAX": 2.0, "FENCE_ACTION": 4}})
+    agent.wait("mc", M.STANDBY)
+    hold = agent.wait("hlc", H.HOLD, timeout=10)  # the takeoff to 3 m breaks the 2 m ceiling
+    assert agent.vehicle.snapshot().mode == "BRAKE"
+    err = agent.error(ErrorCode.AUTOPILOT_FAILSAFE)
+    assert "fence breach" in err.text and err.severity == hlc_error_t.WARNING
+    assert H.MANUAL not in agent.states("hlc") and M.MANUAL not in agent.states("mc")
     time.sleep(0.5)
-    assert agent.states("hlc")[-1] == H.LLC_DOWN and agent.states("mc")[-1] == M.ERROR
+    assert agent.states("hlc")[-1] == H.HOLD and agent.vehicle.snapshot().armed  # it waits for the operator
+    land = operator_cmd_t()
+    land.command = O.LAND
+    agent.probe.publish("OPERATOR_CMD", land)
+    agent.wait("hlc", H.LANDING, timeout=4, since=hold.t)
+    assert agent.vehicle.wait_until(lambda s: s.mode == "LAND", 3)
+    agent.wait("hlc", H.READY, timeout=8, since=hold.t)
+    agent.wait("mc", M.STANDBY, timeout=4, since=hold.t)
+    assert not agent.vehicle.snapshot().armed
 
 
 def test_pilot_takeover_is_manual_until_the_pilot_lands(copter: Callable[..., InProcessAgent]) -> None:
@@ -352,3 +388,38 @@ def test_hlc_restart_mid_flight_resyncs_without_arming_or_taking_off(
     final = emulator.stop()
     assert not final["armed"] and final["alt"] == 0.0
     assert all(c in (0, -15, None) for c in codes.values()), codes
+
+
+@pytest.mark.netns
+def test_hlc_killed_the_vehicle_stops_and_comes_home_by_its_gcs_failsafe(
+    netns: NetNamespace, probe: Probe, tmp_path: Path
+) -> None:
+    """The vehicle set up as docs/ardupilot.md says; the HLC process dies while it flies east."""
+    emulator = EmulatorProcess(netns, "--param", "FS_GCS_ENABLE=1", "--param", "SYSID_MYGCS=245",
+                               "--param", "FS_GCS_TIMEOUT=2", "--param", "GUID_TIMEOUT=1",
+                               "--param", "FENCE_ENABLE=1", "--param", "BATT_FS_LOW_ACT=2")
+    doc = process_doc("copter", f"udpout:127.0.0.1:{emulator.udp_port}")
+    doc["hlc"]["autopilot_params"]["require_vehicle_failsafes"] = True
+    agent = AgentProcesses(netns, tmp_path, doc)
+    agent.start("hlc")
+    agent.start("mc")
+    try:
+        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.STANDBY)
+        probe.publish("copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 1, "agent": "op"}, command=O.TAKEOFF)
+        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.MISSION)
+        assert "vehicle pre-flight check: failsafe parameters OK" in agent.log("hlc")
+        moving = probe.mark()
+        for i in range(10):
+            probe.publish("copter/VELOCITY_CMD", "velocity_cmd_t", header={"seq": i + 1, "agent": "copter"},
+                          frame=1, vx=0.0, vy=3.0)
+            time.sleep(0.1)
+        east = [t["ve"] for t in probe.history("copter/TELEMETRY", "telemetry_t", since=moving)]
+        assert max(east) > 2.0, east
+        agent.kill("hlc")  # SIGKILL while flying east: no LAND, no RTL, nothing more on the link
+        time.sleep(1.0 + 2.0 + 6.0)  # GUID_TIMEOUT, FS_GCS_TIMEOUT, then the RTL home and the landing
+    finally:
+        agent.stop()
+        final = emulator.stop()  # the vehicle's own record (tests/test_mavlink_failsafes.py times the stop)
+    assert ["GCS failsafe", "RTL"] in final["failsafe_modes"] and "GCS Failsafe" in final["statustexts"]
+    assert not final["armed"] and final["alt"] == 0.0
+    assert math.hypot(final["north"], final["east"]) < 1.0

@@ -91,7 +91,8 @@ CLI (to run it as a separate process, e.g. in a network namespace)::
 
     python -m tests.emulators.mavlink_vehicle --host 127.0.0.1 --udp-port 14550 --tcp-port 5760
 
-prints ``READY udp=<port> tcp=<port>`` once listening and a JSON snapshot on SIGTERM/SIGINT.
+prints ``READY udp=<port> tcp=<port>`` once listening and, on SIGTERM/SIGINT, a JSON snapshot with the
+failsafe actions taken (``failsafe_modes``) and every STATUSTEXT sent.
 """
 
 from __future__ import annotations
@@ -1468,7 +1469,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"READY udp={vehicle.udp_port} tcp={vehicle.tcp_port}", flush=True)
         while not stop.wait(0.2):
             pass
-        snap = asdict(vehicle.snapshot())
+        snap = {**asdict(vehicle.snapshot()), "failsafe_modes": vehicle.failsafe_modes,
+                "statustexts": vehicle.statustexts}
     print(json.dumps(snap), flush=True)
     return 0
 

@@ -13,7 +13,6 @@ from antalate_lcm.config import Config
 from antalate_lcm.mc.machine import McState, OperatorCommand
 from antalate_lcm.msgs import direction_cmd_t, mc_state_t, operator_cmd_t
 from antalate_lcm.node import Context, Node, TopicMatch
-from antalate_lcm.security import sign
 
 _RESEND = 1.0  # s between repeats of a broadcast command while some agent has not followed
 
@@ -115,8 +114,7 @@ class ScriptedOperator(Node):
         self._send("SWARM_OPERATOR_CMD", msg)
 
     def _send(self, topic: str, msg: operator_cmd_t | direction_cmd_t) -> None:
-        key = self.config.security.swarm_key
-        self.publish(topic, msg, before_encode=(lambda m: sign(m, key)) if key else None)
+        self.publish(topic, msg)  # signed by Node.publish when a swarm key is configured
 
     def _step(self) -> None:
         if self.finished:

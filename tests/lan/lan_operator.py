@@ -30,7 +30,6 @@ from antalate_lcm.hlc.machine import HlcState
 from antalate_lcm.mc.machine import McState
 from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, operator_cmd_t, telemetry_t
 from antalate_lcm.node import Context, Node, TopicMatch
-from antalate_lcm.security import sign
 from operator_tui.commands import COMMANDS, CommandTracker, DirectionControl, Status
 
 
@@ -106,26 +105,22 @@ class LanOperator(Node):
         if self.direction.due(self.now):
             self._send_direction()
 
-    def _sign(self, msg: Any) -> None:
-        if self.config.security.swarm_key:
-            sign(msg, self.config.security.swarm_key)
-
     def _send_command(self, command: str, target: str, altitude: float, seq: int) -> None:
         msg = operator_cmd_t()
         msg.command = COMMANDS[command]
         msg.target = target
         msg.altitude = altitude
         if target:
-            self.publish("OPERATOR_CMD", msg, seq=seq, before_encode=self._sign, agent=target)
+            self.publish("OPERATOR_CMD", msg, seq=seq, agent=target)  # Node.publish signs with the swarm key
         else:
-            self.publish("SWARM_OPERATOR_CMD", msg, seq=seq, before_encode=self._sign)
+            self.publish("SWARM_OPERATOR_CMD", msg, seq=seq)
 
     def _send_direction(self) -> None:
         msg = direction_cmd_t()
         msg.active = self.direction.active
         msg.azimuth = self.direction.azimuth
         msg.speed = self.direction.speed
-        self.publish("SWARM_DIRECTION_CMD", msg, before_encode=self._sign)
+        self.publish("SWARM_DIRECTION_CMD", msg)
         self.direction.sent("", self.now)
 
     def command(self, command: str, target: str = "", altitude: float = 0.0) -> int:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from collections.abc import Iterator
 
 import pytest
@@ -88,9 +87,7 @@ def _fly_and_stop(i: int) -> None:
 
 
 def test_stopping_a_flying_agent_20_times_raises_no_alarm(alarms: list[logging.LogRecord]) -> None:
-    started = time.monotonic()
     for i in range(STOPS):
         _fly_and_stop(i)
     lines = [f"{r.name} {r.levelname}: {r.getMessage()}" for r in alarms]
     assert lines == [], "\n".join(lines)
-    assert time.monotonic() - started < 120

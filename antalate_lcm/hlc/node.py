@@ -75,7 +75,7 @@ class HlcNode(Node):
                 max_vertical=h.max_vertical_speed,
                 max_yaw_rate=h.max_yaw_rate,
                 velocity_timeout=h.velocity_timeout,
-                max_link_age=h.link_timeout / 2,
+                max_link_age=h.link_timeout,
             )
         )
         self.mc_state: int | None = None

@@ -11,11 +11,13 @@ and on each tick, what (if anything) goes to `Autopilot.set_velocity` and why:
   diagonal is not faster than a straight line); vertical speed and yaw rate are clamped per component;
 * a command whose age (now - receive time) exceeds ``velocity_timeout`` is replaced by zero velocity
   (hover); when behaviors fall silent, `VelocityGuard.tick` sends that hover once;
-* nothing is sent while the autopilot link is stale (the last snapshot older than ``max_link_age``,
-  the HLC node's ``link_timeout / 2``: more than one missed 1 Hz MAVLink heartbeat): a set-point
-  queued into a dead link could be delivered late, and a vehicle that just got its link back must
-  not fly on a behavior's old wish. LLC_DOWN and HOLD are not mission flight, so nothing passes
-  there either; the hover owed by `VelocityGuard.tick` waits until the link is fresh again.
+* nothing is sent while the autopilot link is stale: its age *at the moment of the set-point* is
+  ``max_link_age`` or more (the HLC node's ``link_timeout``, its definition of a live link; not less,
+  since ArduCopter's HEARTBEAT comes only once a second). The HLC notices LLC_DOWN on its 20 Hz
+  control tick; this closes the gap between ticks. A set-point queued into a dead link could be
+  delivered late, and a vehicle that just got its link back must not fly on a behavior's old wish.
+  LLC_DOWN and HOLD are not mission flight, so nothing passes there either; the hover owed by
+  `VelocityGuard.tick` waits until the link is fresh again.
 
 Receive time, not the sender's ``header.utime``, is what ages a command: clocks of different
 machines are not synchronised, the HLC's own monotonic clock is.
@@ -40,7 +42,7 @@ class VelocityLimits:
     max_vertical: float = 2.0  # m/s, up or down
     max_yaw_rate: float = 90.0  # deg/s, either way
     velocity_timeout: float = 0.5  # s after receipt before a command counts as stale
-    max_link_age: float = 1.5  # s: an older autopilot snapshot means a stale link, nothing is sent
+    max_link_age: float = 3.0  # s: a link this old is stale, nothing is sent (the node's link_timeout)
 
     def __post_init__(self) -> None:
         for name in ("max_horizontal", "max_vertical", "max_yaw_rate", "velocity_timeout", "max_link_age"):
@@ -127,10 +129,10 @@ def check_velocity(
             f"velocity ignored: HLC {_state_name(HlcState, hlc_state)}, MC {_state_name(McState, mc_state)}"
             " (needs HLC AIRBORNE and MC MISSION)",
         )
-    if not link_age <= limits.max_link_age:  # NaN is stale too
+    if not link_age < limits.max_link_age:  # NaN is stale too
         return GuardDecision(
             Verdict.REJECT, None,
-            f"velocity withheld: autopilot link {link_age:.1f} s old > {limits.max_link_age:g} s",
+            f"velocity withheld: autopilot link {link_age:.1f} s old >= {limits.max_link_age:g} s",
         )
     components = {"vx": cmd.vx, "vy": cmd.vy, "vz": cmd.vz, "yaw_rate": cmd.yaw_rate}
     bad = [f"{name}={value!r}" for name, value in components.items() if not math.isfinite(value)]
@@ -201,7 +203,7 @@ class VelocityGuard:
         if not mission_flight(hlc_state, mc_state):
             self._last_received = None
             return None
-        if self._last_received is None or self._hovering or not link_age <= self.limits.max_link_age:
+        if self._last_received is None or self._hovering or not link_age < self.limits.max_link_age:
             return None
         age = now - self._last_received
         if age <= self.limits.velocity_timeout:

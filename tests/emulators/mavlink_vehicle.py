@@ -331,8 +331,7 @@ class MavlinkVehicle:
         self.refuse_arm = False  # fault switch: arming answers FAILED while set
         if gcs_sysid_param not in ("SYSID_MYGCS", "MAV_GCS_SYSID"):
             raise ValueError(f"gcs_sysid_param must be SYSID_MYGCS or MAV_GCS_SYSID, not {gcs_sysid_param!r}")
-        table = dict(PARAMS)
-        table[gcs_sysid_param] = table.pop("SYSID_MYGCS")
+        table = {(gcs_sysid_param if name == "SYSID_MYGCS" else name): spec for name, spec in PARAMS.items()}
         self._params: dict[str, float] = {name: float(default) for name, (default, _t) in table.items()}
         self._param_types: dict[str, int] = {name: ptype for name, (_d, ptype) in table.items()}
         self._params["GUID_TIMEOUT"] = float(guided_timeout)

@@ -246,10 +246,9 @@ class Station:
         fb_cols = (fb.content_type, fb.encoding, fb.data) if fb is not None else (None, None, None)
         return (agent_id, now, req.mc_state, req.hlc_state, *tel_cols, *fb_cols)
 
-    def _take_due(self, token: str, now: float) -> tuple[OperatorCommand | None, DirectionCommand | None]:
-        """Pop what this reply delivers (at most once), dropping commands past their TTL (``token``
-        here is the agent's id)."""
-        queue = self._queues.get(token)
+    def _take_due(self, agent_id: str, now: float) -> tuple[OperatorCommand | None, DirectionCommand | None]:
+        """Pop what this reply delivers (at most once), dropping commands past their TTL."""
+        queue = self._queues.get(agent_id)
         if not queue:
             return None, None
         ttl = self.settings.command_ttl_s
@@ -259,10 +258,10 @@ class Station:
         while queue.operator:
             seq, t, cmd = queue.operator.popleft()
             if t < cutoff:
-                done.append((seq, token, "expired"))
-                log.warning("dropped %s (seq %d) for %s: not collected within %.0f s", cmd.command, seq, token, ttl)
+                done.append((seq, agent_id, "expired"))
+                log.warning("dropped %s (seq %d) for %s: not collected within %.0f s", cmd.command, seq, agent_id, ttl)
                 continue
-            done.append((seq, token, "delivered"))
+            done.append((seq, agent_id, "delivered"))
             operator_cmd = cmd
             break
         direction_cmd = None
@@ -270,13 +269,13 @@ class Station:
             seq, t, dcmd = queue.direction
             queue.direction = None
             if t < cutoff:
-                done.append((seq, token, "expired"))
-                log.warning("dropped direction (seq %d) for %s: not collected within %.0f s", seq, token, ttl)
+                done.append((seq, agent_id, "expired"))
+                log.warning("dropped direction (seq %d) for %s: not collected within %.0f s", seq, agent_id, ttl)
             else:
-                done.append((seq, token, "delivered"))
+                done.append((seq, agent_id, "delivered"))
                 direction_cmd = dcmd
         if not queue:
-            del self._queues[token]
+            del self._queues[agent_id]
         self.db.finish_deliveries(done, now)
         return operator_cmd, direction_cmd
 

@@ -195,6 +195,8 @@ class Station:
             log.info("agent %r re-registered with proof from %s: new token, the old one is void", name, address)
             return existing, token
         agent_id = secrets.token_hex(6)
+        while agent_id in self._agents or agent_id in self._by_name:  # an id also names an anonymous agent
+            agent_id = secrets.token_hex(6)
         agent = _Agent(agent_id, token_hash, name or agent_id, now)
         self.db.add_agent(agent.id, token_hash, agent.name, now)
         self._agents[agent.id] = self._by_hash[token_hash] = self._by_name[agent.name] = agent

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import http.server
 import json
+import logging
 import shutil
 import socket
 import subprocess
@@ -253,6 +254,7 @@ def signed_cmd(command: str = "LAND", *, target: str = "alpha", age: float = 0.0
 def test_a_lying_station_cannot_make_up_retarget_or_replay_commands(
     liar: http.server.ThreadingHTTPServer, caplog: pytest.LogCaptureFixture
 ) -> None:
+    caplog.set_level(logging.WARNING)
     good = signed_cmd("LAND", seq=7)
     forged = {**signed_cmd("TAKEOFF", seq=8), "mac": "00" * 32}
     tampered = {**signed_cmd("TAKEOFF", seq=9), "command": "RTL"}  # valid MAC of another message
@@ -273,6 +275,8 @@ def test_a_lying_station_cannot_make_up_retarget_or_replay_commands(
         assert got["cmd"][0].header.mac == bytes.fromhex(good["mac"]), "published exactly as signed"
         assert got["dir"] == []
         assert node.dropped == {"unsigned": 2, "forged": 3, "retargeted": 1, "stale": 1, "replayed": 1}
+        forged_lines = [r for r in caplog.records if "bad MAC" in r.getMessage()]
+        assert len(forged_lines) == 1, "three forgeries, one log line (rate-limited)"
         assert node._thread is not None and node._thread.is_alive()
     finally:
         node.stop()

@@ -307,3 +307,16 @@ def test_openapi_declares_the_bearer_scheme(open_station: StationServer) -> None
     assert doc["paths"]["/api/commands"]["post"]["security"] == [{"HTTPBearer": []}]
     assert "security" not in doc["paths"]["/api/report"]["post"], "agents use their token, not an API key"
     assert set(API_KEYS[0].model_dump()) == {"name", "role", "sha256"}
+
+
+def test_station_cli_refuses_a_bad_config_or_tls_pair_before_listening(tmp_path: Path) -> None:
+    run = [sys.executable, "-m", "antalate_lcm.cli", "station", "--port", "0", "--db", ":memory:"]
+    cfg = tmp_path / "station.toml"
+    cfg.write_text('[station]\nregistration_key = "not hex"\n')
+    r = subprocess.run([*run, "--config", str(cfg)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "station.registration_key" in r.stderr and "Traceback" not in r.stderr
+    r = subprocess.run([*run, "--tls-cert", str(cfg)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "--tls-key" in r.stderr
+    r = subprocess.run([*run, "--tls-cert", str(cfg), "--tls-key", str(cfg)], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 2 and "cannot use TLS certificate" in r.stderr and "Traceback" not in r.stderr

@@ -409,3 +409,48 @@ def test_example_steers_from_the_console(fly: Callable[..., tuple[Agent, TelloEm
     snap = emu.snapshot()
     assert not snap.flying and math.hypot(snap.x, snap.y) < 0.5
     assert not agent.errors(), agent.errors()
+
+
+def test_example_six_second_link_loss_in_flight_comes_home(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+    """Wi-Fi down both ways for 6 s in MISSION; the Tello (15 s auto-landing) is still up when it returns.
+
+    The adapter stops commanding it after ``link_loss_timeout``, the HLC goes LLC_DOWN and the MC ERROR;
+    with the link back the adapter reports a fresh link and a hovering Tello, the HLC HOLDs and the MC's
+    ``on_link_regained`` (rtl, the default) brings it home: STANDBY on the ground, no restart.
+    """
+    agent, emu = fly(example_config(rtl_after=60.0, max_flights=1), takeoff_time=0.5, land_speed=3.0,
+                     auto_land_timeout=15.0)
+    agent.wait("mc", 15, state="MISSION")
+    emu.silence(6.0)
+    agent.wait("hlc", 6, state="LLC_DOWN")
+    agent.wait("mc", 3, state="ERROR")
+    assert emu.snapshot().flying
+    agent.wait("hlc", 8, state="HOLD")
+    agent.wait("mc", 3, state="RTL")
+    agent.wait("mc", 15, state="STANDBY")
+    snap = emu.snapshot()
+    assert not snap.flying and math.hypot(snap.x, snap.y) < 0.5
+    codes = [e["code"] for e in agent.errors()]
+    assert codes[:1] == ["LINK_LOST"] and "LINK_REGAINED" in codes, agent.errors()
+
+
+def test_example_link_loss_while_the_tello_lands_itself(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+    """As above, but the Tello lands itself during the loss and comes back out of SDK mode (a reboot).
+
+    The adapter probes with ``command`` once the Tello must have landed (``autoland_s``, here matching
+    the emulator's 3 s), re-reads it on the ground: HLC READY, MC STANDBY, no restart.
+    """
+    doc = example_config(rtl_after=60.0, max_flights=1)
+    doc["hlc"]["autopilot_params"].update(autoland_s=3.0, keepalive_s=1.0)
+    agent, emu = fly(doc, takeoff_time=0.5, land_speed=3.0, auto_land_timeout=3.0)
+    emu.forget_sdk_on_silence = True
+    agent.wait("mc", 15, state="MISSION")
+    emu.silence(6.0)
+    agent.wait("hlc", 6, state="LLC_DOWN")
+    agent.wait("mc", 3, state="ERROR")
+    assert emu.wait_until(lambda s: not s.flying, timeout=6), "the Tello's own failsafe did not land it"
+    agent.wait("hlc", 10, state="READY")
+    agent.wait("mc", 3, state="STANDBY")
+    assert emu.snapshot().sdk_mode
+    codes = [e["code"] for e in agent.errors()]
+    assert codes[:1] == ["LINK_LOST"] and "LINK_REGAINED" in codes, agent.errors()

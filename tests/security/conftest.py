@@ -46,6 +46,8 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
             _RESULTS[name] = "held"
         elif report.skipped:
             _RESULTS[name] = "skipped"
+        elif call.excinfo is not None and not call.excinfo.errisinstance(AssertionError):
+            _RESULTS[name] = f"harness error ({call.excinfo.typename})"
         else:
             _RESULTS[name] = "succeeded"
 
@@ -55,11 +57,15 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
         return
     tried = {k: v for k, v in _RESULTS.items() if v != "skipped"}
     won = sorted(k for k, v in tried.items() if v.startswith("succeeded"))
+    broken = sorted(k for k, v in tried.items() if v.startswith("harness error"))
     tr = terminalreporter
     tr.section("attacks")
-    tr.write_line(f"attacks tried {len(tried)}, succeeded {len(won)}, skipped {len(_RESULTS) - len(tried)}")
+    line = f"attacks tried {len(tried)}, succeeded {len(won)}, skipped {len(_RESULTS) - len(tried)}"
+    tr.write_line(line + (f", not judged (harness error) {len(broken)}" if broken else ""))
     for name in won:
         tr.write_line(f"  SUCCEEDED: {name} ({tried[name]})")
+    for name in broken:
+        tr.write_line(f"  NOT JUDGED: {name} ({tried[name]})")
 
 
 @pytest.fixture(scope="session")

@@ -92,6 +92,16 @@ class PeerClient(JsonLinesProcess):
     def mark(self) -> int:
         return int(self._ok(op="mark")["index"])
 
+    def udp_open(self) -> int:
+        return int(self._ok(op="udp_open")["port"])
+
+    def udp_send(self, port: int, datagrams: list[bytes], gap: float = 0.0) -> None:
+        self._ok(op="udp_send", host="127.0.0.1", port=port, hexes=[d.hex() for d in datagrams], gap=gap)
+
+    def udp_recv(self, since: int = 0) -> tuple[list[bytes], int]:
+        reply = self._ok(op="udp_recv", since=since)
+        return [bytes.fromhex(h) for h in reply["hexes"]], int(reply["index"])
+
     def http(self, method: str, path: str, json_body: Any = None, *, headers: dict[str, str] | None = None,
              bodies: list[Any] | None = None, content: str | None = None) -> list[dict[str, Any]]:
         url = path if path.startswith("http") else STATION_URL + path
@@ -127,7 +137,9 @@ class AgentRun:
         self.swarm = swarm
         self.name = name
         self.state_file = swarm.tmp / f"{name}-vehicle.json"
-        doc.setdefault("hlc", {}).setdefault("autopilot_params", {})["state_file"] = str(self.state_file)
+        hlc = doc.setdefault("hlc", {})
+        if hlc.get("autopilot", "sim") == "sim":
+            hlc.setdefault("autopilot_params", {})["state_file"] = str(self.state_file)
         self.doc = doc
         self.path = swarm.tmp / f"{name}.toml"
         self.path.write_text(to_toml(doc))

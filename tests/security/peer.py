@@ -18,6 +18,7 @@ Requests, one JSON object a line, one JSON reply line each (``{"ok": bool, ...}`
 ``wait``     {channel, type, where, timeout, since?, genuine?}: the first matching message
 ``history``  {channel, type, since?, genuine?}: every matching message
 ``mark``     the index of the next datagram (a "since" for later requests)
+``udp_open``, ``udp_send`` {host, port, hexes, gap?}, ``udp_recv`` {since?}: raw UDP (MAVLink)
 ``http``     {method, url, json?, content?, headers?, bodies?}: one request, or one per entry of ``bodies``
              (a flood); replies with ``responses: [{status, body}]``
 """
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import json
 import re
+import socket
 import sys
 import threading
 import time
@@ -60,6 +62,8 @@ class Peer:
         self.key = key
         self.window = window
         self.seen: list[tuple[float, str, bytes]] = []
+        self.udp: socket.socket | None = None
+        self.udp_seen: list[bytes] = []
         self.cond = threading.Condition()
         for lc in self.buses:
             lc.subscribe(".*", self._on_msg).set_queue_capacity(1_000_000)
@@ -72,6 +76,12 @@ class Peer:
         with self.cond:
             self.seen.append((time.time(), channel, data))
             self.cond.notify_all()
+
+    def _udp_loop(self, sock: socket.socket) -> None:
+        while True:
+            data = sock.recv(65535)
+            with self.cond:
+                self.udp_seen.append(data)
 
     @staticmethod
     def _loop(lc: lcm.LCM) -> None:
@@ -119,6 +129,24 @@ class Peer:
         if op == "raw":
             self.send(req["channel"], bytes.fromhex(req["hex"]), req.get("count", 1))
             return {"ok": True}
+        if op == "udp_open":
+            # A UDP socket of the attacker's own; what arrives on it is kept (``udp_recv``).
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            sock.bind(("127.0.0.1", 0))
+            self.udp = sock
+            threading.Thread(target=self._udp_loop, args=(sock,), daemon=True).start()
+            return {"ok": True, "port": sock.getsockname()[1]}
+        if op == "udp_send":
+            assert self.udp is not None, "udp_open first"
+            for hx in req["hexes"]:
+                self.udp.sendto(bytes.fromhex(hx), (req["host"], req["port"]))
+                if req.get("gap"):
+                    time.sleep(req["gap"])
+            return {"ok": True}
+        if op == "udp_recv":
+            with self.cond:
+                got = self.udp_seen[req.get("since", 0):]
+            return {"ok": True, "hexes": [d.hex() for d in got], "index": req.get("since", 0) + len(got)}
         if op == "batch":
             for item in req["items"]:
                 self.send(item["channel"], bytes.fromhex(item["hex"]))

@@ -593,7 +593,7 @@ def test_rtl_getting_farther_raises_and_lands_here(driver: Driver, emulator: Cal
     driver.wait(lambda s: s["mode"] == "GUIDED", timeout=3)
     driver.fly(0.6, 0.0, 0.0, 0.0, "BODY", 1.5)
     err = driver.fails("rtl")
-    assert err["type"] == "AutopilotError" and "RTL failed: getting farther" in err["error"], err
+    assert err["type"] == "AutopilotError" and err["error"].startswith("getting farther"), err
     assert "vgx_sign" in err["error"] and err["elapsed"] < 5.0
     s = driver.state()
     assert s["mode"] in ("LAND", "GROUND")

@@ -454,3 +454,18 @@ def test_example_link_loss_while_the_tello_lands_itself(fly: Callable[..., tuple
     assert emu.snapshot().sdk_mode
     codes = [e["code"] for e in agent.errors()]
     assert codes[:1] == ["LINK_LOST"] and "LINK_REGAINED" in codes, agent.errors()
+
+
+def test_rtl_getting_farther_is_reported_and_lands_where_it_is(
+        fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+    """Wrong vgx/vgy signs: the RTL leg grows. The operator gets an hlc_error_t saying so; it lands there."""
+    agent, emu = fly(config(operator={"rtl_after": 2.5}, swarm=True,
+                            autopilot_params={"vgx_sign": -1, "vgy_sign": -1}))
+    agent.wait("mc", 10, state="MISSION")
+    agent.wait("mc", 8, state="RTL")
+    error = agent.wait("error", 8, code="ACTION_FAILED")
+    assert "RTL failed: getting farther" in error["text"] and "vgx_sign" in error["text"], error
+    agent.wait("hlc", 5, state="READY")
+    agent.wait("mc", 3, state="STANDBY")
+    snap = emu.snapshot()
+    assert not snap.flying and distance(snap) > 0.5  # where it was, not home: home is unknown

@@ -611,8 +611,8 @@ class TelloAutopilot(Autopilot):
             with self._lock:
                 self._ingest()
                 if self._phase is not _Phase.RTL:
-                    if self._failsafe:
-                        raise AutopilotError(f"RTL failed: {self._failsafe}")
+                    if self._failsafe:  # the control thread gave up first (the HLC prefixes "RTL failed")
+                        raise AutopilotError(self._failsafe.removeprefix("RTL failed: "))
                     return  # arrived (landing) or overtaken by a land/emergency
                 tn, te = self._takeoff_point
                 dist = math.hypot(tn - self._north, te - self._east)
@@ -629,7 +629,7 @@ class TelloAutopilot(Autopilot):
                     self._rtl_abort(reason)
                     break
             time.sleep(0.05)
-        raise AutopilotError(f"RTL failed: {reason}")
+        raise AutopilotError(reason)  # the HLC reports "autopilot RTL failed: <reason>"
 
     def _rtl_abort(self, reason: str) -> None:
         """End the RTL where the Tello is (lock held): land here, and say why."""

@@ -140,6 +140,8 @@ class Node:
         if self.started:
             return
         self.started = True
+        self._insecure.clear()  # a restarted node warns (and schedules its reminder) afresh
+        self._open_inputs.clear()
         self.context.executor.run_sync(self.on_start)
 
     def stop(self) -> None:

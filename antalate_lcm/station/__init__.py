@@ -9,7 +9,9 @@ Public API (the underscored modules are private):
 * the wire models (`ReportRequest`, `ReportReply`, `Telemetry`, `Feedback`, `Payload`,
   `OperatorCommand`, `DirectionCommand`, `PeerDetection`, `CommandRequest`, …), also as the
   namespace `models`, for clients such as the OSC;
-* `sector` — the pure front-sector geometry.
+* `sector` — the pure front-sector geometry;
+* ``antalate_lcm.station.client`` — `StationClient`, an operator's API client that signs commands
+  with the swarm key where the operator is (import it directly; it is not loaded here).
 
 The server half (FastAPI, uvicorn) is imported on first use, so a client that only needs the wire
 models does not pay for it. The protocol is described in ``docs/station-protocol.md`` and

@@ -788,6 +788,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--battery", type=float, default=100.0)
     parser.add_argument("--battery-drain", type=float, default=0.1, help="%%/s in flight")
     parser.add_argument("--refuse-takeoff", action="store_true")
+    parser.add_argument("--vertical-tau", type=float, default=None, help="s: vertical response to rc")
+    parser.add_argument("--height-resolution-cm", type=int, default=10)
+    parser.add_argument("--height-rounding", choices=("round", "floor"), default="round")
+    parser.add_argument("--lose-reply", action="append", default=[], metavar="COMMAND",
+                        help="lose the first answer to COMMAND (repeatable)")
     parser.add_argument("--log-level", default="WARNING")
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
@@ -799,9 +804,12 @@ def main(argv: list[str] | None = None) -> int:
         args.host, args.port, state_port=args.state_port, state_target=args.state_target,
         takeoff_time=args.takeoff_time, takeoff_height=args.takeoff_height, land_speed=args.land_speed,
         max_speed=args.max_speed, auto_land_timeout=args.auto_land_timeout, battery=args.battery,
-        battery_drain=args.battery_drain,
+        battery_drain=args.battery_drain, vertical_tau=args.vertical_tau,
+        height_resolution_cm=args.height_resolution_cm, height_rounding=args.height_rounding,
     )
     emu.refuse_takeoff = args.refuse_takeoff
+    for command in args.lose_reply:
+        emu.lose_reply(command)
     with emu:
         print(f"READY {emu.address[0]} {emu.address[1]}", flush=True)
         while not stop.wait(0.2):

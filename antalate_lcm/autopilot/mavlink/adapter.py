@@ -224,7 +224,8 @@ class _Vehicle:
     battery: float = -1.0
     voltage: float = math.nan  # V, SYS_STATUS voltage_battery or the BATTERY_STATUS sum
     cells_seen: int = 0  # cells counted in BATTERY_STATUS (a per-cell monitor), 0 = not seen
-    battery_warning: str = ""  # worst seen since arming: "low", "critical", "emergency", "failed", "failsafe"
+    charge_warning: str = ""  # BATTERY_STATUS charge_state now: "low", "critical", "emergency", "failed"
+    battery_warning: str = ""  # from STATUSTEXT / SYS_STATUS health: the worst since the last landing
     health: int | None = None  # SYS_STATUS onboard_control_sensors_health
     fence_breached: bool = False
     failsafes: FailsafeTracker = field(default_factory=FailsafeTracker)
@@ -490,7 +491,7 @@ class MavlinkAutopilot(Autopilot):
                 failsafe=failsafe,
                 voltage=v.voltage,
                 cells=self._p.cells or v.cells_seen,
-                battery_warning=v.battery_warning,
+                battery_warning=max(v.charge_warning, v.battery_warning, key=lambda w: _WARNING_RANK.get(w, 1)),
             )
 
     # ----------------------------------------------------------------- extras (tools, tests)
@@ -713,6 +714,7 @@ class MavlinkAutopilot(Autopilot):
         v.heartbeats += 1
         v.heartbeat_at = now
         v.heartbeat_msg = v.messages
+        was_armed = v.armed
         v.base_mode = msg.base_mode
         v.custom_mode = msg.custom_mode
         v.system_status = msg.system_status
@@ -721,8 +723,8 @@ class MavlinkAutopilot(Autopilot):
         v.failsafes.on_mode(v.mode, now, commanded=commanded)
         if previous != msg.custom_mode and v.failsafes.reason:
             log.warning("autopilot failsafe (%s): mode %s", v.failsafes.reason, v.mode)
-        if not v.armed and not v.in_air:
-            v.battery_warning = ""  # a new pack, or the same one rested: ArduPilot resets at arming too
+        if was_armed and not v.armed:
+            v.battery_warning = ""  # landed and disarmed: what is still wrong, BATTERY_STATUS keeps saying
         if previous != msg.custom_mode:
             if previous is not None:
                 log.info("autopilot mode %s -> %s", mode_name(previous), mode_name(msg.custom_mode))
@@ -769,8 +771,9 @@ class MavlinkAutopilot(Autopilot):
             v.battery = float(msg.battery_remaining)
         warning = _CHARGE_WARNINGS.get(getattr(msg, "charge_state", 0), "")
         v.failsafes.set_active(fs.BATTERY, bool(warning), self.clock())
-        if warning:
-            self._battery_warning(v, warning)
+        if warning != v.charge_warning:
+            log.warning("autopilot battery charge state: %s (%.2f V)", warning or "ok", v.voltage)
+        v.charge_warning = warning
 
     def _battery_warning(self, v: _Vehicle, warning: str) -> None:
         if _WARNING_RANK.get(warning, 1) > _WARNING_RANK.get(v.battery_warning, 1) or not v.battery_warning:

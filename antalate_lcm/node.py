@@ -34,7 +34,7 @@ from antalate_lcm.security import (
     SecurityPolicy,
     default_state_dir,
     network_reachable,
-    sign,
+    signed_bytes,
 )
 from antalate_lcm.topics import OPERATOR_INPUTS, PERSISTED_TYPES, TopicSpec, channel_regex, is_internal
 
@@ -284,9 +284,7 @@ class Node:
         header.seq = seq
         if before_encode is not None:
             before_encode(msg)
-        if self.security.enabled:
-            sign(msg, self.security.key)
-        data = msg.encode()
+        data = signed_bytes(msg, self.security.key) if self.security.enabled else msg.encode()
         ok = True
         for bus in pub.buses:
             ok = self.context.bus.publish(bus, pub.channel, data) and ok

@@ -18,6 +18,7 @@ import json
 import logging
 import os
 import secrets
+import struct
 import tempfile
 import time
 from collections.abc import Callable, Iterable
@@ -55,6 +56,23 @@ def sign(msg: SignedMsg, key: str) -> None:
     """Fill ``mac`` in place; call after the header (utime, seq) is final."""
     digest = _digest(key, _unsigned_bytes(msg))
     msg.header.mac_len, msg.header.mac = len(digest), digest
+
+
+def signed_bytes(msg: SignedMsg, key: str) -> bytes:
+    """Sign ``msg`` (as :func:`sign`) and return its encoding, encoding it once instead of twice.
+
+    Every antalate message starts with its ``header_t``, whose ``mac_len``/``mac`` follow the
+    fingerprint, ``utime``, ``agent`` and ``seq``: the signed encoding is the unsigned one with the
+    empty MAC field replaced, so it is spliced rather than encoded again (what ``Node.publish`` does).
+    """
+    header = msg.header
+    unsigned = _unsigned_bytes(msg)
+    digest = _digest(key, unsigned)
+    header.mac_len, header.mac = len(digest), digest
+    at = 8 + 8 + 4 + len(header.agent.encode("utf-8")) + 1 + 4  # fingerprint, utime, agent, seq
+    if unsigned[at : at + 2] != b"\x00\x00":  # not laid out as expected: encode the plain way
+        return msg.encode()
+    return b"".join((unsigned[:at], struct.pack(">h", len(digest)), digest, unsigned[at + 2 :]))
 
 
 def generate_key() -> str:
@@ -299,5 +317,6 @@ __all__ = [
     "generate_key",
     "network_reachable",
     "sign",
+    "signed_bytes",
     "verify",
 ]

@@ -231,3 +231,18 @@ def test_antalate_keygen_prints_a_fresh_key_each_time() -> None:
     a, b = (subprocess.run(run, capture_output=True, text=True, timeout=30) for _ in range(2))
     assert a.returncode == 0 and b.returncode == 0, a.stderr
     assert a.stdout.strip() != b.stdout.strip() and len(a.stdout.strip()) >= 43
+
+
+@pytest.mark.parametrize("agent", ["", "alpha", "ünïcode-ägent", "x" * 300])
+def test_signed_bytes_equal_sign_then_encode(agent: str) -> None:
+    """Node.publish splices the MAC into the unsigned encoding: it must be the very same bytes."""
+    from antalate_lcm.msgs import telemetry_t
+    from antalate_lcm.security import signed_bytes
+
+    for msg in (_cmd(agent=agent, key=""), telemetry_t()):
+        msg.header.agent, msg.header.utime, msg.header.seq = agent, int(T0 * 1e6), 9
+        spliced = signed_bytes(msg, KEY)
+        sign(msg, KEY)
+        assert spliced == msg.encode()
+        decoded = type(msg).decode(spliced)
+        assert verify(decoded, KEY, 5.0, now=T0) is None

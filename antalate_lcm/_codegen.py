@@ -3,6 +3,10 @@
 The generated modules are committed (so a plain ``pip install`` needs no code generator) and
 ``tests/test_codegen.py`` fails when they are stale against ``lcmtypes/`` or were edited by hand.
 Run ``python -m antalate_lcm._codegen`` (or ``make gen``) after editing a ``.lcm`` file.
+
+``lcmtypes/`` at the repository root stays the source of truth; ``make gen`` also copies the ``.lcm``
+files into ``antalate_lcm/lcmtypes/`` so they travel inside the wheel: an installed antalate has no
+source tree, and ``antalate spy`` / ``antalate types`` still need the definitions.
 """
 
 from __future__ import annotations
@@ -16,7 +20,19 @@ import tempfile
 from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-LCMTYPES_DIR = REPO_ROOT / "lcmtypes"
+SOURCE_LCMTYPES_DIR = REPO_ROOT / "lcmtypes"
+PACKAGED_LCMTYPES_DIR = Path(__file__).resolve().parent / "lcmtypes"
+
+
+def _lcmtypes_dir() -> Path:
+    """The source tree's ``lcmtypes/`` in a checkout (an edit counts before ``make gen``), else the
+    copy installed with the package."""
+    if SOURCE_LCMTYPES_DIR.is_dir() and (REPO_ROOT / "pyproject.toml").is_file():
+        return SOURCE_LCMTYPES_DIR
+    return PACKAGED_LCMTYPES_DIR
+
+
+LCMTYPES_DIR = _lcmtypes_dir()
 MSGS_DIR = Path(__file__).resolve().parent / "msgs"
 _MSGS_SUBPATH = Path("antalate_lcm") / "msgs"
 
@@ -35,6 +51,26 @@ def lcm_tool(name: str) -> str:
 
 def lcm_files() -> list[Path]:
     return sorted(LCMTYPES_DIR.glob("*.lcm"))
+
+
+def stale_packaged_types() -> list[str]:
+    """Names of ``.lcm`` files whose packaged copy is missing, extra or differs from ``lcmtypes/``."""
+    source = {p.name: p for p in SOURCE_LCMTYPES_DIR.glob("*.lcm")}
+    packaged = {p.name: p for p in PACKAGED_LCMTYPES_DIR.glob("*.lcm")}
+    problems = sorted(set(source) ^ set(packaged))
+    for name in sorted(set(source) & set(packaged)):
+        if not filecmp.cmp(source[name], packaged[name], shallow=False):
+            problems.append(name)
+    return problems
+
+
+def copy_packaged_types() -> None:
+    """Make ``antalate_lcm/lcmtypes/`` an exact copy of ``lcmtypes/`` (what the wheel ships)."""
+    PACKAGED_LCMTYPES_DIR.mkdir(parents=True, exist_ok=True)
+    for old in PACKAGED_LCMTYPES_DIR.glob("*.lcm"):
+        old.unlink()
+    for src in SOURCE_LCMTYPES_DIR.glob("*.lcm"):
+        shutil.copy2(src, PACKAGED_LCMTYPES_DIR / src.name)
 
 
 def generate_python(out_dir: Path) -> Path:
@@ -84,4 +120,5 @@ def regenerate() -> None:
 
 if __name__ == "__main__":
     regenerate()
+    copy_packaged_types()
     print(f"generated {len(list(MSGS_DIR.glob('*.py')))} modules in {MSGS_DIR}")

@@ -32,6 +32,12 @@ def _cmd_spy(args: argparse.Namespace) -> int:
     return run_spy(url)
 
 
+def _cmd_types(args: argparse.Namespace) -> int:
+    from antalate_lcm.types_cmd import run
+
+    return run(args.lang, args.out)
+
+
 def _cmd_keygen(args: argparse.Namespace) -> int:
     """Print a new random swarm key (docs/security.md: generating and rotating keys)."""
     from antalate_lcm.security import generate_key
@@ -49,6 +55,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("config", nargs="?", help="config file (default: the embedded defaults)")
     p.add_argument("--bus", help="bus name from the config (default: the default bus)")
     p.set_defaults(func=_cmd_spy)
+
+    from antalate_lcm.types_cmd import LANGUAGES
+
+    p = sub.add_parser("types", help="write the message bindings for nodes in other languages (lcm-gen)")
+    p.add_argument("--lang", required=True, choices=LANGUAGES, help="target language, or lcm for the .lcm files")
+    p.add_argument("--out", required=True, help="folder to write into (created if missing)")
+    p.set_defaults(func=_cmd_types)
 
     p = sub.add_parser("keygen", help="print a new random swarm key for [security] swarm_key (docs/security.md)")
     p.set_defaults(func=_cmd_keygen)

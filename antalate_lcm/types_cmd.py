@@ -1,0 +1,82 @@
+"""``antalate types --lang LANG --out DIR``: message bindings for nodes written in other languages.
+
+Talking to C, C++, Java and Go nodes is why one picks LCM; an installed antalate carries its ``.lcm``
+files (``antalate_lcm/lcmtypes/``) and the ``lcm-gen`` of the lcm wheel, so a user gets bindings
+whose fingerprints match the Python nodes exactly, without the source tree. ``--lang lcm`` copies
+the definitions themselves, for a build that runs its own ``lcm-gen``.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+from antalate_lcm import _codegen
+from antalate_lcm.errors import AntalateError
+
+# lcm-gen's switches per language: emit, then where the files go (C: sources and headers apart is
+# lcm-gen's default too, one folder is what a small node's Makefile wants).
+_LCM_GEN_ARGS: dict[str, list[str]] = {
+    "c": ["--c", "--c-cpath", "{out}", "--c-hpath", "{out}"],
+    "cpp": ["--cpp", "--cpp-std", "c++11", "--cpp-hpath", "{out}"],
+    "java": ["--java", "--jpath", "{out}"],
+    "python": ["--python", "--ppath", "{out}"],
+    "go": ["--go", "--go-path", "{out}"],
+    "lua": ["--lua", "--lpath", "{out}"],
+    "csharp": ["--csharp", "--csharp-path", "{out}"],
+}
+LANGUAGES: tuple[str, ...] = (*_LCM_GEN_ARGS, "lcm")
+
+# What a user can do about a failure we know of, rather than a bare exit status.
+_KNOWN_FAILURES = {
+    "go": (
+        ": the Go emitter of lcm-gen 1.5.3 crashes on variable-length arrays, which header_t.mac is; "
+        "generate Go from the definitions with an lcm-gen that does not (antalate types --lang lcm --out DIR)"
+    ),
+}
+
+
+def lcm_gen_command(lang: str, out: Path, files: list[Path]) -> list[str]:
+    """The lcm-gen command line that writes ``lang`` bindings of ``files`` into ``out``."""
+    if lang not in _LCM_GEN_ARGS:
+        raise AntalateError(f"unknown language {lang!r}: one of {', '.join(LANGUAGES)}")
+    args = [a.format(out=out) for a in _LCM_GEN_ARGS[lang]]
+    return [_codegen.lcm_tool("lcm-gen"), *args, *map(str, files)]
+
+
+def write_types(lang: str, out: Path) -> list[Path]:
+    """Write the bindings (or the ``.lcm`` files) into ``out``; returns the files written, sorted."""
+    files = _codegen.lcm_files()
+    if not files:
+        raise AntalateError(
+            f"no .lcm files in {_codegen.LCMTYPES_DIR}: this antalate was installed without its message "
+            "definitions (rebuild the wheel from a checkout)"
+        )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise AntalateError(f"cannot create {out}: {exc.strerror or exc}") from None
+    if lang == "lcm":
+        for src in files:
+            shutil.copy2(src, out / src.name)
+        return sorted(out / src.name for src in files)
+    try:
+        cmd = lcm_gen_command(lang, out, files)
+    except FileNotFoundError as exc:
+        raise AntalateError(str(exc)) from None
+    started = time.time_ns() - 2_000_000_000  # coarse file-system timestamps
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        said = (proc.stderr.strip() or proc.stdout.strip() or "no message").splitlines()[-1]
+        hint = _KNOWN_FAILURES.get(lang, "")
+        raise AntalateError(f"lcm-gen failed for --lang {lang} (exit {proc.returncode}: {said}){hint}")
+    # lcm-gen does not say what it wrote: every file it (re)wrote just now
+    return sorted(p for p in out.rglob("*") if p.is_file() and p.stat().st_mtime_ns >= started)
+
+
+def run(lang: str, out: str) -> int:
+    written = write_types(lang, Path(out))
+    print(f"antalate types: {len(written)} {lang} files in {out}")
+    return 0

@@ -214,3 +214,15 @@ def test_gcs_failsafe_ignores_heartbeats_from_another_system_id(made: list[Any])
     snap = v.snapshot()
     assert snap.mode == "GUIDED" and snap.armed and not v.gcs_failsafe
     assert not [f for f in v.failsafe_modes if f[0] == "GCS failsafe"]
+
+
+def test_gcs_failsafe_while_the_hlc_lives_is_named(made: list[Any]) -> None:
+    """The uplink fails (our HEARTBEATs stop reaching the vehicle) while its telemetry still reaches us."""
+    v, ap = pair(made, {"FS_GCS_ENABLE": 1, "SYSID_MYGCS": 245, "FS_GCS_TIMEOUT": 1.0})
+    fly(ap, v, alt=1.5)
+    v.drop_uplink()
+    s = state_until(ap, lambda s: s.mode == "RTL", 3)
+    assert s.failsafe == "GCS failsafe" and s.flight_mode is FlightMode.RTL and s.autonomous, s
+    assert s.link_age < 0.5  # the downlink is fine: no LLC_DOWN, the HLC follows the RTL
+    v.drop_uplink(False)
+    assert state_until(ap, lambda s: s.landed, 8).failsafe == "GCS failsafe"

@@ -81,7 +81,8 @@ MAVLink 2 signing
 Not emulated: missions, RC input, SmartRTL (its failsafe options fly RTL).
 
 Faults: ``stop_heartbeats()`` (the link goes silent both ways: nothing is sent, nothing is received)
-and ``resume_heartbeats()``; ``cut_link()`` / ``restore_link()`` (a TCP link or buffering radio: during
+and ``resume_heartbeats()``; ``drop_uplink()`` (only the ground-to-vehicle direction is lost);
+``cut_link()`` / ``restore_link()`` (a TCP link or buffering radio: during
 the cut nothing is delivered either way but everything is kept, and delivered at once on restore);
 ``refuse_arm = True``; ``pilot_switch_mode("LOITER")`` (an RC mode switch: no COMMAND_ACK, guided
 targets dropped); ``set_battery(pct)``; ``set_voltage(volts)``; ``fail_ekf()``; ``inject(msg, key)``
@@ -410,6 +411,7 @@ class MavlinkVehicle:
         self._held_in: list[tuple[_Peer, bytes]] = []
         self._held_out: list[bytes] = []
         self._injected: list[bytes] = []
+        self._uplink_down = False
 
     # -- lifecycle ---------------------------------------------------------------------------------
 
@@ -555,6 +557,11 @@ class MavlinkVehicle:
     def resume_heartbeats(self) -> None:
         with self._lock:
             self._link_up = True
+
+    def drop_uplink(self, down: bool = True) -> None:
+        """An asymmetric radio link: nothing from the ground arrives (True), telemetry still goes out."""
+        with self._lock:
+            self._uplink_down = down
 
     def cut_link(self) -> None:
         """A TCP link or buffering radio cut: nothing is delivered either way, everything is kept."""
@@ -1376,7 +1383,7 @@ class MavlinkVehicle:
                 self._drop_tcp(peer)
                 return
         with self._lock:
-            if not self._link_up:
+            if not self._link_up or self._uplink_down:
                 return
             if self._cut:
                 self._held_in.append((peer, data))  # in the link's buffer, not yet at the autopilot

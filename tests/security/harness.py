@@ -364,11 +364,13 @@ def settle(run: AgentRun, seconds: float = 1.5) -> Vehicle:
     return run.vehicle_after(time.time())
 
 
-def assert_unmoved(run: AgentRun, before: Baseline, *, tolerance: float = 0.3, still: bool = True) -> Vehicle:
+def assert_unmoved(run: AgentRun, before: Baseline, *, tolerance: float = 0.3, still: bool = True,
+                   wait: float = 1.5) -> Vehicle:
     """The attack changed nothing: the vehicle is where it was (armed/in air as it was) and neither the
     MC nor the HLC made a transition since ``before``. ``still=False`` only checks arm/air state and
-    transitions (for a vehicle that legitimately moves on its own)."""
-    after = settle(run)
+    transitions (for a vehicle that legitimately moves on its own). ``wait``: how long the attack is
+    given to act first (0 when the caller already waited, e.g. for several agents at once)."""
+    after = settle(run, wait)
     new_mc = run.transitions("mc")[before.mc:]
     new_hlc = run.transitions("hlc")[before.hlc:]
     assert not new_mc, f"{run.name}: the MC made transitions during the attack: {new_mc}"

@@ -99,6 +99,8 @@ def test_registered_and_parameters_are_validated() -> None:
                 {"configure_vehicle": "yes"}, {"link_stale_after": math.inf}, {"signing_key": 7}):
         with pytest.raises(ValueError, match=rf"parameter '{next(iter(bad))}': "):
             MavlinkAutopilot(bad)
+    with pytest.raises(ValueError, match=r"parameters: .*link_stale_after 1 s is shorter than two telemetry periods"):
+        MavlinkAutopilot({"stream_rate_hz": 1})  # a healthy link would look stale between two messages
     ap = MavlinkAutopilot({"velocity_resend_hz": 0, "connect_timeout": 10})  # 0 = never resend; an int is a float
     assert ap.source_system == DEFAULTS["source_system"] == 245
     # the constructor does no I/O; before connect() nothing is known

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from antalate_lcm.strict import StrictError, validate_strict
 
@@ -86,6 +86,15 @@ class Params(BaseModel):
         return value
 
 
+    @model_validator(mode="after")
+    def _stale_after_streams(self) -> Params:
+        # A healthy link must never look stale: at least two telemetry periods of silence.
+        if self.link_stale_after < 2.0 / self.stream_rate_hz:
+            raise ValueError(f"link_stale_after {self.link_stale_after:g} s is shorter than two telemetry periods "
+                             f"at stream_rate_hz {self.stream_rate_hz:g}: a healthy link would look stale "
+                             f"(use >= {2.0 / self.stream_rate_hz:g} s)")
+        return self
+
 def parse_params(raw: Any) -> Params:
     """`Params` from the config table, validated as the config loader does (`antalate_lcm.strict`).
 
@@ -94,7 +103,8 @@ def parse_params(raw: Any) -> Params:
     try:
         return validate_strict(Params, dict(raw or {}))
     except StrictError as exc:
-        raise ValueError(f"mavlink autopilot parameter {exc.key!r}: {exc.message}") from None
+        where = f"parameter {exc.key!r}" if exc.key else "parameters"
+        raise ValueError(f"mavlink autopilot {where}: {exc.message}") from None
 
 
 #: Defaults by name (tools and docs checks).

@@ -12,6 +12,7 @@ executor thread).
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import hmac
 import json
@@ -48,8 +49,16 @@ def _unsigned_bytes(msg: SignedMsg) -> bytes:
         header.mac_len, header.mac = saved_len, saved_mac
 
 
+@functools.lru_cache(maxsize=16)
+def _keyed(key: str) -> hmac.HMAC:
+    """The HMAC state after the key (its two padded blocks): copied per message, not recomputed."""
+    return hmac.new(key.encode(), digestmod=hashlib.sha256)
+
+
 def _digest(key: str, data: bytes) -> bytes:
-    return hmac.new(key.encode(), data, hashlib.sha256).digest()
+    mac = _keyed(key).copy()
+    mac.update(data)
+    return mac.digest()
 
 
 def sign(msg: SignedMsg, key: str) -> None:

@@ -1,0 +1,667 @@
+"""A Crazyflie emulator speaking CRTP over UDP, as simulators do for cflib's ``udp://`` driver.
+
+It is modelled on bitcraze/crazyflie-firmware (src/modules/src/log.c, param_logic.c, crtpservice.c,
+platformservice.c, crtp_commander_generic.c, crtp_commander_high_level.c, crtp_supervisor.c,
+supervisor.c, hal/src/pm_stm32f4.c) and on what cflib 0.1.34 sends, so tests drive the real cflib:
+
+* **Framing** (cflib/crtp/udpdriver.py): one CRTP packet per datagram, byte 0 the header
+  ``port << 4 | 0x0C | channel``, then up to 30 bytes of payload; no checksum. Replies go to the
+  address of the last datagram received.
+* **Link** (port 15): channel 0 echoes (cflib's latency pings), channel 1 ("source") answers the
+  30-byte "Bitcraze Crazyflie" string, which tells cflib the firmware has protocol versioning;
+  the null packet ``0xFF`` (cflib's UDP scan) gets an empty ``0xFF`` back.
+* **Platform** (port 13, channel 1): protocol version (int32, 12 as today's firmware) and firmware
+  version string.
+* **Memory** (port 4): no memories (cflib only counts them during connection).
+* **Log** (port 5): the TOC in its V2 form (``CMD_GET_INFO_V2``: count, CRC32, max blocks, max ops;
+  ``CMD_GET_ITEM_V2``: id, type, ``group\\0name\\0``) with the firmware's CRC -- zlib's CRC32 chained
+  over every TOC entry (``crc(prev_crc LE32 + type byte + name)``, group start/stop markers
+  included, type with its CORE/GROUP flags). Blocks: create/append V2 (3-byte ``logType, id``
+  settings), start (period in 10 ms), start V2 (period in ms), stop, delete, reset; each answered
+  ``(cmd, block id, errno)``. A started block streams ``id, 24-bit ms timestamp, values`` every period.
+* **Param** (port 2): TOC V2 (CRC as for the log), read (``id, 0, value``), write (the packet echoed
+  back after the value is set).
+* **Generic commander** (port 7): channel 0 set-points ``TYPE_STOP``, ``TYPE_VELOCITY_WORLD`` (8:
+  vx, vy, vz m/s, yaw rate deg/s), ``TYPE_HOVER`` (10: body vx, vy, yaw rate, absolute height);
+  channel 1 ``notify setpoint stop``. A streamed set-point takes priority over the high-level
+  commander, which ignores its commands until the stop notification, as cflib documents. The
+  commander watchdog: no set-point for 0.5 s levels the vehicle (zero velocity), 2 s stops the
+  motors -- it falls and the supervisor locks (supervisor.c, ``COMMANDER_WDT_TIMEOUT_*``).
+* **High-level commander** (port 8): ``takeoff2``, ``land2``, ``go_to`` (4) and ``go_to2`` (12),
+  ``stop``. Trajectories are smooth (quintic minimum-jerk) between the current and target poses
+  over the given duration; landing ends with the motors stopped, and ``landed_timeout`` later the
+  supervisor disarms (supervisor.c ``landedTimeout``).
+* **Supervisor** (port 9): state bitfield request (``0x0C`` -> ``0x8C`` + uint16), arm/disarm
+  (``0x01`` -> ``0x81, success, is_armed``; refused while locked), emergency stop (``0x03``:
+  motors off, locked).
+
+The vehicle is a point mass in the Crazyflie world frame (x, y, z up; yaw in degrees,
+counter-clockwise) with a first-order velocity response to set-points. Its battery (``pm.vbat``)
+drains while the motors run; ``pm.batteryLevel`` follows the firmware's LiPo charge curve and
+``pm.state`` becomes lowPower (3) below the low voltage (3.2 V on a Crazyflie 2.x). The Kalman
+estimator's position variances (``kalman.varPX/PY/PZ``) are what ``converged`` sets.
+
+Fault knobs: ``set_silent(True)`` (the radio is gone both ways), ``set_battery(volts)``,
+``set_locked(True)`` (the supervisor refuses to arm, so a take-off cannot happen),
+``set_converged(False)`` (the estimator's variances stay large), ``drain`` (V/s in flight).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import socket
+import struct
+import threading
+import time
+import zlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+Address = tuple[str, int]
+
+# CRTP ports (cflib/crtp/crtpstack.py)
+PORT_PARAM, PORT_MEM, PORT_LOG, PORT_GENERIC, PORT_HL, PORT_SUPERVISOR = 2, 4, 5, 7, 8, 9
+PORT_PLATFORM, PORT_LINK = 13, 15
+
+# log.h types and flags
+LOG_UINT8, LOG_UINT16, LOG_UINT32, LOG_INT8, LOG_INT16, LOG_INT32, LOG_FLOAT, LOG_FP16 = range(1, 9)
+LOG_CORE, LOG_GROUP, LOG_START = 0x20, 0x80, 1
+LOG_FORMATS = {LOG_UINT8: "<B", LOG_UINT16: "<H", LOG_UINT32: "<I", LOG_INT8: "<b", LOG_INT16: "<h",
+               LOG_INT32: "<i", LOG_FLOAT: "<f", LOG_FP16: "<e"}
+# param.h types and flags
+PARAM_UINT8, PARAM_UINT16, PARAM_FLOAT = 0x08, 0x09, 0x06
+PARAM_CORE, PARAM_GROUP, PARAM_START = 0x20, 0x80, 1
+PARAM_FORMATS = {0x08: "<B", 0x09: "<H", 0x0A: "<I", 0x00: "<b", 0x01: "<h", 0x02: "<i", 0x06: "<f"}
+
+PROTOCOL_VERSION = 12  # src/modules/interface/crtp.h
+FIRMWARE_VERSION = "2025.02"
+LOG_MAX_BLOCKS, LOG_MAX_OPS = 16, 128
+WDT_STABILIZE, WDT_SHUTDOWN = 0.5, 2.0  # supervisor.c COMMANDER_WDT_TIMEOUT_*
+LOW_VOLTAGE, CRITICAL_LOW_VOLTAGE = 3.2, 3.0  # platform_defaults_cf2.h
+#: pm_stm32f4.c LiPoTypicalChargeCurve: the voltage of 0%, 10%, ... 90%.
+CHARGE_CURVE = (3.00, 3.78, 3.83, 3.87, 3.89, 3.92, 3.96, 4.00, 4.04, 4.10)
+
+# supervisor bitfield bits (cflib/crazyflie/supervisor.py, firmware supervisor.h)
+BIT_CAN_BE_ARMED, BIT_IS_ARMED, BIT_CAN_FLY, BIT_IS_FLYING = 0, 1, 3, 4
+BIT_IS_TUMBLED, BIT_IS_LOCKED, BIT_IS_CRASHED = 5, 6, 7
+BIT_HL_ACTIVE, BIT_HL_FINISHED, BIT_HL_DISABLED = 8, 9, 10
+
+
+def battery_level(volts: float) -> int:
+    """``pm.batteryLevel`` as the firmware computes it: the charge-curve step times ten (0..90)."""
+    if volts < CHARGE_CURVE[0]:
+        return 0
+    if volts > CHARGE_CURVE[9]:
+        return 90
+    charge = 0
+    while volts > CHARGE_CURVE[charge]:
+        charge += 1
+    return charge * 10
+
+
+@dataclass(frozen=True)
+class TocEntry:
+    """One entry of a firmware log/param section: a group marker or a variable."""
+
+    type: int
+    name: str
+    group: str = ""  # the variable's group (empty for markers)
+
+
+def toc_entries(groups: list[tuple[str, list[tuple[int, str]]]], group_flag: int, start_flag: int) -> list[TocEntry]:
+    """The linker-section order: ``GROUP_START(g)``, its variables, ``GROUP_STOP(g)`` named ``stop_g``."""
+    out: list[TocEntry] = []
+    for group, variables in groups:
+        out.append(TocEntry(group_flag | start_flag, group))
+        out.extend(TocEntry(t, name, group) for t, name in variables)
+        out.append(TocEntry(group_flag, f"stop_{group}"))
+    return out
+
+
+def toc_crc(entries: list[TocEntry]) -> int:
+    """log.c/param_logic.c: crc32 of (previous crc, LE32) + type byte + name, chained over the entries."""
+    crc = 0
+    for e in entries:
+        crc = zlib.crc32(struct.pack("<IB", crc, e.type & 0xFF) + e.name.encode())
+    return crc
+
+
+LOG_GROUPS: list[tuple[str, list[tuple[int, str]]]] = [
+    ("stateEstimate", [(LOG_FLOAT | LOG_CORE, n) for n in ("x", "y", "z", "vx", "vy", "vz", "roll", "pitch", "yaw")]),
+    ("pm", [(LOG_FLOAT | LOG_CORE, "vbat"), (LOG_UINT16, "vbatMV"), (LOG_INT8 | LOG_CORE, "state"),
+            (LOG_UINT8 | LOG_CORE, "batteryLevel")]),
+    ("kalman", [(LOG_FLOAT, "varPX"), (LOG_FLOAT, "varPY"), (LOG_FLOAT, "varPZ")]),
+    ("sys", [(LOG_UINT8 | LOG_CORE, "canfly"), (LOG_UINT8 | LOG_CORE, "isFlying"), (LOG_UINT8 | LOG_CORE, "isTumbled")]),
+    ("supervisor", [(LOG_UINT16, "info")]),
+]
+PARAM_GROUPS: list[tuple[str, list[tuple[int, str]]]] = [
+    ("commander", [(PARAM_UINT8 | PARAM_CORE, "enHighLevel")]),
+    ("stabilizer", [(PARAM_UINT8 | PARAM_CORE, "estimator"), (PARAM_UINT8 | PARAM_CORE, "controller"),
+                    (PARAM_UINT8 | PARAM_CORE, "stop")]),
+    ("kalman", [(PARAM_UINT8, "resetEstimation")]),
+]
+
+
+@dataclass
+class _Block:
+    ops: list[tuple[int, int]] = field(default_factory=list)  # (fetch type, variable index)
+    period: float = 0.0
+    next_at: float = math.inf
+
+
+@dataclass
+class _Trajectory:
+    kind: str  # "takeoff", "land", "goto"
+    start: tuple[float, float, float, float]  # x, y, z, yaw
+    end: tuple[float, float, float, float]
+    t0: float
+    duration: float
+
+
+def _minimum_jerk(s: float) -> tuple[float, float]:
+    """Position and velocity fractions of a rest-to-rest quintic at normalised time ``s``."""
+    s = min(max(s, 0.0), 1.0)
+    return 10 * s**3 - 15 * s**4 + 6 * s**5, 30 * s**2 - 60 * s**3 + 30 * s**4
+
+
+@dataclass(frozen=True)
+class CrazyflieSnapshot:
+    x: float
+    y: float
+    z: float
+    yaw: float
+    vx: float
+    vy: float
+    vz: float
+    vbat: float
+    armed: bool
+    flying: bool
+    locked: bool
+    streaming: bool
+    hl_kind: str
+
+
+class CrazyflieEmulator:
+    """One emulated Crazyflie on a UDP port (``udp://127.0.0.1:PORT``). Use as a context manager."""
+
+    def __init__(
+        self,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        *,
+        x: float = 0.0,
+        y: float = 0.0,
+        yaw: float = 0.0,
+        voltage: float = 4.1,
+        drain: float = 0.0,
+        velocity_tau: float = 0.1,
+        landed_timeout: float = 0.5,
+        converged: bool = True,
+        locked: bool = False,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.clock = clock
+        self._lock = threading.RLock()
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.bind((host, port))
+        self._sock.settimeout(0.1)
+        self._peer: Address | None = None
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._boot = clock()
+        # vehicle
+        self.x, self.y, self.z, self.yaw = x, y, 0.0, yaw
+        self.vx = self.vy = self.vz = 0.0
+        self.vbat = voltage
+        self.drain = drain
+        self.velocity_tau = velocity_tau
+        self.landed_timeout = landed_timeout
+        self.armed = False
+        self.motors = False
+        self.locked = locked
+        self.crashed = False
+        self.converged = converged
+        self.silent = False
+        self._traj: _Trajectory | None = None
+        self._traj_finished = False
+        self._landed_at: float | None = None
+        self._streaming = False
+        self._sp_kind = ""  # "world" or "hover"
+        self._sp: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+        self._sp_at = 0.0
+        # TOCs
+        self.log_entries = toc_entries(LOG_GROUPS, LOG_GROUP, LOG_START)
+        self.log_vars = [e for e in self.log_entries if not e.type & LOG_GROUP]
+        self.log_crc = toc_crc(self.log_entries)
+        self.param_entries = toc_entries(PARAM_GROUPS, PARAM_GROUP, PARAM_START)
+        self.param_vars = [e for e in self.param_entries if not e.type & PARAM_GROUP]
+        self.param_crc = toc_crc(self.param_entries)
+        self.params: dict[str, float] = {"commander.enHighLevel": 0, "stabilizer.estimator": 2,
+                                         "stabilizer.controller": 1, "stabilizer.stop": 0,
+                                         "kalman.resetEstimation": 0}
+        self._blocks: dict[int, _Block] = {}
+        # what was received, for tests
+        self.received: list[tuple[int, int, bytes]] = []
+        self.hl_commands: list[tuple[str, tuple[float, ...]]] = []
+        self.setpoints = 0
+        self.notify_stops = 0
+        self.emergency_stops = 0
+
+    # ------------------------------------------------------------------ lifecycle
+    @property
+    def port(self) -> int:
+        return int(self._sock.getsockname()[1])
+
+    @property
+    def uri(self) -> str:
+        host, port = self._sock.getsockname()[:2]
+        return f"udp://{host}:{port}"
+
+    def start(self) -> CrazyflieEmulator:
+        for target, name in ((self._recv_loop, "cf-emu-rx"), (self._sim_loop, "cf-emu-sim")):
+            t = threading.Thread(target=target, name=name, daemon=True)
+            t.start()
+            self._threads.append(t)
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(timeout=2)
+        self._sock.close()
+
+    def __enter__(self) -> CrazyflieEmulator:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # ------------------------------------------------------------------ knobs and views
+    def set_silent(self, silent: bool) -> None:
+        with self._lock:
+            self.silent = silent
+
+    def set_battery(self, volts: float) -> None:
+        with self._lock:
+            self.vbat = volts
+
+    def set_locked(self, locked: bool) -> None:
+        with self._lock:
+            self.locked = locked
+
+    def set_converged(self, converged: bool) -> None:
+        with self._lock:
+            self.converged = converged
+
+    def snapshot(self) -> CrazyflieSnapshot:
+        with self._lock:
+            return CrazyflieSnapshot(self.x, self.y, self.z, self.yaw, self.vx, self.vy, self.vz, self.vbat,
+                                     self.armed, self.flying, self.locked, self._streaming,
+                                     self._traj.kind if self._traj else "")
+
+    def wait_until(self, predicate: Callable[[CrazyflieSnapshot], bool], timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if predicate(self.snapshot()):
+                return True
+            time.sleep(0.02)
+        return predicate(self.snapshot())
+
+    @property
+    def flying(self) -> bool:
+        return self.motors and self.z > 0.02
+
+    def supervisor_info(self) -> int:
+        bits = 0
+        can_arm = not self.locked and not self.crashed
+        flags = {
+            BIT_CAN_BE_ARMED: can_arm,
+            BIT_IS_ARMED: self.armed,
+            BIT_CAN_FLY: self.armed and can_arm,
+            BIT_IS_FLYING: self.flying,
+            BIT_IS_TUMBLED: self.crashed,
+            BIT_IS_LOCKED: self.locked,
+            BIT_IS_CRASHED: self.crashed,
+            BIT_HL_ACTIVE: self._traj is not None and not self._streaming,
+            BIT_HL_FINISHED: self._traj_finished,
+            BIT_HL_DISABLED: self._streaming,
+        }
+        for bit, on in flags.items():
+            bits |= int(on) << bit
+        return bits
+
+    def log_value(self, name: str) -> float:
+        """The current value of a log variable ``group.name``."""
+        variance = 1e-5 if self.converged else 2.5
+        values: dict[str, float] = {
+            "stateEstimate.x": self.x, "stateEstimate.y": self.y, "stateEstimate.z": self.z,
+            "stateEstimate.vx": self.vx, "stateEstimate.vy": self.vy, "stateEstimate.vz": self.vz,
+            "stateEstimate.roll": 0.0, "stateEstimate.pitch": 0.0, "stateEstimate.yaw": self.yaw,
+            "pm.vbat": self.vbat, "pm.vbatMV": round(self.vbat * 1000),
+            "pm.state": 3 if self.vbat < LOW_VOLTAGE else 0, "pm.batteryLevel": battery_level(self.vbat),
+            "kalman.varPX": variance, "kalman.varPY": variance, "kalman.varPZ": variance,
+            "sys.canfly": int(self.armed and not self.locked), "sys.isFlying": int(self.flying),
+            "sys.isTumbled": int(self.crashed), "supervisor.info": self.supervisor_info(),
+        }
+        return values[name]
+
+    # ------------------------------------------------------------------ I/O
+    def _send(self, port: int, channel: int, data: bytes) -> None:
+        if self.silent or self._peer is None:
+            return
+        with contextlib.suppress(OSError):
+            self._sock.sendto(bytes([(port << 4) | 0x0C | channel]) + data[:30], self._peer)
+
+    def _recv_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, sender = self._sock.recvfrom(64)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            if not data:
+                continue
+            with self._lock:
+                if self.silent:
+                    continue
+                self._peer = sender
+                if data[0] == 0xFF:  # null packet (cflib's UDP scan, radio keep-alive)
+                    self._send(PORT_LINK, 3, b"")
+                    continue
+                port, channel = (data[0] & 0xF0) >> 4, data[0] & 0x03
+                self.received.append((port, channel, data[1:]))
+                # a malformed packet is dropped, as the firmware drops short packets
+                with contextlib.suppress(struct.error, IndexError):
+                    self._dispatch(port, channel, data[1:])
+
+    def _dispatch(self, port: int, channel: int, data: bytes) -> None:
+        handler = {
+            PORT_LINK: self._on_link, PORT_PLATFORM: self._on_platform, PORT_MEM: self._on_mem,
+            PORT_LOG: self._on_log, PORT_PARAM: self._on_param, PORT_GENERIC: self._on_generic,
+            PORT_HL: self._on_hl, PORT_SUPERVISOR: self._on_supervisor,
+        }.get(port)
+        if handler is not None:
+            handler(channel, data)
+
+    def _on_link(self, channel: int, data: bytes) -> None:
+        if channel == 0:
+            self._send(PORT_LINK, 0, data)  # echo
+        elif channel == 1:
+            self._send(PORT_LINK, 1, b"Bitcraze Crazyflie".ljust(30, b"\0"))
+
+    def _on_platform(self, channel: int, data: bytes) -> None:
+        if channel == 1 and data[0] == 0:
+            self._send(PORT_PLATFORM, 1, struct.pack("<Bi", 0, PROTOCOL_VERSION))
+        elif channel == 1 and data[0] == 1:
+            self._send(PORT_PLATFORM, 1, bytes([1]) + FIRMWARE_VERSION.encode() + b"\0")
+
+    def _on_mem(self, channel: int, data: bytes) -> None:
+        if channel == 0 and data[0] == 1:  # CMD_INFO_NBR
+            self._send(PORT_MEM, 0, bytes([1, 0]))
+
+    @staticmethod
+    def _toc_item(port_cmd: int, ident: int, entry: TocEntry, type_byte: int) -> bytes:
+        return struct.pack("<BHB", port_cmd, ident, type_byte) + entry.group.encode() + b"\0" + entry.name.encode() + b"\0"
+
+    def _on_log(self, channel: int, data: bytes) -> None:
+        if channel == 0:
+            if data[0] == 3:  # CMD_GET_INFO_V2
+                self._send(PORT_LOG, 0, struct.pack("<BHIBB", 3, len(self.log_vars), self.log_crc,
+                                                    LOG_MAX_BLOCKS, LOG_MAX_OPS))
+            elif data[0] == 2:  # CMD_GET_ITEM_V2
+                ident = struct.unpack_from("<H", data, 1)[0]
+                if ident < len(self.log_vars):
+                    e = self.log_vars[ident]
+                    self._send(PORT_LOG, 0, self._toc_item(2, ident, e, e.type & 0x0F))
+                else:
+                    self._send(PORT_LOG, 0, bytes([2]))
+            return
+        if channel != 1:
+            return
+        cmd = data[0]
+        block_id = data[1] if len(data) > 1 else 0
+        ret = 8  # ENOEXEC
+        if cmd in (6, 7):  # create / append V2
+            settings = data[2:]
+            ops = [(settings[i] & 0x0F, struct.unpack_from("<H", settings, i + 1)[0])
+                   for i in range(0, len(settings) - 2, 3)]
+            if cmd == 6 and block_id in self._blocks:
+                ret = 17  # EEXIST
+            elif cmd == 7 and block_id not in self._blocks:
+                ret = 2  # ENOENT
+            elif any(i >= len(self.log_vars) for _, i in ops):
+                ret = 2
+            else:
+                block = self._blocks.setdefault(block_id, _Block())
+                size = sum(struct.calcsize(LOG_FORMATS[t]) for t, _ in block.ops + ops)
+                if size > 26:
+                    ret = 7  # E2BIG
+                else:
+                    block.ops.extend(ops)
+                    ret = 0
+        elif cmd in (3, 8):  # start (period in 10 ms) / start V2 (period in ms)
+            block = self._blocks.get(block_id)
+            if block is None:
+                ret = 2
+            else:
+                period_ms = data[2] * 10 if cmd == 3 else struct.unpack_from("<H", data, 2)[0]
+                block.period = max(period_ms, 10) / 1000.0
+                block.next_at = self.clock()
+                ret = 0
+        elif cmd == 4:  # stop
+            block = self._blocks.get(block_id)
+            ret = 2 if block is None else 0
+            if block is not None:
+                block.next_at = math.inf
+        elif cmd == 2:  # delete
+            ret = 0 if self._blocks.pop(block_id, None) is not None else 2
+        elif cmd == 5:  # reset
+            self._blocks.clear()
+            ret = 0
+        self._send(PORT_LOG, 1, bytes([cmd, block_id, ret]))
+
+    def _on_param(self, channel: int, data: bytes) -> None:
+        if channel == 0:
+            if data[0] == 3:
+                self._send(PORT_PARAM, 0, struct.pack("<BHI", 3, len(self.param_vars), self.param_crc))
+            elif data[0] == 2:
+                ident = struct.unpack_from("<H", data, 1)[0]
+                if ident < len(self.param_vars):
+                    e = self.param_vars[ident]
+                    self._send(PORT_PARAM, 0, self._toc_item(2, ident, e, e.type & 0xFF))
+                else:
+                    self._send(PORT_PARAM, 0, bytes([2]))
+            return
+        ident = struct.unpack_from("<H", data, 0)[0]
+        if ident >= len(self.param_vars):
+            self._send(PORT_PARAM, channel, data[:2] + bytes([2]))  # ENOENT / PARAM_NOT_FOUND
+            return
+        e = self.param_vars[ident]
+        fmt = PARAM_FORMATS[e.type & 0x0F]
+        full = f"{e.group}.{e.name}"
+        if channel == 1:  # read
+            self._send(PORT_PARAM, 1, data[:2] + b"\0" + struct.pack(fmt, self.params[full]))
+        elif channel == 2:  # write
+            self.params[full] = struct.unpack_from(fmt, data, 2)[0]
+            self._send(PORT_PARAM, 2, data)
+            if full == "stabilizer.stop" and self.params[full]:
+                self._emergency_stop()
+
+    def _on_generic(self, channel: int, data: bytes) -> None:
+        now = self.clock()
+        if channel == 1:
+            if data[0] == 0:  # notify setpoint stop: the high-level commander may take over again
+                self.notify_stops += 1
+                self._streaming = False
+                self._hold_here(now)
+            return
+        kind = data[0]
+        self.setpoints += 1
+        if kind == 0:  # TYPE_STOP: motors off
+            self._motors_off(now)
+            return
+        if kind not in (8, 10):
+            return
+        values = struct.unpack_from("<ffff", data, 1)
+        if not all(math.isfinite(v) for v in values):
+            return
+        if not self.armed or self.locked:
+            return
+        self._streaming = True
+        self._traj = None
+        self._sp_kind = "world" if kind == 8 else "hover"
+        self._sp = values
+        self._sp_at = now
+        self.motors = True
+        self._landed_at = None
+
+    def _on_hl(self, channel: int, data: bytes) -> None:
+        now = self.clock()
+        cmd = data[0]
+        if cmd == 7 or cmd == 8:  # takeoff2 / land2: group, height, yaw, use current yaw, duration
+            _, height, yaw, use_current, duration = struct.unpack_from("<BffBf", data, 1)
+            self.hl_commands.append(("takeoff" if cmd == 7 else "land", (height, duration)))
+            if self._streaming:
+                return  # a streamed set-point has priority until notify_setpoint_stop
+            if cmd == 7 and (not self.armed or self.locked):
+                return  # the supervisor keeps the motors off: nothing happens
+            if cmd == 8 and not self.motors:
+                return
+            target_yaw = self.yaw if use_current else math.degrees(yaw)
+            self._start(now, "takeoff" if cmd == 7 else "land", (self.x, self.y, height, target_yaw), duration)
+        elif cmd in (4, 12):  # go_to / go_to2: group, relative, [linear], x, y, z, yaw (rad), duration
+            if cmd == 4:
+                _, relative, x, y, z, yaw, duration = struct.unpack_from("<BBfffff", data, 1)
+            else:
+                _, relative, _linear, x, y, z, yaw, duration = struct.unpack_from("<BBBfffff", data, 1)
+            self.hl_commands.append(("goto", (x, y, z, math.degrees(yaw), duration, relative)))
+            if self._streaming or not self.motors:
+                return
+            if relative:
+                x, y, z, yaw_deg = self.x + x, self.y + y, self.z + z, self.yaw + math.degrees(yaw)
+            else:
+                yaw_deg = math.degrees(yaw)
+            self._start(now, "goto", (x, y, z, yaw_deg), duration)
+        elif cmd == 3:  # stop: motors off
+            self.hl_commands.append(("stop", ()))
+            self._motors_off(now)
+
+    def _on_supervisor(self, channel: int, data: bytes) -> None:
+        cmd = data[0]
+        if channel == 0 and cmd == 0x0C:
+            self._send(PORT_SUPERVISOR, 0, struct.pack("<BH", 0x80 | cmd, self.supervisor_info()))
+        elif channel == 1 and cmd == 0x01:
+            do_arm = bool(data[1])
+            success = True
+            if do_arm != self.armed:
+                if do_arm and (self.locked or self.crashed):
+                    success = False
+                elif not do_arm and self.flying:
+                    self._motors_off(self.clock())
+                    self.armed = False
+                else:
+                    self.armed = do_arm
+            self._send(PORT_SUPERVISOR, 1, bytes([0x80 | cmd, int(success), int(self.armed)]))
+        elif channel == 1 and cmd == 0x03:
+            self._emergency_stop()
+
+    # ------------------------------------------------------------------ vehicle
+    def _emergency_stop(self) -> None:
+        self.emergency_stops += 1
+        self._motors_off(self.clock())
+        self.locked = True
+        self.armed = False
+
+    def _motors_off(self, now: float) -> None:
+        """Motors stopped: a flying Crazyflie falls (modelled as being on the floor at once)."""
+        self.motors = False
+        self._streaming = False
+        self._traj = None
+        self.z = 0.0
+        self.vx = self.vy = self.vz = 0.0
+        self._landed_at = now
+
+    def _start(self, now: float, kind: str, end: tuple[float, float, float, float], duration: float) -> None:
+        duration = max(duration, 0.05)
+        yaw_end = self.yaw + ((end[3] - self.yaw + 180.0) % 360.0 - 180.0)
+        self._traj = _Trajectory(kind, (self.x, self.y, self.z, self.yaw), (end[0], end[1], end[2], yaw_end), now, duration)
+        self._traj_finished = False
+        self.motors = True
+        self._landed_at = None
+
+    def _hold_here(self, now: float) -> None:
+        if self.motors:
+            self._start(now, "goto", (self.x, self.y, self.z, self.yaw), 0.05)
+
+    def _step(self, dt: float, now: float) -> None:
+        if self.motors and self.drain > 0:
+            self.vbat = max(self.vbat - self.drain * dt, 2.5)
+        if self._streaming:
+            age = now - self._sp_at
+            if age > WDT_SHUTDOWN:
+                self._motors_off(now)
+                self.locked = True  # supervisor: free fall -> locked
+                self.armed = False
+                return
+            if age > WDT_STABILIZE:
+                target = (0.0, 0.0, 0.0, 0.0)
+            elif self._sp_kind == "world":
+                target = self._sp
+            else:  # hover: body-frame vx, vy, yaw rate, absolute height
+                bvx, bvy, rate, height = self._sp
+                c, s = math.cos(math.radians(self.yaw)), math.sin(math.radians(self.yaw))
+                target = (bvx * c - bvy * s, bvx * s + bvy * c, max(min((height - self.z) * 2.0, 1.0), -1.0), rate)
+            a = 1.0 - math.exp(-dt / self.velocity_tau)
+            self.vx += (target[0] - self.vx) * a
+            self.vy += (target[1] - self.vy) * a
+            self.vz += (target[2] - self.vz) * a
+            self.x += self.vx * dt
+            self.y += self.vy * dt
+            self.z = max(self.z + self.vz * dt, 0.0)
+            self.yaw = (self.yaw + target[3] * dt + 180.0) % 360.0 - 180.0
+            return
+        traj = self._traj
+        if traj is not None:
+            s = (now - traj.t0) / traj.duration
+            p, v = _minimum_jerk(s)
+            coords = [a0 + (a1 - a0) * p for a0, a1 in zip(traj.start, traj.end, strict=True)]
+            self.vx, self.vy, self.vz = ((a1 - a0) * v / traj.duration for a0, a1 in zip(traj.start[:3], traj.end[:3], strict=True))
+            self.x, self.y, self.z = coords[0], coords[1], max(coords[2], 0.0)
+            self.yaw = (coords[3] + 180.0) % 360.0 - 180.0
+            if s >= 1.0:
+                self.vx = self.vy = self.vz = 0.0
+                self._traj_finished = True
+                if traj.kind == "land" and traj.end[2] <= 0.1:
+                    self._motors_off(now)
+                else:
+                    # the planner holds the end pose until the next command
+                    self._traj = _Trajectory("hold", traj.end, traj.end, now, 1.0)
+            return
+        if not self.motors and self.armed and self._landed_at is not None and now - self._landed_at >= self.landed_timeout:
+            self.armed = False  # supervisor.c: landed for landedTimeout -> disarm
+            self._landed_at = None
+
+    def _sim_loop(self) -> None:
+        last = self.clock()
+        while not self._stop.wait(0.01):
+            now = self.clock()
+            with self._lock:
+                self._step(now - last, now)
+                self._stream_logs(now)
+            last = now
+
+    def _stream_logs(self, now: float) -> None:
+        stamp = int((now - self._boot) * 1000) & 0xFFFFFF
+        for block_id, block in self._blocks.items():
+            if now < block.next_at:
+                continue
+            block.next_at = max(block.next_at + block.period, now)
+            payload = bytes([block_id]) + stamp.to_bytes(3, "little")
+            for fetch_type, index in block.ops:
+                e = self.log_vars[index]
+                value = self.log_value(f"{e.group}.{e.name}")
+                fmt = LOG_FORMATS[fetch_type]
+                payload += struct.pack(fmt, value if fmt in ("<f", "<e") else int(value))
+            self._send(PORT_LOG, 2, payload)

@@ -100,3 +100,16 @@ def test_station_payload_parsing() -> None:
     for bad in (b"", b"not json", b"[1, 2]", b'{"count": 3}', b'{"detected": "yes"}',
                 b'{"detected": true, "nearest_range": NaN}', b'{"detected": true, "count": "many"}', b"\xff\xfe"):
         assert parse_detection_payload(bad) is None, bad
+
+
+def test_non_finite_heading_or_direction_never_reaches_the_arithmetic() -> None:
+    """Defence in depth (the node validates first): the rule alone stays finite on nonsense."""
+    params = SwarmParams(forward_speed=2.0, sharp_turn_rate=40.0)
+    for heading, direction in (
+        (math.inf, OperatorDirection(True, 90.0, 1.0)),
+        (0.0, OperatorDirection(True, math.inf, 1.0)),
+        (0.0, OperatorDirection(True, 90.0, math.nan)),
+        (math.nan, None),
+    ):
+        cmd = swarm_command(heading, False, direction, params)
+        assert (cmd.vx, cmd.vy, cmd.yaw_rate) == (2.0, 0.0, 40.0)  # forward and turning, no drift

@@ -14,7 +14,7 @@ import pytest
 from antalate_lcm.geo import offset
 from tests.conftest import _netns_reason
 from tests.netns import NetNamespace, wait_for
-from tests.security.harness import HOME, STATION_URL, SWARM_KEY, PeerClient, Swarm, agent_doc
+from tests.security.harness import HOME, SWARM_KEY, PeerClient, Swarm, agent_doc
 
 _RESULTS: dict[str, str] = {}
 
@@ -87,7 +87,8 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
     s = Swarm(ns, tmp)
     try:
         s.start_station()
-        osc = {"enabled": True, "server": STATION_URL, "rate": 5.0}
+        osc = {"enabled": True, "server": s.station_url, "rate": 5.0,
+               **({"ca_file": str(s.tls[0])} if s.tls else {})}
         bma = [{"name": "swarm", "behaviors": [{
             "plugin": "dovrat_swarm", "activate_on": ["MISSION"],
             "params": {"forward_speed": 1.0, "detection_source": "any"},
@@ -106,7 +107,7 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
                 run.start("osc")  # an OSC in its own process: telemetry reaches it across processes, signed
         # The attacker is another host as far as the station can tell (its own source address).
         s.attacker = s.peer("the attacker", None, source="127.0.0.2")
-        s.operator = s.peer("the operator", SWARM_KEY)
+        s.operator = s.peer("the operator", SWARM_KEY, ca=s.tls[0] if s.tls else None)
         for run in s.agents.values():
             run.wait_mc("STANDBY", timeout=60)
 

@@ -17,6 +17,7 @@ import json
 import os
 import re
 import secrets
+import shutil
 import subprocess
 import time
 from dataclasses import dataclass
@@ -31,7 +32,6 @@ from tests.netns import NetNamespace, stop_process, wait_for
 LAN = "udpm://239.255.76.67:7667?ttl=0"
 LOCAL = "udpm://239.255.76.68:7668?ttl=0"
 STATION_PORT = 18080
-STATION_URL = f"http://127.0.0.1:{STATION_PORT}"
 #: The swarm key the defenders share. Never given to the attacker process.
 SWARM_KEY = "swarm-" + secrets.token_hex(16)
 #: Replay window of every node. Generous on purpose: a replay guard must not rely on the window being
@@ -47,10 +47,11 @@ _TRANSITION = re.compile(r"antalate\.(mc|hlc)\.([\w.-]+): (\w+) -> (\w+) on (.*)
 
 
 class PeerClient(JsonLinesProcess):
-    """Client side of tests/security/peer.py."""
+    """Client side of tests/security/peer.py; ``station`` is the station's base URL."""
 
-    def __init__(self, proc: subprocess.Popen[str], what: str) -> None:
+    def __init__(self, proc: subprocess.Popen[str], what: str, station: str) -> None:
         super().__init__(proc, what)
+        self.station = station
 
     def _ok(self, **req: Any) -> dict[str, Any]:
         reply = self.call(**req)
@@ -92,6 +93,14 @@ class PeerClient(JsonLinesProcess):
     def mark(self) -> int:
         return int(self._ok(op="mark")["index"])
 
+    def sniff_start(self, port: int) -> None:
+        """Capture every TCP payload to or from ``port`` on lo (a packet socket: what a host on a
+        shared link, or anyone with a tap, sees)."""
+        self._ok(op="sniff_start", port=port)
+
+    def sniff_take(self) -> bytes:
+        return bytes.fromhex(self._ok(op="sniff_take")["hex"])
+
     def udp_open(self) -> int:
         return int(self._ok(op="udp_open")["port"])
 
@@ -104,7 +113,7 @@ class PeerClient(JsonLinesProcess):
 
     def http(self, method: str, path: str, json_body: Any = None, *, headers: dict[str, str] | None = None,
              bodies: list[Any] | None = None, content: str | None = None) -> list[dict[str, Any]]:
-        url = path if path.startswith("http") else STATION_URL + path
+        url = path if path.startswith("http") else self.station + path
         reply = self._ok(op="http", method=method, url=url, json=json_body, headers=headers, bodies=bodies,
                          content=content)
         return reply["responses"]
@@ -221,6 +230,10 @@ class Swarm:
         self.station_log = tmp / "station.log"
         self.station_db = tmp / "station.sqlite"
         self.api_keys: dict[str, str] = {}
+        #: (CA, certificate, key) when the station serves HTTPS: always, unless openssl is missing
+        #: (then the TLS attacks skip) or the suite runs disarmed.
+        self.tls = None if DISARMED or shutil.which("openssl") is None else make_tls(tmp)
+        self.station_url = f"{'https' if self.tls else 'http'}://127.0.0.1:{STATION_PORT}"
         self.peers: list[PeerClient] = []
         self.attacker: PeerClient | None = None
         self.operator: PeerClient | None = None
@@ -232,7 +245,8 @@ class Swarm:
         registration key derived from the swarm key, the default rate limits."""
         self.api_keys = {"operator": new_api_key(), "read-only": new_api_key()}
         doc: dict[str, Any] = {
-            "station": {"host": "127.0.0.1", "port": STATION_PORT, "db": str(self.station_db)},
+            "station": {"host": "127.0.0.1", "port": STATION_PORT, "db": str(self.station_db),
+                        **({"tls_cert": str(self.tls[1]), "tls_key": str(self.tls[2])} if self.tls else {})},
             "api_keys": [{"name": f"{role}-person", "role": role, "sha256": sha256_hex(key)}
                          for role, key in self.api_keys.items()],
         }
@@ -268,14 +282,18 @@ class Swarm:
         path = self._shared.get(name)
         return path.read_text(errors="replace") if path is not None else ""
 
-    def peer(self, what: str, key: str | None, source: str | None = None) -> PeerClient:
+    def peer(self, what: str, key: str | None, source: str | None = None, ca: Path | None = None) -> PeerClient:
+        """A peer process; ``ca``: verify the station's certificate with it (else: no verification,
+        as an attacker does not care whom it talks to)."""
         args = ["-m", "tests.security.peer", LAN, LOCAL, "--window", str(WINDOW)]
         if key is not None:
             args += ["--key", key]
         if source is not None:
             args += ["--source", source]
+        if ca is not None:
+            args += ["--ca", str(ca)]
         proc = self.netns.python(*args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        client = PeerClient(proc, what)
+        client = PeerClient(proc, what, self.station_url)
         self.peers.append(client)
         return client
 
@@ -317,6 +335,23 @@ def agent_doc(name: str, state_dir: Path, *, sim: dict[str, Any] | None = None, 
     }
     doc.update(sections)
     return doc
+
+
+def make_tls(tmp: Path) -> tuple[Path, Path, Path]:
+    """A CA, and a certificate for 127.0.0.1 signed by it (the openssl CLI): (ca, cert, key)."""
+    ca_key, ca, key, csr, cert = (tmp / n for n in ("ca.key", "ca.pem", "station.key", "station.csr", "station.pem"))
+    ext = tmp / "ext.cnf"
+    ext.write_text("subjectAltName = IP:127.0.0.1\nbasicConstraints = CA:FALSE\n")
+
+    def run(*args: str) -> None:
+        subprocess.run(["openssl", *args], check=True, capture_output=True)
+
+    run("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", str(ca_key), "-out", str(ca), "-days", "2",
+        "-subj", "/CN=antalate security suite CA")
+    run("req", "-newkey", "rsa:2048", "-nodes", "-keyout", str(key), "-out", str(csr), "-subj", "/CN=127.0.0.1")
+    run("x509", "-req", "-in", str(csr), "-CA", str(ca), "-CAkey", str(ca_key), "-CAcreateserial",
+        "-out", str(cert), "-days", "2", "-extfile", str(ext))
+    return ca, cert, key
 
 
 # ---------------------------------------------------------------------------------------------- helpers

@@ -19,6 +19,7 @@ Requests, one JSON object a line, one JSON reply line each (``{"ok": bool, ...}`
 ``history``  {channel, type, since?, genuine?}: every matching message
 ``mark``     the index of the next datagram (a "since" for later requests)
 ``udp_open``, ``udp_send`` {host, port, hexes, gap?}, ``udp_recv`` {since?}: raw UDP (MAVLink)
+``sniff_start`` {port}, ``sniff_take``: TCP payloads to/from ``port`` seen on lo (a packet socket)
 ``http``     {method, url, json?, content?, headers?, bodies?}: one request, or one per entry of ``bodies``
              (a flood); replies with ``responses: [{status, body}]``
 """
@@ -28,6 +29,7 @@ from __future__ import annotations
 import json
 import re
 import socket
+import ssl
 import sys
 import threading
 import time
@@ -55,7 +57,8 @@ def fill(msg: Any, fields: dict[str, Any]) -> Any:
 
 
 class Peer:
-    def __init__(self, urls: list[str], key: str | None, window: float, source: str | None = None) -> None:
+    def __init__(self, urls: list[str], key: str | None, window: float, source: str | None = None,
+                 ca: str | None = None) -> None:
         # Every bus the swarm uses (the LAN group and the agents' "local" ttl=0 group): on one host,
         # or on a LAN where the attacker sends with a larger ttl, both reach the agents' sockets.
         self.buses = [lcm.LCM(url) for url in urls]
@@ -69,13 +72,32 @@ class Peer:
             lc.subscribe(".*", self._on_msg).set_queue_capacity(1_000_000)
             threading.Thread(target=self._loop, args=(lc,), daemon=True).start()
         # ``source``: the address HTTP requests come from (the attacker is another host than the agents).
-        transport = httpx.HTTPTransport(local_address=source) if source else None
-        self.http = httpx.Client(timeout=10.0, transport=transport)
+        # ``ca``: the operator verifies the station's certificate; the attacker verifies nothing.
+        verify: Any = ssl.create_default_context(cafile=ca) if ca else False
+        transport = httpx.HTTPTransport(local_address=source, verify=verify) if source else None
+        self.http = httpx.Client(timeout=10.0, transport=transport, verify=verify)
+        self.sniffed: list[bytes] = []
 
     def _on_msg(self, channel: str, data: bytes) -> None:
         with self.cond:
             self.seen.append((time.time(), channel, data))
             self.cond.notify_all()
+
+    def _sniff(self, sock: socket.socket, port: int) -> None:
+        """Keep the TCP payload of every IPv4 frame on lo to or from ``port``."""
+        while True:
+            frame = sock.recv(65535)
+            if len(frame) < 34 or frame[12:14] != b"\x08\x00" or frame[23] != 6:  # IPv4, TCP
+                continue
+            ip = frame[14:]
+            ihl = (ip[0] & 0x0F) * 4
+            tcp = ip[ihl:]
+            src, dst = int.from_bytes(tcp[0:2], "big"), int.from_bytes(tcp[2:4], "big")
+            if port in (src, dst):
+                payload = tcp[(tcp[12] >> 4) * 4:]
+                if payload:
+                    with self.cond:
+                        self.sniffed.append(payload)
 
     def _udp_loop(self, sock: socket.socket) -> None:
         while True:
@@ -129,6 +151,15 @@ class Peer:
         if op == "raw":
             self.send(req["channel"], bytes.fromhex(req["hex"]), req.get("count", 1))
             return {"ok": True}
+        if op == "sniff_start":
+            sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(0x0003))
+            sock.bind(("lo", 0))
+            threading.Thread(target=self._sniff, args=(sock, int(req["port"])), daemon=True).start()
+            return {"ok": True}
+        if op == "sniff_take":
+            with self.cond:
+                data, self.sniffed = b"".join(self.sniffed), []
+            return {"ok": True, "hex": data.hex()}
         if op == "udp_open":
             # A UDP socket of the attacker's own; what arrives on it is kept (``udp_recv``).
             sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -217,8 +248,9 @@ def main() -> None:
     parser.add_argument("--key", default=None)
     parser.add_argument("--window", type=float, default=5.0)
     parser.add_argument("--source", default=None, help="local address of HTTP requests")
+    parser.add_argument("--ca", default=None, help="CA file that verifies the station (else no verification)")
     args = parser.parse_args()
-    peer = Peer(args.url, args.key, args.window, args.source)
+    peer = Peer(args.url, args.key, args.window, args.source, args.ca)
     print(json.dumps({"ok": True, "ready": True}), flush=True)
     for line in sys.stdin:
         try:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 import secrets
+import shutil
 import sqlite3
 import time
 from typing import Any
@@ -25,6 +26,7 @@ from tests.netns import wait_for
 from tests.security.harness import (
     HOME,
     OPERATOR,
+    STATION_PORT,
     SWARM_KEY,
     AgentRun,
     Baseline,
@@ -299,3 +301,24 @@ def test_non_finite_altitude_through_the_station(swarm: Swarm, attacker: PeerCli
         assert r["status"] == 422, r
     still_reporting(swarm, operator, alpha, before)
     assert station_view(swarm, operator, "alpha")["pending_commands"] == 0
+
+
+@pytest.mark.attack("tokens and registrations sniffed off the link between the OSCs and the station")
+def test_sniffing_the_station_link_gives_nothing_away(swarm: Swarm, attacker: PeerClient, operator: PeerClient,
+                                                      alpha: AgentRun) -> None:
+    if shutil.which("openssl") is None:
+        pytest.skip("openssl is not installed: the suite's station cannot serve HTTPS")
+    attacker.sniff_start(STATION_PORT)
+    t = time.time()
+    # Every OSC reports at 5 Hz: wait for a few reports to have crossed the link while the attacker listened.
+    assert wait_for(lambda: station_view(swarm, operator, "alpha")["last_seen"] > t + 1.5, 15.0, 0.2)
+    captured = attacker.sniff_take()
+    assert len(captured) > 1000, f"the sniffer saw only {len(captured)} bytes: it did not see the link"
+    for name in ("alpha", "delta", "charlie"):
+        token = (swarm.tmp / f"{name}.token").read_text().strip()
+        assert token.encode() not in captured, f"{name}'s token crossed the link in the clear"
+    for plain in (b'"token"', b'"telemetry"', b"Bearer ", b"POST /api/"):
+        assert plain not in captured, f"{plain!r} crossed the link in the clear"
+    # And the station does not answer in the clear either.
+    plain_http = attacker.http1("GET", f"http://127.0.0.1:{STATION_PORT}/api/station")
+    assert plain_http["status"] != 200, plain_http

@@ -13,7 +13,7 @@ import time
 import pytest
 
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, velocity_cmd_t
-from tests.security.harness import AgentRun, PeerClient, Swarm, assert_unmoved, baseline, fly
+from tests.security.harness import AgentRun, PeerClient, Swarm, agent_doc, assert_unmoved, baseline, fly
 
 pytestmark = pytest.mark.netns
 
@@ -84,3 +84,25 @@ def test_spoofed_llc_down_does_not_put_the_mc_in_error(
     assert genuine is not None, "charlie's MC publishes no signed mc_state_t"
     assert genuine["state"] == mc_state_t.MISSION
     alive(charlie)
+
+
+@pytest.mark.attack("spoofed mc_state_t TAKEOFF to an HLC left on multicast without a swarm key")
+def test_an_hlc_without_a_key_on_multicast_refuses_to_start(swarm: Swarm, attacker: PeerClient) -> None:
+    """The defence against a swarm configured without a key: its nodes do not start, so there is no
+    vehicle for a spoofed TAKEOFF to launch. (``[security] insecure = true`` accepts the risk, loudly.)"""
+    doc = agent_doc("golf", swarm.tmp / "state")
+    doc["security"] = {"swarm_key": ""}
+    run = swarm.agent("golf", doc)
+    run.start("hlc")
+    proc = run.procs["hlc"]
+    # Meanwhile the attacker tries to launch it, in case it did start.
+    end = time.monotonic() + 10.0
+    while proc.poll() is None and time.monotonic() < end:
+        attacker.publish("golf/MC_STATE", "mc_state_t", header={"agent": "golf", "seq": 1},
+                         state=mc_state_t.TAKEOFF, takeoff_altitude=2.1)
+        time.sleep(0.1)
+    assert proc.poll() is not None and proc.returncode != 0, f"golf's HLC runs without a key: {run.log()[-2000:]}"
+    log = run.log()
+    assert "swarm_key" in log and "insecure" in log, log[-2000:]
+    assert not run.state_file.exists(), "the sim vehicle was started"
+    assert not run.transitions("hlc"), run.transitions("hlc")

@@ -347,3 +347,20 @@ def test_payload_json_reaches_the_behavior_when_it_is_right() -> None:
         payload.size = len(payload.data)
         s.operator.publish("OPERATOR_PAYLOAD", payload, agent=AGENT)
         assert wait_for(lambda: s.context.executor.run_sync(lambda: behavior.detections.detected(behavior.ctx.now)), 5)
+
+
+def test_a_rotation_accepts_the_previous_key_only_while_it_is_listed() -> None:
+    old, new = "swarm-key-2025", "swarm-key-2026"
+    with swarm(config(key=new, security={"previous_keys": [old]})) as s:
+        _, mc = ready(s)
+        cmd = operator_cmd_t()
+        cmd.command = operator_cmd_t.TAKEOFF
+        s.send(f"{AGENT}/OPERATOR_CMD", cmd, agent="console-on-the-old-key", key=old)
+        assert wait_for(lambda: mc.machine.last_command_seq == 4242, 5)  # a console not yet rotated
+    with swarm(config(key=new)) as s:  # rotation finished: the old key is out of service
+        _, mc = ready(s)
+        cmd = operator_cmd_t()
+        cmd.command = operator_cmd_t.TAKEOFF
+        s.send(f"{AGENT}/OPERATOR_CMD", cmd, agent="console-on-the-old-key", key=old)
+        assert wait_for(rejected(mc, Reason.FORGED), 5)
+        assert mc.machine.last_command_seq == 0 and mc.state is McState.STANDBY

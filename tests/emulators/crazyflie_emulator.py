@@ -310,7 +310,8 @@ class CrazyflieEmulator:
 
     @property
     def flying(self) -> bool:
-        return self.motors and self.z > 0.02
+        """supervisor.c isFlyingCheck: a motor above idle thrust (so also on the first centimetres)."""
+        return self.motors
 
     def supervisor_info(self) -> int:
         bits = 0

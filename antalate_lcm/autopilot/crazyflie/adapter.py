@@ -1,0 +1,458 @@
+"""The Crazyflie adapter's I/O: cflib's link, log blocks, high-level commander and streamed set-points.
+
+What the adapter does on top of cflib, and why (docs/crazyflie.md has the operator's view):
+
+* **State** comes from three log blocks (`telemetry.LOG_BLOCKS`): the state estimator's pose and
+  velocity, yaw, battery (``pm.vbat``, ``pm.batteryLevel``, ``pm.state``), the supervisor's bitfield
+  (armed, flying, tumbled, locked) and the Kalman position variances. The link age is the time since
+  the last packet of any kind (log data, or the answers to cflib's 10 Hz latency pings).
+* **Commands**: take-off, landing and the return flight go through the high-level commander, whose
+  trajectories run on board and survive a lost link; MISSION velocities are streamed generic
+  set-points at ``control_hz`` (the firmware levels the vehicle 0.5 s after the last one and stops its
+  motors after 2 s). Leaving the stream for the high-level commander is cflib's documented switch:
+  ``notify_setpoint_stop`` then a high-level command. A zero velocity, a velocity not renewed for
+  ``velocity_hold`` and a link silent for ``link_stale_after`` all hand the vehicle back to the
+  high-level commander holding where it is.
+* **Link loss in the air**: after ``link_loss_land`` s the adapter sends landings blindly (a radio
+  link that drops most packets still delivers some); the state then says LANDING with the failsafe
+  "link lost". A Crazyflie has no link-loss failsafe of its own under the high-level commander.
+* **Arming** is refused, with the reason in ``last_refusal`` (and so in ``hlc_error_t``), while the
+  supervisor is locked, crashed or tumbled, the estimator has not converged, or ``pm.state`` says the
+  battery is low. After a landing the adapter disarms, so a landed vehicle reads disarmed on every
+  platform (some arm themselves at power-on).
+* **Shutdown in the air**: `close` sends an emergency stop (motors off) before closing the link:
+  nothing would command the vehicle any more, and cflib's own close sends a zero-thrust set-point.
+* Several adapters in one process on one Crazyradio share it through cflib's radio manager, as
+  cflib's ``Swarm`` does.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+from pydantic import BaseModel
+
+from antalate_lcm.autopilot.base import (
+    Autopilot,
+    AutopilotError,
+    AutopilotState,
+    Clock,
+    FlightMode,
+    Frame,
+)
+from antalate_lcm.autopilot.crazyflie.frames import LocalFrame
+from antalate_lcm.autopilot.crazyflie.params import Params, parse_params
+from antalate_lcm.autopilot.crazyflie.setpoints import (
+    SetPoint,
+    build_setpoint,
+    goto_duration,
+    is_zero,
+    next_height,
+    takeoff_duration,
+)
+from antalate_lcm.autopilot.crazyflie.telemetry import (
+    LOG_BLOCKS,
+    Reading,
+    apply_log,
+    battery_warning,
+    estimator_problem,
+)
+
+log = logging.getLogger("antalate.autopilot.crazyflie")
+
+CFLIB_MISSING = ("the crazyflie autopilot needs Bitcraze's cflib, which is not installed: "
+                 "pip install 'antalate[crazyflie]'")
+
+_drivers_lock = threading.Lock()
+_drivers_ready = False
+
+# What the adapter is doing; the flight mode the HLC sees follows from it.
+IDLE, TAKEOFF, HOLD, STREAM, LAND, RTL_GO, RTL_LAND = "IDLE", "TAKEOFF", "HOLD", "STREAM", "LAND", "RTL", "RTL_LAND"
+_FLIGHT_MODES = {IDLE: FlightMode.GUIDED, TAKEOFF: FlightMode.GUIDED, HOLD: FlightMode.GUIDED,
+                 STREAM: FlightMode.GUIDED, LAND: FlightMode.LANDING, RTL_GO: FlightMode.RTL,
+                 RTL_LAND: FlightMode.RTL}
+_MODE_NAMES = {IDLE: "IDLE", TAKEOFF: "TAKEOFF", HOLD: "HL_HOLD", STREAM: "VELOCITY", LAND: "LAND",
+               RTL_GO: "RTL", RTL_LAND: "RTL_LAND"}
+
+
+def _init_drivers() -> None:
+    """cflib's drivers, once per process (``init_drivers`` appends to a global list each call)."""
+    global _drivers_ready
+    import cflib.crtp
+
+    with _drivers_lock:
+        if not _drivers_ready:
+            cflib.crtp.init_drivers()
+            _drivers_ready = True
+
+
+class CrazyflieAutopilot(Autopilot):
+    """A Crazyflie through cflib; see the module docstring for the rules on top of cflib."""
+
+    name = "crazyflie"
+    blocking = True  # arm and takeoff wait for the supervisor's confirmation over the radio
+    params_model: ClassVar[type[BaseModel]] = Params
+
+    def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
+        super().__init__(params, clock=clock)
+        self._p = parse_params(self.params)
+        p = self._p
+        self.frame = LocalFrame(p.origin_lat, p.origin_lon, p.origin_heading)
+        self.last_refusal = ""
+        self._lock = threading.RLock()
+        self._cf: Any = None
+        self._reading = Reading()
+        self._last_packet = -math.inf
+        self._connected = False
+        self._no_kalman = False
+        self._link_error = ""
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._mode = IDLE
+        self._mode_at = -math.inf
+        self._failsafe = ""
+        self._velocity: tuple[float, float, float, float, Frame, float] | None = None
+        self._height = 0.0
+        self._home = (0.0, 0.0)
+        self._rtl_deadline = math.inf
+        self._ground_idle = False  # landed by us and disarmed: report disarmed whatever auto-arming says
+        self._blind_land_at = -math.inf
+        self._last_tick = -math.inf
+        self.setpoints_sent = 0
+
+    # ------------------------------------------------------------------ link
+    def connect(self) -> None:
+        try:
+            import cflib  # noqa: F401
+        except ImportError:
+            raise AutopilotError(CFLIB_MISSING) from None
+        self._open_link()
+        if self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._control_loop, name=f"crazyflie-{self._p.uri}", daemon=True)
+            self._thread.start()
+
+    def _open_link(self) -> None:
+        from cflib.crazyflie import Crazyflie
+        from cflib.crazyflie.log import LogConfig
+
+        _init_drivers()
+        p = self._p
+        cf = Crazyflie(rw_cache=p.cache_dir or None)
+        ready = threading.Event()
+        failure: list[str] = []
+
+        def failed(uri: str, message: str) -> None:
+            failure.append(str(message).splitlines()[0] if message else "connection failed")
+            ready.set()
+
+        cf.fully_connected.add_callback(lambda uri: ready.set())
+        cf.connection_failed.add_callback(failed)
+        cf.connection_lost.add_callback(self._on_connection_lost)
+        cf.packet_received.add_callback(self._on_packet)
+        cf.open_link(p.uri)
+        if not ready.wait(p.connect_timeout) or failure:
+            why = failure[0] if failure else f"no answer within {p.connect_timeout:g} s"
+            self._close_quietly(cf)
+            raise AutopilotError(f"cannot connect to the Crazyflie at {p.uri}: {why}")
+        no_kalman = False
+        try:
+            for block, names in LOG_BLOCKS.items():
+                config = LogConfig(name=block, period_in_ms=p.log_period_ms)
+                for var in names:
+                    config.add_variable(var)
+                try:
+                    cf.log.add_config(config)
+                except KeyError as exc:
+                    if block == "antalate_estimator":
+                        no_kalman = True  # arm() refuses and says why
+                        continue
+                    raise AutopilotError(f"the Crazyflie at {p.uri} lacks a log variable the adapter needs: "
+                                         f"{exc.args[0] if exc.args else exc}") from None
+                config.data_received_cb.add_callback(self._on_log)
+                config.start()
+        except AutopilotError:
+            self._close_quietly(cf)
+            raise
+        with self._lock:
+            self._cf = cf
+            self._no_kalman = no_kalman
+            self._link_error = ""
+        deadline = time.monotonic() + p.connect_timeout
+        while time.monotonic() < deadline:
+            with self._lock:
+                if self._reading.has_pose:
+                    self._connected = True
+                    log.info("connected to the Crazyflie at %s", p.uri)
+                    return
+            time.sleep(0.02)
+        with self._lock:
+            self._cf = None
+        self._close_quietly(cf)
+        raise AutopilotError(f"the Crazyflie at {p.uri} sent no state (log blocks) within {p.connect_timeout:g} s")
+
+    @staticmethod
+    def _close_quietly(cf: Any) -> None:
+        try:
+            cf.close_link()
+        except Exception:  # noqa: BLE001 - closing a half-open link must not mask the real error
+            log.debug("closing a failed cflib link raised", exc_info=True)
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+        self._thread = None
+        with self._lock:
+            cf, self._cf = self._cf, None
+            flying = self._reading.flags.flying
+            self._connected = False
+        if cf is None:
+            return
+        if flying:
+            log.warning("shutting down with the Crazyflie at %s in the air: emergency stop (motors off)", self._p.uri)
+            for _ in range(3):  # a radio may drop one; the stop is idempotent
+                cf.supervisor.send_emergency_stop()
+        self._close_quietly(cf)
+
+    def _on_packet(self, _pk: Any) -> None:
+        self._last_packet = self.clock()
+
+    def _on_log(self, _timestamp: int, data: dict[str, Any], _config: Any) -> None:
+        with self._lock:
+            self._reading = apply_log(self._reading, data)
+
+    def _on_connection_lost(self, uri: str, message: str) -> None:
+        with self._lock:
+            self._link_error = str(message).splitlines()[0] if message else "link lost"
+            self._connected = False
+        log.warning("cflib lost the link to %s: %s", uri, self._link_error)
+
+    # ------------------------------------------------------------------ commands
+    def _require_link(self) -> Any:
+        with self._lock:
+            cf = self._cf
+            if cf is None or not self._connected:
+                raise AutopilotError(f"not connected to the Crazyflie at {self._p.uri}"
+                                     + (f" ({self._link_error})" if self._link_error else ""))
+            return cf
+
+    def _refuse(self, reason: str) -> bool:
+        self.last_refusal = reason
+        log.warning("arming refused: %s", reason)
+        return False
+
+    def arm(self) -> bool:
+        cf = self._require_link()
+        self.last_refusal = ""
+        with self._lock:
+            reading = self._reading
+            age = self.clock() - self._last_packet
+            no_kalman = self._no_kalman
+        if age > self._p.link_stale_after:
+            return self._refuse(f"the link is {age:.1f} s old")
+        blocker = reading.flags.arm_blocker()
+        if blocker:
+            return self._refuse(blocker)
+        if no_kalman:
+            return self._refuse("kalman.varPX/PY/PZ are not in the log TOC: the pre-flight estimator check needs "
+                                "the Kalman estimator (stabilizer.estimator = 2)")
+        problem = estimator_problem(reading, self._p.max_position_variance)
+        if problem:
+            return self._refuse(problem)
+        warning = battery_warning(reading.pm_state)
+        if warning:
+            return self._refuse(f"battery low: {warning}, {reading.vbat:.2f} V")
+        with self._lock:
+            self._ground_idle = False
+        cf.supervisor.send_arming_request(True)
+        deadline = time.monotonic() + self._p.arm_timeout
+        while time.monotonic() < deadline:
+            if self._reading.flags.armed:
+                return True
+            time.sleep(0.02)
+        flags = self._reading.flags
+        return self._refuse(f"the supervisor did not arm within {self._p.arm_timeout:g} s"
+                            + (f": {flags.arm_blocker()}" if flags.arm_blocker() else
+                               f" (supervisor.info 0x{self._reading.info:04x})"))
+
+    def disarm(self) -> None:
+        cf = self._require_link()
+        cf.supervisor.send_arming_request(False)
+        with self._lock:
+            self._ground_idle = True
+
+    def takeoff(self, alt: float) -> None:
+        cf = self._require_link()
+        with self._lock:
+            r = self._reading
+            if not r.flags.armed or self._ground_idle:
+                raise AutopilotError("not armed")
+            self._leave_stream(cf)
+            self._home = (r.x, r.y)
+            self._set_mode(TAKEOFF)
+            self._failsafe = ""
+            z0 = r.z
+        cf.high_level_commander.takeoff(alt, takeoff_duration(z0, alt, self._p.climb_speed), yaw=None)
+        deadline = time.monotonic() + self._p.takeoff_confirm
+        while time.monotonic() < deadline:
+            r = self._reading
+            if r.flags.flying or r.z > z0 + 0.05:
+                return
+            time.sleep(0.02)
+        with self._lock:
+            self._set_mode(IDLE)
+        blocker = self._reading.flags.arm_blocker()
+        raise AutopilotError(f"the Crazyflie did not take off within {self._p.takeoff_confirm:g} s: "
+                             + (blocker or "the supervisor never reported flying"))
+
+    def land(self) -> None:
+        cf = self._require_link()
+        with self._lock:
+            self._start_landing(cf, LAND)
+
+    def rtl(self) -> None:
+        cf = self._require_link()
+        with self._lock:
+            r = self._reading
+            self._leave_stream(cf)
+            hx, hy = self._home
+            distance = math.hypot(r.x - hx, r.y - hy)
+            if distance <= self._p.rtl_tolerance:
+                self._start_landing(cf, RTL_LAND)
+                return
+            duration = goto_duration(distance, self._p.rtl_speed)
+            self._set_mode(RTL_GO)
+            self._rtl_deadline = self.clock() + duration + 5.0
+            cf.high_level_commander.go_to(hx, hy, r.z, math.radians(r.yaw), duration)
+        log.info("RTL: go_to the take-off point (%.2f, %.2f), %.1f m in %.1f s", hx, hy, distance, duration)
+
+    def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
+        cf = self._require_link()
+        with self._lock:
+            if self._mode in (LAND, RTL_GO, RTL_LAND):
+                return  # a hover (or a late set-point) never cancels a landing or the way home
+            if is_zero(vx, vy, vz, yaw_rate):
+                self._velocity = None
+                if self._mode == STREAM:
+                    self._hold(cf)
+                return
+            if not self._reading.flags.flying:
+                raise AutopilotError("not flying: velocity set-points are for the air")
+            if self._mode != STREAM:
+                self._height = self._reading.z
+                self._set_mode(STREAM)
+            self._velocity = (vx, vy, vz, yaw_rate, Frame(frame), self.clock())
+            self._send_setpoint(cf, build_setpoint(vx, vy, vz, yaw_rate, Frame(frame), self.frame, self._height))
+
+    # ------------------------------------------------------------------ internals (under self._lock)
+    def _set_mode(self, mode: str) -> None:
+        self._mode = mode
+        self._mode_at = self.clock()
+
+    def _leave_stream(self, cf: Any) -> None:
+        if self._mode == STREAM:
+            cf.commander.send_notify_setpoint_stop()
+        self._velocity = None
+
+    def _hold(self, cf: Any) -> None:
+        """Back to the high-level commander, holding the current position (cflib's documented switch)."""
+        self._leave_stream(cf)
+        cf.high_level_commander.go_to(0.0, 0.0, 0.0, 0.0, 0.5, relative=True)
+        self._set_mode(HOLD)
+
+    def _start_landing(self, cf: Any, mode: str) -> None:
+        self._leave_stream(cf)
+        z = self._reading.z if math.isfinite(self._reading.z) else 1.0
+        cf.high_level_commander.land(0.0, max(z / self._p.land_speed, 1.0), yaw=None)
+        self._set_mode(mode)
+
+    def _send_setpoint(self, cf: Any, sp: SetPoint) -> None:
+        if sp.kind == "world":
+            cf.commander.send_velocity_world_setpoint(*sp.values)
+        else:
+            cf.commander.send_hover_setpoint(*sp.values)
+        self.setpoints_sent += 1
+
+    def _control_loop(self) -> None:
+        period = 1.0 / self._p.control_hz
+        while not self._stop.wait(period):
+            try:
+                self._tick()
+            except Exception:  # noqa: BLE001 - the control thread must outlive one bad tick
+                log.exception("crazyflie control tick failed")
+
+    def _tick(self) -> None:
+        now = self.clock()
+        p = self._p
+        with self._lock:
+            cf = self._cf
+            if cf is None:
+                return
+            dt, self._last_tick = now - self._last_tick, now
+            age = now - self._last_packet
+            r = self._reading
+            flying = r.flags.flying
+            if self._mode == STREAM:
+                if age > p.link_stale_after:
+                    log.warning("link %.1f s old: the high-level commander holds the Crazyflie", age)
+                    self._hold(cf)
+                elif self._velocity is None or now - self._velocity[5] > p.velocity_hold:
+                    self._hold(cf)
+                else:
+                    vx, vy, vz, rate, frame, _ = self._velocity
+                    if frame is Frame.BODY:
+                        self._height = next_height(self._height, vz, dt)
+                    self._send_setpoint(cf, build_setpoint(vx, vy, vz, rate, frame, self.frame, self._height))
+            lost = p.link_loss_land > 0 and age > p.link_loss_land
+            if lost and flying and self._mode != IDLE and now - self._blind_land_at >= 1.0:
+                if self._mode != LAND:
+                    log.warning("link lost for %.1f s in the air: landing blindly", age)
+                self._failsafe = f"link lost for more than {p.link_loss_land:g} s: the adapter commanded a landing"
+                self._blind_land_at = now
+                self._start_landing(cf, LAND)
+            if self._mode == RTL_GO:
+                hx, hy = self._home
+                arrived = math.hypot(r.x - hx, r.y - hy) <= p.rtl_tolerance and math.hypot(r.vx, r.vy) < 0.05
+                if arrived or now > self._rtl_deadline:
+                    self._start_landing(cf, RTL_LAND)
+            if self._mode in (LAND, RTL_LAND) and not flying and now - self._mode_at > 0.5 and age < p.link_stale_after:
+                cf.supervisor.send_arming_request(False)
+                self._ground_idle = True
+                self._set_mode(IDLE)
+                self._failsafe = ""
+
+    # ------------------------------------------------------------------ state
+    def state(self) -> AutopilotState:
+        with self._lock:
+            r = self._reading
+            connected = self._connected and self._cf is not None
+            age = self.clock() - self._last_packet
+            mode = self._mode
+            failsafe = self._failsafe
+            ground_idle = self._ground_idle
+        flags = r.flags
+        common: dict[str, Any] = {
+            "connected": connected,
+            "link_age": age if math.isfinite(self._last_packet) else math.inf,
+            "battery": float(r.battery_level) if r.battery_level >= 0 else -1.0,
+            "voltage": r.vbat,
+            "cells": self._p.cells,
+            "battery_warning": battery_warning(r.pm_state),
+            "armed": flags.armed and not (ground_idle and not flags.flying),
+            "in_air": flags.flying,
+            "mode": "LOCKED" if flags.locked else _MODE_NAMES[mode],
+            "flight_mode": _FLIGHT_MODES[mode],
+            "failsafe": failsafe if mode == LAND else "",
+        }
+        if not r.has_pose:
+            return AutopilotState(**common)
+        lat, lon = self.frame.to_wgs84(r.x, r.y)
+        vn, ve, vd = self.frame.velocity_ned(r.vx, r.vy, r.vz)
+        return AutopilotState(lat=lat, lon=lon, alt=r.z, heading=self.frame.heading(r.yaw), vn=vn, ve=ve, vd=vd,
+                              **common)

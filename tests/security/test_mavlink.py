@@ -178,17 +178,29 @@ def forged_vehicle(enc: mav2.MAVLink) -> list[bytes]:
     return [m.pack(enc) for m in msgs]
 
 
-@pytest.mark.parametrize("signed", ["unsigned", "signed-with-another-key"])
+@pytest.mark.parametrize("signed", ["unsigned", "one-frame-signed-with-another-key"])
 @pytest.mark.attack("forged vehicle messages to the adapter (pilot took over, armed, 3 % battery, far away)")
 def test_forged_vehicle_messages_to_the_adapter(copter: tuple[Copter, AgentRun], attacker: PeerClient,
                                                 operator: PeerClient, signed: str) -> None:
-    """Last in this module: if a forged frame breaks the link, the agent stays down."""
+    """Last in this module: if a forged frame breaks the link, the agent stays down.
+
+    The signed variant is one datagram: a HEARTBEAT ("LOITER, armed") in the vehicle's own stream
+    (link 0, system 1, component 1), signed with a key of the attacker's and stamped an hour ahead.
+    Its signature is wrong, so it must change nothing, not even the stream's replay timestamp.
+    """
     vehicle, run = copter
     before, n_mc, n_hlc = marks(vehicle, run)
     attacker.udp_open()
     mark = operator.mark()
-    frames = forged_vehicle(encoder(COPTER, None if signed == "unsigned" else os.urandom(32)))
-    attacker.udp_send(ADAPTER_PORT, frames * 10, gap=0.02)
+    if signed == "unsigned":
+        frames = forged_vehicle(encoder(COPTER, None)) * 10
+    else:
+        enc = encoder(COPTER, os.urandom(32))
+        enc.signing.timestamp += 3600 * 100_000  # units of 10 us
+        frames = forged_vehicle(enc)[:1]
+    attacker.udp_send(ADAPTER_PORT, frames, gap=0.02)
+    # Longer than the HLC's link_timeout (2 s): a link the forgery broke is declared lost by then.
+    time.sleep(2.0)
     unchanged(vehicle, run, before, n_mc, n_hlc)
     # What the agent tells the operator (its genuine telemetry) never carried the forgery.
     seen = operator.history("foxtrot/TELEMETRY", "telemetry_t", since=mark, genuine=True)

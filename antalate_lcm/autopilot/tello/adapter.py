@@ -705,6 +705,11 @@ class TelloAutopilot(Autopilot):
         if previous is not None and self._in_air():
             self._north, self._east = maths.dead_reckon(self._north, self._east, v0, (self._vn, self._ve),
                                                         now - previous)
+        if self._silenced:
+            # Whoever sees the first packet after a loss re-reads the vehicle, before anyone can act on
+            # the fresh link: the HLC's state() may see it first and command an RTL within the same
+            # tick, which a later re-read by the control thread would undo.
+            self._link_back(now)
         self._air.update(self._in_air(), now)
         self._track_ground()
 
@@ -835,8 +840,6 @@ class TelloAutopilot(Autopilot):
                             "the last command)", self.host, self._link_age())
                 return (0, 0, 0, 0) if self._lost_in_air else None
             return None
-        if self._silenced:
-            self._link_back(now)
         if self._unattended_until is not None and now >= self._unattended_until and self._phase is _Phase.GUIDED:
             self._unattended_until = None
             self._failsafe = (f"nobody commanded the Tello for {p.link_back_hover:g} s after a link loss: "
@@ -881,6 +884,9 @@ class TelloAutopilot(Autopilot):
         if self._phase is _Phase.LAND:
             log.warning("Tello %s: state is back; still landing", self.host)
             self._land_due = now
+            return
+        if self._phase is _Phase.RTL:
+            log.warning("Tello %s: state is back; going on home (dead reckoning missed the loss)", self.host)
             return
         self._phase = _Phase.GUIDED
         self._setpoint = None

@@ -119,3 +119,22 @@ def test_battery_failsafe_escalates_from_low_to_critical(made: list[Any]) -> Non
     v.set_voltage(None)  # the voltage recovers under less load: AP_BattMonitor keeps its failsafe
     time.sleep(1.2)
     assert ap.state().battery_warning == "critical" and v.voltage() > 12.0
+
+
+def test_signature_checked_before_the_timestamp_as_ardupilot_does() -> None:
+    """One forged frame with a later timestamp must not make the genuine stream look like replays."""
+    from tests.emulators.mavlink_vehicle import _Peer
+
+    key = bytes(range(32))
+    peer = _Peer(1, 1, key=key)
+
+    def signed(with_key: bytes, seconds_ahead: float) -> bytes:
+        enc = mav2.MAVLink(None, srcSystem=245, srcComponent=191)
+        enc.signing.secret_key, enc.signing.sign_outgoing, enc.signing.link_id = with_key, True, 7
+        enc.signing.timestamp = int((time.time() - 1420070400 + seconds_ahead) * 1e5)
+        return enc.heartbeat_encode(mav2.MAV_TYPE_GCS, mav2.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(enc)
+
+    assert [m.get_type() for m in peer.parse(signed(key, 0))] == ["HEARTBEAT"]
+    assert peer.parse(signed(b"\x02" * 32, 3600)) == [] and peer.rejected == 1  # forged: a later timestamp
+    assert [m.get_type() for m in peer.parse(signed(key, 1))] == ["HEARTBEAT"]  # genuine still accepted
+    assert peer.parse(signed(key, 0.5)) == [] and peer.rejected == 2  # a replayed (older) one is not

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import socket
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -105,11 +106,23 @@ def test_forged_unsigned_messages_on_a_signed_link_change_nothing(made: list[Any
     assert wait_for(lambda: ap.signing_rejected >= 2, 2)
     s = ap.state()
     assert s.mode == "GUIDED" and s.battery == 100.0 and s.voltage > 12.0
+    # the forgery carried a newer timestamp than the vehicle's: it must not make the vehicle's genuine
+    # frames look like replays (pymavlink records the timestamp before it checks the signature)
+    time.sleep(1.0)
+    assert ap.state().link_age < 0.5 and ap.state().mode == "GUIDED"
     # an attacker's unsigned command to the vehicle (posing as us, system 245) is dropped too
     v_rejected = v.signing_rejected
     attacker = mav2.MAVLink(None, srcSystem=245, srcComponent=191)
     land = attacker.command_long_encode(1, 1, mav2.MAV_CMD_NAV_LAND, 0, 0, 0, 0, 0, 0, 0, 0)
+    forger = mav2.MAVLink(None, srcSystem=245, srcComponent=191)  # signed, wrong key, a later timestamp
+    forger.signing.secret_key, forger.signing.sign_outgoing = b"\x02" * 32, True
+    forger.signing.timestamp = int((time.time() - 1420070400 + 3600) * 1e5)
+    forger.signing.link_id = ap._conn.mav.signing.link_id  # our stream: an attacker reads it off any frame
+    rtl = forger.command_long_encode(1, 1, mav2.MAV_CMD_NAV_RETURN_TO_LAUNCH, 0, 0, 0, 0, 0, 0, 0, 0)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.sendto(land.pack(attacker), ("127.0.0.1", v.udp_port))
-        assert wait_for(lambda: v.signing_rejected > v_rejected, 2)
+        sock.sendto(rtl.pack(forger), ("127.0.0.1", v.udp_port))
+        assert wait_for(lambda: v.signing_rejected >= v_rejected + 2, 2)
     assert v.snapshot().mode == "GUIDED"
+    ap.land()  # our genuine, signed commands still count (the forged timestamp was not recorded)
+    assert state_until(ap, lambda s: s.mode == "LAND", 2)

@@ -99,12 +99,14 @@ failsafe actions taken (``failsafe_modes``) and every STATUSTEXT sent.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import logging
 import math
 import select
 import signal
 import socket
+import struct
 import sys
 import threading
 import time
@@ -240,6 +242,24 @@ class _Peer:
         if key is not None:
             self.parser.signing.secret_key = key
             self.parser.signing.allow_unsigned_callback = lambda _mav, msg_id: msg_id == mav2.MAVLINK_MSG_ID_RADIO_STATUS
+            self.parser.check_signature = self._check_signature  # type: ignore[method-assign]
+
+    def _check_signature(self, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
+        """The C library's mavlink_signature_check (what ArduPilot runs): the signature first, then the
+        timestamp. pymavlink records the timestamp before comparing the signature, so one forged frame
+        with a future timestamp would make every genuine one look like a replay."""
+        signing = self.parser.signing
+        if hashlib.sha256(bytes(signing.secret_key) + bytes(msgbuf[:-6])).digest()[:6] != bytes(msgbuf[-6:]):
+            return False
+        low, high = struct.unpack("<IH", bytes(msgbuf[-12:-6]))
+        timestamp = low + (high << 32)
+        stream = (msgbuf[-13], src_system, src_component)
+        last = signing.stream_timestamps.get(stream)
+        if (last is not None and timestamp <= last) or (last is None and timestamp + 6_000_000 < signing.timestamp):
+            return False
+        signing.stream_timestamps[stream] = timestamp
+        signing.timestamp = max(signing.timestamp, timestamp)
+        return True
 
     def parse(self, data: bytes) -> list[Any]:
         msgs = self.parser.parse_buffer(data) or []

@@ -87,7 +87,7 @@ from antalate_lcm.autopilot.mavlink import failsafe as fs
 from antalate_lcm.autopilot.mavlink import vehicle_checks
 from antalate_lcm.autopilot.mavlink.failsafe import FLIGHT_MODES, FailsafeTracker
 from antalate_lcm.autopilot.mavlink.params import DEFAULTS, Params, parse_params
-from antalate_lcm.autopilot.mavlink.signing import allow_unsigned, signing_key
+from antalate_lcm.autopilot.mavlink.signing import allow_unsigned, signing_key, verify_signature_first
 from antalate_lcm.autopilot.mavlink.vehicle_checks import Finding
 from antalate_lcm.geo import wrap_360
 
@@ -541,6 +541,7 @@ class MavlinkAutopilot(Autopilot):
                 conn.close()
                 raise AutopilotError("MAVLink 2 signing needs MAVLink 2, but pymavlink opened a MAVLink 1 codec")
             conn.setup_signing(self._key, sign_outgoing=True, allow_unsigned_callback=allow_unsigned)
+            verify_signature_first(conn.mav)
         if self.connection.startswith(("tcp:", "uds:", "unix:")):
             # pymavlink only prints on EOF and keeps returning nothing: make it an error we handle.
             def closed_by_peer() -> None:

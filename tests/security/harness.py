@@ -112,10 +112,12 @@ class PeerClient(JsonLinesProcess):
         return [bytes.fromhex(h) for h in reply["hexes"]], int(reply["index"])
 
     def http(self, method: str, path: str, json_body: Any = None, *, headers: dict[str, str] | None = None,
-             bodies: list[Any] | None = None, content: str | None = None) -> list[dict[str, Any]]:
+             bodies: list[Any] | None = None, content: str | None = None,
+             source: str | None = None) -> list[dict[str, Any]]:
+        """One request (or one per entry of ``bodies``); ``source``: send from this local address."""
         url = path if path.startswith("http") else self.station + path
         reply = self._ok(op="http", method=method, url=url, json=json_body, headers=headers, bodies=bodies,
-                         content=content)
+                         content=content, source=source)
         return reply["responses"]
 
     def http1(self, method: str, path: str, json_body: Any = None, **kw: Any) -> dict[str, Any]:

@@ -20,7 +20,7 @@ Requests, one JSON object a line, one JSON reply line each (``{"ok": bool, ...}`
 ``mark``     the index of the next datagram (a "since" for later requests)
 ``udp_open``, ``udp_send`` {host, port, hexes, gap?}, ``udp_recv`` {since?}: raw UDP (MAVLink)
 ``sniff_start`` {port}, ``sniff_take``: TCP payloads to/from ``port`` seen on lo (a packet socket)
-``http``     {method, url, json?, content?, headers?, bodies?}: one request, or one per entry of ``bodies``
+``http``     {method, url, json?, content?, headers?, bodies?, source?}: one request, or one per entry of ``bodies``
              (a flood); replies with ``responses: [{status, body}]``
 """
 
@@ -73,15 +73,19 @@ class Peer:
             threading.Thread(target=self._loop, args=(lc,), daemon=True).start()
         # ``source``: the address HTTP requests come from (the attacker is another host than the agents).
         # ``ca``: the operator verifies the station's certificate; the attacker verifies nothing.
-        verify: Any = ssl.create_default_context(cafile=ca) if ca else False
-        transport = httpx.HTTPTransport(local_address=source, verify=verify) if source else None
-        self.http = httpx.Client(timeout=10.0, transport=transport, verify=verify)
+        self.verify: Any = ssl.create_default_context(cafile=ca) if ca else False
+        self.http = self._client(source)
+        self._clients: dict[str, httpx.Client] = {}
         self.sniffed: list[bytes] = []
 
     def _on_msg(self, channel: str, data: bytes) -> None:
         with self.cond:
             self.seen.append((time.time(), channel, data))
             self.cond.notify_all()
+
+    def _client(self, source: str | None) -> httpx.Client:
+        transport = httpx.HTTPTransport(local_address=source, verify=self.verify) if source else None
+        return httpx.Client(timeout=10.0, transport=transport, verify=self.verify)
 
     def _sniff(self, sock: socket.socket, port: int) -> None:
         """Keep the TCP payload of every IPv4 frame on lo to or from ``port``."""
@@ -222,9 +226,13 @@ class Peer:
         if op == "http":
             bodies = req.get("bodies")
             responses = []
+            client = self.http
+            if req.get("source"):  # another of the attacker's addresses
+                client = self._clients.get(req["source"]) or self._clients.setdefault(
+                    req["source"], self._client(req["source"]))
             for body in bodies if bodies is not None else [req.get("json")]:
                 try:
-                    r = self.http.request(
+                    r = client.request(
                         req["method"], req["url"], json=body if req.get("content") is None else None,
                         content=req.get("content"), headers=req.get("headers"),
                     )

@@ -257,7 +257,6 @@ class Node:
         msg: Any,
         *,
         seq: int | None = None,
-        before_encode: Callable[[Any], None] | None = None,
         **fields: str,
     ) -> bool:
         """Stamp ``msg.header`` (time, agent, per-topic seq), sign it with the swarm key, send it on
@@ -265,8 +264,7 @@ class Node:
 
         ``seq`` overrides the counter (a resend must carry the seq of the original: it is the
         acknowledgement key; its ``utime`` is fresh, so the receivers' replay guard lets it through).
-        ``before_encode`` runs on the stamped message before signing (kept for old callers: signing
-        is done here for every message, there is no need to sign in a hook).
+        This is the one place antalate signs: the MAC covers the final header.
         """
         key = (topic, tuple(sorted(fields.items())))
         pub = self._publishers.get(key)
@@ -282,8 +280,6 @@ class Node:
         header.utime = utime
         header.agent = self.agent
         header.seq = seq
-        if before_encode is not None:
-            before_encode(msg)
         data = signed_bytes(msg, self.security.key) if self.security.enabled else msg.encode()
         ok = True
         for bus in pub.buses:

@@ -543,9 +543,10 @@ def test_lost_ok_to_land_is_settled_by_the_state(driver: Driver, emulator: Calla
 
 
 @pytest.mark.netns
-@pytest.mark.parametrize("method", ["land", "emergency"])
-def test_land_and_emergency_preempt_a_waiting_takeoff(driver: Driver, emulator: Callable[..., TelloEmulator],
-                                                      method: str) -> None:
+@pytest.mark.parametrize(("method", "sent"), [("land", "land"), ("emergency", "emergency"), ("rtl", "land")])
+def test_land_rtl_and_emergency_preempt_a_waiting_takeoff(driver: Driver, emulator: Callable[..., TelloEmulator],
+                                                          method: str, sent: str) -> None:
+    """A takeoff whose answer never comes is given up at once by a LAND, an RTL or an emergency."""
     emu = emulator(takeoff_time=3.0)
     driver.new(takeoff_timeout=20)
     driver.call("connect")
@@ -560,7 +561,7 @@ def test_land_and_emergency_preempt_a_waiting_takeoff(driver: Driver, emulator: 
     assert emu.wait_until(lambda s: not s.flying, timeout=5)
     driver.wait(lambda s: s["mode"] == "GROUND" and not s["in_air"], timeout=3)
     texts = emu.command_texts()
-    assert texts.count("takeoff") == 1 and method in texts
+    assert texts.count("takeoff") == 1 and sent in texts
 
 
 @pytest.mark.netns
@@ -579,7 +580,7 @@ def test_rc_goes_out_at_the_configured_rate(driver: Driver, emulator: Callable[.
     window = (start + 0.5, end - 0.5)  # the steady part
     moving = [t for t in rc_commands(emu, *window) if t != "rc 0 0 0 0"]
     rate = len(moving) / (window[1] - window[0])
-    assert 0.7 * control_hz <= rate <= 1.05 * control_hz, f"{rate:.1f} rc/s for control_hz {control_hz:g}"
+    assert 0.6 * control_hz <= rate <= 1.05 * control_hz, f"{rate:.1f} rc/s for control_hz {control_hz:g}"
     driver.call("land")
 
 

@@ -42,7 +42,9 @@ Frames and units of the emulated state (documented because the SDK guide leaves 
 * State line: ``vgx, vgy`` are that ground frame's x and y velocities and ``vgz`` the vertical velocity
   *positive down*, all in **dm/s** (integer decimetres per second, the unit the Tello reports);
   ``h`` is the height in cm with the Tello's decimetre resolution; ``tof`` is cm from the ground (10
-  when landed); ``baro`` is metres (arbitrary datum); ``agx/agy/agz`` are 0.001 g; ``pitch/roll`` are a
+  when landed); ``baro`` is metres (arbitrary datum; the SDK 2.0 guide: "baro? get barometer value (m)",
+  a ``%.2f`` in the state line, although djitellopy's ``get_barometer`` docstring says cm);
+  ``agx/agy/agz`` are 0.001 g; ``pitch/roll`` are a
   cosmetic tilt that follows the horizontal velocity. The community has reported inconsistent signs of
   ``vgx/vgy`` on real units; adapters should keep the sign convention configurable.
 

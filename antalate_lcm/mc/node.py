@@ -16,7 +16,7 @@ from antalate_lcm.mc.machine import McOutcome, McParams, McState, MissionControl
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
 from antalate_lcm.node import Context, Node
 
-_TICK_PERIOD = 0.1  # s: resolution of the takeoff-acknowledgement timeout and the HLC watchdog and the HLC watchdog
+_TICK_PERIOD = 0.1  # s: resolution of the takeoff-acknowledgement timeout and the HLC watchdog
 
 
 class McNode(Node):
@@ -33,6 +33,9 @@ class McNode(Node):
             )
         )
         self._publish_state = lambda: None
+        #: Rejected commands are logged once per (command, state) per period: well-formed junk
+        #: repeated at line rate must not drown the log.
+        self._reject_log = RateLimitedLog(self.log, period=10.0)
 
     def on_start(self) -> None:
         self.subscribe("OPERATOR_CMD", self._on_command)
@@ -40,9 +43,6 @@ class McNode(Node):
         self.subscribe("HLC_STATE", self._on_hlc_state)
         self.create_timer(_TICK_PERIOD, self._tick)
         self._publish_state = self.state_publisher("MC_STATE", self._state_msg, self.config.mc.republish_hz)
-        #: Rejected commands are logged once per (command, state) per period: well-formed junk
-        #: repeated at line rate must not drown the log.
-        self._reject_log = RateLimitedLog(self.log, period=10.0)
         self._publish_state()
         self.log.info("MC started in %s", self.machine.state.name)
 
@@ -62,10 +62,10 @@ class McNode(Node):
     def _on_command(self, cmd: operator_cmd_t) -> None:
         if cmd.target and cmd.target != self.agent:
             return
-        sender = cmd.header.agent
-        try:
         # Authenticated (swarm key: MAC, window, per-sender replay guard persisted across restarts)
         # and validated (altitude) by Node.subscribe before it gets here: docs/security.md.
+        sender = cmd.header.agent
+        try:
             name = OperatorCommand(cmd.command).name
         except ValueError:
             name = f"#{cmd.command}"

@@ -122,6 +122,7 @@ class CrazyflieAutopilot(Autopilot):
         self._rtl_deadline = math.inf
         self._ground_idle = False  # landed by us and disarmed: report disarmed whatever auto-arming says
         self._blind_land_at = -math.inf
+        self._blind_landing = False  # landings sent into a lost link: resent once it answers again
         self._last_tick = -math.inf
         self.setpoints_sent = 0
 
@@ -415,7 +416,13 @@ class CrazyflieAutopilot(Autopilot):
                     log.warning("link lost for %.1f s in the air: landing blindly", age)
                 self._failsafe = f"link lost for more than {p.link_loss_land:g} s: the adapter commanded a landing"
                 self._blind_land_at = now
+                self._blind_landing = True
                 self._start_landing(cf, LAND)
+            elif self._blind_landing and age < p.link_stale_after:
+                self._blind_landing = False
+                if self._mode == LAND and flying:
+                    log.warning("link back: the landing sent while it was lost is sent again")
+                    self._start_landing(cf, LAND)
             if self._mode == RTL_GO:
                 hx, hy = self._home
                 arrived = math.hypot(r.x - hx, r.y - hy) <= p.rtl_tolerance and math.hypot(r.vx, r.vy) < 0.05

@@ -1,0 +1,203 @@
+"""`CrazyflieAutopilot` through the real cflib against the Crazyflie emulator, without the HLC.
+
+Each test reads the emulated vehicle (its true state) and the adapter's `state()`: arming refusals
+with their reasons, velocities the right way and speed in both frames, the hand-back to the
+high-level commander, link loss, RTL, and the emergency stop on close in the air.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+
+pytest.importorskip("cflib")
+
+from antalate_lcm.autopilot.base import AutopilotError, Frame  # noqa: E402
+from antalate_lcm.autopilot.crazyflie import CFLIB_MISSING, CrazyflieAutopilot  # noqa: E402
+from antalate_lcm.geo import distance  # noqa: E402
+from tests.emulators.crazyflie_emulator import CrazyflieEmulator  # noqa: E402
+
+FAST = {"climb_speed": 2.0, "land_speed": 1.0, "rtl_speed": 2.0, "connect_timeout": 5.0}
+
+
+def wait_for(predicate: Callable[[], bool], timeout: float = 8.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return bool(predicate())
+
+
+@pytest.fixture
+def rig() -> Iterator[Callable[..., tuple[CrazyflieEmulator, CrazyflieAutopilot]]]:
+    made: list[tuple[CrazyflieEmulator, CrazyflieAutopilot]] = []
+
+    def make(emu: dict[str, Any] | None = None, **params: Any) -> tuple[CrazyflieEmulator, CrazyflieAutopilot]:
+        e = CrazyflieEmulator(**(emu or {})).start()
+        ap = CrazyflieAutopilot({"uri": e.uri, **FAST, **params})
+        made.append((e, ap))
+        ap.connect()
+        return e, ap
+
+    yield make
+    for e, ap in made:
+        ap.close()
+        e.stop()
+
+
+def airborne(emu: CrazyflieEmulator, ap: CrazyflieAutopilot, alt: float = 1.0) -> None:
+    assert ap.arm(), ap.last_refusal
+    ap.takeoff(alt)
+    assert wait_for(lambda: ap.state().alt >= 0.98 * alt and emu.snapshot().hl_kind == "hold")
+
+
+def test_state_maps_the_local_pose_to_wgs84_and_ned(rig: Callable[..., Any]) -> None:
+    emu, ap = rig({"x": 3.0, "y": 4.0, "yaw": 90.0}, origin_heading=90.0)
+    s = ap.state()
+    assert s.connected and s.link_age < 0.5
+    # +x is east, +y north: (3, 4) is 3 m east and 4 m north; yaw 90 (anticlockwise) faces north
+    assert distance(32.7767, 35.0231, s.lat, s.lon) == pytest.approx(5.0, abs=0.01)
+    assert s.heading == pytest.approx(0.0, abs=0.1)
+    assert s.voltage == pytest.approx(4.1, abs=1e-3) and s.cells == 1 and s.battery == 90.0
+    assert not s.armed and not s.in_air and s.landed
+
+
+def test_arm_is_refused_until_the_estimator_converges(rig: Callable[..., Any]) -> None:
+    emu, ap = rig({"converged": False})
+    assert ap.arm() is False
+    assert "not converged" in ap.last_refusal and "varX" in ap.last_refusal
+    assert not emu.snapshot().armed
+    emu.set_converged(True)
+    assert wait_for(lambda: ap.arm())
+    assert emu.snapshot().armed and ap.last_refusal == ""
+
+
+def test_arm_is_refused_by_a_locked_supervisor_with_what_to_do(rig: Callable[..., Any]) -> None:
+    emu, ap = rig({"locked": True})
+    assert ap.arm() is False
+    assert "locked" in ap.last_refusal and "reboot" in ap.last_refusal
+    with pytest.raises(AutopilotError, match="not armed"):
+        ap.takeoff(1.0)
+    assert emu.snapshot().z == 0.0
+
+
+def test_arm_is_refused_on_the_firmware_low_battery_state(rig: Callable[..., Any]) -> None:
+    emu, ap = rig({"voltage": 3.1})
+    assert ap.arm() is False
+    assert "battery low" in ap.last_refusal and "lowPower" in ap.last_refusal
+    assert ap.state().battery_warning
+
+
+def test_ned_velocity_moves_the_vehicle_north_at_the_commanded_speed(rig: Callable[..., Any]) -> None:
+    emu, ap = rig(origin_heading=90.0)  # +x east, +y north
+    airborne(emu, ap)
+    for _ in range(20):
+        ap.set_velocity(0.6, 0.0, 0.0, 0.0, Frame.NED)
+        time.sleep(0.05)
+    snap = emu.snapshot()
+    assert snap.streaming
+    assert snap.vy == pytest.approx(0.6, abs=0.05) and abs(snap.vx) < 0.05  # north is +y
+    s = ap.state()
+    assert s.vn == pytest.approx(0.6, abs=0.05) and abs(s.ve) < 0.05
+    assert s.alt == pytest.approx(1.0, abs=0.05)
+
+
+def test_body_velocity_follows_the_heading_and_climbs(rig: Callable[..., Any]) -> None:
+    emu, ap = rig({"yaw": 90.0})  # origin heading 0: the vehicle faces west (+y)
+    airborne(emu, ap)
+    assert ap.state().heading == pytest.approx(270.0, abs=0.5)
+    for _ in range(20):
+        ap.set_velocity(0.5, 0.0, -0.3, 0.0, Frame.BODY)  # forward, climbing 0.3 m/s
+        time.sleep(0.05)
+    s = ap.state()
+    assert s.ve == pytest.approx(-0.5, abs=0.08) and abs(s.vn) < 0.08  # forward is west
+    assert s.alt > 1.15  # 1 s at 0.3 m/s, behind by the vertical response
+
+
+def test_an_unrenewed_velocity_hands_back_to_the_high_level_commander(rig: Callable[..., Any]) -> None:
+    emu, ap = rig()
+    airborne(emu, ap)
+    ap.set_velocity(0.5, 0.0, 0.0, 0.0, Frame.NED)
+    assert wait_for(lambda: emu.snapshot().streaming)
+    assert wait_for(lambda: not emu.snapshot().streaming, timeout=3.0)  # velocity_hold, then notify stop
+    assert emu.notify_stops >= 1 and emu.hl_commands[-1][0] == "goto"
+    time.sleep(2.5)  # past the firmware watchdog: under the high-level commander it keeps flying
+    assert emu.snapshot().flying and not emu.snapshot().locked
+
+
+def test_rtl_flies_to_the_takeoff_point_and_lands_disarmed(rig: Callable[..., Any]) -> None:
+    emu, ap = rig({"x": 1.0, "y": 2.0})
+    airborne(emu, ap)
+    for _ in range(20):
+        ap.set_velocity(1.0, 1.0, 0.0, 0.0, Frame.NED)
+        time.sleep(0.05)
+    assert math.hypot(emu.snapshot().x - 1.0, emu.snapshot().y - 2.0) > 1.0
+    ap.rtl()
+    assert ap.state().mode == "RTL"
+    assert wait_for(lambda: ap.state().landed, timeout=15.0)
+    snap = emu.snapshot()
+    assert math.hypot(snap.x - 1.0, snap.y - 2.0) <= 0.15
+    assert not snap.armed and snap.z == 0.0
+
+
+def test_link_loss_holds_then_lands_blindly_and_says_so(rig: Callable[..., Any]) -> None:
+    emu, ap = rig(link_loss_land=1.0)
+    airborne(emu, ap)
+    emu.set_silent(True)
+    assert wait_for(lambda: ap.state().link_age > 1.2)
+    assert emu.snapshot().flying  # hovering under the high-level commander
+    emu.set_silent(False)  # the link comes back: the landing sent blindly is repeated until it arrives
+    assert wait_for(lambda: emu.snapshot().hl_kind == "land" or not emu.snapshot().flying, timeout=5.0)
+    s = ap.state()
+    assert s.mode in ("LAND", "IDLE")
+    assert wait_for(lambda: ap.state().landed, timeout=10.0)
+
+
+def test_landing_failsafe_is_reported_while_it_lands(rig: Callable[..., Any]) -> None:
+    emu, ap = rig({"velocity_tau": 0.1}, link_loss_land=0.8, land_speed=0.2)
+    airborne(emu, ap)
+    emu.set_silent(True)
+    assert wait_for(lambda: ap.state().flight_mode.name == "LANDING")
+    assert "link lost" in ap.state().failsafe
+    emu.set_silent(False)
+
+
+def test_close_in_the_air_is_an_emergency_stop(rig: Callable[..., Any]) -> None:
+    emu, ap = rig()
+    airborne(emu, ap)
+    ap.close()
+    assert wait_for(lambda: emu.emergency_stops >= 1)
+    snap = emu.snapshot()
+    assert not snap.flying and snap.locked
+
+
+def test_velocity_on_the_ground_is_refused(rig: Callable[..., Any]) -> None:
+    emu, ap = rig()
+    with pytest.raises(AutopilotError, match="not flying"):
+        ap.set_velocity(0.5, 0.0, 0.0, 0.0, Frame.NED)
+    assert emu.setpoints == 0
+
+
+def test_without_cflib_connect_says_how_to_install_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "cflib", None)
+    ap = CrazyflieAutopilot({"uri": "udp://127.0.0.1:9"})
+    with pytest.raises(AutopilotError) as err:
+        ap.connect()
+    assert str(err.value) == CFLIB_MISSING and "antalate[crazyflie]" in str(err.value)
+
+
+def test_nobody_answering_fails_connect_within_its_timeout() -> None:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))  # a port that swallows everything
+        ap = CrazyflieAutopilot({"uri": f"udp://127.0.0.1:{s.getsockname()[1]}", "connect_timeout": 1.0})
+        with pytest.raises(AutopilotError, match="cannot connect"):
+            ap.connect()
+        ap.close()

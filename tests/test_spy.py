@@ -69,9 +69,11 @@ def known_telemetry() -> telemetry_t:
 def known_mc_state() -> mc_state_t:
     msg = mc_state_t()
     msg.header = header(-1, "swarm-7", -2)
+    msg.header.mac_len, msg.header.mac = 4, bytes([0x00, 0x7F, 0x80, 0xFF])  # a MAC's bytes, signed in Java
     msg.state = mc_state_t.MISSION
     msg.last_command_seq = 2_147_483_647
     msg.takeoff_altitude = 12.5
+    msg.reason = "vehicle failsafe: fence breach"
     return msg
 
 
@@ -207,7 +209,7 @@ def test_java_decodes_what_python_encodes(java_cp: str, tmp_path: Path) -> None:
 
     # the two messages spelled out, as a reader of lcm-spy would see them
     tel = decoded["telemetry_t"]
-    assert tel["header"] == {"utime": 1_763_836_800_123_456, "agent": "alpha", "seq": 4242}
+    assert tel["header"] == {"utime": 1_763_836_800_123_456, "agent": "alpha", "seq": 4242, "mac_len": 0, "mac": ""}
     assert (tel["lat"], tel["lon"]) == (32.776664, 35.023056)
     assert (tel["alt"], tel["heading"], tel["vn"], tel["ve"], tel["vd"], tel["battery"]) == (
         12.5, 271.3, 1.25, -0.1, 0.0, 87.6,
@@ -215,10 +217,11 @@ def test_java_decodes_what_python_encodes(java_cp: str, tmp_path: Path) -> None:
     assert (tel["armed"], tel["in_air"], tel["mode"]) == (True, False, "GUIDED")
     mc = decoded["mc_state_t"]
     assert mc == {
-        "header": {"utime": -1, "agent": "swarm-7", "seq": -2},
+        "header": {"utime": -1, "agent": "swarm-7", "seq": -2, "mac_len": 4, "mac": "007f80ff"},
         "state": 3,
         "last_command_seq": 2_147_483_647,
         "takeoff_altitude": 12.5,
+        "reason": "vehicle failsafe: fence breach",
     }
     assert mc["state"] == mc_state_t.MISSION
 

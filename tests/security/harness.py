@@ -13,11 +13,13 @@ transition is logged with its cause).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
 import secrets
 import shutil
+import signal
 import subprocess
 import time
 from dataclasses import dataclass
@@ -300,11 +302,16 @@ class Swarm:
         return client
 
     def close(self) -> None:
-        for run in self.agents.values():
-            for proc in run.procs.values():
-                stop_process(proc)
-        if self.station is not None:
-            stop_process(self.station)
+        """SIGTERM to every process at once, then wait for each (one by one would add their stop times)."""
+        procs = [p for run in self.agents.values() for p in run.procs.values()]
+        procs += [self.station] if self.station is not None else []
+        procs += [peer.proc for peer in self.peers]
+        for proc in procs:
+            if proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError, PermissionError):
+                    os.killpg(proc.pid, signal.SIGTERM)
+        for proc in procs:
+            stop_process(proc)
         self.netns.close()
 
     # -- the legitimate operator ----------------------------------------------------------------
@@ -395,14 +402,14 @@ def baseline(run: AgentRun) -> Baseline:
                     time.time())
 
 
-def settle(run: AgentRun, seconds: float = 1.5) -> Vehicle:
+def settle(run: AgentRun, seconds: float = 1.0) -> Vehicle:
     """The vehicle once the attack had ``seconds`` to act (a takeoff climbs metres in that time)."""
     time.sleep(seconds)
     return run.vehicle_after(time.time())
 
 
 def assert_unmoved(run: AgentRun, before: Baseline, *, tolerance: float = 0.3, still: bool = True,
-                   wait: float = 1.5) -> Vehicle:
+                   wait: float = 1.0) -> Vehicle:
     """The attack changed nothing: the vehicle is where it was (armed/in air as it was) and neither the
     MC nor the HLC made a transition since ``before``. ``still=False`` only checks arm/air state and
     transitions (for a vehicle that legitimately moves on its own). ``wait``: how long the attack is

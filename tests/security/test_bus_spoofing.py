@@ -17,7 +17,7 @@ from tests.security.harness import AgentRun, PeerClient, Swarm, agent_doc, asser
 
 pytestmark = pytest.mark.netns
 
-SPOOF_SECONDS = 2.0
+SPOOF_SECONDS = 1.5
 RATE_HZ = 20.0
 
 

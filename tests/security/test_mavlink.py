@@ -101,7 +101,7 @@ def launch_commands(enc: mav2.MAVLink) -> list[bytes]:
 
 
 def unchanged(vehicle: Copter, run: AgentRun, before: dict[str, Any], n_mc: int, n_hlc: int) -> dict[str, Any]:
-    time.sleep(1.5)
+    time.sleep(1.0)
     after = vehicle.snap()
     s0, s1 = before["snapshot"], after["snapshot"]
     assert not s1["armed"] and s1["alt"] < 0.2, f"the vehicle was armed or took off: {s1}"

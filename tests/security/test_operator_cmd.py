@@ -58,7 +58,7 @@ def before(swarm: Swarm) -> dict[str, Baseline]:
 
 
 def after(swarm: Swarm, marks: dict[str, Baseline], operator: PeerClient) -> None:
-    time.sleep(1.5)  # what a launch would need to show, for every agent at once
+    time.sleep(1.0)  # what a launch would need to show, for every agent at once
     for name, mark in marks.items():
         run: AgentRun = swarm.agents[name]
         assert_unmoved(run, mark, wait=0.0)

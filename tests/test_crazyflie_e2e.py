@@ -1,0 +1,321 @@
+"""Whole agents flying emulated Crazyflies: MC + HLC (``autopilot = "crazyflie"``, the real cflib) + BMAs.
+
+One driver process in a private network namespace runs the agents as ``antalate agent`` does
+(`agent_nodes` on an in-process context whose ``lan`` bus is real multicast, signed with a swarm key),
+the CRTP emulators on 127.0.0.1 (cflib's ``udp://`` driver), and a recorder node that prints every
+MC/HLC state change and ``hlc_error_t`` heard on the bus, plus the emulated vehicles' true state, as
+JSON lines. The test follows that timeline and injects faults through the driver's stdin.
+
+Covered: a whole mission (take-off to the configured altitude, a direction flown at the right
+speed, RTL to the take-off point and landing), low battery by voltage per cell, link loss reported
+within ``link_timeout`` + 0.5 s and recovered, a refused arm with its reason in ``hlc_error_t``, and
+three Crazyflies as three agents in one process flying ``dovrat_swarm`` the way ``antalate demo``
+does. Pilot takeover does not apply: a Crazyflie has no pilot radio in the loop.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.conftest import MCAST_URL
+from tests.netns import NetNamespace
+
+pytest.importorskip("cflib")
+pytestmark = pytest.mark.netns
+
+DRIVER = r"""
+import json, logging, sys, threading, time
+from antalate_lcm.config import parse_config
+from antalate_lcm.hlc.machine import ErrorCode, HlcState
+from antalate_lcm.mc.machine import McState
+from antalate_lcm.msgs import direction_cmd_t
+from antalate_lcm.node import Context, Node
+from antalate_lcm.runtime.agent import agent_nodes, shared_buses, validate
+from antalate_lcm.runtime.scripted_operator import ScriptedOperator
+from tests.emulators.crazyflie_emulator import CrazyflieEmulator
+
+logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(name)s %(message)s")
+T0 = time.monotonic()
+OUT = threading.Lock()
+
+def emit(**event):
+    event["t"] = round(time.monotonic() - T0, 3)
+    with OUT:
+        sys.stdout.write(json.dumps(event) + "\n")
+        sys.stdout.flush()
+
+spec = json.loads(sys.argv[1])
+emus, configs = [], []
+for item in spec["agents"]:
+    emu = CrazyflieEmulator(**item["emu"]).start()
+    emus.append(emu)
+    doc = item["doc"]
+    doc["hlc"]["autopilot_params"]["uri"] = emu.uri
+    config = parse_config(doc, "<test>")
+    validate(config)
+    configs.append(config)
+names = [c.agent.name for c in configs]
+
+class Recorder(Node):
+    kind = "recorder"
+    def on_start(self):
+        self.last = {}
+        self.direction = None
+        self.subscribe_all("MC_STATE", lambda m, match: self.state("mc", m.header.agent, McState(m.state).name))
+        self.subscribe_all("HLC_STATE", lambda m, match: self.state("hlc", m.header.agent, HlcState(m.state).name))
+        self.subscribe_all("HLC_ERROR", lambda m, match: emit(kind="error", agent=m.header.agent,
+                                                               code=ErrorCode(m.code).name, text=m.text))
+        self.create_timer(0.1, self.tick)
+    def state(self, kind, agent, name):
+        if self.last.get((kind, agent)) != name:
+            self.last[(kind, agent)] = name
+            emit(kind=kind, agent=agent, state=name)
+    def tick(self):
+        for name, emu in zip(names, emus):
+            s = emu.snapshot()
+            emit(kind="emu", agent=name, x=s.x, y=s.y, z=s.z, vx=s.vx, vy=s.vy, vz=s.vz, armed=s.armed,
+                 flying=s.flying, vbat=s.vbat)
+        if self.direction is not None and self.now - self.direction[2] >= 0.5:
+            self.send_direction(*self.direction[:2])
+    def send_direction(self, azimuth, speed):
+        msg = direction_cmd_t()
+        msg.active, msg.azimuth, msg.speed, msg.target = speed > 0, azimuth, speed, ""
+        self.publish("SWARM_DIRECTION_CMD", msg)
+        self.direction = (azimuth, speed, self.now) if speed > 0 else None
+
+context = Context.in_process(shared_buses(configs))
+recorder = Recorder(configs[0].with_agent_name("recorder"), context)
+nodes = [recorder] + [n for c in configs for n in agent_nodes(c, context)]
+operator = None
+if spec.get("operator"):
+    operator = ScriptedOperator(configs[0].with_agent_name("operator"), context, expected_agents=len(configs),
+                                mission_time=spec["operator"]["mission_time"], timeout=120.0)
+    nodes.append(operator)
+context.bus.open()
+context.executor.start()
+for node in nodes:
+    node.start()
+emit(kind="started")
+
+def watch_operator():
+    while not operator.finished:
+        time.sleep(0.1)
+    emit(kind="operator", phase=operator.phase.name, report=operator.report())
+
+if operator is not None:
+    threading.Thread(target=watch_operator, daemon=True).start()
+for line in sys.stdin:
+    words = line.split()
+    if words == ["stop"]:
+        break
+    if words[:1] == ["silent"]:
+        emus[int(words[1])].set_silent(words[2] == "1")
+        emit(kind="silent", agent=names[int(words[1])], on=words[2] == "1")
+    elif words[:1] == ["battery"]:
+        emus[int(words[1])].set_battery(float(words[2]))
+    elif words[:1] == ["direction"]:
+        context.executor.call_soon(recorder.send_direction, float(words[1]), float(words[2]))
+for node in reversed(nodes):
+    node.stop()
+context.close()
+for emu in emus:
+    emu.stop()
+emit(kind="stopped")
+"""
+
+KEY = "crazyflie-e2e-swarm-key"
+FAST_AP: dict[str, Any] = {"climb_speed": 1.0, "land_speed": 0.6, "rtl_speed": 1.0, "connect_timeout": 8.0}
+
+
+def agent_doc(name: str, tmp_path: Path, *, operator: dict[str, Any] | None = None, mission: str = "direction_follow",
+              mission_params: dict[str, Any] | None = None, **hlc: Any) -> dict[str, Any]:
+    bma: list[dict[str, Any]] = []
+    if operator is not None:
+        bma.append({"name": "operator", "behaviors": [{
+            "plugin": "auto_operator", "activate_on": ["STANDBY", "MISSION"],
+            "params": {"max_flights": 1, "altitude": 1.0, "retry": 1.0, **operator}}]})
+    bma.append({"name": "mission", "behaviors": [{
+        "plugin": mission, "activate_on": ["MISSION"], "params": mission_params or {}}]})
+    return {
+        "agent": {"name": name},
+        "buses": {"lan": MCAST_URL},
+        "security": {"swarm_key": KEY, "state_dir": str(tmp_path / name)},
+        "mc": {"takeoff_ack_timeout": 3.0},
+        "hlc": {"autopilot": "crazyflie", "default_takeoff_altitude": 1.0, "gain_altitude_timeout": 8.0,
+                "link_timeout": 1.0, "max_horizontal_speed": 1.0, **hlc,
+                "autopilot_params": {**FAST_AP, **hlc.pop("autopilot_params", {})}},
+        "bma": bma,
+    }
+
+
+class Driver:
+    """The driver process and its timeline of events."""
+
+    def __init__(self, proc: subprocess.Popen[str], log_path: Path) -> None:
+        self.proc = proc
+        self.log_path = log_path
+        self.events: list[dict[str, Any]] = []
+        self._cursor = 0
+        self._cond = threading.Condition()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            with self._cond:
+                self.events.append(json.loads(line))
+                self._cond.notify_all()
+        with self._cond:
+            self.events.append({"kind": "exit"})
+            self._cond.notify_all()
+
+    def wait(self, kind: str, timeout: float, test: Callable[[dict[str, Any]], bool] | None = None,
+             **where: Any) -> dict[str, Any]:
+        """The next event of `kind` matching `where` (and `test`) after the one the previous wait returned."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for i in range(self._cursor, len(self.events)):
+                    e = self.events[i]
+                    if e["kind"] == kind and all(e.get(k) == v for k, v in where.items()) and (test is None or test(e)):
+                        self._cursor = i + 1
+                        return e
+                left = deadline - time.monotonic()
+                if left <= 0 or self.events[-1:] == [{"kind": "exit"}]:
+                    raise AssertionError(f"no {kind} {where} within {timeout} s; timeline:\n{self.timeline()}"
+                                         f"\nlog:\n{self.log_tail()}")
+                self._cond.wait(min(left, 0.05))
+
+    def last(self, kind: str, **where: Any) -> dict[str, Any]:
+        with self._cond:
+            return next(e for e in reversed(self.events) if e["kind"] == kind
+                        and all(e.get(k) == v for k, v in where.items()))
+
+    def errors(self) -> list[dict[str, Any]]:
+        with self._cond:
+            return [e for e in self.events if e["kind"] == "error"]
+
+    def timeline(self) -> str:
+        with self._cond:
+            return "\n".join(json.dumps(e) for e in self.events if e["kind"] != "emu")
+
+    def log_tail(self, n: int = 40) -> str:
+        return "\n".join(self.log_path.read_text().splitlines()[-n:])
+
+    def send(self, line: str) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
+
+    def stop(self) -> None:
+        if self.proc.poll() is None and self.proc.stdin is not None:
+            try:
+                self.send("stop")
+                self.proc.wait(15)
+            except (BrokenPipeError, subprocess.TimeoutExpired):
+                self.proc.kill()
+
+
+@pytest.fixture
+def fly(netns: NetNamespace, tmp_path: Path) -> Iterator[Callable[..., Driver]]:
+    started: list[Driver] = []
+
+    def start(agents: list[tuple[dict[str, Any], dict[str, Any]]], operator: dict[str, Any] | None = None) -> Driver:
+        spec = {"agents": [{"doc": doc, "emu": emu} for doc, emu in agents], "operator": operator}
+        log_path = tmp_path / f"driver{len(started)}.log"
+        with open(log_path, "w") as log:
+            proc = netns.python("-c", DRIVER, json.dumps(spec), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                stderr=log)
+        driver = Driver(proc, log_path)
+        started.append(driver)
+        driver.wait("started", 20)
+        return driver
+
+    yield start
+    for driver in started:
+        driver.stop()
+
+
+def test_whole_mission_takes_off_flies_the_direction_and_returns_home(fly: Callable[..., Driver], tmp_path: Path) -> None:
+    d = fly([(agent_doc("cf1", tmp_path, operator={"rtl_after": 5.0}), {"x": 0.5, "y": -0.5})])
+    d.wait("mc", 20, state="MISSION", agent="cf1")
+    assert d.last("emu").get("z") == pytest.approx(1.0, abs=0.08)  # the configured take-off altitude
+    # east at 0.4 m/s; the local frame's +x is north (origin_heading 0), so east is -y
+    d.send("direction 90 0.4")
+    d.wait("emu", 8, test=lambda e: abs(e["vy"] + 0.4) < 0.04 and abs(e["vx"]) < 0.04 and abs(e["z"] - 1.0) < 0.1)
+    d.wait("mc", 15, state="RTL", agent="cf1")
+    d.send("direction 0 0")
+    assert d.last("emu")["y"] < -0.5 - 0.5  # it did go east
+    d.wait("hlc", 20, state="READY", agent="cf1")
+    d.wait("mc", 10, state="STANDBY", agent="cf1")
+    home = d.wait("emu", 5, test=lambda e: not e["flying"])
+    assert math.hypot(home["x"] - 0.5, home["y"] + 0.5) <= 0.15  # back on the take-off point
+    assert home["z"] == 0.0 and not home["armed"]
+    assert not [e for e in d.errors() if e["code"] not in ("LINK_REGAINED",)], d.timeline()
+
+
+def test_low_battery_per_cell_returns_home_and_lands(fly: Callable[..., Driver], tmp_path: Path) -> None:
+    # low_battery 5%: the firmware's 10% at 3.4 V is above it, so the voltage per cell is what fires
+    d = fly([(agent_doc("cf1", tmp_path, operator={}, low_battery=5.0), {})])
+    d.wait("mc", 20, state="MISSION", agent="cf1")
+    d.send("battery 0 3.4")  # 1S: 3.4 V per cell <= low_cell_voltage 3.5
+    d.wait("hlc", 5, state="LOW_BATTERY", agent="cf1")
+    error = d.wait("error", 5, code="LOW_BATTERY")
+    assert "per cell" in error["text"] and "3.4" in error["text"]
+    d.wait("mc", 5, state="RTL", agent="cf1")
+    d.wait("hlc", 20, state="READY", agent="cf1")
+    landed = d.wait("emu", 5, test=lambda e: not e["flying"])
+    assert math.hypot(landed["x"], landed["y"]) <= 0.15 and not landed["armed"]
+
+
+def test_link_loss_is_reported_within_link_timeout_and_recovered(fly: Callable[..., Driver], tmp_path: Path) -> None:
+    d = fly([(agent_doc("cf1", tmp_path, operator={}), {})])
+    d.wait("mc", 20, state="MISSION", agent="cf1")
+    d.send("silent 0 1")
+    silenced = d.wait("silent", 5, on=True)
+    down = d.wait("hlc", 5, state="LLC_DOWN", agent="cf1")
+    assert down["t"] - silenced["t"] <= 1.0 + 0.5  # link_timeout + 0.5 s
+    d.wait("error", 2, code="LINK_LOST")
+    d.wait("mc", 5, state="ERROR", agent="cf1")
+    flying = d.last("emu")
+    assert flying["flying"] and flying["z"] > 0.8  # the high-level commander holds it
+    d.send("silent 0 0")
+    d.wait("error", 5, code="LINK_REGAINED")
+    d.wait("mc", 10, state="RTL", agent="cf1")  # [mc] on_link_regained = rtl
+    d.wait("hlc", 20, state="READY", agent="cf1")
+    d.wait("mc", 10, state="STANDBY", agent="cf1")
+
+
+def test_refused_arm_reaches_the_operator_with_its_reason(fly: Callable[..., Driver], tmp_path: Path) -> None:
+    d = fly([(agent_doc("cf1", tmp_path, operator={}), {"locked": True})])
+    error = d.wait("error", 20, code="ARM_FAILED")
+    assert "locked" in error["text"] and "reboot" in error["text"]
+    d.wait("mc", 10, state="STANDBY", agent="cf1")
+    assert not d.last("emu")["flying"]
+
+
+def test_three_crazyflies_in_one_process_fly_dovrat_swarm(fly: Callable[..., Driver], tmp_path: Path) -> None:
+    agents = [
+        (agent_doc(f"cf{i + 1}", tmp_path, mission="dovrat_swarm",
+                   mission_params={"forward_speed": 0.3, "sharp_turn_rate": 20.0}), {"x": 0.0, "y": 1.5 * i})
+        for i in range(3)
+    ]
+    d = fly(agents, operator={"mission_time": 4.0})
+    done = d.wait("operator", 90)
+    assert done["phase"] == "DONE", done["report"] + "\n" + d.timeline()
+    for i in range(3):
+        name = f"cf{i + 1}"
+        assert d.last("mc", agent=name)["state"] == "STANDBY"
+        final = d.last("emu", agent=name)
+        assert not final["flying"] and not final["armed"]
+        assert math.hypot(final["x"], final["y"] - 1.5 * i) <= 0.15  # each back on its own take-off point
+

@@ -138,6 +138,13 @@ class Vehicle:
     mode: str
     phase: str
     saved_at: float
+    vn: float = 0.0
+    ve: float = 0.0
+
+    @property
+    def speed(self) -> float:
+        """Horizontal ground speed, m/s."""
+        return float((self.vn**2 + self.ve**2) ** 0.5)
 
     def distance(self, other: Vehicle) -> float:
         return ((self.north - other.north) ** 2 + (self.east - other.east) ** 2 + (self.alt - other.alt) ** 2) ** 0.5
@@ -157,6 +164,8 @@ class AgentRun:
         self.path = swarm.tmp / f"{name}.toml"
         self.path.write_text(to_toml(doc))
         self.procs: dict[str, subprocess.Popen[str]] = {}
+        #: The ``antalate agent`` process this agent shares with others, if it runs in one.
+        self.shared: subprocess.Popen[str] | None = None
         self.logs: list[Path] = []
 
     def start(self, node: str) -> None:
@@ -213,7 +222,7 @@ class AgentRun:
         data = wait_for(read, 15.0, 0.1)
         assert data, f"{self.name}: no fresh vehicle state in {self.state_file}"
         return Vehicle(data["north"], data["east"], data["alt"], bool(data["armed"]), bool(data["in_air"]),
-                       data["mode"], data["phase"], data["saved_at"])
+                       data["mode"], data["phase"], data["saved_at"], data["vn"], data["ve"])
 
     def vehicle_after(self, t: float) -> Vehicle:
         """The vehicle's state as saved after wall time ``t`` (so it reflects what happened until then)."""
@@ -280,6 +289,8 @@ class Swarm:
         out = open(log, "w")  # noqa: SIM115 - the process owns it
         proc = self.netns.antalate("agent", *(str(self.agents[n].path) for n in names),
                                    stdout=out, stderr=subprocess.STDOUT)
+        for name in names:
+            self.agents[name].shared = proc
         return proc
 
     def shared_log(self, name: str) -> str:

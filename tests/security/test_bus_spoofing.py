@@ -32,7 +32,8 @@ def stream(attacker: PeerClient, channel: str, type_name: str, **fields: object)
 
 
 def alive(run: AgentRun) -> None:
-    for node, proc in run.procs.items():
+    procs = dict(run.procs) | ({"agent process": run.shared} if run.shared is not None else {})
+    for node, proc in procs.items():
         assert proc.poll() is None, f"{run.name}'s {node} died: {run.log()[-3000:]}"
 
 
@@ -53,9 +54,10 @@ def test_spoofed_mc_takeoff_does_not_launch_an_in_process_agent(swarm: Swarm, at
     assert not before.vehicle.armed and alpha.mc_state() == "STANDBY"
     stream(attacker, "alpha/MC_STATE", "mc_state_t", state=mc_state_t.TAKEOFF, takeoff_altitude=2.1)
     assert_unmoved(alpha, before)
+    alive(alpha)
 
 
-@pytest.mark.attack("injected velocity_cmd_t north 3.2 m/s to a flying vehicle")
+@pytest.mark.attack("injected velocity_cmd_t north 3.2 m/s to a flying vehicle (MC and HLC in separate processes)")
 def test_injected_velocity_does_not_move_a_flying_vehicle(
     swarm: Swarm, operator: PeerClient, attacker: PeerClient
 ) -> None:
@@ -68,22 +70,46 @@ def test_injected_velocity_does_not_move_a_flying_vehicle(
     alive(charlie)
 
 
-@pytest.mark.attack("spoofed hlc_state_t LLC_DOWN to the MC of a flying vehicle")
-def test_spoofed_llc_down_does_not_put_the_mc_in_error(
+@pytest.mark.attack("injected velocity_cmd_t north 3.2 m/s to a swarming agent (antalate agent, one process)")
+def test_injected_velocity_does_not_steer_a_swarming_agent(
     swarm: Swarm, operator: PeerClient, attacker: PeerClient
 ) -> None:
-    fly(swarm, operator, "charlie")
-    charlie = swarm.agents["charlie"]
-    before = baseline(charlie)
-    stream(attacker, "charlie/HLC_STATE", "hlc_state_t", state=hlc_state_t.LLC_DOWN, autopilot="sim")
-    after = assert_unmoved(charlie, before, tolerance=0.5)
-    assert after.in_air and charlie.mc_state() == "MISSION"
+    """delta flies dovrat_swarm at 1 m/s: the attacker's 3.2 m/s must never show in its speed."""
+    fly(swarm, operator, "delta")
+    delta = swarm.agents["delta"]
+    before = baseline(delta)
+    speeds: list[float] = []
+    end = time.monotonic() + SPOOF_SECONDS + 1.0
+    seq = 950_000
+    while time.monotonic() < end:
+        seq += 1
+        attacker.publish("delta/VELOCITY_CMD", "velocity_cmd_t", header={"agent": "delta", "seq": seq},
+                         frame=velocity_cmd_t.NED, vx=3.2)
+        if seq % 4 == 0:
+            speeds.append(delta.vehicle().speed)
+        time.sleep(1.0 / RATE_HZ)
+    assert max(speeds) < 1.5, f"delta flew faster than its swarm behavior commands: {speeds}"
+    assert_unmoved(delta, before, still=False)
+    alive(delta)
+
+
+@pytest.mark.parametrize("name", ["charlie", "delta"])
+@pytest.mark.attack("spoofed hlc_state_t LLC_DOWN to the MC of a flying vehicle")
+def test_spoofed_llc_down_does_not_put_the_mc_in_error(
+    swarm: Swarm, operator: PeerClient, attacker: PeerClient, name: str
+) -> None:
+    fly(swarm, operator, name)
+    run = swarm.agents[name]
+    before = baseline(run)
+    stream(attacker, f"{name}/HLC_STATE", "hlc_state_t", state=hlc_state_t.LLC_DOWN, autopilot="sim")
+    after = assert_unmoved(run, before, tolerance=0.5, still=name == "charlie")
+    assert after.in_air and run.mc_state() == "MISSION"
     # The genuine (signed) MC state still says MISSION: what an operator console trusts.
     mark = operator.mark()
-    genuine = operator.wait("charlie/MC_STATE", "mc_state_t", since=mark, genuine=True, timeout=5)
-    assert genuine is not None, "charlie's MC publishes no signed mc_state_t"
+    genuine = operator.wait(f"{name}/MC_STATE", "mc_state_t", since=mark, genuine=True, timeout=5)
+    assert genuine is not None, f"{name}'s MC publishes no signed mc_state_t"
     assert genuine["state"] == mc_state_t.MISSION
-    alive(charlie)
+    alive(run)
 
 
 @pytest.mark.attack("spoofed mc_state_t TAKEOFF to an HLC left on multicast without a swarm key")

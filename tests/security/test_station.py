@@ -284,7 +284,7 @@ def test_stolen_operator_key_retargeted_signed_command(swarm: Swarm, attacker: P
     still_reporting(swarm, operator, alpha, before)
 
 
-@pytest.mark.attack("TAKEOFF with altitude Infinity/NaN/1e999 through the station")
+@pytest.mark.attack("TAKEOFF altitude and direction azimuth/speed Infinity/NaN/1e999 through the station")
 def test_non_finite_altitude_through_the_station(swarm: Swarm, attacker: PeerClient, operator: PeerClient,
                                                  alpha: AgentRun) -> None:
     before = baseline(alpha)
@@ -300,8 +300,41 @@ def test_non_finite_altitude_through_the_station(swarm: Swarm, attacker: PeerCli
         r = attacker.http1("POST", "/api/commands", content=body,
                            headers={**swarm.auth("operator"), "Content-Type": "application/json"})
         assert r["status"] == 422, r
+    for az, speed in (("Infinity", "1.0"), ("NaN", "1.0"), ("1e999", "1.0"), ("90.0", "Infinity"),
+                      ("90.0", "NaN"), ("90.0", "1e999")):
+        body = '{"target": "alpha", "direction": {"azimuth": %s, "speed": %s}}' % (az, speed)  # noqa: UP031
+        r = attacker.http1("POST", "/api/commands", content=body,
+                           headers={**swarm.auth("operator"), "Content-Type": "application/json"})
+        assert r["status"] == 422, (body, r)
     still_reporting(swarm, operator, alpha, before)
     assert station_view(swarm, operator, "alpha")["pending_commands"] == 0
+
+
+@pytest.mark.attack("stolen operator key: a signed command alpha already received, POSTed again (a replay)")
+def test_stolen_operator_key_replays_a_delivered_command(swarm: Swarm, attacker: PeerClient, operator: PeerClient,
+                                                         alpha: AgentRun) -> None:
+    before = baseline(alpha)
+    mark = operator.mark()
+    seq = swarm.next_seq()
+    cmd = _signed_command(swarm, "LAND", "alpha", seq)  # LAND on the ground: rejected by the MC, moves nothing
+    assert operator.http1("POST", "/api/commands", {"operator_cmd": cmd}, headers=swarm.auth("operator"))["status"] == 200
+
+    def copies() -> int:
+        return sum(m["header"]["seq"] == seq for m in operator.history("alpha/OPERATOR_CMD", "operator_cmd_t",
+                                                                        since=mark, genuine=True))
+    assert wait_for(lambda: copies() >= 1, 15.0, 0.2), "the genuine command never reached alpha"
+    delivered = copies()
+    # The attacker saw it go by on the LAN (or in the station's database) and queues it again, and
+    # once more re-stamped (which breaks the MAC).
+    for body in ({"operator_cmd": cmd}, {"operator_cmd": cmd},
+                 {"operator_cmd": {**cmd, "utime": time.time_ns() // 1000}}):
+        r = attacker.http1("POST", "/api/commands", body, headers=swarm.auth("operator"))
+        assert r["status"] in (200, 403, 409, 422), r
+    t = time.time()
+    assert wait_for(lambda: (lambda a: a if (a.get("last_seen") or 0) > t + 1.0 else None)(
+        station_view(swarm, operator, "alpha")), 15.0, 0.2), "alpha stopped reporting"
+    assert copies() == delivered, "alpha's OSC published the replayed command again"
+    still_reporting(swarm, operator, alpha, before)
 
 
 @pytest.mark.attack("tokens and registrations sniffed off the link between the OSCs and the station")

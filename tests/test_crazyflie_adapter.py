@@ -201,3 +201,21 @@ def test_nobody_answering_fails_connect_within_its_timeout() -> None:
         with pytest.raises(AutopilotError, match="cannot connect"):
             ap.connect()
         ap.close()
+
+
+def test_a_link_cflib_gives_up_on_is_reopened(rig: Callable[..., Any]) -> None:
+    """cflib's radio driver closes the link after a run of lost packets; the adapter reopens it."""
+    emu, ap = rig(connect_timeout=1.5)
+    airborne(emu, ap)
+    emu.set_silent(True)
+    ap._cf._link_error_cb("Too many packets lost")  # what cflib's RadioDriver calls; the link closes
+    assert wait_for(lambda: not ap.state().connected)
+    with pytest.raises(AutopilotError, match="not connected.*Too many packets lost"):
+        ap.land()
+    time.sleep(2.5)  # reopening fails while the Crazyflie is silent
+    assert ap.reconnects == 0
+    emu.set_silent(False)
+    assert wait_for(lambda: ap.state().connected and ap.state().link_age < 0.5, timeout=15.0)
+    assert ap.reconnects == 1 and ap.state().in_air
+    ap.land()  # commands work again on the new link
+    assert wait_for(lambda: ap.state().landed, timeout=10.0)

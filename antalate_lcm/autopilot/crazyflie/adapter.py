@@ -22,6 +22,9 @@ What the adapter does on top of cflib, and why (docs/crazyflie.md has the operat
   platform (some arm themselves at power-on).
 * **Shutdown in the air**: `close` sends an emergency stop (motors off) before closing the link:
   nothing would command the vehicle any more, and cflib's own close sends a zero-thrust set-point.
+* **cflib closing the link**: its radio driver gives up after a run of lost packets ("Too many
+  packets lost") and closes the link for good; the adapter reopens it every ``_RECONNECT_S`` until the
+  Crazyflie answers, so a radio outage is the HLC's recoverable LLC_DOWN, not the end of the agent.
 * Several adapters in one process on one Crazyradio share it through cflib's radio manager, as
   cflib's ``Swarm`` does.
 """
@@ -67,6 +70,8 @@ log = logging.getLogger("antalate.autopilot.crazyflie")
 
 CFLIB_MISSING = ("the crazyflie autopilot needs Bitcraze's cflib, which is not installed: "
                  "pip install 'antalate[crazyflie]'")
+
+_RECONNECT_S = 2.0  # s between attempts to reopen a link cflib closed
 
 _drivers_lock = threading.Lock()
 _drivers_ready = False
@@ -124,6 +129,9 @@ class CrazyflieAutopilot(Autopilot):
         self._blind_land_at = -math.inf
         self._blind_landing = False  # landings sent into a lost link: resent once it answers again
         self._last_tick = -math.inf
+        self._reconnecting = False
+        self._reconnect_at = -math.inf
+        self.reconnects = 0
         self.setpoints_sent = 0
 
     # ------------------------------------------------------------------ link
@@ -232,7 +240,29 @@ class CrazyflieAutopilot(Autopilot):
         with self._lock:
             self._link_error = str(message).splitlines()[0] if message else "link lost"
             self._connected = False
-        log.warning("cflib lost the link to %s: %s", uri, self._link_error)
+        log.warning("cflib lost the link to %s: %s; reopening it every %g s", uri, self._link_error, _RECONNECT_S)
+
+    def _reconnect(self) -> None:
+        """Reopen a link cflib closed (on the reconnect thread); the old Crazyflie object is dropped."""
+        with self._lock:
+            old, self._cf = self._cf, None
+        if old is not None:
+            self._close_quietly(old)
+        try:
+            self._open_link()
+        except AutopilotError as exc:
+            log.info("reopening the link failed: %s", exc)
+        else:
+            self.reconnects += 1
+            log.warning("link to the Crazyflie at %s reopened", self._p.uri)
+            if self._stop.is_set():  # closed meanwhile: do not leave this link open
+                with self._lock:
+                    cf, self._cf, self._connected = self._cf, None, False
+                if cf is not None:
+                    self._close_quietly(cf)
+        finally:
+            with self._lock:
+                self._reconnecting = False
 
     # ------------------------------------------------------------------ commands
     def _require_link(self) -> Any:
@@ -392,6 +422,12 @@ class CrazyflieAutopilot(Autopilot):
         now = self.clock()
         p = self._p
         with self._lock:
+            if self._link_error and not self._connected and not self._reconnecting and not self._stop.is_set():
+                if now - self._reconnect_at >= _RECONNECT_S:
+                    self._reconnecting = True
+                    self._reconnect_at = now
+                    threading.Thread(target=self._reconnect, name="crazyflie-reconnect", daemon=True).start()
+                return
             cf = self._cf
             if cf is None:
                 return

@@ -41,8 +41,9 @@ SWARM_KEY = "swarm-" + secrets.token_hex(16)
 WINDOW = 30.0
 HOME = (32.7767, 35.0231)
 #: Self-check of the suite: ``ANTALATE_SECURITY_DISARMED=1`` runs the same swarm with no swarm key
-#: (``[security] insecure = true``). Every attack must then succeed, i.e. every test fail: a test
-#: that passes disarmed proves nothing about the defence it claims to test.
+#: (``[security] insecure = true``), no registration key, no TLS and no MAVLink signing. The attacks
+#: those defences stop must then succeed (their tests fail): a test that passes disarmed proves
+#: nothing about the defence it claims to test. See README.md for the defences that stay on.
 DISARMED = os.environ.get("ANTALATE_SECURITY_DISARMED") == "1"
 
 _TRANSITION = re.compile(r"antalate\.(mc|hlc)\.([\w.-]+): (\w+) -> (\w+) on (.*)$")
@@ -66,9 +67,6 @@ class PeerClient(JsonLinesProcess):
         reply = self._ok(op="publish", channel=channel, type=type_name, fields=fields, sign=sign,
                          count=count, stamp=stamp)
         return bytes.fromhex(reply["hex"])
-
-    def raw(self, channel: str, data: bytes, count: int = 1) -> None:
-        self._ok(op="raw", channel=channel, hex=data.hex(), count=count)
 
     def batch(self, items: list[tuple[str, bytes]], gap: float = 0.0) -> None:
         self._ok(op="batch", items=[{"channel": c, "hex": d.hex()} for c, d in items], gap=gap)

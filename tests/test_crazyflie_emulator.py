@@ -208,3 +208,15 @@ def test_silence_stops_every_packet_both_ways(emu: CrazyflieEmulator) -> None:
         assert wait_for(lambda: len(got) > n)
     finally:
         scf.close_link()
+
+
+def test_cflib_closing_the_link_in_flight_stops_the_motors(emu: CrazyflieEmulator) -> None:
+    """cflib's close_link sends a zero-thrust legacy set-point: why the adapter's close is an emergency stop."""
+    scf = connect(emu)
+    scf.cf.supervisor.send_arming_request(True)
+    assert wait_for(lambda: emu.snapshot().armed)
+    scf.cf.high_level_commander.takeoff(0.5, 1.0)
+    assert wait_for(lambda: emu.snapshot().z > 0.4)
+    scf.close_link()
+    assert wait_for(lambda: not emu.snapshot().flying)
+    assert emu.snapshot().z == 0.0

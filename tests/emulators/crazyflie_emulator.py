@@ -27,6 +27,9 @@ supervisor.c, hal/src/pm_stm32f4.c) and on what cflib 0.1.34 sends, so tests dri
   commander, which ignores its commands until the stop notification, as cflib documents. The
   commander watchdog: no set-point for 0.5 s levels the vehicle (zero velocity), 2 s stops the
   motors -- it falls and the supervisor locks (supervisor.c, ``COMMANDER_WDT_TIMEOUT_*``).
+* **Legacy commander** (port 3, roll/pitch/yaw-rate/thrust): only what cflib sends itself -- its
+  ``close_link`` sends ``send_setpoint(0, 0, 0, 0)``, a zero-thrust set-point that stops flying motors
+  (attitude flight is not modelled: any other thrust is ignored).
 * **High-level commander** (port 8): ``takeoff2``, ``land2``, ``go_to`` (4) and ``go_to2`` (12),
   ``stop``. Trajectories are smooth (quintic minimum-jerk) between the current and target poses
   over the given duration; landing ends with the motors stopped, and ``landed_timeout`` later the
@@ -61,7 +64,7 @@ from dataclasses import dataclass, field
 Address = tuple[str, int]
 
 # CRTP ports (cflib/crtp/crtpstack.py)
-PORT_PARAM, PORT_MEM, PORT_LOG, PORT_GENERIC, PORT_HL, PORT_SUPERVISOR = 2, 4, 5, 7, 8, 9
+PORT_PARAM, PORT_COMMANDER, PORT_MEM, PORT_LOG, PORT_GENERIC, PORT_HL, PORT_SUPERVISOR = 2, 3, 4, 5, 7, 8, 9
 PORT_PLATFORM, PORT_LINK = 13, 15
 
 # log.h types and flags
@@ -381,7 +384,7 @@ class CrazyflieEmulator:
         handler = {
             PORT_LINK: self._on_link, PORT_PLATFORM: self._on_platform, PORT_MEM: self._on_mem,
             PORT_LOG: self._on_log, PORT_PARAM: self._on_param, PORT_GENERIC: self._on_generic,
-            PORT_HL: self._on_hl, PORT_SUPERVISOR: self._on_supervisor,
+            PORT_HL: self._on_hl, PORT_SUPERVISOR: self._on_supervisor, PORT_COMMANDER: self._on_rpyt,
         }.get(port)
         if handler is not None:
             handler(channel, data)
@@ -517,6 +520,12 @@ class CrazyflieEmulator:
         self._sp_at = now
         self.motors = True
         self._landed_at = None
+
+    def _on_rpyt(self, channel: int, data: bytes) -> None:
+        _roll, _pitch, _yaw_rate, thrust = struct.unpack_from("<fffH", data, 0)
+        self.setpoints += 1
+        if thrust == 0 and self.motors:
+            self._motors_off(self.clock())
 
     def _on_hl(self, channel: int, data: bytes) -> None:
         now = self.clock()

@@ -68,9 +68,9 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
         tr.write_line(f"  NOT JUDGED: {name} ({tried[name]})")
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
-    """The station, four agents and the two peers, started once for the whole directory.
+    """The station, four agents and the two peers, started once for the whole directory (package scope: gone when its last test ends).
 
     * ``alpha`` and ``delta``: one ``antalate agent`` process, OSC reporting to the station,
       ``dovrat_swarm`` on MISSION; alpha stays on the ground (the station attacks' target), the
@@ -125,13 +125,13 @@ def _home(north_m: float) -> tuple[float, float]:
     return offset(HOME[0], HOME[1], north_m, 0.0)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def attacker(swarm: Swarm) -> PeerClient:
     assert swarm.attacker is not None
     return swarm.attacker
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def operator(swarm: Swarm) -> PeerClient:
     assert swarm.operator is not None
     return swarm.operator

@@ -123,7 +123,9 @@ class CrazyflieAutopilot(Autopilot):
         self._failsafe = ""
         self._velocity: tuple[float, float, float, float, Frame, float] | None = None
         self._height = 0.0
-        self._home = (0.0, 0.0)
+        #: RTL's target: the take-off point, else where the vehicle was first seen on the ground, else
+        #: (an HLC restarted in the air) the frame's origin.
+        self._home: tuple[float, float] | None = None
         self._rtl_deadline = math.inf
         self._ground_idle = False  # landed by us and disarmed: report disarmed whatever auto-arming says
         self._blind_land_at = -math.inf
@@ -234,7 +236,9 @@ class CrazyflieAutopilot(Autopilot):
 
     def _on_log(self, _timestamp: int, data: dict[str, Any], _config: Any) -> None:
         with self._lock:
-            self._reading = apply_log(self._reading, data)
+            self._reading = r = apply_log(self._reading, data)
+            if self._home is None and r.has_pose and "supervisor.info" in data and not r.flags.flying:
+                self._home = (r.x, r.y)
 
     def _on_connection_lost(self, uri: str, message: str) -> None:
         with self._lock:
@@ -352,6 +356,9 @@ class CrazyflieAutopilot(Autopilot):
         with self._lock:
             r = self._reading
             self._leave_stream(cf)
+            if self._home is None:
+                log.warning("RTL with no take-off point known (connected in the air): returning to the origin")
+                self._home = (0.0, 0.0)
             hx, hy = self._home
             distance = math.hypot(r.x - hx, r.y - hy)
             if distance <= self._p.rtl_tolerance:
@@ -460,7 +467,7 @@ class CrazyflieAutopilot(Autopilot):
                     log.warning("link back: the landing sent while it was lost is sent again")
                     self._start_landing(cf, LAND)
             if self._mode == RTL_GO:
-                hx, hy = self._home
+                hx, hy = self._home or (0.0, 0.0)
                 arrived = math.hypot(r.x - hx, r.y - hy) <= p.rtl_tolerance and math.hypot(r.vx, r.vy) < 0.05
                 if arrived or now > self._rtl_deadline:
                     self._start_landing(cf, RTL_LAND)

@@ -77,7 +77,7 @@ def test_an_adapter_module_that_fails_to_import(tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(REPO)])}
     one_line_error(
         antalate("agent", str(cfg), env=env),
-        f"invalid config {cfg}: hlc.autopilot: expected an installed adapter (mavlink, sim, tello)",
+        f"invalid config {cfg}: hlc.autopilot: expected an installed adapter (crazyflie, mavlink, sim, tello)",
         "No module named 'serial_port_that_is_not_here'",
     )
 
@@ -103,8 +103,8 @@ def test_duplicate_agent_names(tmp_path: Path) -> None:
         ('[buses]\nlan = "http://127.0.0.1:8080"\n', "buses.lan", "not 'http://'"),
         ('[buses]\nlan = "udpm://239.255.76.67:99999"\n', "buses.lan", "a port 1-65535"),
         ('[buses]\nlan = "udpm://10.0.0.7:7667"\n', "buses.lan", "multicast group"),
-        ('[hlc]\nautopilot = ":Foo"\n', "hlc.autopilot", "an installed adapter (mavlink, sim, tello)"),
-        ('[hlc]\nautopilot = ".sim:X"\n', "hlc.autopilot", "an installed adapter (mavlink, sim, tello)"),
+        ('[hlc]\nautopilot = ":Foo"\n', "hlc.autopilot", "an installed adapter (crazyflie, mavlink, sim, tello)"),
+        ('[hlc]\nautopilot = ".sim:X"\n', "hlc.autopilot", "an installed adapter (crazyflie, mavlink, sim, tello)"),
         ('[hlc]\nautopilot = "nope"\n', "hlc.autopilot", "there is no adapter 'nope'"),
         ('[hlc]\nautopilot = "antalate_lcm.no_such:X"\n', "hlc.autopilot", "No module named 'antalate_lcm.no_such'"),
         ('[hlc]\nautopilot = "antalate_lcm.autopilot.base:AutopilotState"\n', "hlc.autopilot", "not a subclass"),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import pytest
 
@@ -188,3 +189,22 @@ def test_params_documented_and_example_valid() -> None:
     CrazyflieAutopilot(params)
     missing = [k for k in DEFAULTS if f"`{k}`" not in doc or k not in params]
     assert not missing, missing
+
+
+@pytest.mark.parametrize(("table", "key", "phrase"), [
+    ('uri = "http://x"', "uri", "cflib URI"),
+    ("origin_heading = '90'", "origin_heading", "valid "),
+    ("cells = true", "cells", "valid "),
+    ("no_such_key = 1", "no_such_key", "Extra inputs"),
+])
+def test_config_loader_names_the_bad_autopilot_param(tmp_path: Any, table: str, key: str, phrase: str) -> None:
+    """The config loader applies the adapter's params_model before anything starts (one line, the key)."""
+    from antalate_lcm.config import load_config
+    from antalate_lcm.errors import ConfigError
+
+    path = tmp_path / "cf.toml"
+    path.write_text(f'[hlc]\nautopilot = "crazyflie"\n[hlc.autopilot_params]\n{table}\n')
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert info.value.key == f"hlc.autopilot_params.{key}" and phrase in info.value.expected, str(info.value)
+    assert "\n" not in str(info.value)

@@ -68,15 +68,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     for register in _registrars():
         register(sub)
+    from operator_tui import web  # after the runtime's registrar: it adds --web to ``tui``
+
+    web.register(sub)
     return parser
 
 
 def _registrars() -> list[Callable[[argparse._SubParsersAction[argparse.ArgumentParser]], None]]:
     """Subcommands registered by the modules that implement them (imported lazily to start fast)."""
-    from antalate_lcm.runtime import commands
+    from antalate_lcm.runtime import commands, router
     from antalate_lcm.station import cli as station_cli
 
-    return [commands.register, station_cli.register]
+    return [commands.register, station_cli.register, router.register]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,0 +1,67 @@
+"""The image's health check (containers/healthcheck.py) against real nodes, without a container:
+it reads the node's command line, listens for the node's own messages, or asks the station."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.agent_harness import AgentProcesses, agent_config
+from tests.conftest import Probe
+from tests.netns import REPO, NetNamespace, stop_process, wait_for
+
+pytestmark = pytest.mark.netns
+
+HEALTHCHECK = REPO / "containers" / "healthcheck.py"
+
+
+def health(ns: NetNamespace, cmdline: str, listen: float = 3.0) -> tuple[int, str]:
+    proc = ns.run([sys.executable, str(HEALTHCHECK), "--cmdline", cmdline, "--listen", str(listen)],
+                  env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=60)
+    return proc.returncode, (proc.stdout + proc.stderr).strip()
+
+
+def test_a_running_mc_is_healthy_and_a_missing_hlc_is_not(netns: NetNamespace, probe: Probe, tmp_path: Path) -> None:
+    agent = AgentProcesses(netns, tmp_path, agent_config("alpha", security={"insecure": True}, bma=[{"name": "swarm"}]))
+    try:
+        agent.start("mc")
+        agent.start("bma", "--name", "swarm")
+        assert probe.wait("alpha/MC_STATE", "mc_state_t", timeout=20)
+        assert health(netns, f"/opt/antalate/bin/python /opt/antalate/bin/antalate mc {agent.path}") == (0, "healthy")
+        assert health(netns, f"antalate bma {agent.path} --name swarm") == (0, "healthy")
+        code, said = health(netns, f"antalate hlc {agent.path}")
+        assert code == 1 and said == ("unhealthy: no HLC_STATE (alpha/HLC_STATE) heard on "
+                                      "udpm://239.255.76.67:7667?ttl=0 in 3 s"), said
+        code, said = health(netns, f"antalate bma {agent.path} --name other")
+        assert code == 1 and "alpha/ARBITER/other" in said, said
+        agent.kill("mc")
+        code, said = health(netns, f"antalate mc {agent.path}")
+        assert code == 1 and said.startswith("unhealthy: no MC_STATE"), said
+    finally:
+        agent.stop()
+
+
+def test_the_station_answers_or_is_reported(netns: NetNamespace, tmp_path: Path) -> None:
+    log = open(tmp_path / "station.log", "w")  # noqa: SIM115 - closed below
+    station = netns.antalate("station", "--db", ":memory:", "--port", "8181", stdout=log, stderr=log)
+    try:
+        assert wait_for(lambda: health(netns, "antalate station --db :memory: --port 8181", 1)[0] == 0, 30), (
+            (tmp_path / "station.log").read_text())
+        code, said = health(netns, "antalate station --port 8182", 1)
+        assert code == 1 and "the station does not answer on http://127.0.0.1:8182/api/station" in said, said
+    finally:
+        stop_process(station)
+        log.close()
+
+
+def test_a_config_that_does_not_load_or_a_foreign_command_is_unhealthy(netns: NetNamespace, tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[hlc]\nlow_battery = 150\n")
+    code, said = health(netns, f"antalate mc {bad}")
+    assert code == 1 and "hlc.low_battery" in said, said
+    code, said = health(netns, "sleep 100")
+    assert code == 1 and said.startswith("unhealthy: not an antalate command line"), said
+    assert health(netns, "antalate keygen") == (0, "healthy (antalate keygen)")

@@ -47,14 +47,23 @@ def test_spoofed_mc_takeoff_does_not_launch_a_separate_process_hlc(swarm: Swarm,
     alive(bravo)
 
 
-@pytest.mark.attack("spoofed mc_state_t TAKEOFF, antalate agent (one process)")
-def test_spoofed_mc_takeoff_does_not_launch_an_in_process_agent(swarm: Swarm, attacker: PeerClient) -> None:
+@pytest.mark.attack("spoofed mc_state_t TAKEOFF then MISSION, antalate agent (one process, with a BMA)")
+def test_spoofed_mc_takeoff_does_not_launch_an_in_process_agent(
+    swarm: Swarm, attacker: PeerClient, operator: PeerClient
+) -> None:
+    """alpha's HLC and its swarm arbiter both follow MC_STATE: neither may hear the spoof."""
     alpha = swarm.agents["alpha"]
     before = baseline(alpha)
     assert not before.vehicle.armed and alpha.mc_state() == "STANDBY"
+    mark = operator.mark()
     stream(attacker, "alpha/MC_STATE", "mc_state_t", state=mc_state_t.TAKEOFF, takeoff_altitude=2.1)
+    stream(attacker, "alpha/MC_STATE", "mc_state_t", state=mc_state_t.MISSION)
     assert_unmoved(alpha, before)
     alive(alpha)
+    arbiter = operator.history("alpha/ARBITER/swarm", "arbiter_status_t", since=mark, genuine=True)
+    assert arbiter, "alpha's arbiter published no signed status during the attack"
+    states = {(a["state"], tuple(a["active"])) for a in arbiter}
+    assert states == {("STANDBY", ())}, f"alpha's swarm arbiter followed the spoof: {states}"
 
 
 @pytest.mark.attack("injected velocity_cmd_t north 3.2 m/s to a flying vehicle (MC and HLC in separate processes)")

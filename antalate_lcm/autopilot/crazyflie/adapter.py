@@ -123,6 +123,7 @@ class CrazyflieAutopilot(Autopilot):
         self._failsafe = ""
         self._velocity: tuple[float, float, float, float, Frame, float] | None = None
         self._height = 0.0
+        self._takeoff_alt = 0.0
         #: RTL's target: the take-off point, else where the vehicle was first seen on the ground, else
         #: (an HLC restarted in the air) the frame's origin.
         self._home: tuple[float, float] | None = None
@@ -194,8 +195,8 @@ class CrazyflieAutopilot(Autopilot):
             self._cf = cf
             self._no_kalman = no_kalman
             self._link_error = ""
-        deadline = time.monotonic() + p.connect_timeout
-        while time.monotonic() < deadline:
+        deadline = self.clock() + p.connect_timeout
+        while self.clock() < deadline:
             with self._lock:
                 if self._reading.has_pose:
                     self._connected = True
@@ -306,8 +307,8 @@ class CrazyflieAutopilot(Autopilot):
         with self._lock:
             self._ground_idle = False
         cf.supervisor.send_arming_request(True)
-        deadline = time.monotonic() + self._p.arm_timeout
-        while time.monotonic() < deadline:
+        deadline = self.clock() + self._p.arm_timeout
+        while self.clock() < deadline:
             if self._reading.flags.armed:
                 return True
             time.sleep(0.02)
@@ -331,11 +332,12 @@ class CrazyflieAutopilot(Autopilot):
             self._leave_stream(cf)
             self._home = (r.x, r.y)
             self._set_mode(TAKEOFF)
+            self._takeoff_alt = alt
             self._failsafe = ""
             z0 = r.z
         cf.high_level_commander.takeoff(alt, takeoff_duration(z0, alt, self._p.climb_speed), yaw=None)
-        deadline = time.monotonic() + self._p.takeoff_confirm
-        while time.monotonic() < deadline:
+        deadline = self.clock() + self._p.takeoff_confirm
+        while self.clock() < deadline:
             r = self._reading
             if r.flags.flying or r.z > z0 + 0.05:
                 return
@@ -383,7 +385,10 @@ class CrazyflieAutopilot(Autopilot):
             if not self._reading.flags.flying:
                 raise AutopilotError("not flying: velocity set-points are for the air")
             if self._mode != STREAM:
-                self._height = self._reading.z
+                # the HLC steers from 95 % of the take-off altitude: a body-frame height target
+                # started during the climb still ends at the altitude asked for
+                z = self._reading.z
+                self._height = max(z, self._takeoff_alt) if self._mode == TAKEOFF else z
                 self._set_mode(STREAM)
             self._velocity = (vx, vy, vz, yaw_rate, Frame(frame), self.clock())
             self._send_setpoint(cf, build_setpoint(vx, vy, vz, yaw_rate, Frame(frame), self.frame, self._height))

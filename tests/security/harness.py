@@ -93,10 +93,11 @@ class PeerClient(JsonLinesProcess):
     def mark(self) -> int:
         return int(self._ok(op="mark")["index"])
 
-    def sniff_start(self, port: int) -> None:
+    def sniff_start(self, port: int) -> str | None:
         """Capture every TCP payload to or from ``port`` on lo (a packet socket: what a host on a
-        shared link, or anyone with a tap, sees)."""
-        self._ok(op="sniff_start", port=port)
+        shared link, or anyone with a tap, sees). Returns why it cannot, or None."""
+        reply = self.call(op="sniff_start", port=port)
+        return None if reply["ok"] else str(reply.get("error"))
 
     def sniff_take(self) -> bytes:
         return bytes.fromhex(self._ok(op="sniff_take")["hex"])

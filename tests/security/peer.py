@@ -156,8 +156,11 @@ class Peer:
             self.send(req["channel"], bytes.fromhex(req["hex"]), req.get("count", 1))
             return {"ok": True}
         if op == "sniff_start":
-            sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(0x0003))
-            sock.bind(("lo", 0))
+            try:
+                sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(0x0003))
+                sock.bind(("lo", 0))
+            except OSError as exc:  # a kernel that denies packet sockets even in our own namespace
+                return {"ok": False, "error": f"no packet socket: {exc}"}
             threading.Thread(target=self._sniff, args=(sock, int(req["port"])), daemon=True).start()
             return {"ok": True}
         if op == "sniff_take":

@@ -131,7 +131,7 @@ def run_check(check: Check, listen_s: float = LISTEN_S) -> str | None:
             lc.handle_timeout(50)
     if heard:
         return None
-    return f"no {check.what} ({check.channel_regex}) heard on {', '.join(check.urls)} in {listen_s:g} s"
+    return f"{check.what} not heard ({check.channel_regex}) on {', '.join(check.urls)} in {listen_s:g} s"
 
 
 def main(argv: list[str] | None = None) -> int:

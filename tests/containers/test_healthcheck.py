@@ -33,13 +33,13 @@ def test_a_running_mc_is_healthy_and_a_missing_hlc_is_not(netns: NetNamespace, p
         assert health(netns, f"/opt/antalate/bin/python /opt/antalate/bin/antalate mc {agent.path}") == (0, "healthy")
         assert health(netns, f"antalate bma {agent.path} --name swarm") == (0, "healthy")
         code, said = health(netns, f"antalate hlc {agent.path}")
-        assert code == 1 and said == ("unhealthy: no HLC_STATE (alpha/HLC_STATE) heard on "
+        assert code == 1 and said == ("unhealthy: HLC_STATE not heard (alpha/HLC_STATE) on "
                                       "udpm://239.255.76.67:7667?ttl=0 in 3 s"), said
         code, said = health(netns, f"antalate bma {agent.path} --name other")
         assert code == 1 and "alpha/ARBITER/other" in said, said
         agent.kill("mc")
         code, said = health(netns, f"antalate mc {agent.path}")
-        assert code == 1 and said.startswith("unhealthy: no MC_STATE"), said
+        assert code == 1 and said.startswith("unhealthy: MC_STATE not heard"), said
     finally:
         agent.stop()
 

@@ -1,0 +1,164 @@
+"""Build the antalate container image with nothing but package registries (PyPI, a Debian mirror).
+
+    python3 containers/build_image.py [--arch amd64|arm64] [--tag antalate:0.1.0]
+                                      [--base REF] [--wheel antalate-*.whl] [--podman-opt=--root=DIR ...]
+
+1. the wheelhouse: antalate's wheel (built from this checkout unless ``--wheel``) and every
+   dependency's wheel for the target (CPython 3.11, glibc Linux, the architecture), fetched by
+   ``pip download`` on this host, less ``opencv-python`` (see the Containerfile);
+2. the base: ``--base REF`` as given (e.g. ``docker.io/library/python:3.11-slim`` where a registry
+   is reachable), else Debian bookworm made by ``mmdebstrap`` (variant essential + python3,
+   python3-venv, ca-certificates and the libraries the wheels link to; no documentation) and ``podman import``-ed as
+   ``localhost/antalate-base:bookworm-ARCH``. A foreign architecture needs qemu-user-static with
+   binfmt_misc, for mmdebstrap and for the build's RUN step;
+3. ``podman build`` of containers/Containerfile (docker format: OCI images cannot carry a
+   HEALTHCHECK), the build step in a chroot, never pulling.
+
+Prints the image's size. Tests import this module (tests/containers/).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+PYTHON_VERSION = "3.11"  # Debian bookworm's python3, and the stock base's tag
+DEBIAN_SUITE = "bookworm"
+# python3 for the venv; what the wheels link to but do not carry (see the Containerfile)
+DEBIAN_PACKAGES = ("python3", "python3-venv", "ca-certificates", "libglib2.0-0", "libstdc++6", "zlib1g")
+LEFT_OUT = ("opencv_python-", "opencv_python_headless-")
+# glibc tags a bookworm (glibc 2.36) system accepts, newest first
+_GLIBC = ("2_36", "2_35", "2_34", "2_31", "2_28", "2_27", "2_24", "2_17", "2_12", "2_5")
+MACHINE = {"amd64": "x86_64", "arm64": "aarch64"}
+
+
+class BuildError(RuntimeError):
+    """A step failed: the message names it and ends with what the tool said."""
+
+
+def host_arch() -> str:
+    return {"x86_64": "amd64", "aarch64": "arm64"}.get(platform.machine(), platform.machine())
+
+
+def run(cmd: Sequence[str], what: str, timeout: float = 1800, **kw: object) -> subprocess.CompletedProcess[str]:
+    proc = subprocess.run(list(cmd), capture_output=True, text=True, timeout=timeout, **kw)  # type: ignore[call-overload]
+    if proc.returncode != 0:
+        tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-40:])
+        raise BuildError(f"{what} failed (exit {proc.returncode}): {' '.join(cmd)}\n{tail}")
+    return proc
+
+
+def build_wheel(out: Path) -> Path:
+    run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(out), str(REPO)], "building antalate's wheel")
+    return sorted(out.glob("antalate-*.whl"))[-1]
+
+
+def wheelhouse(wheel: Path, out: Path, arch: str) -> list[Path]:
+    """antalate's wheel and its dependencies' for ``arch`` in ``out`` (opencv left out)."""
+    out.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(wheel, out / wheel.name)
+    machine = MACHINE[arch]
+    platforms = [f"manylinux_{g}_{machine}" for g in _GLIBC] + [f"manylinux2014_{machine}", f"linux_{machine}"]
+    cmd = [sys.executable, "-m", "pip", "download", "-q", "--dest", str(out), "--only-binary=:all:",
+           "--python-version", PYTHON_VERSION, "--implementation", "cp",
+           *[a for p in platforms for a in ("--platform", p)], str(out / wheel.name)]
+    run(cmd, f"downloading the dependencies' wheels for {arch}")
+    for left_out in (p for p in out.glob("*.whl") if p.name.startswith(LEFT_OUT)):
+        left_out.unlink()
+    return sorted(out.glob("*.whl"))
+
+
+def podman(opts: Sequence[str], *args: str) -> list[str]:
+    return ["podman", *opts, *args]
+
+
+def debian_rootfs(work: Path, arch: str) -> Path:
+    """Debian bookworm as a tarball, from the host's own apt sources (mmdebstrap)."""
+    tarball = work / f"base-{arch}.tar"
+    cmd = ["mmdebstrap", "--variant=essential", f"--architectures={arch}", f"--include={','.join(DEBIAN_PACKAGES)}",
+           "--dpkgopt=path-exclude=/usr/share/doc/*", "--dpkgopt=path-include=/usr/share/doc/*/copyright",
+           "--dpkgopt=path-exclude=/usr/share/man/*", "--dpkgopt=path-exclude=/usr/share/locale/*",
+           "--dpkgopt=path-exclude=/usr/share/info/*"]
+    if "false" in subprocess.run(["apt-config", "dump", "Acquire::Check-Valid-Until"], capture_output=True,
+                                 text=True).stdout:
+        cmd.append('--aptopt=Acquire::Check-Valid-Until "false"')  # a snapshot mirror, as the host has
+    cmd += [DEBIAN_SUITE, str(tarball)]
+    sources = Path("/etc/apt/sources.list.d/debian.sources")
+    if sources.exists():
+        cmd.append(str(sources))  # the mirror this host is allowed to use
+    run(cmd, f"mmdebstrap of Debian {DEBIAN_SUITE} ({arch})")
+    return tarball
+
+
+def import_base(tarball: Path, arch: str, opts: Sequence[str], tag: str | None = None) -> str:
+    """``podman import`` the root file system; returns the base image's reference."""
+    tag = tag or f"localhost/antalate-base:{DEBIAN_SUITE}-{arch}"
+    # an imported file system has no image config: give it the PATH every Debian image has
+    change = ["--change", "ENV PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"]
+    run(podman(opts, "import", *change, *(["--arch", arch] if arch != host_arch() else []), str(tarball), tag),
+        "podman import of the base")
+    return tag
+
+
+def build_image(context: Path, base: str, tag: str, arch: str, opts: Sequence[str]) -> None:
+    shutil.copy2(HERE / "Containerfile", context / "Containerfile")
+    shutil.copy2(HERE / "healthcheck.py", context / "healthcheck.py")
+    run(podman(opts, "build", "--format", "docker", "--pull=never", "--isolation", "chroot", "--network", "host",
+               "--arch", arch, "--build-arg", f"BASE={base}", "-t", tag, "-f", str(context / "Containerfile"),
+               str(context)), f"podman build of {tag}")
+
+
+def image_size(tag: str, opts: Sequence[str]) -> int:
+    out = run(podman(opts, "image", "inspect", tag), "podman image inspect").stdout
+    return int(json.loads(out)[0]["Size"])
+
+
+def build(
+    *, arch: str, tag: str, base: str | None, wheel: Path | None, opts: Sequence[str], work: Path
+) -> tuple[str, int]:
+    """Every step; returns the image's reference and size in bytes."""
+    context = work / "context"
+    wheels = context / "wheels"
+    wheelhouse(wheel or build_wheel(work / "dist"), wheels, arch)
+    base_ref = base or import_base(debian_rootfs(work, arch), arch, opts)
+    build_image(context, base_ref, tag, arch, opts)
+    return tag, image_size(tag, opts)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--arch", default=host_arch(), choices=sorted(MACHINE), help="target architecture")
+    parser.add_argument("--tag", help="image reference (default localhost/antalate:VERSION-ARCH)")
+    parser.add_argument("--base", help="base image reference (default: Debian made here by mmdebstrap)")
+    parser.add_argument("--wheel", type=Path, help="antalate wheel to install (default: built from this checkout)")
+    parser.add_argument("--podman-opt", action="append", default=[], help="global podman option (repeatable)")
+    args = parser.parse_args(argv)
+    for tool in ("podman", *(() if args.base else ("mmdebstrap",))):
+        if shutil.which(tool) is None:
+            print(f"build_image: {tool} is not installed (Debian: apt-get install {tool})", file=sys.stderr)
+            return 2
+    from importlib.metadata import version
+
+    tag = args.tag or f"localhost/antalate:{version('antalate')}-{args.arch}"
+    with tempfile.TemporaryDirectory(prefix="antalate-image-") as tmp:
+        try:
+            ref, size = build(arch=args.arch, tag=tag, base=args.base, wheel=args.wheel, opts=args.podman_opt,
+                              work=Path(tmp))
+        except BuildError as exc:
+            print(f"build_image: {exc}", file=sys.stderr)
+            return 1
+    print(f"built {ref}: {size / 1e6:.0f} MB")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

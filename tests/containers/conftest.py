@@ -1,0 +1,86 @@
+"""The image, built once per session (a few minutes: mmdebstrap, the wheelhouse, podman build).
+
+Skips with the reason where podman cannot run here (no root, no podman or mmdebstrap, no Debian
+mirror, no container can start); once a container runs, a failing image build is a failure.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from tests.containers.support import Podman, RootNetns, load_build_module, podman_unavailable
+from tests.wheel_support import build_wheel
+
+
+@dataclass
+class Image:
+    podman: Podman
+    tag: str
+    size: int
+    build_seconds: float
+    wheel: Path
+    work: Path
+
+
+@pytest.fixture(scope="session")
+def antalate_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
+    reason = podman_unavailable()
+    if reason:
+        pytest.skip(reason)
+    build = load_build_module()
+    arch = build.host_arch()
+    work = tmp_path_factory.mktemp("image")
+    started = time.monotonic()
+    wheel = build_wheel(work)
+    try:
+        rootfs = build.debian_rootfs(work, arch)
+    except build.BuildError as exc:
+        pytest.skip(f"cannot make the Debian base here (mmdebstrap): {exc}")
+    problems = []
+    chosen: Podman | None = None
+    base = ""
+    # every container of the session runs on the host network of a private namespace: never the host's
+    netns = RootNetns()
+    for driver in ("overlay", "vfs"):  # vfs where overlay cannot be mounted (nested containers)
+        pod = Podman(work / f"podman-{driver}", driver, netns)
+        try:
+            base = build.import_base(rootfs, arch, pod.opts)
+        except build.BuildError as exc:
+            problems.append(f"{driver}: {exc}")
+            continue
+        for flags in (["--log-driver=k8s-file"], ["--log-driver=k8s-file", "--cgroups=disabled"]):
+            probe = pod("run", "--rm", "--network", "host", *flags, base, "/bin/true", timeout=120)
+            if probe.returncode == 0:
+                pod.run_flags = flags
+                chosen = pod
+                break
+            problems.append(f"{driver} {' '.join(flags)}: {probe.stderr.strip()[-500:]}")
+        if chosen is not None:
+            break
+        pod.reset()
+    if chosen is None:
+        netns.close()
+        pytest.skip("podman cannot run a container here:\n" + "\n".join(problems))
+    tag = f"localhost/antalate:test-{arch}"
+    context = work / "context"
+    try:
+        build.wheelhouse(wheel, context / "wheels", arch)
+        build.build_image(context, base, tag, arch, chosen.opts)  # a failure here is the image's fault
+    except BaseException:
+        chosen.reset()
+        netns.close()
+        raise
+    size = build.image_size(tag, chosen.opts)
+    image = Image(chosen, tag, size, time.monotonic() - started, wheel, work)
+    print(f"\nantalate image {tag}: {size / 1e6:.0f} MB, built in {image.build_seconds:.0f} s "
+          f"(storage {chosen.driver}, run flags {chosen.run_flags or 'none'})")
+    try:
+        yield image
+    finally:
+        chosen.reset()
+        netns.close()

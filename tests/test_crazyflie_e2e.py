@@ -301,10 +301,15 @@ def test_link_loss_is_reported_within_link_timeout_and_recovered(fly: Callable[.
     d.wait("mc", 10, state="STANDBY", agent="cf1")
 
 
-def test_refused_arm_reaches_the_operator_with_its_reason(fly: Callable[..., Driver], tmp_path: Path) -> None:
-    d = fly([(agent_doc("cf1", tmp_path, operator={}), {"locked": True})])
+@pytest.mark.parametrize(("emu", "words"), [
+    ({"locked": True}, ("locked", "reboot")),
+    ({"converged": False}, ("not converged", "max_position_variance")),
+], ids=["locked-supervisor", "estimator-not-converged"])
+def test_refused_arm_reaches_the_operator_with_its_reason(fly: Callable[..., Driver], tmp_path: Path,
+                                                          emu: dict[str, Any], words: tuple[str, ...]) -> None:
+    d = fly([(agent_doc("cf1", tmp_path, operator={}), emu)])
     error = d.wait("error", 20, code="ARM_FAILED")
-    assert "locked" in error["text"] and "reboot" in error["text"]
+    assert all(w in error["text"] for w in words), error
     d.wait("mc", 10, state="STANDBY", agent="cf1")
     assert not d.last("emu")["flying"]
 

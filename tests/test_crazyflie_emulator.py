@@ -96,10 +96,11 @@ def test_log_block_streams_values_at_its_period(emu: CrazyflieEmulator) -> None:
     scf = connect(emu)
     try:
         got, _ = stream(scf, ["stateEstimate.z", "pm.vbat", "pm.batteryLevel", "supervisor.info"], period_ms=100)
-        assert wait_for(lambda: len(got) >= 6)
-        stamps = [ts for ts, _ in got[:6]]
-        gaps = [b - a for a, b in zip(stamps, stamps[1:], strict=False)]
-        assert all(80 <= g <= 130 for g in gaps), gaps  # the firmware's ms timestamps, one period apart
+        assert wait_for(lambda: len(got) >= 12)
+        stamps = [ts for ts, _ in got[:12]]
+        gaps = sorted(b - a for a, b in zip(stamps, stamps[1:], strict=False))
+        # the firmware's ms timestamps, one period apart (the median: a loaded host may stall one send)
+        assert 90 <= gaps[len(gaps) // 2] <= 110, gaps
         data = got[-1][1]
         assert data["pm.vbat"] == pytest.approx(4.1, abs=1e-6) and data["pm.batteryLevel"] == 90
     finally:

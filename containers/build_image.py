@@ -1,6 +1,6 @@
 """Build the antalate container image with nothing but package registries (PyPI, a Debian mirror).
 
-    python3 containers/build_image.py [--arch amd64|arm64] [--tag antalate:0.1.0]
+    sudo .venv/bin/python containers/build_image.py [--arch amd64|arm64] [--tag antalate:0.1.0]
                                       [--base REF] [--wheel antalate-*.whl] [--podman-opt=--root=DIR ...]
 
 1. the wheelhouse: antalate's wheel (built from this checkout unless ``--wheel``) and every
@@ -12,7 +12,7 @@
    ``localhost/antalate-base:bookworm-ARCH``. A foreign architecture needs qemu-user-static with
    binfmt_misc, for mmdebstrap and for the build's RUN step;
 3. ``podman build`` of containers/Containerfile (docker format: OCI images cannot carry a
-   HEALTHCHECK), the build step in a chroot, never pulling.
+   HEALTHCHECK), the build step in a chroot, never pulling a ``localhost/`` base.
 
 Prints the image's size. Tests import this module (tests/containers/).
 """
@@ -112,7 +112,8 @@ def import_base(tarball: Path, arch: str, opts: Sequence[str], tag: str | None =
 def build_image(context: Path, base: str, tag: str, arch: str, opts: Sequence[str]) -> None:
     shutil.copy2(HERE / "Containerfile", context / "Containerfile")
     shutil.copy2(HERE / "healthcheck.py", context / "healthcheck.py")
-    run(podman(opts, "build", "--format", "docker", "--pull=never", "--isolation", "chroot", "--network", "host",
+    pull = "never" if base.startswith("localhost/") else "missing"  # only a stock base may come from a registry
+    run(podman(opts, "build", "--format", "docker", f"--pull={pull}", "--isolation", "chroot", "--network", "host",
                "--arch", arch, "--build-arg", f"BASE={base}", "-t", tag, "-f", str(context / "Containerfile"),
                str(context)), f"podman build of {tag}")
 
@@ -146,9 +147,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if shutil.which(tool) is None:
             print(f"build_image: {tool} is not installed (Debian: apt-get install {tool})", file=sys.stderr)
             return 2
-    from importlib.metadata import version
+    import tomllib
 
-    tag = args.tag or f"localhost/antalate:{version('antalate')}-{args.arch}"
+    version = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["version"]
+    tag = args.tag or f"localhost/antalate:{version}-{args.arch}"
     with tempfile.TemporaryDirectory(prefix="antalate-image-") as tmp:
         try:
             ref, size = build(arch=args.arch, tag=tag, base=args.base, wheel=args.wheel, opts=args.podman_opt,

@@ -7,6 +7,10 @@
 #                       library) and the cross-language (Java) decoding test
 #   ffmpeg              the video_capture behavior
 #   tmux                the real-terminal test of the operator console
+#   gcc, pkg-config, liblcm-dev, libssl-dev   the C node built from `antalate types --lang c`
+#   chromium            the web console (`antalate tui --web`) in a headless browser
+#   podman, mmdebstrap  the container image (Debian base made from the mirror, no registry)
+#   qemu-user-static    arm64 images, only where binfmt_misc can be used
 # Without root (and without passwordless sudo) it says what to install and carries on: the tests
 # that need a missing tool skip with the reason.
 set -u
@@ -23,6 +27,16 @@ need xauth xauth
 compgen -G '/usr/lib/jvm/*/lib/libawt_xawt.so' >/dev/null || want+=(default-jre)
 need ffmpeg ffmpeg
 need tmux tmux
+need cc gcc
+need pkg-config pkg-config
+[ -f /usr/include/lcm/lcm.h ] || want+=(liblcm-dev)
+[ -f /usr/include/openssl/hmac.h ] || want+=(libssl-dev)
+need chromium chromium
+need podman podman
+need mmdebstrap mmdebstrap
+if [ -w /proc/sys/fs/binfmt_misc/register ] && [ ! -e /proc/sys/fs/binfmt_misc/qemu-aarch64 ]; then
+  want+=(qemu-user-static binfmt-support)
+fi
 [ ${#want[@]} -eq 0 ] && exit 0
 pkgs=$(printf '%s\n' "${want[@]}" | sort -u | tr '\n' ' ')
 if ! command -v apt-get >/dev/null 2>&1; then

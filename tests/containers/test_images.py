@@ -92,10 +92,8 @@ def test_a_mission_with_every_node_in_its_own_container(antalate_image: Image, n
     names = {node: f"antalate-{node}-{run_id}" for node in nodes}
     try:
         for node, args in nodes.items():
-            # podman 4.3 schedules health checks with systemd timers, which a host without systemd
-            # lacks: the check is run by hand below (podman exec of the image's HEALTHCHECK command)
-            started = pod("run", "-d", "--name", names[node], "--network", "host", "--no-healthcheck",
-                          *pod.run_flags, *([] if node == "station" else mount), tag, *args)
+            # pod.run_flags has --no-healthcheck: the check is run by hand below (podman exec)
+            started = pod("run", "-d", "--name", names[node], "--network", "host", *pod.run_flags, *([] if node == "station" else mount), tag, *args)
             assert started.returncode == 0, f"{node}: {started.stderr}"
         proc = netns.popen([sys.executable, "-m", "tests.lan.lan_operator", str(operator_toml)],
                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)

@@ -82,19 +82,18 @@ def podman(opts: Sequence[str], *args: str) -> list[str]:
 
 
 def debian_rootfs(work: Path, arch: str) -> Path:
-    """Debian bookworm as a tarball, from the host's own apt sources (mmdebstrap)."""
+    """Debian bookworm as a tarball (mmdebstrap from Debian's mirror)."""
     tarball = work / f"base-{arch}.tar"
     cmd = ["mmdebstrap", "--variant=essential", f"--architectures={arch}", f"--include={','.join(DEBIAN_PACKAGES)}",
            "--dpkgopt=path-exclude=/usr/share/doc/*", "--dpkgopt=path-include=/usr/share/doc/*/copyright",
            "--dpkgopt=path-exclude=/usr/share/man/*", "--dpkgopt=path-exclude=/usr/share/locale/*",
            "--dpkgopt=path-exclude=/usr/share/info/*"]
-    if "false" in subprocess.run(["apt-config", "dump", "Acquire::Check-Valid-Until"], capture_output=True,
-                                 text=True).stdout:
-        cmd.append('--aptopt=Acquire::Check-Valid-Until "false"')  # a snapshot mirror, as the host has
-    cmd += [DEBIAN_SUITE, str(tarball)]
-    sources = Path("/etc/apt/sources.list.d/debian.sources")
-    if sources.exists():
-        cmd.append(str(sources))  # the mirror this host is allowed to use
+    for option in ("Acquire::Check-Valid-Until", "Acquire::Check-Date"):
+        # what this host's apt was told about the mirror's dates (a snapshot mirror, a clock off)
+        said = subprocess.run(["apt-config", "dump", option], capture_output=True, text=True).stdout
+        if f'{option} "false";' in said:
+            cmd.append(f'--aptopt={option} "false"')
+    cmd += [DEBIAN_SUITE, str(tarball)]  # Debian's mirror, with bookworm-updates and security
     run(cmd, f"mmdebstrap of Debian {DEBIAN_SUITE} ({arch})")
     return tarball
 

@@ -82,6 +82,13 @@ def open_lcm(url: str) -> lcm.LCM:
         raise open_failure(url, noise) from None
 
 
+def open_zenoh(url: str) -> Any:
+    """A ``zenoh://`` bus: the same LCM-encoded messages over Zenoh (docs/wan.md)."""
+    from antalate_lcm.zenoh_bus import ZenohLCM
+
+    return ZenohLCM(url)
+
+
 #: Characters with a meaning in LCM's channel regular expressions.
 _REGEX_SPECIAL = re.compile(r"([.^$*+?()\[\]{}|\\])")
 
@@ -107,7 +114,7 @@ class _Link:
 
     def __init__(self, url: str, queue_capacity: int, decode_log: RateLimitedLog) -> None:
         self.url = url
-        self._lcm: lcm.LCM | None = open_lcm(url)
+        self._lcm: Any = open_zenoh(url) if url.startswith("zenoh://") else open_lcm(url)
         self._capacity = queue_capacity
         # Routing tables are replaced, never mutated, so the dispatcher reads them without a lock.
         self._routes: dict[str, _Route] = {}
@@ -241,7 +248,9 @@ class _Link:
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join()
         # liblcm frees its sockets when the object is deallocated; drop our only reference.
-        self._lcm = None
+        lc, self._lcm = self._lcm, None
+        if hasattr(lc, "close"):
+            lc.close()  # a Zenoh session is closed explicitly (its links and threads)
 
 
 class Bus:

@@ -16,7 +16,15 @@ file       ``PATH`` of an LCM log        ``mode`` (r, w or a), ``speed`` (replay
                                          as fast as possible), ``start_timestamp`` (µs)
 tcpq       ``HOST:PORT`` (empty:         none (needs an LCM TCP queue server)
            127.0.0.1:7700)
+zenoh      key prefix (empty:            ``connect``, ``listen`` (comma-separated Zenoh endpoints
+           ``antalate``)                 ``tcp/HOST:PORT``), ``mode`` (peer or client), ``scout``
+                                         (0/1: multicast scouting), ``express`` (0/1: no batching),
+                                         ``lease`` (ms a silent link lives; default 3000),
+                                         ``config`` (a Zenoh JSON5 file applied first)
 =========  ============================  ===================================================
+
+``zenoh://`` is antalate's own (not liblcm's): the same LCM-encoded bytes over Zenoh, one key
+``PREFIX/CHANNEL`` per channel (:mod:`antalate_lcm.zenoh_bus`, docs/wan.md).
 
 GROUP is a dotted IPv4 multicast address (224.0.0.0/4), PORT 1-65535 (sources: liblcm's
 ``lcm.h``, ``lcm.c``, ``lcm_udpm.c``, ``lcm_mpudpm.c``, ``lcm_file.c``, ``lcm_tcpq.c``).
@@ -94,8 +102,64 @@ OPTIONS: dict[str, dict[str, Callable[[str], str | None]]] = {
         "start_timestamp": _int("start_timestamp", 0, 2**63 - 1, "microseconds since 1970, >= 0"),
     },
     "tcpq": {},
+    "zenoh": {
+        "connect": lambda v: zenoh_endpoints_problem("connect", v),
+        "listen": lambda v: zenoh_endpoints_problem("listen", v),
+        "mode": lambda v: None if v in ("peer", "client") else f"peer or client for option mode, not {v!r}",
+        "scout": lambda v: None if v in ("0", "1") else f"0 or 1 for option scout (multicast scouting), not {v!r}",
+        "express": lambda v: None if v in ("0", "1") else f"0 or 1 for option express (no batching), not {v!r}",
+        "lease": _int("lease", 500, 3_600_000, "a link lease in milliseconds, 500 to 3600000"),
+        "config": lambda v: None if v else "the path of a Zenoh JSON5 config file for option config",
+    },
 }
 PROVIDERS = tuple(OPTIONS)
+
+
+#: Zenoh link protocols whose address is HOST:PORT (zenoh also has unixsock-stream/PATH).
+_ZENOH_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+_ZENOH_CHUNK = re.compile(r"[^*$?#%/\s]+")
+
+
+def zenoh_endpoints_problem(option: str, value: str) -> str | None:
+    """A problem with a comma-separated list of Zenoh endpoints (``tcp/10.0.0.3:7447``), or None."""
+    if not value:
+        return f"Zenoh endpoints for option {option}, e.g. {option}=tcp/192.0.2.10:7447"
+    for endpoint in value.split(","):
+        proto, sep, address = endpoint.partition("/")
+        if proto == "unixsock-stream" and sep and address:
+            continue
+        if proto not in _ZENOH_PROTOCOLS or not sep:
+            return (
+                f"a Zenoh endpoint PROTOCOL/HOST:PORT ({', '.join(_ZENOH_PROTOCOLS)}, unixsock-stream/PATH) "
+                f"for option {option}, not {endpoint!r}"
+            )
+        host, colon, port = address.rpartition(":")
+        bare = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+        if not colon or not (_HOSTNAME.fullmatch(bare) or _ip(bare)):
+            return f"HOST:PORT after {proto}/ in option {option} ([v6]:PORT for IPv6), not {address!r}"
+        if not (_DECIMAL.fullmatch(port) and 1 <= int(port) <= 65535):
+            return f"a port 1-65535 in option {option}, not {port!r} (in {endpoint!r})"
+    return None
+
+
+def _ip(text: str) -> bool:
+    try:
+        ipaddress.ip_address(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _zenoh(u: LcmUrl) -> LcmUrl:
+    prefix = u.network or "antalate"
+    if not all(_ZENOH_CHUNK.fullmatch(chunk) for chunk in prefix.split("/")):
+        raise ValueError(
+            f"a Zenoh key prefix after zenoh:// (chunks separated by /, none empty, no * $ ? # % or spaces), "
+            f"not {u.network!r}"
+        )
+    if u.options.get("mode") == "client" and "connect" not in u.options:
+        raise ValueError("option connect with mode=client (the router to reach, e.g. connect=tcp/192.0.2.10:7447)")
+    return LcmUrl(u.url, u.provider, prefix, u.options)
 
 
 def _split(url: str) -> LcmUrl:
@@ -172,6 +236,8 @@ def parse_lcm_url(url: str) -> LcmUrl:
         if u.network:
             raise ValueError(f"nothing after memq:// (it is private to the process), not {u.network!r}")
         return u
+    if u.provider == "zenoh":
+        return _zenoh(u)
     if u.provider == "file":
         if not u.network:
             raise ValueError("the path of an LCM log after file:// (file:///abs/path.lcm or file://rel/path.lcm)")
@@ -218,4 +284,5 @@ __all__ = [
     "multicast_route_missing",
     "open_failure",
     "parse_lcm_url",
+    "zenoh_endpoints_problem",
 ]

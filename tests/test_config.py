@@ -216,7 +216,7 @@ def test_every_lcm_provider_is_accepted(tmp_path: Path, url: str) -> None:
 @pytest.mark.parametrize(
     ("url", "expected"),
     [
-        ("http://127.0.0.1:8080", "an LCM provider (udpm://, mpudpm://, memq://, file://, tcpq://), not 'http://'"),
+        ("http://127.0.0.1:8080", "an LCM provider (udpm://, mpudpm://, memq://, file://, tcpq://, zenoh://), not 'http://'"),
         ("udp://239.255.76.67:7667", "not 'udp://'"),
         ("localhost:7667", "provider://network"),
         ("://239.255.76.67:7667", "provider://network"),

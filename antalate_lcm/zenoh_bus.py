@@ -1,0 +1,352 @@
+"""The ``zenoh://`` transport: antalate's LCM-encoded messages over Zenoh, past the first router.
+
+It offers the small part of ``lcm.LCM`` the bus uses -- ``publish``, ``subscribe`` (a channel regex
+matched whole, as liblcm does) with ``set_queue_capacity``, ``unsubscribe``, ``handle``,
+``handle_timeout`` and ``fileno`` -- so :class:`antalate_lcm.bus.Bus` drives it exactly like an LCM
+instance, and so would an event loop waiting on ``fileno()``.
+
+Why it is built this way:
+
+- A sample carries exactly the bytes LCM would send (fingerprint and ``header.mac`` included), so
+  signing and the replay guard work the same on both transports and across a bridge.
+- One Zenoh key per channel, ``PREFIX/CHANNEL`` (channel characters Zenoh reserves are escaped), so
+  Zenoh routes exact subscriptions itself; a regex subscription listens on ``PREFIX/**`` and filters.
+- Zenoh calls back on its own threads; samples go to one FIFO and are handled by whoever calls
+  ``handle`` (the bus's dispatcher thread), like LCM's. A socketpair is readable exactly while the
+  FIFO holds a sample, so ``select`` on ``fileno()`` works.
+- Each subscription queues at most its capacity (dropped beyond, as LCM does), so a slow handler
+  cannot grow memory without bound on a fast link.
+- A copy a bridge forwarded (attachment ``antalate-bridge:...``) is delivered once per subscription
+  even when two bridges forward the same message: identical bytes on one channel within
+  :data:`DEDUP_WINDOW` are one message (every antalate message has its own ``header.seq``/utime).
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import hashlib
+import json
+import logging
+import re
+import select
+import socket
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from antalate_lcm.errors import BusUnavailable
+from antalate_lcm.lcm_url import LcmUrl, parse_lcm_url
+
+log = logging.getLogger("antalate.zenoh")
+
+LcmHandler = Callable[[str, bytes], None]
+
+#: Attachment prefix of a sample a bridge forwarded (followed by the bridge's id).
+BRIDGE_MARK = b"antalate-bridge:"
+#: How long identical forwarded bytes on one channel count as the same message (s).
+DEDUP_WINDOW = 2.0
+#: Default link lease (ms): how long a silent link is kept before reconnecting.
+DEFAULT_LEASE_MS = 3000
+#: LCM's default queue capacity per subscription (the bus raises it).
+DEFAULT_CAPACITY = 30
+
+_SPECIAL = ".^$*+?()[]{}|\\"
+_LITERAL = re.compile(r"(?:[^.^$*+?()\[\]{}|\\]|\\[.^$*+?()\[\]{}|\\])*")
+#: Characters a Zenoh key cannot hold (wildcards, verbatim-chunk ``@``), escaped as %XX in a channel.
+_KEY_UNSAFE = re.compile(r"[%*$?#@\s]")
+_EMPTY_CHUNK = "%-"
+
+
+def channel_key(prefix: str, channel: str) -> str:
+    """The Zenoh key of ``channel``: ``prefix/channel``, reserved characters and empty chunks escaped."""
+    chunks = [_KEY_UNSAFE.sub(lambda m: f"%{ord(m.group()):02X}", c) if c else _EMPTY_CHUNK for c in channel.split("/")]
+    return f"{prefix}/{'/'.join(chunks)}"
+
+
+def key_channel(prefix: str, key: str) -> str | None:
+    """The channel a key under ``prefix`` carries (inverse of :func:`channel_key`); None if not ours."""
+    if not key.startswith(prefix + "/"):
+        return None
+    out = []
+    for chunk in key[len(prefix) + 1 :].split("/"):
+        if chunk == _EMPTY_CHUNK:
+            out.append("")
+        else:
+            out.append(re.sub(r"%([0-9A-F]{2})", lambda m: chr(int(m.group(1), 16)), chunk))
+    return "/".join(out)
+
+
+def literal_channel(regex: str) -> str | None:
+    """The one channel an LCM channel regex matches when it is a literal (``alpha/MC_STATE``), else None."""
+    if not _LITERAL.fullmatch(regex):
+        return None
+    return re.sub(r"\\(.)", r"\1", regex)
+
+
+def zenoh_config(u: LcmUrl) -> Any:
+    """A ``zenoh.Config`` for a parsed ``zenoh://`` URL. Multicast scouting is off unless ``scout=1``:
+    a bus reaches exactly the endpoints its config names, never whatever answers on the LAN."""
+    import zenoh
+
+    opts = u.options
+    config = zenoh.Config.from_file(opts["config"]) if "config" in opts else zenoh.Config()
+    if "mode" in opts:
+        config.insert_json5("mode", json.dumps(opts["mode"]))
+    elif "config" not in opts:
+        config.insert_json5("mode", json.dumps("client" if "connect" in opts and "listen" not in opts else "peer"))
+    for option in ("connect", "listen"):
+        if option in opts:
+            config.insert_json5(f"{option}/endpoints", json.dumps(opts[option].split(",")))
+    if "scout" in opts or "config" not in opts:
+        enabled = json.dumps(opts.get("scout") == "1")
+        config.insert_json5("scouting/multicast/enabled", enabled)
+        config.insert_json5("scouting/gossip/enabled", "true")
+    if "config" not in opts:
+        # Field links come back: retry a lost router quickly and keep retrying forever.
+        retry = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}
+        config.insert_json5("connect/retry", json.dumps(retry))
+        config.insert_json5("connect/timeout_ms", json.dumps({"router": -1, "peer": -1, "client": 0}))
+        config.insert_json5("connect/exit_on_failure", json.dumps({"router": False, "peer": False, "client": False}))
+        config.insert_json5("listen/exit_on_failure", "true")
+    if "lease" in opts or "config" not in opts:
+        # A cut link is noticed within the lease (Zenoh's default, 10 s, outlives a short outage's
+        # TCP backoff), then the client reconnects at most 1 s after the link is back.
+        config.insert_json5("transport/link/tx/lease", opts.get("lease", str(DEFAULT_LEASE_MS)))
+    return config
+
+
+@dataclass(eq=False)
+class ZenohSubscription:
+    """What :meth:`ZenohLCM.subscribe` returns (``set_queue_capacity`` as on an LCM subscription)."""
+
+    regex: str
+    handler: LcmHandler
+    channel: str | None
+    pattern: re.Pattern[str] | None
+    capacity: int = DEFAULT_CAPACITY
+    pending: int = 0
+    dropped: int = 0
+    active: bool = True
+    remote_only: bool = False
+    zsub: Any = None
+    seen: dict[tuple[str, bytes], float] = field(default_factory=dict)
+
+    def set_queue_capacity(self, capacity: int) -> None:
+        self.capacity = max(1, int(capacity))
+
+
+class ZenohLCM:
+    """A Zenoh session that looks like an ``lcm.LCM`` instance to the bus."""
+
+    def __init__(self, url: str) -> None:
+        try:
+            u = parse_lcm_url(url)
+        except ValueError as exc:
+            raise BusUnavailable(url, f"expected {exc}") from None
+        if u.provider != "zenoh":
+            raise BusUnavailable(url, "expected a zenoh:// URL")
+        self.url = url
+        self.prefix = u.network
+        self._express = u.options.get("express", "0") == "1"
+        try:
+            import zenoh
+        except ImportError:
+            raise BusUnavailable(url, "the Zenoh library is not installed: pip install 'antalate[zenoh]'") from None
+        self._zenoh = zenoh
+        self._config = zenoh_config(u)
+        self._session: Any = None
+        self._subs: list[ZenohSubscription] = []
+        self._publishers: dict[str, Any] = {}
+        self._queue: collections.deque[tuple[ZenohSubscription, str, bytes]] = collections.deque()
+        self._lock = threading.Lock()  # the FIFO (taken on Zenoh's threads)
+        self._subs_lock = threading.Lock()  # the session and the subscription list (never on Zenoh's threads)
+        self._rsock, self._wsock = socket.socketpair()
+        self._rsock.setblocking(False)
+        self._wsock.setblocking(False)
+        self._closed = False
+        self._opened = threading.Event()
+        #: Samples dropped because a subscription's queue was full.
+        self.dropped = 0
+        try:
+            self._open()
+        except zenoh.ZError as exc:
+            # A client whose router is not reachable yet (vehicle booted before its LTE link): the
+            # node starts anyway, publishing fails (counted by the bus) until the router answers.
+            if "Unable to connect" not in str(exc):
+                raise BusUnavailable(url, f"Zenoh could not open a session ({exc})") from None
+            log.warning("%s: the Zenoh router is not reachable yet (%s); retrying every second", url, exc)
+            threading.Thread(target=self._open_later, name=f"zenoh-open {url}", daemon=True).start()
+
+    def _open(self) -> None:
+        session = self._zenoh.open(self._config)
+        with self._subs_lock:
+            if self._closed:
+                session.close()
+                return
+            self._session = session
+            for sub in self._subs:
+                if sub.active and sub.zsub is None:
+                    self._declare(sub)
+        self._opened.set()
+
+    def _open_later(self) -> None:
+        while not self._closed:
+            time.sleep(1.0)
+            try:
+                self._open()
+            except self._zenoh.ZError:
+                continue
+            log.info("%s: connected to the Zenoh router", self.url)
+            return
+
+    @property
+    def connected(self) -> bool:
+        """Whether the session is open (a client reached its router at least once)."""
+        return self._opened.is_set()
+
+    # ------------------------------------------------------------------ lcm.LCM's interface
+    def publish(self, channel: str, data: bytes, attachment: bytes | None = None) -> None:
+        """Send ``data`` on ``channel``; raises OSError when the session is closed (like a dead socket)."""
+        publisher = self._publishers.get(channel)
+        try:
+            if publisher is None:
+                if self._closed:
+                    raise OSError(f"Zenoh session {self.url} is closed")
+                if self._session is None:
+                    raise OSError(f"Zenoh session {self.url}: the router has not been reached yet")
+                publisher = self._publishers[channel] = self._session.declare_publisher(
+                    channel_key(self.prefix, channel), express=self._express
+                )
+            if attachment is None:
+                publisher.put(data)
+            else:
+                publisher.put(data, attachment=attachment)
+        except self._zenoh.ZError as exc:
+            raise OSError(f"Zenoh session {self.url}: {exc}") from None
+
+    def subscribe(self, channel_regex: str, handler: LcmHandler, *, remote_only: bool = False) -> ZenohSubscription:
+        """Deliver every message whose channel the regex matches whole; ``remote_only`` skips this
+        session's own publications (a bridge must not hear itself)."""
+        channel = literal_channel(channel_regex)
+        pattern = None if channel is not None else re.compile(channel_regex)
+        sub = ZenohSubscription(channel_regex, handler, channel, pattern, remote_only=remote_only)
+        with self._subs_lock:
+            self._subs = [s for s in self._subs if s.active] + [sub]
+            if self._session is not None:
+                self._declare(sub)
+        return sub
+
+    def _declare(self, sub: ZenohSubscription) -> None:
+        key = channel_key(self.prefix, sub.channel) if sub.channel is not None else f"{self.prefix}/**"
+        origin = self._zenoh.Locality.REMOTE if sub.remote_only else None
+        sub.zsub = self._session.declare_subscriber(key, lambda sample: self._on_sample(sub, sample), allowed_origin=origin)
+
+    def unsubscribe(self, sub: ZenohSubscription) -> None:
+        sub.active = False
+        if sub.zsub is not None:
+            zsub, sub.zsub = sub.zsub, None
+            with contextlib.suppress(self._zenoh.ZError):  # the session is already closed
+                zsub.undeclare()
+
+    def fileno(self) -> int:
+        """Readable while a received message waits for :meth:`handle`."""
+        return self._rsock.fileno()
+
+    def handle(self) -> int:
+        """Handle one message, waiting as long as it takes."""
+        while not self.handle_timeout(1000):
+            if self._closed:
+                raise OSError(f"Zenoh session {self.url} is closed")
+        return 0
+
+    def handle_timeout(self, timeout_ms: int) -> int:
+        """Handle one message if one arrives within ``timeout_ms``: 1 if one was handled, else 0."""
+        item = self._pop()
+        if item is None:
+            if self._closed:
+                raise OSError(f"Zenoh session {self.url} is closed")
+            readable, _, _ = select.select([self._rsock], [], [], max(0, timeout_ms) / 1000)
+            if not readable:
+                return 0
+            item = self._pop()
+            if item is None:
+                return 0
+        sub, channel, data = item
+        if sub.active:
+            sub.handler(channel, data)
+        return 1
+
+    def close(self) -> None:
+        """Close the session (every subscription with it). Idempotent."""
+        if self._closed:
+            return
+        with self._subs_lock:
+            self._closed = True
+            session, self._session = self._session, None
+        try:
+            if session is not None:
+                session.close()
+        except Exception:  # noqa: BLE001 - closing must not fail a shutdown
+            log.debug("closing %s", self.url, exc_info=True)
+        self._publishers.clear()
+        self._rsock.close()
+        self._wsock.close()
+
+    # ------------------------------------------------------------------ Zenoh's threads
+    def _on_sample(self, sub: ZenohSubscription, sample: Any) -> None:
+        if not sub.active:
+            return
+        channel = sub.channel
+        if channel is None:
+            channel = key_channel(self.prefix, str(sample.key_expr))
+            if channel is None or sub.pattern is None or not sub.pattern.fullmatch(channel):
+                return
+        data = sample.payload.to_bytes()
+        attachment = sample.attachment
+        forwarded = attachment is not None and attachment.to_bytes().startswith(BRIDGE_MARK)
+        with self._lock:
+            if forwarded and _duplicate(sub, channel, data):
+                return
+            if sub.pending >= sub.capacity:
+                sub.dropped += 1
+                self.dropped += 1
+                return
+            sub.pending += 1
+            was_empty = not self._queue
+            self._queue.append((sub, channel, data))
+            if was_empty and not self._closed:
+                with contextlib.suppress(OSError):  # closing, or the byte is already there
+                    self._wsock.send(b"\0")
+
+    def _pop(self) -> tuple[ZenohSubscription, str, bytes] | None:
+        with self._lock:
+            if not self._queue:
+                return None
+            item = self._queue.popleft()
+            item[0].pending -= 1
+            if not self._queue:
+                try:
+                    while self._rsock.recv(4096):
+                        pass
+                except OSError:
+                    pass  # drained (BlockingIOError) or closed
+            return item
+
+
+def _duplicate(sub: ZenohSubscription, channel: str, data: bytes) -> bool:
+    """Whether this subscription already had these forwarded bytes on this channel lately."""
+    now = time.monotonic()
+    key = (channel, hashlib.blake2b(data, digest_size=16).digest())
+    seen = sub.seen
+    if len(seen) > 4096:
+        for k in [k for k, t in seen.items() if now - t > DEDUP_WINDOW]:
+            del seen[k]
+    last = seen.get(key)
+    seen[key] = now
+    return last is not None and now - last <= DEDUP_WINDOW
+
+
+__all__ = ["BRIDGE_MARK", "DEDUP_WINDOW", "ZenohLCM", "ZenohSubscription", "channel_key", "key_channel", "literal_channel"]

@@ -219,3 +219,17 @@ def test_a_link_cflib_gives_up_on_is_reopened(rig: Callable[..., Any]) -> None:
     assert ap.reconnects == 1 and ap.state().in_air
     ap.land()  # commands work again on the new link
     assert wait_for(lambda: ap.state().landed, timeout=10.0)
+
+
+def test_a_failed_reconnection_never_drops_a_flying_crazyflie(rig: Callable[..., Any]) -> None:
+    """A reopening attempt that times out as the radio returns closes its link without zero thrust."""
+    emu, ap = rig(connect_timeout=1.0)
+    airborne(emu, ap)
+    emu.set_silent(True)
+    ap._cf._link_error_cb("Too many packets lost")  # the old link is closed: no more pings
+    time.sleep(0.3)
+    before = emu.dropped
+    assert wait_for(lambda: emu.dropped > before)  # the first attempt's request is lost: it will time out
+    emu.set_silent(False)  # the radio is back as it gives up: its close reaches the vehicle
+    assert wait_for(lambda: ap.reconnects >= 1 and ap.state().connected, timeout=10.0)
+    assert emu.snapshot().flying and emu.snapshot().z > 0.9

@@ -212,7 +212,7 @@ def test_silence_stops_every_packet_both_ways(emu: CrazyflieEmulator) -> None:
 
 
 def test_cflib_closing_the_link_in_flight_stops_the_motors(emu: CrazyflieEmulator) -> None:
-    """cflib's close_link sends a zero-thrust legacy set-point: why the adapter's close is an emergency stop."""
+    """cflib's close_link sends a zero-thrust legacy set-point: why the adapter closes links without it."""
     scf = connect(emu)
     scf.cf.supervisor.send_arming_request(True)
     assert wait_for(lambda: emu.snapshot().armed)

@@ -248,6 +248,7 @@ class CrazyflieEmulator:
         self.received: list[tuple[int, int, bytes]] = []
         self.hl_commands: list[tuple[str, tuple[float, ...]]] = []
         self.setpoints = 0
+        self.dropped = 0  # datagrams lost to silence
         self.notify_stops = 0
         self.emergency_stops = 0
 
@@ -369,6 +370,7 @@ class CrazyflieEmulator:
                 continue
             with self._lock:
                 if self.silent:
+                    self.dropped += 1
                     continue
                 self._peer = sender
                 if data[0] == 0xFF:  # null packet (cflib's UDP scan, radio keep-alive)

@@ -21,7 +21,9 @@ What the adapter does on top of cflib, and why (docs/crazyflie.md has the operat
   battery is low. After a landing the adapter disarms, so a landed vehicle reads disarmed on every
   platform (some arm themselves at power-on).
 * **Shutdown in the air**: `close` sends an emergency stop (motors off) before closing the link:
-  nothing would command the vehicle any more, and cflib's own close sends a zero-thrust set-point.
+  nothing would command the vehicle any more (under the high-level commander it would hover until its
+  battery is empty). Every other close -- a failed connection or reconnection -- avoids cflib's
+  parting zero-thrust set-point, which would drop a flying Crazyflie (`_close_quietly`).
 * **cflib closing the link**: its radio driver gives up after a run of lost packets ("Too many
   packets lost") and closes the link for good; the adapter reopens it every ``_RECONNECT_S`` until the
   Crazyflie answers, so a radio outage is the HLC's recoverable LLC_DOWN, not the end of the agent.
@@ -210,10 +212,19 @@ class CrazyflieAutopilot(Autopilot):
 
     @staticmethod
     def _close_quietly(cf: Any) -> None:
+        """Close a cflib link *without* cflib's parting zero-thrust set-point.
+
+        ``Crazyflie.close_link`` sends ``send_setpoint(0, 0, 0, 0)`` first, which stops the motors of a
+        flying Crazyflie: a reconnection attempt that timed out just as the radio came back would drop
+        the vehicle. The driver is closed first, so close_link finds no link to send on.
+        """
         try:
+            link, cf.link = cf.link, None
+            if link is not None:
+                link.close()
             cf.close_link()
         except Exception:  # noqa: BLE001 - closing a half-open link must not mask the real error
-            log.debug("closing a failed cflib link raised", exc_info=True)
+            log.debug("closing a cflib link raised", exc_info=True)
 
     def close(self) -> None:
         self._stop.set()

@@ -15,8 +15,10 @@ import re
 import shutil
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 from aiohttp.test_utils import TestClient, TestServer
@@ -157,6 +159,14 @@ def screenshot_dir(tmp_path: Path) -> Path:
     return target
 
 
+def _drain(stream: Any) -> None:
+    try:
+        for _ in stream:
+            pass
+    except (ValueError, OSError):  # closed when the browser is stopped
+        pass
+
+
 def read_devtools_url(proc: subprocess.Popen[str], deadline_s: float) -> str | None:
     assert proc.stderr is not None
     deadline = time.monotonic() + deadline_s
@@ -168,6 +178,8 @@ def read_devtools_url(proc: subprocess.Popen[str], deadline_s: float) -> str | N
         seen.append(line)
         m = re.search(r"DevTools listening on (ws://[^\s]+)", line)
         if m:
+            # keep reading its log, or a chatty Chromium blocks on a full pipe
+            threading.Thread(target=_drain, args=(proc.stderr,), daemon=True).start()
             return m[1]
     raise AssertionError("Chromium did not start:\n" + "".join(seen[-30:]))
 

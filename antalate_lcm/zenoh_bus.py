@@ -42,7 +42,7 @@ from antalate_lcm.lcm_url import LcmUrl, parse_lcm_url
 
 log = logging.getLogger("antalate.zenoh")
 
-LcmHandler = Callable[[str, bytes], None]
+LcmHandler = Callable[..., None]
 
 #: Attachment prefix of a sample a bridge forwarded (followed by the bridge's id).
 BRIDGE_MARK = b"antalate-bridge:"
@@ -131,6 +131,8 @@ class ZenohSubscription:
     dropped: int = 0
     active: bool = True
     remote_only: bool = False
+    #: Call the handler with a third argument: the sample's attachment (bytes or None).
+    attachments: bool = False
     zsub: Any = None
     seen: dict[tuple[str, bytes], float] = field(default_factory=dict)
 
@@ -160,7 +162,7 @@ class ZenohLCM:
         self._session: Any = None
         self._subs: list[ZenohSubscription] = []
         self._publishers: dict[str, Any] = {}
-        self._queue: collections.deque[tuple[ZenohSubscription, str, bytes]] = collections.deque()
+        self._queue: collections.deque[tuple[ZenohSubscription, str, bytes, bytes | None]] = collections.deque()
         self._lock = threading.Lock()  # the FIFO (taken on Zenoh's threads)
         self._subs_lock = threading.Lock()  # the session and the subscription list (never on Zenoh's threads)
         self._rsock, self._wsock = socket.socketpair()
@@ -227,12 +229,15 @@ class ZenohLCM:
         except self._zenoh.ZError as exc:
             raise OSError(f"Zenoh session {self.url}: {exc}") from None
 
-    def subscribe(self, channel_regex: str, handler: LcmHandler, *, remote_only: bool = False) -> ZenohSubscription:
+    def subscribe(
+        self, channel_regex: str, handler: LcmHandler, *, remote_only: bool = False, attachments: bool = False
+    ) -> ZenohSubscription:
         """Deliver every message whose channel the regex matches whole; ``remote_only`` skips this
-        session's own publications (a bridge must not hear itself)."""
+        session's own publications (a bridge must not hear itself); ``attachments`` passes each
+        sample's attachment as a third argument (a bridge reads where a copy came from)."""
         channel = literal_channel(channel_regex)
         pattern = None if channel is not None else re.compile(channel_regex)
-        sub = ZenohSubscription(channel_regex, handler, channel, pattern, remote_only=remote_only)
+        sub = ZenohSubscription(channel_regex, handler, channel, pattern, remote_only=remote_only, attachments=attachments)
         with self._subs_lock:
             self._subs = [s for s in self._subs if s.active] + [sub]
             if self._session is not None:
@@ -274,9 +279,12 @@ class ZenohLCM:
             item = self._pop()
             if item is None:
                 return 0
-        sub, channel, data = item
+        sub, channel, data, attachment = item
         if sub.active:
-            sub.handler(channel, data)
+            if sub.attachments:
+                sub.handler(channel, data, attachment)
+            else:
+                sub.handler(channel, data)
         return 1
 
     def close(self) -> None:
@@ -305,8 +313,9 @@ class ZenohLCM:
             if channel is None or sub.pattern is None or not sub.pattern.fullmatch(channel):
                 return
         data = sample.payload.to_bytes()
-        attachment = sample.attachment
-        forwarded = attachment is not None and attachment.to_bytes().startswith(BRIDGE_MARK)
+        zatt = sample.attachment
+        attachment = zatt.to_bytes() if zatt is not None else None
+        forwarded = attachment is not None and attachment.startswith(BRIDGE_MARK)
         with self._lock:
             if forwarded and _duplicate(sub, channel, data):
                 return
@@ -316,12 +325,12 @@ class ZenohLCM:
                 return
             sub.pending += 1
             was_empty = not self._queue
-            self._queue.append((sub, channel, data))
+            self._queue.append((sub, channel, data, attachment))
             if was_empty and not self._closed:
                 with contextlib.suppress(OSError):  # closing, or the byte is already there
                     self._wsock.send(b"\0")
 
-    def _pop(self) -> tuple[ZenohSubscription, str, bytes] | None:
+    def _pop(self) -> tuple[ZenohSubscription, str, bytes, bytes | None] | None:
         with self._lock:
             if not self._queue:
                 return None

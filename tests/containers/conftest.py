@@ -6,6 +6,8 @@ mirror, no container can start); once a container runs, a failing image build is
 
 from __future__ import annotations
 
+import shutil
+import tempfile
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -46,8 +48,10 @@ def antalate_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
     base = ""
     # every container of the session runs on the host network of a private namespace: never the host's
     netns = RootNetns()
+    # podman's own folders on a short path: conmon's sockets live there (sun_path is 108 bytes)
+    podman_root = Path(tempfile.mkdtemp(prefix="antalate-ct-", dir="/var/tmp"))
     for driver in ("overlay", "vfs"):  # vfs where overlay cannot be mounted (nested containers)
-        pod = Podman(work / f"podman-{driver}", driver, netns)
+        pod = Podman(podman_root / driver, driver, netns)
         try:
             base = build.import_base(rootfs, arch, pod.opts)
         except build.BuildError as exc:
@@ -68,6 +72,7 @@ def antalate_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
         pod.reset()
     if chosen is None:
         netns.close()
+        shutil.rmtree(podman_root, ignore_errors=True)
         pytest.skip("podman cannot run a container here:\n" + "\n".join(problems))
     tag = f"localhost/antalate:test-{arch}"
     context = work / "context"
@@ -77,6 +82,7 @@ def antalate_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
     except BaseException:
         chosen.reset()
         netns.close()
+        shutil.rmtree(podman_root, ignore_errors=True)
         raise
     size = build.image_size(tag, chosen.opts)
     image = Image(chosen, tag, size, time.monotonic() - started, wheel, work)
@@ -87,3 +93,4 @@ def antalate_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
     finally:
         chosen.reset()
         netns.close()
+        shutil.rmtree(podman_root, ignore_errors=True)

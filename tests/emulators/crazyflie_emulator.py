@@ -44,7 +44,7 @@ drains while the motors run; ``pm.batteryLevel`` follows the firmware's LiPo cha
 ``pm.state`` becomes lowPower (3) below the low voltage (3.2 V on a Crazyflie 2.x). The Kalman
 estimator's position variances (``kalman.varPX/PY/PZ``) are what ``converged`` sets.
 
-Fault knobs: ``set_silent(True)`` (the radio is gone both ways), ``set_battery(volts)``,
+Fault knobs: ``set_silent(True)`` (the radio is gone both ways; ``dropped`` counts what it ate), ``set_battery(volts)``,
 ``set_locked(True)`` (the supervisor refuses to arm, so a take-off cannot happen),
 ``set_converged(False)`` (the estimator's variances stay large), ``drain`` (V/s in flight).
 """

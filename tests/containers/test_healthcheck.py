@@ -65,3 +65,40 @@ def test_a_config_that_does_not_load_or_a_foreign_command_is_unhealthy(netns: Ne
     code, said = health(netns, "sleep 100")
     assert code == 1 and said.startswith("unhealthy: not an antalate command line"), said
     assert health(netns, "antalate keygen") == (0, "healthy (antalate keygen)")
+
+
+def load_healthcheck():  # type: ignore[no-untyped-def]
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("antalate_healthcheck", HEALTHCHECK)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_what_is_checked_for_each_command_line(tmp_path: Path) -> None:
+    """Pure: the plan read from a command line (no bus, no HTTP)."""
+    import re
+
+    from tests.agent_harness import to_toml
+
+    hc = load_healthcheck()
+    cfg = tmp_path / "alpha.toml"
+    cfg.write_text(to_toml(agent_config("alpha", security={"insecure": True})))
+    swarm = hc.plan(["/opt/antalate/bin/python", "/opt/antalate/bin/antalate", "agent", str(cfg), "--agents", "3"])
+    assert isinstance(swarm, hc.LcmCheck) and swarm.urls == ("udpm://239.255.76.67:7667?ttl=0",)
+    assert re.fullmatch(swarm.channel_regex, "alpha-02/MC_STATE") and not re.fullmatch(swarm.channel_regex, "beta/MC_STATE")
+    station_toml = tmp_path / "station.toml"
+    station_toml.write_text('[station]\nhost = "0.0.0.0"\nport = 9090\n')
+    assert hc.plan(["antalate", "station", "--config", str(station_toml)]) == hc.HttpCheck(
+        "http://127.0.0.1:9090/api/station", "the station")
+    assert hc.plan(["antalate", "station", "--port", "8443", "--tls-cert", "c.pem", "--tls-key", "k.pem"]).url == (
+        "https://127.0.0.1:8443/api/station")
+    assert hc.plan(["antalate", "tui", "--web", "--port", "8001"]) == hc.HttpCheck(
+        "http://127.0.0.1:8001/login", "the web console")
+    assert isinstance(hc.plan(["python", "-m", "antalate_lcm.cli", "tui"]), hc.NothingToCheck)
+    memq = tmp_path / "memq.toml"
+    memq.write_text('[agent]\nname = "m"\n[buses]\nlan = "memq://"\n')
+    assert isinstance(hc.plan(["antalate", "mc", str(memq)]), hc.NothingToCheck)

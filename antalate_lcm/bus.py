@@ -1,4 +1,4 @@
-"""The bus: named LCM instances with typed publish/subscribe and one dispatcher thread each.
+"""The bus: named LCM instances with typed publish/subscribe, read by the process's event loop.
 
 How it uses LCM, and why (measured with lcm 1.5.3, see ``benchmarks/bus.py``):
 
@@ -7,11 +7,15 @@ How it uses LCM, and why (measured with lcm 1.5.3, see ``benchmarks/bus.py``):
   and a datagram nobody in this process listens to -- above all the process's own publications,
   which multicast loops back -- is dropped in C without waking Python.
 - Each LCM subscription's queue is raised (the library default of 30 messages silently drops bursts).
+- No thread of its own: the :class:`~antalate_lcm.executor.Executor` (the process's one event loop)
+  waits on every instance's ``fileno()`` and calls ``handle`` when it is readable, so handlers run
+  on the loop thread, where the nodes live, with no queue between (rclpy's wait set). A bus given
+  no executor (:meth:`Bus.attach`) starts a private one on its first subscription.
 - LCM subscriptions are added from the subscribing thread (liblcm guards its handler table) but
-  removed only by the dispatcher thread between two ``handle`` calls: unsubscribing from inside a
+  removed only on the loop thread between two ``handle`` calls: unsubscribing from inside a
   handler can crash lcm 1.5.x.
-- The dispatcher thread starts with the first subscription, so a publish-only bus never reads its
-  own traffic.
+- An instance's descriptor is watched from its first subscription, so a publish-only bus never
+  reads its own traffic.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from typing import Any
 import lcm
 
 from antalate_lcm._ratelimit import RateLimitedLog
+from antalate_lcm.executor import Executor
 from antalate_lcm.lcm_url import open_failure
 
 log = logging.getLogger("antalate.bus")
@@ -41,6 +46,8 @@ _UNDECODABLE = object()
 
 #: Messages LCM may queue for us before dropping (the library default of 30 drops bursts).
 DEFAULT_QUEUE_CAPACITY = 10_000
+#: Messages handled per readable event before the loop looks at its timers and other descriptors.
+_BATCH = 64
 
 
 @dataclass(eq=False)
@@ -110,20 +117,22 @@ class _Route:
 
 
 class _Link:
-    """One LCM instance and its dispatcher thread."""
+    """One LCM instance, read by the event loop while it has subscriptions."""
 
-    def __init__(self, url: str, queue_capacity: int, decode_log: RateLimitedLog) -> None:
+    def __init__(
+        self, url: str, queue_capacity: int, decode_log: RateLimitedLog, executor: Callable[[], Executor]
+    ) -> None:
         self.url = url
         self._lcm: Any = open_zenoh(url) if url.startswith("zenoh://") else open_lcm(url)
         self._capacity = queue_capacity
-        # Routing tables are replaced, never mutated, so the dispatcher reads them without a lock.
+        # Routing tables are replaced, never mutated, so the loop reads them without a lock.
         self._routes: dict[str, _Route] = {}
         self._patterns: tuple[Subscription, ...] = ()
         self._star: Any = None
         self._retire: list[Any] = []
         self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._executor = executor
+        self._watched: tuple[Executor, int] | None = None
         self._decode_log = decode_log
         self.decode_errors: dict[str, int] = {}
         self.handler_errors = 0
@@ -147,9 +156,12 @@ class _Link:
                 if self._star is None:
                     self._star = lc.subscribe(".*", self._on_pattern)
                     self._star.set_queue_capacity(self._capacity)
-            if self._thread is None:
-                self._thread = threading.Thread(target=self._run, name=f"lcm-dispatch {self.url}", daemon=True)
-                self._thread.start()
+            watch = self._watched is None
+            if watch:
+                ex = self._executor()
+                self._watched = (ex, lc.fileno())  # liblcm starts reading the sockets here
+        if watch:
+            ex.add_reader(self._watched[1], self._on_readable)
 
     def remove(self, sub: Subscription) -> None:
         sub.active = False
@@ -168,27 +180,45 @@ class _Link:
                 if not self._patterns and self._star is not None:
                     self._retire.append(self._star)
                     self._star = None
+            watched = self._watched
+        if self._retire and watched is not None:
+            watched[0].call_soon(self._flush_retired)
 
     def publish(self, channel: str, data: bytes) -> None:
         lc = self._lcm
         assert lc is not None, "bus is closed"
         lc.publish(channel, data)
 
-    def _run(self) -> None:
+    def _on_readable(self) -> None:
+        """On the loop thread: handle what is queued (a batch at most), then drop retired subscriptions."""
         lc = self._lcm
-        assert lc is not None
-        while not self._stop.is_set():
-            try:
-                lc.handle_timeout(100)
-            except OSError as exc:
-                # A finished file:// log (replay) ends here; a socket error would repeat forever.
-                log.info("LCM provider %s stopped delivering: %s", self.url, exc)
-                return
-            if self._retire:
-                with self._lock:
-                    retire, self._retire = self._retire, []
-                for lcm_sub in retire:
-                    lc.unsubscribe(lcm_sub)
+        if lc is None:
+            return
+        try:
+            # handle_timeout(0), not handle(): a spurious wake-up must never block the whole loop.
+            for _ in range(_BATCH):
+                if lc.handle_timeout(0) <= 0:
+                    break
+        except OSError as exc:
+            # A finished file:// log (replay) ends here; a socket error would repeat forever.
+            log.info("LCM provider %s stopped delivering: %s", self.url, exc)
+            self._unwatch()
+        if self._retire:
+            self._flush_retired()
+
+    def _flush_retired(self) -> None:
+        lc = self._lcm
+        with self._lock:
+            retire, self._retire = self._retire, []
+        if lc is not None:
+            for lcm_sub in retire:
+                lc.unsubscribe(lcm_sub)
+
+    def _unwatch(self) -> None:
+        with self._lock:
+            watched, self._watched = self._watched, None
+        if watched is not None:
+            watched[0].remove_reader(watched[1])
 
     def _on_exact(self, route: _Route, channel: str, data: bytes) -> None:
         if not route.retired:
@@ -244,9 +274,7 @@ class _Link:
         )
 
     def close(self) -> None:
-        self._stop.set()
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join()
+        self._unwatch()
         # liblcm frees its sockets when the object is deallocated; drop our only reference.
         lc, self._lcm = self._lcm, None
         if hasattr(lc, "close"):
@@ -256,8 +284,9 @@ class _Link:
 class Bus:
     """Named LCM buses of a process (the paper's proxies). Thread-safe; share one per process.
 
-    Handlers run on the bus's dispatcher thread; nodes hand them to their executor
-    (:class:`antalate_lcm.node.Node` does this), so node code never needs locks.
+    Handlers run on the thread of the executor the bus is attached to (:meth:`attach`; a
+    :class:`~antalate_lcm.node.Context` attaches its own), where the nodes' callbacks run, so node
+    code never needs locks. An unattached bus reads on a private executor thread of its own.
     """
 
     def __init__(self, urls: Mapping[str, str], *, queue_capacity: int = DEFAULT_QUEUE_CAPACITY) -> None:
@@ -270,6 +299,27 @@ class Bus:
         self._publish_log = RateLimitedLog(log, period=10.0)
         self.publish_errors = 0
         self._closed = False
+        self._executor: Executor | None = None
+        self._own_executor = False
+
+    def attach(self, executor: Executor) -> None:
+        """Deliver on ``executor``'s loop; before the first subscription (handlers must not move)."""
+        with self._lock:
+            if self._executor is executor:
+                return
+            if self._executor is not None:
+                raise RuntimeError("this bus already delivers on another executor")
+            self._executor = executor
+
+    @property
+    def executor(self) -> Executor:
+        """The loop that reads this bus (a private one, started now, if none was attached)."""
+        with self._lock:
+            if self._executor is None:
+                self._executor = Executor(name="lcm-dispatch")
+                self._own_executor = True
+                self._executor.start()
+            return self._executor
 
     def _link(self, bus: str) -> _Link:
         link = self._by_name.get(bus)
@@ -284,7 +334,9 @@ class Bus:
                 raise RuntimeError("bus is closed")
             link = self._links.get(url)
             if link is None:
-                link = self._links[url] = _Link(url, self._queue_capacity, self._decode_log)
+                link = self._links[url] = _Link(
+                    url, self._queue_capacity, self._decode_log, lambda: self.executor
+                )
             self._by_name[bus] = link
             return link
 
@@ -330,12 +382,14 @@ class Bus:
         return out
 
     def close(self) -> None:
-        """Stop every dispatcher thread and release the sockets. Idempotent."""
+        """Stop reading, release the sockets (and stop a private executor). Idempotent."""
         with self._lock:
             self._closed = True
             links, self._links, self._by_name = list(self._links.values()), {}, {}
         for link in links:
             link.close()
+        if self._own_executor and self._executor is not None:
+            self._executor.stop()
 
     def __enter__(self) -> Bus:
         return self

@@ -1,16 +1,21 @@
-"""One thread that runs every callback and timer of the nodes in a process.
+"""The process's one event loop: every LCM socket, timer and node callback runs on its thread.
 
-Like rclpy's single-threaded executor: LCM dispatcher threads only decode and enqueue, so node code
-(state machines, behaviors) runs on a single thread and needs no locks. A callback that raises is
-logged and the executor carries on.
+Like rclpy's wait set, the loop waits on every LCM instance's file descriptor (``lcm.fileno()``),
+its timers and a wake-up for other threads, and calls ``handle()`` when a descriptor is readable:
+a message reaches its node's handler on the loop thread with no hop through a queue, and node code
+(state machines, behaviors) runs on a single thread and needs no locks. Blocking work (autopilot
+I/O) runs on worker threads that post their results back with :meth:`Executor.call_soon`.
+
+It is an asyncio loop (uvloop when installed: measured in ``benchmarks/bus.py``, it dispatches a
+datagram faster than a selector loop written in Python), so asyncio code can share it through
+:attr:`Executor.loop`. A callback that raises is logged and the loop carries on.
 """
 
 from __future__ import annotations
 
-import heapq
-import itertools
+import asyncio
+import contextlib
 import logging
-import queue
 import threading
 import time
 from collections.abc import Callable
@@ -21,58 +26,123 @@ log = logging.getLogger("antalate.executor")
 T = TypeVar("T")
 
 
+def new_event_loop() -> asyncio.AbstractEventLoop:
+    """uvloop when installed (it comes with uvicorn[standard]), else asyncio's own loop."""
+    try:
+        import uvloop
+    except ImportError:  # pragma: no cover - uvloop is a dependency; plain asyncio still works
+        return asyncio.new_event_loop()
+    return uvloop.new_event_loop()
+
+
 class Timer:
-    """A periodic (or one-shot) callback; :meth:`cancel` stops it."""
+    """A periodic (or one-shot) callback; :meth:`cancel` stops it (from any thread)."""
+
+    __slots__ = ("period", "fn", "oneshot", "cancelled", "due", "_handle")
 
     def __init__(self, period: float, fn: Callable[[], Any], *, oneshot: bool = False) -> None:
         self.period = period
         self.fn = fn
         self.oneshot = oneshot
         self.cancelled = False
+        self.due = 0.0
+        self._handle: asyncio.TimerHandle | None = None
 
     def cancel(self) -> None:
+        # The flag is what counts (the loop checks it before each run); dropping the handle only
+        # frees the loop's slot early, and asyncio handles are not thread-safe, hence the flag.
         self.cancelled = True
 
 
 class Executor:
+    """One event loop on one thread: LCM descriptors, timers and callbacks of a process's nodes."""
+
     def __init__(self, name: str = "antalate-executor", clock: Callable[[], float] = time.monotonic) -> None:
         self.name = name
+        #: What nodes read as ``now`` (timers themselves run on the loop's monotonic clock).
         self.clock = clock
-        self._calls: queue.SimpleQueue[tuple[Callable[..., Any], tuple[Any, ...]] | None] = queue.SimpleQueue()
-        self._timers: list[tuple[float, int, Timer]] = []
-        self._timers_lock = threading.Lock()
-        self._order = itertools.count()
-        self._running = False
+        self._loop = new_event_loop()
+        self._readers: dict[int, Callable[[], None]] = {}
         self._thread: threading.Thread | None = None
+        self._ident: int | None = None
+        self._started = False
+        self._running = False
         #: Worst delay seen between a timer's due time and its run (s): the executor's headroom.
         self.max_timer_lag = 0.0
         self.callbacks_run = 0
 
+    @property
+    def loop(self) -> asyncio.AbstractEventLoop:
+        """The asyncio loop (for coroutines that belong with the nodes: run them with
+        ``asyncio.run_coroutine_threadsafe(coro, executor.loop)``)."""
+        return self._loop
+
+    def on_loop_thread(self) -> bool:
+        return threading.get_ident() == self._ident
+
+    def _direct(self) -> bool:
+        """True when the loop's structures may be touched from here: on its thread, or before it runs."""
+        return self._ident == threading.get_ident() or not self._started
+
     # ------------------------------------------------------------------ scheduling (any thread)
     def call_soon(self, fn: Callable[..., Any], *args: Any) -> None:
-        self._calls.put((fn, args))
+        """Run ``fn(*args)`` on the loop thread, after what is already queued (in call order)."""
+        loop = self._loop
+        try:
+            if self._direct():
+                loop.call_soon(self._invoke, fn, args)
+            else:
+                loop.call_soon_threadsafe(self._invoke, fn, args)
+        except RuntimeError:
+            # The loop is closed: the process is shutting down, like a call queued after stop().
+            log.debug("dropped %s: the executor is stopped", getattr(fn, "__qualname__", fn))
 
     def create_timer(self, period: float, fn: Callable[[], Any], *, first_delay: float | None = None) -> Timer:
         """Run ``fn`` every ``period`` s; the first run after ``first_delay`` (default: one period)."""
         if period <= 0:
             raise ValueError("timer period must be > 0")
         timer = Timer(period, fn)
-        self._schedule(timer, self.clock() + (period if first_delay is None else first_delay))
+        self._schedule(timer, period if first_delay is None else first_delay)
         return timer
 
     def call_later(self, delay: float, fn: Callable[[], Any]) -> Timer:
         timer = Timer(delay, fn, oneshot=True)
-        self._schedule(timer, self.clock() + delay)
+        self._schedule(timer, delay)
         return timer
 
-    def _schedule(self, timer: Timer, due: float) -> None:
-        with self._timers_lock:
-            heapq.heappush(self._timers, (due, next(self._order), timer))
-        self._calls.put((_noop, ()))  # wake the loop so it recomputes its sleep
+    def _schedule(self, timer: Timer, delay: float) -> None:
+        if self._direct():
+            self._arm(timer, self._loop.time() + max(delay, 0.0))
+        else:
+            self.call_soon(lambda: self._arm(timer, self._loop.time() + max(delay, 0.0)))
+
+    def _arm(self, timer: Timer, due: float) -> None:
+        if timer.cancelled:
+            return
+        timer.due = due
+        try:
+            timer._handle = self._loop.call_at(due, self._fire, timer)
+        except RuntimeError:
+            log.debug("timer not armed: the executor is stopped")
+
+    def _fire(self, timer: Timer) -> None:
+        timer._handle = None
+        if timer.cancelled:
+            return
+        now = self._loop.time()
+        lag = now - timer.due
+        if lag > self.max_timer_lag:
+            self.max_timer_lag = lag
+        self._invoke(timer.fn, ())
+        if not timer.oneshot and not timer.cancelled:
+            nxt = timer.due + timer.period
+            if nxt <= now:  # fell behind: skip missed runs rather than burst
+                nxt = now + timer.period
+            self._arm(timer, nxt)
 
     def run_sync(self, fn: Callable[[], T], timeout: float = 10.0) -> T:
-        """Run ``fn`` on the executor thread and return its result (for set-up, tests and shutdown)."""
-        if threading.current_thread() is self._thread or not self._running:
+        """Run ``fn`` on the loop thread and return its result (for set-up, tests and shutdown)."""
+        if self._ident == threading.get_ident() or not self._running:
             return fn()
         fut: Future[T] = Future()
 
@@ -85,26 +155,75 @@ class Executor:
         self.call_soon(call)
         return fut.result(timeout)
 
+    # ------------------------------------------------------------------ file descriptors
+    def add_reader(self, fd: int, callback: Callable[[], None]) -> None:
+        """Call ``callback`` on the loop thread whenever ``fd`` is readable (an LCM ``fileno()``)."""
+        self._readers[fd] = callback
+        if self._direct():
+            self._loop.add_reader(fd, callback)
+        else:
+            self.run_sync(lambda: self._loop.add_reader(fd, callback))
+
+    def remove_reader(self, fd: int) -> None:
+        if self._readers.pop(fd, None) is None or self._loop.is_closed():
+            return
+        if self._direct():
+            self._loop.remove_reader(fd)
+        else:
+            self.run_sync(lambda: self._loop.remove_reader(fd))
+
     # ------------------------------------------------------------------ running
     def start(self) -> None:
-        """Spin in a background thread."""
+        """Run the loop in a background thread."""
         if self._thread is not None:
             return
-        self._running = True
-        self._thread = threading.Thread(target=self._loop, name=self.name, daemon=True)
+        self._prepare()
+        self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
         self._thread.start()
 
     def spin(self) -> None:
-        """Spin in the calling thread until :meth:`stop`."""
-        self._running = True
+        """Run the loop in the calling thread until :meth:`stop`."""
+        self._prepare()
         self._thread = threading.current_thread()
-        self._loop()
+        self._run()
+
+    def _prepare(self) -> None:
+        if self._loop.is_closed():  # restarted after stop(): a fresh loop, the same descriptors
+            self._loop = new_event_loop()
+            for fd, callback in self._readers.items():
+                self._loop.add_reader(fd, callback)
+        self._started = self._running = True
+
+    def _run(self) -> None:
+        loop = self._loop
+        self._ident = threading.get_ident()
+        asyncio.set_event_loop(loop)
+        try:
+            loop.run_forever()
+        finally:
+            self._ident = None
+            self._started = self._running = False
+            asyncio.set_event_loop(None)
+            for fd in self._readers:
+                loop.remove_reader(fd)
+            loop.close()
 
     def stop(self) -> None:
+        """Stop the loop and join its thread (from any thread, the loop's own included)."""
         self._running = False
-        self._calls.put(None)
         thread = self._thread
-        if thread is not None and thread is not threading.current_thread() and thread.is_alive():
+        loop = self._loop
+        if thread is None:
+            if not loop.is_closed() and not loop.is_running():
+                loop.close()
+            return
+        if self._ident == threading.get_ident():
+            loop.stop()  # _run closes the loop when the current callback returns
+            self._thread = None
+            return
+        with contextlib.suppress(RuntimeError):  # already closed
+            loop.call_soon_threadsafe(loop.stop)
+        if thread is not threading.current_thread() and thread.is_alive():
             thread.join(timeout=5)
         self._thread = None
 
@@ -112,50 +231,9 @@ class Executor:
     def running(self) -> bool:
         return self._running
 
-    def _loop(self) -> None:
-        while self._running:
-            timeout = self._run_due_timers()
-            try:
-                item = self._calls.get(timeout=timeout)
-            except queue.Empty:
-                continue
-            while item is not None:
-                self._invoke(*item)
-                try:
-                    item = self._calls.get_nowait()
-                except queue.Empty:
-                    break
-            if item is None and not self._running:
-                break
-
-    def _run_due_timers(self) -> float:
-        while True:
-            now = self.clock()
-            with self._timers_lock:
-                if not self._timers:
-                    return 0.5
-                due, _, timer = self._timers[0]
-                if due > now:
-                    return min(due - now, 0.5)
-                heapq.heappop(self._timers)
-            if timer.cancelled:
-                continue
-            self.max_timer_lag = max(self.max_timer_lag, now - due)
-            self._invoke(timer.fn, ())
-            if not timer.oneshot and not timer.cancelled:
-                nxt = due + timer.period
-                if nxt <= now:  # fell behind: skip missed runs rather than burst
-                    nxt = now + timer.period
-                with self._timers_lock:
-                    heapq.heappush(self._timers, (nxt, next(self._order), timer))
-
     def _invoke(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
         self.callbacks_run += 1
         try:
             fn(*args)
         except Exception:
             log.exception("callback %s raised; the executor carries on", getattr(fn, "__qualname__", fn))
-
-
-def _noop() -> None:
-    return None

@@ -7,6 +7,8 @@ Security lives here, in one place (docs/security.md): with a swarm key, :meth:`N
 every message after stamping its header, and every message a node consumes through
 :meth:`Node.subscribe` / :meth:`Node.subscribe_all` is authenticated (MAC, window, sender, replay)
 and validated (:mod:`antalate_lcm.validation`) on the executor thread before the handler sees it.
+Messages reach handlers on the executor's loop thread straight from LCM's ``handle`` (the bus is
+attached to the context's executor), so there is no queue between the socket and the node.
 When an agent's nodes share a process (:meth:`Context.in_process`), its internal topics travel
 between them on an in-process bus, so no datagram from the network reaches them.
 """
@@ -50,7 +52,7 @@ class InsecureBus(AntalateError):
 
 @dataclass
 class Context:
-    """What the nodes of one process share: the bus connections and the executor thread.
+    """What the nodes of one process share: the bus connections and the executor (its one loop).
 
     ``inproc_bus`` names a memq:// bus that carries the agents' internal topics between the nodes
     of this process (see :meth:`in_process`); None when each node runs in its own process.
@@ -59,6 +61,9 @@ class Context:
     bus: Bus
     executor: Executor
     inproc_bus: str | None = None
+
+    def __post_init__(self) -> None:
+        self.bus.attach(self.executor)  # the bus's descriptors are read on the nodes' loop
 
     @classmethod
     def create(cls, config: Config) -> Context:
@@ -315,13 +320,13 @@ class Node:
         self._check_exposure(topic, bus)
         channel = self.channel(topic, **fields)
         sender = fields.get("agent", self.agent) if is_internal(topic) and "{agent}" in spec.channel else None
-        post = self.context.executor.call_soon
+        admit = self._admit
 
-        def deliver(msg: Any) -> None:
-            if self._admit(channel, msg, sender):
+        def deliver(_channel: str, msg: Any) -> None:  # on the executor's loop thread
+            if admit(channel, msg, sender):
                 handler(msg)
 
-        sub = self.context.bus.subscribe(bus, channel, spec.msg_type, lambda _ch, msg: post(deliver, msg))
+        sub = self.context.bus.subscribe(bus, channel, spec.msg_type, deliver)
         self._subs.append(sub)
         return sub
 
@@ -335,15 +340,18 @@ class Node:
         self._check_exposure(topic, bus)
         pattern = re.compile(channel_regex(spec.channel, **fields))
         bound = is_internal(topic) and "{agent}" in spec.channel
-        post = self.context.executor.call_soon
+        # Channel -> match, so a steady stream of known channels costs no regex per message.
+        matches: dict[str, TopicMatch] = {}
 
-        def admit(channel: str, msg: Any, match: TopicMatch) -> None:
+        def deliver(channel: str, msg: Any) -> None:  # on the executor's loop thread
+            match = matches.get(channel)
+            if match is None:
+                m = pattern.fullmatch(channel)
+                match = TopicMatch(channel, m.groupdict() if m else {})
+                if len(matches) < 100_000:
+                    matches[channel] = match
             if self._admit(channel, msg, match.fields.get("agent") if bound else None):
                 handler(msg, match)
-
-        def deliver(channel: str, msg: Any) -> None:
-            m = pattern.fullmatch(channel)
-            post(admit, channel, msg, TopicMatch(channel, m.groupdict() if m else {}))
 
         sub = self.context.bus.subscribe(bus, pattern.pattern, spec.msg_type, deliver, regex=True)
         self._subs.append(sub)

@@ -25,6 +25,13 @@ The round trip is also measured for ``raw-thread``: raw lcm with the Bus's threa
 (a dispatcher thread runs the handler while the sender waits), the floor for any design with a
 dispatcher thread.
 
+Node to node (``node``): a :class:`~antalate_lcm.node.Node` in each process, through the real
+executor path: ``Node.publish`` of TELEMETRY (header stamped), ``Node.subscribe`` (decode, input
+validation, then the handler on the executor's loop thread). The pinger runs on its node's loop (a
+coroutine on ``Executor.loop`` publishes and awaits the pong), the echo is a node handler that
+publishes back; the time runs from the publish to the pong handler. The sink is a node counting in
+its handler; the streaming publisher calls ``Node.publish``.
+
 Signing (docs/security.md): ``bus-signed`` is the Bus with what a node does under a swarm key on
 every message, in the same run: the sender stamps ``header.utime`` and signs (HMAC-SHA256 into
 ``header.mac``), the receiver runs the node's :class:`~antalate_lcm.security.Authenticator` (MAC,
@@ -32,6 +39,10 @@ window, replay guard) before counting or echoing; the echo re-stamps and re-sign
 round trip holds two signatures and two checks. The cost of one ``sign`` and one check is also timed
 alone, in this process. Takes about 70 s; never more than 118 s. Figures only: nothing here is a
 timed assertion (docs/design.md §12).
+
+Zenoh (``zenoh``, docs/wan.md): the same Bus on a ``zenoh://`` URL, client mode, through an
+``antalate router`` process on loopback (so every message crosses two TCP links and the router), in
+the same run as udpm and raw lcm. Targets: p50 at most 2x the Bus on udpm, 50k msg/s lossless.
 """
 
 from __future__ import annotations
@@ -63,7 +74,7 @@ from antalate_lcm.bus import DEFAULT_QUEUE_CAPACITY  # noqa: E402
 from antalate_lcm.msgs import header_t, telemetry_t  # noqa: E402
 from antalate_lcm.security import Authenticator, SecurityPolicy, signed_bytes  # noqa: E402
 
-PORTS = {"raw": 7667, "bus": 7668, "raw-thread": 7670, "bus-signed": 7671}
+PORTS = {"raw": 7667, "bus": 7668, "raw-thread": 7670, "bus-signed": 7671, "node": 7672}
 BUS_MODULES = {"bus": "antalate_lcm.bus", "bus-signed": "antalate_lcm.bus"}
 SWARM_KEY = "benchmark-swarm-key-0123456789abcdef"
 TIME_LIMIT = 118.0  # seconds for the whole run, namespace included
@@ -71,9 +82,19 @@ RATES = (10_000, 20_000, 30_000, 40_000, 50_000, 60_000, 80_000, 100_000, 120_00
 KEEP_UP = 0.05  # s: the sink must finish this soon after the last message was sent
 BLOCK = 100  # pings per turn
 TARGETS = {"p50 ratio": 1.15, "p99 bus us": 1000.0, "throughput ratio": 0.8}
+#: Node to node (issue 15): at raw lcm's latency, and most of its throughput.
+NODE_TARGETS = {"p50 ratio": 1.05, "p99 bus us": 1000.0, "throughput ratio": 0.9}
+
+
+# zenoh:// through a router on loopback (docs/wan.md): the Bus over Zenoh, next to udpm.
+PORTS["zenoh"] = 7673
+BUS_MODULES["zenoh"] = "antalate_lcm.bus"
+ZENOH_TARGETS = {"p50 ratio to bus": 2.0, "throughput": 50_000.0}
 
 
 def url(api: str) -> str:
+    if api == "zenoh":
+        return f"zenoh://?connect=tcp/127.0.0.1:{PORTS['zenoh']}&mode=client"
     return f"udpm://239.255.76.67:{PORTS[api]}?ttl=0&recv_buf_size=4194304"
 
 
@@ -109,6 +130,23 @@ def checker() -> Authenticator:
     return Authenticator(SecurityPolicy(SWARM_KEY, (), 5.0), logging.getLogger("benchmark"))
 
 
+def make_node(agent: str, api: str = "node") -> Any:
+    """A bare node (no key: unsigned like raw lcm) with its own context, its loop running."""
+    from antalate_lcm.config import parse_config
+    from antalate_lcm.node import Context, Node
+
+    # insecure: TELEMETRY is an agent-internal topic, and this compares transports, not keys
+    config = parse_config(
+        {"agent": {"name": agent}, "buses": {"lan": url(api)}, "security": {"insecure": True}}
+    )
+    context = Context.create(config)
+    context.bus.open()
+    context.executor.start()
+    node = Node(config, context, name="bench")
+    node.start()
+    return node
+
+
 # -- the other process -----------------------------------------------------------------------------
 
 
@@ -120,7 +158,17 @@ class Peer:
         self.last = 0.0
         self.api = api
         self.stop = threading.Event()
-        if api.startswith("raw"):
+        if api == "node":
+            self.node = make_node("echo" if role == "echo" else "sink")
+            if role == "echo":
+                self.node.context.executor.run_sync(
+                    lambda: self.node.subscribe("TELEMETRY", self._echo_node, agent="pinger")
+                )
+            else:
+                self.node.context.executor.run_sync(
+                    lambda: self.node.subscribe("TELEMETRY", self._count_node, agent="source")
+                )
+        elif api.startswith("raw"):
             self.lc = lcm.LCM(url(api))
             if role == "echo":
                 sub = self.lc.subscribe("PING", self._echo_raw)
@@ -138,6 +186,13 @@ class Peer:
             else:
                 self.bus.subscribe("b", "FLOOD", telemetry_t, self._count_signed if signed else self._count_bus)
             self.bus.open()
+
+    def _echo_node(self, msg: telemetry_t) -> None:
+        self.node.publish("TELEMETRY", msg, seq=msg.header.seq)
+
+    def _count_node(self, _msg: telemetry_t) -> None:
+        self.count += 1
+        self.last = time.perf_counter()
 
     def _echo_signed(self, channel: str, msg: telemetry_t) -> None:
         if self.auth.check(msg, channel) is None:
@@ -184,7 +239,10 @@ class Peer:
                 self.count = 0
                 print(json.dumps("ok"), flush=True)
         self.stop.set()
-        if not self.api.startswith("raw"):
+        if self.api == "node":
+            self.node.stop()
+            self.node.context.close()
+        elif not self.api.startswith("raw"):
             self.bus.close()
 
 
@@ -348,6 +406,43 @@ class SignedBusPinger(BusPinger):
         return self.got[1] - t0
 
 
+class NodePinger:
+    """A node pinging a node: the ping is published from the pinger node's executor thread and the time
+    runs to its pong handler there (the main thread only paces the pings and waits for the answer)."""
+
+    def __init__(self, api: str) -> None:
+        self.node = make_node("pinger")
+        self.ex = self.node.context.executor
+        self.got: tuple[int, int] = (-1, 0)
+        self.t0 = 0
+        self.event = threading.Event()
+        self.ex.run_sync(lambda: self.node.subscribe("TELEMETRY", self._on_pong, agent="echo"))
+
+    def _send(self, msg: telemetry_t) -> None:
+        self.t0 = time.perf_counter_ns()
+        self.node.publish("TELEMETRY", msg, seq=msg.header.seq)
+
+    def _on_pong(self, msg: telemetry_t) -> None:
+        self.got = (msg.header.seq, time.perf_counter_ns())
+        self.event.set()
+
+    def ping(self, msg: telemetry_t, timeout: float) -> int | None:
+        seq = msg.header.seq
+        self.event.clear()
+        self.ex.call_soon(self._send, msg)
+        deadline = time.monotonic() + timeout
+        while self.got[0] != seq:
+            left = deadline - time.monotonic()
+            if left <= 0 or not self.event.wait(left):
+                return None
+            self.event.clear()
+        return self.got[1] - self.t0
+
+    def close(self) -> None:
+        self.node.stop()
+        self.node.context.close()
+
+
 def signing_cost(n: int = 20_000) -> dict[str, float]:
     """Microseconds a signature adds to an encode, and one full check of a decoded telemetry_t, alone."""
     signer, auth, msgs = Signer(), checker(), []
@@ -372,7 +467,9 @@ def signing_cost(n: int = 20_000) -> dict[str, float]:
 def round_trip(apis: list[str], n: int, period: float = 0.001, warmup: int = 20) -> dict[str, dict[str, Any]]:
     """``n`` round trips per API at one per ``period``, the APIs taking turns in blocks of BLOCK."""
     msg = make_msg()
-    kinds: dict[str, Any] = {"raw": RawPinger, "raw-thread": RawThreadPinger, "bus-signed": SignedBusPinger}
+    kinds: dict[str, Any] = {
+        "raw": RawPinger, "raw-thread": RawThreadPinger, "bus-signed": SignedBusPinger, "node": NodePinger,
+    }
     pingers = {api: kinds.get(api, BusPinger)(api) for api in apis}
     rtts: dict[str, list[int]] = {api: [] for api in apis}
     lost = dict.fromkeys(apis, 0)
@@ -439,6 +536,14 @@ def publisher(api: str) -> tuple[Callable[[telemetry_t], object], Callable[[], N
     if api == "raw":
         lc = lcm.LCM(url(api))
         return (lambda m: lc.publish("FLOOD", m.encode())), (lambda: None)
+    if api == "node":
+        node = make_node("source")
+
+        def close() -> None:
+            node.stop()
+            node.context.close()
+
+        return (lambda m: node.publish("TELEMETRY", m)), close
     bus = bus_class(api)({"b": url(api)})
     bus.open()
     if api.endswith("-signed"):
@@ -523,12 +628,48 @@ def throughput(apis: list[str], seconds: float, burst: int, deadline: float) -> 
 # -- orchestration ---------------------------------------------------------------------------------
 
 
+def zenoh_router() -> subprocess.Popen[str] | None:
+    """``antalate router`` on loopback for the zenoh column; None (column left out) without eclipse-zenoh."""
+    try:
+        import zenoh  # noqa: F401
+    except ImportError:
+        print("zenoh: eclipse-zenoh is not installed, no zenoh column (pip install -e '.[zenoh]')")
+        return None
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "antalate_lcm.cli", "--log-level", "WARNING", "router",
+         "--listen", f"tcp/127.0.0.1:{PORTS['zenoh']}"],
+        stdout=subprocess.PIPE, text=True, cwd=str(REPO),
+    )
+    assert proc.stdout is not None
+    line = proc.stdout.readline()
+    if "listening" not in line:
+        proc.kill()
+        raise RuntimeError(f"antalate router did not start (said {line!r})")
+    return proc
+
+
+def stop_router(proc: subprocess.Popen[str]) -> None:
+    proc.terminate()
+    try:
+        proc.wait(5)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    if proc.stdout is not None:
+        proc.stdout.close()
+
+
+
 def inside(args: argparse.Namespace) -> int:
     start = time.monotonic()
     deadline = start + TIME_LIMIT - 6
-    apis = ["raw", "bus", "bus-signed"]
-    latency_apis = ["raw", "bus", "bus-signed", "raw-thread"]
+    apis = ["raw", "bus", "bus-signed", "node"]
+    latency_apis = ["raw", "bus", "bus-signed", "raw-thread", "node"]
     size = len(make_msg().encode())
+    router = zenoh_router()
+    if router is not None:
+        apis.append("zenoh")
+        latency_apis.append("zenoh")
     print(
         f"message: telemetry_t, {size} bytes; URL {url('raw')} (one port per API); queue capacity {DEFAULT_QUEUE_CAPACITY}"
     )
@@ -593,19 +734,28 @@ def inside(args: argparse.Namespace) -> int:
             f"  lossless throughput signed {tp['bus-signed']['lossless'] / 1000:.0f}k vs unsigned "
             f"{tp['bus']['lossless'] / 1000:.0f}k msg/s ({tp['bus-signed']['lossless'] / tp['bus']['lossless']:.2f}x)"
         )
+    if router is not None:
+        stop_router(router)
+        p50 = rt["zenoh"]["p50"] / rt["bus"]["p50"] if rt else nan
+        lossless = tp["zenoh"]["lossless"] if tp else nan
+        print("zenoh (through antalate router on loopback) against its targets:")
+        print(f"  {'p50 zenoh/bus':22s} {p50:8.2f}   target <= {ZENOH_TARGETS['p50 ratio to bus']:<5} "
+              f"{'met' if p50 <= ZENOH_TARGETS['p50 ratio to bus'] else 'MISSED'}")
+        print(f"  {'throughput zenoh':22s} {lossless / 1000:7.0f}k   target >= {ZENOH_TARGETS['throughput'] / 1000:.0f}k   "
+              f"{'met' if lossless >= ZENOH_TARGETS['throughput'] else 'MISSED'}")
     print("against the targets:")
-    for api in apis[1:2]:
+    for api, targets in (("bus", TARGETS), ("node", NODE_TARGETS)):
         p50_ratio = rt[api]["p50"] / rt["raw"]["p50"] if rt else nan
         p99 = rt[api]["p99"] if rt else nan
         tp_ratio = tp[api]["lossless"] / tp["raw"]["lossless"] if tp and tp["raw"]["lossless"] else nan
         for name, value, target, ok in (
-            (f"p50 {api}/raw", p50_ratio, f"<= {TARGETS['p50 ratio']}", p50_ratio <= TARGETS["p50 ratio"]),
-            (f"p99 {api} (us)", p99, f"<= {TARGETS['p99 bus us']:.0f}", p99 <= TARGETS["p99 bus us"]),
+            (f"p50 {api}/raw", p50_ratio, f"<= {targets['p50 ratio']}", p50_ratio <= targets["p50 ratio"]),
+            (f"p99 {api} (us)", p99, f"<= {targets['p99 bus us']:.0f}", p99 <= targets["p99 bus us"]),
             (
                 f"throughput {api}/raw",
                 tp_ratio,
-                f">= {TARGETS['throughput ratio']}",
-                tp_ratio >= TARGETS["throughput ratio"],
+                f">= {targets['throughput ratio']}",
+                tp_ratio >= targets["throughput ratio"],
             ),
         ):
             print(f"  {name:22s} {value:8.2f}   target {target:8s} {'met' if ok else 'MISSED'}")

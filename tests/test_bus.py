@@ -253,3 +253,37 @@ def test_a_bad_datagram_is_one_decode_error_however_many_subscribers(bus: Bus) -
     bus.publish("test", "a/MC_STATE", _mc(3))
     assert wait_for(lambda: len(good) == 4, 2)
     assert bus.decode_errors() == {"a/MC_STATE": 1}
+
+
+def test_an_attached_bus_delivers_on_the_executors_thread_with_no_hop() -> None:
+    """Context attaches its bus: handlers run on the nodes' loop thread, and no bus thread exists."""
+    from antalate_lcm.executor import Executor
+
+    ex = Executor(name="the-one-loop")
+    b = Bus({"test": "memq://"})
+    b.attach(ex)
+    ex.start()
+    try:
+        threads: list[str] = []
+        b.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: threads.append(threading.current_thread().name))
+        b.publish("test", "a/MC_STATE", _mc(1))
+        assert wait_for(lambda: threads, 2) == ["the-one-loop"]
+        assert "lcm-dispatch" not in {t.name for t in threading.enumerate()}
+        with pytest.raises(RuntimeError, match="another executor"):
+            b.attach(Executor())
+    finally:
+        ex.stop()
+        b.close()
+
+
+def test_unsubscribe_from_another_thread_releases_the_channel(bus: Bus) -> None:
+    got: list[int] = []
+    sub = bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: got.append(m.header.seq))
+    bus.publish("test", "a/MC_STATE", _mc(1, 1))
+    assert wait_for(lambda: got == [1], 2)
+    bus.unsubscribe(sub)
+    link = bus._by_name["test"]
+    assert wait_for(lambda: not link._retire, 2), "the LCM subscription is dropped on the loop without a datagram"
+    bus.publish("test", "a/MC_STATE", _mc(1, 2))
+    time.sleep(0.1)
+    assert got == [1]

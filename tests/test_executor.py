@@ -63,3 +63,74 @@ def test_stop_joins_the_thread() -> None:
     e.create_timer(0.01, lambda: None)
     e.stop()
     assert "short-lived" not in {t.name for t in threading.enumerate()}
+
+
+def test_a_readable_descriptor_is_handled_on_the_loop_thread(ex: Executor) -> None:
+    """The wait set: an LCM instance's fileno() is watched and handle() runs on the loop thread."""
+    import lcm
+
+    lc = lcm.LCM("memq://")
+    seen: list[tuple[bytes, str]] = []
+    lc.subscribe("C", lambda _ch, data: seen.append((data, threading.current_thread().name)))
+    ex.add_reader(lc.fileno(), lambda: lc.handle_timeout(0))
+    for i in range(50):
+        lc.publish("C", bytes([i]))
+    assert wait_for(lambda: len(seen) == 50, 2)
+    assert [d for d, _ in seen] == [bytes([i]) for i in range(50)]
+    assert {name for _, name in seen} == {"antalate-executor"}
+    ex.remove_reader(lc.fileno())
+    lc.publish("C", b"late")
+    time.sleep(0.1)
+    assert len(seen) == 50, "a removed descriptor is no longer handled"
+
+
+def test_timers_created_from_another_thread_run_on_the_loop(ex: Executor) -> None:
+    names: list[str] = []
+    done = threading.Event()
+
+    def schedule() -> None:
+        ex.call_later(0.01, lambda: (names.append(threading.current_thread().name), done.set()))
+
+    worker = threading.Thread(target=schedule)
+    worker.start()
+    worker.join()
+    assert done.wait(2)
+    assert names == ["antalate-executor"]
+
+
+def test_a_timer_cancelled_before_it_is_due_never_runs(ex: Executor) -> None:
+    ran: list[int] = []
+    timer = ex.call_later(0.05, lambda: ran.append(1))
+    timer.cancel()
+    time.sleep(0.15)
+    assert ran == []
+
+
+def test_stop_from_a_callback_and_calls_after_stop_are_dropped() -> None:
+    """A node may stop the process from inside a callback; a worker posting later must not raise."""
+    e = Executor(name="self-stopping")
+    e.start()
+    e.run_sync(lambda: None)
+    e.call_soon(e.stop)
+    assert wait_for(lambda: "self-stopping" not in {t.name for t in threading.enumerate()}, 2)
+    e.call_soon(lambda: None)  # the loop is closed: dropped, no exception
+    e.call_later(0.01, lambda: None)
+    assert e.run_sync(lambda: 42) == 42  # not running: runs in the caller
+
+
+def test_restart_after_stop_watches_the_same_descriptors() -> None:
+    import lcm
+
+    lc = lcm.LCM("memq://")
+    got: list[bytes] = []
+    lc.subscribe("C", lambda _ch, data: got.append(data))
+    e = Executor()
+    e.add_reader(lc.fileno(), lambda: lc.handle_timeout(0))
+    e.start()
+    lc.publish("C", b"1")
+    assert wait_for(lambda: got == [b"1"], 2)
+    e.stop()
+    e.start()
+    lc.publish("C", b"2")
+    assert wait_for(lambda: got == [b"1", b"2"], 2)
+    e.stop()

@@ -133,6 +133,9 @@ class _Link:
         self._lock = threading.Lock()
         self._executor = executor
         self._watched: tuple[Executor, int] | None = None
+        #: liblcm's udpm and memq providers keep their notify pipe readable exactly while a message
+        #: is queued, so a readable descriptor means handle() returns at once.
+        self._ready_means_message = type(self._lcm) is lcm.LCM and url.split(":", 1)[0] in ("udpm", "memq")
         self._decode_log = decode_log
         self.decode_errors: dict[str, int] = {}
         self.handler_errors = 0
@@ -195,7 +198,10 @@ class _Link:
         if lc is None:
             return
         try:
-            # handle_timeout(0), not handle(): a spurious wake-up must never block the whole loop.
+            if self._ready_means_message:
+                lc.handle()  # liblcm's pipe is readable exactly while a message waits: no block
+            # handle_timeout(0) for the rest (and for other transports): a spurious wake-up must
+            # never block the whole loop.
             for _ in range(_BATCH):
                 if lc.handle_timeout(0) <= 0:
                     break
@@ -221,8 +227,30 @@ class _Link:
             watched[0].remove_reader(watched[1])
 
     def _on_exact(self, route: _Route, channel: str, data: bytes) -> None:
-        if not route.retired:
-            self._deliver(channel, data, route.subs)
+        if route.retired:
+            return
+        subs = route.subs
+        if len(subs) != 1:
+            self._deliver(channel, data, subs)
+            return
+        # One subscriber (the common case): _deliver's work without its per-datagram table.
+        self.received += 1
+        sub = subs[0]
+        if not sub.active:
+            return
+        msg: Any = data
+        msg_type = sub.msg_type
+        if msg_type is not None:
+            try:
+                msg = msg_type.decode(data)
+            except Exception as exc:  # noqa: BLE001 - any garbage must not kill the node
+                self._count_decode_error(channel, msg_type, data, exc)
+                return
+        try:
+            sub.handler(channel, msg)
+        except Exception:
+            self.handler_errors += 1
+            log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 
     def _on_pattern(self, channel: str, data: bytes) -> None:
         subs = tuple(s for s in self._patterns if s.regex is not None and s.regex.fullmatch(channel))

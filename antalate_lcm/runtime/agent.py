@@ -6,16 +6,25 @@ its own (``antalate mc|hlc|bma|osc``) changes nothing for behaviors or configs: 
 
 from __future__ import annotations
 
+import logging
 import math
-from collections.abc import Sequence
+import os
+import signal
+import subprocess
+import threading
+import time
+from collections.abc import Callable, Sequence
+from types import FrameType
 
 from antalate_lcm.autopilot.sim import DEFAULTS as SIM_DEFAULTS
 from antalate_lcm.config import AgentConfig, Config
-from antalate_lcm.errors import ConfigError
+from antalate_lcm.errors import AntalateError, ConfigError
 from antalate_lcm.geo import offset
 from antalate_lcm.hlc.node import HlcNode
 from antalate_lcm.mc.node import McNode
 from antalate_lcm.node import Context, Node
+
+log = logging.getLogger("antalate.agent")
 
 
 def validate(config: Config) -> None:
@@ -100,3 +109,76 @@ def shared_buses(configs: Sequence[Config]) -> dict[str, str]:
                     cfg.source, f"buses.{name}", f"the same URL as in the other configs ({buses[name]!r})"
                 )
     return buses
+
+
+#: Agents above which ``antalate agent`` spreads them over one process per core by default
+#: (one process holds about a thousand simulated agents: benchmarks/agents.py).
+AUTO_PROCESSES_FROM = 500
+
+
+def default_processes(n_agents: int) -> int:
+    """One process per core on a big swarm, else one (a process has its own loop, so its own core)."""
+    return max(1, min(os.cpu_count() or 1, n_agents)) if n_agents >= AUTO_PROCESSES_FROM else 1
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """``"i/P"`` (0-based): this process runs the i-th of P shares of the agents."""
+    try:
+        index, count = (int(part) for part in text.split("/"))
+    except ValueError:
+        raise AntalateError(f"--shard wants INDEX/COUNT, e.g. 0/2 (got {text!r})") from None
+    if not 0 <= index < count:
+        raise AntalateError(f"--shard wants 0 <= INDEX < COUNT (got {text!r})")
+    return index, count
+
+
+def shard(configs: Sequence[Config], index: int, count: int) -> list[Config]:
+    """The ``index``-th of ``count`` contiguous shares: every node of an agent stays in one process,
+    so its internal topics still travel in memory."""
+    n = len(configs)
+    return list(configs[index * n // count : (index + 1) * n // count])
+
+
+def run_processes(child_argv: Callable[[int, int], list[str]], count: int, *, grace: float = 15.0) -> int:
+    """Run ``count`` agent processes (``child_argv(i, count)`` each) until a signal or one exits.
+
+    Ctrl-C reaches every process of the terminal's group at once; SIGTERM here (or one child
+    ending) is passed on as SIGINT so each child stops its nodes in order (MC before HLC, the
+    vehicle in a safe state) and closes its bus; a child still running after ``grace`` s is killed.
+    """
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        log.info("received %s, stopping %d agent processes", signal.Signals(signum).name, count)
+        stop.set()
+
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, on_signal)
+    procs: list[subprocess.Popen[bytes]] = []
+    try:
+        for i in range(count):
+            procs.append(subprocess.Popen(child_argv(i, count)))
+        log.info("%d agent processes: %s", count, ", ".join(str(p.pid) for p in procs))
+        failed: subprocess.Popen[bytes] | None = None
+        while not stop.wait(0.2):
+            failed = next((p for p in procs if p.poll() is not None), None)
+            if failed is not None:
+                log.error("agent process %d exited with %s; stopping the others", failed.pid, failed.returncode)
+                break
+        return (failed.returncode or 1) if failed is not None else 0
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + grace
+        for p in procs:
+            try:
+                p.wait(max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                log.error("agent process %d did not stop within %.0f s; killed", p.pid, grace)
+                p.kill()
+                p.wait()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

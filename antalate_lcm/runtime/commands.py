@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from collections.abc import Callable
 
 from antalate_lcm.config import Config, check_unique_agent_names, load_config
@@ -57,7 +58,16 @@ def _cmd_bma(args: argparse.Namespace) -> int:
 
 
 def _cmd_agent(args: argparse.Namespace) -> int:
-    from antalate_lcm.runtime.agent import agent_nodes, shared_buses, swarm_configs, validate
+    from antalate_lcm.runtime.agent import (
+        agent_nodes,
+        default_processes,
+        parse_shard,
+        run_processes,
+        shard,
+        shared_buses,
+        swarm_configs,
+        validate,
+    )
     from antalate_lcm.runtime.launch import run_until_signal
 
     configs: list[Config] = []
@@ -66,6 +76,13 @@ def _cmd_agent(args: argparse.Namespace) -> int:
     check_unique_agent_names(configs, agents=args.agents)  # names the file and agent.name
     for cfg in configs:
         validate(cfg)
+    processes = args.processes or default_processes(len(configs))
+    if args.shard:
+        configs = shard(configs, *parse_shard(args.shard))
+    elif processes > 1:  # same channels, agents spread over processes (one loop, one core each)
+        argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", args.log_level, "agent", *args.config]
+        argv += ["--agents", str(args.agents), "--spacing", str(args.spacing)]
+        return run_processes(lambda i, n: [*argv, "--shard", f"{i}/{n}"], min(processes, len(configs)))
     # Internal topics between this process's nodes in memory: a spoofed LAN datagram never reaches them.
     context = Context.in_process(shared_buses(configs))
     nodes = [node for cfg in configs for node in agent_nodes(cfg, context)]
@@ -196,6 +213,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("config", nargs="+", help="agent config file(s): one per vehicle")
     p.add_argument("--agents", type=int, default=1, help="N simulated agents from each config (sim only)")
     p.add_argument("--spacing", type=float, default=8.0, help="metres between simulated homes (default 8)")
+    p.add_argument(
+        "--processes", type=int, help="spread the agents over P processes (default: one per core from 500 agents)"
+    )
+    p.add_argument("--shard", help=argparse.SUPPRESS)  # INDEX/COUNT: one of those processes
     p.set_defaults(func=_cmd_agent)
 
     p = sub.add_parser("tui", help="the operator console (a Textual app on the LAN bus)")

@@ -9,7 +9,8 @@ message (the MAC covers every byte), so it remembers what it has carried:
   copy it published itself coming back (multicast loops back to its own socket) and the copy a second
   bridge already carried;
 - on Zenoh it also subscribes to remote samples only and marks what it puts (attachment
-  ``antalate-bridge:ID:ORIGIN``, ORIGIN a hash of the bus the message came from), so a Zenoh
+  ``antalate-bridge:ID:ORIGIN``, ORIGIN a hash of ``[bridge] site`` and the bus the message came
+  from), so a Zenoh
   subscriber receives one copy when two bridges forward the same message
   (:mod:`antalate_lcm.zenoh_bus`), and a bridge never forwards to a bus a copy that came from that
   very bus through another bridge (two bridges on one LAN: whichever thread is first, no echo).
@@ -72,6 +73,10 @@ class BridgeSection(BaseModel):
     exclude: list[str] = Field(default_factory=list)
     #: Seconds a forwarded message is remembered against echoes and duplicates.
     memory: float = Field(default=2.0, gt=0, le=60)
+    #: Name of the network this bridge serves: bridges that join the *same* LAN to Zenoh (a
+    #: redundant gateway) must share it, bridges of different sites must not. Empty: this bridge's
+    #: own random id (safe: never mistakes another site's messages for its own).
+    site: str = ""
     limit: list[RateLimit] = Field(default_factory=list)
 
     @field_validator("channels", "exclude")
@@ -219,9 +224,9 @@ class Direction:
         return None
 
 
-def origin_tag(url: str) -> bytes:
-    """A short tag naming a bus by its URL (the same on every bridge that joins that bus)."""
-    return hashlib.blake2b(url.encode(), digest_size=6).hexdigest().encode()
+def origin_tag(name: str) -> bytes:
+    """A short tag naming a bus of a site (the same on every bridge that joins that bus)."""
+    return hashlib.blake2b(name.encode(), digest_size=6).hexdigest().encode()
 
 
 # ------------------------------------------------------------------------------------------ I/O
@@ -250,8 +255,9 @@ class Bridge:
         for src, dst in (self.names, self.names[::-1]):
             limits = [(re.compile(lim.channel), Throttle(lim.rate)) for lim in sec.limit if lim.to == dst]
             self.directions[src] = Direction(src, dst, limits)
-        #: Origin tag of each side: a hash of its URL (two bridges on one LAN share it).
-        self.origin = {name: origin_tag(config.buses[name]) for name in self.names}
+        #: Origin tag of each side: a hash of the site and its URL (two bridges on one LAN share it).
+        site = sec.site or self.id
+        self.origin = {name: origin_tag(f"{site} {config.buses[name]}") for name in self.names}
         self.dropped_seen = 0
         self.dropped_same_origin = 0
         self.send_errors = 0

@@ -72,9 +72,9 @@ def wait(pred: Any, timeout: float = 20.0) -> bool:
     return False
 
 
-def bridge(lan: str, wan: str, limits: list[dict[str, Any]] | None = None) -> Bridge:
+def bridge(lan: str, wan: str, site: str, limits: list[dict[str, Any]] | None = None) -> Bridge:
     config = BridgeConfig.model_validate(
-        {"buses": {"lan": lan, "wan": wan}, "bridge": {"between": ["lan", "wan"], "limit": limits or []}}
+        {"buses": {"lan": lan, "wan": wan}, "bridge": {"between": ["lan", "wan"], "site": site, "limit": limits or []}}
     )
     b = Bridge(config)
     b.start()
@@ -99,7 +99,8 @@ def settle(bus: Bus, bus_name: str, observers: list[Observer]) -> None:
 def two_sites(port: int) -> dict[str, Any]:
     wan = f"zenoh://?connect=tcp/127.0.0.1:{port}"
     limit = [{"channel": ".*/TELEMETRY", "to": "wan", "rate": RATE}]
-    bridges = [bridge(LAN_A, wan), bridge(LAN_B, wan, limit)]
+    # Both sites' LANs use the same URL form in the field; here two groups stand for two LANs.
+    bridges = [bridge(LAN_A, wan, "site-a"), bridge(LAN_B, wan, "site-b", limit)]
     bus = Bus({"a": LAN_A, "b": LAN_B, "w": wan})
     obs = {"a": Observer(bus, "a"), "b": Observer(bus, "b"), "w": Observer(bus, "w")}
     for name in ("a", "b", "w"):
@@ -146,7 +147,7 @@ def two_sites(port: int) -> dict[str, Any]:
 
 def one_lan(port: int) -> dict[str, Any]:
     wan = f"zenoh://?connect=tcp/127.0.0.1:{port}"
-    bridges = [bridge(LAN_A, wan), bridge(LAN_A, wan)]
+    bridges = [bridge(LAN_A, wan, "site-a"), bridge(LAN_A, wan, "site-a")]
     bus = Bus({"a": LAN_A, "w": wan})
     obs = {"a": Observer(bus, "a"), "w": Observer(bus, "w")}
     settle(bus, "a", [obs["w"]])

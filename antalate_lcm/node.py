@@ -126,7 +126,7 @@ class Node:
         self.name = name or self.kind
         self.log = logging.getLogger(f"antalate.{self.kind}.{self.agent}")
         self._specs = config.topic_specs()
-        self._publishers: dict[tuple[str, tuple[tuple[str, str], ...]], _Publisher] = {}
+        self._publishers: dict[Any, _Publisher] = {}
         self._subs: list[Subscription] = []
         self._timers: list[Timer] = []
         self.started = False
@@ -271,7 +271,7 @@ class Node:
         acknowledgement key; its ``utime`` is fresh, so the receivers' replay guard lets it through).
         This is the one place antalate signs: the MAC covers the final header.
         """
-        key = (topic, tuple(sorted(fields.items())))
+        key: Any = (topic, tuple(sorted(fields.items()))) if fields else topic  # most publishes have no fields
         pub = self._publishers.get(key)
         if pub is None:
             pub = self._publishers[key] = _Publisher(self._publish_buses(topic), self.channel(topic, **fields))

@@ -1,0 +1,67 @@
+"""An agent and an operator that talk Zenoh directly (examples/wan/agent_zenoh.toml and
+operator_remote.toml), no LAN and no bridge: only the bus URLs differ from a LAN set-up.
+
+Everything runs in a private namespace (the agent's own bus is multicast on lo): ``antalate router``
+on loopback, ``antalate agent`` with the example config, and the LAN tests' operator (the console's
+command tracker) on the example operator config.
+"""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from tests.agent_harness import FAST_SIM, to_toml
+from tests.lan.swarm import OperatorClient, _merge, tomllib
+from tests.netns import NetNamespace
+
+pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
+
+REPO = Path(__file__).resolve().parents[2]
+EXAMPLES = REPO / "examples" / "wan"
+KEY = "zenoh-test-swarm-key"
+PORT = 7447
+URL = f"zenoh://?connect=tcp/127.0.0.1:{PORT}&mode=client"
+
+
+def _config(name: str, out: Path, extra: dict[str, object]) -> Path:
+    doc = tomllib.loads((EXAMPLES / name).read_text())
+    assert any(url.startswith("zenoh://") for url in doc["buses"].values()), name
+    for bus, url in doc["buses"].items():
+        if url.startswith("zenoh://"):
+            doc["buses"][bus] = URL  # the example's router address -> the one on this loopback
+    path = out / name
+    path.write_text(to_toml(_merge(doc, extra)))
+    return path
+
+
+@pytest.mark.timeout(120)
+def test_an_agent_on_zenoh_is_flown_by_an_operator_on_zenoh(netns: NetNamespace, tmp_path: Path) -> None:
+    router_log, agent_log = tmp_path / "router.log", tmp_path / "agent.log"
+    with open(router_log, "w") as rlog, open(agent_log, "w") as alog:
+        netns.antalate("router", "--listen", f"tcp/127.0.0.1:{PORT}", stdout=rlog, stderr=subprocess.STDOUT, cwd=str(REPO))
+        agent = _config("agent_zenoh.toml", tmp_path, {
+            "hlc": {"default_takeoff_altitude": 3.0, "autopilot_params": FAST_SIM},
+            "security": {"swarm_key": KEY, "state_dir": str(tmp_path / "state")},
+        })
+        netns.antalate("agent", str(agent), stdout=alog, stderr=subprocess.STDOUT, cwd=str(REPO))
+        operator = _config("operator_remote.toml", tmp_path, {"security": {"swarm_key": KEY}})
+        op = OperatorClient(netns.python(
+            "-m", "tests.lan.lan_operator", str(operator), "--stale-after", "2",
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=str(REPO),
+        ))
+        try:
+            name = tomllib.loads(agent.read_text())["agent"]["name"]
+            op.wait_all([name], "STANDBY", timeout=30)
+            op.command("TAKEOFF", altitude=3.0)
+            op.wait_all([name], "MISSION", timeout=30)
+            op.command("RTL")
+            op.wait_all([name], "STANDBY", timeout=40)
+            status = op.wait(lambda s: s["pending"] == 0, timeout=10, what="no command pending")
+            assert [c["status"] for c in status["commands"]] == ["acked", "acked"], status["commands"]
+            assert status["agents"][name]["in_air"] is False
+        finally:
+            op.quit()
+    assert "Traceback" not in agent_log.read_text()

@@ -128,6 +128,8 @@ class _Link:
         # Routing tables are replaced, never mutated, so the loop reads them without a lock.
         self._routes: dict[str, _Route] = {}
         self._patterns: tuple[Subscription, ...] = ()
+        self._matched: dict[str, tuple[Subscription, ...]] = {}
+        self._matched_for: tuple[Subscription, ...] = ()
         self._star: Any = None
         self._retire: list[Any] = []
         self._lock = threading.Lock()
@@ -253,7 +255,16 @@ class _Link:
             log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 
     def _on_pattern(self, channel: str, data: bytes) -> None:
-        subs = tuple(s for s in self._patterns if s.regex is not None and s.regex.fullmatch(channel))
+        # The matching subscribers of a channel, remembered until the patterns change: a console
+        # watching 1,000 agents would otherwise run its regexes on every datagram.
+        patterns = self._patterns
+        if self._matched_for is not patterns:
+            self._matched, self._matched_for = {}, patterns
+        subs = self._matched.get(channel)
+        if subs is None:
+            subs = tuple(s for s in patterns if s.regex is not None and s.regex.fullmatch(channel))
+            if len(self._matched) < 100_000:  # bounded: channel names come from the network
+                self._matched[channel] = subs
         if subs:
             # A channel that also has an exact route is counted there: one datagram, one count.
             self._deliver(channel, data, subs, count=channel not in self._routes)

@@ -29,6 +29,10 @@ def _cmd_spy(args: argparse.Namespace) -> int:
     url = config.buses.get(args.bus) if args.bus else config.buses.get(config.topics.default_bus)
     if url is None:
         raise AntalateError(f"no bus named {args.bus!r} in {config.source}; declared: {', '.join(config.buses)}")
+    if url.startswith("zenoh://"):
+        from antalate_lcm.lcm_url import ZENOH_NOT_LCM
+
+        raise AntalateError(f"cannot spy on {url}: {ZENOH_NOT_LCM}")
     return run_spy(url)
 
 

@@ -260,6 +260,13 @@ def multicast_route_missing(u: LcmUrl) -> bool:
     return False
 
 
+#: Why an LCM tool cannot open a zenoh:// bus, and what to do instead.
+ZENOH_NOT_LCM = (
+    "a zenoh:// bus is antalate's own, not an LCM provider: the LCM tools (lcm-logger, lcm-spy) cannot "
+    "open it; log or spy a LAN bus joined to it by antalate bridge (docs/wan.md)"
+)
+
+
 def open_failure(url: str, liblcm_said: Sequence[str] = ()) -> AntalateError:
     """The error to raise when liblcm could not create an instance for ``url``.
 
@@ -270,6 +277,8 @@ def open_failure(url: str, liblcm_said: Sequence[str] = ()) -> AntalateError:
         u = parse_lcm_url(url)
     except ValueError as exc:
         return BusUnavailable(url, f"expected {exc}")
+    if u.provider == "zenoh":
+        return BusUnavailable(url, ZENOH_NOT_LCM)
     if multicast_route_missing(u):
         return MulticastUnavailable(url)
     said = " | ".join(line.strip() for line in liblcm_said if line.strip())

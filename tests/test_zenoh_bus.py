@@ -296,3 +296,49 @@ def test_a_closed_transport_says_so_and_closing_twice_is_fine(router: Router) ->
         z.handle_timeout(0)
     with pytest.raises(OSError):
         z.publish("alpha/X", b"late")
+
+
+def test_the_lcm_tools_refuse_a_zenoh_bus_with_the_way_out(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """lcm-logger and lcm-spy speak LCM only: `antalate log`/`spy` on a zenoh bus say to bridge it."""
+    from antalate_lcm.bus import open_lcm
+    from antalate_lcm.cli import main
+    from antalate_lcm.errors import BusUnavailable
+
+    with pytest.raises(BusUnavailable, match="antalate bridge"):
+        open_lcm("zenoh://?connect=tcp/127.0.0.1:7447")
+    (tmp_path / "c.toml").write_text('[buses]\nlan = "zenoh://?connect=tcp/127.0.0.1:7447"\n')
+    for command in (["log", str(tmp_path / "c.toml"), "-o", str(tmp_path / "x.lcm")], ["spy", str(tmp_path / "c.toml")]):
+        assert main(command) == 2
+        assert "antalate bridge" in capsys.readouterr().err
+
+
+def test_a_slow_handler_drops_beyond_its_queue_and_counts(router: Router) -> None:
+    """As LCM does: memory stays bounded when a fast link feeds a handler that does not keep up."""
+    z = ZenohLCM(url(router))
+    try:
+        got: list[bytes] = []
+        sub = z.subscribe("alpha/X", lambda ch, d: got.append(d))
+        sub.set_queue_capacity(5)
+        z.publish("alpha/X", b"first")  # nobody handles: it waits in the queue
+        assert wait_for(lambda: sub.pending == 1, 10)
+        for i in range(49):
+            z.publish("alpha/X", b"%d" % i)
+        assert wait_for(lambda: sub.pending + sub.dropped == 50, 10)
+        assert sub.pending == 5 and sub.dropped == 45 == z.dropped
+        while z.handle_timeout(0):
+            pass
+        assert got == [b"first", b"0", b"1", b"2", b"3"]  # the oldest kept, in order
+    finally:
+        z.close()
+
+
+def test_the_router_command_says_what_is_wrong(capsys: pytest.CaptureFixture[str]) -> None:
+    from antalate_lcm.cli import main
+
+    assert main(["router", "--listen", "tcp/127.0.0.1"]) == 2
+    assert "HOST:PORT" in capsys.readouterr().err
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        assert main(["router", "--listen", f"tcp/127.0.0.1:{busy.getsockname()[1]}"]) == 2
+    assert "cannot listen" in capsys.readouterr().err

@@ -342,3 +342,9 @@ def test_the_router_command_says_what_is_wrong(capsys: pytest.CaptureFixture[str
         busy.listen()
         assert main(["router", "--listen", f"tcp/127.0.0.1:{busy.getsockname()[1]}"]) == 2
     assert "cannot listen" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", ["agent_zenoh.toml", "operator_remote.toml"])
+def test_the_wan_example_configs_load(name: str) -> None:
+    config = load_config(Path(__file__).resolve().parent.parent / "examples" / "wan" / name)
+    assert any(u.startswith("zenoh://") for u in config.buses.values())

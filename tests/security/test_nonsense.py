@@ -10,12 +10,12 @@ active, not failed, and the vehicle still flying the algorithm.
 from __future__ import annotations
 
 import math
+import statistics
 import time
 
 import pytest
 
 from antalate_lcm.msgs import operator_cmd_t
-from tests.netns import wait_for
 from tests.security.harness import (
     OPERATOR,
     AgentRun,
@@ -41,7 +41,7 @@ def swarming(swarm: Swarm, operator: PeerClient) -> AgentRun:
     return swarm.agents["delta"]
 
 
-def still_swarming(swarm: Swarm, operator: PeerClient, delta: AgentRun, t_attack: float) -> None:
+def still_swarming(swarm: Swarm, operator: PeerClient, delta: AgentRun) -> None:
     """The behavior survived: active, not failed, nothing in the log, and the vehicle still moves."""
     time.sleep(1.0)
     since = operator.mark()
@@ -49,12 +49,17 @@ def still_swarming(swarm: Swarm, operator: PeerClient, delta: AgentRun, t_attack
     assert status is not None, "delta's arbiter stopped publishing"
     assert BEHAVIOR in status["active"] and not status["failed"], f"{BEHAVIOR} was killed: {status}"
     assert "failed and is deactivated" not in "\n".join(delta.lines()), "a behavior of delta failed"
-    a = delta.vehicle_after(time.time())
-    b = wait_for(lambda: (lambda v: v if v.saved_at > a.saved_at + 1.0 else None)(delta.vehicle()), 10.0, 0.1)
-    assert b is not None
-    assert b.in_air and b.distance(a) > 0.5 * (b.saved_at - a.saved_at), (
-        f"delta stopped flying the swarm algorithm: {a} -> {b}"
-    )
+    # Still flying the algorithm (1 m/s): the median ground speed over 2 s, so that one late
+    # behavior tick on a loaded machine (the HLC hovers after 0.5 s without a command) does not count,
+    # while a dead behavior's vehicle has all but stopped within half a second.
+    speeds = []
+    end = time.monotonic() + 2.0
+    while time.monotonic() < end:
+        v = delta.vehicle()
+        assert v.in_air, f"delta is not flying: {v}"
+        speeds.append(v.speed)
+        time.sleep(0.2)
+    assert statistics.median(speeds) > 0.5, f"delta stopped flying the swarm algorithm: speeds {speeds}"
     assert delta.mc_state() == "MISSION", delta.transitions("mc")
 
 
@@ -75,26 +80,24 @@ PAYLOADS = [
 @pytest.mark.attack("signed payload_t with count: Infinity (and NaN, 1e999, wrong types) to a swarming agent")
 def test_signed_nonsense_payload_does_not_kill_the_behavior(swarm: Swarm, operator: PeerClient) -> None:
     delta = swarming(swarm, operator)
-    t = time.time()
     for text in PAYLOADS:
         data = text.encode()
         signed(operator, swarm, "delta/OPERATOR_PAYLOAD", "payload_t", content_type="application/json",
                size=len(data), data=data.hex())
         time.sleep(0.05)
-    still_swarming(swarm, operator, delta, t)
+    still_swarming(swarm, operator, delta)
 
 
 @pytest.mark.attack("signed direction_cmd_t with an infinite azimuth (and NaN, huge speed) to a swarming agent")
 def test_signed_nonsense_direction_does_not_kill_the_behavior(swarm: Swarm, operator: PeerClient) -> None:
     delta = swarming(swarm, operator)
-    t = time.time()
     for az, speed in ((math.inf, 1.0), (-math.inf, 1.0), (math.nan, 1.0), (90.0, math.inf), (90.0, math.nan),
                       (1e30, 1.0), (90.0, 1e30)):
         for channel in ("delta/DIRECTION_CMD", "SWARM/DIRECTION_CMD"):
             signed(operator, swarm, channel, "direction_cmd_t", active=True, azimuth=az, speed=speed,
                    target="delta" if channel.startswith("delta") else "")
         time.sleep(0.05)
-    still_swarming(swarm, operator, delta, t)
+    still_swarming(swarm, operator, delta)
     bad = [ln for ln in delta.lines() if "operator direction:" in ln and ("inf" in ln or "nan" in ln)]
     assert not bad, f"delta adopted a non-finite direction: {bad}"
 

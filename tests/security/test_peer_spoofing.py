@@ -65,19 +65,17 @@ def test_spoofed_telemetry_does_not_reach_the_station(
 @pytest.mark.attack("spoofed payload_t (unsigned detections and count: Infinity) to a swarming agent")
 def test_spoofed_payload_to_a_swarming_agent(swarm: Swarm, attacker: PeerClient, operator: PeerClient) -> None:
     delta = swarming(swarm, operator)
-    t = time.time()
     for i in range(20):
         data = PAYLOADS[i % len(PAYLOADS)].encode()
         attacker.publish("delta/OPERATOR_PAYLOAD", "payload_t", header={"agent": "delta", "seq": 700_000 + i},
                          content_type="application/json", size=len(data), data=data.hex())
         time.sleep(0.02)
-    still_swarming(swarm, operator, delta, t)
+    still_swarming(swarm, operator, delta)
 
 
 @pytest.mark.attack("spoofed direction_cmd_t (unsigned, forged MAC) to a swarming agent")
 def test_spoofed_direction_to_a_swarming_agent(swarm: Swarm, attacker: PeerClient, operator: PeerClient) -> None:
     delta = swarming(swarm, operator)
-    t = time.time()
     lines = len([ln for ln in delta.lines() if "operator direction:" in ln])
     for i in range(20):
         mac = {"mac_len": 32, "mac": (b"\x5a" * 32).hex()} if i % 2 else {}
@@ -85,6 +83,6 @@ def test_spoofed_direction_to_a_swarming_agent(swarm: Swarm, attacker: PeerClien
             attacker.publish(channel, "direction_cmd_t", header={"agent": "operator", "seq": 710_000 + i, **mac},
                              active=True, azimuth=float(i * 17 % 360), speed=4.0, target=target)
         time.sleep(0.02)
-    still_swarming(swarm, operator, delta, t)
+    still_swarming(swarm, operator, delta)
     adopted = [ln for ln in delta.lines() if "operator direction:" in ln][lines:]
     assert not adopted, f"delta adopted a spoofed direction: {adopted}"

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import re
+import struct
 import time
 from collections import deque
 from collections.abc import Callable
@@ -39,6 +40,22 @@ log = logging.getLogger("antalate.operator")
 
 #: Topics where every message counts (events): the others keep only the newest per channel.
 EVENTS = frozenset({"HLC_ERROR"})
+
+
+def _body(data: bytes) -> bytes | None:
+    """The type fingerprint and everything after ``header_t`` (utime, agent, seq, MAC), or None if
+    the datagram is too short to say (it is then decoded, and rejected, as usual)."""
+    try:
+        (agent_len,) = _U32.unpack_from(data, 16)
+        at = 20 + agent_len + 4
+        (mac_len,) = _I16.unpack_from(data, at)
+    except struct.error:
+        return None
+    start = at + 2 + max(mac_len, 0)
+    return data[:8] + data[start:] if start <= len(data) else None
+
+
+_U32, _I16 = struct.Struct(">I"), struct.Struct(">h")
 
 
 def _any_fields(template: str) -> str:
@@ -86,6 +103,10 @@ class OperatorNode(Node):
         self.received = 0
         self.skipped = 0
         self.decode_errors = 0
+        #: Per channel, the last decoded message and its bytes after the header: a state republished
+        #: unchanged (most of them, every period) is not decoded again (only its header differs).
+        self._last_body: dict[str, tuple[bytes, Any]] = {}
+        self.unchanged = 0
 
     def on_start(self) -> None:
         by_bus: dict[str, list[str]] = {}
@@ -154,9 +175,18 @@ class OperatorNode(Node):
             if kind is None:
                 continue
             topic, fields = kind
+            body = None if topic in EVENTS else _body(data)
+            if body is not None:
+                last = self._last_body.get(channel)
+                if last is not None and last[0] == body:
+                    self.unchanged += 1  # the same state again: the decoded one stands
+                    out.append(Incoming(topic, fields.get("agent") or last[1].header.agent, last[1], received, fields))
+                    continue
             msg_type = self._decoders[topic][0]
             try:
                 msg = msg_type.decode(data)
+                if body is not None:
+                    self._last_body[channel] = (body, msg)
             except Exception as exc:  # noqa: BLE001 - garbage on the bus must not take the console down
                 self.decode_errors += 1
                 self._decode_log.log(

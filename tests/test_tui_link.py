@@ -73,3 +73,19 @@ def test_garbage_in_the_newest_slot_is_counted_not_fatal(node: OperatorNode) -> 
     bus.publish("lan", "a/MC_STATE", _mc("a", mc_state_t.STANDBY, 0))
     assert wait_for(lambda: node.received == 3, 2)
     assert [i.agent for i in node.drain()] == ["a"]
+
+
+def test_a_state_republished_unchanged_is_not_decoded_again(node: OperatorNode) -> None:
+    bus = node.context.bus
+    bus.publish("lan", "a/MC_STATE", _mc("a", mc_state_t.STANDBY, 3))
+    assert wait_for(lambda: node.received == 1, 2)
+    first = node.drain()[0].msg
+    for n, (state, ack) in enumerate([(mc_state_t.STANDBY, 3), (mc_state_t.MISSION, 3)], start=2):
+        bus.publish("lan", "a/MC_STATE", _mc("a", state, ack))  # a fresh header each time, like a republish
+        assert wait_for(lambda n=n: node.received == n, 2)
+        (item,) = node.drain()
+        if state == mc_state_t.STANDBY:
+            assert item.msg is first and node.unchanged == 1, "same body: the decoded message stands"
+        else:
+            assert item.msg is not first and item.msg.state == mc_state_t.MISSION
+    assert node.unchanged == 1

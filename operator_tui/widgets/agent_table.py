@@ -178,6 +178,11 @@ class AgentTable(ScrollView, can_focus=True):
         self.cursor_row = 0
         self.selected: str | None = None
         self._frame_styles: tuple[Style, Style, Style] | None = None
+        # What the last sync saw, so a row scrolled into view is brought up to date when drawn.
+        self._model: SwarmModel | None = None
+        self._now = 0.0
+        self._tick = 0
+        self._fresh: dict[str, int] = {}
 
     @property
     def row_count(self) -> int:
@@ -185,7 +190,10 @@ class AgentTable(ScrollView, can_focus=True):
 
     # ------------------------------------------------------------------ data
     def sync(self, model: SwarmModel, now: float) -> None:
-        """Bring every row up to date with the model (new agents are inserted in name order)."""
+        """Bring the visible rows up to date with the model (new agents are inserted in name order).
+
+        A virtual table: with 1,000 agents only the rows on screen are formatted each tick; a row
+        scrolled into view is formatted when it is drawn (:meth:`_cells_of`)."""
         cells_of = self.cells
         new = [name for name in model.agents if name not in cells_of]
         for name in new:
@@ -195,13 +203,17 @@ class AgentTable(ScrollView, can_focus=True):
             self.order.insert(i, name)
             cells_of[name] = ()
         changed = bool(new)
+        self._model, self._now = model, now
+        self._tick += 1
+        fresh, tick = self._fresh, self._tick
         first = self.scroll_offset.y
-        last = first + self.size.height
-        for i, name in enumerate(self.order):
+        order = self.order
+        for name in order[first : first + max(1, self.size.height)]:
             cells = row_cells(model.agents[name], now, model.stale_after)
+            fresh[name] = tick
             if cells != cells_of[name]:
                 cells_of[name] = cells
-                changed = changed or first <= i < last
+                changed = True
         if new:
             self.virtual_size = Size(TABLE_WIDTH, len(self.order) + 1)
             if self.selected in cells_of:
@@ -263,7 +275,7 @@ class AgentTable(ScrollView, can_focus=True):
         if row >= len(self.order):
             return Strip.blank(width, self.rich_style)
         name = self.order[row]
-        cells = self.cells[name]
+        cells = self._cells_of(name)
         is_cursor = row == self.cursor_row
         odd = row % 2 == 1
         key = (cells, is_cursor, odd, width, self.has_focus)
@@ -283,6 +295,14 @@ class AgentTable(ScrollView, can_focus=True):
         strip = Strip(segments).crop(0, width)
         self._strips[name] = (key, strip)
         return strip
+
+    def _cells_of(self, name: str) -> tuple[Cell, ...]:
+        """A row's cells as of the last sync (formatted now if the row was off screen then)."""
+        model = self._model
+        if model is not None and self._fresh.get(name) != self._tick and name in model.agents:
+            self.cells[name] = row_cells(model.agents[name], self._now, model.stale_after)
+            self._fresh[name] = self._tick
+        return self.cells[name]
 
     def _row_styles(self) -> tuple[Style, Style, Style]:
         """(cursor, odd, even) row backgrounds, resolved once per frame rather than once per row."""

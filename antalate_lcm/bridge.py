@@ -13,7 +13,9 @@ message (the MAC covers every byte), so it remembers what it has carried:
   from), so a Zenoh
   subscriber receives one copy when two bridges forward the same message
   (:mod:`antalate_lcm.zenoh_bus`), and a bridge never forwards to a bus a copy that came from that
-  very bus through another bridge (two bridges on one LAN: whichever thread is first, no echo).
+  very bus through another bridge (two bridges on one LAN: whichever thread is first, no echo);
+- bridges of one site (same ``[bridge] site``) elect the one that forwards Zenoh to their LAN (Zenoh
+  liveliness tokens, lowest id alive), so a redundant gateway does not double messages on the LAN.
 
 A rate cap per channel and direction (a thin uplink) keeps the newest message and sends it at the
 next slot: a state topic always ends on its latest value, never on a dropped one.
@@ -32,6 +34,7 @@ import uuid
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -260,6 +263,9 @@ class Bridge:
         self.origin = {name: origin_tag(f"{site} {config.buses[name]}") for name in self.names}
         self.dropped_seen = 0
         self.dropped_same_origin = 0
+        self.dropped_standby = 0
+        #: Per LAN side: whether this bridge is the one (of those serving that LAN) that forwards to it.
+        self.leader = dict.fromkeys(self.names, True)
         self.send_errors = 0
         self._threads: list[threading.Thread] = []
 
@@ -280,6 +286,11 @@ class Bridge:
             else:
                 sub = link.subscribe(".*", handler)
             sub.set_queue_capacity(10_000)
+        for zside, lside in (self.names, self.names[::-1]):
+            zlink, llink = self._links[zside], self._links[lside]
+            if isinstance(zlink, ZenohLCM) and not isinstance(llink, ZenohLCM):
+                # Bridges serving one LAN (same site) elect the one that forwards to it: the lowest id alive.
+                zlink.join_group(self.origin[lside].decode(), self.id, partial(self._on_members, lside))
         for name in self.names:
             t = threading.Thread(target=self._run, args=(name,), name=f"bridge {name}", daemon=True)
             t.start()
@@ -288,6 +299,13 @@ class Bridge:
             "bridge %s: %s (%s) <-> %s (%s)",
             self.id, self.names[0], self.config.buses[self.names[0]], self.names[1], self.config.buses[self.names[1]],
         )
+
+    def _on_members(self, side: str, members: frozenset[str]) -> None:
+        leader = min(members) == self.id
+        if leader != self.leader[side]:
+            log.info("bridge %s: %s forwarding to %s (bridges of this site alive: %s)",
+                     self.id, "now" if leader else "no longer", side, ", ".join(sorted(members)))
+        self.leader[side] = leader
 
     def _selected(self, channel: str) -> bool:
         return any(p.fullmatch(channel) for p in self._select) and not any(p.fullmatch(channel) for p in self._exclude)
@@ -304,6 +322,11 @@ class Bridge:
         with self._lock:
             if self.memory.check_and_add(Memory.digest(channel, data), now):
                 self.dropped_seen += 1
+                return
+            if not self.leader[direction.dest]:
+                # Another bridge of this site forwards it; remembered above, so its copy on the LAN
+                # is not sent back to Zenoh from here.
+                self.dropped_standby += 1
                 return
             throttle = direction.throttle_for(channel)
             if throttle is not None and not throttle.offer(channel, data, now):
@@ -351,6 +374,7 @@ class Bridge:
             f"{b}->{a}": self.directions[b].forwarded,
             "not_forwarded_seen": self.dropped_seen,
             "not_forwarded_same_origin": self.dropped_same_origin,
+            "not_forwarded_standby": self.dropped_standby,
             "send_errors": self.send_errors,
         }
 

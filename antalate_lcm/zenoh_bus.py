@@ -161,6 +161,7 @@ class ZenohLCM:
         self._config = zenoh_config(u)
         self._session: Any = None
         self._subs: list[ZenohSubscription] = []
+        self._groups: list[_Group] = []
         self._publishers: dict[str, Any] = {}
         self._queue: collections.deque[tuple[ZenohSubscription, str, bytes, bytes | None]] = collections.deque()
         self._lock = threading.Lock()  # the FIFO (taken on Zenoh's threads)
@@ -192,6 +193,8 @@ class ZenohLCM:
             for sub in self._subs:
                 if sub.active and sub.zsub is None:
                     self._declare(sub)
+            for group in self._groups:
+                self._declare_group(group)
         self._opened.set()
 
     def _open_later(self) -> None:
@@ -243,6 +246,32 @@ class ZenohLCM:
             if self._session is not None:
                 self._declare(sub)
         return sub
+
+    def join_group(self, group: str, member: str, on_change: Callable[[frozenset[str]], None]) -> None:
+        """Be ``member`` of ``group`` (a Zenoh liveliness token) and hear who else is, now and as it
+        changes: ``on_change(members)``, this member always included. A member whose session dies
+        leaves the group within the link lease. ``group`` and ``member``: key chunks (no ``/``)."""
+        g = _Group(f"{self.prefix}-groups/{group}", member, on_change)
+        with self._subs_lock:
+            self._groups.append(g)
+            if self._session is not None:
+                self._declare_group(g)
+
+    def _declare_group(self, g: _Group) -> None:
+        liveliness = self._session.liveliness()
+        g.token = liveliness.declare_token(f"{g.key}/{g.member}")
+
+        def changed(sample: Any) -> None:
+            who = str(sample.key_expr).rsplit("/", 1)[-1]
+            with g.lock:
+                if sample.kind == self._zenoh.SampleKind.DELETE:
+                    g.members.discard(who)
+                else:
+                    g.members.add(who)
+                members = frozenset(g.members | {g.member})
+            g.on_change(members)
+
+        g.sub = liveliness.declare_subscriber(f"{g.key}/*", changed, history=True)
 
     def _declare(self, sub: ZenohSubscription) -> None:
         key = channel_key(self.prefix, sub.channel) if sub.channel is not None else f"{self.prefix}/**"
@@ -343,6 +372,17 @@ class ZenohLCM:
                 except OSError:
                     pass  # drained (BlockingIOError) or closed
             return item
+
+
+@dataclass(eq=False)
+class _Group:
+    key: str
+    member: str
+    on_change: Callable[[frozenset[str]], None]
+    members: set[str] = field(default_factory=set)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    token: Any = None
+    sub: Any = None
 
 
 def _duplicate(sub: ZenohSubscription, channel: str, data: bytes) -> bool:

@@ -133,11 +133,14 @@ def test_the_uplink_cap_lets_the_rate_through_and_ends_on_the_newest(netns: NetN
     assert tel["received"] < tel["sent"]
 
 
-def test_two_bridges_on_one_lan_never_echo_and_zenoh_sees_one_copy(netns: NetNamespace) -> None:
+def test_two_bridges_on_one_lan_deliver_once_each_way_and_fail_over(netns: NetNamespace) -> None:
+    """A redundant site gateway: both bridges share [bridge] site."""
     r = _scenario(netns, "one-lan")
     assert r["arrived"] and r["fenced"]
     assert r["lan_copies_of_a_lan_message"] == 1  # never forwarded back to where it came from
     assert r["wan_copies_of_a_lan_message"] == 1  # the Zenoh side drops the second bridge's copy
-    # A Zenoh message reaches that LAN through both bridges (documented: docs/wan.md), but only once
-    # through each: no loop.
-    assert r["lan_copies_of_a_wan_message"] == 2
+    assert r["lan_copies_of_a_wan_message"] == 1  # only the elected bridge forwards to the LAN
+    standby = [b for b in r["bridges"] if b["wan->lan"] == 0]
+    assert len(standby) == 1 and standby[0]["not_forwarded_standby"] > 0, r["bridges"]
+    # The elected bridge stops: the other one forwards from then on, still once.
+    assert r["took_over"] and r["lan_copies_after_failover"] == 1

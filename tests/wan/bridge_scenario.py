@@ -5,7 +5,8 @@ router on loopback); prints one JSON line of what every observer received and wh
 
 ``two-sites``: LAN A <-> bridge A <-> Zenoh <-> bridge B <-> LAN B; 40 messages from each of LAN A,
 LAN B and a Zenoh publisher, and 60 telemetry messages from LAN B capped at 5/s towards Zenoh.
-``one-lan``: two bridges join the same LAN to Zenoh (a redundant site gateway).
+``one-lan``: two bridges join the same LAN to Zenoh (a redundant site gateway); then the one that
+forwards to the LAN stops, and the other takes over.
 """
 
 from __future__ import annotations
@@ -167,13 +168,29 @@ def one_lan(port: int) -> dict[str, Any]:
     with obs["a"].lock:
         a_from_w = [v for k, v in obs["a"].copies.items() if k[0] == "test/w"]
         a_own = [v for k, v in obs["a"].copies.items() if k[0] == "test/a"]
+    stats = [b.stats() for b in bridges]
+    # The forwarding bridge goes away: the other one takes over (its session's token is gone).
+    leader = min(bridges, key=lambda b: b.id)
+    leader.close()
+    settle(bus, "w", [obs["a"]])
+    after = [("test/after", msg(4, i)) for i in range(N)]
+    for c, d in after:
+        bus.publish("w", c, d)
+    took_over = wait(lambda: all(obs["a"].has(c, d) for c, d in after), 30)
+    fence2 = ("fence/w2", msg(7, 4))
+    bus.publish("w", *fence2)
+    fenced2 = wait(lambda: obs["a"].has(*fence2), 20)
+    with obs["a"].lock:
+        a_after = [v for k, v in obs["a"].copies.items() if k[0] == "test/after"]
     out = {
         "arrived": arrived,
-        "fenced": fenced,
+        "fenced": fenced and fenced2,
         "wan_copies_of_a_lan_message": w_from_a,
         "lan_copies_of_a_wan_message": max(a_from_w, default=0),
         "lan_copies_of_a_lan_message": max(a_own, default=0),
-        "bridges": [b.stats() for b in bridges],
+        "took_over": took_over,
+        "lan_copies_after_failover": max(a_after, default=0),
+        "bridges": stats,
     }
     for b in bridges:
         b.close()

@@ -302,6 +302,8 @@ class ZenohLCM:
         if item is None:
             if self._closed:
                 raise OSError(f"Zenoh session {self.url} is closed")
+            if timeout_ms <= 0:
+                return 0  # a sample arriving now makes fileno() readable again: no need to look
             readable, _, _ = select.select([self._rsock], [], [], max(0, timeout_ms) / 1000)
             if not readable:
                 return 0

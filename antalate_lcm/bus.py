@@ -138,6 +138,9 @@ class _Link:
         #: liblcm's udpm and memq providers keep their notify pipe readable exactly while a message
         #: is queued, so a readable descriptor means handle() returns at once.
         self._ready_means_message = type(self._lcm) is lcm.LCM and url.split(":", 1)[0] in ("udpm", "memq")
+        #: memq:// is private to this instance: a datagram nobody here subscribes to goes nowhere.
+        #: (An agent's in-process bus carries TELEMETRY at 10 Hz that no node of the process reads.)
+        self._private = type(self._lcm) is lcm.LCM and url.startswith("memq://")
         self._decode_log = decode_log
         self.decode_errors: dict[str, int] = {}
         self.handler_errors = 0
@@ -192,6 +195,8 @@ class _Link:
     def publish(self, channel: str, data: bytes) -> None:
         lc = self._lcm
         assert lc is not None, "bus is closed"
+        if self._private and channel not in self._routes and not self._patterns:
+            return  # memq:// reaches only this instance's subscribers, and none wants this channel
         lc.publish(channel, data)
 
     def _on_readable(self) -> None:

@@ -287,3 +287,33 @@ def test_unsubscribe_from_another_thread_releases_the_channel(bus: Bus) -> None:
     bus.publish("test", "a/MC_STATE", _mc(1, 2))
     time.sleep(0.1)
     assert got == [1]
+
+
+def test_memq_drops_what_nobody_in_the_process_subscribes_to_and_delivers_the_rest() -> None:
+    """memq:// is private to its instance: a channel without subscribers is not even queued (no
+    wake-up of the loop), and one with a subscriber (exact or pattern) is delivered as before."""
+    import select
+
+    from antalate_lcm.executor import Executor
+
+    ex = Executor()  # not started yet: whatever memq queues stays queued, for select() to see
+    b = Bus({"test": "memq://"})
+    b.attach(ex)
+    try:
+        exact: list[int] = []
+        b.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: exact.append(m.header.seq))
+        fd = b._link("test")._lcm.fileno()
+        for _ in range(100):
+            b.publish("test", "a/TELEMETRY", b"nobody listens")
+        assert select.select([fd], [], [], 0)[0] == [], "an unsubscribed memq channel is not queued"
+        b.publish("test", "a/MC_STATE", _mc(1, 7))
+        assert select.select([fd], [], [], 0)[0] == [fd]
+        ex.start()
+        assert wait_for(lambda: exact == [7], 2)
+        pattern: list[str] = []
+        b.subscribe("test", r".*/TELEMETRY", None, lambda ch, d: pattern.append(ch), regex=True)
+        b.publish("test", "a/TELEMETRY", b"now someone does")
+        assert wait_for(lambda: pattern == ["a/TELEMETRY"], 2)
+    finally:
+        ex.stop()
+        b.close()

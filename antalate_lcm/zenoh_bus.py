@@ -134,7 +134,7 @@ class ZenohSubscription:
     #: Call the handler with a third argument: the sample's attachment (bytes or None).
     attachments: bool = False
     zsub: Any = None
-    seen: dict[tuple[str, bytes], float] = field(default_factory=dict)
+    seen: collections.OrderedDict[tuple[str, bytes], float] = field(default_factory=collections.OrderedDict)
 
     def set_queue_capacity(self, capacity: int) -> None:
         self.capacity = max(1, int(capacity))
@@ -392,12 +392,14 @@ def _duplicate(sub: ZenohSubscription, channel: str, data: bytes) -> bool:
     now = time.monotonic()
     key = (channel, hashlib.blake2b(data, digest_size=16).digest())
     seen = sub.seen
-    if len(seen) > 4096:
-        for k in [k for k, t in seen.items() if now - t > DEDUP_WINDOW]:
-            del seen[k]
-    last = seen.get(key)
+    while seen:  # oldest first: forget what left the window (O(1) per message)
+        oldest, t = next(iter(seen.items()))
+        if now - t <= DEDUP_WINDOW:
+            break
+        del seen[oldest]
+    last = seen.pop(key, None)
     seen[key] = now
-    return last is not None and now - last <= DEDUP_WINDOW
+    return last is not None
 
 
 __all__ = ["BRIDGE_MARK", "DEDUP_WINDOW", "ZenohLCM", "ZenohSubscription", "channel_key", "key_channel", "literal_channel"]

@@ -348,3 +348,29 @@ def test_the_router_command_says_what_is_wrong(capsys: pytest.CaptureFixture[str
 def test_the_wan_example_configs_load(name: str) -> None:
     config = load_config(Path(__file__).resolve().parent.parent / "examples" / "wan" / name)
     assert any(u.startswith("zenoh://") for u in config.buses.values())
+
+
+def test_a_message_two_bridges_forwarded_is_delivered_once_and_plain_repeats_are_not_touched(router: Router) -> None:
+    from antalate_lcm.zenoh_bus import BRIDGE_MARK
+
+    pub, z = ZenohLCM(url(router)), ZenohLCM(url(router))
+    try:
+        got: list[bytes] = []
+        z.subscribe("alpha/X", lambda ch, d: got.append(d))
+
+        def settled() -> bool:
+            pub.publish("alpha/X", b"probe")
+            z.handle_timeout(50)
+            return bool(got)
+
+        assert wait_for(settled, 10)
+        pub.publish("alpha/X", b"same", attachment=BRIDGE_MARK + b"bridge-1:aaaa")
+        pub.publish("alpha/X", b"same", attachment=BRIDGE_MARK + b"bridge-2:aaaa")  # the second gateway's copy
+        pub.publish("alpha/X", b"plain")
+        pub.publish("alpha/X", b"plain")  # not forwarded by a bridge: the bus never judges
+        pub.publish("alpha/X", b"end")
+        assert wait_for(lambda: z.handle_timeout(50) >= 0 and b"end" in got, 10)
+        assert [d for d in got if d != b"probe"] == [b"same", b"plain", b"plain", b"end"]
+    finally:
+        pub.close()
+        z.close()

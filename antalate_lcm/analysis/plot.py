@@ -9,13 +9,20 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-from matplotlib.patches import Patch
-
 from antalate_lcm.analysis.metrics import Analysis, Track
 from antalate_lcm.analysis.model import SwarmRecord
 from antalate_lcm.errors import AntalateError
+
+#: matplotlib is an extra (90 MB with fontTools and pillow): vehicle computers and the container
+#: image run nodes, not plots, so ``antalate plot`` says what to install instead of a traceback.
+MATPLOTLIB_MISSING = "antalate plot needs matplotlib, which is not installed: pip install 'antalate[plot]'"
+
+try:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Patch
+except ImportError:
+    raise AntalateError(MATPLOTLIB_MISSING) from None
 
 #: MC state colours: calm for the ground, green for the mission, warm for the way home, red for trouble.
 STATE_COLORS: dict[str, str] = {

@@ -73,6 +73,11 @@ from antalate_lcm.geo import FlatFrame, wrap_360
 
 log = logging.getLogger("antalate.autopilot.tello")
 
+#: djitellopy (with av and numpy, 160 MB) is an extra, so a MAVLink or Crazyflie vehicle computer
+#: does not carry it; only connect imports it, so a config validates without it.
+DJITELLOPY_MISSING = ("the tello autopilot needs djitellopy, which is not installed: "
+                      "pip install 'antalate[tello]'")
+
 _APPROACH_GAIN = 1.0  # 1/s: RTL speed per metre of remaining distance (below rtl_speed)
 _MIN_APPROACH_SPEED = 0.2  # m/s
 _RTL_DIVERGENCE = 2.0  # m: farther than the start distance by this much during the leg -> land here
@@ -171,8 +176,8 @@ class TelloAutopilot(Autopilot):
             return
         try:
             from djitellopy import Tello
-        except ImportError as exc:  # pragma: no cover - djitellopy is a dependency of antalate
-            raise AutopilotError(f"djitellopy is not installed ({exc}): pip install djitellopy") from exc
+        except ImportError:
+            raise AutopilotError(DJITELLOPY_MISSING) from None
         Tello.LOGGER.setLevel(self._p.djitellopy_log_level)
         # djitellopy prints through a handler of its own *and* propagates to the root logger, so
         # every line appeared twice; the application's logging configuration is the one to keep.

@@ -10,7 +10,8 @@ process decodes it and publishes it back on PONG; the time runs from just before
 to the moment the pong handler holds the decoded message. Raw lcm: one ``lcm.LCM`` per process,
 subscribed to the one channel, its handler calls ``telemetry_t.decode``, the main thread runs
 ``handle_timeout``. Bus: ``Bus.publish`` / ``Bus.subscribe(..., telemetry_t, ...)``, handlers on the
-Bus's dispatcher thread. The APIs run on separate multicast ports with their echo processes all up,
+loop thread of the Bus's private executor (no Context: the sender is the main thread, which waits on
+an Event, so the ping side has one thread hop that ``node`` below does not). The APIs run on separate multicast ports with their echo processes all up,
 and take turns in blocks of 100 pings, so load from elsewhere on the machine falls on each alike.
 
 Throughput: this process streams messages at a fixed rate (busy-paced, so evenly spaced) to a sink
@@ -21,9 +22,9 @@ and Bus use the same URL options (``recv_buf_size``) and subscription queue capa
 
 Before the streams, each publisher sends alone (nobody listening) to show what it can send at most.
 
-The round trip is also measured for ``raw-thread``: raw lcm with the Bus's threading on the ping side
-(a dispatcher thread runs the handler while the sender waits), the floor for any design with a
-dispatcher thread.
+The round trip is also measured for ``raw-thread``: raw lcm with a bare Bus's threading on the ping
+side (another thread runs the handler while the sender waits), the floor for any design where the
+sender is not the thread that handles the answer.
 
 Node to node (``node``): a :class:`~antalate_lcm.node.Node` in each process, through the real
 executor path: ``Node.publish`` of TELEMETRY (header stamped), ``Node.subscribe`` (decode, input

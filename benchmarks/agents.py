@@ -20,8 +20,10 @@ Figures only (docs/design.md §12): the machine is shared, so the load average i
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
+import signal
 import statistics
 import subprocess
 import sys
@@ -173,11 +175,15 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
     finally:
         stop.set()
         th.join()
-        proc.terminate()
+        tree = _tree(proc.pid)
+        proc.terminate()  # the launcher passes it on to its agent processes
         try:
-            proc.wait(15)
+            proc.wait(90)  # a thousand agents take a while to land their nodes on a loaded machine
         except subprocess.TimeoutExpired:
             proc.kill()
+        for pid in tree[1:]:  # nothing left behind to load the next size
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
         log.close()
 
 

@@ -61,7 +61,7 @@ def _agent_processes(marker: str) -> list[int]:
 
 
 @pytest.mark.netns
-@pytest.mark.parametrize("how", ["ctrl-c", "sigterm"])
+@pytest.mark.parametrize("how", ["ctrl-c", "sigterm", "launcher-killed"])
 def test_agents_over_two_processes_share_the_channels_and_stop_together(
     netns: NetNamespace, probe: Probe, tmp_path: Path, how: str
 ) -> None:
@@ -82,9 +82,11 @@ def test_agents_over_two_processes_share_the_channels_and_stop_together(
         assert probe.wait(f"{agent}/MC_STATE", "mc_state_t", timeout=20, state=M.MISSION), f"{agent} did not take off"
     if how == "ctrl-c":
         os.killpg(proc.pid, signal.SIGINT)  # the terminal sends SIGINT to the whole foreground group
-    else:
+    elif how == "sigterm":
         proc.send_signal(signal.SIGTERM)  # the launcher alone (a service manager): it stops its children
+    else:
+        proc.kill()  # SIGKILL: no chance to pass anything on; the children must not fly on alone
     out, _ = proc.communicate(timeout=30)
-    assert proc.returncode == 0, out
+    assert proc.returncode == (-signal.SIGKILL if how == "launcher-killed" else 0), out
     assert wait_for(lambda: not _agent_processes(str(cfg)), 10), "an agent process outlived the launcher"
     assert "Traceback" not in out

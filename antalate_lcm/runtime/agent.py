@@ -139,12 +139,24 @@ def shard(configs: Sequence[Config], index: int, count: int) -> list[Config]:
     return list(configs[index * n // count : (index + 1) * n // count])
 
 
-def run_processes(child_argv: Callable[[int, int], list[str]], count: int, *, grace: float = 15.0) -> int:
+def _die_with_parent() -> None:
+    """In an agent process, before exec: SIGTERM when the launcher dies, even by SIGKILL (Linux
+    PR_SET_PDEATHSIG), so no swarm is left running behind a killed launcher."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # not Linux: Ctrl-C still reaches the whole group
+        pass
+
+
+def run_processes(child_argv: Callable[[int, int], list[str]], count: int, *, grace: float = 60.0) -> int:
     """Run ``count`` agent processes (``child_argv(i, count)`` each) until a signal or one exits.
 
     Ctrl-C reaches every process of the terminal's group at once; SIGTERM here (or one child
     ending) is passed on as SIGINT so each child stops its nodes in order (MC before HLC, the
     vehicle in a safe state) and closes its bus; a child still running after ``grace`` s is killed.
+    A launcher killed outright takes its children along (they get SIGTERM).
     """
     stop = threading.Event()
 
@@ -159,7 +171,7 @@ def run_processes(child_argv: Callable[[int, int], list[str]], count: int, *, gr
     procs: list[subprocess.Popen[bytes]] = []
     try:
         for i in range(count):
-            procs.append(subprocess.Popen(child_argv(i, count)))
+            procs.append(subprocess.Popen(child_argv(i, count), preexec_fn=_die_with_parent))
         log.info("%d agent processes: %s", count, ", ".join(str(p.pid) for p in procs))
         failed: subprocess.Popen[bytes] | None = None
         while not stop.wait(0.2):

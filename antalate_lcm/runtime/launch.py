@@ -6,11 +6,15 @@ import logging
 import signal
 import threading
 from collections.abc import Callable, Sequence
+from concurrent import futures
 from types import FrameType
 
 from antalate_lcm.node import Context, Node
 
 log = logging.getLogger("antalate.launch")
+
+#: s for every node of the process to stop (a thousand simulated agents on a loaded machine).
+STOP_TIMEOUT = 120.0
 
 
 def run_until_signal(
@@ -43,11 +47,20 @@ def run_until_signal(
                 break
         return 0
     finally:
-        for node in reversed(started):
-            try:
-                node.stop()
-            except Exception:
-                log.exception("stopping %s failed", node.name)
+
+        def stop_all() -> None:
+            for node in reversed(started):
+                try:
+                    node.stop()
+                except Exception:
+                    log.exception("stopping %s failed", node.name)
+
+        # One hop to the loop for all of them (not one per node: a thousand agents' nodes would
+        # each wait for their turn behind the swarm's timers); on_stop may block, hence the time.
+        try:
+            context.executor.run_sync(stop_all, timeout=STOP_TIMEOUT)
+        except (TimeoutError, futures.TimeoutError):  # one class from Python 3.11 on
+            log.error("the nodes did not stop within %.0f s; closing the bus anyway", STOP_TIMEOUT)
         context.close()
         for sig, handler in previous.items():
             signal.signal(sig, handler)

@@ -1,11 +1,13 @@
 """Build the antalate container image with nothing but package registries (PyPI, a Debian mirror).
 
     sudo .venv/bin/python containers/build_image.py [--arch amd64|arm64] [--tag antalate:0.1.0]
-                                      [--base REF] [--wheel antalate-*.whl] [--podman-opt=--root=DIR ...]
+                                      [--extras tello,...] [--base REF] [--wheel antalate-*.whl]
+                                      [--podman-opt=--root=DIR ...]
 
 1. the wheelhouse: antalate's wheel (built from this checkout unless ``--wheel``) and every
-   dependency's wheel for the target (CPython 3.11, glibc Linux, the architecture), fetched by
-   ``pip download`` on this host, less ``opencv-python`` (see the Containerfile);
+   dependency's wheel for the target (CPython 3.11, glibc Linux, the architecture), with the
+   extras asked for (none by default: MAVLink and sim vehicles; ``--extras tello`` for the Tello
+   variant), fetched by ``pip download`` on this host, less ``opencv-python`` (see the Containerfile);
 2. the base: ``--base REF`` as given (e.g. ``docker.io/library/python:3.11-slim`` where a registry
    is reachable), else Debian bookworm made by ``mmdebstrap`` (variant essential + python3,
    python3-venv, ca-certificates and the libraries the wheels link to; no documentation) and ``podman import``-ed as
@@ -62,15 +64,20 @@ def build_wheel(out: Path) -> Path:
     return sorted(out.glob("antalate-*.whl"))[-1]
 
 
-def wheelhouse(wheel: Path, out: Path, arch: str) -> list[Path]:
-    """antalate's wheel and its dependencies' for ``arch`` in ``out`` (opencv left out)."""
+def requirement(wheel: Path, extras: Sequence[str] = ()) -> str:
+    """What pip is asked for: the wheel file, with its extras (``antalate-0.1.0-py3-none-any.whl[tello]``)."""
+    return f"{wheel}[{','.join(extras)}]" if extras else str(wheel)
+
+
+def wheelhouse(wheel: Path, out: Path, arch: str, extras: Sequence[str] = ()) -> list[Path]:
+    """antalate's wheel and its (and ``extras``') dependencies' for ``arch`` in ``out`` (opencv left out)."""
     out.mkdir(parents=True, exist_ok=True)
     shutil.copy2(wheel, out / wheel.name)
     machine = MACHINE[arch]
     platforms = [f"manylinux_{g}_{machine}" for g in _GLIBC] + [f"manylinux2014_{machine}", f"linux_{machine}"]
     cmd = [sys.executable, "-m", "pip", "download", "-q", "--dest", str(out), "--only-binary=:all:",
            "--python-version", PYTHON_VERSION, "--implementation", "cp",
-           *[a for p in platforms for a in ("--platform", p)], str(out / wheel.name)]
+           *[a for p in platforms for a in ("--platform", p)], requirement(out / wheel.name, extras)]
     run(cmd, f"downloading the dependencies' wheels for {arch}")
     for left_out in (p for p in out.glob("*.whl") if p.name.startswith(LEFT_OUT)):
         left_out.unlink()
@@ -108,12 +115,12 @@ def import_base(tarball: Path, arch: str, opts: Sequence[str], tag: str | None =
     return tag
 
 
-def build_image(context: Path, base: str, tag: str, arch: str, opts: Sequence[str]) -> None:
+def build_image(context: Path, base: str, tag: str, arch: str, opts: Sequence[str], extras: Sequence[str] = ()) -> None:
     shutil.copy2(HERE / "Containerfile", context / "Containerfile")
     shutil.copy2(HERE / "healthcheck.py", context / "healthcheck.py")
     pull = "never" if base.startswith("localhost/") else "missing"  # only a stock base may come from a registry
     run(podman(opts, "build", "--format", "docker", f"--pull={pull}", "--isolation", "chroot", "--network", "host",
-               "--arch", arch, "--build-arg", f"BASE={base}", "-t", tag, "-f", str(context / "Containerfile"),
+               "--arch", arch, "--build-arg", f"BASE={base}", "--build-arg", f"EXTRAS={','.join(extras)}", "-t", tag, "-f", str(context / "Containerfile"),
                str(context)), f"podman build of {tag}")
 
 
@@ -123,21 +130,24 @@ def image_size(tag: str, opts: Sequence[str]) -> int:
 
 
 def build(
-    *, arch: str, tag: str, base: str | None, wheel: Path | None, opts: Sequence[str], work: Path
+    *, arch: str, tag: str, base: str | None, wheel: Path | None, opts: Sequence[str], work: Path,
+    extras: Sequence[str] = (),
 ) -> tuple[str, int]:
     """Every step; returns the image's reference and size in bytes."""
     context = work / "context"
     wheels = context / "wheels"
-    wheelhouse(wheel or build_wheel(work / "dist"), wheels, arch)
+    wheelhouse(wheel or build_wheel(work / "dist"), wheels, arch, extras)
     base_ref = base or import_base(debian_rootfs(work, arch), arch, opts)
-    build_image(context, base_ref, tag, arch, opts)
+    build_image(context, base_ref, tag, arch, opts, extras)
     return tag, image_size(tag, opts)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--arch", default=host_arch(), choices=sorted(MACHINE), help="target architecture")
-    parser.add_argument("--tag", help="image reference (default localhost/antalate:VERSION-ARCH)")
+    parser.add_argument("--tag", help="image reference (default localhost/antalate:VERSION[-EXTRA...]-ARCH)")
+    parser.add_argument("--extras", default="", help="antalate extras to install, comma-separated (e.g. tello; "
+                        "default none: the MAVLink and sim adapters)")
     parser.add_argument("--base", help="base image reference (default: Debian made here by mmdebstrap)")
     parser.add_argument("--wheel", type=Path, help="antalate wheel to install (default: built from this checkout)")
     parser.add_argument("--podman-opt", action="append", default=[], help="global podman option (repeatable)")
@@ -149,11 +159,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     import tomllib
 
     version = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["version"]
-    tag = args.tag or f"localhost/antalate:{version}-{args.arch}"
+    extras = [e.strip() for e in args.extras.split(",") if e.strip()]
+    tag = args.tag or f"localhost/antalate:{'-'.join([version, *extras, args.arch])}"
     with tempfile.TemporaryDirectory(prefix="antalate-image-") as tmp:
         try:
             ref, size = build(arch=args.arch, tag=tag, base=args.base, wheel=args.wheel, opts=args.podman_opt,
-                              work=Path(tmp))
+                              work=Path(tmp), extras=extras)
         except BuildError as exc:
             print(f"build_image: {exc}", file=sys.stderr)
             return 1

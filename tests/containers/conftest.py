@@ -1,7 +1,9 @@
-"""The image, built once per session (a few minutes: mmdebstrap, the wheelhouse, podman build).
+"""The image, built once per session (a minute or two: mmdebstrap, the wheelhouse, podman build).
 
-Skips with the reason where podman cannot run here (no root, no podman or mmdebstrap, no Debian
-mirror, no container can start); once a container runs, a failing image build is a failure.
+``built_image`` needs only what building needs (root, podman, mmdebstrap, a Debian mirror) and
+skips with the reason where one is missing; ``antalate_image`` also needs a container to start
+(``podman run``) and skips with podman's reason where none can (crun denied setrlimit, cgroups).
+Once the base is imported, a failing image build is a failure.
 """
 
 from __future__ import annotations
@@ -27,10 +29,12 @@ class Image:
     build_seconds: float
     wheel: Path
     work: Path
+    #: why no container can start here (None: podman run works, with ``podman.run_flags``)
+    cannot_run: str | None = None
 
 
 @pytest.fixture(scope="session")
-def antalate_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
+def built_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
     reason = podman_unavailable()
     if reason:
         pytest.skip(reason)
@@ -45,6 +49,7 @@ def antalate_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
         pytest.skip(f"cannot make the Debian base here (mmdebstrap): {exc}")
     problems = []
     chosen: Podman | None = None
+    imported: Podman | None = None  # the first storage the base went into: enough to build
     base = ""
     # every container of the session runs on the host network of a private namespace: never the host's
     netns = RootNetns()
@@ -69,28 +74,44 @@ def antalate_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
             problems.append(f"{driver} {' '.join(flags)}: {probe.stderr.strip()[-500:]}")
         if chosen is not None:
             break
-        pod.reset()
-    if chosen is None:
+        if imported is None:
+            imported = pod
+        else:
+            pod.reset()
+    builder = chosen or imported
+    if builder is None:
         netns.close()
         shutil.rmtree(podman_root, ignore_errors=True)
-        pytest.skip("podman cannot run a container here:\n" + "\n".join(problems))
+        pytest.skip("podman cannot import the base here:\n" + "\n".join(problems))
+    if chosen is not None and imported is not None and imported is not chosen:
+        imported.reset()
+    cannot_run = None if chosen is not None else "podman cannot run a container here:\n" + "\n".join(problems)
     tag = f"localhost/antalate:test-{arch}"
     context = work / "context"
     try:
         build.wheelhouse(wheel, context / "wheels", arch)
-        build.build_image(context, base, tag, arch, chosen.opts)  # a failure here is the image's fault
+        build.build_image(context, base, tag, arch, builder.opts)  # a failure here is the image's fault
     except BaseException:
-        chosen.reset()
+        builder.reset()
         netns.close()
         shutil.rmtree(podman_root, ignore_errors=True)
         raise
-    size = build.image_size(tag, chosen.opts)
-    image = Image(chosen, tag, size, time.monotonic() - started, wheel, work)
+    size = build.image_size(tag, builder.opts)
+    image = Image(builder, tag, size, time.monotonic() - started, wheel, work, cannot_run)
     print(f"\nantalate image {tag}: {size / 1e6:.0f} MB, built in {image.build_seconds:.0f} s "
-          f"(storage {chosen.driver}, run flags {chosen.run_flags or 'none'})")
+          f"(storage {builder.driver}, run flags {builder.run_flags or 'none'}"
+          f"{'' if cannot_run is None else ', containers cannot start here'})")
     try:
         yield image
     finally:
-        chosen.reset()
+        builder.reset()
         netns.close()
         shutil.rmtree(podman_root, ignore_errors=True)
+
+
+@pytest.fixture(scope="session")
+def antalate_image(built_image: Image) -> Image:
+    """The built image, where a container can start from it."""
+    if built_image.cannot_run:
+        pytest.skip(built_image.cannot_run)
+    return built_image

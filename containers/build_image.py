@@ -7,10 +7,12 @@
 1. the wheelhouse: antalate's wheel (built from this checkout unless ``--wheel``) and every
    dependency's wheel for the target (CPython 3.11, glibc Linux, the architecture), with the
    extras asked for (none by default: MAVLink and sim vehicles; ``--extras tello`` for the Tello
-   variant), fetched by ``pip download`` on this host, less ``opencv-python`` (see the Containerfile);
+   variant), fetched by ``pip download`` on this host, less ``opencv-python`` and, unless the plot
+   extra is asked for, ``pillow`` (see the Containerfile);
 2. the base: ``--base REF`` as given (e.g. ``docker.io/library/python:3.11-slim`` where a registry
    is reachable), else Debian bookworm made by ``mmdebstrap`` (variant essential + python3,
-   python3-venv, ca-certificates and the libraries the wheels link to; no documentation) and ``podman import``-ed as
+   python3-venv, ca-certificates and the libraries the wheels link to; no documentation; merged
+   /usr by mmdebstrap's hook rather than usrmerge, which needs perl) and ``podman import``-ed as
    ``localhost/antalate-base:bookworm-ARCH``. A foreign architecture needs qemu-user-static with
    binfmt_misc, for mmdebstrap and for the build's RUN step;
 3. ``podman build`` of containers/Containerfile (docker format: OCI images cannot carry a
@@ -38,9 +40,14 @@ DEBIAN_SUITE = "bookworm"
 # python3 for the venv; what the wheels link to but do not carry (see the Containerfile)
 DEBIAN_PACKAGES = ("python3", "python3-venv", "ca-certificates", "libglib2.0-0", "libstdc++6", "zlib1g")
 LEFT_OUT = ("opencv_python-", "opencv_python_headless-")
+#: declared by djitellopy, imported by neither it nor antalate (22 MB), but matplotlib's: kept for ``plot``
+LEFT_OUT_UNLESS = {"pillow-": "plot"}
 # glibc tags a bookworm (glibc 2.36) system accepts, newest first
 _GLIBC = ("2_36", "2_35", "2_34", "2_31", "2_28", "2_27", "2_24", "2_17", "2_12", "2_5")
 MACHINE = {"amd64": "x86_64", "arm64": "aarch64"}
+# mmdebstrap's merged-/usr set-up (symlinks + usr-is-merged): without it, bookworm's essential
+# init-system-helpers is satisfied by usrmerge, which pulls in the whole of perl (50 MB)
+MERGED_USR_HOOK = Path("/usr/share/mmdebstrap/hooks/merged-usr")
 
 
 class BuildError(RuntimeError):
@@ -64,13 +71,18 @@ def build_wheel(out: Path) -> Path:
     return sorted(out.glob("antalate-*.whl"))[-1]
 
 
+def left_out(extras: Sequence[str] = ()) -> tuple[str, ...]:
+    """Wheel-name prefixes dropped from the wheelhouse for these extras."""
+    return LEFT_OUT + tuple(prefix for prefix, extra in LEFT_OUT_UNLESS.items() if extra not in extras)
+
+
 def requirement(wheel: Path, extras: Sequence[str] = ()) -> str:
     """What pip is asked for: the wheel file, with its extras (``antalate-0.1.0-py3-none-any.whl[tello]``)."""
     return f"{wheel}[{','.join(extras)}]" if extras else str(wheel)
 
 
 def wheelhouse(wheel: Path, out: Path, arch: str, extras: Sequence[str] = ()) -> list[Path]:
-    """antalate's wheel and its (and ``extras``') dependencies' for ``arch`` in ``out`` (opencv left out)."""
+    """antalate's wheel and its (and ``extras``') dependencies' for ``arch`` in ``out`` (less `left_out`)."""
     out.mkdir(parents=True, exist_ok=True)
     shutil.copy2(wheel, out / wheel.name)
     machine = MACHINE[arch]
@@ -79,8 +91,8 @@ def wheelhouse(wheel: Path, out: Path, arch: str, extras: Sequence[str] = ()) ->
            "--python-version", PYTHON_VERSION, "--implementation", "cp",
            *[a for p in platforms for a in ("--platform", p)], requirement(out / wheel.name, extras)]
     run(cmd, f"downloading the dependencies' wheels for {arch}")
-    for left_out in (p for p in out.glob("*.whl") if p.name.startswith(LEFT_OUT)):
-        left_out.unlink()
+    for unused in (p for p in out.glob("*.whl") if p.name.startswith(left_out(extras))):
+        unused.unlink()
     return sorted(out.glob("*.whl"))
 
 
@@ -95,6 +107,8 @@ def debian_rootfs(work: Path, arch: str) -> Path:
            "--dpkgopt=path-exclude=/usr/share/doc/*", "--dpkgopt=path-include=/usr/share/doc/*/copyright",
            "--dpkgopt=path-exclude=/usr/share/man/*", "--dpkgopt=path-exclude=/usr/share/locale/*",
            "--dpkgopt=path-exclude=/usr/share/info/*"]
+    if MERGED_USR_HOOK.is_dir():
+        cmd.append(f"--hook-dir={MERGED_USR_HOOK}")
     for option in ("Acquire::Check-Valid-Until", "Acquire::Check-Date"):
         # what this host's apt was told about the mirror's dates (a snapshot mirror, a clock off)
         said = subprocess.run(["apt-config", "dump", option], capture_output=True, text=True).stdout

@@ -4,7 +4,9 @@ MC, HLC, BMA, OSC and the station each run in a container of the same image (con
 read-only, host networking, uid 10001); the LAN test operator (tests/lan/lan_operator.py, the
 console's own command tracking) runs outside them in the same private network namespace, signs
 with the swarm key and flies TAKEOFF, MISSION, RTL. Each container's health check passes while its
-node works. About 3 minutes with the image build (once per session), 40 s without.
+node works. About 3 minutes with the image build (once per session), 40 s without. Where no
+container can start (crun denied its rlimits, cgroups), the image's file system is still checked:
+mounted (``podman image mount``) and entered with chroot as the image's user and ENV.
 """
 
 from __future__ import annotations
@@ -242,3 +244,16 @@ def test_build_script_refuses_without_its_tools(tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, str(Path(__file__).resolve().parents[2] / "containers" / "build_image.py")],
                           capture_output=True, text=True, env=env, timeout=60)
     assert proc.returncode == 2 and "podman is not installed" in proc.stderr, proc.stderr
+
+
+def test_the_wheelhouse_asks_for_the_extras_and_drops_only_what_nothing_imports() -> None:
+    """Runs everywhere: what pip is asked for per variant, and what is dropped from its answer."""
+    build = load_build_module()
+    wheel = Path("/w/antalate-0.1.0-py3-none-any.whl")
+    assert build.requirement(wheel) == str(wheel)
+    assert build.requirement(wheel, ["tello", "crazyflie"]) == f"{wheel}[tello,crazyflie]"
+    default, tello, plot = build.left_out(()), build.left_out(("tello",)), build.left_out(("tello", "plot"))
+    assert "opencv_python-" in default and "opencv_python-" in plot  # nothing imports cv2
+    assert "pillow-" in default and "pillow-" in tello  # djitellopy declares it, nothing imports PIL ...
+    assert "pillow-" not in plot  # ... but matplotlib does
+    assert not any(p.startswith(("djitellopy", "av-", "numpy", "pymavlink", "lcm-")) for p in plot)

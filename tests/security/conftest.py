@@ -47,7 +47,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
         elif report.skipped:
             _RESULTS[name] = "skipped"
         elif call.excinfo is not None and not call.excinfo.errisinstance(AssertionError):
-            _RESULTS[name] = f"harness error ({call.excinfo.typename})"
+            _RESULTS[name] = f"not judged ({call.excinfo.typename})"
         else:
             _RESULTS[name] = "succeeded"
 
@@ -57,11 +57,11 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
         return
     tried = {k: v for k, v in _RESULTS.items() if v != "skipped"}
     won = sorted(k for k, v in tried.items() if v.startswith("succeeded"))
-    broken = sorted(k for k, v in tried.items() if v.startswith("harness error"))
+    broken = sorted(k for k, v in tried.items() if v.startswith("not judged"))
     tr = terminalreporter
     tr.section("attacks")
     line = f"attacks tried {len(tried)}, succeeded {len(won)}, skipped {len(_RESULTS) - len(tried)}"
-    tr.write_line(line + (f", not judged (harness error) {len(broken)}" if broken else ""))
+    tr.write_line(line + (f", not judged {len(broken)}" if broken else ""))
     for name in won:
         tr.write_line(f"  SUCCEEDED: {name} ({tried[name]})")
     for name in broken:

@@ -8,7 +8,10 @@ Once the base is imported, a failing image build is a failure.
 
 from __future__ import annotations
 
+import os
+import resource
 import shutil
+import subprocess
 import tempfile
 import time
 from collections.abc import Iterator
@@ -65,13 +68,20 @@ def built_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
         # podman 4.3 schedules health checks with systemd timers, which a host without systemd lacks
         # (an error in its log): the tests run the image's check by hand (podman exec) instead
         common = ["--log-driver=k8s-file", "--no-healthcheck"]
-        for flags in (common, [*common, "--cgroups=disabled"]):
+        for flags in (common, [*common, "--cgroups=disabled"], [*common, *_sandbox_ulimits()]):
             probe = pod("run", "--rm", "--network", "host", *flags, base, "/bin/true", timeout=120)
             if probe.returncode == 0:
                 pod.run_flags = flags
                 chosen = pod
                 break
             problems.append(f"{driver} {' '.join(flags)}: {probe.stderr.strip()[-500:]}")
+            if _HYBRID in probe.stderr and _free_cgroup2_of_hugetlb():
+                probe = pod("run", "--rm", "--network", "host", *flags, base, "/bin/true", timeout=120)
+                if probe.returncode == 0:
+                    pod.run_flags = flags
+                    chosen = pod
+                    break
+                problems.append(f"{driver} {' '.join(flags)} (hugetlb moved to cgroup v1): {probe.stderr.strip()[-500:]}")
         if chosen is not None:
             break
         if imported is None:
@@ -107,6 +117,40 @@ def built_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
         builder.reset()
         netns.close()
         shutil.rmtree(podman_root, ignore_errors=True)
+
+
+_HYBRID = "cgroups in hybrid mode not supported"
+
+
+def _sandbox_ulimits() -> list[str]:
+    """Limits a sandboxed root may set: podman asks for more open files and processes than some VMs'
+    hard limits (crun's setrlimit then fails with EPERM), so ask for the hard limit of open files
+    and a modest process count instead."""
+    nofile = resource.getrlimit(resource.RLIMIT_NOFILE)[1]
+    nofile = nofile if nofile != resource.RLIM_INFINITY else 1 << 20
+    return [f"--ulimit=nofile={nofile}:{nofile}", "--ulimit=nproc=4096:4096"]
+
+
+def _free_cgroup2_of_hugetlb() -> bool:
+    """crun refuses a hybrid cgroup host whose v2 hierarchy still holds a controller (hugetlb in some
+    CI VMs). Mounting that controller on a v1 hierarchy of its own empties v2. This changes the
+    host, so it is done only on CI (``CI=true``, a throw-away machine) or when asked for with
+    ``ANTALATE_TEST_FIX_CGROUPS=1``, and only as root."""
+    if os.geteuid() != 0 or not (os.environ.get("CI") == "true" or os.environ.get("ANTALATE_TEST_FIX_CGROUPS") == "1"):
+        return False
+    unified = Path("/sys/fs/cgroup/unified/cgroup.controllers")
+    try:
+        controllers = unified.read_text().split()
+    except OSError:
+        return False
+    for controller in controllers:
+        target = Path("/sys/fs/cgroup") / controller
+        target.mkdir(exist_ok=True)
+        done = subprocess.run(["mount", "-t", "cgroup", "-o", controller, "cgroup", str(target)],
+                              capture_output=True, text=True)
+        if done.returncode != 0:
+            return False
+    return True
 
 
 @pytest.fixture(scope="session")

@@ -32,6 +32,7 @@ from antalate_lcm.bus import Subscription
 from antalate_lcm.config import Config
 from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
 from antalate_lcm.node import Context, Node
+from antalate_lcm.security import check_datagram
 from antalate_lcm.topics import channel_regex
 from operator_tui.commands import COMMANDS
 from operator_tui.model import WATCHED_TOPICS
@@ -94,6 +95,12 @@ class OperatorNode(Node):
         self.inbox: deque[tuple[str, bytes, float]] = deque()
         self.latest: dict[str, tuple[bytes, float]] = {}
         self.swarm_key = config.security.swarm_key
+        #: With a swarm key, what the console shows and counts as an acknowledgement must be signed
+        #: by a swarm member: a forged mc_state_t would otherwise stop the resends of a command the
+        #: MC never accepted. Checked only on what is decoded (a state republished unchanged is not).
+        self._keys = tuple(k for k in (config.security.swarm_key, *config.security.previous_keys) if k)
+        self._window = config.security.window
+        self.rejected = 0
         self._direction_seq = 0
         self._raw_subs: list[Subscription] = []
         self._decoders: dict[str, tuple[type, re.Pattern[str]]] = {}
@@ -181,6 +188,14 @@ class OperatorNode(Node):
                 if last is not None and last[0] == body:
                     self.unchanged += 1  # the same state again: the decoded one stands
                     out.append(Incoming(topic, fields.get("agent") or last[1].header.agent, last[1], received, fields))
+                    continue
+            if self._keys:
+                problem = check_datagram(data, self._keys, self._window, self.wallclock())
+                if problem is not None:
+                    self.rejected += 1
+                    self._decode_log.log(
+                        ("auth", channel, problem.reason), logging.WARNING, "ignored a message on %s: %s", channel, problem
+                    )
                     continue
             msg_type = self._decoders[topic][0]
             try:

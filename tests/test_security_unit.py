@@ -246,3 +246,29 @@ def test_signed_bytes_equal_sign_then_encode(agent: str) -> None:
         assert spliced == msg.encode()
         decoded = type(msg).decode(spliced)
         assert verify(decoded, KEY, 5.0, now=T0) is None
+
+
+def test_check_datagram_verifies_encoded_bytes_as_check_mac_does() -> None:
+    """The console's path: the MAC checked on the datagram, without decoding it."""
+    from antalate_lcm.msgs import mc_state_t
+    from antalate_lcm.security import Reason, check_datagram, signed_bytes
+
+    msg = mc_state_t()
+    msg.header.agent, msg.header.utime, msg.header.seq = "alpha", 1_800_000_000_000_000, 7
+    msg.state, msg.last_command_seq = mc_state_t.TAKEOFF, 3
+    data = signed_bytes(msg, "k")
+    assert check_datagram(data, ["k"], 5.0, 1_800_000_001.0) is None
+    assert check_datagram(data, ["old", "k"], 5.0, 1_800_000_001.0) is None  # a previous key
+    forged = check_datagram(data, ["other"], 5.0, 1_800_000_001.0)
+    assert forged is not None and forged.reason is Reason.FORGED
+    tampered = bytearray(data)
+    tampered[-5] ^= 1  # a byte of the body
+    bad = check_datagram(bytes(tampered), ["k"], 5.0, 1_800_000_001.0)
+    assert bad is not None and bad.reason is Reason.FORGED
+    stale = check_datagram(data, ["k"], 5.0, 1_800_000_100.0)
+    assert stale is not None and stale.reason is Reason.STALE
+    unsigned = mc_state_t()
+    unsigned.header.agent = "alpha"
+    for junk in (unsigned.encode(), data[:12], b""):
+        problem = check_datagram(junk, ["k"], 5.0, 1_800_000_001.0)
+        assert problem is not None and problem.reason is Reason.UNSIGNED

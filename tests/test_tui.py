@@ -31,7 +31,7 @@ from antalate_lcm.msgs import (
     telemetry_t,
 )
 from antalate_lcm.node import Context
-from antalate_lcm.security import verify
+from antalate_lcm.security import sign, verify
 from operator_tui.app import ConsoleSettings, OperatorApp
 from operator_tui.commands import Status
 from operator_tui.screens import ConfirmScreen, HelpScreen
@@ -63,6 +63,10 @@ class FakeSwarm:
         self.bus_name = bus_name
         self.commands: list[tuple[str, operator_cmd_t]] = []
         self.directions: list[tuple[str, direction_cmd_t]] = []
+        #: The swarm key the agents sign with (None: they do not sign), and the console's fake clock
+        #: their messages are stamped by when they sign (a signed message is checked for its age).
+        self.key: str | None = None
+        self.clock: FakeClock | None = None
         self._lock = threading.Lock()
         bus.subscribe(bus_name, r".*OPERATOR_CMD", operator_cmd_t, self._on_cmd, regex=True)
         bus.subscribe(bus_name, r".*DIRECTION_CMD", direction_cmd_t, self._on_dir, regex=True)
@@ -77,7 +81,9 @@ class FakeSwarm:
 
     def _pub(self, channel: str, msg: Any, agent: str) -> None:
         msg.header.agent = agent
-        msg.header.utime = int(WALL0 * 1e6)
+        msg.header.utime = int((WALL0 + (self.clock() if self.clock is not None else 0.0)) * 1e6)
+        if self.key is not None:
+            sign(msg, self.key)
         self.bus.publish(self.bus_name, channel, msg)
 
     def mc(self, agent: str, state: int = mc_state_t.STANDBY, last: int = 0) -> None:
@@ -466,6 +472,7 @@ async def test_commands_are_signed_when_a_swarm_key_is_configured(
 ) -> None:
     key = "correct horse battery staple"
     app = make_app(context, clock, memq_config(security={"swarm_key": key}))
+    swarm.key, swarm.clock = key, clock
     async with app.run_test(size=(160, 44)) as pilot:
         swarm.agent("alpha")
         await until(pilot, app, lambda: app.selected == "alpha")
@@ -478,6 +485,34 @@ async def test_commands_are_signed_when_a_swarm_key_is_configured(
         assert verify(msg, key, 5.0, now=msg.header.utime / 1e6) is None
         assert verify(msg, "another key", 5.0, now=msg.header.utime / 1e6) is not None
     assert sent[0][1].header.seq == sent[1][1].header.seq and bytes(sent[0][1].header.mac) != bytes(sent[1][1].header.mac)
+
+
+async def test_a_keyed_console_takes_no_forged_acknowledgement_or_state(
+    context: Context, swarm: FakeSwarm, clock: FakeClock
+) -> None:
+    """An attacker's unsigned or wrongly signed mc_state_t must not acknowledge a command the MC never
+    accepted (the console would stop resending it) nor change what the operator sees."""
+    key = "correct horse battery staple"
+    app = make_app(context, clock, memq_config(security={"swarm_key": key}))
+    swarm.key, swarm.clock = key, clock
+    async with app.run_test(size=(160, 44)) as pilot:
+        swarm.agent("alpha")
+        await until(pilot, app, lambda: app.selected == "alpha")
+        await pilot.press("t")
+        ((_, msg),) = await wait_sent(pilot, app, swarm, 1)
+        cmd = app.tracker.pending[msg.header.seq]
+        for forger in (None, "another key"):
+            swarm.key = forger
+            swarm.mc("alpha", mc_state_t.TAKEOFF, last=msg.header.seq)
+            await settle(pilot)
+            app.refresh_now()
+            assert cmd.status is Status.PENDING
+            assert app.model.agents["alpha"].mc_state == "STANDBY"
+        assert app.node.rejected == 2
+        swarm.key = key  # the real MC's acknowledgement
+        swarm.mc("alpha", mc_state_t.TAKEOFF, last=msg.header.seq)
+        await until(pilot, app, lambda: cmd.status is Status.ACKED)
+        assert app.model.agents["alpha"].mc_state == "TAKEOFF"
 
 
 async def test_help_screen_and_footer(two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm) -> None:

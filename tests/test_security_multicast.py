@@ -99,6 +99,7 @@ def test_signed_separate_processes_fly_and_ignore_unsigned_spoofs(netns: NetName
         assert wait_for(lambda: "unsigned message" in agent.log("mc") and "unsigned message" in agent.log("hlc"), 10)
         later = probe.mark()
         assert probe.wait("alpha/MC_STATE", "mc_state_t", timeout=5, since=later)
+        assert probe.wait("alpha/HLC_STATE", "hlc_state_t", timeout=5, since=later), agent.log("hlc")
         states = {m["state"] for m in probe.history("alpha/MC_STATE", "mc_state_t", since=mark) if m["header"]["seq"] != 1}
         assert states == {M.STANDBY}
         hlc = {m["state"] for m in probe.history("alpha/HLC_STATE", "hlc_state_t", since=mark) if m["header"]["seq"] != 1}

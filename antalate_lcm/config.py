@@ -424,6 +424,12 @@ def load_config(path: str | Path | None) -> Config:
     if path is None:
         return parse_config({}, "<defaults>")
     p = Path(path)
+    return parse_config(read_toml_file(p), str(p))
+
+
+def read_toml_file(p: Path) -> dict[str, Any]:
+    """A TOML file as a table, or the one-line `ConfigError` a person can act on (every config file
+    antalate reads: nodes' and the station's)."""
     try:
         text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -431,10 +437,9 @@ def load_config(path: str | Path | None) -> Config:
     except OSError as exc:
         raise ConfigError(str(p), "", f"cannot be read: {exc.strerror}") from None
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(str(p), "", f"is not valid TOML: {exc}") from None
-    return parse_config(data, str(p))
 
 
 

@@ -7,21 +7,16 @@ the file, the key and what was expected (like the agents' config).
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from antalate_lcm.config import read_toml_file
 from antalate_lcm.errors import ConfigError
 
 from ._settings import DEFAULT_HOST, DEFAULT_PORT, ApiKey, RateLimits, StationSettings
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - exercised only on 3.10
-    import tomli as tomllib
 
 EXAMPLE = """\
 # antalate station --config station.toml
@@ -124,14 +119,4 @@ def parse_station_file(data: dict[str, Any], source: str, base: Path | None = No
 
 def load_station_file(path: str | Path) -> StationFile:
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(str(p), "", "file not found") from None
-    except OSError as exc:
-        raise ConfigError(str(p), "", f"cannot be read: {exc.strerror}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(str(p), "", f"is not valid TOML: {exc}") from None
-    return parse_station_file(data, str(p), p.parent)
+    return parse_station_file(read_toml_file(p), str(p), p.parent)

@@ -401,8 +401,8 @@ def run_bridge(config_path: str, *, stop: threading.Event | None = None) -> int:
     bridge.start()
     print(f"bridge {bridge.id} running: {' <-> '.join(bridge.names)}", flush=True)
     try:
-        while not stop.wait(0.5):
-            pass
+        while not stop.is_set():  # never stop.wait(): see launch.run_until_signal
+            time.sleep(0.5)
     finally:
         bridge.close()
     print(f"bridge {bridge.id} stopped: {bridge.stats()}", flush=True)

@@ -174,7 +174,8 @@ def run_processes(child_argv: Callable[[int, int], list[str]], count: int, *, gr
             procs.append(subprocess.Popen(child_argv(i, count), preexec_fn=_die_with_parent))
         log.info("%d agent processes: %s", count, ", ".join(str(p.pid) for p in procs))
         failed: subprocess.Popen[bytes] | None = None
-        while not stop.wait(0.2):
+        while not stop.is_set():  # never stop.wait(): see launch.run_until_signal
+            time.sleep(0.2)
             failed = next((p for p in procs if p.poll() is not None), None)
             if failed is not None:
                 log.error("agent process %d exited with %s; stopping the others", failed.pid, failed.returncode)

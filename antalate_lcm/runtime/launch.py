@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import signal
 import threading
+import time
 from collections.abc import Callable, Sequence
 from concurrent import futures
 from types import FrameType
@@ -26,10 +27,13 @@ def run_until_signal(
     The bus is opened before any node starts so a missing multicast route is reported up front.
     """
     stop = stop_event or threading.Event()
+    # The handler only raises a flag: it runs on the main thread between two bytecodes, possibly
+    # inside `Event.wait`, whose condition lock is not re-entrant -- `stop.set()` there deadlocked
+    # the process for good (a SIGTERM'd HLC that never exited). The main thread polls instead.
+    signalled: list[int] = []
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:
-        log.info("received %s, stopping", signal.Signals(signum).name)
-        stop.set()
+        signalled.append(signum)
 
     previous = {}
     if threading.current_thread() is threading.main_thread():
@@ -42,9 +46,12 @@ def run_until_signal(
         for node in nodes:
             node.start()
             started.append(node)
-        while not stop.wait(0.2):
+        while not (signalled or stop.is_set()):
+            time.sleep(0.2)
             if poll is not None and poll():
                 break
+        if signalled:
+            log.info("received %s, stopping", signal.Signals(signalled[0]).name)
         return 0
     finally:
 

@@ -14,6 +14,7 @@ import json
 import logging
 import signal
 import threading
+import time
 
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.lcm_url import zenoh_endpoints_problem
@@ -54,8 +55,8 @@ def run_router(listen: list[str], *, lease_ms: int, stop: threading.Event | None
             signal.signal(sig, lambda *_: stop.set())
     print(f"zenoh router {session.zid()} listening on {', '.join(listen)}", flush=True)
     try:
-        while not stop.wait(0.5):
-            pass
+        while not stop.is_set():  # never stop.wait(): see launch.run_until_signal
+            time.sleep(0.5)
     finally:
         session.close()
     return 0

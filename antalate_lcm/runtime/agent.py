@@ -176,6 +176,8 @@ def run_processes(child_argv: Callable[[int, int], list[str]], count: int, *, gr
         failed: subprocess.Popen[bytes] | None = None
         while not stop.is_set():  # never stop.wait(): see launch.run_until_signal
             time.sleep(0.2)
+            if stop.is_set():  # a Ctrl-C reaches the children too: their exit is not a failure then
+                break
             failed = next((p for p in procs if p.poll() is not None), None)
             if failed is not None:
                 log.error("agent process %d exited with %s; stopping the others", failed.pid, failed.returncode)

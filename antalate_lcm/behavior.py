@@ -198,7 +198,12 @@ class BehaviorContext:
         return self._timer(fn, lambda f: executor.create_timer(period, f), f"timer {_name(fn)}")
 
     def _timer(
-        self, fn: Callable[[], Any], make: Callable[[Callable[[], None]], Timer], where: str, *, oneshot: bool = False
+        self,
+        fn: Callable[[], Any],
+        make: Callable[[Callable[[], None]], Timer],
+        where: str,
+        *,
+        oneshot: bool = False,
     ) -> Timer:
         # Timers are kept here, not in the node's list, so the many one-shots a behavior may make
         # over a long flight are forgotten once they have run.

@@ -280,7 +280,7 @@ class Bridge:
             raise
         for name in self.names:
             link = self._links[name]
-            handler: Callable[..., None] = lambda ch, data, att=None, src=name: self._on_message(src, ch, data, att)  # noqa: E731
+            handler: Callable[..., None] = partial(self._on_message, name)
             if isinstance(link, ZenohLCM):
                 sub = link.subscribe(".*", handler, remote_only=True, attachments=True)
             else:
@@ -297,18 +297,29 @@ class Bridge:
             self._threads.append(t)
         log.info(
             "bridge %s: %s (%s) <-> %s (%s)",
-            self.id, self.names[0], self.config.buses[self.names[0]], self.names[1], self.config.buses[self.names[1]],
+            self.id,
+            self.names[0],
+            self.config.buses[self.names[0]],
+            self.names[1],
+            self.config.buses[self.names[1]],
         )
 
     def _on_members(self, side: str, members: frozenset[str]) -> None:
         leader = min(members) == self.id
         if leader != self.leader[side]:
-            log.info("bridge %s: %s forwarding to %s (bridges of this site alive: %s)",
-                     self.id, "now" if leader else "no longer", side, ", ".join(sorted(members)))
+            log.info(
+                "bridge %s: %s forwarding to %s (bridges of this site alive: %s)",
+                self.id,
+                "now" if leader else "no longer",
+                side,
+                ", ".join(sorted(members)),
+            )
         self.leader[side] = leader
 
     def _selected(self, channel: str) -> bool:
-        return any(p.fullmatch(channel) for p in self._select) and not any(p.fullmatch(channel) for p in self._exclude)
+        return any(p.fullmatch(channel) for p in self._select) and not any(
+            p.fullmatch(channel) for p in self._exclude
+        )
 
     def _on_message(self, source: str, channel: str, data: bytes, attachment: bytes | None = None) -> None:
         if not self._selected(channel):
@@ -346,7 +357,14 @@ class Bridge:
         except OSError as exc:
             self.send_errors += 1
             if self.send_errors in (1, 10, 100) or self.send_errors % 1000 == 0:
-                log.warning("bridge %s: cannot send %s on %s (%s); %d so far", self.id, channel, direction.dest, exc, self.send_errors)
+                log.warning(
+                    "bridge %s: cannot send %s on %s (%s); %d so far",
+                    self.id,
+                    channel,
+                    direction.dest,
+                    exc,
+                    self.send_errors,
+                )
             return
         direction.forwarded += 1
 

@@ -287,7 +287,9 @@ class _Link:
             return
         self._deliver(channel, data, subs, count=count)
 
-    def _deliver(self, channel: str, data: bytes, subs: tuple[Subscription, ...], *, count: bool = True) -> None:
+    def _deliver(
+        self, channel: str, data: bytes, subs: tuple[Subscription, ...], *, count: bool = True
+    ) -> None:
         if count:
             self.received += 1
         # One decode per type per datagram, failures included: a bad datagram is one decode error
@@ -409,7 +411,9 @@ class Bus:
             self._link(bus).publish(channel, data)
         except OSError as exc:
             self.publish_errors += 1
-            self._publish_log.log((bus, channel), logging.WARNING, "cannot send on %s %s: %s", bus, channel, exc)
+            self._publish_log.log(
+                (bus, channel), logging.WARNING, "cannot send on %s %s: %s", bus, channel, exc
+            )
             return False
         return True
 

@@ -28,7 +28,9 @@ def _cmd_spy(args: argparse.Namespace) -> int:
     config = load_config(args.config)
     url = config.buses.get(args.bus) if args.bus else config.buses.get(config.topics.default_bus)
     if url is None:
-        raise AntalateError(f"no bus named {args.bus!r} in {config.source}; declared: {', '.join(config.buses)}")
+        raise AntalateError(
+            f"no bus named {args.bus!r} in {config.source}; declared: {', '.join(config.buses)}"
+        )
     if url.startswith("zenoh://"):
         from antalate_lcm.lcm_url import ZENOH_NOT_LCM
 
@@ -63,11 +65,15 @@ def build_parser() -> argparse.ArgumentParser:
     from antalate_lcm.types_cmd import LANGUAGES
 
     p = sub.add_parser("types", help="write the message bindings for nodes in other languages (lcm-gen)")
-    p.add_argument("--lang", required=True, choices=LANGUAGES, help="target language, or lcm for the .lcm files")
+    p.add_argument(
+        "--lang", required=True, choices=LANGUAGES, help="target language, or lcm for the .lcm files"
+    )
     p.add_argument("--out", required=True, help="folder to write into (created if missing)")
     p.set_defaults(func=_cmd_types)
 
-    p = sub.add_parser("keygen", help="print a new random swarm key for [security] swarm_key (docs/security.md)")
+    p = sub.add_parser(
+        "keygen", help="print a new random swarm key for [security] swarm_key (docs/security.md)"
+    )
     p.set_defaults(func=_cmd_keygen)
 
     for register in _registrars():

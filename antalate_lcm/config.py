@@ -106,14 +106,19 @@ class TopicsConfig(BaseModel):
                 out[key] = value
             elif isinstance(value, str | list | dict):
                 try:
-                    out[key] = TopicBinding.model_validate(value if isinstance(value, dict) else {"bus": value})
+                    out[key] = TopicBinding.model_validate(
+                        value if isinstance(value, dict) else {"bus": value}
+                    )
                 except ValidationError as exc:
                     err = describe(exc)
                     sub = err.key if isinstance(value, dict) else err.key.removeprefix("bus").lstrip(".")
                     where = f"topics.{key}{'' if not sub or sub.startswith('[') else '.'}{sub}"
                     raise _KeyedError(where, err.message, plain=True) from None
             else:
-                raise _KeyedError(f"topics.{key}", f"a bus name, a list of bus names or a table {{bus, channel, type}}, got {value!r}")
+                raise _KeyedError(
+                    f"topics.{key}",
+                    f"a bus name, a list of bus names or a table {{bus, channel, type}}, got {value!r}",
+                )
         return out
 
 
@@ -257,7 +262,9 @@ class Config(BaseModel):
             except ValueError as exc:
                 raise _KeyedError(f"buses.{name}", str(exc)) from None
         if not v:
-            raise _KeyedError("buses", f"at least one bus, e.g. lan = {DEFAULT_LAN_URL!r} ({LCM_URL_EXAMPLES})")
+            raise _KeyedError(
+                "buses", f"at least one bus, e.g. lan = {DEFAULT_LAN_URL!r} ({LCM_URL_EXAMPLES})"
+            )
         return v
 
     @model_validator(mode="after")
@@ -283,7 +290,9 @@ class Config(BaseModel):
             raise _KeyedError("bma.name", f"unique arbiter names, {dup!r} is used twice")
         for i, bma in enumerate(self.bma):
             if bma.state_topic not in self.topic_specs():
-                raise _KeyedError(f"bma[{i}].state_topic", "a topic name (MC_STATE or one declared in [topics])")
+                raise _KeyedError(
+                    f"bma[{i}].state_topic", "a topic name (MC_STATE or one declared in [topics])"
+                )
         return self
 
     # ----------------------------------------------------------------- derived views
@@ -392,7 +401,9 @@ def _check_autopilot(config: Config, data: dict[str, Any]) -> None:
         raise ConfigError(config.source, prefix, str(exc)) from None
     except Exception as exc:  # noqa: BLE001 - a third-party constructor breaking its contract
         prefix = "hlc.autopilot" if design_style else "hlc.autopilot_params"
-        raise ConfigError(config.source, prefix, f"params the adapter accepts; its constructor failed: {exc!r}") from None
+        raise ConfigError(
+            config.source, prefix, f"params the adapter accepts; its constructor failed: {exc!r}"
+        ) from None
 
 
 def check_unique_agent_names(configs: Sequence[Config], *, agents: int = 1) -> None:
@@ -442,7 +453,6 @@ def read_toml_file(p: Path) -> dict[str, Any]:
         raise ConfigError(str(p), "", f"is not valid TOML: {exc}") from None
 
 
-
 __all__ = [
     "AgentConfig",
     "BehaviorConfig",
@@ -461,4 +471,3 @@ __all__ = [
     "parse_config",
     "station_url_problem",
 ]
-

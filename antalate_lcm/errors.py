@@ -42,7 +42,7 @@ class MulticastUnavailable(BusUnavailable):
             "  (and, if lo is down: sudo ip link set lo up)\n"
             "  on a LAN, route multicast to the interface that faces the other hosts, e.g.\n"
             "      sudo ip route add 224.0.0.0/4 dev eth0\n"
-            "  or run every node in one process on the in-memory bus: set the bus URL to \"memq://\"."
+            '  or run every node in one process on the in-memory bus: set the bus URL to "memq://".',
         )
 
 

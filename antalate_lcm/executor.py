@@ -96,7 +96,9 @@ class Executor:
             # The loop is closed: the process is shutting down, like a call queued after stop().
             log.debug("dropped %s: the executor is stopped", getattr(fn, "__qualname__", fn))
 
-    def create_timer(self, period: float, fn: Callable[[], Any], *, first_delay: float | None = None) -> Timer:
+    def create_timer(
+        self, period: float, fn: Callable[[], Any], *, first_delay: float | None = None
+    ) -> Timer:
         """Run ``fn`` every ``period`` s; the first run after ``first_delay`` (default: one period)."""
         if period <= 0:
             raise ValueError("timer period must be > 0")
@@ -137,7 +139,9 @@ class Executor:
         try:
             timer.fn()
         except Exception:
-            log.exception("callback %s raised; the executor carries on", getattr(timer.fn, "__qualname__", timer.fn))
+            log.exception(
+                "callback %s raised; the executor carries on", getattr(timer.fn, "__qualname__", timer.fn)
+            )
         if not timer.oneshot and not timer.cancelled:
             nxt = due + timer.period
             if nxt <= now:  # fell behind: skip missed runs rather than burst

@@ -47,7 +47,9 @@ DEFAULT_TCPQ = "127.0.0.1:7700"
 EXAMPLES = "udpm://239.255.76.67:7667?ttl=1, memq:// or file:///path/to/log.lcm?mode=r"
 _MULTICAST = ipaddress.IPv4Network("224.0.0.0/4")
 _DECIMAL = re.compile(r"[0-9]+")
-_HOSTNAME = re.compile(r"(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*")
+_HOSTNAME = re.compile(
+    r"(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*"
+)
 
 
 @dataclass(frozen=True)
@@ -85,7 +87,11 @@ def _speed(value: str) -> str | None:
 
 
 def _mode(value: str) -> str | None:
-    return None if value in ("r", "w", "a") else f"r (read), w (write) or a (append) for option mode, not {value!r}"
+    return (
+        None
+        if value in ("r", "w", "a")
+        else f"r (read), w (write) or a (append) for option mode, not {value!r}"
+    )
 
 
 _TTL = _int("ttl", 0, 255, "an integer 0-255 (0 = this host only, 1 = the local network)")
@@ -94,7 +100,11 @@ _RECV_BUF = _int("recv_buf_size", 1, 2**31 - 1, "a size in bytes, 1 to 214748364
 #: Options each provider knows, each with its check (value -> problem or None).
 OPTIONS: dict[str, dict[str, Callable[[str], str | None]]] = {
     "udpm": {"ttl": _TTL, "recv_buf_size": _RECV_BUF},
-    "mpudpm": {"ttl": _TTL, "recv_buf_size": _RECV_BUF, "nports": _int("nports", 1, 65535, "a number of ports >= 1")},
+    "mpudpm": {
+        "ttl": _TTL,
+        "recv_buf_size": _RECV_BUF,
+        "nports": _int("nports", 1, 65535, "a number of ports >= 1"),
+    },
     "memq": {},
     "file": {
         "mode": _mode,
@@ -106,8 +116,12 @@ OPTIONS: dict[str, dict[str, Callable[[str], str | None]]] = {
         "connect": lambda v: zenoh_endpoints_problem("connect", v),
         "listen": lambda v: zenoh_endpoints_problem("listen", v),
         "mode": lambda v: None if v in ("peer", "client") else f"peer or client for option mode, not {v!r}",
-        "scout": lambda v: None if v in ("0", "1") else f"0 or 1 for option scout (multicast scouting), not {v!r}",
-        "express": lambda v: None if v in ("0", "1") else f"0 or 1 for option express (no batching), not {v!r}",
+        "scout": lambda v: (
+            None if v in ("0", "1") else f"0 or 1 for option scout (multicast scouting), not {v!r}"
+        ),
+        "express": lambda v: (
+            None if v in ("0", "1") else f"0 or 1 for option express (no batching), not {v!r}"
+        ),
         "lease": _int("lease", 500, 3_600_000, "a link lease in milliseconds, 500 to 3600000"),
         "config": lambda v: None if v else "the path of a Zenoh JSON5 config file for option config",
     },
@@ -158,7 +172,9 @@ def _zenoh(u: LcmUrl) -> LcmUrl:
             f"not {u.network!r}"
         )
     if u.options.get("mode") == "client" and "connect" not in u.options:
-        raise ValueError("option connect with mode=client (the router to reach, e.g. connect=tcp/192.0.2.10:7447)")
+        raise ValueError(
+            "option connect with mode=client (the router to reach, e.g. connect=tcp/192.0.2.10:7447)"
+        )
     return LcmUrl(u.url, u.provider, prefix, u.options)
 
 
@@ -240,7 +256,9 @@ def parse_lcm_url(url: str) -> LcmUrl:
         return _zenoh(u)
     if u.provider == "file":
         if not u.network:
-            raise ValueError("the path of an LCM log after file:// (file:///abs/path.lcm or file://rel/path.lcm)")
+            raise ValueError(
+                "the path of an LCM log after file:// (file:///abs/path.lcm or file://rel/path.lcm)"
+            )
         return u
     return _host_and_port(u)
 

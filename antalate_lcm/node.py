@@ -202,7 +202,10 @@ class Node:
             if not self._open_inputs:
                 self.log.warning(
                     "no [security] swarm_key: anyone who can send to bus %r (%s) can command %s "
-                    "(take off, land, steer); see docs/security.md", bus, url, self.agent,
+                    "(take off, land, steer); see docs/security.md",
+                    bus,
+                    url,
+                    self.agent,
                 )
             self._open_inputs[topic] = bus
             return
@@ -225,7 +228,9 @@ class Node:
         where = ", ".join(f"{t} on {b!r}" for t, b in sorted(self._insecure.items()))
         self.log.warning(
             "INSECURE ([security] insecure = true, no swarm key): anyone on the network can spoof %s of %s "
-            "(launch it, fly it, ground it, put it in ERROR)", where, self.agent,
+            "(launch it, fly it, ground it, put it in ERROR)",
+            where,
+            self.agent,
         )
 
     def _admit(self, channel: str, msg: Any, expected_sender: str | None) -> bool:
@@ -237,8 +242,15 @@ class Node:
         if problem is not None:
             self.invalid += 1
             self._invalid_log.log(
-                ("invalid", channel), logging.WARNING, "rejected %s on %s from %r seq %d: %s (%d invalid so far)",
-                type(msg).__name__, channel, msg.header.agent, msg.header.seq, problem, self.invalid,
+                ("invalid", channel),
+                logging.WARNING,
+                "rejected %s on %s from %r seq %d: %s (%d invalid so far)",
+                type(msg).__name__,
+                channel,
+                msg.header.agent,
+                msg.header.seq,
+                problem,
+                self.invalid,
             )
             return False
         return True
@@ -271,10 +283,14 @@ class Node:
         acknowledgement key; its ``utime`` is fresh, so the receivers' replay guard lets it through).
         This is the one place antalate signs: the MAC covers the final header.
         """
-        key: Any = (topic, tuple(sorted(fields.items()))) if fields else topic  # most publishes have no fields
+        key: Any = (
+            (topic, tuple(sorted(fields.items()))) if fields else topic
+        )  # most publishes have no fields
         pub = self._publishers.get(key)
         if pub is None:
-            pub = self._publishers[key] = _Publisher(self._publish_buses(topic), self.channel(topic, **fields))
+            pub = self._publishers[key] = _Publisher(
+                self._publish_buses(topic), self.channel(topic, **fields)
+            )
         if seq is None:
             pub.seq += 1
             seq = pub.seq
@@ -330,7 +346,9 @@ class Node:
         self._subs.append(sub)
         return sub
 
-    def subscribe_all(self, topic: str, handler: Callable[[Any, TopicMatch], None], **fields: str) -> Subscription:
+    def subscribe_all(
+        self, topic: str, handler: Callable[[Any, TopicMatch], None], **fields: str
+    ) -> Subscription:
         """Deliver ``topic`` from every agent (template fields not given match anything).
 
         Always from the configured bus, never the in-process one: peers may be other processes.
@@ -363,7 +381,9 @@ class Node:
             self._subs.remove(sub)
 
     # ------------------------------------------------------------------ time
-    def create_timer(self, period: float, fn: Callable[[], Any], *, first_delay: float | None = None) -> Timer:
+    def create_timer(
+        self, period: float, fn: Callable[[], Any], *, first_delay: float | None = None
+    ) -> Timer:
         timer = self.context.executor.create_timer(period, fn, first_delay=first_delay)
         self._timers.append(timer)
         return timer
@@ -383,7 +403,9 @@ class Node:
         """Monotonic seconds on the executor's clock (what state machines are given)."""
         return self.context.executor.clock()
 
-    def state_publisher(self, topic: str, build: Callable[[], Any], hz: float, **fields: str) -> Callable[[], None]:
+    def state_publisher(
+        self, topic: str, build: Callable[[], Any], hz: float, **fields: str
+    ) -> Callable[[], None]:
         """Publish ``build()`` every ``1/hz`` s, and whenever the returned function is called.
 
         State messages go out periodically as well as on change (docs/design.md §4) so a node that starts

@@ -31,7 +31,9 @@ def load_plugin(group: str, name: str, base: type | None = None) -> type:
     if ":" in name:
         module_name, _, attr = name.partition(":")
         if not (_MODULE.fullmatch(module_name) and _CLASS.fullmatch(attr)):
-            raise PluginNotFound(f"cannot load {name!r}: expected 'package.module:ClassName' (an absolute module path)")
+            raise PluginNotFound(
+                f"cannot load {name!r}: expected 'package.module:ClassName' (an absolute module path)"
+            )
         try:
             obj = getattr(importlib.import_module(module_name), attr)
         except (ImportError, AttributeError) as exc:

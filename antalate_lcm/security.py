@@ -168,7 +168,9 @@ def verify(
 
     No replay guard here: see :class:`Authenticator` for what a node does with every message.
     """
-    problem = check_mac(msg, (key, *previous_keys)) or check_window(msg, window, time.time() if now is None else now)
+    problem = check_mac(msg, (key, *previous_keys)) or check_window(
+        msg, window, time.time() if now is None else now
+    )
     return None if problem is None else problem.text
 
 
@@ -306,7 +308,8 @@ class Authenticator:
         sender = str(msg.header.agent)
         if problem is None and expected_sender is not None and sender != expected_sender:
             problem = Rejection(
-                Reason.WRONG_SENDER, f"signed by {sender!r} but {channel} carries only {expected_sender!r}'s messages"
+                Reason.WRONG_SENDER,
+                f"signed by {sender!r} but {channel} carries only {expected_sender!r}'s messages",
             )
         if problem is None:
             problem = self.guard.check(msg, sender, type(msg).__name__)

@@ -89,7 +89,9 @@ def _int_literals(annotation: Any) -> tuple[Any, ...]:
     return members if has_int and not any(isinstance(m, bool) for m in members) else ()
 
 
-def _bool_for_int_literal(model: type[BaseModel], data: Mapping[str, Any], path: tuple[Any, ...] = ()) -> None:
+def _bool_for_int_literal(
+    model: type[BaseModel], data: Mapping[str, Any], path: tuple[Any, ...] = ()
+) -> None:
     for name, info in model.model_fields.items():
         key = info.alias or name
         if key not in data:
@@ -99,7 +101,11 @@ def _bool_for_int_literal(model: type[BaseModel], data: Mapping[str, Any], path:
         if isinstance(value, bool) and members:
             expected = " or ".join(repr(m) for m in members)
             raise StrictError(dotted((*path, key)), f"Input should be {expected}, got {value!r}")
-        if isinstance(value, Mapping) and isinstance(info.annotation, type) and issubclass(info.annotation, BaseModel):
+        if (
+            isinstance(value, Mapping)
+            and isinstance(info.annotation, type)
+            and issubclass(info.annotation, BaseModel)
+        ):
             _bool_for_int_literal(info.annotation, value, (*path, key))
 
 

@@ -62,7 +62,10 @@ _EMPTY_CHUNK = "%-"
 
 def channel_key(prefix: str, channel: str) -> str:
     """The Zenoh key of ``channel``: ``prefix/channel``, reserved characters and empty chunks escaped."""
-    chunks = [_KEY_UNSAFE.sub(lambda m: f"%{ord(m.group()):02X}", c) if c else _EMPTY_CHUNK for c in channel.split("/")]
+    chunks = [
+        _KEY_UNSAFE.sub(lambda m: f"%{ord(m.group()):02X}", c) if c else _EMPTY_CHUNK
+        for c in channel.split("/")
+    ]
     return f"{prefix}/{'/'.join(chunks)}"
 
 
@@ -96,7 +99,9 @@ def zenoh_config(u: LcmUrl) -> Any:
     if "mode" in opts:
         config.insert_json5("mode", json.dumps(opts["mode"]))
     elif "config" not in opts:
-        config.insert_json5("mode", json.dumps("client" if "connect" in opts and "listen" not in opts else "peer"))
+        config.insert_json5(
+            "mode", json.dumps("client" if "connect" in opts and "listen" not in opts else "peer")
+        )
     for option in ("connect", "listen"):
         if option in opts:
             config.insert_json5(f"{option}/endpoints", json.dumps(opts[option].split(",")))
@@ -109,7 +114,9 @@ def zenoh_config(u: LcmUrl) -> Any:
         retry = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}
         config.insert_json5("connect/retry", json.dumps(retry))
         config.insert_json5("connect/timeout_ms", json.dumps({"router": -1, "peer": -1, "client": 0}))
-        config.insert_json5("connect/exit_on_failure", json.dumps({"router": False, "peer": False, "client": False}))
+        config.insert_json5(
+            "connect/exit_on_failure", json.dumps({"router": False, "peer": False, "client": False})
+        )
         config.insert_json5("listen/exit_on_failure", "true")
     if "lease" in opts or "config" not in opts:
         # A cut link is noticed within the lease (Zenoh's default, 10 s, outlives a short outage's
@@ -156,14 +163,18 @@ class ZenohLCM:
         try:
             import zenoh
         except ImportError:
-            raise BusUnavailable(url, "the Zenoh library is not installed: pip install 'antalate[zenoh]'") from None
+            raise BusUnavailable(
+                url, "the Zenoh library is not installed: pip install 'antalate[zenoh]'"
+            ) from None
         self._zenoh = zenoh
         self._config = zenoh_config(u)
         self._session: Any = None
         self._subs: list[ZenohSubscription] = []
         self._groups: list[_Group] = []
         self._publishers: dict[str, Any] = {}
-        self._queue: collections.deque[tuple[ZenohSubscription, str, bytes, bytes | None]] = collections.deque()
+        self._queue: collections.deque[tuple[ZenohSubscription, str, bytes, bytes | None]] = (
+            collections.deque()
+        )
         self._lock = threading.Lock()  # the FIFO (taken on Zenoh's threads)
         self._subs_lock = threading.Lock()  # the session and the subscription list (never on Zenoh's threads)
         self._rsock, self._wsock = socket.socketpair()
@@ -240,7 +251,9 @@ class ZenohLCM:
         sample's attachment as a third argument (a bridge reads where a copy came from)."""
         channel = literal_channel(channel_regex)
         pattern = None if channel is not None else re.compile(channel_regex)
-        sub = ZenohSubscription(channel_regex, handler, channel, pattern, remote_only=remote_only, attachments=attachments)
+        sub = ZenohSubscription(
+            channel_regex, handler, channel, pattern, remote_only=remote_only, attachments=attachments
+        )
         with self._subs_lock:
             self._subs = [s for s in self._subs if s.active] + [sub]
             if self._session is not None:
@@ -276,7 +289,9 @@ class ZenohLCM:
     def _declare(self, sub: ZenohSubscription) -> None:
         key = channel_key(self.prefix, sub.channel) if sub.channel is not None else f"{self.prefix}/**"
         origin = self._zenoh.Locality.REMOTE if sub.remote_only else None
-        sub.zsub = self._session.declare_subscriber(key, lambda sample: self._on_sample(sub, sample), allowed_origin=origin)
+        sub.zsub = self._session.declare_subscriber(
+            key, lambda sample: self._on_sample(sub, sample), allowed_origin=origin
+        )
 
     def unsubscribe(self, sub: ZenohSubscription) -> None:
         sub.active = False
@@ -402,4 +417,12 @@ def _duplicate(sub: ZenohSubscription, channel: str, data: bytes) -> bool:
     return last is not None
 
 
-__all__ = ["BRIDGE_MARK", "DEDUP_WINDOW", "ZenohLCM", "ZenohSubscription", "channel_key", "key_channel", "literal_channel"]
+__all__ = [
+    "BRIDGE_MARK",
+    "DEDUP_WINDOW",
+    "ZenohLCM",
+    "ZenohSubscription",
+    "channel_key",
+    "key_channel",
+    "literal_channel",
+]

@@ -33,8 +33,9 @@ class Direction:
     received: float
 
 
-def follow_velocity(direction: Direction | None, now: float, *, timeout: float,
-                    max_speed: float) -> tuple[float, float]:
+def follow_velocity(
+    direction: Direction | None, now: float, *, timeout: float, max_speed: float
+) -> tuple[float, float]:
     """North/east m/s for `direction` at `now`: zero when there is none, it is inactive, stale or bad."""
     if direction is None or not direction.active or now - direction.received > timeout:
         return 0.0, 0.0
@@ -58,8 +59,11 @@ class DirectionFollow(Behavior):
         max_speed: float = Field(default=0.0, ge=0, allow_inf_nan=False)
 
     params: Params
-    topics = {"DIRECTION_CMD": direction_cmd_t, "SWARM_DIRECTION_CMD": direction_cmd_t,
-              "VELOCITY_CMD": velocity_cmd_t}
+    topics = {
+        "DIRECTION_CMD": direction_cmd_t,
+        "SWARM_DIRECTION_CMD": direction_cmd_t,
+        "VELOCITY_CMD": velocity_cmd_t,
+    }
     activate_on = ("MISSION",)
     tick_hz = 10.0
 
@@ -74,8 +78,9 @@ class DirectionFollow(Behavior):
         if msg.target not in ("", self.ctx.agent):
             return
         self.direction = Direction(bool(msg.active), float(msg.azimuth), float(msg.speed), self.ctx.now)
-        self.log.info("operator direction: %s",
-                      f"{msg.azimuth:.0f} deg at {msg.speed:g} m/s" if msg.active else "none")
+        self.log.info(
+            "operator direction: %s", f"{msg.azimuth:.0f} deg at {msg.speed:g} m/s" if msg.active else "none"
+        )
 
     def on_activate(self) -> None:
         self.tick(0.0)

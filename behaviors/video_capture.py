@@ -88,8 +88,10 @@ class VideoCapture(Behavior):
             raise BehaviorError(f"ffmpeg not found ({p.ffmpeg!r} is not on PATH): apt-get install ffmpeg")
         out_dir = Path(p.output_dir).expanduser()
         out_dir.mkdir(parents=True, exist_ok=True)
-        path = _unique(out_dir / p.filename.format(
-            agent=self.ctx.agent, name=self.ctx.name, time=time.strftime("%Y%m%d-%H%M%S")))
+        path = _unique(
+            out_dir
+            / p.filename.format(agent=self.ctx.agent, name=self.ctx.name, time=time.strftime("%Y%m%d-%H%M%S"))
+        )
         argv = [exe, "-hide_banner", "-nostats", "-loglevel", "warning", "-y", *p.input_args]
         if p.format:
             argv += ["-f", p.format]
@@ -97,13 +99,20 @@ class VideoCapture(Behavior):
         self.log.info("recording to %s: %s", path, " ".join(argv))
         self._stderr = collections.deque(maxlen=20)
         self.proc = subprocess.Popen(
-            argv, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True
+            argv,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            start_new_session=True,
         )
         self.path = path
         self.recordings.append(path)
         assert self.proc.stderr is not None
         self._drainer = threading.Thread(
-            target=_drain, args=(self.proc.stderr, self._stderr, self.log), name=f"ffmpeg-stderr {path.name}", daemon=True
+            target=_drain,
+            args=(self.proc.stderr, self._stderr, self.log),
+            name=f"ffmpeg-stderr {path.name}",
+            daemon=True,
         )
         self._drainer.start()
 
@@ -164,7 +173,9 @@ class VideoCapture(Behavior):
         if rc == 0:
             self.log.info("recording finished: %s", path)
         else:
-            self.log.warning("ffmpeg ended with code %s (%s); the file %s may be incomplete", rc, self._last_error(), path)
+            self.log.warning(
+                "ffmpeg ended with code %s (%s); the file %s may be incomplete", rc, self._last_error(), path
+            )
 
     def _last_error(self) -> str:
         return self._stderr[-1] if self._stderr else "(no message)"

@@ -88,7 +88,17 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
     cfg = tmp / "bench.toml"
     cfg.write_text(f'[agent]\nname = "b"\n[buses]\nlan = "{URL}"\n[hlc]\nautopilot = "sim"\n')
     log = open(tmp / f"agents-{n}.log", "w")  # noqa: SIM115
-    argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", "WARNING", "agent", str(cfg), "--agents", str(n)]
+    argv = [
+        sys.executable,
+        "-m",
+        "antalate_lcm.cli",
+        "--log-level",
+        "WARNING",
+        "agent",
+        str(cfg),
+        "--agents",
+        str(n),
+    ]
     if processes != 0:  # 0: leave the option out (a tree from before --processes, for a baseline)
         argv += ["--processes", str(processes or math.ceil(n / 1000))]
     started = time.perf_counter()
@@ -144,7 +154,9 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
         window = time.perf_counter() - t0
         rss, cpu1 = proc_stats(proc.pid)
         with lock:
-            rates = [telem.get(f"b-{i + 1:02d}" if n < 100 else f"b-{i + 1:03d}", 0) / window for i in range(n)]
+            rates = [
+                telem.get(f"b-{i + 1:02d}" if n < 100 else f"b-{i + 1:03d}", 0) / window for i in range(n)
+            ]
         cmd = operator_cmd_t()
         cmd.header.seq = 1
         cmd.header.agent = "bench"
@@ -188,22 +200,31 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("sizes", nargs="*", type=int, default=[500, 1000, 2000])
     parser.add_argument(
-        "--processes", type=int, help="agent processes (default: one per 1,000 agents; 0: no --processes option)"
+        "--processes",
+        type=int,
+        help="agent processes (default: one per 1,000 agents; 0: no --processes option)",
     )
     args = parser.parse_args()
     ensure_private_netns()
     print(f"CPUs: {os.cpu_count()}; load average {os.getloadavg()[0]:.2f} at start")
-    print(f"{'agents':>6} {'procs':>5} {'STANDBY s':>9} {'telem Hz min/mean':>18} {'MC react p50/p99/max ms':>24} "
-          f"{'HLC react p50/max ms':>21} {'RSS MiB':>8} {'CPU %':>6} {'us/agent-s':>10}  verdict")
+    print(
+        f"{'agents':>6} {'procs':>5} {'STANDBY s':>9} {'telem Hz min/mean':>18} {'MC react p50/p99/max ms':>24} "
+        f"{'HLC react p50/max ms':>21} {'RSS MiB':>8} {'CPU %':>6} {'us/agent-s':>10}  verdict"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.sizes:
             procs = args.processes if args.processes is not None else math.ceil(n / 1000)
             r = run(n, Path(tmp), args.processes)
             if "error" in r:
-                print(f"{n:>6} {procs:>5}  only {int(r['error'])} agents reached STANDBY within 60 s", flush=True)
+                print(
+                    f"{n:>6} {procs:>5}  only {int(r['error'])} agents reached STANDBY within 60 s",
+                    flush=True,
+                )
                 continue
             ok = (
                 r["standby_s"] <= 30

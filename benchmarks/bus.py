@@ -185,7 +185,9 @@ class Peer:
                 echo = self._echo_signed if signed else (lambda _ch, m: self.bus.publish("b", "PONG", m))
                 self.bus.subscribe("b", "PING", telemetry_t, echo)
             else:
-                self.bus.subscribe("b", "FLOOD", telemetry_t, self._count_signed if signed else self._count_bus)
+                self.bus.subscribe(
+                    "b", "FLOOD", telemetry_t, self._count_signed if signed else self._count_bus
+                )
             self.bus.open()
 
     def _echo_node(self, msg: telemetry_t) -> None:
@@ -469,7 +471,10 @@ def round_trip(apis: list[str], n: int, period: float = 0.001, warmup: int = 20)
     """``n`` round trips per API at one per ``period``, the APIs taking turns in blocks of BLOCK."""
     msg = make_msg()
     kinds: dict[str, Any] = {
-        "raw": RawPinger, "raw-thread": RawThreadPinger, "bus-signed": SignedBusPinger, "node": NodePinger,
+        "raw": RawPinger,
+        "raw-thread": RawThreadPinger,
+        "bus-signed": SignedBusPinger,
+        "node": NodePinger,
     }
     pingers = {api: kinds.get(api, BusPinger)(api) for api in apis}
     rtts: dict[str, list[int]] = {api: [] for api in apis}
@@ -637,9 +642,19 @@ def zenoh_router() -> subprocess.Popen[str] | None:
         print("zenoh: eclipse-zenoh is not installed, no zenoh column (pip install -e '.[zenoh]')")
         return None
     proc = subprocess.Popen(
-        [sys.executable, "-m", "antalate_lcm.cli", "--log-level", "WARNING", "router",
-         "--listen", f"tcp/127.0.0.1:{PORTS['zenoh']}"],
-        stdout=subprocess.PIPE, text=True, cwd=str(REPO),
+        [
+            sys.executable,
+            "-m",
+            "antalate_lcm.cli",
+            "--log-level",
+            "WARNING",
+            "router",
+            "--listen",
+            f"tcp/127.0.0.1:{PORTS['zenoh']}",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=str(REPO),
     )
     assert proc.stdout is not None
     line = proc.stdout.readline()
@@ -658,7 +673,6 @@ def stop_router(proc: subprocess.Popen[str]) -> None:
         proc.wait()
     if proc.stdout is not None:
         proc.stdout.close()
-
 
 
 def inside(args: argparse.Namespace) -> int:
@@ -740,10 +754,14 @@ def inside(args: argparse.Namespace) -> int:
         p50 = rt["zenoh"]["p50"] / rt["bus"]["p50"] if rt else nan
         lossless = tp["zenoh"]["lossless"] if tp else nan
         print("zenoh (through antalate router on loopback) against its targets:")
-        print(f"  {'p50 zenoh/bus':22s} {p50:8.2f}   target <= {ZENOH_TARGETS['p50 ratio to bus']:<5} "
-              f"{'met' if p50 <= ZENOH_TARGETS['p50 ratio to bus'] else 'MISSED'}")
-        print(f"  {'throughput zenoh':22s} {lossless / 1000:7.0f}k   target >= {ZENOH_TARGETS['throughput'] / 1000:.0f}k   "
-              f"{'met' if lossless >= ZENOH_TARGETS['throughput'] else 'MISSED'}")
+        print(
+            f"  {'p50 zenoh/bus':22s} {p50:8.2f}   target <= {ZENOH_TARGETS['p50 ratio to bus']:<5} "
+            f"{'met' if p50 <= ZENOH_TARGETS['p50 ratio to bus'] else 'MISSED'}"
+        )
+        print(
+            f"  {'throughput zenoh':22s} {lossless / 1000:7.0f}k   target >= {ZENOH_TARGETS['throughput'] / 1000:.0f}k   "
+            f"{'met' if lossless >= ZENOH_TARGETS['throughput'] else 'MISSED'}"
+        )
     print("against the targets:")
     for api, targets in (("bus", TARGETS), ("node", NODE_TARGETS)):
         p50_ratio = rt[api]["p50"] / rt["raw"]["p50"] if rt else nan

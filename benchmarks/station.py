@@ -71,16 +71,28 @@ def _position(rng: random.Random, field_m: float = FIELD_M) -> tuple[float, floa
 
 def _report(token: str | None, name: str, lat: float, lon: float, heading: float) -> bytes:
     """The JSON an OSC sends: full telemetry, both states, no feedback."""
-    return json.dumps({
-        "token": token,
-        "mc_state": "MISSION",
-        "hlc_state": "AIRBORNE",
-        "telemetry": {
-            "agent": name, "lat": lat, "lon": lon, "alt": 20.0, "heading": heading,
-            "vn": 1.0, "ve": 0.5, "vd": 0.0, "battery": 87.5, "armed": True, "in_air": True, "mode": "SIM",
-        },
-        "feedback": None,
-    }).encode()
+    return json.dumps(
+        {
+            "token": token,
+            "mc_state": "MISSION",
+            "hlc_state": "AIRBORNE",
+            "telemetry": {
+                "agent": name,
+                "lat": lat,
+                "lon": lon,
+                "alt": 20.0,
+                "heading": heading,
+                "vn": 1.0,
+                "ve": 0.5,
+                "vd": 0.0,
+                "battery": 87.5,
+                "armed": True,
+                "in_air": True,
+                "mode": "SIM",
+            },
+            "feedback": None,
+        }
+    ).encode()
 
 
 class _Walk:
@@ -103,7 +115,9 @@ class _Walk:
 def _serve(db_path: str, conn: Connection) -> None:
     # Every simulated agent registers and reports from 127.0.0.1: the per-address and per-agent
     # limits (which a real deployment keeps) would measure the limiter, not the station.
-    no_limits = RateLimits(registrations_per_minute=None, reports_per_second=None, address_reports_per_second=None)
+    no_limits = RateLimits(
+        registrations_per_minute=None, reports_per_second=None, address_reports_per_second=None
+    )
     settings = StationSettings(
         db_path=db_path, range_m=RANGE_M, fov_deg=FOV_DEG, stale_after_s=120.0, rate_limits=no_limits
     )
@@ -114,7 +128,10 @@ def _serve(db_path: str, conn: Connection) -> None:
 
 # -- load generators (each runs in its own process) --------------------------------------------------
 
-def _httpx_client(url: str, agents: list[Agent], seconds: float, seed: int, start: Any, out: Connection) -> None:
+
+def _httpx_client(
+    url: str, agents: list[Agent], seconds: float, seed: int, start: Any, out: Connection
+) -> None:
     walk = _Walk(agents, seed)
     latencies: list[float] = []
     errors = 0
@@ -136,8 +153,15 @@ def _httpx_client(url: str, agents: list[Agent], seconds: float, seed: int, star
     out.send((latencies, errors, time.process_time() - cpu0))
 
 
-async def _raw_connection(host: str, port: int, walk: _Walk, end_at: list[float], latencies: list[float],
-                          errors: list[int], ready: asyncio.Event) -> None:
+async def _raw_connection(
+    host: str,
+    port: int,
+    walk: _Walk,
+    end_at: list[float],
+    latencies: list[float],
+    errors: list[int],
+    ready: asyncio.Event,
+) -> None:
     reader, writer = await asyncio.open_connection(host, port)
     head = b"POST /api/report HTTP/1.1\r\nHost: %s\r\nContent-Type: application/json\r\nContent-Length: %d\r\n\r\n"
     warm = 20
@@ -167,8 +191,9 @@ async def _raw_connection(host: str, port: int, walk: _Walk, end_at: list[float]
         writer.close()
 
 
-def _raw_client(url: str, agents: list[Agent], seconds: float, connections: int, start: Any,
-                out: Connection) -> None:
+def _raw_client(
+    url: str, agents: list[Agent], seconds: float, connections: int, start: Any, out: Connection
+) -> None:
     host, port = url.removeprefix("http://").rsplit(":", 1)
     latencies: list[float] = []
     errors = [0]
@@ -177,9 +202,11 @@ def _raw_client(url: str, agents: list[Agent], seconds: float, connections: int,
         ready = asyncio.Event()
         end_at = [math.inf]
         tasks = [
-            asyncio.create_task(_raw_connection(
-                host, int(port), _Walk(agents[k::connections], 2000 + k), end_at, latencies, errors, ready
-            ))
+            asyncio.create_task(
+                _raw_connection(
+                    host, int(port), _Walk(agents[k::connections], 2000 + k), end_at, latencies, errors, ready
+                )
+            )
             for k in range(connections)
         ]
         await asyncio.sleep(0.5)  # warm-up requests
@@ -196,13 +223,17 @@ def _raw_client(url: str, agents: list[Agent], seconds: float, connections: int,
 
 # -- phases ------------------------------------------------------------------------------------------
 
+
 def _register(url: str, names: list[str], rng: random.Random) -> list[Agent]:
     agents = []
     with httpx.Client(base_url=url, timeout=10.0) as client:
         for name in names:
             lat, lon = _position(rng)
-            r = client.post("/api/report", content=_report(None, name, lat, lon, rng.uniform(0, 360)),
-                            headers={"content-type": "application/json"})
+            r = client.post(
+                "/api/report",
+                content=_report(None, name, lat, lon, rng.uniform(0, 360)),
+                headers={"content-type": "application/json"},
+            )
             r.raise_for_status()
             agents.append((r.json()["token"], name, lat, lon))
     return agents
@@ -232,7 +263,7 @@ def _load_phase(kind: str, url: str, server_pid: int, agents: list[Agent], args:
     if kind == "httpx":
         start = ctx.Barrier(args.clients + 1)
         jobs = [
-            (_httpx_client, (url, agents[k::args.clients], args.seconds, 1000 + k, start))
+            (_httpx_client, (url, agents[k :: args.clients], args.seconds, 1000 + k, start))
             for k in range(args.clients)
         ]
     else:
@@ -270,7 +301,9 @@ def _load_phase(kind: str, url: str, server_pid: int, agents: list[Agent], args:
     )
 
 
-def _sensing_cost(n: int, field_m: float, rng: random.Random, queries: int = 2000) -> tuple[float, float, float]:
+def _sensing_cost(
+    n: int, field_m: float, rng: random.Random, queries: int = 2000
+) -> tuple[float, float, float]:
     """µs per report for the index + sector test, for a brute-force scan, and the mean candidates."""
     positions = [_position(rng, field_m) for _ in range(n)]
     index = GridIndex(RANGE_M / 2.0)
@@ -285,7 +318,8 @@ def _sensing_cost(n: int, field_m: float, rng: random.Random, queries: int = 200
     t_index = (time.perf_counter() - t0) / queries * 1e6
     few = picks[:200]
     candidates = sum(
-        sum(1 for _ in index.candidates(*search_box(*positions[i], h, RANGE_M, FOV_DEG), exclude=i)) for i, h in few
+        sum(1 for _ in index.candidates(*search_box(*positions[i], h, RANGE_M, FOV_DEG), exclude=i))
+        for i, h in few
     )
     t0 = time.perf_counter()
     for i, heading in few:
@@ -298,7 +332,9 @@ def _sensing_cost(n: int, field_m: float, rng: random.Random, queries: int = 200
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--agents", default="100,1000,5000", help="comma-separated swarm sizes (cumulative)")
-    parser.add_argument("--seconds", type=float, default=5.0, help="measurement time per swarm size and client")
+    parser.add_argument(
+        "--seconds", type=float, default=5.0, help="measurement time per swarm size and client"
+    )
     parser.add_argument("--client", choices=("both", "httpx", "raw"), default="both")
     parser.add_argument("--clients", type=int, default=3, help="httpx client processes")
     parser.add_argument("--connections", type=int, default=8, help="raw client connections")
@@ -310,16 +346,23 @@ def main() -> int:
     stack = " + ".join(
         name if importlib.util.find_spec(name) else f"no {name}" for name in ("uvloop", "httptools")
     )
-    print(f"station benchmark: field {FIELD_M / 1000:.0f} km × {FIELD_M / 1000:.0f} km, range {RANGE_M:.0f} m, "
-          f"fov {FOV_DEG:.0f}°, {args.seconds:g} s per size and client, {os.cpu_count()} CPUs, "
-          f"load average {os.getloadavg()[0]:.2f}, uvicorn with {stack}")
+    print(
+        f"station benchmark: field {FIELD_M / 1000:.0f} km × {FIELD_M / 1000:.0f} km, range {RANGE_M:.0f} m, "
+        f"fov {FOV_DEG:.0f}°, {args.seconds:g} s per size and client, {os.cpu_count()} CPUs, "
+        f"load average {os.getloadavg()[0]:.2f}, uvicorn with {stack}"
+    )
     print("\nsensing alone, in this process (µs per report; brute = exact test of every agent):")
     print(f"{'agents':>7} {'field':>8} {'index':>8} {'brute':>9} {'candidates':>11}")
-    for label, field_of in (("fixed", lambda n: FIELD_M), ("density", lambda n: FIELD_M * math.sqrt(n / sizes[-1]))):
+    for label, field_of in (
+        ("fixed", lambda n: FIELD_M),
+        ("density", lambda n: FIELD_M * math.sqrt(n / sizes[-1])),
+    ):
         for n in sizes:
             field_m = field_of(n)
             t_index, t_brute, cands = _sensing_cost(n, field_m, rng)
-            print(f"{n:>7} {field_m / 1000:>6.1f}km {t_index:>8.1f} {t_brute:>9.1f} {cands:>11.1f}   ({label})")
+            print(
+                f"{n:>7} {field_m / 1000:>6.1f}km {t_index:>8.1f} {t_brute:>9.1f} {cands:>11.1f}   ({label})"
+            )
 
     with tempfile.TemporaryDirectory() as tmp:
         db_path = os.path.join(tmp, "station.sqlite")
@@ -328,10 +371,14 @@ def main() -> int:
         server = ctx.Process(target=_serve, args=(db_path, child), daemon=True)
         server.start()
         url = parent.recv()
-        print(f"\nHTTP, station at {url}, database {db_path} "
-              f"(httpx: {args.clients} processes; raw: {args.connections} connections):")
-        print(f"{'agents':>7} {'client':>7} {'reports/s':>10} {'p50 ms':>8} {'p99 ms':>8} {'errors':>7}"
-              f" {'server CPU µs/report':>21} {'client CPU µs/report':>21}")
+        print(
+            f"\nHTTP, station at {url}, database {db_path} "
+            f"(httpx: {args.clients} processes; raw: {args.connections} connections):"
+        )
+        print(
+            f"{'agents':>7} {'client':>7} {'reports/s':>10} {'p50 ms':>8} {'p99 ms':>8} {'errors':>7}"
+            f" {'server CPU µs/report':>21} {'client CPU µs/report':>21}"
+        )
         agents: list[Agent] = []
         try:
             for n in sizes:
@@ -341,8 +388,10 @@ def main() -> int:
                 reg_s = time.perf_counter() - t0
                 for kind in kinds:
                     ph = _load_phase(kind, url, server.pid or 0, agents, args)
-                    print(f"{n:>7} {kind:>7} {ph.rate:>10.0f} {ph.p50_ms:>8.2f} {ph.p99_ms:>8.2f} {ph.errors:>7}"
-                          f" {ph.server_cpu_us:>21.0f} {ph.client_cpu_us:>21.0f}")
+                    print(
+                        f"{n:>7} {kind:>7} {ph.rate:>10.0f} {ph.p50_ms:>8.2f} {ph.p99_ms:>8.2f} {ph.errors:>7}"
+                        f" {ph.server_cpu_us:>21.0f} {ph.client_cpu_us:>21.0f}"
+                    )
                 print(f"{'':>7} (first contact of {n - before} new agents took {reg_s:.1f} s, one at a time)")
         finally:
             parent.send("stop")
@@ -350,8 +399,10 @@ def main() -> int:
         with sqlite3.connect(db_path) as conn:
             rows = conn.execute("SELECT COUNT(*) FROM reports").fetchone()[0]
             n_agents = conn.execute("SELECT COUNT(*) FROM agents").fetchone()[0]
-        print(f"\ndatabase after the run: {n_agents} agents, {rows} history rows "
-              f"({os.path.getsize(db_path) / 1e6:.1f} MB)")
+        print(
+            f"\ndatabase after the run: {n_agents} agents, {rows} history rows "
+            f"({os.path.getsize(db_path) / 1e6:.1f} MB)"
+        )
     return 0
 
 

@@ -46,8 +46,12 @@ def fly(agents: int, mission_time: float, azimuth: float, speed: float) -> tuple
         configs = build_swarm(agents, url, station=station.url)
         nodes: list[Node] = [node for cfg in configs for node in agent_nodes(cfg, context)]
         operator = ScriptedOperator(
-            configs[0].with_agent_name("operator"), context, expected_agents=agents,
-            mission_time=mission_time, direction=(azimuth, speed), timeout=mission_time + 300.0,
+            configs[0].with_agent_name("operator"),
+            context,
+            expected_agents=agents,
+            mission_time=mission_time,
+            direction=(azimuth, speed),
+            timeout=mission_time + 300.0,
         )
         nodes.append(operator)
         run_until_signal(context, nodes, stop_event=threading.Event(), poll=lambda: operator.finished)
@@ -57,7 +61,9 @@ def fly(agents: int, mission_time: float, azimuth: float, speed: float) -> tuple
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--agents", type=int, default=10)
     parser.add_argument("--mission-time", type=float, default=300.0, help="s in MISSION (default 300)")
     parser.add_argument("--azimuth", type=float, default=45.0, help="commanded direction, deg (default 45)")
@@ -74,7 +80,9 @@ def main() -> int:
     tmp = tempfile.TemporaryDirectory()
     log = Path(args.log) if args.log else Path(tmp.name) / "swarm.lcm"
     # The compiled logger itself (the lcm-logger on PATH is a wrapper that would not pass SIGTERM on).
-    logger = subprocess.Popen([native_lcm_tool("lcm-logger"), "--quiet", "--force", f"--lcm-url={DEMO_URL}", str(log)])
+    logger = subprocess.Popen(
+        [native_lcm_tool("lcm-logger"), "--quiet", "--force", f"--lcm-url={DEMO_URL}", str(log)]
+    )
     time.sleep(0.5)
     started = time.monotonic()
     try:

@@ -284,7 +284,9 @@ def main() -> int:
     rate = report.get("published", 0) / max(report.get("seconds", 1.0), 1e-9)
     print(f"publisher sent {rate:.0f} msg/s (its own CPU {report.get('cpu', 0):.1f} s, not counted)")
     target = 15 if args.agents <= 200 else 30
-    print(f"console CPU: {share * 100:.1f} % of one core (target < {target} %; load average {os.getloadavg()[0]:.2f})")
+    print(
+        f"console CPU: {share * 100:.1f} % of one core (target < {target} %; load average {os.getloadavg()[0]:.2f})"
+    )
     print(f"console output: {(out1 - out0) / (t1 - t0) / 1024:.0f} KiB/s to the terminal")
     if lat:
         srt = sorted(lat)

@@ -58,7 +58,9 @@ def host_arch() -> str:
     return {"x86_64": "amd64", "aarch64": "arm64"}.get(platform.machine(), platform.machine())
 
 
-def run(cmd: Sequence[str], what: str, timeout: float = 1800, **kw: object) -> subprocess.CompletedProcess[str]:
+def run(
+    cmd: Sequence[str], what: str, timeout: float = 1800, **kw: object
+) -> subprocess.CompletedProcess[str]:
     proc = subprocess.run(list(cmd), capture_output=True, text=True, timeout=timeout, **kw)  # type: ignore[call-overload]
     if proc.returncode != 0:
         tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-40:])
@@ -67,7 +69,10 @@ def run(cmd: Sequence[str], what: str, timeout: float = 1800, **kw: object) -> s
 
 
 def build_wheel(out: Path) -> Path:
-    run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(out), str(REPO)], "building antalate's wheel")
+    run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(out), str(REPO)],
+        "building antalate's wheel",
+    )
     return sorted(out.glob("antalate-*.whl"))[-1]
 
 
@@ -86,10 +91,26 @@ def wheelhouse(wheel: Path, out: Path, arch: str, extras: Sequence[str] = ()) ->
     out.mkdir(parents=True, exist_ok=True)
     shutil.copy2(wheel, out / wheel.name)
     machine = MACHINE[arch]
-    platforms = [f"manylinux_{g}_{machine}" for g in _GLIBC] + [f"manylinux2014_{machine}", f"linux_{machine}"]
-    cmd = [sys.executable, "-m", "pip", "download", "-q", "--dest", str(out), "--only-binary=:all:",
-           "--python-version", PYTHON_VERSION, "--implementation", "cp",
-           *[a for p in platforms for a in ("--platform", p)], requirement(out / wheel.name, extras)]
+    platforms = [f"manylinux_{g}_{machine}" for g in _GLIBC] + [
+        f"manylinux2014_{machine}",
+        f"linux_{machine}",
+    ]
+    cmd = [
+        sys.executable,
+        "-m",
+        "pip",
+        "download",
+        "-q",
+        "--dest",
+        str(out),
+        "--only-binary=:all:",
+        "--python-version",
+        PYTHON_VERSION,
+        "--implementation",
+        "cp",
+        *[a for p in platforms for a in ("--platform", p)],
+        requirement(out / wheel.name, extras),
+    ]
     run(cmd, f"downloading the dependencies' wheels for {arch}")
     for unused in (p for p in out.glob("*.whl") if p.name.startswith(left_out(extras))):
         unused.unlink()
@@ -103,10 +124,17 @@ def podman(opts: Sequence[str], *args: str) -> list[str]:
 def debian_rootfs(work: Path, arch: str) -> Path:
     """Debian bookworm as a tarball (mmdebstrap from Debian's mirror)."""
     tarball = work / f"base-{arch}.tar"
-    cmd = ["mmdebstrap", "--variant=essential", f"--architectures={arch}", f"--include={','.join(DEBIAN_PACKAGES)}",
-           "--dpkgopt=path-exclude=/usr/share/doc/*", "--dpkgopt=path-include=/usr/share/doc/*/copyright",
-           "--dpkgopt=path-exclude=/usr/share/man/*", "--dpkgopt=path-exclude=/usr/share/locale/*",
-           "--dpkgopt=path-exclude=/usr/share/info/*"]
+    cmd = [
+        "mmdebstrap",
+        "--variant=essential",
+        f"--architectures={arch}",
+        f"--include={','.join(DEBIAN_PACKAGES)}",
+        "--dpkgopt=path-exclude=/usr/share/doc/*",
+        "--dpkgopt=path-include=/usr/share/doc/*/copyright",
+        "--dpkgopt=path-exclude=/usr/share/man/*",
+        "--dpkgopt=path-exclude=/usr/share/locale/*",
+        "--dpkgopt=path-exclude=/usr/share/info/*",
+    ]
     if MERGED_USR_HOOK.is_dir():
         cmd.append(f"--hook-dir={MERGED_USR_HOOK}")
     for option in ("Acquire::Check-Valid-Until", "Acquire::Check-Date"):
@@ -124,18 +152,48 @@ def import_base(tarball: Path, arch: str, opts: Sequence[str], tag: str | None =
     tag = tag or f"localhost/antalate-base:{DEBIAN_SUITE}-{arch}"
     # an imported file system has no image config: give it the PATH every Debian image has
     change = ["--change", "ENV PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"]
-    run(podman(opts, "import", *change, *(["--arch", arch] if arch != host_arch() else []), str(tarball), tag),
-        "podman import of the base")
+    run(
+        podman(
+            opts, "import", *change, *(["--arch", arch] if arch != host_arch() else []), str(tarball), tag
+        ),
+        "podman import of the base",
+    )
     return tag
 
 
-def build_image(context: Path, base: str, tag: str, arch: str, opts: Sequence[str], extras: Sequence[str] = ()) -> None:
+def build_image(
+    context: Path, base: str, tag: str, arch: str, opts: Sequence[str], extras: Sequence[str] = ()
+) -> None:
     shutil.copy2(HERE / "Containerfile", context / "Containerfile")
     shutil.copy2(HERE / "healthcheck.py", context / "healthcheck.py")
-    pull = "never" if base.startswith("localhost/") else "missing"  # only a stock base may come from a registry
-    run(podman(opts, "build", "--format", "docker", f"--pull={pull}", "--isolation", "chroot", "--network", "host",
-               "--arch", arch, "--build-arg", f"BASE={base}", "--build-arg", f"EXTRAS={','.join(extras)}", "-t", tag, "-f", str(context / "Containerfile"),
-               str(context)), f"podman build of {tag}")
+    pull = (
+        "never" if base.startswith("localhost/") else "missing"
+    )  # only a stock base may come from a registry
+    run(
+        podman(
+            opts,
+            "build",
+            "--format",
+            "docker",
+            f"--pull={pull}",
+            "--isolation",
+            "chroot",
+            "--network",
+            "host",
+            "--arch",
+            arch,
+            "--build-arg",
+            f"BASE={base}",
+            "--build-arg",
+            f"EXTRAS={','.join(extras)}",
+            "-t",
+            tag,
+            "-f",
+            str(context / "Containerfile"),
+            str(context),
+        ),
+        f"podman build of {tag}",
+    )
 
 
 def image_size(tag: str, opts: Sequence[str]) -> int:
@@ -144,7 +202,13 @@ def image_size(tag: str, opts: Sequence[str]) -> int:
 
 
 def build(
-    *, arch: str, tag: str, base: str | None, wheel: Path | None, opts: Sequence[str], work: Path,
+    *,
+    arch: str,
+    tag: str,
+    base: str | None,
+    wheel: Path | None,
+    opts: Sequence[str],
+    work: Path,
     extras: Sequence[str] = (),
 ) -> tuple[str, int]:
     """Every step; returns the image's reference and size in bytes."""
@@ -157,13 +221,21 @@ def build(
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--arch", default=host_arch(), choices=sorted(MACHINE), help="target architecture")
     parser.add_argument("--tag", help="image reference (default localhost/antalate:VERSION[-EXTRA...]-ARCH)")
-    parser.add_argument("--extras", default="", help="antalate extras to install, comma-separated (e.g. tello; "
-                        "default none: the MAVLink and sim adapters)")
+    parser.add_argument(
+        "--extras",
+        default="",
+        help="antalate extras to install, comma-separated (e.g. tello; "
+        "default none: the MAVLink and sim adapters)",
+    )
     parser.add_argument("--base", help="base image reference (default: Debian made here by mmdebstrap)")
-    parser.add_argument("--wheel", type=Path, help="antalate wheel to install (default: built from this checkout)")
+    parser.add_argument(
+        "--wheel", type=Path, help="antalate wheel to install (default: built from this checkout)"
+    )
     parser.add_argument("--podman-opt", action="append", default=[], help="global podman option (repeatable)")
     args = parser.parse_args(argv)
     for tool in ("podman", *(() if args.base else ("mmdebstrap",))):
@@ -177,8 +249,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     tag = args.tag or f"localhost/antalate:{'-'.join([version, *extras, args.arch])}"
     with tempfile.TemporaryDirectory(prefix="antalate-image-") as tmp:
         try:
-            ref, size = build(arch=args.arch, tag=tag, base=args.base, wheel=args.wheel, opts=args.podman_opt,
-                              work=Path(tmp), extras=extras)
+            ref, size = build(
+                arch=args.arch,
+                tag=tag,
+                base=args.base,
+                wheel=args.wheel,
+                opts=args.podman_opt,
+                work=Path(tmp),
+                extras=extras,
+            )
         except BuildError as exc:
             print(f"build_image: {exc}", file=sys.stderr)
             return 1

@@ -82,8 +82,13 @@ def plan(cmdline: list[str]) -> Check:
     urls = tuple(config.buses[b] for b in config.topic_buses(topic) if config.buses[b].startswith("udpm://"))
     if not urls:
         return NothingToCheck(f"{topic} travels only in memory")
-    what = {"mc": "MC_STATE", "hlc": "HLC_STATE", "bma": "the arbiter's status", "osc": "the MC_STATE it forwards",
-            "agent": "an agent's MC_STATE"}[kind]
+    what = {
+        "mc": "MC_STATE",
+        "hlc": "HLC_STATE",
+        "bma": "the arbiter's status",
+        "osc": "the MC_STATE it forwards",
+        "agent": "an agent's MC_STATE",
+    }[kind]
     return LcmCheck(urls, regex, what)
 
 
@@ -109,7 +114,9 @@ def run_check(check: Check, listen_s: float = LISTEN_S) -> str | None:
     if isinstance(check, NothingToCheck):
         return None
     if isinstance(check, HttpCheck):
-        context = ssl._create_unverified_context() if check.url.startswith("https") else None  # loopback, own cert
+        context = (
+            ssl._create_unverified_context() if check.url.startswith("https") else None
+        )  # loopback, own cert
         try:
             with urllib.request.urlopen(check.url, timeout=listen_s, context=context) as reply:
                 return None if reply.status < 500 else f"{check.what} answered {reply.status}"

@@ -187,14 +187,22 @@ class OperatorNode(Node):
                 last = self._last_body.get(channel)
                 if last is not None and last[0] == body:
                     self.unchanged += 1  # the same state again: the decoded one stands
-                    out.append(Incoming(topic, fields.get("agent") or last[1].header.agent, last[1], received, fields))
+                    out.append(
+                        Incoming(
+                            topic, fields.get("agent") or last[1].header.agent, last[1], received, fields
+                        )
+                    )
                     continue
             if self._keys:
                 problem = check_datagram(data, self._keys, self._window, self.wallclock())
                 if problem is not None:
                     self.rejected += 1
                     self._decode_log.log(
-                        ("auth", channel, problem.reason), logging.WARNING, "ignored a message on %s: %s", channel, problem
+                        ("auth", channel, problem.reason),
+                        logging.WARNING,
+                        "ignored a message on %s: %s",
+                        channel,
+                        problem,
                     )
                     continue
             msg_type = self._decoders[topic][0]
@@ -243,7 +251,9 @@ class OperatorNode(Node):
         msg.azimuth = azimuth
         msg.speed = speed
         msg.target = target
-        return self._send("DIRECTION_CMD" if target else "SWARM_DIRECTION_CMD", msg, target, self._direction_seq)
+        return self._send(
+            "DIRECTION_CMD" if target else "SWARM_DIRECTION_CMD", msg, target, self._direction_seq
+        )
 
     def bus_summary(self) -> str:
         """'lan=udpm://…' for the topics the console watches (shown in the status bar)."""

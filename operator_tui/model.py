@@ -230,9 +230,11 @@ class SwarmModel:
         if name != view.hlc_state:
             old = view.hlc_state
             view.hlc_state = name
-            sev = {"LLC_DOWN": Severity.CRITICAL, "LOW_BATTERY": Severity.WARNING, "HOLD": Severity.WARNING}.get(
-                name, Severity.INFO
-            )
+            sev = {
+                "LLC_DOWN": Severity.CRITICAL,
+                "LOW_BATTERY": Severity.WARNING,
+                "HOLD": Severity.WARNING,
+            }.get(name, Severity.INFO)
             if old is not None or sev is not Severity.INFO:
                 why = f": {view.hlc_reason}" if view.hlc_reason else ""
                 self._event(wall, view.name, EventKind.HLC, f"HLC {old or '—'} → {name}{why}", sev)

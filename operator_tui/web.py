@@ -78,8 +78,11 @@ class ConsoleAccess:
         if match is None:
             return Refusal(401, "Unknown API key.")
         if match.role != "operator":
-            return Refusal(403, f"The key of {match.name!r} is {match.role}: the console commands vehicles, "
-                                "it needs an operator key.")
+            return Refusal(
+                403,
+                f"The key of {match.name!r} is {match.role}: the console commands vehicles, "
+                "it needs an operator key.",
+            )
         self._expire(now)
         token = secrets.token_urlsafe(32)
         self.sessions[token] = (match.name, now + self.ttl_s)
@@ -106,7 +109,7 @@ def load_keys(path: str) -> tuple[ApiKey, ...]:
 
     keys = load_station_file(path).settings.api_keys
     if not any(k.role == "operator" for k in keys):
-        raise AntalateError(f"{path} has no [[api_keys]] entry with role = \"operator\": nobody could sign in")
+        raise AntalateError(f'{path} has no [[api_keys]] entry with role = "operator": nobody could sign in')
     return keys
 
 
@@ -126,13 +129,25 @@ def same_origin(origin: str | None, scheme: str, host: str) -> bool:
 
 def console_command(config: str | None, name: str) -> str:
     """The shell command textual-serve runs for one browser tab."""
-    args = [sys.executable, "-m", "operator_tui", *([str(Path(config).resolve())] if config else []), "--name", name]
+    args = [
+        sys.executable,
+        "-m",
+        "operator_tui",
+        *([str(Path(config).resolve())] if config else []),
+        "--name",
+        name,
+    ]
     return shlex.join(args)
 
 
 # ------------------------------------------------------------------------------------------ server
 def make_server(
-    config: str | None, *, name: str, host: str, port: int, access: ConsoleAccess | None,
+    config: str | None,
+    *,
+    name: str,
+    host: str,
+    port: int,
+    access: ConsoleAccess | None,
     clock: Callable[[], float] = time.time,
 ) -> Any:
     """The textual-serve server with antalate's page, credential and per-tab names."""
@@ -150,13 +165,15 @@ def make_server(
         async def _make_app(self) -> web.Application:
             app = web.Application(middlewares=[self._guard])
             aiohttp_jinja2.setup(app, loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=True)
-            app.add_routes([
-                web.get("/", self.handle_index, name="index"),
-                web.get("/login", self.handle_login_page, name="login"),
-                web.post("/login", self.handle_login),
-                web.get("/ws", self.handle_websocket, name="websocket"),
-                web.static("/static", statics, show_index=False, name="static"),
-            ])
+            app.add_routes(
+                [
+                    web.get("/", self.handle_index, name="index"),
+                    web.get("/login", self.handle_login_page, name="login"),
+                    web.post("/login", self.handle_login),
+                    web.get("/ws", self.handle_websocket, name="websocket"),
+                    web.static("/static", statics, show_index=False, name="static"),
+                ]
+            )
             app.on_startup.append(self.on_startup)
             return app
 
@@ -203,15 +220,22 @@ def make_server(
             log.info("console signed in from %s with the key of %r", request.remote, holder)
             response = web.HTTPSeeOther("/")
             response.set_cookie(
-                SESSION_COOKIE, token, max_age=int(access.ttl_s), httponly=True, samesite="Strict",
-                secure=request.secure, path="/",
+                SESSION_COOKIE,
+                token,
+                max_age=int(access.ttl_s),
+                httponly=True,
+                samesite="Strict",
+                secure=request.secure,
+                path="/",
             )
             raise response
 
         async def handle_websocket(self, request: web.Request) -> web.WebSocketResponse:
             scheme = "https" if request.secure else "http"
             if not same_origin(request.headers.get("Origin"), scheme, request.host):
-                log.warning("console WebSocket from another site refused: Origin %s", request.headers.get("Origin"))
+                log.warning(
+                    "console WebSocket from another site refused: Origin %s", request.headers.get("Origin")
+                )
                 raise web.HTTPForbidden(text="cross-origin WebSocket refused")
             websocket = web.WebSocketResponse(heartbeat=15)
             width = to_int(request.query.get("width", "80"), 80)
@@ -222,8 +246,11 @@ def make_server(
                 await websocket.prepare(request)
                 app_service = AppService(
                     console_command(config, tab_name),
-                    write_bytes=websocket.send_bytes, write_str=websocket.send_str, close=websocket.close,
-                    download_manager=self.download_manager, debug=False,
+                    write_bytes=websocket.send_bytes,
+                    write_str=websocket.send_str,
+                    close=websocket.close,
+                    download_manager=self.download_manager,
+                    debug=False,
                 )
                 log.info("console %s opened from %s", tab_name, request.remote)
                 await app_service.start(width, height)
@@ -256,15 +283,24 @@ def make_server(
 
         async def on_startup(self, app: web.Application) -> None:
             who = "operator API key required" if access is not None else "NO sign-in"
-            print(f"antalate tui --web: serving the console on http://{self.host}:{self.port}/ ({who})", flush=True)
+            print(
+                f"antalate tui --web: serving the console on http://{self.host}:{self.port}/ ({who})",
+                flush=True,
+            )
 
     return ConsoleServer(
-        command=console_command(config, name), host=host, port=port, title="antalate operator console",
-        statics_path=statics, templates_path=TEMPLATES,
+        command=console_command(config, name),
+        host=host,
+        port=port,
+        title="antalate operator console",
+        statics_path=statics,
+        templates_path=TEMPLATES,
     )
 
 
-def serve(config: str | None, *, name: str | None, host: str, port: int, keys_file: str | None, no_auth: bool) -> int:
+def serve(
+    config: str | None, *, name: str | None, host: str, port: int, keys_file: str | None, no_auth: bool
+) -> int:
     """Serve until SIGINT/SIGTERM. Refuses an open console on the network before it listens."""
     try:
         import textual_serve  # noqa: F401
@@ -282,7 +318,9 @@ def serve(config: str | None, *, name: str | None, host: str, port: int, keys_fi
             "swarm. Give --keys STATION_TOML (operator API keys), bind --host 127.0.0.1, or pass --no-auth"
         )
     if access is None and not is_loopback(host):
-        log.warning("the console on %s:%d has NO sign-in: anyone who reaches it commands the swarm", host, port)
+        log.warning(
+            "the console on %s:%d has NO sign-in: anyone who reaches it commands the swarm", host, port
+        )
     server = make_server(config, name=name or "operator", host=host, port=port, access=access)
     try:
         server.serve()
@@ -296,16 +334,26 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add ``--web`` and its options to the ``tui`` subcommand that ``antalate_lcm.runtime`` defines."""
     p = sub.choices["tui"]
     p.add_argument("--web", action="store_true", help="serve the console to a browser (textual-serve)")
-    p.add_argument("--host", default=DEFAULT_HOST, help=f"--web: address to listen on (default {DEFAULT_HOST})")
+    p.add_argument(
+        "--host", default=DEFAULT_HOST, help=f"--web: address to listen on (default {DEFAULT_HOST})"
+    )
     p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"--web: port (default {DEFAULT_PORT})")
-    p.add_argument("--keys", metavar="STATION_TOML", help="--web: sign in with the operator API keys of this file")
+    p.add_argument(
+        "--keys", metavar="STATION_TOML", help="--web: sign in with the operator API keys of this file"
+    )
     p.add_argument("--no-auth", action="store_true", help="--web: allow no sign-in beyond loopback (unsafe)")
     terminal = p.get_default("func")
 
     def run(args: argparse.Namespace) -> int:
         if not args.web:
             return int(terminal(args))
-        return serve(args.config, name=args.name, host=args.host, port=args.port,
-                     keys_file=args.keys, no_auth=args.no_auth)
+        return serve(
+            args.config,
+            name=args.name,
+            host=args.host,
+            port=args.port,
+            keys_file=args.keys,
+            no_auth=args.no_auth,
+        )
 
     p.set_defaults(func=run)

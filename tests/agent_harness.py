@@ -56,7 +56,9 @@ def _is_table_list(v: Any) -> bool:
     return isinstance(v, list) and bool(v) and all(isinstance(x, dict) for x in v)
 
 
-def agent_config(name: str = "alpha", *, sim: dict[str, Any] | None = None, **sections: Any) -> dict[str, Any]:
+def agent_config(
+    name: str = "alpha", *, sim: dict[str, Any] | None = None, **sections: Any
+) -> dict[str, Any]:
     hlc = {"autopilot": "sim", "default_takeoff_altitude": 3.0, **sections.pop("hlc", {})}
     hlc["autopilot_params"] = {**FAST_SIM, **(sim or {})}
     doc: dict[str, Any] = {"agent": {"name": name}, "buses": {"lan": MCAST_URL}, "hlc": hlc}

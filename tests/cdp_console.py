@@ -116,11 +116,17 @@ def main(argv: list[str]) -> int:
         page.call("Runtime.enable")
         page.call("Page.enable")
         page.call("Page.addScriptToEvaluateOnNewDocument", source=RECORDER)
-        page.call("Emulation.setDeviceMetricsOverride", width=1280, height=860, deviceScaleFactor=1, mobile=False)
+        page.call(
+            "Emulation.setDeviceMetricsOverride", width=1280, height=860, deviceScaleFactor=1, mobile=False
+        )
         page.call("Page.navigate", url=page_url)
-        page.wait("location.pathname === '/login' && document.readyState === 'complete'", 30, "the sign-in page")
-        page.evaluate(f"document.getElementById('key').value = {json.dumps(key)}; "
-                      "document.querySelector('form').submit(); true")
+        page.wait(
+            "location.pathname === '/login' && document.readyState === 'complete'", 30, "the sign-in page"
+        )
+        page.evaluate(
+            f"document.getElementById('key').value = {json.dumps(key)}; "
+            "document.querySelector('form').submit(); true"
+        )
         page.wait("location.pathname === '/' && document.readyState === 'complete'", 30, "the console page")
         text = page.wait_text(agents, 90)
         out["agents_shown"] = [a for a in agents if a in text]

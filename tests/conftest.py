@@ -44,8 +44,12 @@ class Probe(JsonLinesProcess):
     def raw(self, channel: str, data: bytes) -> None:
         assert self.call(op="raw", channel=channel, hex=data.hex())["ok"]
 
-    def wait(self, channel: str, type_name: str, timeout: float = 10, since: int = 0, **where: Any) -> dict[str, Any] | None:
-        reply = self.call(op="wait", channel=channel, type=type_name, where=where, timeout=timeout, since=since)
+    def wait(
+        self, channel: str, type_name: str, timeout: float = 10, since: int = 0, **where: Any
+    ) -> dict[str, Any] | None:
+        reply = self.call(
+            op="wait", channel=channel, type=type_name, where=where, timeout=timeout, since=since
+        )
         return reply.get("msg") if reply["ok"] else None
 
     def history(self, channel: str, type_name: str, since: int = 0) -> list[dict[str, Any]]:

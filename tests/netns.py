@@ -25,7 +25,9 @@ def netns_unavailable() -> str | None:
     for tool in ("unshare", "nsenter", "ip"):
         if shutil.which(tool) is None:
             return f"{tool} is not installed (Debian/Ubuntu: apt-get install util-linux iproute2)"
-    probe = subprocess.run(["unshare", "-rn", "sh", "-c", "ip link set lo up"], capture_output=True, text=True)
+    probe = subprocess.run(
+        ["unshare", "-rn", "sh", "-c", "ip link set lo up"], capture_output=True, text=True
+    )
     if probe.returncode != 0:
         return f"cannot create a network namespace (unshare -rn): {probe.stderr.strip()}"
     return None
@@ -73,7 +75,9 @@ class NetNamespace:
         self._children.append(proc)
         return proc
 
-    def run(self, argv: Sequence[str], timeout: float = 60, **kwargs: object) -> subprocess.CompletedProcess[str]:
+    def run(
+        self, argv: Sequence[str], timeout: float = 60, **kwargs: object
+    ) -> subprocess.CompletedProcess[str]:
         return subprocess.run(self.wrap(argv), timeout=timeout, capture_output=True, text=True, **kwargs)  # type: ignore[call-overload]
 
     def python(self, *args: str, **kwargs: object) -> subprocess.Popen[str]:

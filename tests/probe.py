@@ -107,7 +107,9 @@ def main() -> None:
             reply = {"ok": False}
             with cond:
                 while True:
-                    hits = [d for _, d in decoded(pattern, req["type"], start) if matches(d, req.get("where", {}))]
+                    hits = [
+                        d for _, d in decoded(pattern, req["type"], start) if matches(d, req.get("where", {}))
+                    ]
                     if hits:
                         reply = {"ok": True, "msg": hits[0]}
                         break

@@ -44,8 +44,15 @@ class LogWriter:
         msg.autopilot = "sim"
         self.add(t, f"{agent}/HLC_STATE", msg.encode())
 
-    def direction(self, t: float, azimuth: float, speed: float = 1.0, active: bool = True,
-                  channel: str = "SWARM/DIRECTION_CMD", target: str = "") -> None:
+    def direction(
+        self,
+        t: float,
+        azimuth: float,
+        speed: float = 1.0,
+        active: bool = True,
+        channel: str = "SWARM/DIRECTION_CMD",
+        target: str = "",
+    ) -> None:
         msg = direction_cmd_t()
         msg.header.agent = "operator"
         msg.active, msg.azimuth, msg.speed, msg.target = active, azimuth, speed, target
@@ -60,8 +67,11 @@ class LogWriter:
 
 
 def square_swarm(
-    position: Callable[[str, float], tuple[float, float]] | None = None, *, until: float = 20.0,
-    rtl_at: float = 18.0, azimuth: float | None = 80.0,
+    position: Callable[[str, float], tuple[float, float]] | None = None,
+    *,
+    until: float = 20.0,
+    rtl_at: float = 18.0,
+    azimuth: float | None = 80.0,
 ) -> LogWriter:
     """Four agents on the corners of a 20 m square flying east at 1 m/s (or along ``position``).
 
@@ -79,8 +89,15 @@ def square_swarm(
             n, e = position(name, t) if position else (CORNERS[name][0], CORNERS[name][1] + t)
             w.telemetry(t + 0.001, name, n, e)
         for k in range(int(until * 5)):  # MC republishes at 5 Hz: repeats must fold into one change
-            w.mc(k / 5 + 0.05, name, mc_state_t.RTL if name == "a-1" and k / 5 >= rtl_at else mc_state_t.MISSION
-                 if k / 5 >= (3.0 if name == "a-4" else 2.0) else mc_state_t.STANDBY)
+            w.mc(
+                k / 5 + 0.05,
+                name,
+                mc_state_t.RTL
+                if name == "a-1" and k / 5 >= rtl_at
+                else mc_state_t.MISSION
+                if k / 5 >= (3.0 if name == "a-4" else 2.0)
+                else mc_state_t.STANDBY,
+            )
     if azimuth is not None:
         for k in range(3, int(until)):
             w.direction(k - 0.5, azimuth)

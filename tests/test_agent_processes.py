@@ -68,18 +68,32 @@ def test_agents_over_two_processes_share_the_channels_and_stop_together(
     cfg = tmp_path / f"swarm-{how}.toml"
     cfg.write_text(f'[agent]\nname = "p"\n[buses]\nlan = "{MCAST_URL}"\n[hlc]\nautopilot = "sim"\n')
     proc = netns.antalate(
-        "--log-level", "INFO", "agent", str(cfg), "--agents", "4", "--processes", "2",
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        "--log-level",
+        "INFO",
+        "agent",
+        str(cfg),
+        "--agents",
+        "4",
+        "--processes",
+        "2",
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
     )
     agents = [f"p-{i:02d}" for i in range(1, 5)]
     for agent in agents:
-        assert probe.wait(f"{agent}/MC_STATE", "mc_state_t", timeout=30, state=M.STANDBY), f"{agent} not in STANDBY"
-    shards = [pid for pid in _agent_processes(str(cfg)) if b"--shard" in Path(f"/proc/{pid}/cmdline").read_bytes()]
+        assert probe.wait(f"{agent}/MC_STATE", "mc_state_t", timeout=30, state=M.STANDBY), (
+            f"{agent} not in STANDBY"
+        )
+    shards = [
+        pid for pid in _agent_processes(str(cfg)) if b"--shard" in Path(f"/proc/{pid}/cmdline").read_bytes()
+    ]
     assert len(shards) == 2, "two agent processes, each with its share"
     # one broadcast reaches the agents of both processes: the same channels as one process
     probe.publish("SWARM/OPERATOR_CMD", "operator_cmd_t", header={"seq": 1, "agent": "op"}, command=O.TAKEOFF)
     for agent in agents:
-        assert probe.wait(f"{agent}/MC_STATE", "mc_state_t", timeout=20, state=M.MISSION), f"{agent} did not take off"
+        assert probe.wait(f"{agent}/MC_STATE", "mc_state_t", timeout=20, state=M.MISSION), (
+            f"{agent} did not take off"
+        )
     if how == "ctrl-c":
         os.killpg(proc.pid, signal.SIGINT)  # the terminal sends SIGINT to the whole foreground group
     elif how == "sigterm":

@@ -151,7 +151,8 @@ def test_direction_changes_make_spans_and_azimuth_option_wins(tmp_path: Path) ->
     path = w.write(tmp_path / "turns.lcm")
     result = analyze_log(path)
     assert [(round(d.start, 3), round(d.end, 3), d.azimuth) for d in result.drift] == [
-        (3.0, 8.0, 80.0), (8.0, 12.0, 100.0)
+        (3.0, 8.0, 80.0),
+        (8.0, 12.0, 100.0),
     ]
     assert [round(d.error, 3) for d in result.drift if d.error is not None] == [10.0, -10.0]
     forced = analyze_log(path, azimuth=350.0)
@@ -177,7 +178,11 @@ def test_a_silent_agent_leaves_the_cohesion_and_the_drift(tmp_path: Path) -> Non
     assert c.centroid_east == pytest.approx(-10 / 3, abs=1e-3)
     assert c.max_distance == pytest.approx(math.hypot(20 / 3, 40 / 3), abs=1e-3)
     (d,) = result.drift  # over the three heard at both ends: exactly north at 0.5 m/s
-    assert d.agents == 3 and d.heading == pytest.approx(0.0, abs=1e-3) and d.speed == pytest.approx(0.5, abs=1e-3)
+    assert (
+        d.agents == 3
+        and d.heading == pytest.approx(0.0, abs=1e-3)
+        and d.speed == pytest.approx(0.5, abs=1e-3)
+    )
 
 
 def test_track_interpolation_and_staleness() -> None:
@@ -190,7 +195,11 @@ def test_track_interpolation_and_staleness() -> None:
     assert tr.position_at(7.5, 2.0) is None
     sample = cohesion_at({"x": tr, "y": Track([0.0], [0.0], [0.0], [0.0])}, 0.5, 2.0)
     assert sample is not None
-    assert (sample.agents, sample.centroid_north, sample.max_distance) == (2, pytest.approx(2.5), pytest.approx(2.5))
+    assert (sample.agents, sample.centroid_north, sample.max_distance) == (
+        2,
+        pytest.approx(2.5),
+        pytest.approx(2.5),
+    )
 
 
 # ----------------------------------------------------------------------------- the commands
@@ -251,10 +260,23 @@ def test_antalate_log_records_and_lcm_logplayer_replays(netns, probe, tmp_path: 
     for k in range(20):
         probe.publish("x-1/MC_STATE", "mc_state_t", header={"agent": "x-1", "seq": k}, state=3)
         lat, lon = offset(LAT0, LON0, 0.0, float(k))
-        probe.publish("x-1/TELEMETRY", "telemetry_t", header={"agent": "x-1", "seq": k}, lat=lat, lon=lon,
-                      in_air=True, mode="GUIDED")
-    probe.publish("SWARM/DIRECTION_CMD", "direction_cmd_t", header={"agent": "operator"}, active=True,
-                  azimuth=90.0, speed=1.0)
+        probe.publish(
+            "x-1/TELEMETRY",
+            "telemetry_t",
+            header={"agent": "x-1", "seq": k},
+            lat=lat,
+            lon=lon,
+            in_air=True,
+            mode="GUIDED",
+        )
+    probe.publish(
+        "SWARM/DIRECTION_CMD",
+        "direction_cmd_t",
+        header={"agent": "operator"},
+        active=True,
+        azimuth=90.0,
+        speed=1.0,
+    )
     time.sleep(0.5)
     assert stop_process(logger) in (0, -15)  # SIGTERM reaches lcm-logger itself: the file is complete
     record = read_log(log)

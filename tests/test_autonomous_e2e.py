@@ -29,9 +29,13 @@ AUTONOMOUS_BMA = [
 
 
 @pytest.mark.parametrize("layout", ["separate", "one_process"])
-def test_autonomous_agent_flies_a_whole_mission(netns: NetNamespace, probe: Probe, tmp_path: Path, layout: str) -> None:
+def test_autonomous_agent_flies_a_whole_mission(
+    netns: NetNamespace, probe: Probe, tmp_path: Path, layout: str
+) -> None:
     # Signed: nodes in separate processes on multicast must authenticate each other (docs/security.md).
-    doc = agent_config("auto", bma=AUTONOMOUS_BMA, security={"swarm_key": "e2e-autonomous-key", "state_dir": str(tmp_path)})
+    doc = agent_config(
+        "auto", bma=AUTONOMOUS_BMA, security={"swarm_key": "e2e-autonomous-key", "state_dir": str(tmp_path)}
+    )
     agent = AgentProcesses(netns, tmp_path, doc)
     try:
         if layout == "separate":
@@ -41,7 +45,9 @@ def test_autonomous_agent_flies_a_whole_mission(netns: NetNamespace, probe: Prob
         else:
             agent.start("agent")
         for state in (M.STANDBY, M.TAKEOFF, M.MISSION, M.RTL):
-            assert probe.wait("auto/MC_STATE", "mc_state_t", timeout=20, state=state), f"never reached {state}"
+            assert probe.wait("auto/MC_STATE", "mc_state_t", timeout=20, state=state), (
+                f"never reached {state}"
+            )
         mark = probe.mark()
         assert probe.wait("auto/MC_STATE", "mc_state_t", timeout=20, since=mark, state=M.STANDBY)
         status = probe.wait("auto/ARBITER/operator", "arbiter_status_t", timeout=5, since=mark)

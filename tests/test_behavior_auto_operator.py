@@ -11,7 +11,9 @@ from tests.bma_support import AGENT, Harness, harness, make_config, wait_for
 
 
 def _config(params: dict[str, Any], **extra: Any) -> Any:
-    return make_config([{"name": "ops", "behaviors": [{"plugin": "auto_operator", "params": params}]}], **extra)
+    return make_config(
+        [{"name": "ops", "behaviors": [{"plugin": "auto_operator", "params": params}]}], **extra
+    )
 
 
 def test_takeoff_in_standby_resent_until_the_mc_moves_on() -> None:

@@ -15,14 +15,20 @@ from tests.bma_support import AGENT, Harness, harness, make_config, wait_for
 def test_follow_velocity() -> None:
     east = Direction(True, 90.0, 0.5, received=10.0)
     assert follow_velocity(east, 10.5, timeout=3.0, max_speed=0.0) == pytest.approx((0.0, 0.5), abs=1e-12)
-    assert follow_velocity(east, 13.5, timeout=3.0, max_speed=0.0) == (0.0, 0.0)  # stale: the operator is gone
+    assert follow_velocity(east, 13.5, timeout=3.0, max_speed=0.0) == (
+        0.0,
+        0.0,
+    )  # stale: the operator is gone
     assert follow_velocity(None, 0.0, timeout=3.0, max_speed=0.0) == (0.0, 0.0)
     assert follow_velocity(Direction(False, 90.0, 0.5, 10.0), 10.0, timeout=3.0, max_speed=0.0) == (0.0, 0.0)
     fast_sw = Direction(True, 225.0, 4.0, received=0.0)
     vn, ve = follow_velocity(fast_sw, 0.0, timeout=3.0, max_speed=1.0)
     assert math.hypot(vn, ve) == pytest.approx(1.0) and vn < 0 and ve < 0
-    for bad in (Direction(True, math.nan, 1.0, 0.0), Direction(True, 0.0, math.inf, 0.0),
-                Direction(True, 0.0, -1.0, 0.0)):
+    for bad in (
+        Direction(True, math.nan, 1.0, 0.0),
+        Direction(True, 0.0, math.inf, 0.0),
+        Direction(True, 0.0, -1.0, 0.0),
+    ):
         assert follow_velocity(bad, 0.0, timeout=3.0, max_speed=0.0) == (0.0, 0.0)
 
 
@@ -35,16 +41,31 @@ def _config(**params: float) -> object:
     return make_config([{"name": "steer", "behaviors": [behavior]}])
 
 
-def _direction(h: Harness, azimuth: float, speed: float, *, active: bool = True, target: str = "",
-               topic: str = "DIRECTION_CMD") -> None:
+def _direction(
+    h: Harness,
+    azimuth: float,
+    speed: float,
+    *,
+    active: bool = True,
+    target: str = "",
+    topic: str = "DIRECTION_CMD",
+) -> None:
     msg = direction_cmd_t()
     msg.active, msg.azimuth, msg.speed, msg.target = active, azimuth, speed, target
     h.probe.publish(topic, msg)
 
 
 def _becomes(cmds: list[velocity_cmd_t], vn: float, ve: float, timeout: float = 3.0) -> bool:
-    return bool(wait_for(lambda: cmds and cmds[-1].vx == pytest.approx(vn, abs=1e-6)
-                         and cmds[-1].vy == pytest.approx(ve, abs=1e-6), timeout))
+    return bool(
+        wait_for(
+            lambda: (
+                cmds
+                and cmds[-1].vx == pytest.approx(vn, abs=1e-6)
+                and cmds[-1].vy == pytest.approx(ve, abs=1e-6)
+            ),
+            timeout,
+        )
+    )
 
 
 def test_steers_in_mission_and_hovers_otherwise() -> None:

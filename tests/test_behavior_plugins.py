@@ -42,7 +42,9 @@ def _install_target(pkg: Path, target: Path) -> None:
         shutil.copytree(pkg / name, target / name)
     dist = target / f"{project['name'].replace('-', '_')}-{project['version']}.dist-info"
     dist.mkdir()
-    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: {project['version']}\n")
+    (dist / "METADATA").write_text(
+        f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: {project['version']}\n"
+    )
     lines: list[str] = []
     for group, entries in project["entry-points"].items():
         lines.append(f"[{group}]")
@@ -61,7 +63,8 @@ def installed_plugin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterato
 
 def _echo_config() -> Any:
     return make_config(
-        [{"name": "m", "behaviors": [{"plugin": "test_echo", "params": {"word": "HELLO"}}]}], topics=ECHO_TOPIC
+        [{"name": "m", "behaviors": [{"plugin": "test_echo", "params": {"word": "HELLO"}}]}],
+        topics=ECHO_TOPIC,
     )
 
 
@@ -84,8 +87,9 @@ def test_a_plugin_from_another_distribution_is_loaded_by_its_entry_point_name(in
 
 
 def test_the_plugin_params_are_validated_too(installed_plugin: None) -> None:
-    config = make_config([{"name": "m", "behaviors": [{"plugin": "test_echo", "params": {"wrod": "x"}}]}],
-                         topics=ECHO_TOPIC)
+    config = make_config(
+        [{"name": "m", "behaviors": [{"plugin": "test_echo", "params": {"wrod": "x"}}]}], topics=ECHO_TOPIC
+    )
     with pytest.raises(ConfigError) as info:
         validate_bma_config(config)
     assert info.value.key == "bma[0].behaviors[0].params.wrod"
@@ -107,10 +111,20 @@ def test_the_example_config_is_valid(example_on_path: None) -> None:
 
 
 def test_the_example_behavior_flies_circles_in_mission(example_on_path: None) -> None:
-    config = make_config([{
-        "name": "mission",
-        "behaviors": [{"plugin": "my_behavior.circle:Circle", "tick_hz": 50, "params": {"speed": 3.0, "radius": 15.0}}],
-    }])
+    config = make_config(
+        [
+            {
+                "name": "mission",
+                "behaviors": [
+                    {
+                        "plugin": "my_behavior.circle:Circle",
+                        "tick_hz": 50,
+                        "params": {"speed": 3.0, "radius": 15.0},
+                    }
+                ],
+            }
+        ]
+    )
     validate_bma_config(config)
     with harness(config) as h:
         cmds = h.record("VELOCITY_CMD")

@@ -82,10 +82,16 @@ def _clear_recorder() -> None:
 
 
 def test_behaviors_follow_the_mc_state_and_status_reports_it() -> None:
-    config = make_config([_bma([
-        {"plugin": REC, "name": "flying", "activate_on": ["TAKEOFF", "MISSION"]},
-        {"plugin": REC, "name": "grounded", "activate_on": ["STANDBY"]},
-    ])])
+    config = make_config(
+        [
+            _bma(
+                [
+                    {"plugin": REC, "name": "flying", "activate_on": ["TAKEOFF", "MISSION"]},
+                    {"plugin": REC, "name": "grounded", "activate_on": ["STANDBY"]},
+                ]
+            )
+        ]
+    )
     with harness(config) as h:
         status = h.record("ARBITER", arbiter="main")
         node = h.bma("main")
@@ -101,7 +107,10 @@ def test_behaviors_follow_the_mc_state_and_status_reports_it() -> None:
         assert wait_for(lambda: h.sync(lambda: node.state) == "RTL")
         assert h.sync(node.active) == []
         assert Recorder.events == [
-            ("grounded", "activate"), ("grounded", "deactivate"), ("flying", "activate"), ("flying", "deactivate")
+            ("grounded", "activate"),
+            ("grounded", "deactivate"),
+            ("flying", "activate"),
+            ("flying", "deactivate"),
         ]
         flying = h.sync(lambda: node.behavior("flying"))
         assert isinstance(flying, Recorder) and flying.states == ["MISSION"]  # on_state while staying active
@@ -174,7 +183,9 @@ def test_undefined_mc_state_value_is_ignored() -> None:
 
 
 def test_handlers_of_a_past_activation_are_dropped() -> None:
-    config = make_config([_bma([{"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "handler"}}])])
+    config = make_config(
+        [_bma([{"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "handler"}}])]
+    )
     with harness(config) as h:
         node = h.bma("main")
         h.mc_state("MISSION")
@@ -197,10 +208,22 @@ def test_handlers_of_a_past_activation_are_dropped() -> None:
     ],
 )
 def test_a_raising_behavior_is_deactivated_and_reported_while_others_run(where: str, reason: str) -> None:
-    config = make_config([_bma([
-        {"plugin": RAISER, "activate_on": ["TAKEOFF", "MISSION"], "tick_hz": 50.0, "params": {"where": where}},
-        {"plugin": REC, "activate_on": ["TAKEOFF", "MISSION"], "tick_hz": 50.0},
-    ], restart_backoff=0)])
+    config = make_config(
+        [
+            _bma(
+                [
+                    {
+                        "plugin": RAISER,
+                        "activate_on": ["TAKEOFF", "MISSION"],
+                        "tick_hz": 50.0,
+                        "params": {"where": where},
+                    },
+                    {"plugin": REC, "activate_on": ["TAKEOFF", "MISSION"], "tick_hz": 50.0},
+                ],
+                restart_backoff=0,
+            )
+        ]
+    )
     with harness(config) as h:
         status = h.record("ARBITER", arbiter="main")
         node = h.bma("main")
@@ -223,11 +246,27 @@ def test_a_raising_behavior_is_deactivated_and_reported_while_others_run(where: 
 
 
 def test_failing_constructor_and_on_deactivate_are_reported() -> None:
-    config = make_config([_bma([
-        {"plugin": RAISER, "name": "broken", "activate_on": ["MISSION"], "params": {"where": "init"}},
-        {"plugin": RAISER, "name": "sticky", "activate_on": ["MISSION"], "params": {"where": "on_deactivate"}},
-        {"plugin": REC, "activate_on": ["MISSION"]},
-    ])])
+    config = make_config(
+        [
+            _bma(
+                [
+                    {
+                        "plugin": RAISER,
+                        "name": "broken",
+                        "activate_on": ["MISSION"],
+                        "params": {"where": "init"},
+                    },
+                    {
+                        "plugin": RAISER,
+                        "name": "sticky",
+                        "activate_on": ["MISSION"],
+                        "params": {"where": "on_deactivate"},
+                    },
+                    {"plugin": REC, "activate_on": ["MISSION"]},
+                ]
+            )
+        ]
+    )
     with harness(config) as h:
         node = h.bma("main")
         assert h.sync(node.failures) == {"broken": "RuntimeError: broken constructor (in __init__)"}
@@ -242,9 +281,17 @@ def test_failing_constructor_and_on_deactivate_are_reported() -> None:
 
 
 def test_failed_behavior_is_retried_only_after_the_state_leaves() -> None:
-    config = make_config([_bma([
-        {"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "on_activate"}},
-    ], republish_hz=50.0, restart_backoff=0)])
+    config = make_config(
+        [
+            _bma(
+                [
+                    {"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "on_activate"}},
+                ],
+                republish_hz=50.0,
+                restart_backoff=0,
+            )
+        ]
+    )
     with harness(config) as h:
         node = h.bma("main")
         raiser = h.sync(lambda: node.behavior("Raiser"))
@@ -260,9 +307,16 @@ def test_failed_behavior_is_retried_only_after_the_state_leaves() -> None:
 def test_failed_behavior_is_restarted_after_a_back_off_that_doubles() -> None:
     """A behavior that met one bad input flies again in the same mission; a broken one is not
     restarted in a tight loop: 0.2 s, then 0.4 s, then 0.8 s (the default is 2 s)."""
-    config = make_config([_bma([
-        {"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "on_activate"}},
-    ], restart_backoff=0.2)])
+    config = make_config(
+        [
+            _bma(
+                [
+                    {"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "on_activate"}},
+                ],
+                restart_backoff=0.2,
+            )
+        ]
+    )
     with harness(config) as h:
         node = h.bma("main")
         raiser = h.sync(lambda: node.behavior("Raiser"))
@@ -281,9 +335,16 @@ def test_failed_behavior_is_restarted_after_a_back_off_that_doubles() -> None:
 
 
 def test_a_behavior_that_fails_once_runs_again_in_the_same_state() -> None:
-    config = make_config([_bma([
-        {"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "handler"}},
-    ], restart_backoff=0.1)])
+    config = make_config(
+        [
+            _bma(
+                [
+                    {"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "handler"}},
+                ],
+                restart_backoff=0.1,
+            )
+        ]
+    )
     with harness(config) as h:
         node = h.bma("main")
         h.mc_state("MISSION")
@@ -298,12 +359,26 @@ def test_a_behavior_that_fails_once_runs_again_in_the_same_state() -> None:
 def test_a_behavior_state_drives_a_cascaded_bma() -> None:
     config = make_config(
         [
-            _bma([{"plugin": "tests.bma_support:ModeSwitcher", "activate_on": ["MISSION"],
-                   "topics": {"MODE": "SWARM_MODE"}, "params": {"after": 0.2}}], name="root"),
-            _bma([
-                {"plugin": REC, "name": "searcher", "activate_on": ["SEARCH"]},
-                {"plugin": REC, "name": "follower", "activate_on": ["FOLLOW"]},
-            ], name="swarm", state_topic="SWARM_MODE", states=["SEARCH", "FOLLOW", "IDLE"]),
+            _bma(
+                [
+                    {
+                        "plugin": "tests.bma_support:ModeSwitcher",
+                        "activate_on": ["MISSION"],
+                        "topics": {"MODE": "SWARM_MODE"},
+                        "params": {"after": 0.2},
+                    }
+                ],
+                name="root",
+            ),
+            _bma(
+                [
+                    {"plugin": REC, "name": "searcher", "activate_on": ["SEARCH"]},
+                    {"plugin": REC, "name": "follower", "activate_on": ["FOLLOW"]},
+                ],
+                name="swarm",
+                state_topic="SWARM_MODE",
+                states=["SEARCH", "FOLLOW", "IDLE"],
+            ),
         ],
         topics={"SWARM_MODE": {"type": "behavior_state_t", "channel": "{agent}/SWARM_MODE"}},
     )
@@ -326,8 +401,17 @@ def test_a_behavior_state_drives_a_cascaded_bma() -> None:
 
 def test_published_message_type_is_checked() -> None:
     config = make_config(
-        [_bma([{"plugin": "tests.bma_support:ModeSwitcher", "activate_on": ["MISSION"],
-                "topics": {"MODE": "SWARM_MODE"}}])],
+        [
+            _bma(
+                [
+                    {
+                        "plugin": "tests.bma_support:ModeSwitcher",
+                        "activate_on": ["MISSION"],
+                        "topics": {"MODE": "SWARM_MODE"},
+                    }
+                ]
+            )
+        ],
         topics={"SWARM_MODE": {"type": "behavior_state_t", "channel": "{agent}/SWARM_MODE"}},
     )
     with harness(config) as h:
@@ -338,8 +422,19 @@ def test_published_message_type_is_checked() -> None:
 
 
 def test_timers_of_an_activation_are_cancelled_with_it_and_one_shots_are_forgotten() -> None:
-    config = make_config([_bma([{"plugin": "tests.bma_support:Delayed", "activate_on": ["MISSION"],
-                                 "params": {"delay": 0.2}}])])
+    config = make_config(
+        [
+            _bma(
+                [
+                    {
+                        "plugin": "tests.bma_support:Delayed",
+                        "activate_on": ["MISSION"],
+                        "params": {"delay": 0.2},
+                    }
+                ]
+            )
+        ]
+    )
     with harness(config) as h:
         node = h.bma("main")
         beh = h.sync(lambda: node.behavior("Delayed"))

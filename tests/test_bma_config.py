@@ -31,13 +31,18 @@ def _fails(bma: list[dict[str, Any]], key: str, *fragments: str, **extra: Any) -
 
 
 def test_a_good_config_validates_and_plans() -> None:
-    config = make_config([
-        {"name": "ops", "behaviors": [{"plugin": "auto_operator", "params": {"rtl_after": 60}}]},
-        {"name": "swarm", "behaviors": [
-            {"plugin": "dovrat_swarm", "params": {"forward_speed": 3, "turn_direction": -1}},
-            {"plugin": REC, "activate_on": ["MISSION"], "deactivate_on": ["STANDBY"], "tick_hz": 4},
-        ]},
-    ])
+    config = make_config(
+        [
+            {"name": "ops", "behaviors": [{"plugin": "auto_operator", "params": {"rtl_after": 60}}]},
+            {
+                "name": "swarm",
+                "behaviors": [
+                    {"plugin": "dovrat_swarm", "params": {"forward_speed": 3, "turn_direction": -1}},
+                    {"plugin": REC, "activate_on": ["MISSION"], "deactivate_on": ["STANDBY"], "tick_hz": 4},
+                ],
+            },
+        ]
+    )
     validate_bma_config(config)
     plan = plan_bma(config, config.bma[1])
     swarm, rec = plan.behaviors
@@ -50,58 +55,124 @@ def test_a_good_config_validates_and_plans() -> None:
 
 
 def test_unknown_plugin() -> None:
-    _fails([{"name": "m", "behaviors": [{"plugin": "auto_operater"}]}],
-           "bma[0].behaviors[0].plugin", "no plugin 'auto_operater'", "auto_operator", "dovrat_swarm")
+    _fails(
+        [{"name": "m", "behaviors": [{"plugin": "auto_operater"}]}],
+        "bma[0].behaviors[0].plugin",
+        "no plugin 'auto_operater'",
+        "auto_operator",
+        "dovrat_swarm",
+    )
 
 
 def test_unimportable_module_class() -> None:
-    _fails([{"name": "m", "behaviors": [{"plugin": "no_such_module:Thing", "activate_on": ["MISSION"]}]}],
-           "bma[0].behaviors[0].plugin", "cannot load 'no_such_module:Thing'")
+    _fails(
+        [{"name": "m", "behaviors": [{"plugin": "no_such_module:Thing", "activate_on": ["MISSION"]}]}],
+        "bma[0].behaviors[0].plugin",
+        "cannot load 'no_such_module:Thing'",
+    )
 
 
 def test_plugin_that_is_not_a_behavior() -> None:
-    _fails([{"name": "m", "behaviors": [{"plugin": "antalate_lcm.config:Config"}]}],
-           "bma[0].behaviors[0].plugin", "not a subclass of antalate_lcm.behavior.Behavior")
+    _fails(
+        [{"name": "m", "behaviors": [{"plugin": "antalate_lcm.config:Config"}]}],
+        "bma[0].behaviors[0].plugin",
+        "not a subclass of antalate_lcm.behavior.Behavior",
+    )
 
 
 def test_bad_param_value() -> None:
-    _fails([{"name": "m", "behaviors": [
-        {"plugin": REC, "activate_on": ["MISSION"]},
-        {"plugin": "dovrat_swarm", "params": {"forward_speed": "fast"}},
-    ]}], "bma[0].behaviors[1].params.forward_speed", "valid number", "'fast'")
+    _fails(
+        [
+            {
+                "name": "m",
+                "behaviors": [
+                    {"plugin": REC, "activate_on": ["MISSION"]},
+                    {"plugin": "dovrat_swarm", "params": {"forward_speed": "fast"}},
+                ],
+            }
+        ],
+        "bma[0].behaviors[1].params.forward_speed",
+        "valid number",
+        "'fast'",
+    )
 
 
 def test_param_out_of_range_and_unknown_param() -> None:
-    _fails([{"name": "m", "behaviors": [{"plugin": "auto_operator", "params": {"retry": 0}}]}],
-           "bma[0].behaviors[0].params.retry", "greater than 0")
-    _fails([{"name": "m", "behaviors": [{"plugin": "auto_operator", "params": {"rtl_afterr": 5}}]}],
-           "bma[0].behaviors[0].params.rtl_afterr", "Extra inputs are not permitted")
+    _fails(
+        [{"name": "m", "behaviors": [{"plugin": "auto_operator", "params": {"retry": 0}}]}],
+        "bma[0].behaviors[0].params.retry",
+        "greater than 0",
+    )
+    _fails(
+        [{"name": "m", "behaviors": [{"plugin": "auto_operator", "params": {"rtl_afterr": 5}}]}],
+        "bma[0].behaviors[0].params.rtl_afterr",
+        "Extra inputs are not permitted",
+    )
 
 
 def test_missing_required_param() -> None:
-    _fails([{"name": "m", "behaviors": [{"plugin": "video_capture"}]}],
-           "bma[0].behaviors[0].params.input", "Field required")
+    _fails(
+        [{"name": "m", "behaviors": [{"plugin": "video_capture"}]}],
+        "bma[0].behaviors[0].params.input",
+        "Field required",
+    )
 
 
 def test_unknown_mc_state() -> None:
-    _fails([{"name": "m", "behaviors": [{"plugin": REC, "activate_on": ["MISSION", "HOVER"]}]}],
-           "bma[0].behaviors[0].activate_on[1]", "an mc_state_t state", "STANDBY", "'HOVER'")
-    _fails([{"name": "m", "behaviors": [{"plugin": REC, "activate_on": ["MISSION"], "deactivate_on": ["mission"]}]}],
-           "bma[0].behaviors[0].deactivate_on[0]", "'mission'")
+    _fails(
+        [{"name": "m", "behaviors": [{"plugin": REC, "activate_on": ["MISSION", "HOVER"]}]}],
+        "bma[0].behaviors[0].activate_on[1]",
+        "an mc_state_t state",
+        "STANDBY",
+        "'HOVER'",
+    )
+    _fails(
+        [
+            {
+                "name": "m",
+                "behaviors": [{"plugin": REC, "activate_on": ["MISSION"], "deactivate_on": ["mission"]}],
+            }
+        ],
+        "bma[0].behaviors[0].deactivate_on[0]",
+        "'mission'",
+    )
 
 
 def test_state_in_both_lists_and_no_state_at_all() -> None:
-    _fails([{"name": "m", "behaviors": [{"plugin": REC, "activate_on": ["MISSION"], "deactivate_on": ["MISSION"]}]}],
-           "bma[0].behaviors[0].deactivate_on[0]", "in both")
-    _fails([{"name": "m", "behaviors": [{"plugin": REC}]}],
-           "bma[0].behaviors[0].activate_on", "at least one state")
+    _fails(
+        [
+            {
+                "name": "m",
+                "behaviors": [{"plugin": REC, "activate_on": ["MISSION"], "deactivate_on": ["MISSION"]}],
+            }
+        ],
+        "bma[0].behaviors[0].deactivate_on[0]",
+        "in both",
+    )
+    _fails(
+        [{"name": "m", "behaviors": [{"plugin": REC}]}],
+        "bma[0].behaviors[0].activate_on",
+        "at least one state",
+    )
 
 
 def test_cascaded_states_are_free_unless_declared() -> None:
-    free = [{"name": "m", "state_topic": "SWARM_MODE", "behaviors": [{"plugin": REC, "activate_on": ["ANYTHING"]}]}]
+    free = [
+        {
+            "name": "m",
+            "state_topic": "SWARM_MODE",
+            "behaviors": [{"plugin": REC, "activate_on": ["ANYTHING"]}],
+        }
+    ]
     validate_bma_config(make_config(free, topics=SWARM_MODE))
-    declared = [{"name": "m", "state_topic": "SWARM_MODE", "states": ["SEARCH", "FOLLOW"],
-                 "behaviors": [{"plugin": REC, "activate_on": ["SEARCH", "FOLOW"]}]}]
+    declared = [
+        {
+            "name": "m",
+            "state_topic": "SWARM_MODE",
+            "states": ["SEARCH", "FOLLOW"],
+            "behaviors": [{"plugin": REC, "activate_on": ["SEARCH", "FOLOW"]}],
+        }
+    ]
     _fails(declared, "bma[0].behaviors[0].activate_on[1]", "SEARCH, FOLLOW", "'FOLOW'", topics=SWARM_MODE)
 
 
@@ -110,42 +181,91 @@ def test_declared_states_of_an_mc_arbiter_must_be_mc_states() -> None:
 
 
 def test_state_topic_of_the_wrong_type() -> None:
-    _fails([{"name": "m", "state_topic": "TELEMETRY", "behaviors": []}],
-           "bma[0].state_topic", "mc_state_t or behavior_state_t", "telemetry_t")
+    _fails(
+        [{"name": "m", "state_topic": "TELEMETRY", "behaviors": []}],
+        "bma[0].state_topic",
+        "mc_state_t or behavior_state_t",
+        "telemetry_t",
+    )
 
 
 def test_duplicate_behavior_names() -> None:
-    _fails([{"name": "m", "behaviors": [{"plugin": REC, "activate_on": ["MISSION"]},
-                                        {"plugin": REC, "activate_on": ["STANDBY"]}]}],
-           "bma[0].behaviors[1].name", "'Recorder'", "behaviors[0]")
+    _fails(
+        [
+            {
+                "name": "m",
+                "behaviors": [
+                    {"plugin": REC, "activate_on": ["MISSION"]},
+                    {"plugin": REC, "activate_on": ["STANDBY"]},
+                ],
+            }
+        ],
+        "bma[0].behaviors[1].name",
+        "'Recorder'",
+        "behaviors[0]",
+    )
 
 
 def test_topic_remap_to_an_unknown_topic() -> None:
-    _fails([{"name": "m", "behaviors": [{"plugin": SWITCHER, "activate_on": ["MISSION"],
-                                         "topics": {"MODE": "SWARM_MOOD"}}]}],
-           "bma[0].behaviors[0].topics.MODE", "'SWARM_MOOD'", topics=SWARM_MODE)
+    _fails(
+        [
+            {
+                "name": "m",
+                "behaviors": [
+                    {"plugin": SWITCHER, "activate_on": ["MISSION"], "topics": {"MODE": "SWARM_MOOD"}}
+                ],
+            }
+        ],
+        "bma[0].behaviors[0].topics.MODE",
+        "'SWARM_MOOD'",
+        topics=SWARM_MODE,
+    )
 
 
 def test_topic_remap_of_a_topic_the_behavior_does_not_use() -> None:
-    _fails([{"name": "m", "behaviors": [{"plugin": "dovrat_swarm", "topics": {"TELEMETRI": "TELEMETRY"}}]}],
-           "bma[0].behaviors[0].topics.TELEMETRI", "VELOCITY_CMD")
+    _fails(
+        [{"name": "m", "behaviors": [{"plugin": "dovrat_swarm", "topics": {"TELEMETRI": "TELEMETRY"}}]}],
+        "bma[0].behaviors[0].topics.TELEMETRI",
+        "VELOCITY_CMD",
+    )
 
 
 def test_topic_remap_to_the_wrong_type() -> None:
-    _fails([{"name": "m", "behaviors": [{"plugin": SWITCHER, "activate_on": ["MISSION"],
-                                         "topics": {"MODE": "TELEMETRY"}}]}],
-           "bma[0].behaviors[0].topics.MODE", "behavior_state_t", "telemetry_t")
+    _fails(
+        [
+            {
+                "name": "m",
+                "behaviors": [
+                    {"plugin": SWITCHER, "activate_on": ["MISSION"], "topics": {"MODE": "TELEMETRY"}}
+                ],
+            }
+        ],
+        "bma[0].behaviors[0].topics.MODE",
+        "behavior_state_t",
+        "telemetry_t",
+    )
 
 
 def test_behavior_topic_without_a_binding() -> None:
-    _fails([{"name": "m", "behaviors": [{"plugin": SWITCHER, "activate_on": ["MISSION"]}]}],
-           "bma[0].behaviors[0].topics", "'MODE'", "[topics]")
+    _fails(
+        [{"name": "m", "behaviors": [{"plugin": SWITCHER, "activate_on": ["MISSION"]}]}],
+        "bma[0].behaviors[0].topics",
+        "'MODE'",
+        "[topics]",
+    )
 
 
 def test_a_remap_to_a_new_topic_of_the_same_type_is_fine() -> None:
     topics = {"SIM_DETECTION": {"type": "peer_detection_t", "channel": "{agent}/SIM_DETECTION"}}
-    config = make_config([{"name": "m", "behaviors": [
-        {"plugin": "dovrat_swarm", "topics": {"PEER_DETECTION": "SIM_DETECTION"}}]}], topics=topics)
+    config = make_config(
+        [
+            {
+                "name": "m",
+                "behaviors": [{"plugin": "dovrat_swarm", "topics": {"PEER_DETECTION": "SIM_DETECTION"}}],
+            }
+        ],
+        topics=topics,
+    )
     validate_bma_config(config)
     assert plan_bma(config, config.bma[0]).behaviors[0].topics["PEER_DETECTION"] == "SIM_DETECTION"
 

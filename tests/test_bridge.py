@@ -84,15 +84,25 @@ def test_a_good_config_loads(tmp_path: Path) -> None:
     ("change", "key", "expected"),
     [
         (('between = ["lan", "wan"]', 'between = ["lan", "lan"]'), "bridge.between", "two different buses"),
-        (('between = ["lan", "wan"]', 'between = ["lan", "radio"]'), "bridge.between", "a bus declared in [buses]"),
+        (
+            ('between = ["lan", "wan"]', 'between = ["lan", "radio"]'),
+            "bridge.between",
+            "a bus declared in [buses]",
+        ),
         (('to = "wan"', 'to = "cloud"'), "bridge.limit[0].to", "one of lan, wan"),
         (("rate = 2.0", "rate = 0"), "bridge.limit.0.rate", "greater than 0"),
-        (('wan = "zenoh://?connect=tcp/192.0.2.10:7447"', 'wan = "zenoh://?connect=192.0.2.10:7447"'), "buses", "Zenoh endpoint"),
+        (
+            ('wan = "zenoh://?connect=tcp/192.0.2.10:7447"', 'wan = "zenoh://?connect=192.0.2.10:7447"'),
+            "buses",
+            "Zenoh endpoint",
+        ),
         (('exclude = [".*/VIDEO"]', 'exclude = ["(unclosed"]'), "bridge", "regular expression"),
         (('exclude = [".*/VIDEO"]', 'excluded = [".*/VIDEO"]'), "bridge.excluded", "Extra inputs"),
     ],
 )
-def test_config_mistakes_name_the_key(tmp_path: Path, change: tuple[str, str], key: str, expected: str) -> None:
+def test_config_mistakes_name_the_key(
+    tmp_path: Path, change: tuple[str, str], key: str, expected: str
+) -> None:
     with pytest.raises(ConfigError) as err:
         load_bridge_config(_write(tmp_path, GOOD.replace(*change)))
     assert err.value.key.startswith(key.split(".")[0]), err.value
@@ -109,7 +119,15 @@ def _scenario(netns: NetNamespace, name: str) -> dict[str, Any]:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]  # free on the host; the namespace's loopback is empty anyway
-    proc = netns.python("-m", "tests.wan.bridge_scenario", name, str(port), stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=str(REPO))
+    proc = netns.python(
+        "-m",
+        "tests.wan.bridge_scenario",
+        name,
+        str(port),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=str(REPO),
+    )
     out, err = proc.communicate(timeout=90)
     assert proc.returncode == 0, err[-3000:]
     return json.loads(out.strip().splitlines()[-1])

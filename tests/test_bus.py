@@ -234,7 +234,9 @@ def test_no_multicast_route_gives_the_fix() -> None:
     if reason:
         pytest.skip(f"no private network namespace: {reason}")
     code = "from antalate_lcm.bus import Bus; Bus({'lan': 'udpm://239.255.76.67:7667?ttl=1'}).open()"
-    proc = subprocess.run(["unshare", "-rn", sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
+    proc = subprocess.run(
+        ["unshare", "-rn", sys.executable, "-c", code], capture_output=True, text=True, timeout=30
+    )
     assert proc.returncode != 0
     assert "MulticastUnavailable" in proc.stderr
     assert "ip route add 224.0.0.0/4 dev lo" in proc.stderr
@@ -265,7 +267,9 @@ def test_an_attached_bus_delivers_on_the_executors_thread_with_no_hop() -> None:
     ex.start()
     try:
         threads: list[str] = []
-        b.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: threads.append(threading.current_thread().name))
+        b.subscribe(
+            "test", "a/MC_STATE", mc_state_t, lambda ch, m: threads.append(threading.current_thread().name)
+        )
         b.publish("test", "a/MC_STATE", _mc(1))
         assert wait_for(lambda: threads, 2) == ["the-one-loop"]
         assert "lcm-dispatch" not in {t.name for t in threading.enumerate()}
@@ -283,7 +287,9 @@ def test_unsubscribe_from_another_thread_releases_the_channel(bus: Bus) -> None:
     assert wait_for(lambda: got == [1], 2)
     bus.unsubscribe(sub)
     link = bus._by_name["test"]
-    assert wait_for(lambda: not link._retire, 2), "the LCM subscription is dropped on the loop without a datagram"
+    assert wait_for(lambda: not link._retire, 2), (
+        "the LCM subscription is dropped on the loop without a datagram"
+    )
     bus.publish("test", "a/MC_STATE", _mc(1, 2))
     time.sleep(0.1)
     assert got == [1]

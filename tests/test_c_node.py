@@ -33,7 +33,9 @@ KEY = "c-node-test-swarm-key"
 def lcm_flags() -> tuple[str, list[str]]:
     """Which liblcm to build against, and the compiler flags for it."""
     if shutil.which("pkg-config") and subprocess.run(["pkg-config", "--exists", "lcm"]).returncode == 0:
-        flags = subprocess.run(["pkg-config", "--cflags", "--libs", "lcm"], capture_output=True, text=True, check=True)
+        flags = subprocess.run(
+            ["pkg-config", "--cflags", "--libs", "lcm"], capture_output=True, text=True, check=True
+        )
         return "system liblcm (pkg-config lcm)", flags.stdout.split()
     if Path("/usr/include/lcm/lcm.h").exists():
         return "system liblcm", ["-llcm"]
@@ -58,34 +60,58 @@ def c_node(tmp_path_factory: pytest.TempPathFactory) -> Path:
     types = work / "types"
     gen = subprocess.run(
         [sys.executable, "-m", "antalate_lcm.cli", "types", "--lang", "c", "--out", str(types)],
-        capture_output=True, text=True, timeout=60, env=dict(os.environ, PYTHONPATH=str(REPO)),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
     )
     assert gen.returncode == 0, gen.stderr
     binary = work / "takeoff_node"
     build = subprocess.run(
-        [cc, "-std=c99", "-D_DEFAULT_SOURCE", "-Wall", "-o", str(binary), str(C_SOURCE),
-         *map(str, sorted(types.glob("*.c"))), f"-I{types}", *flags, "-lcrypto"],
-        capture_output=True, text=True, timeout=180,
+        [
+            cc,
+            "-std=c99",
+            "-D_DEFAULT_SOURCE",
+            "-Wall",
+            "-o",
+            str(binary),
+            str(C_SOURCE),
+            *map(str, sorted(types.glob("*.c"))),
+            f"-I{types}",
+            *flags,
+            "-lcrypto",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=180,
     )
     assert build.returncode == 0, f"building the C node against {which} failed:\n{build.stderr}"
     print(f"C node built against {which}")
     return binary
 
 
-def run_c_node(netns: NetNamespace, binary: Path, key: str | None, ack_timeout: float = 30) -> tuple[int, list[dict[str, Any]], str]:
+def run_c_node(
+    netns: NetNamespace, binary: Path, key: str | None, ack_timeout: float = 30
+) -> tuple[int, list[dict[str, Any]], str]:
     env = {k: v for k, v in os.environ.items() if k != "ANTALATE_SWARM_KEY"}
     if key is not None:
         env["ANTALATE_SWARM_KEY"] = key
-    proc = netns.run([str(binary), MCAST_URL, "alpha", "4.0", str(ack_timeout)], timeout=ack_timeout + 70, env=env)
+    proc = netns.run(
+        [str(binary), MCAST_URL, "alpha", "4.0", str(ack_timeout)], timeout=ack_timeout + 70, env=env
+    )
     events = [json.loads(line) for line in proc.stdout.splitlines() if line.startswith("{")]
     return proc.returncode, events, proc.stderr
 
 
-def assert_flew(code: int, events: list[dict[str, Any]], stderr: str, probe: Probe, agent: AgentProcesses, mac_len: int) -> None:
+def assert_flew(
+    code: int, events: list[dict[str, Any]], stderr: str, probe: Probe, agent: AgentProcesses, mac_len: int
+) -> None:
     assert code == 0, f"C node: {events}\n{stderr}\nMC log:\n{agent.log('mc')}"
     states = [e for e in events if e["event"] == "mc_state"]
     first_send = next(i for i, e in enumerate(events) if e["event"] == "sent")
-    assert events[first_send - 1]["event"] == "mc_state" and events[first_send - 1]["state"] == M.STANDBY, events
+    assert events[first_send - 1]["event"] == "mc_state" and events[first_send - 1]["state"] == M.STANDBY, (
+        events
+    )
     assert {e["from"] for e in states} == {"alpha"}
     sent = [e for e in events if e["event"] == "sent"]
     assert sent and all(e["mac_len"] == mac_len and e["rc"] == 0 for e in sent)
@@ -105,7 +131,9 @@ def assert_flew(code: int, events: list[dict[str, Any]], stderr: str, probe: Pro
     assert "STANDBY -> TAKEOFF" in agent.log("mc")
 
 
-def test_c_node_takes_off_a_keyless_agent(c_node: Path, netns: NetNamespace, probe: Probe, tmp_path: Path) -> None:
+def test_c_node_takes_off_a_keyless_agent(
+    c_node: Path, netns: NetNamespace, probe: Probe, tmp_path: Path
+) -> None:
     agent = AgentProcesses(netns, tmp_path, agent_config("alpha", security={"insecure": True}))
     try:
         agent.start("hlc")
@@ -120,7 +148,9 @@ def test_c_node_takes_off_a_keyless_agent(c_node: Path, netns: NetNamespace, pro
 def test_c_node_signs_for_a_keyed_agent_and_a_wrong_key_is_refused(
     c_node: Path, netns: NetNamespace, probe: Probe, tmp_path: Path
 ) -> None:
-    agent = AgentProcesses(netns, tmp_path, agent_config("alpha", security={"swarm_key": KEY, "state_dir": str(tmp_path)}))
+    agent = AgentProcesses(
+        netns, tmp_path, agent_config("alpha", security={"swarm_key": KEY, "state_dir": str(tmp_path)})
+    )
     try:
         agent.start("hlc")
         agent.start("mc")
@@ -129,7 +159,13 @@ def test_c_node_signs_for_a_keyed_agent_and_a_wrong_key_is_refused(
             code, events, stderr = run_c_node(netns, c_node, key=key, ack_timeout=3)
             assert code == 1 and events[-1]["event"] == "timeout", f"{events}\n{stderr}"
             assert events[-1]["state"] == M.STANDBY and events[-1]["last_command_seq"] == 0
-            assert wait_for(lambda why=why: f"dropped operator_cmd_t on alpha/OPERATOR_CMD from 'c-node' seq 1: {why}" in agent.log("mc"), 10), agent.log("mc")
+            assert wait_for(
+                lambda why=why: (
+                    f"dropped operator_cmd_t on alpha/OPERATOR_CMD from 'c-node' seq 1: {why}"
+                    in agent.log("mc")
+                ),
+                10,
+            ), agent.log("mc")
         assert agent.alive("mc") and agent.alive("hlc")
         # the right key: accepted and flown; the agent's own state messages are signed too
         code, events, stderr = run_c_node(netns, c_node, key=KEY)

@@ -15,7 +15,11 @@ REPO = Path(__file__).resolve().parent.parent
 
 def antalate(*args: str, timeout: float = 60, **kw: object) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "antalate_lcm.cli", *args], capture_output=True, text=True, timeout=timeout, **kw
+        [sys.executable, "-m", "antalate_lcm.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        **kw,
     )  # type: ignore[call-overload]
 
 
@@ -29,14 +33,25 @@ def test_help_lists_every_command() -> None:
     ("text", "needle"),
     [
         ("[hlc]\nlow_battery = 150\n", "hlc.low_battery"),
-        ('[[bma]]\nname = "x"\n[[bma.behaviors]]\nplugin = "no_such_behavior"\nactivate_on = ["MISSION"]\n', "no_such_behavior"),
-        ('[[bma]]\nname = "x"\n[[bma.behaviors]]\nplugin = "auto_operator"\nactivate_on = ["FLYING"]\n', "FLYING"),
-        ('[[bma]]\nname = "x"\n[[bma.behaviors]]\nplugin = "auto_operator"\nparams = { retry = -1 }\n', "retry"),
+        (
+            '[[bma]]\nname = "x"\n[[bma.behaviors]]\nplugin = "no_such_behavior"\nactivate_on = ["MISSION"]\n',
+            "no_such_behavior",
+        ),
+        (
+            '[[bma]]\nname = "x"\n[[bma.behaviors]]\nplugin = "auto_operator"\nactivate_on = ["FLYING"]\n',
+            "FLYING",
+        ),
+        (
+            '[[bma]]\nname = "x"\n[[bma.behaviors]]\nplugin = "auto_operator"\nparams = { retry = -1 }\n',
+            "retry",
+        ),
         ('[hlc]\nautopilot = "warp_drive"\n', "warp_drive"),
     ],
 )
 @pytest.mark.parametrize("command", ["agent", "mc"])
-def test_bad_config_stops_before_any_node_starts(tmp_path: Path, text: str, needle: str, command: str) -> None:
+def test_bad_config_stops_before_any_node_starts(
+    tmp_path: Path, text: str, needle: str, command: str
+) -> None:
     cfg = tmp_path / "bad.toml"
     cfg.write_text('[buses]\nlan = "memq://"\n' + text)
     proc = antalate(command, str(cfg))
@@ -87,11 +102,19 @@ def test_duplicate_agent_names(tmp_path: Path) -> None:
     a.write_text('[agent]\nname = "same"\n[buses]\nlan = "memq://"\n')
     b.write_text('[buses]\nlan = "memq://"\n')
     c.write_text('[buses]\nlan = "memq://"\n')
-    one_line_error(antalate("agent", str(a), str(a)), f"invalid config {a}: agent.name: ", "'same'", "the same file twice")
+    one_line_error(
+        antalate("agent", str(a), str(a)),
+        f"invalid config {a}: agent.name: ",
+        "'same'",
+        "the same file twice",
+    )
     # --agents 2 names the copies of an unnamed agent sim-01, sim-02: two such configs collide
     one_line_error(
         antalate("agent", str(b), str(c), "--agents", "2"),
-        f"invalid config {c}: agent.name: ", "'sim-01' is also an agent of", str(b), "--agents 2",
+        f"invalid config {c}: agent.name: ",
+        "'sim-01' is also an agent of",
+        str(b),
+        "--agents 2",
     )
 
 
@@ -103,18 +126,45 @@ def test_duplicate_agent_names(tmp_path: Path) -> None:
         ('[buses]\nlan = "http://127.0.0.1:8080"\n', "buses.lan", "not 'http://'"),
         ('[buses]\nlan = "udpm://239.255.76.67:99999"\n', "buses.lan", "a port 1-65535"),
         ('[buses]\nlan = "udpm://10.0.0.7:7667"\n', "buses.lan", "multicast group"),
-        ('[hlc]\nautopilot = ":Foo"\n', "hlc.autopilot", "an installed adapter (crazyflie, mavlink, sim, tello)"),
-        ('[hlc]\nautopilot = ".sim:X"\n', "hlc.autopilot", "an installed adapter (crazyflie, mavlink, sim, tello)"),
+        (
+            '[hlc]\nautopilot = ":Foo"\n',
+            "hlc.autopilot",
+            "an installed adapter (crazyflie, mavlink, sim, tello)",
+        ),
+        (
+            '[hlc]\nautopilot = ".sim:X"\n',
+            "hlc.autopilot",
+            "an installed adapter (crazyflie, mavlink, sim, tello)",
+        ),
         ('[hlc]\nautopilot = "nope"\n', "hlc.autopilot", "there is no adapter 'nope'"),
-        ('[hlc]\nautopilot = "antalate_lcm.no_such:X"\n', "hlc.autopilot", "No module named 'antalate_lcm.no_such'"),
-        ('[hlc]\nautopilot = "antalate_lcm.autopilot.base:AutopilotState"\n', "hlc.autopilot", "not a subclass"),
+        (
+            '[hlc]\nautopilot = "antalate_lcm.no_such:X"\n',
+            "hlc.autopilot",
+            "No module named 'antalate_lcm.no_such'",
+        ),
+        (
+            '[hlc]\nautopilot = "antalate_lcm.autopilot.base:AutopilotState"\n',
+            "hlc.autopilot",
+            "not a subclass",
+        ),
         ('[security]\nwindow = "5"\n', "security.window", "valid number, got '5'"),
         ('[topics]\nMC_STATE = { bus = "lan", channel = 7 }\n', "topics.MC_STATE.channel", "valid string"),
-        ('[hlc.autopilot]\nname = "sim"\nland_disarm_delay = -1\n', "hlc.autopilot.land_disarm_delay", "greater than or equal to 0"),
+        (
+            '[hlc.autopilot]\nname = "sim"\nland_disarm_delay = -1\n',
+            "hlc.autopilot.land_disarm_delay",
+            "greater than or equal to 0",
+        ),
         ('[osc]\nserver = "ftp://station"\n', "osc.server", "an http:// or https:// URL"),
-        ('[[bma]]\nname = "x"\n[[bma.behaviors]]\nplugin = "auto_operator"\nparams = { retry = "2" }\n',
-         "bma[0].behaviors[0].params.retry", "valid number"),
-        ('[[bma]]\nname = "x"\n[[bma.behaviors]]\nplugin = ".auto_operator:X"\n', "bma[0].behaviors[0].plugin", "package.module:ClassName"),
+        (
+            '[[bma]]\nname = "x"\n[[bma.behaviors]]\nplugin = "auto_operator"\nparams = { retry = "2" }\n',
+            "bma[0].behaviors[0].params.retry",
+            "valid number",
+        ),
+        (
+            '[[bma]]\nname = "x"\n[[bma.behaviors]]\nplugin = ".auto_operator:X"\n',
+            "bma[0].behaviors[0].plugin",
+            "package.module:ClassName",
+        ),
     ],
 )
 def test_config_mistakes_are_one_line_naming_file_key_and_expectation(
@@ -137,8 +187,18 @@ def test_no_multicast_route_is_one_clear_message(tmp_path: Path) -> None:
     if reason:
         pytest.skip(f"no private network namespace: {reason}")
     proc = subprocess.run(
-        ["unshare", "-rn", sys.executable, "-m", "antalate_lcm.cli", "mc", str(REPO / "examples" / "sim_agent.toml")],
-        capture_output=True, text=True, timeout=60,
+        [
+            "unshare",
+            "-rn",
+            sys.executable,
+            "-m",
+            "antalate_lcm.cli",
+            "mc",
+            str(REPO / "examples" / "sim_agent.toml"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert proc.returncode == 2
     assert "ip route add 224.0.0.0/4 dev lo" in proc.stderr and "memq://" in proc.stderr
@@ -155,7 +215,9 @@ def test_agent_runs_and_stops_cleanly_on_sigterm(tmp_path: Path) -> None:
     cfg.write_text('[agent]\nname = "solo"\n[buses]\nlan = "memq://"\n')
     proc = subprocess.Popen(
         [sys.executable, "-m", "antalate_lcm.cli", "agent", str(cfg), "--agents", "3"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     lines: queue.Queue[str] = queue.Queue()
     assert proc.stderr is not None
@@ -218,10 +280,13 @@ def test_no_multicast_route_message_only_when_the_route_is_missing() -> None:
         "http://127.0.0.1:8080",
         "file:///nonexistent/flight.lcm",
     ]
-    script = "ip link set lo up && ip route add 239.255.76.68/32 dev lo && exec \"$0\" -c \"$1\" \"$@\""
+    script = 'ip link set lo up && ip route add 239.255.76.68/32 dev lo && exec "$0" -c "$1" "$@"'
     proc = subprocess.run(
         ["unshare", "-rn", "sh", "-c", script, sys.executable, _OPEN_BUSES, *urls],
-        capture_output=True, text=True, timeout=60, cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=REPO,
     )
     assert proc.returncode == 0, proc.stderr
     got = json.loads(proc.stdout)
@@ -242,7 +307,9 @@ def test_a_bad_bus_url_without_a_route_is_a_config_error(tmp_path: Path) -> None
     cfg.write_text('[buses]\nlan = "udpm://239.255.76.67:99999?ttl=1"\n')
     proc = subprocess.run(
         ["unshare", "-rn", sys.executable, "-m", "antalate_lcm.cli", "mc", str(cfg)],
-        capture_output=True, text=True, timeout=60,
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     line = one_line_error(proc, f"invalid config {cfg}: buses.lan: expected a port 1-65535")
     assert "ip route" not in line and "route" not in proc.stderr

@@ -80,11 +80,17 @@ def test_design_style_autopilot_table(tmp_path: Path) -> None:
         ("[topics]\nFOO = { type = 'nope_t', channel = 'x' }\n", "topics.FOO.type", "one of"),
         ("[[bma]]\nname = 'a'\nstate_topic = 'NOPE'\n", "bma[0].state_topic", "topic name"),
         ("[[bma]]\nname = 'a'\n[[bma]]\nname = 'a'\n", "bma.name", "unique"),
-        ("[[bma]]\nname = 'a'\n[[bma.behaviors]]\nactivate_on = ['MISSION']\n", "bma[0].behaviors[0].plugin", "required"),
+        (
+            "[[bma]]\nname = 'a'\n[[bma.behaviors]]\nactivate_on = ['MISSION']\n",
+            "bma[0].behaviors[0].plugin",
+            "required",
+        ),
         ("[osc]\nrate = 0\n", "osc.rate", "greater than 0"),
     ],
 )
-def test_invalid_files_name_file_key_and_expectation(tmp_path: Path, text: str, key: str, expected: str) -> None:
+def test_invalid_files_name_file_key_and_expectation(
+    tmp_path: Path, text: str, key: str, expected: str
+) -> None:
     path = write(tmp_path, text)
     with pytest.raises(ConfigError) as info:
         load_config(path)
@@ -189,6 +195,7 @@ def test_an_integer_still_fills_a_float(tmp_path: Path) -> None:
 
 # ------------------------------------------------------------------ bus URLs (LCM's providers)
 
+
 @pytest.mark.parametrize(
     "url",
     [
@@ -216,7 +223,10 @@ def test_every_lcm_provider_is_accepted(tmp_path: Path, url: str) -> None:
 @pytest.mark.parametrize(
     ("url", "expected"),
     [
-        ("http://127.0.0.1:8080", "an LCM provider (udpm://, mpudpm://, memq://, file://, tcpq://, zenoh://), not 'http://'"),
+        (
+            "http://127.0.0.1:8080",
+            "an LCM provider (udpm://, mpudpm://, memq://, file://, tcpq://, zenoh://), not 'http://'",
+        ),
         ("udp://239.255.76.67:7667", "not 'udp://'"),
         ("localhost:7667", "provider://network"),
         ("://239.255.76.67:7667", "provider://network"),
@@ -232,7 +242,10 @@ def test_every_lcm_provider_is_accepted(tmp_path: Path, url: str) -> None:
         ("udpm://240.0.0.1:7667", "unicast"),
         ("udpm://239.255.76.67:7667?ttl=256", "an integer 0-255"),
         ("udpm://239.255.76.67:7667?ttl=-1", "an integer 0-255"),
-        ("udpm://239.255.76.67:7667?ttl=yes", "an integer 0-255 (0 = this host only, 1 = the local network) for option ttl, not 'yes'"),
+        (
+            "udpm://239.255.76.67:7667?ttl=yes",
+            "an integer 0-255 (0 = this host only, 1 = the local network) for option ttl, not 'yes'",
+        ),
         ("udpm://239.255.76.67:7667?ttl=0x1", "for option ttl"),
         ("udpm://239.255.76.67:7667?recv_buf_size=0", "a size in bytes"),
         ("udpm://239.255.76.67:7667?recv_buf_size=2MB", "a size in bytes"),
@@ -265,8 +278,10 @@ def test_no_bus_at_all(tmp_path: Path) -> None:
 
 # ------------------------------------------------------------------ [osc] server
 
+
 @pytest.mark.parametrize(
-    "server", ["http://127.0.0.1:8080", "https://station.example", "http://[::1]:8080/", "https://op:8443/antalate"]
+    "server",
+    ["http://127.0.0.1:8080", "https://station.example", "http://[::1]:8080/", "https://op:8443/antalate"],
 )
 def test_station_urls_accepted(tmp_path: Path, server: str) -> None:
     assert load_config(write(tmp_path, f'[osc]\nserver = "{server}"\n')).osc.server == server
@@ -293,6 +308,7 @@ def test_bad_station_urls(tmp_path: Path, server: str, expected: str) -> None:
 
 
 # ------------------------------------------------------------------ autopilot names
+
 
 def _installed_listed(message: str) -> None:
     from antalate_lcm.autopilot import available_autopilots
@@ -323,7 +339,10 @@ def plugin_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
         ("", "there is no adapter ''"),
         ("antalate_lcm.no_such_module:Foo", "No module named 'antalate_lcm.no_such_module'"),
         ("antalate_lcm.autopilot.sim:Nope", "has no attribute 'Nope'"),
-        ("antalate_lcm.autopilot.base:AutopilotState", "not a subclass of antalate_lcm.autopilot.base.Autopilot"),
+        (
+            "antalate_lcm.autopilot.base:AutopilotState",
+            "not a subclass of antalate_lcm.autopilot.base.Autopilot",
+        ),
         ("antalate_lcm.autopilot.base:Autopilot", "abstract"),
     ],
 )
@@ -335,19 +354,28 @@ def test_bad_autopilot_names_list_the_installed_adapters(tmp_path: Path, name: s
 def test_an_adapter_module_that_breaks_on_import(tmp_path: Path, plugin_dir: Path) -> None:
     (plugin_dir / "h4_broken_adapter.py").write_text("raise RuntimeError('needs a serial port at import')\n")
     (plugin_dir / "h4_syntax_adapter.py").write_text("class Broken(:\n")
-    for module, detail in (("h4_broken_adapter", "needs a serial port at import"), ("h4_syntax_adapter", "SyntaxError")):
+    for module, detail in (
+        ("h4_broken_adapter", "needs a serial port at import"),
+        ("h4_syntax_adapter", "SyntaxError"),
+    ):
         err = assert_config_error(
-            write(tmp_path, f'[hlc]\nautopilot = "{module}:Adapter"\n'), "hlc.autopilot", f"importing {module} failed", detail
+            write(tmp_path, f'[hlc]\nautopilot = "{module}:Adapter"\n'),
+            "hlc.autopilot",
+            f"importing {module} failed",
+            detail,
         )
         _installed_listed(err.expected)
 
 
 def test_design_style_table_names_its_name_key(tmp_path: Path) -> None:
-    err = assert_config_error(write(tmp_path, '[hlc.autopilot]\nname = "simm"\n'), "hlc.autopilot.name", "'simm'")
+    err = assert_config_error(
+        write(tmp_path, '[hlc.autopilot]\nname = "simm"\n'), "hlc.autopilot.name", "'simm'"
+    )
     _installed_listed(err.expected)
 
 
 # ------------------------------------------------------------------ adapter params, by the adapter's own model
+
 
 @pytest.mark.parametrize(
     ("params", "field", "expected"),
@@ -370,7 +398,9 @@ def test_design_style_table_names_its_name_key(tmp_path: Path) -> None:
     ],
 )
 @pytest.mark.parametrize("table", ["autopilot", "autopilot_params"])
-def test_sim_params_are_validated_at_load(tmp_path: Path, table: str, params: str, field: str, expected: str) -> None:
+def test_sim_params_are_validated_at_load(
+    tmp_path: Path, table: str, params: str, field: str, expected: str
+) -> None:
     name = 'name = "sim"\n' if table == "autopilot" else ""
     path = write(tmp_path, f"[hlc.{table}]\n{name}{params}\n")
     assert_config_error(path, f"hlc.{table}.{field}", expected)
@@ -420,7 +450,11 @@ def test_any_adapter_declares_its_params_model(tmp_path: Path, plugin_dir: Path)
         "    def __init__(self, params=None, **kw):\n"
         "        raise OSError('opened /dev/ttyACM0 in the constructor')\n"
     )
-    ok = load_config(write(tmp_path, '[hlc]\nautopilot = "h4_custom_adapter:Custom"\n[hlc.autopilot_params]\nport = 5760\n'))
+    ok = load_config(
+        write(
+            tmp_path, '[hlc]\nautopilot = "h4_custom_adapter:Custom"\n[hlc.autopilot_params]\nport = 5760\n'
+        )
+    )
     assert ok.hlc.autopilot_params == {"port": 5760}
     for params, field, expected in (
         ("port = '5760'", "port", "valid integer, got '5760'"),
@@ -432,15 +466,20 @@ def test_any_adapter_declares_its_params_model(tmp_path: Path, plugin_dir: Path)
         assert_config_error(write(tmp_path, text), f"hlc.autopilot.{field}", expected)
     # without a model, the adapter's constructor is the check (no I/O before connect())
     err = assert_config_error(
-        write(tmp_path, '[hlc]\nautopilot = "h4_custom_adapter:Unchecked"\n[hlc.autopilot_params]\nnope = 1\n'),
+        write(
+            tmp_path, '[hlc]\nautopilot = "h4_custom_adapter:Unchecked"\n[hlc.autopilot_params]\nnope = 1\n'
+        ),
         "hlc.autopilot_params",
     )
     assert "nope" in err.expected
-    err = assert_config_error(write(tmp_path, '[hlc]\nautopilot = "h4_custom_adapter:Rude"\n'), "hlc.autopilot_params")
+    err = assert_config_error(
+        write(tmp_path, '[hlc]\nautopilot = "h4_custom_adapter:Rude"\n'), "hlc.autopilot_params"
+    )
     assert "its constructor failed" in err.expected and "/dev/ttyACM0" in err.expected
 
 
 # ------------------------------------------------------------------ behaviors' params are strict too
+
 
 @pytest.mark.parametrize(
     ("params", "key", "expected"),
@@ -450,7 +489,11 @@ def test_any_adapter_declares_its_params_model(tmp_path: Path, plugin_dir: Path)
         ("{ max_flights = '1' }", "max_flights", "valid integer"),
         ("{ altitude = true }", "altitude", "valid number"),
         ("{ turn_direction = true }", "turn_direction", "Input should be 1 or -1, got True"),
-        ("{ detection_source = 1 }", "detection_source", "Input should be 'any', 'peer_detection' or 'payload'"),
+        (
+            "{ detection_source = 1 }",
+            "detection_source",
+            "Input should be 'any', 'peer_detection' or 'payload'",
+        ),
     ],
 )
 def test_behavior_params_are_strict(tmp_path: Path, params: str, key: str, expected: str) -> None:
@@ -474,9 +517,12 @@ def test_behavior_params_accept_what_toml_can_say(tmp_path: Path) -> None:
 
 # ------------------------------------------------------------------ agent names, unique per process
 
+
 def _named(tmp_path: Path, file: str, name: str) -> Config:
     p = tmp_path / file
-    p.write_text(f'[agent]\nname = "{name}"\n[buses]\nlan = "memq://"\n' if name else '[buses]\nlan = "memq://"\n')
+    p.write_text(
+        f'[agent]\nname = "{name}"\n[buses]\nlan = "memq://"\n' if name else '[buses]\nlan = "memq://"\n'
+    )
     return load_config(p)
 
 
@@ -501,10 +547,15 @@ def test_agents_n_naming_can_collide(tmp_path: Path) -> None:
     assert info.value.file == b.source and info.value.key == "agent.name"
     assert "'uav-02'" in info.value.expected and "--agents 3" in info.value.expected
     # two unnamed configs copied N times both become sim-01, sim-02, ...
-    anon = [*swarm_configs(_named(tmp_path, "c.toml", ""), 2), *swarm_configs(_named(tmp_path, "d.toml", ""), 2)]
+    anon = [
+        *swarm_configs(_named(tmp_path, "c.toml", ""), 2),
+        *swarm_configs(_named(tmp_path, "d.toml", ""), 2),
+    ]
     with pytest.raises(ConfigError, match="'sim-01' is also an agent of .*c.toml"):
         check_unique_agent_names(anon, agents=2)
-    check_unique_agent_names([*swarm_configs(a, 3), *swarm_configs(_named(tmp_path, "e.toml", "ugv"), 3)], agents=3)
+    check_unique_agent_names(
+        [*swarm_configs(a, 3), *swarm_configs(_named(tmp_path, "e.toml", "ugv"), 3)], agents=3
+    )
 
 
 def test_lan_examples_have_distinct_agent_names() -> None:
@@ -536,7 +587,9 @@ def test_strict_validation_takes_toml_values_as_written() -> None:
         rate: float = 1.0
         inner: Inner = Inner()
 
-    m = validate_strict(Model, {"pair": [1, 2], "mode": "fast", "path": "/tmp/x", "rate": 3, "inner": {"sign": -1}})
+    m = validate_strict(
+        Model, {"pair": [1, 2], "mode": "fast", "path": "/tmp/x", "rate": 3, "inner": {"sign": -1}}
+    )
     assert (m.pair, m.mode, m.path, m.rate, m.inner.sign) == ((1, 2), Mode.FAST, Path("/tmp/x"), 3.0, -1)
     for data, key, message in (
         ({"pair": ["1", 2]}, "pair[0]", "valid integer"),
@@ -564,5 +617,6 @@ def test_every_shipped_adapter_declares_a_strict_params_model(tmp_path: Path, ad
         assert_config_error(write(tmp_path, text), f"hlc.autopilot.{number}", expected)
     assert_config_error(
         write(tmp_path, f'[hlc]\nautopilot = "{adapter}"\n[hlc.autopilot_params]\nno_such_key = 1\n'),
-        "hlc.autopilot_params.no_such_key", "Extra inputs",
+        "hlc.autopilot_params.no_such_key",
+        "Extra inputs",
     )

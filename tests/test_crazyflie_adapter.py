@@ -38,7 +38,9 @@ def wait_for(predicate: Callable[[], bool], timeout: float = 8.0) -> bool:
 def rig() -> Iterator[Callable[..., tuple[CrazyflieEmulator, CrazyflieAutopilot]]]:
     made: list[tuple[CrazyflieEmulator, CrazyflieAutopilot]] = []
 
-    def make(emu: dict[str, Any] | None = None, **params: Any) -> tuple[CrazyflieEmulator, CrazyflieAutopilot]:
+    def make(
+        emu: dict[str, Any] | None = None, **params: Any
+    ) -> tuple[CrazyflieEmulator, CrazyflieAutopilot]:
         e = CrazyflieEmulator(**(emu or {})).start()
         ap = CrazyflieAutopilot({"uri": e.uri, **FAST, **params})
         made.append((e, ap))

@@ -136,23 +136,49 @@ KEY = "crazyflie-e2e-swarm-key"
 FAST_AP: dict[str, Any] = {"climb_speed": 1.0, "land_speed": 0.6, "rtl_speed": 1.0, "connect_timeout": 8.0}
 
 
-def agent_doc(name: str, tmp_path: Path, *, operator: dict[str, Any] | None = None, mission: str = "direction_follow",
-              mission_params: dict[str, Any] | None = None, **hlc: Any) -> dict[str, Any]:
+def agent_doc(
+    name: str,
+    tmp_path: Path,
+    *,
+    operator: dict[str, Any] | None = None,
+    mission: str = "direction_follow",
+    mission_params: dict[str, Any] | None = None,
+    **hlc: Any,
+) -> dict[str, Any]:
     bma: list[dict[str, Any]] = []
     if operator is not None:
-        bma.append({"name": "operator", "behaviors": [{
-            "plugin": "auto_operator", "activate_on": ["STANDBY", "MISSION"],
-            "params": {"max_flights": 1, "altitude": 1.0, "retry": 1.0, **operator}}]})
-    bma.append({"name": "mission", "behaviors": [{
-        "plugin": mission, "activate_on": ["MISSION"], "params": mission_params or {}}]})
+        bma.append(
+            {
+                "name": "operator",
+                "behaviors": [
+                    {
+                        "plugin": "auto_operator",
+                        "activate_on": ["STANDBY", "MISSION"],
+                        "params": {"max_flights": 1, "altitude": 1.0, "retry": 1.0, **operator},
+                    }
+                ],
+            }
+        )
+    bma.append(
+        {
+            "name": "mission",
+            "behaviors": [{"plugin": mission, "activate_on": ["MISSION"], "params": mission_params or {}}],
+        }
+    )
     return {
         "agent": {"name": name},
         "buses": {"lan": MCAST_URL},
         "security": {"swarm_key": KEY, "state_dir": str(tmp_path / name)},
         "mc": {"takeoff_ack_timeout": 3.0},
-        "hlc": {"autopilot": "crazyflie", "default_takeoff_altitude": 1.0, "gain_altitude_timeout": 8.0,
-                "link_timeout": 1.0, "max_horizontal_speed": 1.0, **hlc,
-                "autopilot_params": {**FAST_AP, **hlc.pop("autopilot_params", {})}},
+        "hlc": {
+            "autopilot": "crazyflie",
+            "default_takeoff_altitude": 1.0,
+            "gain_altitude_timeout": 8.0,
+            "link_timeout": 1.0,
+            "max_horizontal_speed": 1.0,
+            **hlc,
+            "autopilot_params": {**FAST_AP, **hlc.pop("autopilot_params", {})},
+        },
         "bma": bma,
     }
 
@@ -178,27 +204,37 @@ class Driver:
             self.events.append({"kind": "exit"})
             self._cond.notify_all()
 
-    def wait(self, kind: str, timeout: float, test: Callable[[dict[str, Any]], bool] | None = None,
-             **where: Any) -> dict[str, Any]:
+    def wait(
+        self, kind: str, timeout: float, test: Callable[[dict[str, Any]], bool] | None = None, **where: Any
+    ) -> dict[str, Any]:
         """The next event of `kind` matching `where` (and `test`) after the one the previous wait returned."""
         deadline = time.monotonic() + timeout
         with self._cond:
             while True:
                 for i in range(self._cursor, len(self.events)):
                     e = self.events[i]
-                    if e["kind"] == kind and all(e.get(k) == v for k, v in where.items()) and (test is None or test(e)):
+                    if (
+                        e["kind"] == kind
+                        and all(e.get(k) == v for k, v in where.items())
+                        and (test is None or test(e))
+                    ):
                         self._cursor = i + 1
                         return e
                 left = deadline - time.monotonic()
                 if left <= 0 or self.events[-1:] == [{"kind": "exit"}]:
-                    raise AssertionError(f"no {kind} {where} within {timeout} s; timeline:\n{self.timeline()}"
-                                         f"\nlog:\n{self.log_tail()}")
+                    raise AssertionError(
+                        f"no {kind} {where} within {timeout} s; timeline:\n{self.timeline()}"
+                        f"\nlog:\n{self.log_tail()}"
+                    )
                 self._cond.wait(min(left, 0.05))
 
     def last(self, kind: str, **where: Any) -> dict[str, Any]:
         with self._cond:
-            return next(e for e in reversed(self.events) if e["kind"] == kind
-                        and all(e.get(k) == v for k, v in where.items()))
+            return next(
+                e
+                for e in reversed(self.events)
+                if e["kind"] == kind and all(e.get(k) == v for k, v in where.items())
+            )
 
     def all(self, kind: str) -> list[dict[str, Any]]:
         with self._cond:
@@ -233,12 +269,15 @@ class Driver:
 def fly(netns: NetNamespace, tmp_path: Path) -> Iterator[Callable[..., Driver]]:
     started: list[Driver] = []
 
-    def start(agents: list[tuple[dict[str, Any], dict[str, Any]]], operator: dict[str, Any] | None = None) -> Driver:
+    def start(
+        agents: list[tuple[dict[str, Any], dict[str, Any]]], operator: dict[str, Any] | None = None
+    ) -> Driver:
         spec = {"agents": [{"doc": doc, "emu": emu} for doc, emu in agents], "operator": operator}
         log_path = tmp_path / f"driver{len(started)}.log"
         with open(log_path, "w") as log:
-            proc = netns.python("-c", DRIVER, json.dumps(spec), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                stderr=log)
+            proc = netns.python(
+                "-c", DRIVER, json.dumps(spec), stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log
+            )
         driver = Driver(proc, log_path)
         started.append(driver)
         driver.wait("started", 20)
@@ -249,7 +288,9 @@ def fly(netns: NetNamespace, tmp_path: Path) -> Iterator[Callable[..., Driver]]:
         driver.stop()
 
 
-def test_whole_mission_takes_off_flies_the_direction_and_returns_home(fly: Callable[..., Driver], tmp_path: Path) -> None:
+def test_whole_mission_takes_off_flies_the_direction_and_returns_home(
+    fly: Callable[..., Driver], tmp_path: Path
+) -> None:
     d = fly([(agent_doc("cf1", tmp_path, operator={"rtl_after": 5.0}), {"x": 0.5, "y": -0.5})])
     d.wait("mc", 20, state="MISSION", agent="cf1")
     # AIRBORNE at 95 % of the configured take-off altitude; the high-level commander ends at 1.0 m
@@ -257,7 +298,9 @@ def test_whole_mission_takes_off_flies_the_direction_and_returns_home(fly: Calla
     assert top["flying"] and max(e["z"] for e in d.all("emu")) < 1.05  # no overshoot
     # east at 0.4 m/s; the local frame's +x is north (origin_heading 0), so east is -y
     d.send("direction 90 0.4")
-    d.wait("emu", 8, test=lambda e: abs(e["vy"] + 0.4) < 0.04 and abs(e["vx"]) < 0.04 and abs(e["z"] - 1.0) < 0.1)
+    d.wait(
+        "emu", 8, test=lambda e: abs(e["vy"] + 0.4) < 0.04 and abs(e["vx"]) < 0.04 and abs(e["z"] - 1.0) < 0.1
+    )
     d.wait("mc", 15, state="RTL", agent="cf1")
     d.send("direction 0 0")
     assert d.last("emu")["y"] < -0.5 - 0.5  # it did go east
@@ -283,7 +326,9 @@ def test_low_battery_per_cell_returns_home_and_lands(fly: Callable[..., Driver],
     assert math.hypot(landed["x"], landed["y"]) <= 0.15
 
 
-def test_link_loss_is_reported_within_link_timeout_and_recovered(fly: Callable[..., Driver], tmp_path: Path) -> None:
+def test_link_loss_is_reported_within_link_timeout_and_recovered(
+    fly: Callable[..., Driver], tmp_path: Path
+) -> None:
     d = fly([(agent_doc("cf1", tmp_path, operator={}), {})])
     d.wait("mc", 20, state="MISSION", agent="cf1")
     d.send("silent 0 1")
@@ -301,12 +346,17 @@ def test_link_loss_is_reported_within_link_timeout_and_recovered(fly: Callable[.
     d.wait("mc", 10, state="STANDBY", agent="cf1")
 
 
-@pytest.mark.parametrize(("emu", "words"), [
-    ({"locked": True}, ("locked", "reboot")),
-    ({"converged": False}, ("not converged", "max_position_variance")),
-], ids=["locked-supervisor", "estimator-not-converged"])
-def test_refused_arm_reaches_the_operator_with_its_reason(fly: Callable[..., Driver], tmp_path: Path,
-                                                          emu: dict[str, Any], words: tuple[str, ...]) -> None:
+@pytest.mark.parametrize(
+    ("emu", "words"),
+    [
+        ({"locked": True}, ("locked", "reboot")),
+        ({"converged": False}, ("not converged", "max_position_variance")),
+    ],
+    ids=["locked-supervisor", "estimator-not-converged"],
+)
+def test_refused_arm_reaches_the_operator_with_its_reason(
+    fly: Callable[..., Driver], tmp_path: Path, emu: dict[str, Any], words: tuple[str, ...]
+) -> None:
     d = fly([(agent_doc("cf1", tmp_path, operator={}), emu)])
     error = d.wait("error", 20, code="ARM_FAILED")
     assert all(w in error["text"] for w in words), error
@@ -316,8 +366,15 @@ def test_refused_arm_reaches_the_operator_with_its_reason(fly: Callable[..., Dri
 
 def test_three_crazyflies_in_one_process_fly_dovrat_swarm(fly: Callable[..., Driver], tmp_path: Path) -> None:
     agents = [
-        (agent_doc(f"cf{i + 1}", tmp_path, mission="dovrat_swarm",
-                   mission_params={"forward_speed": 0.3, "sharp_turn_rate": 20.0}), {"x": 0.0, "y": 1.5 * i})
+        (
+            agent_doc(
+                f"cf{i + 1}",
+                tmp_path,
+                mission="dovrat_swarm",
+                mission_params={"forward_speed": 0.3, "sharp_turn_rate": 20.0},
+            ),
+            {"x": 0.0, "y": 1.5 * i},
+        )
         for i in range(3)
     ]
     d = fly(agents, operator={"mission_time": 4.0})
@@ -328,4 +385,3 @@ def test_three_crazyflies_in_one_process_fly_dovrat_swarm(fly: Callable[..., Dri
         assert d.last("mc", agent=name)["state"] == "STANDBY"  # heard before the operator's DONE
         final = d.wait("emu", 5, agent=name, test=lambda e: not e["flying"] and not e["armed"])
         assert math.hypot(final["x"], final["y"] - 1.5 * i) <= 0.15  # each back on its own take-off point
-

@@ -47,7 +47,9 @@ def connect(emu: CrazyflieEmulator, cache: Path | None = None) -> SyncCrazyflie:
     return scf
 
 
-def stream(scf: SyncCrazyflie, names: list[str], period_ms: int = 50) -> tuple[list[tuple[int, dict[str, Any]]], LogConfig]:
+def stream(
+    scf: SyncCrazyflie, names: list[str], period_ms: int = 50
+) -> tuple[list[tuple[int, dict[str, Any]]], LogConfig]:
     got: list[tuple[int, dict[str, Any]]] = []
     lock = threading.Lock()
     config = LogConfig("test", period_ms)
@@ -64,7 +66,9 @@ def stream(scf: SyncCrazyflie, names: list[str], period_ms: int = 50) -> tuple[l
     return got, config
 
 
-def test_cflib_reads_both_tocs_and_caches_them_under_the_firmware_crc(emu: CrazyflieEmulator, tmp_path: Path) -> None:
+def test_cflib_reads_both_tocs_and_caches_them_under_the_firmware_crc(
+    emu: CrazyflieEmulator, tmp_path: Path
+) -> None:
     scf = connect(emu, tmp_path)
     try:
         toc = scf.cf.log.toc.toc
@@ -95,7 +99,9 @@ def test_the_crc_changes_with_the_toc(emu: CrazyflieEmulator) -> None:
 def test_log_block_streams_values_at_its_period(emu: CrazyflieEmulator) -> None:
     scf = connect(emu)
     try:
-        got, _ = stream(scf, ["stateEstimate.z", "pm.vbat", "pm.batteryLevel", "supervisor.info"], period_ms=100)
+        got, _ = stream(
+            scf, ["stateEstimate.z", "pm.vbat", "pm.batteryLevel", "supervisor.info"], period_ms=100
+        )
         assert wait_for(lambda: len(got) >= 12)
         stamps = [ts for ts, _ in got[:12]]
         gaps = sorted(b - a for a, b in zip(stamps, stamps[1:], strict=False))
@@ -174,7 +180,9 @@ def test_locked_supervisor_refuses_to_arm_and_takeoff_does_nothing(emu: Crazyfli
         scf.close_link()
 
 
-@pytest.mark.parametrize(("volts", "level"), [(4.2, 90), (4.05, 90), (3.9, 50), (3.79, 20), (3.5, 10), (2.9, 0)])
+@pytest.mark.parametrize(
+    ("volts", "level"), [(4.2, 90), (4.05, 90), (3.9, 50), (3.79, 20), (3.5, 10), (2.9, 0)]
+)
 def test_battery_level_follows_the_firmware_charge_curve(volts: float, level: int) -> None:
     assert battery_level(volts) == level
 

@@ -28,22 +28,29 @@ LAT, LON = 32.7767, 35.0231
 
 
 # ---------------------------------------------------------------- frames
-@pytest.mark.parametrize(("heading", "x", "y", "north", "east"), [
-    (0.0, 1.0, 0.0, 1.0, 0.0),  # +x north: +y (anticlockwise) is west
-    (0.0, 0.0, 1.0, 0.0, -1.0),
-    (90.0, 1.0, 0.0, 0.0, 1.0),  # +x east: +y is north
-    (90.0, 0.0, 1.0, 1.0, 0.0),
-    (180.0, 2.0, 0.0, -2.0, 0.0),
-])
-def test_local_vectors_map_to_north_east(heading: float, x: float, y: float, north: float, east: float) -> None:
+@pytest.mark.parametrize(
+    ("heading", "x", "y", "north", "east"),
+    [
+        (0.0, 1.0, 0.0, 1.0, 0.0),  # +x north: +y (anticlockwise) is west
+        (0.0, 0.0, 1.0, 0.0, -1.0),
+        (90.0, 1.0, 0.0, 0.0, 1.0),  # +x east: +y is north
+        (90.0, 0.0, 1.0, 1.0, 0.0),
+        (180.0, 2.0, 0.0, -2.0, 0.0),
+    ],
+)
+def test_local_vectors_map_to_north_east(
+    heading: float, x: float, y: float, north: float, east: float
+) -> None:
     frame = LocalFrame(LAT, LON, heading)
     n, e = frame.to_ne(x, y)
     assert (n, e) == pytest.approx((north, east), abs=1e-12)
     assert frame.from_ne(n, e) == pytest.approx((x, y), abs=1e-12)
 
 
-@pytest.mark.parametrize(("heading", "yaw", "compass"), [(0.0, 0.0, 0.0), (0.0, 90.0, 270.0), (90.0, 0.0, 90.0),
-                                                         (90.0, -90.0, 180.0), (30.0, 45.0, 345.0)])
+@pytest.mark.parametrize(
+    ("heading", "yaw", "compass"),
+    [(0.0, 0.0, 0.0), (0.0, 90.0, 270.0), (90.0, 0.0, 90.0), (90.0, -90.0, 180.0), (30.0, 45.0, 345.0)],
+)
 def test_yaw_counter_clockwise_becomes_a_compass_heading(heading: float, yaw: float, compass: float) -> None:
     assert LocalFrame(LAT, LON, heading).heading(yaw) == pytest.approx(compass)
 
@@ -104,8 +111,14 @@ def test_zero_is_below_a_millimetre_per_second() -> None:
 
 # ---------------------------------------------------------------- log decoding
 def test_every_log_block_fits_one_packet() -> None:
-    types = {"stateEstimate": "float", "kalman": "float", "pm.vbat": "float", "pm.state": "int8_t",
-             "pm.batteryLevel": "uint8_t", "supervisor.info": "uint16_t"}
+    types = {
+        "stateEstimate": "float",
+        "kalman": "float",
+        "pm.vbat": "float",
+        "pm.state": "int8_t",
+        "pm.batteryLevel": "uint8_t",
+        "supervisor.info": "uint16_t",
+    }
 
     def ctype(name: str) -> str:
         return types.get(name) or types[name.split(".")[0]]
@@ -115,33 +128,68 @@ def test_every_log_block_fits_one_packet() -> None:
 
 
 def test_log_values_fill_the_reading() -> None:
-    r = apply_log(Reading(), {"stateEstimate.x": 1.5, "stateEstimate.y": -2.0, "stateEstimate.z": 0.7,
-                              "pm.vbat": 3.9, "pm.batteryLevel": 60, "pm.state": 0, "supervisor.info": 0b11010,
-                              "unknown.var": 3})
+    r = apply_log(
+        Reading(),
+        {
+            "stateEstimate.x": 1.5,
+            "stateEstimate.y": -2.0,
+            "stateEstimate.z": 0.7,
+            "pm.vbat": 3.9,
+            "pm.batteryLevel": 60,
+            "pm.state": 0,
+            "supervisor.info": 0b11010,
+            "unknown.var": 3,
+        },
+    )
     assert (r.x, r.y, r.z, r.vbat, r.battery_level) == (1.5, -2.0, 0.7, 3.9, 60)
     assert r.has_pose
     assert r.flags.armed and r.flags.can_fly and r.flags.flying and not r.flags.locked
 
 
 def test_nan_position_keeps_the_last_finite_one_but_nan_variance_is_not_converged() -> None:
-    r = apply_log(Reading(), {"stateEstimate.x": 1.0, "stateEstimate.y": 1.0, "stateEstimate.z": 1.0,
-                              "kalman.varPX": 1e-5, "kalman.varPY": 1e-5, "kalman.varPZ": 1e-5})
+    r = apply_log(
+        Reading(),
+        {
+            "stateEstimate.x": 1.0,
+            "stateEstimate.y": 1.0,
+            "stateEstimate.z": 1.0,
+            "kalman.varPX": 1e-5,
+            "kalman.varPY": 1e-5,
+            "kalman.varPZ": 1e-5,
+        },
+    )
     r = apply_log(r, {"stateEstimate.x": math.nan, "kalman.varPX": math.nan})
     assert r.x == 1.0
     assert "varX nan" in estimator_problem(r, 0.001)
 
 
 def test_estimator_check_names_every_axis_over_the_limit() -> None:
-    r = apply_log(Reading(), {"stateEstimate.x": 0.0, "stateEstimate.y": 0.0, "stateEstimate.z": 0.0,
-                              "kalman.varPX": 0.5, "kalman.varPY": 1e-5, "kalman.varPZ": 0.2})
+    r = apply_log(
+        Reading(),
+        {
+            "stateEstimate.x": 0.0,
+            "stateEstimate.y": 0.0,
+            "stateEstimate.z": 0.0,
+            "kalman.varPX": 0.5,
+            "kalman.varPY": 1e-5,
+            "kalman.varPZ": 0.2,
+        },
+    )
     problem = estimator_problem(r, 0.001)
-    assert "not converged" in problem and "varX 0.5" in problem and "varZ 0.2" in problem and "varY" not in problem
+    assert (
+        "not converged" in problem
+        and "varX 0.5" in problem
+        and "varZ 0.2" in problem
+        and "varY" not in problem
+    )
     ok = apply_log(r, {"kalman.varPX": 1e-4, "kalman.varPZ": 1e-4})
     assert estimator_problem(ok, 0.001) == ""
     assert "no position estimate" in estimator_problem(Reading(), 0.001)
 
 
-@pytest.mark.parametrize(("info", "words"), [(1 << 6, "locked"), (1 << 7, "crash"), (1 << 5, "tumbled"), (1, "")])
+@pytest.mark.parametrize(
+    ("info", "words"), [(1 << 6, "locked"), (1 << 7, "crash"), (1 << 5, "tumbled"), (1, "")]
+)
 def test_supervisor_blockers_say_what_to_do(info: int, words: str) -> None:
     blocker = SupervisorFlags.from_info(info).arm_blocker()
     assert (words in blocker) if words else blocker == ""
@@ -160,15 +208,18 @@ def test_defaults_validate_and_the_adapter_is_built_without_io() -> None:
     assert not state.connected and state.link_age == math.inf
 
 
-@pytest.mark.parametrize(("params", "words"), [
-    ({"uri": "http://cf"}, "cflib URI"),
-    ({"velocity_hold": 0.6}, "velocity_hold"),  # past the firmware watchdog's 0.5 s
-    ({"velocity_hold": 0.05}, "two set-point periods"),
-    ({"link_stale_after": 0.1}, "three log periods"),
-    ({"origin_heading": "90"}, "origin_heading"),
-    ({"orign_lat": 1.0}, "orign_lat"),
-    ({"cells": 0}, "cells"),
-])
+@pytest.mark.parametrize(
+    ("params", "words"),
+    [
+        ({"uri": "http://cf"}, "cflib URI"),
+        ({"velocity_hold": 0.6}, "velocity_hold"),  # past the firmware watchdog's 0.5 s
+        ({"velocity_hold": 0.05}, "two set-point periods"),
+        ({"link_stale_after": 0.1}, "three log periods"),
+        ({"origin_heading": "90"}, "origin_heading"),
+        ({"orign_lat": 1.0}, "orign_lat"),
+        ({"cells": 0}, "cells"),
+    ],
+)
 def test_bad_parameters_name_the_key(params: dict[str, object], words: str) -> None:
     with pytest.raises(ValueError, match=words):
         parse_params(params)
@@ -191,13 +242,18 @@ def test_params_documented_and_example_valid() -> None:
     assert not missing, missing
 
 
-@pytest.mark.parametrize(("table", "key", "phrase"), [
-    ('uri = "http://x"', "uri", "cflib URI"),
-    ("origin_heading = '90'", "origin_heading", "valid "),
-    ("cells = true", "cells", "valid "),
-    ("no_such_key = 1", "no_such_key", "Extra inputs"),
-])
-def test_config_loader_names_the_bad_autopilot_param(tmp_path: Any, table: str, key: str, phrase: str) -> None:
+@pytest.mark.parametrize(
+    ("table", "key", "phrase"),
+    [
+        ('uri = "http://x"', "uri", "cflib URI"),
+        ("origin_heading = '90'", "origin_heading", "valid "),
+        ("cells = true", "cells", "valid "),
+        ("no_such_key = 1", "no_such_key", "Extra inputs"),
+    ],
+)
+def test_config_loader_names_the_bad_autopilot_param(
+    tmp_path: Any, table: str, key: str, phrase: str
+) -> None:
     """The config loader applies the adapter's params_model before anything starts (one line, the key)."""
     from antalate_lcm.config import load_config
     from antalate_lcm.errors import ConfigError

@@ -33,9 +33,15 @@ def test_demo_in_a_real_terminal(netns: NetNamespace) -> None:
         return tmux("capture-pane", "-p", "-t", "demo")
 
     def count(word: str) -> int:
-        return sum(1 for line in screen().splitlines() if line.lstrip("│ ").startswith("sim-") and f" {word} " in line)
+        return sum(
+            1
+            for line in screen().splitlines()
+            if line.lstrip("│ ").startswith("sim-") and f" {word} " in line
+        )
 
-    subprocess.run(["tmux", "-L", sock, "new-session", "-d", "-s", "demo", "-x", "200", "-y", "50", cmd], check=True)
+    subprocess.run(
+        ["tmux", "-L", sock, "new-session", "-d", "-s", "demo", "-x", "200", "-y", "50", cmd], check=True
+    )
     try:
         assert wait_for(lambda: count("STANDBY") == 3, 30), screen()
         tmux("send-keys", "-t", "demo", "T")
@@ -49,7 +55,9 @@ def test_demo_in_a_real_terminal(netns: NetNamespace) -> None:
         assert wait_for(lambda: count("STANDBY") == 3, 60), screen()
         tmux("send-keys", "-t", "demo", "q")
         assert wait_for(lambda: "DEMO-EXITED-0" in screen(), 20), screen()
-        left = subprocess.run(["pgrep", "-f", "antalate_lcm.cli demo"], capture_output=True, text=True).stdout.split()
+        left = subprocess.run(
+            ["pgrep", "-f", "antalate_lcm.cli demo"], capture_output=True, text=True
+        ).stdout.split()
         assert not [pid for pid in left if _has_marker(pid, marker)], "the demo left processes behind"
     finally:
         subprocess.run(["tmux", "-L", sock, "kill-server"], capture_output=True, timeout=10)

@@ -38,8 +38,16 @@ def _payload(h: Harness, obj: Any) -> None:
     h.probe.publish("OPERATOR_PAYLOAD", msg)
 
 
-def _direction(h: Harness, azimuth: float, speed: float, *, target: str = "", topic: str = "SWARM_DIRECTION_CMD",
-               active: bool = True, unsigned: bool = False) -> None:
+def _direction(
+    h: Harness,
+    azimuth: float,
+    speed: float,
+    *,
+    target: str = "",
+    topic: str = "SWARM_DIRECTION_CMD",
+    active: bool = True,
+    unsigned: bool = False,
+) -> None:
     """A direction from the probe node (signed by Node.publish when the config has a key)."""
     msg = direction_cmd_t()
     msg.active, msg.azimuth, msg.speed, msg.target = active, azimuth, speed, target

@@ -17,7 +17,9 @@ from behaviors.dovrat_swarm.logic import (
     turn_rate,
 )
 
-P = SwarmParams(forward_speed=2.0, gentle_turn_rate=10.0, sharp_turn_rate=45.0, turn_direction=1, direction_weight=1.0)
+P = SwarmParams(
+    forward_speed=2.0, gentle_turn_rate=10.0, sharp_turn_rate=45.0, turn_direction=1, direction_weight=1.0
+)
 
 
 def _ground(heading: float, vx: float, vy: float) -> tuple[float, float]:
@@ -97,8 +99,16 @@ def test_station_payload_parsing() -> None:
     good = json.dumps({"detected": True, "count": 2, "nearest_range": 12.5, "nearest_bearing": -8.0}).encode()
     assert parse_detection_payload(good) == Detection(True, 2, 12.5, -8.0)
     assert parse_detection_payload(b'{"detected": false}') == Detection(False, 0, 0.0, 0.0)
-    for bad in (b"", b"not json", b"[1, 2]", b'{"count": 3}', b'{"detected": "yes"}',
-                b'{"detected": true, "nearest_range": NaN}', b'{"detected": true, "count": "many"}', b"\xff\xfe"):
+    for bad in (
+        b"",
+        b"not json",
+        b"[1, 2]",
+        b'{"count": 3}',
+        b'{"detected": "yes"}',
+        b'{"detected": true, "nearest_range": NaN}',
+        b'{"detected": true, "count": "many"}',
+        b"\xff\xfe",
+    ):
         assert parse_detection_payload(bad) is None, bad
 
 

@@ -170,7 +170,9 @@ def test_tello_rc_moves_without_reply(tello: TelloEmulator, tello_client: TelloC
     assert tello_client.no_reply("rc 0 100 0 0")  # rc is never answered
     assert tello.wait_until(lambda s: s.x > 0.4, timeout=3)
     state = Tello.parse_state(tello_client.state_packets(0.25)[-1])
-    assert state["vgx"] in (9, 10) and state["vgy"] == 0  # full stick = 1 m/s = 10 dm/s along the initial heading
+    assert (
+        state["vgx"] in (9, 10) and state["vgy"] == 0
+    )  # full stick = 1 m/s = 10 dm/s along the initial heading
     assert tello_client.no_reply("rc 50 0 -20 100")
     assert tello.wait_until(lambda s: s.yaw > 45, timeout=2)
     assert tello.snapshot().vz < 0
@@ -209,9 +211,19 @@ def test_tello_faults(tello: TelloEmulator, tello_client: TelloClient) -> None:
 
 def test_tello_cli(tello_client: TelloClient) -> None:
     proc = subprocess.Popen(
-        [sys.executable, "-m", "tests.emulators.tello_emulator", "--port", "0",
-         "--state-target", f"127.0.0.1:{tello_client.state_port}"],
-        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-m",
+            "tests.emulators.tello_emulator",
+            "--port",
+            "0",
+            "--state-target",
+            f"127.0.0.1:{tello_client.state_port}",
+        ],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     try:
         assert proc.stdout is not None
@@ -258,7 +270,10 @@ def test_real_djitellopy_against_emulator() -> None:
     reason = netns_pair_unavailable()
     if reason:
         pytest.skip(reason)
-    with NetnsPair() as net, TelloEmulator(sock=net.udp_socket("a", (net.addr_a, 8889)), takeoff_time=0.5) as emu:
+    with (
+        NetnsPair() as net,
+        TelloEmulator(sock=net.udp_socket("a", (net.addr_a, 8889)), takeoff_time=0.5) as emu,
+    ):
         done = net.run_python("b", DJITELLOPY_SCRIPT, timeout=60)
         assert done.returncode == 0, done.stderr
         out = json.loads(done.stdout.strip().splitlines()[-1])
@@ -275,7 +290,9 @@ def test_real_djitellopy_against_emulator() -> None:
 # -- MAVLink helpers --------------------------------------------------------------------------------------
 
 
-def recv(conn: Any, mtype: str | list[str], pred: Callable[[Any], bool] = lambda m: True, timeout: float = 5.0) -> Any:
+def recv(
+    conn: Any, mtype: str | list[str], pred: Callable[[Any], bool] = lambda m: True, timeout: float = 5.0
+) -> Any:
     """The next message of ``mtype`` satisfying ``pred``, or None after ``timeout``."""
     deadline = time.monotonic() + timeout
     while (left := deadline - time.monotonic()) > 0:
@@ -307,22 +324,38 @@ def arm(conn: Any) -> int | None:
     return command(conn, mav2.MAV_CMD_COMPONENT_ARM_DISARM, 1)
 
 
-def velocity(conn: Any, vn: float, ve: float, vd: float, yaw_rate: float = 0.0, frame: int = mav2.MAV_FRAME_LOCAL_NED) -> None:
+def velocity(
+    conn: Any, vn: float, ve: float, vd: float, yaw_rate: float = 0.0, frame: int = mav2.MAV_FRAME_LOCAL_NED
+) -> None:
     mask = 0b0000_0101_1100_0111  # use vx vy vz and yaw rate
-    conn.mav.set_position_target_local_ned_send(0, 1, 1, frame, mask, 0, 0, 0, vn, ve, vd, 0, 0, 0, 0, yaw_rate)
+    conn.mav.set_position_target_local_ned_send(
+        0, 1, 1, frame, mask, 0, 0, 0, vn, ve, vd, 0, 0, 0, 0, yaw_rate
+    )
 
 
 def connect_udp(vehicle: MavlinkVehicle) -> Any:
     conn = mavutil.mavlink_connection(vehicle.udp_url, source_system=255)
-    conn.mav.heartbeat_send(mav2.MAV_TYPE_GCS, mav2.MAV_AUTOPILOT_INVALID, 0, 0, 0)  # so it learns our address
+    conn.mav.heartbeat_send(
+        mav2.MAV_TYPE_GCS, mav2.MAV_AUTOPILOT_INVALID, 0, 0, 0
+    )  # so it learns our address
     return conn
 
 
 # Short delays and brisk kinematics so that every flight below takes a few seconds.
 FAST: dict[str, Any] = {
-    "boot_delay": 0.2, "ekf_delay": 0.3, "gps_delay": 0.3, "heartbeat_rate": 4.0, "climb_rate": 4.0,
-    "max_climb_rate": 4.0, "land_speed": 2.0, "land_speed_high": 3.0, "max_descent_rate": 3.0,
-    "velocity_tau": 0.15, "yaw_rate_max": 180.0, "land_detect_time": 0.2, "stream_rates": {"EXTENDED_SYS_STATE": 5.0, "SYS_STATUS": 5.0},
+    "boot_delay": 0.2,
+    "ekf_delay": 0.3,
+    "gps_delay": 0.3,
+    "heartbeat_rate": 4.0,
+    "climb_rate": 4.0,
+    "max_climb_rate": 4.0,
+    "land_speed": 2.0,
+    "land_speed_high": 3.0,
+    "max_descent_rate": 3.0,
+    "velocity_tau": 0.15,
+    "yaw_rate_max": 180.0,
+    "land_detect_time": 0.2,
+    "stream_rates": {"EXTENDED_SYS_STATE": 5.0, "SYS_STATUS": 5.0},
 }
 
 
@@ -348,7 +381,9 @@ def fly_to(conn: Any, vehicle: MavlinkVehicle, alt: float) -> None:
     assert set_mode(conn, "GUIDED") == mav2.MAV_RESULT_ACCEPTED
     assert arm(conn) == mav2.MAV_RESULT_ACCEPTED
     assert command(conn, mav2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, alt) == mav2.MAV_RESULT_ACCEPTED
-    assert vehicle.wait_until(lambda s: s.alt > alt - 0.1 and s.guided_submode == "hover", timeout=alt / 2 + 3)
+    assert vehicle.wait_until(
+        lambda s: s.alt > alt - 0.1 and s.guided_submode == "hover", timeout=alt / 2 + 3
+    )
 
 
 # -- MAVLink tests ----------------------------------------------------------------------------------------
@@ -359,20 +394,27 @@ def test_mavlink_boot_mode_revert_and_arming_gate() -> None:
     try:
         port = client.port.getsockname()[1]
         params = {
-            "boot_delay": 0.6, "ekf_delay": 1.3, "gps_delay": 1.3, "heartbeat_rate": 8.0,
+            "boot_delay": 0.6,
+            "ekf_delay": 1.3,
+            "gps_delay": 1.3,
+            "heartbeat_rate": 8.0,
             "stream_rates": {"GPS_RAW_INT": 5.0, "EKF_STATUS_REPORT": 5.0},
         }
         with MavlinkVehicle("127.0.0.1", 0, udp_target=("127.0.0.1", port), **params) as vehicle:
             first = client.wait_heartbeat(timeout=2)
             assert first is not None and first.system_status == mav2.MAV_STATE_BOOT
-            assert first.type == mav2.MAV_TYPE_QUADROTOR and first.autopilot == mav2.MAV_AUTOPILOT_ARDUPILOTMEGA
+            assert (
+                first.type == mav2.MAV_TYPE_QUADROTOR and first.autopilot == mav2.MAV_AUTOPILOT_ARDUPILOTMEGA
+            )
             assert first.get_srcSystem() == 1 and first.get_srcComponent() == mav2.MAV_COMP_ID_AUTOPILOT1
             assert first.get_header().mlen and client.WIRE_PROTOCOL_VERSION == "2.0"
             assert arm(client) == mav2.MAV_RESULT_FAILED  # still booting
             # a mode set during boot is accepted ... and silently reverted when boot ends
             assert set_mode(client, "GUIDED") == mav2.MAV_RESULT_ACCEPTED
             assert recv(client, "HEARTBEAT", lambda m: m.custom_mode == COPTER_MODES["GUIDED"], timeout=1)
-            assert recv(client, "HEARTBEAT", lambda m: m.system_status == mav2.MAV_STATE_CALIBRATING, timeout=1)
+            assert recv(
+                client, "HEARTBEAT", lambda m: m.system_status == mav2.MAV_STATE_CALIBRATING, timeout=1
+            )
             hb = recv(client, "HEARTBEAT", lambda m: m.system_status == mav2.MAV_STATE_STANDBY, timeout=2)
             assert hb is not None and hb.custom_mode == COPTER_MODES["STABILIZE"]
             # booted, but no GPS fix / EKF position yet
@@ -398,13 +440,19 @@ def test_mavlink_boot_mode_revert_and_arming_gate() -> None:
 @pytest.mark.parametrize("vehicle", [{"guided_timeout": 0.4}], indirect=True)
 def test_mavlink_guided_takeoff_velocity_land(vehicle: MavlinkVehicle, gcs: Any) -> None:
     assert arm(gcs) == mav2.MAV_RESULT_ACCEPTED  # STABILIZE can arm ...
-    assert command(gcs, mav2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 3) == mav2.MAV_RESULT_FAILED  # ... not take off
+    assert (
+        command(gcs, mav2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 3) == mav2.MAV_RESULT_FAILED
+    )  # ... not take off
     assert set_mode(gcs, "GUIDED") == mav2.MAV_RESULT_ACCEPTED
     assert command(gcs, mav2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 2) == mav2.MAV_RESULT_ACCEPTED
-    assert recv(gcs, "EXTENDED_SYS_STATE", lambda m: m.landed_state == mav2.MAV_LANDED_STATE_TAKEOFF, timeout=2)
+    assert recv(
+        gcs, "EXTENDED_SYS_STATE", lambda m: m.landed_state == mav2.MAV_LANDED_STATE_TAKEOFF, timeout=2
+    )
     pos = recv(gcs, "GLOBAL_POSITION_INT", lambda m: m.relative_alt > 1890, timeout=4)
     assert pos is not None and pos.relative_alt < 2200
-    assert recv(gcs, "EXTENDED_SYS_STATE", lambda m: m.landed_state == mav2.MAV_LANDED_STATE_IN_AIR, timeout=2)
+    assert recv(
+        gcs, "EXTENDED_SYS_STATE", lambda m: m.landed_state == mav2.MAV_LANDED_STATE_IN_AIR, timeout=2
+    )
     assert gcs.motors_armed()
 
     for _ in range(6):  # 3 m/s east for 0.6 s
@@ -418,9 +466,13 @@ def test_mavlink_guided_takeoff_velocity_land(vehicle: MavlinkVehicle, gcs: Any)
     assert vehicle.wait_until(lambda s: abs(s.ve) < 0.05 and s.guided_submode == "hover", timeout=2.5)
 
     assert set_mode(gcs, "LAND") == mav2.MAV_RESULT_ACCEPTED
-    assert recv(gcs, "EXTENDED_SYS_STATE", lambda m: m.landed_state == mav2.MAV_LANDED_STATE_LANDING, timeout=2)
+    assert recv(
+        gcs, "EXTENDED_SYS_STATE", lambda m: m.landed_state == mav2.MAV_LANDED_STATE_LANDING, timeout=2
+    )
     assert recv(gcs, "HEARTBEAT", lambda m: not m.base_mode & mav2.MAV_MODE_FLAG_SAFETY_ARMED, timeout=6)
-    assert recv(gcs, "EXTENDED_SYS_STATE", lambda m: m.landed_state == mav2.MAV_LANDED_STATE_ON_GROUND, timeout=2)
+    assert recv(
+        gcs, "EXTENDED_SYS_STATE", lambda m: m.landed_state == mav2.MAV_LANDED_STATE_ON_GROUND, timeout=2
+    )
     snap = vehicle.snapshot()
     assert snap.alt == 0.0 and not snap.armed and snap.mode == "LAND" and snap.east > 1.0
 
@@ -455,7 +507,9 @@ def test_mavlink_refusals_and_auto_disarm(vehicle: MavlinkVehicle, gcs: Any) -> 
     # armed but no takeoff: ArduCopter disarms itself after DISARM_DELAY
     assert recv(gcs, "HEARTBEAT", lambda m: not m.base_mode & mav2.MAV_MODE_FLAG_SAFETY_ARMED, timeout=2)
     assert command(gcs, 31999) == mav2.MAV_RESULT_UNSUPPORTED  # every COMMAND_LONG is acknowledged
-    gcs.mav.set_mode_send(1, mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, COPTER_MODES["LOITER"])  # the message form
+    gcs.mav.set_mode_send(
+        1, mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, COPTER_MODES["LOITER"]
+    )  # the message form
     ack = recv(gcs, "COMMAND_ACK", lambda m: m.command == mav2.MAVLINK_MSG_ID_SET_MODE, timeout=2)
     assert ack is not None and ack.result == mav2.MAV_RESULT_ACCEPTED and vehicle.snapshot().mode == "LOITER"
 
@@ -517,7 +571,9 @@ def test_mavlink_over_tcp_and_home_config() -> None:
             assert pos.lat == pytest.approx(473977420, abs=2) and pos.lon == pytest.approx(85455940, abs=2)
             assert set_mode(conn, "GUIDED") == mav2.MAV_RESULT_ACCEPTED
             assert arm(conn) == mav2.MAV_RESULT_ACCEPTED
-            assert conn.flightmode == "GUIDED" or recv(conn, "HEARTBEAT", lambda m: m.custom_mode == 4, timeout=1)
+            assert conn.flightmode == "GUIDED" or recv(
+                conn, "HEARTBEAT", lambda m: m.custom_mode == 4, timeout=1
+            )
         finally:
             conn.close()
 
@@ -525,7 +581,10 @@ def test_mavlink_over_tcp_and_home_config() -> None:
 def test_mavlink_cli() -> None:
     proc = subprocess.Popen(
         [sys.executable, "-m", "tests.emulators.mavlink_vehicle", "--udp-port", "0", "--boot-delay", "0.1"],
-        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     conn = None
     try:

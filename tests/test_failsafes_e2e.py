@@ -93,8 +93,11 @@ def test_link_cut_for_5s_in_flight_comes_home_with_no_operator_action(
 def test_link_regained_with_policy_hold_waits_for_the_operators_land(
     launch: Callable[..., AgentProcesses], probe: Probe
 ) -> None:
-    launch(sim={"link_loss_after": 1.0, "link_loss_for": 2.0}, hlc={"link_timeout": 1.0},
-           mc={"on_link_regained": "hold"})
+    launch(
+        sim={"link_loss_after": 1.0, "link_loss_for": 2.0},
+        hlc={"link_timeout": 1.0},
+        mc={"on_link_regained": "hold"},
+    )
     take_off(probe)
     mark = probe.mark()
     mc(probe, M.ERROR, since=mark)
@@ -115,8 +118,14 @@ def test_autopilot_failsafe_is_followed_not_taken_for_a_pilot(
     launch: Callable[..., AgentProcesses], probe: Probe
 ) -> None:
     # rtl_altitude: the RTL climbs first, so it is still flying when the operator's LAND comes.
-    launch(sim={"failsafe_after": 1.0, "failsafe_mode": "rtl", "failsafe_reason": "fence breach",
-                "rtl_altitude": 20.0})
+    launch(
+        sim={
+            "failsafe_after": 1.0,
+            "failsafe_mode": "rtl",
+            "failsafe_reason": "fence breach",
+            "rtl_altitude": 20.0,
+        }
+    )
     take_off(probe)
     mark = probe.mark()
     returning = mc(probe, M.RTL, since=mark)
@@ -156,7 +165,9 @@ def test_hlc_killed_in_flight_mc_reports_hlc_lost_then_resyncs(
     mc(probe, M.STANDBY, since=probe.mark(), timeout=20)
 
 
-def test_state_raising_goes_llc_down_then_recovers(launch: Callable[..., AgentProcesses], probe: Probe) -> None:
+def test_state_raising_goes_llc_down_then_recovers(
+    launch: Callable[..., AgentProcesses], probe: Probe
+) -> None:
     agent = launch(sim={"state_error_after": 1.0, "state_error_for": 3.0}, hlc={"link_timeout": 1.0})
     take_off(probe)
     mark = probe.mark()

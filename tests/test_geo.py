@@ -51,8 +51,15 @@ def test_known_values() -> None:
 
 @pytest.mark.parametrize(
     "angle, expected360, expected180",
-    [(0.0, 0.0, 0.0), (360.0, 0.0, 0.0), (-90.0, 270.0, -90.0), (540.0, 180.0, -180.0), (-1e-20, 0.0, -1e-20),
-     (725.5, 5.5, 5.5), (190.0, 190.0, -170.0)],
+    [
+        (0.0, 0.0, 0.0),
+        (360.0, 0.0, 0.0),
+        (-90.0, 270.0, -90.0),
+        (540.0, 180.0, -180.0),
+        (-1e-20, 0.0, -1e-20),
+        (725.5, 5.5, 5.5),
+        (190.0, 190.0, -170.0),
+    ],
 )
 def test_wrapping(angle: float, expected360: float, expected180: float) -> None:
     assert geo.wrap_360(angle) == pytest.approx(expected360)
@@ -72,7 +79,9 @@ def test_flat_frame_round_trip(lat0: float, lon0: float, north: float, east: flo
 
 @pytest.mark.parametrize("lat0, lon0", POINTS[:3])
 @pytest.mark.parametrize("distance, tolerance", [(100.0, 0.002), (1000.0, 0.1), (10_000.0, 10.0)])
-def test_flat_frame_accuracy_as_documented(lat0: float, lon0: float, distance: float, tolerance: float) -> None:
+def test_flat_frame_accuracy_as_documented(
+    lat0: float, lon0: float, distance: float, tolerance: float
+) -> None:
     # The documented figures are for mid latitudes; the error grows with tan(latitude).
     tolerance *= max(1.0, math.tan(math.radians(abs(lat0))) / math.tan(math.radians(35.0)))
     frame = geo.FlatFrame(lat0, lon0)

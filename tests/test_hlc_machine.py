@@ -121,9 +121,15 @@ DESIGN_ROWS: list[tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[Err
     (H.AIRBORNE, ("mc", M.LAND), H.LANDING, (Action.LAND,), NO_ERROR),
     *[(s, ("ap", LANDED), H.READY, (), NO_ERROR) for s in (H.RTL, H.LANDING, H.LOW_BATTERY, H.MANUAL)],
     *[(s, ("ap", TAKEN_OVER), H.MANUAL, (), (ErrorCode.PILOT_TAKEOVER,)) for s in AUTONOMOUS],
-    *[(s, ("ap", LOW), H.LOW_BATTERY, (Action.RTL,), (ErrorCode.LOW_BATTERY,))
-      for s in (H.GAINING_ALTITUDE, H.AIRBORNE)],
-    *[(s, ("ap", LOST), H.LLC_DOWN, (), (ErrorCode.LINK_LOST,)) for s in HlcState if s not in (H.INIT, H.LLC_DOWN)],
+    *[
+        (s, ("ap", LOW), H.LOW_BATTERY, (Action.RTL,), (ErrorCode.LOW_BATTERY,))
+        for s in (H.GAINING_ALTITUDE, H.AIRBORNE)
+    ],
+    *[
+        (s, ("ap", LOST), H.LLC_DOWN, (), (ErrorCode.LINK_LOST,))
+        for s in HlcState
+        if s not in (H.INIT, H.LLC_DOWN)
+    ],
     # INIT (restart resync), with the MC heard
     (H.INIT, ("ap", GROUND), H.READY, (), NO_ERROR),
     (H.INIT, ("ap", FLYING), H.AIRBORNE, (), NO_ERROR),
@@ -141,10 +147,21 @@ DESIGN_ROWS: list[tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[Err
     (H.LLC_DOWN, ("ap", TAKEN_OVER), H.MANUAL, (), (ErrorCode.LINK_REGAINED,)),
     (H.LLC_DOWN, ("ap", PILOT_BRAKE), H.MANUAL, (), (ErrorCode.LINK_REGAINED,)),
     # autopilot failsafes: follow the vehicle, never MANUAL
-    *[(s, ("ap", FS_RTL), H.RTL, (), (ErrorCode.AUTOPILOT_FAILSAFE,))
-      for s in FLYING_STATES if s not in (H.RTL, H.LOW_BATTERY)],
-    *[(s, ("ap", FS_LAND), H.LANDING, (), (ErrorCode.AUTOPILOT_FAILSAFE,)) for s in FLYING_STATES if s is not H.LANDING],
-    *[(s, ("ap", FS_HOLD), H.HOLD, (), (ErrorCode.AUTOPILOT_FAILSAFE,)) for s in FLYING_STATES if s is not H.HOLD],
+    *[
+        (s, ("ap", FS_RTL), H.RTL, (), (ErrorCode.AUTOPILOT_FAILSAFE,))
+        for s in FLYING_STATES
+        if s not in (H.RTL, H.LOW_BATTERY)
+    ],
+    *[
+        (s, ("ap", FS_LAND), H.LANDING, (), (ErrorCode.AUTOPILOT_FAILSAFE,))
+        for s in FLYING_STATES
+        if s is not H.LANDING
+    ],
+    *[
+        (s, ("ap", FS_HOLD), H.HOLD, (), (ErrorCode.AUTOPILOT_FAILSAFE,))
+        for s in FLYING_STATES
+        if s is not H.HOLD
+    ],
     # HOLD waits for the MC (an MC state new since HOLD began)
     (H.HOLD, ("mc", M.RTL), H.RTL, (Action.RTL,), NO_ERROR),
     (H.HOLD, ("mc", M.LAND), H.LANDING, (Action.LAND,), NO_ERROR),
@@ -165,14 +182,35 @@ EXTRA_ROWS: list[tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[Erro
     (H.GAINING_ALTITUDE, ("mc", M.LAND), H.LANDING, (Action.LAND,), NO_ERROR),
     (H.GAINING_ALTITUDE, ("mc", M.RTL), H.RTL, (Action.RTL,), NO_ERROR),
     (H.AIRBORNE, ("ap", LANDED), H.READY, (), (ErrorCode.UNEXPECTED_LANDING,)),
-    (H.AIRBORNE, ("ap", flying(mode="RTL", flight_mode=FlightMode.RTL)), H.RTL, (), (ErrorCode.AUTOPILOT_TOOK_OVER,)),
-    (H.GAINING_ALTITUDE, ("ap", flying(alt=3.0, mode="RTL", flight_mode=FlightMode.RTL)), H.RTL, (),
-     (ErrorCode.AUTOPILOT_TOOK_OVER,)),
-    (H.AIRBORNE, ("ap", flying(mode="LAND", flight_mode=FlightMode.LANDING)), H.LANDING, (),
-     (ErrorCode.AUTOPILOT_TOOK_OVER,)),
+    (
+        H.AIRBORNE,
+        ("ap", flying(mode="RTL", flight_mode=FlightMode.RTL)),
+        H.RTL,
+        (),
+        (ErrorCode.AUTOPILOT_TOOK_OVER,),
+    ),
+    (
+        H.GAINING_ALTITUDE,
+        ("ap", flying(alt=3.0, mode="RTL", flight_mode=FlightMode.RTL)),
+        H.RTL,
+        (),
+        (ErrorCode.AUTOPILOT_TOOK_OVER,),
+    ),
+    (
+        H.AIRBORNE,
+        ("ap", flying(mode="LAND", flight_mode=FlightMode.LANDING)),
+        H.LANDING,
+        (),
+        (ErrorCode.AUTOPILOT_TOOK_OVER,),
+    ),
     (H.RTL, ("ap", flying(mode="LAND", flight_mode=FlightMode.LANDING)), H.LANDING, (), NO_ERROR),
-    (H.GAINING_ALTITUDE, ("ap", flying(alt=3.0, mode="LAND", flight_mode=FlightMode.LANDING)), H.LANDING, (),
-     (ErrorCode.AUTOPILOT_TOOK_OVER,)),
+    (
+        H.GAINING_ALTITUDE,
+        ("ap", flying(alt=3.0, mode="LAND", flight_mode=FlightMode.LANDING)),
+        H.LANDING,
+        (),
+        (ErrorCode.AUTOPILOT_TOOK_OVER,),
+    ),
 ]
 
 
@@ -184,7 +222,9 @@ def _row_id(row: tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[Erro
     return f"{frm.name}-{kind}_{detail}-{to.name}"
 
 
-def _fired(row: tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[ErrorCode, ...]]) -> tuple[object, ...]:
+def _fired(
+    row: tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[ErrorCode, ...]],
+) -> tuple[object, ...]:
     frm, what, to, _, _ = row
     outcome = feed(hlc_in(frm), what)
     assert outcome.transition is not None, _row_id(row)
@@ -235,8 +275,13 @@ def test_every_table_row_is_a_listed_row() -> None:
 def test_extra_rows_are_flagged_in_the_table() -> None:
     extra_events = {row.event for row in HLC_TABLE if row.extra}
     assert extra_events == {
-        HlcEvent.MC_LAND, HlcEvent.MC_RTL, HlcEvent.ARMED, HlcEvent.LANDED,
-        HlcEvent.AUTOPILOT_LAND, HlcEvent.AUTOPILOT_RTL, HlcEvent.TAKEOFF_FAILED,
+        HlcEvent.MC_LAND,
+        HlcEvent.MC_RTL,
+        HlcEvent.ARMED,
+        HlcEvent.LANDED,
+        HlcEvent.AUTOPILOT_LAND,
+        HlcEvent.AUTOPILOT_RTL,
+        HlcEvent.TAKEOFF_FAILED,
     }
 
 
@@ -321,7 +366,9 @@ def test_takeoff_refused_on_low_battery_stays_ready_with_error() -> None:
     outcome = h.on_mc_state(M.TAKEOFF, T0 + 2)
     assert h.state is H.READY
     assert outcome.transition is None and outcome.actions == ()
-    assert [(e.code, e.severity) for e in outcome.errors] == [(ErrorCode.TAKEOFF_REFUSED_LOW_BATTERY, Severity.ERROR)]
+    assert [(e.code, e.severity) for e in outcome.errors] == [
+        (ErrorCode.TAKEOFF_REFUSED_LOW_BATTERY, Severity.ERROR)
+    ]
     assert "20" in outcome.errors[0].text
     # The MC republishes TAKEOFF: no second refusal (edge-triggered), no arming.
     assert h.on_mc_state(M.TAKEOFF, T0 + 2.2) == HlcOutcome()
@@ -472,7 +519,9 @@ def test_a_failsafe_rtl_then_the_operators_land() -> None:
     h = hlc_in(H.AIRBORNE)
     outcome = h.on_autopilot(FS_RTL, T0 + 10)
     assert h.state is H.RTL
-    assert [(e.code, e.severity) for e in outcome.errors] == [(ErrorCode.AUTOPILOT_FAILSAFE, Severity.WARNING)]
+    assert [(e.code, e.severity) for e in outcome.errors] == [
+        (ErrorCode.AUTOPILOT_FAILSAFE, Severity.WARNING)
+    ]
     assert "fence breach" in outcome.errors[0].text and "fence breach" in h.reason
     assert h.on_mc_state(M.MISSION, T0 + 10.1) == HlcOutcome()  # republished before the MC heard
     assert h.on_mc_state(M.RTL, T0 + 10.3) == HlcOutcome()  # the MC follows
@@ -562,13 +611,23 @@ def test_action_helpers() -> None:
     assert str(Action.takeoff(12.0)) == "TAKEOFF(12 m)"
     assert str(Action.HOVER) == "HOVER"
     assert {Action.ARM.kind, Action.DISARM.kind, Action.LAND.kind, Action.RTL.kind} == {
-        ActionKind.ARM, ActionKind.DISARM, ActionKind.LAND, ActionKind.RTL}
+        ActionKind.ARM,
+        ActionKind.DISARM,
+        ActionKind.LAND,
+        ActionKind.RTL,
+    }
 
 
 @pytest.mark.parametrize(
     "changes",
-    [{"default_takeoff_altitude": 0.0}, {"airborne_fraction": 0.0}, {"airborne_fraction": 1.5},
-     {"gain_altitude_timeout": -1.0}, {"low_battery": 100.0}, {"link_timeout": float("nan")}],
+    [
+        {"default_takeoff_altitude": 0.0},
+        {"airborne_fraction": 0.0},
+        {"airborne_fraction": 1.5},
+        {"gain_altitude_timeout": -1.0},
+        {"low_battery": 100.0},
+        {"link_timeout": float("nan")},
+    ],
 )
 def test_params_validated(changes: dict[str, float]) -> None:
     with pytest.raises(ValueError):
@@ -653,10 +712,21 @@ def test_closed_loop_takeoff_mission_rtl() -> None:
     loop.command(OperatorCommand.RTL, 2)
     loop.run(30.0)
     assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
-    assert loop.hlc_log == [(H.INIT, H.READY), (H.READY, H.TAKEOFF), (H.TAKEOFF, H.GAINING_ALTITUDE),
-                            (H.GAINING_ALTITUDE, H.AIRBORNE), (H.AIRBORNE, H.RTL), (H.RTL, H.READY)]
-    assert loop.mc_log == [(M.INIT, M.STANDBY), (M.STANDBY, M.TAKEOFF), (M.TAKEOFF, M.MISSION),
-                           (M.MISSION, M.RTL), (M.RTL, M.STANDBY)]
+    assert loop.hlc_log == [
+        (H.INIT, H.READY),
+        (H.READY, H.TAKEOFF),
+        (H.TAKEOFF, H.GAINING_ALTITUDE),
+        (H.GAINING_ALTITUDE, H.AIRBORNE),
+        (H.AIRBORNE, H.RTL),
+        (H.RTL, H.READY),
+    ]
+    assert loop.mc_log == [
+        (M.INIT, M.STANDBY),
+        (M.STANDBY, M.TAKEOFF),
+        (M.TAKEOFF, M.MISSION),
+        (M.MISSION, M.RTL),
+        (M.RTL, M.STANDBY),
+    ]
     assert loop.sim.state().landed and loop.errors == []
 
 
@@ -733,7 +803,12 @@ def test_closed_loop_restarts_resync_without_commands() -> None:
         (FS_HOLD, False),
         (FS_RTL, False),
         (FS_LAND, False),
-        (flying(mode="LOITER", autonomous=False, failsafe="battery failsafe", flight_mode=FlightMode.MANUAL), True),
+        (
+            flying(
+                mode="LOITER", autonomous=False, failsafe="battery failsafe", flight_mode=FlightMode.MANUAL
+            ),
+            True,
+        ),
         (flying(mode="RTL", flight_mode=FlightMode.RTL, autonomous=False), True),  # a pilot's RTL switch
     ],
     ids=lambda v: v if isinstance(v, bool) else f"{v.mode}-{v.flight_mode.name}-{v.failsafe or 'nofs'}",
@@ -825,4 +900,4 @@ def test_closed_loop_fence_brake_holds_until_the_operator_lands() -> None:
     loop.run(10.0)
     assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
     assert loop.errors == [ErrorCode.AUTOPILOT_FAILSAFE]
-    assert (M.MANUAL not in {to for _, to in loop.mc_log})
+    assert M.MANUAL not in {to for _, to in loop.mc_log}

@@ -21,11 +21,26 @@ from tests.emulators.mavlink_vehicle import MavlinkVehicle, VehicleSnapshot
 
 # Short delays and brisk kinematics; heartbeats at 10 Hz so mode confirmations are quick.
 FAST: dict[str, Any] = {
-    "boot_delay": 0.2, "ekf_delay": 0.3, "gps_delay": 0.3, "heartbeat_rate": 10.0, "climb_rate": 4.0,
-    "max_climb_rate": 4.0, "land_speed": 2.0, "land_speed_high": 3.0, "max_descent_rate": 3.0,
-    "velocity_tau": 0.15, "yaw_rate_max": 180.0, "land_detect_time": 0.2,
+    "boot_delay": 0.2,
+    "ekf_delay": 0.3,
+    "gps_delay": 0.3,
+    "heartbeat_rate": 10.0,
+    "climb_rate": 4.0,
+    "max_climb_rate": 4.0,
+    "land_speed": 2.0,
+    "land_speed_high": 3.0,
+    "max_descent_rate": 3.0,
+    "velocity_tau": 0.15,
+    "yaw_rate_max": 180.0,
+    "land_detect_time": 0.2,
 }
-AP: dict[str, Any] = {"stream_rate_hz": 20.0, "connect_timeout": 3.0, "ready_timeout": 5.0, "ack_timeout": 0.5, "mode_timeout": 2.0}
+AP: dict[str, Any] = {
+    "stream_rate_hz": 20.0,
+    "connect_timeout": 3.0,
+    "ready_timeout": 5.0,
+    "ack_timeout": 0.5,
+    "mode_timeout": 2.0,
+}
 
 
 def wait_for(predicate: Callable[[], Any], timeout: float, interval: float = 0.02) -> Any:
@@ -64,13 +79,17 @@ def ap(vehicle: MavlinkVehicle, request: pytest.FixtureRequest) -> Iterator[Mavl
         adapter.close()
 
 
-def state_until(ap: MavlinkAutopilot, predicate: Callable[[AutopilotState], bool], timeout: float) -> AutopilotState:
+def state_until(
+    ap: MavlinkAutopilot, predicate: Callable[[AutopilotState], bool], timeout: float
+) -> AutopilotState:
     s = wait_for(lambda: (lambda st: st if predicate(st) else None)(ap.state()), timeout)
     assert s is not None, f"state never matched; last {ap.state()}"
     return s
 
 
-def vehicle_until(vehicle: MavlinkVehicle, predicate: Callable[[VehicleSnapshot], bool], timeout: float) -> None:
+def vehicle_until(
+    vehicle: MavlinkVehicle, predicate: Callable[[VehicleSnapshot], bool], timeout: float
+) -> None:
     assert vehicle.wait_until(predicate, timeout), f"vehicle never matched; last {vehicle.snapshot()}"
 
 
@@ -93,15 +112,32 @@ def test_registered_and_parameters_are_validated() -> None:
         MavlinkAutopilot({"conection": "tcp:127.0.0.1:5760"})
     with pytest.raises(ValueError, match="parameter 'velocity_hold': Extra"):  # renamed: setpoint_timeout
         MavlinkAutopilot({"velocity_hold": 3.0})
-    for bad in ({"source_system": 0}, {"source_system": 256}, {"target_component": -1}, {"baud": "fast"},
-                {"ack_timeout": 0}, {"stream_rate_hz": math.nan}, {"velocity_resend_hz": -1}, {"connection": ""},
-                {"heartbeat_hz": True}, {"setpoint_timeout": 0}, {"setpoint_timeout": 11.0}, {"cells": -1},
-                {"configure_vehicle": "yes"}, {"link_stale_after": math.inf}, {"signing_key": 7}):
+    for bad in (
+        {"source_system": 0},
+        {"source_system": 256},
+        {"target_component": -1},
+        {"baud": "fast"},
+        {"ack_timeout": 0},
+        {"stream_rate_hz": math.nan},
+        {"velocity_resend_hz": -1},
+        {"connection": ""},
+        {"heartbeat_hz": True},
+        {"setpoint_timeout": 0},
+        {"setpoint_timeout": 11.0},
+        {"cells": -1},
+        {"configure_vehicle": "yes"},
+        {"link_stale_after": math.inf},
+        {"signing_key": 7},
+    ):
         with pytest.raises(ValueError, match=rf"parameter '{next(iter(bad))}': "):
             MavlinkAutopilot(bad)
-    with pytest.raises(ValueError, match=r"parameters: .*link_stale_after 1 s is shorter than two telemetry periods"):
+    with pytest.raises(
+        ValueError, match=r"parameters: .*link_stale_after 1 s is shorter than two telemetry periods"
+    ):
         MavlinkAutopilot({"stream_rate_hz": 1})  # a healthy link would look stale between two messages
-    ap = MavlinkAutopilot({"velocity_resend_hz": 0, "connect_timeout": 10})  # 0 = never resend; an int is a float
+    ap = MavlinkAutopilot(
+        {"velocity_resend_hz": 0, "connect_timeout": 10}
+    )  # 0 = never resend; an int is a float
     assert ap.source_system == DEFAULTS["source_system"] == 245
     # the constructor does no I/O; before connect() nothing is known
     assert ap.state() == AutopilotState(connected=False, link_age=math.inf)
@@ -126,11 +162,17 @@ def test_connect_over_udp_reads_telemetry(vehicle: MavlinkVehicle, ap: MavlinkAu
     # our GCS heartbeat goes out as system 245, and telemetry was asked for
     hb = vehicle.received_of("HEARTBEAT")
     assert hb and hb[0].fields["type"] == mav2.MAV_TYPE_GCS
-    intervals = [r.fields for r in vehicle.received_of("COMMAND_LONG")
-                 if r.fields["command"] == mav2.MAV_CMD_SET_MESSAGE_INTERVAL]
+    intervals = [
+        r.fields
+        for r in vehicle.received_of("COMMAND_LONG")
+        if r.fields["command"] == mav2.MAV_CMD_SET_MESSAGE_INTERVAL
+    ]
     asked = {int(f["param1"]) for f in intervals}
-    assert {mav2.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, mav2.MAVLINK_MSG_ID_EKF_STATUS_REPORT,
-            mav2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT} <= asked
+    assert {
+        mav2.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+        mav2.MAVLINK_MSG_ID_EKF_STATUS_REPORT,
+        mav2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
+    } <= asked
     assert (mav2.MAV_CMD_SET_MESSAGE_INTERVAL, mav2.MAV_RESULT_ACCEPTED) in vehicle.acks
     ap.connect()  # a second connect() is a no-op
 
@@ -158,7 +200,9 @@ def test_connect_fails_clearly_without_a_heartbeat() -> None:
     port = free_udp_port()  # nobody there
     ap = make_ap(f"udpout:127.0.0.1:{port}", connect_timeout=0.5)
     start = time.monotonic()
-    with pytest.raises(AutopilotError, match=rf"no HEARTBEAT from udpout:127.0.0.1:{port} within 0.5 s.*SITL"):
+    with pytest.raises(
+        AutopilotError, match=rf"no HEARTBEAT from udpout:127.0.0.1:{port} within 0.5 s.*SITL"
+    ):
         ap.connect()
     assert time.monotonic() - start < 2.0
     assert not ap.state().connected
@@ -237,7 +281,9 @@ def test_arm_refused_returns_false_with_the_reason(vehicle: MavlinkVehicle, ap: 
 # -- flying ------------------------------------------------------------------------------------------
 
 
-def test_takeoff_climbs_in_guided_and_is_refused_otherwise(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+def test_takeoff_climbs_in_guided_and_is_refused_otherwise(
+    vehicle: MavlinkVehicle, ap: MavlinkAutopilot
+) -> None:
     with pytest.raises(AutopilotError, match=r"takeoff to 2 m refused \(FAILED; mode STABILIZE, disarmed\)"):
         ap.takeoff(2.0)
     with pytest.raises(AutopilotError, match="must be > 0"):
@@ -250,7 +296,9 @@ def test_takeoff_climbs_in_guided_and_is_refused_otherwise(vehicle: MavlinkVehic
     ap.set_velocity(0.0, 0.0, 0.0, 0.0, Frame.BODY)
     top = state_until(ap, lambda s: s.alt >= 2.4, 3)
     assert top.in_air and top.armed
-    vehicle_until(vehicle, lambda s: s.guided_submode == "hover" and s.landed_state == mav2.MAV_LANDED_STATE_IN_AIR, 2)
+    vehicle_until(
+        vehicle, lambda s: s.guided_submode == "hover" and s.landed_state == mav2.MAV_LANDED_STATE_IN_AIR, 2
+    )
 
 
 def test_velocity_in_ned_and_body_frames(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
@@ -285,7 +333,9 @@ def test_velocity_in_ned_and_body_frames(vehicle: MavlinkVehicle, ap: MavlinkAut
 
 @pytest.mark.parametrize("vehicle", [{"guided_timeout": 0.4}], indirect=True)
 @pytest.mark.parametrize("ap", [{"setpoint_timeout": 0.8}], indirect=True)
-def test_no_setpoint_older_than_the_setpoint_timeout_is_sent(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+def test_no_setpoint_older_than_the_setpoint_timeout_is_sent(
+    vehicle: MavlinkVehicle, ap: MavlinkAutopilot
+) -> None:
     fly(ap, vehicle, alt=1.5)
     ap.set_velocity(1.0, 0.0, 0.0, 0.0, Frame.NED)  # once
     time.sleep(0.7)
@@ -354,7 +404,9 @@ def test_disarm(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
 # -- overrides and faults ----------------------------------------------------------------------------
 
 
-def test_pilot_switching_to_loiter_is_a_manual_override(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+def test_pilot_switching_to_loiter_is_a_manual_override(
+    vehicle: MavlinkVehicle, ap: MavlinkAutopilot
+) -> None:
     fly(ap, vehicle, alt=1.5)
     ap.set_velocity(1.0, 0.0, 0.0, 0.0, Frame.NED)
     assert vehicle.pilot_switch_mode("LOITER")

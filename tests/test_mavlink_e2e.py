@@ -46,20 +46,41 @@ from tests.netns import NetNamespace, stop_process
 
 # The emulated copter: short start-up, brisk kinematics, heartbeats at 10 Hz.
 FAST: dict[str, Any] = {
-    "boot_delay": 0.2, "ekf_delay": 0.3, "gps_delay": 0.3, "heartbeat_rate": 10.0, "climb_rate": 4.0,
-    "max_climb_rate": 4.0, "land_speed": 2.5, "land_speed_high": 3.0, "max_descent_rate": 3.0,
-    "rtl_speed": 8.0, "velocity_tau": 0.15, "land_detect_time": 0.2,
+    "boot_delay": 0.2,
+    "ekf_delay": 0.3,
+    "gps_delay": 0.3,
+    "heartbeat_rate": 10.0,
+    "climb_rate": 4.0,
+    "max_climb_rate": 4.0,
+    "land_speed": 2.5,
+    "land_speed_high": 3.0,
+    "max_descent_rate": 3.0,
+    "rtl_speed": 8.0,
+    "velocity_tau": 0.15,
+    "land_detect_time": 0.2,
 }
-AP: dict[str, Any] = {"stream_rate_hz": 20.0, "connect_timeout": 5.0, "ready_timeout": 5.0, "ack_timeout": 0.5}
+AP: dict[str, Any] = {
+    "stream_rate_hz": 20.0,
+    "connect_timeout": 5.0,
+    "ready_timeout": 5.0,
+    "ack_timeout": 0.5,
+}
 AUTO_OPERATOR: dict[str, Any] = {"altitude": 3.0, "max_flights": 1, "retry": 0.5}
 
 
 def _bma(**operator: Any) -> list[dict[str, Any]]:
-    return [{
-        "name": "operator",
-        "behaviors": [{"plugin": "auto_operator", "activate_on": ["STANDBY", "MISSION"],
-                       "params": {**AUTO_OPERATOR, **operator}}],
-    }]
+    return [
+        {
+            "name": "operator",
+            "behaviors": [
+                {
+                    "plugin": "auto_operator",
+                    "activate_on": ["STANDBY", "MISSION"],
+                    "params": {**AUTO_OPERATOR, **operator},
+                }
+            ],
+        }
+    ]
 
 
 @dataclass
@@ -71,13 +92,23 @@ class Seen:
 class InProcessAgent:
     """MC + HLC + auto_operator BMA on memq://, flying `vehicle`; records every MC/HLC state and error."""
 
-    def __init__(self, vehicle: MavlinkVehicle, *, hlc: dict[str, Any] | None = None,
-                 operator: dict[str, Any] | None = None) -> None:
+    def __init__(
+        self,
+        vehicle: MavlinkVehicle,
+        *,
+        hlc: dict[str, Any] | None = None,
+        operator: dict[str, Any] | None = None,
+    ) -> None:
         doc = {
             "agent": {"name": "copter"},
             "buses": {"lan": "memq://"},
-            "hlc": {"autopilot": "mavlink", "default_takeoff_altitude": 3.0, "link_timeout": 1.5, **(hlc or {}),
-                    "autopilot_params": {"connection": vehicle.udp_url, **AP}},
+            "hlc": {
+                "autopilot": "mavlink",
+                "default_takeoff_altitude": 3.0,
+                "link_timeout": 1.5,
+                **(hlc or {}),
+                "autopilot_params": {"connection": vehicle.udp_url, **AP},
+            },
             "bma": _bma(**(operator or {})),
         }
         self.vehicle = vehicle
@@ -168,7 +199,7 @@ def test_arming_refused_back_to_ready_with_an_error_then_flies(copter: Callable[
     err = agent.error(ErrorCode.ARM_FAILED)
     assert err.severity == hlc_error_t.ERROR and "arm" in err.text
     back = agent.wait("mc", M.STANDBY, since=agent.wait("mc", M.TAKEOFF).t)
-    assert H.READY in agent.states("hlc")[agent.states("hlc").index(H.TAKEOFF):]
+    assert H.READY in agent.states("hlc")[agent.states("hlc").index(H.TAKEOFF) :]
     assert not agent.vehicle.snapshot().armed
     # the pre-arm problem cleared: the auto-operator's retry flies
     agent.vehicle.refuse_arm = False
@@ -190,7 +221,9 @@ def test_low_battery_returns_home(copter: Callable[..., InProcessAgent]) -> None
     assert not snap.armed and math.hypot(snap.north, snap.east) < 0.5
 
 
-def test_link_cut_5_s_then_restored_returns_home_without_the_operator(copter: Callable[..., InProcessAgent]) -> None:
+def test_link_cut_5_s_then_restored_returns_home_without_the_operator(
+    copter: Callable[..., InProcessAgent],
+) -> None:
     """A TCP-like cut that keeps everything written to it and flushes it when the link returns."""
     agent = copter(hlc={"link_timeout": 1.5})
     flying(agent)
@@ -276,9 +309,23 @@ class EmulatorProcess:
 
     def __init__(self, netns: NetNamespace, *args: str) -> None:
         self.proc = netns.python(
-            "-m", "tests.emulators.mavlink_vehicle", "--host", "127.0.0.1", "--udp-port", "0", "--tcp-port", "0",
-            "--boot-delay", "0.3", "--ekf-delay", "0.6", "--gps-delay", "0.5", *args,
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            "-m",
+            "tests.emulators.mavlink_vehicle",
+            "--host",
+            "127.0.0.1",
+            "--udp-port",
+            "0",
+            "--tcp-port",
+            "0",
+            "--boot-delay",
+            "0.3",
+            "--ekf-delay",
+            "0.6",
+            "--gps-delay",
+            "0.5",
+            *args,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
         )
         assert self.proc.stdout is not None
         ready = self.proc.stdout.readline().split()
@@ -307,8 +354,11 @@ def process_doc(name: str, connection: str, bma: list[dict[str, Any]] | None = N
     doc: dict[str, Any] = {
         "agent": {"name": name},
         "buses": {"lan": MCAST_URL},
-        "hlc": {"autopilot": "mavlink", "default_takeoff_altitude": 3.0,
-                "autopilot_params": {"connection": connection, "ack_timeout": 1.0, "stream_rate_hz": 10.0}},
+        "hlc": {
+            "autopilot": "mavlink",
+            "default_takeoff_altitude": 3.0,
+            "autopilot_params": {"connection": connection, "ack_timeout": 1.0, "stream_rate_hz": 10.0},
+        },
         # unsigned operator commands from the probe, MC and HLC in separate processes: this file tests the
         # adapter, docs/security.md and its tests the keys
         "security": {"insecure": True},
@@ -327,7 +377,9 @@ def test_agent_process_flies_a_whole_mission_over_tcp(
     agent.start("agent")
     try:
         for state in (M.STANDBY, M.TAKEOFF, M.MISSION):
-            assert probe.wait("sitl/MC_STATE", "mc_state_t", timeout=15, state=state), f"never reached {state}"
+            assert probe.wait("sitl/MC_STATE", "mc_state_t", timeout=15, state=state), (
+                f"never reached {state}"
+            )
         # (velocity commands are internal to `antalate agent` now: they travel in memory, and the
         # separate-process test below sends them over multicast)
         mark = probe.mark()
@@ -336,13 +388,17 @@ def test_agent_process_flies_a_whole_mission_over_tcp(
         assert probe.wait("sitl/MC_STATE", "mc_state_t", timeout=20, since=mark, state=M.STANDBY)
         down = probe.wait("sitl/TELEMETRY", "telemetry_t", since=mark, timeout=2, armed=False, in_air=False)
         assert down is not None and down["mode"] == "RTL" and down["alt"] == 0.0
-        assert probe.wait("sitl/HLC_STATE", "hlc_state_t", since=mark, state=H.READY)["autopilot"] == "mavlink"
+        assert (
+            probe.wait("sitl/HLC_STATE", "hlc_state_t", since=mark, state=H.READY)["autopilot"] == "mavlink"
+        )
         assert agent.alive("agent")
     finally:
         codes = agent.stop()
     final = emulator.stop()
     assert not final["armed"] and final["alt"] == 0.0
-    assert math.hypot(final["north"], final["east"]) < 1.0  # RTL brought it home (the emulator overshoots a little)
+    assert (
+        math.hypot(final["north"], final["east"]) < 1.0
+    )  # RTL brought it home (the emulator overshoots a little)
     assert codes["agent"] in (0, -15), codes
     log = agent.log("agent")
     assert "connected to autopilot (1, 1)" in log and "mode GUIDED confirmed" in log
@@ -357,7 +413,9 @@ def test_hlc_restart_mid_flight_resyncs_without_arming_or_taking_off(
     agent.start("mc")
     try:
         assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.STANDBY)
-        probe.publish("copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 1, "agent": "op"}, command=O.TAKEOFF)
+        probe.publish(
+            "copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 1, "agent": "op"}, command=O.TAKEOFF
+        )
         assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.MISSION)
         assert "autopilot ARM" in agent.log("hlc")
         agent.kill("hlc")  # SIGKILL: the real vehicle flies on, hovering in GUIDED
@@ -374,13 +432,21 @@ def test_hlc_restart_mid_flight_resyncs_without_arming_or_taking_off(
         # velocity commands reach the copter through the restarted HLC: east at 3 m/s for a second
         moving = probe.mark()
         for i in range(10):  # an internal topic: the sender must be the agent the channel names
-            probe.publish("copter/VELOCITY_CMD", "velocity_cmd_t", header={"seq": i + 1, "agent": "copter"},
-                          frame=1, vx=0.0, vy=3.0)
+            probe.publish(
+                "copter/VELOCITY_CMD",
+                "velocity_cmd_t",
+                header={"seq": i + 1, "agent": "copter"},
+                frame=1,
+                vx=0.0,
+                vy=3.0,
+            )
             time.sleep(0.1)
         east = [t["ve"] for t in probe.history("copter/TELEMETRY", "telemetry_t", since=moving)]
         assert max(east) > 2.0, east
         # and it still obeys: RTL brings it home and down
-        probe.publish("copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 2, "agent": "op"}, command=O.RTL)
+        probe.publish(
+            "copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 2, "agent": "op"}, command=O.RTL
+        )
         assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=10, since=mark, state=M.RTL)
         assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=20, since=probe.mark(), state=M.STANDBY)
     finally:
@@ -395,9 +461,21 @@ def test_hlc_killed_the_vehicle_stops_and_comes_home_by_its_gcs_failsafe(
     netns: NetNamespace, probe: Probe, tmp_path: Path
 ) -> None:
     """The vehicle set up as docs/ardupilot.md says; the HLC process dies while it flies east."""
-    emulator = EmulatorProcess(netns, "--param", "FS_GCS_ENABLE=1", "--param", "SYSID_MYGCS=245",
-                               "--param", "FS_GCS_TIMEOUT=2", "--param", "GUID_TIMEOUT=1",
-                               "--param", "FENCE_ENABLE=1", "--param", "BATT_FS_LOW_ACT=2")
+    emulator = EmulatorProcess(
+        netns,
+        "--param",
+        "FS_GCS_ENABLE=1",
+        "--param",
+        "SYSID_MYGCS=245",
+        "--param",
+        "FS_GCS_TIMEOUT=2",
+        "--param",
+        "GUID_TIMEOUT=1",
+        "--param",
+        "FENCE_ENABLE=1",
+        "--param",
+        "BATT_FS_LOW_ACT=2",
+    )
     doc = process_doc("copter", f"udpout:127.0.0.1:{emulator.udp_port}")
     doc["hlc"]["autopilot_params"]["require_vehicle_failsafes"] = True
     agent = AgentProcesses(netns, tmp_path, doc)
@@ -405,13 +483,21 @@ def test_hlc_killed_the_vehicle_stops_and_comes_home_by_its_gcs_failsafe(
     agent.start("mc")
     try:
         assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.STANDBY)
-        probe.publish("copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 1, "agent": "op"}, command=O.TAKEOFF)
+        probe.publish(
+            "copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 1, "agent": "op"}, command=O.TAKEOFF
+        )
         assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.MISSION)
         assert "vehicle pre-flight check: failsafe parameters OK" in agent.log("hlc")
         moving = probe.mark()
         for i in range(10):
-            probe.publish("copter/VELOCITY_CMD", "velocity_cmd_t", header={"seq": i + 1, "agent": "copter"},
-                          frame=1, vx=0.0, vy=3.0)
+            probe.publish(
+                "copter/VELOCITY_CMD",
+                "velocity_cmd_t",
+                header={"seq": i + 1, "agent": "copter"},
+                frame=1,
+                vx=0.0,
+                vy=3.0,
+            )
             time.sleep(0.1)
         east = [t["ve"] for t in probe.history("copter/TELEMETRY", "telemetry_t", since=moving)]
         assert max(east) > 2.0, east

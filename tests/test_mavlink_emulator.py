@@ -29,7 +29,9 @@ def made() -> Iterator[list[Any]]:
         thing.close() if isinstance(thing, MavlinkAutopilot) else thing.stop()
 
 
-def pair(made: list[Any], params: dict[str, float], **vehicle: Any) -> tuple[MavlinkVehicle, MavlinkAutopilot]:
+def pair(
+    made: list[Any], params: dict[str, float], **vehicle: Any
+) -> tuple[MavlinkVehicle, MavlinkAutopilot]:
     v = MavlinkVehicle("127.0.0.1", 0, **{**FAST, "params": params, **vehicle}).start()
     made.append(v)
     ap = make_ap(v.udp_url)
@@ -68,7 +70,9 @@ def test_parameters_list_index_types_and_unknown_names(made: list[Any]) -> None:
         msg = conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=2)
         assert msg is not None and msg.param_id == "FENCE_ACTION" and msg.param_value == 4.0
         conn.mav.param_set_send(1, 1, b"NO_SUCH_PARAM", 1.0, mav2.MAV_PARAM_TYPE_REAL32)
-        assert conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.5) is None  # no answer, as ArduPilot
+        assert (
+            conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.5) is None
+        )  # no answer, as ArduPilot
     finally:
         conn.close()
     assert v.param("FENCE_ACTION") == 4.0
@@ -105,8 +109,17 @@ def test_ekf_failsafe_to_alt_hold_and_back_to_health(made: list[Any]) -> None:
 
 
 def test_battery_failsafe_escalates_from_low_to_critical(made: list[Any]) -> None:
-    v, ap = pair(made, {"BATT_LOW_VOLT": 10.5, "BATT_CRT_VOLT": 9.9, "BATT_LOW_TIMER": 1, "BATT_FS_LOW_ACT": 2,
-                        "BATT_FS_CRT_ACT": 1}, battery_drain=0.0)
+    v, ap = pair(
+        made,
+        {
+            "BATT_LOW_VOLT": 10.5,
+            "BATT_CRT_VOLT": 9.9,
+            "BATT_LOW_TIMER": 1,
+            "BATT_FS_LOW_ACT": 2,
+            "BATT_FS_CRT_ACT": 1,
+        },
+        battery_drain=0.0,
+    )
     fly(ap, v, alt=2.5)
     ap.set_velocity(0.0, 2.0, 0.0, 0.0, Frame.NED)
     v.set_voltage(10.3)

@@ -14,19 +14,22 @@ from antalate_lcm.autopilot.mavlink.failsafe import (
 )
 
 
-@pytest.mark.parametrize(("text", "reason"), [
-    ("Fence Breached: Circle", fs.FENCE),
-    ("Battery 1 is low 10.40V used 1200 mAh", fs.BATTERY),
-    ("Battery 1 is critical 9.90V used 2400 mAh", fs.BATTERY),
-    ("EKF variance", fs.EKF),
-    ("EKF Failsafe: changed to LAND Mode", fs.EKF),
-    ("GCS Failsafe", fs.GCS),
-    ("GCS Failsafe - Disarming", fs.GCS),
-    ("GCS Failsafe Cleared", ""),
-    ("EKF Failsafe Cleared", ""),
-    ("PreArm: Need Position Estimate", ""),
-    ("Arming motors", ""),
-])
+@pytest.mark.parametrize(
+    ("text", "reason"),
+    [
+        ("Fence Breached: Circle", fs.FENCE),
+        ("Battery 1 is low 10.40V used 1200 mAh", fs.BATTERY),
+        ("Battery 1 is critical 9.90V used 2400 mAh", fs.BATTERY),
+        ("EKF variance", fs.EKF),
+        ("EKF Failsafe: changed to LAND Mode", fs.EKF),
+        ("GCS Failsafe", fs.GCS),
+        ("GCS Failsafe - Disarming", fs.GCS),
+        ("GCS Failsafe Cleared", ""),
+        ("EKF Failsafe Cleared", ""),
+        ("PreArm: Need Position Estimate", ""),
+        ("Arming motors", ""),
+    ],
+)
 def test_statustext(text: str, reason: str) -> None:
     assert text_failsafe(text) == reason
 

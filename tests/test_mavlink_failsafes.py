@@ -34,8 +34,13 @@ def made() -> Iterator[list[Any]]:
         thing.close() if isinstance(thing, MavlinkAutopilot) else thing.stop()
 
 
-def pair(made: list[Any], params: dict[str, float] | None = None, vehicle: dict[str, Any] | None = None,
-         tcp: bool = False, **ap_params: Any) -> tuple[MavlinkVehicle, MavlinkAutopilot]:
+def pair(
+    made: list[Any],
+    params: dict[str, float] | None = None,
+    vehicle: dict[str, Any] | None = None,
+    tcp: bool = False,
+    **ap_params: Any,
+) -> tuple[MavlinkVehicle, MavlinkAutopilot]:
     v = started(params, **(vehicle or {}))
     made.append(v)
     ap = make_ap(v.tcp_url if tcp else v.udp_url, **ap_params)
@@ -69,8 +74,13 @@ class Commander:
 def test_cut_link_backlog_does_not_fly_the_vehicle(made: list[Any], stale: float) -> None:
     """The field trial: during a cut the HLC keeps commanding; the link keeps every byte and flushes it."""
     speed, setpoint_timeout = 2.0, 1.0
-    v, ap = pair(made, vehicle={"guided_timeout": 1.0}, tcp=True, link_stale_after=stale,
-                 setpoint_timeout=setpoint_timeout)
+    v, ap = pair(
+        made,
+        vehicle={"guided_timeout": 1.0},
+        tcp=True,
+        link_stale_after=stale,
+        setpoint_timeout=setpoint_timeout,
+    )
     fly(ap, v, alt=1.5)
     hlc = Commander(ap, speed, 0.0)
     vehicle_until(v, lambda s: s.vn > speed * 0.9, 2)
@@ -101,9 +111,12 @@ def test_cut_link_backlog_does_not_fly_the_vehicle(made: list[Any], stale: float
 # -- fence, battery, EKF: the autopilot's failsafes, not a pilot ------------------------------------------
 
 
-@pytest.mark.parametrize(("action", "mode", "flight_mode"), [(1, "RTL", FlightMode.RTL), (4, "BRAKE", FlightMode.HOLD)])
-def test_fence_breach_is_a_failsafe_not_a_pilot(made: list[Any], action: int, mode: str,
-                                                flight_mode: FlightMode) -> None:
+@pytest.mark.parametrize(
+    ("action", "mode", "flight_mode"), [(1, "RTL", FlightMode.RTL), (4, "BRAKE", FlightMode.HOLD)]
+)
+def test_fence_breach_is_a_failsafe_not_a_pilot(
+    made: list[Any], action: int, mode: str, flight_mode: FlightMode
+) -> None:
     v, ap = pair(made, {"FENCE_ENABLE": 1, "FENCE_RADIUS": 4.0, "FENCE_ACTION": action})
     fly(ap, v, alt=1.5)
     hlc = Commander(ap, 0.0, 3.0)
@@ -129,8 +142,12 @@ def test_fence_breach_is_a_failsafe_not_a_pilot(made: list[Any], action: int, mo
 
 
 def test_battery_failsafe_by_voltage(made: list[Any]) -> None:
-    v, ap = pair(made, {"BATT_LOW_VOLT": 10.5, "BATT_LOW_TIMER": 1, "BATT_FS_LOW_ACT": 2},
-                 vehicle={"report_remaining": False, "battery_drain": 0.0}, cells=3)
+    v, ap = pair(
+        made,
+        {"BATT_LOW_VOLT": 10.5, "BATT_LOW_TIMER": 1, "BATT_FS_LOW_ACT": 2},
+        vehicle={"report_remaining": False, "battery_drain": 0.0},
+        cells=3,
+    )
     s = state_until(ap, lambda s: math.isfinite(s.voltage), 2)
     assert s.battery == -1.0 and not s.battery_known  # many vehicles never estimate the percentage
     assert s.voltage == pytest.approx(12.6, abs=0.01) and s.cells == 3
@@ -138,7 +155,9 @@ def test_battery_failsafe_by_voltage(made: list[Any]) -> None:
     fly(ap, v, alt=1.5)
     v.set_voltage(10.2)
     s = state_until(ap, lambda s: s.voltage < 10.3, 2)
-    assert s.cell_voltage == pytest.approx(3.4, abs=0.01)  # the HLC's 3.5 V/cell rule can act before ArduPilot
+    assert s.cell_voltage == pytest.approx(
+        3.4, abs=0.01
+    )  # the HLC's 3.5 V/cell rule can act before ArduPilot
     assert s.battery_warning == "" and s.mode == "GUIDED"  # BATT_LOW_TIMER has not run out
     s = state_until(ap, lambda s: s.mode == "RTL", 3)
     assert s.battery_warning == "low" and s.failsafe == "battery failsafe", s
@@ -153,13 +172,18 @@ def test_battery_failsafe_by_voltage(made: list[Any]) -> None:
 
 
 def test_battery_cells_from_a_per_cell_monitor_and_critical_state(made: list[Any]) -> None:
-    v, ap = pair(made, {"BATT_LOW_VOLT": 14.0, "BATT_CRT_VOLT": 13.0, "BATT_LOW_TIMER": 1},
-                 vehicle={"per_cell_monitor": True, "battery_cells": 4, "battery_drain": 0.0})
+    v, ap = pair(
+        made,
+        {"BATT_LOW_VOLT": 14.0, "BATT_CRT_VOLT": 13.0, "BATT_LOW_TIMER": 1},
+        vehicle={"per_cell_monitor": True, "battery_cells": 4, "battery_drain": 0.0},
+    )
     s = state_until(ap, lambda s: s.cells == 4, 3)
     assert s.voltage == pytest.approx(16.8, abs=0.01) and s.battery == 100.0
     v.set_voltage(12.8)  # below both thresholds: AP_BattMonitor goes straight to critical
     s = state_until(ap, lambda s: s.battery_warning == "critical", 4)
-    assert s.cell_voltage == pytest.approx(3.2, abs=0.01) and s.mode == "STABILIZE"  # on the ground: no action
+    assert (
+        s.cell_voltage == pytest.approx(3.2, abs=0.01) and s.mode == "STABILIZE"
+    )  # on the ground: no action
     assert s.failsafe == ""  # no mode change to explain
 
 
@@ -186,9 +210,18 @@ def test_pilot_brake_is_manual_without_a_failsafe(made: list[Any]) -> None:
 
 def test_dead_hlc_vehicle_stops_within_guid_timeout_and_returns_by_gcs_failsafe(made: list[Any]) -> None:
     guid, gcs_timeout = 1.0, 1.5
-    v, ap = pair(made, {"FS_GCS_ENABLE": 1, "SYSID_MYGCS": 245, "FS_GCS_TIMEOUT": gcs_timeout,
-                        "GUID_TIMEOUT": guid, "FENCE_ENABLE": 1, "BATT_FS_LOW_ACT": 2},
-                 require_vehicle_failsafes=True)
+    v, ap = pair(
+        made,
+        {
+            "FS_GCS_ENABLE": 1,
+            "SYSID_MYGCS": 245,
+            "FS_GCS_TIMEOUT": gcs_timeout,
+            "GUID_TIMEOUT": guid,
+            "FENCE_ENABLE": 1,
+            "BATT_FS_LOW_ACT": 2,
+        },
+        require_vehicle_failsafes=True,
+    )
     assert ap.vehicle_findings == []  # a vehicle set up as docs/ardupilot.md says
     fly(ap, v, alt=1.5)
     ap.set_velocity(3.0, 0.0, 0.0, 0.0, Frame.NED)

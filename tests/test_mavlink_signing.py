@@ -64,8 +64,11 @@ def test_signed_link_flies(made: list[Any], tcp: bool) -> None:
 def test_wrong_key_is_refused_and_counted(made: list[Any]) -> None:
     v = vehicle(made, KEY)
     ap = make_ap(v.udp_url, signing_key="not the key", connect_timeout=1.0)
-    with pytest.raises(AutopilotError, match=r"dropped for a missing or wrong MAVLink 2 signature: does the vehicle "
-                                             r"have the same signing key\?"):
+    with pytest.raises(
+        AutopilotError,
+        match=r"dropped for a missing or wrong MAVLink 2 signature: does the vehicle "
+        r"have the same signing key\?",
+    ):
         ap.connect()
     assert ap.signing_rejected > 0
     assert wait_for(lambda: v.signing_rejected > 0, 1)  # the vehicle dropped ours too
@@ -97,9 +100,14 @@ def test_forged_unsigned_messages_on_a_signed_link_change_nothing(made: list[Any
     ap.connect()
     fly(ap, v, alt=1.5)
     enc = v.encoder
-    forged_mode = enc.heartbeat_encode(mav2.MAV_TYPE_QUADROTOR, mav2.MAV_AUTOPILOT_ARDUPILOTMEGA,
-                                       mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav2.MAV_MODE_FLAG_SAFETY_ARMED,
-                                       COPTER_MODES["LOITER"], mav2.MAV_STATE_ACTIVE, 3)
+    forged_mode = enc.heartbeat_encode(
+        mav2.MAV_TYPE_QUADROTOR,
+        mav2.MAV_AUTOPILOT_ARDUPILOTMEGA,
+        mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav2.MAV_MODE_FLAG_SAFETY_ARMED,
+        COPTER_MODES["LOITER"],
+        mav2.MAV_STATE_ACTIVE,
+        3,
+    )
     forged_battery = enc.sys_status_encode(0, 0, 0, 0, 9000, 0, 3, 0, 0, 0, 0, 0, 0)
     v.inject(forged_mode)  # unsigned: "a pilot took over"
     v.inject(forged_battery, key=b"\x01" * 32)  # signed with another key: "3 % left"

@@ -18,8 +18,15 @@ from tests.test_mavlink_adapter import FAST, make_ap
 
 # What docs/ardupilot.md asks for, with antalate as system 245.
 GOOD: dict[str, float] = {
-    "FS_GCS_ENABLE": 1, "FS_GCS_TIMEOUT": 5, "SYSID_MYGCS": 245, "GUID_TIMEOUT": 3, "FENCE_ENABLE": 1,
-    "FENCE_ACTION": 1, "BATT_MONITOR": 4, "BATT_FS_LOW_ACT": 2, "BATT_LOW_VOLT": 10.5,
+    "FS_GCS_ENABLE": 1,
+    "FS_GCS_TIMEOUT": 5,
+    "SYSID_MYGCS": 245,
+    "GUID_TIMEOUT": 3,
+    "FENCE_ENABLE": 1,
+    "FENCE_ACTION": 1,
+    "BATT_MONITOR": 4,
+    "BATT_FS_LOW_ACT": 2,
+    "BATT_LOW_VOLT": 10.5,
 }
 
 
@@ -35,14 +42,34 @@ def test_a_vehicle_set_up_as_documented_passes() -> None:
 
 
 def test_each_unprotected_parameter_is_named_with_the_value_to_set() -> None:
-    defaults = {**GOOD, "FS_GCS_ENABLE": 0, "SYSID_MYGCS": 255, "GUID_TIMEOUT": 5, "FENCE_ENABLE": 0,
-                "FENCE_ACTION": 0, "BATT_FS_LOW_ACT": 0, "BATT_LOW_VOLT": 0}
+    defaults = {
+        **GOOD,
+        "FS_GCS_ENABLE": 0,
+        "SYSID_MYGCS": 255,
+        "GUID_TIMEOUT": 5,
+        "FENCE_ENABLE": 0,
+        "FENCE_ACTION": 0,
+        "BATT_FS_LOW_ACT": 0,
+        "BATT_LOW_VOLT": 0,
+    }
     got = findings(defaults)
-    assert set(got) == {"FS_GCS_ENABLE", "SYSID_MYGCS", "GUID_TIMEOUT", "FENCE_ENABLE", "FENCE_ACTION",
-                        "BATT_FS_LOW_ACT", "BATT_LOW_VOLT"}
+    assert set(got) == {
+        "FS_GCS_ENABLE",
+        "SYSID_MYGCS",
+        "GUID_TIMEOUT",
+        "FENCE_ENABLE",
+        "FENCE_ACTION",
+        "BATT_FS_LOW_ACT",
+        "BATT_LOW_VOLT",
+    }
     assert got["SYSID_MYGCS"].text() == (
-        "SYSID_MYGCS = 255 (the GCS failsafe watches system 255, antalate sends as 245): set SYSID_MYGCS = 245")
-    assert got["FS_GCS_ENABLE"].want == 1 and got["GUID_TIMEOUT"].want == 3.0 and got["BATT_FS_LOW_ACT"].want == 2
+        "SYSID_MYGCS = 255 (the GCS failsafe watches system 255, antalate sends as 245): set SYSID_MYGCS = 245"
+    )
+    assert (
+        got["FS_GCS_ENABLE"].want == 1
+        and got["GUID_TIMEOUT"].want == 3.0
+        and got["BATT_FS_LOW_ACT"].want == 2
+    )
     # a low-voltage threshold is only chosen knowing the cells (3.4 V each: below the HLC's 3.5 V)
     assert got["BATT_LOW_VOLT"].want is None and "cells" in got["BATT_LOW_VOLT"].text()
     assert findings(defaults, cells=4)["BATT_LOW_VOLT"].want == pytest.approx(13.6)
@@ -75,54 +102,83 @@ def made() -> Iterator[list[MavlinkAutopilot]]:
         ap.close()
 
 
-def test_defaults_are_reported_and_arming_still_allowed(vehicle: MavlinkVehicle, made: list[MavlinkAutopilot],
-                                                         caplog: pytest.LogCaptureFixture) -> None:
-    ap = adapter(vehicle, made)  # ArduCopter's defaults: no GCS failsafe, GCS 255, no fence, no battery action
-    assert {f.param for f in ap.vehicle_findings} == {"FS_GCS_ENABLE", "SYSID_MYGCS", "FENCE_ENABLE",
-                                                      "BATT_FS_LOW_ACT"}
-    assert "vehicle pre-flight check: SYSID_MYGCS = 255" in caplog.text and "set SYSID_MYGCS = 245" in caplog.text
+def test_defaults_are_reported_and_arming_still_allowed(
+    vehicle: MavlinkVehicle, made: list[MavlinkAutopilot], caplog: pytest.LogCaptureFixture
+) -> None:
+    ap = adapter(
+        vehicle, made
+    )  # ArduCopter's defaults: no GCS failsafe, GCS 255, no fence, no battery action
+    assert {f.param for f in ap.vehicle_findings} == {
+        "FS_GCS_ENABLE",
+        "SYSID_MYGCS",
+        "FENCE_ENABLE",
+        "BATT_FS_LOW_ACT",
+    }
+    assert (
+        "vehicle pre-flight check: SYSID_MYGCS = 255" in caplog.text
+        and "set SYSID_MYGCS = 245" in caplog.text
+    )
     assert vehicle.param("SYSID_MYGCS") == 255  # reported, not touched
     assert ap.arm() is True
 
 
-def test_required_failsafes_refuse_arming_naming_the_parameter(vehicle: MavlinkVehicle,
-                                                               made: list[MavlinkAutopilot]) -> None:
+def test_required_failsafes_refuse_arming_naming_the_parameter(
+    vehicle: MavlinkVehicle, made: list[MavlinkAutopilot]
+) -> None:
     ap = adapter(vehicle, made, require_vehicle_failsafes=True)
     assert ap.arm() is False
     assert ap.last_refusal.startswith("vehicle pre-flight check: FS_GCS_ENABLE = 0")
     assert "set SYSID_MYGCS = 245" in ap.last_refusal and "set FENCE_ENABLE = 1" in ap.last_refusal
     assert not vehicle.snapshot().armed and vehicle.snapshot().mode == "STABILIZE"  # nothing was touched
     # someone fixes the vehicle (a ground station's PARAM_SET): the next arm reads again and flies
-    for name, value in (("FS_GCS_ENABLE", 1), ("SYSID_MYGCS", 245), ("FENCE_ENABLE", 1), ("BATT_FS_LOW_ACT", 2)):
+    for name, value in (
+        ("FS_GCS_ENABLE", 1),
+        ("SYSID_MYGCS", 245),
+        ("FENCE_ENABLE", 1),
+        ("BATT_FS_LOW_ACT", 2),
+    ):
         ap.set_param(name, value)
     assert ap.arm() is True and ap.vehicle_findings == []
 
 
-@pytest.mark.parametrize("vehicle", [{"gcs_sysid_param": "MAV_GCS_SYSID", "params": {"GUID_TIMEOUT": 5.0,
-                                                                                       "BATT_LOW_VOLT": 0.0}}],
-                         indirect=True)
-def test_configure_vehicle_writes_what_is_wrong(vehicle: MavlinkVehicle, made: list[MavlinkAutopilot]) -> None:
+@pytest.mark.parametrize(
+    "vehicle",
+    [{"gcs_sysid_param": "MAV_GCS_SYSID", "params": {"GUID_TIMEOUT": 5.0, "BATT_LOW_VOLT": 0.0}}],
+    indirect=True,
+)
+def test_configure_vehicle_writes_what_is_wrong(
+    vehicle: MavlinkVehicle, made: list[MavlinkAutopilot]
+) -> None:
     ap = adapter(vehicle, made, configure_vehicle=True, require_vehicle_failsafes=True, cells=4)
     assert ap.vehicle_findings == []
     assert vehicle.param("FS_GCS_ENABLE") == 1 and vehicle.param("MAV_GCS_SYSID") == 245  # Copter 4.7's name
     assert vehicle.param("GUID_TIMEOUT") == 3.0 and vehicle.param("FENCE_ENABLE") == 1
     assert vehicle.param("BATT_FS_LOW_ACT") == 2 and vehicle.param("BATT_LOW_VOLT") == pytest.approx(13.6)
     sets = {r.fields["param_id"] for r in vehicle.received_of("PARAM_SET")}
-    assert sets == {"FS_GCS_ENABLE", "MAV_GCS_SYSID", "GUID_TIMEOUT", "FENCE_ENABLE", "BATT_FS_LOW_ACT",
-                    "BATT_LOW_VOLT"}
+    assert sets == {
+        "FS_GCS_ENABLE",
+        "MAV_GCS_SYSID",
+        "GUID_TIMEOUT",
+        "FENCE_ENABLE",
+        "BATT_FS_LOW_ACT",
+        "BATT_LOW_VOLT",
+    }
     assert ap.arm() is True
 
 
 @pytest.mark.parametrize("vehicle", [{"params": {"BATT_MONITOR": 0}}], indirect=True)
-def test_what_the_adapter_cannot_set_still_refuses(vehicle: MavlinkVehicle, made: list[MavlinkAutopilot]) -> None:
+def test_what_the_adapter_cannot_set_still_refuses(
+    vehicle: MavlinkVehicle, made: list[MavlinkAutopilot]
+) -> None:
     ap = adapter(vehicle, made, configure_vehicle=True, require_vehicle_failsafes=True)
     assert [f.param for f in ap.vehicle_findings] == ["BATT_MONITOR"]
     assert ap.arm() is False and "BATT_MONITOR = 0" in ap.last_refusal
     assert ap.read_params(["NO_SUCH_PARAM"]) == {}  # ArduPilot does not answer: left out, not invented
 
 
-def test_without_the_connect_check_arming_still_checks_when_required(vehicle: MavlinkVehicle,
-                                                                    made: list[MavlinkAutopilot]) -> None:
+def test_without_the_connect_check_arming_still_checks_when_required(
+    vehicle: MavlinkVehicle, made: list[MavlinkAutopilot]
+) -> None:
     ap = adapter(vehicle, made, check_vehicle=False, require_vehicle_failsafes=True)
     assert ap.vehicle_findings == [] and not vehicle.received_of("PARAM_REQUEST_READ")
     assert ap.arm() is False  # required: checked at arm time

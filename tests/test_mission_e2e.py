@@ -46,15 +46,24 @@ def mc(probe: Probe, state: int, agent: str = "alpha", timeout: float = 15, sinc
     return msg
 
 
-def hlc(probe: Probe, state: int, agent: str = "alpha", timeout: float = 15, since: int = 0) -> dict[str, Any]:
+def hlc(
+    probe: Probe, state: int, agent: str = "alpha", timeout: float = 15, since: int = 0
+) -> dict[str, Any]:
     msg = probe.wait(f"{agent}/HLC_STATE", "hlc_state_t", timeout=timeout, since=since, state=state)
     assert msg is not None, f"{agent} HLC never reached state {state}"
     return msg
 
 
-def command(probe: Probe, cmd: int, seq: int, agent: str = "alpha", channel: str | None = None, **extra: Any) -> None:
-    probe.publish(channel or f"{agent}/OPERATOR_CMD", "operator_cmd_t",
-                  header={"seq": seq, "agent": "test-op"}, command=cmd, **extra)
+def command(
+    probe: Probe, cmd: int, seq: int, agent: str = "alpha", channel: str | None = None, **extra: Any
+) -> None:
+    probe.publish(
+        channel or f"{agent}/OPERATOR_CMD",
+        "operator_cmd_t",
+        header={"seq": seq, "agent": "test-op"},
+        command=cmd,
+        **extra,
+    )
 
 
 def telemetry(probe: Probe, agent: str = "alpha", since: int = 0, **where: Any) -> dict[str, Any]:
@@ -137,7 +146,9 @@ def test_velocity_failsafes(launch: Callable[..., AgentProcesses], probe: Probe)
     assert agent.alive("hlc")
 
 
-def test_arming_refused_returns_to_standby_with_an_error(launch: Callable[..., AgentProcesses], probe: Probe) -> None:
+def test_arming_refused_returns_to_standby_with_an_error(
+    launch: Callable[..., AgentProcesses], probe: Probe
+) -> None:
     launch(sim={"refuse_arm": True})
     mc(probe, M.STANDBY)
     command(probe, O.TAKEOFF, seq=1)
@@ -200,7 +211,9 @@ def test_pilot_takeover_then_landing(launch: Callable[..., AgentProcesses], prob
     mc(probe, M.STANDBY, since=probe.mark(), timeout=20)
 
 
-def test_mc_restart_mid_flight_resyncs_without_commands(launch: Callable[..., AgentProcesses], probe: Probe) -> None:
+def test_mc_restart_mid_flight_resyncs_without_commands(
+    launch: Callable[..., AgentProcesses], probe: Probe
+) -> None:
     agent = launch()
     mc(probe, M.STANDBY)
     command(probe, O.TAKEOFF, seq=1)

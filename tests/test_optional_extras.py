@@ -27,16 +27,27 @@ REPO = Path(__file__).resolve().parents[1]
 
 def antalate_without(module: str, *argv: str, **kw: object) -> subprocess.Popen[str]:
     """``antalate ARGV`` in a fresh interpreter in which ``import MODULE`` fails."""
-    code = (f"import sys; sys.modules[{module!r}] = None; from antalate_lcm.cli import main; "
-            f"sys.exit(main({list(argv)!r}))")
-    return subprocess.Popen([sys.executable, "-c", code], cwd=REPO, text=True, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, **kw)  # type: ignore[call-overload]
+    code = (
+        f"import sys; sys.modules[{module!r}] = None; from antalate_lcm.cli import main; "
+        f"sys.exit(main({list(argv)!r}))"
+    )
+    return subprocess.Popen(
+        [sys.executable, "-c", code],
+        cwd=REPO,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        **kw,
+    )  # type: ignore[call-overload]
 
 
 def tello_config(tmp_path: Path) -> Path:
-    doc = {"agent": {"name": "tello-1"}, "buses": {"lan": "memq://"},
-           "security": {"swarm_key": "extras-test-key", "state_dir": str(tmp_path / "state")},
-           "hlc": {"autopilot": "tello", "autopilot_params": {"host": "127.0.0.1"}}}
+    doc = {
+        "agent": {"name": "tello-1"},
+        "buses": {"lan": "memq://"},
+        "security": {"swarm_key": "extras-test-key", "state_dir": str(tmp_path / "state")},
+        "hlc": {"autopilot": "tello", "autopilot_params": {"host": "127.0.0.1"}},
+    }
     path = tmp_path / "tello.toml"
     path.write_text(to_toml(doc))
     return path
@@ -53,7 +64,9 @@ def test_plot_without_matplotlib_says_which_extra_to_install(tmp_path: Path) -> 
     assert not (tmp_path / "flight.png").exists()
 
 
-def test_tello_connect_without_djitellopy_says_which_extra_to_install(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_tello_connect_without_djitellopy_says_which_extra_to_install(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     monkeypatch.setitem(sys.modules, "djitellopy", None)
     ap = TelloAutopilot({"host": "127.0.0.1"})
     with pytest.raises(AutopilotError) as err:

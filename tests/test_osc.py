@@ -42,7 +42,14 @@ def make_osc(
         {
             "agent": {"name": "alpha"},
             "buses": {"lan": "memq://"},
-            "osc": {"enabled": True, "server": server, "rate": 20.0, "timeout": 0.5, "max_backoff": 0.5, **osc},
+            "osc": {
+                "enabled": True,
+                "server": server,
+                "rate": 20.0,
+                "timeout": 0.5,
+                "max_backoff": 0.5,
+                **osc,
+            },
             "security": security or {},
         }
     )
@@ -69,7 +76,9 @@ def feed_state(ctx: Context, lat: float = 32.0, heading: float = 0.0) -> None:
 
 @pytest.fixture
 def station(tmp_path: Path) -> Iterator[StationServer]:
-    settings = StationSettings(db_path=str(tmp_path / "station.sqlite"), range_m=100, fov_deg=60, api_keys=API_KEYS)
+    settings = StationSettings(
+        db_path=str(tmp_path / "station.sqlite"), range_m=100, fov_deg=60, api_keys=API_KEYS
+    )
     with StationServer(settings) as srv:
         yield srv
 
@@ -79,17 +88,22 @@ def test_reports_get_a_token_and_deliver_commands_once(station: StationServer) -
     try:
         feed_state(ctx)
         assert wait_for(lambda: node.token, 5)
+
         def listed() -> list[dict[str, Any]]:
             return list(httpx.get(f"{station.url}/api/agents", headers=AUTH).json())
 
         assert wait_for(lambda: any(a.get("mc_state") == "MISSION" for a in listed()), 5), listed()
-        r = httpx.post(f"{station.url}/api/commands", json={"command": "RTL", "target": "alpha"}, headers=AUTH)
+        r = httpx.post(
+            f"{station.url}/api/commands", json={"command": "RTL", "target": "alpha"}, headers=AUTH
+        )
         assert r.status_code == 200, r.text
         seq = r.json()["seq"]
         assert wait_for(lambda: got["cmd"], 5)
         cmd = got["cmd"][0]
         assert cmd.command == operator_cmd_t.RTL and cmd.header.seq == seq and cmd.target == "alpha"
-        httpx.post(f"{station.url}/api/commands", json={"direction": {"azimuth": 90, "speed": 1.5}}, headers=AUTH)
+        httpx.post(
+            f"{station.url}/api/commands", json={"direction": {"azimuth": 90, "speed": 1.5}}, headers=AUTH
+        )
         assert wait_for(lambda: got["dir"], 5)
         d = got["dir"][0]
         assert d.active and d.azimuth == 90 and d.speed == 1.5
@@ -130,8 +144,14 @@ class _Garbage(http.server.BaseHTTPRequestHandler):
         self.rfile.read(int(self.headers.get("Content-Length", 0)))
         body, status = {
             "bad_json": (b"{not json", 200),
-            "wrong_fields": (json.dumps({"token": 5, "operator_cmd": {"command": "FLIP", "seq": 1}}).encode(), 200),
-            "nan": (b'{"token": "t", "direction_cmd": {"active": true, "azimuth": NaN, "speed": 1, "seq": 1}}', 200),
+            "wrong_fields": (
+                json.dumps({"token": 5, "operator_cmd": {"command": "FLIP", "seq": 1}}).encode(),
+                200,
+            ),
+            "nan": (
+                b'{"token": "t", "direction_cmd": {"active": true, "azimuth": NaN, "speed": 1, "seq": 1}}',
+                200,
+            ),
             "huge": (json.dumps({"token": "t", "pad": "x" * 200_000}).encode(), 200),
             "status": (b'{"detail": "boom"}', 500),
             "html": (b"<html>proxy error</html>", 502),
@@ -244,10 +264,12 @@ def liar() -> Iterator[http.server.ThreadingHTTPServer]:
 KEY = generate_key()
 
 
-def signed_cmd(command: str = "LAND", *, target: str = "alpha", age: float = 0.0, key: str = KEY,
-               seq: int = 7) -> dict[str, Any]:
-    msg = build_operator_cmd(command, target=target, sender="console", seq=seq,
-                             utime=int((time.time() - age) * 1e6), key=key)
+def signed_cmd(
+    command: str = "LAND", *, target: str = "alpha", age: float = 0.0, key: str = KEY, seq: int = 7
+) -> dict[str, Any]:
+    msg = build_operator_cmd(
+        command, target=target, sender="console", seq=seq, utime=int((time.time() - age) * 1e6), key=key
+    )
     return operator_cmd_wire(msg)
 
 
@@ -263,15 +285,27 @@ def test_a_lying_station_cannot_make_up_retarget_or_replay_commands(
     other_swarm = signed_cmd("TAKEOFF", key=generate_key(), seq=12)
     unsigned = {"command": "TAKEOFF", "seq": 13}
     unsigned_dir = {"active": True, "azimuth": 90.0, "speed": 5.0, "seq": 14}
-    liar.replies = [{"token": "t", "operator_cmd": c} for c in (  # type: ignore[attr-defined]
-        unsigned, forged, tampered, retargeted, stale, other_swarm, good, good)]
+    liar.replies = [
+        {"token": "t", "operator_cmd": c}
+        for c in (  # type: ignore[attr-defined]
+            unsigned,
+            forged,
+            tampered,
+            retargeted,
+            stale,
+            other_swarm,
+            good,
+            good,
+        )
+    ]
     liar.replies.append({"token": "t", "direction_cmd": unsigned_dir})  # type: ignore[attr-defined]
     node, ctx, got = make_osc(f"http://127.0.0.1:{liar.server_address[1]}", security={"swarm_key": KEY})
     try:
         assert wait_for(lambda: not liar.replies and node.reports_ok >= 10, 10)  # type: ignore[attr-defined]
         time.sleep(0.3)
-        assert [(m.header.seq, m.header.agent, m.command) for m in got["cmd"]] == \
-            [(7, "console", operator_cmd_t.LAND)], "only the operator's own command, once"
+        assert [(m.header.seq, m.header.agent, m.command) for m in got["cmd"]] == [
+            (7, "console", operator_cmd_t.LAND)
+        ], "only the operator's own command, once"
         assert got["cmd"][0].header.mac == bytes.fromhex(good["mac"]), "published exactly as signed"
         assert got["dir"] == []
         assert node.dropped == {"unsigned": 2, "forged": 3, "retargeted": 1, "stale": 1, "replayed": 1}
@@ -315,8 +349,9 @@ def test_out_of_range_replies_are_rejected_with_a_reason(reply: dict[str, Any], 
 
 
 def test_registration_with_proof_and_token_file(tmp_path: Path) -> None:
-    settings = StationSettings(db_path=str(tmp_path / "s.sqlite"), api_keys=API_KEYS,
-                               registration_key=registration_key(KEY))
+    settings = StationSettings(
+        db_path=str(tmp_path / "s.sqlite"), api_keys=API_KEYS, registration_key=registration_key(KEY)
+    )
     token_file = tmp_path / "osc" / "alpha.token"
     with StationServer(settings) as srv:
         node, ctx, _ = make_osc(srv.url, security={"swarm_key": KEY}, token_file=str(token_file))
@@ -395,11 +430,50 @@ def _make_tls(tmp: Path) -> tuple[Path, Path, Path]:
     def run(*args: str) -> None:
         subprocess.run(["openssl", *args], check=True, capture_output=True)
 
-    run("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", str(ca_key), "-out", str(ca), "-days", "2",
-        "-subj", "/CN=antalate test CA")
-    run("req", "-newkey", "rsa:2048", "-nodes", "-keyout", str(key), "-out", str(csr), "-subj", "/CN=127.0.0.1")
-    run("x509", "-req", "-in", str(csr), "-CA", str(ca), "-CAkey", str(ca_key), "-CAcreateserial",
-        "-out", str(cert), "-days", "2", "-extfile", str(ext))
+    run(
+        "req",
+        "-x509",
+        "-newkey",
+        "rsa:2048",
+        "-nodes",
+        "-keyout",
+        str(ca_key),
+        "-out",
+        str(ca),
+        "-days",
+        "2",
+        "-subj",
+        "/CN=antalate test CA",
+    )
+    run(
+        "req",
+        "-newkey",
+        "rsa:2048",
+        "-nodes",
+        "-keyout",
+        str(key),
+        "-out",
+        str(csr),
+        "-subj",
+        "/CN=127.0.0.1",
+    )
+    run(
+        "x509",
+        "-req",
+        "-in",
+        str(csr),
+        "-CA",
+        str(ca),
+        "-CAkey",
+        str(ca_key),
+        "-CAcreateserial",
+        "-out",
+        str(cert),
+        "-days",
+        "2",
+        "-extfile",
+        str(ext),
+    )
     return ca, cert, key
 
 
@@ -435,8 +509,13 @@ def test_tls_station_and_osc_with_a_ca_file(tmp_path: Path) -> None:
 
 
 def test_a_missing_ca_file_is_a_config_error(tmp_path: Path) -> None:
-    cfg = parse_config({"agent": {"name": "alpha"}, "buses": {"lan": "memq://"},
-                        "osc": {"enabled": True, "server": "https://127.0.0.1:1", "ca_file": str(tmp_path / "no.pem")}})
+    cfg = parse_config(
+        {
+            "agent": {"name": "alpha"},
+            "buses": {"lan": "memq://"},
+            "osc": {"enabled": True, "server": "https://127.0.0.1:1", "ca_file": str(tmp_path / "no.pem")},
+        }
+    )
     ctx = Context(Bus(cfg.buses), Executor())
     with pytest.raises(ConfigError, match="osc.ca_file"):
         OscNode(cfg, ctx)
@@ -451,8 +530,11 @@ def test_a_signed_command_through_the_station_flies_a_real_agent(
     netns: NetNamespace, probe: Probe, tmp_path: Path
 ) -> None:
     """Station, agent (MC, HLC, OSC) and `antalate command` as separate processes on real multicast."""
-    api_key, swarm_file, key_file = "antk_e2e-operator-key-0123456789abcdefghijklmn", tmp_path / "swarm.key", \
-        tmp_path / "api.key"
+    api_key, swarm_file, key_file = (
+        "antk_e2e-operator-key-0123456789abcdefghijklmn",
+        tmp_path / "swarm.key",
+        tmp_path / "api.key",
+    )
     swarm_file.write_text(KEY)
     key_file.write_text(api_key)
     station_cfg = tmp_path / "station.toml"
@@ -462,12 +544,26 @@ def test_a_signed_command_through_the_station_flies_a_real_agent(
     )
     station_log = open(tmp_path / "station.log", "w")  # noqa: SIM115 - closed below
     netns.antalate("station", "--config", str(station_cfg), stdout=station_log, stderr=subprocess.STDOUT)
-    agent = AgentProcesses(netns, tmp_path, agent_config(
-        "alpha", security={"swarm_key": KEY}, osc={"enabled": True, "server": "http://127.0.0.1:8080", "rate": 5.0},
-    ))
+    agent = AgentProcesses(
+        netns,
+        tmp_path,
+        agent_config(
+            "alpha",
+            security={"swarm_key": KEY},
+            osc={"enabled": True, "server": "http://127.0.0.1:8080", "rate": 5.0},
+        ),
+    )
     agent.start("agent")
-    base = [sys.executable, "-m", "antalate_lcm.cli", "command", "--station", "http://127.0.0.1:8080",
-            "--api-key-file", str(key_file)]
+    base = [
+        sys.executable,
+        "-m",
+        "antalate_lcm.cli",
+        "command",
+        "--station",
+        "http://127.0.0.1:8080",
+        "--api-key-file",
+        str(key_file),
+    ]
     try:
         assert probe.wait("alpha/MC_STATE", "mc_state_t", timeout=20, state=mc_state_t.STANDBY)
 

@@ -32,7 +32,9 @@ def _before(msgs: list[dict[str, Any]], utime: int) -> list[dict[str, Any]]:
     return [m for m in msgs if m["header"]["utime"] < utime]
 
 
-def test_an_in_process_agent_never_hears_spoofed_internal_topics(netns: NetNamespace, probe: Probe, tmp_path: Path) -> None:
+def test_an_in_process_agent_never_hears_spoofed_internal_topics(
+    netns: NetNamespace, probe: Probe, tmp_path: Path
+) -> None:
     agent = AgentProcesses(netns, tmp_path, agent_config("alpha"))  # no key at all
     try:
         agent.start("agent")
@@ -42,9 +44,13 @@ def test_an_in_process_agent_never_hears_spoofed_internal_topics(netns: NetNames
         _spoof(probe)
         # Sync: an operator command sent after the spoofs (unsigned is fine without a key). Once the MC
         # acknowledges it, the spoofs, delivered earlier on the same socket, have had every chance.
-        probe.publish("SWARM/OPERATOR_CMD", "operator_cmd_t",
-                      header={"utime": int(time.time() * 1e6), "agent": "operator", "seq": 78},
-                      command=operator_cmd_t.TAKEOFF, altitude=0.0)
+        probe.publish(
+            "SWARM/OPERATOR_CMD",
+            "operator_cmd_t",
+            header={"utime": int(time.time() * 1e6), "agent": "operator", "seq": 78},
+            command=operator_cmd_t.TAKEOFF,
+            altitude=0.0,
+        )
         ack = probe.wait("alpha/MC_STATE", "mc_state_t", timeout=10, since=mark, last_command_seq=78)
         assert ack is not None, agent.log("agent")
         t = ack["header"]["utime"]
@@ -60,7 +66,9 @@ def test_an_in_process_agent_never_hears_spoofed_internal_topics(netns: NetNames
         agent.stop()
 
 
-def test_the_same_spoof_grounds_separate_insecure_processes(netns: NetNamespace, probe: Probe, tmp_path: Path) -> None:
+def test_the_same_spoof_grounds_separate_insecure_processes(
+    netns: NetNamespace, probe: Probe, tmp_path: Path
+) -> None:
     """The control for the test above: with each node in its own process and `insecure = true`,
     one spoofed hlc_state_t LLC_DOWN does put the MC in ERROR (what the refusal to start prevents)."""
     agent = AgentProcesses(netns, tmp_path, agent_config("alpha", security={"insecure": True}))
@@ -86,9 +94,13 @@ def test_a_separate_node_without_a_key_refuses_to_start(netns: NetNamespace, tmp
     assert "Traceback" not in log
 
 
-def test_signed_separate_processes_fly_and_ignore_unsigned_spoofs(netns: NetNamespace, probe: Probe, tmp_path: Path) -> None:
+def test_signed_separate_processes_fly_and_ignore_unsigned_spoofs(
+    netns: NetNamespace, probe: Probe, tmp_path: Path
+) -> None:
     key = "multicast-test-key"
-    agent = AgentProcesses(netns, tmp_path, agent_config("alpha", security={"swarm_key": key, "state_dir": str(tmp_path)}))
+    agent = AgentProcesses(
+        netns, tmp_path, agent_config("alpha", security={"swarm_key": key, "state_dir": str(tmp_path)})
+    )
     try:
         agent.start("hlc")
         agent.start("mc")
@@ -96,14 +108,24 @@ def test_signed_separate_processes_fly_and_ignore_unsigned_spoofs(netns: NetName
         mark = probe.mark()
         _spoof(probe)
         # the MC republishes its state at 5 Hz: a few periods after the spoofs, still STANDBY, and it said why
-        assert wait_for(lambda: "unsigned message" in agent.log("mc") and "unsigned message" in agent.log("hlc"), 10)
+        assert wait_for(
+            lambda: "unsigned message" in agent.log("mc") and "unsigned message" in agent.log("hlc"), 10
+        )
         later = probe.mark()
         assert probe.wait("alpha/MC_STATE", "mc_state_t", timeout=5, since=later)
         assert probe.wait("alpha/HLC_STATE", "hlc_state_t", timeout=5, since=later), agent.log("hlc")
         # the genuine messages are the signed ones (the spoofs carry no MAC; a genuine seq may be 1 too)
-        states = {m["state"] for m in probe.history("alpha/MC_STATE", "mc_state_t", since=mark) if m["header"]["mac_len"] > 0}
+        states = {
+            m["state"]
+            for m in probe.history("alpha/MC_STATE", "mc_state_t", since=mark)
+            if m["header"]["mac_len"] > 0
+        }
         assert states == {M.STANDBY}
-        hlc = {m["state"] for m in probe.history("alpha/HLC_STATE", "hlc_state_t", since=mark) if m["header"]["mac_len"] > 0}
+        hlc = {
+            m["state"]
+            for m in probe.history("alpha/HLC_STATE", "hlc_state_t", since=mark)
+            if m["header"]["mac_len"] > 0
+        }
         assert hlc == {H.READY}
     finally:
         agent.stop()

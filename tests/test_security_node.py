@@ -44,8 +44,14 @@ KEY = "node-test-swarm-key"
 AGENT = "alpha"
 SWARM_BMA = {
     "name": "swarm",
-    "behaviors": [{"plugin": "dovrat_swarm", "activate_on": ["MISSION"], "tick_hz": 20.0,
-                   "params": {"forward_speed": 1.0, "detection_source": "payload"}}],
+    "behaviors": [
+        {
+            "plugin": "dovrat_swarm",
+            "activate_on": ["MISSION"],
+            "tick_hz": 20.0,
+            "params": {"forward_speed": 1.0, "detection_source": "payload"},
+        }
+    ],
 }
 
 
@@ -79,7 +85,9 @@ class Swarm:
         node.stop()
         self.nodes.remove(node)
 
-    def send(self, channel: str, msg: Any, *, agent: str = AGENT, key: str = "", utime: float | None = None) -> bytes:
+    def send(
+        self, channel: str, msg: Any, *, agent: str = AGENT, key: str = "", utime: float | None = None
+    ) -> bytes:
         """What an attacker puts on the wire: any header, signed with ``key`` if given."""
         msg.header.utime = int((time.time() if utime is None else utime) * 1e6)
         msg.header.agent, msg.header.seq = agent, 4242
@@ -164,8 +172,14 @@ def test_spoofed_hlc_state_llc_down_does_not_ground_the_mc() -> None:
         s.send(f"{AGENT}/HLC_STATE", down, key="guessed-key")
         # a peer with the swarm key cannot speak for another agent's HLC either
         s.send(f"{AGENT}/HLC_STATE", down, key=KEY, agent="beta")
-        assert wait_for(lambda: rejected(mc, Reason.UNSIGNED)() and rejected(mc, Reason.FORGED)()
-                        and rejected(mc, Reason.WRONG_SENDER)(), 5)
+        assert wait_for(
+            lambda: (
+                rejected(mc, Reason.UNSIGNED)()
+                and rejected(mc, Reason.FORGED)()
+                and rejected(mc, Reason.WRONG_SENDER)()
+            ),
+            5,
+        )
         assert mc.state is McState.STANDBY
 
 
@@ -184,13 +198,21 @@ def test_injected_and_replayed_velocity_commands_fly_nowhere() -> None:
             s.send(f"{AGENT}/VELOCITY_CMD", north)
         s.send(f"{AGENT}/VELOCITY_CMD", north, key=KEY, agent="beta")
         s.raw(f"{AGENT}/VELOCITY_CMD", wire[0])  # a genuine hover, replayed: no effect, but counted
-        assert wait_for(lambda: rejected(hlc, Reason.UNSIGNED)() == 10 and rejected(hlc, Reason.WRONG_SENDER)()
-                        and rejected(hlc, Reason.REPLAYED)(), 5)
+        assert wait_for(
+            lambda: (
+                rejected(hlc, Reason.UNSIGNED)() == 10
+                and rejected(hlc, Reason.WRONG_SENDER)()
+                and rejected(hlc, Reason.REPLAYED)()
+            ),
+            5,
+        )
         assert abs(hlc.autopilot.state().vn) < 0.5
         # the agent's own signed command is flown: the check above could have failed
         north_ok = velocity_cmd_t()
         north_ok.frame, north_ok.vx = velocity_cmd_t.NED, 1.0
-        assert wait_for(lambda: behavior.publish("VELOCITY_CMD", north_ok) and hlc.autopilot.state().vn > 0.5, 5)
+        assert wait_for(
+            lambda: behavior.publish("VELOCITY_CMD", north_ok) and hlc.autopilot.state().vn > 0.5, 5
+        )
 
 
 # ---------------------------------------------------------------------------------------------- replays
@@ -234,14 +256,18 @@ def test_an_older_direction_replayed_within_the_window_is_rejected() -> None:
         wire = s.capture("SWARM/DIRECTION_CMD")
         s.operator.publish("SWARM_DIRECTION_CMD", _direction(90.0, 1.0))
         s.operator.publish("SWARM_DIRECTION_CMD", _direction(270.0, 1.0))
-        assert wait_for(lambda: len(wire) == 2 and behavior.direction and behavior.direction.azimuth == 270.0, 5)
+        assert wait_for(
+            lambda: len(wire) == 2 and behavior.direction and behavior.direction.azimuth == 270.0, 5
+        )
         s.raw("SWARM/DIRECTION_CMD", wire[0])  # the older one, 90 deg, still inside the 5 s window
         assert wait_for(rejected(bma, Reason.REPLAYED), 5)
         assert behavior.direction.azimuth == 270.0
 
 
 # ---------------------------------------------------------------------------------------------- validation
-def test_infinite_and_nan_inputs_are_rejected_and_the_behavior_lives_on(caplog: pytest.LogCaptureFixture) -> None:
+def test_infinite_and_nan_inputs_are_rejected_and_the_behavior_lives_on(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
     with swarm(config(bma=[SWARM_BMA])) as s:
         bma = s.add(BmaNode(s.cfg, s.context, s.cfg.bma[0]))
         behavior = bma.behavior("dovrat_swarm")
@@ -292,8 +318,10 @@ def test_rejected_commands_are_logged_at_a_limited_rate(caplog: pytest.LogCaptur
 
 # ---------------------------------------------------------------------------------------------- exposure
 def _udpm_config(**security: Any) -> Config:
-    return parse_config({"agent": {"name": AGENT}, "buses": {"lan": "udpm://239.255.76.67:7667?ttl=0"},
-                         "security": security}, "agent.toml")
+    return parse_config(
+        {"agent": {"name": AGENT}, "buses": {"lan": "udpm://239.255.76.67:7667?ttl=0"}, "security": security},
+        "agent.toml",
+    )
 
 
 def test_a_node_refuses_internal_topics_on_a_network_bus_without_a_key() -> None:
@@ -346,7 +374,9 @@ def test_payload_json_reaches_the_behavior_when_it_is_right() -> None:
         payload.data = json.dumps({"detected": True, "count": 2}).encode()
         payload.size = len(payload.data)
         s.operator.publish("OPERATOR_PAYLOAD", payload, agent=AGENT)
-        assert wait_for(lambda: s.context.executor.run_sync(lambda: behavior.detections.detected(behavior.ctx.now)), 5)
+        assert wait_for(
+            lambda: s.context.executor.run_sync(lambda: behavior.detections.detected(behavior.ctx.now)), 5
+        )
 
 
 def test_a_rotation_accepts_the_previous_key_only_while_it_is_listed() -> None:

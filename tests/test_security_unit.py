@@ -112,7 +112,9 @@ def test_the_replay_memory_survives_a_restart(tmp_path: Path) -> None:
     assert restarted.check(_cmd(T0 + 0.1), "operator", "operator_cmd_t") is None
 
 
-def test_an_unreadable_replay_memory_is_reported_and_replaced(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+def test_an_unreadable_replay_memory_is_reported_and_replaced(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     path = tmp_path / "m.json"
     path.write_text("{half a fi")
     store = HighWaterStore(path)
@@ -124,7 +126,9 @@ def test_an_unreadable_replay_memory_is_reported_and_replaced(tmp_path: Path, ca
 
 
 # ---------------------------------------------------------------------------------------------- authenticator
-def test_authenticator_counts_each_reason_and_logs_one_line_per_reason(caplog: pytest.LogCaptureFixture) -> None:
+def test_authenticator_counts_each_reason_and_logs_one_line_per_reason(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
     logger = logging.getLogger("test.auth")
     auth = Authenticator(SecurityPolicy(KEY, (OLD,), 5.0), logger, wallclock=lambda: T0)
     caplog.set_level(logging.WARNING, logger="test.auth")
@@ -140,7 +144,11 @@ def test_authenticator_counts_each_reason_and_logs_one_line_per_reason(caplog: p
     problem = auth.check(state, "alpha/MC_STATE", expected_sender="alpha")
     assert problem is not None and problem.reason is Reason.WRONG_SENDER
     assert auth.rejected == {
-        Reason.UNSIGNED: 50, Reason.FORGED: 1, Reason.STALE: 1, Reason.REPLAYED: 1, Reason.WRONG_SENDER: 1,
+        Reason.UNSIGNED: 50,
+        Reason.FORGED: 1,
+        Reason.STALE: 1,
+        Reason.REPLAYED: 1,
+        Reason.WRONG_SENDER: 1,
     }
     assert auth.accepted == 1
     lines = [r.getMessage() for r in caplog.records]
@@ -219,7 +227,9 @@ def test_dovrat_payload_with_wrong_types_is_not_a_detection(body: str) -> None:
 
 
 def test_dovrat_payload_that_is_right_is_a_detection() -> None:
-    d = parse_detection_payload(b'{"detected": true, "count": 2, "nearest_range": 12.5, "nearest_bearing": -3}')
+    d = parse_detection_payload(
+        b'{"detected": true, "count": 2, "nearest_range": 12.5, "nearest_bearing": -3}'
+    )
     assert d is not None and d.count == 2 and d.nearest_range == 12.5
 
 

@@ -123,8 +123,13 @@ def test_autopilot_state_defaults_and_derivations() -> None:
 
 @pytest.mark.parametrize(
     "params, match",
-    [({"hom_lat": 1.0}, "hom_lat"), ({"tau": 0.0}, "tau"), ({"climb_rate": -1.0}, "climb_rate"),
-     ({"battery": 120.0}, "battery"), ({"time_scale": float("nan")}, "time_scale")],
+    [
+        ({"hom_lat": 1.0}, "hom_lat"),
+        ({"tau": 0.0}, "tau"),
+        ({"climb_rate": -1.0}, "climb_rate"),
+        ({"battery": 120.0}, "battery"),
+        ({"time_scale": float("nan")}, "time_scale"),
+    ],
 )
 def test_bad_params_raise(params: dict[str, Any], match: str) -> None:
     with pytest.raises(ValueError, match=match):
@@ -178,7 +183,9 @@ def test_velocity_response_is_first_order_with_time_constant() -> None:
 
 
 @pytest.mark.parametrize("frame, yaw_rate, tolerance", [(Frame.NED, 0.0, 1e-9), (Frame.BODY, 10.0, 0.05)])
-def test_integration_does_not_depend_on_the_polling_rate(frame: Frame, yaw_rate: float, tolerance: float) -> None:
+def test_integration_does_not_depend_on_the_polling_rate(
+    frame: Frame, yaw_rate: float, tolerance: float
+) -> None:
     """Exact for a constant NED set-point; a turning body frame differs by centimetres."""
     finals = []
     for poll in (0.01, 0.1, 1.0):
@@ -361,8 +368,13 @@ def test_link_loss_freezes_state_and_ages_the_link() -> None:
     s = sim.state()
     assert s.link_age == pytest.approx(2.5)
     assert (s.lat, s.lon, s.vn) == (before.lat, before.lon, before.vn)  # nothing new is heard
-    for call in (sim.arm, sim.land, sim.rtl, lambda: sim.takeoff(3.0),
-                 lambda: sim.set_velocity(0.0, 0.0, 0.0, 0.0, Frame.NED)):
+    for call in (
+        sim.arm,
+        sim.land,
+        sim.rtl,
+        lambda: sim.takeoff(3.0),
+        lambda: sim.set_velocity(0.0, 0.0, 0.0, 0.0, Frame.NED),
+    ):
         with pytest.raises(AutopilotError, match="link lost"):
             call()
     sim.set_link_loss(False)
@@ -378,8 +390,14 @@ def test_link_loss_from_the_start() -> None:
     assert s.connected and s.link_age == math.inf
 
 
-@pytest.mark.parametrize("mode, name, flight_mode", [("rtl", "RTL", FlightMode.RTL), ("land", "LAND", FlightMode.LANDING),
-                                                ("brake", "BRAKE", FlightMode.HOLD)])
+@pytest.mark.parametrize(
+    "mode, name, flight_mode",
+    [
+        ("rtl", "RTL", FlightMode.RTL),
+        ("land", "LAND", FlightMode.LANDING),
+        ("brake", "BRAKE", FlightMode.HOLD),
+    ],
+)
 def test_autopilot_failsafe_reports_its_reason_until_commanded_or_landed(
     mode: str, name: str, flight_mode: FlightMode
 ) -> None:
@@ -477,8 +495,12 @@ def test_battery_warning_at() -> None:
 
 @pytest.mark.parametrize(
     "params, match",
-    [({"failsafe_mode": "loiter"}, "failsafe_mode"), ({"link_loss_for": -1.0}, "link_loss_for"),
-     ({"cells": -2}, "cells"), ({"voltage_sag": float("nan")}, "voltage_sag")],
+    [
+        ({"failsafe_mode": "loiter"}, "failsafe_mode"),
+        ({"link_loss_for": -1.0}, "link_loss_for"),
+        ({"cells": -2}, "cells"),
+        ({"voltage_sag": float("nan")}, "voltage_sag"),
+    ],
 )
 def test_bad_fault_params_raise(params: dict[str, Any], match: str) -> None:
     with pytest.raises(ValueError, match=match):
@@ -592,8 +614,11 @@ def test_unknown_name_lists_the_available_ones() -> None:
 
 @pytest.mark.parametrize(
     "target, match",
-    [("antalate_lcm.nope:Thing", "cannot load"), ("antalate_lcm.autopilot.sim:Nope", "cannot load"),
-     ("antalate_lcm.autopilot.base:AutopilotState", "not a subclass")],
+    [
+        ("antalate_lcm.nope:Thing", "cannot load"),
+        ("antalate_lcm.autopilot.sim:Nope", "cannot load"),
+        ("antalate_lcm.autopilot.base:AutopilotState", "not a subclass"),
+    ],
 )
 def test_bad_module_paths(target: str, match: str) -> None:
     with pytest.raises(UnknownAutopilotError, match=match):

@@ -209,7 +209,13 @@ def test_java_decodes_what_python_encodes(java_cp: str, tmp_path: Path) -> None:
 
     # the two messages spelled out, as a reader of lcm-spy would see them
     tel = decoded["telemetry_t"]
-    assert tel["header"] == {"utime": 1_763_836_800_123_456, "agent": "alpha", "seq": 4242, "mac_len": 0, "mac": ""}
+    assert tel["header"] == {
+        "utime": 1_763_836_800_123_456,
+        "agent": "alpha",
+        "seq": 4242,
+        "mac_len": 0,
+        "mac": "",
+    }
     assert (tel["lat"], tel["lon"]) == (32.776664, 35.023056)
     assert (tel["alt"], tel["heading"], tel["vn"], tel["ve"], tel["vd"], tel["battery"]) == (
         12.5, 271.3, 1.25, -0.1, 0.0, 87.6,

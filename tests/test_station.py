@@ -67,18 +67,39 @@ def client(server: StationServer) -> Iterator[httpx.Client]:
         yield c
 
 
-def tel(lat: float, lon: float, heading: float = 0.0, agent: str | None = None, **extra: Any) -> dict[str, Any]:
-    t: dict[str, Any] = {"lat": lat, "lon": lon, "heading": heading, "alt": 10.0, "vn": 0.0, "ve": 0.0, "vd": 0.0,
-                         "battery": 90.0, "armed": True, "in_air": True, "mode": "SIM", **extra}
+def tel(
+    lat: float, lon: float, heading: float = 0.0, agent: str | None = None, **extra: Any
+) -> dict[str, Any]:
+    t: dict[str, Any] = {
+        "lat": lat,
+        "lon": lon,
+        "heading": heading,
+        "alt": 10.0,
+        "vn": 0.0,
+        "ve": 0.0,
+        "vd": 0.0,
+        "battery": 90.0,
+        "armed": True,
+        "in_air": True,
+        "mode": "SIM",
+        **extra,
+    }
     if agent is not None:
         t["agent"] = agent
     return t
 
 
-def report(c: httpx.Client, token: str | None = None, telemetry: dict[str, Any] | None = None,
-           **fields: Any) -> dict[str, Any]:
-    body = {"token": token, "mc_state": "MISSION", "hlc_state": "AIRBORNE", "telemetry": telemetry,
-            "feedback": None, **fields}
+def report(
+    c: httpx.Client, token: str | None = None, telemetry: dict[str, Any] | None = None, **fields: Any
+) -> dict[str, Any]:
+    body = {
+        "token": token,
+        "mc_state": "MISSION",
+        "hlc_state": "AIRBORNE",
+        "telemetry": telemetry,
+        "feedback": None,
+        **fields,
+    }
     r = c.post("/api/report", json=body)
     assert r.status_code == 200, r.text
     return r.json()
@@ -91,6 +112,7 @@ def detection(reply: dict[str, Any]) -> dict[str, Any]:
 
 
 # -- tokens ------------------------------------------------------------------------------------------
+
 
 def test_first_contact_gets_a_token_that_is_kept(client: httpx.Client) -> None:
     first = report(client, None, tel(*ORIGIN, agent="uav1"))
@@ -105,7 +127,9 @@ def test_first_contact_gets_a_token_that_is_kept(client: httpx.Client) -> None:
     agents = client.get("/api/agents").json()
     assert [a["name"] for a in agents] == ["uav1", "uav2"]
     assert all("token" not in a for a in agents), "tokens are secrets, never listed"
-    assert token not in client.get("/api/agents").text and other["token"] not in client.get("/api/agents").text
+    assert (
+        token not in client.get("/api/agents").text and other["token"] not in client.get("/api/agents").text
+    )
     uav1 = agents[0]
     assert uav1["mc_state"] == "MISSION" and uav1["hlc_state"] == "AIRBORNE" and not uav1["stale"]
     assert uav1["telemetry"]["lat"] == ORIGIN[0] and uav1["telemetry"]["battery"] == 90.0
@@ -113,7 +137,9 @@ def test_first_contact_gets_a_token_that_is_kept(client: httpx.Client) -> None:
 
 
 def test_unknown_token_is_401_and_never_adopted(client: httpx.Client) -> None:
-    r = client.post("/api/report", json={"token": "not-a-token-this-station-issued", "telemetry": tel(*ORIGIN)})
+    r = client.post(
+        "/api/report", json={"token": "not-a-token-this-station-issued", "telemetry": tel(*ORIGIN)}
+    )
     assert r.status_code == 401 and "unknown token" in r.json()["detail"]
     assert client.get("/api/agents").json() == []
 
@@ -127,6 +153,7 @@ def test_report_without_telemetry_registers_but_has_no_payload(client: httpx.Cli
 
 
 # -- commands ----------------------------------------------------------------------------------------
+
 
 def test_command_to_one_agent_is_delivered_once(client: httpx.Client) -> None:
     a = report(client, None, tel(*ORIGIN, agent="a"))["token"]
@@ -217,8 +244,10 @@ def test_commands_not_collected_in_time_expire(db_path: str) -> None:
 
 # -- peer detection ----------------------------------------------------------------------------------
 
-def register_peer(c: httpx.Client, dist: float, bearing: float, heading: float = 0.0,
-                  origin: tuple[float, float] = ORIGIN) -> tuple[float, float]:
+
+def register_peer(
+    c: httpx.Client, dist: float, bearing: float, heading: float = 0.0, origin: tuple[float, float] = ORIGIN
+) -> tuple[float, float]:
     lat, lon = place(*origin, dist, bearing)
     report(c, None, tel(lat, lon, heading))
     return lat, lon
@@ -227,15 +256,16 @@ def register_peer(c: httpx.Client, dist: float, bearing: float, heading: float =
 @pytest.mark.parametrize(
     ("heading", "dist", "bearing", "expected_rel"),
     [
-        (0.0, 50.0, 10.0, 10.0),      # in front, a little right
-        (90.0, 80.0, 60.5, -29.5),    # near the left edge (fov 60 → ±30), just inside
-        (350.0, 40.0, 10.0, 20.0),    # heading wraps around north
+        (0.0, 50.0, 10.0, 10.0),  # in front, a little right
+        (90.0, 80.0, 60.5, -29.5),  # near the left edge (fov 60 → ±30), just inside
+        (350.0, 40.0, 10.0, 20.0),  # heading wraps around north
         (10.0, 40.0, 350.0, -20.0),
-        (200.0, 99.5, 200.0, 0.0),    # just inside the range, dead ahead
+        (200.0, 99.5, 200.0, 0.0),  # just inside the range, dead ahead
     ],
 )
-def test_peer_inside_the_front_sector(client: httpx.Client, heading: float, dist: float, bearing: float,
-                                      expected_rel: float) -> None:
+def test_peer_inside_the_front_sector(
+    client: httpx.Client, heading: float, dist: float, bearing: float, expected_rel: float
+) -> None:
     register_peer(client, dist, bearing)
     d = detection(report(client, None, tel(*ORIGIN, heading)))
     assert d["detected"] is True and d["count"] == 1
@@ -246,14 +276,16 @@ def test_peer_inside_the_front_sector(client: httpx.Client, heading: float, dist
 @pytest.mark.parametrize(
     ("heading", "dist", "bearing"),
     [
-        (0.0, 30.0, 180.0),    # behind
-        (0.0, 101.0, 0.0),     # dead ahead but out of range
-        (0.0, 50.0, 30.5),     # just outside the right edge
-        (0.0, 50.0, -30.5),    # just outside the left edge
-        (350.0, 40.0, 30.0),   # relative +40 after the wrap
+        (0.0, 30.0, 180.0),  # behind
+        (0.0, 101.0, 0.0),  # dead ahead but out of range
+        (0.0, 50.0, 30.5),  # just outside the right edge
+        (0.0, 50.0, -30.5),  # just outside the left edge
+        (350.0, 40.0, 30.0),  # relative +40 after the wrap
     ],
 )
-def test_peer_outside_the_front_sector(client: httpx.Client, heading: float, dist: float, bearing: float) -> None:
+def test_peer_outside_the_front_sector(
+    client: httpx.Client, heading: float, dist: float, bearing: float
+) -> None:
     register_peer(client, dist, bearing)
     d = detection(report(client, None, tel(*ORIGIN, heading)))
     assert d == {"detected": False, "count": 0, "nearest_range": 0.0, "nearest_bearing": 0.0}
@@ -286,18 +318,22 @@ def test_stale_agents_are_not_detected(db_path: str) -> None:
 
 # -- persistence -------------------------------------------------------------------------------------
 
+
 def test_restart_with_the_same_database_keeps_agents_tokens_and_commands(db_path: str) -> None:
     settings = settings_for(db_path, stale_after_s=60.0)
     with StationServer(settings) as srv, operator_client(srv.url) as c:
         register_peer(c, 40.0, 0.0)
-        me = report(c, None, tel(*ORIGIN, 0.0, agent="me"), feedback={"content_type": "text/plain", "data": "hi"})
+        me = report(
+            c, None, tel(*ORIGIN, 0.0, agent="me"), feedback={"content_type": "text/plain", "data": "hi"}
+        )
         token = me["token"]
         seq = c.post("/api/commands", json={"command": "TAKEOFF", "target": "me"}).json()["seq"]
         before = c.get("/api/agents").json()
     with StationServer(settings) as srv, operator_client(srv.url) as c:
         after = c.get("/api/agents").json()
-        assert [(a["id"], a["name"], a["telemetry"]) for a in after] == \
-            [(a["id"], a["name"], a["telemetry"]) for a in before]
+        assert [(a["id"], a["name"], a["telemetry"]) for a in after] == [
+            (a["id"], a["name"], a["telemetry"]) for a in before
+        ]
         assert {a["name"]: a["pending_commands"] for a in after}["me"] == 1
         again = report(c, token, tel(*ORIGIN, 0.0))
         assert again["token"] == token
@@ -307,7 +343,9 @@ def test_restart_with_the_same_database_keeps_agents_tokens_and_commands(db_path
         seq2 = c.post("/api/commands", json={"command": "LAND"}).json()["seq"]
         assert seq2 > seq  # sequence numbers are never reused across restarts
     with sqlite3.connect(db_path) as conn:
-        rows = conn.execute("SELECT agent_id, lat, feedback_type, feedback_data FROM reports ORDER BY id").fetchall()
+        rows = conn.execute(
+            "SELECT agent_id, lat, feedback_type, feedback_data FROM reports ORDER BY id"
+        ).fetchall()
     assert len(rows) == 3  # every report is in the history, flushed on shutdown
     me_id = {a["name"]: a["id"] for a in before}["me"]
     assert rows[1] == (me_id, ORIGIN[0], "text/plain", "hi")
@@ -328,6 +366,7 @@ def test_memory_database_works(tmp_path: Path) -> None:
 
 # -- bad input -----------------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize(
     ("body", "status", "words"),
     [
@@ -344,7 +383,9 @@ def test_memory_database_works(tmp_path: Path) -> None:
         (b'{"feedback": {"data": "x"}}', 422, "feedback.content_type"),
     ],
 )
-def test_bad_reports_get_a_4xx_with_a_reason(client: httpx.Client, body: bytes, status: int, words: str) -> None:
+def test_bad_reports_get_a_4xx_with_a_reason(
+    client: httpx.Client, body: bytes, status: int, words: str
+) -> None:
     r = client.post("/api/report", content=body, headers={"content-type": "application/json"})
     assert r.status_code == status, r.text
     detail = r.json()["detail"]
@@ -409,15 +450,27 @@ def test_bad_json_command_is_422(client: httpx.Client) -> None:
 
 # -- protocol document and contracts ---------------------------------------------------------------------
 
+
 def test_openapi_document_is_served_and_committed_copy_is_current(client: httpx.Client) -> None:
     served = client.get("/openapi.json").json()
     report_op = served["paths"]["/api/report"]["post"]
-    assert report_op["requestBody"]["content"]["application/json"]["schema"]["$ref"].endswith("/ReportRequest")
+    assert report_op["requestBody"]["content"]["application/json"]["schema"]["$ref"].endswith(
+        "/ReportRequest"
+    )
     assert {"/api/report", "/api/agents", "/api/commands"} <= set(served["paths"])
-    for name in ("ReportRequest", "ReportReply", "OperatorCommand", "DirectionCommand", "Payload", "PeerDetection"):
+    for name in (
+        "ReportRequest",
+        "ReportReply",
+        "OperatorCommand",
+        "DirectionCommand",
+        "Payload",
+        "PeerDetection",
+    ):
         assert name in served["components"]["schemas"], name
     committed = json.loads((REPO / "docs" / "openapi.json").read_text())
-    assert committed == served, "docs/openapi.json is stale: python -m antalate_lcm.station.openapi > docs/openapi.json"
+    assert committed == served, (
+        "docs/openapi.json is stale: python -m antalate_lcm.station.openapi > docs/openapi.json"
+    )
 
 
 def _constants(cls: type) -> set[str]:
@@ -445,6 +498,7 @@ def test_telemetry_has_the_fields_of_telemetry_t() -> None:
 
 
 # -- settings and startup errors --------------------------------------------------------------------------
+
 
 def test_default_db_path_follows_xdg(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path))

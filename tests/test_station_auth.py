@@ -64,6 +64,7 @@ def register(url: str, name: str, *, key: str | None = SWARM_KEY, **extra: Any) 
 
 # -- operators: API keys and roles ---------------------------------------------------------------------
 
+
 def test_operator_endpoints_need_an_api_key(open_station: StationServer) -> None:
     url = open_station.url
     for method, path, body in (("GET", "/api/agents", None), ("POST", "/api/commands", {"command": "RTL"})):
@@ -88,6 +89,7 @@ def test_a_station_without_api_keys_answers_401_to_everyone(db_path: str) -> Non
 
 # -- tokens are secrets --------------------------------------------------------------------------------
 
+
 def test_tokens_are_never_listed_and_only_their_hash_is_stored(db_path: str) -> None:
     with StationServer(settings_for(db_path)) as srv:
         tokens = [register(srv.url, f"uav{i}", key=None).json()["token"] for i in range(3)]
@@ -96,7 +98,9 @@ def test_tokens_are_never_listed_and_only_their_hash_is_stored(db_path: str) -> 
         for tok in tokens:
             assert tok not in listing.text and tok not in queued.text
         assert all(set(a) >= {"id", "name"} and "token" not in a for a in listing.json())
-    raw = b"".join(p.read_bytes() for p in Path(db_path).parent.iterdir() if p.name.startswith("station.sqlite"))
+    raw = b"".join(
+        p.read_bytes() for p in Path(db_path).parent.iterdir() if p.name.startswith("station.sqlite")
+    )
     with sqlite3.connect(db_path) as conn:
         stored = dict(conn.execute("SELECT name, token_hash FROM agents").fetchall())
     for i, tok in enumerate(tokens):
@@ -112,6 +116,7 @@ def test_a_token_reports_only_for_its_own_name(open_station: StationServer) -> N
 
 
 # -- registration proves the swarm key -------------------------------------------------------------------
+
 
 def test_registration_needs_a_valid_fresh_unused_proof(keyed_station: StationServer) -> None:
     url = keyed_station.url
@@ -168,6 +173,7 @@ def test_unsigned_commands_are_refused_when_the_agents_hold_a_key(keyed_station:
 
 # -- rate limits -----------------------------------------------------------------------------------------
 
+
 def test_registrations_per_address_are_rate_limited(db_path: str) -> None:
     limits = RateLimits(registrations_per_minute=6.0, registration_burst=5)
     with StationServer(settings_for(db_path, rate_limits=limits)) as srv:
@@ -197,6 +203,7 @@ def test_requests_per_address_are_rate_limited(db_path: str) -> None:
 
 # -- signed commands travel untouched --------------------------------------------------------------------
 
+
 def test_a_signed_command_is_forwarded_field_for_field(keyed_station: StationServer) -> None:
     url = keyed_station.url
     token = register(url, "uav1").json()["token"]
@@ -216,8 +223,10 @@ def test_a_signed_command_is_forwarded_field_for_field(keyed_station: StationSer
 
 
 def test_a_signed_command_for_an_unknown_agent_is_404(keyed_station: StationServer) -> None:
-    with StationClient(keyed_station.url, OPERATOR_KEY, swarm_key=SWARM_KEY) as c, \
-            pytest.raises(StationClientError) as err:
+    with (
+        StationClient(keyed_station.url, OPERATOR_KEY, swarm_key=SWARM_KEY) as c,
+        pytest.raises(StationClientError) as err,
+    ):
         c.command("LAND", target="nobody")
     assert err.value.status == 404
 
@@ -233,19 +242,36 @@ def test_a_signed_command_for_an_unknown_agent_is_404(keyed_station: StationServ
     ],
 )
 def test_bad_signed_commands_get_422(open_station: StationServer, field: str, value: Any, words: str) -> None:
-    body = {"target": "", "utime": 1, "sender": "op", "seq": 1, "mac": "ab" * 32, "command": "TAKEOFF",
-            "altitude": 0.0, field: value}
+    body = {
+        "target": "",
+        "utime": 1,
+        "sender": "op",
+        "seq": 1,
+        "mac": "ab" * 32,
+        "command": "TAKEOFF",
+        "altitude": 0.0,
+        field: value,
+    }
     r = httpx.post(f"{open_station.url}/api/commands", json={"operator_cmd": body}, headers=AUTH)
     assert r.status_code == 422 and words in r.json()["detail"], r.text
 
 
 def test_signed_direction_must_not_need_wrapping(open_station: StationServer) -> None:
-    body = {"target": "", "utime": 1, "sender": "op", "seq": 1, "mac": "ab" * 32, "azimuth": 360.0, "speed": 1.0}
+    body = {
+        "target": "",
+        "utime": 1,
+        "sender": "op",
+        "seq": 1,
+        "mac": "ab" * 32,
+        "azimuth": 360.0,
+        "speed": 1.0,
+    }
     r = httpx.post(f"{open_station.url}/api/commands", json={"direction_cmd": body}, headers=AUTH)
     assert r.status_code == 422 and "azimuth" in r.json()["detail"]
 
 
 # -- the station's config file and keys ------------------------------------------------------------------
+
 
 def test_station_file_round_trip(tmp_path: Path) -> None:
     cfg = tmp_path / "station.toml"
@@ -269,15 +295,17 @@ def test_station_key_cli(tmp_path: Path) -> None:
     keyfile = tmp_path / "swarm.key"
     keyfile.write_text(SWARM_KEY + "\n")
     run = [sys.executable, "-m", "antalate_lcm.cli", "station-key"]
-    out = subprocess.run([*run, "registration", "--swarm-key-file", str(keyfile)], capture_output=True, text=True,
-                         check=True).stdout
+    out = subprocess.run(
+        [*run, "registration", "--swarm-key-file", str(keyfile)], capture_output=True, text=True, check=True
+    ).stdout
     assert f'registration_key = "{REG_KEY}"' in out and SWARM_KEY not in out
-    out = subprocess.run([*run, "api", "--name", "ci", "--role", "read-only"], capture_output=True, text=True,
-                         check=True).stdout
+    out = subprocess.run(
+        [*run, "api", "--name", "ci", "--role", "read-only"], capture_output=True, text=True, check=True
+    ).stdout
     key = next(w for w in out.split() if w.startswith("antk_"))
     assert f'sha256 = "{sha256_hex(key)}"' in out and 'role = "read-only"' in out
     cfg = tmp_path / "station.toml"
-    cfg.write_text(out[out.index("[[api_keys]]"):])
+    cfg.write_text(out[out.index("[[api_keys]]") :])
     assert load_station_file(cfg).settings.api_keys[0].sha256 == sha256_hex(key)
 
 
@@ -317,6 +345,7 @@ def test_station_cli_refuses_a_bad_config_or_tls_pair_before_listening(tmp_path:
     assert r.returncode == 2 and "station.registration_key" in r.stderr and "Traceback" not in r.stderr
     r = subprocess.run([*run, "--tls-cert", str(cfg)], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "--tls-key" in r.stderr
-    r = subprocess.run([*run, "--tls-cert", str(cfg), "--tls-key", str(cfg)], capture_output=True, text=True,
-                       timeout=60)
+    r = subprocess.run(
+        [*run, "--tls-cert", str(cfg), "--tls-key", str(cfg)], capture_output=True, text=True, timeout=60
+    )
     assert r.returncode == 2 and "cannot use TLS certificate" in r.stderr and "Traceback" not in r.stderr

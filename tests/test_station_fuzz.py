@@ -17,7 +17,9 @@ from typing import Any
 import httpx
 import pytest
 
-schemathesis = pytest.importorskip("schemathesis", reason="the fuzz needs schemathesis (pip install -e '.[dev]')")
+schemathesis = pytest.importorskip(
+    "schemathesis", reason="the fuzz needs schemathesis (pip install -e '.[dev]')"
+)
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
@@ -28,7 +30,10 @@ from tests.test_station import API_KEYS, AUTH, ORIGIN, tel  # noqa: E402
 
 EXAMPLES = 300  # per operation and mode (and for the raw bodies): about 2,100 requests in all
 FUZZ = settings(
-    max_examples=EXAMPLES, deadline=None, database=None, derandomize=True,
+    max_examples=EXAMPLES,
+    deadline=None,
+    database=None,
+    derandomize=True,
     suppress_health_check=list(HealthCheck),
 )
 
@@ -36,10 +41,14 @@ FUZZ = settings(
 @pytest.fixture(scope="module")
 def station(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[StationServer, list[str]]]:
     db = tmp_path_factory.mktemp("fuzz") / "station.sqlite"
-    limits = RateLimits(registrations_per_minute=None, reports_per_second=None, address_reports_per_second=None)
+    limits = RateLimits(
+        registrations_per_minute=None, reports_per_second=None, address_reports_per_second=None
+    )
     with StationServer(StationSettings(db_path=str(db), api_keys=API_KEYS, rate_limits=limits)) as srv:
         tokens = [
-            httpx.post(f"{srv.url}/api/report", json={"agent": f"keep{i}", "telemetry": tel(*ORIGIN)}).json()["token"]
+            httpx.post(f"{srv.url}/api/report", json={"agent": f"keep{i}", "telemetry": tel(*ORIGIN)}).json()[
+                "token"
+            ]
             for i in range(3)
         ]
         yield srv, tokens
@@ -66,7 +75,9 @@ def test_schema_fuzz_never_gets_a_5xx(
 ) -> None:
     srv, _ = station
     schema = schemathesis.openapi.from_dict(document())
-    generation = schemathesis.GenerationMode.POSITIVE if mode == "positive" else schemathesis.GenerationMode.NEGATIVE
+    generation = (
+        schemathesis.GenerationMode.POSITIVE if mode == "positive" else schemathesis.GenerationMode.NEGATIVE
+    )
     strategy = schema[path][method.upper()].as_strategy(generation_mode=generation)
     key = f"{method.upper()} {path} {mode}"
     SENT[key] = 0
@@ -97,7 +108,9 @@ def test_raw_report_bodies_never_get_a_5xx(station: tuple[StationServer, list[st
         @FUZZ
         @given(
             body=st.binary(max_size=300)
-            | st.builds(lambda d: json.dumps(d).encode(), st.dictionaries(st.sampled_from(_REPORT_KEYS), _JSON))
+            | st.builds(
+                lambda d: json.dumps(d).encode(), st.dictionaries(st.sampled_from(_REPORT_KEYS), _JSON)
+            )
             | st.builds(lambda d: json.dumps(d).encode(), _JSON),
             content_type=st.sampled_from([None, "application/json", "text/plain", "application/x+json; q=1"]),
         )

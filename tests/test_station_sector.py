@@ -49,17 +49,30 @@ def plane_range_bearing(lat: float, lon: float, lat2: float, lon2: float) -> tup
 
 # -- relative bearing ---------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize(
     ("azimuth", "heading", "expected"),
-    [(10, 350, 20), (350, 10, -20), (0, 0, 0), (180, 0, 180), (0, 180, 180), (359, 0, -1), (90, 270, 180),
-     (45, -315, 0), (720, 0, 0)],
+    [
+        (10, 350, 20),
+        (350, 10, -20),
+        (0, 0, 0),
+        (180, 0, 180),
+        (0, 180, 180),
+        (359, 0, -1),
+        (90, 270, 180),
+        (45, -315, 0),
+        (720, 0, 0),
+    ],
 )
-def test_relative_bearing_is_clockwise_and_in_half_open_range(azimuth: float, heading: float, expected: float) -> None:
+def test_relative_bearing_is_clockwise_and_in_half_open_range(
+    azimuth: float, heading: float, expected: float
+) -> None:
     assert relative_bearing(azimuth, heading) == pytest.approx(expected)
     assert -180 < relative_bearing(azimuth, heading) <= 180
 
 
 # -- one peer against the tangent plane ----------------------------------------------------------------
+
 
 @pytest.mark.parametrize("lat", [0.0, 32.8, -45.0, 70.0])
 def test_in_sector_range_and_bearing_match_the_tangent_plane(lat: float) -> None:
@@ -105,7 +118,9 @@ def test_heading_wraps_around_north() -> None:
     assert found.nearest_range == pytest.approx(40.0, abs=0.01)
     # and the mirror case: heading 10, peer at 350 → -20 (left)
     plat, plon = place(lat, lon, 40.0, 350.0)
-    assert detect(lat, lon, 10.0, [(plat, plon)], 100.0, 60.0).nearest_bearing == pytest.approx(-20.0, abs=0.01)
+    assert detect(lat, lon, 10.0, [(plat, plon)], 100.0, 60.0).nearest_bearing == pytest.approx(
+        -20.0, abs=0.01
+    )
 
 
 def test_no_peer_gives_the_zero_answer() -> None:
@@ -114,8 +129,10 @@ def test_no_peer_gives_the_zero_answer() -> None:
 
 # -- shortcuts and index against brute force --------------------------------------------------------
 
-def brute(lat: float, lon: float, heading: float, peers: list[tuple[float, float]], range_m: float, fov: float
-          ) -> Detection:
+
+def brute(
+    lat: float, lon: float, heading: float, peers: list[tuple[float, float]], range_m: float, fov: float
+) -> Detection:
     """`in_sector` on every peer: the definition `detect` must reproduce."""
     hits = []
     for plat, plon in peers:
@@ -129,9 +146,11 @@ def brute(lat: float, lon: float, heading: float, peers: list[tuple[float, float
 
 
 def same(a: Detection, b: Detection) -> bool:
-    return (a.detected, a.count) == (b.detected, b.count) and math.isclose(
-        a.nearest_range, b.nearest_range, abs_tol=1e-9
-    ) and math.isclose(a.nearest_bearing, b.nearest_bearing, abs_tol=1e-9)
+    return (
+        (a.detected, a.count) == (b.detected, b.count)
+        and math.isclose(a.nearest_range, b.nearest_range, abs_tol=1e-9)
+        and math.isclose(a.nearest_bearing, b.nearest_bearing, abs_tol=1e-9)
+    )
 
 
 SWARMS = [
@@ -197,6 +216,7 @@ def test_planar_error_stays_inside_the_margins_the_shortcut_assumes() -> None:
 
 
 # -- the index itself ------------------------------------------------------------------------------
+
 
 def test_grid_index_moves_removes_and_sweeps() -> None:
     index = GridIndex(50.0)

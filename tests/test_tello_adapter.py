@@ -34,8 +34,13 @@ SECOND_TELLO = "192.168.10.3"
 
 #: Adapter params for quick tests: short timeouts so a failure costs seconds, not minutes.
 FAST: dict[str, Any] = {
-    "home_lat": HOME[0], "home_lon": HOME[1], "command_timeout": 2, "takeoff_timeout": 10,
-    "retry_count": 1, "keepalive_s": 0.5, "link_loss_timeout": 1.0,
+    "home_lat": HOME[0],
+    "home_lon": HOME[1],
+    "command_timeout": 2,
+    "takeoff_timeout": 10,
+    "retry_count": 1,
+    "keepalive_s": 0.5,
+    "link_loss_timeout": 1.0,
 }
 #: Emulator settings to match: a brisk takeoff and landing.
 EMU: dict[str, Any] = {"takeoff_time": 0.5, "land_speed": 2.0}
@@ -141,7 +146,9 @@ class Driver:
     def extra(self, name: str = "main") -> dict[str, Any]:
         return self.request(op="extra", name=name)["result"]
 
-    def wait(self, pred: Callable[[dict[str, Any]], bool], timeout: float, name: str = "main") -> dict[str, Any]:
+    def wait(
+        self, pred: Callable[[dict[str, Any]], bool], timeout: float, name: str = "main"
+    ) -> dict[str, Any]:
         deadline = time.monotonic() + timeout
         while True:
             s = self.state(name)
@@ -239,8 +246,9 @@ def driver(net: NetnsPair, tmp_path_factory: pytest.TempPathFactory) -> Iterator
     """The adapter's process; its log (stderr) goes to a file, shown when a test fails."""
     log_path = tmp_path_factory.mktemp("tello") / "driver.log"
     with open(log_path, "w") as log:
-        proc = net.popen("b", [sys.executable, "-c", DRIVER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                         stderr=log)
+        proc = net.popen(
+            "b", [sys.executable, "-c", DRIVER], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log
+        )
         yield Driver(proc, log_path)
 
 
@@ -261,10 +269,10 @@ def emulator(net: NetnsPair, driver: Driver) -> Iterator[Callable[..., TelloEmul
         emu.stop()
 
 
-
 @pytest.mark.netns
-def test_connect_reports_the_tello_on_the_ground(driver: Driver, emulator: Callable[..., TelloEmulator],
-                                                 net: NetnsPair) -> None:
+def test_connect_reports_the_tello_on_the_ground(
+    driver: Driver, emulator: Callable[..., TelloEmulator], net: NetnsPair
+) -> None:
     emu = emulator()
     driver.new(home_heading=30.0)
     driver.call("connect")
@@ -284,8 +292,9 @@ def test_connect_reports_the_tello_on_the_ground(driver: Driver, emulator: Calla
 
 @pytest.mark.netns
 @pytest.mark.parametrize("mode", ["rc", "up"])
-def test_takeoff_climbs_to_the_target_altitude(driver: Driver, emulator: Callable[..., TelloEmulator],
-                                               mode: str) -> None:
+def test_takeoff_climbs_to_the_target_altitude(
+    driver: Driver, emulator: Callable[..., TelloEmulator], mode: str
+) -> None:
     emu = emulator()
     driver.new(takeoff_altitude_mode=mode)
     driver.call("connect")
@@ -311,7 +320,9 @@ def test_takeoff_climbs_to_the_target_altitude(driver: Driver, emulator: Callabl
 
 
 @pytest.mark.netns
-def test_velocity_ned_and_body_and_dead_reckoning(driver: Driver, emulator: Callable[..., TelloEmulator]) -> None:
+def test_velocity_ned_and_body_and_dead_reckoning(
+    driver: Driver, emulator: Callable[..., TelloEmulator]
+) -> None:
     heading0 = 90.0  # the Tello faced east at power-on
     emu = emulator()
     driver.new(home_heading=heading0)
@@ -395,8 +406,9 @@ def test_rtl_flies_back_and_lands(driver: Driver, emulator: Callable[..., TelloE
 
 
 @pytest.mark.netns
-def test_link_loss_grows_link_age_and_stops_commanding(driver: Driver,
-                                                       emulator: Callable[..., TelloEmulator]) -> None:
+def test_link_loss_grows_link_age_and_stops_commanding(
+    driver: Driver, emulator: Callable[..., TelloEmulator]
+) -> None:
     emu = emulator(auto_land_timeout=5.0)
     driver.new(keepalive_s=0.3, link_loss_timeout=0.5, link_back_hover=1.0)
     driver.call("connect")
@@ -430,7 +442,9 @@ def test_link_loss_grows_link_age_and_stops_commanding(driver: Driver,
 
 
 @pytest.mark.netns
-def test_battery_reported_and_arm_refused_when_low(driver: Driver, emulator: Callable[..., TelloEmulator]) -> None:
+def test_battery_reported_and_arm_refused_when_low(
+    driver: Driver, emulator: Callable[..., TelloEmulator]
+) -> None:
     emu = emulator(battery=8.0)
     driver.new(min_battery=10.0)
     driver.call("connect")
@@ -442,8 +456,9 @@ def test_battery_reported_and_arm_refused_when_low(driver: Driver, emulator: Cal
 
 
 @pytest.mark.netns
-def test_refused_takeoff_raises_and_stays_on_the_ground(driver: Driver,
-                                                        emulator: Callable[..., TelloEmulator]) -> None:
+def test_refused_takeoff_raises_and_stays_on_the_ground(
+    driver: Driver, emulator: Callable[..., TelloEmulator]
+) -> None:
     emu = emulator()
     emu.refuse_takeoff = True
     driver.new()
@@ -503,8 +518,9 @@ def rc_commands(emu: TelloEmulator, since: float, until: float) -> list[str]:
 
 
 @pytest.mark.netns
-def test_lost_ok_to_takeoff_is_settled_by_the_state_and_kept_alive(driver: Driver,
-                                                                   emulator: Callable[..., TelloEmulator]) -> None:
+def test_lost_ok_to_takeoff_is_settled_by_the_state_and_kept_alive(
+    driver: Driver, emulator: Callable[..., TelloEmulator]
+) -> None:
     """The Tello took off but its "ok" was lost: takeoff() returns once the state shows it hovering.
 
     djitellopy waited out its 20 s timeout (and then sent a second ``takeoff``) while nothing kept the
@@ -528,7 +544,9 @@ def test_lost_ok_to_takeoff_is_settled_by_the_state_and_kept_alive(driver: Drive
 
 
 @pytest.mark.netns
-def test_lost_ok_to_land_is_settled_by_the_state(driver: Driver, emulator: Callable[..., TelloEmulator]) -> None:
+def test_lost_ok_to_land_is_settled_by_the_state(
+    driver: Driver, emulator: Callable[..., TelloEmulator]
+) -> None:
     emu = emulator()
     driver.new(takeoff_timeout=20)
     driver.call("connect")
@@ -544,8 +562,9 @@ def test_lost_ok_to_land_is_settled_by_the_state(driver: Driver, emulator: Calla
 
 @pytest.mark.netns
 @pytest.mark.parametrize(("method", "sent"), [("land", "land"), ("emergency", "emergency"), ("rtl", "land")])
-def test_land_rtl_and_emergency_preempt_a_waiting_takeoff(driver: Driver, emulator: Callable[..., TelloEmulator],
-                                                          method: str, sent: str) -> None:
+def test_land_rtl_and_emergency_preempt_a_waiting_takeoff(
+    driver: Driver, emulator: Callable[..., TelloEmulator], method: str, sent: str
+) -> None:
     """A takeoff whose answer never comes is given up at once by a LAND, an RTL or an emergency."""
     emu = emulator(takeoff_time=3.0)
     driver.new(takeoff_timeout=20)
@@ -566,8 +585,9 @@ def test_land_rtl_and_emergency_preempt_a_waiting_takeoff(driver: Driver, emulat
 
 @pytest.mark.netns
 @pytest.mark.parametrize("control_hz", [20.0, 10.0])
-def test_rc_goes_out_at_the_configured_rate(driver: Driver, emulator: Callable[..., TelloEmulator],
-                                            control_hz: float) -> None:
+def test_rc_goes_out_at_the_configured_rate(
+    driver: Driver, emulator: Callable[..., TelloEmulator], control_hz: float
+) -> None:
     """Set-points arrive at 10 Hz; rc leaves at control_hz (it was control_hz + 10: each set-point sent twice)."""
     emu = emulator()
     driver.new(control_hz=control_hz)
@@ -585,7 +605,9 @@ def test_rc_goes_out_at_the_configured_rate(driver: Driver, emulator: Callable[.
 
 
 @pytest.mark.netns
-def test_rtl_getting_farther_raises_and_lands_here(driver: Driver, emulator: Callable[..., TelloEmulator]) -> None:
+def test_rtl_getting_farther_raises_and_lands_here(
+    driver: Driver, emulator: Callable[..., TelloEmulator]
+) -> None:
     """Wrong sign conventions: the RTL flies away from home. rtl() says so (hlc_error_t) and it lands."""
     emu = emulator()
     driver.new(vgx_sign=-1, vgy_sign=-1, rtl_speed=0.8)  # the emulator's true signs are +1
@@ -605,8 +627,9 @@ def test_rtl_getting_farther_raises_and_lands_here(driver: Driver, emulator: Cal
 
 
 @pytest.mark.netns
-def test_six_second_link_loss_in_flight_recovers_without_a_restart(driver: Driver,
-                                                                   emulator: Callable[..., TelloEmulator]) -> None:
+def test_six_second_link_loss_in_flight_recovers_without_a_restart(
+    driver: Driver, emulator: Callable[..., TelloEmulator]
+) -> None:
     """Wi-Fi down both ways for 6 s; the Tello lands itself and comes back out of SDK mode.
 
     The adapter stops commanding it, probes with ``command`` once it must have landed (``autoland_s``

@@ -100,33 +100,55 @@ EMU: dict[str, Any] = {"takeoff_time": 0.5, "land_speed": 2.0, "auto_land_timeou
 
 def config(*, operator: dict[str, Any] | None = None, swarm: bool = False, **hlc: Any) -> dict[str, Any]:
     """One Tello agent on memq://, flown by auto_operator (and dovrat_swarm in MISSION if `swarm`)."""
-    bma: list[dict[str, Any]] = [{
-        "name": "operator",
-        "behaviors": [{
-            "plugin": "auto_operator", "activate_on": ["STANDBY", "MISSION"],
-            "params": {"max_flights": 1, "altitude": 1.2, "retry": 1.0, **(operator or {})},
-        }],
-    }]
+    bma: list[dict[str, Any]] = [
+        {
+            "name": "operator",
+            "behaviors": [
+                {
+                    "plugin": "auto_operator",
+                    "activate_on": ["STANDBY", "MISSION"],
+                    "params": {"max_flights": 1, "altitude": 1.2, "retry": 1.0, **(operator or {})},
+                }
+            ],
+        }
+    ]
     if swarm:
-        bma.append({
-            "name": "mission",
-            "behaviors": [{
-                "plugin": "dovrat_swarm", "activate_on": ["MISSION"],
-                "params": {"forward_speed": 0.5, "sharp_turn_rate": 30.0},
-            }],
-        })
+        bma.append(
+            {
+                "name": "mission",
+                "behaviors": [
+                    {
+                        "plugin": "dovrat_swarm",
+                        "activate_on": ["MISSION"],
+                        "params": {"forward_speed": 0.5, "sharp_turn_rate": 30.0},
+                    }
+                ],
+            }
+        )
     autopilot = {
-        "home_lat": 32.7767, "home_lon": 35.0231, "home_heading": 45.0, "command_timeout": 2,
-        "takeoff_timeout": 10, "keepalive_s": 1.0, "rtl_speed": 0.8, "rtl_tolerance": 0.25,
-        "link_loss_timeout": 1.0, **hlc.pop("autopilot_params", {}),
+        "home_lat": 32.7767,
+        "home_lon": 35.0231,
+        "home_heading": 45.0,
+        "command_timeout": 2,
+        "takeoff_timeout": 10,
+        "keepalive_s": 1.0,
+        "rtl_speed": 0.8,
+        "rtl_tolerance": 0.25,
+        "link_loss_timeout": 1.0,
+        **hlc.pop("autopilot_params", {}),
     }
     return {
         "agent": {"name": "tello1"},
         "buses": {"lan": "memq://"},
         "mc": {"takeoff_ack_timeout": 3.0},
         "hlc": {
-            "autopilot": "tello", "default_takeoff_altitude": 1.2, "gain_altitude_timeout": 6.0,
-            "link_timeout": 1.5, "low_battery": 20.0, "max_horizontal_speed": 1.0, **hlc,
+            "autopilot": "tello",
+            "default_takeoff_altitude": 1.2,
+            "gain_altitude_timeout": 6.0,
+            "link_timeout": 1.5,
+            "low_battery": 20.0,
+            "max_horizontal_speed": 1.0,
+            **hlc,
             "autopilot_params": autopilot,
         },
         "bma": bma,
@@ -155,8 +177,9 @@ class Agent:
             self.events.append({"kind": "exit"})
             self._cond.notify_all()
 
-    def wait(self, kind: str, timeout: float, *, poll: Callable[[], None] | None = None,
-             **where: Any) -> dict[str, Any]:
+    def wait(
+        self, kind: str, timeout: float, *, poll: Callable[[], None] | None = None, **where: Any
+    ) -> dict[str, Any]:
         """The next event of `kind` matching `where` after the one the previous `wait` returned.
 
         Waits follow the timeline in order, so ``wait("hlc", state="READY")`` after a take-off finds
@@ -172,8 +195,10 @@ class Agent:
                         return event
                 left = deadline - time.monotonic()
                 if left <= 0 or self.events[-1:] == [{"kind": "exit"}]:
-                    raise AssertionError(f"no {kind} {where} within {timeout} s; timeline:\n{self.timeline()}"
-                                         f"\nlog:\n{self.log_tail()}")
+                    raise AssertionError(
+                        f"no {kind} {where} within {timeout} s; timeline:\n{self.timeline()}"
+                        f"\nlog:\n{self.log_tail()}"
+                    )
                 self._cond.wait(min(left, 0.05))
                 if poll is not None:
                     poll()
@@ -222,15 +247,21 @@ def fly(net: NetnsPair, tmp_path: Path) -> Iterator[Callable[..., tuple[Agent, T
     """Start an emulator (with `emu` settings) and then an agent process with `doc` as its config."""
     started: list[tuple[Agent, TelloEmulator]] = []
 
-    def start(doc: dict[str, Any], setup: Callable[[TelloEmulator], None] | None = None,
-              **emu_kw: Any) -> tuple[Agent, TelloEmulator]:
+    def start(
+        doc: dict[str, Any], setup: Callable[[TelloEmulator], None] | None = None, **emu_kw: Any
+    ) -> tuple[Agent, TelloEmulator]:
         emu = TelloEmulator(sock=net.udp_socket("a", (net.addr_a, 8889)), **{**EMU, **emu_kw}).start()
         if setup is not None:
             setup(emu)
         log_path = tmp_path / "agent.log"
         log = open(log_path, "w")  # noqa: SIM115 - the child process holds it; closed below
-        proc = net.popen("b", [sys.executable, "-c", AGENT, json.dumps(doc)], stdin=subprocess.PIPE,
-                         stdout=subprocess.PIPE, stderr=log)
+        proc = net.popen(
+            "b",
+            [sys.executable, "-c", AGENT, json.dumps(doc)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=log,
+        )
         log.close()
         agent = Agent(proc, log_path)
         started.append((agent, emu))
@@ -264,8 +295,16 @@ def test_whole_mission(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
     assert farthest[0] > 0.8, "the swarm behavior's velocity commands did not move the Tello"
     assert distance(snap) < 0.5, f"landed {distance(snap):.2f} m from the take-off point"
     assert agent.states("mc") == ["INIT", "STANDBY", "TAKEOFF", "MISSION", "RTL", "LAND", "STANDBY"]
-    assert agent.states("hlc") == ["INIT", "READY", "TAKEOFF", "GAINING_ALTITUDE", "AIRBORNE", "RTL", "LANDING",
-                                   "READY"]
+    assert agent.states("hlc") == [
+        "INIT",
+        "READY",
+        "TAKEOFF",
+        "GAINING_ALTITUDE",
+        "AIRBORNE",
+        "RTL",
+        "LANDING",
+        "READY",
+    ]
     assert not agent.errors(), agent.errors()
     texts = emu.command_texts()
     assert any(t.startswith("rc ") and t.split()[4] != "0" for t in texts), "no yaw from the BODY commands"
@@ -338,11 +377,18 @@ def example_config(*, rtl_after: float, max_flights: int) -> dict[str, Any]:
     """examples/tello.toml as shipped, on memq:// buses, plus auto_operator (the example's own BMAs kept)."""
     doc = tomllib.loads((REPO / "examples" / "tello.toml").read_text())
     doc["buses"] = {name: "memq://" for name in doc["buses"]}
-    doc.setdefault("bma", []).append({
-        "name": "operator",
-        "behaviors": [{"plugin": "auto_operator", "activate_on": ["STANDBY", "MISSION"],
-                       "params": {"rtl_after": rtl_after, "retry": 0.5, "max_flights": max_flights}}],
-    })
+    doc.setdefault("bma", []).append(
+        {
+            "name": "operator",
+            "behaviors": [
+                {
+                    "plugin": "auto_operator",
+                    "activate_on": ["STANDBY", "MISSION"],
+                    "params": {"rtl_after": rtl_after, "retry": 0.5, "max_flights": max_flights},
+                }
+            ],
+        }
+    )
     return doc
 
 
@@ -358,7 +404,9 @@ DYNAMICS: list[dict[str, Any]] = [
 ]
 
 
-def test_example_takes_off_20_of_20_across_vehicle_dynamics(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+def test_example_takes_off_20_of_20_across_vehicle_dynamics(
+    fly: Callable[..., tuple[Agent, TelloEmulator]],
+) -> None:
     """examples/tello.toml unchanged (1.2 m, gain_altitude_timeout 10 s), 20 take-offs to MISSION.
 
     Kept fast by the emulator's brisk take-off (0.5 s) and landing, and by RTL-ing 0.1 s into each
@@ -366,8 +414,9 @@ def test_example_takes_off_20_of_20_across_vehicle_dynamics(fly: Callable[..., t
     1.2 m is the adapter's, at the example's rc scale, as in the field.
     """
     flights = 20
-    agent, emu = fly(example_config(rtl_after=0.1, max_flights=0), takeoff_time=0.5, land_speed=3.0,
-                     auto_land_timeout=15.0)
+    agent, emu = fly(
+        example_config(rtl_after=0.1, max_flights=0), takeoff_time=0.5, land_speed=3.0, auto_land_timeout=15.0
+    )
 
     def apply(spec: dict[str, Any]) -> None:
         emu.vertical_tau = spec.get("vertical_tau")
@@ -390,7 +439,9 @@ def test_example_takes_off_20_of_20_across_vehicle_dynamics(fly: Callable[..., t
     assert not agent.errors(), agent.errors()  # no GAIN_ALTITUDE_TIMEOUT, no failed action
     assert all(1.1 <= z <= 1.45 for z in heights), heights
     lost = [cmd for cmd, _ in emu.lost_replies]
-    assert lost.count("takeoff") == flights // len(DYNAMICS) and lost.count("land") == flights // len(DYNAMICS)
+    assert lost.count("takeoff") == flights // len(DYNAMICS) and lost.count("land") == flights // len(
+        DYNAMICS
+    )
 
 
 def test_example_steers_from_the_console(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
@@ -411,15 +462,21 @@ def test_example_steers_from_the_console(fly: Callable[..., tuple[Agent, TelloEm
     assert not agent.errors(), agent.errors()
 
 
-def test_example_six_second_link_loss_in_flight_comes_home(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+def test_example_six_second_link_loss_in_flight_comes_home(
+    fly: Callable[..., tuple[Agent, TelloEmulator]],
+) -> None:
     """Wi-Fi down both ways for 6 s in MISSION; the Tello (15 s auto-landing) is still up when it returns.
 
     The adapter stops commanding it after ``link_loss_timeout``, the HLC goes LLC_DOWN and the MC ERROR;
     with the link back the adapter reports a fresh link and a hovering Tello, the HLC HOLDs and the MC's
     ``on_link_regained`` (rtl, the default) brings it home: STANDBY on the ground, no restart.
     """
-    agent, emu = fly(example_config(rtl_after=60.0, max_flights=1), takeoff_time=0.5, land_speed=3.0,
-                     auto_land_timeout=15.0)
+    agent, emu = fly(
+        example_config(rtl_after=60.0, max_flights=1),
+        takeoff_time=0.5,
+        land_speed=3.0,
+        auto_land_timeout=15.0,
+    )
     agent.wait("mc", 15, state="MISSION")
     emu.silence(6.0)
     agent.wait("hlc", 6, state="LLC_DOWN")
@@ -435,7 +492,9 @@ def test_example_six_second_link_loss_in_flight_comes_home(fly: Callable[..., tu
     assert codes == ["LINK_LOST", "LINK_REGAINED"], agent.errors()
 
 
-def test_example_link_loss_while_the_tello_lands_itself(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+def test_example_link_loss_while_the_tello_lands_itself(
+    fly: Callable[..., tuple[Agent, TelloEmulator]],
+) -> None:
     """As above, but the Tello lands itself during the loss and comes back out of SDK mode (a reboot).
 
     The adapter probes with ``command`` once the Tello must have landed (``autoland_s``, here matching
@@ -458,10 +517,12 @@ def test_example_link_loss_while_the_tello_lands_itself(fly: Callable[..., tuple
 
 
 def test_rtl_getting_farther_is_reported_and_lands_where_it_is(
-        fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+    fly: Callable[..., tuple[Agent, TelloEmulator]],
+) -> None:
     """Wrong vgx/vgy signs: the RTL leg grows. The operator gets an hlc_error_t saying so; it lands there."""
-    agent, emu = fly(config(operator={"rtl_after": 2.5}, swarm=True,
-                            autopilot_params={"vgx_sign": -1, "vgy_sign": -1}))
+    agent, emu = fly(
+        config(operator={"rtl_after": 2.5}, swarm=True, autopilot_params={"vgx_sign": -1, "vgy_sign": -1})
+    )
     agent.wait("mc", 10, state="MISSION")
     agent.wait("mc", 8, state="RTL")
     error = agent.wait("error", 8, code="ACTION_FAILED")

@@ -484,7 +484,9 @@ async def test_commands_are_signed_when_a_swarm_key_is_configured(
         assert msg.header.mac_len == 32
         assert verify(msg, key, 5.0, now=msg.header.utime / 1e6) is None
         assert verify(msg, "another key", 5.0, now=msg.header.utime / 1e6) is not None
-    assert sent[0][1].header.seq == sent[1][1].header.seq and bytes(sent[0][1].header.mac) != bytes(sent[1][1].header.mac)
+    assert sent[0][1].header.seq == sent[1][1].header.seq and bytes(sent[0][1].header.mac) != bytes(
+        sent[1][1].header.mac
+    )
 
 
 async def test_a_keyed_console_takes_no_forged_acknowledgement_or_state(

@@ -42,7 +42,9 @@ def _error(agent: str, code: int) -> bytes:
 def test_newest_state_per_channel_and_every_event(node: OperatorNode) -> None:
     bus = node.context.bus
     for ack in range(1, 11):
-        bus.publish("lan", "a/MC_STATE", _mc("a", mc_state_t.TAKEOFF if ack < 10 else mc_state_t.MISSION, ack))
+        bus.publish(
+            "lan", "a/MC_STATE", _mc("a", mc_state_t.TAKEOFF if ack < 10 else mc_state_t.MISSION, ack)
+        )
         bus.publish("lan", "b/MC_STATE", _mc("b", mc_state_t.STANDBY, 0))
     for code in (1, 2, 3):
         bus.publish("lan", "a/HLC_ERROR", _error("a", code))
@@ -52,11 +54,19 @@ def test_newest_state_per_channel_and_every_event(node: OperatorNode) -> None:
     items = node.drain()
     by_topic = [(i.topic, i.agent) for i in items]
     assert sorted(by_topic) == sorted(
-        [("MC_STATE", "a"), ("MC_STATE", "b"), ("HLC_ERROR", "a"), ("HLC_ERROR", "a"), ("HLC_ERROR", "a"),
-         ("TELEMETRY", "a")]
+        [
+            ("MC_STATE", "a"),
+            ("MC_STATE", "b"),
+            ("HLC_ERROR", "a"),
+            ("HLC_ERROR", "a"),
+            ("HLC_ERROR", "a"),
+            ("TELEMETRY", "a"),
+        ]
     )
     newest = next(i.msg for i in items if i.topic == "MC_STATE" and i.agent == "a")
-    assert (newest.state, newest.last_command_seq) == (mc_state_t.MISSION, 10), "the newest carries the newest ack"
+    assert (newest.state, newest.last_command_seq) == (mc_state_t.MISSION, 10), (
+        "the newest carries the newest ack"
+    )
     assert [i.msg.code for i in items if i.topic == "HLC_ERROR"] == [1, 2, 3]
     assert [i.received for i in items] == sorted(i.received for i in items), "in arrival order"
     assert node.skipped == 18  # 9 superseded states of each agent, never decoded

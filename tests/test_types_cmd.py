@@ -20,10 +20,14 @@ TYPE_NAMES = sorted(p.stem for p in _codegen.SOURCE_LCMTYPES_DIR.glob("*.lcm"))
 
 def test_packaged_lcm_files_are_an_exact_copy_of_lcmtypes() -> None:
     assert TYPE_NAMES, "no .lcm files in lcmtypes/"
-    assert _codegen.stale_packaged_types() == [], "run `make gen`: antalate_lcm/lcmtypes/ differs from lcmtypes/"
+    assert _codegen.stale_packaged_types() == [], (
+        "run `make gen`: antalate_lcm/lcmtypes/ differs from lcmtypes/"
+    )
 
 
-def test_an_edited_or_missing_packaged_file_is_detected(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_an_edited_or_missing_packaged_file_is_detected(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     copy = tmp_path / "lcmtypes"
     monkeypatch.setattr(_codegen, "PACKAGED_LCMTYPES_DIR", copy)
     _codegen.copy_packaged_types()
@@ -89,14 +93,23 @@ def test_cli_rejects_an_unknown_language_and_an_unwritable_folder(tmp_path: Path
     env = dict(os.environ, PYTHONPATH=str(REPO))
     proc = subprocess.run(
         [sys.executable, "-m", "antalate_lcm.cli", "types", "--lang", "cobol", "--out", str(tmp_path)],
-        capture_output=True, text=True, env=env, timeout=60,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
     )
     assert proc.returncode == 2 and "invalid choice: 'cobol'" in proc.stderr, proc.stderr
     blocker = tmp_path / "a-file"
     blocker.write_text("")
     proc = subprocess.run(
         [sys.executable, "-m", "antalate_lcm.cli", "types", "--lang", "c", "--out", str(blocker / "sub")],
-        capture_output=True, text=True, env=env, timeout=60,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
     )
     assert proc.returncode == 2, proc.stderr
-    assert proc.stderr.startswith(f"antalate: cannot create {blocker / 'sub'}") and "Traceback" not in proc.stderr
+    assert (
+        proc.stderr.startswith(f"antalate: cannot create {blocker / 'sub'}")
+        and "Traceback" not in proc.stderr
+    )

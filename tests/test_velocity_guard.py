@@ -23,12 +23,20 @@ LIMITS = VelocityLimits(max_horizontal=5.0, max_vertical=2.0, max_yaw_rate=90.0,
 OK = (HlcState.AIRBORNE, McState.MISSION)
 
 
-def cmd(vx: float = 1.0, vy: float = 0.0, vz: float = 0.0, yaw: float = 0.0, frame: Frame | int = Frame.NED,
-        at: float = 100.0) -> VelocityCommand:
+def cmd(
+    vx: float = 1.0,
+    vy: float = 0.0,
+    vz: float = 0.0,
+    yaw: float = 0.0,
+    frame: Frame | int = Frame.NED,
+    at: float = 100.0,
+) -> VelocityCommand:
     return VelocityCommand(vx, vy, vz, yaw, frame, at)
 
 
-def check(command: VelocityCommand, now: float = 100.0, states: tuple[HlcState, McState | None] = OK) -> GuardDecision:
+def check(
+    command: VelocityCommand, now: float = 100.0, states: tuple[HlcState, McState | None] = OK
+) -> GuardDecision:
     return check_velocity(command, now, states[0], states[1], LIMITS)
 
 

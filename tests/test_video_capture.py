@@ -21,16 +21,36 @@ needs_ffmpeg = pytest.mark.skipif(
 
 
 def _config(tmp_path: Path, **params: Any) -> Any:
-    p = {"input": "testsrc=size=160x120:rate=10", "format": "lavfi", "input_args": ["-re"],
-         "output_args": ["-c:v", "mpeg4"], "output_dir": str(tmp_path / "videos"), **params}
-    return make_config([{"name": "video", "behaviors": [{"plugin": "video_capture", "params": p, "tick_hz": 20}]}])
+    p = {
+        "input": "testsrc=size=160x120:rate=10",
+        "format": "lavfi",
+        "input_args": ["-re"],
+        "output_args": ["-c:v", "mpeg4"],
+        "output_dir": str(tmp_path / "videos"),
+        **params,
+    }
+    return make_config(
+        [{"name": "video", "behaviors": [{"plugin": "video_capture", "params": p, "tick_hz": 20}]}]
+    )
 
 
 def _probe(path: Path) -> dict[str, Any]:
     out = subprocess.run(
-        ["ffprobe", "-v", "error", "-count_frames", "-show_entries", "stream=codec_type,nb_read_frames:format=duration",
-         "-of", "json", str(path)],
-        capture_output=True, text=True, timeout=20, check=True,
+        [
+            "ffprobe",
+            "-v",
+            "error",
+            "-count_frames",
+            "-show_entries",
+            "stream=codec_type,nb_read_frames:format=duration",
+            "-of",
+            "json",
+            str(path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=20,
+        check=True,
     )
     return json.loads(out.stdout)
 
@@ -94,7 +114,11 @@ def test_ffmpeg_exiting_early_is_reported_with_its_message(tmp_path: Path) -> No
         h.mc_state("MISSION")
         failures = wait_for(lambda: h.sync(node.failures), timeout=10)
         reason = failures["video_capture"]
-        assert reason.startswith("ffmpeg exited with code ") and "no-such-camera" in reason and reason.endswith("(in tick)")
+        assert (
+            reason.startswith("ffmpeg exited with code ")
+            and "no-such-camera" in reason
+            and reason.endswith("(in tick)")
+        )
         assert h.sync(node.active) == []
 
 

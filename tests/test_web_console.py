@@ -39,7 +39,9 @@ KEYS = (
 
 
 def keys_toml() -> str:
-    return "".join(f'[[api_keys]]\nname = "{k.name}"\nrole = "{k.role}"\nsha256 = "{k.sha256}"\n' for k in KEYS)
+    return "".join(
+        f'[[api_keys]]\nname = "{k.name}"\nrole = "{k.role}"\nsha256 = "{k.sha256}"\n' for k in KEYS
+    )
 
 
 # -- sign-in logic (pure) --------------------------------------------------------------------------
@@ -49,7 +51,9 @@ def test_only_an_operator_key_opens_a_session_and_sessions_expire() -> None:
     access = web.ConsoleAccess(KEYS, ttl_s=100.0)
     assert access.login("antk_not-a-key", now=0.0) == web.Refusal(401, "Unknown API key.")
     refused = access.login(READER_KEY, now=0.0)
-    assert isinstance(refused, web.Refusal) and refused.status == 403 and "needs an operator key" in refused.text
+    assert (
+        isinstance(refused, web.Refusal) and refused.status == 403 and "needs an operator key" in refused.text
+    )
     token, holder = access.login(f"  {OPERATOR_KEY}\n", now=0.0)  # pasted with blanks
     assert holder == "alice"
     assert access.holder(token, now=50.0) == "alice"
@@ -59,7 +63,8 @@ def test_only_an_operator_key_opens_a_session_and_sessions_expire() -> None:
 
 
 @pytest.mark.parametrize(
-    ("host", "loopback"), [("127.0.0.1", True), ("localhost", True), ("::1", True), ("0.0.0.0", False), ("10.0.0.5", False)]
+    ("host", "loopback"),
+    [("127.0.0.1", True), ("localhost", True), ("::1", True), ("0.0.0.0", False), ("10.0.0.5", False)],
 )
 def test_loopback_hosts(host: str, loopback: bool) -> None:
     assert web.is_loopback(host) is loopback
@@ -114,9 +119,16 @@ async def test_sign_in_cookie_and_websocket_guard() -> None:
         assert "HttpOnly" in cookie and "SameSite=Strict" in cookie
         assert (await client.get("/")).status == 200
         # signed in, but a page of another site opening the WebSocket with the cookie is refused
-        evil = await client.get("/ws", headers={"Origin": "http://evil.example", "Connection": "Upgrade",
-                                                "Upgrade": "websocket", "Sec-WebSocket-Version": "13",
-                                                "Sec-WebSocket-Key": "dGhlIHNhbXBsZSBub25jZQ=="})
+        evil = await client.get(
+            "/ws",
+            headers={
+                "Origin": "http://evil.example",
+                "Connection": "Upgrade",
+                "Upgrade": "websocket",
+                "Sec-WebSocket-Version": "13",
+                "Sec-WebSocket-Key": "dGhlIHNhbXBsZSBub25jZQ==",
+            },
+        )
         assert evil.status == 403
     finally:
         await client.close()
@@ -124,18 +136,25 @@ async def test_sign_in_cookie_and_websocket_guard() -> None:
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    return subprocess.run([sys.executable, "-m", "antalate_lcm.cli", "tui", "--web", *args],
-                          capture_output=True, text=True, env=env, timeout=60)
+    return subprocess.run(
+        [sys.executable, "-m", "antalate_lcm.cli", "tui", "--web", *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
 
 
 def test_an_open_console_on_the_network_is_refused_before_it_listens(tmp_path: Path) -> None:
     proc = run_cli("--host", "0.0.0.0", "--port", "1")
     assert proc.returncode == 2
-    assert "refusing to serve the console on 0.0.0.0 without sign-in" in proc.stderr and "--keys" in proc.stderr
+    assert (
+        "refusing to serve the console on 0.0.0.0 without sign-in" in proc.stderr and "--keys" in proc.stderr
+    )
     readers = tmp_path / "readers.toml"
     readers.write_text(f'[[api_keys]]\nname = "bob"\nrole = "read-only"\nsha256 = "{KEYS[1].sha256}"\n')
     proc = run_cli("--keys", str(readers), "--port", "1")
-    assert proc.returncode == 2 and "no [[api_keys]] entry with role = \"operator\"" in proc.stderr
+    assert proc.returncode == 2 and 'no [[api_keys]] entry with role = "operator"' in proc.stderr
     bad = tmp_path / "bad.toml"
     bad.write_text('[[api_keys]]\nname = "x"\nrole = "operator"\nsha256 = "abc"\n')
     proc = run_cli("--keys", str(bad), "--port", "1")
@@ -194,7 +213,9 @@ def test_web_console_in_chromium_shows_the_swarm_and_takes_it_off(
     agents_cfg = tmp_path / "swarm.toml"
     agents_cfg.write_text(to_toml(agent_config("alpha", security={"insecure": True})))
     operator_cfg = tmp_path / "operator.toml"
-    operator_cfg.write_text(f'[agent]\nname = "operator"\n[buses]\nlan = "{MCAST_URL}"\n[topics]\ndefault_bus = "lan"\n')
+    operator_cfg.write_text(
+        f'[agent]\nname = "operator"\n[buses]\nlan = "{MCAST_URL}"\n[topics]\ndefault_bus = "lan"\n'
+    )
     keys = tmp_path / "keys.toml"
     keys.write_text(keys_toml())
     key_file = tmp_path / "operator.key"
@@ -202,35 +223,78 @@ def test_web_console_in_chromium_shows_the_swarm_and_takes_it_off(
     port = 8765
     shot = screenshot_dir(tmp_path) / "web-console.png"
     logs = {n: open(tmp_path / f"{n}.log", "w") for n in ("swarm", "web")}  # noqa: SIM115 - closed below
-    swarm = netns.antalate("agent", str(agents_cfg), "--agents", "2", stdout=logs["swarm"], stderr=subprocess.STDOUT)
-    server = netns.antalate("tui", "--web", str(operator_cfg), "--port", str(port), "--keys", str(keys),
-                            stdout=logs["web"], stderr=subprocess.STDOUT)
+    swarm = netns.antalate(
+        "agent", str(agents_cfg), "--agents", "2", stdout=logs["swarm"], stderr=subprocess.STDOUT
+    )
+    server = netns.antalate(
+        "tui",
+        "--web",
+        str(operator_cfg),
+        "--port",
+        str(port),
+        "--keys",
+        str(keys),
+        stdout=logs["web"],
+        stderr=subprocess.STDOUT,
+    )
     chrome = netns.popen(
-        [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--no-first-run",
-         "--no-default-browser-check", "--remote-debugging-port=0", f"--user-data-dir={tmp_path / 'chrome'}",
-         "--window-size=1280,860", "about:blank"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+        [
+            browser,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-dev-shm-usage",
+            "--no-first-run",
+            "--no-default-browser-check",
+            "--remote-debugging-port=0",
+            f"--user-data-dir={tmp_path / 'chrome'}",
+            "--window-size=1280,860",
+            "about:blank",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
     )
     try:
         assert probe.wait("alpha-02/MC_STATE", "mc_state_t", timeout=30, state=M.STANDBY)
-        assert wait_for(lambda: "serving the console" in (tmp_path / "web.log").read_text(), 30), (tmp_path / "web.log").read_text()
+        assert wait_for(lambda: "serving the console" in (tmp_path / "web.log").read_text(), 30), (
+            tmp_path / "web.log"
+        ).read_text()
         devtools = read_devtools_url(chrome, 60)
         assert devtools is not None
         http = "http://" + devtools.split("/")[2]
         drive = netns.run(
-            [sys.executable, "-m", "tests.cdp_console", http, f"http://127.0.0.1:{port}/", str(key_file), str(shot),
-             "alpha-01", "alpha-02"],
-            timeout=240, env=dict(os.environ, PYTHONPATH=str(REPO)), cwd=str(REPO),
+            [
+                sys.executable,
+                "-m",
+                "tests.cdp_console",
+                http,
+                f"http://127.0.0.1:{port}/",
+                str(key_file),
+                str(shot),
+                "alpha-01",
+                "alpha-02",
+            ],
+            timeout=240,
+            env=dict(os.environ, PYTHONPATH=str(REPO)),
+            cwd=str(REPO),
         )
         lines = [line for line in drive.stdout.splitlines() if line.startswith("{")]
         assert lines, f"driver said nothing:\n{drive.stdout}\n{drive.stderr}"
         seen = json.loads(lines[-1])
-        assert "error" not in seen, f"{seen.get('error')}\nJS errors: {seen['js_errors']}\nweb log:\n{(tmp_path / 'web.log').read_text()[-3000:]}"
+        assert "error" not in seen, (
+            f"{seen.get('error')}\nJS errors: {seen['js_errors']}\nweb log:\n{(tmp_path / 'web.log').read_text()[-3000:]}"
+        )
         assert seen["agents_shown"] == ["alpha-01", "alpha-02"]
         for agent in ("alpha-01", "alpha-02"):
-            assert probe.wait(f"{agent}/MC_STATE", "mc_state_t", timeout=30, state=M.MISSION), f"{agent} did not take off"
-        outside = [u for u in seen["requests"]
-                   if not re.match(rf"^(https?|wss?)://127\.0\.0\.1:{port}/", u) and not u.startswith(("data:", "about:"))]
+            assert probe.wait(f"{agent}/MC_STATE", "mc_state_t", timeout=30, state=M.MISSION), (
+                f"{agent} did not take off"
+            )
+        outside = [
+            u
+            for u in seen["requests"]
+            if not re.match(rf"^(https?|wss?)://127\.0\.0\.1:{port}/", u)
+            and not u.startswith(("data:", "about:"))
+        ]
         assert outside == [], f"the page requested outside 127.0.0.1: {outside}"
         assert any(u.startswith(f"ws://127.0.0.1:{port}/ws") for u in seen["requests"])
         assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and shot.stat().st_size > 10_000

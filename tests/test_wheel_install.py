@@ -43,14 +43,22 @@ class WheelVenv:
 
     def run(self, *args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
         return subprocess.run(
-            [str(self.bin / "antalate"), *args], cwd=self.home, env=self.env(),
-            capture_output=True, text=True, timeout=timeout,
+            [str(self.bin / "antalate"), *args],
+            cwd=self.home,
+            env=self.env(),
+            capture_output=True,
+            text=True,
+            timeout=timeout,
         )
 
     def site_packages(self) -> Path:
         out = subprocess.run(
             [str(self.bin / "python"), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
-            cwd=self.home, env=self.env(), capture_output=True, text=True, check=True,
+            cwd=self.home,
+            env=self.env(),
+            capture_output=True,
+            text=True,
+            check=True,
         )
         return Path(out.stdout.strip())
 
@@ -66,7 +74,11 @@ def wheel_venv(tmp_path_factory: pytest.TempPathFactory) -> WheelVenv:
     venv = WheelVenv(root)
     proc = subprocess.run(
         [str(venv.bin / "python"), "-m", "pip", "install", "-q", str(wheel)],
-        cwd=venv.home, env=venv.env(), capture_output=True, text=True, timeout=600,
+        cwd=venv.home,
+        env=venv.env(),
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert proc.returncode == 0, f"pip install of the wheel failed:\n{proc.stdout}\n{proc.stderr}"
     return venv
@@ -76,9 +88,16 @@ def test_the_installed_package_is_the_wheel_with_its_lcm_files(wheel_venv: Wheel
     site = wheel_venv.site_packages()
     assert not list(site.glob("__editable__*")), "an editable install: this test must use the wheel"
     out = subprocess.run(
-        [str(wheel_venv.bin / "python"), "-c",
-         "import antalate_lcm._codegen as c; print(c.LCMTYPES_DIR); print(*[p.name for p in c.lcm_files()])"],
-        cwd=wheel_venv.home, env=wheel_venv.env(), capture_output=True, text=True, check=True,
+        [
+            str(wheel_venv.bin / "python"),
+            "-c",
+            "import antalate_lcm._codegen as c; print(c.LCMTYPES_DIR); print(*[p.name for p in c.lcm_files()])",
+        ],
+        cwd=wheel_venv.home,
+        env=wheel_venv.env(),
+        capture_output=True,
+        text=True,
+        check=True,
     ).stdout.splitlines()
     assert Path(out[0]) == site / "antalate_lcm" / "lcmtypes"
     assert out[1].split() == [f"{n}.lcm" for n in TYPE_NAMES]
@@ -96,7 +115,9 @@ def test_types_java_compiles_against_the_wheels_lcm_jar(wheel_venv: WheelVenv) -
     classes = wheel_venv.home / "classes"
     javac = subprocess.run(
         ["javac", "-nowarn", "-cp", str(lcm_jar), "-d", str(classes), *map(str, sources)],
-        capture_output=True, text=True, timeout=180,
+        capture_output=True,
+        text=True,
+        timeout=180,
     )
     assert javac.returncode == 0, javac.stderr
     assert sorted(p.stem for p in classes.rglob("*.class")) == TYPE_NAMES
@@ -105,11 +126,17 @@ def test_types_java_compiles_against_the_wheels_lcm_jar(wheel_venv: WheelVenv) -
 @pytest.mark.netns
 def test_spy_from_the_wheel_finds_every_type(wheel_venv: WheelVenv, tmp_path: Path) -> None:
     """The reported bug: "javac failed on the generated types: error: no source files"."""
-    for tool, hint in (("javac", spy.JDK_HINT), ("xvfb-run", "apt-get install xvfb"), ("xauth", "apt-get install xauth")):
+    for tool, hint in (
+        ("javac", spy.JDK_HINT),
+        ("xvfb-run", "apt-get install xvfb"),
+        ("xauth", "apt-get install xauth"),
+    ):
         if shutil.which(tool) is None:
             pytest.skip(f"{tool} not found ({hint})")
     if _jdk_is_headless():
-        pytest.skip("this Java has no AWT for X11 (libawt_xawt.so), which lcm-spy's window needs (Debian: default-jre)")
+        pytest.skip(
+            "this Java has no AWT for X11 (libawt_xawt.so), which lcm-spy's window needs (Debian: default-jre)"
+        )
     reason = netns_unavailable()
     if reason:
         pytest.skip(f"no private network namespace: {reason}")
@@ -121,7 +148,10 @@ def test_spy_from_the_wheel_finds_every_type(wheel_venv: WheelVenv, tmp_path: Pa
     with NetNamespace() as ns:
         proc = ns.popen(
             ["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", str(wheel_venv.bin / "antalate"), "spy"],
-            env=env, cwd=wheel_venv.home, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            env=env,
+            cwd=wheel_venv.home,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
         )
         try:
             _read_until(proc, out, lambda line: line.startswith("Found ") and line.endswith(" plugins"), 90)
@@ -133,7 +163,9 @@ def test_spy_from_the_wheel_finds_every_type(wheel_venv: WheelVenv, tmp_path: Pa
             stop_process(proc)
     text = "\n".join(out)
     assert "javac failed" not in text and "Traceback" not in text, text
-    counts = [int(line.split()[1]) for line in out if line.startswith("Found ") and line.endswith(" LCM types")]
+    counts = [
+        int(line.split()[1]) for line in out if line.startswith("Found ") and line.endswith(" LCM types")
+    ]
     assert counts and counts[0] >= len(TYPE_NAMES), text
     jars = list((wheel_venv.home / ".cache" / "antalate" / "java").glob("antalate_types-*.jar"))
     assert len(jars) == 1, "antalate spy did not build its types jar in the user's cache"
@@ -148,7 +180,10 @@ def test_demo_headless_flies_from_the_wheel(wheel_venv: WheelVenv) -> None:
     with NetNamespace() as ns:
         proc = ns.popen(
             [str(wheel_venv.bin / "antalate"), "demo", "--headless", "--agents", "2", "--mission-time", "2"],
-            env=wheel_venv.env(), cwd=wheel_venv.home, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            env=wheel_venv.env(),
+            cwd=wheel_venv.home,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
         )
         try:
             output, _ = proc.communicate(timeout=110)
@@ -157,4 +192,6 @@ def test_demo_headless_flies_from_the_wheel(wheel_venv: WheelVenv) -> None:
     assert proc.returncode == 0, output
     assert "OK: 2 agent(s), all back in STANDBY" in output, output
     for agent in ("sim-01", "sim-02"):
-        assert any(line.startswith(f"{agent}: STANDBY@") and "MISSION@" in line for line in output.splitlines()), output
+        assert any(
+            line.startswith(f"{agent}: STANDBY@") and "MISSION@" in line for line in output.splitlines()
+        ), output

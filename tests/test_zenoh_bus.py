@@ -85,7 +85,9 @@ def _settle(pub: Bus, sub_bus: Bus, channel: str, got: list[Any]) -> None:
 
     seen: list[Any] = []
     sub = sub_bus.subscribe("wan", channel, None, lambda ch, d: seen.append(d))
-    assert wait_for(lambda: send() or seen, 10, 0.05), "the subscription never saw a message through the router"
+    assert wait_for(lambda: send() or seen, 10, 0.05), (
+        "the subscription never saw a message through the router"
+    )
     sub_bus.unsubscribe(sub)
 
 
@@ -96,7 +98,21 @@ def probe(m: Any) -> bool:
 # ---------------------------------------------------------------------------------- pure parts
 @pytest.mark.parametrize(
     "channel",
-    ["alpha/MC_STATE", "OPERATOR_CMD", "a//b", "/lead", "trail/", "x*y", "what?", "$sys", "#1", "50%", "a b", "@v", "ü/ß"],
+    [
+        "alpha/MC_STATE",
+        "OPERATOR_CMD",
+        "a//b",
+        "/lead",
+        "trail/",
+        "x*y",
+        "what?",
+        "$sys",
+        "#1",
+        "50%",
+        "a b",
+        "@v",
+        "ü/ß",
+    ],
 )
 def test_every_channel_has_a_key_and_back(channel: str) -> None:
     key = channel_key("antalate", channel)
@@ -298,7 +314,9 @@ def test_a_closed_transport_says_so_and_closing_twice_is_fine(router: Router) ->
         z.publish("alpha/X", b"late")
 
 
-def test_the_lcm_tools_refuse_a_zenoh_bus_with_the_way_out(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_the_lcm_tools_refuse_a_zenoh_bus_with_the_way_out(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """lcm-logger and lcm-spy speak LCM only: `antalate log`/`spy` on a zenoh bus say to bridge it."""
     from antalate_lcm.bus import open_lcm
     from antalate_lcm.cli import main
@@ -307,7 +325,10 @@ def test_the_lcm_tools_refuse_a_zenoh_bus_with_the_way_out(tmp_path: Path, capsy
     with pytest.raises(BusUnavailable, match="antalate bridge"):
         open_lcm("zenoh://?connect=tcp/127.0.0.1:7447")
     (tmp_path / "c.toml").write_text('[buses]\nlan = "zenoh://?connect=tcp/127.0.0.1:7447"\n')
-    for command in (["log", str(tmp_path / "c.toml"), "-o", str(tmp_path / "x.lcm")], ["spy", str(tmp_path / "c.toml")]):
+    for command in (
+        ["log", str(tmp_path / "c.toml"), "-o", str(tmp_path / "x.lcm")],
+        ["spy", str(tmp_path / "c.toml")],
+    ):
         assert main(command) == 2
         assert "antalate bridge" in capsys.readouterr().err
 
@@ -350,7 +371,9 @@ def test_the_wan_example_configs_load(name: str) -> None:
     assert any(u.startswith("zenoh://") for u in config.buses.values())
 
 
-def test_a_message_two_bridges_forwarded_is_delivered_once_and_plain_repeats_are_not_touched(router: Router) -> None:
+def test_a_message_two_bridges_forwarded_is_delivered_once_and_plain_repeats_are_not_touched(
+    router: Router,
+) -> None:
     from antalate_lcm.zenoh_bus import BRIDGE_MARK
 
     pub, z = ZenohLCM(url(router)), ZenohLCM(url(router))
@@ -365,7 +388,9 @@ def test_a_message_two_bridges_forwarded_is_delivered_once_and_plain_repeats_are
 
         assert wait_for(settled, 10)
         pub.publish("alpha/X", b"same", attachment=BRIDGE_MARK + b"bridge-1:aaaa")
-        pub.publish("alpha/X", b"same", attachment=BRIDGE_MARK + b"bridge-2:aaaa")  # the second gateway's copy
+        pub.publish(
+            "alpha/X", b"same", attachment=BRIDGE_MARK + b"bridge-2:aaaa"
+        )  # the second gateway's copy
         pub.publish("alpha/X", b"plain")
         pub.publish("alpha/X", b"plain")  # not forwarded by a bridge: the bus never judges
         pub.publish("alpha/X", b"end")

@@ -15,7 +15,9 @@ def source_files() -> list[str]:
     """Tracked and new (not ignored) files: what a fresh clone with this change would hold."""
     proc = subprocess.run(
         ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
-        cwd=REPO, capture_output=True, check=True,
+        cwd=REPO,
+        capture_output=True,
+        check=True,
     )
     return [name for name in proc.stdout.decode().split("\0") if name and (REPO / name).is_file()]
 
@@ -30,7 +32,9 @@ def build_wheel(workdir: Path) -> Path:
         shutil.copy2(REPO / name, target)
     proc = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(dist), str(src)],
-        capture_output=True, text=True, timeout=300,
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     wheels = sorted(dist.glob("antalate-*.whl"))
     if proc.returncode != 0 or len(wheels) != 1:

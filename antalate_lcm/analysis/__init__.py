@@ -50,7 +50,10 @@ def default_plot_path(log: str | Path) -> Path:
 
 
 def analyze_log(
-    path: str | Path, *, azimuth: float | None = None, bin_s: float = DEFAULT_BIN_S,
+    path: str | Path,
+    *,
+    azimuth: float | None = None,
+    bin_s: float = DEFAULT_BIN_S,
     max_age: float = DEFAULT_MAX_AGE,
 ) -> Analysis:
     """Read ``path`` and analyse it (raises ``AntalateError`` for a file that is not a usable log)."""
@@ -58,8 +61,12 @@ def analyze_log(
 
 
 def plot_log(
-    path: str | Path, out: str | Path | None = None, *, azimuth: float | None = None,
-    bin_s: float = DEFAULT_BIN_S, max_age: float = DEFAULT_MAX_AGE,
+    path: str | Path,
+    out: str | Path | None = None,
+    *,
+    azimuth: float | None = None,
+    bin_s: float = DEFAULT_BIN_S,
+    max_age: float = DEFAULT_MAX_AGE,
 ) -> tuple[Path, Analysis]:
     """Read, analyse and plot ``path``; the PNG goes to ``out`` (default: :func:`default_plot_path`)."""
     from antalate_lcm.analysis.plot import plot

@@ -162,7 +162,12 @@ def _decode_into(
     if isinstance(msg, telemetry_t):
         rec.telemetry.append(
             TelemetrySample(
-                t, float(msg.lat), float(msg.lon), float(msg.alt), float(msg.heading), bool(msg.in_air),
+                t,
+                float(msg.lat),
+                float(msg.lon),
+                float(msg.alt),
+                float(msg.heading),
+                bool(msg.in_air),
                 float(msg.battery),
             )
         )

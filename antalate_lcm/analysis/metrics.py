@@ -139,7 +139,9 @@ class Analysis:
         out = asdict(self)
         out["cohesion_ratio"] = self.cohesion_ratio
         out["origin"] = {"lat": self.origin[0], "lon": self.origin[1]}
-        out["mc_timelines"] = {a: [{"t": t, "state": s} for t, s in tl] for a, tl in self.mc_timelines.items()}
+        out["mc_timelines"] = {
+            a: [{"t": t, "state": s} for t, s in tl] for a, tl in self.mc_timelines.items()
+        }
         return out
 
 
@@ -187,7 +189,10 @@ def cohesion_at(
 
 
 def cohesion_series(
-    tracks: dict[str, Track], start: float, end: float, bin_s: float = DEFAULT_BIN_S,
+    tracks: dict[str, Track],
+    start: float,
+    end: float,
+    bin_s: float = DEFAULT_BIN_S,
     max_age: float = DEFAULT_MAX_AGE,
 ) -> list[CohesionSample]:
     """:func:`cohesion_at` every ``bin_s`` seconds from ``start`` to ``end`` (both included)."""
@@ -256,12 +261,18 @@ def direction_spans(
 
 
 def drift(
-    tracks: dict[str, Track], start: float, end: float, azimuth: float, commanded_speed: float | None,
-    source: str, max_age: float = DEFAULT_MAX_AGE,
+    tracks: dict[str, Track],
+    start: float,
+    end: float,
+    azimuth: float,
+    commanded_speed: float | None,
+    source: str,
+    max_age: float = DEFAULT_MAX_AGE,
 ) -> Drift | None:
     """The centroid's motion from ``start`` to ``end`` against ``azimuth`` (agents heard at both ends)."""
     both = {
-        name for name, tr in tracks.items()
+        name
+        for name, tr in tracks.items()
         if tr.position_at(start, max_age) is not None and tr.position_at(end, max_age) is not None
     }
     a = cohesion_at(tracks, start, max_age, both)
@@ -277,14 +288,25 @@ def drift(
         if error == -180.0:
             error = 180.0
     return Drift(
-        start, end, wrap_360(azimuth), commanded_speed, len(both), heading, dist,
-        dist / (end - start) if end > start else 0.0, error, source,
+        start,
+        end,
+        wrap_360(azimuth),
+        commanded_speed,
+        len(both),
+        heading,
+        dist,
+        dist / (end - start) if end > start else 0.0,
+        error,
+        source,
     )
 
 
 # ----------------------------------------------------------------------------- the whole analysis
 def analyze(
-    record: SwarmRecord, *, azimuth: float | None = None, bin_s: float = DEFAULT_BIN_S,
+    record: SwarmRecord,
+    *,
+    azimuth: float | None = None,
+    bin_s: float = DEFAULT_BIN_S,
     max_age: float = DEFAULT_MAX_AGE,
 ) -> Analysis:
     """Cohesion over time, the mission window's cohesion ratio and the drift against the command.
@@ -299,8 +321,12 @@ def analyze(
     t_first = max(tr.t[0] for tr in tracks.values())
     t_last = max(tr.t[-1] for tr in tracks.values())
     result = Analysis(
-        path=record.path, origin=origin, agents=sorted(tracks), duration=record.duration,
-        events=record.events, window=mission_window(record),
+        path=record.path,
+        origin=origin,
+        agents=sorted(tracks),
+        duration=record.duration,
+        events=record.events,
+        window=mission_window(record),
         mc_timelines={a: [(c.t, c.state) for c in r.mc_states] for a, r in sorted(record.agents.items())},
     )
     result.cohesion = cohesion_series(tracks, t_first, t_last, bin_s, max_age)
@@ -382,7 +408,9 @@ def format_summary(a: Analysis) -> str:
             f"{a.average_mean:.1f} m on average over the window"
         )
     for d in a.drift:
-        cmd = f"commanded {d.azimuth:.0f} deg" + (f" at {d.commanded_speed:g} m/s" if d.commanded_speed else "")
+        cmd = f"commanded {d.azimuth:.0f} deg" + (
+            f" at {d.commanded_speed:g} m/s" if d.commanded_speed else ""
+        )
         cmd += " (from the log)" if d.source == "log" else " (--azimuth)"
         if d.heading is None:
             lines.append(

@@ -82,8 +82,13 @@ def _trajectories(ax, analysis: Analysis, tracks: dict[str, Track]) -> None:  # 
     w = analysis.window
     inside = [c for c in analysis.cohesion if w is None or w.start <= c.t <= w.end]
     if inside:
-        ax.plot([c.centroid_east for c in inside], [c.centroid_north for c in inside], "k--", lw=1.6,
-                label="centroid (mission)")
+        ax.plot(
+            [c.centroid_east for c in inside],
+            [c.centroid_north for c in inside],
+            "k--",
+            lw=1.6,
+            label="centroid (mission)",
+        )
     for d in analysis.drift:
         # The commanded direction, drawn from the centroid at the span's start, as long as the drift.
         start = min(analysis.cohesion, key=lambda c: abs(c.t - d.start), default=None)
@@ -92,7 +97,8 @@ def _trajectories(ax, analysis: Analysis, tracks: dict[str, Track]) -> None:  # 
         length = max(d.distance, 5.0)
         rad = math.radians(d.azimuth)
         ax.annotate(
-            "", xy=(start.centroid_east + length * math.sin(rad), start.centroid_north + length * math.cos(rad)),
+            "",
+            xy=(start.centroid_east + length * math.sin(rad), start.centroid_north + length * math.cos(rad)),
             xytext=(start.centroid_east, start.centroid_north),
             arrowprops={"arrowstyle": "->", "color": "crimson", "lw": 1.8},
         )
@@ -111,7 +117,10 @@ def _timelines(ax, record: SwarmRecord, analysis: Analysis) -> None:  # type: ig
     seen: set[str] = set()
     for row, name in enumerate(names):
         rec = record.agents[name]
-        bars = ((rec.mc_states, STATE_COLORS, row + 0.05, 0.6), (rec.hlc_states, HLC_COLORS, row + 0.68, 0.22))
+        bars = (
+            (rec.mc_states, STATE_COLORS, row + 0.05, 0.6),
+            (rec.hlc_states, HLC_COLORS, row + 0.68, 0.22),
+        )
         for states, colors, y, h in bars:
             for i, change in enumerate(states):
                 # A state lasts until the next one, or until the agent was last heard (a silent
@@ -120,7 +129,9 @@ def _timelines(ax, record: SwarmRecord, analysis: Analysis) -> None:  # type: ig
                 color = colors.get(change.state, _UNKNOWN_STATE)
                 if states is rec.mc_states:
                     seen.add(change.state)
-                ax.broken_barh([(change.t, max(stop - change.t, 1e-3))], (y, h), facecolors=color, edgecolors="none")
+                ax.broken_barh(
+                    [(change.t, max(stop - change.t, 1e-3))], (y, h), facecolors=color, edgecolors="none"
+                )
     if analysis.window is not None:
         ax.axvspan(analysis.window.start, analysis.window.end, color="black", alpha=0.06, lw=0)
     for d in record.directions:
@@ -132,7 +143,9 @@ def _timelines(ax, record: SwarmRecord, analysis: Analysis) -> None:  # type: ig
     ax.set_xlabel("time since the log's start (s)")
     ax.set_title("MC state per agent (thin bar: HLC state; dotted: direction commands)")
     order = [s for s in STATE_COLORS if s in seen]
-    ax.legend(handles=[Patch(color=STATE_COLORS[s], label=s) for s in order], fontsize=7, ncol=4, loc="lower right")
+    ax.legend(
+        handles=[Patch(color=STATE_COLORS[s], label=s) for s in order], fontsize=7, ncol=4, loc="lower right"
+    )
 
 
 def _cohesion(ax, analysis: Analysis) -> None:  # type: ignore[no-untyped-def]
@@ -140,9 +153,13 @@ def _cohesion(ax, analysis: Analysis) -> None:  # type: ignore[no-untyped-def]
     ax.plot([s.t for s in c], [s.max_distance for s in c], color="tab:red", lw=1.0, label="max (radius)")
     ax.plot([s.t for s in c], [s.mean_distance for s in c], color="tab:blue", lw=1.0, label="mean")
     if analysis.window is not None:
-        ax.axvspan(analysis.window.start, analysis.window.end, color="black", alpha=0.06, lw=0, label="mission")
+        ax.axvspan(
+            analysis.window.start, analysis.window.end, color="black", alpha=0.06, lw=0, label="mission"
+        )
         if analysis.start_radius:
-            ax.axhline(2 * analysis.start_radius, color="tab:red", lw=0.8, ls="--", label="2 × starting radius")
+            ax.axhline(
+                2 * analysis.start_radius, color="tab:red", lw=0.8, ls="--", label="2 × starting radius"
+            )
     ax.set_xlabel("time since the log's start (s)")
     ax.set_ylabel("distance to the centroid (m)")
     ax.set_title("swarm cohesion")

@@ -198,15 +198,25 @@ class SimAutopilot(Autopilot):
         self.validate_params(self.params)  # ValueError naming the key, as at config load
         p = {**DEFAULTS, **self.params}
         self._p = p
-        for key in ("link_loss_for", "failsafe_after", "state_error_after", "state_error_for", "voltage_sag",
-                    "battery_warning_at"):
+        for key in (
+            "link_loss_for",
+            "failsafe_after",
+            "state_error_after",
+            "state_error_for",
+            "voltage_sag",
+            "battery_warning_at",
+        ):
             if not (math.isfinite(float(p[key])) and float(p[key]) >= 0.0):
                 raise ValueError(f"sim autopilot parameter {key!r} must be >= 0, got {p[key]!r}")
         if str(p["failsafe_mode"]) not in FAILSAFE_MODES:
-            raise ValueError(f"sim autopilot parameter 'failsafe_mode' must be one of {sorted(FAILSAFE_MODES)},"
-                             f" got {p['failsafe_mode']!r}")
+            raise ValueError(
+                f"sim autopilot parameter 'failsafe_mode' must be one of {sorted(FAILSAFE_MODES)},"
+                f" got {p['failsafe_mode']!r}"
+            )
         if not (isinstance(p["cells"], int) and 0 <= p["cells"] <= 14):
-            raise ValueError(f"sim autopilot parameter 'cells' must be an integer in [0, 14], got {p['cells']!r}")
+            raise ValueError(
+                f"sim autopilot parameter 'cells' must be an integer in [0, 14], got {p['cells']!r}"
+            )
         self.home = FlatFrame(float(p["home_lat"]), float(p["home_lon"]))
         self._tau = float(p["tau"])
         self._time_scale = float(p["time_scale"])
@@ -409,10 +419,16 @@ class SimAutopilot(Autopilot):
         faults = (
             ("takeover_after", self.pilot_takeover, 0.0),
             ("link_loss_after", lambda: self.set_link_loss(True), float(p["link_loss_for"])),
-            ("failsafe_after", lambda: self.trigger_failsafe(str(p["failsafe_mode"]), str(p["failsafe_reason"])),
-             0.0),
-            ("state_error_after", lambda: self.set_state_error("simulated adapter fault: state() failed"),
-             float(p["state_error_for"])),
+            (
+                "failsafe_after",
+                lambda: self.trigger_failsafe(str(p["failsafe_mode"]), str(p["failsafe_reason"])),
+                0.0,
+            ),
+            (
+                "state_error_after",
+                lambda: self.set_state_error("simulated adapter fault: state() failed"),
+                float(p["state_error_for"]),
+            ),
         )
         for name, fire, lasts in faults:
             after = float(p[name])
@@ -424,8 +440,21 @@ class SimAutopilot(Autopilot):
 
     # ----------------------------------------------------------------- persistence across restarts
 
-    _PERSISTED = ("north", "east", "alt", "vn", "ve", "vd", "heading", "battery", "armed", "in_air", "mode", "_takeoff_alt",
-                  "_failsafe")
+    _PERSISTED = (
+        "north",
+        "east",
+        "alt",
+        "vn",
+        "ve",
+        "vd",
+        "heading",
+        "battery",
+        "armed",
+        "in_air",
+        "mode",
+        "_takeoff_alt",
+        "_failsafe",
+    )
 
     def _persist(self) -> None:
         wall = time.time()
@@ -495,7 +524,11 @@ class SimAutopilot(Autopilot):
             sag = float(p["voltage_sag"]) if self.in_air else 0.0
             voltage = cells * (_CELL_EMPTY + (_CELL_FULL - _CELL_EMPTY) * self.battery / 100.0 - sag)
         warn_at = float(p["battery_warning_at"])
-        warning = f"battery low ({self.battery:.0f}% <= {warn_at:g}%)" if warn_at and self.battery <= warn_at else ""
+        warning = (
+            f"battery low ({self.battery:.0f}% <= {warn_at:g}%)"
+            if warn_at and self.battery <= warn_at
+            else ""
+        )
         return AutopilotState(
             failsafe=self._failsafe,
             voltage=voltage,
@@ -548,8 +581,8 @@ class SimAutopilot(Autopilot):
         if phase is _Phase.GROUND:
             self.vn = self.ve = self.vd = 0.0
             landed_long_enough = self._disarm_at is not None and t >= self._disarm_at
-            idle_too_long = (
-                self._armed_since is not None and t - self._armed_since >= float(p["auto_disarm_delay"])
+            idle_too_long = self._armed_since is not None and t - self._armed_since >= float(
+                p["auto_disarm_delay"]
             )
             if landed_long_enough or idle_too_long:
                 self._disarm()

@@ -85,7 +85,10 @@ class BmaNode(Node):
             "arbiter %s follows %s with %s",
             self.bma.name,
             self.bma.state_topic,
-            ", ".join(f"{p.name} ({p.plugin}) on {'/'.join(sorted(p.rule.activate_on))}" for p in self.plan.behaviors)
+            ", ".join(
+                f"{p.name} ({p.plugin}) on {'/'.join(sorted(p.rule.activate_on))}"
+                for p in self.plan.behaviors
+            )
             or "no behaviors",
         )
 
@@ -112,7 +115,9 @@ class BmaNode(Node):
             slot.behavior = plan.cls(ctx)
         except Exception as exc:  # noqa: BLE001 - a broken plugin must not take the BMA down
             reason = f"{failure_reason(exc)} (in __init__)"
-            self.log.error("behavior %s cannot be constructed, it will never run: %s", name, reason, exc_info=True)
+            self.log.error(
+                "behavior %s cannot be constructed, it will never run: %s", name, reason, exc_info=True
+            )
             self._arbiter.failed(name, reason, permanent=True)
             ctx._close()
 
@@ -122,8 +127,11 @@ class BmaNode(Node):
             state = mc_state_name(msg.state)
             if state is None:
                 self._bad_state_log.log(
-                    ("state", msg.state), logging.WARNING,
-                    "ignoring mc_state_t with undefined state value %d on %s", msg.state, self.bma.state_topic,
+                    ("state", msg.state),
+                    logging.WARNING,
+                    "ignoring mc_state_t with undefined state value %d on %s",
+                    msg.state,
+                    self.bma.state_topic,
                 )
                 return
         else:
@@ -136,7 +144,9 @@ class BmaNode(Node):
         if decision.state_changed:
             self.log.info("state %s", state)
         for name in decision.unblocked:
-            self.log.info("%s failed earlier; it will be tried again the next time a state activates it", name)
+            self.log.info(
+                "%s failed earlier; it will be tried again the next time a state activates it", name
+            )
         changed = False
         for name in decision.deactivate:
             self._deactivate(name, why=f"state {state}")
@@ -201,8 +211,13 @@ class BmaNode(Node):
         if self.now - self._started_at.get(name, self.now) >= _STREAK_RESET:
             self._streak[name] = 0
         streak = self._streak[name] = self._streak.get(name, 0) + 1
-        self.log.error("behavior %s failed and is deactivated (failure %d in a row): %s", name, streak, reason,
-                       exc_info=exc)
+        self.log.error(
+            "behavior %s failed and is deactivated (failure %d in a row): %s",
+            name,
+            streak,
+            reason,
+            exc_info=exc,
+        )
         if self._arbiter.is_active(name):
             self._arbiter.deactivated(name)
             if slot.ctx is not None:

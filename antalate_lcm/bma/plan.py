@@ -89,7 +89,10 @@ def plan_bma(config: Config, bma: BmaConfig) -> BmaPlan:
     for j, beh in enumerate(bma.behaviors):
         bkey = f"behaviors[{j}]"
         if beh.name in names:
-            raise fail(f"{bkey}.name", f"a name unique in this arbiter, but {beh.name!r} is also behaviors[{names[beh.name]}]")
+            raise fail(
+                f"{bkey}.name",
+                f"a name unique in this arbiter, but {beh.name!r} is also behaviors[{names[beh.name]}]",
+            )
         names[beh.name] = j
         plans.append(_plan_behavior(config, beh, f"{key}.{bkey}", allowed, bma.state_topic))
     return BmaPlan(key, bma, spec.msg_type, tuple(plans))
@@ -168,7 +171,7 @@ def _plan_topics(config: Config, cls: type[Behavior], beh: BehaviorConfig, fail:
             raise fail(
                 "topics",
                 f"a binding for topic {name!r}, which {beh.plugin!r} uses: declare it in [topics] "
-                f"or remap it (topics = {{{name} = \"...\"}})",
+                f'or remap it (topics = {{{name} = "..."}})',
             )
         want = declared.get(name)
         if want is not None and spec.msg_type is not want:

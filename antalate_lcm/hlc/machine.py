@@ -371,75 +371,208 @@ _ALL_BUT_INIT = frozenset(S) - {S.INIT, S.LLC_DOWN}
 
 #: The HLC transition table, in priority order (the first row matching state, event and guard wins).
 HLC_TABLE: tuple[HlcRow, ...] = (
-    HlcRow(_ALL_BUT_INIT, E.LINK_LOST, S.LLC_DOWN, "autopilot link lost",
-           effect=_fx(error=(ErrorCode.LINK_LOST, Severity.CRITICAL))),
+    HlcRow(
+        _ALL_BUT_INIT,
+        E.LINK_LOST,
+        S.LLC_DOWN,
+        "autopilot link lost",
+        effect=_fx(error=(ErrorCode.LINK_LOST, Severity.CRITICAL)),
+    ),
     HlcRow(_s(S.INIT), E.LINK_UP, S.READY, "autopilot connected and MC heard"),
     HlcRow(_s(S.INIT), E.RESYNC_AIRBORNE, S.AIRBORNE, "restart resync: vehicle flying under our control"),
     HlcRow(_s(S.INIT), E.RESYNC_LANDING, S.LANDING, "restart resync: vehicle landing"),
     HlcRow(_s(S.INIT), E.RESYNC_RTL, S.RTL, "restart resync: vehicle returning to launch"),
     HlcRow(_s(S.INIT), E.RESYNC_MANUAL, S.MANUAL, "restart resync: pilot in control"),
     HlcRow(_s(S.INIT), E.RESYNC_HOLD, S.HOLD, "restart resync: autopilot holding on a failsafe"),
-    HlcRow(_s(S.LLC_DOWN), E.LINK_REGAINED_GROUND, S.READY, "autopilot link regained, vehicle on the ground",
-           effect=_fx(error=(ErrorCode.LINK_REGAINED, Severity.INFO))),
-    HlcRow(_s(S.LLC_DOWN), E.LINK_REGAINED_GUIDED, S.HOLD, "autopilot link regained in the air: stop and wait"
-           " for the MC", effect=_fx(Action.HOVER, error=_REGAINED)),
-    HlcRow(_s(S.LLC_DOWN), E.LINK_REGAINED_RTL, S.RTL, "autopilot link regained, vehicle returning",
-           effect=_fx(error=_REGAINED)),
-    HlcRow(_s(S.LLC_DOWN), E.LINK_REGAINED_LANDING, S.LANDING, "autopilot link regained, vehicle landing",
-           effect=_fx(error=_REGAINED)),
-    HlcRow(_s(S.LLC_DOWN), E.LINK_REGAINED_HOLD, S.HOLD, "autopilot link regained, vehicle holding",
-           effect=_fx(error=_REGAINED)),
-    HlcRow(_s(S.LLC_DOWN), E.LINK_REGAINED_MANUAL, S.MANUAL, "autopilot link regained, pilot in control",
-           effect=_fx(error=_REGAINED)),
-    HlcRow(_s(S.READY), E.MC_TAKEOFF, None, "takeoff refused: battery low", guard=_battery_low,
-           effect=_fx(error=(ErrorCode.TAKEOFF_REFUSED_LOW_BATTERY, Severity.ERROR))),
+    HlcRow(
+        _s(S.LLC_DOWN),
+        E.LINK_REGAINED_GROUND,
+        S.READY,
+        "autopilot link regained, vehicle on the ground",
+        effect=_fx(error=(ErrorCode.LINK_REGAINED, Severity.INFO)),
+    ),
+    HlcRow(
+        _s(S.LLC_DOWN),
+        E.LINK_REGAINED_GUIDED,
+        S.HOLD,
+        "autopilot link regained in the air: stop and wait for the MC",
+        effect=_fx(Action.HOVER, error=_REGAINED),
+    ),
+    HlcRow(
+        _s(S.LLC_DOWN),
+        E.LINK_REGAINED_RTL,
+        S.RTL,
+        "autopilot link regained, vehicle returning",
+        effect=_fx(error=_REGAINED),
+    ),
+    HlcRow(
+        _s(S.LLC_DOWN),
+        E.LINK_REGAINED_LANDING,
+        S.LANDING,
+        "autopilot link regained, vehicle landing",
+        effect=_fx(error=_REGAINED),
+    ),
+    HlcRow(
+        _s(S.LLC_DOWN),
+        E.LINK_REGAINED_HOLD,
+        S.HOLD,
+        "autopilot link regained, vehicle holding",
+        effect=_fx(error=_REGAINED),
+    ),
+    HlcRow(
+        _s(S.LLC_DOWN),
+        E.LINK_REGAINED_MANUAL,
+        S.MANUAL,
+        "autopilot link regained, pilot in control",
+        effect=_fx(error=_REGAINED),
+    ),
+    HlcRow(
+        _s(S.READY),
+        E.MC_TAKEOFF,
+        None,
+        "takeoff refused: battery low",
+        guard=_battery_low,
+        effect=_fx(error=(ErrorCode.TAKEOFF_REFUSED_LOW_BATTERY, Severity.ERROR)),
+    ),
     HlcRow(_s(S.READY), E.MC_TAKEOFF, S.TAKEOFF, "MC TAKEOFF: arming", effect=_fx_start_takeoff),
-    HlcRow(_s(S.TAKEOFF), E.ARMED, S.READY, "takeoff cancelled by the MC while arming",
-           guard=_mc_left_takeoff,
-           effect=_fx(Action.DISARM, error=(ErrorCode.TAKEOFF_CANCELLED, Severity.INFO)), extra=True),
+    HlcRow(
+        _s(S.TAKEOFF),
+        E.ARMED,
+        S.READY,
+        "takeoff cancelled by the MC while arming",
+        guard=_mc_left_takeoff,
+        effect=_fx(Action.DISARM, error=(ErrorCode.TAKEOFF_CANCELLED, Severity.INFO)),
+        extra=True,
+    ),
     HlcRow(_s(S.TAKEOFF), E.ARMED, S.GAINING_ALTITUDE, "armed: taking off", effect=_fx_climb),
-    HlcRow(_s(S.TAKEOFF), E.ARM_FAILED, S.READY, "arming failed",
-           effect=_fx(error=(ErrorCode.ARM_FAILED, Severity.ERROR))),
-    HlcRow(_s(S.GAINING_ALTITUDE), E.ALTITUDE_REACHED, S.AIRBORNE, "altitude reached",
-           effect=_fx(Action.HOVER)),
-    HlcRow(_s(S.GAINING_ALTITUDE), E.TAKEOFF_FAILED, S.LANDING, "the autopilot refused the takeoff: landing",
-           effect=_fx(Action.LAND, error=(ErrorCode.TAKEOFF_REFUSED, Severity.ERROR)), extra=True),
-    HlcRow(_s(S.GAINING_ALTITUDE), E.GAIN_ALTITUDE_TIMEOUT, S.LANDING, "altitude not gained in time: landing",
-           effect=_fx(Action.LAND, error=(ErrorCode.GAIN_ALTITUDE_TIMEOUT, Severity.WARNING))),
+    HlcRow(
+        _s(S.TAKEOFF),
+        E.ARM_FAILED,
+        S.READY,
+        "arming failed",
+        effect=_fx(error=(ErrorCode.ARM_FAILED, Severity.ERROR)),
+    ),
+    HlcRow(
+        _s(S.GAINING_ALTITUDE), E.ALTITUDE_REACHED, S.AIRBORNE, "altitude reached", effect=_fx(Action.HOVER)
+    ),
+    HlcRow(
+        _s(S.GAINING_ALTITUDE),
+        E.TAKEOFF_FAILED,
+        S.LANDING,
+        "the autopilot refused the takeoff: landing",
+        effect=_fx(Action.LAND, error=(ErrorCode.TAKEOFF_REFUSED, Severity.ERROR)),
+        extra=True,
+    ),
+    HlcRow(
+        _s(S.GAINING_ALTITUDE),
+        E.GAIN_ALTITUDE_TIMEOUT,
+        S.LANDING,
+        "altitude not gained in time: landing",
+        effect=_fx(Action.LAND, error=(ErrorCode.GAIN_ALTITUDE_TIMEOUT, Severity.WARNING)),
+    ),
     HlcRow(_s(S.AIRBORNE), E.MC_RTL, S.RTL, "MC RTL", effect=_fx(Action.RTL)),
     HlcRow(_s(S.AIRBORNE), E.MC_LAND, S.LANDING, "MC LAND", effect=_fx(Action.LAND)),
-    HlcRow(_s(S.GAINING_ALTITUDE), E.MC_RTL, S.RTL, "MC RTL during takeoff", effect=_fx(Action.RTL),
-           extra=True),
-    HlcRow(_s(S.GAINING_ALTITUDE), E.MC_LAND, S.LANDING, "MC LAND during takeoff", effect=_fx(Action.LAND),
-           extra=True),
+    HlcRow(
+        _s(S.GAINING_ALTITUDE), E.MC_RTL, S.RTL, "MC RTL during takeoff", effect=_fx(Action.RTL), extra=True
+    ),
+    HlcRow(
+        _s(S.GAINING_ALTITUDE),
+        E.MC_LAND,
+        S.LANDING,
+        "MC LAND during takeoff",
+        effect=_fx(Action.LAND),
+        extra=True,
+    ),
     HlcRow(_s(S.RTL, S.LANDING, S.LOW_BATTERY, S.MANUAL, S.HOLD), E.LANDED, S.READY, "landed and disarmed"),
-    HlcRow(_s(S.AIRBORNE), E.LANDED, S.READY, "vehicle landed on its own",
-           effect=_fx(error=(ErrorCode.UNEXPECTED_LANDING, Severity.WARNING)), extra=True),
-    HlcRow(_AUTONOMOUS, E.PILOT_TAKEOVER, S.MANUAL, "pilot took over",
-           effect=_fx(error=(ErrorCode.PILOT_TAKEOVER, Severity.WARNING))),
+    HlcRow(
+        _s(S.AIRBORNE),
+        E.LANDED,
+        S.READY,
+        "vehicle landed on its own",
+        effect=_fx(error=(ErrorCode.UNEXPECTED_LANDING, Severity.WARNING)),
+        extra=True,
+    ),
+    HlcRow(
+        _AUTONOMOUS,
+        E.PILOT_TAKEOVER,
+        S.MANUAL,
+        "pilot took over",
+        effect=_fx(error=(ErrorCode.PILOT_TAKEOVER, Severity.WARNING)),
+    ),
     # The autopilot's failsafes: follow the vehicle, never MANUAL (the failsafe's reason is in the error).
-    HlcRow(_FLYING - {S.RTL, S.LOW_BATTERY}, E.FAILSAFE_RTL, S.RTL, "autopilot failsafe: returning", effect=_fx(error=_FAILSAFE)),
-    HlcRow(_FLYING - {S.LANDING}, E.FAILSAFE_LAND, S.LANDING, "autopilot failsafe: landing",
-           effect=_fx(error=_FAILSAFE)),
-    HlcRow(_FLYING - {S.HOLD}, E.FAILSAFE_HOLD, S.HOLD, "autopilot failsafe: holding position",
-           effect=_fx(error=_FAILSAFE)),
+    HlcRow(
+        _FLYING - {S.RTL, S.LOW_BATTERY},
+        E.FAILSAFE_RTL,
+        S.RTL,
+        "autopilot failsafe: returning",
+        effect=_fx(error=_FAILSAFE),
+    ),
+    HlcRow(
+        _FLYING - {S.LANDING},
+        E.FAILSAFE_LAND,
+        S.LANDING,
+        "autopilot failsafe: landing",
+        effect=_fx(error=_FAILSAFE),
+    ),
+    HlcRow(
+        _FLYING - {S.HOLD},
+        E.FAILSAFE_HOLD,
+        S.HOLD,
+        "autopilot failsafe: holding position",
+        effect=_fx(error=_FAILSAFE),
+    ),
     # HOLD waits for the MC; the MC's RTL/LAND must be new since HOLD began (not a republish).
     HlcRow(_s(S.HOLD), E.MC_RTL, S.RTL, "MC RTL", guard=_mc_changed_since_entry, effect=_fx(Action.RTL)),
-    HlcRow(_s(S.HOLD), E.MC_LAND, S.LANDING, "MC LAND", guard=_mc_changed_since_entry, effect=_fx(Action.LAND)),
-    HlcRow(_s(S.RTL, S.LOW_BATTERY), E.MC_LAND, S.LANDING, "MC LAND while returning",
-           guard=_mc_changed_since_entry, effect=_fx(Action.LAND)),
+    HlcRow(
+        _s(S.HOLD), E.MC_LAND, S.LANDING, "MC LAND", guard=_mc_changed_since_entry, effect=_fx(Action.LAND)
+    ),
+    HlcRow(
+        _s(S.RTL, S.LOW_BATTERY),
+        E.MC_LAND,
+        S.LANDING,
+        "MC LAND while returning",
+        guard=_mc_changed_since_entry,
+        effect=_fx(Action.LAND),
+    ),
     HlcRow(_s(S.AIRBORNE), E.MC_HOLD, S.HOLD, "MC HOLD: stop and wait", effect=_fx(Action.HOVER)),
-    HlcRow(_s(S.HOLD), E.AUTOPILOT_LAND, S.LANDING, "autopilot landing on its own",
-           effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING))),
-    HlcRow(_s(S.HOLD), E.AUTOPILOT_RTL, S.RTL, "autopilot returning on its own",
-           effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING))),
-    HlcRow(_s(S.GAINING_ALTITUDE, S.AIRBORNE), E.AUTOPILOT_LAND, S.LANDING, "autopilot landing on its own",
-           effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)), extra=True),
+    HlcRow(
+        _s(S.HOLD),
+        E.AUTOPILOT_LAND,
+        S.LANDING,
+        "autopilot landing on its own",
+        effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)),
+    ),
+    HlcRow(
+        _s(S.HOLD),
+        E.AUTOPILOT_RTL,
+        S.RTL,
+        "autopilot returning on its own",
+        effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)),
+    ),
+    HlcRow(
+        _s(S.GAINING_ALTITUDE, S.AIRBORNE),
+        E.AUTOPILOT_LAND,
+        S.LANDING,
+        "autopilot landing on its own",
+        effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)),
+        extra=True,
+    ),
     HlcRow(_s(S.RTL), E.AUTOPILOT_LAND, S.LANDING, "RTL final descent", extra=True),
-    HlcRow(_s(S.GAINING_ALTITUDE, S.AIRBORNE), E.AUTOPILOT_RTL, S.RTL, "autopilot returning on its own",
-           effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)), extra=True),
-    HlcRow(_s(S.GAINING_ALTITUDE, S.AIRBORNE, S.HOLD), E.LOW_BATTERY, S.LOW_BATTERY, "battery low: returning home",
-           effect=_fx(Action.RTL, error=(ErrorCode.LOW_BATTERY, Severity.WARNING))),
+    HlcRow(
+        _s(S.GAINING_ALTITUDE, S.AIRBORNE),
+        E.AUTOPILOT_RTL,
+        S.RTL,
+        "autopilot returning on its own",
+        effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)),
+        extra=True,
+    ),
+    HlcRow(
+        _s(S.GAINING_ALTITUDE, S.AIRBORNE, S.HOLD),
+        E.LOW_BATTERY,
+        S.LOW_BATTERY,
+        "battery low: returning home",
+        effect=_fx(Action.RTL, error=(ErrorCode.LOW_BATTERY, Severity.WARNING)),
+    ),
 )
 del S, E
 
@@ -490,8 +623,10 @@ class HighLevelControl:
             return f"battery {ap.battery:.1f}% <= low_battery {p.low_battery:g}%"
         cell = ap.cell_voltage
         if math.isfinite(cell) and cell <= p.low_cell_voltage:
-            return (f"battery {cell:.2f} V per cell ({ap.voltage:.1f} V / {ap.cells} cells)"
-                    f" <= low_cell_voltage {p.low_cell_voltage:g} V")
+            return (
+                f"battery {cell:.2f} V per cell ({ap.voltage:.1f} V / {ap.cells} cells)"
+                f" <= low_cell_voltage {p.low_cell_voltage:g} V"
+            )
         if ap.battery_warning:
             return f"the autopilot reports the battery low: {ap.battery_warning}"
         return ""
@@ -562,7 +697,8 @@ class HighLevelControl:
         battery = f"{ap.battery:.1f}%" if ap is not None and ap.battery_known else "unknown"
         low = self.battery_low_reason()
         return f"MC TAKEOFF to {self._requested_altitude():g} m, " + (
-            low or f"battery {battery} (low_battery {self.params.low_battery:g}%)")
+            low or f"battery {battery} (low_battery {self.params.low_battery:g}%)"
+        )
 
     def _link_fresh(self, ap: AutopilotState) -> bool:
         return ap.connected and ap.link_age < self.params.link_timeout
@@ -606,21 +742,35 @@ class HighLevelControl:
         if ap.link_age >= p.link_timeout:
             # Nothing else the snapshot says can be trusted.
             why = f"; {fault}" if fault else ""
-            return [(HlcEvent.LINK_LOST, f"no autopilot heartbeat for {ap.link_age:.1f} s"
-                                         f" (link_timeout {p.link_timeout:g} s){why}")]
+            return [
+                (
+                    HlcEvent.LINK_LOST,
+                    f"no autopilot heartbeat for {ap.link_age:.1f} s"
+                    f" (link_timeout {p.link_timeout:g} s){why}",
+                )
+            ]
         if self.state is HlcState.LLC_DOWN:
             return self._regained_events(ap) if self._link_fresh(ap) else []
         events: list[tuple[HlcEvent, str]] = []
         if ap.landed:
             events.append((HlcEvent.LANDED, f"on the ground and disarmed (mode {ap.mode or '?'})"))
         if ap.armed and pilot_in_control(ap):
-            events.append((HlcEvent.PILOT_TAKEOVER, f"autopilot left autonomous control (mode {ap.mode or '?'})"))
+            events.append(
+                (HlcEvent.PILOT_TAKEOVER, f"autopilot left autonomous control (mode {ap.mode or '?'})")
+            )
         events.extend(self._init_events())
         if ap.failsafe and ap.flight_mode in _FAILSAFE_MODES:
-            failsafe = {FlightMode.RTL: HlcEvent.FAILSAFE_RTL, FlightMode.LANDING: HlcEvent.FAILSAFE_LAND,
-                        FlightMode.HOLD: HlcEvent.FAILSAFE_HOLD}
-            events.append((failsafe[ap.flight_mode],  # type: ignore[index]
-                           f"{ap.failsafe}; autopilot switched to {ap.mode or ap.flight_mode.name}"))  # type: ignore[union-attr]
+            failsafe = {
+                FlightMode.RTL: HlcEvent.FAILSAFE_RTL,
+                FlightMode.LANDING: HlcEvent.FAILSAFE_LAND,
+                FlightMode.HOLD: HlcEvent.FAILSAFE_HOLD,
+            }
+            events.append(
+                (
+                    failsafe[ap.flight_mode],  # type: ignore[index]
+                    f"{ap.failsafe}; autopilot switched to {ap.mode or ap.flight_mode.name}",
+                )
+            )  # type: ignore[union-attr]
         if ap.flight_mode is FlightMode.LANDING:
             events.append((HlcEvent.AUTOPILOT_LAND, f"autopilot switched to {ap.mode or 'LAND'}"))
         if ap.flight_mode is FlightMode.RTL:
@@ -629,8 +779,12 @@ class HighLevelControl:
         if low:
             events.append((HlcEvent.LOW_BATTERY, low))
         if altitude_reached(ap.alt, self._target_altitude, p.airborne_fraction):
-            events.append((HlcEvent.ALTITUDE_REACHED, f"altitude {ap.alt:.2f} m >= {p.airborne_fraction:g}"
-                                                      f" x {self._target_altitude:g} m"))
+            events.append(
+                (
+                    HlcEvent.ALTITUDE_REACHED,
+                    f"altitude {ap.alt:.2f} m >= {p.airborne_fraction:g} x {self._target_altitude:g} m",
+                )
+            )
         return events
 
     # ----------------------------------------------------------------- the table

@@ -131,7 +131,8 @@ def check_velocity(
         )
     if not link_age < limits.max_link_age:  # NaN is stale too
         return GuardDecision(
-            Verdict.REJECT, None,
+            Verdict.REJECT,
+            None,
             f"velocity withheld: autopilot link {link_age:.1f} s old >= {limits.max_link_age:g} s",
         )
     components = {"vx": cmd.vx, "vy": cmd.vy, "vz": cmd.vz, "yaw_rate": cmd.yaw_rate}
@@ -145,7 +146,8 @@ def check_velocity(
     age = now - cmd.received_at
     if age > limits.velocity_timeout:
         return GuardDecision(
-            Verdict.HOVER, Velocity.hover(),
+            Verdict.HOVER,
+            Velocity.hover(),
             f"velocity stale: {age:.2f} s old > velocity_timeout {limits.velocity_timeout:g} s: hover",
         )
 
@@ -210,6 +212,7 @@ class VelocityGuard:
             return None
         self._hovering = True
         return GuardDecision(
-            Verdict.HOVER, Velocity.hover(),
+            Verdict.HOVER,
+            Velocity.hover(),
             f"no velocity command for {age:.2f} s > velocity_timeout {self.limits.velocity_timeout:g} s: hover",
         )

@@ -214,8 +214,12 @@ _RESYNC = frozenset({S.INIT, S.HLC_LOST})  # where the MC takes the HLC's word f
 
 #: The MC transition table, in priority order (the first row matching state, event and guard wins).
 MC_TABLE: tuple[McRow, ...] = (
-    McRow(frozenset(S) - {S.ERROR}, E.HLC_LLC_DOWN, S.ERROR,
-          "HLC lost its autopilot link: the vehicle is on its own failsafe until the link is back"),
+    McRow(
+        frozenset(S) - {S.ERROR},
+        E.HLC_LLC_DOWN,
+        S.ERROR,
+        "HLC lost its autopilot link: the vehicle is on its own failsafe until the link is back",
+    ),
     McRow(frozenset(S) - {S.INIT, S.HLC_LOST}, E.HLC_TIMEOUT, S.HLC_LOST, "HLC lost"),
     McRow(_RESYNC, E.HLC_READY, S.STANDBY, "HLC ready"),
     McRow(_RESYNC, E.HLC_GAINING_ALTITUDE, S.TAKEOFF, "restart resync: HLC gaining altitude"),
@@ -232,8 +236,12 @@ MC_TABLE: tuple[McRow, ...] = (
     McRow(_s(S.TAKEOFF), E.HLC_LANDING, S.LAND, "HLC landing: altitude not gained"),
     McRow(_s(S.TAKEOFF, S.MISSION, S.RTL, S.HOLD), E.OP_LAND, S.LAND, "operator LAND"),
     McRow(_s(S.TAKEOFF, S.MISSION, S.HOLD), E.OP_RTL, S.RTL, "operator RTL"),
-    McRow(_s(S.ERROR), E.OP_LAND, S.LAND, "operator LAND with the HLC reporting its link up", guard=_hlc_link_up),
-    McRow(_s(S.ERROR), E.OP_RTL, S.RTL, "operator RTL with the HLC reporting its link up", guard=_hlc_link_up),
+    McRow(
+        _s(S.ERROR), E.OP_LAND, S.LAND, "operator LAND with the HLC reporting its link up", guard=_hlc_link_up
+    ),
+    McRow(
+        _s(S.ERROR), E.OP_RTL, S.RTL, "operator RTL with the HLC reporting its link up", guard=_hlc_link_up
+    ),
     McRow(_s(S.TAKEOFF, S.MISSION, S.HOLD), E.HLC_LOW_BATTERY, S.RTL, "HLC low battery: returning"),
     McRow(_s(S.RTL, S.HOLD), E.HLC_LANDING, S.LAND, "HLC landing"),
     McRow(_s(S.RTL, S.LAND, S.HOLD), E.HLC_READY, S.STANDBY, "landed and disarmed"),
@@ -243,8 +251,13 @@ MC_TABLE: tuple[McRow, ...] = (
     McRow(_s(S.MISSION), E.HLC_LANDING, S.LAND, "vehicle landing on its own", extra=True),
     McRow(_s(S.MISSION), E.HLC_READY, S.STANDBY, "vehicle landed on its own", extra=True),
     # The vehicle's own failsafes: follow what it does (never MANUAL for an autopilot's decision).
-    McRow(_s(S.TAKEOFF, S.MISSION, S.RTL, S.LAND, S.MANUAL), E.HLC_HOLD, S.HOLD, "vehicle holding on its own",
-          guard=_hlc_changed),
+    McRow(
+        _s(S.TAKEOFF, S.MISSION, S.RTL, S.LAND, S.MANUAL),
+        E.HLC_HOLD,
+        S.HOLD,
+        "vehicle holding on its own",
+        guard=_hlc_changed,
+    ),
     McRow(_s(S.LAND, S.MANUAL, S.HOLD), E.HLC_RTL, S.RTL, "vehicle returning on its own", guard=_hlc_changed),
     McRow(_s(S.MANUAL), E.HLC_LANDING, S.LAND, "vehicle landing on its own"),
     # The autopilot link is back (ERROR is only entered on HLC LLC_DOWN).
@@ -254,8 +267,13 @@ MC_TABLE: tuple[McRow, ...] = (
     McRow(_s(S.ERROR), E.HLC_LOW_BATTERY, S.RTL, "autopilot link regained, vehicle returning on low battery"),
     McRow(_s(S.ERROR), E.HLC_MANUAL, S.MANUAL, "autopilot link regained, pilot in control"),
     *(
-        McRow(_s(S.ERROR), event, target, f"autopilot link regained in the air: on_link_regained = {policy}",
-              guard=_policy(target))
+        McRow(
+            _s(S.ERROR),
+            event,
+            target,
+            f"autopilot link regained in the air: on_link_regained = {policy}",
+            guard=_policy(target),
+        )
         for event in (E.HLC_HOLD, E.HLC_AIRBORNE)
         for policy, target in LINK_REGAINED_POLICIES.items()
     ),
@@ -306,7 +324,9 @@ class MissionControl:
         self._forget_old(now)
         key = (sender, seq, cmd)
         if key in self._accepted:
-            return McOutcome(True, reason=f"{label}: duplicate of an accepted command, ignored", duplicate=True)
+            return McOutcome(
+                True, reason=f"{label}: duplicate of an accepted command, ignored", duplicate=True
+            )
         if cmd is OperatorCommand.TAKEOFF and not (math.isfinite(altitude) and altitude >= 0.0):
             return McOutcome(False, reason=f"{label} rejected: altitude {altitude!r} is not a number >= 0")
         event = McEvent.of_command(cmd)
@@ -315,7 +335,9 @@ class MissionControl:
             allowed = ", ".join(s.name for s in _ACCEPTED_IN[event])
             why = f"accepted in {allowed}"
             if self.state is McState.HLC_LOST:
-                why = f"the HLC is silent: nobody can execute it, the vehicle is on its own GCS failsafe; {why}"
+                why = (
+                    f"the HLC is silent: nobody can execute it, the vehicle is on its own GCS failsafe; {why}"
+                )
             elif self.state is McState.ERROR and event is not McEvent.OP_TAKEOFF:
                 heard = self.hlc_state.name if self.hlc_state is not None else "nothing"
                 why = f"the HLC reports {heard}: the autopilot cannot be reached; {why} (ERROR: once the link is up)"

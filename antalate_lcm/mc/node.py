@@ -93,8 +93,12 @@ class McNode(Node):
             self._publish_state()
         elif not outcome.accepted:
             self._reject_log.log(
-                ("rejected", what.split(" (", 1)[0], self.machine.state), logging.WARNING,
-                "rejected %s in %s: %s", what, self.machine.state.name, outcome.reason,
+                ("rejected", what.split(" (", 1)[0], self.machine.state),
+                logging.WARNING,
+                "rejected %s in %s: %s",
+                what,
+                self.machine.state.name,
+                outcome.reason,
             )
             self._publish_state()  # the operator sees at once that it was not acknowledged
         elif outcome.duplicate:

@@ -68,7 +68,9 @@ class OscNode(Node):
                 self._verify = ssl.create_default_context(cafile=self.osc.ca_file)
             except (OSError, ssl.SSLError) as exc:
                 raise ConfigError(
-                    config.source, "osc.ca_file", f"a readable PEM file of CA certificates ({self.osc.ca_file}: {exc})"
+                    config.source,
+                    "osc.ca_file",
+                    f"a readable PEM file of CA certificates ({self.osc.ca_file}: {exc})",
                 ) from None
         self._token_file = Path(self.osc.token_file).expanduser() if self.osc.token_file else None
         self.token: str | None = self._load_token()
@@ -95,7 +97,9 @@ class OscNode(Node):
         except FileNotFoundError:
             return None
         except OSError as exc:
-            self.log.warning("cannot read the station token from %s: %s; registering anew", self._token_file, exc)
+            self.log.warning(
+                "cannot read the station token from %s: %s; registering anew", self._token_file, exc
+            )
             return None
         return token or None
 
@@ -116,7 +120,9 @@ class OscNode(Node):
                 f.write(token + "\n")
             os.replace(tmp, path)
         except OSError as exc:
-            self._problems.log(("token-file",), logging.WARNING, "cannot keep the station token in %s: %s", path, exc)
+            self._problems.log(
+                ("token-file",), logging.WARNING, "cannot keep the station token in %s: %s", path, exc
+            )
 
     # ------------------------------------------------------------------ lifecycle
     def on_start(self) -> None:
@@ -132,7 +138,8 @@ class OscNode(Node):
         if self.url.startswith("http://") and host not in ("127.0.0.1", "localhost", "::1"):
             self.log.warning(
                 "the station link %s is not encrypted: the agent's token and reports travel in clear "
-                "(use https:// with [osc] ca_file)", self.url,
+                "(use https:// with [osc] ca_file)",
+                self.url,
             )
 
     def on_stop(self) -> None:
@@ -187,7 +194,13 @@ class OscNode(Node):
             telemetry: telemetry_t | None = self._latest.get("telemetry")
             feedback, self._feedback = self._feedback, None
         body = wire.report_body(
-            self.token, mc, hlc, telemetry, feedback, agent=self.agent, swarm_key=self.config.security.swarm_key
+            self.token,
+            mc,
+            hlc,
+            telemetry,
+            feedback,
+            agent=self.agent,
+            swarm_key=self.config.security.swarm_key,
         )
         try:
             with client.stream("POST", self.url, json=body) as response:
@@ -250,8 +263,15 @@ class OscNode(Node):
     def _drop(self, reason: str, topic: str, msg: Any, text: str) -> None:
         self.dropped[reason] = self.dropped.get(reason, 0) + 1
         self._drops.log(
-            (reason, topic), logging.WARNING, "dropped %s from the station (sender %r, seq %d): %s (%d %s so far)",
-            topic, msg.header.agent, msg.header.seq, text, self.dropped[reason], reason,
+            (reason, topic),
+            logging.WARNING,
+            "dropped %s from the station (sender %r, seq %d): %s (%d %s so far)",
+            topic,
+            msg.header.agent,
+            msg.header.seq,
+            text,
+            self.dropped[reason],
+            reason,
         )
 
     def _publish(self, topic: str, msg: Any, seq: int | None, signed: bool = False) -> None:
@@ -263,7 +283,9 @@ class OscNode(Node):
             return
         if not signed:
             if self.security.enabled:
-                self._drop("unsigned", topic, msg, "the station sent it unsigned and this agent has a swarm key")
+                self._drop(
+                    "unsigned", topic, msg, "the station sent it unsigned and this agent has a swarm key"
+                )
                 return
             problem = validation.problem(msg)
             if problem is not None:

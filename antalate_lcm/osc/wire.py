@@ -28,11 +28,17 @@ class ReplyError(ValueError):
     """A reply the OSC will not act on; the message says what was wrong with it."""
 
 
-def registration(agent: str, swarm_key: str, *, utime: int | None = None, nonce: str | None = None) -> dict[str, Any]:
+def registration(
+    agent: str, swarm_key: str, *, utime: int | None = None, nonce: str | None = None
+) -> dict[str, Any]:
     """The proof of the swarm key a first report carries: a MAC with the derived registration key."""
     utime = time.time_ns() // 1000 if utime is None else utime
     nonce = secrets.token_urlsafe(18) if nonce is None else nonce
-    return {"utime": utime, "nonce": nonce, "mac": registration_mac(registration_key(swarm_key), agent, utime, nonce)}
+    return {
+        "utime": utime,
+        "nonce": nonce,
+        "mac": registration_mac(registration_key(swarm_key), agent, utime, nonce),
+    }
 
 
 def report_body(

@@ -180,7 +180,9 @@ def run_processes(child_argv: Callable[[int, int], list[str]], count: int, *, gr
                 break
             failed = next((p for p in procs if p.poll() is not None), None)
             if failed is not None:
-                log.error("agent process %d exited with %s; stopping the others", failed.pid, failed.returncode)
+                log.error(
+                    "agent process %d exited with %s; stopping the others", failed.pid, failed.returncode
+                )
                 break
         return (failed.returncode or 1) if failed is not None else 0
     finally:

@@ -80,7 +80,15 @@ def _cmd_agent(args: argparse.Namespace) -> int:
     if args.shard:
         configs = shard(configs, *parse_shard(args.shard))
     elif processes > 1:  # same channels, agents spread over processes (one loop, one core each)
-        argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", args.log_level, "agent", *args.config]
+        argv = [
+            sys.executable,
+            "-m",
+            "antalate_lcm.cli",
+            "--log-level",
+            args.log_level,
+            "agent",
+            *args.config,
+        ]
         argv += ["--agents", str(args.agents), "--spacing", str(args.spacing)]
         return run_processes(lambda i, n: [*argv, "--shard", f"{i}/{n}"], min(processes, len(configs)))
     # Internal topics between this process's nodes in memory: a spoofed LAN datagram never reaches them.
@@ -186,11 +194,18 @@ def _positive(text: str) -> float:
 
 def _add_analysis_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", help="LCM log file (lcm-logger, antalate log)")
-    p.add_argument("--azimuth", type=float, help="compare the drift with this direction (deg) instead of "
-                   "the direction commands in the log")
+    p.add_argument(
+        "--azimuth",
+        type=float,
+        help="compare the drift with this direction (deg) instead of the direction commands in the log",
+    )
     p.add_argument("--bin", type=_positive, default=1.0, help="cohesion sampling period, s (default 1)")
-    p.add_argument("--max-age", type=_positive, default=2.0,
-                   help="s after which an agent's last position no longer counts (default 2)")
+    p.add_argument(
+        "--max-age",
+        type=_positive,
+        default=2.0,
+        help="s after which an agent's last position no longer counts (default 2)",
+    )
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -214,7 +229,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--agents", type=int, default=1, help="N simulated agents from each config (sim only)")
     p.add_argument("--spacing", type=float, default=8.0, help="metres between simulated homes (default 8)")
     p.add_argument(
-        "--processes", type=int, help="spread the agents over P processes (default: one per core from 500 agents)"
+        "--processes",
+        type=int,
+        help="spread the agents over P processes (default: one per core from 500 agents)",
     )
     p.add_argument("--shard", help=argparse.SUPPRESS)  # INDEX/COUNT: one of those processes
     p.set_defaults(func=_cmd_agent)
@@ -226,8 +243,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
     p = sub.add_parser("demo", help="fly a simulated swarm (the template application)")
     p.add_argument("--agents", type=int, default=5, help="number of simulated agents (default 5)")
-    p.add_argument("--headless", action="store_true", help="no console: a scripted operator flies one mission")
-    p.add_argument("--mission-time", type=float, default=20.0, help="seconds in MISSION before RTL (headless)")
+    p.add_argument(
+        "--headless", action="store_true", help="no console: a scripted operator flies one mission"
+    )
+    p.add_argument(
+        "--mission-time", type=float, default=20.0, help="seconds in MISSION before RTL (headless)"
+    )
     p.add_argument("--azimuth", type=float, help="direction command during the mission, deg (headless)")
     p.add_argument("--speed", type=float, default=1.0, help="direction command speed, m/s (headless)")
     p.set_defaults(func=_cmd_demo)
@@ -246,7 +267,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("log", help="record a bus to an LCM log file (lcm-logger on the config's bus)")
     p.add_argument("config", nargs="?", help="config file (default: the embedded defaults)")
     p.add_argument("-o", "--output", help="log file (default: antalate-YYYYmmdd-HHMMSS.lcm)")
-    p.add_argument("--bus", help="bus name from the config (default: 'lan' if declared, else the default bus)")
+    p.add_argument(
+        "--bus", help="bus name from the config (default: 'lan' if declared, else the default bus)"
+    )
     p.add_argument("--channel", default=".*", help="channel regex to record (default: every channel)")
     p.add_argument("-f", "--force", action="store_true", help="overwrite the log file if it exists")
     p.set_defaults(func=_cmd_log)

@@ -89,20 +89,32 @@ def start_station(swarm_key: str = "", api_key: str = "") -> StationServer:
     from antalate_lcm.station._auth import registration_key, sha256_hex
     from antalate_lcm.station._settings import ApiKey, RateLimits
 
-    server = StationServer(StationSettings(
-        db_path=":memory:", range_m=30.0, fov_deg=90.0, stale_after_s=3.0,
-        registration_key=registration_key(swarm_key) if swarm_key else None,
-        api_keys=(ApiKey(name="demo-operator", role="operator", sha256=sha256_hex(api_key)),) if api_key else (),
-        rate_limits=RateLimits(registrations_per_minute=None),
-    ))
+    server = StationServer(
+        StationSettings(
+            db_path=":memory:",
+            range_m=30.0,
+            fov_deg=90.0,
+            stale_after_s=3.0,
+            registration_key=registration_key(swarm_key) if swarm_key else None,
+            api_keys=(ApiKey(name="demo-operator", role="operator", sha256=sha256_hex(api_key)),)
+            if api_key
+            else (),
+            rate_limits=RateLimits(registrations_per_minute=None),
+        )
+    )
     server.start()
     log.info("station serving on %s", server.url)
     return server
 
 
 def run_headless(
-    n: int, *, mission_time: float = 20.0, url: str = DEMO_URL, direction: tuple[float, float] | None = None,
-    with_station: bool = True, on_report: Callable[[str], None] = print,
+    n: int,
+    *,
+    mission_time: float = 20.0,
+    url: str = DEMO_URL,
+    direction: tuple[float, float] | None = None,
+    with_station: bool = True,
+    on_report: Callable[[str], None] = print,
 ) -> int:
     swarm_key = generate_key()
     station = start_station(swarm_key) if with_station else None
@@ -116,8 +128,13 @@ def run_headless(
 
 
 def _fly_headless(
-    n: int, mission_time: float, url: str, direction: tuple[float, float] | None, station: str | None,
-    on_report: Callable[[str], None], swarm_key: str = "",
+    n: int,
+    mission_time: float,
+    url: str,
+    direction: tuple[float, float] | None,
+    station: str | None,
+    on_report: Callable[[str], None],
+    swarm_key: str = "",
 ) -> int:
     context, url = open_context(url)
     configs = build_swarm(n, url, station=station, swarm_key=swarm_key)

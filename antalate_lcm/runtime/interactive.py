@@ -53,7 +53,11 @@ def run_interactive(n: int, *, url: str = DEMO_URL) -> int:
         station = start_station(swarm_key, api_key)
         logging.getLogger("antalate.demo").info(
             "station on %s; its API key (role operator) is in %s: antalate command agents --station %s "
-            "--api-key-file %s", station.url, key_path, station.url, key_path,
+            "--api-key-file %s",
+            station.url,
+            key_path,
+            station.url,
+            key_path,
         )
         context, url = open_context(url)
         try:

@@ -19,7 +19,10 @@ STOP_TIMEOUT = 120.0
 
 
 def run_until_signal(
-    context: Context, nodes: Sequence[Node], *, stop_event: threading.Event | None = None,
+    context: Context,
+    nodes: Sequence[Node],
+    *,
+    stop_event: threading.Event | None = None,
     poll: Callable[[], bool] | None = None,
 ) -> int:
     """Start ``nodes`` and block until a signal, ``stop_event`` or ``poll()`` returning True.

@@ -78,12 +78,16 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add ``router`` and ``bridge`` to the ``antalate`` parser (docs/wan.md)."""
     p = sub.add_parser("router", help="a Zenoh router for zenoh:// buses across networks (docs/wan.md)")
     p.add_argument(
-        "--listen", action="append", metavar="ENDPOINT",
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
         help=f"Zenoh endpoint to listen on, repeatable (default {DEFAULT_LISTEN})",
     )
     p.add_argument("--lease", type=int, metavar="MS", help="link lease in ms (default: the buses' 3000)")
     p.set_defaults(func=_cmd_router)
 
-    p = sub.add_parser("bridge", help="forward channels between two buses, e.g. a LAN and Zenoh (docs/wan.md)")
+    p = sub.add_parser(
+        "bridge", help="forward channels between two buses, e.g. a LAN and Zenoh (docs/wan.md)"
+    )
     p.add_argument("config", help="bridge config (TOML: [buses] and [bridge])")
     p.set_defaults(func=_cmd_bridge)

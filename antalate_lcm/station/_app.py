@@ -219,7 +219,9 @@ class _ReportFastPath:
             if name == b"content-type":
                 content_type = value.decode("latin-1")
                 break
-        status, payload, retry = handle_report(station, b"".join(chunks), content_type, self.clock(), _address(scope))
+        status, payload, retry = handle_report(
+            station, b"".join(chunks), content_type, self.clock(), _address(scope)
+        )
         await send({"type": "http.response.start", "status": status, "headers": _headers(payload, retry)})
         await send({"type": "http.response.body", "body": payload})
 
@@ -234,8 +236,9 @@ def _authorise(request: Request, credentials: HTTPAuthorizationCredentials | Non
     time does not depend on how much of a guessed key is right.
     """
     if credentials is None:
-        raise HTTPException(401, "an API key is needed: Authorization: Bearer KEY",
-                            headers={"WWW-Authenticate": "Bearer"})
+        raise HTTPException(
+            401, "an API key is needed: Authorization: Bearer KEY", headers={"WWW-Authenticate": "Bearer"}
+        )
     who: Operator | None = request.app.state.api_keys.get(sha256_hex(credentials.credentials))
     if who is None:
         raise HTTPException(401, "unknown API key", headers={"WWW-Authenticate": "Bearer"})
@@ -286,7 +289,10 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
 
     keys = {k.sha256: Operator(k.name, k.role) for k in cfg.api_keys}
     app = FastAPI(
-        title="antalate station", version=API_VERSION, description=_DESCRIPTION, lifespan=lifespan,
+        title="antalate station",
+        version=API_VERSION,
+        description=_DESCRIPTION,
+        lifespan=lifespan,
         responses={422: {"model": ErrorResponse, "description": "invalid request"}},
     )
     # Starlette wraps the last added outermost: the size limit sees the request before the fast path.
@@ -296,19 +302,24 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError) -> Response:
-        return Response(_error_body(_error_list(exc.errors())), status_code=422, media_type="application/json")
+        return Response(
+            _error_body(_error_list(exc.errors())), status_code=422, media_type="application/json"
+        )
 
     @app.exception_handler(HTTPException)
     async def _http_error(request: Request, exc: HTTPException) -> JSONResponse:
         return JSONResponse(
-            status_code=exc.status_code, content={"detail": str(exc.detail), "errors": []},
+            status_code=exc.status_code,
+            content={"detail": str(exc.detail), "errors": []},
             headers=getattr(exc, "headers", None),
         )
 
     @app.exception_handler(Refused)
     async def _refused(request: Request, exc: Refused) -> Response:
         payload = ErrorResponse(detail=exc.detail).model_dump_json().encode()
-        headers = {"Retry-After": retry_after_header(exc.retry_after)} if exc.retry_after is not None else None
+        headers = (
+            {"Retry-After": retry_after_header(exc.retry_after)} if exc.retry_after is not None else None
+        )
         return Response(payload, status_code=exc.status, media_type="application/json", headers=headers)
 
     auth_errors: dict[int | str, dict[str, Any]] = {
@@ -318,11 +329,21 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
     }
 
     @app.post(
-        "/api/report", response_model=ReportReply, response_model_exclude_none=True, tags=["agents"],
-        openapi_extra={"requestBody": {"required": True, "content": {"application/json": {
-            "schema": {"$ref": "#/components/schemas/ReportRequest"}}}}},
+        "/api/report",
+        response_model=ReportReply,
+        response_model_exclude_none=True,
+        tags=["agents"],
+        openapi_extra={
+            "requestBody": {
+                "required": True,
+                "content": {"application/json": {"schema": {"$ref": "#/components/schemas/ReportRequest"}}},
+            }
+        },
         responses={
-            401: {"model": ErrorResponse, "description": "unknown token, or registration without a valid proof"},
+            401: {
+                "model": ErrorResponse,
+                "description": "unknown token, or registration without a valid proof",
+            },
             409: {"model": ErrorResponse, "description": "the name is registered to another token"},
             415: {"model": ErrorResponse, "description": "the body is not JSON"},
             429: {"model": ErrorResponse, "description": "over a rate limit (see Retry-After)"},
@@ -334,7 +355,11 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
         # `_ReportFastPath` answers before this route is reached; see its docstring.
         client = request.client.host if request.client else ""
         status, payload, retry = handle_report(
-            request.app.state.station, await request.body(), request.headers.get("content-type"), clock(), client
+            request.app.state.station,
+            await request.body(),
+            request.headers.get("content-type"),
+            clock(),
+            client,
         )
         headers = {"Retry-After": retry_after_header(retry)} if retry is not None else None
         return Response(payload, status_code=status, media_type="application/json", headers=headers)
@@ -347,8 +372,13 @@ def create_app(settings: StationSettings | None = None, *, clock: Callable[[], f
         return Response(_AGENT_LIST.dump_json(listing), media_type="application/json")
 
     @app.post(
-        "/api/commands", response_model=CommandResponse, tags=["operators"],
-        responses={404: {"model": ErrorResponse, "description": "no agent has the id or name"}, **auth_errors},
+        "/api/commands",
+        response_model=CommandResponse,
+        tags=["operators"],
+        responses={
+            404: {"model": ErrorResponse, "description": "no agent has the id or name"},
+            **auth_errors,
+        },
     )
     async def commands(
         body: CommandRequest, request: Request, who: Annotated[Operator, Depends(_operator)]

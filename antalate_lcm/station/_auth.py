@@ -55,7 +55,9 @@ def registration_message(name: str, utime: int, nonce: str) -> bytes:
 
 
 def registration_mac(reg_key_hex: str, name: str, utime: int, nonce: str) -> str:
-    return hmac.new(bytes.fromhex(reg_key_hex), registration_message(name, utime, nonce), hashlib.sha256).hexdigest()
+    return hmac.new(
+        bytes.fromhex(reg_key_hex), registration_message(name, utime, nonce), hashlib.sha256
+    ).hexdigest()
 
 
 def check_registration(
@@ -105,7 +107,9 @@ class TokenBucket:
         return 0.0
 
     def sweep(self, now: float) -> None:
-        full = [k for k, (level, last) in self._buckets.items() if level + (now - last) * self.rate >= self.burst]
+        full = [
+            k for k, (level, last) in self._buckets.items() if level + (now - last) * self.rate >= self.burst
+        ]
         for k in full:
             del self._buckets[k]
 

@@ -186,7 +186,8 @@ class StationDB:
             conn.execute("PRAGMA foreign_keys=ON")
         log.warning(
             "%s was a version-1 station database (tokens in clear): its tables are kept as *_v1 and every "
-            "agent registers again", self.path,
+            "agent registers again",
+            self.path,
         )
 
     # -- startup ---------------------------------------------------------------------------------
@@ -224,7 +225,12 @@ class StationDB:
             self._conn.execute("UPDATE agents SET token_hash = ? WHERE id = ?", (token_hash, agent_id))
 
     def queue_command(
-        self, t: float, target: str | None, kind: str, body: dict[str, object], agent_ids: Sequence[str],
+        self,
+        t: float,
+        target: str | None,
+        kind: str,
+        body: dict[str, object],
+        agent_ids: Sequence[str],
         replaced: Iterable[tuple[int, str]] = (),
     ) -> int:
         """Store a command and one pending delivery per agent in one transaction; returns its seq.
@@ -276,8 +282,12 @@ class StationDB:
             return 0
         updates = [
             (
-                s.name, s.last_seen, s.mc_state, s.hlc_state,
-                s.telemetry.model_dump_json() if s.telemetry is not None else None, aid,
+                s.name,
+                s.last_seen,
+                s.mc_state,
+                s.hlc_state,
+                s.telemetry.model_dump_json() if s.telemetry is not None else None,
+                aid,
             )
             for aid, s in latest.items()
         ]

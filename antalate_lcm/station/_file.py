@@ -96,8 +96,13 @@ def parse_station_file(data: dict[str, Any], source: str, base: Path | None = No
     st = doc.station
     here = base if base is not None else Path(".")
     fields: dict[str, Any] = {"api_keys": tuple(doc.api_keys), "rate_limits": doc.rate_limits}
-    for key, name in (("range", "range_m"), ("fov", "fov_deg"), ("stale_after", "stale_after_s"),
-                      ("command_ttl", "command_ttl_s"), ("registration_key", "registration_key")):
+    for key, name in (
+        ("range", "range_m"),
+        ("fov", "fov_deg"),
+        ("stale_after", "stale_after_s"),
+        ("command_ttl", "command_ttl_s"),
+        ("registration_key", "registration_key"),
+    ):
         value = getattr(st, key)
         if value is not None:
             fields[name] = value
@@ -107,8 +112,13 @@ def parse_station_file(data: dict[str, Any], source: str, base: Path | None = No
         settings = StationSettings.model_validate(fields)
     except ValidationError as exc:
         err = exc.errors()[0]
-        names = {"range_m": "range", "fov_deg": "fov", "stale_after_s": "stale_after",
-                 "command_ttl_s": "command_ttl", "db_path": "db"}
+        names = {
+            "range_m": "range",
+            "fov_deg": "fov",
+            "stale_after_s": "stale_after",
+            "command_ttl_s": "command_ttl",
+            "db_path": "db",
+        }
         key = ".".join(str(p) for p in err["loc"])
         raise ConfigError(source, f"station.{names.get(key, key)}", str(err["msg"])) from None
     names = [k.name for k in doc.api_keys]

@@ -21,9 +21,20 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 #: State names, exactly the constant names of ``mc_state_t`` / ``hlc_state_t`` (a test keeps them in sync).
-McStateName = Literal["INIT", "STANDBY", "TAKEOFF", "MISSION", "RTL", "LAND", "MANUAL", "ERROR", "HOLD", "HLC_LOST"]
+McStateName = Literal[
+    "INIT", "STANDBY", "TAKEOFF", "MISSION", "RTL", "LAND", "MANUAL", "ERROR", "HOLD", "HLC_LOST"
+]
 HlcStateName = Literal[
-    "INIT", "READY", "TAKEOFF", "GAINING_ALTITUDE", "AIRBORNE", "RTL", "LANDING", "MANUAL", "LOW_BATTERY", "LLC_DOWN",
+    "INIT",
+    "READY",
+    "TAKEOFF",
+    "GAINING_ALTITUDE",
+    "AIRBORNE",
+    "RTL",
+    "LANDING",
+    "MANUAL",
+    "LOW_BATTERY",
+    "LLC_DOWN",
     "HOLD",
 ]
 #: Operator commands, the constant names of ``operator_cmd_t``.
@@ -89,7 +100,8 @@ class Feedback(_Wire):
     content_type: str = Field(min_length=1, max_length=255, description='MIME type, e.g. "image/jpeg"')
     data: str
     encoding: Literal["utf-8", "base64"] = Field(
-        "utf-8", description='"utf-8": data is the content itself; "base64": data is base64 (RFC 4648) of the bytes'
+        "utf-8",
+        description='"utf-8": data is the content itself; "base64": data is base64 (RFC 4648) of the bytes',
     )
 
     @model_validator(mode="after")
@@ -158,11 +170,13 @@ class ReportRequest(_Wire):
 
     token: str | None = Field(None, max_length=128, description="null/absent on first contact (registration)")
     agent: str | None = Field(
-        None, pattern=AGENT_NAME,
+        None,
+        pattern=AGENT_NAME,
         description="the agent's name; at registration it claims the name (else telemetry.agent does)",
     )
     registration: Registration | None = Field(
-        None, description="proof of the swarm key, needed at registration when the station has a registration key"
+        None,
+        description="proof of the swarm key, needed at registration when the station has a registration key",
     )
     mc_state: McStateName | None = None
     hlc_state: HlcStateName | None = None
@@ -179,7 +193,9 @@ class _Signature(_Wire):
     target: str | None = Field(None, max_length=64, description='the signed target: "" = every agent')
     utime: int | None = Field(None, ge=0, le=_INT64_MAX, description="header.utime set by the operator, µs")
     sender: str | None = Field(None, max_length=64, description="header.agent: the operator's name")
-    mac: str | None = Field(None, pattern=_HEX64, description="header.mac (hex): HMAC-SHA256 with the swarm key")
+    mac: str | None = Field(
+        None, pattern=_HEX64, description="header.mac (hex): HMAC-SHA256 with the swarm key"
+    )
 
     @model_validator(mode="after")
     def _all_or_none(self) -> _Signature:
@@ -262,7 +278,9 @@ class SignedDirectionCommand(_SignedHeader):
     """A ``direction_cmd_t`` signed by the operator, field by field."""
 
     active: bool = True
-    azimuth: float = Field(ge=0.0, lt=360.0, description="degrees from true north, [0, 360): not wrapped once signed")
+    azimuth: float = Field(
+        ge=0.0, lt=360.0, description="degrees from true north, [0, 360): not wrapped once signed"
+    )
     speed: float = Field(ge=0.0, le=MAX_SPEED, description="m/s")
 
 
@@ -282,7 +300,9 @@ class CommandRequest(_Wire):
 
     @model_validator(mode="after")
     def _exactly_one(self) -> CommandRequest:
-        given = [x for x in (self.command, self.direction, self.operator_cmd, self.direction_cmd) if x is not None]
+        given = [
+            x for x in (self.command, self.direction, self.operator_cmd, self.direction_cmd) if x is not None
+        ]
         if len(given) != 1:
             raise ValueError('give exactly one of "command", "direction", "operator_cmd" and "direction_cmd"')
         if self.altitude is not None and self.command != "TAKEOFF":

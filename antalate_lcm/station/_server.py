@@ -29,9 +29,16 @@ def _config(
     # instead of uvicorn installing handlers of its own. No access log: one line per report would
     # cost more than the report.
     return uvicorn.Config(
-        create_app(settings), log_level=log_level.lower(), log_config=None, access_log=False,
-        loop="auto", http="auto", lifespan="on", timeout_keep_alive=30,
-        ssl_certfile=tls_cert, ssl_keyfile=tls_key,
+        create_app(settings),
+        log_level=log_level.lower(),
+        log_config=None,
+        access_log=False,
+        loop="auto",
+        http="auto",
+        lifespan="on",
+        timeout_keep_alive=30,
+        ssl_certfile=tls_cert,
+        ssl_keyfile=tls_key,
     )
 
 
@@ -97,8 +104,11 @@ def run_station(
     """
     if settings is None:
         fields: dict[str, object] = {
-            "range_m": range_m, "fov_deg": fov_deg, "stale_after_s": stale_after_s,
-            "command_ttl_s": command_ttl_s, "history_retention_s": history_retention_s,
+            "range_m": range_m,
+            "fov_deg": fov_deg,
+            "stale_after_s": stale_after_s,
+            "command_ttl_s": command_ttl_s,
+            "history_retention_s": history_retention_s,
         }
         if db_path is not None:
             fields["db_path"] = db_path
@@ -113,10 +123,14 @@ def run_station(
     scheme = "https" if tls_cert else "http"
     log.info("station listening on %s://%s:%d (database %s)", scheme, host, actual, settings.db_path)
     if not settings.api_keys:
-        log.warning("no API keys configured: /api/agents and /api/commands answer 401 (antalate station-key api)")
+        log.warning(
+            "no API keys configured: /api/agents and /api/commands answer 401 (antalate station-key api)"
+        )
     if settings.registration_key is None:
-        log.warning("no registration key: any host that reaches the station can register an agent "
-                    "(antalate station-key registration)")
+        log.warning(
+            "no registration key: any host that reaches the station can register an agent "
+            "(antalate station-key registration)"
+        )
     server = uvicorn.Server(_config(settings, log_level, tls_cert, tls_key))
     try:
         server.run(sockets=[sock])
@@ -134,8 +148,14 @@ class StationServer:
     """
 
     def __init__(
-        self, settings: StationSettings | None = None, host: str = "127.0.0.1", port: int = 0,
-        log_level: str = "warning", *, tls_cert: str | None = None, tls_key: str | None = None,
+        self,
+        settings: StationSettings | None = None,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        log_level: str = "warning",
+        *,
+        tls_cert: str | None = None,
+        tls_key: str | None = None,
     ) -> None:
         self.settings = settings if settings is not None else StationSettings()
         if self.settings.db_path != MEMORY:
@@ -188,4 +208,3 @@ class StationServer:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.stop()
-

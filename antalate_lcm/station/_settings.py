@@ -69,7 +69,9 @@ class StationSettings(BaseModel):
         description='SQLite file (created with its directory if missing), or ":memory:"',
     )
     range_m: float = Field(100.0, gt=0.0, description="sensing range of the simulated front sector, metres")
-    fov_deg: float = Field(60.0, gt=0.0, le=360.0, description="full field of view of the front sector, degrees")
+    fov_deg: float = Field(
+        60.0, gt=0.0, le=360.0, description="full field of view of the front sector, degrees"
+    )
     stale_after_s: float = Field(
         5.0, gt=0.0, description="an agent with no report for this long is not detected by others"
     )
@@ -81,7 +83,8 @@ class StationSettings(BaseModel):
         0.5, gt=0.0, le=60.0, description="reports are written in one transaction per this interval"
     )
     history_retention_s: float | None = Field(
-        24 * 3600.0, gt=0.0,
+        24 * 3600.0,
+        gt=0.0,
         description="delete history rows older than this (a row is ~200 bytes); None = keep everything",
     )
     max_body_bytes: int = Field(1 << 20, ge=1024, description="larger requests get 413")
@@ -89,7 +92,8 @@ class StationSettings(BaseModel):
         (), description="operator credentials; none = the operator endpoints answer 401 to everyone"
     )
     registration_key: str | None = Field(
-        None, description="hex key derived from the swarm key; set = registration needs proof of the swarm key"
+        None,
+        description="hex key derived from the swarm key; set = registration needs proof of the swarm key",
     )
     registration_window_s: float = Field(
         60.0, gt=0.0, description="accepted clock difference of a registration proof, seconds"

@@ -82,8 +82,14 @@ class GridIndex:
         return len(dead)
 
     def candidates(
-        self, south: float, north: float, west: float, east: float, *,
-        since: float = -math.inf, exclude: Hashable = None,
+        self,
+        south: float,
+        north: float,
+        west: float,
+        east: float,
+        *,
+        since: float = -math.inf,
+        exclude: Hashable = None,
     ) -> Iterator[tuple[float, float]]:
         """(lat, lon) of every entry whose cell meets the box (a superset of the entries inside it).
 

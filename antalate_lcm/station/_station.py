@@ -110,13 +110,22 @@ class Station:
                 queue.direction = (p.seq, p.t, DirectionCommand.model_validate({"seq": p.seq, **p.body}))
         log.info(
             "station: %d agent(s) and %d pending command(s) from %s; range %.1f m, field of view %.1f°",
-            len(self._agents), sum(len(q.operator) + (q.direction is not None) for q in self._queues.values()),
-            db.path, settings.range_m, settings.fov_deg,
+            len(self._agents),
+            sum(len(q.operator) + (q.direction is not None) for q in self._queues.values()),
+            db.path,
+            settings.range_m,
+            settings.fov_deg,
         )
 
     def _adopt(self, row: AgentRow) -> None:
         agent = _Agent(
-            row.id, row.token_hash, row.name, row.first_seen, row.last_seen, row.mc_state, row.hlc_state,
+            row.id,
+            row.token_hash,
+            row.name,
+            row.first_seen,
+            row.last_seen,
+            row.mc_state,
+            row.hlc_state,
             row.telemetry,
         )
         self._agents[row.id] = self._by_hash[row.token_hash] = self._by_name[row.name] = agent
@@ -163,11 +172,17 @@ class Station:
             agent.telemetry = tel
             self.index.update(agent.id, tel.lat, tel.lon, now)
             payload = self._detection_payload(agent.id, tel.lat, tel.lon, tel.heading, now)
-        self.db.buffer_report(agent.id, self._history_row(agent.id, req, now), LatestState(
-            agent.name, now, agent.mc_state, agent.hlc_state, tel if tel is not None else agent.telemetry
-        ))
+        self.db.buffer_report(
+            agent.id,
+            self._history_row(agent.id, req, now),
+            LatestState(
+                agent.name, now, agent.mc_state, agent.hlc_state, tel if tel is not None else agent.telemetry
+            ),
+        )
         operator_cmd, direction_cmd = self._take_due(agent.id, now)
-        return ReportReply(token=token, operator_cmd=operator_cmd, direction_cmd=direction_cmd, payload=payload)
+        return ReportReply(
+            token=token, operator_cmd=operator_cmd, direction_cmd=direction_cmd, payload=payload
+        )
 
     def _register(self, req: ReportRequest, name: str | None, now: float, address: str) -> tuple[_Agent, str]:
         """First contact: a new agent, or a proven one taking its own name back with a new token."""
@@ -176,7 +191,9 @@ class Station:
             if wait:
                 raise Refused(429, f"too many registrations from {address}", wait)
         if name is not None and not re.fullmatch(AGENT_NAME, name):
-            raise Refused(422, f"agent name {name[:70]!r}: letters, digits, '-', '_' and '.' only, at most 64")
+            raise Refused(
+                422, f"agent name {name[:70]!r}: letters, digits, '-', '_' and '.' only, at most 64"
+            )
         proven = self._check_proof(req, name, now)
         existing = self._by_name.get(name) if name is not None else None
         token = new_token()
@@ -192,7 +209,9 @@ class Station:
             del self._by_hash[existing.token_hash]
             existing.token_hash = token_hash
             self._by_hash[token_hash] = existing
-            log.info("agent %r re-registered with proof from %s: new token, the old one is void", name, address)
+            log.info(
+                "agent %r re-registered with proof from %s: new token, the old one is void", name, address
+            )
             return existing, token
         agent_id = secrets.token_hex(6)
         while agent_id in self._agents or agent_id in self._by_name:  # an id also names an anonymous agent
@@ -200,7 +219,9 @@ class Station:
         agent = _Agent(agent_id, token_hash, name or agent_id, now)
         self.db.add_agent(agent.id, token_hash, agent.name, now)
         self._agents[agent.id] = self._by_hash[token_hash] = self._by_name[agent.name] = agent
-        log.info("new agent %r (id %s) from %s%s", agent.name, agent.id, address, " with proof" if proven else "")
+        log.info(
+            "new agent %r (id %s) from %s%s", agent.name, agent.id, address, " with proof" if proven else ""
+        )
         return agent, token
 
     def _check_proof(self, req: ReportRequest, name: str | None, now: float) -> bool:
@@ -211,9 +232,11 @@ class Station:
             return False
         reg = req.registration
         if reg is None:
-            raise Refused(401, "this station registers only agents that prove the swarm key ([security] swarm_key)")
+            raise Refused(
+                401, "this station registers only agents that prove the swarm key ([security] swarm_key)"
+            )
         if name is None:
-            raise Refused(401, "a registration proof needs the agent's name (\"agent\")")
+            raise Refused(401, 'a registration proof needs the agent\'s name ("agent")')
         window = self.settings.registration_window_s
         problem = check_registration(key, name, reg.utime, reg.nonce, reg.mac, now, window)
         if problem is not None:
@@ -226,8 +249,10 @@ class Station:
     def _detection_payload(self, token: str, lat: float, lon: float, heading: float, now: float) -> Payload:
         found = self._sense(token, lat, lon, heading, now)
         detection = PeerDetection(
-            detected=found.detected, count=found.count,
-            nearest_range=found.nearest_range, nearest_bearing=found.nearest_bearing,
+            detected=found.detected,
+            count=found.count,
+            nearest_range=found.nearest_range,
+            nearest_bearing=found.nearest_bearing,
         )
         return Payload(content_type="application/json", data=detection.model_dump_json())
 
@@ -242,8 +267,22 @@ class Station:
             return None
         t, fb = req.telemetry, req.feedback
         tel_cols: tuple[object, ...] = (
-            (t.lat, t.lon, t.alt, t.heading, t.vn, t.ve, t.vd, t.battery, int(t.armed), int(t.in_air), t.mode, t.agent)
-            if t is not None else (None,) * 12
+            (
+                t.lat,
+                t.lon,
+                t.alt,
+                t.heading,
+                t.vn,
+                t.ve,
+                t.vd,
+                t.battery,
+                int(t.armed),
+                int(t.in_air),
+                t.mode,
+                t.agent,
+            )
+            if t is not None
+            else (None,) * 12
         )
         fb_cols = (fb.content_type, fb.encoding, fb.data) if fb is not None else (None, None, None)
         return (agent_id, now, req.mc_state, req.hlc_state, *tel_cols, *fb_cols)
@@ -261,7 +300,9 @@ class Station:
             seq, t, cmd = queue.operator.popleft()
             if t < cutoff:
                 done.append((seq, agent_id, "expired"))
-                log.warning("dropped %s (seq %d) for %s: not collected within %.0f s", cmd.command, seq, agent_id, ttl)
+                log.warning(
+                    "dropped %s (seq %d) for %s: not collected within %.0f s", cmd.command, seq, agent_id, ttl
+                )
                 continue
             done.append((seq, agent_id, "delivered"))
             operator_cmd = cmd
@@ -272,7 +313,9 @@ class Station:
             queue.direction = None
             if t < cutoff:
                 done.append((seq, agent_id, "expired"))
-                log.warning("dropped direction (seq %d) for %s: not collected within %.0f s", seq, agent_id, ttl)
+                log.warning(
+                    "dropped direction (seq %d) for %s: not collected within %.0f s", seq, agent_id, ttl
+                )
             else:
                 done.append((seq, agent_id, "delivered"))
                 direction_cmd = dcmd
@@ -327,10 +370,13 @@ class Station:
             else:
                 assert req.direction is not None  # CommandRequest validates exactly one
                 body = {
-                    "active": req.direction.active, "azimuth": req.direction.azimuth, "speed": req.direction.speed
+                    "active": req.direction.active,
+                    "azimuth": req.direction.azimuth,
+                    "speed": req.direction.speed,
                 }
             replaced = [
-                (q.direction[0], aid) for aid in agent_ids
+                (q.direction[0], aid)
+                for aid in agent_ids
                 if (q := self._queues.get(aid)) is not None and q.direction is not None
             ]
         seq = self.db.queue_command(now, target, kind, body, agent_ids, replaced)
@@ -341,17 +387,29 @@ class Station:
             op = OperatorCommand.model_validate({"seq": seq, **body})
             for agent in targets:
                 self._queues.setdefault(agent.id, _Queue()).operator.append((seq, now, op))
-                queued.append(QueuedCommand.model_construct(
-                    id=agent.id, name=agent.name, seq=seq, operator_cmd=op, direction_cmd=None))
+                queued.append(
+                    QueuedCommand.model_construct(
+                        id=agent.id, name=agent.name, seq=seq, operator_cmd=op, direction_cmd=None
+                    )
+                )
         else:
             dc = DirectionCommand.model_validate({"seq": seq, **body})
             for agent in targets:
                 self._queues.setdefault(agent.id, _Queue()).direction = (seq, now, dc)
-                queued.append(QueuedCommand.model_construct(
-                    id=agent.id, name=agent.name, seq=seq, operator_cmd=None, direction_cmd=dc))
+                queued.append(
+                    QueuedCommand.model_construct(
+                        id=agent.id, name=agent.name, seq=seq, operator_cmd=None, direction_cmd=dc
+                    )
+                )
         shown = {k: v for k, v in body.items() if k != "mac"}
-        log.info("queued %s%s seq %d for %s (%d agent(s))", "signed " if signed else "", shown, seq,
-                 target or "every agent", len(queued))
+        log.info(
+            "queued %s%s seq %d for %s (%d agent(s))",
+            "signed " if signed else "",
+            shown,
+            seq,
+            target or "every agent",
+            len(queued),
+        )
         return CommandResponse(seq=seq, target=target, queued=queued)
 
     # -- listing and upkeep ----------------------------------------------------------------------
@@ -366,9 +424,14 @@ class Station:
         stale_before = now - self.settings.stale_after_s
         return [
             AgentInfo.model_construct(
-                id=a.id, name=a.name, first_seen=a.first_seen, last_seen=a.last_seen,
+                id=a.id,
+                name=a.name,
+                first_seen=a.first_seen,
+                last_seen=a.last_seen,
                 stale=a.last_seen is None or a.last_seen < stale_before,
-                mc_state=a.mc_state, hlc_state=a.hlc_state, telemetry=a.telemetry,
+                mc_state=a.mc_state,
+                hlc_state=a.hlc_state,
+                telemetry=a.telemetry,
                 pending_commands=self._pending_count(a.id),
             )
             for a in sorted(self._agents.values(), key=lambda a: (a.name, a.id))

@@ -25,7 +25,12 @@ def _cmd_station(args: argparse.Namespace) -> int:
     else:
         settings, host, port, cert, key = StationSettings(), DEFAULT_HOST, DEFAULT_PORT, None, None
     overrides: dict[str, object] = {}
-    for flag, name in (("db", "db_path"), ("range", "range_m"), ("fov", "fov_deg"), ("stale_after", "stale_after_s")):
+    for flag, name in (
+        ("db", "db_path"),
+        ("range", "range_m"),
+        ("fov", "fov_deg"),
+        ("stale_after", "stale_after_s"),
+    ):
         value = getattr(args, flag)
         if value is not None:
             overrides[name] = value
@@ -37,8 +42,11 @@ def _cmd_station(args: argparse.Namespace) -> int:
         except ValidationError as exc:
             raise AntalateError(f"invalid station parameters: {exc}") from None
     run_station(
-        host=args.host or host, port=args.port if args.port is not None else port, settings=settings,
-        tls_cert=args.tls_cert or cert, tls_key=args.tls_key or key,
+        host=args.host or host,
+        port=args.port if args.port is not None else port,
+        settings=settings,
+        tls_cert=args.tls_cert or cert,
+        tls_key=args.tls_key or key,
     )
     return 0
 
@@ -78,7 +86,9 @@ def _cmd_station_key(args: argparse.Namespace) -> int:
     swarm_key = _swarm_key(args)
     if swarm_key is None:
         raise AntalateError("give the swarm key: --swarm-key-file FILE or --agent-config AGENT.toml")
-    print("Registration key (derived from the swarm key; it cannot sign commands). Add to the station config:\n")
+    print(
+        "Registration key (derived from the swarm key; it cannot sign commands). Add to the station config:\n"
+    )
     print(f'[station]\nregistration_key = "{registration_key(swarm_key)}"')
     return 0
 
@@ -92,7 +102,9 @@ def _cmd_command(args: argparse.Namespace) -> int:
     if not api_key:
         raise AntalateError("an API key is needed: --api-key-file FILE, --api-key KEY or $ANTALATE_API_KEY")
     swarm_key = _swarm_key(args)
-    with StationClient(args.station, api_key, swarm_key=swarm_key, sender=args.sender, ca_file=args.ca_file) as c:
+    with StationClient(
+        args.station, api_key, swarm_key=swarm_key, sender=args.sender, ca_file=args.ca_file
+    ) as c:
         try:
             if args.action == "agents":
                 result: object = c.agents()
@@ -115,8 +127,10 @@ def _cmd_command(args: argparse.Namespace) -> int:
     json.dump(result, sys.stdout, indent=1)
     sys.stdout.write("\n")
     if swarm_key is None and args.action != "agents":
-        print("antalate: the command went unsigned (no --swarm-key-file): agents with a swarm key drop it",
-              file=sys.stderr)
+        print(
+            "antalate: the command went unsigned (no --swarm-key-file): agents with a swarm key drop it",
+            file=sys.stderr,
+        )
     return 0
 
 
@@ -124,28 +138,42 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add ``station``, ``station-key`` and ``command`` to the ``antalate`` parser."""
     p = sub.add_parser("station", help="run the reference operator station (HTTP(S) + SQLite)")
     p.add_argument("--config", help="station config file (TOML: [station], [rate_limits], [[api_keys]])")
-    p.add_argument("--db", help="SQLite file (default: in the user's data directory; ':memory:' keeps nothing)")
+    p.add_argument(
+        "--db", help="SQLite file (default: in the user's data directory; ':memory:' keeps nothing)"
+    )
     p.add_argument("--host", help=f"address to listen on (default {DEFAULT_HOST})")
     p.add_argument("--port", type=int, help=f"port (default {DEFAULT_PORT})")
     p.add_argument("--range", type=float, help="front-sector sensing range, m (default 100)")
     p.add_argument("--fov", type=float, help="front-sector field of view, deg (default 60)")
-    p.add_argument("--stale-after", type=float, help="s without a report before an agent is stale (default 5)")
+    p.add_argument(
+        "--stale-after", type=float, help="s without a report before an agent is stale (default 5)"
+    )
     p.add_argument("--tls-cert", help="PEM certificate (chain): serve HTTPS")
     p.add_argument("--tls-key", help="PEM private key of --tls-cert")
     p.set_defaults(func=_cmd_station)
 
     p = sub.add_parser("station-key", help="make an API key, or the station's registration key")
-    p.add_argument("kind", choices=("api", "registration"), help="api: an operator's key; registration: "
-                   "the key derived from the swarm key")
+    p.add_argument(
+        "kind",
+        choices=("api", "registration"),
+        help="api: an operator's key; registration: the key derived from the swarm key",
+    )
     p.add_argument("--name", default="operator", help="api: who holds the key (default operator)")
-    p.add_argument("--role", choices=("operator", "read-only"), default="operator", help="api: default operator")
+    p.add_argument(
+        "--role", choices=("operator", "read-only"), default="operator", help="api: default operator"
+    )
     p.add_argument("--swarm-key-file", help="registration: a file holding the swarm key")
     p.add_argument("--agent-config", help="registration: an agent config with [security] swarm_key")
     p.set_defaults(func=_cmd_station_key)
 
-    p = sub.add_parser("command", help="send an operator command through a station (signed with the swarm key)")
-    p.add_argument("action", choices=("TAKEOFF", "LAND", "RTL", "direction", "agents"),
-                   help="a command, a direction (--azimuth, --speed) or 'agents' to list them")
+    p = sub.add_parser(
+        "command", help="send an operator command through a station (signed with the swarm key)"
+    )
+    p.add_argument(
+        "action",
+        choices=("TAKEOFF", "LAND", "RTL", "direction", "agents"),
+        help="a command, a direction (--azimuth, --speed) or 'agents' to list them",
+    )
     p.add_argument("--station", required=True, help="station URL, e.g. https://192.168.1.10:8443")
     p.add_argument("--api-key", help="the API key (visible in the process list: prefer --api-key-file)")
     p.add_argument("--api-key-file", help="a file holding the API key (or set $ANTALATE_API_KEY)")

@@ -51,11 +51,24 @@ def wrap_azimuth(azimuth: float) -> float:
 
 def _header_fields(msg: Any) -> dict[str, Any]:
     h = msg.header
-    return {"target": msg.target, "utime": h.utime, "sender": h.agent, "seq": h.seq, "mac": bytes(h.mac).hex()}
+    return {
+        "target": msg.target,
+        "utime": h.utime,
+        "sender": h.agent,
+        "seq": h.seq,
+        "mac": bytes(h.mac).hex(),
+    }
 
 
 def build_operator_cmd(
-    command: str, *, target: str = "", altitude: float = 0.0, sender: str, seq: int, utime: int, key: str | None
+    command: str,
+    *,
+    target: str = "",
+    altitude: float = 0.0,
+    sender: str,
+    seq: int,
+    utime: int,
+    key: str | None,
 ) -> operator_cmd_t:
     """The ``operator_cmd_t`` an operator sends, signed with ``key`` when there is one."""
     if command not in COMMANDS:
@@ -73,7 +86,14 @@ def build_operator_cmd(
 
 
 def build_direction_cmd(
-    azimuth: float, speed: float, *, active: bool = True, target: str = "", sender: str, seq: int, utime: int,
+    azimuth: float,
+    speed: float,
+    *,
+    active: bool = True,
+    target: str = "",
+    sender: str,
+    seq: int,
+    utime: int,
     key: str | None,
 ) -> direction_cmd_t:
     """The ``direction_cmd_t`` an operator sends, signed with ``key`` when there is one."""
@@ -104,8 +124,15 @@ class StationClient:
     and keys duplicates on it)."""
 
     def __init__(
-        self, url: str, api_key: str, *, swarm_key: str | None = None, sender: str = "station-client",
-        ca_file: str | None = None, timeout: float = 5.0, transport: httpx.BaseTransport | None = None,
+        self,
+        url: str,
+        api_key: str,
+        *,
+        swarm_key: str | None = None,
+        sender: str = "station-client",
+        ca_file: str | None = None,
+        timeout: float = 5.0,
+        transport: httpx.BaseTransport | None = None,
     ) -> None:
         self.url = url.rstrip("/")
         self.swarm_key = swarm_key or None
@@ -113,7 +140,10 @@ class StationClient:
         self._seq = 0
         verify: Any = ssl.create_default_context(cafile=ca_file) if ca_file else True
         self._http = httpx.Client(
-            base_url=self.url, timeout=timeout, verify=verify, transport=transport,
+            base_url=self.url,
+            timeout=timeout,
+            verify=verify,
+            transport=transport,
             headers={"Authorization": f"Bearer {api_key}"},
         )
 
@@ -157,11 +187,18 @@ class StationClient:
                 body["target"] = target
             if altitude:
                 body["altitude"] = altitude
-            build_operator_cmd(command, altitude=altitude, sender=self.sender, seq=1, utime=1, key=None)  # checks
+            build_operator_cmd(
+                command, altitude=altitude, sender=self.sender, seq=1, utime=1, key=None
+            )  # checks
             return self._post(body)
         msg = build_operator_cmd(
-            command, target=target or "", altitude=altitude, sender=self.sender, seq=self.next_seq(),
-            utime=time.time_ns() // 1000, key=self.swarm_key,
+            command,
+            target=target or "",
+            altitude=altitude,
+            sender=self.sender,
+            seq=self.next_seq(),
+            utime=time.time_ns() // 1000,
+            key=self.swarm_key,
         )
         return self._post({"operator_cmd": operator_cmd_wire(msg)})
 
@@ -170,11 +207,19 @@ class StationClient:
     ) -> dict[str, Any]:
         """Queue a direction for ``target`` (a name; None = every agent)."""
         msg = build_direction_cmd(
-            azimuth, speed, active=active, target=target or "", sender=self.sender, seq=self.next_seq(),
-            utime=time.time_ns() // 1000, key=self.swarm_key,
+            azimuth,
+            speed,
+            active=active,
+            target=target or "",
+            sender=self.sender,
+            seq=self.next_seq(),
+            utime=time.time_ns() // 1000,
+            key=self.swarm_key,
         )
         if self.swarm_key is None:
-            body: dict[str, Any] = {"direction": {"azimuth": msg.azimuth, "speed": msg.speed, "active": active}}
+            body: dict[str, Any] = {
+                "direction": {"azimuth": msg.azimuth, "speed": msg.speed, "active": active}
+            }
             if target:
                 body["target"] = target
             return self._post(body)

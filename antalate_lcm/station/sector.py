@@ -96,7 +96,19 @@ class _Flat:
     FOV_MARGIN_DEG = 1.0
     NEAR_M = 10.0
 
-    __slots__ = ("lat", "lon", "k_north", "k_east", "hn", "he", "out_d2", "in_d2", "cos_out", "cos_in", "omni")
+    __slots__ = (
+        "lat",
+        "lon",
+        "k_north",
+        "k_east",
+        "hn",
+        "he",
+        "out_d2",
+        "in_d2",
+        "cos_out",
+        "cos_in",
+        "omni",
+    )
 
     def __init__(self, lat: float, lon: float, heading: float, range_m: float, fov_deg: float) -> None:
         phi = math.radians(lat)
@@ -113,8 +125,14 @@ class _Flat:
         self.in_d2 = in_d * in_d if in_d > 0.0 else -1.0
         half = fov_deg / 2.0
         self.omni = half - self.FOV_MARGIN_DEG >= 180.0
-        self.cos_out = -2.0 if half + self.FOV_MARGIN_DEG >= 180.0 else math.cos(math.radians(half + self.FOV_MARGIN_DEG))
-        self.cos_in = math.cos(math.radians(half - self.FOV_MARGIN_DEG)) if half > self.FOV_MARGIN_DEG else 2.0
+        self.cos_out = (
+            -2.0
+            if half + self.FOV_MARGIN_DEG >= 180.0
+            else math.cos(math.radians(half + self.FOV_MARGIN_DEG))
+        )
+        self.cos_in = (
+            math.cos(math.radians(half - self.FOV_MARGIN_DEG)) if half > self.FOV_MARGIN_DEG else 2.0
+        )
 
     @classmethod
     def usable(cls, lat: float, range_m: float) -> bool:
@@ -192,7 +210,12 @@ def detect(
 
 
 def _detect_exact(
-    lat: float, lon: float, heading: float, peers: Iterable[tuple[float, float]], range_m: float, fov_deg: float
+    lat: float,
+    lon: float,
+    heading: float,
+    peers: Iterable[tuple[float, float]],
+    range_m: float,
+    fov_deg: float,
 ) -> Detection:
     """`detect` without shortcuts: long ranges and polar regions, where the planar bounds do not hold."""
     count = 0
@@ -209,8 +232,9 @@ def _detect_exact(
     return Detection(True, count, best_d, best_rel)
 
 
-def search_box(lat: float, lon: float, heading: float, range_m: float, fov_deg: float
-               ) -> tuple[float, float, float, float]:
+def search_box(
+    lat: float, lon: float, heading: float, range_m: float, fov_deg: float
+) -> tuple[float, float, float, float]:
     """(south, north, west, east) in degrees enclosing the sector, generously: what the index scans.
 
     A narrow sector needs a box a quarter the size of the circle's, so the index hands over a

@@ -116,8 +116,14 @@ class DovratSwarm(Behavior):
         # the rule safe if the behavior is ever fed by something else.
         direction = OperatorDirection(bool(msg.active), float(msg.azimuth), float(msg.speed))
         if not finite_direction(direction):
-            self._reject_log.log("direction", logging.WARNING, "ignored a direction from %r: azimuth %r, speed %r",
-                                 msg.header.agent, msg.azimuth, msg.speed)
+            self._reject_log.log(
+                "direction",
+                logging.WARNING,
+                "ignored a direction from %r: azimuth %r, speed %r",
+                msg.header.agent,
+                msg.azimuth,
+                msg.speed,
+            )
             return
         self.direction = direction
         self.log.info(
@@ -126,15 +132,20 @@ class DovratSwarm(Behavior):
         )
 
     def _on_peer_detection(self, msg: peer_detection_t) -> None:
-        detection = Detection(bool(msg.detected), max(0, int(msg.count)), float(msg.nearest_range),
-                              float(msg.nearest_bearing))
+        detection = Detection(
+            bool(msg.detected), max(0, int(msg.count)), float(msg.nearest_range), float(msg.nearest_bearing)
+        )
         self.detections.update(detection, self.ctx.now)
 
     def _on_payload(self, msg: payload_t) -> None:
         detection = parse_detection_payload(bytes(msg.data))
         if detection is None:
-            self._reject_log.log("payload", logging.DEBUG, "operator payload (%s) holds no detection; ignored",
-                                 msg.content_type)
+            self._reject_log.log(
+                "payload",
+                logging.DEBUG,
+                "operator payload (%s) holds no detection; ignored",
+                msg.content_type,
+            )
             return
         self.detections.update(detection, self.ctx.now)
 
@@ -145,8 +156,11 @@ class DovratSwarm(Behavior):
         return self._heading
 
     def on_activate(self) -> None:
-        self.log.info("swarming: %g m/s, turning %s", self.rule.forward_speed,
-                      "clockwise" if self.rule.turn_direction > 0 else "counter-clockwise")
+        self.log.info(
+            "swarming: %g m/s, turning %s",
+            self.rule.forward_speed,
+            "clockwise" if self.rule.turn_direction > 0 else "counter-clockwise",
+        )
 
     def tick(self, dt: float) -> None:
         now = self.ctx.now

@@ -81,7 +81,9 @@ def built_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
                     pod.run_flags = flags
                     chosen = pod
                     break
-                problems.append(f"{driver} {' '.join(flags)} (hugetlb moved to cgroup v1): {probe.stderr.strip()[-500:]}")
+                problems.append(
+                    f"{driver} {' '.join(flags)} (hugetlb moved to cgroup v1): {probe.stderr.strip()[-500:]}"
+                )
         if chosen is not None:
             break
         if imported is None:
@@ -108,9 +110,11 @@ def built_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
         raise
     size = build.image_size(tag, builder.opts)
     image = Image(builder, tag, size, time.monotonic() - started, wheel, work, cannot_run)
-    print(f"\nantalate image {tag}: {size / 1e6:.0f} MB, built in {image.build_seconds:.0f} s "
-          f"(storage {builder.driver}, run flags {builder.run_flags or 'none'}"
-          f"{'' if cannot_run is None else ', containers cannot start here'})")
+    print(
+        f"\nantalate image {tag}: {size / 1e6:.0f} MB, built in {image.build_seconds:.0f} s "
+        f"(storage {builder.driver}, run flags {builder.run_flags or 'none'}"
+        f"{'' if cannot_run is None else ', containers cannot start here'})"
+    )
     try:
         yield image
     finally:
@@ -136,7 +140,9 @@ def _free_cgroup2_of_hugetlb() -> bool:
     CI VMs). Mounting that controller on a v1 hierarchy of its own empties v2. This changes the
     host, so it is done only on CI (``CI=true``, a throw-away machine) or when asked for with
     ``ANTALATE_TEST_FIX_CGROUPS=1``, and only as root."""
-    if os.geteuid() != 0 or not (os.environ.get("CI") == "true" or os.environ.get("ANTALATE_TEST_FIX_CGROUPS") == "1"):
+    if os.geteuid() != 0 or not (
+        os.environ.get("CI") == "true" or os.environ.get("ANTALATE_TEST_FIX_CGROUPS") == "1"
+    ):
         return False
     unified = Path("/sys/fs/cgroup/unified/cgroup.controllers")
     try:
@@ -146,8 +152,9 @@ def _free_cgroup2_of_hugetlb() -> bool:
     for controller in controllers:
         target = Path("/sys/fs/cgroup") / controller
         target.mkdir(exist_ok=True)
-        done = subprocess.run(["mount", "-t", "cgroup", "-o", controller, "cgroup", str(target)],
-                              capture_output=True, text=True)
+        done = subprocess.run(
+            ["mount", "-t", "cgroup", "-o", controller, "cgroup", str(target)], capture_output=True, text=True
+        )
         if done.returncode != 0:
             return False
     return True

@@ -25,7 +25,9 @@ _SETUP = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && echo ready && 
 
 def load_build_module() -> ModuleType:
     """containers/build_image.py (a script, not a package) as a module."""
-    spec = importlib.util.spec_from_file_location("antalate_build_image", REPO / "containers" / "build_image.py")
+    spec = importlib.util.spec_from_file_location(
+        "antalate_build_image", REPO / "containers" / "build_image.py"
+    )
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module
@@ -36,8 +38,13 @@ def load_build_module() -> ModuleType:
 def podman_unavailable() -> str | None:
     if os.geteuid() != 0:
         return "the container tests run podman as root (CI does)"
-    for tool, package in (("podman", "podman"), ("mmdebstrap", "mmdebstrap"), ("unshare", "util-linux"),
-                          ("nsenter", "util-linux"), ("ip", "iproute2")):
+    for tool, package in (
+        ("podman", "podman"),
+        ("mmdebstrap", "mmdebstrap"),
+        ("unshare", "util-linux"),
+        ("nsenter", "util-linux"),
+        ("ip", "iproute2"),
+    ):
         if shutil.which(tool) is None:
             return f"{tool} is not installed (Debian: apt-get install {package})"
     probe = subprocess.run(["unshare", "-n", "sh", "-c", "ip link set lo up"], capture_output=True, text=True)
@@ -51,7 +58,10 @@ class RootNetns:
 
     def __init__(self) -> None:
         self.holder = subprocess.Popen(
-            ["unshare", "-n", "sh", "-c", _SETUP], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            ["unshare", "-n", "sh", "-c", _SETUP],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
             start_new_session=True,
         )
         assert self.holder.stdout is not None
@@ -90,8 +100,18 @@ class Podman:
         for sub in ("storage", "run", "tmp"):
             (root / sub).mkdir(parents=True, exist_ok=True)
         self.opts = [
-            "--root", str(root / "storage"), "--runroot", str(root / "run"), "--tmpdir", str(root / "tmp"),
-            "--storage-driver", driver, "--cgroup-manager", "cgroupfs", "--events-backend", "file",
+            "--root",
+            str(root / "storage"),
+            "--runroot",
+            str(root / "run"),
+            "--tmpdir",
+            str(root / "tmp"),
+            "--storage-driver",
+            driver,
+            "--cgroup-manager",
+            "cgroupfs",
+            "--events-backend",
+            "file",
         ]
         self.run_flags: list[str] = []
 
@@ -103,7 +123,9 @@ class Podman:
         return self.netns.wrap(argv) if self.netns is not None else argv
 
     def __call__(self, *args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
-        return subprocess.run(self.command(*args), capture_output=True, text=True, timeout=timeout, env=self.env())
+        return subprocess.run(
+            self.command(*args), capture_output=True, text=True, timeout=timeout, env=self.env()
+        )
 
     def in_netns(self, netns: RootNetns) -> Podman:
         other = Podman(self.root, self.driver, netns)

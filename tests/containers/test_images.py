@@ -33,17 +33,23 @@ MCAST = "udpm://239.255.76.67:7667?ttl=0"
 KEY = "container-test-swarm-key"
 HEALTHCHECK = ["/opt/antalate/bin/python", "/usr/local/lib/antalate-healthcheck.py"]
 # the module every node kind runs, the LCM binding and the MAVLink adapter (the default image's vehicle)
-NODE_IMPORTS = ("import lcm, antalate_lcm.cli, antalate_lcm.mc, antalate_lcm.hlc.node, antalate_lcm.bma, "
-                "antalate_lcm.osc, antalate_lcm.station, antalate_lcm.autopilot.mavlink, "
-                "antalate_lcm.autopilot.tello, operator_tui.web; from pymavlink import mavutil")
+NODE_IMPORTS = (
+    "import lcm, antalate_lcm.cli, antalate_lcm.mc, antalate_lcm.hlc.node, antalate_lcm.bma, "
+    "antalate_lcm.osc, antalate_lcm.station, antalate_lcm.autopilot.mavlink, "
+    "antalate_lcm.autopilot.tello, operator_tui.web; from pymavlink import mavutil"
+)
 # what the default image leaves out: opencv (never imported), the tello and plot extras
-LEFT_OUT_CHECK = ("import importlib.util as u, sys; "
-                  "bad = [m for m in ('cv2', 'djitellopy', 'av', 'numpy', 'matplotlib') if u.find_spec(m)]; "
-                  "sys.exit(f'in the image but left out: {bad}' if bad else 0)")
+LEFT_OUT_CHECK = (
+    "import importlib.util as u, sys; "
+    "bad = [m for m in ('cv2', 'djitellopy', 'av', 'numpy', 'matplotlib') if u.find_spec(m)]; "
+    "sys.exit(f'in the image but left out: {bad}' if bad else 0)"
+)
 # antalate's source files in the venv, and those without compiled bytecode (prints "missing total")
-STALE_BYTECODE = ("import importlib.util as u, pathlib, sys; "
-                  "fs = [f for f in pathlib.Path(sys.prefix, 'lib').rglob('*.py') if 'antalate_lcm' in f.parts]; "
-                  "print(sum(1 for f in fs if not pathlib.Path(u.cache_from_source(str(f))).exists()), len(fs))")
+STALE_BYTECODE = (
+    "import importlib.util as u, pathlib, sys; "
+    "fs = [f for f in pathlib.Path(sys.prefix, 'lib').rglob('*.py') if 'antalate_lcm' in f.parts]; "
+    "print(sum(1 for f in fs if not pathlib.Path(u.cache_from_source(str(f))).exists()), len(fs))"
+)
 
 
 def test_image_is_one_non_root_image_with_its_health_check(antalate_image: Image) -> None:
@@ -59,10 +65,22 @@ def test_image_is_one_non_root_image_with_its_health_check(antalate_image: Image
     # every node kind is a subcommand of the one entry point; opencv was left out, pymavlink works
     helps = pod("run", "--rm", "--network", "host", *pod.run_flags, tag, "--help")
     assert helps.returncode == 0, helps.stderr
-    listed = {line.split()[0] for line in helps.stdout.splitlines() if line.startswith("    ") and line.split()}
+    listed = {
+        line.split()[0] for line in helps.stdout.splitlines() if line.startswith("    ") and line.split()
+    }
     assert {"mc", "hlc", "bma", "osc", "agent", "station", "tui", "types"} <= listed, helps.stdout
-    probe = pod("run", "--rm", "--network", "host", *pod.run_flags, "--entrypoint", "/opt/antalate/bin/python", tag,
-                "-c", f"{NODE_IMPORTS}; {LEFT_OUT_CHECK}")
+    probe = pod(
+        "run",
+        "--rm",
+        "--network",
+        "host",
+        *pod.run_flags,
+        "--entrypoint",
+        "/opt/antalate/bin/python",
+        tag,
+        "-c",
+        f"{NODE_IMPORTS}; {LEFT_OUT_CHECK}",
+    )
     assert probe.returncode == 0, probe.stdout + probe.stderr
     assert antalate_image.size < 400e6, f"{antalate_image.size / 1e6:.0f} MB: something big came back"
 
@@ -98,17 +116,22 @@ def test_every_node_kind_imports_in_the_image_as_its_user(built_image: Image, im
 
     helps = run("antalate", "--help")
     assert helps.returncode == 0, helps.stderr
-    listed = {line.split()[0] for line in helps.stdout.splitlines() if line.startswith("    ") and line.split()}
+    listed = {
+        line.split()[0] for line in helps.stdout.splitlines() if line.startswith("    ") and line.split()
+    }
     assert {"mc", "hlc", "bma", "osc", "agent", "station", "tui", "types"} <= listed, helps.stdout
     probe = run("/opt/antalate/bin/python", "-c", f"{NODE_IMPORTS}; {LEFT_OUT_CHECK}")
     assert probe.returncode == 0, probe.stdout + probe.stderr
     # what was left out says so in one line, as on any install without the extra
     plot = run("antalate", "plot", "/var/lib/antalate/flight.lcm")
     assert plot.returncode == 2 and plot.stderr.strip().endswith("pip install 'antalate[plot]'"), plot.stderr
-    tello = run("/opt/antalate/bin/python", "-c",
-                "from antalate_lcm.autopilot.tello import TelloAutopilot\n"
-                "try:\n    TelloAutopilot({'host': '127.0.0.1'}).connect()\n"
-                "except Exception as exc:\n    print(exc)")
+    tello = run(
+        "/opt/antalate/bin/python",
+        "-c",
+        "from antalate_lcm.autopilot.tello import TelloAutopilot\n"
+        "try:\n    TelloAutopilot({'host': '127.0.0.1'}).connect()\n"
+        "except Exception as exc:\n    print(exc)",
+    )
     assert "pip install 'antalate[tello]'" in tello.stdout, tello.stdout + tello.stderr
     # bytecode is there and current: a node as uid 10001 (who cannot write /opt) does not compile at start
     stale = run("/opt/antalate/bin/python", "-c", STALE_BYTECODE)
@@ -126,11 +149,14 @@ def netns() -> Iterator[RootNetns]:
         ns.close()
 
 
-def test_a_mission_with_every_node_in_its_own_container(antalate_image: Image, netns: RootNetns, tmp_path: Path) -> None:
+def test_a_mission_with_every_node_in_its_own_container(
+    antalate_image: Image, netns: RootNetns, tmp_path: Path
+) -> None:
     pod = antalate_image.podman.in_netns(netns)
     tag = antalate_image.tag
     agent = agent_config(
-        "alpha", security={"swarm_key": KEY},
+        "alpha",
+        security={"swarm_key": KEY},
         osc={"enabled": True, "server": "http://127.0.0.1:8080", "rate": 2.0},
         bma=[{"name": "swarm"}],
     )
@@ -138,9 +164,16 @@ def test_a_mission_with_every_node_in_its_own_container(antalate_image: Image, n
     agent_toml = tmp_path / "alpha.toml"
     agent_toml.write_text(to_toml(agent))
     operator_toml = tmp_path / "operator.toml"
-    operator_toml.write_text(to_toml({"agent": {"name": "operator"}, "buses": {"lan": MCAST},
-                                      "topics": {"default_bus": "lan"},
-                                      "security": {"swarm_key": KEY, "state_dir": str(tmp_path / "operator-state")}}))
+    operator_toml.write_text(
+        to_toml(
+            {
+                "agent": {"name": "operator"},
+                "buses": {"lan": MCAST},
+                "topics": {"default_bus": "lan"},
+                "security": {"swarm_key": KEY, "state_dir": str(tmp_path / "operator-state")},
+            }
+        )
+    )
     for f in (agent_toml, operator_toml):
         f.chmod(0o644)
     run_id = uuid.uuid4().hex[:8]
@@ -156,10 +189,25 @@ def test_a_mission_with_every_node_in_its_own_container(antalate_image: Image, n
     try:
         for node, args in nodes.items():
             # pod.run_flags has --no-healthcheck: the check is run by hand below (podman exec)
-            started = pod("run", "-d", "--name", names[node], "--network", "host", *pod.run_flags, *([] if node == "station" else mount), tag, *args)
+            started = pod(
+                "run",
+                "-d",
+                "--name",
+                names[node],
+                "--network",
+                "host",
+                *pod.run_flags,
+                *([] if node == "station" else mount),
+                tag,
+                *args,
+            )
             assert started.returncode == 0, f"{node}: {started.stderr}"
-        proc = netns.popen([sys.executable, "-m", "tests.lan.lan_operator", str(operator_toml)],
-                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        proc = netns.popen(
+            [sys.executable, "-m", "tests.lan.lan_operator", str(operator_toml)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
         op = OperatorClient(proc)
         try:
             op.wait_all(["alpha"], "STANDBY", timeout=90)
@@ -168,7 +216,8 @@ def test_a_mission_with_every_node_in_its_own_container(antalate_image: Image, n
             health = {node: pod("exec", names[node], *HEALTHCHECK, timeout=60) for node in nodes}
             for node, result in health.items():
                 assert result.returncode == 0 and result.stdout.startswith("healthy"), (
-                    f"{node}: {result.stdout}{result.stderr}\n{logs(pod, names[node])}")
+                    f"{node}: {result.stdout}{result.stderr}\n{logs(pod, names[node])}"
+                )
             op.command("RTL")
             op.wait_all(["alpha"], "STANDBY", timeout=90)
             status = op.wait(lambda s: s["pending"] == 0, timeout=20, what="no command pending")
@@ -184,7 +233,9 @@ def test_a_mission_with_every_node_in_its_own_container(antalate_image: Image, n
         # a node that stops is reported unhealthy by the others' image: the MC gone, the OSC's check fails
         pod("stop", "--time", "5", names["mc"])
         sick = pod("exec", names["osc"], *HEALTHCHECK, timeout=60)
-        assert sick.returncode == 1 and "the MC_STATE it forwards not heard" in sick.stdout, sick.stdout + sick.stderr
+        assert sick.returncode == 1 and "the MC_STATE it forwards not heard" in sick.stdout, (
+            sick.stdout + sick.stderr
+        )
     finally:
         for name in names.values():
             pod("stop", "--time", "5", name, timeout=120)
@@ -208,8 +259,10 @@ def binfmt_arm64() -> str | None:
         return None
     handler = Path("/proc/sys/fs/binfmt_misc/qemu-aarch64")
     if not handler.exists():
-        return ("this host has no binfmt_misc handler for arm64 (/proc/sys/fs/binfmt_misc/qemu-aarch64): install "
-                "qemu-user-static and binfmt-support where the kernel allows binfmt_misc")
+        return (
+            "this host has no binfmt_misc handler for arm64 (/proc/sys/fs/binfmt_misc/qemu-aarch64): install "
+            "qemu-user-static and binfmt-support where the kernel allows binfmt_misc"
+        )
     if "enabled" not in handler.read_text():
         return "the qemu-aarch64 binfmt_misc handler is disabled"
     return None
@@ -231,9 +284,23 @@ def test_the_same_image_builds_for_arm64(antalate_image: Image) -> None:
     build.wheelhouse(antalate_image.wheel, work / "context" / "wheels", "arm64")
     tag = "localhost/antalate:test-arm64"
     build.build_image(work / "context", base, tag, "arm64", pod.opts)
-    arch = pod("run", "--rm", "--arch", "arm64", "--network", "host", *pod.run_flags, "--entrypoint", "uname", tag, "-m")
+    arch = pod(
+        "run",
+        "--rm",
+        "--arch",
+        "arm64",
+        "--network",
+        "host",
+        *pod.run_flags,
+        "--entrypoint",
+        "uname",
+        tag,
+        "-m",
+    )
     assert arch.stdout.strip() == "aarch64", arch.stderr
-    helps = pod("run", "--rm", "--arch", "arm64", "--network", "host", *pod.run_flags, tag, "--help", timeout=300)
+    helps = pod(
+        "run", "--rm", "--arch", "arm64", "--network", "host", *pod.run_flags, tag, "--help", timeout=300
+    )
     assert helps.returncode == 0 and "station" in helps.stdout, helps.stderr
     print(f"arm64 image: {build.image_size(tag, pod.opts) / 1e6:.0f} MB")
 
@@ -241,8 +308,13 @@ def test_the_same_image_builds_for_arm64(antalate_image: Image) -> None:
 def test_build_script_refuses_without_its_tools(tmp_path: Path) -> None:
     """The user's entry point says what is missing instead of failing half-way (runs everywhere)."""
     env = dict(os.environ, PATH=str(tmp_path))  # no podman, no mmdebstrap
-    proc = subprocess.run([sys.executable, str(Path(__file__).resolve().parents[2] / "containers" / "build_image.py")],
-                          capture_output=True, text=True, env=env, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, str(Path(__file__).resolve().parents[2] / "containers" / "build_image.py")],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
     assert proc.returncode == 2 and "podman is not installed" in proc.stderr, proc.stderr
 
 

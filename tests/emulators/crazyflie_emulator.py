@@ -70,8 +70,16 @@ PORT_PLATFORM, PORT_LINK = 13, 15
 # log.h types and flags
 LOG_UINT8, LOG_UINT16, LOG_UINT32, LOG_INT8, LOG_INT16, LOG_INT32, LOG_FLOAT, LOG_FP16 = range(1, 9)
 LOG_CORE, LOG_GROUP, LOG_START = 0x20, 0x80, 1
-LOG_FORMATS = {LOG_UINT8: "<B", LOG_UINT16: "<H", LOG_UINT32: "<I", LOG_INT8: "<b", LOG_INT16: "<h",
-               LOG_INT32: "<i", LOG_FLOAT: "<f", LOG_FP16: "<e"}
+LOG_FORMATS = {
+    LOG_UINT8: "<B",
+    LOG_UINT16: "<H",
+    LOG_UINT32: "<I",
+    LOG_INT8: "<b",
+    LOG_INT16: "<h",
+    LOG_INT32: "<i",
+    LOG_FLOAT: "<f",
+    LOG_FP16: "<e",
+}
 # param.h types and flags
 PARAM_UINT8, PARAM_UINT16, PARAM_FLOAT = 0x08, 0x09, 0x06
 PARAM_CORE, PARAM_GROUP, PARAM_START = 0x20, 0x80, 1
@@ -112,7 +120,9 @@ class TocEntry:
     group: str = ""  # the variable's group (empty for markers)
 
 
-def toc_entries(groups: list[tuple[str, list[tuple[int, str]]]], group_flag: int, start_flag: int) -> list[TocEntry]:
+def toc_entries(
+    groups: list[tuple[str, list[tuple[int, str]]]], group_flag: int, start_flag: int
+) -> list[TocEntry]:
     """The linker-section order: ``GROUP_START(g)``, its variables, ``GROUP_STOP(g)`` named ``stop_g``."""
     out: list[TocEntry] = []
     for group, variables in groups:
@@ -131,17 +141,40 @@ def toc_crc(entries: list[TocEntry]) -> int:
 
 
 LOG_GROUPS: list[tuple[str, list[tuple[int, str]]]] = [
-    ("stateEstimate", [(LOG_FLOAT | LOG_CORE, n) for n in ("x", "y", "z", "vx", "vy", "vz", "roll", "pitch", "yaw")]),
-    ("pm", [(LOG_FLOAT | LOG_CORE, "vbat"), (LOG_UINT16, "vbatMV"), (LOG_INT8 | LOG_CORE, "state"),
-            (LOG_UINT8 | LOG_CORE, "batteryLevel")]),
+    (
+        "stateEstimate",
+        [(LOG_FLOAT | LOG_CORE, n) for n in ("x", "y", "z", "vx", "vy", "vz", "roll", "pitch", "yaw")],
+    ),
+    (
+        "pm",
+        [
+            (LOG_FLOAT | LOG_CORE, "vbat"),
+            (LOG_UINT16, "vbatMV"),
+            (LOG_INT8 | LOG_CORE, "state"),
+            (LOG_UINT8 | LOG_CORE, "batteryLevel"),
+        ],
+    ),
     ("kalman", [(LOG_FLOAT, "varPX"), (LOG_FLOAT, "varPY"), (LOG_FLOAT, "varPZ")]),
-    ("sys", [(LOG_UINT8 | LOG_CORE, "canfly"), (LOG_UINT8 | LOG_CORE, "isFlying"), (LOG_UINT8 | LOG_CORE, "isTumbled")]),
+    (
+        "sys",
+        [
+            (LOG_UINT8 | LOG_CORE, "canfly"),
+            (LOG_UINT8 | LOG_CORE, "isFlying"),
+            (LOG_UINT8 | LOG_CORE, "isTumbled"),
+        ],
+    ),
     ("supervisor", [(LOG_UINT16, "info")]),
 ]
 PARAM_GROUPS: list[tuple[str, list[tuple[int, str]]]] = [
     ("commander", [(PARAM_UINT8 | PARAM_CORE, "enHighLevel")]),
-    ("stabilizer", [(PARAM_UINT8 | PARAM_CORE, "estimator"), (PARAM_UINT8 | PARAM_CORE, "controller"),
-                    (PARAM_UINT8 | PARAM_CORE, "stop")]),
+    (
+        "stabilizer",
+        [
+            (PARAM_UINT8 | PARAM_CORE, "estimator"),
+            (PARAM_UINT8 | PARAM_CORE, "controller"),
+            (PARAM_UINT8 | PARAM_CORE, "stop"),
+        ],
+    ),
     ("kalman", [(PARAM_UINT8, "resetEstimation")]),
 ]
 
@@ -240,9 +273,13 @@ class CrazyflieEmulator:
         self.param_entries = toc_entries(PARAM_GROUPS, PARAM_GROUP, PARAM_START)
         self.param_vars = [e for e in self.param_entries if not e.type & PARAM_GROUP]
         self.param_crc = toc_crc(self.param_entries)
-        self.params: dict[str, float] = {"commander.enHighLevel": 0, "stabilizer.estimator": 2,
-                                         "stabilizer.controller": 1, "stabilizer.stop": 0,
-                                         "kalman.resetEstimation": 0}
+        self.params: dict[str, float] = {
+            "commander.enHighLevel": 0,
+            "stabilizer.estimator": 2,
+            "stabilizer.controller": 1,
+            "stabilizer.stop": 0,
+            "kalman.resetEstimation": 0,
+        }
         self._blocks: dict[int, _Block] = {}
         # what was received, for tests
         self.received: list[tuple[int, int, bytes]] = []
@@ -300,9 +337,21 @@ class CrazyflieEmulator:
 
     def snapshot(self) -> CrazyflieSnapshot:
         with self._lock:
-            return CrazyflieSnapshot(self.x, self.y, self.z, self.yaw, self.vx, self.vy, self.vz, self.vbat,
-                                     self.armed, self.flying, self.locked, self._streaming,
-                                     self._traj.kind if self._traj else "")
+            return CrazyflieSnapshot(
+                self.x,
+                self.y,
+                self.z,
+                self.yaw,
+                self.vx,
+                self.vy,
+                self.vz,
+                self.vbat,
+                self.armed,
+                self.flying,
+                self.locked,
+                self._streaming,
+                self._traj.kind if self._traj else "",
+            )
 
     def wait_until(self, predicate: Callable[[CrazyflieSnapshot], bool], timeout: float) -> bool:
         deadline = time.monotonic() + timeout
@@ -340,14 +389,26 @@ class CrazyflieEmulator:
         """The current value of a log variable ``group.name``."""
         variance = 1e-5 if self.converged else 2.5
         values: dict[str, float] = {
-            "stateEstimate.x": self.x, "stateEstimate.y": self.y, "stateEstimate.z": self.z,
-            "stateEstimate.vx": self.vx, "stateEstimate.vy": self.vy, "stateEstimate.vz": self.vz,
-            "stateEstimate.roll": 0.0, "stateEstimate.pitch": 0.0, "stateEstimate.yaw": self.yaw,
-            "pm.vbat": self.vbat, "pm.vbatMV": round(self.vbat * 1000),
-            "pm.state": 3 if self.vbat < LOW_VOLTAGE else 0, "pm.batteryLevel": battery_level(self.vbat),
-            "kalman.varPX": variance, "kalman.varPY": variance, "kalman.varPZ": variance,
-            "sys.canfly": int(self.armed and not self.locked), "sys.isFlying": int(self.flying),
-            "sys.isTumbled": int(self.crashed), "supervisor.info": self.supervisor_info(),
+            "stateEstimate.x": self.x,
+            "stateEstimate.y": self.y,
+            "stateEstimate.z": self.z,
+            "stateEstimate.vx": self.vx,
+            "stateEstimate.vy": self.vy,
+            "stateEstimate.vz": self.vz,
+            "stateEstimate.roll": 0.0,
+            "stateEstimate.pitch": 0.0,
+            "stateEstimate.yaw": self.yaw,
+            "pm.vbat": self.vbat,
+            "pm.vbatMV": round(self.vbat * 1000),
+            "pm.state": 3 if self.vbat < LOW_VOLTAGE else 0,
+            "pm.batteryLevel": battery_level(self.vbat),
+            "kalman.varPX": variance,
+            "kalman.varPY": variance,
+            "kalman.varPZ": variance,
+            "sys.canfly": int(self.armed and not self.locked),
+            "sys.isFlying": int(self.flying),
+            "sys.isTumbled": int(self.crashed),
+            "supervisor.info": self.supervisor_info(),
         }
         return values[name]
 
@@ -384,9 +445,15 @@ class CrazyflieEmulator:
 
     def _dispatch(self, port: int, channel: int, data: bytes) -> None:
         handler = {
-            PORT_LINK: self._on_link, PORT_PLATFORM: self._on_platform, PORT_MEM: self._on_mem,
-            PORT_LOG: self._on_log, PORT_PARAM: self._on_param, PORT_GENERIC: self._on_generic,
-            PORT_HL: self._on_hl, PORT_SUPERVISOR: self._on_supervisor, PORT_COMMANDER: self._on_rpyt,
+            PORT_LINK: self._on_link,
+            PORT_PLATFORM: self._on_platform,
+            PORT_MEM: self._on_mem,
+            PORT_LOG: self._on_log,
+            PORT_PARAM: self._on_param,
+            PORT_GENERIC: self._on_generic,
+            PORT_HL: self._on_hl,
+            PORT_SUPERVISOR: self._on_supervisor,
+            PORT_COMMANDER: self._on_rpyt,
         }.get(port)
         if handler is not None:
             handler(channel, data)
@@ -409,13 +476,22 @@ class CrazyflieEmulator:
 
     @staticmethod
     def _toc_item(port_cmd: int, ident: int, entry: TocEntry, type_byte: int) -> bytes:
-        return struct.pack("<BHB", port_cmd, ident, type_byte) + entry.group.encode() + b"\0" + entry.name.encode() + b"\0"
+        return (
+            struct.pack("<BHB", port_cmd, ident, type_byte)
+            + entry.group.encode()
+            + b"\0"
+            + entry.name.encode()
+            + b"\0"
+        )
 
     def _on_log(self, channel: int, data: bytes) -> None:
         if channel == 0:
             if data[0] == 3:  # CMD_GET_INFO_V2
-                self._send(PORT_LOG, 0, struct.pack("<BHIBB", 3, len(self.log_vars), self.log_crc,
-                                                    LOG_MAX_BLOCKS, LOG_MAX_OPS))
+                self._send(
+                    PORT_LOG,
+                    0,
+                    struct.pack("<BHIBB", 3, len(self.log_vars), self.log_crc, LOG_MAX_BLOCKS, LOG_MAX_OPS),
+                )
             elif data[0] == 2:  # CMD_GET_ITEM_V2
                 ident = struct.unpack_from("<H", data, 1)[0]
                 if ident < len(self.log_vars):
@@ -431,8 +507,10 @@ class CrazyflieEmulator:
         ret = 8  # ENOEXEC
         if cmd in (6, 7):  # create / append V2
             settings = data[2:]
-            ops = [(settings[i] & 0x0F, struct.unpack_from("<H", settings, i + 1)[0])
-                   for i in range(0, len(settings) - 2, 3)]
+            ops = [
+                (settings[i] & 0x0F, struct.unpack_from("<H", settings, i + 1)[0])
+                for i in range(0, len(settings) - 2, 3)
+            ]
             if cmd == 6 and block_id in self._blocks:
                 ret = 17  # EEXIST
             elif cmd == 7 and block_id not in self._blocks:
@@ -542,7 +620,9 @@ class CrazyflieEmulator:
             if cmd == 8 and not self.motors:
                 return
             target_yaw = self.yaw if use_current else math.degrees(yaw)
-            self._start(now, "takeoff" if cmd == 7 else "land", (self.x, self.y, height, target_yaw), duration)
+            self._start(
+                now, "takeoff" if cmd == 7 else "land", (self.x, self.y, height, target_yaw), duration
+            )
         elif cmd in (4, 12):  # go_to / go_to2: group, relative, [linear], x, y, z, yaw (rad), duration
             if cmd == 4:
                 _, relative, x, y, z, yaw, duration = struct.unpack_from("<BBfffff", data, 1)
@@ -598,7 +678,9 @@ class CrazyflieEmulator:
     def _start(self, now: float, kind: str, end: tuple[float, float, float, float], duration: float) -> None:
         duration = max(duration, 0.05)
         yaw_end = self.yaw + ((end[3] - self.yaw + 180.0) % 360.0 - 180.0)
-        self._traj = _Trajectory(kind, (self.x, self.y, self.z, self.yaw), (end[0], end[1], end[2], yaw_end), now, duration)
+        self._traj = _Trajectory(
+            kind, (self.x, self.y, self.z, self.yaw), (end[0], end[1], end[2], yaw_end), now, duration
+        )
         self._traj_finished = False
         self.motors = True
         self._landed_at = None
@@ -624,7 +706,12 @@ class CrazyflieEmulator:
             else:  # hover: body-frame vx, vy, yaw rate, absolute height
                 bvx, bvy, rate, height = self._sp
                 c, s = math.cos(math.radians(self.yaw)), math.sin(math.radians(self.yaw))
-                target = (bvx * c - bvy * s, bvx * s + bvy * c, max(min((height - self.z) * 2.0, 1.0), -1.0), rate)
+                target = (
+                    bvx * c - bvy * s,
+                    bvx * s + bvy * c,
+                    max(min((height - self.z) * 2.0, 1.0), -1.0),
+                    rate,
+                )
             a = 1.0 - math.exp(-dt / self.velocity_tau)
             self.vx += (target[0] - self.vx) * a
             self.vy += (target[1] - self.vy) * a
@@ -639,7 +726,9 @@ class CrazyflieEmulator:
             s = (now - traj.t0) / traj.duration
             p, v = _minimum_jerk(s)
             coords = [a0 + (a1 - a0) * p for a0, a1 in zip(traj.start, traj.end, strict=True)]
-            self.vx, self.vy, self.vz = ((a1 - a0) * v / traj.duration for a0, a1 in zip(traj.start[:3], traj.end[:3], strict=True))
+            self.vx, self.vy, self.vz = (
+                (a1 - a0) * v / traj.duration for a0, a1 in zip(traj.start[:3], traj.end[:3], strict=True)
+            )
             self.x, self.y, self.z = coords[0], coords[1], max(coords[2], 0.0)
             self.yaw = (coords[3] + 180.0) % 360.0 - 180.0
             if s >= 1.0:
@@ -651,7 +740,12 @@ class CrazyflieEmulator:
                     # the planner holds the end pose until the next command
                     self._traj = _Trajectory("hold", traj.end, traj.end, now, 1.0)
             return
-        if not self.motors and self.armed and self._landed_at is not None and now - self._landed_at >= self.landed_timeout:
+        if (
+            not self.motors
+            and self.armed
+            and self._landed_at is not None
+            and now - self._landed_at >= self.landed_timeout
+        ):
             self.armed = False  # supervisor.c: landed for landedTimeout -> disarm
             self._landed_at = None
 

@@ -122,16 +122,51 @@ LOG = logging.getLogger("antalate.tests.mavlink_vehicle")
 Address = tuple[str, int]
 
 COPTER_MODES: dict[str, int] = {
-    "STABILIZE": 0, "ACRO": 1, "ALT_HOLD": 2, "AUTO": 3, "GUIDED": 4, "LOITER": 5, "RTL": 6,
-    "CIRCLE": 7, "LAND": 9, "DRIFT": 11, "SPORT": 13, "FLIP": 14, "AUTOTUNE": 15, "POSHOLD": 16,
-    "BRAKE": 17, "THROW": 18, "AVOID_ADSB": 19, "GUIDED_NOGPS": 20, "SMART_RTL": 21, "FLOWHOLD": 22,
-    "FOLLOW": 23, "ZIGZAG": 24, "SYSTEMID": 25, "AUTOROTATE": 26, "AUTO_RTL": 27,
+    "STABILIZE": 0,
+    "ACRO": 1,
+    "ALT_HOLD": 2,
+    "AUTO": 3,
+    "GUIDED": 4,
+    "LOITER": 5,
+    "RTL": 6,
+    "CIRCLE": 7,
+    "LAND": 9,
+    "DRIFT": 11,
+    "SPORT": 13,
+    "FLIP": 14,
+    "AUTOTUNE": 15,
+    "POSHOLD": 16,
+    "BRAKE": 17,
+    "THROW": 18,
+    "AVOID_ADSB": 19,
+    "GUIDED_NOGPS": 20,
+    "SMART_RTL": 21,
+    "FLOWHOLD": 22,
+    "FOLLOW": 23,
+    "ZIGZAG": 24,
+    "SYSTEMID": 25,
+    "AUTOROTATE": 26,
+    "AUTO_RTL": 27,
 }
 MODE_NAMES: dict[int, str] = {number: name for name, number in COPTER_MODES.items()}
 # Modes that need a position estimate to be entered.
 POSITION_MODES = frozenset(
-    {"AUTO", "GUIDED", "LOITER", "RTL", "CIRCLE", "DRIFT", "POSHOLD", "BRAKE", "THROW", "AVOID_ADSB",
-     "SMART_RTL", "FOLLOW", "ZIGZAG", "AUTO_RTL"}
+    {
+        "AUTO",
+        "GUIDED",
+        "LOITER",
+        "RTL",
+        "CIRCLE",
+        "DRIFT",
+        "POSHOLD",
+        "BRAKE",
+        "THROW",
+        "AVOID_ADSB",
+        "SMART_RTL",
+        "FOLLOW",
+        "ZIGZAG",
+        "AUTO_RTL",
+    }
 )
 # Modes ArduCopter will not arm in.
 NOT_ARMABLE = frozenset(
@@ -139,9 +174,18 @@ NOT_ARMABLE = frozenset(
 )
 
 DEFAULT_RATES: dict[str, float] = {
-    "GLOBAL_POSITION_INT": 5.0, "ATTITUDE": 5.0, "SYS_STATUS": 1.0, "EXTENDED_SYS_STATE": 1.0,
-    "GPS_RAW_INT": 1.0, "EKF_STATUS_REPORT": 1.0, "VFR_HUD": 2.0, "LOCAL_POSITION_NED": 0.0,
-    "HOME_POSITION": 0.0, "SYSTEM_TIME": 0.0, "BATTERY_STATUS": 1.0, "FENCE_STATUS": 1.0,
+    "GLOBAL_POSITION_INT": 5.0,
+    "ATTITUDE": 5.0,
+    "SYS_STATUS": 1.0,
+    "EXTENDED_SYS_STATE": 1.0,
+    "GPS_RAW_INT": 1.0,
+    "EKF_STATUS_REPORT": 1.0,
+    "VFR_HUD": 2.0,
+    "LOCAL_POSITION_NED": 0.0,
+    "HOME_POSITION": 0.0,
+    "SYSTEM_TIME": 0.0,
+    "BATTERY_STATUS": 1.0,
+    "FENCE_STATUS": 1.0,
 }
 # REQUEST_DATA_STREAM groups (ArduCopter's grouping, restricted to the messages emulated here).
 DATA_STREAMS: dict[int, tuple[str, ...]] = {
@@ -159,12 +203,24 @@ FORCE_MAGIC = 21196  # param2 of ARM_DISARM that bypasses checks (ArduPilot conv
 _I8, _I16, _R32 = mav2.MAV_PARAM_TYPE_INT8, mav2.MAV_PARAM_TYPE_INT16, mav2.MAV_PARAM_TYPE_REAL32
 #: ArduCopter 4.x parameters the emulator keeps: name -> (default, MAV_PARAM_TYPE).
 PARAMS: dict[str, tuple[float, int]] = {
-    "SYSID_THISMAV": (1, _I16), "SYSID_MYGCS": (255, _I16), "FS_GCS_ENABLE": (0, _I8),
-    "FS_GCS_TIMEOUT": (5.0, _R32), "GUID_TIMEOUT": (3.0, _R32), "FENCE_ENABLE": (0, _I8),
-    "FENCE_ACTION": (1, _I8), "FENCE_RADIUS": (300.0, _R32), "FENCE_ALT_MAX": (100.0, _R32),
-    "BATT_MONITOR": (4, _I8), "BATT_LOW_VOLT": (10.5, _R32), "BATT_CRT_VOLT": (0.0, _R32),
-    "BATT_LOW_TIMER": (10, _I8), "BATT_FS_LOW_ACT": (0, _I8), "BATT_FS_CRT_ACT": (0, _I8),
-    "FS_EKF_ACTION": (1, _I8), "FS_EKF_THRESH": (0.8, _R32), "DISARM_DELAY": (10, _I8),
+    "SYSID_THISMAV": (1, _I16),
+    "SYSID_MYGCS": (255, _I16),
+    "FS_GCS_ENABLE": (0, _I8),
+    "FS_GCS_TIMEOUT": (5.0, _R32),
+    "GUID_TIMEOUT": (3.0, _R32),
+    "FENCE_ENABLE": (0, _I8),
+    "FENCE_ACTION": (1, _I8),
+    "FENCE_RADIUS": (300.0, _R32),
+    "FENCE_ALT_MAX": (100.0, _R32),
+    "BATT_MONITOR": (4, _I8),
+    "BATT_LOW_VOLT": (10.5, _R32),
+    "BATT_CRT_VOLT": (0.0, _R32),
+    "BATT_LOW_TIMER": (10, _I8),
+    "BATT_FS_LOW_ACT": (0, _I8),
+    "BATT_FS_CRT_ACT": (0, _I8),
+    "FS_EKF_ACTION": (1, _I8),
+    "FS_EKF_THRESH": (0.8, _R32),
+    "DISARM_DELAY": (10, _I8),
 }
 _FS_GCS_MODES = {1: "RTL", 2: "RTL", 3: "RTL", 4: "RTL", 5: "LAND", 6: "RTL", 7: "BRAKE"}
 _FENCE_MODES = {1: "RTL", 2: "LAND", 3: "RTL", 4: "BRAKE", 5: "RTL"}
@@ -173,21 +229,34 @@ _EKF_BAD_FOR = 1.0  # s of bad variances before ArduCopter's EKF failsafe (ekf_c
 EARTH_RADIUS = 6378137.0
 
 _EKF_GOOD = (
-    mav2.EKF_ATTITUDE | mav2.EKF_VELOCITY_HORIZ | mav2.EKF_VELOCITY_VERT | mav2.EKF_POS_HORIZ_REL
-    | mav2.EKF_POS_HORIZ_ABS | mav2.EKF_POS_VERT_ABS | mav2.EKF_POS_VERT_AGL
-    | mav2.EKF_PRED_POS_HORIZ_REL | mav2.EKF_PRED_POS_HORIZ_ABS
+    mav2.EKF_ATTITUDE
+    | mav2.EKF_VELOCITY_HORIZ
+    | mav2.EKF_VELOCITY_VERT
+    | mav2.EKF_POS_HORIZ_REL
+    | mav2.EKF_POS_HORIZ_ABS
+    | mav2.EKF_POS_VERT_ABS
+    | mav2.EKF_POS_VERT_AGL
+    | mav2.EKF_PRED_POS_HORIZ_REL
+    | mav2.EKF_PRED_POS_HORIZ_ABS
 )
-_EKF_NO_POSITION = mav2.EKF_ATTITUDE | mav2.EKF_VELOCITY_VERT | mav2.EKF_POS_VERT_ABS | mav2.EKF_CONST_POS_MODE
+_EKF_NO_POSITION = (
+    mav2.EKF_ATTITUDE | mav2.EKF_VELOCITY_VERT | mav2.EKF_POS_VERT_ABS | mav2.EKF_CONST_POS_MODE
+)
 _SENSORS = (
-    mav2.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav2.MAV_SYS_STATUS_SENSOR_3D_ACCEL | mav2.MAV_SYS_STATUS_SENSOR_3D_MAG
-    | mav2.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE | mav2.MAV_SYS_STATUS_SENSOR_GPS
+    mav2.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | mav2.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mav2.MAV_SYS_STATUS_SENSOR_3D_MAG
+    | mav2.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | mav2.MAV_SYS_STATUS_SENSOR_GPS
 )
 _TM_POS = (
-    mav2.POSITION_TARGET_TYPEMASK_X_IGNORE | mav2.POSITION_TARGET_TYPEMASK_Y_IGNORE
+    mav2.POSITION_TARGET_TYPEMASK_X_IGNORE
+    | mav2.POSITION_TARGET_TYPEMASK_Y_IGNORE
     | mav2.POSITION_TARGET_TYPEMASK_Z_IGNORE
 )
 _TM_VEL = (
-    mav2.POSITION_TARGET_TYPEMASK_VX_IGNORE | mav2.POSITION_TARGET_TYPEMASK_VY_IGNORE
+    mav2.POSITION_TARGET_TYPEMASK_VX_IGNORE
+    | mav2.POSITION_TARGET_TYPEMASK_VY_IGNORE
     | mav2.POSITION_TARGET_TYPEMASK_VZ_IGNORE
 )
 
@@ -232,8 +301,14 @@ class Received:
 class _Peer:
     """One transport endpoint with its own parser (MAVLink framing state is per stream)."""
 
-    def __init__(self, sysid: int, compid: int, sock: socket.socket | None = None, addr: Address | None = None,
-                 key: bytes | None = None):
+    def __init__(
+        self,
+        sysid: int,
+        compid: int,
+        sock: socket.socket | None = None,
+        addr: Address | None = None,
+        key: bytes | None = None,
+    ):
         self.sock = sock  # TCP client socket, None for UDP peers
         self.addr = addr
         self.parser = mav2.MAVLink(None, srcSystem=sysid, srcComponent=compid)
@@ -241,7 +316,9 @@ class _Peer:
         self.rejected = 0  # messages dropped for their signature
         if key is not None:
             self.parser.signing.secret_key = key
-            self.parser.signing.allow_unsigned_callback = lambda _mav, msg_id: msg_id == mav2.MAVLINK_MSG_ID_RADIO_STATUS
+            self.parser.signing.allow_unsigned_callback = lambda _mav, msg_id: (
+                msg_id == mav2.MAVLINK_MSG_ID_RADIO_STATUS
+            )
             self.parser.check_signature = self._check_signature  # type: ignore[method-assign]
 
     def _check_signature(self, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
@@ -255,7 +332,9 @@ class _Peer:
         timestamp = low + (high << 32)
         stream = (msgbuf[-13], src_system, src_component)
         last = signing.stream_timestamps.get(stream)
-        if (last is not None and timestamp <= last) or (last is None and timestamp + 6_000_000 < signing.timestamp):
+        if (last is not None and timestamp <= last) or (
+            last is None and timestamp + 6_000_000 < signing.timestamp
+        ):
             return False
         signing.stream_timestamps[stream] = timestamp
         signing.timestamp = max(signing.timestamp, timestamp)
@@ -341,7 +420,11 @@ class MavlinkVehicle:
         self.climb_rate = climb_rate
         self.land_speed, self.land_speed_high, self.land_alt_low = land_speed, land_speed_high, land_alt_low
         self.rtl_speed, self.rtl_alt = rtl_speed, rtl_alt
-        self.max_speed, self.max_climb_rate, self.max_descent_rate = max_speed, max_climb_rate, max_descent_rate
+        self.max_speed, self.max_climb_rate, self.max_descent_rate = (
+            max_speed,
+            max_climb_rate,
+            max_descent_rate,
+        )
         self.velocity_tau = velocity_tau
         self.yaw_rate_max = yaw_rate_max
         self.disarm_delay = disarm_delay
@@ -502,12 +585,26 @@ class MavlinkVehicle:
             now = time.monotonic()
             lat, lon = self._latlon()
             return VehicleSnapshot(
-                booted=self._booted, system_status=self._system_status(now), mode=self._mode,
-                custom_mode=COPTER_MODES[self._mode], armed=self._armed, landed_state=self._landed_state(),
-                north=self._n, east=self._e, alt=-self._d, vn=self._vn, ve=self._ve, vd=self._vd,
-                yaw=self._yaw % 360.0, lat=lat, lon=lon, battery=self._battery,
-                gps_fix_type=3 if self._gps_fix(now) else 0, ekf_position_ok=self._position_ok(now),
-                home=self._home, link_up=self._link_up,
+                booted=self._booted,
+                system_status=self._system_status(now),
+                mode=self._mode,
+                custom_mode=COPTER_MODES[self._mode],
+                armed=self._armed,
+                landed_state=self._landed_state(),
+                north=self._n,
+                east=self._e,
+                alt=-self._d,
+                vn=self._vn,
+                ve=self._ve,
+                vd=self._vd,
+                yaw=self._yaw % 360.0,
+                lat=lat,
+                lon=lon,
+                battery=self._battery,
+                gps_fix_type=3 if self._gps_fix(now) else 0,
+                ekf_position_ok=self._position_ok(now),
+                home=self._home,
+                link_up=self._link_up,
                 guided_submode=self._guided if self._mode == "GUIDED" else None,
                 rtl_phase=self._rtl_phase if self._mode == "RTL" else None,
             )
@@ -873,7 +970,9 @@ class MavlinkVehicle:
         body = msg.coordinate_frame in (mav2.MAV_FRAME_BODY_NED, mav2.MAV_FRAME_BODY_OFFSET_NED)
         offset = msg.coordinate_frame in (mav2.MAV_FRAME_LOCAL_OFFSET_NED,) or body
         if msg.coordinate_frame not in (
-            mav2.MAV_FRAME_LOCAL_NED, mav2.MAV_FRAME_LOCAL_OFFSET_NED, mav2.MAV_FRAME_BODY_NED,
+            mav2.MAV_FRAME_LOCAL_NED,
+            mav2.MAV_FRAME_LOCAL_OFFSET_NED,
+            mav2.MAV_FRAME_BODY_NED,
             mav2.MAV_FRAME_BODY_OFFSET_NED,
         ):
             return
@@ -1199,20 +1298,35 @@ class MavlinkVehicle:
             if self._armed:
                 base |= mav2.MAV_MODE_FLAG_SAFETY_ARMED
             return enc.heartbeat_encode(
-                mav2.MAV_TYPE_QUADROTOR, mav2.MAV_AUTOPILOT_ARDUPILOTMEGA, base, COPTER_MODES[self._mode],
-                self._system_status(now), 3,
+                mav2.MAV_TYPE_QUADROTOR,
+                mav2.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                base,
+                COPTER_MODES[self._mode],
+                self._system_status(now),
+                3,
             )
         if name == "GLOBAL_POSITION_INT":
             return enc.global_position_int_encode(
-                boot_ms, round(lat * 1e7), round(lon * 1e7), round((self.origin[2] + alt) * 1000),
-                round((self.origin[2] + alt - home_alt) * 1000), round(self._vn * 100), round(self._ve * 100),
-                round(self._vd * 100), round(self._yaw % 360.0 * 100) % 36000,
+                boot_ms,
+                round(lat * 1e7),
+                round(lon * 1e7),
+                round((self.origin[2] + alt) * 1000),
+                round((self.origin[2] + alt - home_alt) * 1000),
+                round(self._vn * 100),
+                round(self._ve * 100),
+                round(self._vd * 100),
+                round(self._yaw % 360.0 * 100) % 36000,
             )
         if name == "ATTITUDE":
             fwd = self._vn * math.cos(yaw_rad) + self._ve * math.sin(yaw_rad)
             right = -self._vn * math.sin(yaw_rad) + self._ve * math.cos(yaw_rad)
             return enc.attitude_encode(
-                boot_ms, math.radians(2.0 * right), math.radians(-2.0 * fwd), yaw_rad, 0.0, 0.0,
+                boot_ms,
+                math.radians(2.0 * right),
+                math.radians(-2.0 * fwd),
+                yaw_rad,
+                0.0,
+                0.0,
                 math.radians(self._yaw_rate),
             )
         if name == "SYS_STATUS":
@@ -1234,7 +1348,19 @@ class MavlinkVehicle:
             current = 1500 if self._armed else 50  # cA
             remaining = round(self._battery) if self.report_remaining else -1
             return enc.sys_status_encode(
-                present, present, health, 150, round(self._voltage() * 1000), current, remaining, 0, 0, 0, 0, 0, 0,
+                present,
+                present,
+                health,
+                150,
+                round(self._voltage() * 1000),
+                current,
+                remaining,
+                0,
+                0,
+                0,
+                0,
+                0,
+                0,
             )
         if name == "BATTERY_STATUS":
             volts = self._voltage()
@@ -1243,18 +1369,33 @@ class MavlinkVehicle:
             else:
                 cells = [min(round(volts * 1000), 65534)]  # ArduPilot's analog monitors: the pack in cell 1
             voltages = (cells + [65535] * 10)[:10]
-            charge = {0: mav2.MAV_BATTERY_CHARGE_STATE_OK, 1: mav2.MAV_BATTERY_CHARGE_STATE_LOW,
-                      2: mav2.MAV_BATTERY_CHARGE_STATE_CRITICAL}[self._batt_failsafe]
+            charge = {
+                0: mav2.MAV_BATTERY_CHARGE_STATE_OK,
+                1: mav2.MAV_BATTERY_CHARGE_STATE_LOW,
+                2: mav2.MAV_BATTERY_CHARGE_STATE_CRITICAL,
+            }[self._batt_failsafe]
             remaining = round(self._battery) if self.report_remaining else -1
             return enc.battery_status_encode(
-                0, mav2.MAV_BATTERY_FUNCTION_UNKNOWN, mav2.MAV_BATTERY_TYPE_LIPO, 32767, voltages,
-                1500 if self._armed else 50, -1, -1, remaining, 0, charge, [0, 0, 0, 0],
+                0,
+                mav2.MAV_BATTERY_FUNCTION_UNKNOWN,
+                mav2.MAV_BATTERY_TYPE_LIPO,
+                32767,
+                voltages,
+                1500 if self._armed else 50,
+                -1,
+                -1,
+                remaining,
+                0,
+                charge,
+                [0, 0, 0, 0],
             )
         if name == "FENCE_STATUS":
             if not round(self._params["FENCE_ENABLE"]):
                 return None  # ArduPilot sends it only with the fence enabled
             return enc.fence_status_encode(
-                1 if self._fence_breached else 0, self._fence_breaches, self._fence_breach_type,
+                1 if self._fence_breached else 0,
+                self._fence_breaches,
+                self._fence_breach_type,
                 self._fence_breach_time,
             )
         if name == "EXTENDED_SYS_STATE":
@@ -1263,12 +1404,20 @@ class MavlinkVehicle:
             if self._gps_fix(now):
                 glat, glon = self._latlon()
                 return enc.gps_raw_int_encode(
-                    int((now - self._t0) * 1e6), mav2.GPS_FIX_TYPE_3D_FIX, round(glat * 1e7), round(glon * 1e7),
-                    round((self.origin[2] + alt) * 1000), 70, 120, round(math.hypot(self._vn, self._ve) * 100),
-                    round(math.degrees(math.atan2(self._ve, self._vn)) % 360.0 * 100) % 36000, 12,
+                    int((now - self._t0) * 1e6),
+                    mav2.GPS_FIX_TYPE_3D_FIX,
+                    round(glat * 1e7),
+                    round(glon * 1e7),
+                    round((self.origin[2] + alt) * 1000),
+                    70,
+                    120,
+                    round(math.hypot(self._vn, self._ve) * 100),
+                    round(math.degrees(math.atan2(self._ve, self._vn)) % 360.0 * 100) % 36000,
+                    12,
                 )
-            return enc.gps_raw_int_encode(int((now - self._t0) * 1e6), mav2.GPS_FIX_TYPE_NO_GPS, 0, 0, 0,
-                                          65535, 65535, 0, 65535, 0)
+            return enc.gps_raw_int_encode(
+                int((now - self._t0) * 1e6), mav2.GPS_FIX_TYPE_NO_GPS, 0, 0, 0, 65535, 65535, 0, 65535, 0
+            )
         if name == "EKF_STATUS_REPORT":
             if self._ekf_bad():
                 return enc.ekf_status_report_encode(_EKF_GOOD, 1.2, 1.3, 0.9, 0.5, 0.0)
@@ -1279,23 +1428,42 @@ class MavlinkVehicle:
             return enc.ekf_status_report_encode(_EKF_NO_POSITION, 0.1, 1.0, 0.1, 0.1, 0.0)
         if name == "VFR_HUD":
             speed = math.hypot(self._vn, self._ve)
-            return enc.vfr_hud_encode(speed, speed, round(self._yaw % 360.0) % 360, 40 if self._armed and not
-                                      self._on_ground else 0, self.origin[2] + alt, -self._vd)
+            return enc.vfr_hud_encode(
+                speed,
+                speed,
+                round(self._yaw % 360.0) % 360,
+                40 if self._armed and not self._on_ground else 0,
+                self.origin[2] + alt,
+                -self._vd,
+            )
         if name == "LOCAL_POSITION_NED":
-            return enc.local_position_ned_encode(boot_ms, self._n, self._e, self._d, self._vn, self._ve, self._vd)
+            return enc.local_position_ned_encode(
+                boot_ms, self._n, self._e, self._d, self._vn, self._ve, self._vd
+            )
         if name == "HOME_POSITION":
             hlat, hlon, halt = self._home or (self.origin[0], self.origin[1], self.origin[2])
             hn, he = self._home_ned()
             return enc.home_position_encode(
-                round(hlat * 1e7), round(hlon * 1e7), round(halt * 1000), hn, he, -(halt - self.origin[2]),
-                [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int((now - self._t0) * 1e6),
+                round(hlat * 1e7),
+                round(hlon * 1e7),
+                round(halt * 1000),
+                hn,
+                he,
+                -(halt - self.origin[2]),
+                [1.0, 0.0, 0.0, 0.0],
+                0.0,
+                0.0,
+                0.0,
+                int((now - self._t0) * 1e6),
             )
         if name == "SYSTEM_TIME":
             return enc.system_time_encode(int(time.time() * 1e6), boot_ms)
         if name == "AUTOPILOT_VERSION":
             caps = (
-                mav2.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav2.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-                | mav2.MAV_PROTOCOL_CAPABILITY_COMMAND_INT | mav2.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+                mav2.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+                | mav2.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                | mav2.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                | mav2.MAV_PROTOCOL_CAPABILITY_MISSION_INT
             )
             version = (4 << 24) | (5 << 16) | (7 << 8) | mav2.FIRMWARE_VERSION_TYPE_OFFICIAL
             return enc.autopilot_version_encode(caps, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0)
@@ -1449,7 +1617,9 @@ _MSG_NAMES: dict[int, str] = {
 
 def main(argv: list[str] | None = None) -> int:
     """Run a vehicle until SIGTERM/SIGINT (for tests that need it in another process or namespace)."""
-    parser = argparse.ArgumentParser(prog="python -m tests.emulators.mavlink_vehicle", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m tests.emulators.mavlink_vehicle", description=__doc__.split("\n")[0]
+    )
     parser.add_argument("--host", default="127.0.0.1")
     parser.add_argument("--udp-port", type=int, default=0, help="-1 disables UDP")
     parser.add_argument("--tcp-port", type=int, default=-1, help="-1 disables TCP, 0 picks a free port")
@@ -1460,8 +1630,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--gps-delay", type=float, default=1.0)
     parser.add_argument("--battery", type=float, default=100.0)
     parser.add_argument("--refuse-arm", action="store_true")
-    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                        help="an ArduCopter parameter (FS_GCS_ENABLE=1, SYSID_MYGCS=245, ...); repeatable")
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="an ArduCopter parameter (FS_GCS_ENABLE=1, SYSID_MYGCS=245, ...); repeatable",
+    )
     parser.add_argument("--signing-key", default=None, help="MAVLink 2 signing key, 64 hex digits")
     parser.add_argument("--log-level", default="WARNING")
     args = parser.parse_args(argv)
@@ -1487,7 +1662,10 @@ def main(argv: list[str] | None = None) -> int:
         args.host,
         None if args.udp_port < 0 else args.udp_port,
         None if args.tcp_port < 0 else args.tcp_port,
-        boot_delay=args.boot_delay, ekf_delay=args.ekf_delay, gps_delay=args.gps_delay, battery=args.battery,
+        boot_delay=args.boot_delay,
+        ekf_delay=args.ekf_delay,
+        gps_delay=args.gps_delay,
+        battery=args.battery,
         **kwargs,
     )
     vehicle.refuse_arm = args.refuse_arm
@@ -1495,8 +1673,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"READY udp={vehicle.udp_port} tcp={vehicle.tcp_port}", flush=True)
         while not stop.wait(0.2):
             pass
-        snap = {**asdict(vehicle.snapshot()), "failsafe_modes": vehicle.failsafe_modes,
-                "statustexts": vehicle.statustexts}
+        snap = {
+            **asdict(vehicle.snapshot()),
+            "failsafe_modes": vehicle.failsafe_modes,
+            "statustexts": vehicle.statustexts,
+        }
     print(json.dumps(snap), flush=True)
     return 0
 

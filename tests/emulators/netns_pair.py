@@ -112,7 +112,9 @@ class NetnsPair:
             )
             for side, dev, addr in (("a", "veth_a", self.addr_a), ("b", "veth_b", self.addr_b)):
                 script = [f"ip link set lo up && ip addr add {addr}/{self.prefix_len} dev {dev}"]
-                script += [f"ip addr add {extra}/{self.prefix_len} dev {dev}" for extra in self.extra_addrs[side]]
+                script += [
+                    f"ip addr add {extra}/{self.prefix_len} dev {dev}" for extra in self.extra_addrs[side]
+                ]
                 script.append(f"ip link set {dev} up")
                 self._check(side, " && ".join(script))  # type: ignore[arg-type]
             self._wait_link_up()
@@ -156,7 +158,9 @@ class NetnsPair:
         self._children.append(proc)
         return proc
 
-    def run(self, side: Side, argv: Sequence[str], timeout: float = 60, **kwargs: object) -> subprocess.CompletedProcess[str]:
+    def run(
+        self, side: Side, argv: Sequence[str], timeout: float = 60, **kwargs: object
+    ) -> subprocess.CompletedProcess[str]:
         """Run ``argv`` inside ``side`` to completion (stdout/stderr captured as text)."""
         kwargs.setdefault("env", _env(kwargs.pop("extra_env", None)))  # type: ignore[arg-type]
         kwargs.setdefault("cwd", str(REPO))
@@ -164,7 +168,9 @@ class NetnsPair:
             self.wrap(side, argv), timeout=timeout, capture_output=True, text=True, **kwargs
         )
 
-    def run_python(self, side: Side, code: str, timeout: float = 60, **kwargs: object) -> subprocess.CompletedProcess[str]:
+    def run_python(
+        self, side: Side, code: str, timeout: float = 60, **kwargs: object
+    ) -> subprocess.CompletedProcess[str]:
         """Run a Python snippet inside ``side`` with this interpreter (djitellopy scripts, adapters...)."""
         return self.run(side, [sys.executable, "-c", code], timeout=timeout, **kwargs)
 
@@ -196,7 +202,11 @@ class NetnsPair:
 
     def _spawn_holder(self, argv: list[str]) -> subprocess.Popen[str]:
         holder = subprocess.Popen(
-            argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            argv,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
             start_new_session=True,
         )
         assert holder.stdout is not None
@@ -210,7 +220,9 @@ class NetnsPair:
         """Carrier takes a moment after ``ip link set up``; packets sent before it are lost."""
         deadline = time.monotonic() + timeout
         for side, dev in (("a", "veth_a"), ("b", "veth_b")):
-            while "state UP" not in self.run(side, ["ip", "-o", "link", "show", "dev", dev], timeout=10).stdout:  # type: ignore[arg-type]
+            while (
+                "state UP" not in self.run(side, ["ip", "-o", "link", "show", "dev", dev], timeout=10).stdout
+            ):  # type: ignore[arg-type]
                 if time.monotonic() > deadline:
                     raise RuntimeError(f"{dev} in namespace {side} did not come up")
                 time.sleep(0.01)

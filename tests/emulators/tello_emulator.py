@@ -297,13 +297,23 @@ class TelloEmulator:
     def snapshot(self) -> TelloSnapshot:
         with self._lock:
             return TelloSnapshot(
-                x=self._x, y=self._y, z=self._z, yaw=_wrap180(self._yaw),
-                vx=self._vx, vy=self._vy, vz=self._vz,
-                flying=self._flying, sdk_mode=self._sdk_mode, stream_on=self._stream_on,
-                battery=self._battery, rc=self._rc,
+                x=self._x,
+                y=self._y,
+                z=self._z,
+                yaw=_wrap180(self._yaw),
+                vx=self._vx,
+                vy=self._vy,
+                vz=self._vz,
+                flying=self._flying,
+                sdk_mode=self._sdk_mode,
+                stream_on=self._stream_on,
+                battery=self._battery,
+                rc=self._rc,
                 maneuver=self._maneuver.name if self._maneuver else None,
-                client=self._client, state_packets=self._state_packets,
-                motor_time=self._motor_time, speed_setting=self._speed_setting,
+                client=self._client,
+                state_packets=self._state_packets,
+                motor_time=self._motor_time,
+                speed_setting=self._speed_setting,
             )
 
     @property
@@ -388,11 +398,19 @@ class TelloEmulator:
             roll = round(10.0 * right)
             templ = int(min(90.0, 60.0 + self._motor_time / 20.0))
             fields = [
-                f"pitch:{pitch}", f"roll:{roll}", f"yaw:{round(_wrap180(self._yaw))}",
-                f"vgx:{round(self._vx * 10)}", f"vgy:{round(self._vy * 10)}", f"vgz:{round(-self._vz * 10)}",
-                f"templ:{templ}", f"temph:{templ + 2}",
-                f"tof:{round(self._z * 100) + 10}", f"h:{self.height_cm()}",
-                f"bat:{int(self._battery)}", f"baro:{100.0 + self._z:.2f}", f"time:{int(self._motor_time)}",
+                f"pitch:{pitch}",
+                f"roll:{roll}",
+                f"yaw:{round(_wrap180(self._yaw))}",
+                f"vgx:{round(self._vx * 10)}",
+                f"vgy:{round(self._vy * 10)}",
+                f"vgz:{round(-self._vz * 10)}",
+                f"templ:{templ}",
+                f"temph:{templ + 2}",
+                f"tof:{round(self._z * 100) + 10}",
+                f"h:{self.height_cm()}",
+                f"bat:{int(self._battery)}",
+                f"baro:{100.0 + self._z:.2f}",
+                f"time:{int(self._motor_time)}",
                 f"agx:{round(-1000.0 * math.sin(math.radians(pitch)), 2) + 0.0:.2f}",
                 f"agy:{round(1000.0 * math.sin(math.radians(roll)), 2) + 0.0:.2f}",
                 "agz:-1000.00",
@@ -534,7 +552,9 @@ class TelloEmulator:
             "sn?": lambda: self.serial,
             "tof?": lambda: f"{round(self._z * 1000) + 100}mm",
             "baro?": lambda: f"{100.0 + self._z:.2f}",
-            "temp?": lambda: f"{int(min(90.0, 60.0 + self._motor_time / 20.0))}~{int(min(90.0, 62.0 + self._motor_time / 20.0))}C",
+            "temp?": lambda: (
+                f"{int(min(90.0, 60.0 + self._motor_time / 20.0))}~{int(min(90.0, 62.0 + self._motor_time / 20.0))}C"
+            ),
             "attitude?": lambda: f"pitch:0;roll:0;yaw:{round(_wrap180(self._yaw))};",
         }
         getter = values.get(cmd)
@@ -546,8 +566,10 @@ class TelloEmulator:
         self._flying = True
         self._rc = (0, 0, 0, 0)
         self._maneuver = _Maneuver(
-            "takeoff", (self._x, self._y, self.takeoff_height),
-            speed=self.takeoff_height / max(self.takeoff_time, 1e-3), reply_to=sender,
+            "takeoff",
+            (self._x, self._y, self.takeoff_height),
+            speed=self.takeoff_height / max(self.takeoff_time, 1e-3),
+            reply_to=sender,
         )
         return None
 
@@ -559,7 +581,9 @@ class TelloEmulator:
 
     def _start_landing(self, reply_to: Address | None) -> None:
         self._rc = (0, 0, 0, 0)
-        self._maneuver = _Maneuver("land", (self._x, self._y, 0.0), speed=self.land_speed, reply_to=reply_to, lands=True)
+        self._maneuver = _Maneuver(
+            "land", (self._x, self._y, 0.0), speed=self.land_speed, reply_to=reply_to, lands=True
+        )
 
     def _cmd_ok(self, args: list[str], sender: Address, now: float) -> str | None:
         return "ok"
@@ -605,13 +629,19 @@ class TelloEmulator:
             return refusal
         d = value[0] / 100.0
         fwd, right, up = {
-            "forward": (d, 0.0, 0.0), "back": (-d, 0.0, 0.0), "right": (0.0, d, 0.0),
-            "left": (0.0, -d, 0.0), "up": (0.0, 0.0, d), "down": (0.0, 0.0, -d),
+            "forward": (d, 0.0, 0.0),
+            "back": (-d, 0.0, 0.0),
+            "right": (0.0, d, 0.0),
+            "left": (0.0, -d, 0.0),
+            "up": (0.0, 0.0, d),
+            "down": (0.0, 0.0, -d),
         }[cmd]
         self._start_relative(cmd, fwd, right, up, self._speed_setting / 100.0, sender)
         return None
 
-    def _start_relative(self, name: str, fwd: float, right: float, up: float, speed: float, sender: Address) -> None:
+    def _start_relative(
+        self, name: str, fwd: float, right: float, up: float, speed: float, sender: Address
+    ) -> None:
         yaw = math.radians(self._yaw)
         dx = fwd * math.cos(yaw) - right * math.sin(yaw)
         dy = fwd * math.sin(yaw) + right * math.cos(yaw)
@@ -646,8 +676,12 @@ class TelloEmulator:
         sign = 1.0 if cmd == "cw" else -1.0
         self._rc = (0, 0, 0, 0)
         self._maneuver = _Maneuver(
-            cmd, (self._x, self._y, self._z), speed=0.0, yaw=self._yaw + sign * value[0],
-            yaw_rate=self.rotate_rate, reply_to=sender,
+            cmd,
+            (self._x, self._y, self._z),
+            speed=0.0,
+            yaw=self._yaw + sign * value[0],
+            yaw_rate=self.rotate_rate,
+            reply_to=sender,
         )
         return None
 
@@ -777,7 +811,9 @@ def _address(text: str) -> Address:
 
 def main(argv: list[str] | None = None) -> int:
     """Run an emulator until SIGTERM/SIGINT (for tests that need it in another process or namespace)."""
-    parser = argparse.ArgumentParser(prog="python -m tests.emulators.tello_emulator", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m tests.emulators.tello_emulator", description=__doc__.split("\n")[0]
+    )
     parser.add_argument("--host", default="127.0.0.1")
     parser.add_argument("--port", type=int, default=8889)
     parser.add_argument("--state-port", type=int, default=8890)
@@ -793,8 +829,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--vertical-tau", type=float, default=None, help="s: vertical response to rc")
     parser.add_argument("--height-resolution-cm", type=int, default=10)
     parser.add_argument("--height-rounding", choices=("round", "floor"), default="round")
-    parser.add_argument("--lose-reply", action="append", default=[], metavar="COMMAND",
-                        help="lose the first answer to COMMAND (repeatable)")
+    parser.add_argument(
+        "--lose-reply",
+        action="append",
+        default=[],
+        metavar="COMMAND",
+        help="lose the first answer to COMMAND (repeatable)",
+    )
     parser.add_argument("--log-level", default="WARNING")
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
@@ -803,11 +844,20 @@ def main(argv: list[str] | None = None) -> int:
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
     emu = TelloEmulator(
-        args.host, args.port, state_port=args.state_port, state_target=args.state_target,
-        takeoff_time=args.takeoff_time, takeoff_height=args.takeoff_height, land_speed=args.land_speed,
-        max_speed=args.max_speed, auto_land_timeout=args.auto_land_timeout, battery=args.battery,
-        battery_drain=args.battery_drain, vertical_tau=args.vertical_tau,
-        height_resolution_cm=args.height_resolution_cm, height_rounding=args.height_rounding,
+        args.host,
+        args.port,
+        state_port=args.state_port,
+        state_target=args.state_target,
+        takeoff_time=args.takeoff_time,
+        takeoff_height=args.takeoff_height,
+        land_speed=args.land_speed,
+        max_speed=args.max_speed,
+        auto_land_timeout=args.auto_land_timeout,
+        battery=args.battery,
+        battery_drain=args.battery_drain,
+        vertical_tau=args.vertical_tau,
+        height_resolution_cm=args.height_resolution_cm,
+        height_rounding=args.height_rounding,
     )
     emu.refuse_takeoff = args.refuse_takeoff
     for command in args.lose_reply:

@@ -137,18 +137,29 @@ class LanOperator(Node):
         now = self.now
         agents = {
             name: {
-                "mc": v.mc, "hlc": v.hlc, "last_command_seq": v.last_command_seq,
+                "mc": v.mc,
+                "hlc": v.hlc,
+                "last_command_seq": v.last_command_seq,
                 "mc_age": None if v.mc_heard is None else now - v.mc_heard,
                 "tel_age": None if v.tel_heard is None else now - v.tel_heard,
-                "lat": v.lat, "lon": v.lon, "alt": v.alt, "in_air": v.in_air,
+                "lat": v.lat,
+                "lon": v.lon,
+                "alt": v.alt,
+                "in_air": v.in_air,
             }
             for name, v in sorted(self.agents.items())
         }
         commands = [
             {
-                "seq": c.seq, "command": c.command, "target": c.target, "status": c.status.value,
-                "sends": c.sends, "expected": sorted(c.expected), "acked": sorted(c.acked),
-                "superseded": sorted(c.superseded), "reason": c.reason,
+                "seq": c.seq,
+                "command": c.command,
+                "target": c.target,
+                "status": c.status.value,
+                "sends": c.sends,
+                "expected": sorted(c.expected),
+                "acked": sorted(c.acked),
+                "superseded": sorted(c.superseded),
+                "reason": c.reason,
             }
             for c in [*self.tracker.done, *self.tracker.pending.values()]
         ]
@@ -183,7 +194,11 @@ def main() -> int:
                 command, target, alt = req["command"], req.get("target", ""), float(req.get("altitude", 0.0))
                 reply: dict[str, Any] = {"seq": run(lambda: node.command(command, target, alt))}  # noqa: B023 - run at once
             elif op == "direction":
-                az, speed, active = float(req["azimuth"]), float(req.get("speed", 1.0)), bool(req.get("active", True))
+                az, speed, active = (
+                    float(req["azimuth"]),
+                    float(req.get("speed", 1.0)),
+                    bool(req.get("active", True)),
+                )
                 run(lambda: node.set_direction(az, speed, active))  # noqa: B023 - run at once
                 reply = {"ok": True}
             elif op == "status":

@@ -47,15 +47,22 @@ SWARM_KEY = "lan-test-swarm-key"
 def _merge(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
     out = copy.deepcopy(base)
     for key, value in extra.items():
-        out[key] = _merge(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+        out[key] = (
+            _merge(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+        )
     return out
 
 
 def vehicle_config(name: str, out_dir: Path, forward_speed: float = 0.3) -> Path:
     """The example config of ``name``, with only the test's speed-ups, written to ``out_dir``."""
     doc = tomllib.loads((EXAMPLES / f"{name}.toml").read_text())
-    doc = _merge(doc, {"hlc": {"default_takeoff_altitude": ALTITUDE, "autopilot_params": FAST_SIM},
-                       "security": {"swarm_key": SWARM_KEY, "state_dir": str(out_dir / f"{name}-state")}})
+    doc = _merge(
+        doc,
+        {
+            "hlc": {"default_takeoff_altitude": ALTITUDE, "autopilot_params": FAST_SIM},
+            "security": {"swarm_key": SWARM_KEY, "state_dir": str(out_dir / f"{name}-state")},
+        },
+    )
     for bma in doc.get("bma", []):
         for behavior in bma.get("behaviors", []):
             if behavior["plugin"] == "dovrat_swarm":
@@ -89,14 +96,17 @@ class OperatorClient(JsonLinesProcess):
                 return status
             if time.monotonic() > deadline:
                 agents = {a: (v["mc"], round(v["mc_age"] or -1, 1)) for a, v in status["agents"].items()}
-                raise AssertionError(f"timed out after {timeout:g} s waiting for {what}; agents: {agents}; "
-                                     f"commands: {status['commands']}")
+                raise AssertionError(
+                    f"timed out after {timeout:g} s waiting for {what}; agents: {agents}; "
+                    f"commands: {status['commands']}"
+                )
             time.sleep(0.2)
 
     def wait_all(self, agents: Iterable[str], state: str, timeout: float) -> dict[str, Any]:
         names = list(agents)
         return self.wait(
-            lambda s: all(s["agents"].get(a, {}).get("mc") == state for a in names), timeout,
+            lambda s: all(s["agents"].get(a, {}).get("mc") == state for a in names),
+            timeout,
             f"{', '.join(names)} in {state}",
         )
 
@@ -114,8 +124,13 @@ class LanSwarm:
     """The whole set-up for one test; a context manager that tears everything down."""
 
     def __init__(
-        self, tmp_path: Path, *, vehicles: Iterable[str] = VEHICLES, loss: int = 0,
-        split: Iterable[str] = (), local_log: Iterable[str] = (),
+        self,
+        tmp_path: Path,
+        *,
+        vehicles: Iterable[str] = VEHICLES,
+        loss: int = 0,
+        split: Iterable[str] = (),
+        local_log: Iterable[str] = (),
     ) -> None:
         self.tmp = tmp_path
         self.vehicles = list(vehicles)
@@ -162,16 +177,33 @@ class LanSwarm:
         if self.loss:
             self.lan.set_loss(self.loss)
         logger = native_lcm_tool("lcm-logger")
-        operator.antalate("--log-level", "WARNING", "station", "--host", operator.address, "--port",
-                          str(STATION_PORT), "--db", ":memory:", "--range", "30", "--fov", "90",
-                          log=self._log("station"))
-        operator.popen([logger, "--quiet", "--force", f"--lcm-url={LAN_URL}", str(self.lan_log)],
-                       log=self._log("operator-logger"))
+        operator.antalate(
+            "--log-level",
+            "WARNING",
+            "station",
+            "--host",
+            operator.address,
+            "--port",
+            str(STATION_PORT),
+            "--db",
+            ":memory:",
+            "--range",
+            "30",
+            "--fov",
+            "90",
+            log=self._log("station"),
+        )
+        operator.popen(
+            [logger, "--quiet", "--force", f"--lcm-url={LAN_URL}", str(self.lan_log)],
+            log=self._log("operator-logger"),
+        )
         for name in self.vehicles:
             host, cfg = self.lan[name], str(configs[name])
             if name in self.local_log:
-                host.popen([logger, "--quiet", "--force", f"--lcm-url={LOCAL_URL}", str(self.local_log_path(name))],
-                           log=self._log(f"{name}-logger"))
+                host.popen(
+                    [logger, "--quiet", "--force", f"--lcm-url={LOCAL_URL}", str(self.local_log_path(name))],
+                    log=self._log(f"{name}-logger"),
+                )
             if name in self.split:
                 host.antalate("hlc", cfg, log=self._log(f"{name}-hlc"))
                 host.antalate("mc", cfg, log=self._log(f"{name}-mc"))
@@ -180,11 +212,15 @@ class LanSwarm:
             else:
                 host.antalate("agent", cfg, log=self._log(f"{name}-agent"))
         op_cfg = self.tmp / "operator.toml"
-        op_doc = _merge(tomllib.loads((EXAMPLES / "operator.toml").read_text()), {"security": {"swarm_key": SWARM_KEY}})
+        op_doc = _merge(
+            tomllib.loads((EXAMPLES / "operator.toml").read_text()), {"security": {"swarm_key": SWARM_KEY}}
+        )
         op_cfg.write_text(to_toml(op_doc))
         proc = operator.popen(
             [sys.executable, "-m", "tests.lan.lan_operator", str(op_cfg), "--stale-after", "2"],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
         )
         self.op = OperatorClient(proc)
 

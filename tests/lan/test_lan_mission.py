@@ -63,7 +63,10 @@ def check_log(swarm: LanSwarm, *, max_error: float) -> None:
     for name in VEHICLES:
         states = [c.state for c in record.agents[name].mc_states]
         flown = [s for s in states if s in ("STANDBY", "TAKEOFF", "MISSION", "RTL")]
-        assert flown[:4] == ["STANDBY", "TAKEOFF", "MISSION", "RTL"] and states[-1] == "STANDBY", (name, states)
+        assert flown[:4] == ["STANDBY", "TAKEOFF", "MISSION", "RTL"] and states[-1] == "STANDBY", (
+            name,
+            states,
+        )
     result = analyze(record)
     assert [d.azimuth for d in result.drift] == [a for a, _, _ in DIRECTIONS]
     for d in result.drift:

@@ -20,16 +20,22 @@ NAIVE_LOCAL_URL = "udpm://239.255.76.67:7668?ttl=0"
 
 
 def receiver(host: Host, url: str, seconds: float) -> subprocess.Popen[str]:
-    proc = host.popen([sys.executable, "-m", "tests.lan.mcast", "recv", url, str(seconds)],
-                      stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = host.popen(
+        [sys.executable, "-m", "tests.lan.mcast", "recv", url, str(seconds)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     assert proc.stdout is not None
     assert json.loads(proc.stdout.readline()).get("ready"), proc.stderr.read() if proc.stderr else ""
     return proc
 
 
 def sender(host: Host, url: str, n: int, period: float, channel: str = "TEST") -> subprocess.Popen[str]:
-    return host.popen([sys.executable, "-m", "tests.lan.mcast", "send", url, channel, str(n), str(period)],
-                      stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    return host.popen(
+        [sys.executable, "-m", "tests.lan.mcast", "send", url, channel, str(n), str(period)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
 
 
 def result(proc: subprocess.Popen[str], timeout: float = 30) -> dict:
@@ -42,8 +48,11 @@ def test_lan_bus_crosses_the_switch_and_the_local_bus_stays_home(make_lan: Calla
     lan = make_lan(3)
     h1, h2, h3 = lan["h1"], lan["h2"], lan["h3"]
     assert (h1.address, h3.address) == ("10.77.0.11", "10.77.0.13")
-    rx = {(h.name, bus): receiver(h, url, 2.5) for h in (h1, h2, h3) for bus, url in (("lan", LAN_URL),
-                                                                                      ("local", LOCAL_URL))}
+    rx = {
+        (h.name, bus): receiver(h, url, 2.5)
+        for h in (h1, h2, h3)
+        for bus, url in (("lan", LAN_URL), ("local", LOCAL_URL))
+    }
     sends = [sender(h1, LAN_URL, 50, 0.01, "L"), sender(h1, LOCAL_URL, 50, 0.01, "H")]
     assert all(result(s)["sent"] == 50 for s in sends)
     got = {key: result(p)["received"] for key, p in rx.items()}
@@ -73,8 +82,10 @@ def test_a_cut_host_keeps_its_local_bus_only_with_its_own_route(make_lan: Callab
     rx_local = receiver(h1, LOCAL_URL, 5.0)
     rx_naive = receiver(h1, NAIVE_LOCAL_URL, 5.0)
     # 3 s of traffic on each bus; the link is down from 1 s to 2 s
-    tx = {bus: sender(h1, url, 150, 0.02) for bus, url in (("lan", LAN_URL), ("local", LOCAL_URL),
-                                                           ("naive", NAIVE_LOCAL_URL))}
+    tx = {
+        bus: sender(h1, url, 150, 0.02)
+        for bus, url in (("lan", LAN_URL), ("local", LOCAL_URL), ("naive", NAIVE_LOCAL_URL))
+    }
     time.sleep(1.0)
     lan.cut("h1")
     assert "224.0.0.0/4" not in h1.routes()  # the kernel deleted the LAN's multicast route

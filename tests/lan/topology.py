@@ -66,7 +66,9 @@ class LanError(RuntimeError):
 def _run(argv: Sequence[str], *, check: bool = True, timeout: float = 20) -> subprocess.CompletedProcess[str]:
     proc = subprocess.run(list(argv), capture_output=True, text=True, timeout=timeout)
     if check and proc.returncode != 0:
-        raise LanError(f"{' '.join(argv)} failed ({proc.returncode}): {proc.stderr.strip() or proc.stdout.strip()}")
+        raise LanError(
+            f"{' '.join(argv)} failed ({proc.returncode}): {proc.stderr.strip() or proc.stdout.strip()}"
+        )
     return proc
 
 
@@ -203,7 +205,9 @@ class Host:
     def antalate(self, *args: str, log: Path | None = None, **kwargs: Any) -> subprocess.Popen[str]:
         return self.popen([sys.executable, "-m", "antalate_lcm.cli", *args], log=log, **kwargs)
 
-    def run(self, argv: Sequence[str], timeout: float = 30, check: bool = False) -> subprocess.CompletedProcess[str]:
+    def run(
+        self, argv: Sequence[str], timeout: float = 30, check: bool = False
+    ) -> subprocess.CompletedProcess[str]:
         return _run(self.wrap(argv), check=check, timeout=timeout)
 
     def stop(self, timeout: float = 5.0) -> dict[int, int | None]:
@@ -261,15 +265,20 @@ class Lan:
         # membership timeouts. A small flat LAN switch floods multicast; so does this one.
         _run(["ip", "-n", sw, "link", "add", "br0", "type", "bridge", "mcast_snooping", "0"])
         _run(["ip", "-n", sw, "link", "set", "br0", "up"])
-        self._nft(f"add table bridge {_LOSS_TABLE}\n"
-                  f"add chain bridge {_LOSS_TABLE} forward {{ type filter hook forward priority 0; policy accept; }}\n")
+        self._nft(
+            f"add table bridge {_LOSS_TABLE}\n"
+            f"add chain bridge {_LOSS_TABLE} forward {{ type filter hook forward priority 0; policy accept; }}\n"
+        )
         for host in self.hosts.values():
             self._built.append(host.ns)
             host.build()
 
     def _nft(self, script: str) -> str:
         proc = subprocess.run(
-            ["ip", "netns", "exec", self.switch, "nft", "-f", "-"], input=script, capture_output=True, text=True,
+            ["ip", "netns", "exec", self.switch, "nft", "-f", "-"],
+            input=script,
+            capture_output=True,
+            text=True,
             timeout=20,
         )
         if proc.returncode != 0:
@@ -299,14 +308,22 @@ class Lan:
             if not pct and target is None:
                 continue
             match = f'oifname "{self.hosts[target].port}" ' if target is not None else ""
-            verdict = "accept" if not pct else "counter drop" if pct >= 100 else f"numgen random mod 100 < {pct} counter drop"
+            verdict = (
+                "accept"
+                if not pct
+                else "counter drop"
+                if pct >= 100
+                else f"numgen random mod 100 < {pct} counter drop"
+            )
             script += f"add rule bridge {_LOSS_TABLE} forward {match}{verdict}\n"
         self._nft(script)
         self.loss = self._loss.get(None, 0)
 
     def dropped(self) -> int:
         """Frames dropped by the loss rules since they were last set."""
-        out = _run(["ip", "netns", "exec", self.switch, "nft", "list", "chain", "bridge", _LOSS_TABLE, "forward"]).stdout
+        out = _run(
+            ["ip", "netns", "exec", self.switch, "nft", "list", "chain", "bridge", _LOSS_TABLE, "forward"]
+        ).stdout
         return sum(int(n) for n in re.findall(r"counter packets (\d+)", out))
 
     def cut(self, name: str) -> None:
@@ -332,4 +349,3 @@ class Lan:
     def namespaces(self) -> list[str]:
         """This LAN's namespaces that exist now (empty after teardown)."""
         return [ns for ns in _namespaces() if ns.startswith(self.prefix + "-")]
-

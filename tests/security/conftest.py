@@ -87,16 +87,32 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
     s = Swarm(ns, tmp)
     try:
         s.start_station()
-        osc = {"enabled": True, "server": s.station_url, "rate": 5.0,
-               **({"ca_file": str(s.tls[0])} if s.tls else {})}
-        bma = [{"name": "swarm", "behaviors": [{
-            "plugin": "dovrat_swarm", "activate_on": ["MISSION"],
-            "params": {"forward_speed": 1.0, "detection_source": "any"},
-        }]}]
+        osc = {
+            "enabled": True,
+            "server": s.station_url,
+            "rate": 5.0,
+            **({"ca_file": str(s.tls[0])} if s.tls else {}),
+        }
+        bma = [
+            {
+                "name": "swarm",
+                "behaviors": [
+                    {
+                        "plugin": "dovrat_swarm",
+                        "activate_on": ["MISSION"],
+                        "params": {"forward_speed": 1.0, "detection_source": "any"},
+                    }
+                ],
+            }
+        ]
         for name, north in (("alpha", 0.0), ("delta", 40.0)):
             token_file = str(tmp / f"{name}.token")
-            s.agent(name, agent_doc(name, tmp / "state", home=_home(north), osc={**osc, "token_file": token_file},
-                                    bma=bma))
+            s.agent(
+                name,
+                agent_doc(
+                    name, tmp / "state", home=_home(north), osc={**osc, "token_file": token_file}, bma=bma
+                ),
+            )
         s.start_agents_process("alpha-delta", ["alpha", "delta"])
         for name, north in (("bravo", 80.0), ("charlie", 120.0)):
             extra = {"osc": {**osc, "token_file": str(tmp / f"{name}.token")}} if name == "charlie" else {}

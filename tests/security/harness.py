@@ -46,6 +46,7 @@ HOME = (32.7767, 35.0231)
 #: nothing about the defence it claims to test. See README.md for the defences that stay on.
 DISARMED = os.environ.get("ANTALATE_SECURITY_DISARMED") == "1"
 
+
 class NotJudged(Exception):
     """The test could not set up its attack, or the machine starved a node: no verdict on the attack.
 
@@ -68,34 +69,64 @@ class PeerClient(JsonLinesProcess):
         assert reply["ok"], f"{self.what}: {req['op']} failed: {reply.get('error')}"
         return reply
 
-    def publish(self, channel: str, type_name: str, *, sign: bool = False, count: int = 1,
-                stamp: bool = True, **fields: Any) -> bytes:
+    def publish(
+        self,
+        channel: str,
+        type_name: str,
+        *,
+        sign: bool = False,
+        count: int = 1,
+        stamp: bool = True,
+        **fields: Any,
+    ) -> bytes:
         """Encode and send a message; returns its bytes. ``stamp`` sets header.utime to now."""
-        reply = self._ok(op="publish", channel=channel, type=type_name, fields=fields, sign=sign,
-                         count=count, stamp=stamp)
+        reply = self._ok(
+            op="publish", channel=channel, type=type_name, fields=fields, sign=sign, count=count, stamp=stamp
+        )
         return bytes.fromhex(reply["hex"])
 
     def batch(self, items: list[tuple[str, bytes]], gap: float = 0.0) -> None:
         self._ok(op="batch", items=[{"channel": c, "hex": d.hex()} for c, d in items], gap=gap)
 
-    def replay(self, channel: str, type_name: str, pick: str = "last", since: int = 0, **where: Any) -> dict[str, Any]:
+    def replay(
+        self, channel: str, type_name: str, pick: str = "last", since: int = 0, **where: Any
+    ) -> dict[str, Any]:
         """Resend, byte for byte, a message recorded off the network."""
-        return self._ok(op="replay", channel=channel, type=type_name, where=where, pick=pick, since=since)["msg"]
+        return self._ok(op="replay", channel=channel, type=type_name, where=where, pick=pick, since=since)[
+            "msg"
+        ]
 
     def capture(self, channel: str, type_name: str, since: int = 0, **where: Any) -> bytes:
         """The bytes of the last message recorded on ``channel`` matching ``where``."""
         reply = self._ok(op="capture", channel=channel, type=type_name, where=where, pick="last", since=since)
         return bytes.fromhex(reply["hex"])
 
-    def wait(self, channel: str, type_name: str, timeout: float = 15, since: int = 0, genuine: bool = False,
-             **where: Any) -> dict[str, Any] | None:
-        reply = self.call(op="wait", channel=channel, type=type_name, where=where, timeout=timeout, since=since,
-                          genuine=genuine and not DISARMED)
+    def wait(
+        self,
+        channel: str,
+        type_name: str,
+        timeout: float = 15,
+        since: int = 0,
+        genuine: bool = False,
+        **where: Any,
+    ) -> dict[str, Any] | None:
+        reply = self.call(
+            op="wait",
+            channel=channel,
+            type=type_name,
+            where=where,
+            timeout=timeout,
+            since=since,
+            genuine=genuine and not DISARMED,
+        )
         return reply.get("msg") if reply["ok"] else None
 
-    def history(self, channel: str, type_name: str, since: int = 0, genuine: bool = False) -> list[dict[str, Any]]:
-        return self._ok(op="history", channel=channel, type=type_name, since=since,
-                        genuine=genuine and not DISARMED)["msgs"]
+    def history(
+        self, channel: str, type_name: str, since: int = 0, genuine: bool = False
+    ) -> list[dict[str, Any]]:
+        return self._ok(
+            op="history", channel=channel, type=type_name, since=since, genuine=genuine and not DISARMED
+        )["msgs"]
 
     def mark(self) -> int:
         return int(self._ok(op="mark")["index"])
@@ -119,13 +150,29 @@ class PeerClient(JsonLinesProcess):
         reply = self._ok(op="udp_recv", since=since)
         return [bytes.fromhex(h) for h in reply["hexes"]], int(reply["index"])
 
-    def http(self, method: str, path: str, json_body: Any = None, *, headers: dict[str, str] | None = None,
-             bodies: list[Any] | None = None, content: str | None = None,
-             source: str | None = None) -> list[dict[str, Any]]:
+    def http(
+        self,
+        method: str,
+        path: str,
+        json_body: Any = None,
+        *,
+        headers: dict[str, str] | None = None,
+        bodies: list[Any] | None = None,
+        content: str | None = None,
+        source: str | None = None,
+    ) -> list[dict[str, Any]]:
         """One request (or one per entry of ``bodies``); ``source``: send from this local address."""
         url = path if path.startswith("http") else self.station + path
-        reply = self._ok(op="http", method=method, url=url, json=json_body, headers=headers, bodies=bodies,
-                         content=content, source=source)
+        reply = self._ok(
+            op="http",
+            method=method,
+            url=url,
+            json=json_body,
+            headers=headers,
+            bodies=bodies,
+            content=content,
+            source=source,
+        )
         return reply["responses"]
 
     def http1(self, method: str, path: str, json_body: Any = None, **kw: Any) -> dict[str, Any]:
@@ -153,7 +200,9 @@ class Vehicle:
         return float((self.vn**2 + self.ve**2) ** 0.5)
 
     def distance(self, other: Vehicle) -> float:
-        return ((self.north - other.north) ** 2 + (self.east - other.east) ** 2 + (self.alt - other.alt) ** 2) ** 0.5
+        return (
+            (self.north - other.north) ** 2 + (self.east - other.east) ** 2 + (self.alt - other.alt) ** 2
+        ) ** 0.5
 
 
 class AgentRun:
@@ -178,7 +227,9 @@ class AgentRun:
         log = self.swarm.tmp / f"{self.name}-{node}-{len(self.logs)}.log"
         self.logs.append(log)
         out = open(log, "w")  # noqa: SIM115 - the process owns it
-        self.procs[node] = self.swarm.netns.antalate(node, str(self.path), stdout=out, stderr=subprocess.STDOUT)
+        self.procs[node] = self.swarm.netns.antalate(
+            node, str(self.path), stdout=out, stderr=subprocess.STDOUT
+        )
 
     def kill(self, node: str) -> None:
         proc = self.procs.pop(node)
@@ -219,6 +270,7 @@ class AgentRun:
 
     def vehicle(self) -> Vehicle:
         """The vehicle's state, read from the sim's state file (fresh within a second)."""
+
         def read() -> dict[str, Any] | None:
             try:
                 data = json.loads(self.state_file.read_text())
@@ -229,8 +281,18 @@ class AgentRun:
         data = wait_for(read, 15.0, 0.1)
         if not data:
             raise NotJudged(f"{self.name}: no fresh vehicle state in {self.state_file}")
-        return Vehicle(data["north"], data["east"], data["alt"], bool(data["armed"]), bool(data["in_air"]),
-                       data["mode"], data["phase"], data["saved_at"], data["vn"], data["ve"])
+        return Vehicle(
+            data["north"],
+            data["east"],
+            data["alt"],
+            bool(data["armed"]),
+            bool(data["in_air"]),
+            data["mode"],
+            data["phase"],
+            data["saved_at"],
+            data["vn"],
+            data["ve"],
+        )
 
     def vehicle_after(self, t: float) -> Vehicle:
         """The vehicle's state as saved after wall time ``t`` (so it reflects what happened until then)."""
@@ -267,17 +329,25 @@ class Swarm:
         registration key derived from the swarm key, the default rate limits."""
         self.api_keys = {"operator": new_api_key(), "read-only": new_api_key()}
         doc: dict[str, Any] = {
-            "station": {"host": "127.0.0.1", "port": STATION_PORT, "db": str(self.station_db),
-                        **({"tls_cert": str(self.tls[1]), "tls_key": str(self.tls[2])} if self.tls else {})},
-            "api_keys": [{"name": f"{role}-person", "role": role, "sha256": sha256_hex(key)}
-                         for role, key in self.api_keys.items()],
+            "station": {
+                "host": "127.0.0.1",
+                "port": STATION_PORT,
+                "db": str(self.station_db),
+                **({"tls_cert": str(self.tls[1]), "tls_key": str(self.tls[2])} if self.tls else {}),
+            },
+            "api_keys": [
+                {"name": f"{role}-person", "role": role, "sha256": sha256_hex(key)}
+                for role, key in self.api_keys.items()
+            ],
         }
         if not DISARMED:
             doc["station"]["registration_key"] = registration_key(SWARM_KEY)
         path = self.tmp / "station.toml"
         path.write_text(to_toml(doc))
         out = open(self.station_log, "w")  # noqa: SIM115 - the process owns it
-        self.station = self.netns.antalate("station", "--config", str(path), stdout=out, stderr=subprocess.STDOUT)
+        self.station = self.netns.antalate(
+            "station", "--config", str(path), stdout=out, stderr=subprocess.STDOUT
+        )
 
     def auth(self, role: str) -> dict[str, str]:
         return {"Authorization": f"Bearer {self.api_keys[role]}"}
@@ -296,8 +366,9 @@ class Swarm:
         for name in names:
             self._shared[name] = log
         out = open(log, "w")  # noqa: SIM115 - the process owns it
-        proc = self.netns.antalate("agent", *(str(self.agents[n].path) for n in names),
-                                   stdout=out, stderr=subprocess.STDOUT)
+        proc = self.netns.antalate(
+            "agent", *(str(self.agents[n].path) for n in names), stdout=out, stderr=subprocess.STDOUT
+        )
         for name in names:
             self.agents[name].shared = proc
         return proc
@@ -306,7 +377,9 @@ class Swarm:
         path = self._shared.get(name)
         return path.read_text(errors="replace") if path is not None else ""
 
-    def peer(self, what: str, key: str | None, source: str | None = None, ca: Path | None = None) -> PeerClient:
+    def peer(
+        self, what: str, key: str | None, source: str | None = None, ca: Path | None = None
+    ) -> PeerClient:
         """A peer process; ``ca``: verify the station's certificate with it (else: no verification,
         as an attacker does not care whom it talks to)."""
         args = ["-m", "tests.security.peer", LAN, LOCAL, "--window", str(WINDOW)]
@@ -340,25 +413,43 @@ class Swarm:
         return self._op_seq
 
 
-def agent_doc(name: str, state_dir: Path, *, sim: dict[str, Any] | None = None, home: tuple[float, float] = HOME,
-              internal: str = "local", **sections: Any) -> dict[str, Any]:
+def agent_doc(
+    name: str,
+    state_dir: Path,
+    *,
+    sim: dict[str, Any] | None = None,
+    home: tuple[float, float] = HOME,
+    internal: str = "local",
+    **sections: Any,
+) -> dict[str, Any]:
     """An agent's config as a field user writes it: internal topics on the host-only ``local`` bus,
     what the operator sees also on ``lan``, a swarm key; the replay memory in ``state_dir``."""
-    hlc = {"autopilot": "sim", "default_takeoff_altitude": 3.0, "link_timeout": 2.0, **sections.pop("hlc", {})}
+    hlc = {
+        "autopilot": "sim",
+        "default_takeoff_altitude": 3.0,
+        "link_timeout": 2.0,
+        **sections.pop("hlc", {}),
+    }
     hlc["autopilot_params"] = {**FAST_SIM, "home_lat": home[0], "home_lon": home[1], **(sim or {})}
     doc: dict[str, Any] = {
         "agent": {"name": name},
         "buses": {"lan": LAN, "local": LOCAL},
         "topics": {
             "default_bus": internal,
-            "MC_STATE": [internal, "lan"], "HLC_STATE": [internal, "lan"], "TELEMETRY": [internal, "lan"],
-            "HLC_ERROR": [internal, "lan"], "ARBITER": [internal, "lan"],
-            "OPERATOR_CMD": ["lan", internal], "DIRECTION_CMD": ["lan", internal],
-            "SWARM_OPERATOR_CMD": "lan", "SWARM_DIRECTION_CMD": "lan",
+            "MC_STATE": [internal, "lan"],
+            "HLC_STATE": [internal, "lan"],
+            "TELEMETRY": [internal, "lan"],
+            "HLC_ERROR": [internal, "lan"],
+            "ARBITER": [internal, "lan"],
+            "OPERATOR_CMD": ["lan", internal],
+            "DIRECTION_CMD": ["lan", internal],
+            "SWARM_OPERATOR_CMD": "lan",
+            "SWARM_DIRECTION_CMD": "lan",
         },
         "hlc": hlc,
         "security": (
-            {"swarm_key": "", "insecure": True} if DISARMED
+            {"swarm_key": "", "insecure": True}
+            if DISARMED
             else {"swarm_key": SWARM_KEY, "window": WINDOW, "state_dir": str(state_dir)}
         ),
     }
@@ -368,18 +459,59 @@ def agent_doc(name: str, state_dir: Path, *, sim: dict[str, Any] | None = None, 
 
 def make_tls(tmp: Path) -> tuple[Path, Path, Path]:
     """A CA, and a certificate for 127.0.0.1 signed by it (the openssl CLI): (ca, cert, key)."""
-    ca_key, ca, key, csr, cert = (tmp / n for n in ("ca.key", "ca.pem", "station.key", "station.csr", "station.pem"))
+    ca_key, ca, key, csr, cert = (
+        tmp / n for n in ("ca.key", "ca.pem", "station.key", "station.csr", "station.pem")
+    )
     ext = tmp / "ext.cnf"
     ext.write_text("subjectAltName = IP:127.0.0.1\nbasicConstraints = CA:FALSE\n")
 
     def run(*args: str) -> None:
         subprocess.run(["openssl", *args], check=True, capture_output=True)
 
-    run("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", str(ca_key), "-out", str(ca), "-days", "2",
-        "-subj", "/CN=antalate security suite CA")
-    run("req", "-newkey", "rsa:2048", "-nodes", "-keyout", str(key), "-out", str(csr), "-subj", "/CN=127.0.0.1")
-    run("x509", "-req", "-in", str(csr), "-CA", str(ca), "-CAkey", str(ca_key), "-CAcreateserial",
-        "-out", str(cert), "-days", "2", "-extfile", str(ext))
+    run(
+        "req",
+        "-x509",
+        "-newkey",
+        "rsa:2048",
+        "-nodes",
+        "-keyout",
+        str(ca_key),
+        "-out",
+        str(ca),
+        "-days",
+        "2",
+        "-subj",
+        "/CN=antalate security suite CA",
+    )
+    run(
+        "req",
+        "-newkey",
+        "rsa:2048",
+        "-nodes",
+        "-keyout",
+        str(key),
+        "-out",
+        str(csr),
+        "-subj",
+        "/CN=127.0.0.1",
+    )
+    run(
+        "x509",
+        "-req",
+        "-in",
+        str(csr),
+        "-CA",
+        str(ca),
+        "-CAkey",
+        str(ca_key),
+        "-CAcreateserial",
+        "-out",
+        str(cert),
+        "-days",
+        "2",
+        "-extfile",
+        str(ext),
+    )
     return ca, cert, key
 
 
@@ -388,21 +520,39 @@ OPERATOR = "operator"
 MC_NAMES = {"TAKEOFF": 0, "LAND": 1, "RTL": 2}
 
 
-def command(operator: PeerClient, swarm: Swarm, target: str, name: str, *, altitude: float = 0.0,
-            channel: str | None = None, seq: int | None = None) -> bytes:
+def command(
+    operator: PeerClient,
+    swarm: Swarm,
+    target: str,
+    name: str,
+    *,
+    altitude: float = 0.0,
+    channel: str | None = None,
+    seq: int | None = None,
+) -> bytes:
     """A genuine, signed operator command (what the operator console sends); returns its bytes."""
     return operator.publish(
-        channel or f"{target}/OPERATOR_CMD", "operator_cmd_t", sign=True,
+        channel or f"{target}/OPERATOR_CMD",
+        "operator_cmd_t",
+        sign=True,
         header={"agent": OPERATOR, "seq": seq if seq is not None else swarm.next_seq()},
-        command=MC_NAMES[name], target=target, altitude=altitude,
+        command=MC_NAMES[name],
+        target=target,
+        altitude=altitude,
     )
 
 
-def direction(operator: PeerClient, swarm: Swarm, target: str, azimuth: float, speed: float,
-              active: bool = True) -> bytes:
+def direction(
+    operator: PeerClient, swarm: Swarm, target: str, azimuth: float, speed: float, active: bool = True
+) -> bytes:
     return operator.publish(
-        f"{target}/DIRECTION_CMD", "direction_cmd_t", sign=True,
-        header={"agent": OPERATOR, "seq": swarm.next_seq()}, active=active, azimuth=azimuth, speed=speed,
+        f"{target}/DIRECTION_CMD",
+        "direction_cmd_t",
+        sign=True,
+        header={"agent": OPERATOR, "seq": swarm.next_seq()},
+        active=active,
+        azimuth=azimuth,
+        speed=speed,
         target=target,
     )
 
@@ -418,8 +568,9 @@ class Baseline:
 
 
 def baseline(run: AgentRun) -> Baseline:
-    return Baseline(run.vehicle_after(time.time()), len(run.transitions("mc")), len(run.transitions("hlc")),
-                    time.time())
+    return Baseline(
+        run.vehicle_after(time.time()), len(run.transitions("mc")), len(run.transitions("hlc")), time.time()
+    )
 
 
 def settle(run: AgentRun, seconds: float = 1.0) -> Vehicle:
@@ -428,16 +579,22 @@ def settle(run: AgentRun, seconds: float = 1.0) -> Vehicle:
     return run.vehicle_after(time.time())
 
 
-def assert_unmoved(run: AgentRun, before: Baseline, *, tolerance: float = 0.3, still: bool = True,
-                   wait: float = 1.0) -> Vehicle:
+def assert_unmoved(
+    run: AgentRun, before: Baseline, *, tolerance: float = 0.3, still: bool = True, wait: float = 1.0
+) -> Vehicle:
     """The attack changed nothing: the vehicle is where it was (armed/in air as it was) and neither the
     MC nor the HLC made a transition since ``before``. ``still=False`` only checks arm/air state and
     transitions (for a vehicle that legitimately moves on its own). ``wait``: how long the attack is
     given to act first (0 when the caller already waited, e.g. for several agents at once)."""
     after = settle(run, wait)
-    new_mc = run.transitions("mc")[before.mc:]
-    new_hlc = run.transitions("hlc")[before.hlc:]
-    if new_mc and not new_hlc and all(_watchdog(t) for t in new_mc) and after.distance(before.vehicle) <= tolerance:
+    new_mc = run.transitions("mc")[before.mc :]
+    new_hlc = run.transitions("hlc")[before.hlc :]
+    if (
+        new_mc
+        and not new_hlc
+        and all(_watchdog(t) for t in new_mc)
+        and after.distance(before.vehicle) <= tolerance
+    ):
         # The MC's HLC watchdog fired and the MC resynchronised, nothing else happened: on a
         # heavily loaded machine a node was not scheduled for seconds. An attack does not do that.
         raise NotJudged(f"{run.name}: the MC lost and found its HLC (a starved process?): {new_mc}")
@@ -448,14 +605,18 @@ def assert_unmoved(run: AgentRun, before: Baseline, *, tolerance: float = 0.3, s
     )
     if still:
         moved = after.distance(before.vehicle)
-        assert moved <= tolerance, f"{run.name}: the vehicle moved {moved:.2f} m: before {before.vehicle}, after {after}"
+        assert moved <= tolerance, (
+            f"{run.name}: the vehicle moved {moved:.2f} m: before {before.vehicle}, after {after}"
+        )
     return after
 
 
 def _watchdog(t: tuple[str, str, str]) -> bool:
     """An MC transition of its HLC watchdog: into HLC_LOST on its timer, or the resync out of it."""
     src, dst, cause = t
-    return (dst == "HLC_LOST" and cause.startswith("timer")) or (src == "HLC_LOST" and cause.startswith("HLC state"))
+    return (dst == "HLC_LOST" and cause.startswith("timer")) or (
+        src == "HLC_LOST" and cause.startswith("HLC state")
+    )
 
 
 def fly(swarm: Swarm, operator: PeerClient, name: str) -> None:

@@ -18,9 +18,18 @@ from tests.emulators.mavlink_vehicle import MavlinkVehicle
 
 #: Brisk kinematics, as the MAVLink end-to-end tests use.
 FAST = {
-    "boot_delay": 0.2, "ekf_delay": 0.3, "gps_delay": 0.3, "heartbeat_rate": 10.0, "climb_rate": 4.0,
-    "max_climb_rate": 4.0, "land_speed": 2.5, "land_speed_high": 3.0, "max_descent_rate": 3.0,
-    "rtl_speed": 8.0, "velocity_tau": 0.15, "land_detect_time": 0.2,
+    "boot_delay": 0.2,
+    "ekf_delay": 0.3,
+    "gps_delay": 0.3,
+    "heartbeat_rate": 10.0,
+    "climb_rate": 4.0,
+    "max_climb_rate": 4.0,
+    "land_speed": 2.5,
+    "land_speed_high": 3.0,
+    "max_descent_rate": 3.0,
+    "rtl_speed": 8.0,
+    "velocity_tau": 0.15,
+    "land_detect_time": 0.2,
 }
 
 
@@ -34,8 +43,14 @@ def main() -> None:
     host, _, port = args.udp_target.rpartition(":")
     lat, lon = (float(v) for v in args.home.split(","))
     vehicle = MavlinkVehicle(
-        "127.0.0.1", args.udp_port, None, udp_target=(host, int(port)), home_lat=lat, home_lon=lon,
-        signing_key=bytes.fromhex(args.signing_key) if args.signing_key else None, **FAST,
+        "127.0.0.1",
+        args.udp_port,
+        None,
+        udp_target=(host, int(port)),
+        home_lat=lat,
+        home_lon=lon,
+        signing_key=bytes.fromhex(args.signing_key) if args.signing_key else None,
+        **FAST,
     )
     with vehicle:
         print(json.dumps({"ok": True, "ready": True}), flush=True)
@@ -44,8 +59,12 @@ def main() -> None:
             if req["op"] == "snapshot":
                 snap = asdict(vehicle.snapshot())
                 counts = Counter(r.type for r in vehicle.received)
-                reply = {"ok": True, "snapshot": snap, "signing_rejected": vehicle.signing_rejected,
-                         "received": dict(counts)}
+                reply = {
+                    "ok": True,
+                    "snapshot": snap,
+                    "signing_rejected": vehicle.signing_rejected,
+                    "received": dict(counts),
+                }
             else:
                 reply = {"ok": False, "error": f"unknown op {req['op']}"}
             print(json.dumps(reply, default=str), flush=True)

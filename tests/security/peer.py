@@ -57,8 +57,14 @@ def fill(msg: Any, fields: dict[str, Any]) -> Any:
 
 
 class Peer:
-    def __init__(self, urls: list[str], key: str | None, window: float, source: str | None = None,
-                 ca: str | None = None) -> None:
+    def __init__(
+        self,
+        urls: list[str],
+        key: str | None,
+        window: float,
+        source: str | None = None,
+        ca: str | None = None,
+    ) -> None:
         # Every bus the swarm uses (the LAN group and the agents' "local" ttl=0 group): on one host,
         # or on a LAN where the attacker sends with a larger ttl, both reach the agents' sockets.
         self.buses = [lcm.LCM(url) for url in urls]
@@ -98,7 +104,7 @@ class Peer:
             tcp = ip[ihl:]
             src, dst = int.from_bytes(tcp[0:2], "big"), int.from_bytes(tcp[2:4], "big")
             if port in (src, dst):
-                payload = tcp[(tcp[12] >> 4) * 4:]
+                payload = tcp[(tcp[12] >> 4) * 4 :]
                 if payload:
                     with self.cond:
                         self.sniffed.append(payload)
@@ -119,7 +125,9 @@ class Peer:
             for lc in self.buses:
                 lc.publish(channel, data)
 
-    def _decoded(self, pattern: str, type_name: str, start: int, genuine: bool) -> list[tuple[int, dict[str, Any]]]:
+    def _decoded(
+        self, pattern: str, type_name: str, start: int, genuine: bool
+    ) -> list[tuple[int, dict[str, Any]]]:
         rx = re.compile(pattern)
         msg_type = MESSAGE_TYPES[type_name]
         out = []
@@ -183,7 +191,7 @@ class Peer:
             return {"ok": True}
         if op == "udp_recv":
             with self.cond:
-                got = self.udp_seen[req.get("since", 0):]
+                got = self.udp_seen[req.get("since", 0) :]
             return {"ok": True, "hexes": [d.hex() for d in got], "index": req.get("since", 0) + len(got)}
         if op == "batch":
             for item in req["items"]:
@@ -194,7 +202,8 @@ class Peer:
         if op in ("replay", "capture"):
             with self.cond:
                 hits = [
-                    (i, d) for i, d in self._decoded(req["channel"], req["type"], req.get("since", 0), False)
+                    (i, d)
+                    for i, d in self._decoded(req["channel"], req["type"], req.get("since", 0), False)
                     if matches(d, req.get("where", {}))
                 ]
             if not hits:
@@ -209,8 +218,10 @@ class Peer:
             with self.cond:
                 while True:
                     hits = [
-                        d for _, d in self._decoded(req["channel"], req["type"], req.get("since", 0),
-                                                    req.get("genuine", False))
+                        d
+                        for _, d in self._decoded(
+                            req["channel"], req["type"], req.get("since", 0), req.get("genuine", False)
+                        )
                         if matches(d, req.get("where", {}))
                     ]
                     if hits:
@@ -221,7 +232,9 @@ class Peer:
                     self.cond.wait(min(remaining, 0.2))
         if op == "history":
             with self.cond:
-                hits = self._decoded(req["channel"], req["type"], req.get("since", 0), req.get("genuine", False))
+                hits = self._decoded(
+                    req["channel"], req["type"], req.get("since", 0), req.get("genuine", False)
+                )
             return {"ok": True, "msgs": [d for _, d in hits]}
         if op == "mark":
             with self.cond:
@@ -232,12 +245,16 @@ class Peer:
             client = self.http
             if req.get("source"):  # another of the attacker's addresses
                 client = self._clients.get(req["source"]) or self._clients.setdefault(
-                    req["source"], self._client(req["source"]))
+                    req["source"], self._client(req["source"])
+                )
             for body in bodies if bodies is not None else [req.get("json")]:
                 try:
                     r = client.request(
-                        req["method"], req["url"], json=body if req.get("content") is None else None,
-                        content=req.get("content"), headers=req.get("headers"),
+                        req["method"],
+                        req["url"],
+                        json=body if req.get("content") is None else None,
+                        content=req.get("content"),
+                        headers=req.get("headers"),
                     )
                 except httpx.HTTPError as exc:
                     responses.append({"status": 0, "body": f"{type(exc).__name__}: {exc}"})

@@ -38,7 +38,9 @@ def alive(run: AgentRun) -> None:
 
 
 @pytest.mark.attack("spoofed mc_state_t TAKEOFF, MC and HLC in separate processes")
-def test_spoofed_mc_takeoff_does_not_launch_a_separate_process_hlc(swarm: Swarm, attacker: PeerClient) -> None:
+def test_spoofed_mc_takeoff_does_not_launch_a_separate_process_hlc(
+    swarm: Swarm, attacker: PeerClient
+) -> None:
     bravo = swarm.agents["bravo"]
     before = baseline(bravo)
     assert not before.vehicle.armed and bravo.mc_state() == "STANDBY"
@@ -66,7 +68,9 @@ def test_spoofed_mc_takeoff_does_not_launch_an_in_process_agent(
     assert states == {("STANDBY", ())}, f"alpha's swarm arbiter followed the spoof: {states}"
 
 
-@pytest.mark.attack("injected velocity_cmd_t north 3.2 m/s to a flying vehicle (MC and HLC in separate processes)")
+@pytest.mark.attack(
+    "injected velocity_cmd_t north 3.2 m/s to a flying vehicle (MC and HLC in separate processes)"
+)
 def test_injected_velocity_does_not_move_a_flying_vehicle(
     swarm: Swarm, operator: PeerClient, attacker: PeerClient
 ) -> None:
@@ -92,8 +96,13 @@ def test_injected_velocity_does_not_steer_a_swarming_agent(
     seq = 950_000
     while time.monotonic() < end:
         seq += 1
-        attacker.publish("delta/VELOCITY_CMD", "velocity_cmd_t", header={"agent": "delta", "seq": seq},
-                         frame=velocity_cmd_t.NED, vx=3.2)
+        attacker.publish(
+            "delta/VELOCITY_CMD",
+            "velocity_cmd_t",
+            header={"agent": "delta", "seq": seq},
+            frame=velocity_cmd_t.NED,
+            vx=3.2,
+        )
         if seq % 4 == 0:
             speeds.append(delta.vehicle().speed)
         time.sleep(1.0 / RATE_HZ)
@@ -133,10 +142,17 @@ def test_an_hlc_without_a_key_on_multicast_refuses_to_start(swarm: Swarm, attack
     # Meanwhile the attacker tries to launch it, in case it did start.
     end = time.monotonic() + 10.0
     while proc.poll() is None and time.monotonic() < end:
-        attacker.publish("golf/MC_STATE", "mc_state_t", header={"agent": "golf", "seq": 1},
-                         state=mc_state_t.TAKEOFF, takeoff_altitude=2.1)
+        attacker.publish(
+            "golf/MC_STATE",
+            "mc_state_t",
+            header={"agent": "golf", "seq": 1},
+            state=mc_state_t.TAKEOFF,
+            takeoff_altitude=2.1,
+        )
         time.sleep(0.1)
-    assert proc.poll() is not None and proc.returncode != 0, f"golf's HLC runs without a key: {run.log()[-2000:]}"
+    assert proc.poll() is not None and proc.returncode != 0, (
+        f"golf's HLC runs without a key: {run.log()[-2000:]}"
+    )
     log = run.log()
     assert "swarm_key" in log and "insecure" in log, log[-2000:]
     assert not run.state_file.exists(), "the sim vehicle was started"

@@ -52,18 +52,35 @@ class Copter(JsonLinesProcess):
 
 @pytest.fixture(scope="module")
 def copter(swarm: Swarm) -> Iterator[tuple[Copter, AgentRun]]:
-    args = ["-m", "tests.security.mav_vehicle", "--udp-port", str(VEHICLE_PORT),
-            "--udp-target", f"127.0.0.1:{ADAPTER_PORT}", "--home", f"{HOME[0]},{HOME[1]}"]
+    args = [
+        "-m",
+        "tests.security.mav_vehicle",
+        "--udp-port",
+        str(VEHICLE_PORT),
+        "--udp-target",
+        f"127.0.0.1:{ADAPTER_PORT}",
+        "--home",
+        f"{HOME[0]},{HOME[1]}",
+    ]
     if not DISARMED:
         args += ["--signing-key", MAV_KEY.hex()]
     proc = swarm.netns.python(*args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     vehicle = Copter(proc, "the MAVLink vehicle")
-    doc = agent_doc("foxtrot", swarm.tmp / "state", hlc={
-        "autopilot": "mavlink", "link_timeout": 2.0,
-    })
+    doc = agent_doc(
+        "foxtrot",
+        swarm.tmp / "state",
+        hlc={
+            "autopilot": "mavlink",
+            "link_timeout": 2.0,
+        },
+    )
     doc["hlc"]["autopilot_params"] = {
-        "connection": f"udpin:127.0.0.1:{ADAPTER_PORT}", "stream_rate_hz": 20.0, "connect_timeout": 5.0,
-        "ready_timeout": 5.0, "ack_timeout": 0.5, **({} if DISARMED else {"signing_key": MAV_KEY.hex()}),
+        "connection": f"udpin:127.0.0.1:{ADAPTER_PORT}",
+        "stream_rate_hz": 20.0,
+        "connect_timeout": 5.0,
+        "ready_timeout": 5.0,
+        "ack_timeout": 0.5,
+        **({} if DISARMED else {"signing_key": MAV_KEY.hex()}),
     }
     run = swarm.agent("foxtrot", doc)
     agent = swarm.start_agents_process("foxtrot", ["foxtrot"])
@@ -90,17 +107,21 @@ def launch_commands(enc: mav2.MAVLink) -> list[bytes]:
     guided = COPTER_MODES["GUIDED"]
     msgs = [
         enc.set_mode_encode(1, mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, guided),
-        enc.command_long_encode(1, 1, mav2.MAV_CMD_DO_SET_MODE, 0, mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, guided,
-                                0, 0, 0, 0, 0),
+        enc.command_long_encode(
+            1, 1, mav2.MAV_CMD_DO_SET_MODE, 0, mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, guided, 0, 0, 0, 0, 0
+        ),
         enc.command_long_encode(1, 1, mav2.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 21196, 0, 0, 0, 0, 0),
         enc.command_long_encode(1, 1, mav2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 10.0),
-        enc.set_position_target_local_ned_encode(0, 1, 1, mav2.MAV_FRAME_LOCAL_NED, 0b0000111111000111,
-                                                 0, 0, 0, 3.0, 0, 0, 0, 0, 0, 0, 0),
+        enc.set_position_target_local_ned_encode(
+            0, 1, 1, mav2.MAV_FRAME_LOCAL_NED, 0b0000111111000111, 0, 0, 0, 3.0, 0, 0, 0, 0, 0, 0, 0
+        ),
     ]
     return [m.pack(enc) for m in msgs]
 
 
-def unchanged(vehicle: Copter, run: AgentRun, before: dict[str, Any], n_mc: int, n_hlc: int) -> dict[str, Any]:
+def unchanged(
+    vehicle: Copter, run: AgentRun, before: dict[str, Any], n_mc: int, n_hlc: int
+) -> dict[str, Any]:
     time.sleep(1.0)
     after = vehicle.snap()
     s0, s1 = before["snapshot"], after["snapshot"]
@@ -140,8 +161,9 @@ def test_wrongly_signed_mavlink_commands(copter: tuple[Copter, AgentRun], attack
 
 
 @pytest.mark.attack("signed MAVLink frames recorded off the link, replayed to the vehicle after landing")
-def test_replayed_signed_mavlink_frames(swarm: Swarm, copter: tuple[Copter, AgentRun], attacker: PeerClient,
-                                        operator: PeerClient) -> None:
+def test_replayed_signed_mavlink_frames(
+    swarm: Swarm, copter: tuple[Copter, AgentRun], attacker: PeerClient, operator: PeerClient
+) -> None:
     vehicle, run = copter
     assert run.mc_state() == "STANDBY"
     # The attacker joins the adapter's listeners (udpin answers whoever sends): it now receives every
@@ -168,20 +190,28 @@ def forged_vehicle(enc: mav2.MAVLink) -> list[bytes]:
     """A vehicle that says: a pilot switched to LOITER, it is armed and in the air, 3 % battery, far away."""
     armed = mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav2.MAV_MODE_FLAG_SAFETY_ARMED
     msgs = [
-        enc.heartbeat_encode(mav2.MAV_TYPE_QUADROTOR, mav2.MAV_AUTOPILOT_ARDUPILOTMEGA, armed,
-                             COPTER_MODES["LOITER"], mav2.MAV_STATE_ACTIVE, 3),
+        enc.heartbeat_encode(
+            mav2.MAV_TYPE_QUADROTOR,
+            mav2.MAV_AUTOPILOT_ARDUPILOTMEGA,
+            armed,
+            COPTER_MODES["LOITER"],
+            mav2.MAV_STATE_ACTIVE,
+            3,
+        ),
         enc.sys_status_encode(0, 0, 0, 0, 9000, 0, 3, 0, 0, 0, 0, 0, 0),
         enc.extended_sys_state_encode(0, mav2.MAV_LANDED_STATE_IN_AIR),
-        enc.global_position_int_encode(0, int((HOME[0] + 0.05) * 1e7), int((HOME[1] + 0.05) * 1e7), 50_000, 40_000,
-                                       0, 0, 0, 9000),
+        enc.global_position_int_encode(
+            0, int((HOME[0] + 0.05) * 1e7), int((HOME[1] + 0.05) * 1e7), 50_000, 40_000, 0, 0, 0, 9000
+        ),
     ]
     return [m.pack(enc) for m in msgs]
 
 
 @pytest.mark.parametrize("signed", ["unsigned", "one-frame-signed-with-another-key"])
 @pytest.mark.attack("forged vehicle messages to the adapter (pilot took over, armed, 3 % battery, far away)")
-def test_forged_vehicle_messages_to_the_adapter(copter: tuple[Copter, AgentRun], attacker: PeerClient,
-                                                operator: PeerClient, signed: str) -> None:
+def test_forged_vehicle_messages_to_the_adapter(
+    copter: tuple[Copter, AgentRun], attacker: PeerClient, operator: PeerClient, signed: str
+) -> None:
     """Last in this module: if a forged frame breaks the link, the agent stays down.
 
     The signed variant is one datagram: a HEARTBEAT ("LOITER, armed") in the vehicle's own stream

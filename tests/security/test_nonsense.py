@@ -34,8 +34,9 @@ BEHAVIOR = "dovrat_swarm"
 def swarming(swarm: Swarm, operator: PeerClient) -> AgentRun:
     """delta in MISSION with its swarm behavior active (genuine, signed arbiter status)."""
     fly(swarm, operator, "delta")
-    status = operator.wait("delta/ARBITER/swarm", "arbiter_status_t", genuine=True, timeout=15,
-                           since=operator.mark())
+    status = operator.wait(
+        "delta/ARBITER/swarm", "arbiter_status_t", genuine=True, timeout=15, since=operator.mark()
+    )
     assert status is not None, "delta's arbiter publishes no signed arbiter_status_t"
     assert BEHAVIOR in status["active"], status
     return swarm.agents["delta"]
@@ -64,7 +65,9 @@ def still_swarming(swarm: Swarm, operator: PeerClient, delta: AgentRun) -> None:
 
 
 def signed(operator: PeerClient, swarm: Swarm, channel: str, type_name: str, **fields: object) -> None:
-    operator.publish(channel, type_name, sign=True, header={"agent": OPERATOR, "seq": swarm.next_seq()}, **fields)
+    operator.publish(
+        channel, type_name, sign=True, header={"agent": OPERATOR, "seq": swarm.next_seq()}, **fields
+    )
 
 
 PAYLOADS = [
@@ -82,20 +85,44 @@ def test_signed_nonsense_payload_does_not_kill_the_behavior(swarm: Swarm, operat
     delta = swarming(swarm, operator)
     for text in PAYLOADS:
         data = text.encode()
-        signed(operator, swarm, "delta/OPERATOR_PAYLOAD", "payload_t", content_type="application/json",
-               size=len(data), data=data.hex())
+        signed(
+            operator,
+            swarm,
+            "delta/OPERATOR_PAYLOAD",
+            "payload_t",
+            content_type="application/json",
+            size=len(data),
+            data=data.hex(),
+        )
         time.sleep(0.05)
     still_swarming(swarm, operator, delta)
 
 
-@pytest.mark.attack("signed direction_cmd_t with an infinite azimuth (and NaN, huge speed) to a swarming agent")
+@pytest.mark.attack(
+    "signed direction_cmd_t with an infinite azimuth (and NaN, huge speed) to a swarming agent"
+)
 def test_signed_nonsense_direction_does_not_kill_the_behavior(swarm: Swarm, operator: PeerClient) -> None:
     delta = swarming(swarm, operator)
-    for az, speed in ((math.inf, 1.0), (-math.inf, 1.0), (math.nan, 1.0), (90.0, math.inf), (90.0, math.nan),
-                      (1e30, 1.0), (90.0, 1e30)):
+    for az, speed in (
+        (math.inf, 1.0),
+        (-math.inf, 1.0),
+        (math.nan, 1.0),
+        (90.0, math.inf),
+        (90.0, math.nan),
+        (1e30, 1.0),
+        (90.0, 1e30),
+    ):
         for channel in ("delta/DIRECTION_CMD", "SWARM/DIRECTION_CMD"):
-            signed(operator, swarm, channel, "direction_cmd_t", active=True, azimuth=az, speed=speed,
-                   target="delta" if channel.startswith("delta") else "")
+            signed(
+                operator,
+                swarm,
+                channel,
+                "direction_cmd_t",
+                active=True,
+                azimuth=az,
+                speed=speed,
+                target="delta" if channel.startswith("delta") else "",
+            )
         time.sleep(0.05)
     still_swarming(swarm, operator, delta)
     bad = [ln for ln in delta.lines() if "operator direction:" in ln and ("inf" in ln or "nan" in ln)]
@@ -108,7 +135,14 @@ def test_signed_takeoff_with_nonsense_altitude_does_not_launch(swarm: Swarm, ope
     assert bravo.mc_state() == "STANDBY"
     before = baseline(bravo)
     for alt in (math.inf, math.nan, -math.inf, -1.0, 1e30):
-        signed(operator, swarm, "bravo/OPERATOR_CMD", "operator_cmd_t", command=operator_cmd_t.TAKEOFF,
-               target="bravo", altitude=alt)
+        signed(
+            operator,
+            swarm,
+            "bravo/OPERATOR_CMD",
+            "operator_cmd_t",
+            command=operator_cmd_t.TAKEOFF,
+            target="bravo",
+            altitude=alt,
+        )
         time.sleep(0.05)
     assert_unmoved(bravo, before)

@@ -104,8 +104,9 @@ def test_forged_commands(swarm: Swarm, attacker: PeerClient, operator: PeerClien
     after(swarm, marks, operator)
 
 
-def recorded_genuine(swarm: Swarm, operator: PeerClient, attacker: PeerClient, target: str,
-                     utime: int | None = None) -> bytes:
+def recorded_genuine(
+    swarm: Swarm, operator: PeerClient, attacker: PeerClient, target: str, utime: int | None = None
+) -> bytes:
     """A genuine signed TAKEOFF the operator sent to ``target``, as the attacker recorded it off the
     network. Fresh ones go to an agent that does not exist, so sending them moved nothing."""
     channel = f"{target or 'SWARM'}/OPERATOR_CMD"
@@ -113,8 +114,16 @@ def recorded_genuine(swarm: Swarm, operator: PeerClient, attacker: PeerClient, t
     header: dict[str, object] = {"agent": OPERATOR, "seq": swarm.next_seq()}
     if utime is not None:
         header["utime"] = utime
-    operator.publish(channel, "operator_cmd_t", sign=True, stamp=utime is None, header=header,
-                     command=operator_cmd_t.TAKEOFF, target=target, altitude=2.1)
+    operator.publish(
+        channel,
+        "operator_cmd_t",
+        sign=True,
+        stamp=utime is None,
+        header=header,
+        command=operator_cmd_t.TAKEOFF,
+        target=target,
+        altitude=2.1,
+    )
     assert attacker.wait(channel, "operator_cmd_t", since=mark, timeout=5) is not None
     return attacker.capture(channel, "operator_cmd_t", since=mark)
 

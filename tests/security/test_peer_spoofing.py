@@ -43,15 +43,27 @@ def test_spoofed_telemetry_does_not_reach_the_station(
     seq = 800_000
     while time.monotonic() < end:
         seq += 1
-        attacker.publish(f"{name}/TELEMETRY", "telemetry_t", header={"agent": name, "seq": seq},
-                         lat=FAR[0], lon=FAR[1], alt=40.0, heading=90.0, battery=5.0, armed=True, in_air=True,
-                         mode="SPOOF")
+        attacker.publish(
+            f"{name}/TELEMETRY",
+            "telemetry_t",
+            header={"agent": name, "seq": seq},
+            lat=FAR[0],
+            lon=FAR[1],
+            alt=40.0,
+            heading=90.0,
+            battery=5.0,
+            armed=True,
+            in_air=True,
+            mode="SPOOF",
+        )
         if seq % 5 == 0:
             seen.append(station_position(swarm, operator, name))
         time.sleep(0.04)
     t = time.time()
     # What the station reported during the attack and after it: only where the vehicle really is.
-    assert wait_for(lambda: station_position(swarm, operator, name)[2] > t, 10.0, 0.2), f"{name} stopped reporting"
+    assert wait_for(lambda: station_position(swarm, operator, name)[2] > t, 10.0, 0.2), (
+        f"{name} stopped reporting"
+    )
     seen.append(station_position(swarm, operator, name))
     v = run.vehicle()
     real = offset(home[0], home[1], v.north, v.east)
@@ -63,25 +75,42 @@ def test_spoofed_telemetry_does_not_reach_the_station(
 
 
 @pytest.mark.attack("spoofed payload_t (unsigned detections and count: Infinity) to a swarming agent")
-def test_spoofed_payload_to_a_swarming_agent(swarm: Swarm, attacker: PeerClient, operator: PeerClient) -> None:
+def test_spoofed_payload_to_a_swarming_agent(
+    swarm: Swarm, attacker: PeerClient, operator: PeerClient
+) -> None:
     delta = swarming(swarm, operator)
     for i in range(20):
         data = PAYLOADS[i % len(PAYLOADS)].encode()
-        attacker.publish("delta/OPERATOR_PAYLOAD", "payload_t", header={"agent": "delta", "seq": 700_000 + i},
-                         content_type="application/json", size=len(data), data=data.hex())
+        attacker.publish(
+            "delta/OPERATOR_PAYLOAD",
+            "payload_t",
+            header={"agent": "delta", "seq": 700_000 + i},
+            content_type="application/json",
+            size=len(data),
+            data=data.hex(),
+        )
         time.sleep(0.02)
     still_swarming(swarm, operator, delta)
 
 
 @pytest.mark.attack("spoofed direction_cmd_t (unsigned, forged MAC) to a swarming agent")
-def test_spoofed_direction_to_a_swarming_agent(swarm: Swarm, attacker: PeerClient, operator: PeerClient) -> None:
+def test_spoofed_direction_to_a_swarming_agent(
+    swarm: Swarm, attacker: PeerClient, operator: PeerClient
+) -> None:
     delta = swarming(swarm, operator)
     lines = len([ln for ln in delta.lines() if "operator direction:" in ln])
     for i in range(20):
         mac = {"mac_len": 32, "mac": (b"\x5a" * 32).hex()} if i % 2 else {}
         for channel, target in (("delta/DIRECTION_CMD", "delta"), ("SWARM/DIRECTION_CMD", "")):
-            attacker.publish(channel, "direction_cmd_t", header={"agent": "operator", "seq": 710_000 + i, **mac},
-                             active=True, azimuth=float(i * 17 % 360), speed=4.0, target=target)
+            attacker.publish(
+                channel,
+                "direction_cmd_t",
+                header={"agent": "operator", "seq": 710_000 + i, **mac},
+                active=True,
+                azimuth=float(i * 17 % 360),
+                speed=4.0,
+                target=target,
+            )
         time.sleep(0.02)
     still_swarming(swarm, operator, delta)
     adopted = [ln for ln in delta.lines() if "operator direction:" in ln][lines:]

@@ -41,7 +41,9 @@ def test_command_replayed_after_mc_restart(swarm: Swarm, operator: PeerClient, a
     bravo.start("mc")
     bravo.wait_mc("STANDBY", timeout=30, after=n)
     before = baseline(bravo)
-    attacker.replay("bravo/OPERATOR_CMD", "operator_cmd_t", pick="last", since=mark, command=0, target="bravo")
+    attacker.replay(
+        "bravo/OPERATOR_CMD", "operator_cmd_t", pick="last", since=mark, command=0, target="bravo"
+    )
     assert_unmoved(bravo, before)
 
 
@@ -60,10 +62,14 @@ def test_older_direction_replayed(swarm: Swarm, operator: PeerClient, attacker: 
     direction(operator, swarm, "alpha", 90.0, 1.0)
     assert wait_for(lambda: directions(swarm, "alpha")[start:] == [90], 10.0, 0.1), directions(swarm, "alpha")
     direction(operator, swarm, "alpha", 180.0, 1.0)
-    assert wait_for(lambda: directions(swarm, "alpha")[start:] == [90, 180], 10.0, 0.1), directions(swarm, "alpha")
+    assert wait_for(lambda: directions(swarm, "alpha")[start:] == [90, 180], 10.0, 0.1), directions(
+        swarm, "alpha"
+    )
     before = baseline(alpha)
     for _ in range(5):
         attacker.replay("alpha/DIRECTION_CMD", "direction_cmd_t", pick="first", since=mark, azimuth=90.0)
         time.sleep(0.1)
     assert_unmoved(alpha, before)
-    assert directions(swarm, "alpha")[start:] == [90, 180], "the replayed direction rolled alpha's direction back"
+    assert directions(swarm, "alpha")[start:] == [90, 180], (
+        "the replayed direction rolled alpha's direction back"
+    )

@@ -61,7 +61,11 @@ class Observer:
     def summary(self, prefix: str) -> dict[str, Any]:
         with self.lock:
             mine = {k: v for k, v in self.copies.items() if k[0].startswith(prefix)}
-        return {"distinct": len(mine), "max_copies": max(mine.values(), default=0), "total": sum(mine.values())}
+        return {
+            "distinct": len(mine),
+            "max_copies": max(mine.values(), default=0),
+            "total": sum(mine.values()),
+        }
 
 
 def wait(pred: Any, timeout: float = 20.0) -> bool:
@@ -75,7 +79,10 @@ def wait(pred: Any, timeout: float = 20.0) -> bool:
 
 def bridge(lan: str, wan: str, site: str, limits: list[dict[str, Any]] | None = None) -> Bridge:
     config = BridgeConfig.model_validate(
-        {"buses": {"lan": lan, "wan": wan}, "bridge": {"between": ["lan", "wan"], "site": site, "limit": limits or []}}
+        {
+            "buses": {"lan": lan, "wan": wan},
+            "bridge": {"between": ["lan", "wan"], "site": site, "limit": limits or []},
+        }
     )
     b = Bridge(config)
     b.start()
@@ -135,8 +142,14 @@ def two_sites(port: int) -> dict[str, Any]:
         "all_arrived": all_arrived,
         "fenced": fenced,
         "observers": {k: o.summary("test/") for k, o in obs.items()},
-        "telemetry": {"sent": TELEMETRY, "received": len(tel), "elapsed": elapsed, "rate": RATE,
-                      "newest_arrived": newest_arrived, "last_is_newest": bool(tel) and tel[-1] == last},
+        "telemetry": {
+            "sent": TELEMETRY,
+            "received": len(tel),
+            "elapsed": elapsed,
+            "rate": RATE,
+            "newest_arrived": newest_arrived,
+            "last_is_newest": bool(tel) and tel[-1] == last,
+        },
         "telemetry_on_b": obs["b"].summary("bravo/")["total"],
         "bridges": [b.stats() for b in bridges],
     }
@@ -158,7 +171,9 @@ def one_lan(port: int) -> dict[str, Any]:
     for (ca, da), (cw, dw) in zip(sent_a, sent_w, strict=True):
         bus.publish("a", ca, da)
         bus.publish("w", cw, dw)
-    arrived = wait(lambda: all(obs["w"].has(c, d) for c, d in sent_a) and all(obs["a"].has(c, d) for c, d in sent_w), 30)
+    arrived = wait(
+        lambda: all(obs["w"].has(c, d) for c, d in sent_a) and all(obs["a"].has(c, d) for c, d in sent_w), 30
+    )
     fence = [("fence/a", "a", msg(7, 1)), ("fence/w", "w", msg(7, 3))]
     for ch, name, data in fence:
         bus.publish(name, ch, data)

@@ -15,7 +15,8 @@ _REASON: list[str | None] = []
 def need_wan() -> None:
     if not _REASON:
         _REASON.append(
-            "eclipse-zenoh is not installed (pip install -e '.[dev]')" if importlib.util.find_spec("zenoh") is None
+            "eclipse-zenoh is not installed (pip install -e '.[dev]')"
+            if importlib.util.find_spec("zenoh") is None
             else lan_unavailable()
         )
     if _REASON[0]:

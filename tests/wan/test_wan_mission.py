@@ -83,22 +83,36 @@ def test_operator_at_site_a_flies_the_agents_of_site_b_through_the_router(tmp_pa
         log_a, log_b = tmp_path / "site-a.lcm", tmp_path / "site-b.lcm"
 
         router.antalate("router", "--listen", f"tcp/0.0.0.0:{ROUTER_PORT}", log=tmp_path / "router.log")
-        wan["a", "gw"].antalate("bridge", str(bridge_config(tmp_path, "a", router.address, cap=False)),
-                                log=tmp_path / "bridge-a.log")
-        wan["b", "gw"].antalate("bridge", str(bridge_config(tmp_path, "b", router.address, cap=True)),
-                                log=tmp_path / "bridge-b.log")
-        wan["a", "op"].popen([logger, "--quiet", "--force", f"--lcm-url={LAN_URL}", str(log_a)],
-                             log=tmp_path / "logger-a.log")
-        wan["b", "gw"].popen([logger, "--quiet", "--force", f"--lcm-url={LAN_URL}", str(log_b)],
-                             log=tmp_path / "logger-b.log")
+        wan["a", "gw"].antalate(
+            "bridge",
+            str(bridge_config(tmp_path, "a", router.address, cap=False)),
+            log=tmp_path / "bridge-a.log",
+        )
+        wan["b", "gw"].antalate(
+            "bridge",
+            str(bridge_config(tmp_path, "b", router.address, cap=True)),
+            log=tmp_path / "bridge-b.log",
+        )
+        wan["a", "op"].popen(
+            [logger, "--quiet", "--force", f"--lcm-url={LAN_URL}", str(log_a)], log=tmp_path / "logger-a.log"
+        )
+        wan["b", "gw"].popen(
+            [logger, "--quiet", "--force", f"--lcm-url={LAN_URL}", str(log_b)], log=tmp_path / "logger-b.log"
+        )
         wan["b", "uavs"].antalate("agent", *agent_configs(tmp_path), log=tmp_path / "agents.log")
         op_cfg = tmp_path / "operator.toml"
-        op_doc = _merge(tomllib.loads((EXAMPLES / "operator.toml").read_text()), {"security": {"swarm_key": SWARM_KEY}})
+        op_doc = _merge(
+            tomllib.loads((EXAMPLES / "operator.toml").read_text()), {"security": {"swarm_key": SWARM_KEY}}
+        )
         op_cfg.write_text(to_toml(op_doc))
-        op = OperatorClient(wan["a", "op"].popen(
-            [sys.executable, "-m", "tests.lan.lan_operator", str(op_cfg), "--stale-after", "2"],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        ))
+        op = OperatorClient(
+            wan["a", "op"].popen(
+                [sys.executable, "-m", "tests.lan.lan_operator", str(op_cfg), "--stale-after", "2"],
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+            )
+        )
         try:
             op.wait_all(VEHICLES, "STANDBY", timeout=40)
 
@@ -121,7 +135,9 @@ def test_operator_at_site_a_flies_the_agents_of_site_b_through_the_router(tmp_pa
             time.sleep(max(0.0, 10.0 - (time.time() - t_cut)))
             wan.restore("c")
             t_back = time.time()
-            status = op.wait(lambda s: not set(VEHICLES) & set(s["stale"]), timeout=20, what="agents heard again")
+            status = op.wait(
+                lambda s: not set(VEHICLES) & set(s["stale"]), timeout=20, what="agents heard again"
+            )
             seen_again = time.time() - t_back
             print(f"agents seen again at site A {seen_again:.1f} s after the router came back")
             assert seen_again <= 5.0, seen_again
@@ -135,8 +151,10 @@ def test_operator_at_site_a_flies_the_agents_of_site_b_through_the_router(tmp_pa
             for cmd in status["commands"]:
                 assert cmd["status"] == "acked" and cmd["acked"] == list(VEHICLES), cmd
             dropped += wan.dropped()
-            print(f"packets dropped on B's uplink: {dropped}; sends per command: "
-                  f"{ {c['command']: c['sends'] for c in status['commands']} }")
+            print(
+                f"packets dropped on B's uplink: {dropped}; sends per command: "
+                f"{ {c['command']: c['sends'] for c in status['commands']} }"
+            )
         finally:
             op.quit()
             stop_loggers(wan)

@@ -41,17 +41,37 @@ def _config(name: str, out: Path, extra: dict[str, object]) -> Path:
 def test_an_agent_on_zenoh_is_flown_by_an_operator_on_zenoh(netns: NetNamespace, tmp_path: Path) -> None:
     router_log, agent_log = tmp_path / "router.log", tmp_path / "agent.log"
     with open(router_log, "w") as rlog, open(agent_log, "w") as alog:
-        netns.antalate("router", "--listen", f"tcp/127.0.0.1:{PORT}", stdout=rlog, stderr=subprocess.STDOUT, cwd=str(REPO))
-        agent = _config("agent_zenoh.toml", tmp_path, {
-            "hlc": {"default_takeoff_altitude": 3.0, "autopilot_params": FAST_SIM},
-            "security": {"swarm_key": KEY, "state_dir": str(tmp_path / "state")},
-        })
+        netns.antalate(
+            "router",
+            "--listen",
+            f"tcp/127.0.0.1:{PORT}",
+            stdout=rlog,
+            stderr=subprocess.STDOUT,
+            cwd=str(REPO),
+        )
+        agent = _config(
+            "agent_zenoh.toml",
+            tmp_path,
+            {
+                "hlc": {"default_takeoff_altitude": 3.0, "autopilot_params": FAST_SIM},
+                "security": {"swarm_key": KEY, "state_dir": str(tmp_path / "state")},
+            },
+        )
         netns.antalate("agent", str(agent), stdout=alog, stderr=subprocess.STDOUT, cwd=str(REPO))
         operator = _config("operator_remote.toml", tmp_path, {"security": {"swarm_key": KEY}})
-        op = OperatorClient(netns.python(
-            "-m", "tests.lan.lan_operator", str(operator), "--stale-after", "2",
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=str(REPO),
-        ))
+        op = OperatorClient(
+            netns.python(
+                "-m",
+                "tests.lan.lan_operator",
+                str(operator),
+                "--stale-after",
+                "2",
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                cwd=str(REPO),
+            )
+        )
         try:
             name = tomllib.loads(agent.read_text())["agent"]["name"]
             op.wait_all([name], "STANDBY", timeout=30)

@@ -56,7 +56,23 @@ class SiteHost:
         ns = self.ns
         _run(["ip", "netns", "add", ns])
         _run(["ip", "-n", ns, "link", "set", "lo", "up"])
-        _run(["ip", "-n", self.switch, "link", "add", self.port, "type", "veth", "peer", "name", "lan0", "netns", ns])
+        _run(
+            [
+                "ip",
+                "-n",
+                self.switch,
+                "link",
+                "add",
+                self.port,
+                "type",
+                "veth",
+                "peer",
+                "name",
+                "lan0",
+                "netns",
+                ns,
+            ]
+        )
         _run(["ip", "-n", self.switch, "link", "set", self.port, "master", "br0"])
         _run(["ip", "-n", self.switch, "link", "set", self.port, "up"])
         _run(["ip", "-n", ns, "addr", "add", f"{self.address}/24", "dev", "lan0"])
@@ -143,7 +159,23 @@ class Wan:
             _run(["ip", "-n", sw, "link", "set", "lo", "up"])
             _run(["ip", "-n", sw, "link", "add", "br0", "type", "bridge", "mcast_snooping", "0"])
             _run(["ip", "-n", sw, "link", "set", "br0", "up"])
-            _run(["ip", "-n", core, "link", "add", f"s{site}", "type", "veth", "peer", "name", "uplink", "netns", sw])
+            _run(
+                [
+                    "ip",
+                    "-n",
+                    core,
+                    "link",
+                    "add",
+                    f"s{site}",
+                    "type",
+                    "veth",
+                    "peer",
+                    "name",
+                    "uplink",
+                    "netns",
+                    sw,
+                ]
+            )
             _run(["ip", "-n", sw, "link", "set", "dev", "uplink", "master", "br0"])
             _run(["ip", "-n", sw, "link", "set", "dev", "uplink", "up"])
             _run(["ip", "-n", core, "addr", "add", f"{SUBNET}.{i}.1/24", "dev", f"s{site}"])
@@ -151,12 +183,19 @@ class Wan:
         for host in self.hosts.values():
             self._built.append(host.ns)
             host.build()
-        self._nft(f"add table inet {_TABLE}\n"
-                  f"add chain inet {_TABLE} forward {{ type filter hook forward priority 0; policy accept; }}\n")
+        self._nft(
+            f"add table inet {_TABLE}\n"
+            f"add chain inet {_TABLE} forward {{ type filter hook forward priority 0; policy accept; }}\n"
+        )
 
     def _nft(self, script: str) -> None:
-        proc = subprocess.run(["ip", "netns", "exec", self.core, "nft", "-f", "-"], input=script,
-                              capture_output=True, text=True, timeout=20)
+        proc = subprocess.run(
+            ["ip", "netns", "exec", self.core, "nft", "-f", "-"],
+            input=script,
+            capture_output=True,
+            text=True,
+            timeout=20,
+        )
         if proc.returncode != 0:
             raise LanError(f"nft in {self.core} failed: {proc.stderr.strip()}")
 
@@ -185,7 +224,9 @@ class Wan:
     def dropped(self) -> int:
         import re
 
-        out = _run(["ip", "netns", "exec", self.core, "nft", "list", "chain", "inet", _TABLE, "forward"]).stdout
+        out = _run(
+            ["ip", "netns", "exec", self.core, "nft", "list", "chain", "inet", _TABLE, "forward"]
+        ).stdout
         return sum(int(n) for n in re.findall(r"counter packets (\d+)", out))
 
     def close(self) -> None:

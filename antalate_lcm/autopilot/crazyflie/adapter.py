@@ -70,8 +70,10 @@ from antalate_lcm.autopilot.crazyflie.telemetry import (
 
 log = logging.getLogger("antalate.autopilot.crazyflie")
 
-CFLIB_MISSING = ("the crazyflie autopilot needs Bitcraze's cflib, which is not installed: "
-                 "pip install 'antalate[crazyflie]'")
+CFLIB_MISSING = (
+    "the crazyflie autopilot needs Bitcraze's cflib, which is not installed: "
+    "pip install 'antalate[crazyflie]'"
+)
 
 _RECONNECT_S = 2.0  # s between attempts to reopen a link cflib closed
 
@@ -79,12 +81,33 @@ _drivers_lock = threading.Lock()
 _drivers_ready = False
 
 # What the adapter is doing; the flight mode the HLC sees follows from it.
-IDLE, TAKEOFF, HOLD, STREAM, LAND, RTL_GO, RTL_LAND = "IDLE", "TAKEOFF", "HOLD", "STREAM", "LAND", "RTL", "RTL_LAND"
-_FLIGHT_MODES = {IDLE: FlightMode.GUIDED, TAKEOFF: FlightMode.GUIDED, HOLD: FlightMode.GUIDED,
-                 STREAM: FlightMode.GUIDED, LAND: FlightMode.LANDING, RTL_GO: FlightMode.RTL,
-                 RTL_LAND: FlightMode.RTL}
-_MODE_NAMES = {IDLE: "IDLE", TAKEOFF: "TAKEOFF", HOLD: "HL_HOLD", STREAM: "VELOCITY", LAND: "LAND",
-               RTL_GO: "RTL", RTL_LAND: "RTL_LAND"}
+IDLE, TAKEOFF, HOLD, STREAM, LAND, RTL_GO, RTL_LAND = (
+    "IDLE",
+    "TAKEOFF",
+    "HOLD",
+    "STREAM",
+    "LAND",
+    "RTL",
+    "RTL_LAND",
+)
+_FLIGHT_MODES = {
+    IDLE: FlightMode.GUIDED,
+    TAKEOFF: FlightMode.GUIDED,
+    HOLD: FlightMode.GUIDED,
+    STREAM: FlightMode.GUIDED,
+    LAND: FlightMode.LANDING,
+    RTL_GO: FlightMode.RTL,
+    RTL_LAND: FlightMode.RTL,
+}
+_MODE_NAMES = {
+    IDLE: "IDLE",
+    TAKEOFF: "TAKEOFF",
+    HOLD: "HL_HOLD",
+    STREAM: "VELOCITY",
+    LAND: "LAND",
+    RTL_GO: "RTL",
+    RTL_LAND: "RTL_LAND",
+}
 
 
 def _init_drivers() -> None:
@@ -148,7 +171,9 @@ class CrazyflieAutopilot(Autopilot):
         self._open_link()
         if self._thread is None:
             self._stop.clear()
-            self._thread = threading.Thread(target=self._control_loop, name=f"crazyflie-{self._p.uri}", daemon=True)
+            self._thread = threading.Thread(
+                target=self._control_loop, name=f"crazyflie-{self._p.uri}", daemon=True
+            )
             self._thread.start()
 
     def _open_link(self) -> None:
@@ -186,8 +211,10 @@ class CrazyflieAutopilot(Autopilot):
                     if block == "antalate_estimator":
                         no_kalman = True  # arm() refuses and says why
                         continue
-                    raise AutopilotError(f"the Crazyflie at {p.uri} lacks a log variable the adapter needs: "
-                                         f"{exc.args[0] if exc.args else exc}") from None
+                    raise AutopilotError(
+                        f"the Crazyflie at {p.uri} lacks a log variable the adapter needs: "
+                        f"{exc.args[0] if exc.args else exc}"
+                    ) from None
                 config.data_received_cb.add_callback(self._on_log)
                 config.start()
         except AutopilotError:
@@ -208,7 +235,9 @@ class CrazyflieAutopilot(Autopilot):
         with self._lock:
             self._cf = None
         self._close_quietly(cf)
-        raise AutopilotError(f"the Crazyflie at {p.uri} sent no state (log blocks) within {p.connect_timeout:g} s")
+        raise AutopilotError(
+            f"the Crazyflie at {p.uri} sent no state (log blocks) within {p.connect_timeout:g} s"
+        )
 
     @staticmethod
     def _close_quietly(cf: Any) -> None:
@@ -238,7 +267,9 @@ class CrazyflieAutopilot(Autopilot):
         if cf is None:
             return
         if flying:
-            log.warning("shutting down with the Crazyflie at %s in the air: emergency stop (motors off)", self._p.uri)
+            log.warning(
+                "shutting down with the Crazyflie at %s in the air: emergency stop (motors off)", self._p.uri
+            )
             for _ in range(3):  # a radio may drop one; the stop is idempotent
                 cf.supervisor.send_emergency_stop()
         self._close_quietly(cf)
@@ -256,7 +287,9 @@ class CrazyflieAutopilot(Autopilot):
         with self._lock:
             self._link_error = str(message).splitlines()[0] if message else "link lost"
             self._connected = False
-        log.warning("cflib lost the link to %s: %s; reopening it every %g s", uri, self._link_error, _RECONNECT_S)
+        log.warning(
+            "cflib lost the link to %s: %s; reopening it every %g s", uri, self._link_error, _RECONNECT_S
+        )
 
     def _reconnect(self) -> None:
         """Reopen a link cflib closed (on the reconnect thread); the old Crazyflie object is dropped."""
@@ -285,8 +318,10 @@ class CrazyflieAutopilot(Autopilot):
         with self._lock:
             cf = self._cf
             if cf is None or not self._connected:
-                raise AutopilotError(f"not connected to the Crazyflie at {self._p.uri}"
-                                     + (f" ({self._link_error})" if self._link_error else ""))
+                raise AutopilotError(
+                    f"not connected to the Crazyflie at {self._p.uri}"
+                    + (f" ({self._link_error})" if self._link_error else "")
+                )
             return cf
 
     def _refuse(self, reason: str) -> bool:
@@ -307,8 +342,10 @@ class CrazyflieAutopilot(Autopilot):
         if blocker:
             return self._refuse(blocker)
         if no_kalman:
-            return self._refuse("kalman.varPX/PY/PZ are not in the log TOC: the pre-flight estimator check needs "
-                                "the Kalman estimator (stabilizer.estimator = 2)")
+            return self._refuse(
+                "kalman.varPX/PY/PZ are not in the log TOC: the pre-flight estimator check needs "
+                "the Kalman estimator (stabilizer.estimator = 2)"
+            )
         problem = estimator_problem(reading, self._p.max_position_variance)
         if problem:
             return self._refuse(problem)
@@ -324,9 +361,14 @@ class CrazyflieAutopilot(Autopilot):
                 return True
             time.sleep(0.02)
         flags = self._reading.flags
-        return self._refuse(f"the supervisor did not arm within {self._p.arm_timeout:g} s"
-                            + (f": {flags.arm_blocker()}" if flags.arm_blocker() else
-                               f" (supervisor.info 0x{self._reading.info:04x})"))
+        return self._refuse(
+            f"the supervisor did not arm within {self._p.arm_timeout:g} s"
+            + (
+                f": {flags.arm_blocker()}"
+                if flags.arm_blocker()
+                else f" (supervisor.info 0x{self._reading.info:04x})"
+            )
+        )
 
     def disarm(self) -> None:
         cf = self._require_link()
@@ -356,8 +398,10 @@ class CrazyflieAutopilot(Autopilot):
         with self._lock:
             self._set_mode(IDLE)
         blocker = self._reading.flags.arm_blocker()
-        raise AutopilotError(f"the Crazyflie did not take off within {self._p.takeoff_confirm:g} s: "
-                             + (blocker or "the supervisor never reported flying"))
+        raise AutopilotError(
+            f"the Crazyflie did not take off within {self._p.takeoff_confirm:g} s: "
+            + (blocker or "the supervisor never reported flying")
+        )
 
     def land(self) -> None:
         cf = self._require_link()
@@ -370,7 +414,9 @@ class CrazyflieAutopilot(Autopilot):
             r = self._reading
             self._leave_stream(cf)
             if self._home is None:
-                log.warning("RTL with no take-off point known (connected in the air): returning to the origin")
+                log.warning(
+                    "RTL with no take-off point known (connected in the air): returning to the origin"
+                )
                 self._home = (0.0, 0.0)
             hx, hy = self._home
             distance = math.hypot(r.x - hx, r.y - hy)
@@ -402,7 +448,9 @@ class CrazyflieAutopilot(Autopilot):
                 self._height = max(z, self._takeoff_alt) if self._mode == TAKEOFF else z
                 self._set_mode(STREAM)
             self._velocity = (vx, vy, vz, yaw_rate, Frame(frame), self.clock())
-            self._send_setpoint(cf, build_setpoint(vx, vy, vz, yaw_rate, Frame(frame), self.frame, self._height))
+            self._send_setpoint(
+                cf, build_setpoint(vx, vy, vz, yaw_rate, Frame(frame), self.frame, self._height)
+            )
 
     # ------------------------------------------------------------------ internals (under self._lock)
     def _set_mode(self, mode: str) -> None:
@@ -445,7 +493,12 @@ class CrazyflieAutopilot(Autopilot):
         now = self.clock()
         p = self._p
         with self._lock:
-            if self._link_error and not self._connected and not self._reconnecting and not self._stop.is_set():
+            if (
+                self._link_error
+                and not self._connected
+                and not self._reconnecting
+                and not self._stop.is_set()
+            ):
                 if now - self._reconnect_at >= _RECONNECT_S:
                     self._reconnecting = True
                     self._reconnect_at = now
@@ -473,7 +526,9 @@ class CrazyflieAutopilot(Autopilot):
             if lost and flying and self._mode != IDLE and now - self._blind_land_at >= 1.0:
                 if self._mode != LAND:
                     log.warning("link lost for %.1f s in the air: landing blindly", age)
-                self._failsafe = f"link lost for more than {p.link_loss_land:g} s: the adapter commanded a landing"
+                self._failsafe = (
+                    f"link lost for more than {p.link_loss_land:g} s: the adapter commanded a landing"
+                )
                 self._blind_land_at = now
                 self._blind_landing = True
                 self._start_landing(cf, LAND)
@@ -487,7 +542,12 @@ class CrazyflieAutopilot(Autopilot):
                 arrived = math.hypot(r.x - hx, r.y - hy) <= p.rtl_tolerance and math.hypot(r.vx, r.vy) < 0.05
                 if arrived or now > self._rtl_deadline:
                     self._start_landing(cf, RTL_LAND)
-            if self._mode in (LAND, RTL_LAND) and not flying and now - self._mode_at > 0.5 and age < p.link_stale_after:
+            if (
+                self._mode in (LAND, RTL_LAND)
+                and not flying
+                and now - self._mode_at > 0.5
+                and age < p.link_stale_after
+            ):
                 cf.supervisor.send_arming_request(False)
                 self._ground_idle = True
                 self._set_mode(IDLE)
@@ -520,5 +580,6 @@ class CrazyflieAutopilot(Autopilot):
             return AutopilotState(**common)
         lat, lon = self.frame.to_wgs84(r.x, r.y)
         vn, ve, vd = self.frame.velocity_ned(r.vx, r.vy, r.vz)
-        return AutopilotState(lat=lat, lon=lon, alt=r.z, heading=self.frame.heading(r.yaw), vn=vn, ve=ve, vd=vd,
-                              **common)
+        return AutopilotState(
+            lat=lat, lon=lon, alt=r.z, heading=self.frame.heading(r.yaw), vn=vn, ve=ve, vd=vd, **common
+        )

@@ -27,16 +27,22 @@ class Params(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
 
     uri: str = Field("radio://0/80/2M/E7E7E7E7E7", description="cflib link URI: radio://, usb://, udp://")
-    origin_lat: float = Field(32.7767, ge=-90.0, le=90.0, description="deg: WGS84 of the local frame's origin")
+    origin_lat: float = Field(
+        32.7767, ge=-90.0, le=90.0, description="deg: WGS84 of the local frame's origin"
+    )
     origin_lon: float = Field(35.0231, ge=-180.0, le=180.0, description="deg")
     origin_heading: float = Field(0.0, description="deg from north (clockwise) of the local frame's +x axis")
     connect_timeout: float = Field(10.0, gt=0, description="s to open the link and read the TOCs")
     arm_timeout: float = Field(2.0, gt=0, description="s for the supervisor to report the vehicle armed")
-    takeoff_confirm: float = Field(2.0, gt=0, description="s for the supervisor to report flying after takeoff")
+    takeoff_confirm: float = Field(
+        2.0, gt=0, description="s for the supervisor to report flying after takeoff"
+    )
     log_period_ms: int = Field(50, ge=10, le=2540, description="period of the state log blocks")
     control_hz: float = Field(20.0, ge=5.0, le=100.0, description="rate of streamed velocity set-points")
     velocity_hold: float = Field(
-        0.4, gt=0, lt=WDT_STABILIZE_S,
+        0.4,
+        gt=0,
+        lt=WDT_STABILIZE_S,
         description="s a velocity set-point is streamed unrenewed before the high-level commander holds",
     )
     climb_speed: float = Field(0.5, gt=0, le=2.0, description="m/s of the take-off trajectory")
@@ -44,13 +50,19 @@ class Params(BaseModel):
     rtl_speed: float = Field(0.5, gt=0, le=2.0, description="m/s of the go_to back to the take-off point")
     rtl_tolerance: float = Field(0.15, gt=0, description="m from the take-off point at which RTL lands")
     max_position_variance: float = Field(
-        0.001, gt=0, description="m^2: arm() refuses while kalman.varPX/PY/PZ is above (estimator not converged)"
+        0.001,
+        gt=0,
+        description="m^2: arm() refuses while kalman.varPX/PY/PZ is above (estimator not converged)",
     )
     link_stale_after: float = Field(
-        0.5, gt=0, description="s without a packet after which streaming stops and the high-level commander holds"
+        0.5,
+        gt=0,
+        description="s without a packet after which streaming stops and the high-level commander holds",
     )
     link_loss_land: float = Field(
-        5.0, ge=0, description="s of lost link in the air after which the adapter sends landings blindly; 0 = never"
+        5.0,
+        ge=0,
+        description="s of lost link in the air after which the adapter sends landings blindly; 0 = never",
     )
     cells: int = Field(1, ge=1, le=4, description="battery cells in series (1 on a Crazyflie 2.x)")
     cache_dir: str = Field("", description="directory for cflib's TOC cache (faster connects); empty = none")
@@ -60,11 +72,20 @@ class Params(BaseModel):
     def _uri(cls, value: str) -> str:
         value = value.strip()
         if not value.startswith(_URI_SCHEMES):
-            raise ValueError(f"must be a cflib URI ({', '.join(s + '...' for s in _URI_SCHEMES)}), got {value!r}")
+            raise ValueError(
+                f"must be a cflib URI ({', '.join(s + '...' for s in _URI_SCHEMES)}), got {value!r}"
+            )
         return value
 
-    @field_validator("origin_heading", "connect_timeout", "arm_timeout", "takeoff_confirm", "link_stale_after",
-                     "link_loss_land", "max_position_variance")
+    @field_validator(
+        "origin_heading",
+        "connect_timeout",
+        "arm_timeout",
+        "takeoff_confirm",
+        "link_stale_after",
+        "link_loss_land",
+        "max_position_variance",
+    )
     @classmethod
     def _finite(cls, value: float) -> float:
         if not math.isfinite(value):
@@ -74,11 +95,15 @@ class Params(BaseModel):
     @model_validator(mode="after")
     def _rates(self) -> Params:
         if self.velocity_hold < 2.0 / self.control_hz:
-            raise ValueError(f"velocity_hold {self.velocity_hold:g} s is shorter than two set-point periods at "
-                             f"control_hz {self.control_hz:g}")
+            raise ValueError(
+                f"velocity_hold {self.velocity_hold:g} s is shorter than two set-point periods at "
+                f"control_hz {self.control_hz:g}"
+            )
         if self.link_stale_after < 3.0 * self.log_period_ms / 1000.0:
-            raise ValueError(f"link_stale_after {self.link_stale_after:g} s is shorter than three log periods "
-                             f"({self.log_period_ms} ms): a healthy link would look stale")
+            raise ValueError(
+                f"link_stale_after {self.link_stale_after:g} s is shorter than three log periods "
+                f"({self.log_period_ms} ms): a healthy link would look stale"
+            )
         return self
 
 

@@ -45,8 +45,9 @@ def is_zero(vx: float, vy: float, vz: float, yaw_rate: float) -> bool:
     return all(abs(v) < _ZERO for v in (vx, vy, vz, yaw_rate))
 
 
-def build_setpoint(vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame, local: LocalFrame,
-                   height: float) -> SetPoint:
+def build_setpoint(
+    vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame, local: LocalFrame, height: float
+) -> SetPoint:
     """The set-point for an HLC command (z down, yaw rate clockwise) in `frame`.
 
     `height` is the body-frame height target the adapter holds (already integrated for this tick).

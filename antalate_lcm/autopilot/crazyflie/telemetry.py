@@ -15,15 +15,29 @@ from typing import Any
 #: The log blocks: name -> variables, each within one log packet (26 bytes of values): the pose is 6
 #: floats (24 bytes), the status 2 floats + int8 + uint8 + uint16 (12), the estimator 3 floats (12).
 LOG_BLOCKS: dict[str, tuple[str, ...]] = {
-    "antalate_pose": ("stateEstimate.x", "stateEstimate.y", "stateEstimate.z",
-                      "stateEstimate.vx", "stateEstimate.vy", "stateEstimate.vz"),
+    "antalate_pose": (
+        "stateEstimate.x",
+        "stateEstimate.y",
+        "stateEstimate.z",
+        "stateEstimate.vx",
+        "stateEstimate.vy",
+        "stateEstimate.vz",
+    ),
     "antalate_status": ("stateEstimate.yaw", "pm.vbat", "pm.state", "pm.batteryLevel", "supervisor.info"),
     "antalate_estimator": ("kalman.varPX", "kalman.varPY", "kalman.varPZ"),
 }
 
 #: Bytes per log type (cflib LogTocElement.types), to keep every block within one packet.
-LOG_TYPE_SIZES = {"uint8_t": 1, "int8_t": 1, "uint16_t": 2, "int16_t": 2, "uint32_t": 4, "int32_t": 4,
-                  "float": 4, "FP16": 2}
+LOG_TYPE_SIZES = {
+    "uint8_t": 1,
+    "int8_t": 1,
+    "uint16_t": 2,
+    "int16_t": 2,
+    "uint32_t": 4,
+    "int32_t": 4,
+    "float": 4,
+    "FP16": 2,
+}
 LOG_MAX_BYTES = 26
 
 # supervisor.info bits
@@ -53,14 +67,25 @@ class SupervisorFlags:
         def bit(n: int) -> bool:
             return bool(info >> n & 1)
 
-        return cls(bit(CAN_BE_ARMED), bit(IS_ARMED), bit(CAN_FLY), bit(IS_FLYING), bit(IS_TUMBLED),
-                   bit(IS_LOCKED), bit(IS_CRASHED), bit(HL_ACTIVE), bit(HL_DISABLED))
+        return cls(
+            bit(CAN_BE_ARMED),
+            bit(IS_ARMED),
+            bit(CAN_FLY),
+            bit(IS_FLYING),
+            bit(IS_TUMBLED),
+            bit(IS_LOCKED),
+            bit(IS_CRASHED),
+            bit(HL_ACTIVE),
+            bit(HL_DISABLED),
+        )
 
     def arm_blocker(self) -> str:
         """Why the supervisor will not arm (or fly), empty when nothing in the bitfield stops it."""
         if self.locked:
-            return ("the supervisor is locked (after an emergency stop, a crash or a commander watchdog "
-                    "timeout): reboot the Crazyflie")
+            return (
+                "the supervisor is locked (after an emergency stop, a crash or a commander watchdog "
+                "timeout): reboot the Crazyflie"
+            )
         if self.crashed:
             return "the supervisor reports a crash: send a crash recovery or reboot the Crazyflie"
         if self.tumbled:
@@ -97,11 +122,20 @@ class Reading:
 
 
 _FIELDS = {
-    "stateEstimate.x": ("x", float), "stateEstimate.y": ("y", float), "stateEstimate.z": ("z", float),
-    "stateEstimate.vx": ("vx", float), "stateEstimate.vy": ("vy", float), "stateEstimate.vz": ("vz", float),
-    "stateEstimate.yaw": ("yaw", float), "pm.vbat": ("vbat", float), "pm.state": ("pm_state", int),
-    "pm.batteryLevel": ("battery_level", int), "supervisor.info": ("info", int),
-    "kalman.varPX": ("var_x", float), "kalman.varPY": ("var_y", float), "kalman.varPZ": ("var_z", float),
+    "stateEstimate.x": ("x", float),
+    "stateEstimate.y": ("y", float),
+    "stateEstimate.z": ("z", float),
+    "stateEstimate.vx": ("vx", float),
+    "stateEstimate.vy": ("vy", float),
+    "stateEstimate.vz": ("vz", float),
+    "stateEstimate.yaw": ("yaw", float),
+    "pm.vbat": ("vbat", float),
+    "pm.state": ("pm_state", int),
+    "pm.batteryLevel": ("battery_level", int),
+    "supervisor.info": ("info", int),
+    "kalman.varPX": ("var_x", float),
+    "kalman.varPY": ("var_y", float),
+    "kalman.varPZ": ("var_z", float),
 }
 
 
@@ -142,9 +176,11 @@ def estimator_problem(reading: Reading, max_variance: float) -> str:
     bad = {k: v for k, v in variances.items() if not (math.isfinite(v) and v <= max_variance)}
     if bad:
         shown = ", ".join(f"var{k.upper()} {v:.3g}" for k, v in bad.items())
-        return (f"the position estimator has not converged ({shown} > max_position_variance "
-                f"{max_variance:g} m^2): check the positioning system (Lighthouse base stations, Loco "
-                f"anchors, Flow deck, motion capture) and reset the estimator")
+        return (
+            f"the position estimator has not converged ({shown} > max_position_variance "
+            f"{max_variance:g} m^2): check the positioning system (Lighthouse base stations, Loco "
+            f"anchors, Flow deck, motion capture) and reset the estimator"
+        )
     return ""
 
 

@@ -19,4 +19,12 @@ from antalate_lcm.autopilot.mavlink.adapter import (
     mode_name,
 )
 
-__all__ = ["COPTER_MODES", "DEFAULTS", "FLIGHT_MODES", "VELOCITY_TYPE_MASK", "MavlinkAutopilot", "Params", "mode_name"]
+__all__ = [
+    "COPTER_MODES",
+    "DEFAULTS",
+    "FLIGHT_MODES",
+    "VELOCITY_TYPE_MASK",
+    "MavlinkAutopilot",
+    "Params",
+    "mode_name",
+]

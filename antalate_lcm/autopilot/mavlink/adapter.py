@@ -101,9 +101,12 @@ _MODE_NAMES: dict[int, str] = dict(mavutil.mode_mapping_acm)
 
 # Velocity + yaw rate: ignore position, acceleration and yaw (bits set = ignored).
 VELOCITY_TYPE_MASK = (
-    mav.POSITION_TARGET_TYPEMASK_X_IGNORE | mav.POSITION_TARGET_TYPEMASK_Y_IGNORE
-    | mav.POSITION_TARGET_TYPEMASK_Z_IGNORE | mav.POSITION_TARGET_TYPEMASK_AX_IGNORE
-    | mav.POSITION_TARGET_TYPEMASK_AY_IGNORE | mav.POSITION_TARGET_TYPEMASK_AZ_IGNORE
+    mav.POSITION_TARGET_TYPEMASK_X_IGNORE
+    | mav.POSITION_TARGET_TYPEMASK_Y_IGNORE
+    | mav.POSITION_TARGET_TYPEMASK_Z_IGNORE
+    | mav.POSITION_TARGET_TYPEMASK_AX_IGNORE
+    | mav.POSITION_TARGET_TYPEMASK_AY_IGNORE
+    | mav.POSITION_TARGET_TYPEMASK_AZ_IGNORE
     | mav.POSITION_TARGET_TYPEMASK_YAW_IGNORE
 )
 _FRAMES = {Frame.NED: mav.MAV_FRAME_LOCAL_NED, Frame.BODY: mav.MAV_FRAME_BODY_OFFSET_NED}
@@ -114,10 +117,16 @@ EKF_FORBIDDEN = mav.EKF_CONST_POS_MODE | mav.EKF_UNINITIALIZED
 
 _IN_AIR = frozenset({mav.MAV_LANDED_STATE_IN_AIR, mav.MAV_LANDED_STATE_TAKEOFF, mav.MAV_LANDED_STATE_LANDING})
 _FLYING_STATUS = frozenset({mav.MAV_STATE_ACTIVE, mav.MAV_STATE_CRITICAL, mav.MAV_STATE_EMERGENCY})
-_NOT_AUTOPILOT_TYPES = frozenset({
-    mav.MAV_TYPE_GCS, mav.MAV_TYPE_ONBOARD_CONTROLLER, mav.MAV_TYPE_GIMBAL, mav.MAV_TYPE_ADSB,
-    mav.MAV_TYPE_CAMERA, mav.MAV_TYPE_ANTENNA_TRACKER,
-})
+_NOT_AUTOPILOT_TYPES = frozenset(
+    {
+        mav.MAV_TYPE_GCS,
+        mav.MAV_TYPE_ONBOARD_CONTROLLER,
+        mav.MAV_TYPE_GIMBAL,
+        mav.MAV_TYPE_ADSB,
+        mav.MAV_TYPE_CAMERA,
+        mav.MAV_TYPE_ANTENNA_TRACKER,
+    }
+)
 
 #: SYS_STATUS sensors whose health bit dropping is a failsafe (ArduPilot clears GEOFENCE on a breach,
 #: BATTERY on a battery failsafe, AHRS when the EKF is unhealthy).
@@ -137,14 +146,24 @@ _WARNING_RANK = {"": 0, "low": 1, "failsafe": 1, "critical": 2, "emergency": 3, 
 
 #: Telemetry asked for with MAV_CMD_SET_MESSAGE_INTERVAL: (message, rate as a factor of stream_rate_hz).
 STREAMS: tuple[tuple[str, float], ...] = (
-    ("GLOBAL_POSITION_INT", 1.0), ("ATTITUDE", 1.0), ("VFR_HUD", 1.0), ("SYS_STATUS", 1.0),
-    ("EXTENDED_SYS_STATE", 1.0), ("EKF_STATUS_REPORT", 1.0), ("GPS_RAW_INT", 1.0), ("HOME_POSITION", 0.1),
-    ("BATTERY_STATUS", 0.4), ("FENCE_STATUS", 0.4),
+    ("GLOBAL_POSITION_INT", 1.0),
+    ("ATTITUDE", 1.0),
+    ("VFR_HUD", 1.0),
+    ("SYS_STATUS", 1.0),
+    ("EXTENDED_SYS_STATE", 1.0),
+    ("EKF_STATUS_REPORT", 1.0),
+    ("GPS_RAW_INT", 1.0),
+    ("HOME_POSITION", 0.1),
+    ("BATTERY_STATUS", 0.4),
+    ("FENCE_STATUS", 0.4),
 )
 #: The REQUEST_DATA_STREAM groups that carry the same messages (the fallback for old firmware).
 DATA_STREAMS = (
-    mav.MAV_DATA_STREAM_EXTENDED_STATUS, mav.MAV_DATA_STREAM_POSITION, mav.MAV_DATA_STREAM_EXTRA1,
-    mav.MAV_DATA_STREAM_EXTRA2, mav.MAV_DATA_STREAM_EXTRA3,
+    mav.MAV_DATA_STREAM_EXTENDED_STATUS,
+    mav.MAV_DATA_STREAM_POSITION,
+    mav.MAV_DATA_STREAM_EXTRA1,
+    mav.MAV_DATA_STREAM_EXTRA2,
+    mav.MAV_DATA_STREAM_EXTRA3,
 )
 
 _ZERO_RESEND = 1.0  # s a zero (hover) set-point is still resent, against a lost datagram
@@ -237,7 +256,9 @@ class _Vehicle:
     gps_fix: int | None = None
     home: tuple[float, float, float] | None = None  # lat, lon (deg), alt AMSL (m)
     acks: dict[int, tuple[int, int]] = field(default_factory=dict)  # command -> (result, at message #)
-    texts: deque[tuple[int, int, str]] = field(default_factory=lambda: deque(maxlen=50))  # (#, severity, text)
+    texts: deque[tuple[int, int, str]] = field(
+        default_factory=lambda: deque(maxlen=50)
+    )  # (#, severity, text)
 
     @property
     def armed(self) -> bool:
@@ -263,14 +284,22 @@ class _Vehicle:
         """Why the vehicle cannot be armed for GUIDED flight yet (empty: it can)."""
         reasons = []
         if self.system_status != mav.MAV_STATE_STANDBY and not self.armed:
-            booting = self.system_status in (mav.MAV_STATE_BOOT, mav.MAV_STATE_CALIBRATING, mav.MAV_STATE_UNINIT)
-            reasons.append(f"system_status {_status_name(self.system_status)}"
-                           + (" (still booting)" if booting else " (not STANDBY)"))
+            booting = self.system_status in (
+                mav.MAV_STATE_BOOT,
+                mav.MAV_STATE_CALIBRATING,
+                mav.MAV_STATE_UNINIT,
+            )
+            reasons.append(
+                f"system_status {_status_name(self.system_status)}"
+                + (" (still booting)" if booting else " (not STANDBY)")
+            )
         if not self.ekf_ok:
             flags = "no EKF_STATUS_REPORT" if self.ekf_flags is None else f"EKF flags 0x{self.ekf_flags:04x}"
             reasons.append(f"EKF has no absolute horizontal position ({flags})")
         if self.gps_fix is None or self.gps_fix < mav.GPS_FIX_TYPE_3D_FIX:
-            reasons.append("no GPS_RAW_INT" if self.gps_fix is None else f"GPS fix_type {self.gps_fix} (needs 3D)")
+            reasons.append(
+                "no GPS_RAW_INT" if self.gps_fix is None else f"GPS fix_type {self.gps_fix} (needs 3D)"
+            )
         return reasons
 
 
@@ -337,8 +366,14 @@ class MavlinkAutopilot(Autopilot):
             self._conn = self._open_until(deadline)
             self._start_threads()
             if not self._wait(lambda v: v.heartbeats > 0, deadline - self.clock()):
-                rejected = (f"; {self.signing_rejected} message(s) dropped for a missing or wrong MAVLink 2 "
-                            "signature: does the vehicle have the same signing key?") if self.signing_rejected else ""
+                rejected = (
+                    (
+                        f"; {self.signing_rejected} message(s) dropped for a missing or wrong MAVLink 2 "
+                        "signature: does the vehicle have the same signing key?"
+                    )
+                    if self.signing_rejected
+                    else ""
+                )
                 raise AutopilotError(
                     f"no HEARTBEAT from {self.connection} within {timeout:g} s: "
                     f"is SITL/the autopilot running, and is this the right port?{rejected}"
@@ -353,8 +388,13 @@ class MavlinkAutopilot(Autopilot):
             target = self._target
             summary = f"mode {v.mode}, {_status_name(v.system_status)}, {'armed' if v.armed else 'disarmed'}"
             self._connected = True
-        log.info("connected to autopilot %s over %s: %s%s", target, self.connection, summary,
-                 ", MAVLink 2 signed" if self._key else "")
+        log.info(
+            "connected to autopilot %s over %s: %s%s",
+            target,
+            self.connection,
+            summary,
+            ", MAVLink 2 signed" if self._key else "",
+        )
         if self._p.check_vehicle:
             try:
                 with self._cmd_lock:
@@ -392,8 +432,10 @@ class MavlinkAutopilot(Autopilot):
                 log.warning("arming refused (%s)%s", _result_name(result), f": {reason}" if reason else "")
                 return False
             if not self._wait(lambda v: v.armed, self._mode_timeout):  # disarmed before: a fresh HEARTBEAT
-                raise AutopilotError(f"arming acknowledged but no HEARTBEAT showed the motors armed "
-                                     f"within {self._mode_timeout:g} s")
+                raise AutopilotError(
+                    f"arming acknowledged but no HEARTBEAT showed the motors armed "
+                    f"within {self._mode_timeout:g} s"
+                )
             with self._cond:
                 mode = self._v.mode
             if mode != "GUIDED":
@@ -421,8 +463,9 @@ class MavlinkAutopilot(Autopilot):
             result = self._command(mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, float(alt))
             if result != mav.MAV_RESULT_ACCEPTED:
                 state = f"mode {mode}, {'armed' if armed else 'disarmed'}"
-                raise AutopilotError(f"takeoff to {alt:g} m refused ({_result_name(result)}; {state})"
-                                     f"{self._because(mark)}")
+                raise AutopilotError(
+                    f"takeoff to {alt:g} m refused ({_result_name(result)}; {state}){self._because(mark)}"
+                )
             log.info("taking off to %g m", alt)
 
     def land(self) -> None:
@@ -444,8 +487,15 @@ class MavlinkAutopilot(Autopilot):
             raise AutopilotError(f"velocity refused: non-finite value in {values}")
         self._require_link("set_velocity")
         now = self.clock()
-        sp = _Setpoint(_FRAMES[Frame(frame)], float(vx), float(vy), float(vz), float(yaw_rate), now,
-                       now + self._resend_period)
+        sp = _Setpoint(
+            _FRAMES[Frame(frame)],
+            float(vx),
+            float(vy),
+            float(vz),
+            float(yaw_rate),
+            now,
+            now + self._resend_period,
+        )
         with self._cond:
             v = self._v
             if not (v.armed and v.mode == "GUIDED"):
@@ -454,8 +504,12 @@ class MavlinkAutopilot(Autopilot):
             if self._stale(now):
                 self._setpoint = None  # it would wait in a socket buffer and fly when the link returns
                 self.setpoints_withheld += 1
-                self._rate_log.log(("stale",), logging.WARNING, "velocity set-point withheld: nothing heard "
-                                   "from the vehicle for %.1f s", now - (v.rx_at or now))
+                self._rate_log.log(
+                    ("stale",),
+                    logging.WARNING,
+                    "velocity set-point withheld: nothing heard from the vehicle for %.1f s",
+                    now - (v.rx_at or now),
+                )
                 return
             if sp.zero and v.landed_state == mav.MAV_LANDED_STATE_TAKEOFF:
                 self._setpoint = None  # let the takeoff finish; it ends in a hover anyway
@@ -491,7 +545,9 @@ class MavlinkAutopilot(Autopilot):
                 failsafe=failsafe,
                 voltage=v.voltage,
                 cells=self._p.cells or v.cells_seen,
-                battery_warning=max(v.charge_warning, v.battery_warning, key=lambda w: _WARNING_RANK.get(w, 1)),
+                battery_warning=max(
+                    v.charge_warning, v.battery_warning, key=lambda w: _WARNING_RANK.get(w, 1)
+                ),
             )
 
     # ----------------------------------------------------------------- extras (tools, tests)
@@ -531,15 +587,21 @@ class MavlinkAutopilot(Autopilot):
             mavutil.set_dialect("ardupilotmega")
         try:
             conn = mavutil.mavlink_connection(
-                self.connection, baud=p.baud, source_system=self.source_system,
-                source_component=p.source_component, autoreconnect=False, retries=0,
+                self.connection,
+                baud=p.baud,
+                source_system=self.source_system,
+                source_component=p.source_component,
+                autoreconnect=False,
+                retries=0,
             )
         except (OSError, ValueError) as exc:
             raise AutopilotError(f"cannot open {self.connection}: {exc}") from exc
         if self._key is not None:
             if conn.WIRE_PROTOCOL_VERSION != "2.0":
                 conn.close()
-                raise AutopilotError("MAVLink 2 signing needs MAVLink 2, but pymavlink opened a MAVLink 1 codec")
+                raise AutopilotError(
+                    "MAVLink 2 signing needs MAVLink 2, but pymavlink opened a MAVLink 1 codec"
+                )
             conn.setup_signing(self._key, sign_outgoing=True, allow_unsigned_callback=allow_unsigned)
             verify_signature_first(conn.mav)
         if self.connection.startswith(("tcp:", "uds:", "unix:")):
@@ -560,8 +622,9 @@ class MavlinkAutopilot(Autopilot):
                 if isinstance(exc.__cause__, ValueError):
                     raise  # a malformed connection string: retrying cannot help
                 if self.clock() >= deadline or self._stop.wait(0.5):
-                    raise AutopilotError(f"{exc} (is SITL/the autopilot running, and is this the right port?)") \
-                        from exc.__cause__
+                    raise AutopilotError(
+                        f"{exc} (is SITL/the autopilot running, and is this the right port?)"
+                    ) from exc.__cause__
 
     def _start_threads(self) -> None:
         self._threads = [
@@ -597,7 +660,9 @@ class MavlinkAutopilot(Autopilot):
             if conn is None:
                 raise AutopilotError("not connected")
             try:
-                fn(conn.mav)  # conn.mav is replaced when pymavlink switches to MAVLink 2: look it up each time
+                fn(
+                    conn.mav
+                )  # conn.mav is replaced when pymavlink switches to MAVLink 2: look it up each time
             except OSError as exc:
                 raise AutopilotError(f"cannot send on {self.connection}: {exc}") from exc
 
@@ -620,13 +685,24 @@ class MavlinkAutopilot(Autopilot):
                 try:
                     self._on_message(msg)
                 except Exception as exc:  # noqa: BLE001 - one odd message must not end reception
-                    self._rate_log.log(("decode", msg.get_type()), logging.WARNING,
-                                       "cannot use %s from the autopilot: %r", msg.get_type(), exc)
+                    self._rate_log.log(
+                        ("decode", msg.get_type()),
+                        logging.WARNING,
+                        "cannot use %s from the autopilot: %r",
+                        msg.get_type(),
+                        exc,
+                    )
 
     def _link_dropped(self, exc: BaseException) -> None:
         """A stream link (TCP, serial) failed: reopen it until it comes back or we are closed."""
-        self._rate_log.log(("dropped",), logging.WARNING, "link %s failed (%s): reopening every %g s",
-                           self.connection, exc, _REOPEN_DELAY)
+        self._rate_log.log(
+            ("dropped",),
+            logging.WARNING,
+            "link %s failed (%s): reopening every %g s",
+            self.connection,
+            exc,
+            _REOPEN_DELAY,
+        )
         while not self._stop.wait(_REOPEN_DELAY):
             try:
                 new = self._open()
@@ -660,8 +736,12 @@ class MavlinkAutopilot(Autopilot):
         if mtype == "BAD_DATA":
             if "signature" in str(getattr(msg, "reason", "")):
                 self.signing_rejected += 1
-                self._rate_log.log(("signature",), logging.WARNING, "message with a missing or wrong MAVLink 2 "
-                                   "signature dropped (%d so far)", self.signing_rejected)
+                self._rate_log.log(
+                    ("signature",),
+                    logging.WARNING,
+                    "message with a missing or wrong MAVLink 2 signature dropped (%d so far)",
+                    self.signing_rejected,
+                )
             return
         source = (msg.get_srcSystem(), msg.get_srcComponent())
         stop: _Setpoint | None = None
@@ -687,7 +767,9 @@ class MavlinkAutopilot(Autopilot):
                 handler(self, v, msg)
             self._cond.notify_all()
         if stop is not None:
-            log.warning("link back after a stale spell: stopping the vehicle (zero velocity) until the HLC commands")
+            log.warning(
+                "link back after a stale spell: stopping the vehicle (zero velocity) until the HLC commands"
+            )
             try:
                 self._send_setpoint(stop)
             except AutopilotError as exc:
@@ -703,8 +785,11 @@ class MavlinkAutopilot(Autopilot):
             return
         self._warned_autopilot = True
         if msg.autopilot != mav.MAV_AUTOPILOT_ARDUPILOTMEGA:
-            log.warning("autopilot %s is not ArduPilot (MAV_AUTOPILOT %d): this adapter speaks ArduCopter's modes",
-                        self._target, msg.autopilot)
+            log.warning(
+                "autopilot %s is not ArduPilot (MAV_AUTOPILOT %d): this adapter speaks ArduCopter's modes",
+                self._target,
+                msg.autopilot,
+            )
 
     def _on_heartbeat(self, v: _Vehicle, msg: Any) -> None:
         previous = v.custom_mode
@@ -719,8 +804,11 @@ class MavlinkAutopilot(Autopilot):
         v.base_mode = msg.base_mode
         v.custom_mode = msg.custom_mode
         v.system_status = msg.system_status
-        commanded = self._commanded is not None and self._commanded[0] == v.mode \
+        commanded = (
+            self._commanded is not None
+            and self._commanded[0] == v.mode
             and now - self._commanded[1] <= 2 * self._ack_timeout + self._mode_timeout + 1.0
+        )
         v.failsafes.on_mode(v.mode, now, commanded=commanded)
         if previous != msg.custom_mode and v.failsafes.reason:
             log.warning("autopilot failsafe (%s): mode %s", v.failsafes.reason, v.mode)
@@ -785,12 +873,16 @@ class MavlinkAutopilot(Autopilot):
     def _on_fence_status(self, v: _Vehicle, msg: Any) -> None:
         breached = bool(msg.breach_status)
         if breached and not v.fence_breached:
-            log.warning("autopilot reports a fence breach (type %d, %d so far)", msg.breach_type, msg.breach_count)
+            log.warning(
+                "autopilot reports a fence breach (type %d, %d so far)", msg.breach_type, msg.breach_count
+            )
         v.fence_breached = breached
         v.failsafes.set_active(fs.FENCE, breached, self.clock())
 
     def _on_param_value(self, v: _Vehicle, msg: Any) -> None:
-        name = msg.param_id if isinstance(msg.param_id, str) else bytes(msg.param_id).decode("ascii", "replace")
+        name = (
+            msg.param_id if isinstance(msg.param_id, str) else bytes(msg.param_id).decode("ascii", "replace")
+        )
         name = name.rstrip("\x00")
         v.params[name] = float(msg.param_value)
         v.param_types[name] = int(msg.param_type)
@@ -834,8 +926,11 @@ class MavlinkAutopilot(Autopilot):
             if now >= next_heartbeat:
                 next_heartbeat = max(next_heartbeat + self._heartbeat_period, now)
                 try:
-                    self._send(lambda m: m.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0,
-                                                          mav.MAV_STATE_ACTIVE))
+                    self._send(
+                        lambda m: m.heartbeat_send(
+                            mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE
+                        )
+                    )
                 except AutopilotError as exc:
                     self._rate_log.log(("heartbeat",), logging.WARNING, "HEARTBEAT not sent: %s", exc)
             due = self._due_setpoint(now)
@@ -871,10 +966,26 @@ class MavlinkAutopilot(Autopilot):
     def _send_setpoint(self, sp: _Setpoint) -> None:
         ts, tc = self._target or (1, 1)
         boot_ms = int(self.clock() * 1000) & 0xFFFFFFFF
-        self._send(lambda m: m.set_position_target_local_ned_send(
-            boot_ms, ts, tc, sp.frame, VELOCITY_TYPE_MASK, 0, 0, 0, sp.vx, sp.vy, sp.vz, 0, 0, 0, 0,
-            math.radians(sp.yaw_rate),
-        ))
+        self._send(
+            lambda m: m.set_position_target_local_ned_send(
+                boot_ms,
+                ts,
+                tc,
+                sp.frame,
+                VELOCITY_TYPE_MASK,
+                0,
+                0,
+                0,
+                sp.vx,
+                sp.vy,
+                sp.vz,
+                0,
+                0,
+                0,
+                0,
+                math.radians(sp.yaw_rate),
+            )
+        )
 
     def _clear_setpoint(self) -> None:
         with self._cond:
@@ -912,15 +1023,21 @@ class MavlinkAutopilot(Autopilot):
             if self._wait(acked, self._ack_timeout):
                 with self._cond:
                     return self._v.acks[command][0]
-            log.debug("%s: no COMMAND_ACK after %g s (attempt %d)", _cmd_name(command), self._ack_timeout,
-                      confirmation + 1)
+            log.debug(
+                "%s: no COMMAND_ACK after %g s (attempt %d)",
+                _cmd_name(command),
+                self._ack_timeout,
+                confirmation + 1,
+            )
         return None
 
     def _command(self, command: int, *params: float) -> int:
         result = self._command_result(command, *params)
         if result is None:
-            raise AutopilotError(f"{_cmd_name(command)}: no COMMAND_ACK from {self.connection} "
-                                 f"(2 attempts, {self._ack_timeout:g} s each)")
+            raise AutopilotError(
+                f"{_cmd_name(command)}: no COMMAND_ACK from {self.connection} "
+                f"(2 attempts, {self._ack_timeout:g} s each)"
+            )
         return result
 
     def _set_mode(self, name: str) -> None:
@@ -933,19 +1050,25 @@ class MavlinkAutopilot(Autopilot):
         if result == mav.MAV_RESULT_UNSUPPORTED:
             result = self._set_mode_message(number)  # the SET_MODE message: older firmware
         if result is None:
-            raise AutopilotError(f"mode {name}: no COMMAND_ACK from {self.connection} "
-                                 f"(2 attempts, {self._ack_timeout:g} s each)")
+            raise AutopilotError(
+                f"mode {name}: no COMMAND_ACK from {self.connection} "
+                f"(2 attempts, {self._ack_timeout:g} s each)"
+            )
         if result != mav.MAV_RESULT_ACCEPTED:
             raise AutopilotError(f"mode {name} refused ({_result_name(result)}){self._because(mark)}")
         with self._cond:
             acks = self._v.acks
-            ack_at = max(at for cmd, (_, at) in acks.items()
-                         if cmd in (mav.MAV_CMD_DO_SET_MODE, mav.MAVLINK_MSG_ID_SET_MODE) and at > mark)
+            ack_at = max(
+                at
+                for cmd, (_, at) in acks.items()
+                if cmd in (mav.MAV_CMD_DO_SET_MODE, mav.MAVLINK_MSG_ID_SET_MODE) and at > mark
+            )
         if not self._wait(lambda v: v.heartbeat_msg > ack_at and v.custom_mode == number, self._mode_timeout):
             with self._cond:
                 shown = self._v.mode
-            raise AutopilotError(f"mode {name} acknowledged but HEARTBEAT still shows {shown} after "
-                                 f"{self._mode_timeout:g} s")
+            raise AutopilotError(
+                f"mode {name} acknowledged but HEARTBEAT still shows {shown} after {self._mode_timeout:g} s"
+            )
         log.info("mode %s confirmed", name)
 
     def _set_mode_message(self, number: int) -> int | None:
@@ -992,11 +1115,15 @@ class MavlinkAutopilot(Autopilot):
         rate = self._p.stream_rate_hz
         for i, (name, factor) in enumerate(STREAMS):
             msg_id = getattr(mav, f"MAVLINK_MSG_ID_{name}")
-            result = self._command_result(mav.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / (rate * factor),
-                                          attempts=1)
+            result = self._command_result(
+                mav.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / (rate * factor), attempts=1
+            )
             if i == 0 and result in (None, mav.MAV_RESULT_UNSUPPORTED, mav.MAV_RESULT_DENIED):
-                log.info("SET_MESSAGE_INTERVAL %s (%s): falling back to REQUEST_DATA_STREAM",
-                         _result_name(result).lower(), name)
+                log.info(
+                    "SET_MESSAGE_INTERVAL %s (%s): falling back to REQUEST_DATA_STREAM",
+                    _result_name(result).lower(),
+                    name,
+                )
                 self._request_data_streams(max(1, round(rate)))
                 return
             if result != mav.MAV_RESULT_ACCEPTED:
@@ -1009,8 +1136,9 @@ class MavlinkAutopilot(Autopilot):
 
     # ----------------------------------------------------------------- vehicle parameters
 
-    def read_params(self, names: tuple[str, ...] | list[str],
-                    groups: tuple[tuple[str, ...], ...] | None = None) -> dict[str, float]:
+    def read_params(
+        self, names: tuple[str, ...] | list[str], groups: tuple[tuple[str, ...], ...] | None = None
+    ) -> dict[str, float]:
         """The named parameters the vehicle reports (PARAM_REQUEST_READ, two rounds); absent ones are left out.
 
         All requests go out at once and the answers are collected together, so a slow radio costs two
@@ -1028,7 +1156,9 @@ class MavlinkAutopilot(Autopilot):
         for _ in range(2):
             ts, tc = self._target or (1, 1)
             for name in wanted:
-                self._send(lambda m, n=name, ts=ts, tc=tc: m.param_request_read_send(ts, tc, n.encode("ascii"), -1))
+                self._send(
+                    lambda m, n=name, ts=ts, tc=tc: m.param_request_read_send(ts, tc, n.encode("ascii"), -1)
+                )
             self._wait(complete, self._ack_timeout)
             with self._cond:
                 if complete(self._v):
@@ -1045,24 +1175,31 @@ class MavlinkAutopilot(Autopilot):
             with self._cond:
                 mark = self._v.messages
                 ts, tc = self._target or (1, 1)
-            self._send(lambda m, ts=ts, tc=tc: m.param_set_send(ts, tc, name.encode("ascii"), float(value), ptype))
+            self._send(
+                lambda m, ts=ts, tc=tc: m.param_set_send(ts, tc, name.encode("ascii"), float(value), ptype)
+            )
 
             def confirmed(v: _Vehicle, mark: int = mark) -> bool:
-                return v.param_at.get(name, -1) > mark and abs(v.params[name] - value) <= 1e-3 * max(1.0, abs(value))
+                return v.param_at.get(name, -1) > mark and abs(v.params[name] - value) <= 1e-3 * max(
+                    1.0, abs(value)
+                )
 
             if self._wait(confirmed, self._ack_timeout):
                 log.warning("vehicle parameter %s set to %g (configure_vehicle)", name, value)
                 return
         with self._cond:
             shown = self._v.params.get(name)
-        raise AutopilotError(f"PARAM_SET {name} = {value:g} not confirmed by the vehicle (it reports {shown})")
+        raise AutopilotError(
+            f"PARAM_SET {name} = {value:g} not confirmed by the vehicle (it reports {shown})"
+        )
 
     def _check_vehicle(self) -> list[Finding]:
         """The pre-flight check of the vehicle's own failsafes (module docstring); the findings left."""
         p = self._p
         values = self.read_params(vehicle_checks.READ, vehicle_checks.REQUIRED_GROUPS)
-        findings = vehicle_checks.check(values, source_system=self.source_system,
-                                        max_guid_timeout=p.max_guid_timeout, cells=p.cells)
+        findings = vehicle_checks.check(
+            values, source_system=self.source_system, max_guid_timeout=p.max_guid_timeout, cells=p.cells
+        )
         if p.configure_vehicle and any(f.settable for f in findings):
             for f in findings:
                 if f.settable and f.want is not None:
@@ -1071,13 +1208,16 @@ class MavlinkAutopilot(Autopilot):
                     except AutopilotError as exc:
                         log.warning("%s", exc)
             values = self.read_params(vehicle_checks.READ, vehicle_checks.REQUIRED_GROUPS)
-            findings = vehicle_checks.check(values, source_system=self.source_system,
-                                            max_guid_timeout=p.max_guid_timeout, cells=p.cells)
+            findings = vehicle_checks.check(
+                values, source_system=self.source_system, max_guid_timeout=p.max_guid_timeout, cells=p.cells
+            )
         for f in findings:
             log.warning("vehicle pre-flight check: %s", f.text())
         if not findings:
-            log.info("vehicle pre-flight check: failsafe parameters OK (%s)",
-                     ", ".join(f"{k}={v:g}" for k, v in sorted(values.items())))
+            log.info(
+                "vehicle pre-flight check: failsafe parameters OK (%s)",
+                ", ".join(f"{k}={v:g}" for k, v in sorted(values.items())),
+            )
         self.vehicle_findings = findings
         self._vehicle_ok = not findings
         return findings

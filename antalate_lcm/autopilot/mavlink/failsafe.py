@@ -60,7 +60,7 @@ def text_failsafe(text: str) -> str:
 
 
 def text_battery_level(text: str) -> str:
-    """"low" / "critical" from ArduPilot's battery failsafe STATUSTEXT, "" otherwise."""
+    """ "low" / "critical" from ArduPilot's battery failsafe STATUSTEXT, "" otherwise."""
     match = _BATTERY_LEVEL.search(text)
     return match.group(1).lower() if match else ""
 

@@ -19,20 +19,30 @@ GCS_SYSID_NAMES = ("SYSID_MYGCS", "MAV_GCS_SYSID")
 
 #: Parameters read on connect. GUID_TIMEOUT and FS_GCS_TIMEOUT exist from Copter 4.1 (3 s and 5 s fixed before).
 READ = (
-    "FS_GCS_ENABLE", "FS_GCS_TIMEOUT", *GCS_SYSID_NAMES, "GUID_TIMEOUT", "FENCE_ENABLE", "FENCE_ACTION",
-    "BATT_MONITOR", "BATT_FS_LOW_ACT", "BATT_LOW_VOLT",
+    "FS_GCS_ENABLE",
+    "FS_GCS_TIMEOUT",
+    *GCS_SYSID_NAMES,
+    "GUID_TIMEOUT",
+    "FENCE_ENABLE",
+    "FENCE_ACTION",
+    "BATT_MONITOR",
+    "BATT_FS_LOW_ACT",
+    "BATT_LOW_VOLT",
 )
 _OPTIONAL = frozenset({"FS_GCS_TIMEOUT", "GUID_TIMEOUT", *GCS_SYSID_NAMES})
 #: A read is complete when one name of each group arrived (the optional ones come in the same burst).
 REQUIRED_GROUPS: tuple[tuple[str, ...], ...] = (
-    *((n,) for n in READ if n not in _OPTIONAL), GCS_SYSID_NAMES,
+    *((n,) for n in READ if n not in _OPTIONAL),
+    GCS_SYSID_NAMES,
 )
 
 #: Volts per cell for BATT_LOW_VOLT when the adapter sets it: below the HLC's `low_cell_voltage` (3.5 V),
 #: so antalate's own RTL comes first and ArduPilot's failsafe is the backstop.
 LOW_VOLT_PER_CELL = 3.4
 
-FS_GCS_RTL = 1  # FS_GCS_ENABLE: 0 disabled, 1 RTL, 3 SmartRTL or RTL, 4 SmartRTL or Land, 5 Land, 6, 7 Brake or Land
+FS_GCS_RTL = (
+    1  # FS_GCS_ENABLE: 0 disabled, 1 RTL, 3 SmartRTL or RTL, 4 SmartRTL or Land, 5 Land, 6, 7 Brake or Land
+)
 FENCE_RTL_OR_LAND = 1  # FENCE_ACTION: 0 report only, 1 RTL or Land, 2 Land, 3 SmartRTL.., 4 Brake or Land, 5
 BATT_FS_RTL = 2  # BATT_FS_LOW_ACT: 0 none, 1 Land, 2 RTL, 3 SmartRTL or RTL, 4 SmartRTL or Land, 5 Terminate
 
@@ -61,7 +71,9 @@ def gcs_sysid_name(values: Mapping[str, float]) -> str:
     return next((n for n in GCS_SYSID_NAMES if n in values), GCS_SYSID_NAMES[0])
 
 
-def check(values: Mapping[str, float], *, source_system: int, max_guid_timeout: float, cells: int) -> list[Finding]:
+def check(
+    values: Mapping[str, float], *, source_system: int, max_guid_timeout: float, cells: int
+) -> list[Finding]:
     """Every finding for the parameter `values` read from the vehicle (empty: its failsafes protect it)."""
     findings: list[Finding] = []
     missing = [n for n in READ if n not in values and n not in _OPTIONAL]
@@ -73,19 +85,34 @@ def check(values: Mapping[str, float], *, source_system: int, max_guid_timeout: 
 
     fs_gcs = get("FS_GCS_ENABLE")
     if fs_gcs is not None and round(fs_gcs) == 0:
-        findings.append(Finding("FS_GCS_ENABLE", fs_gcs, FS_GCS_RTL,
-                                "GCS failsafe off: if antalate dies in flight the copter hovers until its battery fails"))
+        findings.append(
+            Finding(
+                "FS_GCS_ENABLE",
+                fs_gcs,
+                FS_GCS_RTL,
+                "GCS failsafe off: if antalate dies in flight the copter hovers until its battery fails",
+            )
+        )
     sysid_name = gcs_sysid_name(values)
     sysid = get(sysid_name)
     if sysid is None:
         findings.append(Finding(sysid_name, None, None, "not read from the vehicle"))
     elif round(sysid) != source_system:
-        findings.append(Finding(sysid_name, sysid, source_system,
-                                f"the GCS failsafe watches system {sysid:g}, antalate sends as {source_system}"))
+        findings.append(
+            Finding(
+                sysid_name,
+                sysid,
+                source_system,
+                f"the GCS failsafe watches system {sysid:g}, antalate sends as {source_system}",
+            )
+        )
     guid = get("GUID_TIMEOUT")
     if guid is not None and guid > max_guid_timeout + 1e-6:
-        findings.append(Finding("GUID_TIMEOUT", guid, max_guid_timeout,
-                                f"a dead HLC's last velocity is flown for {guid:g} s"))
+        findings.append(
+            Finding(
+                "GUID_TIMEOUT", guid, max_guid_timeout, f"a dead HLC's last velocity is flown for {guid:g} s"
+            )
+        )
     fence = get("FENCE_ENABLE")
     if fence is not None and round(fence) == 0:
         findings.append(Finding("FENCE_ENABLE", fence, 1, "no geofence"))
@@ -101,6 +128,13 @@ def check(values: Mapping[str, float], *, source_system: int, max_guid_timeout: 
     low_volt = get("BATT_LOW_VOLT")
     if low_volt is not None and low_volt <= 0.0:
         want = round(LOW_VOLT_PER_CELL * cells, 2) if cells > 0 else None
-        findings.append(Finding("BATT_LOW_VOLT", low_volt, want, "no low-voltage failsafe"
-                                + ("" if cells > 0 else " (set the adapter's `cells` to let it choose)")))
+        findings.append(
+            Finding(
+                "BATT_LOW_VOLT",
+                low_volt,
+                want,
+                "no low-voltage failsafe"
+                + ("" if cells > 0 else " (set the adapter's `cells` to let it choose)"),
+            )
+        )
     return findings

@@ -75,8 +75,9 @@ log = logging.getLogger("antalate.autopilot.tello")
 
 #: djitellopy (with av and numpy, 160 MB) is an extra, so a MAVLink or Crazyflie vehicle computer
 #: does not carry it; only connect imports it, so a config validates without it.
-DJITELLOPY_MISSING = ("the tello autopilot needs djitellopy, which is not installed: "
-                      "pip install 'antalate[tello]'")
+DJITELLOPY_MISSING = (
+    "the tello autopilot needs djitellopy, which is not installed: pip install 'antalate[tello]'"
+)
 
 _APPROACH_GAIN = 1.0  # 1/s: RTL speed per metre of remaining distance (below rtl_speed)
 _MIN_APPROACH_SPEED = 0.2  # m/s
@@ -186,7 +187,8 @@ class TelloAutopilot(Autopilot):
             if not self._owns_host and self.host in _HOSTS_IN_USE:
                 raise AutopilotError(
                     f"another tello autopilot in this process already flies {self.host}: "
-                    "djitellopy keeps one reply queue per IP, so each agent needs its own Tello")
+                    "djitellopy keeps one reply queue per IP, so each agent needs its own Tello"
+                )
             _HOSTS_IN_USE.add(self.host)
             self._owns_host = True
         try:
@@ -198,8 +200,12 @@ class TelloAutopilot(Autopilot):
         self._thread = threading.Thread(target=self._control_loop, name=f"tello-{self.host}", daemon=True)
         self._connected = True
         self._thread.start()
-        log.info("Tello %s connected: battery %s%%, %s", self.host, self._battery,
-                 "flying" if self._phase is not _Phase.GROUND else "on the ground")
+        log.info(
+            "Tello %s connected: battery %s%%, %s",
+            self.host,
+            self._battery,
+            "flying" if self._phase is not _Phase.GROUND else "on the ground",
+        )
 
     def close(self) -> None:
         self._stop.set()
@@ -226,7 +232,9 @@ class TelloAutopilot(Autopilot):
         try:
             battery = float(answer)
         except ValueError:
-            raise AutopilotError(f"arm: the Tello at {self.host} did not answer 'battery?' ({answer!r})") from None
+            raise AutopilotError(
+                f"arm: the Tello at {self.host} did not answer 'battery?' ({answer!r})"
+            ) from None
         if battery <= self._p.min_battery:
             log.warning("arm refused: battery %.0f%% <= min_battery %g%%", battery, self._p.min_battery)
             return False
@@ -236,8 +244,10 @@ class TelloAutopilot(Autopilot):
         self._require_connected("disarm")
         with self._lock:
             if self._in_air():
-                raise AutopilotError("disarm refused: the Tello is flying (its only disarm, 'emergency', "
-                                     "cuts the motors in the air)")
+                raise AutopilotError(
+                    "disarm refused: the Tello is flying (its only disarm, 'emergency', "
+                    "cuts the motors in the air)"
+                )
 
     def takeoff(self, alt: float) -> None:
         self._require_link("takeoff")
@@ -245,8 +255,9 @@ class TelloAutopilot(Autopilot):
             raise AutopilotError(f"takeoff refused: altitude {alt!r} must be > 0")
         with self._lock:
             if self._phase is not _Phase.GROUND or self._in_air():
-                raise AutopilotError(f"takeoff refused: already {self._phase.value.lower()} "
-                                     f"at {self._height:.1f} m")
+                raise AutopilotError(
+                    f"takeoff refused: already {self._phase.value.lower()} at {self._height:.1f} m"
+                )
             self._commanded()
             self._phase = _Phase.TAKEOFF
             self._takeoff_point = (self._north, self._east)
@@ -255,8 +266,9 @@ class TelloAutopilot(Autopilot):
             self._failsafe = ""
             sent = self.clock()
         try:
-            answer = self._exchange("takeoff", self._p.takeoff_timeout, settled=lambda: self._move_settled(sent),
-                                    done_in_air=True)
+            answer = self._exchange(
+                "takeoff", self._p.takeoff_timeout, settled=lambda: self._move_settled(sent), done_in_air=True
+            )
         except _Preempted:
             raise AutopilotError("takeoff interrupted (land, rtl or emergency)") from None
         except AutopilotError:
@@ -272,8 +284,11 @@ class TelloAutopilot(Autopilot):
         with self._lock:
             self._air.reset(True)  # it said so (or the packets did): no half second of doubt
         if not answer:
-            log.warning("Tello %s: no answer to 'takeoff', but the state shows it up at %.1f m: going on",
-                        self.host, self._height)
+            log.warning(
+                "Tello %s: no answer to 'takeoff', but the state shows it up at %.1f m: going on",
+                self.host,
+                self._height,
+            )
         if self._p.takeoff_altitude_mode == "up":
             try:
                 self._climb_with_up(alt)
@@ -411,7 +426,8 @@ class TelloAutopilot(Autopilot):
             raise AutopilotError(
                 f"cannot bind UDP {tello_cls.CONTROL_UDP_PORT} for djitellopy ({exc}): another process on "
                 "this machine talks to a Tello; run every Tello agent in one process "
-                "(antalate agent tello-a.toml tello-b.toml)") from exc
+                "(antalate agent tello-a.toml tello-b.toml)"
+            ) from exc
         self._tello = tello
         answer = ""
         for _ in range(p.retry_count):
@@ -426,7 +442,8 @@ class TelloAutopilot(Autopilot):
             raise AutopilotError(
                 f"no answer from the Tello at {self.host}:{tello_cls.CONTROL_UDP_PORT} to 'command' "
                 f"({p.retry_count} x {p.command_timeout:g} s): is it on, and is this machine on its "
-                f"Wi-Fi (or it on yours, in station mode)? ({answer})")
+                f"Wi-Fi (or it on yours, in station mode)? ({answer})"
+            )
         deadline = self.clock() + p.state_timeout
         while True:
             with self._lock:
@@ -440,7 +457,8 @@ class TelloAutopilot(Autopilot):
                 raise AutopilotError(
                     f"the Tello at {self.host} entered SDK mode but sent no state packet to UDP "
                     f"{tello_cls.STATE_UDP_PORT} within {p.state_timeout:g} s (a firewall, or another "
-                    "program bound to that port?)")
+                    "program bound to that port?)"
+                )
             time.sleep(_POLL)
 
     def _release(self) -> None:
@@ -470,7 +488,9 @@ class TelloAutopilot(Autopilot):
             self._ingest()
             age = self._link_age()
         if age > self._p.link_loss_timeout:
-            raise AutopilotError(f"{what}: no state from the Tello at {self.host} for {age:.1f} s (link lost)")
+            raise AutopilotError(
+                f"{what}: no state from the Tello at {self.host} for {age:.1f} s (link lost)"
+            )
 
     def _commanded(self) -> None:
         """The HLC commanded the Tello (lock held): someone is flying it after a link loss."""
@@ -495,8 +515,15 @@ class TelloAutopilot(Autopilot):
         finally:
             self._last_sent = self.clock()
 
-    def _exchange(self, text: str, timeout: float, *, settled: Callable[[], bool] | None = None,
-                  done_in_air: bool = False, preemptible: bool = True) -> str:
+    def _exchange(
+        self,
+        text: str,
+        timeout: float,
+        *,
+        settled: Callable[[], bool] | None = None,
+        done_in_air: bool = False,
+        preemptible: bool = True,
+    ) -> str:
         """Send an answered command once and wait for its answer; ``""`` when `settled` said done first.
 
         `settled` (called with the state lock held, after each state packet is taken in) lets the state
@@ -531,8 +558,9 @@ class TelloAutopilot(Autopilot):
                         if self.clock() >= deadline:
                             if done_in_air and self._air.value:
                                 return ""
-                            raise AutopilotError(f"the Tello at {self.host} did not answer {text!r} "
-                                                 f"within {timeout:g} s")
+                            raise AutopilotError(
+                                f"the Tello at {self.host} did not answer {text!r} within {timeout:g} s"
+                            )
                     if self._stop.is_set():
                         raise AutopilotError(f"{text!r}: the adapter is closing")
                     time.sleep(_POLL)
@@ -543,8 +571,12 @@ class TelloAutopilot(Autopilot):
     def _move_settled(self, sent: float) -> bool:
         """A take-off or up/down whose answer was lost is over (lock held): flying, height steady."""
         now = self.clock()
-        return (self._air.value and now - sent >= _SETTLED and now - self._height_changed >= _SETTLED
-                and abs(self._vd) < 0.05)
+        return (
+            self._air.value
+            and now - sent >= _SETTLED
+            and now - self._height_changed >= _SETTLED
+            and abs(self._vd) < 0.05
+        )
 
     def _landed(self) -> bool:
         """The state packets have shown the Tello on the ground for `_GROUND_CONFIRM` (lock held)."""
@@ -573,7 +605,9 @@ class TelloAutopilot(Autopilot):
                     self._phase = _Phase.GROUND
                     return
             try:
-                answer = self._exchange("land", self._p.takeoff_timeout, settled=self._landed, preemptible=False)
+                answer = self._exchange(
+                    "land", self._p.takeoff_timeout, settled=self._landed, preemptible=False
+                )
             except AutopilotError:
                 answer = "no answer"
         with self._lock:
@@ -590,8 +624,9 @@ class TelloAutopilot(Autopilot):
                     self._phase = _Phase.GROUND
                 return
             self._land_due = self.clock() + _LAND_RETRY
-        raise AutopilotError(f"the Tello at {self.host} did not land ({answer!r}); retrying every "
-                             f"{_LAND_RETRY:g} s")
+        raise AutopilotError(
+            f"the Tello at {self.host} did not land ({answer!r}); retrying every {_LAND_RETRY:g} s"
+        )
 
     def _land_in_background(self) -> None:
         """Land from a thread of its own, so the control thread keeps its rc schedule."""
@@ -625,11 +660,15 @@ class TelloAutopilot(Autopilot):
                     return
                 reason = ""
                 if dist > dist0 + _RTL_EARLY_DIVERGENCE:
-                    reason = (f"getting farther ({dist:.1f} m, started at {dist0:.1f} m): check vgx_sign, "
-                              "vgy_sign, velocity_frame and home_heading; landing here")
+                    reason = (
+                        f"getting farther ({dist:.1f} m, started at {dist0:.1f} m): check vgx_sign, "
+                        "vgy_sign, velocity_frame and home_heading; landing here"
+                    )
                 elif self.clock() >= deadline:
-                    reason = (f"not getting closer ({dist:.1f} m, started at {dist0:.1f} m) after "
-                              f"{deadline - self._rtl_start:.0f} s; landing here")
+                    reason = (
+                        f"not getting closer ({dist:.1f} m, started at {dist0:.1f} m) after "
+                        f"{deadline - self._rtl_start:.0f} s; landing here"
+                    )
                 if reason:
                     self._rtl_abort(reason)
                     break
@@ -653,9 +692,12 @@ class TelloAutopilot(Autopilot):
                     return
             cm = max(_UP_MIN_CM, round(abs(delta) * 100))
             sent = self.clock()
-            answer = self._exchange(f"{'up' if delta > 0 else 'down'} {min(cm, _UP_MAX_CM)}",
-                                    self._p.takeoff_timeout, settled=lambda s=sent: self._move_settled(s),
-                                    done_in_air=True)
+            answer = self._exchange(
+                f"{'up' if delta > 0 else 'down'} {min(cm, _UP_MAX_CM)}",
+                self._p.takeoff_timeout,
+                settled=lambda s=sent: self._move_settled(s),
+                done_in_air=True,
+            )
             if answer not in ("ok", ""):
                 raise AutopilotError(f"the Tello at {self.host} refused the climb: {answer!r}")
 
@@ -708,8 +750,9 @@ class TelloAutopilot(Autopilot):
         if "bat" in raw:
             self._battery = float(raw["bat"])
         if previous is not None and self._in_air():
-            self._north, self._east = maths.dead_reckon(self._north, self._east, v0, (self._vn, self._ve),
-                                                        now - previous)
+            self._north, self._east = maths.dead_reckon(
+                self._north, self._east, v0, (self._vn, self._ve), now - previous
+            )
         if self._silenced:
             # Whoever sees the first packet after a loss re-reads the vehicle, before anyone can act on
             # the fresh link: the HLC's state() may see it first and command an RTL within the same
@@ -728,11 +771,15 @@ class TelloAutopilot(Autopilot):
             return
         if self._phase is not _Phase.GROUND and not self._air.value:
             if self._phase is not _Phase.LAND:
-                log.warning("Tello %s is on the ground (landed by itself: battery, or 15 s without a "
-                            "command?)", self.host)
+                log.warning(
+                    "Tello %s is on the ground (landed by itself: battery, or 15 s without a command?)",
+                    self.host,
+                )
             self._to_ground()
         elif self._phase is _Phase.GROUND and self._air.value:
-            log.warning("Tello %s is flying though we did not take off: hovering under our control", self.host)
+            log.warning(
+                "Tello %s is flying though we did not take off: hovering under our control", self.host
+            )
             self._phase = _Phase.GUIDED
 
     def _to_ground(self) -> None:
@@ -756,8 +803,15 @@ class TelloAutopilot(Autopilot):
 
     def _rc(self, fwd: float, right: float, up: float, yaw_rate: float) -> tuple[int, int, int, int]:
         p = self._p
-        return maths.rc_sticks(fwd, right, up, yaw_rate, max_speed=p.max_speed,
-                               max_vertical_speed=p.max_vertical_speed, max_yaw_rate=p.max_yaw_rate)
+        return maths.rc_sticks(
+            fwd,
+            right,
+            up,
+            yaw_rate,
+            max_speed=p.max_speed,
+            max_vertical_speed=p.max_vertical_speed,
+            max_yaw_rate=p.max_yaw_rate,
+        )
 
     def _ned_rc(self, vn: float, ve: float, up: float, yaw_rate: float) -> tuple[int, int, int, int]:
         fwd, right = maths.ne_to_body(vn, ve, self._heading())
@@ -841,14 +895,23 @@ class TelloAutopilot(Autopilot):
                 self._silenced = True
                 self._lost_in_air = self._in_air() or self._phase is not _Phase.GROUND
                 self._last_probe = now
-                log.warning("Tello %s: no state for %.1f s; stopped commanding it (it lands itself 15 s after "
-                            "the last command)", self.host, self._link_age())
+                log.warning(
+                    "Tello %s: no state for %.1f s; stopped commanding it (it lands itself 15 s after "
+                    "the last command)",
+                    self.host,
+                    self._link_age(),
+                )
                 return (0, 0, 0, 0) if self._lost_in_air else None
             return None
-        if self._unattended_until is not None and now >= self._unattended_until and self._phase is _Phase.GUIDED:
+        if (
+            self._unattended_until is not None
+            and now >= self._unattended_until
+            and self._phase is _Phase.GUIDED
+        ):
             self._unattended_until = None
-            self._failsafe = (f"nobody commanded the Tello for {p.link_back_hover:g} s after a link loss: "
-                              "landing")
+            self._failsafe = (
+                f"nobody commanded the Tello for {p.link_back_hover:g} s after a link loss: landing"
+            )
             log.warning("Tello %s: %s", self.host, self._failsafe)
             self._phase = _Phase.LAND
             self._setpoint = None
@@ -897,8 +960,13 @@ class TelloAutopilot(Autopilot):
         self._setpoint = None
         self._climb_target = None
         self._unattended_until = now + self._p.link_back_hover
-        log.warning("Tello %s: state is back with the Tello in the air at %.1f m: hovering; it lands in "
-                    "%g s unless commanded", self.host, self._height, self._p.link_back_hover)
+        log.warning(
+            "Tello %s: state is back with the Tello in the air at %.1f m: hovering; it lands in "
+            "%g s unless commanded",
+            self.host,
+            self._height,
+            self._p.link_back_hover,
+        )
 
     def _climb_rc(self) -> tuple[int, int, int, int]:
         assert self._climb_target is not None
@@ -912,8 +980,14 @@ class TelloAutopilot(Autopilot):
 
     def _rtl_rc(self, now: float) -> tuple[int, int, int, int]:
         p = self._p
-        vn, ve, dist = maths.rtl_leg(self._north, self._east, self._takeoff_point, speed=p.rtl_speed,
-                                     gain=_APPROACH_GAIN, min_speed=_MIN_APPROACH_SPEED)
+        vn, ve, dist = maths.rtl_leg(
+            self._north,
+            self._east,
+            self._takeoff_point,
+            speed=p.rtl_speed,
+            gain=_APPROACH_GAIN,
+            min_speed=_MIN_APPROACH_SPEED,
+        )
         deadline = 10.0 + 3.0 * self._rtl_dist0 / p.rtl_speed
         if dist <= p.rtl_tolerance:
             log.info("Tello %s RTL: at the take-off point (%.2f m): landing", self.host, dist)
@@ -921,8 +995,10 @@ class TelloAutopilot(Autopilot):
             self._land_due = now  # the control thread lands (outside the state lock)
             return (0, 0, 0, 0)
         if dist > self._rtl_dist0 + _RTL_DIVERGENCE:
-            self._rtl_abort(f"getting farther ({dist:.1f} m, started at {self._rtl_dist0:.1f} m): check "
-                            "vgx_sign, vgy_sign, velocity_frame and home_heading; landing here")
+            self._rtl_abort(
+                f"getting farther ({dist:.1f} m, started at {self._rtl_dist0:.1f} m): check "
+                "vgx_sign, vgy_sign, velocity_frame and home_heading; landing here"
+            )
             return (0, 0, 0, 0)
         if now - self._rtl_start > deadline:
             self._rtl_abort(f"not back after {deadline:.0f} s ({dist:.1f} m to go): landing here")

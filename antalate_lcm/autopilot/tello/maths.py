@@ -33,8 +33,9 @@ def ne_to_body(vn: float, ve: float, heading: float) -> tuple[float, float]:
     return vn * math.cos(psi) + ve * math.sin(psi), -vn * math.sin(psi) + ve * math.cos(psi)
 
 
-def dead_reckon(north: float, east: float, v0: tuple[float, float], v1: tuple[float, float],
-                dt: float) -> tuple[float, float]:
+def dead_reckon(
+    north: float, east: float, v0: tuple[float, float], v1: tuple[float, float], dt: float
+) -> tuple[float, float]:
     """One trapezoid step of the position from the velocities at both ends of `dt` seconds.
 
     Negative or absurd gaps (a clock step, a link loss of minutes) integrate nothing: the velocity
@@ -48,8 +49,16 @@ def dead_reckon(north: float, east: float, v0: tuple[float, float], v1: tuple[fl
 _MAX_DR_GAP = 1.0  # s: state comes at 10 Hz; a longer gap is a link loss, not a step to integrate
 
 
-def rc_sticks(fwd: float, right: float, up: float, yaw_rate: float, *, max_speed: float,
-              max_vertical_speed: float, max_yaw_rate: float) -> RC:
+def rc_sticks(
+    fwd: float,
+    right: float,
+    up: float,
+    yaw_rate: float,
+    *,
+    max_speed: float,
+    max_vertical_speed: float,
+    max_yaw_rate: float,
+) -> RC:
     """Body-frame m/s (and deg/s) to ``rc`` sticks (left/right, forward/back, up/down, yaw).
 
     The horizontal pair is scaled down together when either exceeds full stick, so the direction
@@ -64,7 +73,12 @@ def rc_sticks(fwd: float, right: float, up: float, yaw_rate: float, *, max_speed
     def stick(value: float) -> int:
         return int(round(max(-100.0, min(100.0, value))))
 
-    return (stick(lr), stick(fb), stick(up / max_vertical_speed * 100.0), stick(yaw_rate / max_yaw_rate * 100.0))
+    return (
+        stick(lr),
+        stick(fb),
+        stick(up / max_vertical_speed * 100.0),
+        stick(yaw_rate / max_yaw_rate * 100.0),
+    )
 
 
 #: The climb is over inside [target, target + CLIMB_BAND]: at or above the target, so the HLC's
@@ -123,8 +137,9 @@ class Debounced:
         self._since = None
 
 
-def rtl_leg(north: float, east: float, home: tuple[float, float], *, speed: float, gain: float,
-            min_speed: float) -> tuple[float, float, float]:
+def rtl_leg(
+    north: float, east: float, home: tuple[float, float], *, speed: float, gain: float, min_speed: float
+) -> tuple[float, float, float]:
     """North/east velocity towards `home` and the distance left: slows down over the last metre."""
     dn, de = home[0] - north, home[1] - east
     dist = math.hypot(dn, de)

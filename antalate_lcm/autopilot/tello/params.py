@@ -28,13 +28,17 @@ class Params(BaseModel):
     host: str = "192.168.10.1"  # the Tello's IP (192.168.10.1 in its own access-point mode)
     home_lat: float = Field(default=32.7767, ge=-90.0, le=90.0, allow_inf_nan=False)  # deg: power-on point
     home_lon: float = Field(default=35.0231, allow_inf_nan=False)  # deg
-    home_heading: float = Field(default=0.0, allow_inf_nan=False)  # deg from north the Tello faced at power-on
+    home_heading: float = Field(
+        default=0.0, allow_inf_nan=False
+    )  # deg from north the Tello faced at power-on
     max_speed: float = Field(default=1.0, gt=0, allow_inf_nan=False)  # m/s horizontally at rc 100
     max_vertical_speed: float = Field(default=1.0, gt=0, allow_inf_nan=False)  # m/s at rc 100
     max_yaw_rate: float = Field(default=100.0, gt=0, allow_inf_nan=False)  # deg/s at rc 100
     control_hz: float = Field(default=20.0, gt=0, le=50.0, allow_inf_nan=False)  # rc rate
     keepalive_s: float = Field(default=5.0, gt=0, allow_inf_nan=False)  # s between keepalives in the air
-    velocity_hold: float = Field(default=1.0, gt=0, allow_inf_nan=False)  # s a set-point is streamed unrenewed
+    velocity_hold: float = Field(
+        default=1.0, gt=0, allow_inf_nan=False
+    )  # s a set-point is streamed unrenewed
     rtl_speed: float = Field(default=0.5, gt=0, allow_inf_nan=False)  # m/s back to the take-off point
     rtl_tolerance: float = Field(default=0.3, gt=0, allow_inf_nan=False)  # m from it at which the RTL lands
     vgx_sign: Literal[1, -1] = 1  # sign of the state's vgx (forward along yaw 0 is positive)
@@ -42,14 +46,24 @@ class Params(BaseModel):
     velocity_frame: Literal["ground", "body"] = "ground"  # frame of vgx/vgy
     altitude_source: Literal["h", "tof"] = "h"  # the state's height, or the downward range finder
     takeoff_altitude_mode: Literal["rc", "up"] = "rc"  # climb with rc after takeoff, or blocking up/down
-    min_battery: float = Field(default=10.0, ge=0, le=100, allow_inf_nan=False)  # percent: arm() refuses at/below
-    command_timeout: float = Field(default=7.0, gt=0, allow_inf_nan=False)  # s for an answer (command, battery?)
+    min_battery: float = Field(
+        default=10.0, ge=0, le=100, allow_inf_nan=False
+    )  # percent: arm() refuses at/below
+    command_timeout: float = Field(
+        default=7.0, gt=0, allow_inf_nan=False
+    )  # s for an answer (command, battery?)
     takeoff_timeout: float = Field(default=20.0, gt=0, allow_inf_nan=False)  # s for takeoff/land/up to finish
     retry_count: int = Field(default=3, ge=1)  # attempts of `command` at connect
     state_timeout: float = Field(default=2.0, gt=0, allow_inf_nan=False)  # s connect() waits for state
-    link_loss_timeout: float = Field(default=2.0, gt=0, allow_inf_nan=False)  # s without state: stop commanding
-    autoland_s: float = Field(default=TELLO_AUTOLAND_S, gt=0, allow_inf_nan=False)  # the Tello's own auto-landing
-    link_back_hover: float = Field(default=10.0, gt=0, allow_inf_nan=False)  # s hovering uncommanded after a loss
+    link_loss_timeout: float = Field(
+        default=2.0, gt=0, allow_inf_nan=False
+    )  # s without state: stop commanding
+    autoland_s: float = Field(
+        default=TELLO_AUTOLAND_S, gt=0, allow_inf_nan=False
+    )  # the Tello's own auto-landing
+    link_back_hover: float = Field(
+        default=10.0, gt=0, allow_inf_nan=False
+    )  # s hovering uncommanded after a loss
     djitellopy_log_level: str = "WARNING"  # djitellopy logs every command (and rc) at INFO
 
     @field_validator("host")
@@ -58,8 +72,9 @@ class Params(BaseModel):
         try:
             ipaddress.IPv4Address(value)
         except ValueError:
-            raise ValueError("must be an IPv4 address (djitellopy matches replies to drones by the "
-                             "sender's IP)") from None
+            raise ValueError(
+                "must be an IPv4 address (djitellopy matches replies to drones by the sender's IP)"
+            ) from None
         return value
 
     @field_validator("vgx_sign", "vgy_sign", mode="before")
@@ -79,11 +94,15 @@ class Params(BaseModel):
     @model_validator(mode="after")
     def _rates(self) -> Params:
         if self.keepalive_s >= self.autoland_s:
-            raise ValueError(f"keepalive_s must be < autoland_s {self.autoland_s:g} (the Tello lands that long "
-                             f"after the last command), got {self.keepalive_s!r}")
+            raise ValueError(
+                f"keepalive_s must be < autoland_s {self.autoland_s:g} (the Tello lands that long "
+                f"after the last command), got {self.keepalive_s!r}"
+            )
         if self.keepalive_s < 1.0 / self.control_hz:
-            raise ValueError(f"keepalive_s {self.keepalive_s:g} is shorter than one control tick "
-                             f"(control_hz {self.control_hz:g})")
+            raise ValueError(
+                f"keepalive_s {self.keepalive_s:g} is shorter than one control tick "
+                f"(control_hz {self.control_hz:g})"
+            )
         return self
 
 
@@ -96,7 +115,7 @@ def validated(params: dict[str, Any]) -> Params:
         for err in exc.errors():
             key = ".".join(str(part) for part in err["loc"]) or "(parameters)"
             if not err["loc"] and str(err.get("msg", "")).startswith("Value error, "):
-                problems.append(str(err["msg"])[len("Value error, "):])  # names its keys itself
+                problems.append(str(err["msg"])[len("Value error, ") :])  # names its keys itself
                 continue
             if err["type"] == "extra_forbidden":
                 problems.append(f"unknown key {key!r} (known: {sorted(Params.model_fields)})")

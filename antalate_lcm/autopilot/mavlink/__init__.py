@@ -1,9 +1,13 @@
 """The ``mavlink`` autopilot adapter (ArduCopter through pymavlink), split by job:
 
-* `adapter` -- `MavlinkAutopilot`, the link, the threads, the commands;
+* `adapter` -- `MavlinkAutopilot`: the threads, the commands and their waits;
+* `link` -- the I/O: `MavLink`, pymavlink's connection (`PymavlinkLink`) and `MemoryLink` for tests;
+* `dialect` -- ArduCopter's mode numbers, names and the messages sent (pure);
+* `vehicle` -- the vehicle's picture from its telemetry, COMMAND_ACK matching (pure);
+* `setpoints` -- when a velocity set-point may go out, and its resend (pure);
 * `params` -- the validated ``[hlc.autopilot_params]``;
-* `failsafe` -- who changed the mode: a pilot or one of ArduCopter's failsafes;
-* `vehicle_checks` -- the vehicle's own failsafe parameters, checked before flight;
+* `failsafe` -- who changed the mode: a pilot or one of ArduCopter's failsafes (pure);
+* `vehicle_checks` -- the vehicle's own failsafe parameters, checked before flight (pure);
 * `signing` -- the MAVLink 2 signing key.
 
 The entry point ``antalate_lcm.autopilot.mavlink:MavlinkAutopilot`` stays as it was.
@@ -14,17 +18,23 @@ from antalate_lcm.autopilot.mavlink.adapter import (
     DEFAULTS,
     FLIGHT_MODES,
     VELOCITY_TYPE_MASK,
+    LinkOpener,
     MavlinkAutopilot,
     Params,
     mode_name,
 )
+from antalate_lcm.autopilot.mavlink.link import MavLink, MemoryLink, PymavlinkLink
 
 __all__ = [
     "COPTER_MODES",
     "DEFAULTS",
     "FLIGHT_MODES",
     "VELOCITY_TYPE_MASK",
+    "LinkOpener",
+    "MavLink",
     "MavlinkAutopilot",
+    "MemoryLink",
     "Params",
+    "PymavlinkLink",
     "mode_name",
 ]

@@ -58,10 +58,13 @@ ignored.
 
 Threads
 -------
-``connect()`` starts a receive thread (decodes everything, keeps one snapshot under a lock, wakes the
-command waiters) and a transmit thread (our HEARTBEAT and the velocity resend). Commands are blocking
-(`blocking` = True: the HLC runs them on its worker thread); `set_velocity` and `state` never wait.
-A TCP or serial link that drops is reopened by the receive thread every second until `close`.
+``connect()`` opens the link (`link.MavLink`: pymavlink's connection, or a `link.MemoryLink` given
+as ``link=``) and starts a receive thread (decodes everything, keeps the `vehicle.Vehicle` picture under
+a lock, wakes the command waiters) and a transmit thread (our HEARTBEAT and the velocity resend).
+Commands are blocking (`blocking` = True: the HLC runs them on its worker thread); `set_velocity` and
+`state` never wait. A TCP or serial link that drops is reopened by the receive thread every second
+until `close`. The rules themselves are pure: `dialect` (modes, names, messages), `vehicle` (telemetry
+into the picture, ACK matching) and `setpoints` (when a velocity target may go out).
 """
 
 from __future__ import annotations
@@ -69,269 +72,109 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-import os
 import threading
 import time
-from collections import deque
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from pydantic import BaseModel
-from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, Clock, Frame
-from antalate_lcm.autopilot.mavlink import failsafe as fs
-from antalate_lcm.autopilot.mavlink import vehicle_checks
-from antalate_lcm.autopilot.mavlink.failsafe import FLIGHT_MODES, FailsafeTracker
+from antalate_lcm.autopilot.mavlink import dialect, vehicle_checks
+from antalate_lcm.autopilot.mavlink.dialect import (
+    COPTER_MODES,
+    DATA_STREAMS,
+    SET_MODE_ACK,
+    STREAMS,
+    VELOCITY_TYPE_MASK,
+    cmd_name,
+    mode_name,
+    result_name,
+)
+from antalate_lcm.autopilot.mavlink.failsafe import FLIGHT_MODES
+from antalate_lcm.autopilot.mavlink.link import MavLink, PymavlinkLink
 from antalate_lcm.autopilot.mavlink.params import DEFAULTS, Params, parse_params
-from antalate_lcm.autopilot.mavlink.signing import allow_unsigned, signing_key, verify_signature_first
+from antalate_lcm.autopilot.mavlink.setpoints import Setpoint, SetpointRules, Verdict
+from antalate_lcm.autopilot.mavlink.signing import signing_key
+from antalate_lcm.autopilot.mavlink.vehicle import Vehicle
 from antalate_lcm.autopilot.mavlink.vehicle_checks import Finding
-from antalate_lcm.geo import wrap_360
 
 log = logging.getLogger("antalate.autopilot.mavlink")
 
-__all__ = ["DEFAULTS", "FLIGHT_MODES", "MavlinkAutopilot", "Params", "VELOCITY_TYPE_MASK", "mode_name"]
+__all__ = [
+    "COPTER_MODES",
+    "DEFAULTS",
+    "FLIGHT_MODES",
+    "LinkOpener",
+    "MavlinkAutopilot",
+    "Params",
+    "VELOCITY_TYPE_MASK",
+    "mode_name",
+]
 
-#: ArduCopter mode numbers (HEARTBEAT custom_mode) by name, from pymavlink's table.
-COPTER_MODES: dict[str, int] = {name: number for number, name in mavutil.mode_mapping_acm.items()}
-_MODE_NAMES: dict[int, str] = dict(mavutil.mode_mapping_acm)
+#: Opens the link for the validated parameters; called on `connect` and on every reopen.
+LinkOpener = Callable[[Params], MavLink]
 
-# Velocity + yaw rate: ignore position, acceleration and yaw (bits set = ignored).
-VELOCITY_TYPE_MASK = (
-    mav.POSITION_TARGET_TYPEMASK_X_IGNORE
-    | mav.POSITION_TARGET_TYPEMASK_Y_IGNORE
-    | mav.POSITION_TARGET_TYPEMASK_Z_IGNORE
-    | mav.POSITION_TARGET_TYPEMASK_AX_IGNORE
-    | mav.POSITION_TARGET_TYPEMASK_AY_IGNORE
-    | mav.POSITION_TARGET_TYPEMASK_AZ_IGNORE
-    | mav.POSITION_TARGET_TYPEMASK_YAW_IGNORE
-)
-_FRAMES = {Frame.NED: mav.MAV_FRAME_LOCAL_NED, Frame.BODY: mav.MAV_FRAME_BODY_OFFSET_NED}
-
-# EKF_STATUS_REPORT: what "the EKF uses GPS" means here.
-EKF_NEEDED = mav.EKF_ATTITUDE | mav.EKF_VELOCITY_HORIZ | mav.EKF_POS_HORIZ_ABS
-EKF_FORBIDDEN = mav.EKF_CONST_POS_MODE | mav.EKF_UNINITIALIZED
-
-_IN_AIR = frozenset({mav.MAV_LANDED_STATE_IN_AIR, mav.MAV_LANDED_STATE_TAKEOFF, mav.MAV_LANDED_STATE_LANDING})
-_FLYING_STATUS = frozenset({mav.MAV_STATE_ACTIVE, mav.MAV_STATE_CRITICAL, mav.MAV_STATE_EMERGENCY})
-_NOT_AUTOPILOT_TYPES = frozenset(
-    {
-        mav.MAV_TYPE_GCS,
-        mav.MAV_TYPE_ONBOARD_CONTROLLER,
-        mav.MAV_TYPE_GIMBAL,
-        mav.MAV_TYPE_ADSB,
-        mav.MAV_TYPE_CAMERA,
-        mav.MAV_TYPE_ANTENNA_TRACKER,
-    }
-)
-
-#: SYS_STATUS sensors whose health bit dropping is a failsafe (ArduPilot clears GEOFENCE on a breach,
-#: BATTERY on a battery failsafe, AHRS when the EKF is unhealthy).
-_HEALTH_FAILSAFES = (
-    (mav.MAV_SYS_STATUS_GEOFENCE, fs.FENCE),
-    (mav.MAV_SYS_STATUS_SENSOR_BATTERY, fs.BATTERY),
-    (mav.MAV_SYS_STATUS_AHRS, fs.EKF),
-)
-#: BATTERY_STATUS charge_state -> `AutopilotState.battery_warning`.
-_CHARGE_WARNINGS = {
-    mav.MAV_BATTERY_CHARGE_STATE_LOW: "low",
-    mav.MAV_BATTERY_CHARGE_STATE_CRITICAL: "critical",
-    mav.MAV_BATTERY_CHARGE_STATE_EMERGENCY: "emergency",
-    mav.MAV_BATTERY_CHARGE_STATE_FAILED: "failed",
-}
-_WARNING_RANK = {"": 0, "low": 1, "failsafe": 1, "critical": 2, "emergency": 3, "failed": 4}
-
-#: Telemetry asked for with MAV_CMD_SET_MESSAGE_INTERVAL: (message, rate as a factor of stream_rate_hz).
-STREAMS: tuple[tuple[str, float], ...] = (
-    ("GLOBAL_POSITION_INT", 1.0),
-    ("ATTITUDE", 1.0),
-    ("VFR_HUD", 1.0),
-    ("SYS_STATUS", 1.0),
-    ("EXTENDED_SYS_STATE", 1.0),
-    ("EKF_STATUS_REPORT", 1.0),
-    ("GPS_RAW_INT", 1.0),
-    ("HOME_POSITION", 0.1),
-    ("BATTERY_STATUS", 0.4),
-    ("FENCE_STATUS", 0.4),
-)
-#: The REQUEST_DATA_STREAM groups that carry the same messages (the fallback for old firmware).
-DATA_STREAMS = (
-    mav.MAV_DATA_STREAM_EXTENDED_STATUS,
-    mav.MAV_DATA_STREAM_POSITION,
-    mav.MAV_DATA_STREAM_EXTRA1,
-    mav.MAV_DATA_STREAM_EXTRA2,
-    mav.MAV_DATA_STREAM_EXTRA3,
-)
-
-_ZERO_RESEND = 1.0  # s a zero (hover) set-point is still resent, against a lost datagram
 _REOPEN_DELAY = 1.0  # s between attempts to reopen a dropped TCP/serial link
 _RX_POLL = 0.1  # s the receive thread blocks at most, so close() is prompt
 _SETTLE = 3.0  # s connect() waits at most for the first position and landed-state reports
-_REBOOT_GAP = 2.0  # s of HEARTBEAT silence after which the autopilot may have rebooted: ask for streams again
-_PER_CELL_MAX_MV = 5000  # BATTERY_STATUS voltages[] below this are single cells (a per-cell monitor)
 
 
-def _result_name(result: int | None) -> str:
-    if result is None:
-        return "no COMMAND_ACK"
-    entry = mav.enums["MAV_RESULT"].get(result)
-    return entry.name.removeprefix("MAV_RESULT_") if entry is not None else f"result {result}"
-
-
-def _cmd_name(command: int) -> str:
-    entry = mav.enums["MAV_CMD"].get(command)
-    return entry.name if entry is not None else f"command {command}"
-
-
-def _status_name(status: int | None) -> str:
-    if status is None:
-        return "unknown"
-    entry = mav.enums["MAV_STATE"].get(status)
-    return entry.name.removeprefix("MAV_STATE_") if entry is not None else str(status)
-
-
-def mode_name(custom_mode: int) -> str:
-    """ArduCopter's name for a HEARTBEAT ``custom_mode`` (``MODE_<n>`` for one pymavlink does not know)."""
-    return _MODE_NAMES.get(custom_mode, f"MODE_{custom_mode}")
-
-
-class _PeerClosed(ConnectionError):
-    """The TCP peer closed the stream (pymavlink would otherwise just keep returning nothing)."""
-
-
-@dataclass
-class _Setpoint:
-    """The last velocity target, kept for the resend thread."""
-
-    frame: int
-    vx: float
-    vy: float
-    vz: float
-    yaw_rate: float  # deg/s, clockwise, like every yaw rate in antalate; rad/s only on the wire
-    set_at: float  # clock time of the set_velocity() call: the set-point's age counts from here
-    next_send: float
-
-    @property
-    def zero(self) -> bool:
-        return self.vx == 0.0 and self.vy == 0.0 and self.vz == 0.0 and self.yaw_rate == 0.0
-
-
-@dataclass
-class _Vehicle:
-    """What the autopilot last told us; guarded by `MavlinkAutopilot._cond`."""
-
-    messages: int = 0  # count of messages accepted from the vehicle: marks "after" for waits
-    rx_at: float | None = None  # clock time of the last message accepted from the vehicle (link staleness)
-    heartbeats: int = 0
-    heartbeat_at: float | None = None  # clock time of the last HEARTBEAT
-    heartbeat_msg: int = 0  # `messages` count at the last HEARTBEAT: "a HEARTBEAT after the ACK"
-    base_mode: int = 0
-    custom_mode: int | None = None
-    system_status: int | None = None
-    lat: float = math.nan
-    lon: float = math.nan
-    alt: float = 0.0
-    heading: float | None = None  # deg, from GLOBAL_POSITION_INT
-    yaw: float | None = None  # deg, from ATTITUDE (fallback heading)
-    vn: float = 0.0
-    ve: float = 0.0
-    vd: float = 0.0
-    position_seen: bool = False
-    battery: float = -1.0
-    voltage: float = math.nan  # V, SYS_STATUS voltage_battery or the BATTERY_STATUS sum
-    cells_seen: int = 0  # cells counted in BATTERY_STATUS (a per-cell monitor), 0 = not seen
-    charge_warning: str = ""  # BATTERY_STATUS charge_state now: "low", "critical", "emergency", "failed"
-    battery_warning: str = ""  # from STATUSTEXT / SYS_STATUS health: the worst since the last landing
-    health: int | None = None  # SYS_STATUS onboard_control_sensors_health
-    fence_breached: bool = False
-    failsafes: FailsafeTracker = field(default_factory=FailsafeTracker)
-    params: dict[str, float] = field(default_factory=dict)  # PARAM_VALUE by name
-    param_types: dict[str, int] = field(default_factory=dict)
-    param_at: dict[str, int] = field(default_factory=dict)  # name -> `messages` count when it arrived
-    landed_state: int | None = None
-    ekf_flags: int | None = None
-    gps_fix: int | None = None
-    home: tuple[float, float, float] | None = None  # lat, lon (deg), alt AMSL (m)
-    acks: dict[int, tuple[int, int]] = field(default_factory=dict)  # command -> (result, at message #)
-    texts: deque[tuple[int, int, str]] = field(
-        default_factory=lambda: deque(maxlen=50)
-    )  # (#, severity, text)
-
-    @property
-    def armed(self) -> bool:
-        return bool(self.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
-
-    @property
-    def mode(self) -> str:
-        return "" if self.custom_mode is None else mode_name(self.custom_mode)
-
-    @property
-    def in_air(self) -> bool:
-        if self.landed_state is not None and self.landed_state != mav.MAV_LANDED_STATE_UNDEFINED:
-            return self.landed_state in _IN_AIR
-        # No EXTENDED_SYS_STATE: ArduCopter is ACTIVE while armed, so an armed vehicle counts as flying.
-        return self.armed and self.system_status in _FLYING_STATUS
-
-    @property
-    def ekf_ok(self) -> bool:
-        flags = self.ekf_flags
-        return flags is not None and flags & EKF_NEEDED == EKF_NEEDED and not flags & EKF_FORBIDDEN
-
-    def not_ready(self) -> list[str]:
-        """Why the vehicle cannot be armed for GUIDED flight yet (empty: it can)."""
-        reasons = []
-        if self.system_status != mav.MAV_STATE_STANDBY and not self.armed:
-            booting = self.system_status in (
-                mav.MAV_STATE_BOOT,
-                mav.MAV_STATE_CALIBRATING,
-                mav.MAV_STATE_UNINIT,
-            )
-            reasons.append(
-                f"system_status {_status_name(self.system_status)}"
-                + (" (still booting)" if booting else " (not STANDBY)")
-            )
-        if not self.ekf_ok:
-            flags = "no EKF_STATUS_REPORT" if self.ekf_flags is None else f"EKF flags 0x{self.ekf_flags:04x}"
-            reasons.append(f"EKF has no absolute horizontal position ({flags})")
-        if self.gps_fix is None or self.gps_fix < mav.GPS_FIX_TYPE_3D_FIX:
-            reasons.append(
-                "no GPS_RAW_INT" if self.gps_fix is None else f"GPS fix_type {self.gps_fix} (needs 3D)"
-            )
-        return reasons
+def open_pymavlink(p: Params) -> MavLink:
+    """The real link: ``p.connection`` through pymavlink (serial, UDP, TCP), signed with ``p.signing_key``."""
+    return PymavlinkLink(
+        p.connection,
+        source_system=p.source_system,
+        source_component=p.source_component,
+        baud=p.baud,
+        signing_key=signing_key(p.signing_key) if p.signing_key.strip() else None,
+    )
 
 
 class MavlinkAutopilot(Autopilot):
-    """ArduCopter through pymavlink; see the module docstring for what it waits for and why."""
+    """ArduCopter through pymavlink; see the module docstring for what it waits for and why.
+
+    ``link`` opens the link instead of pymavlink's connection (a `link.MemoryLink` in tests).
+    """
 
     name = "mavlink"
     blocking = True
     params_model: ClassVar[type[BaseModel]] = Params
 
-    def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
+    def __init__(
+        self,
+        params: Mapping[str, Any] | None = None,
+        *,
+        clock: Clock = time.monotonic,
+        link: LinkOpener | None = None,
+    ) -> None:
         super().__init__(params, clock=clock)
         p = parse_params(self.params)
         self._p = p
+        self._opener: LinkOpener = link or open_pymavlink
         self.connection: str = p.connection
         self.source_system = p.source_system
         self._ack_timeout = p.ack_timeout
         self._mode_timeout = p.mode_timeout
-        self._resend_period = 1.0 / p.velocity_resend_hz if p.velocity_resend_hz > 0 else 0.0
-        self._setpoint_timeout = p.setpoint_timeout
-        self._stale_after = p.link_stale_after
+        self._rules = SetpointRules(
+            resend_period=1.0 / p.velocity_resend_hz if p.velocity_resend_hz > 0 else 0.0,
+            timeout=p.setpoint_timeout,
+            stale_after=p.link_stale_after,
+        )
         self._heartbeat_period = 1.0 / p.heartbeat_hz
-        self._key: bytes | None = signing_key(p.signing_key) if p.signing_key.strip() else None
+        self._signed = bool(p.signing_key.strip())
+        if self._signed:
+            signing_key(p.signing_key)  # a bad key fails here, at configuration time
 
-        self._conn: Any = None  # the pymavlink connection (mavutil.mavfile)
+        self._link: MavLink | None = None
         self._cond = threading.Condition()  # guards _v, _setpoint, _target; notified on every message
-        self._send_lock = threading.Lock()  # one writer at a time on the link
+        self._send_lock = threading.Lock()  # guards _link replacement against a send
         self._cmd_lock = threading.Lock()  # one command (and its ACK wait) at a time
-        self._v = _Vehicle()
-        self._setpoint: _Setpoint | None = None
+        self._v = self._new_vehicle()
+        self._setpoint: Setpoint | None = None
         self._target: tuple[int, int] | None = None  # (system, component) of the autopilot
-        self._commanded: tuple[str, float] | None = None  # (mode, clock time) of our last mode command
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._connected = False
@@ -348,6 +191,11 @@ class MavlinkAutopilot(Autopilot):
         self.setpoints_withheld = 0
         self._vehicle_ok = False  # the last pre-flight check found nothing
 
+    def _new_vehicle(self) -> Vehicle:
+        # A HEARTBEAT showing the mode we commanded counts as ours for the longest a mode change can take.
+        window = 2 * self._ack_timeout + self._mode_timeout + 1.0
+        return Vehicle(source_system=self.source_system, command_window=window)
+
     # ----------------------------------------------------------------- Autopilot contract
 
     def connect(self) -> None:
@@ -363,7 +211,7 @@ class MavlinkAutopilot(Autopilot):
         timeout = self._p.connect_timeout
         deadline = self.clock() + timeout
         try:
-            self._conn = self._open_until(deadline)
+            self._link = self._open_until(deadline)
             self._start_threads()
             if not self._wait(lambda v: v.heartbeats > 0, deadline - self.clock()):
                 rejected = (
@@ -384,16 +232,15 @@ class MavlinkAutopilot(Autopilot):
             self._shutdown()
             raise
         with self._cond:
-            v = self._v
             target = self._target
-            summary = f"mode {v.mode}, {_status_name(v.system_status)}, {'armed' if v.armed else 'disarmed'}"
+            summary = self._v.summary()
             self._connected = True
         log.info(
             "connected to autopilot %s over %s: %s%s",
             target,
             self.connection,
             summary,
-            ", MAVLink 2 signed" if self._key else "",
+            ", MAVLink 2 signed" if self._signed else "",
         )
         if self._p.check_vehicle:
             try:
@@ -427,9 +274,10 @@ class MavlinkAutopilot(Autopilot):
                 mark = self._v.messages
             result = self._command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
             if result != mav.MAV_RESULT_ACCEPTED:
-                reason = self._texts_since(mark) or self._latest_prearm()
+                with self._cond:
+                    reason = self._v.texts_since(mark) or self._v.latest_prearm()
                 self.last_refusal = reason
-                log.warning("arming refused (%s)%s", _result_name(result), f": {reason}" if reason else "")
+                log.warning("arming refused (%s)%s", result_name(result), f": {reason}" if reason else "")
                 return False
             if not self._wait(lambda v: v.armed, self._mode_timeout):  # disarmed before: a fresh HEARTBEAT
                 raise AutopilotError(
@@ -450,7 +298,7 @@ class MavlinkAutopilot(Autopilot):
                 mark = self._v.messages
             result = self._command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 0.0)
             if result != mav.MAV_RESULT_ACCEPTED:
-                raise AutopilotError(f"disarm refused ({_result_name(result)}){self._because(mark)}")
+                raise AutopilotError(f"disarm refused ({result_name(result)}){self._because(mark)}")
 
     def takeoff(self, alt: float) -> None:
         if not (math.isfinite(alt) and alt > 0.0):
@@ -464,7 +312,7 @@ class MavlinkAutopilot(Autopilot):
             if result != mav.MAV_RESULT_ACCEPTED:
                 state = f"mode {mode}, {'armed' if armed else 'disarmed'}"
                 raise AutopilotError(
-                    f"takeoff to {alt:g} m refused ({_result_name(result)}; {state}){self._because(mark)}"
+                    f"takeoff to {alt:g} m refused ({result_name(result)}; {state}){self._because(mark)}"
                 )
             log.info("taking off to %g m", alt)
 
@@ -487,68 +335,26 @@ class MavlinkAutopilot(Autopilot):
             raise AutopilotError(f"velocity refused: non-finite value in {values}")
         self._require_link("set_velocity")
         now = self.clock()
-        sp = _Setpoint(
-            _FRAMES[Frame(frame)],
-            float(vx),
-            float(vy),
-            float(vz),
-            float(yaw_rate),
-            now,
-            now + self._resend_period,
-        )
+        sp = self._rules.new(Frame(frame), float(vx), float(vy), float(vz), float(yaw_rate), now)
         with self._cond:
-            v = self._v
-            if not (v.armed and v.mode == "GUIDED"):
-                self._setpoint = None  # ArduCopter ignores targets outside GUIDED: nothing to keep alive
-                return
-            if self._stale(now):
-                self._setpoint = None  # it would wait in a socket buffer and fly when the link returns
+            verdict = self._rules.judge(self._v, sp, now)
+            self._setpoint = self._rules.keep(sp) if verdict is Verdict.SEND else None
+            if verdict is Verdict.WITHHOLD:
                 self.setpoints_withheld += 1
                 self._rate_log.log(
                     ("stale",),
                     logging.WARNING,
                     "velocity set-point withheld: nothing heard from the vehicle for %.1f s",
-                    now - (v.rx_at or now),
+                    now - (self._v.rx_at or now),
                 )
-                return
-            if sp.zero and v.landed_state == mav.MAV_LANDED_STATE_TAKEOFF:
-                self._setpoint = None  # let the takeoff finish; it ends in a hover anyway
-                return
-            self._setpoint = sp if self._resend_period > 0 else None
-        self._send_setpoint(sp)
+        if verdict is Verdict.SEND:
+            self._send_setpoint(sp)
 
     def state(self) -> AutopilotState:
         with self._cond:
-            v = self._v
             if not self._connected:
                 return AutopilotState(connected=False, link_age=math.inf)
-            link_age = math.inf if v.heartbeat_at is None else max(0.0, self.clock() - v.heartbeat_at)
-            mode = v.mode
-            flight_mode, autonomous, failsafe = fs.classify(mode, v.failsafes.reason)
-            heading = v.heading if v.heading is not None else (v.yaw if v.yaw is not None else 0.0)
-            return AutopilotState(
-                connected=True,
-                link_age=link_age,
-                lat=v.lat,
-                lon=v.lon,
-                alt=v.alt,
-                heading=heading,
-                vn=v.vn,
-                ve=v.ve,
-                vd=v.vd,
-                battery=v.battery,
-                armed=v.armed,
-                in_air=v.in_air,
-                autonomous=autonomous,
-                mode=mode,
-                flight_mode=flight_mode,
-                failsafe=failsafe,
-                voltage=v.voltage,
-                cells=self._p.cells or v.cells_seen,
-                battery_warning=max(
-                    v.charge_warning, v.battery_warning, key=lambda w: _WARNING_RANK.get(w, 1)
-                ),
-            )
+            return self._v.autopilot_state(self.clock(), self._p.cells)
 
     # ----------------------------------------------------------------- extras (tools, tests)
 
@@ -577,43 +383,13 @@ class MavlinkAutopilot(Autopilot):
 
     # ----------------------------------------------------------------- link
 
-    def _open(self) -> Any:
-        p = self._p
-        if self._key is not None and "MAVLINK20" not in os.environ:
-            # Signing needs MAVLink 2 from the first byte: pymavlink's switch on the first v2 frame it
-            # hears replaces its codec and would drop the signing state. (pymavlink sets the same
-            # process-wide switch itself as soon as it hears MAVLink 2.)
-            os.environ["MAVLINK20"] = "1"
-            mavutil.set_dialect("ardupilotmega")
+    def _open(self) -> MavLink:
         try:
-            conn = mavutil.mavlink_connection(
-                self.connection,
-                baud=p.baud,
-                source_system=self.source_system,
-                source_component=p.source_component,
-                autoreconnect=False,
-                retries=0,
-            )
+            return self._opener(self._p)
         except (OSError, ValueError) as exc:
             raise AutopilotError(f"cannot open {self.connection}: {exc}") from exc
-        if self._key is not None:
-            if conn.WIRE_PROTOCOL_VERSION != "2.0":
-                conn.close()
-                raise AutopilotError(
-                    "MAVLink 2 signing needs MAVLink 2, but pymavlink opened a MAVLink 1 codec"
-                )
-            conn.setup_signing(self._key, sign_outgoing=True, allow_unsigned_callback=allow_unsigned)
-            verify_signature_first(conn.mav)
-        if self.connection.startswith(("tcp:", "uds:", "unix:")):
-            # pymavlink only prints on EOF and keeps returning nothing: make it an error we handle.
-            def closed_by_peer() -> None:
-                raise _PeerClosed(f"{self.connection} closed by the peer")
 
-            conn.handle_eof = closed_by_peer
-            conn.handle_disconnect = closed_by_peer
-        return conn
-
-    def _open_until(self, deadline: float) -> Any:
+    def _open_until(self, deadline: float) -> MavLink:
         """Open the link, retrying a refused TCP connection (SITL still starting) until `deadline`."""
         while True:
             try:
@@ -644,38 +420,40 @@ class MavlinkAutopilot(Autopilot):
                 t.join(timeout=2.0)
         self._threads = []
         with self._send_lock:
-            conn, self._conn = self._conn, None
-        if conn is not None:
+            link, self._link = self._link, None
+        if link is not None:
             with contextlib.suppress(OSError):
-                conn.close()
+                link.close()
 
     def _require_link(self, what: str) -> None:
-        if self._closed or self._conn is None:
+        if self._closed or self._link is None:
             raise AutopilotError(f"{what}: not connected")
 
-    def _send(self, fn: Callable[[Any], None]) -> None:
-        """Write one message (``fn(conn.mav)``); raises `AutopilotError` if the link cannot take it."""
+    def _send(self, msg: Any) -> None:
+        """Write one message; raises `AutopilotError` if the link cannot take it."""
         with self._send_lock:
-            conn = self._conn
-            if conn is None:
+            link = self._link
+            if link is None:
                 raise AutopilotError("not connected")
             try:
-                fn(
-                    conn.mav
-                )  # conn.mav is replaced when pymavlink switches to MAVLink 2: look it up each time
+                link.send(msg)
             except OSError as exc:
                 raise AutopilotError(f"cannot send on {self.connection}: {exc}") from exc
+
+    def _target_or_default(self) -> tuple[int, int]:
+        with self._cond:
+            return self._target or (1, 1)
 
     # ----------------------------------------------------------------- receiving
 
     def _receive_loop(self) -> None:
         stop = self._stop
         while not stop.is_set():
-            conn = self._conn
-            if conn is None:
+            link = self._link
+            if link is None:
                 return
             try:
-                msg = conn.recv_match(blocking=True, timeout=_RX_POLL)
+                msg = link.recv(_RX_POLL)
             except (OSError, ValueError) as exc:  # ValueError: select() on a socket closed by close()
                 if stop.is_set():
                     return
@@ -710,7 +488,7 @@ class MavlinkAutopilot(Autopilot):
                 self._rate_log.log(("reopen",), logging.INFO, "%s", err)
                 continue
             with self._send_lock:
-                old, self._conn = self._conn, new
+                old, self._link = self._link, new
             if old is not None:
                 with contextlib.suppress(OSError):
                     old.close()
@@ -720,16 +498,6 @@ class MavlinkAutopilot(Autopilot):
             log.info("link %s reopened", self.connection)
             self._rerequest_streams()  # a reopened stream link usually means a rebooted autopilot
             return
-
-    def _is_our_autopilot(self, msg: Any) -> bool:
-        want_sys = self._p.target_system
-        want_comp = self._p.target_component or mav.MAV_COMP_ID_AUTOPILOT1
-        return (
-            msg.autopilot != mav.MAV_AUTOPILOT_INVALID
-            and msg.type not in _NOT_AUTOPILOT_TYPES
-            and msg.get_srcComponent() == want_comp
-            and want_sys in (0, msg.get_srcSystem())
-        )
 
     def _on_message(self, msg: Any) -> None:
         mtype = msg.get_type()
@@ -744,28 +512,26 @@ class MavlinkAutopilot(Autopilot):
                 )
             return
         source = (msg.get_srcSystem(), msg.get_srcComponent())
-        stop: _Setpoint | None = None
         with self._cond:
             if self._target is None:
-                if mtype != "HEARTBEAT" or not self._is_our_autopilot(msg):
+                if mtype != "HEARTBEAT" or not dialect.is_autopilot(
+                    msg, self._p.target_system, self._p.target_component
+                ):
                     return
                 self._target = source
                 self._check_autopilot_kind(msg)
             if source != self._target:
                 return
-            v = self._v
             now = self.clock()
-            if self._stale(now) and v.armed and v.mode == "GUIDED" and v.in_air:
-                # Back after a stale spell: whatever we wrote before noticing may be flushed to the vehicle
-                # right now. A stop sent at once arrives right behind it.
-                stop = _Setpoint(_FRAMES[Frame.NED], 0.0, 0.0, 0.0, 0.0, now, now + self._resend_period)
+            stop = self._rules.stop_after_stale(self._v, now)
+            if stop is not None:
                 self._setpoint = None
-            v.rx_at = now
-            v.messages += 1
-            handler = _HANDLERS.get(mtype)
-            if handler is not None:
-                handler(self, v, msg)
+            update = self._v.update(msg, now)
+            if update.drop_setpoint:
+                self._setpoint = None
             self._cond.notify_all()
+        if update.request_streams:
+            self._rerequest_streams()
         if stop is not None:
             log.warning(
                 "link back after a stale spell: stopping the vehicle (zero velocity) until the HLC commands"
@@ -774,11 +540,6 @@ class MavlinkAutopilot(Autopilot):
                 self._send_setpoint(stop)
             except AutopilotError as exc:
                 self._rate_log.log(("resend",), logging.WARNING, "stop not sent: %s", exc)
-
-    def _stale(self, now: float) -> bool:
-        """Nothing heard from the vehicle for ``link_stale_after`` (lock held)."""
-        rx_at = self._v.rx_at
-        return rx_at is None or now - rx_at > self._stale_after
 
     def _check_autopilot_kind(self, msg: Any) -> None:
         if self._warned_autopilot:
@@ -791,132 +552,6 @@ class MavlinkAutopilot(Autopilot):
                 msg.autopilot,
             )
 
-    def _on_heartbeat(self, v: _Vehicle, msg: Any) -> None:
-        previous = v.custom_mode
-        now = self.clock()
-        if v.heartbeat_at is not None and now - v.heartbeat_at > _REBOOT_GAP:
-            log.info("HEARTBEAT back after %.1f s: asking for telemetry again", now - v.heartbeat_at)
-            self._rerequest_streams()
-        v.heartbeats += 1
-        v.heartbeat_at = now
-        v.heartbeat_msg = v.messages
-        was_armed = v.armed
-        v.base_mode = msg.base_mode
-        v.custom_mode = msg.custom_mode
-        v.system_status = msg.system_status
-        commanded = (
-            self._commanded is not None
-            and self._commanded[0] == v.mode
-            and now - self._commanded[1] <= 2 * self._ack_timeout + self._mode_timeout + 1.0
-        )
-        v.failsafes.on_mode(v.mode, now, commanded=commanded)
-        if previous != msg.custom_mode and v.failsafes.reason:
-            log.warning("autopilot failsafe (%s): mode %s", v.failsafes.reason, v.mode)
-        if was_armed and not v.armed:
-            v.battery_warning = ""  # landed and disarmed: what is still wrong, BATTERY_STATUS keeps saying
-        if previous != msg.custom_mode:
-            if previous is not None:
-                log.info("autopilot mode %s -> %s", mode_name(previous), mode_name(msg.custom_mode))
-            if mode_name(msg.custom_mode) != "GUIDED":
-                self._setpoint = None  # out of GUIDED (a pilot, a failsafe): never resume an old target
-        if not v.armed:
-            self._setpoint = None
-
-    def _on_global_position(self, v: _Vehicle, msg: Any) -> None:
-        known = msg.lat != 0 or msg.lon != 0  # ArduCopter sends 0, 0 until it has a position
-        v.lat = msg.lat / 1e7 if known else math.nan
-        v.lon = msg.lon / 1e7 if known else math.nan
-        v.alt = msg.relative_alt / 1000.0
-        v.vn, v.ve, v.vd = msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0
-        v.heading = None if msg.hdg == 65535 else wrap_360(msg.hdg / 100.0)
-        v.position_seen = True
-
-    def _on_attitude(self, v: _Vehicle, msg: Any) -> None:
-        v.yaw = wrap_360(math.degrees(msg.yaw))
-
-    def _on_sys_status(self, v: _Vehicle, msg: Any) -> None:
-        v.battery = float(msg.battery_remaining) if 0 <= msg.battery_remaining <= 100 else -1.0
-        if 0 < msg.voltage_battery < 0xFFFF:
-            v.voltage = msg.voltage_battery / 1000.0
-        now = self.clock()
-        v.health = msg.onboard_control_sensors_health
-        for bit, reason in _HEALTH_FAILSAFES:
-            enabled = msg.onboard_control_sensors_enabled & bit and msg.onboard_control_sensors_present & bit
-            unhealthy = bool(enabled) and not msg.onboard_control_sensors_health & bit
-            v.failsafes.set_active(reason, unhealthy, now)
-            if reason == fs.BATTERY and unhealthy:
-                self._battery_warning(v, "failsafe")
-
-    def _on_battery_status(self, v: _Vehicle, msg: Any) -> None:
-        if msg.id != 0:
-            return  # the first battery is the one SYS_STATUS describes
-        cells = [mv for mv in msg.voltages if mv != 0xFFFF]
-        cells += [mv for mv in getattr(msg, "voltages_ext", []) or [] if mv not in (0, 0xFFFF)]
-        if cells:
-            v.voltage = sum(cells) / 1000.0
-            if len(cells) >= 2 and all(0 < mv < _PER_CELL_MAX_MV for mv in cells):
-                v.cells_seen = len(cells)  # a per-cell monitor (SMBus, DroneCAN); ArduPilot's analog splits
-        if 0 <= msg.battery_remaining <= 100:
-            v.battery = float(msg.battery_remaining)
-        warning = _CHARGE_WARNINGS.get(getattr(msg, "charge_state", 0), "")
-        v.failsafes.set_active(fs.BATTERY, bool(warning), self.clock())
-        if warning != v.charge_warning:
-            log.warning("autopilot battery charge state: %s (%.2f V)", warning or "ok", v.voltage)
-        v.charge_warning = warning
-
-    def _battery_warning(self, v: _Vehicle, warning: str) -> None:
-        if _WARNING_RANK.get(warning, 1) > _WARNING_RANK.get(v.battery_warning, 1) or not v.battery_warning:
-            if v.battery_warning != warning:
-                log.warning("autopilot battery warning: %s (%.2f V)", warning, v.voltage)
-            v.battery_warning = warning
-
-    def _on_fence_status(self, v: _Vehicle, msg: Any) -> None:
-        breached = bool(msg.breach_status)
-        if breached and not v.fence_breached:
-            log.warning(
-                "autopilot reports a fence breach (type %d, %d so far)", msg.breach_type, msg.breach_count
-            )
-        v.fence_breached = breached
-        v.failsafes.set_active(fs.FENCE, breached, self.clock())
-
-    def _on_param_value(self, v: _Vehicle, msg: Any) -> None:
-        name = (
-            msg.param_id if isinstance(msg.param_id, str) else bytes(msg.param_id).decode("ascii", "replace")
-        )
-        name = name.rstrip("\x00")
-        v.params[name] = float(msg.param_value)
-        v.param_types[name] = int(msg.param_type)
-        v.param_at[name] = v.messages
-
-    def _on_extended_sys_state(self, v: _Vehicle, msg: Any) -> None:
-        v.landed_state = msg.landed_state
-
-    def _on_ekf(self, v: _Vehicle, msg: Any) -> None:
-        v.ekf_flags = msg.flags
-
-    def _on_gps(self, v: _Vehicle, msg: Any) -> None:
-        v.gps_fix = msg.fix_type
-
-    def _on_home(self, v: _Vehicle, msg: Any) -> None:
-        v.home = (msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1000.0)
-
-    def _on_ack(self, v: _Vehicle, msg: Any) -> None:
-        target = getattr(msg, "target_system", 0)  # a MAVLink 2 extension: 0 when absent
-        if target not in (0, self.source_system):
-            return  # another ground station's acknowledgement
-        v.acks[msg.command] = (msg.result, v.messages)
-
-    def _on_statustext(self, v: _Vehicle, msg: Any) -> None:
-        text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode("utf-8", "replace")
-        text = text.rstrip("\x00").strip()
-        v.texts.append((v.messages, msg.severity, text))
-        v.failsafes.event(fs.text_failsafe(text), self.clock())
-        level = fs.text_battery_level(text)
-        if level:
-            self._battery_warning(v, level)
-        level = logging.WARNING if msg.severity <= mav.MAV_SEVERITY_WARNING else logging.INFO
-        log.log(level, "autopilot says: %s", text)
-
     # ----------------------------------------------------------------- transmitting
 
     def _transmit_loop(self) -> None:
@@ -926,14 +561,14 @@ class MavlinkAutopilot(Autopilot):
             if now >= next_heartbeat:
                 next_heartbeat = max(next_heartbeat + self._heartbeat_period, now)
                 try:
-                    self._send(
-                        lambda m: m.heartbeat_send(
-                            mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE
-                        )
-                    )
+                    self._send(dialect.gcs_heartbeat())
                 except AutopilotError as exc:
                     self._rate_log.log(("heartbeat",), logging.WARNING, "HEARTBEAT not sent: %s", exc)
-            due = self._due_setpoint(now)
+            with self._cond:
+                self._setpoint, verdict = self._rules.due(self._v, self._setpoint, now)
+                if verdict is Verdict.WITHHOLD:
+                    self.setpoints_withheld += 1  # never queue a set-point into a cut link
+                due = self._setpoint if verdict is Verdict.SEND else None
             if due is not None:
                 try:
                     self._send_setpoint(due)
@@ -944,48 +579,10 @@ class MavlinkAutopilot(Autopilot):
                 wake = next_heartbeat if sp is None else min(next_heartbeat, sp.next_send)
             self._stop.wait(min(max(wake - self.clock(), 0.005), 0.1))
 
-    def _due_setpoint(self, now: float) -> _Setpoint | None:
-        """The set-point to resend now, if any; drops one that has expired or no longer applies."""
-        with self._cond:
-            sp = self._setpoint
-            if sp is None or now < sp.next_send:
-                return None
-            v = self._v
-            hold = min(_ZERO_RESEND, self._setpoint_timeout) if sp.zero else self._setpoint_timeout
-            expired = now - sp.set_at >= hold
-            if expired or not (v.armed and v.mode == "GUIDED" and v.in_air):
-                self._setpoint = None
-                return None
-            if self._stale(now):
-                self._setpoint = None  # never queue a set-point into a cut link (see the module docstring)
-                self.setpoints_withheld += 1
-                return None
-            sp.next_send = max(sp.next_send + self._resend_period, now)
-            return sp
-
-    def _send_setpoint(self, sp: _Setpoint) -> None:
-        ts, tc = self._target or (1, 1)
-        boot_ms = int(self.clock() * 1000) & 0xFFFFFFFF
-        self._send(
-            lambda m: m.set_position_target_local_ned_send(
-                boot_ms,
-                ts,
-                tc,
-                sp.frame,
-                VELOCITY_TYPE_MASK,
-                0,
-                0,
-                0,
-                sp.vx,
-                sp.vy,
-                sp.vz,
-                0,
-                0,
-                0,
-                0,
-                math.radians(sp.yaw_rate),
-            )
-        )
+    def _send_setpoint(self, sp: Setpoint) -> None:
+        boot_ms = int(self.clock() * 1000)
+        target = self._target_or_default()
+        self._send(dialect.velocity_target(target, boot_ms, sp.frame, sp.vx, sp.vy, sp.vz, sp.yaw_rate))
 
     def _clear_setpoint(self) -> None:
         with self._cond:
@@ -993,7 +590,7 @@ class MavlinkAutopilot(Autopilot):
 
     # ----------------------------------------------------------------- commands
 
-    def _wait(self, predicate: Callable[[_Vehicle], bool], timeout: float) -> bool:
+    def _wait(self, predicate: Callable[[Vehicle], bool], timeout: float) -> bool:
         """Block until ``predicate(snapshot)`` holds (True) or `timeout` s pass (False); raises if closed."""
         deadline = self.clock() + timeout
         with self._cond:
@@ -1009,23 +606,21 @@ class MavlinkAutopilot(Autopilot):
 
     def _command_result(self, command: int, *params: float, attempts: int = 2) -> int | None:
         """Send COMMAND_LONG `command`, return its COMMAND_ACK's MAV_RESULT (None: never acknowledged)."""
-        p = [float(x) for x in params] + [0.0] * (7 - len(params))
         for confirmation in range(attempts):
             with self._cond:
                 mark = self._v.messages
-                ts, tc = self._target or (1, 1)
-            self._send(lambda m, c=confirmation, ts=ts, tc=tc: m.command_long_send(ts, tc, command, c, *p))
+                target = self._target or (1, 1)
+            self._send(dialect.command_long(target, command, confirmation, *params))
 
-            def acked(v: _Vehicle, mark: int = mark) -> bool:
-                ack = v.acks.get(command)
-                return ack is not None and ack[1] > mark and ack[0] != mav.MAV_RESULT_IN_PROGRESS
+            def acked(v: Vehicle, mark: int = mark) -> bool:
+                return v.ack_after(command, mark) is not None
 
             if self._wait(acked, self._ack_timeout):
                 with self._cond:
                     return self._v.acks[command][0]
             log.debug(
                 "%s: no COMMAND_ACK after %g s (attempt %d)",
-                _cmd_name(command),
+                cmd_name(command),
                 self._ack_timeout,
                 confirmation + 1,
             )
@@ -1035,7 +630,7 @@ class MavlinkAutopilot(Autopilot):
         result = self._command_result(command, *params)
         if result is None:
             raise AutopilotError(
-                f"{_cmd_name(command)}: no COMMAND_ACK from {self.connection} "
+                f"{cmd_name(command)}: no COMMAND_ACK from {self.connection} "
                 f"(2 attempts, {self._ack_timeout:g} s each)"
             )
         return result
@@ -1045,7 +640,7 @@ class MavlinkAutopilot(Autopilot):
         number = COPTER_MODES[name]
         with self._cond:
             mark = self._v.messages
-            self._commanded = (name, self.clock())
+            self._v.commanded = (name, self.clock())
         result = self._command_result(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, number)
         if result == mav.MAV_RESULT_UNSUPPORTED:
             result = self._set_mode_message(number)  # the SET_MODE message: older firmware
@@ -1055,13 +650,13 @@ class MavlinkAutopilot(Autopilot):
                 f"(2 attempts, {self._ack_timeout:g} s each)"
             )
         if result != mav.MAV_RESULT_ACCEPTED:
-            raise AutopilotError(f"mode {name} refused ({_result_name(result)}){self._because(mark)}")
+            raise AutopilotError(f"mode {name} refused ({result_name(result)}){self._because(mark)}")
         with self._cond:
             acks = self._v.acks
             ack_at = max(
                 at
                 for cmd, (_, at) in acks.items()
-                if cmd in (mav.MAV_CMD_DO_SET_MODE, mav.MAVLINK_MSG_ID_SET_MODE) and at > mark
+                if cmd in (mav.MAV_CMD_DO_SET_MODE, SET_MODE_ACK) and at > mark
             )
         if not self._wait(lambda v: v.heartbeat_msg > ack_at and v.custom_mode == number, self._mode_timeout):
             with self._cond:
@@ -1074,16 +669,11 @@ class MavlinkAutopilot(Autopilot):
     def _set_mode_message(self, number: int) -> int | None:
         with self._cond:
             mark = self._v.messages
-            ts = (self._target or (1, 1))[0]
-        self._send(lambda m: m.set_mode_send(ts, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, number))
-
-        def acked(v: _Vehicle) -> bool:
-            ack = v.acks.get(mav.MAVLINK_MSG_ID_SET_MODE)
-            return ack is not None and ack[1] > mark
-
-        if self._wait(acked, self._ack_timeout):
+            target_system = (self._target or (1, 1))[0]
+        self._send(dialect.set_mode(target_system, number))
+        if self._wait(lambda v: v.ack_after(SET_MODE_ACK, mark, final=False) is not None, self._ack_timeout):
             with self._cond:
-                return self._v.acks[mav.MAVLINK_MSG_ID_SET_MODE][0]
+                return self._v.acks[SET_MODE_ACK][0]
         return None
 
     def _wait_ready(self) -> None:
@@ -1121,18 +711,18 @@ class MavlinkAutopilot(Autopilot):
             if i == 0 and result in (None, mav.MAV_RESULT_UNSUPPORTED, mav.MAV_RESULT_DENIED):
                 log.info(
                     "SET_MESSAGE_INTERVAL %s (%s): falling back to REQUEST_DATA_STREAM",
-                    _result_name(result).lower(),
+                    result_name(result).lower(),
                     name,
                 )
                 self._request_data_streams(max(1, round(rate)))
                 return
             if result != mav.MAV_RESULT_ACCEPTED:
-                log.debug("SET_MESSAGE_INTERVAL %s: %s", name, _result_name(result))
+                log.debug("SET_MESSAGE_INTERVAL %s: %s", name, result_name(result))
 
     def _request_data_streams(self, hz: int) -> None:
-        ts, tc = self._target or (1, 1)
+        target = self._target_or_default()
         for stream in DATA_STREAMS:
-            self._send(lambda m, s=stream: m.request_data_stream_send(ts, tc, s, hz, 1))
+            self._send(dialect.request_data_stream(target, stream, hz))
 
     # ----------------------------------------------------------------- vehicle parameters
 
@@ -1149,23 +739,21 @@ class MavlinkAutopilot(Autopilot):
         with self._cond:
             mark = self._v.messages
 
-        def complete(v: _Vehicle) -> bool:
-            return all(any(v.param_at.get(n, -1) > mark for n in group) for group in groups)
+        def complete(v: Vehicle) -> bool:
+            return all(any(v.param_after(n, mark) for n in group) for group in groups)
 
         wanted = list(names)
         for _ in range(2):
-            ts, tc = self._target or (1, 1)
+            target = self._target_or_default()
             for name in wanted:
-                self._send(
-                    lambda m, n=name, ts=ts, tc=tc: m.param_request_read_send(ts, tc, n.encode("ascii"), -1)
-                )
+                self._send(dialect.param_request_read(target, name))
             self._wait(complete, self._ack_timeout)
             with self._cond:
                 if complete(self._v):
                     break
-                wanted = [n for n in names if self._v.param_at.get(n, -1) <= mark]
+                wanted = [n for n in names if not self._v.param_after(n, mark)]
         with self._cond:
-            return {n: self._v.params[n] for n in names if self._v.param_at.get(n, -1) > mark}
+            return {n: self._v.params[n] for n in names if self._v.param_after(n, mark)}
 
     def set_param(self, name: str, value: float) -> None:
         """PARAM_SET `name` and wait for the PARAM_VALUE that confirms it; `AutopilotError` otherwise."""
@@ -1174,13 +762,11 @@ class MavlinkAutopilot(Autopilot):
         for _ in range(2):
             with self._cond:
                 mark = self._v.messages
-                ts, tc = self._target or (1, 1)
-            self._send(
-                lambda m, ts=ts, tc=tc: m.param_set_send(ts, tc, name.encode("ascii"), float(value), ptype)
-            )
+                target = self._target or (1, 1)
+            self._send(dialect.param_set(target, name, value, ptype))
 
-            def confirmed(v: _Vehicle, mark: int = mark) -> bool:
-                return v.param_at.get(name, -1) > mark and abs(v.params[name] - value) <= 1e-3 * max(
+            def confirmed(v: Vehicle, mark: int = mark) -> bool:
+                return v.param_after(name, mark) and abs(v.params[name] - value) <= 1e-3 * max(
                     1.0, abs(value)
                 )
 
@@ -1224,32 +810,7 @@ class MavlinkAutopilot(Autopilot):
 
     # ----------------------------------------------------------------- STATUSTEXT reasons
 
-    def _texts_since(self, mark: int) -> str:
-        with self._cond:
-            texts = [t for n, sev, t in self._v.texts if n > mark and sev <= mav.MAV_SEVERITY_WARNING]
-        return "; ".join(texts)
-
-    def _latest_prearm(self) -> str:
-        with self._cond:
-            return next((t for _, _, t in reversed(self._v.texts) if t.startswith(("PreArm", "Arm"))), "")
-
     def _because(self, mark: int) -> str:
-        reason = self._texts_since(mark)
+        with self._cond:
+            reason = self._v.texts_since(mark)
         return f": {reason}" if reason else ""
-
-
-_HANDLERS: dict[str, Callable[[MavlinkAutopilot, _Vehicle, Any], None]] = {
-    "HEARTBEAT": MavlinkAutopilot._on_heartbeat,
-    "GLOBAL_POSITION_INT": MavlinkAutopilot._on_global_position,
-    "ATTITUDE": MavlinkAutopilot._on_attitude,
-    "SYS_STATUS": MavlinkAutopilot._on_sys_status,
-    "EXTENDED_SYS_STATE": MavlinkAutopilot._on_extended_sys_state,
-    "EKF_STATUS_REPORT": MavlinkAutopilot._on_ekf,
-    "GPS_RAW_INT": MavlinkAutopilot._on_gps,
-    "HOME_POSITION": MavlinkAutopilot._on_home,
-    "COMMAND_ACK": MavlinkAutopilot._on_ack,
-    "BATTERY_STATUS": MavlinkAutopilot._on_battery_status,
-    "FENCE_STATUS": MavlinkAutopilot._on_fence_status,
-    "PARAM_VALUE": MavlinkAutopilot._on_param_value,
-    "STATUSTEXT": MavlinkAutopilot._on_statustext,
-}

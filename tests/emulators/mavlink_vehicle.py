@@ -52,7 +52,9 @@ Transports: ``udp_port`` (0 = a free port) answers every peer that sends it some
 ``udpout:HOST:PORT``; the client must send first, e.g. a HEARTBEAT); ``udp_target=(host, port)`` also
 pushes to a fixed address like SITL's ``udpclient`` (pymavlink ``udpin:HOST:PORT``); ``tcp_port``
 accepts any number of TCP clients (pymavlink ``tcp:HOST:PORT``). Ports are read back from
-``udp_port``/``tcp_port`` after ``start()``.
+``udp_port``/``tcp_port`` after ``start()``. ``memory_link()`` adds a client without a socket: an
+``antalate_lcm.autopilot.mavlink.link.MemoryLink`` whose frames reach the vehicle as bytes, like a TCP
+client's (``udp_port=None`` for a vehicle with no socket at all).
 
 Parameters (:data:`PARAMS`, ArduCopter 4.x names, defaults and types; ``params={...}`` overrides)
     PARAM_REQUEST_READ (by name or index), PARAM_REQUEST_LIST and PARAM_SET answered with PARAM_VALUE,
@@ -116,6 +118,8 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mav2
+
+from antalate_lcm.autopilot.mavlink.link import MemoryLink
 
 LOG = logging.getLogger("antalate.tests.mavlink_vehicle")
 
@@ -308,9 +312,11 @@ class _Peer:
         sock: socket.socket | None = None,
         addr: Address | None = None,
         key: bytes | None = None,
+        link: MemoryLink | None = None,
     ):
         self.sock = sock  # TCP client socket, None for UDP peers
         self.addr = addr
+        self.link = link  # the client's end of an in-memory link (`MavlinkVehicle.memory_link`)
         self.parser = mav2.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         self.parser.robust_parsing = True
         self.rejected = 0  # messages dropped for their signature
@@ -457,6 +463,8 @@ class MavlinkVehicle:
         self._tcp: socket.socket | None = None
         self._udp_peers: dict[Address, _Peer] = {}
         self._tcp_peers: list[_Peer] = []
+        self._memory_peers: list[_Peer] = []
+        self._memory_in: deque[tuple[_Peer, bytes]] = deque()  # written by clients' threads, read by ours
         self._wire = _WireBuffer()
         self._encoder = mav2.MAVLink(self._wire, srcSystem=sysid, srcComponent=compid)
         if signing_key is not None:
@@ -569,6 +577,28 @@ class MavlinkVehicle:
         """A pymavlink encoder for building messages to `inject` (its ``*_encode`` methods)."""
         return mav2.MAVLink(_WireBuffer(), srcSystem=self.sysid, srcComponent=self.compid)
 
+    def memory_link(
+        self,
+        *,
+        source_system: int = 245,
+        source_component: int = mav2.MAV_COMP_ID_ONBOARD_COMPUTER,
+        signing_key: bytes | None = None,
+    ) -> MemoryLink:
+        """A new client on an in-memory link (like a new TCP client, without a socket): what the client
+        sends reaches this vehicle's I/O thread as bytes, what the vehicle sends is fed to the link."""
+        peer = self._peer()
+
+        def write(data: bytes) -> None:
+            self._memory_in.append((peer, data))
+
+        link = MemoryLink(
+            write, source_system=source_system, source_component=source_component, signing_key=signing_key
+        )
+        peer.link = link
+        with self._lock:
+            self._memory_peers.append(peer)
+        return link
+
     @property
     def udp_url(self) -> str:
         """The pymavlink connection string for the UDP server side (the client must send first)."""
@@ -647,7 +677,7 @@ class MavlinkVehicle:
     def signing_rejected(self) -> int:
         """Messages dropped for a missing or wrong signature (with ``signing_key``)."""
         with self._lock:
-            peers = [*self._udp_peers.values(), *self._tcp_peers]
+            peers = [*self._udp_peers.values(), *self._tcp_peers, *self._memory_peers]
             return self._signing_rejected_gone + sum(p.rejected for p in peers)
 
     @property
@@ -1511,6 +1541,12 @@ class MavlinkVehicle:
                 peer.sock.sendall(data)
             except OSError:
                 self._drop_tcp(peer)
+        for peer in list(self._memory_peers):
+            assert peer.link is not None
+            if peer.link.closed:
+                self._drop_memory(peer)
+            else:
+                peer.link.feed(data)
 
     # -- the I/O thread ------------------------------------------------------------------------------
 
@@ -1528,6 +1564,9 @@ class MavlinkVehicle:
                 self._tcp_peers = [p for p in self._tcp_peers if p.sock is not None and p.sock.fileno() >= 0]
             for sock in ready:
                 self._read(sock)
+            while self._memory_in:
+                peer, data = self._memory_in.popleft()
+                self._receive(peer, data, time.monotonic())
             self._release_backlog()
             now = time.monotonic()
             if now >= next_tick:
@@ -1570,6 +1609,10 @@ class MavlinkVehicle:
             if not data:
                 self._drop_tcp(peer)
                 return
+        self._receive(peer, data, now)
+
+    def _receive(self, peer: _Peer, data: bytes, now: float) -> None:
+        """Bytes from `peer` reach the autopilot: unless the link is down, or cut (then they wait)."""
         with self._lock:
             if not self._link_up or self._uplink_down:
                 return
@@ -1599,6 +1642,12 @@ class MavlinkVehicle:
             self._signing_rejected_gone += peer.rejected
         if peer.sock is not None:
             peer.sock.close()
+
+    def _drop_memory(self, peer: _Peer) -> None:
+        with self._lock:
+            if peer in self._memory_peers:
+                self._memory_peers.remove(peer)
+                self._signing_rejected_gone += peer.rejected
 
     def _close_sockets(self) -> None:
         for peer in list(self._tcp_peers):

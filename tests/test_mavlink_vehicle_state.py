@@ -1,0 +1,133 @@
+"""`mavlink.vehicle` and `mavlink.dialect`: ArduCopter telemetry into the adapter's picture (pure, no sockets)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from antalate_lcm.autopilot.base import FlightMode
+from antalate_lcm.autopilot.mavlink import dialect
+from antalate_lcm.autopilot.mavlink.vehicle import REBOOT_GAP, Vehicle
+
+GUIDED, LOITER, RTL = (dialect.COPTER_MODES[m] for m in ("GUIDED", "LOITER", "RTL"))
+ARMED = mav.MAV_MODE_FLAG_SAFETY_ARMED | mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+
+
+def heartbeat(custom_mode: int, armed: bool = False, status: int = mav.MAV_STATE_STANDBY) -> Any:
+    base = ARMED if armed else mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    return mav.MAVLink_heartbeat_message(
+        mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, base, custom_mode, status, 3
+    )
+
+
+def ack(command: int, result: int, target_system: int = 245) -> Any:
+    return mav.MAVLink_command_ack_message(command, result, 0, 0, target_system, 191)
+
+
+def test_mode_names_and_unknown_modes() -> None:
+    assert dialect.mode_name(GUIDED) == "GUIDED" and dialect.mode_name(250) == "MODE_250"
+    assert dialect.result_name(None) == "no COMMAND_ACK"
+    assert dialect.result_name(mav.MAV_RESULT_TEMPORARILY_REJECTED) == "TEMPORARILY_REJECTED"
+    assert dialect.cmd_name(mav.MAV_CMD_NAV_TAKEOFF) == "MAV_CMD_NAV_TAKEOFF"
+    assert dialect.status_name(mav.MAV_STATE_STANDBY) == "STANDBY" and dialect.status_name(None) == "unknown"
+
+
+def test_velocity_target_is_velocity_and_yaw_rate_in_rad_per_s() -> None:
+    msg = dialect.velocity_target((1, 1), 2**32 + 5, mav.MAV_FRAME_LOCAL_NED, 1.0, -2.0, 0.5, 90.0)
+    assert msg.time_boot_ms == 5 and msg.type_mask == dialect.VELOCITY_TYPE_MASK == 0x05C7
+    assert (msg.vx, msg.vy, msg.vz) == (1.0, -2.0, 0.5) and msg.yaw_rate == pytest.approx(math.pi / 2)
+
+
+def test_only_an_autopilot_heartbeat_is_the_vehicle() -> None:
+    codec = mav.MAVLink(None, srcSystem=1, srcComponent=1)
+    hb = codec.parse_buffer(heartbeat(0).pack(codec))[0]
+    gcs = mav.MAVLink_heartbeat_message(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)
+    gcs = codec.parse_buffer(gcs.pack(codec))[0]
+    assert dialect.is_autopilot(hb, 0, 0) and dialect.is_autopilot(hb, 1, 1)
+    assert not dialect.is_autopilot(hb, 2, 0) and not dialect.is_autopilot(gcs, 0, 0)
+
+
+def test_heartbeat_sets_mode_and_arming_and_drops_the_setpoint_out_of_guided() -> None:
+    v = Vehicle()
+    assert v.update(heartbeat(GUIDED, armed=True, status=mav.MAV_STATE_ACTIVE), 1.0).drop_setpoint is False
+    assert v.armed and v.mode == "GUIDED" and v.in_air  # no EXTENDED_SYS_STATE: armed + ACTIVE is flying
+    assert v.heartbeats == 1 and v.heartbeat_at == 1.0 and v.heartbeat_msg == 1
+    assert v.update(heartbeat(LOITER, armed=True), 1.5).drop_setpoint  # a pilot's switch
+    assert v.update(heartbeat(GUIDED, armed=False), 2.0).drop_setpoint  # disarmed
+    state = v.autopilot_state(2.5)
+    assert state.link_age == pytest.approx(0.5) and not state.armed
+
+
+def test_heartbeat_after_a_silence_asks_for_streams_again() -> None:
+    v = Vehicle()
+    assert not v.update(heartbeat(0), 1.0).request_streams
+    assert not v.update(heartbeat(0), 1.0 + REBOOT_GAP).request_streams
+    assert v.update(heartbeat(0), 2.0 + 2 * REBOOT_GAP).request_streams
+
+
+def test_a_mode_we_commanded_is_no_failsafe_and_loiter_is_a_pilot() -> None:
+    v = Vehicle(command_window=3.0)
+    v.update(heartbeat(GUIDED, armed=True), 0.0)
+    v.commanded = ("RTL", 1.0)
+    v.update(heartbeat(RTL, armed=True), 2.0)
+    assert v.autopilot_state(2.0).flight_mode is FlightMode.RTL and v.failsafes.reason == ""
+    v.update(heartbeat(LOITER, armed=True), 3.0)
+    assert v.autopilot_state(3.0).flight_mode is FlightMode.MANUAL
+
+
+def test_fence_status_names_the_failsafe_of_a_mode_change() -> None:
+    v = Vehicle()
+    v.update(heartbeat(GUIDED, armed=True), 0.0)
+    v.update(mav.MAVLink_fence_status_message(1, 1, mav.FENCE_BREACH_MAXALT, 0, 0), 0.5)
+    v.update(heartbeat(RTL, armed=True), 1.0)
+    state = v.autopilot_state(1.0)
+    assert v.fence_breached and state.failsafe == "fence breach" and state.autonomous
+
+
+def test_acks_match_by_command_after_the_mark_and_ignore_other_stations() -> None:
+    v = Vehicle(source_system=245)
+    mark = v.messages
+    v.update(ack(mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_RESULT_IN_PROGRESS), 0.0)
+    assert v.ack_after(mav.MAV_CMD_NAV_TAKEOFF, mark) is None  # not final yet
+    assert v.ack_after(mav.MAV_CMD_NAV_TAKEOFF, mark, final=False) == mav.MAV_RESULT_IN_PROGRESS
+    v.update(ack(mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_RESULT_DENIED, target_system=255), 0.1)  # Mission Planner's
+    assert v.ack_after(mav.MAV_CMD_NAV_TAKEOFF, mark) is None
+    v.update(ack(mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_RESULT_ACCEPTED), 0.2)
+    assert v.ack_after(mav.MAV_CMD_NAV_TAKEOFF, mark) == mav.MAV_RESULT_ACCEPTED
+    assert v.ack_after(mav.MAV_CMD_NAV_TAKEOFF, v.messages) is None  # nothing after the latest
+
+
+def test_position_battery_and_params() -> None:
+    v = Vehicle()
+    v.update(mav.MAVLink_global_position_int_message(0, 0, 0, 0, 1500, 0, 0, 0, 65535), 0.0)
+    assert math.isnan(v.lat) and v.alt == 1.5 and v.heading is None  # no fix yet: lat/lon 0
+    v.update(mav.MAVLink_attitude_message(0, 0, 0, -math.pi / 2, 0, 0, 0), 0.0)
+    assert v.autopilot_state(0.0).heading == pytest.approx(270.0)
+    cells = [4100, 4100, 4100, 4100] + [0xFFFF] * 6
+    v.update(
+        mav.MAVLink_battery_status_message(
+            0, 0, 0, 0, cells, -1, -1, -1, 42, 0, mav.MAV_BATTERY_CHARGE_STATE_LOW, [0, 0, 0, 0], 0, 0
+        ),
+        1.0,
+    )
+    state = v.autopilot_state(1.0)
+    assert state.cells == 4 and state.voltage == pytest.approx(16.4) and state.battery == 42
+    assert state.battery_warning == "low" and "battery failsafe" in v.failsafes.active
+    v.update(mav.MAVLink_param_value_message(b"FS_GCS_ENABLE", 1.0, mav.MAV_PARAM_TYPE_INT8, 1, 0), 1.0)
+    assert v.params["FS_GCS_ENABLE"] == 1.0 and v.param_after("FS_GCS_ENABLE", 0)
+
+
+def test_statustext_reasons_and_readiness() -> None:
+    v = Vehicle()
+    v.update(heartbeat(0, status=mav.MAV_STATE_BOOT), 0.0)
+    assert any("still booting" in r for r in v.not_ready()) and len(v.not_ready()) == 3
+    mark = v.messages
+    v.update(mav.MAVLink_statustext_message(mav.MAV_SEVERITY_CRITICAL, b"PreArm: Need 3D Fix", 0, 0), 0.1)
+    assert v.texts_since(mark) == "PreArm: Need 3D Fix" == v.latest_prearm()
+    v.update(heartbeat(0), 0.2)
+    v.update(mav.MAVLink_ekf_status_report_message(dialect.EKF_NEEDED, 0, 0, 0, 0, 0, 0), 0.2)
+    v.update(mav.MAVLink_gps_raw_int_message(0, 3, 0, 0, 0, 0, 0, 0, 0, 10), 0.2)
+    assert v.not_ready() == []

@@ -29,10 +29,12 @@ from typing import Any
 
 import pytest
 
+from antalate_lcm.autopilot.mavlink import LinkOpener, MavlinkAutopilot
 from antalate_lcm.bus import Bus
 from antalate_lcm.config import parse_config
 from antalate_lcm.executor import Executor
 from antalate_lcm.hlc.machine import ErrorCode
+from antalate_lcm.hlc.node import HlcNode
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, operator_cmd_t, telemetry_t
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
@@ -98,7 +100,9 @@ class InProcessAgent:
         *,
         hlc: dict[str, Any] | None = None,
         operator: dict[str, Any] | None = None,
+        link: LinkOpener | None = None,
     ) -> None:
+        connection = vehicle.udp_url if link is None else "memory:emulator"
         doc = {
             "agent": {"name": "copter"},
             "buses": {"lan": "memq://"},
@@ -107,7 +111,7 @@ class InProcessAgent:
                 "default_takeoff_altitude": 3.0,
                 "link_timeout": 1.5,
                 **(hlc or {}),
-                "autopilot_params": {"connection": vehicle.udp_url, **AP},
+                "autopilot_params": {"connection": connection, **AP},
             },
             "bma": _bma(**(operator or {})),
         }
@@ -120,6 +124,11 @@ class InProcessAgent:
         self.telemetry: list[telemetry_t] = []
         self.probe = Node(self.config, self.context, name="probe")
         self.nodes = agent_nodes(self.config, self.context)
+        if link is not None:  # the adapter on the test's own link (a MemoryLink): the HLC comes first
+            params, clock = self.config.hlc.autopilot_params, self.context.executor.clock
+            self.nodes[0] = HlcNode(
+                self.config, self.context, MavlinkAutopilot(params, clock=clock, link=link)
+            )
 
     def start(self) -> InProcessAgent:
         self.context.executor.start()

@@ -51,6 +51,19 @@ def test_answering_link_replies_through_the_codec() -> None:
         MemoryLink(lambda _data: None).push(dialect.gcs_heartbeat())
 
 
+def test_a_failing_handler_is_logged_and_the_link_goes_on(caplog: pytest.LogCaptureFixture) -> None:
+    def broken(msg: Any) -> Iterable[Any]:
+        if msg.get_type() == "HEARTBEAT":
+            raise RuntimeError("vehicle bug")
+        yield from echo_ack(msg)
+
+    link = MemoryLink.answering(broken)
+    link.send(dialect.gcs_heartbeat())  # the sender (the adapter's transmit thread) is not hit
+    link.send(dialect.command_long((1, 1), mav.MAV_CMD_NAV_TAKEOFF, 0))
+    assert link.recv(1.0).get_type() == "COMMAND_ACK"
+    assert "MemoryLink handler failed on HEARTBEAT" in caplog.text
+
+
 def test_signed_link_drops_what_the_vehicle_sends_without_the_key() -> None:
     signed = MemoryLink.answering(echo_ack, signing_key=KEY)
     signed.send(dialect.command_long((1, 1), mav.MAV_CMD_NAV_TAKEOFF, 0))

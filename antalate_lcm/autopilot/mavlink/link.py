@@ -16,6 +16,7 @@ output to `MemoryLink.feed`.
 from __future__ import annotations
 
 import abc
+import logging
 import os
 import queue
 import sys
@@ -28,6 +29,8 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from antalate_lcm.autopilot.mavlink.signing import allow_unsigned, verify_signature_first
+
+log = logging.getLogger("antalate.autopilot.mavlink")
 
 __all__ = ["LinkClosed", "MavLink", "MemoryLink", "PymavlinkLink", "PeerClosed"]
 
@@ -200,9 +203,15 @@ class MemoryLink(MavLink):
             with lock:
                 received = vehicle.parse_buffer(data) or []
             for msg in received:
-                if msg.get_type() != "BAD_DATA":
-                    for reply in handler(msg):
-                        link.push(reply)
+                if msg.get_type() == "BAD_DATA":
+                    continue
+                try:
+                    replies = list(handler(msg))
+                except Exception:  # a test's vehicle failing must show, not end the sender's thread
+                    log.exception("MemoryLink handler failed on %s", msg.get_type())
+                    continue
+                for reply in replies:
+                    link.push(reply)
 
         def push(msg: Any) -> None:
             with lock:

@@ -42,18 +42,6 @@ MESSAGE_TYPES: dict[str, type] = {
 }
 
 
-def constant_names(msg_type: type) -> dict[int, str]:
-    """A message type's ``const`` members by value (e.g. ``{3: "MISSION"}`` for ``mc_state_t``).
-
-    Read from the generated class, so a state added to the ``.lcm`` file needs no edit elsewhere.
-    """
-    return {
-        value: name
-        for name, value in vars(msg_type).items()
-        if name.isupper() and isinstance(value, int) and not isinstance(value, bool)
-    }
-
-
 @dataclass(frozen=True)
 class TopicSpec:
     """A topic's message type and its default channel template (``{agent}``, ``{arbiter}``, ... fields)."""

@@ -24,30 +24,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from antalate_lcm.geo import FlatFrame, wrap_360
-from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
-from antalate_lcm.topics import constant_names
-
-#: State names by wire value (from the generated constants, so a new state needs no edit here).
-MC_STATES: dict[int, str] = constant_names(mc_state_t)
-HLC_STATES: dict[int, str] = constant_names(hlc_state_t)
-ERROR_SEVERITIES: dict[int, str] = constant_names(hlc_error_t)
+from antalate_lcm.vocabulary import HlcState, McState, Severity, name_of
 
 #: The topics the model understands (config topic names).
 WATCHED_TOPICS: tuple[str, ...] = ("MC_STATE", "HLC_STATE", "TELEMETRY", "HLC_ERROR", "ARBITER")
-
-
-def state_name(table: dict[int, str], value: int) -> str:
-    """A state's name; an unknown value (a newer agent) is shown as a number rather than dropped."""
-    return table.get(value, f"?{value}")
-
-
-class Severity(enum.IntEnum):
-    """Event severities; the values of INFO..CRITICAL match ``hlc_error_t``'s constants."""
-
-    INFO = hlc_error_t.INFO
-    WARNING = hlc_error_t.WARNING
-    ERROR = hlc_error_t.ERROR
-    CRITICAL = hlc_error_t.CRITICAL
 
 
 class EventKind(enum.Enum):
@@ -210,7 +190,7 @@ class SwarmModel:
             handler(self, view, msg, now, wall, fields or {})
 
     def _on_mc(self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]) -> None:
-        name = state_name(MC_STATES, msg.state)
+        name = name_of(McState, msg.state) or f"?{msg.state}"  # a newer agent's state: shown, not dropped
         view.mc_reason = getattr(msg, "reason", "")
         if name != view.mc_state:
             old = view.mc_state
@@ -224,7 +204,7 @@ class SwarmModel:
         view.last_command_seq = msg.last_command_seq
 
     def _on_hlc(self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]) -> None:
-        name = state_name(HLC_STATES, msg.state)
+        name = name_of(HlcState, msg.state) or f"?{msg.state}"
         view.autopilot = msg.autopilot
         view.hlc_reason = getattr(msg, "reason", "")
         if name != view.hlc_state:

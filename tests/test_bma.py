@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.bma import ActivationRule, Arbiter, mc_state_name
+from antalate_lcm.bma import ActivationRule, Arbiter
 from antalate_lcm.msgs import arbiter_status_t, mc_state_t, telemetry_t
 from tests.bma_support import AGENT, Recorder, harness, make_config, wait_for
 
@@ -64,11 +64,6 @@ def test_permanent_failure_is_never_retried() -> None:
     arb.failed("a", "cannot construct", permanent=True)
     arb.on_state("STANDBY")
     assert arb.on_state("MISSION").activate == []
-
-
-def test_mc_state_names_come_from_the_generated_type() -> None:
-    assert mc_state_name(mc_state_t.MISSION) == "MISSION"
-    assert mc_state_name(99) is None
 
 
 # ---------------------------------------------------------------------- the node

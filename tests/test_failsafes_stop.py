@@ -16,14 +16,13 @@ from collections.abc import Iterator
 import pytest
 
 from antalate_lcm.config import AgentConfig, Config, HlcConfig
-from antalate_lcm.hlc.machine import HlcState
 from antalate_lcm.hlc.node import HlcNode
-from antalate_lcm.mc.machine import McState
 from antalate_lcm.mc.node import McNode
 from antalate_lcm.msgs import operator_cmd_t
 from antalate_lcm.node import Context, Node
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.runtime.launch import run_until_signal
+from antalate_lcm.vocabulary import HlcState, McState
 from tests.netns import wait_for
 
 STOPS = 20

@@ -14,7 +14,6 @@ from typing import Any
 from antalate_lcm.autopilot.base import Frame
 from antalate_lcm.autopilot.sim import SimAutopilot
 from antalate_lcm.config import AgentConfig, Config, HlcConfig, McConfig
-from antalate_lcm.hlc.machine import HlcState
 from antalate_lcm.hlc.node import HlcNode
 from antalate_lcm.hlc.velocity_guard import (
     VelocityCommand,
@@ -23,10 +22,10 @@ from antalate_lcm.hlc.velocity_guard import (
     Verdict,
     check_velocity,
 )
-from antalate_lcm.mc.machine import McState
 from antalate_lcm.mc.node import McNode
 from antalate_lcm.msgs import operator_cmd_t, velocity_cmd_t
 from antalate_lcm.node import Context, Node
+from antalate_lcm.vocabulary import HlcState, McState
 from tests.netns import wait_for
 
 LIMITS = VelocityLimits(velocity_timeout=0.5, max_link_age=1.5)  # the node passes its link_timeout

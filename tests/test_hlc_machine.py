@@ -21,13 +21,11 @@ from antalate_lcm.hlc.machine import (
     HlcEvent,
     HlcOutcome,
     HlcParams,
-    HlcState,
-    Severity,
     classify,
     pilot_in_control,
 )
-from antalate_lcm.mc.machine import McState, MissionControl, OperatorCommand
-from antalate_lcm.msgs import hlc_error_t, hlc_state_t
+from antalate_lcm.mc.machine import MissionControl
+from antalate_lcm.vocabulary import Command, HlcState, McState, Severity
 
 H = HlcState
 M = McState
@@ -229,13 +227,6 @@ def _fired(
     outcome = feed(hlc_in(frm), what)
     assert outcome.transition is not None, _row_id(row)
     return (frm, outcome.transition.event, to)
-
-
-def test_state_values_match_the_lcm_constants() -> None:
-    for s in HlcState:
-        assert getattr(hlc_state_t, s.name) == s.value
-    for sev in Severity:
-        assert getattr(hlc_error_t, sev.name) == sev.value
 
 
 @pytest.mark.parametrize("row", DESIGN_ROWS + EXTRA_ROWS, ids=_row_id)
@@ -683,7 +674,7 @@ class Loop:
         if transition:
             self.mc_log.append((transition.from_state, transition.to_state))
 
-    def command(self, command: OperatorCommand, seq: int, altitude: float = 0.0) -> None:
+    def command(self, command: Command, seq: int, altitude: float = 0.0) -> None:
         outcome = self.mc.on_command(command, seq, self.clock.t, altitude=altitude)
         assert outcome.accepted, outcome.reason
         self._mc(outcome)
@@ -703,13 +694,13 @@ def test_closed_loop_takeoff_mission_rtl() -> None:
     loop = Loop()
     loop.run(1.0)
     assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
-    loop.command(OperatorCommand.TAKEOFF, 1, altitude=15.0)
+    loop.command(Command.TAKEOFF, 1, altitude=15.0)
     loop.run(10.0)
     assert (loop.mc.state, loop.hlc.state) == (M.MISSION, H.AIRBORNE)
     assert loop.sim.state().alt == pytest.approx(15.0, abs=0.01)
     loop.sim.set_velocity(5.0, 0.0, 0.0, 0.0, Frame.NED)
     loop.run(2.0)
-    loop.command(OperatorCommand.RTL, 2)
+    loop.command(Command.RTL, 2)
     loop.run(30.0)
     assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
     assert loop.hlc_log == [
@@ -733,7 +724,7 @@ def test_closed_loop_takeoff_mission_rtl() -> None:
 def test_closed_loop_arm_refused_returns_everyone_to_standby() -> None:
     loop = Loop({"refuse_arm": True})
     loop.run(1.0)
-    loop.command(OperatorCommand.TAKEOFF, 1)
+    loop.command(Command.TAKEOFF, 1)
     loop.run(2.0)
     assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
     assert loop.errors == [ErrorCode.ARM_FAILED]
@@ -743,7 +734,7 @@ def test_closed_loop_arm_refused_returns_everyone_to_standby() -> None:
 def test_closed_loop_pilot_takeover_and_link_loss() -> None:
     loop = Loop({"takeover_land_delay": 1.0})
     loop.run(1.0)
-    loop.command(OperatorCommand.TAKEOFF, 1)
+    loop.command(Command.TAKEOFF, 1)
     loop.run(6.0)
     loop.sim.pilot_takeover()
     loop.run(0.5)
@@ -759,7 +750,7 @@ def test_closed_loop_pilot_takeover_and_link_loss() -> None:
 def test_closed_loop_low_battery_brings_it_home() -> None:
     loop = Loop({"battery": 25.0, "drain_flying": 30.0})  # 0.5 %/s: low after ~10 s in the air
     loop.run(1.0)
-    loop.command(OperatorCommand.TAKEOFF, 1)
+    loop.command(Command.TAKEOFF, 1)
     loop.run(9.0)
     assert (loop.mc.state, loop.hlc.state) == (M.MISSION, H.AIRBORNE)
     loop.run(2.0)
@@ -774,7 +765,7 @@ def test_closed_loop_low_battery_brings_it_home() -> None:
 def test_closed_loop_restarts_resync_without_commands() -> None:
     loop = Loop()
     loop.run(1.0)
-    loop.command(OperatorCommand.TAKEOFF, 1)
+    loop.command(Command.TAKEOFF, 1)
     loop.run(6.0)
     assert (loop.mc.state, loop.hlc.state) == (M.MISSION, H.AIRBORNE)
     loop.sim.rtl()  # e.g. the autopilot's own failsafe
@@ -870,7 +861,7 @@ def test_low_cell_voltage_validated(value: float) -> None:
 def test_closed_loop_link_regained_in_the_air_returns_home_by_policy() -> None:
     loop = Loop()
     loop.run(1.0)
-    loop.command(OperatorCommand.TAKEOFF, 1)
+    loop.command(Command.TAKEOFF, 1)
     loop.run(6.0)
     assert (loop.mc.state, loop.hlc.state) == (M.MISSION, H.AIRBORNE)
     loop.sim.set_link_loss(True)
@@ -890,13 +881,13 @@ def test_closed_loop_link_regained_in_the_air_returns_home_by_policy() -> None:
 def test_closed_loop_fence_brake_holds_until_the_operator_lands() -> None:
     loop = Loop()
     loop.run(1.0)
-    loop.command(OperatorCommand.TAKEOFF, 1)
+    loop.command(Command.TAKEOFF, 1)
     loop.run(6.0)
     loop.sim.trigger_failsafe("brake", "fence breach")
     loop.run(2.0)
     assert (loop.mc.state, loop.hlc.state) == (M.HOLD, H.HOLD)
     assert "fence breach" in loop.hlc.reason and loop.sim.state().in_air
-    loop.command(OperatorCommand.LAND, 2)
+    loop.command(Command.LAND, 2)
     loop.run(10.0)
     assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
     assert loop.errors == [ErrorCode.AUTOPILOT_FAILSAFE]

@@ -23,9 +23,7 @@ from antalate_lcm.bma import BmaNode
 from antalate_lcm.bus import Bus
 from antalate_lcm.config import Config, parse_config
 from antalate_lcm.executor import Executor
-from antalate_lcm.hlc.machine import HlcState
 from antalate_lcm.hlc.node import HlcNode
-from antalate_lcm.mc.machine import McState
 from antalate_lcm.mc.node import McNode
 from antalate_lcm.msgs import (
     direction_cmd_t,
@@ -37,6 +35,7 @@ from antalate_lcm.msgs import (
 )
 from antalate_lcm.node import Context, InsecureBus, Node
 from antalate_lcm.security import Reason, sign
+from antalate_lcm.vocabulary import HlcState, McState
 from tests.agent_harness import FAST_SIM
 from tests.netns import wait_for
 

@@ -19,7 +19,6 @@ import httpx
 import pytest
 
 from antalate_lcm.errors import AntalateError
-from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
 from antalate_lcm.station import StationServer, StationSettings, default_db_path, models, run_station
 from antalate_lcm.station._auth import sha256_hex
 from antalate_lcm.station._settings import ApiKey
@@ -471,18 +470,6 @@ def test_openapi_document_is_served_and_committed_copy_is_current(client: httpx.
     assert committed == served, (
         "docs/openapi.json is stale: python -m antalate_lcm.station.openapi > docs/openapi.json"
     )
-
-
-def _constants(cls: type) -> set[str]:
-    return {k for k, v in vars(cls).items() if k.isupper() and isinstance(v, int)}
-
-
-def test_state_and_command_names_match_the_lcm_types() -> None:
-    from typing import get_args
-
-    assert set(get_args(models.McStateName)) == _constants(mc_state_t)
-    assert set(get_args(models.HlcStateName)) == _constants(hlc_state_t)
-    assert set(get_args(models.CommandName)) == _constants(operator_cmd_t)
 
 
 def test_peer_detection_has_the_fields_of_peer_detection_t() -> None:

@@ -36,8 +36,8 @@ pytestmark = pytest.mark.netns
 AGENT = r"""
 import json, logging, sys, threading, time
 from antalate_lcm.config import parse_config
-from antalate_lcm.hlc.machine import ErrorCode, HlcState
-from antalate_lcm.mc.machine import McState
+from antalate_lcm.hlc.machine import ErrorCode
+from antalate_lcm.vocabulary import HlcState, McState
 from antalate_lcm.node import Context, Node
 from antalate_lcm.runtime.agent import agent_nodes, validate
 

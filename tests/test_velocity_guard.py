@@ -7,7 +7,6 @@ import math
 import pytest
 
 from antalate_lcm.autopilot.base import Frame
-from antalate_lcm.hlc.machine import HlcState
 from antalate_lcm.hlc.velocity_guard import (
     GuardDecision,
     Velocity,
@@ -17,7 +16,7 @@ from antalate_lcm.hlc.velocity_guard import (
     Verdict,
     check_velocity,
 )
-from antalate_lcm.mc.machine import McState
+from antalate_lcm.vocabulary import HlcState, McState
 
 LIMITS = VelocityLimits(max_horizontal=5.0, max_vertical=2.0, max_yaw_rate=90.0, velocity_timeout=0.5)
 OK = (HlcState.AIRBORNE, McState.MISSION)

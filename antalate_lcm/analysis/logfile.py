@@ -19,10 +19,9 @@ import lcm
 from antalate_lcm.analysis.model import DirectionCommand, SwarmRecord, TelemetrySample
 from antalate_lcm.bus import _captured_stderr
 from antalate_lcm.errors import AntalateError
-from antalate_lcm.hlc.machine import HlcState
-from antalate_lcm.mc.machine import McState
 from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, telemetry_t
 from antalate_lcm.topics import TOPICS, channel_regex
+from antalate_lcm.vocabulary import HlcState, McState, name_of
 
 #: Every LCM log event starts with this sync word (big-endian), so a file that does not is no log.
 LOG_SYNC_WORD = 0xEDA1DA01
@@ -43,13 +42,6 @@ def _route(channel: str) -> tuple[str, str] | None:
         if m is not None:
             return topic, m.groupdict().get("agent", "")
     return None
-
-
-def _state_name(enum: type[McState] | type[HlcState], value: int) -> str:
-    try:
-        return enum(value).name
-    except ValueError:
-        return f"?{value}"
 
 
 def check_log_file(path: str | Path) -> Path:
@@ -172,6 +164,6 @@ def _decode_into(
             )
         )
     elif isinstance(msg, mc_state_t):
-        rec.add_state(rec.mc_states, t, _state_name(McState, msg.state))
+        rec.add_state(rec.mc_states, t, name_of(McState, msg.state) or f"?{msg.state}")
     elif isinstance(msg, hlc_state_t):
-        rec.add_state(rec.hlc_states, t, _state_name(HlcState, msg.state))
+        rec.add_state(rec.hlc_states, t, name_of(HlcState, msg.state) or f"?{msg.state}")

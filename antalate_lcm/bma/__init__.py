@@ -3,18 +3,16 @@
 ``validate_bma_config(config)`` checks every ``[[bma]]`` before nodes start; ``BmaNode`` runs one.
 """
 
-from antalate_lcm.bma.arbiter import MC_STATE_NAMES, ActivationRule, Arbiter, mc_state_name
+from antalate_lcm.bma.arbiter import ActivationRule, Arbiter
 from antalate_lcm.bma.node import BmaNode
 from antalate_lcm.bma.plan import BehaviorPlan, BmaPlan, plan_bma, validate_bma_config
 
 __all__ = [
-    "MC_STATE_NAMES",
     "ActivationRule",
     "Arbiter",
     "BehaviorPlan",
     "BmaNode",
     "BmaPlan",
-    "mc_state_name",
     "plan_bma",
     "validate_bma_config",
 ]

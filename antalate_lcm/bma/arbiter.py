@@ -23,17 +23,6 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
-from antalate_lcm.msgs import mc_state_t
-from antalate_lcm.topics import constant_names
-
-#: mc_state_t's state values by number, from the generated type (so the .lcm stays the only source).
-MC_STATE_NAMES: dict[int, str] = constant_names(mc_state_t)
-
-
-def mc_state_name(value: int) -> str | None:
-    """The name of an ``mc_state_t.state`` value, or None for a value the contract does not define."""
-    return MC_STATE_NAMES.get(value)
-
 
 @dataclass(frozen=True)
 class ActivationRule:

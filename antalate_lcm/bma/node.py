@@ -11,11 +11,12 @@ from typing import Any
 
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.behavior import Behavior, BehaviorContext, failure_reason
-from antalate_lcm.bma.arbiter import Arbiter, mc_state_name
+from antalate_lcm.bma.arbiter import Arbiter
 from antalate_lcm.bma.plan import BehaviorPlan, plan_bma
 from antalate_lcm.config import BmaConfig, Config
 from antalate_lcm.msgs import arbiter_status_t, mc_state_t
 from antalate_lcm.node import Context, Node
+from antalate_lcm.vocabulary import McState, name_of
 
 #: s: the longest restart back-off, and how long a behavior must run for its failures to be forgotten.
 _MAX_BACKOFF = 60.0
@@ -124,7 +125,7 @@ class BmaNode(Node):
     # ------------------------------------------------------------------ state
     def _on_state_msg(self, msg: Any) -> None:
         if self._reading_mc:
-            state = mc_state_name(msg.state)
+            state = name_of(McState, msg.state)
             if state is None:
                 self._bad_state_log.log(
                     ("state", msg.state),

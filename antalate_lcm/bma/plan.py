@@ -13,14 +13,15 @@ from typing import Any
 from pydantic import BaseModel
 
 from antalate_lcm.behavior import Behavior
-from antalate_lcm.bma.arbiter import MC_STATE_NAMES, ActivationRule
+from antalate_lcm.bma.arbiter import ActivationRule
 from antalate_lcm.config import BehaviorConfig, BmaConfig, Config
 from antalate_lcm.errors import ConfigError, PluginNotFound
 from antalate_lcm.msgs import behavior_state_t, mc_state_t
 from antalate_lcm.plugins import BEHAVIORS, load_plugin
 from antalate_lcm.strict import StrictError, validate_strict
+from antalate_lcm.vocabulary import McState, names
 
-MC_STATES: tuple[str, ...] = tuple(MC_STATE_NAMES.values())
+MC_STATES: tuple[str, ...] = names(McState)
 
 
 @dataclass(frozen=True)

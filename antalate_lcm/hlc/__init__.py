@@ -15,9 +15,7 @@ from antalate_lcm.hlc.machine import (
     HlcOutcome,
     HlcParams,
     HlcRow,
-    HlcState,
     HlcTransition,
-    Severity,
 )
 
 __all__ = [
@@ -31,7 +29,5 @@ __all__ = [
     "HlcOutcome",
     "HlcParams",
     "HlcRow",
-    "HlcState",
     "HlcTransition",
-    "Severity",
 ]

@@ -85,38 +85,10 @@ import enum
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar
+from typing import ClassVar
 
 from antalate_lcm.autopilot.base import AutopilotState, FlightMode, altitude_reached
-from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
-
-if TYPE_CHECKING:
-    from antalate_lcm.mc.machine import McState
-
-
-class HlcState(enum.IntEnum):
-    """HLC states; values are the ``hlc_state_t`` constants (shared with the MC machine)."""
-
-    INIT = hlc_state_t.INIT
-    READY = hlc_state_t.READY
-    TAKEOFF = hlc_state_t.TAKEOFF
-    GAINING_ALTITUDE = hlc_state_t.GAINING_ALTITUDE
-    AIRBORNE = hlc_state_t.AIRBORNE
-    RTL = hlc_state_t.RTL
-    LANDING = hlc_state_t.LANDING
-    MANUAL = hlc_state_t.MANUAL
-    LOW_BATTERY = hlc_state_t.LOW_BATTERY
-    LLC_DOWN = hlc_state_t.LLC_DOWN
-    HOLD = hlc_state_t.HOLD
-
-
-class Severity(enum.IntEnum):
-    """``hlc_error_t`` severities."""
-
-    INFO = hlc_error_t.INFO
-    WARNING = hlc_error_t.WARNING
-    ERROR = hlc_error_t.ERROR
-    CRITICAL = hlc_error_t.CRITICAL
+from antalate_lcm.vocabulary import HlcState, McState, Severity
 
 
 class ErrorCode(enum.IntEnum):
@@ -349,7 +321,7 @@ def _battery_low(m: HighLevelControl) -> bool:
 
 
 def _mc_left_takeoff(m: HighLevelControl) -> bool:
-    return m.mc_state != mc_state_t.TAKEOFF
+    return m.mc_state != McState.TAKEOFF
 
 
 def _mc_changed_since_entry(m: HighLevelControl) -> bool:
@@ -639,15 +611,15 @@ class HighLevelControl:
         if self.mc_state != self.mc_state_at_entry:
             self.mc_moved = True
         events: list[tuple[HlcEvent, str]] = []
-        if state == mc_state_t.TAKEOFF:
+        if state == McState.TAKEOFF:
             self._mc_takeoff_altitude = takeoff_altitude
-            if previous != mc_state_t.TAKEOFF:
+            if previous != McState.TAKEOFF:
                 events.append((HlcEvent.MC_TAKEOFF, self._takeoff_detail()))
-        elif state == mc_state_t.LAND:
+        elif state == McState.LAND:
             events.append((HlcEvent.MC_LAND, "MC is in LAND"))
-        elif state == mc_state_t.RTL:
+        elif state == McState.RTL:
             events.append((HlcEvent.MC_RTL, "MC is in RTL"))
-        elif state == mc_state_t.HOLD:
+        elif state == McState.HOLD:
             events.append((HlcEvent.MC_HOLD, "MC is in HOLD"))
         events.extend(self._init_events())
         return self._fire(events, now)

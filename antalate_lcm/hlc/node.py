@@ -29,8 +29,6 @@ from antalate_lcm.hlc.machine import (
     HlcError,
     HlcOutcome,
     HlcParams,
-    HlcState,
-    Severity,
 )
 from antalate_lcm.hlc.velocity_guard import (
     GuardDecision,
@@ -43,6 +41,7 @@ from antalate_lcm.hlc.velocity_guard import (
 )
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t, velocity_cmd_t
 from antalate_lcm.node import Context, Node
+from antalate_lcm.vocabulary import HlcState, Severity
 
 _CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
 

@@ -30,8 +30,7 @@ import math
 from dataclasses import dataclass
 
 from antalate_lcm.autopilot.base import Frame
-from antalate_lcm.hlc.machine import HlcState
-from antalate_lcm.mc.machine import McState
+from antalate_lcm.vocabulary import HlcState, McState, name_of
 
 
 @dataclass(frozen=True)
@@ -98,13 +97,6 @@ class GuardDecision:
         return self.verdict is Verdict.SEND
 
 
-def _state_name(enum_cls: type[HlcState] | type[McState], value: int | None) -> str:
-    try:
-        return enum_cls(value).name
-    except ValueError:
-        return repr(value)
-
-
 def mission_flight(hlc_state: HlcState | int, mc_state: McState | int | None) -> bool:
     """The only situation in which behaviors may steer the vehicle."""
     return hlc_state == HlcState.AIRBORNE and mc_state == McState.MISSION
@@ -126,7 +118,8 @@ def check_velocity(
         return GuardDecision(
             Verdict.REJECT,
             None,
-            f"velocity ignored: HLC {_state_name(HlcState, hlc_state)}, MC {_state_name(McState, mc_state)}"
+            f"velocity ignored: HLC {name_of(HlcState, hlc_state) or repr(hlc_state)},"
+            f" MC {name_of(McState, mc_state) or repr(mc_state)}"
             " (needs HLC AIRBORNE and MC MISSION)",
         )
     if not link_age < limits.max_link_age:  # NaN is stale too

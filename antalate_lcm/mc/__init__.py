@@ -1,4 +1,7 @@
-"""Mission Control: the pure state machine (`machine`); the node that wires it to the bus lives beside it."""
+"""Mission Control: the pure state machine (`machine`); the node that wires it to the bus lives beside it.
+
+Its states and commands are wire vocabulary: `antalate_lcm.vocabulary` (`McState`, `Command`).
+"""
 
 from antalate_lcm.mc.machine import (
     MC_TABLE,
@@ -6,10 +9,8 @@ from antalate_lcm.mc.machine import (
     McOutcome,
     McParams,
     McRow,
-    McState,
     McTransition,
     MissionControl,
-    OperatorCommand,
 )
 
 __all__ = [
@@ -18,8 +19,6 @@ __all__ = [
     "McOutcome",
     "McParams",
     "McRow",
-    "McState",
     "McTransition",
     "MissionControl",
-    "OperatorCommand",
 ]

@@ -62,31 +62,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from antalate_lcm.hlc.machine import HlcState
-from antalate_lcm.msgs import mc_state_t, operator_cmd_t
-
-
-class McState(enum.IntEnum):
-    """MC states; values are the ``mc_state_t`` constants."""
-
-    INIT = mc_state_t.INIT
-    STANDBY = mc_state_t.STANDBY
-    TAKEOFF = mc_state_t.TAKEOFF
-    MISSION = mc_state_t.MISSION
-    RTL = mc_state_t.RTL
-    LAND = mc_state_t.LAND
-    MANUAL = mc_state_t.MANUAL
-    ERROR = mc_state_t.ERROR
-    HOLD = mc_state_t.HOLD
-    HLC_LOST = mc_state_t.HLC_LOST
-
-
-class OperatorCommand(enum.IntEnum):
-    """Operator commands; values are the ``operator_cmd_t`` constants."""
-
-    TAKEOFF = operator_cmd_t.TAKEOFF
-    LAND = operator_cmd_t.LAND
-    RTL = operator_cmd_t.RTL
+from antalate_lcm.vocabulary import Command, HlcState, McState
 
 
 class McEvent(enum.Enum):
@@ -114,7 +90,7 @@ class McEvent(enum.Enum):
         return cls[f"HLC_{state.name}"]
 
     @classmethod
-    def of_command(cls, command: OperatorCommand) -> McEvent:
+    def of_command(cls, command: Command) -> McEvent:
         return cls[f"OP_{command.name}"]
 
 
@@ -302,13 +278,13 @@ class MissionControl:
         self.hlc_changed = False  # the last hlc_state_t heard differs from the one before
         self.hlc_left_ready = False  # since entering TAKEOFF
         self.reason = "waiting for the HLC"  # why the MC is in `state` (mc_state_t.reason)
-        self._accepted: dict[tuple[str, int, OperatorCommand], float] = {}
+        self._accepted: dict[tuple[str, int, Command], float] = {}
 
     # ----------------------------------------------------------------- inputs
 
     def on_command(
         self,
-        command: OperatorCommand | int,
+        command: Command | int,
         seq: int,
         now: float,
         *,
@@ -317,7 +293,7 @@ class MissionControl:
     ) -> McOutcome:
         """An operator command (already authenticated by the node). `altitude` is for TAKEOFF only."""
         try:
-            cmd = OperatorCommand(command)
+            cmd = Command(command)
         except ValueError:
             return McOutcome(False, reason=f"unknown operator command {command!r} (seq {seq})")
         label = f"operator {cmd.name} seq {seq}" + (f" from {sender!r}" if sender else "")
@@ -327,7 +303,7 @@ class MissionControl:
             return McOutcome(
                 True, reason=f"{label}: duplicate of an accepted command, ignored", duplicate=True
             )
-        if cmd is OperatorCommand.TAKEOFF and not (math.isfinite(altitude) and altitude >= 0.0):
+        if cmd is Command.TAKEOFF and not (math.isfinite(altitude) and altitude >= 0.0):
             return McOutcome(False, reason=f"{label} rejected: altitude {altitude!r} is not a number >= 0")
         event = McEvent.of_command(cmd)
         row = self._match(event)
@@ -344,10 +320,10 @@ class MissionControl:
             return McOutcome(False, reason=f"{label} rejected in {self.state.name} ({why})")
         self._accepted[key] = now
         self.last_command_seq = seq
-        if cmd is OperatorCommand.TAKEOFF:
+        if cmd is Command.TAKEOFF:
             self.takeoff_altitude = altitude
         detail = f"seq {seq}" + (f" from {sender!r}" if sender else "")
-        if cmd is OperatorCommand.TAKEOFF:
+        if cmd is Command.TAKEOFF:
             detail += f", altitude {altitude:g} m" if altitude else ", default altitude"
         transition = self._apply(row, event, detail, now)
         return McOutcome(True, transition, reason=transition.reason)

@@ -12,9 +12,10 @@ from typing import Any
 
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.config import Config
-from antalate_lcm.mc.machine import McOutcome, McParams, McState, MissionControl, OperatorCommand
+from antalate_lcm.mc.machine import McOutcome, McParams, MissionControl
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
 from antalate_lcm.node import Context, Node
+from antalate_lcm.vocabulary import Command, McState, name_of
 
 _TICK_PERIOD = 0.1  # s: resolution of the takeoff-acknowledgement timeout and the HLC watchdog
 
@@ -65,10 +66,7 @@ class McNode(Node):
         # Authenticated (swarm key: MAC, window, per-sender replay guard persisted across restarts)
         # and validated (altitude) by Node.subscribe before it gets here: docs/security.md.
         sender = cmd.header.agent
-        try:
-            name = OperatorCommand(cmd.command).name
-        except ValueError:
-            name = f"#{cmd.command}"
+        name = name_of(Command, cmd.command) or f"#{cmd.command}"
         outcome = self.machine.on_command(
             cmd.command, cmd.header.seq, self.now, altitude=_finite_or_zero(cmd.altitude), sender=sender
         )

@@ -17,10 +17,8 @@ from pydantic import ValidationError
 from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, operator_cmd_t, payload_t, telemetry_t
 from antalate_lcm.station import models
 from antalate_lcm.station._auth import registration_key, registration_mac
-from antalate_lcm.topics import constant_names
+from antalate_lcm.vocabulary import HlcState, McState, name_of
 
-_MC_NAMES = constant_names(mc_state_t)
-_HLC_NAMES = constant_names(hlc_state_t)
 _TELEMETRY_FIELDS = ("lat", "lon", "alt", "heading", "vn", "ve", "vd", "battery", "armed", "in_air", "mode")
 
 
@@ -55,8 +53,8 @@ def report_body(
     body: dict[str, Any] = {
         "token": token,
         "agent": agent,
-        "mc_state": _MC_NAMES.get(mc.state) if mc is not None else None,
-        "hlc_state": _HLC_NAMES.get(hlc.state) if hlc is not None else None,
+        "mc_state": name_of(McState, mc.state) if mc is not None else None,
+        "hlc_state": name_of(HlcState, hlc.state) if hlc is not None else None,
         "telemetry": None,
         "feedback": None,
     }

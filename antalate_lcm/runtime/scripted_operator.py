@@ -10,9 +10,9 @@ import enum
 from dataclasses import dataclass, field
 
 from antalate_lcm.config import Config
-from antalate_lcm.mc.machine import McState, OperatorCommand
 from antalate_lcm.msgs import direction_cmd_t, mc_state_t, operator_cmd_t
 from antalate_lcm.node import Context, Node, TopicMatch
+from antalate_lcm.vocabulary import Command, McState
 
 _RESEND = 1.0  # s between repeats of a broadcast command while some agent has not followed
 
@@ -104,7 +104,7 @@ class ScriptedOperator(Node):
         self._phase_at = self.now
         self._last_sent = -1e9
 
-    def _broadcast(self, command: OperatorCommand) -> None:
+    def _broadcast(self, command: Command) -> None:
         if self.now - self._last_sent < _RESEND:
             return
         self._last_sent = self.now
@@ -139,7 +139,7 @@ class ScriptedOperator(Node):
                     d.active, (d.azimuth, d.speed) = True, self.direction
                     self._send("SWARM_DIRECTION_CMD", d)
             elif any(s is McState.STANDBY for s in states):
-                self._broadcast(OperatorCommand.TAKEOFF)
+                self._broadcast(Command.TAKEOFF)
         elif self.phase is Phase.MISSION:
             if self.now - self._phase_at >= self.mission_time:
                 self._enter(Phase.RETURNING)
@@ -147,7 +147,7 @@ class ScriptedOperator(Node):
             if all(s is McState.STANDBY for s in states):
                 self._enter(Phase.DONE)
             elif any(s in (McState.MISSION, McState.TAKEOFF) for s in states):
-                self._broadcast(OperatorCommand.RTL)
+                self._broadcast(Command.RTL)
 
     def report(self) -> str:
         lines = [f"{name}: {tl.render()}" for name, tl in sorted(self.timelines.items())]

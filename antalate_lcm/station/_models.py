@@ -20,25 +20,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-#: State names, exactly the constant names of ``mc_state_t`` / ``hlc_state_t`` (a test keeps them in sync).
-McStateName = Literal[
-    "INIT", "STANDBY", "TAKEOFF", "MISSION", "RTL", "LAND", "MANUAL", "ERROR", "HOLD", "HLC_LOST"
-]
-HlcStateName = Literal[
-    "INIT",
-    "READY",
-    "TAKEOFF",
-    "GAINING_ALTITUDE",
-    "AIRBORNE",
-    "RTL",
-    "LANDING",
-    "MANUAL",
-    "LOW_BATTERY",
-    "LLC_DOWN",
-    "HOLD",
-]
-#: Operator commands, the constant names of ``operator_cmd_t``.
-CommandName = Literal["TAKEOFF", "LAND", "RTL"]
+from antalate_lcm.vocabulary import CommandName, HlcStateName, McStateName
+
 #: An agent name as the config allows it (it is part of LCM channel names).
 AGENT_NAME = r"^[A-Za-z0-9_.-]{1,64}$"
 _HEX64 = r"^[0-9a-fA-F]{64}$"

@@ -26,10 +26,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from antalate_lcm.config import Config, load_config
-from antalate_lcm.hlc.machine import HlcState
-from antalate_lcm.mc.machine import McState
 from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, operator_cmd_t, telemetry_t
 from antalate_lcm.node import Context, Node, TopicMatch
+from antalate_lcm.vocabulary import HlcState, McState
 from operator_tui.commands import COMMANDS, CommandTracker, DirectionControl, Status
 
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import re
+import sys
 import threading
 import time
 import uuid
@@ -124,10 +125,10 @@ class BridgeConfig(BaseModel):
 
 def load_bridge_config(path: str | Path) -> BridgeConfig:
     """Read and check a bridge config; every mistake is a ConfigError naming the file and key."""
-    try:
+    if sys.version_info >= (3, 11):
         import tomllib
-    except ModuleNotFoundError:  # python 3.10
-        import tomli as tomllib  # type: ignore[no-redef]
+    else:  # pragma: no cover - exercised only on 3.10
+        import tomli as tomllib
 
     source = str(path)
     try:

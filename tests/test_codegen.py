@@ -1,7 +1,9 @@
-"""The generated message modules must match lcmtypes/ exactly: stale or hand-edited code fails here."""
+"""The generated message modules and their stubs must match lcmtypes/ exactly: stale or hand-edited
+code fails here."""
 
 from __future__ import annotations
 
+import ast
 import shutil
 from pathlib import Path
 
@@ -33,11 +35,61 @@ def test_a_missing_module_is_detected(tmp_path: Path, monkeypatch: pytest.Monkey
     assert _codegen.stale_files() == ["payload_t.py"]
 
 
-def test_every_lcm_file_has_a_module_and_a_topic_type() -> None:
+def test_a_hand_edited_or_missing_stub_is_detected(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    copy = tmp_path / "msgs"
+    shutil.copytree(_codegen.MSGS_DIR, copy)
+    target = copy / "header_t.pyi"
+    target.write_text(target.read_text().replace("mac: bytes", "mac: list[int]"))
+    (copy / "payload_t.pyi").unlink()
+    monkeypatch.setattr(_codegen, "MSGS_DIR", copy)
+    assert _codegen.stale_files() == ["payload_t.pyi", "header_t.pyi"]
+
+
+def test_every_lcm_file_has_a_module_a_stub_and_a_topic_type() -> None:
     names = {p.stem for p in _codegen.lcm_files()}
     assert names - {"header_t"} == set(MESSAGE_TYPES)
     for name in names:
         assert (_codegen.MSGS_DIR / f"{name}.py").exists()
+        assert (_codegen.MSGS_DIR / f"{name}.pyi").exists()
+
+
+def _stub_fields(name: str) -> dict[str, str]:
+    tree = ast.parse((_codegen.MSGS_DIR / f"{name}.pyi").read_text())
+    (cls,) = [node for node in tree.body if isinstance(node, ast.ClassDef)]
+    return {
+        node.target.id: ast.unparse(node.annotation)
+        for node in cls.body
+        if isinstance(node, ast.AnnAssign)
+        and isinstance(node.target, ast.Name)
+        and not ast.unparse(node.annotation).startswith(("ClassVar", "Final"))
+    }
+
+
+def test_stub_field_types_are_what_decode_produces() -> None:
+    """Decode a message with every array filled and compare each field's runtime type with its stub."""
+    header_fields = _stub_fields("header_t")
+    assert header_fields == {"utime": "int", "agent": "str", "seq": "int", "mac_len": "int", "mac": "bytes"}
+    for name, msg_type in MESSAGE_TYPES.items():
+        fields = _stub_fields(name)
+        assert list(fields) == list(msg_type.__slots__)
+        msg = msg_type()
+        msg.header.mac, msg.header.mac_len = b"\x01\x02", 2
+        for slot, dims in zip(msg_type.__slots__, msg_type.__dimensions__, strict=True):
+            if dims and fields[slot] == "list[str]":
+                setattr(msg, slot, ["a", "b"])
+                setattr(msg, dims[0], 2)
+            elif dims and fields[slot] == "bytes":
+                setattr(msg, slot, b"xy")
+                setattr(msg, dims[0], 2)
+        decoded = msg_type.decode(msg.encode())
+        for slot, annotation in fields.items():
+            value = getattr(decoded, slot)
+            if annotation.startswith("list["):
+                assert isinstance(value, list) and value, (name, slot)
+                inner = annotation.removeprefix("list[").removesuffix("]")
+                assert all(type(item).__name__ == inner for item in value), (name, slot, value)
+            else:
+                assert type(value).__name__ == annotation, (name, slot, annotation, value)
 
 
 def test_every_message_starts_with_a_header() -> None:

@@ -5,6 +5,7 @@
 * `dialect` -- ArduCopter's mode numbers, names and the messages sent (pure);
 * `vehicle` -- the vehicle's picture from its telemetry, COMMAND_ACK matching (pure);
 * `setpoints` -- when a velocity set-point may go out, and its resend (pure);
+* `streams` -- the telemetry requests, one at a time (pure);
 * `params` -- the validated ``[hlc.autopilot_params]``;
 * `failsafe` -- who changed the mode: a pilot or one of ArduCopter's failsafes (pure);
 * `vehicle_checks` -- the vehicle's own failsafe parameters, checked before flight (pure);

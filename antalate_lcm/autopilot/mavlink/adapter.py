@@ -60,11 +60,13 @@ Threads
 -------
 ``connect()`` opens the link (`link.MavLink`: pymavlink's connection, or a `link.MemoryLink` given
 as ``link=``) and starts a receive thread (decodes everything, keeps the `vehicle.Vehicle` picture under
-a lock, wakes the command waiters) and a transmit thread (our HEARTBEAT and the velocity resend).
+a lock, wakes the command waiters) and a transmit thread (our HEARTBEAT, the velocity resend, and the
+telemetry re-request after a reboot or a reopened link: no thread is started for it).
 Commands are blocking (`blocking` = True: the HLC runs them on its worker thread); `set_velocity` and
 `state` never wait. A TCP or serial link that drops is reopened by the receive thread every second
 until `close`. The rules themselves are pure: `dialect` (modes, names, messages), `vehicle` (telemetry
-into the picture, ACK matching) and `setpoints` (when a velocity target may go out).
+into the picture, ACK matching), `setpoints` (when a velocity target may go out) and `streams` (the
+telemetry requests).
 """
 
 from __future__ import annotations
@@ -85,9 +87,7 @@ from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotStat
 from antalate_lcm.autopilot.mavlink import dialect, vehicle_checks
 from antalate_lcm.autopilot.mavlink.dialect import (
     COPTER_MODES,
-    DATA_STREAMS,
     SET_MODE_ACK,
-    STREAMS,
     VELOCITY_TYPE_MASK,
     cmd_name,
     mode_name,
@@ -98,6 +98,7 @@ from antalate_lcm.autopilot.mavlink.link import MavLink, PymavlinkLink
 from antalate_lcm.autopilot.mavlink.params import DEFAULTS, Params, parse_params
 from antalate_lcm.autopilot.mavlink.setpoints import Setpoint, SetpointRules, Verdict
 from antalate_lcm.autopilot.mavlink.signing import signing_key
+from antalate_lcm.autopilot.mavlink.streams import StreamRequest
 from antalate_lcm.autopilot.mavlink.vehicle import Vehicle
 from antalate_lcm.autopilot.mavlink.vehicle_checks import Finding
 
@@ -174,6 +175,7 @@ class MavlinkAutopilot(Autopilot):
         self._cmd_lock = threading.Lock()  # one command (and its ACK wait) at a time
         self._v = self._new_vehicle()
         self._setpoint: Setpoint | None = None
+        self._streams: StreamRequest | None = None  # a telemetry re-request the transmit thread runs
         self._target: tuple[int, int] | None = None  # (system, component) of the autopilot
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -414,6 +416,7 @@ class MavlinkAutopilot(Autopilot):
         self._stop.set()
         with self._cond:
             self._setpoint = None
+            self._streams = None
             self._cond.notify_all()
         for t in self._threads:
             if t is not threading.current_thread():
@@ -569,14 +572,30 @@ class MavlinkAutopilot(Autopilot):
                 if verdict is Verdict.WITHHOLD:
                     self.setpoints_withheld += 1  # never queue a set-point into a cut link
                 due = self._setpoint if verdict is Verdict.SEND else None
+                streams = self._streams
+                requests = [] if streams is None else streams.step(self._v, self._target or (1, 1), now)
+                if streams is not None and streams.done:
+                    self._streams = None
+            for msg in requests:
+                try:
+                    self._send(msg)
+                except AutopilotError as exc:
+                    self._rate_log.log(("streams",), logging.WARNING, "telemetry request failed: %s", exc)
+                    with self._cond:
+                        self._streams = None
+                    break
             if due is not None:
                 try:
                     self._send_setpoint(due)
                 except AutopilotError as exc:
                     self._rate_log.log(("resend",), logging.WARNING, "velocity resend failed: %s", exc)
             with self._cond:
-                sp = self._setpoint
-                wake = next_heartbeat if sp is None else min(next_heartbeat, sp.next_send)
+                sp, streams = self._setpoint, self._streams
+                wake = min(
+                    next_heartbeat,
+                    math.inf if sp is None else sp.next_send,
+                    math.inf if streams is None else streams.deadline,
+                )
             self._stop.wait(min(max(wake - self.clock(), 0.005), 0.1))
 
     def _send_setpoint(self, sp: Setpoint) -> None:
@@ -688,41 +707,23 @@ class MavlinkAutopilot(Autopilot):
             raise AutopilotError(f"not ready to arm after {timeout:g} s: {'; '.join(reasons)}")
 
     def _rerequest_streams(self) -> None:
-        """Ask for the streams again, off the receive thread (the requests wait for ACKs it delivers)."""
+        """Ask for the streams again; the transmit thread sends the requests (nothing here waits)."""
         if not self._connected:
             return  # connect() is asking anyway
-
-        def run() -> None:
-            try:
-                self._request_streams()
-            except AutopilotError as exc:
-                self._rate_log.log(("streams",), logging.WARNING, "telemetry request failed: %s", exc)
-
-        threading.Thread(target=run, name=f"mavlink-streams {self.connection}", daemon=True).start()
+        with self._cond:
+            self._streams = StreamRequest(self._p.stream_rate_hz, self._ack_timeout)
 
     def _request_streams(self) -> None:
-        """Ask for the telemetry `state` needs: SET_MESSAGE_INTERVAL, or REQUEST_DATA_STREAM if unsupported."""
-        rate = self._p.stream_rate_hz
-        for i, (name, factor) in enumerate(STREAMS):
-            msg_id = getattr(mav, f"MAVLINK_MSG_ID_{name}")
-            result = self._command_result(
-                mav.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / (rate * factor), attempts=1
-            )
-            if i == 0 and result in (None, mav.MAV_RESULT_UNSUPPORTED, mav.MAV_RESULT_DENIED):
-                log.info(
-                    "SET_MESSAGE_INTERVAL %s (%s): falling back to REQUEST_DATA_STREAM",
-                    result_name(result).lower(),
-                    name,
-                )
-                self._request_data_streams(max(1, round(rate)))
+        """Ask for the telemetry `state` needs (`streams.StreamRequest`), waiting for each answer."""
+        req = StreamRequest(self._p.stream_rate_hz, self._ack_timeout)
+        while True:
+            with self._cond:
+                msgs = req.step(self._v, self._target or (1, 1), self.clock())
+            for msg in msgs:
+                self._send(msg)
+            if req.done:
                 return
-            if result != mav.MAV_RESULT_ACCEPTED:
-                log.debug("SET_MESSAGE_INTERVAL %s: %s", name, result_name(result))
-
-    def _request_data_streams(self, hz: int) -> None:
-        target = self._target_or_default()
-        for stream in DATA_STREAMS:
-            self._send(dialect.request_data_stream(target, stream, hz))
+            self._wait(req.answered, max(req.deadline - self.clock(), 0.0))
 
     # ----------------------------------------------------------------- vehicle parameters
 

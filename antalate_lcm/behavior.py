@@ -151,7 +151,7 @@ class BehaviorContext:
         expected = self._node.topic_spec(mapped).msg_type
         if not isinstance(msg, expected):
             raise TypeError(f"topic {mapped!r} carries {expected.__name__}, not {type(msg).__name__}")
-        return self._node.publish(mapped, msg, **fields)
+        return self._node.publish(mapped, msg, seq=None, **fields)
 
     def subscribe(self, topic: str, handler: Callable[[Any], None], **fields: str) -> Subscription:
         """Deliver this agent's ``topic`` to ``handler`` on the executor thread.

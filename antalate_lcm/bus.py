@@ -36,6 +36,7 @@ import lcm
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.executor import Executor
 from antalate_lcm.lcm_url import open_failure
+from antalate_lcm.topics import Message
 
 log = logging.getLogger("antalate.bus")
 
@@ -56,7 +57,7 @@ class Subscription:
 
     bus: str
     channel: str
-    msg_type: type | None
+    msg_type: type[Message] | None
     handler: Handler
     regex: re.Pattern[str] | None = None
     active: bool = field(default=True)
@@ -167,9 +168,10 @@ class _Link:
             watch = self._watched is None
             if watch:
                 ex = self._executor()
-                self._watched = (ex, lc.fileno())  # liblcm starts reading the sockets here
+                fd = lc.fileno()  # liblcm starts reading the sockets here
+                self._watched = (ex, fd)
         if watch:
-            ex.add_reader(self._watched[1], self._on_readable)
+            ex.add_reader(fd, self._on_readable)
 
     def remove(self, sub: Subscription) -> None:
         sub.active = False
@@ -318,7 +320,7 @@ class _Link:
                 self.handler_errors += 1
                 log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 
-    def _count_decode_error(self, channel: str, msg_type: type, data: bytes, exc: Exception) -> None:
+    def _count_decode_error(self, channel: str, msg_type: type[Message], data: bytes, exc: Exception) -> None:
         n = self.decode_errors.get(channel, 0) + 1
         self.decode_errors[channel] = n
         self._decode_log.log(
@@ -406,7 +408,7 @@ class Bus:
 
     def publish(self, bus: str, channel: str, msg: Any) -> bool:
         """Encode and send; a send error (link down) is logged at a limited rate and returns False."""
-        data = msg if isinstance(msg, (bytes, bytearray)) else msg.encode()  # noqa: UP038 - faster than a union
+        data = bytes(msg) if isinstance(msg, (bytes, bytearray)) else msg.encode()  # noqa: UP038 - faster than a union
         try:
             self._link(bus).publish(channel, data)
         except OSError as exc:
@@ -418,7 +420,7 @@ class Bus:
         return True
 
     def subscribe(
-        self, bus: str, channel: str, msg_type: type | None, handler: Handler, *, regex: bool = False
+        self, bus: str, channel: str, msg_type: type[Message] | None, handler: Handler, *, regex: bool = False
     ) -> Subscription:
         """Deliver every ``channel`` message, decoded as ``msg_type`` (raw bytes if None), to ``handler``.
 

@@ -413,7 +413,7 @@ class Node:
         """
 
         def publish_now() -> None:
-            self.publish(topic, build(), **fields)
+            self.publish(topic, build(), seq=None, **fields)
 
         self.create_timer(1.0 / hz, publish_now)
         return publish_now

@@ -23,10 +23,12 @@ def available(group: str) -> list[str]:
     return sorted(ep.name for ep in entry_points(group=group))
 
 
-def load_plugin(group: str, name: str, base: type | None = None) -> type:
-    """The class registered as ``name`` in ``group``, or named ``module:Class``.
+def load_plugin(group: str, name: str, base: type) -> type:
+    """The ``base`` subclass registered as ``name`` in ``group``, or named ``module:Class``.
 
     Raises :class:`PluginNotFound` listing what is available, so a typo in a config is a one-line fix.
+    ``base`` is a plain ``type`` (an abstract class cannot be a ``type[T]`` to mypy): callers narrow
+    the result with ``assert issubclass(cls, base)``.
     """
     if ":" in name:
         module_name, _, attr = name.partition(":")
@@ -51,6 +53,6 @@ def load_plugin(group: str, name: str, base: type | None = None) -> type:
             obj = matches[0].load()
         except Exception as exc:  # noqa: BLE001 - a broken plugin must not look like a missing one
             raise PluginNotFound(f"plugin {name!r} in {group} failed to import: {exc!r}") from None
-    if base is not None and not (isinstance(obj, type) and issubclass(obj, base)):
+    if not (isinstance(obj, type) and issubclass(obj, base)):
         raise PluginNotFound(f"{name!r} is not a subclass of {base.__module__}.{base.__qualname__}")
     return obj

@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from typing import Protocol
 
 from antalate_lcm.msgs import (
     arbiter_status_t,
     behavior_state_t,
     direction_cmd_t,
+    header_t,
     hlc_error_t,
     hlc_state_t,
     mc_state_t,
@@ -23,8 +25,22 @@ from antalate_lcm.msgs import (
     velocity_cmd_t,
 )
 
+
+
+class Message(Protocol):
+    """What the bus, the log readers and the console rely on in every message class (the surface
+    typed in ``msgs/*.pyi``), so a table of mixed types still checks ``decode`` and ``header``."""
+
+    header: header_t
+
+    def encode(self) -> bytes: ...
+
+    @staticmethod
+    def decode(data: bytes) -> Message: ...
+
+
 #: Every LCM type antalate defines, by type name (used by log readers and ``antalate spy``).
-MESSAGE_TYPES: dict[str, type] = {
+MESSAGE_TYPES: dict[str, type[Message]] = {
     t.__name__: t
     for t in (
         mc_state_t,
@@ -46,7 +62,7 @@ MESSAGE_TYPES: dict[str, type] = {
 class TopicSpec:
     """A topic's message type and its default channel template (``{agent}``, ``{arbiter}``, ... fields)."""
 
-    msg_type: type
+    msg_type: type[Message]
     channel: str
 
 

@@ -33,7 +33,7 @@ from antalate_lcm.config import Config
 from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
 from antalate_lcm.node import Context, Node
 from antalate_lcm.security import check_datagram
-from antalate_lcm.topics import channel_regex
+from antalate_lcm.topics import Message, channel_regex
 from operator_tui.commands import COMMANDS
 from operator_tui.model import WATCHED_TOPICS
 
@@ -103,7 +103,7 @@ class OperatorNode(Node):
         self.rejected = 0
         self._direction_seq = 0
         self._raw_subs: list[Subscription] = []
-        self._decoders: dict[str, tuple[type, re.Pattern[str]]] = {}
+        self._decoders: dict[str, tuple[type[Message], re.Pattern[str]]] = {}
         self._channels: dict[str, tuple[str, dict[str, str]] | None] = {}
         self._decode_log = RateLimitedLog(log)
         self.sent = 0

@@ -7,6 +7,8 @@ arbiter's decisions, contains behavior failures and publishes ``arbiter_status_t
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 from antalate_lcm._ratelimit import RateLimitedLog
@@ -52,7 +54,7 @@ class BmaNode(Node):
         self._arbiter = Arbiter({p.name: p.rule for p in self.plan.behaviors})
         self._reading_mc = self.plan.state_type is mc_state_t
         self._bad_state_log = RateLimitedLog(self.log)
-        self._publish_status = lambda: None
+        self._publish_status: Callable[[], None] = lambda: None
         #: Per behavior: failures in a row and when it last started (a restart back-off doubles per
         #: failure, and forgets them once the behavior has run for ``_STREAK_RESET`` s).
         self._streak: dict[str, int] = {}
@@ -109,7 +111,7 @@ class BmaNode(Node):
             plan.params,
             plan.topics,
             state=lambda: self._arbiter.state,
-            on_error=lambda where, exc, _n=name: self._fail(_n, where, exc),
+            on_error=partial(self._fail, name),
         )
         slot.ctx = ctx
         try:

@@ -112,6 +112,7 @@ def _plan_behavior(
         cls = load_plugin(BEHAVIORS, beh.plugin, base=Behavior)
     except PluginNotFound as exc:
         raise raw("plugin", str(exc)) from None
+    assert issubclass(cls, Behavior)  # checked by load_plugin; narrows the type
     params_model = getattr(cls, "Params", None)
     if not (isinstance(params_model, type) and issubclass(params_model, BaseModel)):
         raise fail("plugin", f"a plugin whose Params is a pydantic BaseModel subclass ({beh.plugin!r})")

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from typing import Any
@@ -87,7 +88,7 @@ class HlcNode(Node):
         self.connected = False
         self._io: ThreadPoolExecutor | None = None
         self._reject_log = RateLimitedLog(self.log, period=5.0)
-        self._publish_state = lambda: None
+        self._publish_state: Callable[[], None] = lambda: None
 
     @property
     def state(self) -> HlcState:

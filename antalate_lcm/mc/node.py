@@ -8,6 +8,7 @@ command is logged with its reason.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from typing import Any
 
 from antalate_lcm._ratelimit import RateLimitedLog
@@ -33,7 +34,7 @@ class McNode(Node):
                 on_link_regained=m.on_link_regained,
             )
         )
-        self._publish_state = lambda: None
+        self._publish_state: Callable[[], None] = lambda: None
         #: Rejected commands are logged once per (command, state) per period: well-formed junk
         #: repeated at line rate must not drown the log.
         self._reject_log = RateLimitedLog(self.log, period=10.0)

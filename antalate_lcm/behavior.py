@@ -19,13 +19,14 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from pydantic import BaseModel, ConfigDict
 
 from antalate_lcm.bus import Subscription
+from antalate_lcm.errors import AntalateError
 from antalate_lcm.executor import Timer
 
 if TYPE_CHECKING:
     from antalate_lcm.node import Node
 
 
-class BehaviorError(Exception):
+class BehaviorError(AntalateError):
     """Raise this for an expected failure; its message alone is reported (no exception type name).
 
     E.g. ``raise BehaviorError("ffmpeg not found: apt-get install ffmpeg")`` shows up in the
@@ -192,10 +193,13 @@ class BehaviorContext:
         executor = self._node.context.executor
         return self._timer(fn, lambda f: executor.call_later(delay, f), f"timer {_name(fn)}", oneshot=True)
 
-    def create_timer(self, period: float, fn: Callable[[], Any]) -> Timer:
-        """Run ``fn`` every ``period`` s (cancelled on deactivation if made while active)."""
+    def create_timer(self, period: float, fn: Callable[[], Any], *, where: str | None = None) -> Timer:
+        """Run ``fn`` every ``period`` s (cancelled on deactivation if made while active).
+
+        ``where`` names it in the failure reason if ``fn`` raises (default ``timer <fn's name>``).
+        """
         executor = self._node.context.executor
-        return self._timer(fn, lambda f: executor.create_timer(period, f), f"timer {_name(fn)}")
+        return self._timer(fn, lambda f: executor.create_timer(period, f), where or f"timer {_name(fn)}")
 
     def _timer(
         self,
@@ -232,12 +236,13 @@ class BehaviorContext:
             return False
         return True
 
-    def _begin_activation(self) -> None:
+    def begin_activation(self) -> None:
+        """The BMA activates the behavior: what it subscribes to or times from now on is scoped."""
         self._generation += 1
         self._active = True
 
-    def _end_activation(self) -> None:
-        """Drop what the activation acquired; safe to call twice."""
+    def end_activation(self) -> None:
+        """The BMA deactivates the behavior: drop what the activation acquired; safe to call twice."""
         self._generation += 1
         self._active = False
         for timer in self._scoped_timers:
@@ -247,8 +252,9 @@ class BehaviorContext:
         self._scoped_timers.clear()
         self._scoped_subs.clear()
 
-    def _close(self) -> None:
-        self._end_activation()
+    def close(self) -> None:
+        """The BMA drops the behavior for good (stop, or a failed construction): release everything."""
+        self.end_activation()
         self._closed = True
         for timer in self._persistent_timers:
             timer.cancel()

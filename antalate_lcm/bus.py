@@ -64,8 +64,11 @@ class Subscription:
 
 
 @contextlib.contextmanager
-def _captured_stderr() -> Iterator[list[str]]:
-    """Swallow what liblcm prints on fd 2 while it opens sockets; our own error says it better."""
+def captured_stderr() -> Iterator[list[str]]:
+    """Swallow what liblcm prints on fd 2 (opening sockets, reading a damaged log): our errors say it better.
+
+    The yielded list holds the swallowed lines once the block ends (for a debug log).
+    """
     lines: list[str] = []
     with tempfile.TemporaryFile(mode="w+b") as tmp:
         saved = os.dup(2)
@@ -82,7 +85,7 @@ def _captured_stderr() -> Iterator[list[str]]:
 def open_lcm(url: str) -> lcm.LCM:
     """Create an LCM instance, turning 'Couldn't create LCM' into a message that says the fix."""
     try:
-        with _captured_stderr() as noise:
+        with captured_stderr() as noise:
             return lcm.LCM(url)
     except (RuntimeError, OSError):
         log.debug("liblcm said: %s", " | ".join(noise))
@@ -144,7 +147,6 @@ class _Link:
         self._private = type(self._lcm) is lcm.LCM and url.startswith("memq://")
         self._decode_log = decode_log
         self.decode_errors: dict[str, int] = {}
-        self.handler_errors = 0
         #: Datagrams delivered to at least one subscriber.
         self.received = 0
 
@@ -258,7 +260,6 @@ class _Link:
         try:
             sub.handler(channel, msg)
         except Exception:
-            self.handler_errors += 1
             log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 
     def _on_pattern(self, channel: str, data: bytes) -> None:
@@ -284,7 +285,6 @@ class _Link:
             try:
                 sub.handler(channel, data)
             except Exception:
-                self.handler_errors += 1
                 log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
             return
         self._deliver(channel, data, subs, count=count)
@@ -317,7 +317,6 @@ class _Link:
             try:
                 sub.handler(channel, msg)
             except Exception:
-                self.handler_errors += 1
                 log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 
     def _count_decode_error(self, channel: str, msg_type: type[Message], data: bytes, exc: Exception) -> None:

@@ -1,4 +1,10 @@
-"""Exceptions a user can meet, each carrying enough to say what to do next."""
+"""Exceptions a user can meet, each carrying enough to say what to do next.
+
+`AntalateError` is the root of every exception the package defines (``tests/test_layers.py`` checks
+it), so ``except AntalateError`` (the CLI, the console) catches whatever antalate raises on purpose.
+Exceptions defined elsewhere keep the standard base their callers already catch as a second base
+(``AutopilotError(AntalateError, RuntimeError)``, ``ReplyError(AntalateError, ValueError)``).
+"""
 
 from __future__ import annotations
 

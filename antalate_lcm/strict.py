@@ -25,10 +25,12 @@ from typing import Any, Literal, TypeVar, Union, get_args, get_origin
 
 from pydantic import BaseModel, ValidationError
 
+from antalate_lcm.errors import AntalateError
+
 M = TypeVar("M", bound=BaseModel)
 
 
-class StrictError(ValueError):
+class StrictError(AntalateError, ValueError):
     """One invalid value: ``key`` is the dotted path inside the validated table ('' = the table)."""
 
     def __init__(self, key: str, message: str) -> None:

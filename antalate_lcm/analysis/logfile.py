@@ -17,7 +17,7 @@ from typing import Any
 import lcm
 
 from antalate_lcm.analysis.model import DirectionCommand, SwarmRecord, TelemetrySample
-from antalate_lcm.bus import _captured_stderr
+from antalate_lcm.bus import captured_stderr
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, telemetry_t
 from antalate_lcm.topics import TOPICS, channel_regex
@@ -83,7 +83,7 @@ def read_log(path: str | Path) -> SwarmRecord:
     except (OSError, RuntimeError, ValueError) as exc:
         raise AntalateError(f"{p}: cannot be opened as an LCM log: {exc}") from None
     # liblcm prints "Invalid header after log data" on fd 2 when it meets damage; we report it ourselves.
-    with _captured_stderr():
+    with captured_stderr():
         try:
             size = log.size()
             while True:

@@ -41,13 +41,14 @@ from typing import Any, ClassVar
 
 from pydantic import BaseModel
 
+from antalate_lcm.errors import AntalateError
 from antalate_lcm.msgs import velocity_cmd_t
 from antalate_lcm.strict import validate_strict
 
 Clock = Callable[[], float]
 
 
-class AutopilotError(RuntimeError):
+class AutopilotError(AntalateError, RuntimeError):
     """A command the vehicle refused, did not acknowledge, or cannot perform in its current state."""
 
 
@@ -168,6 +169,9 @@ class Autopilot(ABC):
     #: out-of-range value stops the program naming ``hlc.autopilot.<field>`` before any node starts.
     #: None = the adapter checks its params in its constructor only.
     params_model: ClassVar[type[BaseModel] | None] = None
+    #: Why the last `arm` returned False (e.g. ArduCopter's PreArm text), "" when the adapter cannot
+    #: say: the HLC puts it into its ``hlc_error_t``. An adapter sets it before refusing.
+    last_refusal: str = ""
 
     @classmethod
     def validate_params(cls, params: Mapping[str, Any] | None) -> BaseModel | None:

@@ -100,7 +100,7 @@ class BmaNode(Node):
             self._deactivate(name, why="arbiter stopping")
         for slot in self._slots.values():
             if slot.ctx is not None:
-                slot.ctx._close()
+                slot.ctx.close()
         self._publish_status()
 
     def _construct(self, name: str, slot: _Slot) -> None:
@@ -122,7 +122,7 @@ class BmaNode(Node):
                 "behavior %s cannot be constructed, it will never run: %s", name, reason, exc_info=True
             )
             self._arbiter.failed(name, reason, permanent=True)
-            ctx._close()
+            ctx.close()
 
     # ------------------------------------------------------------------ state
     def _on_state_msg(self, msg: Any) -> None:
@@ -170,7 +170,7 @@ class BmaNode(Node):
         behavior, ctx = slot.behavior, slot.ctx
         if behavior is None or ctx is None:
             return
-        ctx._begin_activation()
+        ctx.begin_activation()
         # Active in the arbiter's eyes before the hook runs, so a failure inside it is handled as
         # "deactivate an active behavior" (on_deactivate attempted to release a half-done start).
         self._arbiter.activated(name)
@@ -189,13 +189,13 @@ class BmaNode(Node):
             dt, last[0] = now - last[0], now
             behavior.tick(dt)
 
-        ctx._timer(tick, lambda f: self.context.executor.create_timer(1.0 / hz, f), "tick")
+        ctx.create_timer(1.0 / hz, tick, where="tick")
 
     def _deactivate(self, name: str, *, why: str) -> None:
         slot = self._slots[name]
         self._arbiter.deactivated(name)
         if slot.ctx is not None:
-            slot.ctx._end_activation()
+            slot.ctx.end_activation()
         if slot.behavior is not None:
             try:
                 slot.behavior.on_deactivate()
@@ -224,7 +224,7 @@ class BmaNode(Node):
         if self._arbiter.is_active(name):
             self._arbiter.deactivated(name)
             if slot.ctx is not None:
-                slot.ctx._end_activation()
+                slot.ctx.end_activation()
             if slot.behavior is not None:
                 try:
                     slot.behavior.on_deactivate()

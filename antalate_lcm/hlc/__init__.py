@@ -1,7 +1,7 @@
 """High-Level Control: the pure state machine (`machine`) and velocity filter (`velocity_guard`).
 
-Only the machine is re-exported here; `velocity_guard` depends on the MC states, and importing it
-from this package's ``__init__`` would create an import cycle (the MC machine imports `HlcState`).
+Only the machine is re-exported here; import `velocity_guard` from its module. The states and
+severities are wire vocabulary: `antalate_lcm.vocabulary` (`HlcState`, `McState`, `Severity`).
 """
 
 from antalate_lcm.hlc.machine import (

@@ -149,7 +149,7 @@ class HlcNode(Node):
                 return False, f"{type(exc).__name__}: {exc}"
             if result is False:
                 # An adapter may say why (ArduCopter's PreArm text): it goes into the hlc_error_t.
-                return False, str(getattr(self.autopilot, "last_refusal", "") or "refused")
+                return False, self.autopilot.last_refusal or "refused"
             return True, ""
 
         if self._io is None:

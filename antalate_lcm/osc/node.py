@@ -29,7 +29,7 @@ import httpx
 from antalate_lcm import validation
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.config import Config
-from antalate_lcm.errors import ConfigError
+from antalate_lcm.errors import AntalateError, ConfigError
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, payload_t, telemetry_t
 from antalate_lcm.node import Context, Node
 from antalate_lcm.osc import wire
@@ -38,7 +38,7 @@ from antalate_lcm.osc import wire
 logging.getLogger("httpx").setLevel(logging.WARNING)
 
 
-class ServerProblem(Exception):
+class ServerProblem(AntalateError):
     """One failed exchange with the station (down, timeout, wrong status, oversized or invalid reply)."""
 
     def __init__(self, text: str, retry_after: float = 0.0) -> None:

@@ -15,6 +15,8 @@ import secrets
 from collections import deque
 from dataclasses import dataclass, field
 
+from antalate_lcm.errors import AntalateError
+
 from . import sector
 from ._auth import TokenBucket, check_registration, new_token, sha256_hex
 from ._db import AgentRow, LatestState, StationDB
@@ -38,11 +40,11 @@ from ._spatial import GridIndex
 log = logging.getLogger("antalate.station")
 
 
-class UnknownTarget(LookupError):
+class UnknownTarget(AntalateError, LookupError):
     """A command addressed to a name or id the station has never seen."""
 
 
-class Refused(Exception):
+class Refused(AntalateError):
     """A request the station turns down: an HTTP status, a sentence, and for 429 when to retry."""
 
     def __init__(self, status: int, detail: str, retry_after: float | None = None) -> None:

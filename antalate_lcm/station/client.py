@@ -22,6 +22,7 @@ from typing import Any
 
 import httpx
 
+from antalate_lcm.errors import AntalateError
 from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
 from antalate_lcm.security import sign
 
@@ -30,7 +31,7 @@ from ._models import CommandName
 COMMANDS: tuple[CommandName, ...] = ("TAKEOFF", "LAND", "RTL")
 
 
-class StationClientError(Exception):
+class StationClientError(AntalateError):
     """The station refused a request: the HTTP status and its one-sentence reason."""
 
     def __init__(self, status: int, detail: str) -> None:
@@ -164,7 +165,7 @@ class StationClient:
 
     def _post(self, body: dict[str, Any]) -> dict[str, Any]:
         r = self._http.post("/api/commands", json=body)
-        return self._json(r)
+        return dict(self._json(r))
 
     @staticmethod
     def _json(r: httpx.Response) -> Any:

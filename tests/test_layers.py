@@ -1,0 +1,242 @@
+"""The package's structure: layers that only import downwards, no private names across packages, one
+exception root.
+
+The layer picture is drawn in docs/architecture.md ("Layers"); `LAYERS` below is the same picture, and
+these tests are what keeps it true. They read the source (ast), so a function-level import or one under
+``if TYPE_CHECKING:`` counts as much as one at the top of a module.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import inspect
+import pkgutil
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from antalate_lcm.errors import AntalateError
+
+REPO = Path(__file__).resolve().parent.parent
+PACKAGES = ("antalate_lcm", "operator_tui", "behaviors")
+
+#: Lowest first. A unit is a subpackage or a top-level module of antalate_lcm (by its name), or a
+#: whole top-level package. A unit may import units of its own layer or below, never above.
+LAYERS: list[tuple[str, frozenset[str]]] = [
+    ("contract", frozenset({"msgs"})),
+    (
+        "base",
+        frozenset(
+            {
+                "errors",
+                "_ratelimit",
+                "_codegen",
+                "_golang",
+                "_golang_parse",
+                "vocabulary",
+                "topics",
+                "validation",
+                "geo",
+                "lcm_url",
+                "strict",
+                "plugins",
+                "security",
+            }
+        ),
+    ),
+    ("vehicles", frozenset({"autopilot"})),
+    ("core", frozenset({"zenoh_bus", "executor", "bus", "config", "node", "behavior", "antalate_lcm"})),
+    ("domain", frozenset({"mc", "hlc", "bma", "osc", "station", "analysis"})),
+    ("applications", frozenset({"operator_tui", "behaviors", "bridge", "spy", "types_cmd"})),
+    ("composition root", frozenset({"runtime", "cli"})),
+]
+LAYER_OF: dict[str, int] = {unit: i for i, (_, units) in enumerate(LAYERS) for unit in units}
+
+
+@dataclass(frozen=True)
+class Import:
+    module: str  # the importing module
+    line: int
+    target: str  # the imported module
+    name: str | None  # for ``from target import name``: the name
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(REPO).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _is_package(module: str) -> bool:
+    return (REPO / module.replace(".", "/") / "__init__.py").exists()
+
+
+def _sources() -> Iterator[Path]:
+    for package in PACKAGES:
+        yield from sorted((REPO / package).rglob("*.py"))
+
+
+def _imports(path: Path) -> Iterator[Import]:
+    """Every import of one of our packages in ``path``, at any depth (functions, TYPE_CHECKING)."""
+    module = _module_name(path)
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield Import(module, node.lineno, alias.name, None)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                target = ".".join([*base, node.module] if node.module else base)
+            else:
+                target = node.module or ""
+            for alias in node.names:
+                submodule = f"{target}.{alias.name}"
+                if _is_package(target) and (
+                    _is_package(submodule) or (REPO / f"{submodule.replace('.', '/')}.py").exists()
+                ):
+                    yield Import(module, node.lineno, submodule, None)  # ``from pkg import module``
+                else:
+                    yield Import(module, node.lineno, target, alias.name)
+
+
+def _unit(module: str) -> str:
+    parts = module.split(".")
+    if parts[0] != "antalate_lcm":
+        return parts[0]
+    return parts[1] if len(parts) > 1 else "antalate_lcm"
+
+
+def _ours(module: str) -> bool:
+    return module.split(".")[0] in PACKAGES
+
+
+ALL_IMPORTS: list[Import] = [imp for path in _sources() for imp in _imports(path) if _ours(imp.target)]
+
+
+def _where(imp: Import) -> str:
+    what = f"from {imp.target} import {imp.name}" if imp.name else f"import {imp.target}"
+    return f"{imp.module}:{imp.line}: {what}"
+
+
+def test_every_unit_has_a_layer() -> None:
+    """A new module or subpackage must be placed in the picture (and in docs/architecture.md)."""
+    units = {_unit(_module_name(path)) for path in _sources()}
+    assert units - set(LAYER_OF) == set()
+
+
+def test_no_lower_layer_imports_a_higher_one() -> None:
+    upward = [
+        f"{_where(imp)} ({LAYERS[LAYER_OF[_unit(imp.module)]][0]} imports {LAYERS[LAYER_OF[_unit(imp.target)]][0]})"
+        for imp in ALL_IMPORTS
+        if LAYER_OF.get(_unit(imp.target), -1) > LAYER_OF.get(_unit(imp.module), len(LAYERS))
+    ]
+    assert upward == []
+
+
+def test_no_import_cycle_between_units() -> None:
+    """Within a layer units may import each other, but not both ways round (mc ↔ hlc was one)."""
+    edges: dict[str, set[str]] = {}
+    for imp in ALL_IMPORTS:
+        a, b = _unit(imp.module), _unit(imp.target)
+        if a != b:
+            edges.setdefault(a, set()).add(b)
+
+    def reaches(start: str, goal: str) -> bool:
+        seen, todo = set(), [start]
+        while todo:
+            unit = todo.pop()
+            if unit == goal:
+                return True
+            if unit not in seen:
+                seen.add(unit)
+                todo.extend(edges.get(unit, ()))
+        return False
+
+    cycles = sorted(
+        f"{a} -> {b} -> … -> {a}" for a, targets in edges.items() for b in targets if reaches(b, a)
+    )
+    assert cycles == []
+
+
+def test_no_private_name_is_imported_from_another_package() -> None:
+    """``from x import _name`` is for x's own package; another package gets a public name."""
+
+    def package(module: str) -> str:
+        return module if _is_package(module) else module.rpartition(".")[0]
+
+    leaks = [
+        _where(imp)
+        for imp in ALL_IMPORTS
+        if imp.name is not None
+        and imp.name.startswith("_")
+        and not imp.name.startswith("__")
+        and package(imp.target) != package(imp.module)
+    ]
+    assert leaks == []
+
+
+def test_the_checks_see_function_level_and_relative_imports() -> None:
+    """The parser finds what the rules are about: an import inside a function, a relative import."""
+    found = {(imp.module, imp.target) for imp in ALL_IMPORTS}
+    assert ("antalate_lcm.runtime.commands", "operator_tui") in found  # inside a function
+    assert ("antalate_lcm.station", "antalate_lcm.station._models") in found  # ``from . import _models``
+
+
+# ------------------------------------------------------------------------------ exceptions
+
+#: Private control flow that never leaves its module, so it keeps the base its caller needs.
+PRIVATE_EXCEPTIONS = {
+    # pydantic turns a ValueError raised in a validator into its ValidationError, which load_config
+    # reports as a ConfigError; it must stay a ValueError for pydantic to do that.
+    "antalate_lcm.config._KeyedError",
+    # raised and caught inside the station's body-size middleware.
+    "antalate_lcm.station._app._TooLarge",
+}
+
+
+def _exception_classes() -> Iterator[type[BaseException]]:
+    for package in PACKAGES:
+        root = importlib.import_module(package)
+        names = [package] + [m.name for m in pkgutil.walk_packages(root.__path__, f"{package}.")]
+        for name in names:
+            if name.rpartition(".")[2] == "__main__":
+                continue  # running it is what importing it does
+            module = importlib.import_module(name)
+            for value in vars(module).values():
+                if inspect.isclass(value) and issubclass(value, BaseException) and value.__module__ == name:
+                    yield value
+
+
+def test_every_exception_derives_from_antalate_error() -> None:
+    """One root, so ``except AntalateError`` (the CLI, the console) catches whatever antalate raises."""
+    classes = list(_exception_classes())
+    assert len(classes) > 10  # the walk found the package's exceptions
+    strays = [
+        f"{cls.__module__}.{cls.__qualname__}"
+        for cls in classes
+        if not issubclass(cls, AntalateError)
+        and f"{cls.__module__}.{cls.__qualname__}" not in PRIVATE_EXCEPTIONS
+    ]
+    assert strays == []
+
+
+@pytest.mark.parametrize(
+    ("qualified", "stdlib"),
+    [
+        ("antalate_lcm.autopilot.AutopilotError", RuntimeError),
+        ("antalate_lcm.autopilot.UnknownAutopilotError", LookupError),
+        ("antalate_lcm.autopilot.mavlink.link.LinkClosed", ConnectionError),
+        ("antalate_lcm.osc.wire.ReplyError", ValueError),
+        ("antalate_lcm.strict.StrictError", ValueError),
+        ("antalate_lcm.station._station.UnknownTarget", LookupError),
+    ],
+)
+def test_exceptions_keep_the_stdlib_base_callers_catch(qualified: str, stdlib: type[Exception]) -> None:
+    """Adding the root must not stop an ``except RuntimeError`` (…) that caught them before."""
+    module, _, name = qualified.rpartition(".")
+    assert issubclass(getattr(importlib.import_module(module), name), stdlib)

@@ -68,16 +68,12 @@ class Executor:
         self._running = False
         #: Worst delay seen between a timer's due time and its run (s): the executor's headroom.
         self.max_timer_lag = 0.0
-        self.callbacks_run = 0
 
     @property
     def loop(self) -> asyncio.AbstractEventLoop:
         """The asyncio loop (for coroutines that belong with the nodes: run them with
         ``asyncio.run_coroutine_threadsafe(coro, executor.loop)``)."""
         return self._loop
-
-    def on_loop_thread(self) -> bool:
-        return threading.get_ident() == self._ident
 
     def _direct(self) -> bool:
         """True when the loop's structures may be touched from here: on its thread, or before it runs."""
@@ -135,7 +131,6 @@ class Executor:
         due = timer.due
         if now - due > self.max_timer_lag:
             self.max_timer_lag = now - due
-        self.callbacks_run += 1
         try:
             timer.fn()
         except Exception:
@@ -190,12 +185,6 @@ class Executor:
         self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
         self._thread.start()
 
-    def spin(self) -> None:
-        """Run the loop in the calling thread until :meth:`stop`."""
-        self._prepare()
-        self._thread = threading.current_thread()
-        self._run()
-
     def _prepare(self) -> None:
         if self._loop.is_closed():  # restarted after stop(): a fresh loop, the same descriptors
             self._loop = new_event_loop()
@@ -236,12 +225,7 @@ class Executor:
             thread.join(timeout=5)
         self._thread = None
 
-    @property
-    def running(self) -> bool:
-        return self._running
-
     def _invoke(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
-        self.callbacks_run += 1
         try:
             fn(*args)
         except Exception:

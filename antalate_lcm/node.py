@@ -86,10 +86,6 @@ class Context:
         self.bus.close()
 
 
-def now_utime() -> int:
-    return int(time.time() * 1_000_000)
-
-
 @dataclass
 class _Publisher:
     buses: list[str]

@@ -185,7 +185,6 @@ class HighWaterStore:
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
-        self.writes = 0
         self._marks: dict[str, int] = {}
         try:
             raw = json.loads(self.path.read_text(encoding="utf-8"))
@@ -215,7 +214,6 @@ class HighWaterStore:
                 with contextlib.suppress(OSError):
                     os.unlink(tmp)
                 raise
-            self.writes += 1
         except OSError as exc:
             log.warning("cannot write the replay memory %s: %s (kept in memory only)", self.path, exc)
 

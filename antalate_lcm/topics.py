@@ -26,7 +26,6 @@ from antalate_lcm.msgs import (
 )
 
 
-
 class Message(Protocol):
     """What the bus, the log readers and the console rely on in every message class (the surface
     typed in ``msgs/*.pyi``), so a table of mixed types still checks ``decode`` and ``header``."""
@@ -101,10 +100,6 @@ def is_internal(topic: str) -> bool:
 
 
 _FIELD = re.compile(r"\{(\w+)\}")
-
-
-def template_fields(template: str) -> set[str]:
-    return set(_FIELD.findall(template))
 
 
 def channel_regex(template: str, **known: str) -> str:

@@ -197,7 +197,6 @@ class OperatorApp(App[None]):
         self._log_bridge = _LogBridge()
         #: Worst time one refresh took (s): the console's own headroom, reported by the benchmark.
         self.max_refresh = 0.0
-        self.refreshes = 0
         self._render_errors = 0
 
     # ------------------------------------------------------------------ lifecycle
@@ -251,7 +250,6 @@ class OperatorApp(App[None]):
             self._render_errors += 1
             if self._render_errors in (1, 10, 100) or self._render_errors % 1000 == 0:
                 log.exception("could not redraw the console (%d times so far)", self._render_errors)
-        self.refreshes += 1
         self.max_refresh = max(self.max_refresh, time.perf_counter() - started)
 
     def _render(self, now: float) -> None:

@@ -119,7 +119,6 @@ class AgentView:
     """Everything known about one agent; ``None`` fields have not been heard yet."""
 
     name: str
-    first_heard: float
     last_heard: float
     mc_state: str | None = None
     mc_reason: str = ""  # mc_state_t.reason: why the MC is in its state
@@ -174,7 +173,7 @@ class SwarmModel:
         """Fold one decoded message from ``agent`` (the name recovered from its channel) into the model."""
         view = self.agents.get(agent)
         if view is None:
-            view = self.agents[agent] = AgentView(agent, now, now)
+            view = self.agents[agent] = AgentView(agent, now)
             self._event(wall, agent, EventKind.DISCOVERED, f"discovered (first heard on {topic})")
         elif view.stale:
             view.stale = False

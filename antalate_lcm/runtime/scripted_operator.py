@@ -40,9 +40,6 @@ class Timeline:
         if self.current is not state:
             self.entries.append((t, state))
 
-    def reached(self, state: McState) -> bool:
-        return any(s is state for _, s in self.entries)
-
     def render(self) -> str:
         return " -> ".join(f"{s.name}@{t:.1f}s" for t, s in self.entries)
 

@@ -18,26 +18,6 @@ from antalate_lcm.errors import ConfigError
 
 from ._settings import DEFAULT_HOST, DEFAULT_PORT, ApiKey, RateLimits, StationSettings
 
-EXAMPLE = """\
-# antalate station --config station.toml
-[station]
-host = "0.0.0.0"                 # listen on the LAN
-port = 8443
-db = "/var/lib/antalate/station.sqlite"
-tls_cert = "/etc/antalate/station.crt"
-tls_key = "/etc/antalate/station.key"
-# derived from the swarm key (antalate station-key registration --swarm-key-file swarm.key):
-registration_key = "..."
-
-[rate_limits]                    # per source address / per agent; see docs/station-protocol.md
-registrations_per_minute = 60
-
-[[api_keys]]                     # antalate station-key api --name alice --role operator
-name = "alice"
-role = "operator"
-sha256 = "..."
-"""
-
 
 class _StationTable(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
@@ -121,8 +101,8 @@ def parse_station_file(data: dict[str, Any], source: str, base: Path | None = No
         }
         key = ".".join(str(p) for p in err["loc"])
         raise ConfigError(source, f"station.{names.get(key, key)}", str(err["msg"])) from None
-    names = [k.name for k in doc.api_keys]
-    for dup in sorted({n for n in names if names.count(n) > 1}):
+    key_names = [k.name for k in doc.api_keys]
+    for dup in sorted({n for n in key_names if key_names.count(n) > 1}):
         raise ConfigError(source, "api_keys.name", f"unique names, {dup!r} is used twice")
     return StationFile(settings, st.host, st.port, _relative(here, st.tls_cert), _relative(here, st.tls_key))
 

@@ -243,10 +243,6 @@ class AgentTable(ScrollView, can_focus=True):
             # a message to the node that is its sender, so an app-sent message never reaches the app.
             self.post_message(self.Selected(name).set_sender(self))
 
-    def select_agent(self, name: str) -> None:
-        if name in self.cells:
-            self._set_cursor(self.order.index(name))
-
     def action_move(self, delta: int) -> None:
         self._set_cursor(self.cursor_row + delta)
 

@@ -160,7 +160,6 @@ class CrazyflieAutopilot(Autopilot):
         self._reconnecting = False
         self._reconnect_at = -math.inf
         self.reconnects = 0
-        self.setpoints_sent = 0
 
     # ------------------------------------------------------------------ link
     def connect(self) -> None:
@@ -479,7 +478,6 @@ class CrazyflieAutopilot(Autopilot):
             cf.commander.send_velocity_world_setpoint(*sp.values)
         else:
             cf.commander.send_hover_setpoint(*sp.values)
-        self.setpoints_sent += 1
 
     def _control_loop(self) -> None:
         period = 1.0 / self._p.control_hz

@@ -16,7 +16,6 @@ from antalate_lcm.strict import validate_strict
 #: The Crazyflie firmware's commander watchdog (supervisor.c): no set-point for 0.5 s levels the
 #: vehicle, 2 s stops the motors. A streamed set-point must be renewed well inside the first.
 WDT_STABILIZE_S = 0.5
-WDT_SHUTDOWN_S = 2.0
 
 _URI_SCHEMES = ("radio://", "usb://", "udp://", "tcp://", "serial://")
 

@@ -44,9 +44,6 @@ LOG_MAX_BYTES = 26
 CAN_BE_ARMED, IS_ARMED, AUTO_ARMED, CAN_FLY, IS_FLYING, IS_TUMBLED, IS_LOCKED, IS_CRASHED = range(8)
 HL_ACTIVE, HL_TRAJ_FINISHED, HL_DISABLED = 8, 9, 10
 
-#: pm.state (pm.h PMStates)
-PM_STATES = {0: "battery", 1: "charging", 2: "charged", 3: "lowPower", 4: "shutDown"}
-
 
 @dataclass(frozen=True)
 class SupervisorFlags:

@@ -97,7 +97,6 @@ class Vehicle:
     cells_seen: int = 0  # cells counted in BATTERY_STATUS (a per-cell monitor), 0 = not seen
     charge_warning: str = ""  # BATTERY_STATUS charge_state now: "low", "critical", "emergency", "failed"
     battery_warning: str = ""  # from STATUSTEXT / SYS_STATUS health: the worst since the last landing
-    health: int | None = None  # SYS_STATUS onboard_control_sensors_health
     fence_breached: bool = False
     failsafes: FailsafeTracker = field(default_factory=FailsafeTracker)
     params: dict[str, float] = field(default_factory=dict)  # PARAM_VALUE by name
@@ -271,7 +270,6 @@ class Vehicle:
         self.battery = float(msg.battery_remaining) if 0 <= msg.battery_remaining <= 100 else -1.0
         if 0 < msg.voltage_battery < 0xFFFF:
             self.voltage = msg.voltage_battery / 1000.0
-        self.health = msg.onboard_control_sensors_health
         for bit, reason in HEALTH_FAILSAFES:
             enabled = msg.onboard_control_sensors_enabled & bit and msg.onboard_control_sensors_present & bit
             unhealthy = bool(enabled) and not msg.onboard_control_sensors_health & bit

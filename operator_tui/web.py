@@ -29,7 +29,7 @@ import secrets
 import shlex
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -161,7 +161,7 @@ def make_server(
     statics = Path(textual_serve.__file__).resolve().parent / "static"
     tabs = itertools.count(1)
 
-    class ConsoleServer(Server):  # type: ignore[misc]
+    class ConsoleServer(Server):
         async def _make_app(self) -> web.Application:
             app = web.Application(middlewares=[self._guard])
             aiohttp_jinja2.setup(app, loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=True)
@@ -178,7 +178,9 @@ def make_server(
             return app
 
         @web.middleware
-        async def _guard(self, request: web.Request, handler: Any) -> web.StreamResponse:
+        async def _guard(
+            self, request: web.Request, handler: Callable[[web.Request], Awaitable[web.StreamResponse]]
+        ) -> web.StreamResponse:
             if access is None or request.path == "/login" or request.path.startswith("/static/"):
                 return await handler(request)
             if access.holder(request.cookies.get(SESSION_COOKIE), clock()) is None:
@@ -242,13 +244,17 @@ def make_server(
             height = to_int(request.query.get("height", "24"), 24)
             tab_name = f"{name}-web{next(tabs)}"
             app_service: AppService | None = None
+
+            async def close_websocket() -> None:  # AppService awaits it and wants no result
+                await websocket.close()
+
             try:
                 await websocket.prepare(request)
                 app_service = AppService(
                     console_command(config, tab_name),
                     write_bytes=websocket.send_bytes,
                     write_str=websocket.send_str,
-                    close=websocket.close,
+                    close=close_websocket,
                     download_manager=self.download_manager,
                     debug=False,
                 )

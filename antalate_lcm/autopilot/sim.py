@@ -61,7 +61,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import replace
 from typing import Any, Literal
 
@@ -114,8 +114,8 @@ DEFAULTS: dict[str, Any] = {
 }
 
 
-def _num(key: str, **bounds: float) -> Any:
-    return Field(default=DEFAULTS[key], allow_inf_nan=False, **bounds)
+def _num(key: str, *, ge: float | None = None, gt: float | None = None, le: float | None = None) -> Any:
+    return Field(default=DEFAULTS[key], allow_inf_nan=False, ge=ge, gt=gt, le=le)
 
 
 class Params(BaseModel):
@@ -416,7 +416,7 @@ class SimAutopilot(Autopilot):
         if self._airborne_since is None or not self.in_air:
             return
         flown = self._sim_time - self._airborne_since
-        faults = (
+        faults: tuple[tuple[str, Callable[[], None], float], ...] = (
             ("takeover_after", self.pilot_takeover, 0.0),
             ("link_loss_after", lambda: self.set_link_loss(True), float(p["link_loss_for"])),
             (

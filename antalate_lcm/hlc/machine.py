@@ -149,7 +149,7 @@ class Action:
     def __str__(self) -> str:
         if self.kind is ActionKind.TAKEOFF:
             return f"TAKEOFF({self.altitude:g} m)"
-        return self.kind.value
+        return self.kind.name
 
 
 Action.ARM = Action(ActionKind.ARM)
@@ -739,10 +739,10 @@ class HighLevelControl:
             }
             events.append(
                 (
-                    failsafe[ap.flight_mode],  # type: ignore[index]
+                    failsafe[ap.flight_mode],
                     f"{ap.failsafe}; autopilot switched to {ap.mode or ap.flight_mode.name}",
                 )
-            )  # type: ignore[union-attr]
+            )
         if ap.flight_mode is FlightMode.LANDING:
             events.append((HlcEvent.AUTOPILOT_LAND, f"autopilot switched to {ap.mode or 'LAND'}"))
         if ap.flight_mode is FlightMode.RTL:

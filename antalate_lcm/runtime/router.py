@@ -15,19 +15,23 @@ import logging
 import signal
 import threading
 import time
+from typing import TYPE_CHECKING
 
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.lcm_url import zenoh_endpoints_problem
+
+if TYPE_CHECKING:  # the zenoh extra is optional: imported where used
+    import zenoh
 
 log = logging.getLogger("antalate.router")
 
 DEFAULT_LISTEN = "tcp/0.0.0.0:7447"
 
 
-def router_config(listen: list[str], lease_ms: int) -> object:
+def router_config(listen: list[str], lease_ms: int) -> zenoh.Config:
     import zenoh
 
-    config = zenoh.Config()
+    config: zenoh.Config = zenoh.Config()  # zenoh's stub returns typing.Self, Any before 3.11
     config.insert_json5("mode", json.dumps("router"))
     config.insert_json5("listen/endpoints", json.dumps(listen))
     config.insert_json5("scouting/multicast/enabled", "false")

@@ -61,6 +61,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Mapping
+from functools import partial
 from typing import Any, ClassVar
 
 from pydantic import BaseModel
@@ -695,7 +696,7 @@ class TelloAutopilot(Autopilot):
             answer = self._exchange(
                 f"{'up' if delta > 0 else 'down'} {min(cm, _UP_MAX_CM)}",
                 self._p.takeoff_timeout,
-                settled=lambda s=sent: self._move_settled(s),
+                settled=partial(self._move_settled, sent),
                 done_in_air=True,
             )
             if answer not in ("ok", ""):

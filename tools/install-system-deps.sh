@@ -8,6 +8,7 @@
 #   ffmpeg              the video_capture behavior
 #   tmux                the real-terminal test of the operator console
 #   gcc, pkg-config, liblcm-dev, libssl-dev   the C node built from `antalate types --lang c`
+#   golang-go           the Go types of `antalate types --lang go`, built and run against Python
 #   chromium            the web console (`antalate tui --web`) in a headless browser
 #   podman, mmdebstrap  the container image (Debian base made from the mirror, no registry)
 #   qemu-user-static    arm64 images, only where binfmt_misc can be used
@@ -29,6 +30,7 @@ need ffmpeg ffmpeg
 need tmux tmux
 need cc gcc
 need pkg-config pkg-config
+need go golang-go
 [ -f /usr/include/lcm/lcm.h ] || want+=(liblcm-dev)
 [ -f /usr/include/openssl/hmac.h ] || want+=(libssl-dev)
 need chromium chromium

@@ -167,7 +167,7 @@ class BehaviorContext:
         def deliver(msg: Any) -> None:
             if self._closed or (scoped and gen != self._generation):
                 return
-            self.guard(f"handler for {topic}", handler, msg)
+            self.contain(f"handler for {topic}", handler, msg)
 
         sub = self._node.subscribe(self.topic(topic), deliver, **fields)
         (self._scoped_subs if scoped else self._persistent_subs).append(sub)
@@ -220,15 +220,19 @@ class BehaviorContext:
                 owner.remove(timer)
             if self._closed or (scoped and gen != self._generation):
                 return
-            self.guard(where, fn)
+            self.contain(where, fn)
 
         timer = make(run)
         owner.append(timer)
         return timer
 
     # ------------------------------------------------------------------ used by the BMA
-    def guard(self, where: str, fn: Callable[..., Any], *args: Any) -> bool:
-        """Call ``fn``; on an exception report it (the behavior fails) and return False."""
+    def contain(self, where: str, fn: Callable[..., Any], *args: Any) -> bool:
+        """Call ``fn``; on an exception report it (the behavior fails) and return False.
+
+        Not a "guard": that word is taken by the transition tables' row conditions, the replay guard
+        and the velocity guard.
+        """
         try:
             fn(*args)
         except Exception as exc:  # noqa: BLE001 - the whole point: contain a plugin's failure

@@ -176,7 +176,10 @@ class Node:
             if state_dir is not None:
                 store = HighWaterStore(state_dir / f"{self.agent}.{self.name}.replay.json")
             self._auth = Authenticator(
-                self.security, self.log, guard=ReplayGuard(store, PERSISTED_TYPES), wallclock=self.wallclock
+                self.security,
+                self.log,
+                replay_guard=ReplayGuard(store, PERSISTED_TYPES),
+                wallclock=self.wallclock,
             )
         return self._auth
 

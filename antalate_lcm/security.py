@@ -285,14 +285,14 @@ class Authenticator:
         policy: SecurityPolicy,
         logger: logging.Logger,
         *,
-        guard: ReplayGuard | None = None,
+        replay_guard: ReplayGuard | None = None,
         wallclock: Callable[[], float] = time.time,
         log_period: float = 10.0,
     ) -> None:
         from antalate_lcm._ratelimit import RateLimitedLog
 
         self.policy = policy
-        self.guard = guard or ReplayGuard()
+        self.replay_guard = replay_guard or ReplayGuard()
         self._wallclock = wallclock
         self._log = RateLimitedLog(logger, period=log_period)
         self.rejected: dict[Reason, int] = {}
@@ -310,7 +310,7 @@ class Authenticator:
                 f"signed by {sender!r} but {channel} carries only {expected_sender!r}'s messages",
             )
         if problem is None:
-            problem = self.guard.check(msg, sender, type(msg).__name__)
+            problem = self.replay_guard.check(msg, sender, type(msg).__name__)
         if problem is None:
             self.accepted += 1
             return None

@@ -42,7 +42,9 @@ class ActivationRule:
 
 
 @dataclass
-class _Slot:
+class _Standing:
+    """A behavior's rule and where it stands with the arbiter (the node's `_Slot` holds the instance)."""
+
     rule: ActivationRule
     active: bool = False
     failed: str | None = None
@@ -67,59 +69,66 @@ class Arbiter:
     """Tracks the state, which behaviors are active, and which failed. The node reports outcomes back."""
 
     def __init__(self, rules: Mapping[str, ActivationRule]) -> None:
-        self._slots: dict[str, _Slot] = {name: _Slot(rule) for name, rule in rules.items()}
+        self._standings: dict[str, _Standing] = {name: _Standing(rule) for name, rule in rules.items()}
         self.state: str = ""
 
     def on_state(self, state: str) -> Decision:
         decision = Decision(state_changed=state != self.state)
         self.state = state
-        for name, slot in self._slots.items():
-            if slot.blocked and not slot.permanent and state not in slot.rule.activate_on:
-                slot.blocked = False
+        for name, standing in self._standings.items():
+            if standing.blocked and not standing.permanent and state not in standing.rule.activate_on:
+                standing.blocked = False
                 decision.unblocked.append(name)
-            want = slot.rule.wants_active(state, slot.active)
-            if slot.active and not want:
+            want = standing.rule.wants_active(state, standing.active)
+            if standing.active and not want:
                 decision.deactivate.append(name)
-            elif want and not slot.active and not slot.blocked:
+            elif want and not standing.active and not standing.blocked:
                 decision.activate.append(name)
-            elif slot.active and decision.state_changed:
+            elif standing.active and decision.state_changed:
                 decision.notify.append(name)
         return decision
 
     # ------------------------------------------------------------------ outcomes
     def activated(self, name: str) -> None:
-        slot = self._slots[name]
-        slot.active = True
-        slot.failed = None
+        standing = self._standings[name]
+        standing.active = True
+        standing.failed = None
 
     def deactivated(self, name: str) -> None:
-        self._slots[name].active = False
+        self._standings[name].active = False
 
     def failed(self, name: str, reason: str, *, permanent: bool = False) -> None:
         """``name`` raised: it is inactive, reported, and blocked (see the module docstring)."""
-        slot = self._slots[name]
-        slot.active = False
-        slot.failed = reason
+        standing = self._standings[name]
+        standing.active = False
+        standing.failed = reason
         # Only a state that would start it again needs blocking; a failure while leaving (in
         # on_deactivate, or in a hold state) is retried at the next activating state anyway.
-        slot.blocked = permanent or self.state in slot.rule.activate_on
-        slot.permanent = slot.permanent or permanent
+        standing.blocked = permanent or self.state in standing.rule.activate_on
+        standing.permanent = standing.permanent or permanent
 
     def retry(self, name: str) -> bool:
         """Lift a failure block while the state still activates ``name``; True if it should start now."""
-        slot = self._slots[name]
-        if slot.active or slot.permanent or not slot.blocked or self.state not in slot.rule.activate_on:
+        standing = self._standings[name]
+        if (
+            standing.active
+            or standing.permanent
+            or not standing.blocked
+            or self.state not in standing.rule.activate_on
+        ):
             return False
-        slot.blocked = False
+        standing.blocked = False
         return True
 
     # ------------------------------------------------------------------ views
     def is_active(self, name: str) -> bool:
-        return self._slots[name].active
+        return self._standings[name].active
 
     def active(self) -> list[str]:
         """Active behaviors in config order (stable, so status messages only change on real changes)."""
-        return [name for name, slot in self._slots.items() if slot.active]
+        return [name for name, standing in self._standings.items() if standing.active]
 
     def failures(self) -> dict[str, str]:
-        return {name: slot.failed for name, slot in self._slots.items() if slot.failed is not None}
+        return {
+            name: standing.failed for name, standing in self._standings.items() if standing.failed is not None
+        }

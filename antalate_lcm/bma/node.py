@@ -160,7 +160,7 @@ class BmaNode(Node):
         for name in decision.notify:
             slot = self._slots[name]
             if slot.behavior is not None and self._arbiter.is_active(name) and slot.ctx is not None:
-                slot.ctx.guard("on_state", slot.behavior.on_state, state)
+                slot.ctx.contain("on_state", slot.behavior.on_state, state)
         if changed or decision.state_changed:
             self._publish_status()
 
@@ -175,7 +175,7 @@ class BmaNode(Node):
         # "deactivate an active behavior" (on_deactivate attempted to release a half-done start).
         self._arbiter.activated(name)
         self._started_at[name] = self.now
-        if not ctx.guard("on_activate", behavior.on_activate):
+        if not ctx.contain("on_activate", behavior.on_activate):
             return
         self.log.info("activated %s", name)
         if slot.plan.tick_hz > 0:

@@ -69,7 +69,7 @@ class HlcNode(Node):
                 low_cell_voltage=h.low_cell_voltage,
             )
         )
-        self.guard = VelocityGuard(
+        self.velocity_guard = VelocityGuard(
             VelocityLimits(
                 max_horizontal=h.max_horizontal_speed,
                 max_vertical=h.max_vertical_speed,
@@ -201,7 +201,9 @@ class HlcNode(Node):
         if not self.started:
             return
         cmd = VelocityCommand(msg.vx, msg.vy, msg.vz, msg.yaw_rate, msg.frame, self.now)
-        decision = self.guard.on_command(cmd, self.now, self.machine.state, self.mc_state, self._link_age())
+        decision = self.velocity_guard.on_command(
+            cmd, self.now, self.machine.state, self.mc_state, self._link_age()
+        )
         self._apply(decision, msg.header.agent)
 
     def _link_age(self) -> float:
@@ -237,7 +239,7 @@ class HlcNode(Node):
         self._polled_at = now
         self._handle(self.machine.on_autopilot(self.snapshot, now, fault=self._state_fault))
         self._handle(self.machine.tick(now))
-        stale = self.guard.tick(now, self.machine.state, self.mc_state, self._link_age())
+        stale = self.velocity_guard.tick(now, self.machine.state, self.mc_state, self._link_age())
         if stale is not None:
             self._apply(stale, "velocity timeout")
 

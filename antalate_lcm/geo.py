@@ -83,6 +83,14 @@ def local_ne(lat0: float, lon0: float, lat: float, lon: float) -> tuple[float, f
     return dist * math.cos(rad), dist * math.sin(rad)
 
 
+def metres_per_radian(lat: float) -> tuple[float, float]:
+    """Metres per radian of latitude and of longitude at ``lat`` (the ellipsoid's local radii): the one
+    flat-earth scale shared by the sim's frame and the station's sector prefilter."""
+    phi = math.radians(lat)
+    w = 1.0 - _E2 * math.sin(phi) ** 2
+    return WGS84_A * (1.0 - _E2) / w**1.5, WGS84_A / math.sqrt(w) * math.cos(phi)
+
+
 def _wrap_lon(lon: float) -> float:
     return wrap_180(lon) if not -180.0 <= lon < 180.0 else lon
 
@@ -100,12 +108,9 @@ class FlatFrame:
     _m_per_rad_lon: float = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        phi = math.radians(self.lat0)
-        w = 1.0 - _E2 * math.sin(phi) ** 2
-        meridional = WGS84_A * (1.0 - _E2) / w**1.5
-        prime_vertical = WGS84_A / math.sqrt(w)
-        object.__setattr__(self, "_m_per_rad_lat", meridional)
-        object.__setattr__(self, "_m_per_rad_lon", prime_vertical * math.cos(phi))
+        per_rad_lat, per_rad_lon = metres_per_radian(self.lat0)
+        object.__setattr__(self, "_m_per_rad_lat", per_rad_lat)
+        object.__setattr__(self, "_m_per_rad_lon", per_rad_lon)
 
     def to_latlon(self, north_m: float, east_m: float) -> tuple[float, float]:
         """Lat/lon of a point given in metres north/east of the reference point."""

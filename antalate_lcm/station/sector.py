@@ -22,10 +22,10 @@ from dataclasses import dataclass
 
 from geographiclib.geodesic import Geodesic
 
+from antalate_lcm.geo import WGS84_A, metres_per_radian
+
 _WGS84 = Geodesic.WGS84
 _MASK = Geodesic.DISTANCE | Geodesic.AZIMUTH
-_A = 6378137.0
-_E2 = (1.0 / 298.257223563) * (2.0 - 1.0 / 298.257223563)
 #: Metres per degree of latitude at the equator, the smallest anywhere on WGS84.
 _MIN_M_PER_DEG_LAT = 110_574.0
 #: Relative widening of the search box beyond the planar sector: covers the planar approximation's
@@ -111,12 +111,11 @@ class _Flat:
     )
 
     def __init__(self, lat: float, lon: float, heading: float, range_m: float, fov_deg: float) -> None:
-        phi = math.radians(lat)
-        w = 1.0 - _E2 * math.sin(phi) ** 2
         self.lat = lat
         self.lon = lon
-        self.k_north = math.radians(1.0) * _A * (1.0 - _E2) / w**1.5  # metres per degree of latitude
-        self.k_east = math.radians(1.0) * _A / math.sqrt(w) * math.cos(phi)  # per degree of longitude
+        per_rad_lat, per_rad_lon = metres_per_radian(lat)
+        self.k_north = math.radians(1.0) * per_rad_lat  # metres per degree of latitude
+        self.k_east = math.radians(1.0) * per_rad_lon  # per degree of longitude
         self.hn = math.cos(math.radians(heading))
         self.he = math.sin(math.radians(heading))
         out_d = range_m * (1.0 + self.REL_MARGIN) + self.SLACK_M
@@ -272,7 +271,7 @@ def search_box(
     cos_pole = math.cos(math.radians(max(abs(south), abs(north))))
     if cos_pole < 1e-9:
         return south, north, -180.0, 180.0
-    m_per_deg_lon = math.radians(1.0) * _A * cos_pole
+    m_per_deg_lon = math.radians(1.0) * WGS84_A * cos_pole
     west = lon + min(easts) * slack / m_per_deg_lon
     east = lon + max(easts) * slack / m_per_deg_lon
     if east - west >= 360.0:

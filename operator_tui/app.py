@@ -25,9 +25,10 @@ from textual.widgets import Footer
 
 from antalate_lcm.config import Config
 from antalate_lcm.node import Context
+from antalate_lcm.vocabulary import Severity
 from operator_tui.commands import CommandTracker, CommandUpdate, DirectionControl, Status, applies
 from operator_tui.link import OperatorNode
-from operator_tui.model import Severity, SwarmModel
+from operator_tui.model import SwarmModel
 from operator_tui.screens import ConfirmScreen, HelpScreen
 from operator_tui.widgets.agent_table import AgentTable
 from operator_tui.widgets.panels import (

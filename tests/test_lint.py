@@ -1,10 +1,13 @@
-"""The tree stays `ruff` clean (pyproject.toml holds the rules)."""
+"""The tree stays `ruff` clean and formatted, and `mypy --strict` passes on the packages (pyproject.toml
+holds the rules of both)."""
 
 from __future__ import annotations
 
+import importlib.util
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -12,11 +15,42 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 
 
-def test_ruff_clean() -> None:
+def _ruff() -> str:
     ruff = shutil.which("ruff", path=str(Path(sys.executable).parent)) or shutil.which("ruff")
     if ruff is None:
         pytest.skip("ruff is not installed (pip install -e '.[dev]')")
+    return ruff
+
+
+def _mypy_cache_dir() -> Path:
+    """Beside the interpreter in a venv (kept between runs, and thrown away with the venv of a fresh
+    CI clone), else in the temp dir: an incremental run takes a few seconds, a cold one several times that."""
+    if sys.prefix != sys.base_prefix:
+        return Path(sys.prefix) / ".mypy_cache"
+    return Path(tempfile.gettempdir()) / "antalate-mypy-cache"
+
+
+def test_ruff_clean() -> None:
     proc = subprocess.run(
-        [ruff, "check", "--output-format", "concise", "."], cwd=REPO, capture_output=True, text=True
+        [_ruff(), "check", "--output-format", "concise", "."], cwd=REPO, capture_output=True, text=True
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_ruff_format() -> None:
+    proc = subprocess.run([_ruff(), "format", "--check", "."], cwd=REPO, capture_output=True, text=True)
+    assert proc.returncode == 0, "run `ruff format .`:\n" + proc.stdout + proc.stderr
+
+
+def test_mypy_strict() -> None:
+    """pyproject's [tool.mypy]: strict over antalate_lcm, operator_tui and behaviors, as Python 3.10."""
+    if importlib.util.find_spec("mypy") is None:
+        pytest.skip("mypy is not installed (pip install -e '.[dev]')")
+    proc = subprocess.run(
+        [sys.executable, "-m", "mypy", "--cache-dir", str(_mypy_cache_dir())],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr

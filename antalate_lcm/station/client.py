@@ -25,8 +25,7 @@ import httpx
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
 from antalate_lcm.security import sign
-
-from ._models import CommandName
+from antalate_lcm.vocabulary import CommandName
 
 COMMANDS: tuple[CommandName, ...] = ("TAKEOFF", "LAND", "RTL")
 

@@ -12,8 +12,9 @@ from collections.abc import Callable, Iterable
 from rich.text import Text
 from textual.widgets import RichLog, Static
 
+from antalate_lcm.vocabulary import Severity
 from operator_tui.commands import DirectionControl, Status, TrackedCommand, applies
-from operator_tui.model import AgentView, Event, Severity, heading_arrow
+from operator_tui.model import AgentView, Event, heading_arrow
 from operator_tui.widgets.palette import SEVERITY_STYLE, battery_style, hlc_style, mc_style
 
 TimeFormat = Callable[[float], str]

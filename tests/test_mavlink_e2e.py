@@ -223,7 +223,8 @@ def test_low_battery_returns_home(copter: Callable[..., InProcessAgent]) -> None
     agent.wait("hlc", H.LOW_BATTERY, timeout=3)
     agent.error(ErrorCode.LOW_BATTERY)
     agent.wait("mc", M.RTL)
-    assert agent.vehicle.snapshot().mode == "RTL"
+    # the MC's RTL and the HLC's mode command to the vehicle go out together: wait for the vehicle
+    assert agent.vehicle.wait_until(lambda s: s.mode == "RTL", 3)
     agent.wait("mc", M.STANDBY, timeout=10, since=agent.wait("mc", M.RTL).t)
     assert agent.wait("hlc", H.READY, since=agent.wait("hlc", H.LOW_BATTERY).t)
     snap = agent.vehicle.snapshot()

@@ -69,6 +69,13 @@ def test_station_models_use_the_vocabulary_literals() -> None:
     """The station's JSON validates states and commands with these very literals, not copies."""
     from antalate_lcm.station import models
 
-    assert models.ReportRequest.model_fields["mc_state"].annotation == McStateName | None
-    assert models.ReportRequest.model_fields["hlc_state"].annotation == HlcStateName | None
-    assert models.OperatorCommand.model_fields["command"].annotation == CommandName
+    annotations: dict[str, object] = {
+        "mc_state": models.ReportRequest.model_fields["mc_state"].annotation,
+        "hlc_state": models.ReportRequest.model_fields["hlc_state"].annotation,
+        "command": models.OperatorCommand.model_fields["command"].annotation,
+    }
+    assert annotations == {
+        "mc_state": McStateName | None,
+        "hlc_state": HlcStateName | None,
+        "command": CommandName,
+    }

@@ -83,6 +83,15 @@ def local_ne(lat0: float, lon0: float, lat: float, lon: float) -> tuple[float, f
     return dist * math.cos(rad), dist * math.sin(rad)
 
 
+def body_to_ne(forward: float, right: float, heading: float) -> tuple[float, float]:
+    """A horizontal vector given as (forward, right) of something facing compass ``heading`` degrees,
+    as (north, east): the one body-to-NED rotation (the sim's body-frame commands, the Tello's frames).
+    Its inverse is the same rotation by ``-heading``."""
+    psi = math.radians(heading)
+    c, s = math.cos(psi), math.sin(psi)
+    return forward * c - right * s, forward * s + right * c
+
+
 def metres_per_radian(lat: float) -> tuple[float, float]:
     """Metres per radian of latitude and of longitude at ``lat`` (the ellipsoid's local radii): the one
     flat-earth scale shared by the sim's frame and the station's sector prefilter."""

@@ -68,7 +68,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, Clock, FlightMode, Frame
-from antalate_lcm.geo import FlatFrame, wrap_360
+from antalate_lcm.geo import FlatFrame, body_to_ne, wrap_360
 
 #: Parameters and their defaults (``[hlc.autopilot]`` with ``autopilot = "sim"``).
 DEFAULTS: dict[str, Any] = {
@@ -638,9 +638,7 @@ class SimAutopilot(Autopilot):
         if self._cmd is not None and self._sim_time - self._cmd_time <= float(p["velocity_hold"]):
             vx, vy, vz, yaw_rate, frame = self._cmd
             if frame is Frame.BODY:
-                psi = math.radians(self.heading)
-                tn = vx * math.cos(psi) - vy * math.sin(psi)
-                te = vx * math.sin(psi) + vy * math.cos(psi)
+                tn, te = body_to_ne(vx, vy, self.heading)
             else:
                 tn, te = vx, vy
             td = vz

@@ -11,26 +11,24 @@ import math
 from dataclasses import dataclass
 
 from antalate_lcm.autopilot.base import altitude_reached
+from antalate_lcm.geo import body_to_ne
 
 RC = tuple[int, int, int, int]
 
 
 def ground_to_ne(gx: float, gy: float, home_heading: float) -> tuple[float, float]:
     """A ground-frame vector (x along yaw 0, y to its right) as north/east."""
-    psi = math.radians(home_heading)
-    return gx * math.cos(psi) - gy * math.sin(psi), gx * math.sin(psi) + gy * math.cos(psi)
+    return body_to_ne(gx, gy, home_heading)
 
 
 def body_to_ground(fwd: float, right: float, yaw: float) -> tuple[float, float]:
     """A body-frame vector (forward, right) at `yaw` degrees into the ground frame."""
-    r = math.radians(yaw)
-    return fwd * math.cos(r) - right * math.sin(r), fwd * math.sin(r) + right * math.cos(r)
+    return body_to_ne(fwd, right, yaw)
 
 
 def ne_to_body(vn: float, ve: float, heading: float) -> tuple[float, float]:
     """A north/east vector as forward/right of a vehicle facing `heading` (compass degrees)."""
-    psi = math.radians(heading)
-    return vn * math.cos(psi) + ve * math.sin(psi), -vn * math.sin(psi) + ve * math.cos(psi)
+    return body_to_ne(vn, ve, -heading)
 
 
 def dead_reckon(

@@ -18,16 +18,16 @@ from __future__ import annotations
 import math
 import ssl
 import time
-from typing import Any
+from typing import Any, get_args
 
 import httpx
 
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
 from antalate_lcm.security import sign
-from antalate_lcm.vocabulary import CommandName
+from antalate_lcm.vocabulary import Command, CommandName
 
-COMMANDS: tuple[CommandName, ...] = ("TAKEOFF", "LAND", "RTL")
+COMMANDS: tuple[CommandName, ...] = get_args(CommandName)
 
 
 class StationClientError(AntalateError):
@@ -77,7 +77,7 @@ def build_operator_cmd(
         raise ValueError(f"altitude must be a finite number of metres >= 0, got {altitude!r}")
     msg = operator_cmd_t()
     msg.header.utime, msg.header.agent, msg.header.seq = utime, sender, seq
-    msg.command = getattr(operator_cmd_t, command)
+    msg.command = Command[command].value
     msg.target = target
     msg.altitude = float(altitude)
     if key:
@@ -109,8 +109,7 @@ def build_direction_cmd(
 
 def operator_cmd_wire(msg: operator_cmd_t) -> dict[str, Any]:
     """The ``operator_cmd`` object of ``POST /api/commands`` for a signed message."""
-    names = {v: k for k, v in vars(operator_cmd_t).items() if k in COMMANDS}
-    return {**_header_fields(msg), "command": names[msg.command], "altitude": msg.altitude}
+    return {**_header_fields(msg), "command": Command(msg.command).name, "altitude": msg.altitude}
 
 
 def direction_cmd_wire(msg: direction_cmd_t) -> dict[str, Any]:

@@ -32,6 +32,7 @@ from antalate_lcm.msgs import (
 )
 from antalate_lcm.node import Context
 from antalate_lcm.security import sign, verify
+from antalate_lcm.vocabulary import Command, name_of
 from operator_tui.app import ConsoleSettings, OperatorApp
 from operator_tui.commands import Status
 from operator_tui.screens import ConfirmScreen, HelpScreen
@@ -335,8 +336,7 @@ async def test_each_key_sends_the_right_command_to_the_right_channel(
         await pilot.press("y")
         expected.append(("SWARM/OPERATOR_CMD", command, ""))
     sent = await wait_sent(pilot, app, swarm, 6)
-    names = {v: k for k, v in vars(operator_cmd_t).items() if k.isupper()}
-    assert [(ch, names[m.command], m.target) for ch, m in sent] == expected
+    assert [(ch, name_of(Command, m.command), m.target) for ch, m in sent] == expected
     assert [m.header.seq for _, m in sent] == list(range(FIRST_SEQ, FIRST_SEQ + 6))
     assert {m.header.agent for _, m in sent} == {"operator"}
     assert all(m.header.mac_len == 0 for _, m in sent)  # no swarm key configured

@@ -18,7 +18,7 @@ from antalate_lcm.errors import AntalateError
 from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, operator_cmd_t, payload_t, telemetry_t
 from antalate_lcm.station import models
 from antalate_lcm.station._auth import registration_key, registration_mac
-from antalate_lcm.vocabulary import HlcState, McState, name_of
+from antalate_lcm.vocabulary import Command, HlcState, McState, name_of
 
 _TELEMETRY_FIELDS = ("lat", "lon", "alt", "heading", "vn", "ve", "vd", "battery", "armed", "in_air", "mode")
 
@@ -113,7 +113,7 @@ def operator_cmd(reply: models.ReportReply, agent: str) -> operator_cmd_t | None
     if c is None:
         return None
     msg = operator_cmd_t()
-    msg.command = getattr(operator_cmd_t, c.command)
+    msg.command = Command[c.command].value
     msg.altitude = float(c.altitude or 0.0)
     _signed_header(msg, c, agent)
     return msg

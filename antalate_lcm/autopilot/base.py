@@ -155,6 +155,19 @@ def altitude_reached(alt: float, target: float, fraction: float) -> bool:
     return alt >= fraction * target - _ALTITUDE_EPSILON
 
 
+def check_takeoff_altitude(alt: float) -> None:
+    """The argument check every adapter's ``takeoff`` starts with: no vehicle is sent NaN or a height <= 0."""
+    if not (math.isfinite(alt) and alt > 0.0):
+        raise AutopilotError(f"takeoff refused: altitude {alt!r} must be > 0")
+
+
+def check_velocity(vx: float, vy: float, vz: float, yaw_rate: float) -> None:
+    """The argument check every adapter's ``set_velocity`` starts with: no vehicle is sent inf or NaN."""
+    values = (vx, vy, vz, yaw_rate)
+    if not all(math.isfinite(v) for v in values):
+        raise AutopilotError(f"velocity refused: non-finite value in {values}")
+
+
 class Autopilot(ABC):
     """Base class of every vehicle adapter (see the module docstring for the call contract)."""
 

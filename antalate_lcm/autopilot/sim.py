@@ -67,7 +67,16 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, Clock, FlightMode, Frame
+from antalate_lcm.autopilot.base import (
+    Autopilot,
+    AutopilotError,
+    AutopilotState,
+    Clock,
+    FlightMode,
+    Frame,
+    check_takeoff_altitude,
+    check_velocity,
+)
 from antalate_lcm.geo import FlatFrame, body_to_ne, wrap_360
 
 #: Parameters and their defaults (``[hlc.autopilot]`` with ``autopilot = "sim"``).
@@ -290,8 +299,7 @@ class SimAutopilot(Autopilot):
 
     def takeoff(self, alt: float) -> None:
         self._command("takeoff")
-        if not (math.isfinite(alt) and alt > 0.0):
-            raise AutopilotError(f"takeoff refused: altitude {alt!r} must be > 0")
+        check_takeoff_altitude(alt)
         if not self.armed:
             raise AutopilotError("takeoff refused: not armed")
         if self.mode != "GUIDED":
@@ -326,9 +334,7 @@ class SimAutopilot(Autopilot):
 
     def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
         self._command("set_velocity")
-        values = (vx, vy, vz, yaw_rate)
-        if not all(math.isfinite(v) for v in values):
-            raise AutopilotError(f"velocity refused: non-finite value in {values}")
+        check_velocity(vx, vy, vz, yaw_rate)
         if self.mode != "GUIDED" or self._phase is not _Phase.GUIDED:
             return  # like ArduCopter: velocity targets are ignored outside GUIDED flight
         self._cmd = (vx, vy, vz, yaw_rate, Frame(frame))

@@ -49,6 +49,8 @@ from antalate_lcm.autopilot.base import (
     Clock,
     FlightMode,
     Frame,
+    check_takeoff_altitude,
+    check_velocity,
 )
 from antalate_lcm.autopilot.crazyflie.frames import LocalFrame
 from antalate_lcm.autopilot.crazyflie.params import Params, parse_params
@@ -111,14 +113,20 @@ _MODE_NAMES = {
 
 
 def _init_drivers() -> None:
-    """cflib's drivers, once per process (``init_drivers`` appends to a global list each call)."""
+    """cflib's drivers, once per process (``init_drivers`` appends to a global list each call).
+
+    ``memory://`` (`memory.MemoryDriver`, a peer in this process) comes last, after cflib's own.
+    """
     global _drivers_ready
     import cflib.crtp
+
+    from antalate_lcm.autopilot.crazyflie import memory
 
     with _drivers_lock:
         if not _drivers_ready:
             cflib.crtp.init_drivers()
             _drivers_ready = True
+    memory.install()
 
 
 class CrazyflieAutopilot(Autopilot):
@@ -376,6 +384,7 @@ class CrazyflieAutopilot(Autopilot):
             self._ground_idle = True
 
     def takeoff(self, alt: float) -> None:
+        check_takeoff_altitude(alt)
         cf = self._require_link()
         with self._lock:
             r = self._reading
@@ -429,6 +438,7 @@ class CrazyflieAutopilot(Autopilot):
         log.info("RTL: go_to the take-off point (%.2f, %.2f), %.1f m in %.1f s", hx, hy, distance, duration)
 
     def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
+        check_velocity(vx, vy, vz, yaw_rate)
         cf = self._require_link()
         with self._lock:
             if self._mode in (LAND, RTL_GO, RTL_LAND):

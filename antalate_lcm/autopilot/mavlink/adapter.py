@@ -83,7 +83,15 @@ from pydantic import BaseModel
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from antalate_lcm._ratelimit import RateLimitedLog
-from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, Clock, Frame
+from antalate_lcm.autopilot.base import (
+    Autopilot,
+    AutopilotError,
+    AutopilotState,
+    Clock,
+    Frame,
+    check_takeoff_altitude,
+    check_velocity,
+)
 from antalate_lcm.autopilot.mavlink import dialect, vehicle_checks
 from antalate_lcm.autopilot.mavlink.dialect import (
     COPTER_MODES,
@@ -303,8 +311,7 @@ class MavlinkAutopilot(Autopilot):
                 raise AutopilotError(f"disarm refused ({result_name(result)}){self._because(mark)}")
 
     def takeoff(self, alt: float) -> None:
-        if not (math.isfinite(alt) and alt > 0.0):
-            raise AutopilotError(f"takeoff refused: altitude {alt!r} must be > 0")
+        check_takeoff_altitude(alt)
         with self._cmd_lock:
             self._require_link("takeoff")
             self._clear_setpoint()
@@ -332,9 +339,7 @@ class MavlinkAutopilot(Autopilot):
 
     def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
         """Send a velocity target now and keep resending it (never blocks: no ACK exists for it)."""
-        values = (vx, vy, vz, yaw_rate)
-        if not all(math.isfinite(v) for v in values):
-            raise AutopilotError(f"velocity refused: non-finite value in {values}")
+        check_velocity(vx, vy, vz, yaw_rate)
         self._require_link("set_velocity")
         now = self.clock()
         sp = self._rules.new(Frame(frame), float(vx), float(vy), float(vz), float(yaw_rate), now)

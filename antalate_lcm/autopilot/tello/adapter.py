@@ -67,7 +67,16 @@ from typing import Any, ClassVar
 from pydantic import BaseModel
 
 from antalate_lcm._ratelimit import RateLimitedLog
-from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, Clock, FlightMode, Frame
+from antalate_lcm.autopilot.base import (
+    Autopilot,
+    AutopilotError,
+    AutopilotState,
+    Clock,
+    FlightMode,
+    Frame,
+    check_takeoff_altitude,
+    check_velocity,
+)
 from antalate_lcm.autopilot.tello import maths
 from antalate_lcm.autopilot.tello.params import Params, validated
 from antalate_lcm.geo import FlatFrame, wrap_360
@@ -252,8 +261,7 @@ class TelloAutopilot(Autopilot):
 
     def takeoff(self, alt: float) -> None:
         self._require_link("takeoff")
-        if not (math.isfinite(alt) and alt > 0.0):
-            raise AutopilotError(f"takeoff refused: altitude {alt!r} must be > 0")
+        check_takeoff_altitude(alt)
         with self._lock:
             if self._phase is not _Phase.GROUND or self._in_air():
                 raise AutopilotError(
@@ -338,9 +346,7 @@ class TelloAutopilot(Autopilot):
         self._verify_rtl(dist0)
 
     def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
-        values = (vx, vy, vz, yaw_rate)
-        if not all(math.isfinite(v) for v in values):
-            raise AutopilotError(f"velocity refused: non-finite value in {values}")
+        check_velocity(vx, vy, vz, yaw_rate)
         self._require_link("set_velocity")
         with self._lock:
             self._ingest()

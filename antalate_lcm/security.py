@@ -26,20 +26,14 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
+
+from antalate_lcm.topics import Message  # every antalate message starts with header_t (mac_len, mac)
 
 log = logging.getLogger("antalate.security")
 
 
-class SignedMsg(Protocol):
-    """Any antalate message: every one starts with a ``header_t`` that carries ``mac_len``/``mac``."""
-
-    header: Any
-
-    def encode(self) -> bytes: ...
-
-
-def _unsigned_bytes(msg: SignedMsg) -> bytes:
+def _unsigned_bytes(msg: Message) -> bytes:
     header = msg.header
     saved_len, saved_mac = header.mac_len, header.mac
     header.mac_len, header.mac = 0, b""
@@ -61,13 +55,13 @@ def _digest(key: str, data: bytes) -> bytes:
     return mac.digest()
 
 
-def sign(msg: SignedMsg, key: str) -> None:
+def sign(msg: Message, key: str) -> None:
     """Fill ``mac`` in place; call after the header (utime, seq) is final."""
     digest = _digest(key, _unsigned_bytes(msg))
     msg.header.mac_len, msg.header.mac = len(digest), digest
 
 
-def signed_bytes(msg: SignedMsg, key: str) -> bytes:
+def signed_bytes(msg: Message, key: str) -> bytes:
     """Sign ``msg`` (as :func:`sign`) and return its encoding, encoding it once instead of twice.
 
     Every antalate message starts with its ``header_t``, whose ``mac_len``/``mac`` follow the
@@ -108,7 +102,7 @@ class Rejection:
         return self.text
 
 
-def check_mac(msg: SignedMsg, keys: Iterable[str]) -> Rejection | None:
+def check_mac(msg: Message, keys: Iterable[str]) -> Rejection | None:
     """None if ``msg`` carries a valid MAC under one of ``keys`` (the current key first)."""
     if msg.header.mac_len == 0:
         return Rejection(Reason.UNSIGNED, "unsigned message while a swarm key is configured")
@@ -149,7 +143,7 @@ def check_datagram(data: bytes, keys: Iterable[str], window: float, now: float) 
     return None
 
 
-def check_window(msg: SignedMsg, window: float, now: float) -> Rejection | None:
+def check_window(msg: Message, window: float, now: float) -> Rejection | None:
     """None if ``header.utime`` is within ``window`` s of ``now`` (wall clock, s)."""
     age = now - msg.header.utime / 1e6
     if abs(age) <= window:
@@ -162,7 +156,7 @@ def check_window(msg: SignedMsg, window: float, now: float) -> Rejection | None:
 
 
 def verify(
-    msg: SignedMsg, key: str, window: float, *, now: float | None = None, previous_keys: Iterable[str] = ()
+    msg: Message, key: str, window: float, *, now: float | None = None, previous_keys: Iterable[str] = ()
 ) -> str | None:
     """Return None if authentic and fresh, else the reason to reject (for the log).
 

@@ -185,7 +185,9 @@ _CELL_FULL, _CELL_EMPTY = 4.2, 3.4  # V per cell at 100% and 0%
 _HOME_RADIUS = 0.05  # m: close enough to home to start the RTL descent
 
 
-class _Phase(enum.Enum):
+class _Motion(enum.Enum):
+    """What the kinematic model is doing (the Tello adapter's `_Phase` is a different thing: its mode)."""
+
     GROUND = "ground"
     CLIMB = "climb"  # takeoff
     GUIDED = "guided"  # following velocity set-points (hover without)
@@ -242,7 +244,7 @@ class SimAutopilot(Autopilot):
         self.armed = False
         self.in_air = False
         self.mode = "GUIDED"
-        self._phase = _Phase.GROUND
+        self._phase = _Motion.GROUND
         self._takeoff_alt = 0.0
         self._cmd: tuple[float, float, float, float, Frame] | None = None  # vx, vy, vz, yaw_rate, frame
         self._cmd_time = 0.0
@@ -310,7 +312,7 @@ class SimAutopilot(Autopilot):
         self._takeoff_alt = alt
         self._armed_since = None
         self._airborne_since = self._sim_time
-        self._phase = _Phase.CLIMB
+        self._phase = _Motion.CLIMB
 
     def land(self) -> None:
         self._command("land")
@@ -318,7 +320,7 @@ class SimAutopilot(Autopilot):
         self._failsafe = ""
         self._cmd = None
         if self.in_air:
-            self._phase = _Phase.DESCEND
+            self._phase = _Motion.DESCEND
         elif self.armed:
             self._disarm()
 
@@ -328,14 +330,14 @@ class SimAutopilot(Autopilot):
         self._failsafe = ""
         self._cmd = None
         if self.in_air:
-            self._phase = _Phase.RETURN
+            self._phase = _Motion.RETURN
         elif self.armed:
             self._disarm()
 
     def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
         self._command("set_velocity")
         check_velocity(vx, vy, vz, yaw_rate)
-        if self.mode != "GUIDED" or self._phase is not _Phase.GUIDED:
+        if self.mode != "GUIDED" or self._phase is not _Motion.GUIDED:
             return  # like ArduCopter: velocity targets are ignored outside GUIDED flight
         self._cmd = (vx, vy, vz, yaw_rate, Frame(frame))
         self._cmd_time = self._sim_time
@@ -377,7 +379,7 @@ class SimAutopilot(Autopilot):
         self._failsafe = reason or mode
         self._cmd = None
         if self.in_air:
-            self._phase = {"rtl": _Phase.RETURN, "land": _Phase.DESCEND, "brake": _Phase.HOLD}[mode]
+            self._phase = {"rtl": _Motion.RETURN, "land": _Motion.DESCEND, "brake": _Motion.HOLD}[mode]
         elif self.armed:
             self._disarm()
 
@@ -407,7 +409,7 @@ class SimAutopilot(Autopilot):
         if auto_land is not None:
             self._pilot_autoland = auto_land
         if self.in_air:
-            self._phase = _Phase.PILOT
+            self._phase = _Motion.PILOT
             self._takeover_time = self._sim_time
 
     def _scheduled_faults(self) -> None:
@@ -489,7 +491,7 @@ class SimAutopilot(Autopilot):
         for k in self._PERSISTED:
             if k in data:
                 setattr(self, k, data[k])
-        self._phase = _Phase[data.get("phase", "GROUND")]
+        self._phase = _Motion[data.get("phase", "GROUND")]
         if self.in_air:
             self._airborne_since = self._sim_time
         # The vehicle flew on while nobody was listening.
@@ -564,7 +566,7 @@ class SimAutopilot(Autopilot):
         dt = max(0.0, now - self._t_last) * self._time_scale
         self._t_last = now
         while dt > 0.0:
-            if self._phase is _Phase.GROUND:
+            if self._phase is _Motion.GROUND:
                 self._step(dt)  # nothing moves: one step, however long
                 return
             h = min(dt, self._max_step)
@@ -577,14 +579,14 @@ class SimAutopilot(Autopilot):
         t = self._sim_time
         drain = float(p["drain_flying"] if self.in_air else p["drain_idle"])
         self.battery = max(0.0, self.battery - drain * h / 60.0)
-        if self.in_air and self.battery <= 0.0 and self._phase is not _Phase.DESCEND:
+        if self.in_air and self.battery <= 0.0 and self._phase is not _Motion.DESCEND:
             self.mode = "LAND"  # the autopilot's own empty-battery failsafe
             self._failsafe = "battery empty"
             self._cmd = None
-            self._phase = _Phase.DESCEND
+            self._phase = _Motion.DESCEND
 
         phase = self._phase
-        if phase is _Phase.GROUND:
+        if phase is _Motion.GROUND:
             self.vn = self.ve = self.vd = 0.0
             landed_long_enough = self._disarm_at is not None and t >= self._disarm_at
             idle_too_long = self._armed_since is not None and t - self._armed_since >= float(
@@ -592,27 +594,27 @@ class SimAutopilot(Autopilot):
             )
             if landed_long_enough or idle_too_long:
                 self._disarm()
-        elif phase is _Phase.CLIMB:
+        elif phase is _Motion.CLIMB:
             self._brake(h)
             self._vertical_to(self._takeoff_alt, float(p["climb_rate"]), h)
             if self.alt >= self._takeoff_alt:
-                self._phase = _Phase.GUIDED
-        elif phase is _Phase.GUIDED:
+                self._phase = _Motion.GUIDED
+        elif phase is _Motion.GUIDED:
             self._follow_setpoint(h)
-        elif phase is _Phase.RETURN:
+        elif phase is _Motion.RETURN:
             self._return_home(h)
-        elif phase is _Phase.DESCEND:
+        elif phase is _Motion.DESCEND:
             self._brake(h)
             self._vertical_to(0.0, float(p["descent_rate"]), h)
-        elif phase is _Phase.HOLD:
+        elif phase is _Motion.HOLD:
             self._brake(h)
             self.vd = 0.0
-        elif phase is _Phase.PILOT:
+        elif phase is _Motion.PILOT:
             self._brake(h)
             self.vd = 0.0
             if self._pilot_autoland and t - self._takeover_time >= float(p["takeover_land_delay"]):
-                self._phase = _Phase.DESCEND
-        if self.in_air and self.alt <= 0.0 and self._phase is not _Phase.CLIMB:
+                self._phase = _Motion.DESCEND
+        if self.in_air and self.alt <= 0.0 and self._phase is not _Motion.CLIMB:
             self._touchdown()
 
     def _lag(self, v0: float, target: float, h: float) -> tuple[float, float]:
@@ -677,7 +679,7 @@ class SimAutopilot(Autopilot):
             # Arrive exactly (within one step's travel), stop, and descend.
             self.north = self.east = 0.0
             self.vn = self.ve = 0.0
-            self._phase = _Phase.DESCEND
+            self._phase = _Motion.DESCEND
             return
         self.vn, self.ve = -self.north / dist * speed, -self.east / dist * speed
         self.north += self.vn * h
@@ -688,7 +690,7 @@ class SimAutopilot(Autopilot):
         self.alt = 0.0
         self.vn = self.ve = self.vd = 0.0
         self.in_air = False
-        self._phase = _Phase.GROUND
+        self._phase = _Motion.GROUND
         self._failsafe = ""
         self._cmd = None
         if self.armed:

@@ -30,15 +30,6 @@ def make_config(bma: list[dict[str, Any]], **extra: Any) -> Config:
     return parse_config(data, "test.toml")
 
 
-def wait_for(predicate: Callable[[], Any], timeout: float = 3.0, interval: float = 0.01) -> Any:
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value or time.monotonic() > deadline:
-            return value
-        time.sleep(interval)
-
-
 class Harness:
     """A started executor and bus, a probe node for the test's own traffic, and BMAs to run."""
 

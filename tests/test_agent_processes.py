@@ -22,7 +22,8 @@ from antalate_lcm.runtime.agent import (
     swarm_configs,
 )
 from tests.conftest import MCAST_URL, Probe
-from tests.netns import NetNamespace, wait_for
+from tests.netns import NetNamespace
+from tests.polling import wait_for
 
 
 def test_shards_cover_every_agent_once_in_order() -> None:

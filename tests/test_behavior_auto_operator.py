@@ -7,7 +7,8 @@ from typing import Any
 
 from antalate_lcm import security
 from antalate_lcm.msgs import mc_state_t, operator_cmd_t
-from tests.bma_support import AGENT, Harness, harness, make_config, wait_for
+from tests.bma_support import AGENT, Harness, harness, make_config
+from tests.polling import wait_for
 
 
 def _config(params: dict[str, Any], **extra: Any) -> Any:

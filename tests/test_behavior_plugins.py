@@ -16,7 +16,8 @@ from antalate_lcm.config import load_config
 from antalate_lcm.errors import ConfigError
 from antalate_lcm.msgs import velocity_cmd_t
 from antalate_lcm.plugins import BEHAVIORS, available
-from tests.bma_support import harness, make_config, wait_for
+from tests.bma_support import harness, make_config
+from tests.polling import wait_for
 
 if sys.version_info >= (3, 11):
     import tomllib

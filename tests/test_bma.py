@@ -9,7 +9,8 @@ import pytest
 
 from antalate_lcm.bma import ActivationRule, Arbiter
 from antalate_lcm.msgs import arbiter_status_t, mc_state_t, telemetry_t
-from tests.bma_support import AGENT, Recorder, harness, make_config, wait_for
+from tests.bma_support import AGENT, Recorder, harness, make_config
+from tests.polling import wait_for
 
 REC = "tests.bma_support:Recorder"
 RAISER = "tests.bma_support:Raiser"

@@ -16,7 +16,8 @@ from antalate_lcm.bus import Bus
 from antalate_lcm.errors import MulticastUnavailable
 from antalate_lcm.msgs import mc_state_t, telemetry_t
 from tests.conftest import MCAST_URL, Probe
-from tests.netns import NetNamespace, wait_for
+from tests.netns import NetNamespace
+from tests.polling import wait_for
 
 
 @pytest.fixture

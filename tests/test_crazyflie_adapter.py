@@ -21,17 +21,9 @@ from antalate_lcm.autopilot.base import AutopilotError, Frame  # noqa: E402
 from antalate_lcm.autopilot.crazyflie import CFLIB_MISSING, CrazyflieAutopilot  # noqa: E402
 from antalate_lcm.geo import distance  # noqa: E402
 from tests.emulators.crazyflie_emulator import CrazyflieEmulator  # noqa: E402
+from tests.polling import wait_for  # noqa: E402
 
 FAST = {"climb_speed": 2.0, "land_speed": 1.0, "rtl_speed": 2.0, "connect_timeout": 5.0}
-
-
-def wait_for(predicate: Callable[[], bool], timeout: float = 8.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return bool(predicate())
 
 
 @pytest.fixture

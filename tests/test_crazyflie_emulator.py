@@ -20,17 +20,9 @@ from cflib.crazyflie.log import LogConfig  # noqa: E402
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie  # noqa: E402
 
 from tests.emulators.crazyflie_emulator import CrazyflieEmulator, battery_level  # noqa: E402
+from tests.polling import wait_for  # noqa: E402
 
 cflib.crtp.init_drivers() if not cflib.crtp.CLASSES else None
-
-
-def wait_for(predicate: Any, timeout: float = 5.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return bool(predicate())
 
 
 @pytest.fixture

@@ -12,7 +12,8 @@ import uuid
 
 import pytest
 
-from tests.netns import NetNamespace, wait_for
+from tests.netns import NetNamespace
+from tests.polling import wait_for
 
 pytestmark = pytest.mark.netns
 

@@ -8,7 +8,7 @@ import time
 import pytest
 
 from antalate_lcm.executor import Executor
-from tests.netns import wait_for
+from tests.polling import wait_for
 
 
 @pytest.fixture

@@ -23,7 +23,7 @@ from antalate_lcm.node import Context, Node
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.runtime.launch import run_until_signal
 from antalate_lcm.vocabulary import HlcState, McState
-from tests.netns import wait_for
+from tests.polling import wait_for
 
 STOPS = 20
 

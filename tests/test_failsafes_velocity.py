@@ -26,7 +26,7 @@ from antalate_lcm.mc.node import McNode
 from antalate_lcm.msgs import operator_cmd_t, velocity_cmd_t
 from antalate_lcm.node import Context, Node
 from antalate_lcm.vocabulary import HlcState, McState
-from tests.netns import wait_for
+from tests.polling import wait_for
 
 LIMITS = VelocityLimits(velocity_timeout=0.5, max_link_age=1.5)  # the node passes its link_timeout
 A, M = HlcState.AIRBORNE, McState.MISSION

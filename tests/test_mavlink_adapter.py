@@ -18,6 +18,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav2
 from antalate_lcm.autopilot import AutopilotError, AutopilotState, FlightMode, Frame, load_autopilot
 from antalate_lcm.autopilot.mavlink import DEFAULTS, VELOCITY_TYPE_MASK, MavlinkAutopilot, Params
 from tests.emulators.mavlink_vehicle import MavlinkVehicle, VehicleSnapshot
+from tests.polling import wait_for
 
 # Short delays and brisk kinematics; heartbeats at 10 Hz so mode confirmations are quick.
 FAST: dict[str, Any] = {
@@ -41,15 +42,6 @@ AP: dict[str, Any] = {
     "ack_timeout": 0.5,
     "mode_timeout": 2.0,
 }
-
-
-def wait_for(predicate: Callable[[], Any], timeout: float, interval: float = 0.02) -> Any:
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value or time.monotonic() > deadline:
-            return value
-        time.sleep(interval)
 
 
 def free_udp_port() -> int:

@@ -18,7 +18,8 @@ import pytest
 from antalate_lcm.autopilot import FlightMode, Frame
 from antalate_lcm.autopilot.mavlink import MavlinkAutopilot
 from tests.emulators.mavlink_vehicle import MavlinkVehicle
-from tests.test_mavlink_adapter import FAST, fly, make_ap, state_until, vehicle_until, wait_for
+from tests.polling import wait_for
+from tests.test_mavlink_adapter import FAST, fly, make_ap, state_until, vehicle_until
 
 
 def started(params: dict[str, float] | None = None, **kw: Any) -> MavlinkVehicle:

@@ -20,7 +20,8 @@ from antalate_lcm.autopilot import AutopilotError, Frame
 from antalate_lcm.autopilot.mavlink import MavlinkAutopilot
 from antalate_lcm.autopilot.mavlink.signing import signing_key
 from tests.emulators.mavlink_vehicle import COPTER_MODES, MavlinkVehicle
-from tests.test_mavlink_adapter import FAST, fly, make_ap, state_until, vehicle_until, wait_for
+from tests.polling import wait_for
+from tests.test_mavlink_adapter import FAST, fly, make_ap, state_until, vehicle_until
 
 PASSPHRASE = "correct horse battery staple"
 KEY = hashlib.sha256(PASSPHRASE.encode()).digest()  # MAVProxy's `signing setup PASSPHRASE`

@@ -31,7 +31,8 @@ from antalate_lcm.station._auth import registration_key, sha256_hex
 from antalate_lcm.station.client import StationClient, build_operator_cmd, operator_cmd_wire
 from tests.agent_harness import AgentProcesses, agent_config
 from tests.conftest import Probe
-from tests.netns import NetNamespace, wait_for
+from tests.netns import NetNamespace
+from tests.polling import wait_for
 from tests.test_station import API_KEYS, AUTH, OPERATOR_KEY
 
 

@@ -12,7 +12,8 @@ import pytest
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t, velocity_cmd_t
 from tests.agent_harness import AgentProcesses, agent_config
 from tests.conftest import Probe
-from tests.netns import NetNamespace, wait_for
+from tests.netns import NetNamespace
+from tests.polling import wait_for
 
 pytestmark = pytest.mark.netns
 

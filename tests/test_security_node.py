@@ -37,7 +37,7 @@ from antalate_lcm.node import Context, InsecureBus, Node
 from antalate_lcm.security import Reason, sign
 from antalate_lcm.vocabulary import HlcState, McState
 from tests.agent_harness import FAST_SIM
-from tests.netns import wait_for
+from tests.polling import wait_for
 
 KEY = "node-test-swarm-key"
 AGENT = "alpha"

@@ -28,7 +28,8 @@ import pytest
 
 from antalate_lcm import _codegen, spy
 from antalate_lcm.msgs import header_t, mc_state_t, telemetry_t
-from tests.netns import REPO, NetNamespace, netns_unavailable, stop_process, wait_for
+from tests.netns import REPO, NetNamespace, netns_unavailable, stop_process
+from tests.polling import wait_for
 
 JAVA_SRC = Path(__file__).resolve().parent / "java" / "DecodeCheck.java"
 MCAST_URL = "udpm://239.255.76.67:7667?ttl=0"

@@ -13,7 +13,7 @@ from antalate_lcm.executor import Executor
 from antalate_lcm.msgs import hlc_error_t, mc_state_t, telemetry_t
 from antalate_lcm.node import Context
 from operator_tui.link import OperatorNode
-from tests.netns import wait_for
+from tests.polling import wait_for
 
 
 @pytest.fixture

@@ -12,7 +12,8 @@ from typing import Any
 import pytest
 
 from behaviors.video_capture import VideoCapture
-from tests.bma_support import AGENT, harness, make_config, wait_for
+from tests.bma_support import AGENT, harness, make_config
+from tests.polling import wait_for
 
 needs_ffmpeg = pytest.mark.skipif(
     shutil.which("ffmpeg") is None or shutil.which("ffprobe") is None,

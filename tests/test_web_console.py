@@ -29,7 +29,8 @@ from antalate_lcm.station._settings import ApiKey
 from operator_tui import web
 from tests.agent_harness import agent_config, to_toml
 from tests.conftest import MCAST_URL, Probe
-from tests.netns import REPO, NetNamespace, stop_process, wait_for
+from tests.netns import REPO, NetNamespace, stop_process
+from tests.polling import wait_for
 
 OPERATOR_KEY, READER_KEY = new_api_key(), new_api_key()
 KEYS = (

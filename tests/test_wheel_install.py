@@ -20,7 +20,8 @@ from pathlib import Path
 import pytest
 
 from antalate_lcm import _codegen, spy
-from tests.netns import NetNamespace, netns_unavailable, stop_process, wait_for
+from tests.netns import NetNamespace, netns_unavailable, stop_process
+from tests.polling import wait_for
 from tests.test_spy import _jdk_is_headless, _marked_processes, _read_until
 from tests.wheel_support import build_wheel
 

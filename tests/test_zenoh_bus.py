@@ -19,7 +19,7 @@ from antalate_lcm.errors import ConfigError  # noqa: E402
 from antalate_lcm.msgs import mc_state_t, telemetry_t  # noqa: E402
 from antalate_lcm.runtime.router import router_config  # noqa: E402
 from antalate_lcm.zenoh_bus import ZenohLCM, channel_key, key_channel, literal_channel  # noqa: E402
-from tests.netns import wait_for  # noqa: E402
+from tests.polling import wait_for  # noqa: E402
 
 
 def free_port() -> int:

@@ -11,7 +11,8 @@ import pytest
 
 from tests.agent_harness import AgentProcesses, agent_config
 from tests.conftest import Probe
-from tests.netns import REPO, NetNamespace, stop_process, wait_for
+from tests.netns import REPO, NetNamespace, stop_process
+from tests.polling import wait_for
 
 pytestmark = pytest.mark.netns
 

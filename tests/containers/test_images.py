@@ -248,7 +248,7 @@ def logs(pod: Podman, name: str) -> str:
 
 
 def wait_logged(pod: Podman, name: str, text: str, timeout: float = 20) -> bool:
-    from tests.netns import wait_for
+    from tests.polling import wait_for
 
     return bool(wait_for(lambda: text in logs(pod, name), timeout, interval=0.5))
 

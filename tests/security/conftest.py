@@ -13,7 +13,8 @@ import pytest
 
 from antalate_lcm.geo import offset
 from tests.conftest import _netns_reason
-from tests.netns import NetNamespace, wait_for
+from tests.netns import NetNamespace
+from tests.polling import wait_for
 from tests.security.harness import HOME, SWARM_KEY, PeerClient, Swarm, agent_doc
 
 _RESULTS: dict[str, str] = {}

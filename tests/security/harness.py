@@ -29,7 +29,8 @@ from typing import Any
 from antalate_lcm.station._auth import new_api_key, registration_key, sha256_hex
 from tests.agent_harness import FAST_SIM, to_toml
 from tests.jsonl import JsonLinesProcess
-from tests.netns import NetNamespace, stop_process, wait_for
+from tests.netns import NetNamespace, stop_process
+from tests.polling import wait_for
 
 LAN = "udpm://239.255.76.67:7667?ttl=0"
 LOCAL = "udpm://239.255.76.68:7668?ttl=0"

@@ -23,7 +23,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mav2
 
 from tests.emulators.mavlink_vehicle import COPTER_MODES
 from tests.jsonl import JsonLinesProcess
-from tests.netns import stop_process, wait_for
+from tests.netns import stop_process
+from tests.polling import wait_for
 from tests.security.harness import (
     DISARMED,
     HOME,

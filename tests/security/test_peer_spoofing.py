@@ -15,7 +15,7 @@ import time
 import pytest
 
 from antalate_lcm.geo import offset
-from tests.netns import wait_for
+from tests.polling import wait_for
 from tests.security.harness import HOME, PeerClient, Swarm, assert_unmoved, baseline
 from tests.security.test_nonsense import PAYLOADS, still_swarming, swarming
 

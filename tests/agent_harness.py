@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import json
 import subprocess
 from pathlib import Path
 from typing import Any
+
+import tomli_w
 
 from tests.conftest import MCAST_URL
 from tests.netns import NetNamespace, stop_process
@@ -16,44 +17,6 @@ FAST_SIM = {
     "rtl_speed": 8.0,
     "land_disarm_delay": 0.2,
 }
-
-
-def _toml_value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, list):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    return repr(v)
-
-
-def to_toml(doc: dict[str, Any]) -> str:
-    """A tiny TOML writer for test configs (tables, arrays of tables, scalars, lists)."""
-    lines: list[str] = []
-
-    def table(prefix: str, d: dict[str, Any], array: bool = False) -> None:
-        scalars = {k: v for k, v in d.items() if not isinstance(v, dict) and not _is_table_list(v)}
-        lines.append(f"[[{prefix}]]" if array else f"[{prefix}]")
-        lines.extend(f"{k} = {_toml_value(v)}" for k, v in scalars.items())
-        for k, v in d.items():
-            if isinstance(v, dict):
-                table(f"{prefix}.{k}", v)
-            elif _is_table_list(v):
-                for item in v:
-                    table(f"{prefix}.{k}", item, array=True)
-
-    for key, value in doc.items():
-        if _is_table_list(value):
-            for item in value:
-                table(key, item, array=True)
-        else:
-            table(key, value)
-    return "\n".join(lines) + "\n"
-
-
-def _is_table_list(v: Any) -> bool:
-    return isinstance(v, list) and bool(v) and all(isinstance(x, dict) for x in v)
 
 
 def agent_config(
@@ -73,7 +36,7 @@ class AgentProcesses:
         self.netns = netns
         self.name = doc["agent"]["name"]
         self.path = tmp_path / f"{self.name}.toml"
-        self.path.write_text(to_toml(doc))
+        self.path.write_text(tomli_w.dumps(doc))
         self.procs: dict[str, subprocess.Popen[str]] = {}
         self.logs: dict[str, Path] = {}
         self._tmp = tmp_path

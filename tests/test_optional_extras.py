@@ -15,12 +15,12 @@ import time
 from pathlib import Path
 
 import pytest
+import tomli_w
 
 from antalate_lcm.analysis.plot import MATPLOTLIB_MISSING
 from antalate_lcm.autopilot import AutopilotError
 from antalate_lcm.autopilot.tello import DJITELLOPY_MISSING, TelloAutopilot
 from antalate_lcm.config import load_config
-from tests.agent_harness import to_toml
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -49,7 +49,7 @@ def tello_config(tmp_path: Path) -> Path:
         "hlc": {"autopilot": "tello", "autopilot_params": {"host": "127.0.0.1"}},
     }
     path = tmp_path / "tello.toml"
-    path.write_text(to_toml(doc))
+    path.write_text(tomli_w.dumps(doc))
     return path
 
 

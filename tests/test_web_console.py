@@ -21,13 +21,14 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import tomli_w
 from aiohttp.test_utils import TestClient, TestServer
 
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.station._auth import new_api_key, sha256_hex
 from antalate_lcm.station._settings import ApiKey
 from operator_tui import web
-from tests.agent_harness import agent_config, to_toml
+from tests.agent_harness import agent_config
 from tests.conftest import MCAST_URL, Probe
 from tests.netns import REPO, NetNamespace, stop_process
 from tests.polling import wait_for
@@ -212,7 +213,7 @@ def test_web_console_in_chromium_shows_the_swarm_and_takes_it_off(
     if browser is None:
         pytest.skip("chromium not found (Debian: apt-get install chromium; or set ANTALATE_TEST_CHROMIUM)")
     agents_cfg = tmp_path / "swarm.toml"
-    agents_cfg.write_text(to_toml(agent_config("alpha", security={"insecure": True})))
+    agents_cfg.write_text(tomli_w.dumps(agent_config("alpha", security={"insecure": True})))
     operator_cfg = tmp_path / "operator.toml"
     operator_cfg.write_text(
         f'[agent]\nname = "operator"\n[buses]\nlan = "{MCAST_URL}"\n[topics]\ndefault_bus = "lan"\n'

@@ -97,11 +97,11 @@ def test_what_is_checked_for_each_command_line(tmp_path: Path) -> None:
     """Pure: the plan read from a command line (no bus, no HTTP)."""
     import re
 
-    from tests.agent_harness import to_toml
+    import tomli_w
 
     hc = load_healthcheck()
     cfg = tmp_path / "alpha.toml"
-    cfg.write_text(to_toml(agent_config("alpha", security={"insecure": True})))
+    cfg.write_text(tomli_w.dumps(agent_config("alpha", security={"insecure": True})))
     swarm = hc.plan(
         ["/opt/antalate/bin/python", "/opt/antalate/bin/antalate", "agent", str(cfg), "--agents", "3"]
     )

@@ -21,8 +21,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import tomli_w
 
-from tests.agent_harness import agent_config, to_toml
+from tests.agent_harness import agent_config
 from tests.containers.conftest import Image
 from tests.containers.support import Podman, RootNetns, load_build_module
 from tests.lan.swarm import OperatorClient
@@ -162,10 +163,10 @@ def test_a_mission_with_every_node_in_its_own_container(
     )
     agent["buses"] = {"lan": MCAST}
     agent_toml = tmp_path / "alpha.toml"
-    agent_toml.write_text(to_toml(agent))
+    agent_toml.write_text(tomli_w.dumps(agent))
     operator_toml = tmp_path / "operator.toml"
     operator_toml.write_text(
-        to_toml(
+        tomli_w.dumps(
             {
                 "agent": {"name": "operator"},
                 "buses": {"lan": MCAST},

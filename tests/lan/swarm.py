@@ -22,8 +22,10 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
+import tomli_w
+
 from antalate_lcm.runtime.commands import native_lcm_tool
-from tests.agent_harness import FAST_SIM, to_toml
+from tests.agent_harness import FAST_SIM
 from tests.jsonl import JsonLinesProcess
 from tests.lan.topology import REPO, Lan, stop_process
 
@@ -68,7 +70,7 @@ def vehicle_config(name: str, out_dir: Path, forward_speed: float = 0.3) -> Path
             if behavior["plugin"] == "dovrat_swarm":
                 behavior["params"] = {**behavior.get("params", {}), "forward_speed": forward_speed}
     path = out_dir / f"{name}.toml"
-    path.write_text(to_toml(doc))
+    path.write_text(tomli_w.dumps(doc))
     return path
 
 
@@ -215,7 +217,7 @@ class LanSwarm:
         op_doc = _merge(
             tomllib.loads((EXAMPLES / "operator.toml").read_text()), {"security": {"swarm_key": SWARM_KEY}}
         )
-        op_cfg.write_text(to_toml(op_doc))
+        op_cfg.write_text(tomli_w.dumps(op_doc))
         proc = operator.popen(
             [sys.executable, "-m", "tests.lan.lan_operator", str(op_cfg), "--stale-after", "2"],
             stdin=subprocess.PIPE,

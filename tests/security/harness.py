@@ -26,8 +26,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import tomli_w
+
 from antalate_lcm.station._auth import new_api_key, registration_key, sha256_hex
-from tests.agent_harness import FAST_SIM, to_toml
+from tests.agent_harness import FAST_SIM
 from tests.jsonl import JsonLinesProcess
 from tests.netns import NetNamespace, stop_process
 from tests.polling import wait_for
@@ -218,7 +220,7 @@ class AgentRun:
             hlc.setdefault("autopilot_params", {})["state_file"] = str(self.state_file)
         self.doc = doc
         self.path = swarm.tmp / f"{name}.toml"
-        self.path.write_text(to_toml(doc))
+        self.path.write_text(tomli_w.dumps(doc))
         self.procs: dict[str, subprocess.Popen[str]] = {}
         #: The ``antalate agent`` process this agent shares with others, if it runs in one.
         self.shared: subprocess.Popen[str] | None = None
@@ -344,7 +346,7 @@ class Swarm:
         if not DISARMED:
             doc["station"]["registration_key"] = registration_key(SWARM_KEY)
         path = self.tmp / "station.toml"
-        path.write_text(to_toml(doc))
+        path.write_text(tomli_w.dumps(doc))
         out = open(self.station_log, "w")  # noqa: SIM115 - the process owns it
         self.station = self.netns.antalate(
             "station", "--config", str(path), stdout=out, stderr=subprocess.STDOUT

@@ -21,10 +21,10 @@ from typing import Any
 
 import lcm
 import pytest
+import tomli_w
 
 from antalate_lcm.analysis import read_log
 from antalate_lcm.runtime.commands import native_lcm_tool
-from tests.agent_harness import to_toml
 from tests.lan.swarm import EXAMPLES, SWARM_KEY, VEHICLES, OperatorClient, _merge, tomllib, vehicle_config
 from tests.wan.topology import Wan
 
@@ -44,7 +44,7 @@ def bridge_config(out: Path, site: str, router: str, *, cap: bool) -> Path:
     if cap:
         doc["bridge"]["limit"] = [{"channel": ".*/TELEMETRY", "to": "wan", "rate": TELEMETRY_RATE}]
     path = out / f"bridge-{site}.toml"
-    path.write_text(to_toml(doc))
+    path.write_text(tomli_w.dumps(doc))
     return path
 
 
@@ -54,7 +54,7 @@ def agent_configs(out: Path) -> list[str]:
         path = vehicle_config(name, out)
         doc = tomllib.loads(path.read_text())
         doc["osc"] = {"enabled": False}  # no station across the WAN in this test
-        path.write_text(to_toml(doc))
+        path.write_text(tomli_w.dumps(doc))
         paths.append(str(path))
     return paths
 
@@ -104,7 +104,7 @@ def test_operator_at_site_a_flies_the_agents_of_site_b_through_the_router(tmp_pa
         op_doc = _merge(
             tomllib.loads((EXAMPLES / "operator.toml").read_text()), {"security": {"swarm_key": SWARM_KEY}}
         )
-        op_cfg.write_text(to_toml(op_doc))
+        op_cfg.write_text(tomli_w.dumps(op_doc))
         op = OperatorClient(
             wan["a", "op"].popen(
                 [sys.executable, "-m", "tests.lan.lan_operator", str(op_cfg), "--stale-after", "2"],

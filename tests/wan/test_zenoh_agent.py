@@ -12,8 +12,9 @@ import subprocess
 from pathlib import Path
 
 import pytest
+import tomli_w
 
-from tests.agent_harness import FAST_SIM, to_toml
+from tests.agent_harness import FAST_SIM
 from tests.lan.swarm import OperatorClient, _merge, tomllib
 from tests.netns import NetNamespace
 
@@ -33,7 +34,7 @@ def _config(name: str, out: Path, extra: dict[str, object]) -> Path:
         if url.startswith("zenoh://"):
             doc["buses"][bus] = URL  # the example's router address -> the one on this loopback
     path = out / name
-    path.write_text(to_toml(_merge(doc, extra)))
+    path.write_text(tomli_w.dumps(_merge(doc, extra)))
     return path
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import re
 import time
+import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,10 +39,19 @@ from antalate_lcm.security import (
     network_reachable,
     signed_bytes,
 )
-from antalate_lcm.topics import OPERATOR_INPUTS, PERSISTED_TYPES, TopicSpec, channel_regex, is_internal
+from antalate_lcm.topics import (
+    OPERATOR_INPUTS,
+    PERSISTED_TYPES,
+    Message,
+    TopicSpec,
+    channel_regex,
+    is_internal,
+)
 
 #: The bus name of :meth:`Context.in_process` (memq://, one per process).
 INPROC_BUS = "_inproc"
+#: Phases a period is split into to spread the agents' periodic timers (Node.first_delay).
+_PHASES = 16
 #: s between the reminders an insecure node logs.
 INSECURE_REMINDER = 60.0
 
@@ -270,7 +280,7 @@ class Node:
     def publish(
         self,
         topic: str,
-        msg: Any,
+        msg: Message,
         *,
         seq: int | None = None,
         **fields: str,
@@ -414,5 +424,11 @@ class Node:
         def publish_now() -> None:
             self.publish(topic, build(), seq=None, **fields)
 
-        self.create_timer(1.0 / hz, publish_now)
+        self.create_timer(1.0 / hz, publish_now, first_delay=self.first_delay(1.0 / hz))
         return publish_now
+
+    def first_delay(self, period: float) -> float:
+        """When a periodic timer of this agent first runs: within one ``period``, at a phase fixed
+        by the agent's name, so a thousand agents started together do not all run in the same tick
+        (one of 16 phases: those of an agent's nodes and of agents that share one stay together)."""
+        return period * (1.0 - (zlib.crc32(self.agent.encode()) % _PHASES) / _PHASES)

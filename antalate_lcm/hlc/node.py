@@ -101,8 +101,9 @@ class HlcNode(Node):
         self.subscribe("MC_STATE", self._on_mc_state)
         self.subscribe("VELOCITY_CMD", self._on_velocity)
         self._publish_state = self.state_publisher("HLC_STATE", self._state_msg, self.config.hlc.republish_hz)
-        self.create_timer(1.0 / self.config.hlc.control_hz, self._control)
-        self.create_timer(1.0 / self.config.hlc.telemetry_hz, self._publish_telemetry)
+        control, telemetry = 1.0 / self.config.hlc.control_hz, 1.0 / self.config.hlc.telemetry_hz
+        self.create_timer(control, self._control, first_delay=self.first_delay(control))
+        self.create_timer(telemetry, self._publish_telemetry, first_delay=self.first_delay(telemetry))
         self._publish_state()
         self._connect()
 

@@ -21,6 +21,7 @@ from pydantic import BaseModel, ConfigDict
 from antalate_lcm.bus import Subscription
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.executor import Timer
+from antalate_lcm.topics import Message
 
 if TYPE_CHECKING:
     from antalate_lcm.node import Node
@@ -145,7 +146,7 @@ class BehaviorContext:
         return self._topics.get(name, name)
 
     # ------------------------------------------------------------------ messaging
-    def publish(self, topic: str, msg: Any, **fields: str) -> bool:
+    def publish(self, topic: str, msg: Message, **fields: str) -> bool:
         """Publish on the behavior's ``topic``; the header is stamped (and, with a swarm key, the
         message signed) by the node, so a behavior acting as an operator works under authentication."""
         mapped = self.topic(topic)

@@ -30,6 +30,8 @@ test: setup sysdeps
 
 lint: setup
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/mypy --cache-dir $(VENV)/.mypy_cache
 
 gen: setup
 	$(PY) -m antalate_lcm._codegen

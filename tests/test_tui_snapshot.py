@@ -11,11 +11,10 @@ then review the diff of the .txt file.
 
 from __future__ import annotations
 
-import io
+import html
 import os
+import re
 from pathlib import Path
-
-from rich.console import Console
 
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
 from antalate_lcm.node import Context
@@ -33,21 +32,25 @@ SNAPSHOT = Path(__file__).parent / "snapshots" / "tui_main_screen.txt"
 SIZE = (150, 42)
 
 
+#: One drawn run of text in the SVG that App.export_screenshot returns (rich's export_svg): its x (px),
+#: the width it is drawn in (px, ``len(text)`` cells), its screen line (in the clip path) and the text.
+_RUN = re.compile(
+    r'<text [^>]*?x="([\d.]+)" [^>]*?textLength="([\d.]+)" clip-path="url\(#[\w-]+-line-(\d+)\)">([^<]*)</text>'
+)
+
+
 def screen_text(app: OperatorApp) -> str:
-    """The screen as plain text (what export_screenshot draws, without the SVG wrapping)."""
+    """The screen as plain text, read back from Textual's public SVG screenshot.
+
+    Each run of text carries its position; blanks are not drawn, so they are filled back in by column.
+    """
     width, height = app.size
-    console = Console(
-        width=width,
-        height=height,
-        file=io.StringIO(),
-        force_terminal=True,
-        color_system="truecolor",
-        record=True,
-        legacy_windows=False,
-        safe_box=False,
-    )
-    console.print(app.screen._compositor.render_update(full=True, screen_stack=app._background_screens))
-    return "\n".join(line.rstrip() for line in console.export_text().splitlines()) + "\n"
+    rows = [[" "] * width for _ in range(height)]
+    for x, length, line, raw in _RUN.findall(app.export_screenshot()):
+        text = html.unescape(raw).replace("\xa0", " ")
+        column = round(float(x) * len(text) / float(length))
+        rows[int(line)][column : column + len(text)] = text
+    return "\n".join("".join(row).rstrip() for row in rows) + "\n"
 
 
 async def test_main_screen_snapshot(context: Context, swarm: FakeSwarm, clock: FakeClock) -> None:

@@ -79,6 +79,9 @@ from antalate_lcm.autopilot.base import (
 )
 from antalate_lcm.geo import FlatFrame, body_to_ne, wrap_360
 
+#: The scheduled faults' parameters (s of flight after takeoff, 0 = never).
+_SCHEDULED_FAULTS = ("takeover_after", "link_loss_after", "failsafe_after", "state_error_after")
+
 #: Parameters and their defaults (``[hlc.autopilot]`` with ``autopilot = "sim"``).
 DEFAULTS: dict[str, Any] = {
     "home_lat": 32.7767,  # deg; Technion, Haifa
@@ -262,6 +265,14 @@ class SimAutopilot(Autopilot):
         self._airborne_since: float | None = None
         self._fired: set[str] = set()
         self._ends: dict[str, float] = {}  # scheduled fault -> sim time it ends
+        #: Whether any fault is scheduled at all (state() runs 20 times a second per simulated agent).
+        #: cells, voltage sag per cell in the air, warning level (%): read by every snapshot.
+        self._battery_params = (
+            int(self._p["cells"]),
+            float(self._p["voltage_sag"]),
+            float(self._p["battery_warning_at"]),
+        )
+        self._scheduled = any(float(self._p[name]) > 0.0 for name in _SCHEDULED_FAULTS)
         self._failsafe = ""  # the active failsafe's reason
         self._state_error: str | None = None
         self._state_file = str(p["state_file"])
@@ -414,14 +425,15 @@ class SimAutopilot(Autopilot):
 
     def _scheduled_faults(self) -> None:
         p = self._p
-        for name, end in list(self._ends.items()):
-            if self._sim_time >= end:
-                del self._ends[name]
-                if name == "link_loss_after":
-                    self.set_link_loss(False)
-                else:
-                    self.set_state_error(None)
-        if self._airborne_since is None or not self.in_air:
+        if self._ends:
+            for name, end in list(self._ends.items()):
+                if self._sim_time >= end:
+                    del self._ends[name]
+                    if name == "link_loss_after":
+                        self.set_link_loss(False)
+                    else:
+                        self.set_state_error(None)
+        if not self._scheduled or self._airborne_since is None or not self.in_air:
             return
         flown = self._sim_time - self._airborne_since
         faults: tuple[tuple[str, Callable[[], None], float], ...] = (
@@ -525,13 +537,12 @@ class SimAutopilot(Autopilot):
     def _snapshot(self) -> AutopilotState:
         lat, lon = self.home.to_latlon(self.north, self.east)
         flight_mode = _AUTONOMOUS_MODES.get(self.mode, FlightMode.MANUAL)
-        p = self._p
-        cells = int(p["cells"])
+        cells, sag, warn_at = self._battery_params
         voltage = math.nan
         if cells:
-            sag = float(p["voltage_sag"]) if self.in_air else 0.0
+            if not self.in_air:
+                sag = 0.0
             voltage = cells * (_CELL_EMPTY + (_CELL_FULL - _CELL_EMPTY) * self.battery / 100.0 - sag)
-        warn_at = float(p["battery_warning_at"])
         warning = (
             f"battery low ({self.battery:.0f}% <= {warn_at:g}%)"
             if warn_at and self.battery <= warn_at

@@ -73,6 +73,9 @@ class Incoming:
     msg: Any
     received: float
     fields: dict[str, str]
+    #: The channel's state republished with the same body: ``msg`` is the one decoded before, so the
+    #: UI only needs to note that the agent was heard (no transition, no new acknowledgement).
+    unchanged: bool = False
 
 
 class OperatorNode(Node):
@@ -164,6 +167,13 @@ class OperatorNode(Node):
     def drain(self) -> list[Incoming]:
         """Decode what arrived since the last call (on the UI thread): the newest message of each
         channel, and every event, oldest first."""
+        decode = self.decode
+        return [item for item in map(decode, self.take()) if item is not None]
+
+    def take(self) -> list[tuple[str, bytes, float]]:
+        """What arrived since the last call, undecoded ``(channel, datagram, received)``, oldest first:
+        the UI decodes it with :meth:`decode` in slices, so a key press never waits behind a whole
+        tick's worth of decoding."""
         # Swap, then read: a store racing the swap lands in the old table and waits one tick at most
         # (it is read below unless it came after this loop, then it is superseded by the next sample).
         latest, self.latest = self.latest, {}
@@ -175,55 +185,52 @@ class OperatorNode(Node):
         except IndexError:
             pass
         raw.sort(key=lambda item: item[2])  # arrival order, so transitions are logged as they came
-        classify = self._classify
-        out: list[Incoming] = []
-        for channel, data, received in raw:
-            kind = classify(channel)
-            if kind is None:
-                continue
-            topic, fields = kind
-            body = None if topic in EVENTS else _body(data)
-            if body is not None:
-                last = self._last_body.get(channel)
-                if last is not None and last[0] == body:
-                    self.unchanged += 1  # the same state again: the decoded one stands
-                    out.append(
-                        Incoming(
-                            topic, fields.get("agent") or last[1].header.agent, last[1], received, fields
-                        )
-                    )
-                    continue
-            if self._keys:
-                problem = check_datagram(data, self._keys, self._window, self.wallclock())
-                if problem is not None:
-                    self.rejected += 1
-                    self._decode_log.log(
-                        ("auth", channel, problem.reason),
-                        logging.WARNING,
-                        "ignored a message on %s: %s",
-                        channel,
-                        problem,
-                    )
-                    continue
-            msg_type = self._decoders[topic][0]
-            try:
-                msg = msg_type.decode(data)
-                if body is not None:
-                    self._last_body[channel] = (body, msg)
-            except Exception as exc:  # noqa: BLE001 - garbage on the bus must not take the console down
-                self.decode_errors += 1
+        return raw
+
+    def decode(self, raw: tuple[str, bytes, float]) -> Incoming | None:
+        """One datagram from :meth:`take` for the UI, or None (unwatched, forged, or garbage)."""
+        channel, data, received = raw
+        kind = self._classify(channel)
+        if kind is None:
+            return None
+        topic, fields = kind
+        body = None if topic in EVENTS else _body(data)
+        if body is not None:
+            last = self._last_body.get(channel)
+            if last is not None and last[0] == body:
+                self.unchanged += 1  # the same state again: the decoded one stands
+                agent = fields.get("agent") or last[1].header.agent
+                return Incoming(topic, agent, last[1], received, fields, unchanged=True)
+        if self._keys:
+            problem = check_datagram(data, self._keys, self._window, self.wallclock())
+            if problem is not None:
+                self.rejected += 1
                 self._decode_log.log(
-                    channel,
+                    ("auth", channel, problem.reason),
                     logging.WARNING,
-                    "dropped a %d-byte datagram on %s that is not a valid %s (%s)",
-                    len(data),
+                    "ignored a message on %s: %s",
                     channel,
-                    msg_type.__name__,
-                    exc,
+                    problem,
                 )
-                continue
-            out.append(Incoming(topic, fields.get("agent") or msg.header.agent, msg, received, fields))
-        return out
+                return None
+        msg_type = self._decoders[topic][0]
+        try:
+            msg = msg_type.decode(data)
+            if body is not None:
+                self._last_body[channel] = (body, msg)
+        except Exception as exc:  # noqa: BLE001 - garbage on the bus must not take the console down
+            self.decode_errors += 1
+            self._decode_log.log(
+                channel,
+                logging.WARNING,
+                "dropped a %d-byte datagram on %s that is not a valid %s (%s)",
+                len(data),
+                channel,
+                msg_type.__name__,
+                exc,
+            )
+            return None
+        return Incoming(topic, fields.get("agent") or msg.header.agent, msg, received, fields)
 
     # ------------------------------------------------------------------ sending (the UI thread)
     def _send(self, topic: str, msg: Any, target: str, seq: int) -> str:

@@ -171,6 +171,14 @@ class SwarmModel:
         self, topic: str, agent: str, msg: Any, now: float, wall: float, fields: dict[str, str] | None = None
     ) -> None:
         """Fold one decoded message from ``agent`` (the name recovered from its channel) into the model."""
+        view = self.heard(topic, agent, now, wall)
+        handler = self._handlers.get(topic)
+        if handler is not None:
+            handler(self, view, msg, now, wall, fields or {})
+
+    def heard(self, topic: str, agent: str, now: float, wall: float) -> AgentView:
+        """Note that ``agent`` was heard on ``topic`` (alive again if it was stale) without a new
+        message to fold in: what a state republished unchanged needs (most of them, at 5 Hz)."""
         view = self.agents.get(agent)
         if view is None:
             view = self.agents[agent] = AgentView(agent, now)
@@ -184,9 +192,7 @@ class SwarmModel:
         view.heard[topic] = now
         view.messages += 1
         self.messages += 1
-        handler = self._handlers.get(topic)
-        if handler is not None:
-            handler(self, view, msg, now, wall, fields or {})
+        return view
 
     def _on_mc(self, view: AgentView, msg: Any, now: float, wall: float, fields: dict[str, str]) -> None:
         name = name_of(McState, msg.state) or f"?{msg.state}"  # a newer agent's state: shown, not dropped

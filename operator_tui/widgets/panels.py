@@ -8,14 +8,19 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
 
 from rich.text import Text
+from textual.geometry import Region
 from textual.widgets import RichLog, Static
 
 from antalate_lcm.vocabulary import Severity
 from operator_tui.commands import DirectionControl, Status, TrackedCommand, applies
 from operator_tui.model import AgentView, Event, heading_arrow
 from operator_tui.widgets.palette import SEVERITY_STYLE, battery_style, hlc_style, mc_style
+
+if TYPE_CHECKING:
+    from typing_extensions import Self  # typing.Self is 3.11+
 
 TimeFormat = Callable[[float], str]
 
@@ -194,12 +199,37 @@ def event_line(ev: Event, time_format: TimeFormat = clock_hms) -> Text:
 
 
 class EventLog(RichLog):
-    """The event log: newest at the bottom, scrolls on its own unless the operator scrolled up."""
+    """The event log: newest at the bottom, scrolls on its own unless the operator scrolled up.
+
+    Appending lines changes the log's virtual size, for which Textual lays out and repaints the
+    whole screen (the 1,000-row table and the map too: tens of milliseconds, and every tick brings
+    events with a large swarm). The log's own size is fixed by the layout, so while lines are
+    appended a layout is skipped unless a scrollbar appears or disappears; the scrollbars are
+    updated in place and only the log is repainted.
+    """
 
     def __init__(self, *, time_format: TimeFormat = clock_hms, id: str | None = None) -> None:  # noqa: A002
         super().__init__(id=id, max_lines=2000, wrap=True, markup=False, highlight=False, auto_scroll=True)
         self.time_format = time_format
+        self._appending = False
+        #: Layouts skipped while appending (tests read it).
+        self.layouts_skipped = 0
 
     def add(self, events: Iterable[Event]) -> None:
-        for ev in events:
-            self.write(event_line(ev, self.time_format))
+        self._appending = True
+        try:
+            for ev in events:
+                self.write(event_line(ev, self.time_format))
+        finally:
+            self._appending = False
+
+    def refresh(
+        self, *regions: Region, repaint: bool = True, layout: bool = False, recompose: bool = False
+    ) -> Self:
+        if layout and self._appending and not recompose and self.is_mounted:
+            shown = (self.show_horizontal_scrollbar, self.show_vertical_scrollbar)
+            self._scroll_update(self.virtual_size)  # recomputes which scrollbars show
+            if (self.show_horizontal_scrollbar, self.show_vertical_scrollbar) == shown:
+                layout = False
+                self.layouts_skipped += 1
+        return super().refresh(*regions, repaint=repaint, layout=layout, recompose=recompose)

@@ -137,7 +137,12 @@ def _style(spec: str) -> Style:
 
 
 class SwarmMap(Widget):
-    """Draws what :meth:`update_points` gave it (Line API: lines are built once per change, not per frame)."""
+    """Draws what :meth:`update_points` gave it, aggregated per terminal cell.
+
+    With 1,000 agents nearly every position changes on every message, but the picture (which glyph
+    in which cell) changes far less: the widget compares the aggregated picture (:func:`map_rows`)
+    with the one on screen and repaints only when it differs; strips are built once per change.
+    """
 
     DEFAULT_CSS = """
     SwarmMap { height: 1fr; }
@@ -147,33 +152,39 @@ class SwarmMap(Widget):
         super().__init__(id=id)
         self.points: list[MapPoint] = []
         self.selected: str | None = None
+        self._rows: list[list[Run]] = []
+        self._rows_for: tuple[int, int] | None = None  # the size the picture was computed for
         self._lines: list[Strip] = []
-        self._built_for: tuple[int, int] | None = None
+        self._lines_for: tuple[int, int] | None = None  # the size the strips were built for
+        #: How many times the picture changed (and was repainted): tests read it.
+        self.repaints = 0
 
     def update_points(self, points: list[MapPoint], selected: str | None) -> None:
-        if points != self.points or selected != self.selected:
-            self.points = points
-            self.selected = selected
-            self._built_for = None
+        self.points = points
+        self.selected = selected
+        size = (self.size.width, self.size.height)
+        rows = map_rows(points, selected, *size)
+        if rows != self._rows or size != self._rows_for:
+            self._rows, self._rows_for, self._lines_for = rows, size, None
+            self.repaints += 1
             self.refresh()
 
-    def _build(self) -> None:
-        width, height = self.size
-        base = self.rich_style
-        self._lines = [
-            Strip([Segment(text, base + _style(spec)) for text, spec in line])
-            .extend_cell_length(width, base)
-            .crop(0, width)
-            for line in map_rows(self.points, self.selected, width, height)
-        ]
-        self._built_for = (width, height)
-
     def render_line(self, y: int) -> Strip:
-        if self._built_for != tuple(self.size):
-            self._build()
+        size = (self.size.width, self.size.height)
+        if self._lines_for != size:
+            if self._rows_for != size:  # resized since the last update
+                self._rows, self._rows_for = map_rows(self.points, self.selected, *size), size
+            base = self.rich_style
+            self._lines = [
+                Strip([Segment(text, base + _style(spec)) for text, spec in line])
+                .extend_cell_length(size[0], base)
+                .crop(0, size[0])
+                for line in self._rows
+            ]
+            self._lines_for = size
         if y < len(self._lines):
             return self._lines[y]
-        return Strip.blank(self.size.width, self.rich_style)
+        return Strip.blank(size[0], self.rich_style)
 
 
 def points_from(positions: Iterable[tuple[AgentView, float, float]]) -> list[MapPoint]:

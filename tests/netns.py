@@ -19,6 +19,15 @@ REPO = Path(__file__).resolve().parent.parent
 _SETUP = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && echo ready && exec sleep 100000"
 
 
+def child_env() -> dict[str, str]:
+    """The environment of a test's child process: this checkout importable, output unbuffered (so
+    a log read after a crash holds everything the child printed)."""
+    env = dict(os.environ)
+    env.setdefault("PYTHONUNBUFFERED", "1")
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p)
+    return env
+
+
 def netns_unavailable() -> str | None:
     """The reason private namespaces cannot be made here, or None when they can."""
     for tool in ("unshare", "nsenter", "ip"):
@@ -64,10 +73,7 @@ class NetNamespace:
         return ["nsenter", "-t", str(self.pid), "-U", "-n", "--preserve-credentials", "--", *argv]
 
     def popen(self, argv: Sequence[str], **kwargs: object) -> subprocess.Popen[str]:
-        env = dict(os.environ)
-        env.setdefault("PYTHONUNBUFFERED", "1")
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p)
-        kwargs.setdefault("env", env)
+        kwargs.setdefault("env", child_env())
         kwargs.setdefault("text", True)
         kwargs.setdefault("start_new_session", True)
         proc: subprocess.Popen[str] = subprocess.Popen(self.wrap(argv), **kwargs)  # type: ignore[call-overload]

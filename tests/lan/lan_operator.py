@@ -2,11 +2,12 @@
 
     python -m tests.lan.lan_operator CONFIG [--stale-after 2]
 
-It is an ordinary antalate :class:`~antalate_lcm.node.Node` on the config's LAN bus, and sends and
-tracks commands with the operator console's own :class:`operator_tui.commands.CommandTracker`
-(seq per command, ack = ``mc_state_t.last_command_seq``, resend with the same seq until every
-expected agent acknowledged) and :class:`~operator_tui.commands.DirectionControl` (the direction is a
-state, repeated every second), so what the tests prove is what the console does.
+It is the operator console without its terminal: the console's own node
+(:class:`operator_tui.link.OperatorNode`: receiving, signed sending), model
+(:class:`operator_tui.model.SwarmModel`: who is live or stale), command tracker
+(:class:`operator_tui.commands.CommandTracker`: seq per command, ack = ``mc_state_t.last_command_seq``,
+resend with the same seq until every expected agent acknowledged) and direction control (the direction
+is a state, repeated every second), so what the tests prove is what the console does.
 
 Requests, one JSON object a line; one JSON reply line each:
 
@@ -22,132 +23,93 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import dataclass
 from typing import Any
 
 from antalate_lcm.config import Config, load_config
-from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, operator_cmd_t, telemetry_t
-from antalate_lcm.node import Context, Node, TopicMatch
-from antalate_lcm.vocabulary import HlcState, McState
-from operator_tui.commands import COMMANDS, CommandTracker, DirectionControl, Status
+from antalate_lcm.node import Context
+from operator_tui.commands import CommandTracker, DirectionControl, Status
+from operator_tui.link import OperatorNode
+from operator_tui.model import SwarmModel
 
 
-@dataclass
-class AgentView:
-    mc: str | None = None
-    mc_heard: float | None = None
-    last_command_seq: int = 0
-    hlc: str | None = None
-    lat: float = 0.0
-    lon: float = 0.0
-    alt: float = 0.0
-    in_air: bool = False
-    tel_heard: float | None = None
-
-
-class LanOperator(Node):
-    kind = "operator"
+class LanOperator(OperatorNode):
+    """The console's own parts without its terminal: :class:`~operator_tui.link.OperatorNode` receives
+    and sends (signed), :class:`~operator_tui.model.SwarmModel` says who is stale, the tracker and
+    the direction control resend. Its refresh runs on the executor's timer instead of the UI's."""
 
     def __init__(self, config: Config, context: Context, *, stale_after: float = 2.0) -> None:
         super().__init__(config, context)
-        self.stale_after = stale_after
+        self.model = SwarmModel(stale_after=stale_after)
         self.tracker = CommandTracker(resend_interval=1.0, timeout=30.0)
         self.direction = DirectionControl(repeat_interval=1.0)
-        self.agents: dict[str, AgentView] = {}
         self.updates: list[str] = []
 
     def on_start(self) -> None:
-        self.subscribe_all("MC_STATE", self._on_mc)
-        self.subscribe_all("HLC_STATE", self._on_hlc)
-        self.subscribe_all("TELEMETRY", self._on_telemetry)
-        self.create_timer(0.1, self._tick)
+        super().on_start()
+        self.create_timer(0.1, self.refresh)
 
-    # ------------------------------------------------------------------ inputs
-    def _view(self, match: TopicMatch, msg: Any) -> AgentView:
-        name = match.fields.get("agent") or msg.header.agent
-        return self.agents.setdefault(name, AgentView())
+    def _mc_state_of(self, agent: str) -> str | None:
+        view = self.model.agents.get(agent)
+        return None if view is None else view.mc_state
 
-    def _on_mc(self, msg: mc_state_t, match: TopicMatch) -> None:
-        view = self._view(match, msg)
-        view.mc = McState(msg.state).name if msg.state in McState._value2member_map_ else f"?{msg.state}"
-        view.mc_heard = self.now
-        view.last_command_seq = msg.last_command_seq
-        name = match.fields.get("agent") or msg.header.agent
-        self.updates.extend(u.text for u in self.tracker.observe(name, msg.last_command_seq, self.now))
+    def _is_stale(self, agent: str) -> bool:
+        view = self.model.agents.get(agent)
+        return view is not None and view.stale
 
-    def _on_hlc(self, msg: hlc_state_t, match: TopicMatch) -> None:
-        view = self._view(match, msg)
-        view.hlc = HlcState(msg.state).name if msg.state in HlcState._value2member_map_ else f"?{msg.state}"
-
-    def _on_telemetry(self, msg: telemetry_t, match: TopicMatch) -> None:
-        view = self._view(match, msg)
-        view.lat, view.lon, view.alt, view.in_air = msg.lat, msg.lon, msg.alt, msg.in_air
-        view.tel_heard = self.now
-
-    # ------------------------------------------------------------------ stale detection
-    def age(self, name: str) -> float | None:
-        heard = self.agents[name].mc_heard
-        return None if heard is None else self.now - heard
-
-    def is_stale(self, name: str) -> bool:
-        age = self.age(name) if name in self.agents else None
-        return age is None or age > self.stale_after
-
-    # ------------------------------------------------------------------ outputs
-    def _tick(self) -> None:
-        resend, updates = self.tracker.tick(
-            self.now, lambda a: self.agents[a].mc if a in self.agents else None, self.is_stale
-        )
+    def refresh(self) -> None:
+        """What the console's refresh does, but draw: fold in what arrived, mark the silent stale,
+        resend what is unacknowledged and repeat the direction."""
+        now, wall = self.clock(), self.wallclock()
+        for item in self.drain():
+            if item.unchanged:
+                self.model.heard(item.topic, item.agent, item.received, wall)
+                continue
+            self.model.apply(item.topic, item.agent, item.msg, item.received, wall, item.fields)
+            if item.topic == "MC_STATE":
+                observed = self.tracker.observe(item.agent, item.msg.last_command_seq, now)
+                self.updates.extend(u.text for u in observed)
+        self.model.tick(now, wall)
+        resend, updates = self.tracker.tick(now, self._mc_state_of, self._is_stale)
         for cmd in resend:
-            self._send_command(cmd.command, cmd.target, cmd.altitude, cmd.seq)
+            self.send_operator_cmd(cmd.command, cmd.target, cmd.seq, altitude=cmd.altitude)
         self.updates.extend(u.text for u in updates)
-        if self.direction.due(self.now):
-            self._send_direction()
+        if self.direction.due(now) and self.direction.target is not None:
+            self._send_direction(self.direction.target, now)
 
-    def _send_command(self, command: str, target: str, altitude: float, seq: int) -> None:
-        msg = operator_cmd_t()
-        msg.command = COMMANDS[command]
-        msg.target = target
-        msg.altitude = altitude
-        if target:
-            self.publish("OPERATOR_CMD", msg, seq=seq, agent=target)  # Node.publish signs with the swarm key
-        else:
-            self.publish("SWARM_OPERATOR_CMD", msg, seq=seq)
-
-    def _send_direction(self) -> None:
-        msg = direction_cmd_t()
-        msg.active = self.direction.active
-        msg.azimuth = self.direction.azimuth
-        msg.speed = self.direction.speed
-        self.publish("SWARM_DIRECTION_CMD", msg)
-        self.direction.sent("", self.now)
+    def _send_direction(self, target: str, now: float) -> None:
+        d = self.direction
+        self.send_direction(active=d.active, azimuth=d.azimuth, speed=d.speed, target=target)
+        d.sent(target, now)
 
     def command(self, command: str, target: str = "", altitude: float = 0.0) -> int:
-        live = [a for a in self.agents if not self.is_stale(a)]
-        cmd = self.tracker.new(command, target, self.now, expected=live, altitude=altitude)
-        self._send_command(cmd.command, cmd.target, cmd.altitude, cmd.seq)
+        """A new command, as the console sends it: a broadcast expects every live agent's ack."""
+        expected = self.model.live_names() if not target else [target]
+        cmd = self.tracker.new(command, target, self.clock(), expected=expected, altitude=altitude)
+        self.send_operator_cmd(command, target, cmd.seq, altitude=altitude)
         return cmd.seq
 
     def set_direction(self, azimuth: float, speed: float, active: bool) -> None:
         self.direction.azimuth, self.direction.speed, self.direction.active = azimuth % 360.0, speed, active
-        self._send_direction()
+        self._send_direction("", self.clock())
 
     def status(self) -> dict[str, Any]:
-        now = self.now
-        agents = {
-            name: {
-                "mc": v.mc,
-                "hlc": v.hlc,
-                "last_command_seq": v.last_command_seq,
-                "mc_age": None if v.mc_heard is None else now - v.mc_heard,
-                "tel_age": None if v.tel_heard is None else now - v.tel_heard,
-                "lat": v.lat,
-                "lon": v.lon,
-                "alt": v.alt,
-                "in_air": v.in_air,
+        now = self.clock()
+        agents: dict[str, Any] = {}
+        for name in self.model.names():
+            v = self.model.agents[name]
+            mc_heard, tel_heard = v.heard.get("MC_STATE"), v.heard.get("TELEMETRY")
+            tel = v.telemetry
+            agents[name] = {
+                "mc": v.mc_state,
+                "hlc": v.hlc_state,
+                "last_command_seq": v.last_command_seq or 0,
+                "mc_age": None if mc_heard is None else now - mc_heard,
+                "tel_age": None if tel_heard is None else now - tel_heard,
+                "lat": tel.lat if tel else 0.0,
+                "lon": tel.lon if tel else 0.0,
+                "alt": tel.alt if tel else 0.0,
+                "in_air": tel.in_air if tel else False,
             }
-            for name, v in sorted(self.agents.items())
-        }
         commands = [
             {
                 "seq": c.seq,
@@ -164,7 +126,7 @@ class LanOperator(Node):
         ]
         return {
             "agents": agents,
-            "stale": sorted(a for a in self.agents if self.is_stale(a)),
+            "stale": sorted(n for n, v in self.model.agents.items() if v.stale),
             "commands": sorted(commands, key=lambda c: c["seq"]),
             "pending": sum(1 for c in commands if c["status"] == Status.PENDING.value),
             "direction_sends": self.direction.sends,

@@ -30,6 +30,28 @@ Names are ``antalate-lan-<pid>-<random>-<role>``: parallel runs never collide, a
 :func:`sweep_stale` removes the namespaces of runs whose process is gone (a crash, a SIGKILL),
 only those of this harness. Teardown (also on an exception) kills every process started in the
 hosts, then any process left in the namespaces, then deletes the namespaces.
+
+:class:`Wan` builds sites of such LANs from the same :class:`Host` and teardown: three sites
+joined only by routed unicast, each a LAN (a bridge in its own namespace) of hosts, their uplinks
+meeting in a ``core`` namespace that forwards IPv4 and nothing else.
+
+    with Wan({"a": ["op"], "b": ["uavs", "gw"], "c": ["router"]}) as wan:
+        wan["b", "uavs"].antalate("agent", ...)
+        wan.set_loss("b", 20)     # 20 % of the packets through site B's uplink, each way
+        wan.cut("c")              # site C unreachable (every packet through its uplink dropped)
+
+Layout (docs/wan.md)::
+
+    core:   sa 10.81.1.1/24   sb 10.81.2.1/24   sc 10.81.3.1/24     (ip_forward=1, no multicast routing)
+              │                 │                 │
+    sw-a:   br0 ── hosts of A   br0 ── hosts of B   br0 ── hosts of C
+    hosts:  lan0 10.81.N.11, .12, ...; default via 10.81.N.1; 224.0.0.0/4 dev lan0 (the site's bus);
+            239.255.76.68/32 dev lo (an agent's own bus)
+
+Multicast never crosses the core (ttl=1, and the kernel routes no multicast without a daemon), so
+the only way between sites is TCP to the router at site C. Loss and cuts are nftables rules in the
+core's ``forward`` hook on a site's uplink. Names are the LAN's, so
+:func:`sweep_stale` removes what a killed run left.
 """
 
 from __future__ import annotations
@@ -44,15 +66,17 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, TypeVar
 
-from tests.netns import stop_process
+from tests.netns import child_env, stop_process
 
 REPO = Path(__file__).resolve().parents[2]
 PREFIX = "antalate-lan"
 SUBNET = "10.77.0"
+#: The WAN's sites are 10.81.<site>.0/24, their router 10.81.<site>.1.
+WAN_SUBNET = "10.81"
 #: The multicast group of the agents' own (``local``) bus in the LAN example configs.
 LOCAL_GROUP = "239.255.76.68"
 _NAME = re.compile(rf"^{PREFIX}-(\d+)-([0-9a-f]+)-")
@@ -133,16 +157,19 @@ def sweep_stale() -> list[str]:
 
 
 class Host:
-    """One simulated machine: a network namespace with one interface (``lan0``) on the switch."""
+    """One simulated machine: a network namespace with one interface (``lan0``) on a switch."""
 
-    def __init__(self, lan: Lan, name: str, index: int) -> None:
-        self.lan = lan
+    def __init__(
+        self, name: str, ns: str, switch: str, port: str, address: str, gateway: str | None = None
+    ) -> None:
         self.name = name
-        self.index = index
-        self.ns = f"{lan.prefix}-h{index}"
-        #: The switch-side end of this host's cable (in the switch namespace).
-        self.port = f"p{index}"
-        self.address = f"{SUBNET}.{10 + index}"
+        self.ns = ns
+        #: The switch's namespace, and the switch-side end of this host's cable in it.
+        self.switch = switch
+        self.port = port
+        self.address = address
+        #: The site's router (a WAN host); a LAN host has no route beyond its switch.
+        self.gateway = gateway
         self.procs: list[subprocess.Popen[str]] = []
         self._files: list[IO[str]] = []
 
@@ -151,7 +178,7 @@ class Host:
 
     # ------------------------------------------------------------------ set-up
     def build(self) -> None:
-        ns, sw = self.ns, self.lan.switch
+        ns, sw = self.ns, self.switch
         _run(["ip", "netns", "add", ns])
         _run(["ip", "-n", ns, "link", "set", "lo", "up"])
         _run(["ip", "-n", sw, "link", "add", self.port, "type", "veth", "peer", "name", "lan0", "netns", ns])
@@ -162,6 +189,8 @@ class Host:
         self._routes()
 
     def _routes(self) -> None:
+        if self.gateway is not None:
+            _run(["ip", "-n", self.ns, "route", "replace", "default", "via", self.gateway])
         _run(["ip", "-n", self.ns, "route", "replace", "224.0.0.0/4", "dev", "lan0"])
         _run(["ip", "-n", self.ns, "route", "replace", f"{LOCAL_GROUP}/32", "dev", "lo"])
 
@@ -186,10 +215,7 @@ class Host:
 
     def popen(self, argv: Sequence[str], *, log: Path | None = None, **kwargs: Any) -> subprocess.Popen[str]:
         """Start ``argv`` in this host (its own process group, so teardown can kill its children)."""
-        env = dict(os.environ)
-        env.setdefault("PYTHONUNBUFFERED", "1")
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p)
-        kwargs.setdefault("env", env)
+        kwargs.setdefault("env", child_env())
         kwargs.setdefault("text", True)
         kwargs.setdefault("start_new_session", True)
         kwargs.setdefault("cwd", str(REPO))
@@ -222,27 +248,27 @@ class Host:
         return codes
 
 
-class Lan:
-    """K hosts on one switch. A context manager: everything it made is gone after ``with``."""
+class _Topology:
+    """What a LAN and a WAN share: build inside ``with``, a loss table, and a teardown that leaves
+    nothing (hosts' processes, then the namespaces in reverse order of creation)."""
 
-    def __init__(self, hosts: int | Iterable[str]) -> None:
-        names = [f"h{i + 1}" for i in range(hosts)] if isinstance(hosts, int) else list(hosts)
-        if not names or len(set(names)) != len(names):
-            raise ValueError("a LAN needs at least one host and unique host names")
-        if len(names) > 200:
-            raise ValueError("at most 200 hosts (one /24)")
+    #: The nftables family and table of the loss rules, and the namespace they live in (set by _build).
+    _FAMILY = ""
+    _TABLE = ""
+
+    def __init__(self) -> None:
         self.prefix = f"{PREFIX}-{os.getpid()}-{secrets.token_hex(3)}"
-        self.switch = f"{self.prefix}-sw"
-        self.hosts: dict[str, Host] = {n: Host(self, n, i + 1) for i, n in enumerate(names)}
-        self.loss = 0
-        self._loss: dict[str | None, int] = {}
+        self._filter_ns = ""
         self._built: list[str] = []
         self._closed = False
 
-    def __getitem__(self, name: str) -> Host:
-        return self.hosts[name]
+    def _all_hosts(self) -> Iterable[Host]:
+        raise NotImplementedError
 
-    def __enter__(self) -> Lan:
+    def _build(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self: _T) -> _T:
         sweep_stale()
         atexit.register(self.close)
         try:
@@ -255,35 +281,116 @@ class Lan:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def _build(self) -> None:
-        _run(["ip", "netns", "add", self.switch])
-        self._built.append(self.switch)
-        sw = self.switch
-        _run(["ip", "-n", sw, "link", "set", "lo", "up"])
-        # Snooping off: a bridge that snoops forwards a group only to ports it saw an IGMP report on
-        # (and floods only while no querier exists), so delivery would hinge on report timing and
-        # membership timeouts. A small flat LAN switch floods multicast; so does this one.
-        _run(["ip", "-n", sw, "link", "add", "br0", "type", "bridge", "mcast_snooping", "0"])
-        _run(["ip", "-n", sw, "link", "set", "br0", "up"])
-        self._nft(
-            f"add table bridge {_LOSS_TABLE}\n"
-            f"add chain bridge {_LOSS_TABLE} forward {{ type filter hook forward priority 0; policy accept; }}\n"
-        )
-        for host in self.hosts.values():
+    def _namespace(self, ns: str) -> str:
+        _run(["ip", "netns", "add", ns])
+        self._built.append(ns)
+        _run(["ip", "-n", ns, "link", "set", "lo", "up"])
+        return ns
+
+    def _switch(self, ns: str) -> str:
+        """A switch: a bridge in its own namespace. Snooping off: a bridge that snoops forwards a group
+        only to ports it saw an IGMP report on (and floods only while no querier exists), so delivery
+        would hinge on report timing and membership timeouts. A small flat LAN switch floods
+        multicast; so does this one."""
+        self._namespace(ns)
+        _run(["ip", "-n", ns, "link", "add", "br0", "type", "bridge", "mcast_snooping", "0"])
+        _run(["ip", "-n", ns, "link", "set", "br0", "up"])
+        return ns
+
+    def _add_hosts(self) -> None:
+        for host in self._all_hosts():
             self._built.append(host.ns)
             host.build()
 
+    def _loss_table(self, ns: str) -> None:
+        self._filter_ns = ns
+        self._nft(
+            f"add table {self._FAMILY} {self._TABLE}\n"
+            f"add chain {self._FAMILY} {self._TABLE} forward "
+            "{ type filter hook forward priority 0; policy accept; }\n"
+        )
+
     def _nft(self, script: str) -> str:
         proc = subprocess.run(
-            ["ip", "netns", "exec", self.switch, "nft", "-f", "-"],
+            ["ip", "netns", "exec", self._filter_ns, "nft", "-f", "-"],
             input=script,
             capture_output=True,
             text=True,
             timeout=20,
         )
         if proc.returncode != 0:
-            raise LanError(f"nft in {self.switch} failed: {proc.stderr.strip()}")
+            raise LanError(f"nft in {self._filter_ns} failed: {proc.stderr.strip()}")
         return proc.stdout
+
+    def dropped(self) -> int:
+        """Packets dropped by the loss rules since they were last set."""
+        out = _run(
+            [
+                "ip",
+                "netns",
+                "exec",
+                self._filter_ns,
+                "nft",
+                "list",
+                "chain",
+                self._FAMILY,
+                self._TABLE,
+                "forward",
+            ]
+        ).stdout
+        return sum(int(n) for n in re.findall(r"counter packets (\d+)", out))
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for host in self._all_hosts():
+            with contextlib.suppress(Exception):  # teardown carries on whatever happens
+                host.stop()
+        for ns in reversed(self._built):
+            delete_namespace(ns)
+        self._built.clear()
+        atexit.unregister(self.close)
+
+    def namespaces(self) -> list[str]:
+        """This topology's namespaces that exist now (empty after teardown)."""
+        return [ns for ns in _namespaces() if ns.startswith(self.prefix + "-")]
+
+
+_T = TypeVar("_T", bound=_Topology)
+
+
+class Lan(_Topology):
+    """K hosts on one switch. A context manager: everything it made is gone after ``with``."""
+
+    _FAMILY = "bridge"
+    _TABLE = _LOSS_TABLE
+
+    def __init__(self, hosts: int | Iterable[str]) -> None:
+        super().__init__()
+        names = [f"h{i + 1}" for i in range(hosts)] if isinstance(hosts, int) else list(hosts)
+        if not names or len(set(names)) != len(names):
+            raise ValueError("a LAN needs at least one host and unique host names")
+        if len(names) > 200:
+            raise ValueError("at most 200 hosts (one /24)")
+        self.switch = f"{self.prefix}-sw"
+        self.hosts: dict[str, Host] = {
+            n: Host(n, f"{self.prefix}-h{i}", self.switch, f"p{i}", f"{SUBNET}.{10 + i}")
+            for i, n in enumerate(names, start=1)
+        }
+        self.loss = 0
+        self._loss: dict[str | None, int] = {}
+
+    def __getitem__(self, name: str) -> Host:
+        return self.hosts[name]
+
+    def _all_hosts(self) -> Iterable[Host]:
+        return self.hosts.values()
+
+    def _build(self) -> None:
+        self._switch(self.switch)
+        self._loss_table(self.switch)
+        self._add_hosts()
 
     # ------------------------------------------------------------------ faults
     def set_loss(self, percent: int | None, host: str | None = None) -> None:
@@ -319,13 +426,6 @@ class Lan:
         self._nft(script)
         self.loss = self._loss.get(None, 0)
 
-    def dropped(self) -> int:
-        """Frames dropped by the loss rules since they were last set."""
-        out = _run(
-            ["ip", "netns", "exec", self.switch, "nft", "list", "chain", "bridge", _LOSS_TABLE, "forward"]
-        ).stdout
-        return sum(int(n) for n in re.findall(r"counter packets (\d+)", out))
-
     def cut(self, name: str) -> None:
         """Cut a host off the switch: its interface goes down (see :meth:`Host.link_down`)."""
         self.hosts[name].link_down()
@@ -333,19 +433,88 @@ class Lan:
     def restore(self, name: str) -> None:
         self.hosts[name].link_up()
 
-    # ------------------------------------------------------------------ teardown
-    def close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
-        for host in self.hosts.values():
-            with contextlib.suppress(Exception):  # teardown carries on whatever happens
-                host.stop()
-        for ns in reversed(self._built):
-            delete_namespace(ns)
-        self._built.clear()
-        atexit.unregister(self.close)
 
-    def namespaces(self) -> list[str]:
-        """This LAN's namespaces that exist now (empty after teardown)."""
-        return [ns for ns in _namespaces() if ns.startswith(self.prefix + "-")]
+class Wan(_Topology):
+    """Sites of hosts behind one core router. A context manager: nothing is left after ``with``."""
+
+    _FAMILY = "inet"
+    _TABLE = "antalate_wan"
+
+    def __init__(self, sites: Mapping[str, Sequence[str]]) -> None:
+        super().__init__()
+        self.core = f"{self.prefix}-core"
+        self.sites = list(sites)
+        self.site_index = {s: i + 1 for i, s in enumerate(self.sites)}
+        self.hosts: dict[tuple[str, str], Host] = {}
+        for site, names in sites.items():
+            net = f"{WAN_SUBNET}.{self.site_index[site]}"
+            for k, name in enumerate(names, start=1):
+                self.hosts[(site, name)] = Host(
+                    name,
+                    f"{self.prefix}-{site}{k}",
+                    f"{self.prefix}-sw{site}",
+                    f"p{k}",
+                    f"{net}.{10 + k}",
+                    f"{net}.1",
+                )
+        self._loss: dict[str, int] = {}
+
+    def __getitem__(self, key: tuple[str, str]) -> Host:
+        return self.hosts[key]
+
+    def _all_hosts(self) -> Iterable[Host]:
+        return self.hosts.values()
+
+    def _build(self) -> None:
+        core = self._namespace(self.core)
+        _run(["ip", "netns", "exec", core, "sysctl", "-qw", "net.ipv4.ip_forward=1"])
+        for site in self.sites:
+            sw = self._switch(f"{self.prefix}-sw{site}")
+            uplink = f"s{site}"
+            _run(
+                [
+                    "ip",
+                    "-n",
+                    core,
+                    "link",
+                    "add",
+                    uplink,
+                    "type",
+                    "veth",
+                    "peer",
+                    "name",
+                    "uplink",
+                    "netns",
+                    sw,
+                ]
+            )
+            _run(["ip", "-n", sw, "link", "set", "dev", "uplink", "master", "br0"])
+            _run(["ip", "-n", sw, "link", "set", "dev", "uplink", "up"])
+            _run(
+                ["ip", "-n", core, "addr", "add", f"{WAN_SUBNET}.{self.site_index[site]}.1/24", "dev", uplink]
+            )
+            _run(["ip", "-n", core, "link", "set", uplink, "up"])
+        self._add_hosts()
+        self._loss_table(core)
+
+    def set_loss(self, site: str, percent: int) -> None:
+        """Drop ``percent`` % of the packets through ``site``'s uplink, both ways (0 removes it)."""
+        if site not in self.site_index:
+            raise KeyError(site)
+        if not 0 <= percent <= 100:
+            raise ValueError("loss is a percentage, 0..100")
+        self._loss[site] = percent
+        script = f"flush chain inet {self._TABLE} forward\n"
+        for s, pct in self._loss.items():
+            if not pct:
+                continue
+            verdict = "counter drop" if pct >= 100 else f"numgen random mod 100 < {pct} counter drop"
+            for hook in ("iifname", "oifname"):
+                script += f'add rule inet {self._TABLE} forward {hook} "s{s}" {verdict}\n'
+        self._nft(script)
+
+    def cut(self, site: str) -> None:
+        self.set_loss(site, 100)
+
+    def restore(self, site: str) -> None:
+        self.set_loss(site, 0)

@@ -26,7 +26,7 @@ import tomli_w
 from antalate_lcm.analysis import read_log
 from antalate_lcm.runtime.commands import native_lcm_tool
 from tests.lan.swarm import EXAMPLES, SWARM_KEY, VEHICLES, OperatorClient, _merge, tomllib, vehicle_config
-from tests.wan.topology import Wan
+from tests.lan.topology import Wan
 
 pytestmark = [pytest.mark.lan, pytest.mark.timeout(150), pytest.mark.usefixtures("need_wan")]
 

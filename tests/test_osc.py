@@ -34,6 +34,7 @@ from tests.conftest import Probe
 from tests.netns import NetNamespace
 from tests.polling import wait_for
 from tests.test_station import API_KEYS, AUTH, OPERATOR_KEY
+from tests.tls import make_tls
 
 
 def make_osc(
@@ -422,65 +423,9 @@ def test_the_osc_waits_as_long_as_retry_after_says(tmp_path: Path) -> None:
 # ----------------------------------------------------------------------------- TLS
 
 
-def _make_tls(tmp: Path) -> tuple[Path, Path, Path]:
-    """A CA and a certificate for 127.0.0.1 signed by it, made with the openssl CLI."""
-    ca_key, ca, key, csr, cert = (tmp / n for n in ("ca.key", "ca.pem", "srv.key", "srv.csr", "srv.pem"))
-    ext = tmp / "ext.cnf"
-    ext.write_text("subjectAltName = IP:127.0.0.1\nbasicConstraints = CA:FALSE\n")
-
-    def run(*args: str) -> None:
-        subprocess.run(["openssl", *args], check=True, capture_output=True)
-
-    run(
-        "req",
-        "-x509",
-        "-newkey",
-        "rsa:2048",
-        "-nodes",
-        "-keyout",
-        str(ca_key),
-        "-out",
-        str(ca),
-        "-days",
-        "2",
-        "-subj",
-        "/CN=antalate test CA",
-    )
-    run(
-        "req",
-        "-newkey",
-        "rsa:2048",
-        "-nodes",
-        "-keyout",
-        str(key),
-        "-out",
-        str(csr),
-        "-subj",
-        "/CN=127.0.0.1",
-    )
-    run(
-        "x509",
-        "-req",
-        "-in",
-        str(csr),
-        "-CA",
-        str(ca),
-        "-CAkey",
-        str(ca_key),
-        "-CAcreateserial",
-        "-out",
-        str(cert),
-        "-days",
-        "2",
-        "-extfile",
-        str(ext),
-    )
-    return ca, cert, key
-
-
 @pytest.mark.skipif(shutil.which("openssl") is None, reason="needs the openssl CLI")
 def test_tls_station_and_osc_with_a_ca_file(tmp_path: Path) -> None:
-    ca, cert, key = _make_tls(tmp_path)
+    ca, cert, key = make_tls(tmp_path)
     settings = StationSettings(db_path=str(tmp_path / "s.sqlite"), api_keys=API_KEYS)
     with StationServer(settings, tls_cert=str(cert), tls_key=str(key)) as srv:
         assert srv.url.startswith("https://127.0.0.1:")

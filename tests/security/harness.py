@@ -33,6 +33,7 @@ from tests.agent_harness import FAST_SIM
 from tests.jsonl import JsonLinesProcess
 from tests.netns import NetNamespace, stop_process
 from tests.polling import wait_for
+from tests.tls import make_tls
 
 LAN = "udpm://239.255.76.67:7667?ttl=0"
 LOCAL = "udpm://239.255.76.68:7668?ttl=0"
@@ -458,64 +459,6 @@ def agent_doc(
     }
     doc.update(sections)
     return doc
-
-
-def make_tls(tmp: Path) -> tuple[Path, Path, Path]:
-    """A CA, and a certificate for 127.0.0.1 signed by it (the openssl CLI): (ca, cert, key)."""
-    ca_key, ca, key, csr, cert = (
-        tmp / n for n in ("ca.key", "ca.pem", "station.key", "station.csr", "station.pem")
-    )
-    ext = tmp / "ext.cnf"
-    ext.write_text("subjectAltName = IP:127.0.0.1\nbasicConstraints = CA:FALSE\n")
-
-    def run(*args: str) -> None:
-        subprocess.run(["openssl", *args], check=True, capture_output=True)
-
-    run(
-        "req",
-        "-x509",
-        "-newkey",
-        "rsa:2048",
-        "-nodes",
-        "-keyout",
-        str(ca_key),
-        "-out",
-        str(ca),
-        "-days",
-        "2",
-        "-subj",
-        "/CN=antalate security suite CA",
-    )
-    run(
-        "req",
-        "-newkey",
-        "rsa:2048",
-        "-nodes",
-        "-keyout",
-        str(key),
-        "-out",
-        str(csr),
-        "-subj",
-        "/CN=127.0.0.1",
-    )
-    run(
-        "x509",
-        "-req",
-        "-in",
-        str(csr),
-        "-CA",
-        str(ca),
-        "-CAkey",
-        str(ca_key),
-        "-CAcreateserial",
-        "-out",
-        str(cert),
-        "-days",
-        "2",
-        "-extfile",
-        str(ext),
-    )
-    return ca, cert, key
 
 
 # ---------------------------------------------------------------------------------------------- helpers

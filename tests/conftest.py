@@ -4,13 +4,17 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from collections.abc import Iterator
-from typing import Any
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
 from tests.jsonl import JsonLinesProcess
 from tests.netns import NetNamespace, netns_unavailable
+
+if TYPE_CHECKING:
+    from tests.agent_harness import AgentProcesses
 
 MCAST_URL = "udpm://239.255.76.67:7667?ttl=0"
 _NETNS_REASON: list[str | None] = []
@@ -68,3 +72,28 @@ def probe(netns: NetNamespace) -> Iterator[Probe]:
         stderr=subprocess.PIPE,
     )
     yield Probe(proc)
+
+
+@pytest.fixture
+def launch(netns: NetNamespace, tmp_path: Path) -> Iterator[Callable[..., AgentProcesses]]:
+    """Start agents as separate node processes in ``netns``; each must exit cleanly at the end.
+
+    On multicast with no key: the probe plays an unsigned operator and behavior, so an agent runs
+    insecure unless the test says otherwise (tests/test_security_*.py fly the signed path).
+    """
+    from tests.agent_harness import AgentProcesses, agent_config  # it imports this module
+
+    started: list[AgentProcesses] = []
+
+    def start(name: str = "alpha", nodes: tuple[str, ...] = ("hlc", "mc"), **kw: Any) -> AgentProcesses:
+        kw.setdefault("security", {"insecure": True})
+        agent = AgentProcesses(netns, tmp_path, agent_config(name, **kw))
+        for node in nodes:
+            agent.start(node)
+        started.append(agent)
+        return agent
+
+    yield start
+    for agent in started:
+        codes = agent.stop()
+        assert all(c in (0, -15, None) for c in codes.values()), f"unclean exit {codes}"

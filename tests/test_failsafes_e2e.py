@@ -11,43 +11,22 @@ in a private network namespace, the sim's fault knobs standing in for the field 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import pytest
 
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
-from tests.agent_harness import AgentProcesses, agent_config
+from tests.agent_harness import AgentProcesses
 from tests.conftest import Probe
-from tests.netns import NetNamespace
 from tests.test_mission_e2e import command, hlc, mc
 
 pytestmark = pytest.mark.netns
 
 LINK_REGAINED = 13  # ErrorCode.LINK_REGAINED
 AUTOPILOT_FAILSAFE = 12  # ErrorCode.AUTOPILOT_FAILSAFE
-
-
-@pytest.fixture
-def launch(netns: NetNamespace, tmp_path: Path) -> Iterator[Callable[..., AgentProcesses]]:
-    started: list[AgentProcesses] = []
-
-    def start(name: str = "alpha", nodes: tuple[str, ...] = ("hlc", "mc"), **kw: Any) -> AgentProcesses:
-        # The probe plays an unsigned operator: the agent runs insecure on the namespace's multicast.
-        kw.setdefault("security", {"insecure": True})
-        agent = AgentProcesses(netns, tmp_path, agent_config(name, **kw))
-        for node in nodes:
-            agent.start(node)
-        started.append(agent)
-        return agent
-
-    yield start
-    for agent in started:
-        codes = agent.stop()
-        assert all(c in (0, -15, None) for c in codes.values()), f"unclean exit {codes}"
 
 
 def take_off(probe: Probe, seq: int = 1) -> None:

@@ -4,7 +4,7 @@ multicast inside a private network namespace (docs/design.md §5, §6, §12)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -13,31 +13,10 @@ import pytest
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
-from tests.agent_harness import AgentProcesses, agent_config
+from tests.agent_harness import AgentProcesses
 from tests.conftest import Probe
-from tests.netns import NetNamespace
 
 pytestmark = pytest.mark.netns
-
-
-@pytest.fixture
-def launch(netns: NetNamespace, tmp_path: Path) -> Iterator[Callable[..., AgentProcesses]]:
-    started: list[AgentProcesses] = []
-
-    def start(name: str = "alpha", nodes: tuple[str, ...] = ("hlc", "mc"), **kw: Any) -> AgentProcesses:
-        # Separate processes on multicast with no key: the probe plays unsigned operator and
-        # behavior, so the agent runs insecure (tests/test_security_*.py fly the signed path).
-        kw.setdefault("security", {"insecure": True})
-        agent = AgentProcesses(netns, tmp_path, agent_config(name, **kw))
-        for node in nodes:
-            agent.start(node)
-        started.append(agent)
-        return agent
-
-    yield start
-    for agent in started:
-        codes = agent.stop()
-        assert all(c in (0, -15, None) for c in codes.values()), f"unclean exit {codes}"
 
 
 def mc(probe: Probe, state: int, agent: str = "alpha", timeout: float = 15, since: int = 0) -> dict[str, Any]:

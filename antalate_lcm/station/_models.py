@@ -73,6 +73,19 @@ class Telemetry(_Wire):
         return _wrap_360(value)
 
 
+def _check_encoded(data: str, encoding: str) -> None:
+    """Feedback's and Payload's ``data`` must decode as its ``encoding`` says (base64, RFC 4648)."""
+    if encoding == "base64":
+        try:
+            base64.b64decode(data, validate=True)
+        except (binascii.Error, ValueError) as exc:
+            raise ValueError(f"data is not valid base64: {exc}") from None
+
+
+def _decoded(data: str, encoding: str) -> bytes:
+    return base64.b64decode(data) if encoding == "base64" else data.encode("utf-8")
+
+
 class Feedback(_Wire):
     """Agent → station payload (``payload_t`` on ``{agent}/OPERATOR_FEEDBACK``), stored with the report.
 
@@ -89,16 +102,12 @@ class Feedback(_Wire):
 
     @model_validator(mode="after")
     def _base64_decodes(self) -> Feedback:
-        if self.encoding == "base64":
-            try:
-                base64.b64decode(self.data, validate=True)
-            except (binascii.Error, ValueError) as exc:
-                raise ValueError(f"data is not valid base64: {exc}") from None
+        _check_encoded(self.data, self.encoding)
         return self
 
     def content(self) -> bytes:
         """The payload bytes, whatever the encoding: what an LCM ``payload_t.data`` holds."""
-        return base64.b64decode(self.data) if self.encoding == "base64" else self.data.encode("utf-8")
+        return _decoded(self.data, self.encoding)
 
 
 class Payload(_Wire):
@@ -112,16 +121,12 @@ class Payload(_Wire):
 
     @model_validator(mode="after")
     def _base64_decodes(self) -> Payload:
-        if self.encoding == "base64":
-            try:
-                base64.b64decode(self.data, validate=True)
-            except (binascii.Error, ValueError) as exc:
-                raise ValueError(f"data is not valid base64: {exc}") from None
+        _check_encoded(self.data, self.encoding)
         return self
 
     def content(self) -> bytes:
         """The payload bytes, whatever the encoding: what an LCM ``payload_t.data`` holds."""
-        return base64.b64decode(self.data) if self.encoding == "base64" else self.data.encode("utf-8")
+        return _decoded(self.data, self.encoding)
 
 
 class PeerDetection(_Wire):

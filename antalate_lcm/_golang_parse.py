@@ -122,6 +122,41 @@ def fingerprint(struct: Struct, structs: dict[str, Struct], parents: tuple[str, 
     return ((v << 1) | (v >> 63)) & _MASK64
 
 
+# Encoded bytes of one primitive; a string is at least its int32 length and the NUL.
+PRIMITIVE_SIZES = {
+    "byte": 1,
+    "boolean": 1,
+    "int8_t": 1,
+    "int16_t": 2,
+    "int32_t": 4,
+    "int64_t": 8,
+    "float": 4,
+    "double": 8,
+    "string": 5,
+}
+
+
+def min_encoded_size(
+    type_name: TypeName, structs: dict[str, Struct], user: Struct, parents: tuple[str, ...] = ()
+) -> int:
+    """The fewest bytes one value of ``type_name`` can encode to (a variable array may be empty):
+    what lets a decoder refuse an array length the bytes left cannot hold before it allocates."""
+    if type_name.primitive:
+        return PRIMITIVE_SIZES[type_name.full]
+    if type_name.full in parents:  # a type inside itself: no finite encoding, nothing to bound by
+        return 0
+    struct = lookup(structs, type_name, user)
+    total = 0
+    for m in struct.members:
+        if any(d.variable for d in m.dimensions):
+            continue
+        count = 1
+        for d in m.dimensions:
+            count *= _int(d.size) or 0
+        total += count * min_encoded_size(m.type, structs, struct, (*parents, type_name.full))
+    return total
+
+
 def lookup(structs: dict[str, Struct], type_name: TypeName, user: Struct) -> Struct:
     found = structs.get(type_name.full)
     if found is None:

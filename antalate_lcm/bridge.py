@@ -409,19 +409,14 @@ class Bridge:
 
 def run_bridge(config_path: str, *, stop: threading.Event | None = None) -> int:
     """``antalate bridge CONFIG``: run until SIGINT/SIGTERM, then print what was forwarded."""
-    import signal
+    from antalate_lcm.runtime.launch import wait_for_stop
 
     config = load_bridge_config(config_path)
     bridge = Bridge(config)
-    stop = stop or threading.Event()
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda *_: stop.set())
     bridge.start()
     print(f"bridge {bridge.id} running: {' <-> '.join(bridge.names)}", flush=True)
     try:
-        while not stop.is_set():  # never stop.wait(): see launch.run_until_signal
-            time.sleep(0.5)
+        wait_for_stop(stop)
     finally:
         bridge.close()
     print(f"bridge {bridge.id} stopped: {bridge.stats()}", flush=True)

@@ -18,6 +18,24 @@ log = logging.getLogger("antalate.launch")
 STOP_TIMEOUT = 120.0
 
 
+def wait_for_stop(stop: threading.Event | None = None) -> None:
+    """Block the main thread until SIGINT/SIGTERM or ``stop`` is set (what ``antalate bridge`` and
+    ``antalate router`` do while their own threads work). The handlers only note the signal, for
+    the reason given in :func:`run_until_signal`, and the previous ones are put back."""
+    stop = stop or threading.Event()
+    signalled: list[int] = []
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, lambda signum, _frame: signalled.append(signum))
+    try:
+        while not (signalled or stop.is_set()):
+            time.sleep(0.2)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
 def run_until_signal(
     context: Context,
     nodes: Sequence[Node],

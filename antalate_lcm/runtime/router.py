@@ -12,13 +12,12 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import signal
 import threading
-import time
 from typing import TYPE_CHECKING
 
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.lcm_url import zenoh_endpoints_problem
+from antalate_lcm.runtime.launch import wait_for_stop
 
 if TYPE_CHECKING:  # the zenoh extra is optional: imported where used
     import zenoh
@@ -53,14 +52,9 @@ def run_router(listen: list[str], *, lease_ms: int, stop: threading.Event | None
         session = zenoh.open(router_config(listen, lease_ms))
     except zenoh.ZError as exc:
         raise AntalateError(f"the Zenoh router cannot listen on {', '.join(listen)}: {exc}") from None
-    stop = stop or threading.Event()
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda *_: stop.set())
     print(f"zenoh router {session.zid()} listening on {', '.join(listen)}", flush=True)
     try:
-        while not stop.is_set():  # never stop.wait(): see launch.run_until_signal
-            time.sleep(0.5)
+        wait_for_stop(stop)
     finally:
         session.close()
     return 0

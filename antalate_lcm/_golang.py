@@ -84,9 +84,6 @@ class _Writer:
     def start(self, indent: int, text: str) -> None:
         self.parts.append("\t" * indent + text)
 
-    def cont(self, text: str) -> None:
-        self.parts.append(text)
-
     def end(self, text: str) -> None:
         self.parts.append(text + "\n")
 

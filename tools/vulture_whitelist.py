@@ -29,7 +29,6 @@ _.border_title
 _.TITLE
 _.ENABLE_COMMAND_PALETTE
 _.get_default_screen
-_.virtual_size  # ScrollView's scrollable extent, read by Textual's scrolling
 _._make_app  # textual-serve's Server hook (operator_tui/web.py overrides it)
 
 # --- Set on objects of other libraries, which read them.
@@ -96,7 +95,6 @@ _.resending  # MavlinkAutopilot: a command is being resent (tests/test_mavlink_a
 _.ready_reasons  # MavlinkAutopilot: why arming would be refused (tests/test_mavlink_adapter.py)
 _.reconnects  # CrazyflieAutopilot: link recoveries (tests/test_crazyflie_adapter.py)
 _.reports_ok  # OscNode: reports the station accepted (tests/test_osc.py)
-_.unchanged  # OperatorNode: republished states not decoded again (tests/test_tui_link.py)
 _.set_refuse_arm  # SimAutopilot fault knobs for tests and the demo
 _.set_battery
 _.set_time_scale
@@ -111,3 +109,5 @@ _.stale_files  # tests/test_codegen.py
 _.wait_stopped  # VideoCapture: tests/test_video_capture.py
 _.row_count  # AgentTable: tests/test_tui.py
 _.render_map  # swarm_map's pure renderer: tests/test_tui_model.py
+_.repaints  # SwarmMap: repaints only on a changed picture (tests/test_tui.py)
+_.layouts_skipped  # the event log's skipped layouts (tests/test_tui.py)

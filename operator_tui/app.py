@@ -278,7 +278,7 @@ class OperatorApp(App[None]):
             sev = Severity.ERROR if record.levelno >= logging.ERROR else Severity.WARNING
             model.log(wall, _log_source(record.name), record.getMessage(), sev)
         model.tick(now, wall)
-        resend, updates = tracker.tick(now, self._mc_state_of, self._is_stale)
+        resend, updates = tracker.tick(now, model.mc_state_of, model.is_stale)
         for cmd in resend:
             self.node.send_operator_cmd(cmd.command, cmd.target, cmd.seq, altitude=cmd.altitude)
         for update in updates:
@@ -314,7 +314,7 @@ class OperatorApp(App[None]):
             detail_text(model.agents.get(self.selected or ""), now, self.time_format)
         )
         screen.query_one(CommandPanel).show(
-            commands_text(self.tracker.recent(self.settings.command_rows), now, self._mc_state_of)
+            commands_text(self.tracker.recent(self.settings.command_rows), now, self.model.mc_state_of)
         )
         screen.query_one(EventLog).add(model.take_events())
         counts = self.tracker.counts()
@@ -336,14 +336,6 @@ class OperatorApp(App[None]):
             if isinstance(screen, MainScreen):
                 return screen
         return None
-
-    def _mc_state_of(self, agent: str) -> str | None:
-        view = self.model.agents.get(agent)
-        return None if view is None else view.mc_state
-
-    def _is_stale(self, agent: str) -> bool:
-        view = self.model.agents.get(agent)
-        return view is not None and view.stale
 
     def _log_update(self, update: CommandUpdate, wall: float) -> None:
         self.model.log(
@@ -388,7 +380,7 @@ class OperatorApp(App[None]):
         channel = self.node.send_operator_cmd(command, target, cmd.seq, altitude=altitude)
         text = f"sent {cmd.label} #{cmd.seq} on {channel}"
         severity = Severity.INFO
-        state = self._mc_state_of(target) if target else None
+        state = self.model.mc_state_of(target) if target else None
         if applies(command, state) is False:
             text += f" — MC is {state}: it will likely be rejected"
             severity = Severity.WARNING

@@ -299,6 +299,16 @@ class SwarmModel:
         """Agent names in natural order (``a2`` before ``a10``), the table's order."""
         return sorted(self.agents, key=natural_key)
 
+    def mc_state_of(self, agent: str) -> str | None:
+        """The MC state last heard from ``agent`` (None: never heard): what the command tracker checks
+        a command against."""
+        view = self.agents.get(agent)
+        return None if view is None else view.mc_state
+
+    def is_stale(self, agent: str) -> bool:
+        view = self.agents.get(agent)
+        return view is not None and view.stale
+
     def live_names(self) -> list[str]:
         return [n for n in self.names() if not self.agents[n].stale]
 

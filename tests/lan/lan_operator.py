@@ -48,14 +48,6 @@ class LanOperator(OperatorNode):
         super().on_start()
         self.create_timer(0.1, self.refresh)
 
-    def _mc_state_of(self, agent: str) -> str | None:
-        view = self.model.agents.get(agent)
-        return None if view is None else view.mc_state
-
-    def _is_stale(self, agent: str) -> bool:
-        view = self.model.agents.get(agent)
-        return view is not None and view.stale
-
     def refresh(self) -> None:
         """What the console's refresh does, but draw: fold in what arrived, mark the silent stale,
         resend what is unacknowledged and repeat the direction."""
@@ -69,7 +61,7 @@ class LanOperator(OperatorNode):
                 observed = self.tracker.observe(item.agent, item.msg.last_command_seq, now)
                 self.updates.extend(u.text for u in observed)
         self.model.tick(now, wall)
-        resend, updates = self.tracker.tick(now, self._mc_state_of, self._is_stale)
+        resend, updates = self.tracker.tick(now, self.model.mc_state_of, self.model.is_stale)
         for cmd in resend:
             self.send_operator_cmd(cmd.command, cmd.target, cmd.seq, altitude=cmd.altitude)
         self.updates.extend(u.text for u in updates)

@@ -8,6 +8,7 @@ GOPROXY=off and its caches in the test's folder: the generated code needs the st
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -24,6 +25,7 @@ from antalate_lcm.msgs import arbiter_status_t, header_t, operator_cmd_t, payloa
 from tests.netns import REPO
 
 ROUNDTRIP = REPO / "tests" / "go" / "roundtrip" / "main.go"
+HOSTILE = REPO / "tests" / "go" / "hostile" / "main.go"
 KEY = "go-node-test-swarm-key"
 # The decoder's added checks (``_golang._StructEmitter.need``/``array_checks``): one line each.
 BOUNDS_CHECK = re.compile(r"^\t+if .+ \{ return fmt\.Errorf\(.+\) \}$")
@@ -101,16 +103,22 @@ def test_a_definition_go_cannot_have_is_refused_with_its_line(tmp_path: Path) ->
 def test_a_multi_dimensional_type_compiles(tmp_path: Path, go: dict[str, str]) -> None:
     """What our messages do not use yet but .lcm can say: fixed and variable dimensions mixed,
     a variable array of structs, constants as sizes, /* */ comments."""
-    (tmp_path / "grid_t.lcm").write_text(
+    out = tmp_path / "go"
+    _write_demo_maps(tmp_path, out)
+    (out / "go.mod").write_text("module antalate.test/demo\n\ngo 1.19\n")
+    _go(go, out, "vet", "./...")
+
+
+def _write_demo_maps(folder: Path, out: Path) -> None:
+    """Go for package demo.maps (grid_t and cell_t, the constructs our messages do not use) under
+    ``out``, from ``.lcm`` files written to ``folder``."""
+    (folder / "grid_t.lcm").write_text(
         "package demo.maps;\n/* A map */\nstruct grid_t\n{\n    const int32_t W = 3;\n"
         "    int16_t rows;\n    int8_t n_cells;\n    double cells[rows][W][n_cells];\n"
         "    string names[rows];\n    cell_t extra[n_cells];\n    boolean ok[2];\n}\n"
     )
-    (tmp_path / "cell_t.lcm").write_text("package demo.maps;\nstruct cell_t\n{\n    int64_t v;\n}\n")
-    out = tmp_path / "go"
-    _golang.write_go(sorted(tmp_path.glob("*.lcm")), out)
-    (out / "go.mod").write_text("module antalate.test/demo\n\ngo 1.19\n")
-    _go(go, out, "vet", "./...")
+    (folder / "cell_t.lcm").write_text("package demo.maps;\nstruct cell_t\n{\n    int64_t v;\n}\n")
+    _golang.write_go([folder / "grid_t.lcm", folder / "cell_t.lcm"], out)
 
 
 @pytest.fixture(scope="module")
@@ -204,3 +212,47 @@ def test_go_and_python_read_each_other(tmp_path: Path, go: dict[str, str]) -> No
     assert (status.n_failed, status.failed, status.header.mac_len) == (1, ["video: no camera"], 0)
     payload = built["payload_t"]
     assert (payload.content_type, payload.size, payload.data) == ("application/json", 8, b'{"k": 1}')
+
+
+def test_hostile_datagrams_get_errors_not_panics(tmp_path: Path, go: dict[str, str]) -> None:
+    """``tests/go/hostile/main.go`` decodes, for every type, each truncation of a valid message,
+    the message with every length field forged huge and negative, and thousands of seeded random
+    and mutated datagrams: any panic fails (a Go node must keep running), and a forged 2^31 length
+    must not allocate what it claims."""
+    module = tmp_path / "module"
+    types_cmd.write_types("go", module)
+    _write_demo_maps(tmp_path, module)
+    (module / "go.mod").write_text("module antalate.test/types\n\ngo 1.19\n")
+    (module / "hostile").mkdir()
+    shutil.copy(HOSTILE, module / "hostile" / "main.go")
+    _go(go, module, "vet", "./...")
+    _go(go, module, "build", "-o", str(tmp_path / "hostile"), "./hostile")
+    proc = subprocess.run([str(tmp_path / "hostile")], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr + proc.stdout
+    reports = {r["type"]: r for r in map(json.loads, proc.stdout.splitlines())}
+    assert set(reports) == {p.stem for p in _codegen.lcm_files()} | {"demo.maps.grid_t", "demo.maps.cell_t"}
+
+    for name, report in reports.items():
+        assert report["panics"] == [], name
+        assert report["decodes"] > 4000, name
+        # a forged length is refused before make: without the checks payload_t allocates 2 GB
+        assert report["allocated"] < 64 << 20, (name, report["allocated"])
+        if not name.startswith("demo."):  # Go's valid message is one for the Python class too
+            cls = getattr(__import__(f"antalate_lcm.msgs.{name}", fromlist=[name]), name)
+            valid = bytes.fromhex(report["valid"])
+            assert cls.decode(valid).encode() == valid, name
+
+    # each kind of check was reached by what the Go program forged
+    def seen(name: str, prefix: str) -> int:
+        return sum(n for kind, n in reports[name]["errors"].items() if kind.startswith(prefix))
+
+    assert seen("header_t", "Missing data in buffer for header_t.utime") > 0
+    assert seen("header_t", "Missing data in buffer for header_t.agent") > 0
+    assert seen("header_t", "Decoded array length of header_t.mac is negative") > 0
+    assert seen("header_t", "Decoded array length of header_t.mac too long") > 0
+    assert seen("payload_t", "Decoded array length of payload_t.data too long") > 0
+    assert seen("arbiter_status_t", "Decoded array length of arbiter_status_t.failed is negative") > 0
+    assert seen("arbiter_status_t", "Decoded string length is negative") > 0
+    assert seen("demo.maps.grid_t", "Decoded array length of grid_t.cells too long") > 0
+    assert seen("demo.maps.grid_t", "Decoded array length of grid_t.extra too long") > 0
+    assert seen("demo.maps.grid_t", "Missing data in buffer for grid_t.ok") > 0

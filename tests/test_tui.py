@@ -9,6 +9,7 @@ clock: staleness, resends and timeouts advance only when a test says so, and no 
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import subprocess
 import sys
 import threading
@@ -33,10 +34,13 @@ from antalate_lcm.msgs import (
 from antalate_lcm.node import Context
 from antalate_lcm.security import sign, verify
 from antalate_lcm.vocabulary import Command, name_of
-from operator_tui.app import ConsoleSettings, OperatorApp
+from operator_tui.app import SLICE_ITEMS, ConsoleSettings, OperatorApp
 from operator_tui.commands import Status
+from operator_tui.model import EventKind
 from operator_tui.screens import ConfirmScreen, HelpScreen
 from operator_tui.widgets.agent_table import COLUMNS, AgentTable
+from operator_tui.widgets.panels import EventLog
+from operator_tui.widgets.swarm_map import SwarmMap, points_from
 from tests.netns import NetNamespace, netns_unavailable
 
 FIRST_SEQ = 1000
@@ -531,6 +535,83 @@ async def test_help_screen_and_footer(two_agents: tuple[OperatorApp, Any], swarm
 
 
 # ---------------------------------------------------------------------- robustness and the entry point
+async def test_a_key_goes_before_a_pending_bulk_update(
+    context: Context, swarm: FakeSwarm, clock: FakeClock
+) -> None:
+    """Keys are handled before bulk updates: with a tick's worth of datagrams from a large swarm
+    pending, the timer's refresh yields between slices and a key's command goes out in between."""
+    app = make_app(context, clock, refresh_interval=3600.0)  # only the refresh this test starts
+    async with app.run_test(size=(160, 44)) as pilot:
+        swarm.agent("alpha")
+        await until(pilot, app, lambda: app.selected == "alpha")
+        n = 16 * SLICE_ITEMS  # each is logged as discovered: fewer than the 2,000 events the model keeps
+        for i in range(n):
+            swarm.mc(f"bulk{i:04d}")
+        deadline = time.monotonic() + 10.0
+        while len(app.node.latest) < n:  # delivered to the node, not yet folded in
+            assert time.monotonic() < deadline, "the bulk never reached the console"
+            await asyncio.sleep(0.02)
+        tick = asyncio.ensure_future(app.refresh_sliced())
+        await pilot.press("t")
+        await tick
+        assert len(app.model.agents) == n + 1
+        events = list(app.model.events)
+        (sent,) = [i for i, ev in enumerate(events) if ev.text.startswith("sent TAKEOFF → alpha")]
+        discovered = [i for i, ev in enumerate(events) if ev.kind is EventKind.DISCOVERED]
+        assert discovered[0] < sent < discovered[-1], "the key waited for the whole bulk update"
+
+
+async def test_the_map_is_fixed_rate_and_repaints_only_when_its_picture_changes(
+    two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm, clock: FakeClock
+) -> None:
+    app, pilot = two_agents
+    swarm_map = app.screen.query_one(SwarmMap)
+    points = points_from(app.model.positions())
+    swarm_map.update_points(points, app.selected)
+    repaints = swarm_map.repaints
+    # Agents moving inside their cells: the aggregated picture is the same, nothing is repainted.
+    nudged = [dataclasses.replace(p, north=p.north + 0.01, east=p.east - 0.01) for p in points]
+    swarm_map.update_points(nudged, app.selected)
+    assert swarm_map.repaints == repaints
+    turned = [dataclasses.replace(p, heading=p.heading + 180.0) for p in points]
+    swarm_map.update_points(turned, app.selected)
+    assert swarm_map.repaints == repaints + 1
+
+    # The timer's refresh takes positions in once per map_interval; refresh_now() at once.
+    app.refresh_now()
+    shown = swarm_map.points
+    swarm.tel("bravo", lat=47.3990, lon=8.5470, heading=90.0)
+    await until(pilot, app, lambda: app.model.agents["bravo"].telemetry.lat == 47.3990)
+    assert swarm_map.points != shown
+    shown = swarm_map.points
+    swarm.tel("bravo", lat=47.3995, lon=8.5475, heading=90.0)
+    deadline = time.monotonic() + 5.0
+    while app.model.agents["bravo"].telemetry.lat != 47.3995:
+        assert time.monotonic() < deadline
+        await app.refresh_sliced()
+        await pilot.pause(0.02)
+    assert swarm_map.points == shown, "not before map_interval has passed"
+    clock.advance(ConsoleSettings().map_interval)
+    await app.refresh_sliced()
+    assert swarm_map.points != shown
+
+
+async def test_appending_events_does_not_lay_out_the_screen(two_agents: tuple[OperatorApp, Any]) -> None:
+    app, pilot = two_agents
+    log_widget = app.screen.query_one(EventLog)
+    for i in range(40):  # more lines than the log shows: its scrollbar is up
+        app.model.log(WALL0, "alpha", f"line {i}")
+    app.refresh_now()
+    await pilot.pause()
+    skipped = log_widget.layouts_skipped
+    app.model.log(WALL0, "alpha", "one more line")
+    app.refresh_now()
+    await pilot.pause()
+    assert log_widget.layouts_skipped == skipped + 1
+    assert log_widget.scroll_y == log_widget.max_scroll_y, "still following the newest line"
+    assert log_widget.lines[-1].text.endswith("one more line")
+
+
 async def test_garbage_on_a_watched_channel_is_reported_not_fatal(
     two_agents: tuple[OperatorApp, Any], context: Context
 ) -> None:

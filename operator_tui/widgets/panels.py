@@ -217,11 +217,15 @@ class EventLog(RichLog):
 
     def add(self, events: Iterable[Event]) -> None:
         self._appending = True
+        wrote = False
         try:
             for ev in events:
-                self.write(event_line(ev, self.time_format))
+                self.write(event_line(ev, self.time_format), scroll_end=False)
+                wrote = True
         finally:
             self._appending = False
+        if wrote and self.auto_scroll:  # once per batch, not once per line
+            self.scroll_end(animate=False, immediate=False, x_axis=False)
 
     def refresh(
         self, *regions: Region, repaint: bool = True, layout: bool = False, recompose: bool = False

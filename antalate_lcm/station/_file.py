@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from antalate_lcm.config import read_toml_file
 from antalate_lcm.errors import ConfigError
+from antalate_lcm.strict import dotted
 
 from ._settings import DEFAULT_HOST, DEFAULT_PORT, ApiKey, RateLimits, StationSettings
 
@@ -61,10 +62,6 @@ def _relative(base: Path, value: str | None) -> str | None:
     return str(p if p.is_absolute() else base / p)
 
 
-def _dotted(loc: tuple[Any, ...]) -> str:
-    return ".".join(f"[{p}]" if isinstance(p, int) else str(p) for p in loc).replace(".[", "[")
-
-
 def parse_station_file(data: dict[str, Any], source: str, base: Path | None = None) -> StationFile:
     try:
         doc = _StationFile.model_validate(data)
@@ -72,7 +69,7 @@ def parse_station_file(data: dict[str, Any], source: str, base: Path | None = No
         err = exc.errors()[0]
         got = err.get("input")
         shown = "" if isinstance(got, dict) else f", got {got!r}"
-        raise ConfigError(source, _dotted(tuple(err["loc"])), f"{err['msg']}{shown}") from None
+        raise ConfigError(source, dotted(err["loc"]), f"{err['msg']}{shown}") from None
     st = doc.station
     here = base if base is not None else Path(".")
     fields: dict[str, Any] = {"api_keys": tuple(doc.api_keys), "rate_limits": doc.rate_limits}

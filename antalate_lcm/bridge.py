@@ -42,7 +42,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from antalate_lcm.errors import ConfigError
-from antalate_lcm.lcm_url import parse_lcm_url
+from antalate_lcm.lcm_url import bus_url_problem
 from antalate_lcm.zenoh_bus import BRIDGE_MARK
 
 log = logging.getLogger("antalate.bridge")
@@ -100,11 +100,9 @@ class BridgeConfig(BaseModel):
     @field_validator("buses")
     @classmethod
     def _urls(cls, v: dict[str, str]) -> dict[str, str]:
-        for name, url in v.items():
-            try:
-                parse_lcm_url(url)
-            except ValueError as exc:
-                raise ValueError(f"buses.{name}: expected {exc}") from None
+        problem = bus_url_problem(v)
+        if problem is not None:
+            raise ValueError(f"{problem[0]}: expected {problem[1]}")
         return v
 
     @model_validator(mode="after")

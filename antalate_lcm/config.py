@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from antalate_lcm.errors import ConfigError
 from antalate_lcm.lcm_url import EXAMPLES as LCM_URL_EXAMPLES
-from antalate_lcm.lcm_url import parse_lcm_url
+from antalate_lcm.lcm_url import bus_url_problem
 from antalate_lcm.strict import StrictError, describe, dotted, find_datetime
 from antalate_lcm.topics import MESSAGE_TYPES, TOPICS, TopicSpec
 
@@ -255,12 +255,9 @@ class Config(BaseModel):
     @field_validator("buses")
     @classmethod
     def _urls(cls, v: dict[str, str]) -> dict[str, str]:
-        # Checked here, not left to liblcm: its answer to any mistake is "Couldn't create LCM".
-        for name, url in v.items():
-            try:
-                parse_lcm_url(url)
-            except ValueError as exc:
-                raise _KeyedError(f"buses.{name}", str(exc)) from None
+        problem = bus_url_problem(v)
+        if problem is not None:
+            raise _KeyedError(*problem)
         if not v:
             raise _KeyedError(
                 "buses", f"at least one bus, e.g. lan = {DEFAULT_LAN_URL!r} ({LCM_URL_EXAMPLES})"

@@ -37,7 +37,7 @@ import ipaddress
 import math
 import re
 import socket
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 from antalate_lcm.errors import AntalateError, BusUnavailable, MulticastUnavailable
@@ -261,6 +261,18 @@ def parse_lcm_url(url: str) -> LcmUrl:
             )
         return u
     return _host_and_port(u)
+
+
+def bus_url_problem(buses: Mapping[str, str]) -> tuple[str, str] | None:
+    """The first ``[buses]`` entry whose URL does not parse, as (``buses.NAME``, what was expected):
+    checked at load time by every file with buses, since liblcm's answer to any mistake is "Couldn't
+    create LCM"."""
+    for name, url in buses.items():
+        try:
+            parse_lcm_url(url)
+        except ValueError as exc:
+            return f"buses.{name}", str(exc)
+    return None
 
 
 def multicast_route_missing(u: LcmUrl) -> bool:

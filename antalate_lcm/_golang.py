@@ -337,8 +337,6 @@ class _StructEmitter:
         left = "int64(len(data)-offset)"
         for j, d in enumerate(dims):
             last = j == len(dims) - 1
-            if not (d.variable or last):
-                continue
             limit = (
                 (f"{left}/{element}" if element > 1 else left)
                 if last and element > 0

@@ -1,5 +1,6 @@
-"""``antalate types --lang go``: antalate's Go is lcm-gen's Go, it compiles and vets with the system
-Go, and Go and the Python classes read each other's bytes (``tests/go/roundtrip/main.go``).
+"""``antalate types --lang go``: antalate's Go is lcm-gen's Go (but for the decoder's bounds checks),
+it compiles and vets with the system Go, Go and the Python classes read each other's bytes
+(``tests/go/roundtrip/main.go``), and no datagram makes a Go decoder panic (``tests/go/hostile/``).
 
 lcm-gen 1.5.3 crashes writing Go for a type with a variable-length array of its own (header_t,
 arbiter_status_t, payload_t); for every other type its output is the reference. Go runs with

@@ -15,6 +15,15 @@ listens from this process with raw LCM, and prints:
     python benchmarks/agents.py [N ...] [--processes P]      (default: 500 1000 2000)
 
 Figures only (docs/design.md §12): the machine is shared, so the load average is printed beside them.
+
+Measured 2026-11-23 on the 2-core machine shared with other work (load average 1.8-7.5 during the runs):
+one process of 1,000 agents: every agent in STANDBY after 11.0-16.4 s, telemetry min 9.6-10.0 Hz, MC
+reaction p50 19.6-23.5 ms / max 36.8-43.7 ms, RSS 66-67 MiB, 84-87% of a core, 842-866 us per
+agent-second (the tree before in-process delivery on the loop, timer slots and phased timers: only
+777-896 of the 1,000 in STANDBY within 60 s). 500 agents: 952 us/agent-s against 1268 for that tree in
+the same run. 2,000 over 2 processes: all 2,000 in STANDBY but after 48.8-52.1 s, telemetry min 7.4-8.2
+Hz, MC max 104-169 ms, 778-792 us/agent-s at load 5.4-7.5 (the tree before: 1,243 in STANDBY within 60 s):
+over target while other work takes a core.
 """
 
 from __future__ import annotations

@@ -8,12 +8,15 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from concurrent import futures
+from functools import partial
 from types import FrameType
 
 from antalate_lcm.node import Context, Node
 
 log = logging.getLogger("antalate.launch")
 
+#: Nodes started per hop to the loop (a few ms of work; the loop runs its timers in between).
+START_BATCH = 64
 #: s for every node of the process to stop (a thousand simulated agents on a loaded machine).
 STOP_TIMEOUT = 120.0
 
@@ -64,9 +67,17 @@ def run_until_signal(
     try:
         context.bus.open()
         context.executor.start()
-        for node in nodes:
-            node.start()
-            started.append(node)
+
+        # A hop to the loop per batch of nodes, not per node: a thousand agents' nodes each waited
+        # for their turn behind the timers of those already running (STANDBY came late), and one
+        # hop for all would hold the loop for seconds.
+        def start_batch(batch: Sequence[Node]) -> None:
+            for node in batch:
+                node.start()
+                started.append(node)
+
+        for i in range(0, len(nodes), START_BATCH):
+            context.executor.run_sync(partial(start_batch, nodes[i : i + START_BATCH]), timeout=STOP_TIMEOUT)
         while not (signalled or stop.is_set()):
             time.sleep(0.2)
             if poll is not None and poll():

@@ -14,6 +14,7 @@ Keys come before bulk updates: the timer's tick decodes and folds in slices of
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import time
 from collections import deque
@@ -214,6 +215,8 @@ class OperatorApp(App[None]):
         self._render_errors = 0
         #: Datagrams taken from the node and not folded in yet (a sliced tick may be under way).
         self._backlog: deque[tuple[str, bytes, float]] = deque()
+        #: Per agent, its newest telemetry datagram not decoded yet (see _refresh_steps).
+        self._deferred: dict[str, tuple[str, bytes, float]] = {}
         self._map_due = -float("inf")
         self._map_key: tuple[str | None, int] | None = None
 
@@ -240,25 +243,38 @@ class OperatorApp(App[None]):
     def refresh_now(self) -> None:
         """Fold in everything that arrived, run timeouts and resends, and redraw, all at once."""
         self._map_due = -float("inf")
-        for _ in self._refresh_steps():
+        for _ in self._refresh_steps(lazy=False):
             pass
 
     async def refresh_sliced(self) -> None:
         """The timer's refresh: the same steps, yielding to the event loop between slices so that
         key presses (and their commands) go first."""
-        for _ in self._refresh_steps():
+        for _ in self._refresh_steps(lazy=True):
             await asyncio.sleep(0)
 
-    def _refresh_steps(self) -> Iterator[None]:
-        """One refresh, as slices of bounded work (yields between them)."""
+    def _refresh_steps(self, *, lazy: bool) -> Iterator[None]:
+        """One refresh, as slices of bounded work (yields between them).
+
+        ``lazy``: the telemetry of an agent already shown once is decoded only when it is on screen
+        (its table row, the detail, the map when due); until then only its arrival is noted (the
+        agent is alive) and the newest datagram is kept in :attr:`_deferred`."""
         started = time.perf_counter()
         model, tracker, node = self.model, self.tracker, self.node
-        backlog = self._backlog
+        backlog, deferred = self._backlog, self._deferred
         backlog.extend(node.take())
         while backlog:
             wall = self.wallclock()
             for _ in range(min(SLICE_ITEMS, len(backlog))):
-                item = node.decode(backlog.popleft())
+                raw = backlog.popleft()
+                agent = node.deferrable(raw[0])
+                if agent is not None:
+                    view = model.agents.get(agent)
+                    if lazy and view is not None and view.telemetry is not None:
+                        model.heard("TELEMETRY", agent, raw[2], wall)
+                        deferred[agent] = raw
+                        continue
+                    deferred.pop(agent, None)  # older than this one
+                item = node.decode(raw)
                 if item is None:
                     continue
                 try:
@@ -275,6 +291,21 @@ class OperatorApp(App[None]):
             yield
             started = time.perf_counter()
         now, wall = self.clock(), self.wallclock()
+        if deferred:
+            if not lazy or self._map_is_due(now):
+                wanted = list(deferred)
+            else:
+                wanted = [a for a in dict.fromkeys(self._shown_agents()) if a in deferred]
+            for i, agent in enumerate(wanted, 1):
+                raw = deferred.pop(agent)
+                item = node.decode(raw)
+                if item is not None:
+                    model.fold(item.topic, item.agent, item.msg, item.received, wall, item.fields)
+                if i % SLICE_ITEMS == 0:
+                    self.max_refresh = max(self.max_refresh, time.perf_counter() - started)
+                    yield
+                    started = time.perf_counter()
+            now, wall = self.clock(), self.wallclock()
         while self._log_bridge.records:
             record = self._log_bridge.records.popleft()
             sev = Severity.ERROR if record.levelno >= logging.ERROR else Severity.WARNING
@@ -295,6 +326,18 @@ class OperatorApp(App[None]):
                 log.exception("could not redraw the console (%d times so far)", self._render_errors)
         self.max_refresh = max(self.max_refresh, time.perf_counter() - started)
 
+    def _map_is_due(self, now: float) -> bool:
+        return now >= self._map_due or (self.selected, len(self.model.agents)) != self._map_key
+
+    def _shown_agents(self) -> list[str]:
+        """Agents whose telemetry is on screen: the table's visible rows and the selected agent."""
+        screen = self._main_screen()
+        shown = [self.selected] if self.selected else []
+        if screen is not None and screen.is_mounted:
+            with contextlib.suppress(NoMatches):
+                shown.extend(screen.query_one(AgentTable).visible_names())
+        return shown
+
     def _render(self, now: float) -> None:
         screen = self._main_screen()
         if screen is None or not screen.is_mounted:
@@ -307,10 +350,10 @@ class OperatorApp(App[None]):
     def _render_on(self, screen: MainScreen, now: float) -> None:
         model = self.model
         screen.query_one(AgentTable).sync(model, now)
-        map_key = (self.selected, len(model.agents))
-        if now >= self._map_due or map_key != self._map_key:
+        if self._map_is_due(now):
             # Fixed-rate: every agent's position is aggregated into the picture once a map_interval.
-            self._map_due, self._map_key = now + self.settings.map_interval, map_key
+            self._map_due = now + self.settings.map_interval
+            self._map_key = (self.selected, len(model.agents))
             screen.query_one(SwarmMap).update_points(points_from(model.positions()), self.selected)
         screen.query_one(AgentDetail).show(
             detail_text(model.agents.get(self.selected or ""), now, self.time_format)

@@ -187,6 +187,17 @@ class OperatorNode(Node):
         raw.sort(key=lambda item: item[2])  # arrival order, so transitions are logged as they came
         return raw
 
+    def deferrable(self, channel: str) -> str | None:
+        """The agent of a TELEMETRY channel whose decoding may wait until it is shown, or None.
+
+        Never with a swarm key: what the console shows must then be checked first."""
+        if self._keys:
+            return None
+        kind = self._classify(channel)
+        if kind is None or kind[0] != "TELEMETRY":
+            return None
+        return kind[1].get("agent")
+
     def decode(self, raw: tuple[str, bytes, float]) -> Incoming | None:
         """One datagram from :meth:`take` for the UI, or None (unwatched, forged, or garbage)."""
         channel, data, received = raw

@@ -176,6 +176,16 @@ class SwarmModel:
         if handler is not None:
             handler(self, view, msg, now, wall, fields or {})
 
+    def fold(
+        self, topic: str, agent: str, msg: Any, now: float, wall: float, fields: dict[str, str] | None = None
+    ) -> None:
+        """Fold in a message whose arrival :meth:`heard` already noted (the console decodes an
+        off-screen agent's telemetry only when it is shown); nothing if the agent is unknown."""
+        view = self.agents.get(agent)
+        handler = self._handlers.get(topic)
+        if view is not None and handler is not None:
+            handler(self, view, msg, now, wall, fields or {})
+
     def heard(self, topic: str, agent: str, now: float, wall: float) -> AgentView:
         """Note that ``agent`` was heard on ``topic`` (alive again if it was stale) without a new
         message to fold in: what a state republished unchanged needs (most of them, at 5 Hz)."""

@@ -596,6 +596,40 @@ async def test_the_map_is_fixed_rate_and_repaints_only_when_its_picture_changes(
     assert swarm_map.points != shown
 
 
+async def test_off_screen_telemetry_is_decoded_when_shown(
+    context: Context, swarm: FakeSwarm, clock: FakeClock
+) -> None:
+    """The timer's refresh decodes the telemetry of agents on screen (table rows, selection) and
+    keeps only the newest datagram of the others until the map takes every position in."""
+    app = make_app(context, clock, refresh_interval=3600.0)  # only the refreshes this test runs
+    async with app.run_test(size=(160, 44)) as pilot:
+        names = [f"uav{i:02d}" for i in range(60)]  # more rows than the table shows
+        for name in names:
+            swarm.agent(name, battery=90.0)
+        await until(
+            pilot,
+            app,
+            lambda: len(app.model.agents) == 60 and all(v.telemetry for v in app.model.agents.values()),
+        )
+        await pilot.pause()
+        shown, hidden = names[0], names[-1]
+        assert hidden not in app.screen.query_one(AgentTable).visible_names()
+        heard = app.model.agents[hidden].messages
+        for name in (shown, hidden):
+            swarm.tel(name, battery=50.0)
+        deadline = time.monotonic() + 5.0
+        while len(app.node.latest) < 2:
+            assert time.monotonic() < deadline, "the telemetry never reached the console"
+            await asyncio.sleep(0.02)
+        await app.refresh_sliced()
+        assert app.model.agents[shown].telemetry.battery == 50.0
+        assert app.model.agents[hidden].telemetry.battery == 90.0, "off screen: not decoded yet"
+        assert app.model.agents[hidden].messages == heard + 1, "but heard"
+        clock.advance(ConsoleSettings().map_interval)
+        await app.refresh_sliced()
+        assert app.model.agents[hidden].telemetry.battery == 50.0, "the map's turn: every position"
+
+
 async def test_appending_events_does_not_lay_out_the_screen(two_agents: tuple[OperatorApp, Any]) -> None:
     app, pilot = two_agents
     log_widget = app.screen.query_one(EventLog)

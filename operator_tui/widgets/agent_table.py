@@ -223,6 +223,11 @@ class AgentTable(ScrollView, can_focus=True):
         if changed:
             self.refresh()
 
+    def visible_names(self) -> list[str]:
+        """The agents whose rows are on screen now."""
+        first = self.scroll_offset.y
+        return self.order[first : first + max(1, self.size.height)]
+
     # ------------------------------------------------------------------ cursor
     def _set_cursor(self, row: int) -> None:
         if not self.order:

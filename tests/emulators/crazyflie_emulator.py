@@ -60,8 +60,13 @@ import time
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # cflib only when a memory link is asked for
+    from antalate_lcm.autopilot.crazyflie.memory import MemoryLink
 
 Address = tuple[str, int]
+_MEMORY_PEER: Address = ("memory", 0)  # the sender of packets off a memory link
 
 # CRTP ports (cflib/crtp/crtpstack.py)
 PORT_PARAM, PORT_COMMANDER, PORT_MEM, PORT_LOG, PORT_GENERIC, PORT_HL, PORT_SUPERVISOR = 2, 3, 4, 5, 7, 8, 9
@@ -236,12 +241,21 @@ class CrazyflieEmulator:
         converged: bool = True,
         locked: bool = False,
         clock: Callable[[], float] = time.monotonic,
+        memory: str | None = None,
     ) -> None:
+        """Bind ``host:port`` (``udp://``), or with `memory` register ``memory://MEMORY`` and bind nothing."""
         self.clock = clock
         self._lock = threading.RLock()
-        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self._sock.bind((host, port))
-        self._sock.settimeout(0.1)
+        self._sock: socket.socket | None = None
+        self._memory: MemoryLink | None = None
+        if memory is None:
+            self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self._sock.bind((host, port))
+            self._sock.settimeout(0.1)
+        else:
+            from antalate_lcm.autopilot.crazyflie.memory import MemoryLink
+
+            self._memory = MemoryLink(memory, lambda packet: self._on_datagram(packet, _MEMORY_PEER))
         self._peer: Address | None = None
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -292,15 +306,22 @@ class CrazyflieEmulator:
     # ------------------------------------------------------------------ lifecycle
     @property
     def port(self) -> int:
+        assert self._sock is not None, "an emulator on a memory link has no port"
         return int(self._sock.getsockname()[1])
 
     @property
     def uri(self) -> str:
+        if self._memory is not None:
+            return self._memory.uri
+        assert self._sock is not None
         host, port = self._sock.getsockname()[:2]
         return f"udp://{host}:{port}"
 
     def start(self) -> CrazyflieEmulator:
-        for target, name in ((self._recv_loop, "cf-emu-rx"), (self._sim_loop, "cf-emu-sim")):
+        loops = [(self._sim_loop, "cf-emu-sim")]
+        if self._sock is not None:
+            loops.append((self._recv_loop, "cf-emu-rx"))
+        for target, name in loops:
             t = threading.Thread(target=target, name=name, daemon=True)
             t.start()
             self._threads.append(t)
@@ -310,7 +331,10 @@ class CrazyflieEmulator:
         self._stop.set()
         for t in self._threads:
             t.join(timeout=2)
-        self._sock.close()
+        if self._sock is not None:
+            self._sock.close()
+        if self._memory is not None:
+            self._memory.close()
 
     def __enter__(self) -> CrazyflieEmulator:
         return self.start()
@@ -416,10 +440,16 @@ class CrazyflieEmulator:
     def _send(self, port: int, channel: int, data: bytes) -> None:
         if self.silent or self._peer is None:
             return
+        packet = bytes([(port << 4) | 0x0C | channel]) + data[:30]
+        if self._memory is not None:
+            self._memory.push(packet)
+            return
         with contextlib.suppress(OSError):
-            self._sock.sendto(bytes([(port << 4) | 0x0C | channel]) + data[:30], self._peer)
+            if self._sock is not None:
+                self._sock.sendto(packet, self._peer)
 
     def _recv_loop(self) -> None:
+        assert self._sock is not None
         while not self._stop.is_set():
             try:
                 data, sender = self._sock.recvfrom(64)
@@ -427,21 +457,25 @@ class CrazyflieEmulator:
                 continue
             except OSError:
                 return
-            if not data:
-                continue
-            with self._lock:
-                if self.silent:
-                    self.dropped += 1
-                    continue
-                self._peer = sender
-                if data[0] == 0xFF:  # null packet (cflib's UDP scan, radio keep-alive)
-                    self._send(PORT_LINK, 3, b"")
-                    continue
-                port, channel = (data[0] & 0xF0) >> 4, data[0] & 0x03
-                self.received.append((port, channel, data[1:]))
-                # a malformed packet is dropped, as the firmware drops short packets
-                with contextlib.suppress(struct.error, IndexError):
-                    self._dispatch(port, channel, data[1:])
+            self._on_datagram(data, sender)
+
+    def _on_datagram(self, data: bytes, sender: Address) -> None:
+        """One CRTP packet from the client, off the UDP socket or a memory link (the same bytes)."""
+        if not data:
+            return
+        with self._lock:
+            if self.silent:
+                self.dropped += 1
+                return
+            self._peer = sender
+            if data[0] == 0xFF:  # null packet (cflib's UDP scan, radio keep-alive)
+                self._send(PORT_LINK, 3, b"")
+                return
+            port, channel = (data[0] & 0xF0) >> 4, data[0] & 0x03
+            self.received.append((port, channel, data[1:]))
+            # a malformed packet is dropped, as the firmware drops short packets
+            with contextlib.suppress(struct.error, IndexError):
+                self._dispatch(port, channel, data[1:])
 
     def _dispatch(self, port: int, channel: int, data: bytes) -> None:
         handler = {

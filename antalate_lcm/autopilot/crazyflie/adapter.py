@@ -113,14 +113,20 @@ _MODE_NAMES = {
 
 
 def _init_drivers() -> None:
-    """cflib's drivers, once per process (``init_drivers`` appends to a global list each call)."""
+    """cflib's drivers, once per process (``init_drivers`` appends to a global list each call).
+
+    ``memory://`` (`memory.MemoryDriver`, a peer in this process) comes last, after cflib's own.
+    """
     global _drivers_ready
     import cflib.crtp
+
+    from antalate_lcm.autopilot.crazyflie import memory
 
     with _drivers_lock:
         if not _drivers_ready:
             cflib.crtp.init_drivers()
             _drivers_ready = True
+    memory.install()
 
 
 class CrazyflieAutopilot(Autopilot):

@@ -16,7 +16,7 @@ from antalate_lcm.strict import validate_strict
 #: vehicle, 2 s stops the motors. A streamed set-point must be renewed well inside the first.
 WDT_STABILIZE_S = 0.5
 
-_URI_SCHEMES = ("radio://", "usb://", "udp://", "tcp://", "serial://")
+_URI_SCHEMES = ("radio://", "usb://", "udp://", "tcp://", "serial://", "memory://")
 
 
 class Params(BaseModel):
@@ -25,7 +25,10 @@ class Params(BaseModel):
     # allow_inf_nan=False: no float field may be inf or nan (a timeout of inf never fires).
     model_config = ConfigDict(extra="forbid", strict=True, frozen=True, allow_inf_nan=False)
 
-    uri: str = Field("radio://0/80/2M/E7E7E7E7E7", description="cflib link URI: radio://, usb://, udp://")
+    uri: str = Field(
+        "radio://0/80/2M/E7E7E7E7E7",
+        description="cflib link URI: radio://, usb://, udp://, memory:// (a peer in this process)",
+    )
     origin_lat: float = Field(
         32.7767, ge=-90.0, le=90.0, description="deg: WGS84 of the local frame's origin"
     )

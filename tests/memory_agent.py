@@ -1,0 +1,103 @@
+"""One agent in the test process (MC + HLC + an ``auto_operator`` BMA on ``memq://``) for any autopilot.
+
+What the memory-link tests of the Tello and Crazyflie adapters share: the agent is assembled by
+`agent_nodes` from a config, as ``antalate agent`` does, and the HLC's adapter can be the test's own
+instance (one built on an in-memory link). A probe node records every MC/HLC state change and
+``hlc_error_t``, so a test waits for states in order with generous deadlines.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from antalate_lcm.autopilot.base import Autopilot
+from antalate_lcm.bus import Bus
+from antalate_lcm.config import parse_config
+from antalate_lcm.executor import Executor
+from antalate_lcm.hlc.node import HlcNode
+from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
+from antalate_lcm.node import Context, Node
+from antalate_lcm.runtime.agent import agent_nodes
+
+
+@dataclass
+class Seen:
+    t: float
+    state: int
+
+
+class MemoryAgent:
+    """An agent flying `autopilot` (a name and its params), optionally through the test's `adapter`."""
+
+    def __init__(
+        self,
+        autopilot: str,
+        params: dict[str, Any],
+        *,
+        hlc: dict[str, Any] | None = None,
+        operator: dict[str, Any] | None = None,
+        adapter: Autopilot | None = None,
+    ) -> None:
+        doc = {
+            "agent": {"name": "memory"},
+            "buses": {"lan": "memq://"},
+            "hlc": {"autopilot": autopilot, **(hlc or {}), "autopilot_params": params},
+            "bma": [
+                {
+                    "name": "operator",
+                    "behaviors": [
+                        {
+                            "plugin": "auto_operator",
+                            "activate_on": ["STANDBY", "MISSION"],
+                            "params": {"max_flights": 1, "retry": 0.5, **(operator or {})},
+                        }
+                    ],
+                }
+            ],
+        }
+        self.config = parse_config(doc, "memory-agent.toml")
+        self.context = Context(Bus(self.config.buses), Executor())
+        self.mc: list[Seen] = []
+        self.hlc: list[Seen] = []
+        self.errors: list[hlc_error_t] = []
+        self.probe = Node(self.config, self.context, name="probe")
+        self.nodes = agent_nodes(self.config, self.context)
+        if adapter is not None:  # the HLC comes first in agent_nodes
+            assert isinstance(self.nodes[0], HlcNode)
+            self.nodes[0] = HlcNode(self.config, self.context, adapter)
+
+    def start(self) -> MemoryAgent:
+        self.context.executor.start()
+        self.probe.start()
+        self.probe.subscribe("MC_STATE", lambda m: self._seen(self.mc, m))
+        self.probe.subscribe("HLC_STATE", lambda m: self._seen(self.hlc, m))
+        self.probe.subscribe("HLC_ERROR", self.errors.append)
+        for node in self.nodes:
+            node.start()
+        return self
+
+    def stop(self) -> None:
+        for node in reversed([self.probe, *self.nodes]):
+            node.stop()
+        self.context.close()
+
+    @staticmethod
+    def _seen(into: list[Seen], msg: mc_state_t | hlc_state_t) -> None:
+        if not into or into[-1].state != msg.state:
+            into.append(Seen(time.monotonic(), msg.state))
+
+    def wait(self, which: str, state: int, timeout: float = 10.0, since: float = 0.0) -> Seen:
+        """The first `state` of the MC or HLC seen at or after `since`, waiting up to `timeout` s."""
+        seen = self.mc if which == "mc" else self.hlc
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            hit = next((s for s in list(seen) if s.state == state and s.t >= since), None)
+            if hit is not None:
+                return hit
+            time.sleep(0.02)
+        raise AssertionError(
+            f"{which} never reached state {state} (mc {[s.state for s in self.mc]}, "
+            f"hlc {[s.state for s in self.hlc]}, errors {[(e.code, e.text) for e in self.errors]})"
+        )

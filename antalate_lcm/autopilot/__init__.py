@@ -10,11 +10,10 @@ loader shared with behaviors, so both kinds of plugin fail the same way.
 from __future__ import annotations
 
 import inspect
-from importlib.metadata import entry_points
 
 from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, FlightMode, Frame
 from antalate_lcm.errors import PluginNotFound
-from antalate_lcm.plugins import AUTOPILOTS, load_plugin
+from antalate_lcm.plugins import AUTOPILOTS, group_entry_points, load_plugin
 
 ENTRY_POINT_GROUP = AUTOPILOTS
 
@@ -40,7 +39,7 @@ class UnknownAutopilotError(PluginNotFound, LookupError):
 
 def available_autopilots() -> dict[str, str]:
     """Registered adapter names mapped to their ``module:Class`` targets, sorted by name."""
-    return dict(sorted((ep.name, ep.value) for ep in entry_points(group=ENTRY_POINT_GROUP)))
+    return dict(sorted((ep.name, ep.value) for ep in group_entry_points(ENTRY_POINT_GROUP)))
 
 
 def load_autopilot(name: str) -> type[Autopilot]:

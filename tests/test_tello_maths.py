@@ -7,7 +7,8 @@ import math
 import pytest
 
 from antalate_lcm.autopilot.base import altitude_reached
-from antalate_lcm.autopilot.tello import maths
+from antalate_lcm.autopilot.tello import maths, telemetry
+from antalate_lcm.autopilot.tello.params import validated
 
 
 def test_altitude_reached_is_the_hlc_rule_with_float_slack_only() -> None:
@@ -82,3 +83,23 @@ def test_rtl_leg_slows_down_near_home() -> None:
     vn, ve, dist = maths.rtl_leg(0.3, 0.0, (0.0, 0.0), speed=0.5, gain=1.0, min_speed=0.2)
     assert vn == pytest.approx(-0.3) and dist == pytest.approx(0.3)
     assert maths.rtl_leg(0.0, 0.0, (0.0, 0.0), speed=0.5, gain=1.0, min_speed=0.2) == (0.0, 0.0, 0.0)
+
+
+def test_a_state_packet_read_in_the_adapters_units() -> None:
+    """`telemetry.read`: dm/s into north/east/down m/s through home_heading, height from h or tof."""
+    p = validated({})
+    east = telemetry.read(
+        {"yaw": 30, "vgx": 10, "vgy": 0, "vgz": -5, "h": 120, "bat": 80}, p, 90.0, telemetry.Reading()
+    )
+    assert (east.vn, east.ve, east.vd) == pytest.approx(
+        (0.0, 1.0, -0.5), abs=1e-9
+    )  # x points east at heading 90
+    assert (east.yaw, east.h_cm, east.height, east.battery) == (30.0, 120, 1.2, 80.0)
+    partial = telemetry.read({"vgx": 0}, p, 90.0, east)  # a field the packet lacks keeps its value
+    assert (partial.yaw, partial.h_cm, partial.battery) == (30.0, 120, 80.0) and partial.ve == 0.0
+    tof = validated({"altitude_source": "tof"})
+    assert telemetry.read({"h": 0, "tof": 95}, tof, 0.0, telemetry.Reading()).height == pytest.approx(0.85)
+    assert telemetry.read({"h": 30, "tof": 6553}, tof, 0.0, telemetry.Reading()).height == pytest.approx(0.3)
+    body = validated({"velocity_frame": "body"})
+    turned = telemetry.read({"yaw": 90, "vgx": 10}, body, 0.0, telemetry.Reading())
+    assert (turned.vn, turned.ve) == pytest.approx((0.0, 1.0), abs=1e-9)  # forward, facing east

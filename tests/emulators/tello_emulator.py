@@ -92,9 +92,12 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
+from antalate_lcm.autopilot.tello.link import MemoryLink
+
 LOG = logging.getLogger("antalate.tests.tello_emulator")
 
 Address = tuple[str, int]
+_MEMORY_SENDER: Address = ("memory", 8889)  # where commands off a memory link come from
 
 
 @dataclass(frozen=True)
@@ -187,13 +190,21 @@ class TelloEmulator:
         vertical_tau: float | None = None,
         height_resolution_cm: int = 10,
         height_rounding: str = "round",
+        memory: bool = False,
     ) -> None:
         """Bind ``host:port`` (``port=0``: a free port) or adopt ``sock`` (already bound, e.g. in a netns).
+
+        With `memory` the emulator binds nothing: its datagrams go over `link`, a `MemoryLink` for
+        ``TelloAutopilot(params, link=lambda _p: emu.link)`` (commands in; replies and state lines out).
 
         Speeds are m/s and deg/s, times seconds, battery percent; ``battery_drain`` is %/s in flight.
         """
         self._host, self._port = host, port
         self._sock = sock
+        self.link: MemoryLink | None = None
+        if memory:
+            self._host, self._port = _MEMORY_SENDER
+            self.link = MemoryLink(self._from_link, name="tello-emulator")
         self.state_port = state_port
         self.state_target = state_target
         self.state_rate = state_rate
@@ -256,7 +267,7 @@ class TelloEmulator:
     def start(self) -> TelloEmulator:
         if self._thread is not None:
             return self
-        if self._sock is None:
+        if self._sock is None and self.link is None:
             sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             try:
                 sock.bind((self._host, self._port))
@@ -264,7 +275,8 @@ class TelloEmulator:
                 sock.close()
                 raise
             self._sock = sock
-        self._host, self._port = self._sock.getsockname()[:2]
+        if self._sock is not None:
+            self._host, self._port = self._sock.getsockname()[:2]
         self._stop_evt.clear()
         self._thread = threading.Thread(target=self._run, name=f"tello-emu-{self._port}", daemon=True)
         self._thread.start()
@@ -421,7 +433,6 @@ class TelloEmulator:
     # -- the I/O + physics thread ----------------------------------------------------------------
 
     def _run(self) -> None:
-        assert self._sock is not None
         sock = self._sock
         tick = 1.0 / self.tick_rate
         state_period = 1.0 / self.state_rate
@@ -429,11 +440,16 @@ class TelloEmulator:
         next_tick = last + tick
         next_state = last
         while not self._stop_evt.is_set():
-            try:
-                ready, _, _ = select.select([sock], [], [], max(0.0, min(next_tick - time.monotonic(), 0.05)))
-            except (OSError, ValueError):
-                break  # socket closed under us: stop() is in progress
-            if ready:
+            wait = max(0.0, min(next_tick - time.monotonic(), 0.05))
+            if sock is None:  # a memory link delivers on the sender's thread (_from_link)
+                self._stop_evt.wait(wait)
+                ready: list[socket.socket] = []
+            else:
+                try:
+                    ready, _, _ = select.select([sock], [], [], wait)
+                except (OSError, ValueError):
+                    break  # socket closed under us: stop() is in progress
+            if ready and sock is not None:
                 try:
                     data, sender = sock.recvfrom(4096)
                 except OSError:
@@ -449,7 +465,17 @@ class TelloEmulator:
                 next_state = now + state_period
                 self._send_state()
 
+    def _from_link(self, text: str) -> None:
+        """A command off the memory link: the same datagram a socket would have delivered."""
+        self._on_datagram(text.encode("utf-8"), _MEMORY_SENDER)
+
     def _send(self, payload: bytes, dest: Address) -> None:
+        if self.link is not None:
+            if dest[1] == self.state_port:
+                self.link.push_state(payload.decode("ascii"))
+            else:
+                self.link.reply(payload.decode("utf-8"))
+            return
         if self._sock is None:
             return
         try:

@@ -1,10 +1,29 @@
 """The Tello adapter (``autopilot = "tello"``): `TelloAutopilot` and its parameters.
 
-``adapter`` does the I/O (djitellopy, an optional extra: ``pip install 'antalate[tello]'``; the control thread), ``maths`` the frames, dead reckoning,
-rc scaling, climb and landing rules, ``params`` the validated ``[hlc.autopilot_params]``.
+``adapter`` flies it (commands, the control thread) through a ``link`` (`DjitellopyLink`: djitellopy, an
+optional extra: ``pip install 'antalate[tello]'``; `MemoryLink`: a peer in this process);
+``telemetry`` reads a state packet into the adapter's units, ``maths`` the frames, dead reckoning, rc
+scaling, climb and landing rules, ``params`` the validated ``[hlc.autopilot_params]``.
 """
 
-from antalate_lcm.autopilot.tello.adapter import DJITELLOPY_MISSING, TelloAutopilot
+from antalate_lcm.autopilot.tello.adapter import TelloAutopilot
+from antalate_lcm.autopilot.tello.link import (
+    DJITELLOPY_MISSING,
+    DjitellopyLink,
+    LinkOpener,
+    MemoryLink,
+    TelloLink,
+)
 from antalate_lcm.autopilot.tello.params import DEFAULTS, TELLO_AUTOLAND_S, Params
 
-__all__ = ["DJITELLOPY_MISSING", "DEFAULTS", "TELLO_AUTOLAND_S", "Params", "TelloAutopilot"]
+__all__ = [
+    "DEFAULTS",
+    "DJITELLOPY_MISSING",
+    "TELLO_AUTOLAND_S",
+    "DjitellopyLink",
+    "LinkOpener",
+    "MemoryLink",
+    "Params",
+    "TelloAutopilot",
+    "TelloLink",
+]

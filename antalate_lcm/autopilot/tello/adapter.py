@@ -20,8 +20,11 @@ What the adapter adds, and why
   packets: a lost ``ok`` to ``takeoff`` is settled once the state shows the Tello in the air and
   holding its height, a lost ``ok`` to ``land`` once it shows it on the ground; a read (``battery?``)
   skips a stray ``ok``. ``land``, ``rtl`` and `emergency` pre-empt a command that is still waiting.
-* **Link age.** djitellopy's receiver thread replaces the per-drone state dict on every packet, so a
-  new dict object means a new packet; it is stamped with the adapter's clock when first seen.
+* **Link age.** The link's ``state()`` is a new object for every packet (djitellopy's receiver thread
+  replaces its per-drone dict), so a new object means a new packet; it is stamped with the adapter's
+  clock when first seen, read into the adapter's units by `telemetry.read`, and dead-reckoned.
+* **The link** (`link.TelloLink`) is given by the caller: djitellopy's sockets by default,
+  `link.MemoryLink` to a peer in this process in tests (no socket, the same adapter).
 * **A control thread** at ``control_hz`` (a fixed schedule: rc goes out at that rate and no other)
   streams ``rc`` while a velocity set-point, the take-off climb or the RTL leg is active, and sends
   ``rc 0 0 0 0`` every ``keepalive_s`` whenever the Tello is in the air and not landing -- also while
@@ -77,17 +80,12 @@ from antalate_lcm.autopilot.base import (
     check_takeoff_altitude,
     check_velocity,
 )
-from antalate_lcm.autopilot.tello import maths
+from antalate_lcm.autopilot.tello import maths, telemetry
+from antalate_lcm.autopilot.tello.link import LinkOpener, TelloLink, open_djitellopy
 from antalate_lcm.autopilot.tello.params import Params, validated
 from antalate_lcm.geo import FlatFrame, wrap_360
 
 log = logging.getLogger("antalate.autopilot.tello")
-
-#: djitellopy (with av and numpy, 160 MB) is an extra, so a MAVLink or Crazyflie vehicle computer
-#: does not carry it; only connect imports it, so a config validates without it.
-DJITELLOPY_MISSING = (
-    "the tello autopilot needs djitellopy, which is not installed: pip install 'antalate[tello]'"
-)
 
 _APPROACH_GAIN = 1.0  # 1/s: RTL speed per metre of remaining distance (below rtl_speed)
 _MIN_APPROACH_SPEED = 0.2  # m/s
@@ -100,13 +98,7 @@ _LAND_RETRY = 2.0  # s between attempts when a land command failed in the air
 _STOP_REPEAT = 3  # zero rc sent this many ticks in a row when motion stops (UDP may drop one)
 _PROBE_PERIOD = 1.0  # s between "command" probes while the link is lost
 _UP_MIN_CM, _UP_MAX_CM = 20, 500  # the SDK's range for up/down
-_TOF_GROUND_CM = 10  # the range finder reads this on the ground
-_TOF_INVALID_CM = 6000  # and implausibly large values out of range
 _POLL = 0.02  # s between looks at the reply list and the state while a command waits
-
-#: Hosts with a live adapter in this process: djitellopy keeps one reply queue per IP.
-_HOSTS_IN_USE: set[str] = set()
-_HOSTS_LOCK = threading.Lock()
 
 
 class _Phase(enum.Enum):
@@ -133,32 +125,35 @@ class TelloAutopilot(Autopilot):
     blocking = True  # takeoff/land/up wait for the Tello's answer, which comes when the move is done
     params_model: ClassVar[type[BaseModel]] = Params
 
-    def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
+    def __init__(
+        self,
+        params: Mapping[str, Any] | None = None,
+        *,
+        clock: Clock = time.monotonic,
+        link: LinkOpener | None = None,
+    ) -> None:
+        """`link` opens the adapter's link at `connect` (`link.MemoryLink` in tests); default djitellopy."""
         super().__init__(params, clock=clock)
         p = validated(self.params)
         self._p = p
         self.host: str = p.host
         self.home = FlatFrame(p.home_lat, p.home_lon)
         self._home_heading = wrap_360(p.home_heading)
-        self._tello: Any = None  # djitellopy.Tello once connected
+        self._opener: LinkOpener = link or open_djitellopy
+        self._link: TelloLink | None = None  # once connected
         self._lock = threading.RLock()  # adapter state, shared by the HLC, control and caller threads
         self._cmd_lock = threading.RLock()  # one answered command at a time (replies carry no id)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._lander: threading.Thread | None = None
         self._connected = False
-        self._owns_host = False
         self._ratelog = RateLimitedLog(log, period=10.0, clock=clock)
         # Telemetry from the newest state packet.
-        self._raw: dict[str, Any] | None = None  # the dict object of the last packet (identity = packet)
+        self._raw: Mapping[str, Any] | None = None  # the dict object of the last packet (identity = packet)
         self._state_time: float | None = None  # clock() when it was first seen
-        self._yaw = 0.0  # deg, the Tello's own (0 at power-on)
-        self._vn = self._ve = self._vd = 0.0  # m/s
-        self._height = 0.0  # m above the take-off point
+        self._reading = telemetry.Reading()  # the newest packet in the adapter's units
         self._height_changed = -math.inf  # clock() of the last change of the height reading
-        self._h_cm = 0  # the raw height, the in-air test
         self._air = maths.Debounced(_GROUND_CONFIRM)  # the in-air flag, believed once it held
-        self._battery = -1.0
         # Dead reckoning (metres north/east of home).
         self._north = self._east = 0.0
         self._takeoff_point = (0.0, 0.0)
@@ -185,24 +180,11 @@ class TelloAutopilot(Autopilot):
     def connect(self) -> None:
         if self._connected:
             return
+        link = self._opener(self._p)
+        link.open()
+        self._link = link
         try:
-            from djitellopy import Tello
-        except ImportError:
-            raise AutopilotError(DJITELLOPY_MISSING) from None
-        Tello.LOGGER.setLevel(self._p.djitellopy_log_level)
-        # djitellopy prints through a handler of its own *and* propagates to the root logger, so
-        # every line appeared twice; the application's logging configuration is the one to keep.
-        Tello.LOGGER.removeHandler(Tello.HANDLER)
-        with _HOSTS_LOCK:
-            if not self._owns_host and self.host in _HOSTS_IN_USE:
-                raise AutopilotError(
-                    f"another tello autopilot in this process already flies {self.host}: "
-                    "djitellopy keeps one reply queue per IP, so each agent needs its own Tello"
-                )
-            _HOSTS_IN_USE.add(self.host)
-            self._owns_host = True
-        try:
-            self._open(Tello)
+            self._open(link)
         except BaseException:
             self._release()
             raise
@@ -213,7 +195,7 @@ class TelloAutopilot(Autopilot):
         log.info(
             "Tello %s connected: battery %s%%, %s",
             self.host,
-            self._battery,
+            self._reading.battery,
             "flying" if self._phase is not _Phase.GROUND else "on the ground",
         )
 
@@ -224,8 +206,7 @@ class TelloAutopilot(Autopilot):
         thread, self._thread = self._thread, None
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout=2.0)
-        tello = self._tello
-        if tello is not None and self._connected:
+        if self._link is not None and self._connected:
             with self._lock:
                 flying = self._phase is not _Phase.GROUND
             if flying:
@@ -265,7 +246,7 @@ class TelloAutopilot(Autopilot):
         with self._lock:
             if self._phase is not _Phase.GROUND or self._in_air():
                 raise AutopilotError(
-                    f"takeoff refused: already {self._phase.value.lower()} at {self._height:.1f} m"
+                    f"takeoff refused: already {self._phase.value.lower()} at {self._reading.height:.1f} m"
                 )
             self._commanded()
             self._phase = _Phase.TAKEOFF
@@ -296,7 +277,7 @@ class TelloAutopilot(Autopilot):
             log.warning(
                 "Tello %s: no answer to 'takeoff', but the state shows it up at %.1f m: going on",
                 self.host,
-                self._height,
+                self._reading.height,
             )
         if self._p.takeoff_altitude_mode == "up":
             try:
@@ -307,7 +288,7 @@ class TelloAutopilot(Autopilot):
             self._wait_fresh_state()  # the height when "ok" came, not from a packet sent mid-climb
         with self._lock:
             if self._phase is _Phase.TAKEOFF:
-                if maths.climb_done(self._height, alt):
+                if maths.climb_done(self._reading.height, alt):
                     self._phase = _Phase.GUIDED
                 else:
                     self._climb_target = alt  # the control thread takes it from here
@@ -376,12 +357,12 @@ class TelloAutopilot(Autopilot):
                 link_age=self._link_age(),
                 lat=lat,
                 lon=lon,
-                alt=self._height,
+                alt=self._reading.height,
                 heading=self._heading(),
-                vn=self._vn,
-                ve=self._ve,
-                vd=self._vd,
-                battery=self._battery,
+                vn=self._reading.vn,
+                ve=self._reading.ve,
+                vd=self._reading.vd,
+                battery=self._reading.battery,
                 armed=in_air,  # a Tello's motors run exactly while it flies
                 in_air=in_air,
                 autonomous=True,  # no pilot radio: always under computer control
@@ -419,23 +400,14 @@ class TelloAutopilot(Autopilot):
 
     # ================================================================= link and commands
 
-    def _open(self, tello_cls: Any) -> None:
-        """Make the djitellopy client, enter SDK mode, wait for state (connect's I/O).
+    def _open(self, link: TelloLink) -> None:
+        """Enter SDK mode and wait for state on the open `link` (connect's I/O).
 
-        This is ``Tello.connect()`` done by hand: djitellopy's own waits 3 x 7 s for an answer and
-        1 s for state, fixed; a dead host must fail in ``command_timeout`` x ``retry_count`` s, and
+        This is djitellopy's ``Tello.connect()`` done by hand: its own waits 3 x 7 s for an answer
+        and 1 s for state, fixed; a dead host must fail in ``command_timeout`` x ``retry_count`` s, and
         each failure must say what to check.
         """
         p = self._p
-        try:
-            tello = tello_cls(self.host, retry_count=p.retry_count)
-        except OSError as exc:
-            raise AutopilotError(
-                f"cannot bind UDP {tello_cls.CONTROL_UDP_PORT} for djitellopy ({exc}): another process on "
-                "this machine talks to a Tello; run every Tello agent in one process "
-                "(antalate agent tello-a.toml tello-b.toml)"
-            ) from exc
-        self._tello = tello
         answer = ""
         for _ in range(p.retry_count):
             try:
@@ -447,7 +419,7 @@ class TelloAutopilot(Autopilot):
                 break
         else:
             raise AutopilotError(
-                f"no answer from the Tello at {self.host}:{tello_cls.CONTROL_UDP_PORT} to 'command' "
+                f"no answer from the Tello at {link.where} to 'command' "
                 f"({p.retry_count} x {p.command_timeout:g} s): is it on, and is this machine on its "
                 f"Wi-Fi (or it on yours, in station mode)? ({answer})"
             )
@@ -462,31 +434,19 @@ class TelloAutopilot(Autopilot):
                     return
             if self.clock() >= deadline:
                 raise AutopilotError(
-                    f"the Tello at {self.host} entered SDK mode but sent no state packet to UDP "
-                    f"{tello_cls.STATE_UDP_PORT} within {p.state_timeout:g} s (a firewall, or another "
+                    f"the Tello at {self.host} entered SDK mode but sent no state packet to "
+                    f"{link.state_where} within {p.state_timeout:g} s (a firewall, or another "
                     "program bound to that port?)"
                 )
             time.sleep(_POLL)
 
     def _release(self) -> None:
-        tello, self._tello = self._tello, None
-        if tello is not None:
-            tello.is_flying = False  # djitellopy's end()/__del__ would otherwise block on a land
-            try:
-                tello.end()  # drops this host from djitellopy's tables
-            except Exception:  # noqa: BLE001 - closing must not fail
-                log.debug("djitellopy end() failed", exc_info=True)
-            # end() runs again from Tello.__del__, whenever the object is collected; by then a new
-            # adapter may have registered the same host, whose entry it would delete. Point this
-            # object at no host so that second end() finds nothing to remove.
-            tello.address = ("closed", tello.address[1])
-        with _HOSTS_LOCK:
-            if self._owns_host:
-                _HOSTS_IN_USE.discard(self.host)
-                self._owns_host = False
+        link, self._link = self._link, None
+        if link is not None:
+            link.close()
 
     def _require_connected(self, what: str) -> None:
-        if not self._connected or self._tello is None:
+        if not self._connected or self._link is None:
             raise AutopilotError(f"{what}: not connected to the Tello at {self.host}")
 
     def _require_link(self, what: str) -> None:
@@ -504,19 +464,18 @@ class TelloAutopilot(Autopilot):
         self._unattended_until = None
 
     def _replies(self) -> list[bytes]:
-        try:
-            replies: list[bytes] = self._tello.get_own_udp_object()["responses"]
-        except (KeyError, AttributeError, TypeError) as exc:  # closed under us
-            raise AutopilotError(f"the link to the Tello at {self.host} is closed") from exc
-        return replies
+        link = self._link
+        if link is None:
+            raise AutopilotError(f"the link to the Tello at {self.host} is closed")
+        return link.replies()
 
     def _send_raw(self, text: str) -> None:
-        """One datagram to the Tello through djitellopy's socket (no wait, no retry)."""
-        tello = self._tello
-        if tello is None:
+        """One datagram to the Tello through the link (no wait, no retry)."""
+        link = self._link
+        if link is None:
             raise AutopilotError(f"{text!r}: not connected to the Tello at {self.host}")
         try:
-            tello.send_command_without_return(text)
+            link.send(text)
         except OSError as exc:
             raise AutopilotError(f"{text!r} to the Tello at {self.host} failed: {exc!r}") from exc
         finally:
@@ -582,7 +541,7 @@ class TelloAutopilot(Autopilot):
             self._air.value
             and now - sent >= _SETTLED
             and now - self._height_changed >= _SETTLED
-            and abs(self._vd) < 0.05
+            and abs(self._reading.vd) < 0.05
         )
 
     def _landed(self) -> bool:
@@ -694,8 +653,8 @@ class TelloAutopilot(Autopilot):
         for _ in range(4):
             self._wait_fresh_state()
             with self._lock:
-                delta = alt + maths.CLIMB_BAND / 2.0 - self._height
-                if maths.climb_done(self._height, alt):
+                delta = alt + maths.CLIMB_BAND / 2.0 - self._reading.height
+                if maths.climb_done(self._reading.height, alt):
                     return
             cm = max(_UP_MIN_CM, round(abs(delta) * 100))
             sent = self.clock()
@@ -721,44 +680,30 @@ class TelloAutopilot(Autopilot):
     # ================================================================= state packets, dead reckoning
 
     def _ingest(self) -> None:
-        """Take in the newest state packet, if djitellopy received one since the last call (lock held)."""
-        tello = self._tello
-        if tello is None:
-            return
-        try:
-            raw = tello.get_current_state()
-        except (KeyError, AttributeError):
-            return  # closed under us
-        if not raw or raw is self._raw:
+        """Take in the newest state packet, if the link received one since the last call (lock held).
+
+        Three steps: the packet as a reading (`telemetry.read`, pure), the dead-reckoned position
+        (`maths.dead_reckon`, pure), then what the reading means for the adapter (a link back, a
+        landing nobody commanded: `_link_back`, `_track_ground`).
+        """
+        link = self._link
+        raw = link.state() if link is not None else None
+        if raw is None or raw is self._raw:
             return
         now = self.clock()
         self._raw = raw
-        previous = self._state_time
+        previous, before = self._state_time, self._reading
         self._state_time = now
-        v0 = (self._vn, self._ve)
-        p = self._p
-        self._yaw = float(raw.get("yaw", self._yaw))
-        gx = p.vgx_sign * float(raw.get("vgx", 0)) / 10.0
-        gy = p.vgy_sign * float(raw.get("vgy", 0)) / 10.0
-        if p.velocity_frame == "body":
-            gx, gy = maths.body_to_ground(gx, gy, self._yaw)
-        self._vn, self._ve = maths.ground_to_ne(gx, gy, self._home_heading)
-        self._vd = float(raw.get("vgz", 0)) / 10.0
-        self._h_cm = int(raw.get("h", self._h_cm))
-        height = self._h_cm / 100.0
-        if p.altitude_source == "tof":
-            tof = int(raw.get("tof", 0))
-            if 0 < tof < _TOF_INVALID_CM:
-                height = max(0.0, (tof - _TOF_GROUND_CM) / 100.0)
-        height = max(0.0, height)
-        if height != self._height:
+        self._reading = telemetry.read(raw, self._p, self._home_heading, before)
+        if self._reading.height != before.height:
             self._height_changed = now
-        self._height = height
-        if "bat" in raw:
-            self._battery = float(raw["bat"])
         if previous is not None and self._in_air():
             self._north, self._east = maths.dead_reckon(
-                self._north, self._east, v0, (self._vn, self._ve), now - previous
+                self._north,
+                self._east,
+                (before.vn, before.ve),
+                (self._reading.vn, self._reading.ve),
+                now - previous,
             )
         if self._silenced:
             # Whoever sees the first packet after a loss re-reads the vehicle, before anyone can act on
@@ -798,13 +743,13 @@ class TelloAutopilot(Autopilot):
 
     def _in_air(self) -> bool:
         """What the newest packet says (height above zero); `state` adds the landing in progress."""
-        return self._h_cm > 0
+        return self._reading.h_cm > 0
 
     def _link_age(self) -> float:
         return math.inf if self._state_time is None else max(0.0, self.clock() - self._state_time)
 
     def _heading(self) -> float:
-        return wrap_360(self._home_heading + self._yaw)
+        return wrap_360(self._home_heading + self._reading.yaw)
 
     # ================================================================= rc
 
@@ -886,11 +831,11 @@ class TelloAutopilot(Autopilot):
 
     def _probe(self) -> None:
         """``command`` again: a Tello that rebooted or dropped us sends state only in SDK mode."""
-        tello = self._tello
-        if tello is None:
+        link = self._link
+        if link is None:
             return
         try:
-            tello.send_command_without_return("command")  # the "ok" is dropped by the next exchange
+            link.send("command")  # the "ok" is dropped by the next exchange
         except OSError as exc:
             self._ratelog.log(("probe",), logging.WARNING, "Tello %s: probe not sent: %s", self.host, exc)
 
@@ -971,15 +916,17 @@ class TelloAutopilot(Autopilot):
             "Tello %s: state is back with the Tello in the air at %.1f m: hovering; it lands in "
             "%g s unless commanded",
             self.host,
-            self._height,
+            self._reading.height,
             self._p.link_back_hover,
         )
 
     def _climb_rc(self) -> tuple[int, int, int, int]:
         assert self._climb_target is not None
-        speed = maths.climb_speed(self._height, self._climb_target, self._p.max_vertical_speed)
+        speed = maths.climb_speed(self._reading.height, self._climb_target, self._p.max_vertical_speed)
         if speed == 0.0:
-            log.info("Tello %s reached %.2f m (target %.2f m)", self.host, self._height, self._climb_target)
+            log.info(
+                "Tello %s reached %.2f m (target %.2f m)", self.host, self._reading.height, self._climb_target
+            )
             self._climb_target = None
             self._phase = _Phase.GUIDED
             return (0, 0, 0, 0)

@@ -124,10 +124,20 @@ def run_publisher(url: str, agents: int, hz: float, arbiter: bool) -> int:
 
 
 # ---------------------------------------------------------------------- the console on a pty
-def cpu_seconds(pid: int) -> float:
-    """utime + stime of a process (all its threads) from /proc, in seconds."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+def cpu_seconds(pid: int, task: int | None = None) -> float:
+    """utime + stime of a process (all its threads), or of one of its threads, from /proc, in seconds."""
+    path = f"/proc/{pid}/stat" if task is None else f"/proc/{pid}/task/{task}/stat"
+    fields = Path(path).read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def thread_cpu(pid: int) -> dict[int, float]:
+    """CPU seconds of each thread of a process (the UI thread's id is the pid)."""
+    out: dict[int, float] = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        with contextlib.suppress(OSError):
+            out[int(task.name)] = cpu_seconds(pid, int(task.name))
+    return out
 
 
 class Terminal:
@@ -245,6 +255,7 @@ def main() -> int:
                 return 1
             time.sleep(3.0)  # let the first-seen burst (table inserts, event log) settle
             cpu0, t0, out0 = cpu_seconds(tui.pid), time.monotonic(), term.bytes
+            threads0 = thread_cpu(tui.pid)
             presses: list[float] = []
             next_key = t0 + 1.0
             keys = ["t", "down", "l", "d", "r", "down"]
@@ -261,6 +272,7 @@ def main() -> int:
                     next_key += 1.0
                 time.sleep(0.01)
             cpu1, t1, out1 = cpu_seconds(tui.pid), time.monotonic(), term.bytes
+            threads1 = thread_cpu(tui.pid)
             assert pub.stdin is not None and pub.stdout is not None
             pub.stdin.close()
             report = json.loads(pub.stdout.readline() or "{}")
@@ -286,6 +298,13 @@ def main() -> int:
     target = 15 if args.agents <= 200 else 30
     print(
         f"console CPU: {share * 100:.1f} % of one core (target < {target} %; load average {os.getloadavg()[0]:.2f})"
+    )
+    per_thread = {tid: (cpu - threads0.get(tid, 0.0)) / (t1 - t0) for tid, cpu in threads1.items()}
+    others = sorted((share for tid, share in per_thread.items() if tid != tui.pid), reverse=True)
+    print(
+        f"  by thread: UI {per_thread.get(tui.pid, 0.0) * 100:.1f} %, others "
+        + ", ".join(f"{x * 100:.1f} %" for x in others if x >= 0.005)
+        + " (the bus executor, LCM's receive thread, Textual's writer)"
     )
     print(f"console output: {(out1 - out0) / (t1 - t0) / 1024:.0f} KiB/s to the terminal")
     if lat:

@@ -51,7 +51,7 @@ from antalate_lcm.topics import (
 #: The bus name of :meth:`Context.in_process` (memq://, one per process).
 INPROC_BUS = "_inproc"
 #: Phases a period is split into to spread the agents' periodic timers (Node.first_delay).
-_PHASES = 16
+_PHASES = 1000
 #: s between the reminders an insecure node logs.
 INSECURE_REMINDER = 60.0
 
@@ -430,5 +430,7 @@ class Node:
     def first_delay(self, period: float) -> float:
         """When a periodic timer of this agent first runs: within one ``period``, at a phase fixed
         by the agent's name, so a thousand agents started together do not all run in the same tick
-        (one of 16 phases: those of an agent's nodes and of agents that share one stay together)."""
+        (one of 1,000 phases, so a period's runs spread over its every millisecond: 16 phases sent
+        a thousand agents' datagrams in bursts that overflowed receive buffers; an agent's nodes
+        share their phase)."""
         return period * (1.0 - (zlib.crc32(self.agent.encode()) % _PHASES) / _PHASES)

@@ -6,7 +6,8 @@ supervisor.c, hal/src/pm_stm32f4.c) and on what cflib 0.1.34 sends, so tests dri
 
 * **Framing** (cflib/crtp/udpdriver.py): one CRTP packet per datagram, byte 0 the header
   ``port << 4 | 0x0C | channel``, then up to 30 bytes of payload; no checksum. Replies go to the
-  address of the last datagram received.
+  address of the last datagram received. With ``memory=NAME`` the same bytes go over a
+  ``memory://NAME`` link instead (`antalate_lcm.autopilot.crazyflie.memory`): no socket at all.
 * **Link** (port 15): channel 0 echoes (cflib's latency pings), channel 1 ("source") answers the
   30-byte "Bitcraze Crazyflie" string, which tells cflib the firmware has protocol versioning;
   the null packet ``0xFF`` (cflib's UDP scan) gets an empty ``0xFF`` back.

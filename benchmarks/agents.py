@@ -16,14 +16,14 @@ listens from this process with raw LCM, and prints:
 
 Figures only (docs/design.md §12): the machine is shared, so the load average is printed beside them.
 
-Measured 2026-11-23 on the 2-core machine shared with other work (load average 1.8-7.5 during the runs):
-one process of 1,000 agents: every agent in STANDBY after 11.0-16.4 s, telemetry min 9.6-10.0 Hz, MC
-reaction p50 19.6-23.5 ms / max 36.8-43.7 ms, RSS 66-67 MiB, 84-87% of a core, 842-866 us per
-agent-second (the tree before in-process delivery on the loop, timer slots and phased timers: only
-777-896 of the 1,000 in STANDBY within 60 s). 500 agents: 952 us/agent-s against 1268 for that tree in
-the same run. 2,000 over 2 processes: all 2,000 in STANDBY but after 48.8-52.1 s, telemetry min 7.4-8.2
-Hz, MC max 104-169 ms, 778-792 us/agent-s at load 5.4-7.5 (the tree before: 1,243 in STANDBY within 60 s):
-over target while other work takes a core.
+Measured 2026-11-23 on the 2-core machine shared with other work (load average 2.4-3.6 in these runs),
+after in-process delivery on the loop, timer slots, phased timers, batched start and entry points read
+once: one process of 1,000 agents: every agent in STANDBY after 2.7-2.8 s, telemetry min 9.6-10.0 Hz, MC
+reaction p50 27-55 ms / max 45-78 ms, RSS 67 MiB, 98% of a core, 978-982 us per agent-second (the tree
+before: only 672-896 of the 1,000 in STANDBY within 60 s). 500 agents: STANDBY 0.9 s, MC max 24 ms,
+1244 us/agent-s. 2,000 over 2 processes: STANDBY 6.2-7.1 s, MC max 95-101 ms, RSS 179 MiB, 756-796
+us/agent-s, but telemetry min 5.4-6.6 Hz as received here: over target (the tree before: 1,243 in
+STANDBY within 60 s). The per-agent cost moves by +-20% from run to run with the machine's load.
 """
 
 from __future__ import annotations

@@ -20,6 +20,7 @@ from antalate_lcm.hlc.node import HlcNode
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
 from antalate_lcm.node import Context, Node
 from antalate_lcm.runtime.agent import agent_nodes
+from tests.polling import wait_for
 
 
 @dataclass
@@ -39,9 +40,10 @@ class MemoryAgent:
         hlc: dict[str, Any] | None = None,
         operator: dict[str, Any] | None = None,
         adapter: Autopilot | None = None,
+        name: str = "memory",
     ) -> None:
         doc = {
-            "agent": {"name": "memory"},
+            "agent": {"name": name},
             "buses": {"lan": "memq://"},
             "hlc": {"autopilot": autopilot, **(hlc or {}), "autopilot_params": params},
             "bma": [
@@ -57,7 +59,7 @@ class MemoryAgent:
                 }
             ],
         }
-        self.config = parse_config(doc, "memory-agent.toml")
+        self.config = parse_config(doc, f"{name}.toml")
         self.context = Context(Bus(self.config.buses), Executor())
         self.mc: list[Seen] = []
         self.hlc: list[Seen] = []
@@ -101,3 +103,14 @@ class MemoryAgent:
             f"{which} never reached state {state} (mc {[s.state for s in self.mc]}, "
             f"hlc {[s.state for s in self.hlc]}, errors {[(e.code, e.text) for e in self.errors]})"
         )
+
+    def error(self, code: int, timeout: float = 5.0) -> hlc_error_t:
+        """The first ``hlc_error_t`` with `code`, waiting up to `timeout` s."""
+        hit = wait_for(lambda: next((e for e in list(self.errors) if e.code == code), None), timeout)
+        if hit is None:
+            raise AssertionError(f"no hlc_error {code}; got {[(e.code, e.text) for e in self.errors]}")
+        return hit
+
+    def states(self, which: str) -> list[int]:
+        """Every MC or HLC state change seen, in order."""
+        return [s.state for s in (self.mc if which == "mc" else self.hlc)]

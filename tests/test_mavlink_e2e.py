@@ -23,27 +23,21 @@ import math
 import subprocess
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from antalate_lcm.autopilot.mavlink import LinkOpener, MavlinkAutopilot
-from antalate_lcm.bus import Bus
-from antalate_lcm.config import parse_config
-from antalate_lcm.executor import Executor
 from antalate_lcm.hlc.machine import ErrorCode
-from antalate_lcm.hlc.node import HlcNode
-from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, operator_cmd_t, telemetry_t
+from antalate_lcm.msgs import hlc_error_t, operator_cmd_t
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
-from antalate_lcm.node import Context, Node
-from antalate_lcm.runtime.agent import agent_nodes
 from tests.agent_harness import AgentProcesses
 from tests.conftest import MCAST_URL, Probe
 from tests.emulators.mavlink_vehicle import MavlinkVehicle
+from tests.memory_agent import MemoryAgent
 from tests.netns import NetNamespace, stop_process
 
 # The emulated copter: short start-up, brisk kinematics, heartbeats at 10 Hz.
@@ -85,14 +79,8 @@ def _bma(**operator: Any) -> list[dict[str, Any]]:
     ]
 
 
-@dataclass
-class Seen:
-    t: float
-    state: int
-
-
-class InProcessAgent:
-    """MC + HLC + auto_operator BMA on memq://, flying `vehicle`; records every MC/HLC state and error."""
+class InProcessAgent(MemoryAgent):
+    """MC + HLC + auto_operator BMA on memq://, flying `vehicle` (over UDP, or the test's own `link`)."""
 
     def __init__(
         self,
@@ -103,75 +91,16 @@ class InProcessAgent:
         link: LinkOpener | None = None,
     ) -> None:
         connection = vehicle.udp_url if link is None else "memory:emulator"
-        doc = {
-            "agent": {"name": "copter"},
-            "buses": {"lan": "memq://"},
-            "hlc": {
-                "autopilot": "mavlink",
-                "default_takeoff_altitude": 3.0,
-                "link_timeout": 1.5,
-                **(hlc or {}),
-                "autopilot_params": {"connection": connection, **AP},
-            },
-            "bma": _bma(**(operator or {})),
-        }
+        params = {"connection": connection, **AP}
+        super().__init__(
+            "mavlink",
+            params,
+            name="copter",
+            hlc={"default_takeoff_altitude": 3.0, "link_timeout": 1.5, **(hlc or {})},
+            operator={**AUTO_OPERATOR, **(operator or {})},
+            adapter=None if link is None else MavlinkAutopilot(params, link=link),
+        )
         self.vehicle = vehicle
-        self.config = parse_config(doc, "mavlink-e2e.toml")
-        self.context = Context(Bus(self.config.buses), Executor())
-        self.mc: list[Seen] = []
-        self.hlc: list[Seen] = []
-        self.errors: list[hlc_error_t] = []
-        self.telemetry: list[telemetry_t] = []
-        self.probe = Node(self.config, self.context, name="probe")
-        self.nodes = agent_nodes(self.config, self.context)
-        if link is not None:  # the adapter on the test's own link (a MemoryLink): the HLC comes first
-            params, clock = self.config.hlc.autopilot_params, self.context.executor.clock
-            self.nodes[0] = HlcNode(
-                self.config, self.context, MavlinkAutopilot(params, clock=clock, link=link)
-            )
-
-    def start(self) -> InProcessAgent:
-        self.context.executor.start()
-        self.probe.start()
-        self.probe.subscribe("MC_STATE", lambda m: self._seen(self.mc, m))
-        self.probe.subscribe("HLC_STATE", lambda m: self._seen(self.hlc, m))
-        self.probe.subscribe("HLC_ERROR", self.errors.append)
-        self.probe.subscribe("TELEMETRY", self.telemetry.append)
-        for node in self.nodes:
-            node.start()
-        return self
-
-    def stop(self) -> None:
-        for node in reversed([self.probe, *self.nodes]):
-            node.stop()
-        self.context.close()
-
-    @staticmethod
-    def _seen(into: list[Seen], msg: mc_state_t | hlc_state_t) -> None:
-        if not into or into[-1].state != msg.state:
-            into.append(Seen(time.monotonic(), msg.state))
-
-    def wait(self, which: str, state: int, timeout: float = 10.0, since: float = 0.0) -> Seen:
-        seen = self.mc if which == "mc" else self.hlc
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            hit = next((s for s in list(seen) if s.state == state and s.t >= since), None)
-            if hit is not None:
-                return hit
-            time.sleep(0.02)
-        raise AssertionError(f"{which} never reached state {state} (seen {[s.state for s in seen]})")
-
-    def error(self, code: ErrorCode, timeout: float = 5.0) -> hlc_error_t:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            hit = next((e for e in list(self.errors) if e.code == code), None)
-            if hit is not None:
-                return hit
-            time.sleep(0.02)
-        raise AssertionError(f"no hlc_error {code.name}; got {[(e.code, e.text) for e in self.errors]}")
-
-    def states(self, which: str) -> list[int]:
-        return [s.state for s in (self.mc if which == "mc" else self.hlc)]
 
 
 @pytest.fixture

@@ -405,20 +405,4 @@ class Bridge:
         self._links.clear()
 
 
-def run_bridge(config_path: str, *, stop: threading.Event | None = None) -> int:
-    """``antalate bridge CONFIG``: run until SIGINT/SIGTERM, then print what was forwarded."""
-    from antalate_lcm.runtime.launch import wait_for_stop
-
-    config = load_bridge_config(config_path)
-    bridge = Bridge(config)
-    bridge.start()
-    print(f"bridge {bridge.id} running: {' <-> '.join(bridge.names)}", flush=True)
-    try:
-        wait_for_stop(stop)
-    finally:
-        bridge.close()
-    print(f"bridge {bridge.id} stopped: {bridge.stats()}", flush=True)
-    return 0
-
-
-__all__: Sequence[str] = ["Bridge", "BridgeConfig", "Memory", "Throttle", "load_bridge_config", "run_bridge"]
+__all__: Sequence[str] = ["Bridge", "BridgeConfig", "Memory", "Throttle", "load_bridge_config"]

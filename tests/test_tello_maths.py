@@ -89,7 +89,7 @@ def test_a_state_packet_read_in_the_adapters_units() -> None:
     """`telemetry.read`: dm/s into north/east/down m/s through home_heading, height from h or tof."""
     p = validated({})
     east = telemetry.read(
-        {"yaw": 30, "vgx": 10, "vgy": 0, "vgz": -5, "h": 120, "bat": 80}, p, 90.0, telemetry.Reading()
+        {"yaw": 30, "vgx": 10, "vgy": 0, "vgz": -5, "h": 120, "bat": 80}, p, 90.0, telemetry.StateReading()
     )
     assert (east.vn, east.ve, east.vd) == pytest.approx(
         (0.0, 1.0, -0.5), abs=1e-9
@@ -98,8 +98,12 @@ def test_a_state_packet_read_in_the_adapters_units() -> None:
     partial = telemetry.read({"vgx": 0}, p, 90.0, east)  # a field the packet lacks keeps its value
     assert (partial.yaw, partial.h_cm, partial.battery) == (30.0, 120, 80.0) and partial.ve == 0.0
     tof = validated({"altitude_source": "tof"})
-    assert telemetry.read({"h": 0, "tof": 95}, tof, 0.0, telemetry.Reading()).height == pytest.approx(0.85)
-    assert telemetry.read({"h": 30, "tof": 6553}, tof, 0.0, telemetry.Reading()).height == pytest.approx(0.3)
+    assert telemetry.read({"h": 0, "tof": 95}, tof, 0.0, telemetry.StateReading()).height == pytest.approx(
+        0.85
+    )
+    assert telemetry.read({"h": 30, "tof": 6553}, tof, 0.0, telemetry.StateReading()).height == pytest.approx(
+        0.3
+    )
     body = validated({"velocity_frame": "body"})
-    turned = telemetry.read({"yaw": 90, "vgx": 10}, body, 0.0, telemetry.Reading())
+    turned = telemetry.read({"yaw": 90, "vgx": 10}, body, 0.0, telemetry.StateReading())
     assert (turned.vn, turned.ve) == pytest.approx((0.0, 1.0), abs=1e-9)  # forward, facing east

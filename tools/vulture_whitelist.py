@@ -87,7 +87,16 @@ _.HLC_TAKEOFF
 # --- Public API documented for users' own code and tools (docs/*.md), exercised by the tests.
 _.emergency  # Tello extra: docs/tello.md
 _.answering  # MemoryLink.answering: docs/ardupilot.md, users' tests without SITL
-_.closed  # MemoryLink.closed
+_.push_state  # tello MemoryLink: the peer's state lines (docs/tello.md, the Tello emulator's memory mode)
+
+# --- cflib's CRTPDriver interface: cflib's link thread and scanner call these on our memory:// driver.
+_.needs_resending
+_.send_packet
+_.receive_packet
+_.get_status
+_.get_name
+_.scan_interface
+_.get_help
 _.publish_errors  # Bus: docs/wan.md
 _.setpoints_withheld  # MavlinkAutopilot: docs/ardupilot.md
 _.vehicle_findings  # MavlinkAutopilot: what the vehicle checks found (docs/ardupilot.md)

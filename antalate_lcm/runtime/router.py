@@ -66,9 +66,23 @@ def _cmd_router(args: argparse.Namespace) -> int:
     return run_router(args.listen or [DEFAULT_LISTEN], lease_ms=args.lease or DEFAULT_LEASE_MS)
 
 
-def _cmd_bridge(args: argparse.Namespace) -> int:
-    from antalate_lcm.bridge import run_bridge
+def run_bridge(config_path: str, *, stop: threading.Event | None = None) -> int:
+    """``antalate bridge CONFIG``: run until SIGINT/SIGTERM, then print what was forwarded."""
+    from antalate_lcm.bridge import Bridge, load_bridge_config
 
+    config = load_bridge_config(config_path)
+    bridge = Bridge(config)
+    bridge.start()
+    print(f"bridge {bridge.id} running: {' <-> '.join(bridge.names)}", flush=True)
+    try:
+        wait_for_stop(stop)
+    finally:
+        bridge.close()
+    print(f"bridge {bridge.id} stopped: {bridge.stats()}", flush=True)
+    return 0
+
+
+def _cmd_bridge(args: argparse.Namespace) -> int:
     return run_bridge(args.config)
 
 

@@ -89,7 +89,8 @@ class MemoryDriver(CRTPDriver):  # type: ignore[misc]  # cflib is untyped
         self._link: MemoryLink | None = None
         self._inbox: queue.Queue[bytes] = queue.Queue()
 
-    def connect(self, uri: str, radio_link_statistics_callback: Any, link_error_callback: Any) -> None:
+    def connect(self, uri: str, _link_statistics: Any, _link_error: Any) -> None:
+        # cflib passes its callbacks positionally; an in-memory link has no statistics and no radio errors.
         if not uri.startswith(SCHEME):
             raise WrongUriType("not a memory:// URI")
         name = uri[len(SCHEME) :]

@@ -151,7 +151,7 @@ class TelloAutopilot(Autopilot):
         # Telemetry from the newest state packet.
         self._raw: Mapping[str, Any] | None = None  # the dict object of the last packet (identity = packet)
         self._state_time: float | None = None  # clock() when it was first seen
-        self._reading = telemetry.Reading()  # the newest packet in the adapter's units
+        self._reading = telemetry.StateReading()  # the newest packet in the adapter's units
         self._height_changed = -math.inf  # clock() of the last change of the height reading
         self._air = maths.Debounced(_GROUND_CONFIRM)  # the in-air flag, believed once it held
         # Dead reckoning (metres north/east of home).

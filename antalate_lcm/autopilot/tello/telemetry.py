@@ -3,7 +3,7 @@
 The packet's ground velocities ``vgx/vgy`` (dm/s, signs and frame as configured) become north/east
 m/s through ``home_heading``; ``vgz`` (dm/s, positive down) becomes m/s down; the height is ``h``
 (cm, decimetre steps) or the ``tof`` range finder less its ground reading. A field the packet lacks
-keeps its previous value (`Reading` before it), so a partial packet never reads as zero.
+keeps its previous value (`StateReading` before it), so a partial packet never reads as zero.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ TOF_INVALID_CM = 6000  # and implausibly large values out of range
 
 
 @dataclass(frozen=True)
-class Reading:
+class StateReading:
     """What one packet says, in the adapter's units."""
 
     yaw: float = 0.0  # deg, the Tello's own (0 at power-on)
@@ -32,8 +32,8 @@ class Reading:
     battery: float = -1.0  # percent; -1 before a packet carried it
 
 
-def read(raw: Mapping[str, Any], p: Params, home_heading: float, before: Reading) -> Reading:
-    """The packet `raw` (djitellopy's parsed dict) as a `Reading`; missing fields from `before`."""
+def read(raw: Mapping[str, Any], p: Params, home_heading: float, before: StateReading) -> StateReading:
+    """The packet `raw` (djitellopy's parsed dict) as a `StateReading`; missing fields from `before`."""
     yaw = float(raw.get("yaw", before.yaw))
     gx = p.vgx_sign * float(raw.get("vgx", 0)) / 10.0
     gy = p.vgy_sign * float(raw.get("vgy", 0)) / 10.0
@@ -46,7 +46,7 @@ def read(raw: Mapping[str, Any], p: Params, home_heading: float, before: Reading
         tof = int(raw.get("tof", 0))
         if 0 < tof < TOF_INVALID_CM:
             height = (tof - TOF_GROUND_CM) / 100.0
-    return Reading(
+    return StateReading(
         yaw=yaw,
         vn=vn,
         ve=ve,

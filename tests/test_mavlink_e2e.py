@@ -36,25 +36,10 @@ from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
 from tests.agent_harness import AgentProcesses
 from tests.conftest import MCAST_URL, Probe
-from tests.emulators.mavlink_vehicle import MavlinkVehicle
+from tests.emulators.mavlink_vehicle import BRISK, MavlinkVehicle
 from tests.memory_agent import MemoryAgent
 from tests.netns import NetNamespace, stop_process
 
-# The emulated copter: short start-up, brisk kinematics, heartbeats at 10 Hz.
-FAST: dict[str, Any] = {
-    "boot_delay": 0.2,
-    "ekf_delay": 0.3,
-    "gps_delay": 0.3,
-    "heartbeat_rate": 10.0,
-    "climb_rate": 4.0,
-    "max_climb_rate": 4.0,
-    "land_speed": 2.5,
-    "land_speed_high": 3.0,
-    "max_descent_rate": 3.0,
-    "rtl_speed": 8.0,
-    "velocity_tau": 0.15,
-    "land_detect_time": 0.2,
-}
 AP: dict[str, Any] = {
     "stream_rate_hz": 20.0,
     "connect_timeout": 5.0,
@@ -108,7 +93,7 @@ def copter() -> Iterator[Callable[..., InProcessAgent]]:
     made: list[tuple[MavlinkVehicle, InProcessAgent]] = []
 
     def make(vehicle: dict[str, Any] | None = None, **kw: Any) -> InProcessAgent:
-        v = MavlinkVehicle("127.0.0.1", 0, **{**FAST, **(vehicle or {})}).start()
+        v = MavlinkVehicle("127.0.0.1", 0, **{**BRISK, **(vehicle or {})}).start()
         agent = InProcessAgent(v, **kw)
         made.append((v, agent))
         return agent.start()

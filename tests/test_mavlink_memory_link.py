@@ -22,13 +22,13 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from antalate_lcm.autopilot.mavlink import MavlinkAutopilot, MemoryLink, Params
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
-from tests.emulators.mavlink_vehicle import MavlinkVehicle
-from tests.test_mavlink_e2e import FAST, InProcessAgent
+from tests.emulators.mavlink_vehicle import BRISK, MavlinkVehicle
+from tests.test_mavlink_e2e import InProcessAgent
 
 
 @pytest.fixture
 def memory_copter() -> Iterator[tuple[InProcessAgent, list[MemoryLink]]]:
-    vehicle = MavlinkVehicle(udp_port=None, tcp_port=None, **FAST).start()
+    vehicle = MavlinkVehicle(udp_port=None, tcp_port=None, **BRISK).start()
     links: list[MemoryLink] = []
 
     def open_link(params: Params) -> MemoryLink:

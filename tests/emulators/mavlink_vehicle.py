@@ -125,6 +125,23 @@ LOG = logging.getLogger("antalate.tests.mavlink_vehicle")
 
 Address = tuple[str, int]
 
+#: Short start-up and brisk kinematics, heartbeats at 10 Hz: the copter the end-to-end and security
+#: tests fly, so a whole sortie takes seconds (one profile, shared by the in-process and process tests).
+BRISK: dict[str, Any] = {
+    "boot_delay": 0.2,
+    "ekf_delay": 0.3,
+    "gps_delay": 0.3,
+    "heartbeat_rate": 10.0,
+    "climb_rate": 4.0,
+    "max_climb_rate": 4.0,
+    "land_speed": 2.5,
+    "land_speed_high": 3.0,
+    "max_descent_rate": 3.0,
+    "rtl_speed": 8.0,
+    "velocity_tau": 0.15,
+    "land_detect_time": 0.2,
+}
+
 COPTER_MODES: dict[str, int] = {
     "STABILIZE": 0,
     "ACRO": 1,

@@ -14,23 +14,7 @@ import sys
 from collections import Counter
 from dataclasses import asdict
 
-from tests.emulators.mavlink_vehicle import MavlinkVehicle
-
-#: Brisk kinematics, as the MAVLink end-to-end tests use.
-FAST = {
-    "boot_delay": 0.2,
-    "ekf_delay": 0.3,
-    "gps_delay": 0.3,
-    "heartbeat_rate": 10.0,
-    "climb_rate": 4.0,
-    "max_climb_rate": 4.0,
-    "land_speed": 2.5,
-    "land_speed_high": 3.0,
-    "max_descent_rate": 3.0,
-    "rtl_speed": 8.0,
-    "velocity_tau": 0.15,
-    "land_detect_time": 0.2,
-}
+from tests.emulators.mavlink_vehicle import BRISK, MavlinkVehicle
 
 
 def main() -> None:
@@ -50,7 +34,7 @@ def main() -> None:
         home_lat=lat,
         home_lon=lon,
         signing_key=bytes.fromhex(args.signing_key) if args.signing_key else None,
-        **FAST,
+        **BRISK,
     )
     with vehicle:
         print(json.dumps({"ok": True, "ready": True}), flush=True)

@@ -16,6 +16,11 @@ How it uses LCM, and why (measured with lcm 1.5.3, see ``benchmarks/bus.py``):
   handler can crash lcm 1.5.x.
 - An instance's descriptor is watched from its first subscription, so a publish-only bus never
   reads its own traffic.
+- udpm:// is read on the loop's own thread from a socket of our own (:mod:`antalate_lcm.udpm_socket`,
+  liblcm's wire format in :mod:`antalate_lcm.lcm_datagram`): one thread wake-up per message instead
+  of liblcm's two (its receive thread, then its notify pipe). Not for a process that publishes far
+  more than it reads (``own_udpm_reader=False``, :meth:`Context.in_process <antalate_lcm.node.Context.in_process>`):
+  its own datagrams loop back, and liblcm drops them in C.
 - memq:// (an agent's in-process bus) does not go through liblcm's queue: a message for a channel
   someone here subscribes to is queued on the loop directly (no copy, no notify-pipe write per
   message), in publish order and never inside the publisher's call, as liblcm's memq would.
@@ -43,6 +48,7 @@ from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.executor import Executor
 from antalate_lcm.lcm_url import open_failure
 from antalate_lcm.topics import Message
+from antalate_lcm.udpm_socket import UdpmReceiver
 
 log = logging.getLogger("antalate.bus")
 
@@ -132,10 +138,18 @@ class _Link:
     """One LCM instance, read by the event loop while it has subscriptions."""
 
     def __init__(
-        self, url: str, queue_capacity: int, decode_log: RateLimitedLog, executor: Callable[[], Executor]
+        self,
+        url: str,
+        queue_capacity: int,
+        decode_log: RateLimitedLog,
+        executor: Callable[[], Executor],
+        own_reader: bool = False,
     ) -> None:
         self.url = url
         self._lcm: Any = open_zenoh(url) if url.startswith("zenoh://") else open_lcm(url)
+        #: Read udpm:// from our own socket on the loop thread (None until the first subscription).
+        self._own_reader = own_reader and type(self._lcm) is lcm.LCM and url.startswith("udpm://")
+        self._receiver: UdpmReceiver | None = None
         self._capacity = queue_capacity
         # Routing tables are replaced, never mutated, so the loop reads them without a lock.
         self._routes: dict[str, _Route] = {}
@@ -162,26 +176,38 @@ class _Link:
         lc = self._lcm
         assert lc is not None, "bus is closed"
         with self._lock:
+            own = self._own_reader
             if sub.regex is None:
                 route = self._routes.get(sub.channel)
                 if route is None:
                     route = _Route()
-                    route.lcm_sub = lc.subscribe(lcm_literal(sub.channel), partial(self._on_exact, route))
-                    route.lcm_sub.set_queue_capacity(self._capacity)
+                    if not own:
+                        route.lcm_sub = lc.subscribe(lcm_literal(sub.channel), partial(self._on_exact, route))
+                        route.lcm_sub.set_queue_capacity(self._capacity)
                     self._routes = {**self._routes, sub.channel: route}
                 route.subs = (*route.subs, sub)
             else:
                 self._patterns = (*self._patterns, sub)
-                if self._star is None:
+                if self._star is None and not own:
                     self._star = lc.subscribe(".*", self._on_pattern)
                     self._star.set_queue_capacity(self._capacity)
             watch = self._watched is None
             if watch:
                 ex = self._executor()
-                fd = lc.fileno()  # liblcm starts reading the sockets here
+                if own:
+                    self._receiver = self._open_receiver()
+                    fd, on_readable = self._receiver.fileno(), self._on_datagrams
+                else:
+                    fd, on_readable = lc.fileno(), self._on_readable  # liblcm starts reading here
                 self._watched = (ex, fd)
         if watch:
-            ex.add_reader(fd, self._on_readable)
+            ex.add_reader(fd, on_readable)
+
+    def _open_receiver(self) -> UdpmReceiver:
+        try:
+            return UdpmReceiver(self.url)
+        except OSError as exc:
+            raise open_failure(self.url, [f"receive socket: {exc}"]) from None
 
     def remove(self, sub: Subscription) -> None:
         sub.active = False
@@ -193,7 +219,8 @@ class _Link:
                 route.subs = tuple(s for s in route.subs if s is not sub)
                 if not route.subs:
                     route.retired = True  # a late datagram must not reach a re-subscribed channel twice
-                    self._retire.append(route.lcm_sub)
+                    if route.lcm_sub is not None:
+                        self._retire.append(route.lcm_sub)
                     self._routes = {k: v for k, v in self._routes.items() if v is not route}
             else:
                 self._patterns = tuple(s for s in self._patterns if s is not sub)
@@ -248,6 +275,32 @@ class _Link:
             self._unwatch()
         if self._retire:
             self._flush_retired()
+
+    def _on_datagrams(self) -> None:
+        """On the loop thread: the own udpm socket is readable; the same batch and budget as liblcm's."""
+        receiver = self._receiver
+        if receiver is None:
+            return
+        try:
+            if receiver.drain(self._dispatch, _BATCH) == _BATCH:
+                end = time.monotonic() + _DRAIN_BUDGET
+                while receiver.drain(self._dispatch, _BATCH) == _BATCH and time.monotonic() < end:
+                    pass
+        except OSError as exc:  # never EAGAIN (drain stops there): a socket that cannot be read
+            self._decode_log.log((self.url, "socket"), logging.WARNING, "reading %s: %s", self.url, exc)
+
+    def _dispatch(self, channel: str, data: bytes) -> None:
+        """A datagram from the own socket, to the subscribers liblcm would have handed it to."""
+        route = self._routes.get(channel)
+        if route is not None:
+            self._on_exact(route, channel, data)
+        if self._patterns:
+            self._on_pattern(channel, data)
+
+    @property
+    def damaged(self) -> int:
+        """Datagrams on the own udpm socket that were not LCM or were damaged (liblcm drops them too)."""
+        return 0 if self._receiver is None else self._receiver.reassembler.dropped
 
     def _flush_retired(self) -> None:
         lc = self._lcm
@@ -361,6 +414,9 @@ class _Link:
 
     def close(self) -> None:
         self._unwatch()
+        receiver, self._receiver = self._receiver, None
+        if receiver is not None:
+            receiver.close()
         # liblcm frees its sockets when the object is deallocated; drop our only reference.
         lc, self._lcm = self._lcm, None
         if hasattr(lc, "close"):
@@ -375,8 +431,16 @@ class Bus:
     code never needs locks. An unattached bus reads on a private executor thread of its own.
     """
 
-    def __init__(self, urls: Mapping[str, str], *, queue_capacity: int = DEFAULT_QUEUE_CAPACITY) -> None:
+    def __init__(
+        self,
+        urls: Mapping[str, str],
+        *,
+        queue_capacity: int = DEFAULT_QUEUE_CAPACITY,
+        own_udpm_reader: bool = True,
+    ) -> None:
         self.urls = dict(urls)
+        #: Read udpm:// buses from a socket on the loop thread (module docstring); False leaves it to liblcm.
+        self.own_udpm_reader = own_udpm_reader
         self._queue_capacity = queue_capacity
         self._links: dict[str, _Link] = {}
         self._by_name: dict[str, _Link] = {}
@@ -421,7 +485,7 @@ class Bus:
             link = self._links.get(url)
             if link is None:
                 link = self._links[url] = _Link(
-                    url, self._queue_capacity, self._decode_log, lambda: self.executor
+                    url, self._queue_capacity, self._decode_log, lambda: self.executor, self.own_udpm_reader
                 )
             self._by_name[bus] = link
             return link
@@ -468,6 +532,10 @@ class Bus:
             for channel, n in link.decode_errors.items():
                 out[channel] = out.get(channel, 0) + n
         return out
+
+    def damaged_datagrams(self) -> int:
+        """Datagrams this process's own udpm sockets dropped as not LCM or damaged."""
+        return sum(link.damaged for link in list(self._links.values()))
 
     def close(self) -> None:
         """Stop reading, release the sockets (and stop a private executor). Idempotent."""

@@ -41,6 +41,8 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
                 "validation",
                 "geo",
                 "lcm_url",
+                "lcm_datagram",
+                "udpm_socket",
                 "strict",
                 "plugins",
                 "security",

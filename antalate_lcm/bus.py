@@ -54,6 +54,9 @@ log = logging.getLogger("antalate.bus")
 
 Handler = Callable[[str, Any], None]
 
+#: ``liblcm`` here makes every Bus leave udpm:// to liblcm's receive thread.
+UDPM_READER_ENV = "ANTALATE_UDPM_READER"
+
 #: Marks a type that failed to decode this datagram (so later subscribers skip it silently).
 _UNDECODABLE = object()
 
@@ -436,10 +439,14 @@ class Bus:
         urls: Mapping[str, str],
         *,
         queue_capacity: int = DEFAULT_QUEUE_CAPACITY,
-        own_udpm_reader: bool = True,
+        own_udpm_reader: bool | None = None,
     ) -> None:
         self.urls = dict(urls)
-        #: Read udpm:// buses from a socket on the loop thread (module docstring); False leaves it to liblcm.
+        #: Read udpm:// buses from a socket on the loop thread (module docstring); False leaves it to
+        #: liblcm. None: yes, unless the environment says ``ANTALATE_UDPM_READER=liblcm`` (a way back
+        #: for a network where the own reader misbehaves, and the baseline of benchmarks/tui.py).
+        if own_udpm_reader is None:
+            own_udpm_reader = os.environ.get(UDPM_READER_ENV, "own") != "liblcm"
         self.own_udpm_reader = own_udpm_reader
         self._queue_capacity = queue_capacity
         self._links: dict[str, _Link] = {}

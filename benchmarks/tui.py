@@ -55,7 +55,7 @@ def run_publisher(url: str, agents: int, hz: float, arbiter: bool) -> int:
     from antalate_lcm.geo import FlatFrame
     from antalate_lcm.msgs import arbiter_status_t, hlc_state_t, mc_state_t, operator_cmd_t, telemetry_t
 
-    bus = Bus({"lan": url})
+    bus = Bus({"lan": url}, own_udpm_reader=False)  # it sends 100x what it reads: liblcm drops the echo
     frame = FlatFrame(47.3977, 8.5456)
     names = [f"uav{i:03d}" for i in range(agents)]
     last_seq = dict.fromkeys(names, 0)
@@ -188,34 +188,12 @@ class Terminal:
                 os.close(fd)
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--agents", type=int, default=200)
-    parser.add_argument("--hz", type=float, default=5.0, help="rate of each state/telemetry topic per agent")
-    parser.add_argument("--seconds", type=float, default=20.0, help="measurement window")
-    parser.add_argument("--size", default="160x50", help="terminal COLSxROWS")
-    parser.add_argument("--arbiter", action="store_true", help="also publish arbiter_status_t at --hz")
-    parser.add_argument(
-        "--profile", metavar="PATH", help="run the console under cProfile (UI thread), write stats"
-    )
-    parser.add_argument("--role", choices=["main", "publisher"], default="main", help=argparse.SUPPRESS)
-    parser.add_argument("--url", default=URL, help=argparse.SUPPRESS)
-    args = parser.parse_args()
-    if args.role == "publisher":
-        return run_publisher(args.url, args.agents, args.hz, args.arbiter)
+def measure(args: argparse.Namespace, reader: str) -> int:
+    """One console run with its udpm:// reader (``own`` or ``liblcm``), figures printed."""
+    from antalate_lcm.bus import UDPM_READER_ENV
+    from tests.netns import NetNamespace, stop_process
 
-    from tests.netns import NetNamespace, netns_unavailable, stop_process
-
-    reason = netns_unavailable()
-    if reason:
-        print(f"benchmarks/tui.py needs a private network namespace: {reason}", file=sys.stderr)
-        return 2
     cols, rows = (int(x) for x in args.size.split("x"))
-    topics = 4 if args.arbiter else 3
-    print(
-        f"operator console: {args.agents} agents x {topics} topics at {args.hz:g} Hz "
-        f"= {args.agents * topics * args.hz:.0f} msg/s, terminal {cols}x{rows}, {args.seconds:g} s window"
-    )
     with tempfile.TemporaryDirectory() as tmp, NetNamespace() as ns:
         config = Path(tmp) / "tui.toml"
         config.write_text(f'[buses]\nlan = "{URL}"\n')
@@ -236,6 +214,7 @@ def main() -> int:
         env = dict(os.environ, TERM="xterm-256color", COLORTERM="truecolor", PYTHONPATH=str(REPO))
         env.pop("NO_COLOR", None)
         env.pop("TEXTUAL", None)
+        env[UDPM_READER_ENV] = reader
         profile = ["-m", "cProfile", "-o", str(Path(args.profile).resolve())] if args.profile else []
         tui = ns.popen(
             [sys.executable, *profile, "-m", "operator_tui", str(config)],
@@ -316,6 +295,54 @@ def main() -> int:
         )
     else:
         print("key -> command on the wire: no command arrived (keys not delivered?)")
+    return 0
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--agents", type=int, default=200)
+    parser.add_argument("--hz", type=float, default=5.0, help="rate of each state/telemetry topic per agent")
+    parser.add_argument("--seconds", type=float, default=20.0, help="measurement window")
+    parser.add_argument("--size", default="160x50", help="terminal COLSxROWS")
+    parser.add_argument("--arbiter", action="store_true", help="also publish arbiter_status_t at --hz")
+    parser.add_argument(
+        "--profile", metavar="PATH", help="run the console under cProfile (UI thread), write stats"
+    )
+    parser.add_argument(
+        "--reader",
+        choices=["own", "liblcm"],
+        default="own",
+        help="who reads udpm:// in the console: its own socket (default) or liblcm's receive thread",
+    )
+    parser.add_argument(
+        "--baseline", action="store_true", help="run twice in this run: own reader, then liblcm's"
+    )
+    parser.add_argument("--role", choices=["main", "publisher"], default="main", help=argparse.SUPPRESS)
+    parser.add_argument("--url", default=URL, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.role == "publisher":
+        return run_publisher(args.url, args.agents, args.hz, args.arbiter)
+
+    from tests.netns import netns_unavailable
+
+    reason = netns_unavailable()
+    if reason:
+        print(f"benchmarks/tui.py needs a private network namespace: {reason}", file=sys.stderr)
+        return 2
+    cols, rows = (int(x) for x in args.size.split("x"))
+    topics = 4 if args.arbiter else 3
+    print(
+        f"operator console: {args.agents} agents x {topics} topics at {args.hz:g} Hz "
+        f"= {args.agents * topics * args.hz:.0f} msg/s, terminal {cols}x{rows}, {args.seconds:g} s window"
+    )
+    readers = ["own", "liblcm"] if args.baseline else [args.reader]
+    for reader in readers:
+        print(
+            f"-- udpm:// read by {'the console own socket' if reader == 'own' else 'liblcm'} (ANTALATE_UDPM_READER={reader})"
+        )
+        rc = measure(args, reader)
+        if rc:
+            return rc
     return 0
 
 

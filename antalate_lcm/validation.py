@@ -95,4 +95,10 @@ def problem(msg: Any) -> str | None:
     return None if check is None else check(msg)
 
 
-__all__ = ["MAX_TAKEOFF_ALTITUDE", "problem", "strict_json"]
+def needs_check(msg_type: type) -> bool:
+    """Whether :func:`problem` can find anything in a ``msg_type`` (a subscriber of a type it cannot
+    skips the call on every message)."""
+    return msg_type in _CHECKS
+
+
+__all__ = ["MAX_TAKEOFF_ALTITUDE", "needs_check", "problem", "strict_json"]

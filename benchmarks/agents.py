@@ -89,10 +89,22 @@ def proc_stats(pid: int) -> tuple[float, float]:
     return rss, cpu
 
 
+def udp_drops(port: int) -> dict[int, int]:
+    """Datagrams the kernel dropped per socket bound to ``port`` (socket inode -> drops), from
+    /proc/net/udp of this network namespace: a full receive buffer, i.e. a reader that fell behind."""
+    out: dict[int, int] = {}
+    for line in Path("/proc/net/udp").read_text().splitlines()[1:]:
+        f = line.split()
+        if int(f[1].split(":")[1], 16) == port:
+            out[int(f[9])] = int(f[12])
+    return out
+
+
 def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
     import lcm
 
     from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
+    from antalate_lcm.udpm_socket import UdpmReceiver
 
     cfg = tmp / "bench.toml"
     cfg.write_text(f'[agent]\nname = "b"\n[buses]\nlan = "{URL}"\n[hlc]\nautopilot = "sim"\n')
@@ -112,7 +124,13 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
         argv += ["--processes", str(processes or math.ceil(n / 1000))]
     started = time.perf_counter()
     proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT)
-    lc = lcm.LCM(URL)
+    lc = lcm.LCM(URL)  # to send the TAKEOFF
+    # Listening on antalate's own udpm reader (antalate_lcm/udpm_socket.py): no liblcm receive thread
+    # competing with the agents for the two cores; the kernel's drop count of this socket says
+    # whether a rate below target was the agents' or this listener's.
+    receiver = UdpmReceiver(URL)
+    port = int(URL.rsplit(":", 1)[1].split("?")[0])
+    mine = os.fstat(receiver.fileno()).st_ino
     lock = threading.Lock()
     telem: dict[str, int] = {}
     mc_takeoff: dict[str, float] = {}
@@ -138,12 +156,14 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
             ):
                 hlc_takeoff[agent] = now
 
-    lc.subscribe(".*", on_msg).set_queue_capacity(1_000_000)
     stop = threading.Event()
 
     def loop() -> None:
+        import select
+
         while not stop.is_set():
-            lc.handle_timeout(50)
+            if select.select([receiver.fileno()], [], [], 0.05)[0]:
+                receiver.drain(on_msg, 1_000)
 
     th = threading.Thread(target=loop, daemon=True)
     th.start()
@@ -158,10 +178,13 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
         with lock:
             telem.clear()
         cpu0 = proc_stats(proc.pid)[1]
+        drops0 = udp_drops(port)
         t0 = time.perf_counter()
         time.sleep(5.0)
         window = time.perf_counter() - t0
         rss, cpu1 = proc_stats(proc.pid)
+        drops1 = udp_drops(port)
+        dropped = {ino: d - drops0.get(ino, 0) for ino, d in drops1.items()}
         with lock:
             rates = [
                 telem.get(f"b-{i + 1:02d}" if n < 100 else f"b-{i + 1:03d}", 0) / window for i in range(n)
@@ -192,10 +215,13 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
             "rss_mib": rss,
             "cpu_pct": 100 * (cpu1 - cpu0) / window,
             "us_per_agent_s": (cpu1 - cpu0) / window / n * 1e6,
+            "listener_dropped": dropped.get(mine, 0),
+            "agents_dropped": sum(d for ino, d in dropped.items() if ino != mine),
         }
     finally:
         stop.set()
         th.join()
+        receiver.close()
         tree = _tree(proc.pid)
         proc.terminate()  # the launcher passes it on to its agent processes
         try:
@@ -247,6 +273,11 @@ def main() -> None:
                 f"{r['mc_p50_ms']:>8.1f}/{r['mc_p99_ms']:.1f}/{r['mc_max_ms']:<8.1f} "
                 f"{r['hlc_p50_ms']:>10.1f}/{r['hlc_max_ms']:<10.1f} {r['rss_mib']:>8.0f} {r['cpu_pct']:>6.0f} "
                 f"{r['us_per_agent_s']:>10.0f}  {'OK' if ok else 'over target'}  (load {os.getloadavg()[0]:.2f})",
+                flush=True,
+            )
+            print(
+                f"{'':>12} kernel drops in the telemetry window: this listener's socket {r['listener_dropped']:.0f}, "
+                f"the agent processes' sockets {r['agents_dropped']:.0f}",
                 flush=True,
             )
 

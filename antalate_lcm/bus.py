@@ -18,9 +18,11 @@ How it uses LCM, and why (measured with lcm 1.5.3, see ``benchmarks/bus.py``):
   reads its own traffic.
 - udpm:// is read on the loop's own thread from a socket of our own (:mod:`antalate_lcm.udpm_socket`,
   liblcm's wire format in :mod:`antalate_lcm.lcm_datagram`): one thread wake-up per message instead
-  of liblcm's two (its receive thread, then its notify pipe). Not for a process that publishes far
-  more than it reads (``own_udpm_reader=False``, :meth:`Context.in_process <antalate_lcm.node.Context.in_process>`):
-  its own datagrams loop back, and liblcm drops them in C.
+  of liblcm's two (its receive thread, then its notify pipe), and a datagram nobody here wants (a
+  process's own publications loop back) costs less dropped here than in liblcm's thread: 1,000
+  agents in a process read 40,000 datagrams a second to keep a few, and liblcm's thread took a
+  quarter of a core doing it (``benchmarks/agents.py``). ``own_udpm_reader=False`` (or
+  ``ANTALATE_UDPM_READER=liblcm``) leaves udpm:// to liblcm.
 - memq:// (an agent's in-process bus) does not go through liblcm's queue: a message for a channel
   someone here subscribes to is queued on the loop directly (no copy, no notify-pipe write per
   message), in publish order and never inside the publisher's call, as liblcm's memq would.
@@ -204,7 +206,8 @@ class _Link:
                     fd, on_readable = lc.fileno(), self._on_readable  # liblcm starts reading here
                 self._watched = (ex, fd)
         if watch:
-            ex.add_reader(fd, on_readable)
+            # The own socket's kernel buffer is its only queue: read it between long runs of timers too.
+            ex.add_reader(fd, on_readable, urgent=own)
 
     def _open_receiver(self) -> UdpmReceiver:
         try:

@@ -28,6 +28,9 @@ log = logging.getLogger("antalate.executor")
 #: thousand simulated agents start in the same tick, so their same-period timers stay together),
 #: which saves a handle and a heap entry per timer run; a timer runs at most 1 ms after its time.
 _SLOTS_PER_S = 1000
+#: Timers run between two polls of the urgent readers (:meth:`Executor.add_reader`): a slot of a
+#: thousand agents' timers takes tens of milliseconds, longer than a socket's buffer lasts.
+_POLL_EVERY = 64
 T = TypeVar("T")
 
 
@@ -67,6 +70,8 @@ class Executor:
         self.clock = clock
         self._loop = new_event_loop()
         self._readers: dict[int, Callable[[], None]] = {}
+        #: Readers that are also called between timers of a long slot (they must never block).
+        self._urgent: tuple[Callable[[], None], ...] = ()
         #: Timers by due slot (see _SLOTS_PER_S): one loop handle per slot, not one per timer run.
         self._slots: dict[int, list[Timer]] = {}
         self._thread: threading.Thread | None = None
@@ -142,7 +147,15 @@ class Executor:
         loop = self._loop
         slots = self._slots
         now = loop.time()
+        urgent = self._urgent if len(timers) > _POLL_EVERY else ()
+        n = 0
         for timer in timers:
+            if urgent:
+                n += 1
+                if n == _POLL_EVERY:
+                    n = 0
+                    for poll in urgent:
+                        self._invoke(poll, ())
             if timer.cancelled:
                 continue
             due = timer.due
@@ -185,16 +198,27 @@ class Executor:
         return fut.result(timeout)
 
     # ------------------------------------------------------------------ file descriptors
-    def add_reader(self, fd: int, callback: Callable[[], None]) -> None:
-        """Call ``callback`` on the loop thread whenever ``fd`` is readable (an LCM ``fileno()``)."""
+    def add_reader(self, fd: int, callback: Callable[[], None], *, urgent: bool = False) -> None:
+        """Call ``callback`` on the loop thread whenever ``fd`` is readable (an LCM ``fileno()``).
+
+        ``urgent``: also call it between the timers of a long slot, readable or not (it must return
+        at once when nothing waits): a socket read only by this loop (udpm_socket) would otherwise
+        overflow its kernel buffer while a thousand agents' timers run.
+        """
         self._readers[fd] = callback
+        if urgent:
+            self._urgent = (*self._urgent, callback)
         if self._direct():
             self._loop.add_reader(fd, callback)
         else:
             self.run_sync(lambda: self._loop.add_reader(fd, callback))
 
     def remove_reader(self, fd: int) -> None:
-        if self._readers.pop(fd, None) is None or self._loop.is_closed():
+        callback = self._readers.pop(fd, None)
+        if callback is None:
+            return
+        self._urgent = tuple(c for c in self._urgent if c is not callback)
+        if self._loop.is_closed():
             return
         if self._direct():
             self._loop.remove_reader(fd)

@@ -89,9 +89,7 @@ class Context:
         """
         if INPROC_BUS in buses:
             raise AntalateError(f"bus name {INPROC_BUS!r} is reserved for the in-process bus")
-        # Many agents publish far more than they read: liblcm drops their looped-back datagrams in C.
-        bus = Bus({**buses, INPROC_BUS: "memq://"}, own_udpm_reader=False)
-        return cls(bus, Executor(), inproc_bus=INPROC_BUS)
+        return cls(Bus({**buses, INPROC_BUS: "memq://"}), Executor(), inproc_bus=INPROC_BUS)
 
     def close(self) -> None:
         self.executor.stop()

@@ -55,7 +55,7 @@ def run_publisher(url: str, agents: int, hz: float, arbiter: bool) -> int:
     from antalate_lcm.geo import FlatFrame
     from antalate_lcm.msgs import arbiter_status_t, hlc_state_t, mc_state_t, operator_cmd_t, telemetry_t
 
-    bus = Bus({"lan": url}, own_udpm_reader=False)  # it sends 100x what it reads: liblcm drops the echo
+    bus = Bus({"lan": url})
     frame = FlatFrame(47.3977, 8.5456)
     names = [f"uav{i:03d}" for i in range(agents)]
     last_seq = dict.fromkeys(names, 0)

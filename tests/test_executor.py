@@ -134,3 +134,36 @@ def test_restart_after_stop_watches_the_same_descriptors() -> None:
     lc.publish("C", b"2")
     assert wait_for(lambda: got == [b"1", b"2"], 2)
     e.stop()
+
+
+def test_an_urgent_reader_is_polled_between_the_timers_of_a_long_slot(ex: Executor) -> None:
+    """A thousand agents' timers due in one millisecond run as one slot; a socket that only this
+    loop reads (the own udpm reader) is read between them, not only when the slot is over."""
+    import socket
+
+    quiet, other = socket.socketpair()  # never readable: only the polls between timers call it
+    order: list[str] = []
+    done = threading.Event()
+    try:
+        ex.add_reader(quiet.fileno(), lambda: order.append("poll"), urgent=True)
+
+        def make() -> None:  # one loop callback: the same loop time, so one slot
+            for _ in range(300):
+                ex.call_later(0.05, lambda: order.append("timer"))
+            ex.call_later(0.2, done.set)
+
+        ex.run_sync(make)
+        assert done.wait(5)
+        timers = [i for i, what in enumerate(order) if what == "timer"]
+        assert len(timers) == 300
+        between = order[timers[0] : timers[-1]]
+        assert between.count("poll") >= 3, order  # one poll per 64 timers at least
+        ex.remove_reader(quiet.fileno())
+        before = len(order)
+        done.clear()
+        ex.run_sync(make)
+        assert done.wait(5)
+        assert order[before:].count("poll") == 0  # removed: no longer polled
+    finally:
+        quiet.close()
+        other.close()

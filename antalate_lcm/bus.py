@@ -155,6 +155,7 @@ class _Link:
         #: Read udpm:// from our own socket on the loop thread (None until the first subscription).
         self._own_reader = own_reader and type(self._lcm) is lcm.LCM and url.startswith("udpm://")
         self._receiver: UdpmReceiver | None = None
+        self._damaged_seen = 0
         self._capacity = queue_capacity
         # Routing tables are replaced, never mutated, so the loop reads them without a lock.
         self._routes: dict[str, _Route] = {}
@@ -294,6 +295,18 @@ class _Link:
                     pass
         except OSError as exc:  # never EAGAIN (drain stops there): a socket that cannot be read
             self._decode_log.log((self.url, "socket"), logging.WARNING, "reading %s: %s", self.url, exc)
+        r = receiver.reassembler
+        if r.dropped + r.evicted != self._damaged_seen:  # liblcm drops these silently; say so, rate-limited
+            self._damaged_seen = r.dropped + r.evicted
+            self._decode_log.log(
+                (self.url, "damaged"),
+                logging.WARNING,
+                "dropped datagrams on %s that are not LCM or are damaged: %d so far, and %d partial "
+                "messages whose fragments never all came",
+                self.url,
+                r.dropped,
+                r.evicted,
+            )
 
     def _dispatch(self, channel: str, data: bytes) -> None:
         """A datagram from the own socket, to the subscribers liblcm would have handed it to."""

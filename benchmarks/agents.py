@@ -16,14 +16,14 @@ listens from this process with raw LCM, and prints:
 
 Figures only (docs/design.md §12): the machine is shared, so the load average is printed beside them.
 
-Measured 2026-11-23 on the 2-core machine shared with other work (load average 2.4-3.6 in these runs),
-after in-process delivery on the loop, timer slots, phased timers, batched start and entry points read
-once: one process of 1,000 agents: every agent in STANDBY after 2.7-2.8 s, telemetry min 9.6-10.0 Hz, MC
-reaction p50 27-55 ms / max 45-78 ms, RSS 67 MiB, 98% of a core, 978-982 us per agent-second (the tree
-before: only 672-896 of the 1,000 in STANDBY within 60 s). 500 agents: STANDBY 0.9 s, MC max 24 ms,
-1244 us/agent-s. 2,000 over 2 processes: STANDBY 6.2-7.1 s, MC max 95-101 ms, RSS 179 MiB, 756-796
-us/agent-s, but telemetry min 5.4-6.6 Hz as received here: over target (the tree before: 1,243 in
-STANDBY within 60 s). The per-agent cost moves by +-20% from run to run with the machine's load.
+Measured 2026-11-24 on the 2-core machine (load average 1.0-1.3), once every process read udpm:// on
+its own loop instead of liblcm's receive thread (which spent a quarter of a core per agent process
+dropping the swarm's datagrams): 500 agents: STANDBY 0.6 s, 10.0 Hz, MC max 13 ms, 628 us/agent-s;
+1,000 in one process: STANDBY 0.9-1.1 s, telemetry min 10.0 Hz, MC reaction p50 14-17 ms / max 30 ms,
+RSS 65 MiB, 61-79% of a core, 608-794 us per agent-second; 2,000 over 2 processes: STANDBY 1.5-1.7 s,
+telemetry min 10.0 Hz, MC max 45-48 ms, RSS 175 MiB, 654-754 us/agent-s, no kernel drops. The same
+day with liblcm's thread: 2,000 over 2 processes had telemetry min 8.0-8.2 Hz and MC max 64-100 ms
+(824 us/agent-s). The per-agent cost moves by +-20% from run to run with the machine's load.
 """
 
 from __future__ import annotations

@@ -283,7 +283,7 @@ def measure(args: argparse.Namespace, reader: str) -> int:
     print(
         f"  by thread: UI {per_thread.get(tui.pid, 0.0) * 100:.1f} %, others "
         + ", ".join(f"{x * 100:.1f} %" for x in others if x >= 0.005)
-        + " (the bus executor, LCM's receive thread, Textual's writer)"
+        + " (the bus executor, Textual's writer; with liblcm also its receive thread)"
     )
     print(f"console output: {(out1 - out0) / (t1 - t0) / 1024:.0f} KiB/s to the terminal")
     if lat:

@@ -11,7 +11,10 @@ to the moment the pong handler holds the decoded message. Raw lcm: one ``lcm.LCM
 subscribed to the one channel, its handler calls ``telemetry_t.decode``, the main thread runs
 ``handle_timeout``. Bus: ``Bus.publish`` / ``Bus.subscribe(..., telemetry_t, ...)``, handlers on the
 loop thread of the Bus's private executor (no Context: the sender is the main thread, which waits on
-an Event, so the ping side has one thread hop that ``node`` below does not). The APIs run on separate multicast ports with their echo processes all up,
+an Event, so the ping side has one thread hop that ``node`` below does not). The Bus (and so every
+node) reads udpm:// from a socket of its own on the loop thread (docs/lan.md, "Who reads a udpm
+bus"); raw lcm reads through liblcm's receive thread and notify pipe, one thread wake-up more per
+message. The APIs run on separate multicast ports with their echo processes all up,
 and take turns in blocks of 100 pings, so load from elsewhere on the machine falls on each alike.
 
 Throughput: this process streams messages at a fixed rate (busy-paced, so evenly spaced) to a sink

@@ -183,6 +183,9 @@ class _Link:
         assert lc is not None, "bus is closed"
         with self._lock:
             own = self._own_reader
+            if own and self._receiver is None:
+                # First, so a socket that cannot open leaves no subscription behind.
+                self._receiver = self._open_receiver()
             if sub.regex is None:
                 route = self._routes.get(sub.channel)
                 if route is None:
@@ -200,8 +203,7 @@ class _Link:
             watch = self._watched is None
             if watch:
                 ex = self._executor()
-                if own:
-                    self._receiver = self._open_receiver()
+                if self._receiver is not None:
                     fd, on_readable = self._receiver.fileno(), self._on_datagrams
                 else:
                     fd, on_readable = lc.fileno(), self._on_readable  # liblcm starts reading here

@@ -90,7 +90,11 @@ def test_mission_with_20_percent_loss(tmp_path: Path) -> None:
         sends = {c["command"]: c["sends"] for c in status["commands"]}
         print(f"sends per command with 20 % loss: {sends}; frames dropped: {swarm.lan.dropped()}")
         assert sends["TAKEOFF"] >= 2  # uav-2 missed the first: acknowledged only thanks to the resend
-        check_log(swarm, max_error=25.0)
+        # The turn from east to north alone costs ~14 deg over the 5 s span (lossless). The operator
+        # repeats the direction every second, so a vehicle that misses it twice (4 % per vehicle and
+        # change at 20 % loss) flies the old direction 2 s longer: 10-12 deg typical here, 37 deg seen
+        # once in 9 runs. 45 deg still tells the commanded heading from the one before (90 deg away).
+        check_log(swarm, max_error=45.0)
 
 
 def _events(path: Path, channel: str) -> list[float]:

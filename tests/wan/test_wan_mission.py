@@ -170,12 +170,24 @@ def test_operator_at_site_a_flies_the_agents_of_site_b_through_the_router(tmp_pa
             tel = [s for s in agent.telemetry if a <= s.t <= b]
             assert tel and all(s.in_air for s in tel), name
         # Site A recorded every agent's telemetry and whole mission, through both bridges.
+        # How many samples cross depends on how long TCP stalls under 20 % loss (18-34 seen), so what is
+        # checked is that each phase of the flight reached A: on the ground, in the air before the cut
+        # and after it. (The cap itself is tested in tests/test_bridge.py: stalled TCP delivers bursts.)
         record_a = read_log(log_a)
+        t0 = record_a.start_utime / 1e6
+        cut_a, back_a = t_cut - t0, t_back - t0
         for name in VEHICLES:
             agent = record_a.agents[name]
-            assert len(agent.telemetry) > 20, (name, len(agent.telemetry))
             states = [c.state for c in agent.mc_states]
             assert {"TAKEOFF", "MISSION", "RTL"} <= set(states) and states[-1] == "STANDBY", (name, states)
+            t_takeoff = next(c.t for c in agent.mc_states if c.state == "TAKEOFF")
+            tel = agent.telemetry
+            phases = {
+                "on the ground before take-off": [s for s in tel if s.t < t_takeoff and not s.in_air],
+                "in the air before the cut": [s for s in tel if t_takeoff < s.t < cut_a and s.in_air],
+                "in the air after the cut": [s for s in tel if back_a < s.t and s.in_air],
+            }
+            assert all(phases.values()), (name, {what: len(got) for what, got in phases.items()})
         heard = sorted(t for t, ch in events(log_a, "/TELEMETRY") if t_cut + 3.5 < t < t_back - 0.2)
         assert heard == [], "nothing crossed while the router was cut"
         for label in ("agents", "bridge-a", "bridge-b", "router"):

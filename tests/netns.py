@@ -11,6 +11,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -115,7 +116,44 @@ def stop_process(proc: subprocess.Popen[str], timeout: float = 5.0) -> int | Non
             except (ProcessLookupError, PermissionError):
                 proc.kill()
             proc.wait(timeout)
+    _end_group(proc.pid, timeout)
     for stream in (proc.stdout, proc.stderr, proc.stdin):
         if stream is not None:
             stream.close()
     return proc.returncode
+
+
+def _end_group(pgid: int, timeout: float) -> None:
+    """What the leader left of its group (xvfb-run signals Xvfb on its way out and never waits for
+    it): SIGTERM, then SIGKILL what is still there after ``timeout``."""
+    if not group_members(pgid):
+        return
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        try:
+            os.killpg(pgid, sig)
+        except (ProcessLookupError, PermissionError):
+            return
+        deadline = time.monotonic() + timeout
+        while group_members(pgid) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        if not group_members(pgid):
+            return
+
+
+def group_members(pgid: int) -> list[str]:
+    """The live processes of a process group, as "pid state cmdline" (zombies, which only wait for
+    their reaper, are not counted)."""
+    members = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+            cmdline = (entry / "cmdline").read_bytes()
+        except OSError:
+            continue
+        fields = stat.rsplit(")", 1)[1].split()
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            command = cmdline.replace(b"\0", b" ").decode(errors="replace").strip()
+            members.append(f"{entry.name} {fields[0]} {command}")
+    return members

@@ -28,7 +28,7 @@ import pytest
 
 from antalate_lcm import _codegen, spy
 from antalate_lcm.msgs import header_t, mc_state_t, telemetry_t
-from tests.netns import REPO, NetNamespace, netns_unavailable, stop_process
+from tests.netns import REPO, NetNamespace, group_members, netns_unavailable, stop_process
 from tests.polling import wait_for
 
 JAVA_SRC = Path(__file__).resolve().parent / "java" / "DecodeCheck.java"
@@ -299,7 +299,7 @@ def test_lcm_spy_headless_finds_every_antalate_type(types_jar: Path, tmp_path: P
     # lcm-spy counts distinct fingerprints on its classpath: ours, plus any lcm may ship some day
     assert counts[0] >= len(TYPE_NAMES), text
     assert "Exception in thread" not in text and "Couldn't create LCM" not in text, text
-    assert wait_for(lambda: not _group_alive(pgid), 5), "lcm-spy's process group outlived stop_process"
+    assert wait_for(lambda: not group_members(pgid), 5), f"outlived stop_process: {group_members(pgid)}"
     assert wait_for(lambda: not _marked_processes(marker), 5), "lcm-spy's JVM outlived the test"
     assert not list(tmp_path.glob("xvfb-run.*")), "xvfb-run did not clean up: it was killed, not stopped"
 
@@ -335,15 +335,6 @@ def _read_until(proc: subprocess.Popen[str], out: list[str], done: Any, timeout:
         pytest.fail(f"lcm-spy did not start (exit code {proc.poll()}):\n" + "\n".join(out))
 
 
-def _group_alive(pgid: int) -> bool:
-    try:
-        os.killpg(pgid, 0)
-    except ProcessLookupError:
-        return False
-    # zombies still count for killpg; a group of zombies only waits for its reaper
-    return any(_state(pid) not in ("Z", None) for pid in _pids() if _pgid(pid) == pgid)
-
-
 def _marked_processes(marker: str) -> list[int]:
     hits = []
     for pid in _pids():
@@ -366,13 +357,6 @@ def _state(pid: int) -> str | None:
     except OSError:
         return None
     return stat.rsplit(")", 1)[1].split()[0]
-
-
-def _pgid(pid: int) -> int | None:
-    try:
-        return os.getpgid(pid)
-    except ProcessLookupError:
-        return None
 
 
 def test_cli_spy_without_display_says_how(tmp_path: Path) -> None:

@@ -71,6 +71,10 @@ class Context:
     bus: Bus
     executor: Executor
     inproc_bus: str | None = None
+    #: Buses whose missing swarm key a node of this process has already warned of: a thousand
+    #: agents in one process (``antalate agent --agents 1000``) would say it a thousand times and
+    #: bury every other line of the start.
+    open_warned: set[str] = field(default_factory=set, repr=False)
 
     def __post_init__(self) -> None:
         self.bus.attach(self.executor)  # the bus's descriptors are read on the nodes' loop
@@ -208,14 +212,19 @@ class Node:
         if self.security.enabled or not network_reachable(url):
             return
         if topic in OPERATOR_INPUTS:
-            if not self._open_inputs:
+            warned = self.context.open_warned
+            if bus not in warned:
+                warned.add(bus)
                 self.log.warning(
-                    "no [security] swarm_key: anyone who can send to bus %r (%s) can command %s "
-                    "(take off, land, steer); see docs/security.md",
+                    "no [security] swarm_key: anyone who can send to bus %r (%s) can command %s, and "
+                    "every other agent of this process without a key (take off, land, steer); said "
+                    "once per bus; see docs/security.md",
                     bus,
                     url,
                     self.agent,
                 )
+            elif not self._open_inputs:
+                self.log.debug("no [security] swarm_key: bus %r can command %s", bus, self.agent)
             self._open_inputs[topic] = bus
             return
         if self.kind == "operator" or not is_internal(topic):

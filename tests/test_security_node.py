@@ -351,6 +351,45 @@ def test_insecure_true_starts_and_says_so(caplog: pytest.LogCaptureFixture) -> N
         context.close()
 
 
+def test_an_open_command_bus_is_said_once_per_process_and_bus(caplog: pytest.LogCaptureFixture) -> None:
+    """A thousand keyless agents in one process give one warning, not a thousand; another process
+    (another context) and another bus still get theirs."""
+
+    def keyless(name: str) -> Config:
+        return parse_config(
+            {
+                "agent": {"name": name},
+                "buses": {"lan": "udpm://239.255.76.67:7667?ttl=0", "wan": "udpm://239.255.76.70:7670?ttl=1"},
+            },
+            "agent.toml",
+        )
+
+    first = Context.in_process(keyless("a-0").buses)  # never opened: no socket outside a namespace
+    second = Context.in_process(keyless("b-0").buses)
+    try:
+        with caplog.at_level(logging.DEBUG):
+            for i in range(5):
+                mc = McNode(keyless(f"a-{i}"), first)
+                mc._check_exposure("OPERATOR_CMD", "lan")
+                mc._check_exposure("SWARM_OPERATOR_CMD", "lan")
+            McNode(keyless("a-9"), first)._check_exposure("OPERATOR_CMD", "wan")
+            McNode(keyless("b-0"), second)._check_exposure("OPERATOR_CMD", "lan")
+        warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+        assert len(warnings) == 3, warnings
+        assert "bus 'lan'" in warnings[0] and "command a-0, and every other agent" in warnings[0]
+        assert "bus 'wan'" in warnings[1] and "a-9" in warnings[1]
+        assert "bus 'lan'" in warnings[2] and "b-0" in warnings[2]
+        quiet = [
+            r.getMessage()
+            for r in caplog.records
+            if r.levelno == logging.DEBUG and "swarm_key" in r.getMessage()
+        ]
+        assert [m.rsplit(" ", 1)[1] for m in quiet] == ["a-1", "a-2", "a-3", "a-4"]
+    finally:
+        first.close()
+        second.close()
+
+
 def test_in_process_context_keeps_internal_topics_off_the_network_bus() -> None:
     cfg = _udpm_config()
     context = Context.in_process(cfg.buses)

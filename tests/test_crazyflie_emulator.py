@@ -39,6 +39,14 @@ def connect(emu: CrazyflieEmulator, cache: Path | None = None) -> SyncCrazyflie:
     return scf
 
 
+def close(scf: SyncCrazyflie) -> None:
+    """Close like the adapter does: cflib's 10 Hz latency pings stopped first. cflib closes the
+    driver before it stops them, so a ping sent in between fails on the closed socket, and its link
+    error callback then joins the ping thread from that same thread (a RuntimeError in the thread)."""
+    scf.cf.link_statistics.stop()
+    scf.close_link()
+
+
 def stream(
     scf: SyncCrazyflie, names: list[str], period_ms: int = 50
 ) -> tuple[list[tuple[int, dict[str, Any]]], LogConfig]:
@@ -69,7 +77,7 @@ def test_cflib_reads_both_tocs_and_caches_them_under_the_firmware_crc(
         assert toc["supervisor"]["info"].ctype == "uint16_t"
         assert scf.cf.param.toc.toc["commander"]["enHighLevel"].ctype == "uint8_t"
     finally:
-        scf.close_link()
+        close(scf)
     # cflib files each TOC under the CRC the firmware sent: both are there, named by our CRCs
     names = {p.name for p in tmp_path.glob("*.json")}
     assert names == {f"{emu.log_crc:08X}.json", f"{emu.param_crc:08X}.json"}
@@ -102,7 +110,7 @@ def test_log_block_streams_values_at_its_period(emu: CrazyflieEmulator) -> None:
         data = got[-1][1]
         assert data["pm.vbat"] == pytest.approx(4.1, abs=1e-6) and data["pm.batteryLevel"] == 90
     finally:
-        scf.close_link()
+        close(scf)
 
 
 def test_param_write_is_echoed_and_applied(emu: CrazyflieEmulator) -> None:
@@ -112,7 +120,7 @@ def test_param_write_is_echoed_and_applied(emu: CrazyflieEmulator) -> None:
         assert wait_for(lambda: emu.params["kalman.resetEstimation"] == 1)
         assert wait_for(lambda: scf.cf.param.values["kalman"]["resetEstimation"] == "1")
     finally:
-        scf.close_link()
+        close(scf)
 
 
 def test_high_level_commands_wait_for_notify_setpoint_stop_after_streaming(emu: CrazyflieEmulator) -> None:
@@ -135,7 +143,7 @@ def test_high_level_commands_wait_for_notify_setpoint_stop_after_streaming(emu: 
         assert wait_for(lambda: not emu.snapshot().flying)
         assert emu.notify_stops == 1
     finally:
-        scf.close_link()
+        close(scf)
 
 
 def test_watchdog_stops_the_motors_two_seconds_after_the_last_setpoint(emu: CrazyflieEmulator) -> None:
@@ -153,7 +161,7 @@ def test_watchdog_stops_the_motors_two_seconds_after_the_last_setpoint(emu: Craz
         assert wait_for(lambda: bool(got))
         assert got[-1][1]["supervisor.info"] >> 6 & 1  # locked bit
     finally:
-        scf.close_link()
+        close(scf)
 
 
 def test_locked_supervisor_refuses_to_arm_and_takeoff_does_nothing(emu: CrazyflieEmulator) -> None:
@@ -169,7 +177,7 @@ def test_locked_supervisor_refuses_to_arm_and_takeoff_does_nothing(emu: Crazyfli
         snap = emu.snapshot()
         assert not snap.armed and not snap.flying and snap.z == 0.0
     finally:
-        scf.close_link()
+        close(scf)
 
 
 @pytest.mark.parametrize(
@@ -192,7 +200,7 @@ def test_battery_drains_in_flight_into_low_power(emu: CrazyflieEmulator) -> None
         assert wait_for(lambda: bool(got) and got[-1][1]["pm.state"] == 3)
         assert got[-1][1]["pm.vbat"] < 3.2
     finally:
-        scf.close_link()
+        close(scf)
 
 
 def test_silence_stops_every_packet_both_ways(emu: CrazyflieEmulator) -> None:
@@ -208,7 +216,7 @@ def test_silence_stops_every_packet_both_ways(emu: CrazyflieEmulator) -> None:
         emu.set_silent(False)
         assert wait_for(lambda: len(got) > n)
     finally:
-        scf.close_link()
+        close(scf)
 
 
 def test_cflib_closing_the_link_in_flight_stops_the_motors(emu: CrazyflieEmulator) -> None:
@@ -218,6 +226,6 @@ def test_cflib_closing_the_link_in_flight_stops_the_motors(emu: CrazyflieEmulato
     assert wait_for(lambda: emu.snapshot().armed)
     scf.cf.high_level_commander.takeoff(0.5, 1.0)
     assert wait_for(lambda: emu.snapshot().z > 0.4)
-    scf.close_link()
+    close(scf)
     assert wait_for(lambda: not emu.snapshot().flying)
     assert emu.snapshot().z == 0.0

@@ -252,9 +252,12 @@ class CrazyflieAutopilot(Autopilot):
 
         ``Crazyflie.close_link`` sends ``send_setpoint(0, 0, 0, 0)`` first, which stops the motors of a
         flying Crazyflie: a reconnection attempt that timed out just as the radio came back would drop
-        the vehicle. The driver is closed first, so close_link finds no link to send on.
+        the vehicle. The driver is closed first, so close_link finds no link to send on. Before it, the
+        10 Hz latency pings are stopped: a ping already past cflib's link check would be sent on the
+        closed socket, and the link error it raises makes cflib join the ping thread from itself.
         """
         try:
+            cf.link_statistics.stop()
             link, cf.link = cf.link, None
             if link is not None:
                 link.close()

@@ -31,6 +31,8 @@ _SLOTS_PER_S = 1000
 #: Timers run between two polls of the urgent readers (:meth:`Executor.add_reader`): a slot of a
 #: thousand agents' timers takes tens of milliseconds, longer than a socket's buffer lasts.
 _POLL_EVERY = 64
+#: s the coroutines left on a stopping loop have to unwind once cancelled (see _finish_tasks).
+_UNWIND_S = 2.0
 T = TypeVar("T")
 
 
@@ -41,6 +43,24 @@ def new_event_loop() -> asyncio.AbstractEventLoop:
     except ImportError:  # pragma: no cover - uvloop is a dependency; plain asyncio still works
         return asyncio.new_event_loop()
     return uvloop.new_event_loop()
+
+
+def _finish_tasks(loop: asyncio.AbstractEventLoop) -> None:
+    """Cancel the coroutines still on a stopped loop and let them unwind (as ``asyncio.run`` does):
+    a node's HTTP exchange closes its connections instead of being destroyed pending."""
+    tasks = asyncio.all_tasks(loop)
+    if not tasks:
+        return
+    for task in tasks:
+        task.cancel()
+    done, pending = loop.run_until_complete(asyncio.wait(tasks, timeout=_UNWIND_S))
+    for task in pending:
+        log.warning(
+            "coroutine %s did not finish within %.0f s of the executor's stop", task.get_name(), _UNWIND_S
+        )
+    for task in done:
+        if not task.cancelled() and task.exception() is not None:
+            log.error("coroutine %s raised", task.get_name(), exc_info=task.exception())
 
 
 class Timer:
@@ -248,6 +268,7 @@ class Executor:
         asyncio.set_event_loop(loop)
         try:
             loop.run_forever()
+            _finish_tasks(loop)
         finally:
             self._ident = None
             self._started = self._running = False
@@ -263,6 +284,7 @@ class Executor:
         loop = self._loop
         if thread is None:
             if not loop.is_closed() and not loop.is_running():
+                _finish_tasks(loop)  # created by nodes started before the loop ever ran
                 loop.close()
             return
         if self._ident == threading.get_ident():

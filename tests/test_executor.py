@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import threading
 import time
 
@@ -167,3 +168,29 @@ def test_an_urgent_reader_is_polled_between_the_timers_of_a_long_slot(ex: Execut
     finally:
         quiet.close()
         other.close()
+
+
+@pytest.mark.parametrize("ran", [True, False], ids=["running", "never-started"])
+def test_coroutines_left_at_stop_are_cancelled_and_unwind(ran: bool) -> None:
+    """A node's coroutine (the OSC's HTTP exchange) gets to close what it holds when the executor
+    stops, instead of being destroyed pending."""
+    ex = Executor()
+    unwound: list[str] = []
+
+    async def holds_a_connection() -> None:
+        unwound.append("started")
+        try:
+            await asyncio.sleep(3600)
+        finally:
+            await asyncio.sleep(0)  # unwinding may await (closing a connection does)
+            unwound.append(threading.current_thread().name)
+
+    if ran:
+        ex.start()
+    task = ex.run_sync(lambda: ex.loop.create_task(holds_a_connection()))
+    if ran:
+        assert wait_for(lambda: unwound == ["started"], 2)
+    ex.stop()
+    # a coroutine that never ran took nothing to release: cancelled before its first line
+    assert unwound == (["started", "antalate-executor"] if ran else [])
+    assert task.cancelled()

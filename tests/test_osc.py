@@ -25,6 +25,7 @@ from antalate_lcm.executor import Executor
 from antalate_lcm.msgs import direction_cmd_t, mc_state_t, operator_cmd_t, payload_t, telemetry_t
 from antalate_lcm.node import Context
 from antalate_lcm.osc import OscNode, wire
+from antalate_lcm.osc.node import tls_context
 from antalate_lcm.security import generate_key
 from antalate_lcm.station import StationServer, StationSettings
 from antalate_lcm.station._auth import registration_key, sha256_hex
@@ -187,9 +188,50 @@ def test_garbage_replies_are_ignored_and_retried(
         assert wait_for(lambda: node.failures >= 3, 10), "keeps retrying"
         assert node.reports_ok == 0 and node.token is None
         assert got == {"cmd": [], "dir": [], "payload": []}, "nothing invented from an invalid reply"
-        assert node._thread is not None and node._thread.is_alive()
+        assert node.reporting
     finally:
         node.stop()
+        ctx.close()
+
+
+def test_many_oscs_share_the_loop_and_send_nothing_once_stopped(station: StationServer) -> None:
+    """A process of 40 agents reports through one event loop (no thread per OSC: antalate agent
+    --agents 1000 with a station would have started a thousand), and a stopped OSC sends no more."""
+    cfgs = [
+        parse_config(
+            {
+                "agent": {"name": f"uav-{i}"},
+                "buses": {"lan": "memq://"},
+                "osc": {"enabled": True, "server": station.url, "rate": 5.0, "timeout": 2.0},
+            }
+        )
+        for i in range(40)
+    ]
+    ctx = Context(Bus(cfgs[0].buses), Executor())
+    ctx.executor.start()
+    threads = threading.active_count()
+    nodes = [OscNode(cfg, ctx) for cfg in cfgs]
+    try:
+        for node in nodes:
+            node.start()
+        assert wait_for(lambda: all(n.reports_ok >= 2 for n in nodes), 20), [n.failures for n in nodes]
+        assert {n.token is not None for n in nodes} == {True}
+        # one TLS context for the process (each client's own cost 850 KiB and 17 ms to build)
+        assert {id(n._verify) for n in nodes} == {id(tls_context(""))}
+        # asyncio's resolver pool at most (a few threads for the whole process), never one per agent
+        assert threading.active_count() - threads <= 8, [t.name for t in threading.enumerate()]
+        for node in nodes[:20]:
+            node.stop()
+        stopped = [n.reports_ok for n in nodes[:20]]
+        running = [n.reports_ok for n in nodes[20:]]
+        assert wait_for(
+            lambda: all(n.reports_ok >= r + 2 for n, r in zip(nodes[20:], running, strict=True)), 10
+        )
+        assert [n.reports_ok for n in nodes[:20]] == stopped
+        assert not any(n.reporting for n in nodes[:20]) and all(n.reporting for n in nodes[20:])
+    finally:
+        for node in nodes:
+            node.stop()
         ctx.close()
 
 
@@ -313,7 +355,7 @@ def test_a_lying_station_cannot_make_up_retarget_or_replay_commands(
         assert node.dropped == {"unsigned": 2, "forged": 3, "retargeted": 1, "stale": 1, "replayed": 1}
         forged_lines = [r for r in caplog.records if "bad MAC" in r.getMessage()]
         assert len(forged_lines) == 1, "three forgeries, one log line (rate-limited)"
-        assert node._thread is not None and node._thread.is_alive()
+        assert node.reporting
     finally:
         node.stop()
         ctx.close()

@@ -97,7 +97,6 @@ _.needs_resending
 _.send_packet
 _.receive_packet
 _.get_status
-_.get_name
 _.scan_interface
 _.get_help
 _.publish_errors  # Bus: docs/wan.md
@@ -107,6 +106,7 @@ _.resending  # MavlinkAutopilot: a command is being resent (tests/test_mavlink_a
 _.ready_reasons  # MavlinkAutopilot: why arming would be refused (tests/test_mavlink_adapter.py)
 _.reconnects  # CrazyflieAutopilot: link recoveries (tests/test_crazyflie_adapter.py)
 _.reports_ok  # OscNode: reports the station accepted (tests/test_osc.py)
+_.reporting  # OscNode: whether the exchange with the station runs (tests/test_osc.py)
 _.set_refuse_arm  # SimAutopilot fault knobs for tests and the demo
 _.set_battery
 _.set_time_scale

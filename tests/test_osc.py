@@ -235,6 +235,36 @@ def test_many_oscs_share_the_loop_and_send_nothing_once_stopped(station: Station
         ctx.close()
 
 
+def test_an_unexpected_error_in_the_exchange_is_logged_and_retried(caplog: pytest.LogCaptureFixture) -> None:
+    """Not a server problem but a failure nobody foresaw (here the transport itself raises): the OSC
+    says so with the traceback, backs off and keeps reporting, where a thread or task would have died."""
+    calls: list[int] = []
+
+    def broken(request: httpx.Request) -> httpx.Response:
+        calls.append(1)
+        raise RuntimeError("a bug in the transport")
+
+    cfg = parse_config(
+        {
+            "agent": {"name": "alpha"},
+            "buses": {"lan": "memq://"},
+            "osc": {"enabled": True, "server": "http://127.0.0.1:9", "rate": 20.0, "max_backoff": 0.2},
+        }
+    )
+    ctx = Context(Bus(cfg.buses), Executor())
+    ctx.executor.start()
+    node = OscNode(cfg, ctx, transport=httpx.MockTransport(broken))
+    try:
+        with caplog.at_level(logging.ERROR, logger=node.log.name):
+            node.start()
+            assert wait_for(lambda: len(calls) >= 3, 5)
+        assert node.reporting and node.failures >= 2 and node.reports_ok == 0
+        assert "a bug in the transport" in caplog.text and "retrying in 0.2 s" in caplog.text
+    finally:
+        node.stop()
+        ctx.close()
+
+
 def test_server_down_backs_off_and_recovers(tmp_path: Path) -> None:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -2,9 +2,9 @@
 
 The HTTP exchange is a coroutine on the process's event loop (``Executor.loop``, where the agent's
 other nodes run): it awaits the server, so a slow or dead server never stalls them, and a thousand
-agents' OSCs in one process need no thread each. A server that is down, slow or answers garbage is logged (at a limited
-rate) and retried with exponential backoff; nothing is published from a reply that did not validate
-completely.
+agents' OSCs in one process need no thread each. A server that is down, slow or answers garbage is
+logged (at a limited rate) and retried with exponential backoff; nothing is published from a reply
+that did not validate completely.
 
 The OSC never signs for the station. An operator command arrives as the operator signed it and is
 published exactly so (header and MAC untouched); with a swarm key the OSC verifies it first (MAC,

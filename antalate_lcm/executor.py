@@ -8,7 +8,8 @@ I/O) runs on worker threads that post their results back with :meth:`Executor.ca
 
 It is an asyncio loop (uvloop when installed: measured in ``benchmarks/bus.py``, it dispatches a
 datagram faster than a selector loop written in Python), so asyncio code can share it through
-:attr:`Executor.loop`. A callback that raises is logged and the loop carries on.
+:attr:`Executor.loop` (the OSC's HTTP exchange does); coroutines still running when the executor stops
+are cancelled and given a moment to unwind. A callback that raises is logged and the loop carries on.
 """
 
 from __future__ import annotations
@@ -278,7 +279,8 @@ class Executor:
             loop.close()
 
     def stop(self) -> None:
-        """Stop the loop and join its thread (from any thread, the loop's own included)."""
+        """Stop the loop and join its thread (from any thread, the loop's own included); coroutines
+        still on the loop are cancelled first and unwind on its thread (see _finish_tasks)."""
         self._running = False
         thread = self._thread
         loop = self._loop

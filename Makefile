@@ -25,8 +25,13 @@ demo: setup
 demo-headless: setup
 	$(VENV)/bin/antalate demo --headless --agents 5
 
+# Two workers: the suite mostly waits (vehicles climbing, links timing out), so two halve it on two
+# cores. A module's tests stay on one worker, in order (--dist loadfile): its module-scoped fixtures
+# (a built wheel, an emulator) are made once, and tests that build on the one before keep their order.
+TEST_WORKERS ?= 2
+
 test: setup sysdeps
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 lint: setup
 	$(VENV)/bin/ruff check .

@@ -18,6 +18,33 @@ if TYPE_CHECKING:
 
 MCAST_URL = "udpm://239.255.76.67:7667?ttl=0"
 _NETNS_REASON: list[str | None] = []
+#: The ``user_properties`` key of an attack's verdict (tests/security/conftest.py judges each attack).
+ATTACK_PROPERTY = "antalate-attack"
+_ATTACKS: dict[str, str] = {}
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    """Tally the attacks (here, in the process that prints the summary: the xdist controller too)."""
+    for key, value in report.user_properties:
+        if key == ATTACK_PROPERTY:
+            name, verdict = value
+            _ATTACKS[name] = verdict
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    if not _ATTACKS:
+        return
+    tried = {k: v for k, v in _ATTACKS.items() if v != "skipped"}
+    won = sorted(k for k, v in tried.items() if v.startswith("succeeded"))
+    broken = sorted(k for k, v in tried.items() if v.startswith("not judged"))
+    tr = terminalreporter
+    tr.section("attacks")
+    line = f"attacks tried {len(tried)}, succeeded {len(won)}, skipped {len(_ATTACKS) - len(tried)}"
+    tr.write_line(line + (f", not judged {len(broken)}" if broken else ""))
+    for name in won:
+        tr.write_line(f"  SUCCEEDED: {name} ({tried[name]})")
+    for name in broken:
+        tr.write_line(f"  NOT JUDGED: {name} ({tried[name]})")
 
 
 def _netns_reason() -> str | None:

@@ -1,8 +1,8 @@
 """The attacker suite (issue 13): one shared swarm for the session, and the tally of attacks tried.
 
 Every test is one attack, tagged ``@pytest.mark.attack("name")``; it passes only when the attack
-failed *and* nothing moved. The terminal summary counts them: ``attacks tried N, succeeded M``
-(a failed test, or an xfail, is an attack that succeeded).
+failed *and* nothing moved. The terminal summary counts them (tests/conftest.py): ``attacks tried N,
+succeeded M`` (a failed test, or an xfail, is an attack that succeeded).
 """
 
 from __future__ import annotations
@@ -12,12 +12,10 @@ from collections.abc import Iterator
 import pytest
 
 from antalate_lcm.geo import offset
-from tests.conftest import _netns_reason
+from tests.conftest import ATTACK_PROPERTY, _netns_reason
 from tests.netns import NetNamespace
 from tests.polling import wait_for
 from tests.security.harness import HOME, SWARM_KEY, PeerClient, Swarm, agent_doc
-
-_RESULTS: dict[str, str] = {}
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -35,6 +33,8 @@ def _attack(item: pytest.Item) -> str | None:
 
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[None]:
+    """Judge the attack where the test ran and attach the verdict to the report (``user_properties``
+    travel with it to the process that prints the summary: tests/conftest.py, also under xdist)."""
     outcome = yield
     report = outcome.get_result()
     name = _attack(item)
@@ -42,31 +42,16 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
         return
     if report.when == "call" or (report.when == "setup" and not report.passed):
         if hasattr(report, "wasxfail"):
-            _RESULTS[name] = "succeeded (defence missing, xfail)"
+            verdict = "succeeded (defence missing, xfail)"
         elif report.passed:
-            _RESULTS[name] = "held"
+            verdict = "held"
         elif report.skipped:
-            _RESULTS[name] = "skipped"
+            verdict = "skipped"
         elif call.excinfo is not None and not call.excinfo.errisinstance(AssertionError):
-            _RESULTS[name] = f"not judged ({call.excinfo.typename})"
+            verdict = f"not judged ({call.excinfo.typename})"
         else:
-            _RESULTS[name] = "succeeded"
-
-
-def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
-    if not _RESULTS:
-        return
-    tried = {k: v for k, v in _RESULTS.items() if v != "skipped"}
-    won = sorted(k for k, v in tried.items() if v.startswith("succeeded"))
-    broken = sorted(k for k, v in tried.items() if v.startswith("not judged"))
-    tr = terminalreporter
-    tr.section("attacks")
-    line = f"attacks tried {len(tried)}, succeeded {len(won)}, skipped {len(_RESULTS) - len(tried)}"
-    tr.write_line(line + (f", not judged {len(broken)}" if broken else ""))
-    for name in won:
-        tr.write_line(f"  SUCCEEDED: {name} ({tried[name]})")
-    for name in broken:
-        tr.write_line(f"  NOT JUDGED: {name} ({tried[name]})")
+            verdict = "succeeded"
+        report.user_properties.append((ATTACK_PROPERTY, (name, verdict)))
 
 
 @pytest.fixture(scope="package")

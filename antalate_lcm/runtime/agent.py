@@ -150,15 +150,22 @@ def _die_with_parent() -> None:
         pass
 
 
-def run_processes(child_argv: Callable[[int, int], list[str]], count: int, *, grace: float = 60.0) -> int:
+def run_processes(
+    child_argv: Callable[[int, int], list[str]],
+    count: int,
+    *,
+    grace: float = 60.0,
+    stop: threading.Event | None = None,
+) -> int:
     """Run ``count`` agent processes (``child_argv(i, count)`` each) until a signal or one exits.
 
     Ctrl-C reaches every process of the terminal's group at once; SIGTERM here (or one child
     ending) is passed on as SIGINT so each child stops its nodes in order (MC before HLC, the
     vehicle in a safe state) and closes its bus; a child still running after ``grace`` s is killed.
-    A launcher killed outright takes its children along (they get SIGTERM).
+    A launcher killed outright takes its children along (they get SIGTERM). ``stop`` set by
+    another thread (``antalate run`` once its operator is done) ends them the same way.
     """
-    stop = threading.Event()
+    stop = stop if stop is not None else threading.Event()
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:
         log.info("received %s, stopping %d agent processes", signal.Signals(signum).name, count)

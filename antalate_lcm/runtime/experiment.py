@@ -167,11 +167,17 @@ def run(exp: Experiment, *, report: Callable[[str], None] = print) -> int:
     children_done = threading.Event()
     stop_children = threading.Event()
     children: threading.Thread | None = None
+    # With the console, every log line goes to a file: they would tear the console's screen.
+    console_log = None if exp.headless else _temp_log()
     if processes > 1:
 
         def supervise() -> None:
             try:
-                run_processes(_child_argv(exp), processes, stop=stop_children)
+                if console_log is None:
+                    run_processes(_child_argv(exp), processes, stop=stop_children)
+                else:
+                    with open(console_log, "ab") as output:
+                        run_processes(_child_argv(exp), processes, stop=stop_children, output=output)
             finally:
                 children_done.set()
 
@@ -187,8 +193,8 @@ def run(exp: Experiment, *, report: Callable[[str], None] = print) -> int:
                 operator.reason = "an agent process ended before the experiment did"
             report(operator.report())
             code = 0 if operator.phase is Phase.DONE else 1
-        else:
-            code = _run_console(configs[0], context, nodes)
+        elif console_log is not None:
+            code = _run_console(configs[0], context, nodes, console_log, report)
     finally:
         stop_children.set()
         if children is not None:
@@ -198,8 +204,29 @@ def run(exp: Experiment, *, report: Callable[[str], None] = print) -> int:
     return code
 
 
-def _run_console(config: Config, context: Context, nodes: list[Node]) -> int:
-    """The operator console in the foreground, the nodes on the executor behind it (as ``antalate demo``)."""
+def _temp_log() -> str:
+    import tempfile
+
+    fd, path = tempfile.mkstemp(prefix="antalate-run-", suffix=".log")
+    os.close(fd)
+    return path
+
+
+def _run_console(
+    config: Config, context: Context, nodes: list[Node], log_path: str, report: Callable[[str], None]
+) -> int:
+    """The operator console in the foreground, the nodes on the executor behind it (as ``antalate demo``);
+    the log lines go to ``log_path`` meanwhile, named at the end."""
+    from antalate_lcm.runtime.interactive import _log_to_file
+
+    try:
+        with _log_to_file(log_path):
+            return _console(config, context, nodes)
+    finally:
+        report(f"the nodes' log lines are in {log_path}")
+
+
+def _console(config: Config, context: Context, nodes: list[Node]) -> int:
     from operator_tui.app import OperatorApp
 
     started: list[Node] = []

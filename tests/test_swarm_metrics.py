@@ -313,3 +313,18 @@ def test_plot_goal_lines_come_from_options_only(gathering: tuple[Path, Analysis]
     out = tmp_path / "g.png"
     assert main(["plot", str(path), "--goal", "5", "-q", "-o", str(out)]) == 0
     assert out.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_the_python_example_of_docs_logging_runs(
+    gathering: tuple[Path, Analysis], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """docs/logging.md's Python example, as written, on a log called mission.lcm."""
+    import shutil
+
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "logging.md").read_text()
+    block = doc.split("The same from Python, with the trajectories:", 1)[1].split("```python\n", 1)[1]
+    code = block.split("```", 1)[0]
+    shutil.copy(gathering[0], tmp_path / "mission.lcm")
+    monkeypatch.chdir(tmp_path)
+    exec(compile(code, "docs/logging.md", "exec"), {})  # noqa: S102 - the documented example itself
+    assert (tmp_path / "mission.png").read_bytes()[:4] == b"\x89PNG"

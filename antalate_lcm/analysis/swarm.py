@@ -1,7 +1,7 @@
 """Swarm metrics for any algorithm, over time and per flight phase (pure: tracks in, numbers out).
 
 Definitions (units: metres, seconds since the log's first event, m/s; the same in ``antalate
-analyze``'s text and JSON, and in docs/analysis.md):
+analyze``'s text and JSON, and in docs/logging.md):
 
 * **Snapshot** at t: every agent heard within ``max_age`` s, at its position interpolated to t
   (:meth:`Track.position_at`), and its reported velocity (``telemetry_t.vn``/``ve``).

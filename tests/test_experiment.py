@@ -235,52 +235,24 @@ def test_run_with_the_console_in_a_real_terminal(tmp_path: Path) -> None:
     and the metrics follow when it quits."""
     import shlex
     import shutil
-    import time
-    import uuid
 
     from tests.polling import wait_for
+    from tests.tmux import Tmux, fly_one_sortie
 
     if shutil.which("tmux") is None:
         pytest.skip("tmux is not installed (Debian/Ubuntu: apt-get install tmux)")
     config = tmp_path / "swarm.toml"
     config.write_text(MEMQ_CONFIG)
     log = tmp_path / "console.lcm"
-    sock = f"antalate-test-{uuid.uuid4().hex[:8]}"
     argv = [sys.executable, "-m", "antalate_lcm.cli", "run", str(config), "--agents", "2", "-o", str(log)]
     env = _env()
     cmd = f"cd {shlex.quote(str(tmp_path))} && PYTHONPATH={shlex.quote(env['PYTHONPATH'])} {shlex.join(argv)}"
     cmd += "; echo RUN-EXITED-$?; sleep 60"
-
-    def tmux(*args: str) -> str:
-        return subprocess.run(["tmux", "-L", sock, *args], capture_output=True, text=True, timeout=10).stdout
-
-    def screen() -> str:
-        return tmux("capture-pane", "-p", "-S", "-200", "-t", "run")
-
-    def count(word: str) -> int:
-        return sum(
-            1 for line in screen().splitlines() if line.lstrip("│ ").startswith("e-0") and f" {word} " in line
-        )
-
-    subprocess.run(
-        ["tmux", "-L", sock, "new-session", "-d", "-s", "run", "-x", "200", "-y", "50", cmd], check=True
-    )
-    try:
-        assert wait_for(lambda: count("STANDBY") == 2, 30), screen()
-        tmux("send-keys", "-t", "run", "T")
-        assert wait_for(lambda: "TAKEOFF to ALL" in screen(), 5), screen()
-        tmux("send-keys", "-t", "run", "y")
-        assert wait_for(lambda: count("MISSION") == 2, 30), screen()
-        time.sleep(2)
-        tmux("send-keys", "-t", "run", "R")
-        assert wait_for(lambda: "RTL to ALL" in screen(), 5), screen()
-        tmux("send-keys", "-t", "run", "y")
-        assert wait_for(lambda: count("STANDBY") == 2, 60), screen()
-        tmux("send-keys", "-t", "run", "q")
-        assert wait_for(lambda: "RUN-EXITED-0" in screen(), 30), screen()
-        assert "phase mission:" in screen()
-    finally:
-        subprocess.run(["tmux", "-L", sock, "kill-server"], capture_output=True, timeout=10)
+    with Tmux(cmd, session="run") as term:
+        fly_one_sortie(term, "e-0", 2)
+        term.keys("q")
+        assert wait_for(lambda: "RUN-EXITED-0" in term.screen(200), 30), term.screen(200)
+        assert "phase mission:" in term.screen(200)
     record = read_log(log)
     assert sorted(record.agents) == ["e-01", "e-02"]
     assert all("MISSION" in [c.state for c in a.mc_states] for a in record.agents.values())

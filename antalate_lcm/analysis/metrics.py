@@ -37,6 +37,7 @@ from antalate_lcm.analysis.swarm import (
     SwarmSample,
     format_phase,
     phase_metrics,
+    sample_times,
     swarm_series,
 )
 from antalate_lcm.analysis.track import Track
@@ -185,17 +186,8 @@ def cohesion_series(
     """:func:`cohesion_at` every ``bin_s`` seconds from ``start`` to ``end`` (both included)."""
     if bin_s <= 0:
         raise ValueError("bin_s must be > 0")
-    out = []
-    n = int(math.floor((end - start) / bin_s + 1e-9))
-    for k in range(n + 1):
-        sample = cohesion_at(tracks, start + k * bin_s, max_age)
-        if sample is not None:
-            out.append(sample)
-    if n * bin_s < end - start - 1e-9:
-        last = cohesion_at(tracks, end, max_age)
-        if last is not None:
-            out.append(last)
-    return out
+    samples = (cohesion_at(tracks, t, max_age) for t in sample_times(start, end, bin_s))
+    return [s for s in samples if s is not None]
 
 
 def direction_spans(

@@ -36,17 +36,10 @@ class Window:
 
 
 @dataclass(frozen=True)
-class FlightPhase:
+class FlightPhase(Window):
     """One phase of the flight: ``name`` is one of :data:`PHASES`."""
 
-    name: str
-    start: float
-    end: float
-    how: str
-
-    @property
-    def length(self) -> float:
-        return self.end - self.start
+    name: str = "mission"
 
 
 def mission_window(record: SwarmRecord) -> Window | None:
@@ -93,12 +86,12 @@ def flight_phases(record: SwarmRecord, window: Window | None = None) -> list[Fli
         takeoffs = [c.t for rec in record.agents.values() for c in rec.mc_states if c.state == "TAKEOFF"]
         takeoffs = [t for t in takeoffs if t < window.start]
         if takeoffs:
-            phases.append(FlightPhase("takeoff", min(takeoffs), window.start, "first TAKEOFF to the mission"))
+            phases.append(FlightPhase(min(takeoffs), window.start, "first TAKEOFF to the mission", "takeoff"))
     else:
         airborne = [s.t for rec in record.agents.values() for s in rec.telemetry if s.in_air]
         if airborne and min(airborne) < window.start:
-            phases.append(FlightPhase("takeoff", min(airborne), window.start, "first in_air to the mission"))
-    phases.append(FlightPhase("mission", window.start, window.end, window.how))
+            phases.append(FlightPhase(min(airborne), window.start, "first in_air to the mission", "takeoff"))
+    phases.append(FlightPhase(window.start, window.end, window.how, "mission"))
     ends: list[float] = []
     for rec in record.agents.values():
         if with_states:
@@ -116,5 +109,5 @@ def flight_phases(record: SwarmRecord, window: Window | None = None) -> list[Fli
         how = (
             "mission end to every agent back in STANDBY" if with_states else "mission end to the last in_air"
         )
-        phases.append(FlightPhase("return", window.end, end, how))
+        phases.append(FlightPhase(window.end, end, how, "return"))
     return phases

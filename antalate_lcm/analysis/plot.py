@@ -7,11 +7,12 @@ plotting works without a display (vehicle computers, CI) and from any thread.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from antalate_lcm.analysis.metrics import Analysis
 from antalate_lcm.analysis.model import SwarmRecord
+from antalate_lcm.analysis.swarm import SwarmSample
 from antalate_lcm.analysis.track import Track
 from antalate_lcm.errors import AntalateError
 
@@ -210,24 +211,14 @@ def _cohesion(ax, analysis: Analysis, goals: Sequence[float]) -> None:  # type: 
     c = analysis.cohesion
     ax.plot([s.t for s in c], [s.max_distance for s in c], color="tab:red", lw=1.0, label="max (radius)")
     ax.plot([s.t for s in c], [s.mean_distance for s in c], color="tab:blue", lw=1.0, label="mean")
-    sep = [s for s in analysis.series if s.min_separation is not None]
-    if sep:
-        ax.plot(
-            [s.t for s in sep],
-            [s.min_separation for s in sep],
-            color="tab:green",
-            lw=0.8,
-            label="min separation",
-        )
-    nn = [s for s in analysis.series if s.nn_mean is not None]
-    if nn:
-        ax.plot(
-            [s.t for s in nn],
-            [s.nn_mean for s in nn],
-            color="tab:olive",
-            lw=0.8,
-            label="mean nearest neighbour",
-        )
+    extra: tuple[tuple[str, str, Callable[[SwarmSample], float | None]], ...] = (
+        ("min separation", "tab:green", lambda s: s.min_separation),
+        ("mean nearest neighbour", "tab:olive", lambda s: s.nn_mean),
+    )
+    for label, color, value in extra:
+        points = [(s.t, value(s)) for s in analysis.series if value(s) is not None]
+        if points:
+            ax.plot([t for t, _ in points], [v for _, v in points], color=color, lw=0.8, label=label)
     _shade_phases(ax, analysis, labels=True)
     for goal in goals:
         ax.axhline(goal, color="black", lw=0.8, ls="--", label=f"goal {goal:g} m")

@@ -30,35 +30,26 @@ class Track:
             return None
         return i - 1, 0.0
 
+    def _interpolated(
+        self, xs: list[float], ys: list[float], t: float, max_age: float
+    ) -> tuple[float, float] | None:
+        at = self._around(t, max_age)
+        if at is None:
+            return None
+        i, f = at
+        if f == 0.0:
+            return xs[i], ys[i]
+        return xs[i] + f * (xs[i + 1] - xs[i]), ys[i] + f * (ys[i + 1] - ys[i])
+
     def position_at(self, t: float, max_age: float) -> tuple[float, float] | None:
         """(north, east) at ``t``, interpolated between the samples around it; None when silent.
 
         Interpolation needs both neighbours within ``max_age`` of each other; otherwise the latest
         sample counts if it is at most ``max_age`` old.
         """
-        at = self._around(t, max_age)
-        if at is None:
-            return None
-        i, f = at
-        if f == 0.0:
-            return self.north[i], self.east[i]
-        return (
-            self.north[i] + f * (self.north[i + 1] - self.north[i]),
-            self.east[i] + f * (self.east[i + 1] - self.east[i]),
-        )
+        return self._interpolated(self.north, self.east, t, max_age)
 
     def velocity_at(self, t: float, max_age: float) -> tuple[float, float] | None:
         """(vn, ve) at ``t``, interpolated like :meth:`position_at`; None when silent or when the
         track carries no velocities."""
-        if not self.vn:
-            return None
-        at = self._around(t, max_age)
-        if at is None:
-            return None
-        i, f = at
-        if f == 0.0:
-            return self.vn[i], self.ve[i]
-        return (
-            self.vn[i] + f * (self.vn[i + 1] - self.vn[i]),
-            self.ve[i] + f * (self.ve[i + 1] - self.ve[i]),
-        )
+        return self._interpolated(self.vn, self.ve, t, max_age) if self.vn else None

@@ -189,10 +189,13 @@ def run(exp: Experiment, *, report: Callable[[str], None] = print) -> int:
             operator = _operator(configs, context, script)
             nodes.append(operator)
             run_until_signal(context, nodes, poll=lambda: operator.finished or children_done.is_set())
-            if children_done.is_set() and not operator.finished:
-                operator.reason = "an agent process ended before the experiment did"
-            report(operator.report())
             code = 0 if operator.phase is Phase.DONE else 1
+            if not operator.finished:
+                if children_done.is_set():
+                    operator.reason = "an agent process ended before the experiment did"
+                else:  # run_until_signal only returns early on SIGINT or SIGTERM
+                    operator.reason, code = "interrupted (SIGINT or SIGTERM)", 130
+            report(operator.report())
         elif console_log is not None:
             code = _run_console(configs[0], context, nodes, console_log, report)
     finally:

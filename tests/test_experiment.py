@@ -256,3 +256,47 @@ def test_run_with_the_console_in_a_real_terminal(tmp_path: Path) -> None:
     record = read_log(log)
     assert sorted(record.agents) == ["e-01", "e-02"]
     assert all("MISSION" in [c.state for c in a.mc_states] for a in record.agents.values())
+
+
+def test_ctrl_c_mid_mission_stops_cleanly_and_still_measures(tmp_path: Path) -> None:
+    """SIGINT while the swarm is in MISSION: the nodes stop in order, the log is complete up to
+    there, the metrics are printed, exit status 130."""
+    import signal
+
+    from tests.netns import stop_process
+    from tests.polling import wait_for
+
+    config = tmp_path / "swarm.toml"
+    config.write_text(MEMQ_CONFIG)
+    script = tmp_path / "long.toml"
+    script.write_text("mission_time = 600.0\n")
+    log = tmp_path / "cut.lcm"
+    argv = [sys.executable, "-m", "antalate_lcm.cli", "run", str(config), "--agents", "2", "--headless"]
+    proc = subprocess.Popen(
+        [*argv, "--script", str(script), "-o", str(log)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=_env(),
+        start_new_session=True,
+    )
+    try:
+        # the operator logs each phase; MISSION once every agent is in it
+        assert proc.stderr is not None
+        lines: list[str] = []
+
+        def in_mission() -> bool:
+            line = proc.stderr.readline() if proc.stderr is not None else ""
+            lines.append(line)
+            return "phase: mission" in line
+
+        assert wait_for(in_mission, 60), "".join(lines)
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        stop_process(proc)
+    assert proc.returncode == 130, out
+    assert "FAILED: 2 agent(s), interrupted (SIGINT or SIGTERM)" in out
+    assert "phase mission:" in out
+    record = read_log(log)
+    assert all("MISSION" in [c.state for c in a.mc_states] for a in record.agents.values())

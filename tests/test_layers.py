@@ -47,6 +47,7 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
                 "plugins",
                 "security",
                 "peers",
+                "safety",
             }
         ),
     ),

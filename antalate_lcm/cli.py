@@ -86,10 +86,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _registrars() -> list[Callable[[argparse._SubParsersAction[argparse.ArgumentParser]], None]]:
     """Subcommands registered by the modules that implement them (imported lazily to start fast)."""
+    from antalate_lcm import mcap_record
     from antalate_lcm.runtime import commands, router
     from antalate_lcm.station import cli as station_cli
 
-    return [commands.register, station_cli.register, router.register]
+    return [commands.register, station_cli.register, router.register, mcap_record.register]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -104,3 +104,26 @@ def test_without_the_foxglove_extra_it_says_what_to_install() -> None:
     proc = antalate_without("foxglove", "foxglove", "--port", "0")
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 2 and err.strip() == f"antalate: {FOXGLOVE_MISSING}"
+
+
+def test_the_shipped_layout_is_the_generated_one_and_reads_real_fields() -> None:
+    """docs/foxglove-layout.json is what tools/foxglove_layout.py writes (foxglove-sdk's layout
+    classes), and every topic and field a panel reads is one antalate serves."""
+    import re
+
+    from tools.foxglove_layout import AGENT, LAYOUT_FILE, layout_json
+
+    text = LAYOUT_FILE.read_text()
+    assert text == layout_json()
+    paths = re.findall(r'"(?:value|topicPath|topicToRender)": "([^"]+)"', text)
+    assert len(paths) == 6
+    for path in paths:
+        topic, _, field = path.partition(".")
+        if topic == "swarm/log":
+            continue
+        agent, _, name = topic.partition("/")
+        assert agent == AGENT
+        props = lcm_json.schema(
+            {"TELEMETRY": "telemetry_t", "MC_STATE": "mc_state_t", "HLC_STATE": "hlc_state_t"}[name]
+        )
+        assert not field or field in props["properties"]

@@ -86,8 +86,12 @@ def serve(url: str, *, host: str, port: int, no_auth: bool, stop: threading.Even
 
     stop = stop or threading.Event()
 
-    def on_signal(_signum: int, _frame: FrameType | None) -> None:
-        stop.set()
+    # The handler only raises a flag: setting an Event from a signal handler can deadlock the main
+    # thread waiting on it (runtime/launch.py: run_until_signal), so the main thread polls.
+    signalled: list[int] = []
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        signalled.append(signum)
 
     previous = (
         signal.signal(signal.SIGTERM, on_signal)
@@ -116,8 +120,8 @@ def serve(url: str, *, host: str, port: int, no_auth: bool, stop: threading.Even
             )
         print(f"serving {url} to Foxglove on ws://{host}:{server.port} (read-only); Ctrl-C stops", flush=True)
         try:
-            while not stop.wait(0.5):
-                pass
+            while not signalled and not stop.is_set():
+                time.sleep(0.2)
         except KeyboardInterrupt:
             pass
     finally:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import logging
 import signal
-import threading
 import time
 from pathlib import Path
 from types import FrameType
@@ -45,10 +44,13 @@ def record(url: str, out_path: str, *, channel: str = ".*", raw: bool = False, f
     from antalate_lcm.bus import Bus
 
     out = _open_output(out_path, force)
-    stop = threading.Event()
 
-    def on_signal(_signum: int, _frame: FrameType | None) -> None:
-        stop.set()
+    # The handler only raises a flag: setting an Event from a signal handler can deadlock the main
+    # thread waiting on it (runtime/launch.py: run_until_signal), so the main thread polls.
+    signalled: list[int] = []
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        signalled.append(signum)
 
     previous = signal.signal(signal.SIGTERM, on_signal)
     bus = Bus({"log": url})
@@ -67,8 +69,8 @@ def record(url: str, out_path: str, *, channel: str = ".*", raw: bool = False, f
             bus.subscribe("log", channel, None, on_message, regex=True)
             print(f"logging {url} to {out} (MCAP); Ctrl-C stops", flush=True)
             try:
-                while not stop.wait(0.5):
-                    pass
+                while not signalled:
+                    time.sleep(0.2)
             except KeyboardInterrupt:
                 pass
             bus.close()  # no handler runs after this: the writer is ours alone

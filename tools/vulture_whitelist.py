@@ -123,3 +123,6 @@ _.row_count  # AgentTable: tests/test_tui.py
 _.render_map  # swarm_map's pure renderer: tests/test_tui_model.py
 _.repaints  # SwarmMap: repaints only on a changed picture (tests/test_tui.py)
 _.layouts_skipped  # the event log's skipped layouts (tests/test_tui.py)
+_.relative  # PeerTable: the documented peer API (docs/behaviors.md, "Peers")
+_.centroid
+_.CONTINUE  # safety.filter.Policy: chosen by value from [safety] no_peers (Policy("continue"))

@@ -64,7 +64,7 @@ def default_plot_path(log: str | Path) -> Path:
     """``swarm.lcm`` -> ``swarm.png``; any other name gets ``.png`` appended, so lcm-logger's numbered
     files (``lcmlog-2026-11-22.00``, ``.01``) never share one plot."""
     p = Path(log)
-    return p.with_suffix(".png") if p.suffix == ".lcm" else p.with_name(p.name + ".png")
+    return p.with_suffix(".png") if p.suffix in (".lcm", ".mcap") else p.with_name(p.name + ".png")
 
 
 def analyze_log(

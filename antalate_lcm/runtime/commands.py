@@ -157,6 +157,12 @@ def _cmd_log(args: argparse.Namespace) -> int:
         raise AntalateError(f"no bus named {bus!r} in {config.source}; declared: {', '.join(config.buses)}")
     open_lcm(url)  # a missing multicast route is reported with the fix, not as LCM's one-liner
     out = args.output or time.strftime("antalate-%Y%m%d-%H%M%S.lcm")
+    if out.endswith(".mcap"):
+        from antalate_lcm.mcap_record import record
+
+        return record(url, out, channel=args.channel, raw=args.raw, force=args.force)
+    if args.raw:
+        raise AntalateError("--raw is for an MCAP file (-o NAME.mcap): an LCM log keeps the bytes anyway")
     if os.path.exists(out) and not args.force:
         raise AntalateError(f"{out} exists: pass --force to overwrite it, or -o another file")
     logger = native_lcm_tool("lcm-logger")
@@ -208,7 +214,7 @@ def _analysis_options(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _add_analysis_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("log", help="LCM log file (lcm-logger, antalate log)")
+    p.add_argument("log", help="LCM log or MCAP file (lcm-logger, antalate log, antalate export)")
     p.add_argument(
         "--azimuth",
         type=float,
@@ -316,10 +322,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
     p = sub.add_parser("log", help="record a bus to an LCM log file (lcm-logger on the config's bus)")
     p.add_argument("config", nargs="?", help="config file (default: the embedded defaults)")
-    p.add_argument("-o", "--output", help="log file (default: antalate-YYYYmmdd-HHMMSS.lcm)")
+    p.add_argument(
+        "-o", "--output", help="log file; NAME.mcap records MCAP (default: antalate-YYYYmmdd-HHMMSS.lcm)"
+    )
     p.add_argument(
         "--bus", help="bus name from the config (default: 'lan' if declared, else the default bus)"
     )
     p.add_argument("--channel", default=".*", help="channel regex to record (default: every channel)")
     p.add_argument("-f", "--force", action="store_true", help="overwrite the log file if it exists")
+    p.add_argument("--raw", action="store_true", help="MCAP: keep each message's LCM bytes too (raw/CHANNEL)")
     p.set_defaults(func=_cmd_log)

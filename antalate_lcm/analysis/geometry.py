@@ -17,7 +17,7 @@ from collections.abc import Mapping, Sequence
 Point = tuple[float, float]
 
 
-def mean_position(points: Mapping[str, Point]) -> Point:
+def centroid(points: Mapping[str, Point]) -> Point:
     """The mean position (the caller ensures there is at least one point)."""
     n = len(points)
     return sum(p[0] for p in points.values()) / n, sum(p[1] for p in points.values()) / n

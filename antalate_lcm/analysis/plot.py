@@ -211,11 +211,11 @@ def _cohesion(ax, analysis: Analysis, goals: Sequence[float]) -> None:  # type: 
     c = analysis.cohesion
     ax.plot([s.t for s in c], [s.max_distance for s in c], color="tab:red", lw=1.0, label="max (radius)")
     ax.plot([s.t for s in c], [s.mean_distance for s in c], color="tab:blue", lw=1.0, label="mean")
-    curves: tuple[tuple[str, str, Callable[[SwarmSample], float | None]], ...] = (
+    extra: tuple[tuple[str, str, Callable[[SwarmSample], float | None]], ...] = (
         ("min separation", "tab:green", lambda s: s.min_separation),
         ("mean nearest neighbour", "tab:olive", lambda s: s.nn_mean),
     )
-    for label, color, value in curves:
+    for label, color, value in extra:
         points = [(s.t, value(s)) for s in analysis.series if value(s) is not None]
         if points:
             ax.plot([t for t, _ in points], [v for _, v in points], color=color, lw=0.8, label=label)

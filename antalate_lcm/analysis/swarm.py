@@ -31,9 +31,9 @@ from dataclasses import dataclass
 
 from antalate_lcm.analysis.geometry import (
     Point,
+    centroid,
     closest_pair,
     components,
-    mean_position,
     nearest_neighbour_distances,
     polarisation,
     quantile,
@@ -162,7 +162,7 @@ def swarm_sample(
     points = snap.points
     if not points:
         return None
-    cn, ce = mean_position(points)
+    cn, ce = centroid(points)
     dists = [math.hypot(p[0] - cn, p[1] - ce) for p in points.values()]
     pair = closest_pair(points)
     nn = nearest_neighbour_distances(points)

@@ -187,6 +187,8 @@ def test_a_generated_behavior_installs_and_flies_across_processes(netns, tmp_pat
         text=True,
         timeout=300,
     )
+    if pip.returncode != 0 and "No matching distribution found for setuptools" in pip.stderr:
+        pytest.skip("pip cannot fetch setuptools to build the package (no package index reachable)")
     assert pip.returncode == 0, pip.stderr
     entry_points = next(site.glob("spiral_test-*.dist-info")) / "entry_points.txt"
     assert "spiral_test = spiral_test.behavior:SpiralTest" in entry_points.read_text()

@@ -301,7 +301,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--speed", type=float, default=1.0, help="direction command speed, m/s (headless)")
     p.set_defaults(func=_cmd_demo)
 
-    p = sub.add_parser("analyze", help="swarm metrics from an LCM log: cohesion, drift vs the command")
+    p = sub.add_parser(
+        "analyze",
+        help="swarm metrics from an LCM log, per phase: radius, separation, polarisation, connectivity, drift",
+    )
     _add_analysis_options(p)
     p.add_argument("--json", action="store_true", help="print every number as JSON instead of the summary")
     p.add_argument("--tracks", action="store_true", help="with --json: every agent's trajectory too")

@@ -290,11 +290,21 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="fly a config with N simulated agents and a scripted operator, record it, print the swarm metrics",
     )
     p.add_argument("config", help="agent config file (TOML), e.g. the one `antalate new behavior` wrote")
-    p.add_argument("--agents", type=int, default=1, help="N simulated agents from the config (default 1)")
-    p.add_argument("--processes", type=int, default=1, help="spread the agents over P processes (default 1)")
-    p.add_argument("--spacing", type=float, default=8.0, help="metres between simulated homes (default 8)")
-    p.add_argument("--script", help="experiment script (TOML; default: a 30 s mission, then RTL)")
-    p.add_argument("-o", "--output", help="LCM log file (default: antalate-run-YYYYmmdd-HHMMSS.lcm)")
+    p.add_argument(
+        "--agents", type=int, default=1, metavar="N", help="N simulated agents from the config (default 1)"
+    )
+    p.add_argument(
+        "--processes", type=int, default=1, metavar="P", help="spread the agents over P processes (default 1)"
+    )
+    p.add_argument(
+        "--spacing", type=float, default=8.0, metavar="M", help="metres between simulated homes (default 8)"
+    )
+    p.add_argument(
+        "--script", metavar="SCRIPT", help="experiment script (TOML; default: a 30 s mission, then RTL)"
+    )
+    p.add_argument(
+        "-o", "--output", metavar="LOG", help="LCM log file (default: antalate-run-YYYYmmdd-HHMMSS.lcm)"
+    )
     p.add_argument("--bus", help="bus to record (default: 'lan' if declared, else the default bus)")
     p.add_argument("-f", "--force", action="store_true", help="overwrite the log file if it exists")
     p.add_argument(

@@ -59,9 +59,9 @@ PHASE_COLORS: dict[str, str] = {"takeoff": "#fdae6b", "mission": "black", "retur
 #: Line styles of the trajectories by phase: the mission solid, the rest faint, so the flight home
 #: (every agent to its own home point) is never read as the swarm's behaviour.
 _PHASE_STYLE: dict[str, tuple[str, float, float]] = {
-    "takeoff": (":", 0.6, 0.6),
+    "takeoff": (":", 0.8, 0.7),
     "mission": ("-", 1.0, 1.0),
-    "return": ("--", 0.6, 0.45),
+    "return": ("--", 0.8, 0.6),
 }
 
 

@@ -7,6 +7,7 @@ installed by pip, and the recorded log read back by the analysis.
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -262,7 +263,7 @@ def test_run_with_the_console_in_a_real_terminal(tmp_path: Path) -> None:
 
 def test_ctrl_c_mid_mission_stops_cleanly_and_still_measures(tmp_path: Path) -> None:
     """SIGINT while the swarm is in MISSION: the nodes stop in order, the log is complete up to
-    there, the metrics are printed, exit status 130."""
+    there, the metrics are printed (here as --json), exit status 130."""
     import signal
 
     from tests.netns import stop_process
@@ -275,7 +276,7 @@ def test_ctrl_c_mid_mission_stops_cleanly_and_still_measures(tmp_path: Path) -> 
     log = tmp_path / "cut.lcm"
     argv = [sys.executable, "-m", "antalate_lcm.cli", "run", str(config), "--agents", "2", "--headless"]
     proc = subprocess.Popen(
-        [*argv, "--script", str(script), "-o", str(log)],
+        [*argv, "--json", "--script", str(script), "-o", str(log)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -298,7 +299,10 @@ def test_ctrl_c_mid_mission_stops_cleanly_and_still_measures(tmp_path: Path) -> 
     finally:
         stop_process(proc)
     assert proc.returncode == 130, out
-    assert "FAILED: 2 agent(s), interrupted (SIGINT or SIGTERM)" in out
-    assert "phase mission:" in out
+    data = json.loads(out)
+    assert (data["ok"], data["code"], data["log"]) == (False, 130, str(log))
+    assert all(any(s["state"] == "MISSION" for s in tl) for tl in data["timelines"].values())
+    assert len(data["timelines"]) == 2 and data["messages"] > 0
+    assert [p["phase"]["name"] for p in data["analysis"]["phases"]] == ["takeoff", "mission"]
     record = read_log(log)
     assert all("MISSION" in [c.state for c in a.mc_states] for a in record.agents.values())

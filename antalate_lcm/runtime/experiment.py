@@ -18,14 +18,14 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import logging
 import os
 import sys
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from antalate_lcm.bus import Bus
 from antalate_lcm.config import Config, check_unique_agent_names, load_config
@@ -44,7 +44,8 @@ from antalate_lcm.runtime.recorder import LogRecorder
 from antalate_lcm.runtime.script import Script, load_script
 from antalate_lcm.runtime.scripted_operator import DirectionAt, Phase, ScriptedOperator
 
-log = logging.getLogger("antalate.run")
+if TYPE_CHECKING:
+    from antalate_lcm.analysis import Analysis
 
 #: Topics this process must hear or send when the agents are in other processes.
 _OPERATOR_TOPICS = ("MC_STATE", "TELEMETRY", "SWARM_OPERATOR_CMD", "SWARM_DIRECTION_CMD")
@@ -151,8 +152,56 @@ def _child_argv(exp: Experiment) -> Callable[[int, int], list[str]]:
     return lambda i, n: [*argv, "--shard", f"{i}/{n}"]
 
 
-def run(exp: Experiment, *, report: Callable[[str], None] = print) -> int:
-    """Fly the experiment, then print the operator's report and the metrics; the exit status."""
+@dataclass
+class Outcome:
+    """What an experiment gives: the exit status, the flight and its measure."""
+
+    code: int
+    log: str
+    bus: str
+    #: Messages the recorder wrote.
+    messages: int
+    #: The scripted operator's report (each agent's MC timeline, OK/FAILED and why); "" with the console.
+    report: str = ""
+    #: Each agent's MC states as the operator saw them: (s since the operator started, state name).
+    timelines: dict[str, list[tuple[float, str]]] = field(default_factory=dict)
+    #: The metrics of the recorded log (None when it holds nothing to analyse: then ``problem`` says why).
+    analysis: Analysis | None = None
+    problem: str = ""
+    #: With the console: the file that holds the nodes' log lines.
+    node_log: str = ""
+
+    def text(self) -> str:
+        """What ``antalate run`` prints."""
+        lines = [self.report] if self.report else []
+        if self.node_log:
+            lines.append(f"the nodes' log lines are in {self.node_log}")
+        lines.append(f"log: {self.log} ({self.messages} messages on bus {self.bus!r})")
+        if self.analysis is not None:
+            from antalate_lcm.analysis import format_summary
+
+            lines.append(format_summary(self.analysis))
+        else:
+            lines.append(f"no metrics: {self.problem}")
+        return "\n".join(lines)
+
+    def to_json(self) -> dict[str, Any]:
+        """What ``antalate run --json`` prints: the same, as plain JSON types."""
+        return {
+            "ok": self.code == 0,
+            "code": self.code,
+            "log": self.log,
+            "bus": self.bus,
+            "messages": self.messages,
+            "timelines": {a: [{"t": t, "state": s} for t, s in tl] for a, tl in self.timelines.items()},
+            "node_log": self.node_log or None,
+            "analysis": self.analysis.to_json() if self.analysis is not None else None,
+            "problem": self.problem or None,
+        }
+
+
+def run(exp: Experiment) -> Outcome:
+    """Fly the experiment, then measure its log (every check first: :func:`prepare`)."""
     script = exp.script or load_script(None)
     configs, bus, out = prepare(exp)
     processes = min(exp.processes, len(configs))
@@ -164,47 +213,71 @@ def run(exp: Experiment, *, report: Callable[[str], None] = print) -> int:
     nodes: list[Node] = [recorder]
     if processes == 1:
         nodes += [node for cfg in configs for node in agent_nodes(cfg, context)]
-    children_done = threading.Event()
-    stop_children = threading.Event()
-    children: threading.Thread | None = None
     # With the console, every log line goes to a file: they would tear the console's screen.
-    console_log = None if exp.headless else _temp_log()
-    if processes > 1:
-
-        def supervise() -> None:
-            try:
-                if console_log is None:
-                    run_processes(_child_argv(exp), processes, stop=stop_children)
-                else:
-                    with open(console_log, "ab") as output:
-                        run_processes(_child_argv(exp), processes, stop=stop_children, output=output)
-            finally:
-                children_done.set()
-
-        children = threading.Thread(target=supervise, name="agent-processes", daemon=True)
-        children.start()
-    code = 1
+    node_log = "" if exp.headless else _temp_log()
+    children = _AgentProcesses(exp, processes, node_log) if processes > 1 else None
+    outcome = Outcome(1, out, bus, 0, node_log=node_log)
     try:
         if exp.headless:
-            operator = _operator(configs, context, script)
-            nodes.append(operator)
-            run_until_signal(context, nodes, poll=lambda: operator.finished or children_done.is_set())
-            code = 0 if operator.phase is Phase.DONE else 1
-            if not operator.finished:
-                if children_done.is_set():
-                    operator.reason = "an agent process ended before the experiment did"
-                else:  # run_until_signal only returns early on SIGINT or SIGTERM
-                    operator.reason, code = "interrupted (SIGINT or SIGTERM)", 130
-            report(operator.report())
-        elif console_log is not None:
-            code = _run_console(configs[0], context, nodes, console_log, report)
+            _fly_scripted(configs, context, nodes, script, children, outcome)
+        else:
+            outcome.code = _run_console(configs[0], context, nodes, node_log)
     finally:
-        stop_children.set()
         if children is not None:
-            children.join()
-    report(f"log: {out} ({recorder.events} messages on bus {bus!r})")
-    _report_metrics(out, script, report)
-    return code
+            children.stop()
+    outcome.messages = recorder.events
+    _measure(outcome, script)
+    return outcome
+
+
+class _AgentProcesses:
+    """The agents' processes (``antalate agent --shard``), supervised from a thread of this one."""
+
+    def __init__(self, exp: Experiment, count: int, node_log: str) -> None:
+        self.done = threading.Event()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(
+            target=self._supervise, args=(exp, count, node_log), name="agent-processes", daemon=True
+        )
+        self._thread.start()
+
+    def _supervise(self, exp: Experiment, count: int, node_log: str) -> None:
+        try:
+            if not node_log:
+                run_processes(_child_argv(exp), count, stop=self._stop)
+            else:
+                with open(node_log, "ab") as output:
+                    run_processes(_child_argv(exp), count, stop=self._stop, output=output)
+        finally:
+            self.done.set()
+
+    def stop(self) -> None:
+        """Stop every agent process (SIGINT, each stops its nodes in order) and wait for them."""
+        self._stop.set()
+        self._thread.join()
+
+
+def _fly_scripted(
+    configs: list[Config],
+    context: Context,
+    nodes: list[Node],
+    script: Script,
+    children: _AgentProcesses | None,
+    outcome: Outcome,
+) -> None:
+    operator = _operator(configs, context, script)
+    ended = children.done if children is not None else threading.Event()
+    run_until_signal(context, [*nodes, operator], poll=lambda: operator.finished or ended.is_set())
+    outcome.code = 0 if operator.phase is Phase.DONE else 1
+    if not operator.finished:
+        if ended.is_set():
+            operator.reason = "an agent process ended before the experiment did"
+        else:  # run_until_signal only returns early on SIGINT or SIGTERM
+            operator.reason, outcome.code = "interrupted (SIGINT or SIGTERM)", 130
+    outcome.report = operator.report()
+    outcome.timelines = {
+        name: [(t, state.name) for t, state in tl.entries] for name, tl in sorted(operator.timelines.items())
+    }
 
 
 def _temp_log() -> str:
@@ -215,18 +288,13 @@ def _temp_log() -> str:
     return path
 
 
-def _run_console(
-    config: Config, context: Context, nodes: list[Node], log_path: str, report: Callable[[str], None]
-) -> int:
+def _run_console(config: Config, context: Context, nodes: list[Node], log_path: str) -> int:
     """The operator console in the foreground, the nodes on the executor behind it (as ``antalate demo``);
-    the log lines go to ``log_path`` meanwhile, named at the end."""
+    the log lines go to ``log_path`` meanwhile."""
     from antalate_lcm.runtime.interactive import _log_to_file
 
-    try:
-        with _log_to_file(log_path):
-            return _console(config, context, nodes)
-    finally:
-        report(f"the nodes' log lines are in {log_path}")
+    with _log_to_file(log_path):
+        return _console(config, context, nodes)
 
 
 def _console(config: Config, context: Context, nodes: list[Node]) -> int:
@@ -249,25 +317,25 @@ def _console(config: Config, context: Context, nodes: list[Node]) -> int:
         context.close()
 
 
-def _report_metrics(path: str, script: Script, report: Callable[[str], None]) -> None:
-    from antalate_lcm.analysis import analyze_log, format_summary
+def _measure(outcome: Outcome, script: Script) -> None:
+    from antalate_lcm.analysis import analyze_log
 
     options = script.analyze
     try:
-        result = analyze_log(
-            path,
+        outcome.analysis = analyze_log(
+            outcome.log,
             range_m=options.range_m,
             radius_below=options.radius_below,
             radius_above=options.radius_above,
         )
     except AntalateError as exc:  # a flight that never got going leaves a log with nothing to analyse
-        report(f"no metrics: {exc}")
-        return
-    report(format_summary(result))
+        outcome.problem = str(exc)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    return run(
+    import json
+
+    outcome = run(
         Experiment(
             config_path=args.config,
             agents=args.agents,
@@ -281,6 +349,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             log_level=args.log_level,
         )
     )
+    print(json.dumps(outcome.to_json(), indent=1) if args.json else outcome.text(), flush=True)
+    return outcome.code
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -307,6 +377,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--bus", help="bus to record (default: 'lan' if declared, else the default bus)")
     p.add_argument("-f", "--force", action="store_true", help="overwrite the log file if it exists")
+    p.add_argument("--json", action="store_true", help="print the outcome and every metric as JSON")
     p.add_argument(
         "--headless", action="store_true", help="the script's operator flies (no console); for scripts and CI"
     )

@@ -17,6 +17,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 Vec = tuple[float, float]
+#: Passes of separate() over the neighbours.
+_PASSES = 10
 #: m inside the dispersion area's edge where outward motion stops.
 _EDGE = 2.0
 
@@ -52,9 +54,13 @@ def separate(v: Vec, neighbours: Sequence[Neighbour], separation: float, margin:
     with a lag (tau = 0.5 s in the simulator), and both agents of a pair slow down, so a pair closes
     at most at 2 x gain x gap; with 2 x gain <= 1 / (4 tau) the gap shrinks without overshoot
     (a critically damped second-order approach), whatever the speed the rule asked for.
+
+    Each limit is applied in turn, a few passes over all (easing off one neighbour may close on
+    another); an agent squeezed between neighbours on opposite sides cannot back away from both,
+    and gets the compromise of the last pass.
     """
     vn, ve = v
-    for _ in range(2):  # a second pass: easing off one neighbour may close on another
+    for _ in range(_PASSES):
         for nb in neighbours:
             d = nb.distance
             if d < 1e-6:  # on top of each other: any way out is as good as another, pick a fixed one

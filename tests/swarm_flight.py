@@ -33,7 +33,7 @@ SPACING = 6.0
 ALTITUDE = 4.0
 SEPARATION = 3.0
 #: s in MISSION before the operator behavior orders RTL.
-MISSION = {"gathering": 12.0, "flocking": 12.0}
+MISSION = {"gathering": 14.0, "flocking": 12.0}
 BEHAVIOR_PARAMS: dict[str, dict[str, Any]] = {
     "gathering": {"separation": SEPARATION},
     "flocking": {"separation": SEPARATION, "speed": 1.5},

@@ -31,7 +31,7 @@ from antalate_lcm.hlc.machine import (
     HlcOutcome,
     HlcParams,
 )
-from antalate_lcm.hlc.safety import Filtered, SafetyLayer, describe
+from antalate_lcm.hlc.safety import Filtered, SafetyLayer, describe, new_picture
 from antalate_lcm.hlc.velocity_guard import (
     GuardDecision,
     Velocity,
@@ -49,8 +49,54 @@ _CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
 #: s between two SAFETY hlc_error_t of the same kind (separation, fence, conflict): the console and
 #: the log see every episode without a message per set-point.
 _SAFETY_REPORT_PERIOD = 1.0
+#: s between sweeps of the swarm picture (stale agents out of the grid, silent ones forgotten).
+_SWEEP_PERIOD = 0.25
 #: HLC states in which the filtered return leg flies (the machine's RTL action started it).
 _RETURNING = (HlcState.RTL, HlcState.LOW_BATTERY)
+
+
+class _SharedPicture:
+    """The `SwarmPicture` of one process (one `Context`), fed by one hidden node for all its HLCs."""
+
+    def __init__(self, config: Config, context: Context) -> None:
+        self.picture = new_picture(config)
+        self.feeder = Node(config, context, name="safety-picture")
+        self.users = 0
+
+    def join(self) -> None:
+        self.users += 1
+        if self.users > 1:
+            return
+        feeder, picture = self.feeder, self.picture
+        feeder.start()
+
+        def on_telemetry(msg: telemetry_t, m: TopicMatch) -> None:
+            picture.feed(m.fields.get("agent", ""), msg, feeder.now)
+
+        feeder.subscribe_all("TELEMETRY", on_telemetry)
+        feeder.subscribe_all(
+            "MC_STATE", lambda msg, m: picture.state(m.fields.get("agent", ""), msg.state, feeder.now)
+        )
+        feeder.create_timer(_SWEEP_PERIOD, lambda: picture.sweep(feeder.now))
+
+    def leave(self) -> bool:
+        """False once the last HLC left (the feeder is stopped)."""
+        self.users -= 1
+        if self.users > 0:
+            return True
+        self.feeder.stop()
+        return False
+
+
+#: id(Context) -> its shared picture. A context lives as long as its process's nodes.
+_PICTURES: dict[int, _SharedPicture] = {}
+
+
+def _picture(config: Config, context: Context) -> _SharedPicture:
+    shared = _PICTURES.get(id(context))
+    if shared is None:
+        shared = _PICTURES[id(context)] = _SharedPicture(config, context)
+    return shared
 
 
 def make_autopilot(config: Config, context: Context) -> Autopilot:
@@ -96,7 +142,11 @@ class HlcNode(Node):
         self._reject_log = RateLimitedLog(self.log, period=5.0)
         self._publish_state: Callable[[], None] = lambda: None
         #: The separation and fence filter (docs/safety.md), None when [safety] is not enabled.
-        self.safety = SafetyLayer(self.agent, config) if config.safety.enabled else None
+        self._shared: _SharedPicture | None = None
+        self.safety: SafetyLayer | None = None
+        if config.safety.enabled:
+            self._shared = _picture(config, context)
+            self.safety = SafetyLayer(self.agent, config, self._shared.picture)
         self._wish: tuple[Velocity, float] | None = None  # the last velocity a behavior asked for, when
         self._modified = False  # the filter changed the last set-point it saw
         self._returning = False  # flying the filtered return leg (RTL with [safety] rtl = "filtered")
@@ -113,9 +163,8 @@ class HlcNode(Node):
             self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"hlc-io-{self.agent}")
         self.subscribe("MC_STATE", self._on_mc_state)
         self.subscribe("VELOCITY_CMD", self._on_velocity)
-        if self.safety is not None:
-            self.subscribe_all("TELEMETRY", self._on_peer_telemetry)
-            self.subscribe_all("MC_STATE", self._on_peer_mc_state)
+        if self._shared is not None:
+            self._shared.join()
         self._publish_state = self.state_publisher("HLC_STATE", self._state_msg, self.config.hlc.republish_hz)
         control, telemetry = 1.0 / self.config.hlc.control_hz, 1.0 / self.config.hlc.telemetry_hz
         self.create_timer(control, self._control, first_delay=self.first_delay(control))
@@ -124,6 +173,9 @@ class HlcNode(Node):
         self._connect()
 
     def on_stop(self) -> None:
+        shared, self._shared = self._shared, None
+        if shared is not None and not shared.leave():
+            _PICTURES.pop(id(self.context), None)
         io, self._io = self._io, None
         if io is not None:
             io.shutdown(wait=False, cancel_futures=True)
@@ -218,14 +270,6 @@ class HlcNode(Node):
             msg.takeoff_altitude if math.isfinite(msg.takeoff_altitude) and msg.takeoff_altitude > 0 else 0.0
         )
         self._handle(self.machine.on_mc_state(msg.state, self.now, takeoff_altitude=alt))
-
-    def _on_peer_telemetry(self, msg: telemetry_t, match: TopicMatch) -> None:
-        if self.safety is not None and self.started:
-            self.safety.on_telemetry(match.fields.get("agent", ""), msg, self.now)
-
-    def _on_peer_mc_state(self, msg: mc_state_t, match: TopicMatch) -> None:
-        if self.safety is not None and self.started:
-            self.safety.on_mc_state(match.fields.get("agent", ""), msg.state, self.now)
 
     def _on_velocity(self, msg: velocity_cmd_t) -> None:
         if not self.started:

@@ -149,6 +149,7 @@ class HlcNode(Node):
             self.safety = SafetyLayer(self.agent, config, self._shared.picture)
         self._wish: tuple[Velocity, float] | None = None  # the last velocity a behavior asked for, when
         self._modified = False  # the filter changed the last set-point it saw
+        self._filtered_at = -math.inf  # `now` of the last set-point filtered
         self._returning = False  # flying the filtered return leg (RTL with [safety] rtl = "filtered")
         self._safety_landing = False  # the filter's policy asked the vehicle to land
         self._reported: dict[str, float] = {}  # SAFETY report kind -> `now` of the last one
@@ -358,6 +359,7 @@ class HlcNode(Node):
             return v
         self._act_on(out)
         self._modified = out.decision.modified
+        self._filtered_at = self.now
         if not out.decision.modified:
             return v
         return Velocity(out.vn, out.ve, out.vd, v.yaw_rate, Frame.NED)
@@ -389,6 +391,8 @@ class HlcNode(Node):
         if not mission_flight(state, self.mc_state):
             self._wish = None
             return
+        if not self._modified and now - self._filtered_at < 2.0 / self.config.hlc.control_hz:
+            return  # a behavior commanding at 10 Hz or more is filtered on every command already
         wish = self._wish
         fresh = wish is not None and now - wish[1] <= self.config.hlc.velocity_timeout
         v = wish[0] if wish is not None and fresh else Velocity.hover()

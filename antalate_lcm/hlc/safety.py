@@ -123,7 +123,13 @@ class SafetyLayer:
         """The peers near `here` as the filter sees them."""
         assert self._filter is not None
         out = []
-        for p in self.picture.near(self.agent, here[0], here[1], self._filter.horizon):
+        horizon = self._filter.horizon
+        north, east = here[0], here[1]
+        for p in self.picture.near(self.agent, north, east, horizon):
+            age = max(0.0, now - p.received)
+            reach = horizon + self.params.separation.peer_speed * age
+            if abs(p.north - north) > reach or abs(p.east - east) > reach:
+                continue  # in a neighbouring cell but out of reach: no constraint, no object
             out.append(
                 PeerView(
                     p.agent,
@@ -133,8 +139,8 @@ class SafetyLayer:
                     p.vn,
                     p.ve,
                     -p.vd,
-                    age=max(0.0, now - p.received),
-                    cooperative=p.in_air and p.mc_state in _FILTERING_STATES,
+                    age,
+                    p.in_air and p.mc_state in _FILTERING_STATES,
                 )
             )
         return out

@@ -17,7 +17,7 @@ import math
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
-from typing import Any
+from typing import Any, cast
 
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.autopilot import Autopilot, AutopilotError, AutopilotState, Frame, load_autopilot
@@ -153,6 +153,7 @@ class HlcNode(Node):
         self._returning = False  # flying the filtered return leg (RTL with [safety] rtl = "filtered")
         self._safety_landing = False  # the filter's policy asked the vehicle to land
         self._reported: dict[str, float] = {}  # SAFETY report kind -> `now` of the last one
+        self._fence_mirrored = False  # the fence was written into the autopilot's own (once per start)
 
     @property
     def state(self) -> HlcState:
@@ -368,6 +369,8 @@ class HlcNode(Node):
         """Every control tick: the filtered return leg, or the last wish re-filtered as peers move
         (a behavior may command at 1 Hz; the filter must not wait for it)."""
         assert self.safety is not None
+        if not self._fence_mirrored:
+            self._mirror_fence()
         state = self.machine.state
         if self._returning and state not in _RETURNING:
             self._returning = False  # the MC landed it, a pilot took it, ...
@@ -418,6 +421,41 @@ class HlcNode(Node):
         self._reported[kind] = now
         severity = Severity.ERROR if conflict else Severity.WARNING
         self._error(HlcError(ErrorCode.SAFETY, severity, describe(d)))
+
+    def _mirror_fence(self) -> None:
+        """Write the swarm fence into an ArduPilot's FENCE_* parameters and read them back, once, on the
+        ground with a position fix (antalate_lcm.autopilot.mavlink.fence_mirror): it holds if we die."""
+        safety, fence_config = self.safety, self.config.safety.fence
+        if safety is None or fence_config is None or self.autopilot.name != "mavlink" or not self.connected:
+            return
+        s = self.snapshot
+        here = safety.position(s)
+        fence = safety.params.fence
+        if here is None or fence is None or s.in_air or s.armed:
+            return
+        self._fence_mirrored = True
+        from antalate_lcm.autopilot.mavlink.fence_mirror import ParamLink, fence_parameters, mirror
+
+        wanted = fence_parameters(fence, (here[0], here[1]), fence_config.outside)
+        link = cast(ParamLink, self.autopilot)
+
+        def call() -> None:
+            problems = mirror(link, wanted)
+            if problems:
+                raise AutopilotError("; ".join(problems))
+
+        def done(ok: bool, detail: str) -> None:
+            if not self.started:
+                return
+            shown = ", ".join(f"{k} {v:g}" for k, v in wanted.items())
+            if ok:
+                text = f"safety: fence mirrored into the autopilot and read back: {shown}"
+                self._error(HlcError(ErrorCode.SAFETY, Severity.INFO, text))
+            else:
+                text = f"safety: the autopilot does not hold the fence ({detail}); wanted {shown}"
+                self._error(HlcError(ErrorCode.SAFETY, Severity.WARNING, text))
+
+        self._run(call, done)
 
     def _after_safety_action(self, ok: bool, detail: str) -> None:
         if not ok:

@@ -86,10 +86,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _registrars() -> list[Callable[[argparse._SubParsersAction[argparse.ArgumentParser]], None]]:
     """Subcommands registered by the modules that implement them (imported lazily to start fast)."""
-    from antalate_lcm.runtime import commands, router
+    from antalate_lcm import foxglove_server, mcap_record
+    from antalate_lcm.runtime import commands, experiment, router, scaffold
     from antalate_lcm.station import cli as station_cli
 
-    return [commands.register, station_cli.register, router.register]
+    return [
+        commands.register,
+        station_cli.register,
+        router.register,
+        experiment.register,
+        scaffold.register,
+        mcap_record.register,
+        foxglove_server.register,
+    ]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

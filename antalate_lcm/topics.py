@@ -124,3 +124,22 @@ def channel_regex(template: str, **known: str) -> str:
         pos = m.end()
     out.append(re.escape(template[pos:]))
     return "".join(out)
+
+
+#: Topics by default channel, fixed channels first: ``SWARM/DIRECTION_CMD`` would also match
+#: ``{agent}/DIRECTION_CMD`` with an agent called "SWARM".
+_ROUTES: list[tuple[str, re.Pattern[str]]] = [
+    (topic, re.compile(channel_regex(spec.channel)))
+    for topic, spec in sorted(TOPICS.items(), key=lambda item: "{" in item[1].channel)
+]
+
+
+def route(channel: str) -> tuple[str, str] | None:
+    """``(topic, agent)`` of a channel named by the default templates (``uav-1/TELEMETRY`` ->
+    ``("TELEMETRY", "uav-1")``; ``""`` for a swarm channel), None for any other channel: what lets a
+    log reader or a converter that has no config tell each message's type from its channel."""
+    for topic, pattern in _ROUTES:
+        m = pattern.fullmatch(channel)
+        if m is not None:
+            return topic, m.groupdict().get("agent", "")
+    return None

@@ -48,13 +48,24 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
                 "security",
                 "peers",
                 "safety",
+                "lcm_json",
+                "foxglove_msgs",
+                "json_view",
             }
         ),
     ),
     ("vehicles", frozenset({"autopilot"})),
-    ("core", frozenset({"zenoh_bus", "executor", "bus", "config", "node", "behavior", "antalate_lcm"})),
+    (
+        "core",
+        frozenset({"zenoh_bus", "executor", "bus", "config", "node", "behavior", "antalate_lcm", "mcap_log"}),
+    ),
     ("domain", frozenset({"mc", "hlc", "bma", "osc", "station", "analysis"})),
-    ("applications", frozenset({"operator_tui", "behaviors", "bridge", "spy", "types_cmd"})),
+    (
+        "applications",
+        frozenset(
+            {"operator_tui", "behaviors", "bridge", "spy", "types_cmd", "mcap_record", "foxglove_server"}
+        ),
+    ),
     ("composition root", frozenset({"runtime", "cli"})),
 ]
 LAYER_OF: dict[str, int] = {unit: i for i, (_, units) in enumerate(LAYERS) for unit in units}

@@ -12,6 +12,8 @@
 #   chromium            the web console (`antalate tui --web`) in a headless browser
 #   podman, mmdebstrap  the container image (Debian base made from the mirror, no registry)
 #   qemu-user-static    arm64 images, only where binfmt_misc can be used
+#   nodejs, npm         reference clients under node: @mcap/core reads antalate's MCAP files,
+#                       @foxglove/ws-protocol connects to `antalate foxglove` (tests/npm_tools.py)
 # Without root (and without passwordless sudo) it says what to install and carries on: the tests
 # that need a missing tool skip with the reason.
 set -u
@@ -36,6 +38,8 @@ need go golang-go
 need chromium chromium
 need podman podman
 need mmdebstrap mmdebstrap
+need node nodejs
+need npm npm
 if [ -w /proc/sys/fs/binfmt_misc/register ] && [ ! -e /proc/sys/fs/binfmt_misc/qemu-aarch64 ]; then
   want+=(qemu-user-static binfmt-support)
 fi

@@ -1,6 +1,8 @@
-"""Reading LCM log files (``lcm-logger``, ``antalate log``) into a :class:`SwarmRecord`.
+"""Reading LCM log files (``lcm-logger``, ``antalate log``) and antalate's MCAP files
+(``antalate log -o X.mcap``, ``antalate export``) into a :class:`SwarmRecord`.
 
-This is the only module of the package that touches files. Messages are recognised by their
+This is the only module of the analysis that touches files (an MCAP file is read as the LCM events
+it holds, by ``antalate_lcm.mcap_log``, so both kinds go through one decoding). Messages are recognised by their
 channel (the default channel templates of :data:`antalate_lcm.topics.TOPICS`, e.g.
 ``uav-1/TELEMETRY``) and decoded with their LCM type. A log is what a logger happened to hear, so
 nothing in it is trusted: an event that does not decode, or a channel that is not antalate's, is
@@ -9,7 +11,6 @@ counted and skipped, never fatal. Only a file that is not an LCM log at all is a
 
 from __future__ import annotations
 
-import re
 import struct
 from pathlib import Path
 from typing import Any
@@ -19,29 +20,16 @@ import lcm
 from antalate_lcm.analysis.model import DirectionCommand, SwarmRecord, TelemetrySample
 from antalate_lcm.bus import captured_stderr
 from antalate_lcm.errors import AntalateError
+from antalate_lcm.mcap_log import McapEvents, is_mcap, read_events
 from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, telemetry_t
-from antalate_lcm.topics import TOPICS, channel_regex
+from antalate_lcm.topics import TOPICS, route
 from antalate_lcm.vocabulary import HlcState, McState, name_of
 
 #: Every LCM log event starts with this sync word (big-endian), so a file that does not is no log.
 LOG_SYNC_WORD = 0xEDA1DA01
 
-#: Topics the analysis decodes; the broadcast channel is tried first because ``SWARM/DIRECTION_CMD``
-#: would also match ``{agent}/DIRECTION_CMD`` with an agent called "SWARM".
+#: Topics the analysis decodes.
 _USED = ("SWARM_DIRECTION_CMD", "MC_STATE", "HLC_STATE", "TELEMETRY", "DIRECTION_CMD")
-_ROUTES: list[tuple[str, re.Pattern[str]]] = [
-    (topic, re.compile(channel_regex(TOPICS[topic].channel)))
-    for topic in (*_USED, *(t for t in TOPICS if t not in _USED))
-]
-
-
-def _route(channel: str) -> tuple[str, str] | None:
-    """``(topic, agent)`` for an antalate channel, None for any other channel."""
-    for topic, pattern in _ROUTES:
-        m = pattern.fullmatch(channel)
-        if m is not None:
-            return topic, m.groupdict().get("agent", "")
-    return None
 
 
 def check_log_file(path: str | Path) -> Path:
@@ -68,16 +56,17 @@ def check_log_file(path: str | Path) -> Path:
 
 
 def read_log(path: str | Path) -> SwarmRecord:
-    """Decode every antalate state, telemetry and direction message of an LCM log.
+    """Decode every antalate state, telemetry and direction message of an LCM log or an MCAP file.
 
-    Raises :class:`AntalateError` for a missing, unreadable or non-LCM file. A log that ends in
+    Raises :class:`AntalateError` for a missing, unreadable or non-log file. A log that ends in
     garbage (a logger killed mid-write, a damaged copy) yields what precedes the damage, with
     :attr:`SwarmRecord.truncated` saying where reading stopped.
     """
+    if is_mcap(path):
+        return _read_mcap(Path(path))
     p = check_log_file(path)
     record = SwarmRecord(path=str(p))
-    routes: dict[str, tuple[str, str] | None] = {}
-    last_direction: dict[str, tuple[bool, float, float, str]] = {}
+    reader = _Reader(record)
     try:
         log = lcm.EventLog(str(p), "r")
     except (OSError, RuntimeError, ValueError) as exc:
@@ -90,25 +79,10 @@ def read_log(path: str | Path) -> SwarmRecord:
                 event = log.read_next_event()
                 if event is None:
                     break
-                if record.events == 0:
-                    record.start_utime = int(event.timestamp)
-                record.events += 1
-                t = (int(event.timestamp) - record.start_utime) / 1e6
-                record.duration = max(record.duration, t)
                 channel = event.channel
                 if isinstance(channel, bytes):
                     channel = channel.decode("utf-8", "replace")
-                if channel not in routes:
-                    routes[channel] = _route(channel)
-                route = routes[channel]
-                if route is None and channel == "LCM_SELF_TEST":
-                    # Every LCM instance multicasts one when it starts: the library's, not garbage.
-                    record.unused[channel] = record.unused.get(channel, 0) + 1
-                    continue
-                if route is None:
-                    record.unknown[channel] = record.unknown.get(channel, 0) + 1
-                    continue
-                _decode_into(record, route, channel, t, event.data, last_direction)
+                reader.add(int(event.timestamp), channel, event.data)
             position = log.tell()
         finally:
             log.close()
@@ -118,6 +92,51 @@ def read_log(path: str | Path) -> SwarmRecord:
             "(a truncated or damaged log)"
         )
     return record
+
+
+def _read_mcap(p: Path) -> SwarmRecord:
+    """An MCAP file antalate wrote (``antalate log -o X.mcap``, ``antalate export``): its bus
+    messages are read back as the LCM events they were, then decoded as any log's."""
+    record = SwarmRecord(path=str(p))
+    reader = _Reader(record)
+    report = McapEvents()
+    try:
+        for utime, channel, data in read_events(p, report):
+            reader.add(utime, channel, data)
+    except OSError as exc:
+        raise AntalateError(f"{p}: cannot be read: {exc.strerror or exc}") from None
+    for channel, n in report.skipped_json.items():
+        record.undecodable[channel] = record.undecodable.get(channel, 0) + n
+    record.truncated = report.truncated
+    return record
+
+
+class _Reader:
+    """One log's events into a record, whatever file they came from."""
+
+    def __init__(self, record: SwarmRecord) -> None:
+        self.record = record
+        self.routes: dict[str, tuple[str, str] | None] = {}
+        self.last_direction: dict[str, tuple[bool, float, float, str]] = {}
+
+    def add(self, utime: int, channel: str, data: bytes) -> None:
+        record = self.record
+        if record.events == 0:
+            record.start_utime = utime
+        record.events += 1
+        t = (utime - record.start_utime) / 1e6
+        record.duration = max(record.duration, t)
+        if channel not in self.routes:
+            self.routes[channel] = route(channel)
+        routed = self.routes[channel]
+        if routed is None and channel == "LCM_SELF_TEST":
+            # Every LCM instance multicasts one when it starts: the library's, not garbage.
+            record.unused[channel] = record.unused.get(channel, 0) + 1
+            return
+        if routed is None:
+            record.unknown[channel] = record.unknown.get(channel, 0) + 1
+            return
+        _decode_into(record, routed, channel, t, data, self.last_direction)
 
 
 def _decode_into(
@@ -161,6 +180,8 @@ def _decode_into(
                 float(msg.heading),
                 bool(msg.in_air),
                 float(msg.battery),
+                float(msg.vn),
+                float(msg.ve),
             )
         )
     elif isinstance(msg, mc_state_t):

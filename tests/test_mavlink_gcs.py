@@ -242,6 +242,7 @@ def test_mavproxy_sees_five_vehicles_and_flies_them_only_when_commands_are_on(
         assert wait_for(lambda: len(mavproxy.vehicles()) == AGENTS, timeout=30), mavproxy.lines[-20:]
         assert wait_for(lambda: len(sysids) == AGENTS, timeout=10)
         assert mavproxy.vehicles() == set(sysids.values()) == set(range(101, 101 + AGENTS))
+        refused_at = probe.mark()
         mavproxy.send("vehicle 0")
         mavproxy.send("takeoff 5")
         assert wait_for(lambda: mavproxy.matching(r"COMMAND_ACK: NAV_TAKEOFF: DENIED"), timeout=15), (
@@ -252,8 +253,16 @@ def test_mavproxy_sees_five_vehicles_and_flies_them_only_when_commands_are_on(
         heard = json.loads(forwarded.communicate(timeout=30)[0])
         assert set(heard) == {str(i) for i in sysids.values()}
         for name in names:
-            t = probe.wait(f"{name}/TELEMETRY", "telemetry_t", timeout=10)
-            assert t is not None and not t["in_air"]  # refused: still on the ground
+            # refused: two seconds of telemetry after the takeoff, every one on the ground, MC in STANDBY
+            telemetry = f"{name}/TELEMETRY"
+            assert wait_for(
+                lambda ch=telemetry: len(probe.history(ch, "telemetry_t", since=refused_at)) >= 20, timeout=15
+            )
+            since = probe.history(telemetry, "telemetry_t", since=refused_at)
+            assert not any(t["in_air"] or t["armed"] for t in since), name
+            states = {m["state"] for m in probe.history(f"{name}/MC_STATE", "mc_state_t", since=refused_at)}
+            assert states == {int(McState.STANDBY)}, (name, states)
+            t = since[-1]
             lat, lon = heard[str(sysids[name])]
             assert (lat, lon) == (round(t["lat"] * 1e7), round(t["lon"] * 1e7)), name
         # garbage at the endpoint is dropped; the server keeps serving

@@ -18,8 +18,10 @@ from urllib.parse import urlsplit
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from antalate_lcm.errors import ConfigError
+from antalate_lcm.geo import FlatFrame
 from antalate_lcm.lcm_url import EXAMPLES as LCM_URL_EXAMPLES
 from antalate_lcm.lcm_url import bus_url_problem
+from antalate_lcm.safety.geofence import Geofence
 from antalate_lcm.strict import StrictError, describe, dotted, find_datetime
 from antalate_lcm.topics import MESSAGE_TYPES, TOPICS, TopicSpec
 
@@ -167,6 +169,86 @@ class HlcConfig(_Section):
         return data
 
 
+class FenceConfig(_Section):
+    """The swarm's geofence ([safety.fence], docs/safety.md): a polygon, a floor and a ceiling."""
+
+    #: Vertices as [north, east] metres from [safety] origin (needs `origin`)...
+    polygon: list[
+        Annotated[list[Annotated[float, Field(allow_inf_nan=False)]], Field(min_length=2, max_length=2)]
+    ] = Field(default_factory=list)
+    #: ... or as [lat, lon] degrees WGS84 (one of the two).
+    polygon_wgs84: list[
+        Annotated[list[Annotated[float, Field(allow_inf_nan=False)]], Field(min_length=2, max_length=2)]
+    ] = Field(default_factory=list)
+    floor: NonNegative = 0.0  # m above home
+    ceiling: Positive = 120.0  # m above home
+    margin: NonNegative = 2.0  # m kept from every edge, the floor and the ceiling
+    #: A vehicle found outside: fly back in ("return"), "land" or "hover".
+    outside: Literal["return", "land", "hover"] = "return"
+
+    @model_validator(mode="after")
+    def _one_polygon(self) -> FenceConfig:
+        if bool(self.polygon) == bool(self.polygon_wgs84):
+            raise _KeyedError(
+                "safety.fence.polygon", "either polygon ([north, east] m) or polygon_wgs84, not both"
+            )
+        for lat, _lon in self.polygon_wgs84:
+            if not -90.0 <= lat <= 90.0:
+                raise _KeyedError("safety.fence.polygon_wgs84", f"latitudes in [-90, 90], got {lat!r}")
+        try:
+            self.geofence(self.polygon_wgs84[0] if self.polygon_wgs84 else [0.0, 0.0])
+        except ValueError as exc:
+            key = "safety.fence.polygon_wgs84" if self.polygon_wgs84 else "safety.fence.polygon"
+            raise _KeyedError(key, str(exc), plain=True) from None
+        return self
+
+    def geofence(self, origin: Sequence[float]) -> Geofence:
+        """The fence in the local frame at ``origin`` ([lat, lon]); ValueError when it is not a simple polygon."""
+        if self.polygon:
+            points = tuple((float(n), float(e)) for n, e in self.polygon)
+        else:
+            frame = FlatFrame(float(origin[0]), float(origin[1]))
+            points = tuple(frame.to_ne(lat, lon) for lat, lon in self.polygon_wgs84)
+        return Geofence(points, self.floor, self.ceiling, self.margin)
+
+
+class SafetyConfig(_Section):
+    """Separation and geofence below every behavior ([safety], docs/safety.md). Empty values take
+    the vehicle's defaults (`antalate_lcm.hlc.safety_params`)."""
+
+    #: Off by default: every HLC then listens to the whole swarm's telemetry (docs/safety.md, cost).
+    enabled: bool = False
+    radius: Annotated[float | None, Field(gt=0, allow_inf_nan=False)] = None  # m, horizontal
+    vertical: Annotated[float | None, Field(gt=0, allow_inf_nan=False)] = None  # m, half-height
+    gamma: Positive = 2.0  # 1/s, the barrier's rate
+    #: s, the vehicle's velocity response time constant (the positions' lead); default per vehicle.
+    lead: Annotated[float | None, Field(ge=0, allow_inf_nan=False)] = None
+    #: m/s, the fastest a peer may fly (stale peers' growing balls); default hlc.max_horizontal_speed.
+    peer_speed: Annotated[float | None, Field(gt=0, allow_inf_nan=False)] = None
+    stale_after: Positive = 1.0  # s: an older peer report is stale
+    forget_after: Positive = 30.0  # s: an older one is dropped
+    #: Fewer fresh peers than this is "no peer information" (0: a lone agent is fine).
+    min_peers: Annotated[int, Field(ge=0)] = 0
+    no_peers: Literal["hover", "continue", "land"] = "hover"
+    #: [lat, lon] of the local frame (a local fence needs it); default: the vehicle's first position.
+    origin: list[Annotated[float, Field(allow_inf_nan=False)]] = Field(default_factory=list)
+    #: RTL: "filtered" (the HLC flies home through the filter, then lands) or "autopilot" (the
+    #: vehicle's own RTL: not deconflicted, docs/safety.md).
+    rtl: Literal["filtered", "autopilot"] = "filtered"
+    rtl_speed: Positive = 3.0  # m/s, the filtered return leg
+    fence: FenceConfig | None = None
+
+    @model_validator(mode="after")
+    def _checks(self) -> SafetyConfig:
+        if self.origin and (len(self.origin) != 2 or not -90.0 <= self.origin[0] <= 90.0):
+            raise _KeyedError("safety.origin", f"[lat, lon] in degrees, got {self.origin!r}")
+        if self.fence is not None and self.fence.polygon and not self.origin:
+            raise _KeyedError("safety.origin", "[lat, lon]: a fence in [north, east] metres needs its origin")
+        if self.forget_after < self.stale_after:
+            raise _KeyedError("safety.forget_after", f"at least stale_after ({self.stale_after:g} s)")
+        return self
+
+
 class OscConfig(_Section):
     enabled: bool = False
     #: Base URL of the station, e.g. "http://127.0.0.1:8080" (the OSC POSTs to {server}/api/report).
@@ -249,6 +331,7 @@ class Config(BaseModel):
     osc: OscConfig = Field(default_factory=OscConfig)
     bma: list[BmaConfig] = Field(default_factory=list)
     security: SecurityConfig = Field(default_factory=SecurityConfig)
+    safety: SafetyConfig = Field(default_factory=SafetyConfig)
     #: Path of the file this came from (for messages); not a TOML key.
     source: str = Field(default="<defaults>", exclude=True)
 
@@ -456,9 +539,11 @@ __all__ = [
     "BmaConfig",
     "Config",
     "ConfigError",
+    "FenceConfig",
     "HlcConfig",
     "McConfig",
     "OscConfig",
+    "SafetyConfig",
     "SecurityConfig",
     "TopicBinding",
     "TopicsConfig",

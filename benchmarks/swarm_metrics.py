@@ -92,11 +92,12 @@ def main() -> int:
         logger.wait(10)
     print(report)
     print(f"flight: {time.monotonic() - started:.0f} s; log: {log} ({log.stat().st_size / 1e6:.1f} MB)\n")
+    result = analyze_log(log)
     if args.plot:
-        _, result = plot_log(log, args.plot)
+        # This benchmark's own goal (the plot draws none unless asked): twice the starting radius.
+        goals = (MAX_RADIUS_RATIO * result.start_radius,) if result.start_radius else ()
+        _, result = plot_log(log, args.plot, goals=goals)
         print(f"plot: {args.plot}")
-    else:
-        result = analyze_log(log)
     print(format_summary(result))
     ratio = result.cohesion_ratio
     error = result.drift[0].error if result.drift else None

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from antalate_lcm.geo import FlatFrame, wrap_360
+from antalate_lcm.hlc.machine import ErrorCode
 from antalate_lcm.vocabulary import HlcState, McState, Severity, name_of
 
 #: The topics the model understands (config topic names).
@@ -130,6 +131,9 @@ class AgentView:
     arbiters: dict[str, ArbiterView] = field(default_factory=dict)
     last_error: ErrorReport | None = None
     errors: int = 0
+    #: The latest SAFETY report (the filter modified a command: by whom, the nearest peer and its
+    #: distance), kept apart so a later error of another kind does not hide it (docs/safety.md).
+    last_safety: ErrorReport | None = None
     stale: bool = False
     #: Last time each topic was heard from this agent (so the detail view can say *what* went quiet).
     heard: dict[str, float] = field(default_factory=dict)
@@ -248,6 +252,8 @@ class SwarmModel:
         except ValueError:
             sev = Severity.ERROR
         view.last_error = ErrorReport(msg.code, sev, msg.text, wall, now)
+        if msg.code == ErrorCode.SAFETY:
+            view.last_safety = view.last_error
         view.errors += 1
         self._event(wall, view.name, EventKind.ERROR, f"[{sev.name} {msg.code}] {msg.text}", sev)
 

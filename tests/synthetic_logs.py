@@ -24,11 +24,22 @@ class LogWriter:
     def add(self, t: float, channel: str, data: bytes) -> None:
         self.events.append((t, channel, data))
 
-    def telemetry(self, t: float, agent: str, north: float, east: float, *, in_air: bool = True) -> None:
+    def telemetry(
+        self,
+        t: float,
+        agent: str,
+        north: float,
+        east: float,
+        *,
+        in_air: bool = True,
+        vn: float = 0.0,
+        ve: float = 0.0,
+    ) -> None:
         msg = telemetry_t()
         msg.header.agent = agent
         msg.lat, msg.lon = offset(LAT0, LON0, north, east)
         msg.alt, msg.in_air, msg.mode = 5.0, in_air, "GUIDED"
+        msg.vn, msg.ve = vn, ve
         self.add(t, f"{agent}/TELEMETRY", msg.encode())
 
     def mc(self, t: float, agent: str, state: int) -> None:

@@ -81,11 +81,15 @@ def test_arm_is_refused_by_a_locked_supervisor_with_what_to_do(rig: Callable[...
     assert emu.snapshot().z == 0.0
 
 
-def test_arm_is_refused_on_the_firmware_low_battery_state(rig: Callable[..., Any]) -> None:
+def test_arm_is_refused_below_the_low_voltage_before_the_firmware_says_low_power(
+    rig: Callable[..., Any],
+) -> None:
+    """pm_stm32f4.c says lowPower only after 5 s below 3.2 V: the adapter refuses at once by pm.vbat.
+    (It used to wait for pm.state, which the emulator set at once; the firmware does not.)"""
     emu, ap = rig({"voltage": 3.1})
     assert ap.arm() is False
-    assert "battery low" in ap.last_refusal and "lowPower" in ap.last_refusal
-    assert ap.state().battery_warning
+    assert "battery low" in ap.last_refusal and "3.10 V <= low_voltage 3.2 V" in ap.last_refusal
+    assert emu.pm_state == 0 and not ap.state().battery_warning  # the firmware's verdict is 5 s away
 
 
 def test_ned_velocity_moves_the_vehicle_north_at_the_commanded_speed(rig: Callable[..., Any]) -> None:
@@ -136,8 +140,10 @@ def test_rtl_flies_to_the_takeoff_point_and_lands_disarmed(rig: Callable[..., An
     assert ap.state().mode == "RTL"
     assert wait_for(lambda: ap.state().landed, timeout=15.0)
     snap = emu.snapshot()
-    assert math.hypot(snap.x - 1.0, snap.y - 2.0) <= 0.15
-    assert not snap.armed and snap.z == 0.0
+    assert math.hypot(snap.x - 1.0, snap.y - 2.0) <= 0.15 and snap.z == 0.0 and not snap.flying
+    # the adapter disarmed it; a CF2.x arms itself again (auto-arming), which the HLC must not see
+    assert wait_for(lambda: emu.snapshot().armed)
+    assert not ap.state().armed and ap.state().landed
 
 
 def test_link_loss_holds_then_lands_blindly_and_says_so(rig: Callable[..., Any]) -> None:
@@ -227,3 +233,135 @@ def test_a_failed_reconnection_never_drops_a_flying_crazyflie(rig: Callable[...,
     emu.set_silent(False)  # the radio is back as it gives up: its close reaches the vehicle
     assert wait_for(lambda: ap.reconnects >= 1 and ap.state().connected, timeout=10.0)
     assert emu.snapshot().flying and emu.snapshot().z > 0.9
+
+
+# --------------------------------------------------------------------------- the firmware's own rules
+# (crazyflie-firmware 2026.08, cflib 0.1.34; tests/emulators/crazyflie_emulator.py cites each file)
+
+
+def test_a_lost_command_after_notify_setpoint_stop_never_drops_the_crazyflie(rig: Callable[..., Any]) -> None:
+    """PR #1298: notify-stop with no high-level command after it is motors off. The adapter sends
+    command, notify, command, and resends until the firmware answers: one lost command changes nothing."""
+    emu, ap = rig()
+    airborne(emu, ap)
+    for _ in range(6):
+        ap.set_velocity(0.5, 0.0, 0.0, 0.0, Frame.NED)
+        time.sleep(0.05)
+    assert emu.snapshot().streaming
+    emu.drop_next(8)  # the first high-level packet of the hand-back is lost
+    ap.set_velocity(0.0, 0.0, 0.0, 0.0, Frame.NED)  # zero velocity: hold
+    assert wait_for(lambda: not emu.snapshot().streaming)
+    time.sleep(2.5)  # past the watchdog and any fall
+    snap = emu.snapshot()
+    assert snap.flying and snap.z > 0.9 and emu.falls == 0 and not snap.locked
+    assert emu.notify_stops >= 1 and ap.state().mode == "HL_HOLD"
+
+
+def test_a_stale_link_hold_is_resent_until_it_arrives(rig: Callable[..., Any]) -> None:
+    """The link goes silent mid-stream: the hold (command, notify, command) is lost, the firmware's
+    watchdog levels the vehicle and keeps its climb (supervisor.c); once the link is back within the
+    2 s cut the unanswered hold is resent, and the Crazyflie holds instead of falling."""
+    emu, ap = rig(link_stale_after=0.3)
+    airborne(emu, ap)
+    for _ in range(6):
+        ap.set_velocity(0.0, 0.0, -0.3, 0.0, Frame.NED)  # climbing 0.3 m/s
+        time.sleep(0.05)
+    emu.set_silent(True)
+    t0 = time.monotonic()
+    assert wait_for(lambda: ap.state().mode == "HL_HOLD", timeout=2.0)  # decided, sent into the void
+    time.sleep(max(0.0, t0 + 1.0 - time.monotonic()))
+    z_silent = emu.snapshot().z
+    assert emu.snapshot().vz > 0.2  # the watchdog's level-out: the climb goes on
+    emu.set_silent(False)  # 1 s in: before the 2 s cut
+    assert wait_for(lambda: emu.snapshot().hl_kind in ("goto", "hold"), timeout=1.5)
+    time.sleep(2.0)
+    snap = emu.snapshot()
+    assert snap.flying and not snap.locked and emu.falls == 0
+    assert snap.z >= z_silent and abs(snap.vz) < 0.05  # held where it got to, no longer climbing
+
+
+def test_cflib_closing_the_link_in_a_hover_still_lands_blindly_once_reopened(rig: Callable[..., Any]) -> None:
+    """cflib's radio driver closes the link after 100 lost packets (radiodriver.py). The adapter's loop
+    keeps its timers while it reopens the link: link_loss_land decides the landing (the operator sees
+    LANDING, "link lost"), and it goes out on the new link; the firmware lands (answered 0)."""
+    emu, ap = rig(connect_timeout=1.5, link_loss_land=1.0)
+    airborne(emu, ap)
+    emu.set_silent(True)
+    ap._cf._link_error_cb("Too many packets lost")  # what cflib's RadioDriver calls when it gives up
+    assert wait_for(lambda: not ap.state().connected)
+    assert wait_for(lambda: ap.state().flight_mode.name == "LANDING", timeout=3.0)
+    assert "link lost" in ap.state().failsafe
+    assert emu.snapshot().flying  # hovering under the high-level commander meanwhile
+    emu.set_silent(False)
+    assert wait_for(lambda: ap.state().connected, timeout=10.0)
+    assert wait_for(lambda: ("land", 0) in emu.hl_answers, timeout=3.0)  # sent on the new link
+    assert wait_for(lambda: ap.state().landed, timeout=10.0)
+    assert emu.falls == 0
+
+
+def test_cflib_closing_the_link_mid_stream_turns_the_stream_into_a_hold(rig: Callable[..., Any]) -> None:
+    """The same closed link while streaming: the adapter turns the stream into a hold (HL_HOLD) and
+    then a blind landing at once, to be sent when the link reopens; nothing gets through meanwhile,
+    so the firmware's watchdog levels the vehicle at 0.5 s and cuts it at 2 s (supervisor.c). On the
+    new link the adapter reads it down and locked and says so (mode LOCKED)."""
+    emu, ap = rig(connect_timeout=1.5, link_loss_land=2.5)
+    airborne(emu, ap)
+    for _ in range(6):
+        ap.set_velocity(0.3, 0.0, 0.0, 0.0, Frame.NED)
+        time.sleep(0.05)
+    emu.set_silent(True)
+    ap._cf._link_error_cb("Too many packets lost")  # (cflib's UDP close takes ~1 s of this)
+    assert ap.state().mode == "HL_HOLD" and not ap.state().connected
+    assert wait_for(lambda: ap.state().flight_mode.name == "LANDING", timeout=3.0)
+    emu.set_silent(False)
+    assert wait_for(lambda: ap.state().connected, timeout=10.0)
+    assert emu.snapshot().locked and emu.falls == 1  # the outage outlasted the watchdog's 2 s
+    # on the new link the adapter sees it down and locked: nothing more is sent, the HLC is told
+    assert wait_for(lambda: ap.state().mode == "LOCKED" and ap.state().landed, timeout=5.0)
+
+
+def test_the_takeoff_needs_arm_although_the_crazyflie_armed_itself(rig: Callable[..., Any]) -> None:
+    """MOTORS_REQUIRE_ARMING=n: the supervisor arms at power-on and after every landing. The HLC sees
+    disarmed until arm(), and a take-off without it is refused."""
+    emu, ap = rig()
+    assert wait_for(lambda: emu.snapshot().armed)  # armed itself
+    time.sleep(0.3)  # several log periods: the adapter has read the supervisor's "armed" bit
+    assert not ap.state().armed
+    with pytest.raises(AutopilotError, match="not armed"):
+        ap.takeoff(1.0)
+    assert emu.snapshot().z == 0.0 and emu.hl_commands == []
+    airborne(emu, ap, 0.5)
+    ap.land()
+    assert wait_for(lambda: ap.state().landed, timeout=10.0)
+    assert wait_for(lambda: emu.snapshot().armed)  # re-armed itself after the adapter's disarm
+    time.sleep(0.3)
+    assert not ap.state().armed
+    with pytest.raises(AutopilotError, match="not armed"):
+        ap.takeoff(1.0)
+
+
+def test_a_critical_battery_lands_before_the_firmware_powers_off(rig: Callable[..., Any]) -> None:
+    """pm_stm32f4.c: 5 s below 3.0 V in lowPower powers an auto-shutdown build off (it falls). The
+    adapter lands where it is once pm.vbat stays below critical_voltage, well inside those 5 s."""
+    emu, ap = rig({"auto_shutdown": True}, land_speed=0.5)
+    airborne(emu, ap, 0.8)
+    emu.set_battery(3.1)
+    time.sleep(0.5)
+    assert ap.state().in_air and ap.state().flight_mode.name != "LANDING"  # low, not critical
+    emu.set_battery(2.95)
+    t0 = time.monotonic()
+    assert wait_for(lambda: ap.state().flight_mode.name == "LANDING", timeout=2.0)
+    assert "battery critical" in ap.state().failsafe
+    assert wait_for(lambda: not emu.snapshot().flying, timeout=5.0)
+    assert time.monotonic() - t0 < 4.5 and emu.falls == 0  # down by landing, before any shutdown
+
+
+def test_a_takeoff_the_firmware_refuses_is_reported_with_its_reason(rig: Callable[..., Any]) -> None:
+    """stabilizer.c crtpCommanderBlock(!canFly): EBUSY, answered at once instead of a silent timeout."""
+    emu, ap = rig(takeoff_confirm=5.0)
+    assert ap.arm()
+    emu.set_locked(True)  # locked after the arm: the supervisor cannot fly
+    t0 = time.monotonic()
+    with pytest.raises(AutopilotError, match="EBUSY"):
+        ap.takeoff(1.0)
+    assert time.monotonic() - t0 < 2.0 and emu.snapshot().z == 0.0

@@ -1,5 +1,7 @@
 """The Crazyflie emulator driven by cflib itself: connection, TOCs and their CRC, log streaming, params,
-the commanders' priority rule, the commander watchdog, the supervisor and the battery."""
+the commanders' priority rule (PR #1298: notify-stop alone stops the motors), the high-level
+commander's answers and refusals, the commander watchdog's level-out and cut, auto-arming, and the
+battery's low-power and shutdown timers -- each as the firmware source says (2026.08)."""
 
 from __future__ import annotations
 
@@ -123,45 +125,125 @@ def test_param_write_is_echoed_and_applied(emu: CrazyflieEmulator) -> None:
         close(scf)
 
 
-def test_high_level_commands_wait_for_notify_setpoint_stop_after_streaming(emu: CrazyflieEmulator) -> None:
+def airborne(emu: CrazyflieEmulator, cf: Crazyflie, height: float = 1.0) -> None:
+    """Take off with cflib (the emulator armed itself: auto-arming) and wait for the hover."""
+    assert wait_for(lambda: emu.snapshot().armed)
+    cf.high_level_commander.takeoff(height, 1.0)
+    assert wait_for(lambda: emu.snapshot().z > height - 0.05 and emu.snapshot().hl_kind == "hold")
+
+
+def test_a_streamed_setpoint_outranks_the_planner_until_notify_setpoint_stop(emu: CrazyflieEmulator) -> None:
+    """commander.c: the stream has priority; a land sent meanwhile is planned but not flown until the
+    notification relaxes the priority; a second land while landing is refused (planner.c)."""
     scf = connect(emu)
     cf = scf.cf
     try:
-        cf.supervisor.send_arming_request(True)
-        assert wait_for(lambda: emu.snapshot().armed)
-        cf.high_level_commander.takeoff(1.0, 1.0)
-        assert wait_for(lambda: emu.snapshot().z > 0.95)
+        airborne(emu, cf)
         for _ in range(10):
             cf.commander.send_velocity_world_setpoint(0.5, 0.0, 0.0, 0.0)
             time.sleep(0.05)
         assert emu.snapshot().streaming and emu.snapshot().vx > 0.3
-        cf.high_level_commander.land(0.0, 1.0)  # ignored: a streamed set-point has priority
-        time.sleep(0.3)
-        assert emu.snapshot().hl_kind == ""
+        cf.high_level_commander.land(0.0, 1.0)  # planned, answered 0, but the stream still flies
+        assert wait_for(lambda: ("land", 0) in emu.hl_answers)
+        snap = emu.snapshot()
+        assert snap.streaming and snap.z > 0.95
         cf.commander.send_notify_setpoint_stop()
-        cf.high_level_commander.land(0.0, 1.0)
+        cf.high_level_commander.land(0.0, 1.0)  # already landing: refused, and answered so
+        assert wait_for(lambda: emu.hl_answers[-1] == ("land", 1))
         assert wait_for(lambda: not emu.snapshot().flying)
-        assert emu.notify_stops == 1
+        assert emu.notify_stops == 1 and emu.falls == 0
     finally:
         close(scf)
 
 
-def test_watchdog_stops_the_motors_two_seconds_after_the_last_setpoint(emu: CrazyflieEmulator) -> None:
+def test_notify_setpoint_stop_alone_stops_the_motors(emu: CrazyflieEmulator) -> None:
+    """PR #1298: the stream stopped the planner, so after the notification it sends the null set-point:
+    a Crazyflie that gets no high-level command next falls; one that does, holds where it is."""
     scf = connect(emu)
     cf = scf.cf
     try:
-        cf.supervisor.send_arming_request(True)
-        assert wait_for(lambda: emu.snapshot().armed)
-        cf.commander.send_hover_setpoint(0.0, 0.0, 0.0, 0.8)
-        assert wait_for(lambda: emu.snapshot().z > 0.05)
-        assert wait_for(lambda: not emu.snapshot().flying, timeout=5.0)
+        airborne(emu, cf)
+        for _ in range(5):
+            cf.commander.send_hover_setpoint(0.0, 0.0, 0.0, 1.0)
+            time.sleep(0.05)
+        cf.commander.send_notify_setpoint_stop()
+        cf.high_level_commander.go_to(0.0, 0.0, 0.0, 0.0, 0.5, relative=True)
+        time.sleep(0.5)
+        assert emu.snapshot().flying and emu.snapshot().z > 0.9 and emu.falls == 0
+        cf.commander.send_hover_setpoint(0.0, 0.0, 0.0, 1.0)
+        time.sleep(0.1)
+        cf.commander.send_notify_setpoint_stop()  # and no high-level command
+        assert wait_for(lambda: emu.snapshot().z == 0.0, timeout=3.0)
+        assert emu.falls == 1 and not emu.snapshot().flying and not emu.snapshot().locked
+    finally:
+        close(scf)
+
+
+def test_every_high_level_packet_is_answered_and_the_planner_refuses_a_second_takeoff(
+    emu: CrazyflieEmulator,
+) -> None:
+    scf = connect(emu)
+    cf = scf.cf
+    answers: list[list[int]] = []
+    cf.add_port_callback(8, lambda pk: answers.append(list(pk.data)))
+    try:
+        airborne(emu, cf)
+        cf.high_level_commander.takeoff(1.5, 1.0)  # flying a trajectory: plan_takeoff refuses
+        assert wait_for(lambda: len(answers) >= 2)
+        assert answers[0][0] == 7 and answers[0][3] == 0 and answers[1][0] == 7 and answers[1][3] == 1
+        time.sleep(0.5)
+        assert emu.snapshot().z == pytest.approx(1.0, abs=0.02)
+        cf.high_level_commander.go_to(0.5, 0.0, 1.0, 0.0, 1.0)
+        assert wait_for(lambda: len(answers) >= 3 and answers[2][0] == 12 and answers[2][3] == 0)
+    finally:
+        close(scf)
+
+
+def test_the_watchdog_levels_out_but_keeps_the_vertical_velocity_then_cuts_at_two_seconds(
+    emu: CrazyflieEmulator,
+) -> None:
+    """supervisor.c: after 0.5 s WarningLevelOut (x/y level, z as set: the climb goes on), after 2 s the
+    motors stop and the supervisor locks."""
+    scf = connect(emu)
+    cf = scf.cf
+    try:
+        airborne(emu, cf)
+        for _ in range(10):
+            cf.commander.send_velocity_world_setpoint(0.4, 0.0, 0.3, 0.0)
+            time.sleep(0.05)
+        last = time.monotonic()
+        time.sleep(1.0)  # in WarningLevelOut
         snap = emu.snapshot()
-        assert snap.locked and snap.z == 0.0
+        assert snap.flying and snap.vz == pytest.approx(0.3, abs=0.03)  # still climbing
+        assert snap.vx == pytest.approx(0.4, abs=0.05)  # level: coasting, not braked
+        z_at_1s = snap.z
+        time.sleep(max(0.0, last + 1.7 - time.monotonic()))
+        assert emu.snapshot().z > z_at_1s + 0.1
+        assert wait_for(lambda: not emu.snapshot().flying, timeout=2.0)
+        assert time.monotonic() - last >= 1.9  # `last` is 50 ms after the last set-point
+        assert emu.snapshot().locked
+        assert wait_for(lambda: emu.snapshot().z == 0.0, timeout=2.0) and emu.falls == 1
         got, _ = stream(scf, ["supervisor.info"])
         assert wait_for(lambda: bool(got))
         assert got[-1][1]["supervisor.info"] >> 6 & 1  # locked bit
     finally:
         close(scf)
+
+
+def test_auto_arming_arms_at_power_on_and_after_every_disarm(emu: CrazyflieEmulator) -> None:
+    """Kconfig MOTORS_REQUIRE_ARMING=n (a CF2.x's default): the supervisor arms itself."""
+    scf = connect(emu)
+    cf = scf.cf
+    try:
+        assert wait_for(lambda: emu.snapshot().armed)
+        cf.supervisor.send_arming_request(False)
+        assert wait_for(lambda: any(p == 9 and ch == 1 for p, ch, _ in emu.received))
+        assert wait_for(lambda: emu.snapshot().armed)  # re-armed by itself
+    finally:
+        close(scf)
+    with CrazyflieEmulator(auto_arming=False) as e:  # a MOTORS_REQUIRE_ARMING=y build
+        time.sleep(0.3)
+        assert not e.snapshot().armed
 
 
 def test_locked_supervisor_refuses_to_arm_and_takeoff_does_nothing(emu: CrazyflieEmulator) -> None:
@@ -173,7 +255,8 @@ def test_locked_supervisor_refuses_to_arm_and_takeoff_does_nothing(emu: Crazyfli
         assert wait_for(lambda: any(p == 9 and ch == 1 for p, ch, _ in emu.received))
         time.sleep(0.2)
         cf.high_level_commander.takeoff(1.0, 1.0)
-        time.sleep(0.5)
+        assert wait_for(lambda: emu.hl_answers == [("takeoff", 16)])  # EBUSY: crtpCommanderBlock
+        time.sleep(0.3)
         snap = emu.snapshot()
         assert not snap.armed and not snap.flying and snap.z == 0.0
     finally:
@@ -187,20 +270,39 @@ def test_battery_level_follows_the_firmware_charge_curve(volts: float, level: in
     assert battery_level(volts) == level
 
 
-def test_battery_drains_in_flight_into_low_power(emu: CrazyflieEmulator) -> None:
-    emu.drain = 2.0  # V/s: seconds to empty
-    emu.set_battery(3.4)
+def test_low_power_comes_five_seconds_below_the_low_voltage_and_a_shutdown_five_after_critical(
+    emu: CrazyflieEmulator,
+) -> None:
+    """pm_stm32f4.c: lowPower after 5 s under 3.2 V; in lowPower, 5 s under 3.0 V shuts an
+    auto_shutdown build down (motors off, radio dead); a default build flies on."""
+    emu.auto_shutdown = True
     scf = connect(emu)
     cf = scf.cf
     try:
         got, _ = stream(scf, ["pm.vbat", "pm.state"])
-        cf.supervisor.send_arming_request(True)
-        assert wait_for(lambda: emu.snapshot().armed)
-        cf.high_level_commander.takeoff(0.5, 1.0)
-        assert wait_for(lambda: bool(got) and got[-1][1]["pm.state"] == 3)
-        assert got[-1][1]["pm.vbat"] < 3.2
+        airborne(emu, cf, 0.5)
+        emu.set_battery(3.1)  # below 3.2 V: the low timer starts
+        below = time.monotonic()
+        time.sleep(2.5)
+        emu.set_battery(2.95)  # below 3.0 V: the critical timer starts
+        critical = time.monotonic()
+        assert got[-1][1]["pm.state"] == 0  # not yet: the firmware waits 5 s
+        assert wait_for(lambda: got[-1][1]["pm.state"] == 3, timeout=5.0)
+        assert time.monotonic() - below > 4.9
+        assert not emu.shut_down  # the critical timer runs 5 s of its own
+        assert wait_for(lambda: emu.shut_down, timeout=5.0)
+        assert time.monotonic() - critical > 4.9
+        assert not emu.snapshot().flying
+        assert wait_for(lambda: emu.falls == 1)
+        n = len(got)
+        time.sleep(0.3)
+        assert len(got) == n  # powered off: no more log packets
     finally:
         close(scf)
+    with CrazyflieEmulator(voltage=2.9) as e:  # a default build (no CONFIG_PM_AUTO_SHUTDOWN)
+        assert e.pm_state == 0
+        time.sleep(0.2)
+        assert not e.shut_down
 
 
 def test_silence_stops_every_packet_both_ways(emu: CrazyflieEmulator) -> None:
@@ -222,10 +324,9 @@ def test_silence_stops_every_packet_both_ways(emu: CrazyflieEmulator) -> None:
 def test_cflib_closing_the_link_in_flight_stops_the_motors(emu: CrazyflieEmulator) -> None:
     """cflib's close_link sends a zero-thrust legacy set-point: why the adapter closes links without it."""
     scf = connect(emu)
-    scf.cf.supervisor.send_arming_request(True)
-    assert wait_for(lambda: emu.snapshot().armed)
+    assert wait_for(lambda: emu.snapshot().armed)  # auto-arming
     scf.cf.high_level_commander.takeoff(0.5, 1.0)
     assert wait_for(lambda: emu.snapshot().z > 0.4)
     close(scf)
     assert wait_for(lambda: not emu.snapshot().flying)
-    assert emu.snapshot().z == 0.0
+    assert wait_for(lambda: emu.snapshot().z == 0.0) and emu.falls == 1  # it falls at 1 g

@@ -46,6 +46,8 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
                 "strict",
                 "plugins",
                 "security",
+                "peers",
+                "safety",
                 "lcm_json",
                 "foxglove_msgs",
                 "json_view",

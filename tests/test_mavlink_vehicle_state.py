@@ -131,3 +131,48 @@ def test_statustext_reasons_and_readiness() -> None:
     v.update(mav.MAVLink_ekf_status_report_message(dialect.EKF_NEEDED, 0, 0, 0, 0, 0, 0), 0.2)
     v.update(mav.MAVLink_gps_raw_int_message(0, 3, 0, 0, 0, 0, 0, 0, 0, 10), 0.2)
     assert v.not_ready() == []
+
+
+BATTERY_BIT = mav.MAV_SYS_STATUS_SENSOR_BATTERY
+
+
+def sys_status(healthy: bool, mv: int, percent: int) -> Any:
+    """SYS_STATUS with only the battery bit, as ArduCopter 4.6.3 sends it (present and enabled)."""
+    return mav.MAVLink_sys_status_message(
+        BATTERY_BIT, BATTERY_BIT, BATTERY_BIT if healthy else 0, 0, mv, -1, percent, 0, 0, 0, 0, 0, 0
+    )
+
+
+def test_a_battery_not_yet_reported_is_unknown_never_low() -> None:
+    """ArduCopter 4.6.3 SITL, agent connected before the monitor reads: the first SYS_STATUS says the
+    battery unhealthy with 0 mV and -1 % (measured), the next 12.6 V, 100 %, healthy. That first one was
+    latched as a battery failsafe and every take-off refused for as long as the agent ran (issue #25)."""
+    v = Vehicle()
+    v.update(heartbeat(0, status=mav.MAV_STATE_BOOT), 0.0)
+    v.update(sys_status(False, 0, -1), 0.1)
+    state = v.autopilot_state(0.1)
+    assert (
+        state.battery_warning == ""
+        and not state.battery_known
+        and "battery failsafe" not in v.failsafes.active
+    )
+    assert any("battery unknown" in r for r in v.not_ready())
+    v.update(sys_status(True, 12600, 100), 0.2)
+    state = v.autopilot_state(0.2)
+    assert state.battery_warning == "" and state.battery == 100 and state.voltage == pytest.approx(12.6)
+    assert not any("battery" in r for r in v.not_ready())
+
+
+def test_the_health_bit_is_a_level_and_a_healthy_report_clears_a_kept_warning() -> None:
+    v = Vehicle()
+    v.update(heartbeat(GUIDED, armed=True, status=mav.MAV_STATE_ACTIVE), 0.0)
+    v.update(sys_status(False, 10200, 20), 1.0)  # read, and failsafed (has_failsafed)
+    assert v.autopilot_state(1.0).battery_warning == "failsafe" and "battery failsafe" in v.failsafes.active
+    v.update(mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, b"Battery 1 is low 10.20V", 0, 0), 1.1)
+    assert v.autopilot_state(1.1).battery_warning == "low"
+    # the vehicle reports its battery healthy and not failsafed (a fresh pack, a monitor reset): nothing stays
+    v.update(sys_status(True, 12500, 95), 2.0)
+    assert v.autopilot_state(2.0).battery_warning == "" and "battery failsafe" not in v.failsafes.active
+    # a monitor that stops reading in flight is unknown, not low
+    v.update(sys_status(False, 0, -1), 3.0)
+    assert v.autopilot_state(3.0).battery_warning == "" and any("battery unknown" in r for r in v.not_ready())

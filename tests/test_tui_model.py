@@ -92,6 +92,25 @@ def test_model_errors_arbiters_and_unknown_states() -> None:
     assert not [e for e in model.take_events() if e.kind is EventKind.BEHAVIOR]
 
 
+def test_the_latest_safety_report_is_kept_apart_and_shown_in_the_detail() -> None:
+    from operator_tui.widgets.panels import detail_text
+
+    model = SwarmModel()
+    safety = hlc_error_t()
+    safety.code, safety.severity = 14, hlc_error_t.WARNING
+    safety.text = "safety: velocity modified by separation; nearest b at 3.12 m"
+    model.apply("HLC_ERROR", "a", safety, 1.0, 1001.0)
+    other = hlc_error_t()
+    other.code, other.severity, other.text = 7, hlc_error_t.ERROR, "autopilot LAND failed"
+    model.apply("HLC_ERROR", "a", other, 2.0, 1002.0)
+    view = model.agents["a"]
+    assert view.last_safety is not None and view.last_safety.text.endswith("nearest b at 3.12 m")
+    assert view.last_error is not None and view.last_error.code == 7
+    text = detail_text(view, 2.0).plain
+    assert "safety " in text and "modified by separation; nearest b at 3.12 m" in text
+    assert "autopilot LAND failed" in text
+
+
 def test_stale_agents_are_marked_once_and_kept() -> None:
     model = SwarmModel(stale_after=3.0)
     model.apply("MC_STATE", "a", mc(1), 0.0, 1000.0)

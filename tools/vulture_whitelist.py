@@ -70,7 +70,6 @@ _.state_file
 _.fov  # station/_file.py: [station] table, mapped onto StationSettings by name
 _.command_ttl
 _.pending_commands  # station/_models.py: a field of the JSON the API returns (docs/station-protocol.md)
-_.extra  # mc/hlc machine transitions: marks rows not in docs/design.md (tests/test_*_machine.py)
 
 # --- The firmware's names, kept whole so the decoded bitfield reads like supervisor.h.
 _.AUTO_ARMED
@@ -123,3 +122,5 @@ _.row_count  # AgentTable: tests/test_tui.py
 _.render_map  # swarm_map's pure renderer: tests/test_tui_model.py
 _.repaints  # SwarmMap: repaints only on a changed picture (tests/test_tui.py)
 _.layouts_skipped  # the event log's skipped layouts (tests/test_tui.py)
+_.relative  # PeerTable: the documented peer API (docs/behaviors.md, "Peers")
+_.CONTINUE  # safety.filter.Policy: chosen by value from [safety] no_peers (Policy("continue"))

@@ -180,6 +180,8 @@ def _decode_into(
                 float(msg.heading),
                 bool(msg.in_air),
                 float(msg.battery),
+                float(msg.vn),
+                float(msg.ve),
             )
         )
     elif isinstance(msg, mc_state_t):

@@ -23,12 +23,24 @@ Definitions (also printed by ``antalate analyze``):
 
 from __future__ import annotations
 
-import bisect
 import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from antalate_lcm.analysis.model import DirectionCommand, SwarmRecord
+from antalate_lcm.analysis.phases import Window, flight_phases, mission_window
+from antalate_lcm.analysis.swarm import (
+    DEFAULT_MIN_SPEED,
+    DEFAULT_RANGE_M,
+    DEFAULT_STEP_S,
+    PhaseMetrics,
+    SwarmSample,
+    format_phase,
+    phase_metrics,
+    sample_times,
+    swarm_series,
+)
+from antalate_lcm.analysis.track import Track
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.geo import local_ne, wrap_180, wrap_360
 
@@ -41,36 +53,6 @@ MIN_DRIFT_M = 0.5
 
 
 @dataclass(frozen=True)
-class Track:
-    """One agent's positions in the local frame, sorted by time."""
-
-    t: list[float]
-    north: list[float]
-    east: list[float]
-    alt: list[float]
-
-    def position_at(self, t: float, max_age: float) -> tuple[float, float] | None:
-        """(north, east) at ``t``, interpolated between the samples around it; None when silent.
-
-        Interpolation needs both neighbours within ``max_age`` of each other; otherwise the latest
-        sample counts if it is at most ``max_age`` old.
-        """
-        i = bisect.bisect_right(self.t, t)
-        if i == 0:
-            return None
-        t0 = self.t[i - 1]
-        if i < len(self.t) and self.t[i] - t0 <= max_age and self.t[i] > t0:
-            f = (t - t0) / (self.t[i] - t0)
-            return (
-                self.north[i - 1] + f * (self.north[i] - self.north[i - 1]),
-                self.east[i - 1] + f * (self.east[i] - self.east[i - 1]),
-            )
-        if t - t0 > max_age:
-            return None
-        return self.north[i - 1], self.east[i - 1]
-
-
-@dataclass(frozen=True)
 class CohesionSample:
     t: float
     agents: int
@@ -78,18 +60,6 @@ class CohesionSample:
     centroid_east: float
     mean_distance: float
     max_distance: float
-
-
-@dataclass(frozen=True)
-class Window:
-    start: float
-    end: float
-    #: How the window was found (for the summary).
-    how: str
-
-    @property
-    def length(self) -> float:
-        return self.end - self.start
 
 
 @dataclass(frozen=True)
@@ -127,6 +97,16 @@ class Analysis:
     drift: list[Drift] = field(default_factory=list)
     mc_timelines: dict[str, list[tuple[float, str]]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    #: The swarm metrics of each flight phase (takeoff, mission, return; analysis/swarm.py).
+    phases: list[PhaseMetrics] = field(default_factory=list)
+    #: The swarm metrics every ``bin_s`` s over the whole log.
+    series: list[SwarmSample] = field(default_factory=list)
+    #: Every agent's trajectory in the local frame (left out of :meth:`to_json` unless asked for).
+    tracks: dict[str, Track] = field(default_factory=dict)
+
+    def phase(self, name: str) -> PhaseMetrics | None:
+        """The metrics of the phase called ``name`` ("takeoff", "mission", "return"), if the log has it."""
+        return next((p for p in self.phases if p.phase.name == name), None)
 
     @property
     def cohesion_ratio(self) -> float | None:
@@ -134,9 +114,12 @@ class Analysis:
             return None
         return self.peak_radius / self.start_radius
 
-    def to_json(self) -> dict[str, Any]:
-        """Everything, as plain JSON types (``antalate analyze --json``)."""
+    def to_json(self, *, tracks: bool = False) -> dict[str, Any]:
+        """Everything, as plain JSON types (``antalate analyze --json``); the trajectories only with
+        ``tracks`` (they are most of the bytes: 60 numbers a second an agent)."""
         out = asdict(self)
+        if not tracks:
+            del out["tracks"]
         out["cohesion_ratio"] = self.cohesion_ratio
         out["origin"] = {"lat": self.origin[0], "lon": self.origin[1]}
         out["mc_timelines"] = {
@@ -164,7 +147,12 @@ def local_tracks(record: SwarmRecord, origin: tuple[float, float]) -> dict[str, 
             continue
         ne = [local_ne(lat0, lon0, s.lat, s.lon) for s in samples]
         tracks[name] = Track(
-            [s.t for s in samples], [p[0] for p in ne], [p[1] for p in ne], [s.alt for s in samples]
+            [s.t for s in samples],
+            [p[0] for p in ne],
+            [p[1] for p in ne],
+            [s.alt for s in samples],
+            [s.vn for s in samples],
+            [s.ve for s in samples],
         )
     return tracks
 
@@ -198,47 +186,8 @@ def cohesion_series(
     """:func:`cohesion_at` every ``bin_s`` seconds from ``start`` to ``end`` (both included)."""
     if bin_s <= 0:
         raise ValueError("bin_s must be > 0")
-    out = []
-    n = int(math.floor((end - start) / bin_s + 1e-9))
-    for k in range(n + 1):
-        sample = cohesion_at(tracks, start + k * bin_s, max_age)
-        if sample is not None:
-            out.append(sample)
-    if n * bin_s < end - start - 1e-9:
-        last = cohesion_at(tracks, end, max_age)
-        if last is not None:
-            out.append(last)
-    return out
-
-
-def mission_window(record: SwarmRecord) -> Window | None:
-    """The span in which every agent was flying its mission (see the module docstring)."""
-    entries: list[float] = []
-    exits: list[float] = []
-    for rec in record.agents.values():
-        states = rec.mc_states
-        first = next((i for i, c in enumerate(states) if c.state == "MISSION"), None)
-        if first is None:
-            continue
-        entries.append(states[first].t)
-        left = next((c.t for c in states[first + 1 :] if c.state != "MISSION"), None)
-        exits.append(left if left is not None else record.duration)
-    if entries:
-        start, end = max(entries), min(exits)
-        if end > start:
-            n = len(entries)
-            return Window(start, end, f"all {n} agent(s) that flew a mission were in MISSION")
-        return None
-    spans = []
-    for rec in record.agents.values():
-        airborne = [s.t for s in rec.telemetry if s.in_air]
-        if airborne:
-            spans.append((airborne[0], airborne[-1]))
-    if spans:
-        start, end = max(a for a, _ in spans), min(b for _, b in spans)
-        if end > start:
-            return Window(start, end, "no MC states in the log: every agent's telemetry said in_air")
-    return None
+    samples = (cohesion_at(tracks, t, max_age) for t in sample_times(start, end, bin_s))
+    return [s for s in samples if s is not None]
 
 
 def direction_spans(
@@ -308,11 +257,18 @@ def analyze(
     azimuth: float | None = None,
     bin_s: float = DEFAULT_BIN_S,
     max_age: float = DEFAULT_MAX_AGE,
+    step: float = DEFAULT_STEP_S,
+    range_m: float = DEFAULT_RANGE_M,
+    min_speed: float = DEFAULT_MIN_SPEED,
+    radius_below: float | None = None,
+    radius_above: float | None = None,
 ) -> Analysis:
-    """Cohesion over time, the mission window's cohesion ratio and the drift against the command.
+    """Cohesion over time, the mission window's cohesion ratio, the drift against the command, and
+    the swarm metrics of :mod:`.swarm` over time and per flight phase.
 
     ``azimuth`` overrides the log's direction commands (for logs recorded without the operator's
-    channels, or to ask how far the swarm went in some other direction).
+    channels, or to ask how far the swarm went in some other direction). ``step``, ``range_m``,
+    ``min_speed``, ``radius_below`` and ``radius_above`` are :func:`.swarm.phase_metrics`'s.
     """
     origin = frame_origin(record)
     tracks = local_tracks(record, origin)
@@ -330,6 +286,21 @@ def analyze(
         mc_timelines={a: [(c.t, c.state) for c in r.mc_states] for a, r in sorted(record.agents.items())},
     )
     result.cohesion = cohesion_series(tracks, t_first, t_last, bin_s, max_age)
+    result.tracks = tracks
+    result.series = swarm_series(tracks, t_first, t_last, bin_s, max_age, range_m, min_speed)
+    result.phases = [
+        phase_metrics(
+            tracks,
+            phase,
+            step=step,
+            max_age=max_age,
+            range_m=range_m,
+            min_speed=min_speed,
+            radius_below=radius_below,
+            radius_above=radius_above,
+        )
+        for phase in flight_phases(record, result.window)
+    ]
     window = result.window
     if window is None:
         result.notes.append("no mission window: the swarm never flew a mission together")
@@ -407,6 +378,7 @@ def format_summary(a: Analysis) -> str:
             f"          mean distance to the centroid {a.start_mean:.1f} m at the start, "
             f"{a.average_mean:.1f} m on average over the window"
         )
+    lines += [line for m in a.phases for line in format_phase(m)]
     for d in a.drift:
         cmd = f"commanded {d.azimuth:.0f} deg" + (
             f" at {d.commanded_speed:g} m/s" if d.commanded_speed else ""

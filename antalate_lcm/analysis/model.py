@@ -21,6 +21,9 @@ class TelemetrySample:
     heading: float
     in_air: bool
     battery: float
+    #: Velocity north and east (m/s), as the vehicle reported it (0 in logs of older versions).
+    vn: float = 0.0
+    ve: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)

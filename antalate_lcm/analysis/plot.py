@@ -7,10 +7,13 @@ plotting works without a display (vehicle computers, CI) and from any thread.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from antalate_lcm.analysis.metrics import Analysis, Track
+from antalate_lcm.analysis.metrics import Analysis
 from antalate_lcm.analysis.model import SwarmRecord
+from antalate_lcm.analysis.swarm import SwarmSample
+from antalate_lcm.analysis.track import Track
 from antalate_lcm.errors import AntalateError
 
 #: matplotlib is an extra (90 MB with fontTools and pillow): vehicle computers and the container
@@ -51,20 +54,28 @@ HLC_COLORS: dict[str, str] = {
 _UNKNOWN_STATE = "#636363"
 
 
-def plot(record: SwarmRecord, analysis: Analysis, tracks: dict[str, Track], out: str | Path) -> Path:
-    """Write the figure to ``out`` (PNG) and return its path."""
-    fig = Figure(figsize=(15, 8), dpi=100, layout="constrained")
-    grid = fig.add_gridspec(2, 2, width_ratios=(1.05, 1.0), height_ratios=(1.0, 1.0))
-    _trajectories(fig.add_subplot(grid[:, 0]), analysis, tracks)
-    _timelines(fig.add_subplot(grid[0, 1]), record, analysis)
-    _cohesion(fig.add_subplot(grid[1, 1]), analysis)
-    title = f"{Path(record.path).name}: {len(tracks)} agent(s), {record.duration:.0f} s"
-    ratio = analysis.cohesion_ratio
-    if ratio is not None:
-        title += f"; peak radius {ratio:.2f}x the start"
-    if analysis.drift and analysis.drift[0].error is not None:
-        title += f"; drift error {analysis.drift[0].error:+.1f}°"
-    fig.suptitle(title)
+#: Phase shading on the time axes: the mission grey as before, the climb and the way home tinted.
+PHASE_COLORS: dict[str, str] = {"takeoff": "#fdae6b", "mission": "black", "return": "#9e9ac8"}
+#: Line styles of the trajectories by phase: the mission solid, the rest faint, so the flight home
+#: (every agent to its own home point) is never read as the swarm's behaviour.
+_PHASE_STYLE: dict[str, tuple[str, float, float]] = {
+    "takeoff": (":", 0.6, 0.6),
+    "mission": ("-", 1.0, 1.0),
+    "return": ("--", 0.6, 0.45),
+}
+
+
+def plot(
+    record: SwarmRecord,
+    analysis: Analysis,
+    tracks: dict[str, Track],
+    out: str | Path,
+    *,
+    goals: Sequence[float] = (),
+) -> Path:
+    """Write the figure to ``out`` (PNG) and return its path; ``goals`` are radii (m) drawn on the
+    cohesion panel."""
+    fig = figure(record, analysis, tracks, goals=goals)
     path = Path(out)
     try:
         FigureCanvasAgg(fig).print_png(str(path))
@@ -73,10 +84,48 @@ def plot(record: SwarmRecord, analysis: Analysis, tracks: dict[str, Track], out:
     return path
 
 
+def figure(
+    record: SwarmRecord, analysis: Analysis, tracks: dict[str, Track], *, goals: Sequence[float] = ()
+) -> Figure:
+    """The figure itself: trajectories (left), state timelines (top right), cohesion (bottom right);
+    for a caller that adds its own panels or saves another format."""
+    fig = Figure(figsize=(15, 8), dpi=100, layout="constrained")
+    grid = fig.add_gridspec(2, 2, width_ratios=(1.05, 1.0), height_ratios=(1.0, 1.0))
+    _trajectories(fig.add_subplot(grid[:, 0]), analysis, tracks)
+    _timelines(fig.add_subplot(grid[0, 1]), record, analysis)
+    _cohesion(fig.add_subplot(grid[1, 1]), analysis, goals)
+    title = f"{Path(record.path).name}: {len(tracks)} agent(s), {record.duration:.0f} s"
+    ratio = analysis.cohesion_ratio
+    if ratio is not None:
+        title += f"; peak radius {ratio:.2f}x the start"
+    if analysis.drift and analysis.drift[0].error is not None:
+        title += f"; drift error {analysis.drift[0].error:+.1f}°"
+    fig.suptitle(title)
+    return fig
+
+
 def _trajectories(ax, analysis: Analysis, tracks: dict[str, Track]) -> None:  # type: ignore[no-untyped-def]
     cmap = _agent_colors(len(tracks))
+    spans = [(p.phase.name, p.phase.start, p.phase.end) for p in analysis.phases]
     for (name, tr), color in zip(sorted(tracks.items()), cmap, strict=True):
-        ax.plot(tr.east, tr.north, "-", lw=0.8, color=color, label=name)
+        if not spans:
+            ax.plot(tr.east, tr.north, "-", lw=0.8, color=color, label=name)
+        for k, (phase, p_start, p_end) in enumerate(spans):
+            idx = [i for i, t in enumerate(tr.t) if p_start <= t <= p_end]
+            if not idx:
+                continue
+            ls, lw, alpha = _PHASE_STYLE.get(phase, ("-", 0.8, 1.0))
+            ax.plot(
+                [tr.east[i] for i in idx],
+                [tr.north[i] for i in idx],
+                ls,
+                lw=0.8 * lw,
+                alpha=alpha,
+                color=color,
+                label=name
+                if phase == "mission" or (k == 0 and "mission" not in {s[0] for s in spans})
+                else None,
+            )
         ax.plot(tr.east[0], tr.north[0], "o", ms=5, color=color, mec="black", mew=0.5)
         ax.plot(tr.east[-1], tr.north[-1], "s", ms=4, color=color, mec="black", mew=0.5)
     w = analysis.window
@@ -107,7 +156,7 @@ def _trajectories(ax, analysis: Analysis, tracks: dict[str, Track]) -> None:  # 
     ax.set_ylabel("north (m)")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, lw=0.3)
-    ax.set_title("trajectories (○ start, □ end)")
+    ax.set_title("trajectories (○ start, □ end; solid: mission, dotted: takeoff, dashed: return)")
     ax.legend(fontsize=7, loc="best", ncol=2 if len(tracks) > 8 else 1)
 
 
@@ -132,8 +181,7 @@ def _timelines(ax, record: SwarmRecord, analysis: Analysis) -> None:  # type: ig
                 ax.broken_barh(
                     [(change.t, max(stop - change.t, 1e-3))], (y, h), facecolors=color, edgecolors="none"
                 )
-    if analysis.window is not None:
-        ax.axvspan(analysis.window.start, analysis.window.end, color="black", alpha=0.06, lw=0)
+    _shade_phases(ax, analysis, labels=False)
     for d in record.directions:
         if not d.target:
             ax.axvline(d.t, color="crimson", lw=0.8, ls=":")
@@ -148,21 +196,35 @@ def _timelines(ax, record: SwarmRecord, analysis: Analysis) -> None:  # type: ig
     )
 
 
-def _cohesion(ax, analysis: Analysis) -> None:  # type: ignore[no-untyped-def]
+def _shade_phases(ax, analysis: Analysis, *, labels: bool) -> None:  # type: ignore[no-untyped-def]
+    if not analysis.phases and analysis.window is not None:  # no phases: the mission window alone
+        ax.axvspan(analysis.window.start, analysis.window.end, color="black", alpha=0.06, lw=0)
+    for p in analysis.phases:
+        color = PHASE_COLORS.get(p.phase.name, "black")
+        alpha = 0.06 if p.phase.name == "mission" else 0.12
+        ax.axvspan(
+            p.phase.start, p.phase.end, color=color, alpha=alpha, lw=0, label=p.phase.name if labels else None
+        )
+
+
+def _cohesion(ax, analysis: Analysis, goals: Sequence[float]) -> None:  # type: ignore[no-untyped-def]
     c = analysis.cohesion
     ax.plot([s.t for s in c], [s.max_distance for s in c], color="tab:red", lw=1.0, label="max (radius)")
     ax.plot([s.t for s in c], [s.mean_distance for s in c], color="tab:blue", lw=1.0, label="mean")
-    if analysis.window is not None:
-        ax.axvspan(
-            analysis.window.start, analysis.window.end, color="black", alpha=0.06, lw=0, label="mission"
-        )
-        if analysis.start_radius:
-            ax.axhline(
-                2 * analysis.start_radius, color="tab:red", lw=0.8, ls="--", label="2 × starting radius"
-            )
+    extra: tuple[tuple[str, str, Callable[[SwarmSample], float | None]], ...] = (
+        ("min separation", "tab:green", lambda s: s.min_separation),
+        ("mean nearest neighbour", "tab:olive", lambda s: s.nn_mean),
+    )
+    for label, color, value in extra:
+        points = [(s.t, value(s)) for s in analysis.series if value(s) is not None]
+        if points:
+            ax.plot([t for t, _ in points], [v for _, v in points], color=color, lw=0.8, label=label)
+    _shade_phases(ax, analysis, labels=True)
+    for goal in goals:
+        ax.axhline(goal, color="black", lw=0.8, ls="--", label=f"goal {goal:g} m")
     ax.set_xlabel("time since the log's start (s)")
-    ax.set_ylabel("distance to the centroid (m)")
-    ax.set_title("swarm cohesion")
+    ax.set_ylabel("distance (m)")
+    ax.set_title("swarm cohesion (distance to the centroid) and separation")
     ax.grid(True, lw=0.3)
     ax.legend(fontsize=7, loc="upper left")
 

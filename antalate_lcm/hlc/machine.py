@@ -107,6 +107,9 @@ class ErrorCode(enum.IntEnum):
     TAKEOFF_REFUSED = 11
     AUTOPILOT_FAILSAFE = 12  # the autopilot's own failsafe changed the mode; the text carries its reason
     LINK_REGAINED = 13  # the autopilot answers again after LLC_DOWN; the text says what the vehicle does
+    #: The safety filter changed a velocity (separation or fence), or cannot keep its promise; the
+    #: text names who changed it, the nearest peer and its distance (docs/safety.md).
+    SAFETY = 14
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ from antalate_lcm.hlc.machine import (
     HlcOutcome,
     HlcParams,
 )
+from antalate_lcm.hlc.safety import Filtered, SafetyLayer, describe
 from antalate_lcm.hlc.velocity_guard import (
     GuardDecision,
     Velocity,
@@ -41,10 +42,15 @@ from antalate_lcm.hlc.velocity_guard import (
     mission_flight,
 )
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t, velocity_cmd_t
-from antalate_lcm.node import Context, Node
+from antalate_lcm.node import Context, Node, TopicMatch
 from antalate_lcm.vocabulary import HlcState, Severity
 
 _CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
+#: s between two SAFETY hlc_error_t of the same kind (separation, fence, conflict): the console and
+#: the log see every episode without a message per set-point.
+_SAFETY_REPORT_PERIOD = 1.0
+#: HLC states in which the filtered return leg flies (the machine's RTL action started it).
+_RETURNING = (HlcState.RTL, HlcState.LOW_BATTERY)
 
 
 def make_autopilot(config: Config, context: Context) -> Autopilot:
@@ -89,6 +95,13 @@ class HlcNode(Node):
         self._io: ThreadPoolExecutor | None = None
         self._reject_log = RateLimitedLog(self.log, period=5.0)
         self._publish_state: Callable[[], None] = lambda: None
+        #: The separation and fence filter (docs/safety.md), None when [safety] is not enabled.
+        self.safety = SafetyLayer(self.agent, config) if config.safety.enabled else None
+        self._wish: tuple[Velocity, float] | None = None  # the last velocity a behavior asked for, when
+        self._modified = False  # the filter changed the last set-point it saw
+        self._returning = False  # flying the filtered return leg (RTL with [safety] rtl = "filtered")
+        self._safety_landing = False  # the filter's policy asked the vehicle to land
+        self._reported: dict[str, float] = {}  # SAFETY report kind -> `now` of the last one
 
     @property
     def state(self) -> HlcState:
@@ -100,6 +113,9 @@ class HlcNode(Node):
             self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"hlc-io-{self.agent}")
         self.subscribe("MC_STATE", self._on_mc_state)
         self.subscribe("VELOCITY_CMD", self._on_velocity)
+        if self.safety is not None:
+            self.subscribe_all("TELEMETRY", self._on_peer_telemetry)
+            self.subscribe_all("MC_STATE", self._on_peer_mc_state)
         self._publish_state = self.state_publisher("HLC_STATE", self._state_msg, self.config.hlc.republish_hz)
         control, telemetry = 1.0 / self.config.hlc.control_hz, 1.0 / self.config.hlc.telemetry_hz
         self.create_timer(control, self._control, first_delay=self.first_delay(control))
@@ -181,6 +197,11 @@ class HlcNode(Node):
                 self.log.warning("autopilot %s failed: %s", action.kind.name, detail or "refused")
             self._handle(self.machine.on_action_result(action.kind, ok, self.now, detail))
 
+        if action.kind is ActionKind.RTL and self.safety is not None and self.config.safety.rtl == "filtered":
+            # The HLC flies home itself, through the filter, and lands there (`_return_leg`).
+            self._returning = True
+            self.log.info("RTL: flying home through the safety filter (safety.rtl = filtered)")
+            return
         if action.kind is ActionKind.HOVER:
             # Like every velocity set-point, inline: queued behind a slow command on the worker it
             # could arrive after, and override, a newer velocity command.
@@ -197,6 +218,14 @@ class HlcNode(Node):
             msg.takeoff_altitude if math.isfinite(msg.takeoff_altitude) and msg.takeoff_altitude > 0 else 0.0
         )
         self._handle(self.machine.on_mc_state(msg.state, self.now, takeoff_altitude=alt))
+
+    def _on_peer_telemetry(self, msg: telemetry_t, match: TopicMatch) -> None:
+        if self.safety is not None and self.started:
+            self.safety.on_telemetry(match.fields.get("agent", ""), msg, self.now)
+
+    def _on_peer_mc_state(self, msg: mc_state_t, match: TopicMatch) -> None:
+        if self.safety is not None and self.started:
+            self.safety.on_mc_state(match.fields.get("agent", ""), msg.state, self.now)
 
     def _on_velocity(self, msg: velocity_cmd_t) -> None:
         if not self.started:
@@ -243,6 +272,8 @@ class HlcNode(Node):
         stale = self.velocity_guard.tick(now, self.machine.state, self.mc_state, self._link_age())
         if stale is not None:
             self._apply(stale, "velocity timeout")
+        if self.safety is not None:
+            self._safety_tick(now)
 
     # ------------------------------------------------------------------ outputs
     def _apply(self, decision: GuardDecision, source: str) -> None:
@@ -263,14 +294,93 @@ class HlcNode(Node):
             self.log.info("hover: %s", decision.reason)
         elif decision.clamped:
             self._reject_log.log(("clamp",), logging.INFO, "velocity command clamped: %s", decision.reason)
+        if self.safety is not None:
+            self._wish = (v, self.now)
+            v = self._filtered(v)
+        self._send(v)
+
+    def _send(self, v: Velocity) -> None:
         try:
             self.autopilot.set_velocity(v.vx, v.vy, v.vz, v.yaw_rate, Frame(v.frame))
         except Exception as exc:
             self._reject_log.log(("set_velocity",), logging.WARNING, "set_velocity failed: %s", exc)
 
+    # ------------------------------------------------------------------ the safety filter
+    def _filtered(self, v: Velocity) -> Velocity:
+        """`v` through the separation and fence filter (unchanged when it is safe or no fix is known)."""
+        assert self.safety is not None
+        out = self.safety.filter_velocity(self.snapshot, v.vx, v.vy, v.vz, Frame(v.frame), self.now)
+        if out is None:
+            return v
+        self._act_on(out)
+        self._modified = out.decision.modified
+        if not out.decision.modified:
+            return v
+        return Velocity(out.vn, out.ve, out.vd, v.yaw_rate, Frame.NED)
+
+    def _safety_tick(self, now: float) -> None:
+        """Every control tick: the filtered return leg, or the last wish re-filtered as peers move
+        (a behavior may command at 1 Hz; the filter must not wait for it)."""
+        assert self.safety is not None
+        state = self.machine.state
+        if self._returning and state not in _RETURNING:
+            self._returning = False  # the MC landed it, a pilot took it, ...
+        if self._link_age() >= self.config.hlc.link_timeout:
+            return
+        if self._returning:
+            leg = self.safety.return_leg(self.snapshot, now)
+            if leg is None:
+                if self.safety.home is None or not math.isfinite(self.snapshot.lat):
+                    self.log.warning("filtered RTL: no home or position known: the autopilot's own RTL")
+                    self._returning = False
+                    self._run(self.autopilot.rtl, self._after_safety_action)
+                    return
+                self._returning = False
+                self.log.info("filtered RTL: home reached, landing")
+                self._run(self.autopilot.land, self._after_safety_action)
+                return
+            self._act_on(leg)
+            self._send(Velocity(leg.vn, leg.ve, leg.vd, 0.0, Frame.NED))
+            return
+        if not mission_flight(state, self.mc_state):
+            self._wish = None
+            return
+        wish = self._wish
+        fresh = wish is not None and now - wish[1] <= self.config.hlc.velocity_timeout
+        v = wish[0] if wish is not None and fresh else Velocity.hover()
+        was = self._modified
+        out = self._filtered(v)
+        if self._modified or was:
+            self._send(out)
+
+    def _act_on(self, f: Filtered) -> None:
+        """Report a modified set-point, and follow the filter's policy (land) once."""
+        d = f.decision
+        if d.action == "land" and not self._safety_landing:
+            self._safety_landing = True
+            self.log.warning("%s: landing", describe(d))
+            self._run(self.autopilot.land, self._after_safety_action)
+        if not (d.modified or d.reason):
+            return
+        conflict = bool(d.reason) and not d.reason.startswith("no peer")
+        kind = "conflict" if conflict else d.by or "peers"
+        now = self.now
+        if now - self._reported.get(kind, -math.inf) < _SAFETY_REPORT_PERIOD:
+            return
+        self._reported[kind] = now
+        severity = Severity.ERROR if conflict else Severity.WARNING
+        self._error(HlcError(ErrorCode.SAFETY, severity, describe(d)))
+
+    def _after_safety_action(self, ok: bool, detail: str) -> None:
+        if not ok:
+            self.log.warning("safety: autopilot command failed: %s", detail or "refused")
+
     def _handle(self, outcome: HlcOutcome) -> None:
         t = outcome.transition
         if t is not None:
+            if t.to_state is HlcState.TAKEOFF and self.safety is not None:
+                self.safety.mark_home(self.snapshot)
+                self._safety_landing = False
             level = logging.INFO
             if t.to_state is HlcState.LLC_DOWN:
                 level = logging.ERROR

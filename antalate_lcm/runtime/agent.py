@@ -15,6 +15,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from types import FrameType
+from typing import IO
 
 from antalate_lcm.autopilot.sim import DEFAULTS as SIM_DEFAULTS
 from antalate_lcm.config import AgentConfig, Config
@@ -150,15 +151,24 @@ def _die_with_parent() -> None:
         pass
 
 
-def run_processes(child_argv: Callable[[int, int], list[str]], count: int, *, grace: float = 60.0) -> int:
+def run_processes(
+    child_argv: Callable[[int, int], list[str]],
+    count: int,
+    *,
+    grace: float = 60.0,
+    stop: threading.Event | None = None,
+    output: IO[bytes] | None = None,
+) -> int:
     """Run ``count`` agent processes (``child_argv(i, count)`` each) until a signal or one exits.
 
     Ctrl-C reaches every process of the terminal's group at once; SIGTERM here (or one child
     ending) is passed on as SIGINT so each child stops its nodes in order (MC before HLC, the
     vehicle in a safe state) and closes its bus; a child still running after ``grace`` s is killed.
-    A launcher killed outright takes its children along (they get SIGTERM).
+    A launcher killed outright takes its children along (they get SIGTERM). ``stop`` set by
+    another thread (``antalate run`` once its operator is done) ends them the same way; ``output``
+    takes the children's stdout and stderr (a console owns the terminal) instead of this process's.
     """
-    stop = threading.Event()
+    stop = stop if stop is not None else threading.Event()
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:
         log.info("received %s, stopping %d agent processes", signal.Signals(signum).name, count)
@@ -171,7 +181,11 @@ def run_processes(child_argv: Callable[[int, int], list[str]], count: int, *, gr
     procs: list[subprocess.Popen[bytes]] = []
     try:
         for i in range(count):
-            procs.append(subprocess.Popen(child_argv(i, count), preexec_fn=_die_with_parent))
+            procs.append(
+                subprocess.Popen(
+                    child_argv(i, count), preexec_fn=_die_with_parent, stdout=output, stderr=output
+                )
+            )
         log.info("%d agent processes: %s", count, ", ".join(str(p.pid) for p in procs))
         failed: subprocess.Popen[bytes] | None = None
         while not stop.is_set():  # never stop.wait(): see launch.run_until_signal

@@ -10,6 +10,7 @@ import argparse
 import os
 import sys
 from collections.abc import Callable
+from typing import Any
 
 from antalate_lcm.config import Config, check_unique_agent_names, load_config
 from antalate_lcm.errors import AntalateError
@@ -120,9 +121,9 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
 
     from antalate_lcm.analysis import analyze_log, format_summary
 
-    result = analyze_log(args.log, azimuth=args.azimuth, bin_s=args.bin, max_age=args.max_age)
+    result = analyze_log(args.log, **_analysis_options(args))
     if args.json:
-        print(json.dumps(result.to_json(), indent=1))
+        print(json.dumps(result.to_json(tracks=args.tracks), indent=1))
     else:
         print(format_summary(result))
     return 0
@@ -131,7 +132,7 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
 def _cmd_plot(args: argparse.Namespace) -> int:
     from antalate_lcm.analysis import format_summary, plot_log
 
-    path, result = plot_log(args.log, args.output, azimuth=args.azimuth, bin_s=args.bin, max_age=args.max_age)
+    path, result = plot_log(args.log, args.output, goals=args.goal or (), **_analysis_options(args))
     if not args.quiet:
         print(format_summary(result))
     print(f"wrote {path}")
@@ -192,10 +193,24 @@ def _positive(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
     return value
+
+
+def _analysis_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The keywords of ``analyze_log`` from the options of :func:`_add_analysis_options`."""
+    return {
+        "azimuth": args.azimuth,
+        "bin_s": args.bin,
+        "max_age": args.max_age,
+        "step": args.step,
+        "range_m": args.range,
+        "min_speed": args.min_speed,
+        "radius_below": args.radius_below,
+        "radius_above": args.radius_above,
+    }
 
 
 def _add_analysis_options(p: argparse.ArgumentParser) -> None:
@@ -211,6 +226,33 @@ def _add_analysis_options(p: argparse.ArgumentParser) -> None:
         type=_positive,
         default=2.0,
         help="s after which an agent's last position no longer counts (default 2)",
+    )
+    p.add_argument(
+        "--step", type=_positive, default=0.1, help="sampling step of the per-phase metrics, s (default 0.1)"
+    )
+    p.add_argument(
+        "--range",
+        type=_positive,
+        default=10.0,
+        help="range of the proximity graph (connectivity), m (default 10)",
+    )
+    p.add_argument(
+        "--min-speed",
+        type=_positive,
+        default=0.2,
+        help="m/s below which an agent has no heading for the polarisation (default 0.2)",
+    )
+    p.add_argument(
+        "--radius-below",
+        type=_positive,
+        metavar="M",
+        help="report when the radius first falls below M metres",
+    )
+    p.add_argument(
+        "--radius-above",
+        type=_positive,
+        metavar="M",
+        help="report when the radius first rises above M metres",
     )
 
 
@@ -262,12 +304,20 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("analyze", help="swarm metrics from an LCM log: cohesion, drift vs the command")
     _add_analysis_options(p)
     p.add_argument("--json", action="store_true", help="print every number as JSON instead of the summary")
+    p.add_argument("--tracks", action="store_true", help="with --json: every agent's trajectory too")
     p.set_defaults(func=_cmd_analyze)
 
     p = sub.add_parser("plot", help="PNG of trajectories, state timelines and cohesion from an LCM log")
     _add_analysis_options(p)
     p.add_argument("-o", "--output", help="PNG file (default: the log's name with .png)")
     p.add_argument("-q", "--quiet", action="store_true", help="do not print the analysis summary")
+    p.add_argument(
+        "--goal",
+        type=_positive,
+        action="append",
+        metavar="M",
+        help="draw a goal radius of M metres on the cohesion panel (repeatable; none by default)",
+    )
     p.set_defaults(func=_cmd_plot)
 
     p = sub.add_parser("log", help="record a bus to an LCM log file (lcm-logger on the config's bus)")

@@ -1,12 +1,16 @@
-"""A scripted operator for the headless demo and tests: take off all, fly a mission, RTL all.
+"""A scripted operator for the headless demo, ``antalate run`` and tests: take off all, fly a
+mission (optionally steering it), RTL all.
 
 It talks to the swarm only through the broadcast channels and learns the agents from their
 ``MC_STATE`` channels, as a human operator would; it records every agent's MC state timeline.
+A direction is repeated every second while it holds, as the console does (a direction is a state,
+like a stick: ``direction_follow`` hovers after 3 s without one).
 """
 
 from __future__ import annotations
 
 import enum
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from antalate_lcm.config import Config
@@ -15,6 +19,16 @@ from antalate_lcm.node import Context, Node, TopicMatch
 from antalate_lcm.vocabulary import Command, McState
 
 _RESEND = 1.0  # s between repeats of a broadcast command while some agent has not followed
+
+
+@dataclass(frozen=True)
+class DirectionAt:
+    """A direction command ``at`` s after the whole swarm entered MISSION (``active`` False: stop)."""
+
+    at: float
+    azimuth: float
+    speed: float
+    active: bool = True
 
 
 class Phase(enum.Enum):
@@ -57,12 +71,15 @@ class ScriptedOperator(Node):
         altitude: float = 0.0,
         direction: tuple[float, float] | None = None,
         timeout: float = 180.0,
+        directions: Sequence[DirectionAt] = (),
     ) -> None:
         super().__init__(config, context)
         self.expected_agents = expected_agents
         self.mission_time = mission_time
         self.altitude = altitude
-        self.direction = direction
+        #: (azimuth, speed) from the mission's start, then ``directions`` at their times.
+        self.directions = [DirectionAt(0.0, *direction)] if direction is not None else []
+        self.directions += sorted(directions, key=lambda d: d.at)
         self.timeout = timeout
         self.timelines: dict[str, Timeline] = {}
         self.phase = Phase.WAITING
@@ -70,6 +87,8 @@ class ScriptedOperator(Node):
         self._t0 = 0.0
         self._phase_at = 0.0
         self._last_sent = -1e9
+        self._current: DirectionAt | None = None
+        self._direction_sent = -1e9
 
     def on_start(self) -> None:
         self._t0 = self._phase_at = self.now
@@ -131,20 +150,41 @@ class ScriptedOperator(Node):
         elif self.phase is Phase.TAKING_OFF:
             if all(s is McState.MISSION for s in states):
                 self._enter(Phase.MISSION)
-                if self.direction is not None:
-                    d = direction_cmd_t()
-                    d.active, (d.azimuth, d.speed) = True, self.direction
-                    self._send("SWARM_DIRECTION_CMD", d)
+                self._steer()
             elif any(s is McState.STANDBY for s in states):
                 self._broadcast(Command.TAKEOFF)
         elif self.phase is Phase.MISSION:
             if self.now - self._phase_at >= self.mission_time:
                 self._enter(Phase.RETURNING)
+            else:
+                self._steer()
         elif self.phase is Phase.RETURNING:
             if all(s is McState.STANDBY for s in states):
                 self._enter(Phase.DONE)
             elif any(s in (McState.MISSION, McState.TAKEOFF) for s in states):
                 self._broadcast(Command.RTL)
+
+    def _steer(self) -> None:
+        """Send the direction due at this point of the mission: on a change at once, else every second."""
+        since = self.now - self._phase_at
+        due = None
+        for d in self.directions:
+            if d.at <= since:
+                due = d
+        if due is None:
+            return
+        if due is self._current and self.now - self._direction_sent < _RESEND:
+            return
+        if due is not self._current:
+            self.log.info(
+                "direction at %.1f s: %s",
+                since,
+                f"{due.azimuth:g} deg at {due.speed:g} m/s" if due.active else "stop",
+            )
+        self._current, self._direction_sent = due, self.now
+        msg = direction_cmd_t()
+        msg.active, msg.azimuth, msg.speed = due.active, due.azimuth, due.speed
+        self._send("SWARM_DIRECTION_CMD", msg)
 
     def report(self) -> str:
         lines = [f"{name}: {tl.render()}" for name, tl in sorted(self.timelines.items())]

@@ -126,6 +126,10 @@ def detail_text(view: AgentView | None, now: float, time_format: TimeFormat = cl
         t.append(", ".join(arb.active) or "(none active)", "green" if arb.active else "grey62")
         for fail in arb.failed:
             t.append(f"\n  failed {fail}", "bold red")
+    safety = view.last_safety
+    if safety is not None and safety is not view.last_error:
+        t.append("\nsafety ")
+        t.append(f"{time_format(safety.wall)} {safety.text}", SEVERITY_STYLE[safety.severity])
     err = view.last_error
     if err is not None:
         t.append("\nerr ")

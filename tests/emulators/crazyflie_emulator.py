@@ -1,8 +1,11 @@
 """A Crazyflie emulator speaking CRTP over UDP, as simulators do for cflib's ``udp://`` driver.
 
 It is modelled on bitcraze/crazyflie-firmware (src/modules/src/log.c, param_logic.c, crtpservice.c,
-platformservice.c, crtp_commander_generic.c, crtp_commander_high_level.c, crtp_supervisor.c,
-supervisor.c, hal/src/pm_stm32f4.c) and on what cflib 0.1.34 sends, so tests drive the real cflib:
+platformservice.c, crtp_commander_generic.c, crtp_commander.c, commander.c,
+crtp_commander_high_level.c, planner.c, crtp_supervisor.c, supervisor.c,
+supervisor_state_machine.c, stabilizer.c, hal/src/pm_stm32f4.c) and on what cflib 0.1.34 sends, so
+tests drive the real cflib. The behaviours below were checked against the firmware at tag 2026.08
+(commit 2a18fc29); "(file)" after each says where:
 
 * **Framing** (cflib/crtp/udpdriver.py): one CRTP packet per datagram, byte 0 the header
   ``port << 4 | 0x0C | channel``, then up to 30 bytes of payload; no checksum. Replies go to the
@@ -24,30 +27,60 @@ supervisor.c, hal/src/pm_stm32f4.c) and on what cflib 0.1.34 sends, so tests dri
   back after the value is set).
 * **Generic commander** (port 7): channel 0 set-points ``TYPE_STOP``, ``TYPE_VELOCITY_WORLD`` (8:
   vx, vy, vz m/s, yaw rate deg/s), ``TYPE_HOVER`` (10: body vx, vy, yaw rate, absolute height);
-  channel 1 ``notify setpoint stop``. A streamed set-point takes priority over the high-level
-  commander, which ignores its commands until the stop notification, as cflib documents. The
-  commander watchdog: no set-point for 0.5 s levels the vehicle (zero velocity), 2 s stops the
-  motors -- it falls and the supervisor locks (supervisor.c, ``COMMANDER_WDT_TIMEOUT_*``).
+  channel 1 ``notify setpoint stop``. A streamed set-point has a higher priority than the
+  high-level commander and *stops its planner* (commander.c ``commanderSetSetpoint`` calls
+  ``crtpCommanderHighLevelStop``, PR #1298); high-level set-points are ignored while it streams.
+  ``notify setpoint stop`` only relaxes the priority (crtp_commander.c -> commander.c
+  ``commanderRelaxPriority``): a stopped planner then sends the *null set-point* -- motors off
+  (crtp_commander_high_level.c ``crtpCommanderHighLevelGetSetpoint``: "when the HLcommander is
+  stopped, it wants the motors to be off") -- until the next high-level command. A flying
+  Crazyflie that gets a notify and no high-level command falls (`falls` counts it); one that gets
+  the command within its fall (a few ms on a radio) recovers where it is.
+* **Commander watchdog** (supervisor.c ``COMMANDER_WDT_TIMEOUT_STABILIZE`` 500 ms /
+  ``_SHUTDOWN`` 2000 ms, supervisor_state_machine.c, ``supervisorOverrideSetpoint``): a streamed
+  set-point older than 0.5 s puts the supervisor in WarningLevelOut -- x/y control off, roll and
+  pitch level, yaw rate 0, *z kept as it was* (the last vertical velocity of a world set-point, the
+  last height of a hover set-point); the horizontal velocity then only coasts (no tilt, drag not
+  modelled). Older than 2 s: ExceptFreeFall, then Locked -- motors off, it falls, reboot required.
 * **Legacy commander** (port 3, roll/pitch/yaw-rate/thrust): only what cflib sends itself -- its
   ``close_link`` sends ``send_setpoint(0, 0, 0, 0)``, a zero-thrust set-point that stops flying motors
   (attitude flight is not modelled: any other thrust is ignored).
 * **High-level commander** (port 8): ``takeoff2``, ``land2``, ``go_to`` (4) and ``go_to2`` (12),
   ``stop``. Trajectories are smooth (quintic minimum-jerk) between the current and target poses
-  over the given duration; landing ends with the motors stopped, and ``landed_timeout`` later the
-  supervisor disarms (supervisor.c ``landedTimeout``).
+  over the given duration; landing ends with the planner idle, so the motors stop (the null
+  set-point), and ``landed_timeout`` (3 s, platform_defaults.h ``LANDING_TIMEOUT_MS``) later the
+  supervisor disarms. **Every packet is answered** (crtp_commander_high_level.c
+  ``crtpCommanderHighLevelTask``: the first three bytes back, byte 3 the result): 0, or 1 when the
+  planner refuses -- ``takeoff`` unless the planner is idle (so a take-off while flying a
+  trajectory), ``land`` while landing (planner.c ``plan_takeoff``/``plan_land``) -- or ``EBUSY``
+  (16) while the supervisor says it cannot fly (stabilizer.c ``crtpCommanderBlock(!canFly)``), or
+  ``ENOEXEC`` (8) for an unknown command. `hl_answers` keeps them.
 * **Supervisor** (port 9): state bitfield request (``0x0C`` -> ``0x8C`` + uint16), arm/disarm
   (``0x01`` -> ``0x81, success, is_armed``; refused while locked), emergency stop (``0x03``:
-  motors off, locked).
+  motors off, locked). **Auto-arming** (``auto_arming``, default on: Kconfig
+  ``MOTORS_REQUIRE_ARMING`` defaults to n on a CF2.x, supervisor.c ``AUTO_ARMING``): the supervisor
+  arms itself whenever its pre-flight checks pass -- at power-on, after a disarm request, after the
+  landed timeout -- within ``rearm_delay``; only a lock (or a crash) keeps it disarmed.
+* **Power** (hal/src/pm_stm32f4.c ``pmTask``, platform_defaults_cf2.h): ``pm.state`` becomes
+  lowPower (3) once ``pm.vbat`` has been below 3.2 V for 5 s (``DEFAULT_BAT_LOW_VOLTAGE``,
+  ``DEFAULT_BAT_LOW_DURATION_TO_TRIGGER_SEC``); in lowPower, 5 s below 3.0 V
+  (``DEFAULT_BAT_CRITICAL_LOW_VOLTAGE``) calls ``pmSystemShutdown``, which powers the Crazyflie
+  off only in a build with ``CONFIG_PM_AUTO_SHUTDOWN`` (Kconfig default n): ``auto_shutdown=True``
+  models such a build -- motors off (it falls) and the radio dead (`shut_down`). A default build
+  flies on, its LiPo below 3.0 V.
 
 The vehicle is a point mass in the Crazyflie world frame (x, y, z up; yaw in degrees,
-counter-clockwise) with a first-order velocity response to set-points. Its battery (``pm.vbat``)
-drains while the motors run; ``pm.batteryLevel`` follows the firmware's LiPo charge curve and
-``pm.state`` becomes lowPower (3) below the low voltage (3.2 V on a Crazyflie 2.x). The Kalman
-estimator's position variances (``kalman.varPX/PY/PZ``) are what ``converged`` sets.
+counter-clockwise) with a first-order velocity response to set-points; with its motors off in the
+air it falls at 1 g. Its battery (``pm.vbat``) drains while the motors run; ``pm.batteryLevel``
+follows the firmware's LiPo charge curve. The Kalman estimator's position variances
+(``kalman.varPX/PY/PZ``) are what ``converged`` sets.
 
 Fault knobs: ``set_silent(True)`` (the radio is gone both ways; ``dropped`` counts what it ate), ``set_battery(volts)``,
 ``set_locked(True)`` (the supervisor refuses to arm, so a take-off cannot happen),
-``set_converged(False)`` (the estimator's variances stay large), ``drain`` (V/s in flight).
+``set_converged(False)`` (the estimator's variances stay large), ``drain`` (V/s in flight),
+``drop_next(port, count)`` (the next `count` packets to `port` are lost on the way in: one lost
+high-level command), ``auto_arming`` / ``auto_shutdown`` (the build options above). Over a
+``radio://`` link (`tests.emulators.crazyradio`) silence is what makes cflib's radio driver give up.
 """
 
 from __future__ import annotations
@@ -95,7 +128,13 @@ PROTOCOL_VERSION = 12  # src/modules/interface/crtp.h
 FIRMWARE_VERSION = "2025.02"
 LOG_MAX_BLOCKS, LOG_MAX_OPS = 16, 128
 WDT_STABILIZE, WDT_SHUTDOWN = 0.5, 2.0  # supervisor.c COMMANDER_WDT_TIMEOUT_*
-LOW_VOLTAGE, CRITICAL_LOW_VOLTAGE = 3.2, 3.0  # platform_defaults_cf2.h
+LOW_VOLTAGE, CRITICAL_LOW_VOLTAGE = 3.2, 3.0  # platform_defaults_cf2.h DEFAULT_BAT_(CRITICAL_)LOW_VOLTAGE
+LOW_DURATION = 5.0  # platform_defaults_cf2.h DEFAULT_BAT_LOW_DURATION_TO_TRIGGER_SEC (both timers)
+LANDING_TIMEOUT = 3.0  # platform_defaults.h LANDING_TIMEOUT_MS: landed this long -> disarm
+GRAVITY = 9.81
+# crtp_commander_high_level.c answers: 0, planner.c's refusal (1), errno
+HL_OK, HL_REFUSED, HL_ENOEXEC, HL_EBUSY = 0, 1, 8, 16
+PM_BATTERY, PM_LOW_POWER = 0, 3  # pm.h PMStates
 #: pm_stm32f4.c LiPoTypicalChargeCurve: the voltage of 0%, 10%, ... 90%.
 CHARGE_CURVE = (3.00, 3.78, 3.83, 3.87, 3.89, 3.92, 3.96, 4.00, 4.04, 4.10)
 
@@ -238,9 +277,12 @@ class CrazyflieEmulator:
         voltage: float = 4.1,
         drain: float = 0.0,
         velocity_tau: float = 0.1,
-        landed_timeout: float = 0.5,
+        landed_timeout: float = LANDING_TIMEOUT,
         converged: bool = True,
         locked: bool = False,
+        auto_arming: bool = True,
+        rearm_delay: float = 0.1,
+        auto_shutdown: bool = False,
         clock: Callable[[], float] = time.monotonic,
         memory: str | None = None,
     ) -> None:
@@ -268,12 +310,20 @@ class CrazyflieEmulator:
         self.drain = drain
         self.velocity_tau = velocity_tau
         self.landed_timeout = landed_timeout
+        self.auto_arming = auto_arming
+        self.rearm_delay = rearm_delay
+        self.auto_shutdown = auto_shutdown
         self.armed = False
+        self._disarmed_at = clock()  # auto-arming re-arms rearm_delay after this
         self.motors = False
         self.locked = locked
         self.crashed = False
         self.converged = converged
         self.silent = False
+        self.shut_down = False  # pmSystemShutdown in an auto_shutdown build: powered off for good
+        self._low_since = clock() if voltage < LOW_VOLTAGE else math.inf  # pm_stm32f4.c batteryLowTimeStamp
+        self._critical_since = clock() if voltage < CRITICAL_LOW_VOLTAGE else math.inf
+        self._drop: dict[int, int] = {}  # port -> packets still to lose on the way in
         self._traj: _Trajectory | None = None
         self._traj_finished = False
         self._landed_at: float | None = None
@@ -299,6 +349,8 @@ class CrazyflieEmulator:
         # what was received, for tests
         self.received: list[tuple[int, int, bytes]] = []
         self.hl_commands: list[tuple[str, tuple[float, ...]]] = []
+        self.hl_answers: list[tuple[str, int]] = []  # (command, result) as answered on port 8
+        self.falls = 0  # times it hit the floor with its motors off (null set-point, watchdog, stop)
         self.setpoints = 0
         self.dropped = 0  # datagrams lost to silence
         self.notify_stops = 0
@@ -351,6 +403,12 @@ class CrazyflieEmulator:
     def set_battery(self, volts: float) -> None:
         with self._lock:
             self.vbat = volts
+            self._track_battery(self.clock())
+
+    def drop_next(self, port: int, count: int = 1) -> None:
+        """Lose the next `count` packets to CRTP `port` on the way in (one lost command)."""
+        with self._lock:
+            self._drop[port] = self._drop.get(port, 0) + count
 
     def set_locked(self, locked: bool) -> None:
         with self._lock:
@@ -391,6 +449,11 @@ class CrazyflieEmulator:
         """supervisor.c isFlyingCheck: a motor above idle thrust (so also on the first centimetres)."""
         return self.motors
 
+    @property
+    def pm_state(self) -> int:
+        """pm_stm32f4.c pmUpdateState: lowPower once below the low voltage for LOW_DURATION."""
+        return PM_LOW_POWER if self.clock() - self._low_since > LOW_DURATION else PM_BATTERY
+
     def supervisor_info(self) -> int:
         bits = 0
         can_arm = not self.locked and not self.crashed
@@ -402,9 +465,11 @@ class CrazyflieEmulator:
             BIT_IS_TUMBLED: self.crashed,
             BIT_IS_LOCKED: self.locked,
             BIT_IS_CRASHED: self.crashed,
-            BIT_HL_ACTIVE: self._traj is not None and not self._streaming,
+            # supervisor.c updateLogData: the planner flying or landing; a stream stops it (never
+            # "disabled" since PR #1298)
+            BIT_HL_ACTIVE: self._traj is not None,
             BIT_HL_FINISHED: self._traj_finished,
-            BIT_HL_DISABLED: self._streaming,
+            BIT_HL_DISABLED: False,
         }
         for bit, on in flags.items():
             bits |= int(on) << bit
@@ -425,7 +490,7 @@ class CrazyflieEmulator:
             "stateEstimate.yaw": self.yaw,
             "pm.vbat": self.vbat,
             "pm.vbatMV": round(self.vbat * 1000),
-            "pm.state": 3 if self.vbat < LOW_VOLTAGE else 0,
+            "pm.state": self.pm_state,
             "pm.batteryLevel": battery_level(self.vbat),
             "kalman.varPX": variance,
             "kalman.varPY": variance,
@@ -439,7 +504,7 @@ class CrazyflieEmulator:
 
     # ------------------------------------------------------------------ I/O
     def _send(self, port: int, channel: int, data: bytes) -> None:
-        if self.silent or self._peer is None:
+        if self.silent or self.shut_down or self._peer is None:
             return
         packet = bytes([(port << 4) | 0x0C | channel]) + data[:30]
         if self._memory is not None:
@@ -465,7 +530,12 @@ class CrazyflieEmulator:
         if not data:
             return
         with self._lock:
-            if self.silent:
+            if self.silent or self.shut_down:
+                self.dropped += 1
+                return
+            port = (data[0] & 0xF0) >> 4
+            if data[0] != 0xFF and self._drop.get(port, 0) > 0:
+                self._drop[port] -= 1
                 self.dropped += 1
                 return
             self._peer = sender
@@ -611,10 +681,13 @@ class CrazyflieEmulator:
     def _on_generic(self, channel: int, data: bytes) -> None:
         now = self.clock()
         if channel == 1:
-            if data[0] == 0:  # notify setpoint stop: the high-level commander may take over again
+            if data[0] == 0:  # notify setpoint stop (crtp_commander.c): commanderRelaxPriority only
                 self.notify_stops += 1
                 self._streaming = False
-                self._hold_here(now)
+                if self._traj is None and self.motors:
+                    # the planner was stopped by the stream: its null set-point stops the motors
+                    # until a high-level command comes (crtp_commander_high_level.c)
+                    self._motors_off(now)
             return
         kind = data[0]
         self.setpoints += 1
@@ -629,7 +702,7 @@ class CrazyflieEmulator:
         if not self.armed or self.locked:
             return
         self._streaming = True
-        self._traj = None
+        self._traj = None  # commander.c: a higher-priority set-point stops the high-level planner
         self._sp_kind = "world" if kind == 8 else "hover"
         self._sp = values
         self._sp_at = now
@@ -642,38 +715,61 @@ class CrazyflieEmulator:
         if thrust == 0 and self.motors:
             self._motors_off(self.clock())
 
+    def _can_fly(self) -> bool:
+        """supervisor.c supervisorCanFly: armed and neither locked nor crashed."""
+        return self.armed and not self.locked and not self.crashed
+
     def _on_hl(self, channel: int, data: bytes) -> None:
-        now = self.clock()
         cmd = data[0]
+        name, ret = self._hl_command(cmd, data, self.clock())
+        self.hl_answers.append((name, ret))
+        # crtp_commander_high_level.c crtpCommanderHighLevelTask: every packet answered, 4 bytes
+        self._send(PORT_HL, channel, bytes([cmd]) + data[1:3].ljust(2, b"\0") + bytes([ret]))
+
+    def _hl_command(self, cmd: int, data: bytes, now: float) -> tuple[str, int]:
+        """One high-level command: its name and the result the firmware answers."""
         if cmd == 7 or cmd == 8:  # takeoff2 / land2: group, height, yaw, use current yaw, duration
+            name = "takeoff" if cmd == 7 else "land"
             _, height, yaw, use_current, duration = struct.unpack_from("<BffBf", data, 1)
-            self.hl_commands.append(("takeoff" if cmd == 7 else "land", (height, duration)))
-            if self._streaming:
-                return  # a streamed set-point has priority until notify_setpoint_stop
-            if cmd == 7 and (not self.armed or self.locked):
-                return  # the supervisor keeps the motors off: nothing happens
-            if cmd == 8 and not self.motors:
-                return
+            self.hl_commands.append((name, (height, duration)))
+            if not self._can_fly():
+                return name, HL_EBUSY  # stabilizer.c crtpCommanderBlock(!canFly)
+            if cmd == 7 and self._traj is not None:
+                return name, HL_REFUSED  # planner.c plan_takeoff: only from an idle planner
+            if cmd == 8 and self._traj is not None and self._traj.kind == "land":
+                return name, HL_REFUSED  # planner.c plan_land: not while landing
+            if cmd == 8 and not self.motors and self.z <= 0.0:
+                return name, HL_OK  # a landing on the floor: nothing moves
             target_yaw = self.yaw if use_current else math.degrees(yaw)
-            self._start(
-                now, "takeoff" if cmd == 7 else "land", (self.x, self.y, height, target_yaw), duration
-            )
-        elif cmd in (4, 12):  # go_to / go_to2: group, relative, [linear], x, y, z, yaw (rad), duration
+            self._start(now, name, (self.x, self.y, height, target_yaw), duration)
+            return name, HL_OK
+        if cmd in (4, 12):  # go_to / go_to2: group, relative, [linear], x, y, z, yaw (rad), duration
             if cmd == 4:
                 _, relative, x, y, z, yaw, duration = struct.unpack_from("<BBfffff", data, 1)
             else:
                 _, relative, _linear, x, y, z, yaw, duration = struct.unpack_from("<BBBfffff", data, 1)
             self.hl_commands.append(("goto", (x, y, z, math.degrees(yaw), duration, relative)))
-            if self._streaming or not self.motors:
-                return
-            if relative:
-                x, y, z, yaw_deg = self.x + x, self.y + y, self.z + z, self.yaw + math.degrees(yaw)
+            if not self._can_fly():
+                return "goto", HL_EBUSY
+            if not self.motors and self.z <= 0.0:
+                return "goto", HL_OK  # on the floor (not modelled: a go_to that lifts off)
+            if relative:  # from the planner's current goal, or the state when it is idle
+                base = self._traj.end if self._traj is not None and self._traj.kind == "hold" else None
+                bx, by, bz, byaw = base or (self.x, self.y, self.z, self.yaw)
+                x, y, z, yaw_deg = bx + x, by + y, bz + z, byaw + math.degrees(yaw)
             else:
                 yaw_deg = math.degrees(yaw)
             self._start(now, "goto", (x, y, z, yaw_deg), duration)
-        elif cmd == 3:  # stop: motors off
+            return "goto", HL_OK
+        if cmd == 3:  # stop: planner idle -> the null set-point, motors off
             self.hl_commands.append(("stop", ()))
-            self._motors_off(now)
+            self._traj = None
+            if not self._streaming and self.motors:
+                self._motors_off(now)
+            return "stop", HL_OK
+        if cmd == 0:  # set group mask
+            return "group", HL_OK
+        return f"cmd{cmd}", HL_ENOEXEC
 
     def _on_supervisor(self, channel: int, data: bytes) -> None:
         cmd = data[0]
@@ -687,27 +783,32 @@ class CrazyflieEmulator:
                     success = False
                 elif not do_arm and self.flying:
                     self._motors_off(self.clock())
-                    self.armed = False
+                    self._disarm()
+                elif do_arm:
+                    self.armed = True
                 else:
-                    self.armed = do_arm
+                    self._disarm()
             self._send(PORT_SUPERVISOR, 1, bytes([0x80 | cmd, int(success), int(self.armed)]))
         elif channel == 1 and cmd == 0x03:
             self._emergency_stop()
 
     # ------------------------------------------------------------------ vehicle
+    def _disarm(self) -> None:
+        self.armed = False
+        self._disarmed_at = self.clock()
+
     def _emergency_stop(self) -> None:
         self.emergency_stops += 1
         self._motors_off(self.clock())
         self.locked = True
-        self.armed = False
+        self._disarm()
 
     def _motors_off(self, now: float) -> None:
-        """Motors stopped: a flying Crazyflie falls (modelled as being on the floor at once)."""
+        """Motors stopped: a Crazyflie in the air falls (`_step`), on the floor it just stops."""
         self.motors = False
         self._streaming = False
         self._traj = None
-        self.z = 0.0
-        self.vx = self.vy = self.vz = 0.0
+        self.vx = self.vy = 0.0
         self._landed_at = now
 
     def _start(self, now: float, kind: str, end: tuple[float, float, float, float], duration: float) -> None:
@@ -717,72 +818,109 @@ class CrazyflieEmulator:
             kind, (self.x, self.y, self.z, self.yaw), (end[0], end[1], end[2], yaw_end), now, duration
         )
         self._traj_finished = False
-        self.motors = True
-        self._landed_at = None
+        if not self._streaming:
+            self.motors = True
+            self.vz = 0.0  # a fall caught by the planner
+            self._landed_at = None
 
-    def _hold_here(self, now: float) -> None:
-        if self.motors:
-            self._start(now, "goto", (self.x, self.y, self.z, self.yaw), 0.05)
+    def _track_battery(self, now: float) -> None:
+        """pm_stm32f4.c pmTask: the low and critical timers restart while above their voltages."""
+        if self.vbat >= LOW_VOLTAGE:
+            self._low_since = math.inf
+        elif math.isinf(self._low_since):
+            self._low_since = now
+        if self.vbat >= CRITICAL_LOW_VOLTAGE:
+            self._critical_since = math.inf
+        elif math.isinf(self._critical_since):
+            self._critical_since = now
+        if (
+            self.auto_shutdown
+            and not self.shut_down
+            and self.pm_state == PM_LOW_POWER
+            and now - self._critical_since > LOW_DURATION
+        ):
+            self.shut_down = True  # pmSystemShutdown: the nRF powers everything off
+            self._motors_off(now)
+            self._disarm()
 
     def _step(self, dt: float, now: float) -> None:
         if self.motors and self.drain > 0:
             self.vbat = max(self.vbat - self.drain * dt, 2.5)
+        self._track_battery(now)
+        if not self.motors:
+            if self.z > 0.0:  # falling
+                self.vz -= GRAVITY * dt
+                self.z = max(self.z + self.vz * dt, 0.0)
+                if self.z == 0.0:
+                    self.vz = 0.0
+                    self.falls += 1
+            self._supervise_ground(now)
+            return
         if self._streaming:
             age = now - self._sp_at
             if age > WDT_SHUTDOWN:
                 self._motors_off(now)
-                self.locked = True  # supervisor: free fall -> locked
-                self.armed = False
+                self.locked = True  # supervisor: ExceptFreeFall -> Locked
+                self._disarm()
                 return
+            a = 1.0 - math.exp(-dt / self.velocity_tau)
             if age > WDT_STABILIZE:
-                target = (0.0, 0.0, 0.0, 0.0)
+                # WarningLevelOut (supervisorOverrideSetpoint): roll/pitch level, yaw rate 0, z as set
+                # -- the horizontal velocity coasts, the vertical one is still flown
+                tx, ty, rate = self.vx, self.vy, 0.0
+                if self._sp_kind == "world":
+                    tz = self._sp[2]
+                else:
+                    tz = max(min((self._sp[3] - self.z) * 2.0, 1.0), -1.0)
             elif self._sp_kind == "world":
-                target = self._sp
+                tx, ty, tz, rate = self._sp
             else:  # hover: body-frame vx, vy, yaw rate, absolute height
                 bvx, bvy, rate, height = self._sp
                 c, s = math.cos(math.radians(self.yaw)), math.sin(math.radians(self.yaw))
-                target = (
-                    bvx * c - bvy * s,
-                    bvx * s + bvy * c,
-                    max(min((height - self.z) * 2.0, 1.0), -1.0),
-                    rate,
-                )
-            a = 1.0 - math.exp(-dt / self.velocity_tau)
-            self.vx += (target[0] - self.vx) * a
-            self.vy += (target[1] - self.vy) * a
-            self.vz += (target[2] - self.vz) * a
+                tx, ty = bvx * c - bvy * s, bvx * s + bvy * c
+                tz = max(min((height - self.z) * 2.0, 1.0), -1.0)
+            self.vx += (tx - self.vx) * a
+            self.vy += (ty - self.vy) * a
+            self.vz += (tz - self.vz) * a
             self.x += self.vx * dt
             self.y += self.vy * dt
             self.z = max(self.z + self.vz * dt, 0.0)
-            self.yaw = (self.yaw + target[3] * dt + 180.0) % 360.0 - 180.0
+            self.yaw = (self.yaw + rate * dt + 180.0) % 360.0 - 180.0
             return
         traj = self._traj
-        if traj is not None:
-            s = (now - traj.t0) / traj.duration
-            p, v = _minimum_jerk(s)
-            coords = [a0 + (a1 - a0) * p for a0, a1 in zip(traj.start, traj.end, strict=True)]
-            self.vx, self.vy, self.vz = (
-                (a1 - a0) * v / traj.duration for a0, a1 in zip(traj.start[:3], traj.end[:3], strict=True)
-            )
-            self.x, self.y, self.z = coords[0], coords[1], max(coords[2], 0.0)
-            self.yaw = (coords[3] + 180.0) % 360.0 - 180.0
-            if s >= 1.0:
-                self.vx = self.vy = self.vz = 0.0
-                self._traj_finished = True
-                if traj.kind == "land" and traj.end[2] <= 0.1:
-                    self._motors_off(now)
-                else:
-                    # the planner holds the end pose until the next command
-                    self._traj = _Trajectory("hold", traj.end, traj.end, now, 1.0)
+        if traj is None:  # the planner idle and nothing streamed: the null set-point
+            self._motors_off(now)
             return
-        if (
-            not self.motors
-            and self.armed
-            and self._landed_at is not None
-            and now - self._landed_at >= self.landed_timeout
-        ):
-            self.armed = False  # supervisor.c: landed for landedTimeout -> disarm
+        s = (now - traj.t0) / traj.duration
+        p, v = _minimum_jerk(s)
+        coords = [a0 + (a1 - a0) * p for a0, a1 in zip(traj.start, traj.end, strict=True)]
+        self.vx, self.vy, self.vz = (
+            (a1 - a0) * v / traj.duration for a0, a1 in zip(traj.start[:3], traj.end[:3], strict=True)
+        )
+        self.x, self.y, self.z = coords[0], coords[1], max(coords[2], 0.0)
+        self.yaw = (coords[3] + 180.0) % 360.0 - 180.0
+        if s >= 1.0:
+            self.vx = self.vy = self.vz = 0.0
+            self._traj_finished = True
+            if traj.kind == "land":
+                self._motors_off(now)  # planner.c: a finished landing leaves the planner idle
+            else:
+                # the planner holds the end pose until the next command
+                self._traj = _Trajectory("hold", traj.end, traj.end, now, 1.0)
+
+    def _supervise_ground(self, now: float) -> None:
+        """supervisor.c: landed for landed_timeout -> disarm; auto-arming re-arms (motors off)."""
+        landed = self._landed_at is not None and self.z <= 0.0
+        if self.armed and landed and now - (self._landed_at or now) >= self.landed_timeout:
+            self._disarm()  # Landed -> Reset
             self._landed_at = None
+        if (
+            not self.armed
+            and self.auto_arming
+            and not (self.locked or self.crashed or self.shut_down)
+            and now - self._disarmed_at >= self.rearm_delay
+        ):
+            self.armed = True  # PreFlChecksPassed -> supervisorRequestArming(true) (AUTO_ARMING)
 
     def _sim_loop(self) -> None:
         last = self.clock()

@@ -9,24 +9,46 @@ What the adapter does on top of cflib, and why (docs/crazyflie.md has the operat
 * **Commands**: take-off, landing and the return flight go through the high-level commander, whose
   trajectories run on board and survive a lost link; MISSION velocities are streamed generic
   set-points at ``control_hz`` (the firmware levels the vehicle 0.5 s after the last one and stops its
-  motors after 2 s). Leaving the stream for the high-level commander is cflib's documented switch:
-  ``notify_setpoint_stop`` then a high-level command. A zero velocity, a velocity not renewed for
+  motors after 2 s). Leaving the stream for the high-level commander is cflib's documented switch,
+  ``notify_setpoint_stop`` then a high-level command -- but never the notification alone: a stream
+  stops the firmware's planner, and a stopped planner answers the notification with the null
+  set-point, motors off, until a high-level command comes (crazyflie-firmware 2026.08
+  crtp_commander_high_level.c ``crtpCommanderHighLevelGetSetpoint``, commander.c, PR #1298). So the
+  switch is *command, notify, command* (`_switch`): whichever of the two commands arrives, the
+  planner has a trajectory when the priority drops. The firmware answers every high-level packet
+  (crtp_commander_high_level.c ``crtpCommanderHighLevelTask``); until the command that set the mode
+  is answered, the switch is resent every ``_HL_RESEND_S`` -- also into a stale or closed link,
+  so it lands as soon as the link carries it. A zero velocity, a velocity not renewed for
   ``velocity_hold`` and a link silent for ``link_stale_after`` all hand the vehicle back to the
-  high-level commander holding where it is.
+  high-level commander holding where it is. If the switch cannot get through at all, the firmware's
+  watchdog takes over: 0.5 s after the last set-point it levels the vehicle but keeps its vertical
+  velocity (a climb goes on), 2 s after it stops the motors and locks (supervisor.c).
 * **Link loss in the air**: after ``link_loss_land`` s the adapter sends landings blindly (a radio
   link that drops most packets still delivers some); the state then says LANDING with the failsafe
   "link lost". A Crazyflie has no link-loss failsafe of its own under the high-level commander.
 * **Arming** is refused, with the reason in ``last_refusal`` (and so in ``hlc_error_t``), while the
-  supervisor is locked, crashed or tumbled, the estimator has not converged, or ``pm.state`` says the
-  battery is low. After a landing the adapter disarms, so a landed vehicle reads disarmed on every
-  platform (some arm themselves at power-on).
+  supervisor is locked, crashed or tumbled, the estimator has not converged, ``pm.state`` says the
+  battery is low, or ``pm.vbat`` is at or below ``low_voltage`` (the firmware says lowPower only
+  5 s later: pm_stm32f4.c). A CF2.x arms itself (Kconfig ``MOTORS_REQUIRE_ARMING`` defaults to n;
+  supervisor.c ``AUTO_ARMING``: at power-on, after a disarm, after the landed timeout), so the
+  adapter's own flag decides what the HLC sees: a vehicle on the ground reads disarmed until
+  `arm` and again after a landing, and `takeoff` refuses without `arm`, whatever the supervisor
+  says.
+* **Critical battery in the air**: ``pm.vbat`` below ``critical_voltage`` for
+  ``critical_land_after`` s lands the vehicle where it is (failsafe "battery critical"): a firmware
+  built with ``CONFIG_PM_AUTO_SHUTDOWN`` powers off 5 s after that voltage once in lowPower
+  (pm_stm32f4.c), and even without it the LiPo is empty.
 * **Shutdown in the air**: `close` sends an emergency stop (motors off) before closing the link:
   nothing would command the vehicle any more (under the high-level commander it would hover until its
   battery is empty). Every other close -- a failed connection or reconnection -- avoids cflib's
   parting zero-thrust set-point, which would drop a flying Crazyflie (`_close_quietly`).
-* **cflib closing the link**: its radio driver gives up after a run of lost packets ("Too many
-  packets lost") and closes the link for good; the adapter reopens it every ``_RECONNECT_S`` until the
-  Crazyflie answers, so a radio outage is the HLC's recoverable LLC_DOWN, not the end of the agent.
+* **cflib closing the link**: its radio driver gives up after 100 un-acknowledged packets in a row
+  ("Too many packets lost", cflib 0.1.34 crtp/radiodriver.py ``_nr_of_retries``) and closes the
+  link for good; the adapter reopens it every ``_RECONNECT_S`` until the Crazyflie answers, so a
+  radio outage is the HLC's recoverable LLC_DOWN, not the end of the agent. Meanwhile the control
+  loop keeps its timers: a stream is turned into a hold and ``link_loss_land`` into a landing, each
+  sent the moment the link is open again (a Crazyflie under the high-level commander hovers on
+  its own meanwhile; one that was streaming has been stopped by the watchdog).
 * Several adapters in one process on one Crazyradio share it through cflib's radio manager, as
   cflib's ``Swarm`` does.
 """
@@ -78,6 +100,10 @@ CFLIB_MISSING = (
 )
 
 _RECONNECT_S = 2.0  # s between attempts to reopen a link cflib closed
+_HL_RESEND_S = 0.3  # s without the firmware's answer to a high-level command before it is resent
+#: cflib's high-level commander command bytes (crtp_commander_high_level.c TrajectoryCommand_e)
+_HL_TAKEOFF, _HL_LAND, _HL_GOTO = 7, 8, 12
+_HL_PORT = 8  # CRTP_PORT_SETPOINT_HL
 
 _drivers_lock = threading.Lock()
 _drivers_ready = False
@@ -161,7 +187,14 @@ class CrazyflieAutopilot(Autopilot):
         #: (an HLC restarted in the air) the frame's origin.
         self._home: tuple[float, float] | None = None
         self._rtl_deadline = math.inf
-        self._ground_idle = False  # landed by us and disarmed: report disarmed whatever auto-arming says
+        #: on the ground and not armed by us: report disarmed whatever auto-arming says (a CF2.x arms
+        #: itself at power-on), and refuse a take-off that arm() did not precede
+        self._ground_idle = True
+        #: the high-level command that set the mode, until the firmware answers it: (command byte,
+        #: when sent, how to send it again); resent by the control loop (see the module docstring)
+        self._hl_pending: tuple[int, float, str] | None = None
+        self._hl_refused: tuple[int, int] | None = None  # (command byte, result) of the last refusal
+        self._critical_since = math.inf
         self._blind_land_at = -math.inf
         self._blind_landing = False  # landings sent into a lost link: resent once it answers again
         self._last_tick = -math.inf
@@ -201,6 +234,7 @@ class CrazyflieAutopilot(Autopilot):
         cf.connection_failed.add_callback(failed)
         cf.connection_lost.add_callback(self._on_connection_lost)
         cf.packet_received.add_callback(self._on_packet)
+        cf.add_port_callback(_HL_PORT, self._on_hl_answer)
         cf.open_link(p.uri)
         if not ready.wait(p.connect_timeout) or failure:
             why = failure[0] if failure else f"no answer within {p.connect_timeout:g} s"
@@ -287,6 +321,19 @@ class CrazyflieAutopilot(Autopilot):
     def _on_packet(self, _pk: Any) -> None:
         self._last_packet = self.clock()
 
+    def _on_hl_answer(self, pk: Any) -> None:
+        """crtp_commander_high_level.c answers each command: byte 0 the command, byte 3 the result."""
+        data = bytes(pk.data)
+        if len(data) < 4:
+            return
+        cmd, result = data[0], data[3]
+        with self._lock:
+            pending = self._hl_pending
+            if pending is not None and pending[0] == cmd:
+                self._hl_pending = None
+            if result != 0:
+                self._hl_refused = (cmd, result)
+
     def _on_log(self, _timestamp: int, data: dict[str, Any], _config: Any) -> None:
         with self._lock:
             self._reading = r = apply_log(self._reading, data)
@@ -362,6 +409,11 @@ class CrazyflieAutopilot(Autopilot):
         warning = battery_warning(reading.pm_state)
         if warning:
             return self._refuse(f"battery low: {warning}, {reading.vbat:.2f} V")
+        if reading.vbat <= self._p.low_voltage:
+            return self._refuse(
+                f"battery low: {reading.vbat:.2f} V <= low_voltage {self._p.low_voltage:g} V "
+                "(the firmware reports lowPower 5 s after it)"
+            )
         with self._lock:
             self._ground_idle = False
         cf.supervisor.send_arming_request(True)
@@ -394,10 +446,12 @@ class CrazyflieAutopilot(Autopilot):
             if not r.flags.armed or self._ground_idle:
                 raise AutopilotError("not armed")
             self._leave_stream(cf)
+            self._hl_pending = None
             self._home = (r.x, r.y)
             self._set_mode(TAKEOFF)
             self._takeoff_alt = alt
             self._failsafe = ""
+            self._hl_refused = None
             z0 = r.z
         cf.high_level_commander.takeoff(alt, takeoff_duration(z0, alt, self._p.climb_speed), yaw=None)
         deadline = self.clock() + self._p.takeoff_confirm
@@ -405,6 +459,18 @@ class CrazyflieAutopilot(Autopilot):
             r = self._reading
             if r.flags.flying or r.z > z0 + 0.05:
                 return
+            refused = self._hl_refused
+            if refused is not None and refused[0] == _HL_TAKEOFF:
+                with self._lock:
+                    self._set_mode(IDLE)
+                raise AutopilotError(
+                    "the Crazyflie refused the take-off: "
+                    + (
+                        "its supervisor cannot fly (EBUSY: not armed, locked or crashed)"
+                        if refused[1] == 16
+                        else f"its planner is busy with a trajectory (result {refused[1]})"
+                    )
+                )
             time.sleep(0.02)
         with self._lock:
             self._set_mode(IDLE)
@@ -437,7 +503,7 @@ class CrazyflieAutopilot(Autopilot):
             duration = goto_duration(distance, self._p.rtl_speed)
             self._set_mode(RTL_GO)
             self._rtl_deadline = self.clock() + duration + 5.0
-            cf.high_level_commander.go_to(hx, hy, r.z, math.radians(r.yaw), duration)
+            self._switch(cf, "rtl")
         log.info("RTL: go_to the take-off point (%.2f, %.2f), %.1f m in %.1f s", hx, hy, distance, duration)
 
     def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
@@ -459,6 +525,7 @@ class CrazyflieAutopilot(Autopilot):
                 z = self._reading.z
                 self._height = max(z, self._takeoff_alt) if self._mode == TAKEOFF else z
                 self._set_mode(STREAM)
+                self._hl_pending = None  # the stream supersedes a hold or a landing not yet answered
             self._velocity = (vx, vy, vz, yaw_rate, Frame(frame), self.clock())
             self._send_setpoint(
                 cf, build_setpoint(vx, vy, vz, yaw_rate, Frame(frame), self.frame, self._height)
@@ -470,21 +537,45 @@ class CrazyflieAutopilot(Autopilot):
         self._mode_at = self.clock()
 
     def _leave_stream(self, cf: Any) -> None:
-        if self._mode == STREAM:
-            cf.commander.send_notify_setpoint_stop()
+        """Before a high-level command: a velocity stream ends (the command's `_switch` notifies)."""
         self._velocity = None
 
-    def _hold(self, cf: Any) -> None:
-        """Back to the high-level commander, holding the current position (cflib's documented switch)."""
-        self._leave_stream(cf)
-        cf.high_level_commander.go_to(0.0, 0.0, 0.0, 0.0, 0.5, relative=True)
-        self._set_mode(HOLD)
+    def _switch(self, cf: Any | None, what: str) -> None:
+        """Send the high-level command `what` as *command, notify, command* and await its answer.
 
-    def _start_landing(self, cf: Any, mode: str) -> None:
+        Never the notification alone (the module docstring says why). `cf` None (cflib closed the
+        link) only records the command: the control loop sends it once the link is open again.
+        """
+        cmd = {"hold": _HL_GOTO, "rtl": _HL_GOTO, "land": _HL_LAND}[what]
+        self._hl_pending = (cmd, self.clock(), what)
+        if cf is None:
+            return
+        self._send_hl(cf, what)
+        cf.commander.send_notify_setpoint_stop()
+        self._send_hl(cf, what)
+
+    def _send_hl(self, cf: Any, what: str) -> None:
+        r = self._reading
+        if what == "hold":
+            cf.high_level_commander.go_to(0.0, 0.0, 0.0, 0.0, 0.5, relative=True)
+        elif what == "land":
+            z = r.z if math.isfinite(r.z) else 1.0
+            cf.high_level_commander.land(0.0, max(z / self._p.land_speed, 1.0), yaw=None)
+        else:  # rtl: the take-off point at the current height, at rtl_speed from where it is now
+            hx, hy = self._home or (0.0, 0.0)
+            duration = goto_duration(math.hypot(r.x - hx, r.y - hy), self._p.rtl_speed)
+            cf.high_level_commander.go_to(hx, hy, r.z, math.radians(r.yaw), duration)
+
+    def _hold(self, cf: Any | None) -> None:
+        """Back to the high-level commander, holding the current position."""
         self._leave_stream(cf)
-        z = self._reading.z if math.isfinite(self._reading.z) else 1.0
-        cf.high_level_commander.land(0.0, max(z / self._p.land_speed, 1.0), yaw=None)
+        self._set_mode(HOLD)
+        self._switch(cf, "hold")
+
+    def _start_landing(self, cf: Any | None, mode: str) -> None:
+        self._leave_stream(cf)
         self._set_mode(mode)
+        self._switch(cf, "land")
 
     def _send_setpoint(self, cf: Any, sp: SetPoint) -> None:
         if sp.kind == "world":
@@ -509,21 +600,22 @@ class CrazyflieAutopilot(Autopilot):
                 and not self._connected
                 and not self._reconnecting
                 and not self._stop.is_set()
+                and now - self._reconnect_at >= _RECONNECT_S
             ):
-                if now - self._reconnect_at >= _RECONNECT_S:
-                    self._reconnecting = True
-                    self._reconnect_at = now
-                    threading.Thread(target=self._reconnect, name="crazyflie-reconnect", daemon=True).start()
-                return
-            cf = self._cf
-            if cf is None:
-                return
+                self._reconnecting = True
+                self._reconnect_at = now
+                threading.Thread(target=self._reconnect, name="crazyflie-reconnect", daemon=True).start()
+            # cflib closed the link: no cf to send on, but the timers below still run and what they
+            # decide (a hold, a landing) is sent once the link is open again
+            cf = self._cf if self._connected else None
+            if cf is None and not self._link_error:
+                return  # closing, or never opened
             dt, self._last_tick = now - self._last_tick, now
             age = now - self._last_packet
             r = self._reading
             flying = r.flags.flying
             if self._mode == STREAM:
-                if age > p.link_stale_after:
+                if cf is None or age > p.link_stale_after:
                     log.warning("link %.1f s old: the high-level commander holds the Crazyflie", age)
                     self._hold(cf)
                 elif self._velocity is None or now - self._velocity[5] > p.velocity_hold:
@@ -533,36 +625,65 @@ class CrazyflieAutopilot(Autopilot):
                     if frame is Frame.BODY:
                         self._height = next_height(self._height, vz, dt)
                     self._send_setpoint(cf, build_setpoint(vx, vy, vz, rate, frame, self.frame, self._height))
+            self._check_battery(cf, now, flying)
             lost = p.link_loss_land > 0 and age > p.link_loss_land
             if lost and flying and self._mode != IDLE and now - self._blind_land_at >= 1.0:
                 if self._mode != LAND:
                     log.warning("link lost for %.1f s in the air: landing blindly", age)
-                self._failsafe = (
-                    f"link lost for more than {p.link_loss_land:g} s: the adapter commanded a landing"
-                )
+                if not self._failsafe:
+                    self._failsafe = (
+                        f"link lost for more than {p.link_loss_land:g} s: the adapter commanded a landing"
+                    )
                 self._blind_land_at = now
                 self._blind_landing = True
                 self._start_landing(cf, LAND)
-            elif self._blind_landing and age < p.link_stale_after:
+            elif self._blind_landing and cf is not None and age < p.link_stale_after:
                 self._blind_landing = False
                 if self._mode == LAND and flying:
                     log.warning("link back: the landing sent while it was lost is sent again")
                     self._start_landing(cf, LAND)
+            pending = self._hl_pending
+            if pending is not None and cf is not None and now - pending[1] >= _HL_RESEND_S:
+                if flying:
+                    log.info("no answer to the high-level %s: sent again", pending[2])
+                    self._switch(cf, pending[2])
+                else:
+                    self._hl_pending = None
             if self._mode == RTL_GO:
                 hx, hy = self._home or (0.0, 0.0)
                 arrived = math.hypot(r.x - hx, r.y - hy) <= p.rtl_tolerance and math.hypot(r.vx, r.vy) < 0.05
                 if arrived or now > self._rtl_deadline:
                     self._start_landing(cf, RTL_LAND)
             if (
-                self._mode in (LAND, RTL_LAND)
+                cf is not None
+                and self._mode in (LAND, RTL_LAND)
                 and not flying
                 and now - self._mode_at > 0.5
                 and age < p.link_stale_after
             ):
                 cf.supervisor.send_arming_request(False)
                 self._ground_idle = True
+                self._hl_pending = None
                 self._set_mode(IDLE)
                 self._failsafe = ""
+
+    def _check_battery(self, cf: Any | None, now: float, flying: bool) -> None:
+        """Land where it is once ``pm.vbat`` has stayed below ``critical_voltage`` in the air."""
+        p = self._p
+        vbat = self._reading.vbat
+        if not (math.isfinite(vbat) and vbat < p.critical_voltage):
+            self._critical_since = math.inf
+            return
+        if math.isinf(self._critical_since):
+            self._critical_since = now
+        if not flying or self._mode in (IDLE, LAND) or now - self._critical_since < p.critical_land_after:
+            return
+        log.warning("battery critical in the air (%.2f V): landing where it is", vbat)
+        self._failsafe = (
+            f"battery critical: {vbat:.2f} V < {p.critical_voltage:g} V (a Crazyflie built with "
+            "CONFIG_PM_AUTO_SHUTDOWN powers off 5 s later): the adapter commanded a landing"
+        )
+        self._start_landing(cf, LAND)
 
     # ------------------------------------------------------------------ state
     def state(self) -> AutopilotState:

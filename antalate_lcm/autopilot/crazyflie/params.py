@@ -67,6 +67,24 @@ class Params(BaseModel):
         description="s of lost link in the air after which the adapter sends landings blindly; 0 = never",
     )
     cells: int = Field(1, ge=1, le=4, description="battery cells in series (1 on a Crazyflie 2.x)")
+    # crazyflie-firmware 2026.08 platform_defaults_cf2.h DEFAULT_BAT_LOW_VOLTAGE / _CRITICAL_LOW_VOLTAGE
+    # (the persistent params pm.lowVoltage / pm.criticalLowVoltage; 3.35 V low on a CF2.1 brushless)
+    low_voltage: float = Field(
+        3.2,
+        gt=0,
+        description="V: arm() refuses at or below it at once (the firmware says lowPower only 5 s later)",
+    )
+    critical_voltage: float = Field(
+        3.0,
+        gt=0,
+        description="V: in the air below it for critical_land_after s the adapter lands where it is",
+    )
+    critical_land_after: float = Field(
+        0.5,
+        ge=0,
+        description="s below critical_voltage before the landing (a firmware built with "
+        "CONFIG_PM_AUTO_SHUTDOWN powers off 5 s after it, once in lowPower)",
+    )
     cache_dir: str = Field("", description="directory for cflib's TOC cache (faster connects); empty = none")
 
     @field_validator("uri")

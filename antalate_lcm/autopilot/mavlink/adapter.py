@@ -77,7 +77,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Mapping
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 from pydantic import BaseModel
 from pymavlink.dialects.v20 import ardupilotmega as mav
@@ -160,7 +160,7 @@ class MavlinkAutopilot(Autopilot):
         link: LinkOpener | None = None,
     ) -> None:
         super().__init__(params, clock=clock)
-        p = parse_params(self.params)
+        p = parse_params(self.params, cast("type[Params]", self.params_model), self.name)
         self._p = p
         self._opener: LinkOpener = link or open_pymavlink
         self.connection: str = p.connection
@@ -661,11 +661,11 @@ class MavlinkAutopilot(Autopilot):
 
     def _set_mode(self, name: str) -> None:
         """Switch to ArduCopter mode `name` and confirm it by a HEARTBEAT received after the ACK."""
-        number = COPTER_MODES[name]
+        number, params = self._mode_request(name)
         with self._cond:
             mark = self._v.messages
             self._v.commanded = (name, self.clock())
-        result = self._command_result(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, number)
+        result = self._command_result(mav.MAV_CMD_DO_SET_MODE, *params)
         if result == mav.MAV_RESULT_UNSUPPORTED:
             result = self._set_mode_message(number)  # the SET_MODE message: older firmware
         if result is None:
@@ -689,6 +689,11 @@ class MavlinkAutopilot(Autopilot):
                 f"mode {name} acknowledged but HEARTBEAT still shows {shown} after {self._mode_timeout:g} s"
             )
         log.info("mode %s confirmed", name)
+
+    def _mode_request(self, name: str) -> tuple[int, tuple[float, ...]]:
+        """(the HEARTBEAT ``custom_mode`` of mode `name`, MAV_CMD_DO_SET_MODE's parameters for it)."""
+        number = COPTER_MODES[name]
+        return number, (mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, number)
 
     def _set_mode_message(self, number: int) -> int | None:
         with self._cond:
@@ -769,7 +774,7 @@ class MavlinkAutopilot(Autopilot):
             with self._cond:
                 mark = self._v.messages
                 target = self._target or (1, 1)
-            self._send(dialect.param_set(target, name, value, ptype))
+            self._send(dialect.param_set(target, name, self._param_wire_value(value, ptype), ptype))
 
             def confirmed(v: Vehicle, mark: int = mark) -> bool:
                 return v.param_after(name, mark) and abs(v.params[name] - value) <= 1e-3 * max(
@@ -785,13 +790,29 @@ class MavlinkAutopilot(Autopilot):
             f"PARAM_SET {name} = {value:g} not confirmed by the vehicle (it reports {shown})"
         )
 
+    #: The failsafe parameters the pre-flight check reads, and the groups that make a read complete.
+    _failsafe_params: ClassVar[tuple[tuple[str, ...], tuple[tuple[str, ...], ...]]] = (
+        vehicle_checks.READ,
+        vehicle_checks.REQUIRED_GROUPS,
+    )
+
+    def _findings(self, values: dict[str, float]) -> list[Finding]:
+        """What the pre-flight check finds in the failsafe parameter `values` read from the vehicle."""
+        p = self._p
+        return vehicle_checks.check(
+            values, source_system=self.source_system, max_guid_timeout=p.max_guid_timeout, cells=p.cells
+        )
+
+    def _param_wire_value(self, value: float, param_type: int) -> float:
+        """The float PARAM_SET carries for `value` (ArduPilot: the value itself; PX4 packs integers)."""
+        return float(value)
+
     def _check_vehicle(self) -> list[Finding]:
         """The pre-flight check of the vehicle's own failsafes (module docstring); the findings left."""
         p = self._p
-        values = self.read_params(vehicle_checks.READ, vehicle_checks.REQUIRED_GROUPS)
-        findings = vehicle_checks.check(
-            values, source_system=self.source_system, max_guid_timeout=p.max_guid_timeout, cells=p.cells
-        )
+        names, groups = self._failsafe_params
+        values = self.read_params(names, groups)
+        findings = self._findings(values)
         if p.configure_vehicle and any(f.settable for f in findings):
             for f in findings:
                 if f.settable and f.want is not None:
@@ -799,10 +820,8 @@ class MavlinkAutopilot(Autopilot):
                         self.set_param(f.param, f.want)
                     except AutopilotError as exc:
                         log.warning("%s", exc)
-            values = self.read_params(vehicle_checks.READ, vehicle_checks.REQUIRED_GROUPS)
-            findings = vehicle_checks.check(
-                values, source_system=self.source_system, max_guid_timeout=p.max_guid_timeout, cells=p.cells
-            )
+            values = self.read_params(names, groups)
+            findings = self._findings(values)
         for f in findings:
             log.warning("vehicle pre-flight check: %s", f.text())
         if not findings:

@@ -7,7 +7,7 @@ TOML integers are accepted where a float is expected (``connect_timeout = 10``).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -99,16 +99,20 @@ class Params(BaseModel):
         return self
 
 
-def parse_params(raw: Any) -> Params:
-    """`Params` from the config table, validated as the config loader does (`antalate_lcm.strict`).
+P = TypeVar("P", bound=Params)
+
+
+def parse_params(raw: Any, model: type[P] = Params, adapter: str = "mavlink") -> P:  # type: ignore[assignment]
+    """`model` (`Params` or a flight stack's subclass) from the config table, validated as the config
+    loader does (`antalate_lcm.strict`).
 
     Raises `ValueError` naming the key, so a typo in the field is a one-line fix.
     """
     try:
-        return validate_strict(Params, dict(raw or {}))
+        return validate_strict(model, dict(raw or {}))
     except StrictError as exc:
         where = f"parameter {exc.key!r}" if exc.key else "parameters"
-        raise ValueError(f"mavlink autopilot {where}: {exc.message}") from None
+        raise ValueError(f"{adapter} autopilot {where}: {exc.message}") from None
 
 
 #: Defaults by name (tools and docs checks).

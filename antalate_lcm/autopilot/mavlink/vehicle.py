@@ -96,7 +96,9 @@ class Vehicle:
     voltage: float = math.nan  # V, SYS_STATUS voltage_battery or the BATTERY_STATUS sum
     cells_seen: int = 0  # cells counted in BATTERY_STATUS (a per-cell monitor), 0 = not seen
     charge_warning: str = ""  # BATTERY_STATUS charge_state now: "low", "critical", "emergency", "failed"
-    battery_warning: str = ""  # from STATUSTEXT / SYS_STATUS health: the worst since the last landing
+    battery_warning: str = ""  # from STATUSTEXT: the worst since the last landing or healthy report
+    health_failsafe: bool = False  # SYS_STATUS: the monitor reads and its health bit is cleared (a level)
+    battery_unknown: bool = False  # SYS_STATUS: a monitor is enabled but has not read yet (boot)
     fence_breached: bool = False
     failsafes: FailsafeTracker = field(default_factory=FailsafeTracker)
     params: dict[str, float] = field(default_factory=dict)  # PARAM_VALUE by name
@@ -154,6 +156,8 @@ class Vehicle:
         if not self.ekf_ok:
             flags = "no EKF_STATUS_REPORT" if self.ekf_flags is None else f"EKF flags 0x{self.ekf_flags:04x}"
             reasons.append(f"EKF has no absolute horizontal position ({flags})")
+        if self.battery_unknown:
+            reasons.append("battery unknown (the autopilot's battery monitor has not reported yet)")
         if self.gps_fix is None or self.gps_fix < mav.GPS_FIX_TYPE_3D_FIX:
             reasons.append(
                 "no GPS_RAW_INT" if self.gps_fix is None else f"GPS fix_type {self.gps_fix} (needs 3D)"
@@ -211,7 +215,10 @@ class Vehicle:
             voltage=self.voltage,
             cells=cells or self.cells_seen,
             battery_warning=max(
-                self.charge_warning, self.battery_warning, key=lambda w: WARNING_RANK.get(w, 1)
+                self.charge_warning,
+                self.battery_warning,
+                "failsafe" if self.health_failsafe else "",
+                key=lambda w: WARNING_RANK.get(w, 1),
             ),
         )
 
@@ -268,14 +275,36 @@ class Vehicle:
 
     def _on_sys_status(self, msg: Any, now: float) -> None:
         self.battery = float(msg.battery_remaining) if 0 <= msg.battery_remaining <= 100 else -1.0
-        if 0 < msg.voltage_battery < 0xFFFF:
+        reading = 0 < msg.voltage_battery < 0xFFFF
+        if reading:
             self.voltage = msg.voltage_battery / 1000.0
         for bit, reason in HEALTH_FAILSAFES:
             enabled = msg.onboard_control_sensors_enabled & bit and msg.onboard_control_sensors_present & bit
             unhealthy = bool(enabled) and not msg.onboard_control_sensors_health & bit
+            if reason == fs.BATTERY:
+                unhealthy = self._battery_health(bool(enabled), unhealthy, reading or self.battery >= 0)
             self.failsafes.set_active(reason, unhealthy, now)
-            if reason == fs.BATTERY and unhealthy:
-                self._battery_warning("failsafe")
+
+    def _battery_health(self, enabled: bool, unhealthy: bool, reading: bool) -> bool:
+        """Whether the SYS_STATUS battery bit says failsafe; sets `battery_unknown` and `health_failsafe`.
+
+        ArduPilot clears the bit when the monitor is not healthy *or* has failsafed
+        (GCS_Common.cpp, Copter-4.6.3: ``battery.healthy() && !battery.has_failsafed()``). A monitor that
+        has not read yet -- the first SYS_STATUS after boot says 0 mV, -1 % (measured on ArduCopter 4.6.3
+        SITL) -- is unhealthy, not low: that is "battery unknown", never a failsafe. The bit is a level
+        the firmware keeps cleared while its failsafe lasts, so nothing here is latched.
+        """
+        self.battery_unknown = enabled and unhealthy and not reading
+        failsafe = unhealthy and reading
+        if failsafe and not self.health_failsafe:
+            log.warning("autopilot battery failsafe (SYS_STATUS battery unhealthy, %.2f V)", self.voltage)
+        self.health_failsafe = failsafe
+        if enabled and not unhealthy and self.battery_warning:
+            # The vehicle says its battery is healthy and not failsafed: a warning we kept from an
+            # earlier report (a STATUSTEXT) no longer holds.
+            log.info("autopilot battery healthy again: warning %r cleared", self.battery_warning)
+            self.battery_warning = ""
+        return failsafe
 
     def _on_battery_status(self, msg: Any, now: float) -> None:
         if msg.id != 0:

@@ -1,0 +1,303 @@
+"""``antalate run CONFIG``: one command for one experiment (docs/experiments.md).
+
+It flies ``CONFIG`` with N simulated agents (``--agents``, homes on a grid as ``antalate agent``
+makes them), in this process or spread over ``--processes P`` (``antalate agent --shard`` children,
+exactly what ``antalate agent --processes`` runs), records one bus to an LCM log (``-o``) from
+this process, and prints the swarm metrics of ``antalate analyze`` at the end.
+
+With ``--headless`` a :class:`ScriptedOperator` flies the script (take-off, direction commands at
+given times, mission duration, RTL) and the exit status says whether every agent came back to
+STANDBY; without it the operator console flies, and the metrics follow when it quits.
+
+Everything is checked before anything flies: the config and its plugins (as ``antalate agent``),
+the script (one line naming the key), and that this process can hear and command agents that run
+in other processes (no ``memq://`` for the operator's topics then).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from antalate_lcm.bus import Bus
+from antalate_lcm.config import Config, check_unique_agent_names, load_config
+from antalate_lcm.errors import AntalateError, ConfigError
+from antalate_lcm.executor import Executor
+from antalate_lcm.node import Context, Node
+from antalate_lcm.runtime.agent import (
+    agent_nodes,
+    run_processes,
+    shared_buses,
+    swarm_configs,
+    validate,
+)
+from antalate_lcm.runtime.launch import run_until_signal
+from antalate_lcm.runtime.recorder import LogRecorder
+from antalate_lcm.runtime.script import Script, load_script
+from antalate_lcm.runtime.scripted_operator import DirectionAt, Phase, ScriptedOperator
+
+log = logging.getLogger("antalate.run")
+
+#: Topics this process must hear or send when the agents are in other processes.
+_OPERATOR_TOPICS = ("MC_STATE", "TELEMETRY", "SWARM_OPERATOR_CMD", "SWARM_DIRECTION_CMD")
+#: Bus schemes that never leave a process.
+_IN_PROCESS = ("memq://", "file://")
+
+
+@dataclass(frozen=True)
+class Experiment:
+    config_path: str
+    agents: int = 1
+    processes: int = 1
+    spacing: float = 8.0
+    script: Script | None = None
+    output: str | None = None
+    bus: str | None = None
+    headless: bool = True
+    force: bool = False
+    log_level: str = "INFO"
+
+
+def default_log_path() -> str:
+    return time.strftime("antalate-run-%Y%m%d-%H%M%S.lcm")
+
+
+def record_bus(config: Config, bus: str | None) -> str:
+    """The bus to record: ``bus``, else ``lan`` if declared, else the default bus (as ``antalate log``);
+    it must carry the telemetry and the MC states, or the log would hold nothing to analyse."""
+    name = bus or ("lan" if "lan" in config.buses else config.topics.default_bus)
+    if name not in config.buses:
+        raise AntalateError(f"no bus named {name!r} in {config.source}; declared: {', '.join(config.buses)}")
+    for topic in ("TELEMETRY", "MC_STATE"):
+        if name not in config.topic_buses(topic):
+            raise ConfigError(
+                config.source,
+                f"topics.{topic}",
+                f"a binding that includes the recorded bus {name!r} (or pass --bus one of "
+                f"{', '.join(config.topic_buses(topic))})",
+            )
+    return name
+
+
+def check_reach(config: Config, processes: int, recorded: str) -> None:
+    """With agents in other processes, every bus this process uses to hear or command them must
+    cross processes: a ``memq://`` bus would fly agents nobody commands and record nothing."""
+    if processes <= 1:
+        return
+    for topic in _OPERATOR_TOPICS:
+        for name in config.topic_buses(topic):
+            url = config.buses.get(name, "")
+            if url.startswith(_IN_PROCESS):
+                raise ConfigError(
+                    config.source,
+                    f"buses.{name}",
+                    f"a bus other processes reach (udpm:// or zenoh://) with --processes {processes}: "
+                    f"{topic} travels on it and {url!r} stays inside one process",
+                )
+    url = config.buses[recorded]
+    if url.startswith(_IN_PROCESS):
+        raise ConfigError(
+            config.source,
+            f"buses.{recorded}",
+            f"a bus other processes reach to record with --processes {processes}",
+        )
+
+
+def prepare(exp: Experiment) -> tuple[list[Config], str, str]:
+    """The agents' configs, the recorded bus and the log path: every check before anything flies."""
+    if exp.agents < 1:
+        raise AntalateError(f"--agents wants a number >= 1 (got {exp.agents})")
+    if exp.processes < 1:
+        raise AntalateError(f"--processes wants a number >= 1 (got {exp.processes})")
+    base = load_config(exp.config_path)
+    configs = swarm_configs(base, exp.agents, spacing=exp.spacing)
+    check_unique_agent_names(configs, agents=exp.agents)
+    for cfg in configs:
+        validate(cfg)
+    bus = record_bus(base, exp.bus)
+    check_reach(base, min(exp.processes, len(configs)), bus)
+    out = exp.output or default_log_path()
+    if os.path.exists(out) and not exp.force:
+        raise AntalateError(f"{out} exists: pass --force to overwrite it, or -o another file")
+    parent = Path(out).resolve().parent
+    if not parent.is_dir():
+        raise AntalateError(f"cannot write the log {out}: {parent} is not a folder")
+    return configs, bus, out
+
+
+def _operator(configs: list[Config], context: Context, script: Script) -> ScriptedOperator:
+    return ScriptedOperator(
+        configs[0].with_agent_name("operator"),
+        context,
+        expected_agents=len(configs),
+        mission_time=script.mission_time,
+        altitude=script.altitude,
+        directions=[DirectionAt(d.at, d.azimuth, d.speed, d.active) for d in script.direction],
+        timeout=script.mission_time + script.timeout,
+    )
+
+
+def _child_argv(exp: Experiment) -> Callable[[int, int], list[str]]:
+    argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", exp.log_level, "agent", exp.config_path]
+    argv += ["--agents", str(exp.agents), "--spacing", str(exp.spacing)]
+    return lambda i, n: [*argv, "--shard", f"{i}/{n}"]
+
+
+def run(exp: Experiment, *, report: Callable[[str], None] = print) -> int:
+    """Fly the experiment, then print the operator's report and the metrics; the exit status."""
+    script = exp.script or load_script(None)
+    configs, bus, out = prepare(exp)
+    processes = min(exp.processes, len(configs))
+    buses = shared_buses(configs)
+    # One process: every agent's internal topics in memory, as `antalate agent` runs them. Several:
+    # this process only commands and records, on the configured buses.
+    context = Context.in_process(buses) if processes == 1 else Context(Bus(buses), Executor())
+    recorder = LogRecorder(configs[0].with_agent_name("recorder"), context, bus=bus, path=out)
+    nodes: list[Node] = [recorder]
+    if processes == 1:
+        nodes += [node for cfg in configs for node in agent_nodes(cfg, context)]
+    children_done = threading.Event()
+    stop_children = threading.Event()
+    children: threading.Thread | None = None
+    # With the console, every log line goes to a file: they would tear the console's screen.
+    console_log = None if exp.headless else _temp_log()
+    if processes > 1:
+
+        def supervise() -> None:
+            try:
+                if console_log is None:
+                    run_processes(_child_argv(exp), processes, stop=stop_children)
+                else:
+                    with open(console_log, "ab") as output:
+                        run_processes(_child_argv(exp), processes, stop=stop_children, output=output)
+            finally:
+                children_done.set()
+
+        children = threading.Thread(target=supervise, name="agent-processes", daemon=True)
+        children.start()
+    code = 1
+    try:
+        if exp.headless:
+            operator = _operator(configs, context, script)
+            nodes.append(operator)
+            run_until_signal(context, nodes, poll=lambda: operator.finished or children_done.is_set())
+            code = 0 if operator.phase is Phase.DONE else 1
+            if not operator.finished:
+                if children_done.is_set():
+                    operator.reason = "an agent process ended before the experiment did"
+                else:  # run_until_signal only returns early on SIGINT or SIGTERM
+                    operator.reason, code = "interrupted (SIGINT or SIGTERM)", 130
+            report(operator.report())
+        elif console_log is not None:
+            code = _run_console(configs[0], context, nodes, console_log, report)
+    finally:
+        stop_children.set()
+        if children is not None:
+            children.join()
+    report(f"log: {out} ({recorder.events} messages on bus {bus!r})")
+    _report_metrics(out, script, report)
+    return code
+
+
+def _temp_log() -> str:
+    import tempfile
+
+    fd, path = tempfile.mkstemp(prefix="antalate-run-", suffix=".log")
+    os.close(fd)
+    return path
+
+
+def _run_console(
+    config: Config, context: Context, nodes: list[Node], log_path: str, report: Callable[[str], None]
+) -> int:
+    """The operator console in the foreground, the nodes on the executor behind it (as ``antalate demo``);
+    the log lines go to ``log_path`` meanwhile, named at the end."""
+    from antalate_lcm.runtime.interactive import _log_to_file
+
+    try:
+        with _log_to_file(log_path):
+            return _console(config, context, nodes)
+    finally:
+        report(f"the nodes' log lines are in {log_path}")
+
+
+def _console(config: Config, context: Context, nodes: list[Node]) -> int:
+    from operator_tui.app import OperatorApp
+
+    started: list[Node] = []
+    try:
+        context.bus.open()
+        context.executor.start()
+        for node in nodes:
+            node.start()
+            started.append(node)
+        app = OperatorApp(config.with_agent_name("operator"), context=context, name="operator")
+        app.run()
+        return app.return_code or 0
+    finally:
+        for node in reversed(started):
+            with contextlib.suppress(Exception):
+                node.stop()
+        context.close()
+
+
+def _report_metrics(path: str, script: Script, report: Callable[[str], None]) -> None:
+    from antalate_lcm.analysis import analyze_log, format_summary
+
+    options = script.analyze
+    try:
+        result = analyze_log(
+            path,
+            range_m=options.range_m,
+            radius_below=options.radius_below,
+            radius_above=options.radius_above,
+        )
+    except AntalateError as exc:  # a flight that never got going leaves a log with nothing to analyse
+        report(f"no metrics: {exc}")
+        return
+    report(format_summary(result))
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    return run(
+        Experiment(
+            config_path=args.config,
+            agents=args.agents,
+            processes=args.processes,
+            spacing=args.spacing,
+            script=load_script(args.script),
+            output=args.output,
+            bus=args.bus,
+            headless=args.headless,
+            force=args.force,
+            log_level=args.log_level,
+        )
+    )
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``run`` to the ``antalate`` parser (docs/experiments.md)."""
+    p = sub.add_parser(
+        "run",
+        help="fly a config with N simulated agents and a scripted operator, record it, print the swarm metrics",
+    )
+    p.add_argument("config", help="agent config file (TOML), e.g. the one `antalate new behavior` wrote")
+    p.add_argument("--agents", type=int, default=1, help="N simulated agents from the config (default 1)")
+    p.add_argument("--processes", type=int, default=1, help="spread the agents over P processes (default 1)")
+    p.add_argument("--spacing", type=float, default=8.0, help="metres between simulated homes (default 8)")
+    p.add_argument("--script", help="experiment script (TOML; default: a 30 s mission, then RTL)")
+    p.add_argument("-o", "--output", help="LCM log file (default: antalate-run-YYYYmmdd-HHMMSS.lcm)")
+    p.add_argument("--bus", help="bus to record (default: 'lan' if declared, else the default bus)")
+    p.add_argument("-f", "--force", action="store_true", help="overwrite the log file if it exists")
+    p.add_argument(
+        "--headless", action="store_true", help="the script's operator flies (no console); for scripts and CI"
+    )
+    p.set_defaults(func=_cmd_run)

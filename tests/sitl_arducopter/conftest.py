@@ -1,0 +1,43 @@
+"""Module-scoped fixtures for the ArduCopter SITL tests: one namespace, one LCM probe, one booted vehicle.
+
+ArduCopter needs ~40 s from start to being ready to arm, so a module boots its vehicle once and its tests
+share it, each leaving it landed and disarmed in STANDBY (`landed`), in the order the module lists them.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import MCAST_URL, Probe, _netns_reason
+from tests.netns import NetNamespace
+from tests.sitl_arducopter.harness import sitl_missing
+
+
+@pytest.fixture(scope="module")
+def sitl_netns() -> Iterator[NetNamespace]:
+    reason = sitl_missing() or _netns_reason()
+    if reason:
+        pytest.skip(reason)
+    with NetNamespace() as ns:
+        yield ns
+
+
+@pytest.fixture(scope="module")
+def sitl_probe(sitl_netns: NetNamespace) -> Iterator[Probe]:
+    proc = sitl_netns.popen(
+        [sys.executable, "-m", "tests.probe", MCAST_URL],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    yield Probe(proc)
+
+
+@pytest.fixture(scope="module")
+def sitl_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("sitl")

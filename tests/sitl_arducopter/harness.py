@@ -1,0 +1,152 @@
+"""ArduCopter 4.6.3 SITL in a private network namespace, flown by a whole ``antalate agent`` process.
+
+`Copter` is one vehicle and its agent inside the test's namespace: the ``arducopter`` binary (from
+``ANTALATE_ARDUCOPTER_SITL``, default ``../shared/sitl/arducopter/arducopter`` from the project root,
+with ``copter.parm`` beside it; ../shared/sitl/README.md), a `gcs` helper that relays the agent's TCP
+link to SERIAL0 (so the test can cut or stall it) and watches the vehicle on SERIAL1, and the agent (MC +
+HLC with the ``mavlink`` adapter + a BMA running ``direction_follow``, or ``dovrat_swarm``).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import time
+from pathlib import Path
+from typing import Any
+
+from tests.agent_harness import AgentProcesses
+from tests.conftest import MCAST_URL
+from tests.jsonl import JsonLinesProcess
+from tests.netns import REPO, NetNamespace, stop_process
+
+DEFAULT_SITL = REPO / ".." / "shared" / "sitl" / "arducopter" / "arducopter"
+HOME = (-35.363261, 149.165230, 584.0, 353.0)
+RELAY_PORT = 15760  # + 10 N: where the agent connects
+
+
+def sitl_binary() -> Path:
+    return Path(os.environ.get("ANTALATE_ARDUCOPTER_SITL", str(DEFAULT_SITL))).resolve()
+
+
+def sitl_missing() -> str | None:
+    """Why the SITL tests cannot run here (None: they can)."""
+    binary = sitl_binary()
+    if not binary.is_file() or not os.access(binary, os.X_OK):
+        return (
+            f"no ArduCopter SITL binary at {binary} (set ANTALATE_ARDUCOPTER_SITL; ../shared/sitl/README.md)"
+        )
+    if not (binary.parent / "copter.parm").is_file():
+        return f"no copter.parm beside {binary}"
+    return None
+
+
+class Gcs(JsonLinesProcess):
+    """Client of `gcs`: the vehicle's own record, a second ground station, and the link's relay."""
+
+    def __init__(self, netns: NetNamespace, instance: int) -> None:
+        proc = netns.python(
+            "-m",
+            "tests.sitl_arducopter.gcs",
+            f"tcp:127.0.0.1:{5762 + 10 * instance}",
+            str(RELAY_PORT + 10 * instance),
+            str(5760 + 10 * instance),
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
+        super().__init__(proc, "the SITL ground station")
+
+    def ok(self, **req: Any) -> dict[str, Any]:
+        reply = self.call(**req)
+        assert reply["ok"], reply
+        return reply
+
+    def state(self) -> dict[str, Any]:
+        return self.ok(op="state")
+
+    def set_param(self, name: str, value: float) -> None:
+        self.ok(op="set_param", name=name, value=value)
+
+    def relay(self, mode: str) -> None:
+        self.ok(op="relay", mode=mode)
+
+
+class Copter:
+    """SITL instance ``instance`` (system id instance + 1) and the agent ``name`` that flies it."""
+
+    def __init__(
+        self,
+        netns: NetNamespace,
+        workdir: Path,
+        *,
+        instance: int = 0,
+        name: str = "copter",
+        bma: list[dict[str, Any]] | None = None,
+        speedup: float = 1.0,
+        home: tuple[float, float, float, float] = HOME,
+        hlc: dict[str, Any] | None = None,
+        autopilot: dict[str, Any] | None = None,
+    ) -> None:
+        self.netns, self.instance, self.name = netns, instance, name
+        workdir.mkdir(parents=True, exist_ok=True)
+        self.workdir = workdir
+        self.gcs = Gcs(netns, instance)  # the relay listens before the agent connects
+        binary = sitl_binary()
+        self.booted_at = time.monotonic()
+        self.sitl = netns.popen(
+            [
+                str(binary),
+                "--model",
+                "+",
+                "--speedup",
+                f"{speedup:g}",
+                "--home",
+                ",".join(f"{x:g}" for x in home),
+                "--defaults",
+                str(binary.parent / "copter.parm"),
+                "--instance",
+                str(instance),
+                "-w",
+                "--sysid",
+                str(instance + 1),
+            ],
+            cwd=str(workdir),
+            stdout=open(workdir / "sitl.log", "w"),  # noqa: SIM115 - closed with the process
+            stderr=subprocess.STDOUT,
+        )
+        doc: dict[str, Any] = {
+            "agent": {"name": name},
+            "buses": {"lan": MCAST_URL},
+            "hlc": {
+                "autopilot": "mavlink",
+                "default_takeoff_altitude": 5.0,
+                "gain_altitude_timeout": 40.0,
+                **(hlc or {}),
+                "autopilot_params": {
+                    "connection": f"tcp:127.0.0.1:{RELAY_PORT + 10 * instance}",
+                    "ready_timeout": 120.0,
+                    "stream_rate_hz": 10.0,
+                    **(autopilot or {}),
+                },
+            },
+            "bma": bma
+            or [
+                {
+                    "name": "pilot",
+                    "behaviors": [{"plugin": "direction_follow", "activate_on": ["MISSION"]}],
+                }
+            ],
+            "security": {"insecure": True},  # the probe plays an unsigned operator
+        }
+        self.agent = AgentProcesses(netns, workdir, doc)
+        self.agent.start("agent")
+        self.gcs.ok(op="connect")
+
+    def restart_agent(self) -> None:
+        self.agent.start("agent")
+
+    def stop(self) -> None:
+        self.agent.stop()
+        stop_process(self.sitl)
+        stop_process(self.gcs.proc)

@@ -1,0 +1,81 @@
+"""A TCP relay between the adapter and SITL's SERIAL0 that the test can cut or stall (a radio or a modem).
+
+``pass`` forwards both ways; ``cut`` reads and drops everything (a radio out of range: the TCP
+connection stays up, nothing arrives); ``stall`` reads and holds everything, and the next ``pass``
+delivers it all at once, in order (a TCP link or a modem buffering through a dead spell, as a field
+trial saw). The upstream connection to SITL is made when the adapter connects, so SITL -- which waits
+for its first SERIAL0 client before it boots -- starts with the agent already connected.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+import threading
+import time
+
+MODES = ("pass", "cut", "stall")
+
+
+class Relay:
+    def __init__(self, listen_port: int, upstream_port: int, host: str = "127.0.0.1") -> None:
+        self.upstream = (host, upstream_port)
+        self.mode = "pass"
+        self._lock = threading.Lock()
+        self._held: dict[str, bytearray] = {"up": bytearray(), "down": bytearray()}
+        self._socks: dict[str, socket.socket] = {}  # "up": to SITL, "down": to the adapter
+        self._server = socket.create_server((host, listen_port))
+        self.port = self._server.getsockname()[1]
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def set_mode(self, mode: str) -> None:
+        if mode not in MODES:
+            raise ValueError(f"relay mode {mode!r}: one of {MODES}")
+        with self._lock:
+            self.mode = mode
+            if mode != "pass":
+                return
+            flush = [(self._socks.get(k), bytes(b)) for k, b in self._held.items()]
+            for b in self._held.values():
+                b.clear()
+        for sock, data in flush:
+            if sock is not None and data:
+                with contextlib.suppress(OSError):
+                    sock.sendall(data)
+
+    def _accept(self) -> None:
+        while True:
+            down, _ = self._server.accept()
+            up = self._connect_upstream()
+            with self._lock:
+                self._socks = {"up": up, "down": down}
+            threading.Thread(target=self._pump, args=(down, up, "up"), daemon=True).start()
+            threading.Thread(target=self._pump, args=(up, down, "down"), daemon=True).start()
+
+    def _connect_upstream(self) -> socket.socket:
+        while True:
+            try:
+                return socket.create_connection(self.upstream, timeout=5)
+            except OSError:
+                time.sleep(0.1)
+
+    def _pump(self, src: socket.socket, dst: socket.socket, key: str) -> None:
+        src.settimeout(None)
+        while True:
+            try:
+                data = src.recv(65536)
+            except OSError:
+                data = b""
+            if not data:
+                for s in (src, dst):
+                    with contextlib.suppress(OSError):
+                        s.close()
+                return
+            with self._lock:
+                if self.mode == "cut":
+                    continue
+                if self.mode == "stall":
+                    self._held[key] += data
+                    continue
+            with contextlib.suppress(OSError):
+                dst.sendall(data)

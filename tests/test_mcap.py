@@ -256,7 +256,9 @@ def test_raw_keeps_the_lcm_bytes_and_reads_back_as_the_log(tmp_path: Path) -> No
     assert main(["export", str(square_swarm().write(tmp_path / "swarm.lcm")), "-o", str(swarm)]) == 0
     assert main(["plot", str(swarm), "-q"]) == 0
     assert (tmp_path / "swarm.png").stat().st_size > 10_000
-    assert analyze_log(swarm).to_json() == analyze_log(tmp_path / "swarm.lcm").to_json() | {"path": str(swarm)}
+    assert analyze_log(swarm).to_json() == analyze_log(tmp_path / "swarm.lcm").to_json() | {
+        "path": str(swarm)
+    }
 
 
 def test_bad_inputs_are_one_line_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

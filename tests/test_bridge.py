@@ -16,7 +16,8 @@ from hypothesis import strategies as st
 
 from antalate_lcm.bridge import Bridge, BridgeConfig, Direction, Memory, Throttle, load_bridge_config
 from antalate_lcm.errors import ConfigError
-from antalate_lcm.zenoh_bus import BRIDGE_MARK
+from antalate_lcm.security import MemberProof
+from antalate_lcm.zenoh_bus import BRIDGE_MARK, _Group
 from tests.netns import NetNamespace
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
@@ -221,3 +222,28 @@ def test_any_message_is_forwarded_or_counted_never_raised(
     else:
         assert _accounted(d) >= before + 1
     assert all(t.is_alive() for t in loop_bridge._threads)
+
+
+# ------------------------------------------------------------------------------ the election's tokens
+def test_a_member_token_is_believed_only_when_signed_and_fresh() -> None:
+    proof = MemberProof(("k1", "k0"), window=5.0, refresh=1.0)
+    name = proof.token("g", "abc123", 1000.0)
+    assert proof.check("g", name, 1000.5) == ("abc123", 1000.0)
+    assert MemberProof(("k0", "k1")).check("g", name, 1000.5) == ("abc123", 1000.0)  # rotation: both check
+    assert "MAC" in str(MemberProof(("other",)).check("g", name, 1000.5))
+    assert "MAC" in str(proof.check("other-group", name, 1000.5))  # not valid in another site's group
+    assert "stale" in str(proof.check("g", name, 1007.0))
+    assert "not a signed" in str(proof.check("g", "0", 1000.0))
+
+
+def test_a_group_counts_signed_members_and_forgets_stale_ones() -> None:
+    reported: list[frozenset[str]] = []
+    proof = MemberProof(("k",), window=5.0, refresh=1.0)
+    g = _Group("p-groups/g", "g", "me", reported.append, proof)
+    assert g.seen("0", True, 100.0) is not None  # the outsider's token of issue 29.3
+    assert g.seen(proof.token("g", "zz", 100.0), True, 100.0) is None
+    g.report()
+    assert reported == [frozenset({"me", "zz"})]
+    g.expire(106.5)  # zz stopped refreshing: gone after window + refresh
+    g.report()
+    assert reported[-1] == frozenset({"me"})

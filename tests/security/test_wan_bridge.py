@@ -1,8 +1,9 @@
-"""Issue 29, findings 1, 2 and 4: an outsider against ``antalate bridge`` (no key, no certificate).
+"""Issue 29, findings 1, 2, 3 and 4: an outsider against ``antalate bridge`` (no key, no certificate).
 
-One private network namespace for the module: an ``antalate router`` on loopback, two real
-``antalate bridge`` processes (LAN A and LAN B, two multicast groups standing for two sites' LANs,
-each joined to the router), and tests/security/wan_peer.py: the outsider (a plain Zenoh client, raw
+One private network namespace for the module: an ``antalate router`` on loopback, real ``antalate
+bridge`` processes (LAN A and LAN B, two multicast groups standing for two sites' LANs, each joined
+to the router; LAN C joined by a redundant pair that holds the swarm key and elects which one
+forwards to it), and tests/security/wan_peer.py: the outsider (a plain Zenoh client, raw
 UDP on both LANs) and the witness (fresh probes through the bridges, bytes seen on each side).
 
 What is judged never comes from the attacker's side: a probe sent after each attack must cross
@@ -12,6 +13,7 @@ the witness, and a bridge's memory is read from /proc.
 
 from __future__ import annotations
 
+import secrets
 import socket
 import subprocess
 import time
@@ -22,6 +24,7 @@ from typing import Any
 import pytest
 import tomli_w
 
+from antalate_lcm.bridge import origin_tag
 from antalate_lcm.lcm_datagram import fragments, short_datagram
 from antalate_lcm.zenoh_bus import BRIDGE_MARK
 from tests.conftest import _netns_reason
@@ -34,6 +37,8 @@ pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install
 REPO = Path(__file__).resolve().parents[2]
 LAN_A = "udpm://239.255.76.67:7667?ttl=0"
 LAN_B = "udpm://239.255.76.69:7669?ttl=0"
+LAN_C = "udpm://239.255.76.71:7671?ttl=0"
+SWARM_KEY = "wan-" + secrets.token_hex(16)
 
 
 class Peer(JsonLinesProcess):
@@ -58,6 +63,8 @@ class Wan:
         self.bridges = {
             "a": self.bridge("a", LAN_A),
             "b": self.bridge("b", LAN_B),
+            "c1": self.bridge("c", LAN_C, "c1"),
+            "c2": self.bridge("c", LAN_C, "c2"),
         }
         self.peer = Peer(
             ns.python(
@@ -72,14 +79,17 @@ class Wan:
             "wan_peer",
         )
 
-    def bridge(self, site: str, lan: str) -> subprocess.Popen[str]:
-        doc = {
+    def bridge(self, site: str, lan: str, name: str = "") -> subprocess.Popen[str]:
+        doc: dict[str, Any] = {
             "buses": {"lan": lan, "wan": f"zenoh://?connect={self.router}"},
             "bridge": {"between": ["lan", "wan"], "site": f"site-{site}"},
         }
-        path = self.tmp / f"bridge-{site}.toml"
+        if name:  # the redundant pair holds the swarm key: it signs its election tokens
+            doc["security"] = {"swarm_key": SWARM_KEY}
+        name = name or site
+        path = self.tmp / f"bridge-{name}.toml"
         path.write_text(tomli_w.dumps(doc))
-        log = (self.tmp / f"bridge-{site}.log").open("w")
+        log = (self.tmp / f"bridge-{name}.log").open("w")
         return self.ns.antalate("bridge", str(path), stdout=log, stderr=subprocess.STDOUT, cwd=str(REPO))
 
     def log(self, site: str) -> str:
@@ -110,6 +120,7 @@ def wan(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Wan]:
         w = Wan(ns, tmp_path_factory.mktemp("wan"))
         assert wait_for(lambda: w.peer.latency("a", "b", 1.0) is not None, 30.0, 0.1), w.log("a") + w.log("b")
         assert wait_for(lambda: w.peer.latency("zenoh", "a", 1.0) is not None, 30.0, 0.1), w.log("a")
+        assert wait_for(lambda: w.peer.latency("zenoh", "c", 1.0) is not None, 30.0, 0.1), w.log("c1")
         yield w
 
 
@@ -219,3 +230,31 @@ def test_a_channel_flood_leaves_no_memory_behind_and_does_not_stall_the_other_wa
     assert after is not None and caught_up < 5.0, (after, caught_up)
     assert settled <= baseline * 1.10, (baseline, peak, settled)
     assert wan.alive()
+
+
+# ------------------------------------------------------------------------ finding 3: election hijack
+@pytest.mark.attack("an outsider's liveliness token takes a site's bridge election over (issue 29.3)")
+def test_an_outsiders_liveliness_token_changes_nothing(wan: Wan) -> None:
+    group = f"antalate-groups/{origin_tag(f'site-c {LAN_C}').decode()}"
+    genuine = [
+        k for k in wan.peer.ok(op="keys", selector="antalate-groups/**")["keys"] if k.startswith(group)
+    ]
+    assert len(genuine) >= 2, genuine  # anyone can list them, as the issue found
+    now_ms = int(time.time() * 1000)
+    forged = [
+        f"{group}/0",  # the issue's token: lowest id, so elected
+        f"{group}/0.{now_ms}.{'0' * 32}",  # shaped like a signed one, wrong MAC
+        f"{group}/{genuine[0].rsplit('/', 1)[1].split('.')[0]}x.{now_ms}.{'f' * 32}",
+    ]
+    try:
+        for key in forged:
+            wan.peer.ok(op="token", key=key)
+        time.sleep(2.5)  # past the pair's token refresh
+        for _ in range(5):
+            assert wan.peer.latency("zenoh", "c", 5.0) is not None, wan.log("c1") + wan.log("c2")
+        logs = wan.log("c1") + wan.log("c2")
+        assert "ignored a liveliness token" in logs
+        assert "forwarding to lan (bridges of this site alive: 0" not in logs
+    finally:
+        for key in forged:
+            wan.peer.ok(op="untoken", key=key)

@@ -92,7 +92,7 @@ def test_an_adapter_module_that_fails_to_import(tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(REPO)])}
     one_line_error(
         antalate("agent", str(cfg), env=env),
-        f"invalid config {cfg}: hlc.autopilot: expected an installed adapter (crazyflie, mavlink, sim, tello)",
+        f"invalid config {cfg}: hlc.autopilot: expected an installed adapter (crazyflie, mavlink, px4, sim, tello)",
         "No module named 'serial_port_that_is_not_here'",
     )
 
@@ -129,12 +129,12 @@ def test_duplicate_agent_names(tmp_path: Path) -> None:
         (
             '[hlc]\nautopilot = ":Foo"\n',
             "hlc.autopilot",
-            "an installed adapter (crazyflie, mavlink, sim, tello)",
+            "an installed adapter (crazyflie, mavlink, px4, sim, tello)",
         ),
         (
             '[hlc]\nautopilot = ".sim:X"\n',
             "hlc.autopilot",
-            "an installed adapter (crazyflie, mavlink, sim, tello)",
+            "an installed adapter (crazyflie, mavlink, px4, sim, tello)",
         ),
         ('[hlc]\nautopilot = "nope"\n', "hlc.autopilot", "there is no adapter 'nope'"),
         (

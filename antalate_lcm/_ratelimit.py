@@ -1,6 +1,7 @@
-"""Log a recurring problem once per key per period, with a count of what was suppressed.
+"""Log a recurring problem once per key per period; limit a rate per key.
 
-A flood of garbage datagrams or a dead link must be visible in the log without drowning it.
+A flood of garbage datagrams or a dead link must be visible in the log without drowning it, and one
+sender's flood must spend its own budget, not everyone's (the station, the bridge, the web console).
 """
 
 from __future__ import annotations
@@ -37,3 +38,36 @@ class RateLimitedLog:
             args = (*args, suppressed)
         self._logger.log(level, msg, *args)
         return True
+
+
+class TokenBucket:
+    """Rate limits by key: ``rate`` per second sustained, ``burst`` at once.
+
+    ``take`` returns 0 when allowed, else the seconds until one more is allowed (Retry-After).
+    Full buckets are forgotten by `sweep`, so memory follows the active keys, not every address
+    that ever knocked.
+    """
+
+    def __init__(self, rate: float, burst: float) -> None:
+        self.rate = rate
+        self.burst = burst
+        self._buckets: dict[Hashable, tuple[float, float]] = {}
+
+    def take(self, key: Hashable, now: float) -> float:
+        level, last = self._buckets.get(key, (self.burst, now))
+        level = min(self.burst, level + (now - last) * self.rate)
+        if level < 1.0:
+            self._buckets[key] = (level, now)
+            return (1.0 - level) / self.rate
+        self._buckets[key] = (level - 1.0, now)
+        return 0.0
+
+    def sweep(self, now: float) -> None:
+        full = [
+            k for k, (level, last) in self._buckets.items() if level + (now - last) * self.rate >= self.burst
+        ]
+        for k in full:
+            del self._buckets[k]
+
+    def __len__(self) -> int:
+        return len(self._buckets)

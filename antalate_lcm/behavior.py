@@ -21,6 +21,7 @@ from pydantic import BaseModel, ConfigDict
 from antalate_lcm.bus import Subscription
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.executor import Timer
+from antalate_lcm.peers import PeerTable
 from antalate_lcm.topics import Message
 
 if TYPE_CHECKING:
@@ -54,6 +55,10 @@ class Behavior(ABC):
       the types are checked at load.
     - ``activate_on`` / ``deactivate_on``: default states, used when the config gives none.
     - ``tick_hz``: default rate of :meth:`tick` (0 = never ticked), overridden by the config's ``tick_hz``.
+    - ``uses_peers``: True for a behavior that reads ``ctx.peers`` (every other agent's latest
+      telemetry). Its BMA then listens to the swarm's TELEMETRY and MC_STATE, and a config in which
+      those cannot reach it (a process-local bus while agents run in several processes) fails at
+      start instead of splitting the swarm silently.
 
     Lifecycle: constructed once when the BMA starts (keep ``__init__`` cheap and free of I/O; the
     instance, and so its attributes, lives across activations) → :meth:`on_activate` /
@@ -66,6 +71,7 @@ class Behavior(ABC):
     activate_on: ClassVar[tuple[str, ...]] = ()
     deactivate_on: ClassVar[tuple[str, ...]] = ()
     tick_hz: ClassVar[float] = 0.0
+    uses_peers: ClassVar[bool] = False
 
     def __init__(self, ctx: BehaviorContext) -> None:
         self.ctx = ctx
@@ -107,8 +113,10 @@ class BehaviorContext:
         *,
         state: Callable[[], str],
         on_error: Callable[[str, BaseException], None],
+        peers: PeerTable | None = None,
     ) -> None:
         self._node = node
+        self._peers = peers
         self._topics = dict(topics)
         self._state = state
         self._on_error = on_error
@@ -140,6 +148,20 @@ class BehaviorContext:
     @property
     def active(self) -> bool:
         return self._active
+
+    @property
+    def peers(self) -> PeerTable:
+        """Every other agent's latest position, velocity, heading and MC state (docs/behaviors.md,
+        "Peers"), fed by the BMA from the swarm's own telemetry; ``peers.me`` is this agent.
+
+        Only for a behavior that declares ``uses_peers = True``: that is what makes its BMA listen
+        and check at start that the peers can be heard.
+        """
+        if self._peers is None:
+            raise BehaviorError(
+                f"behavior {self.name} reads ctx.peers but its class does not declare uses_peers = True"
+            )
+        return self._peers
 
     def topic(self, name: str) -> str:
         """The config topic that the behavior's topic ``name`` is bound to (after remaps)."""

@@ -15,12 +15,17 @@ What liblcm drops is dropped here too, and counted: an unknown magic, a channel 
 without its NUL, a message over 256 MiB, a fragment that would write past its message. Partial
 messages are bounded the way liblcm bounds them (1,000 at most, 16 MiB in all; the least recently
 updated goes first), so a flood of first fragments that never complete costs bounded memory.
+
+Two things liblcm does not do, both against amplification (issue 29): a message is delivered only
+when its fragments carried all of its bytes (liblcm delivers a 47-byte datagram that claims 16 MiB in
+"one fragment" as 16 MiB of zeros), and a reader may set a smaller size limit, per channel too, that
+is checked on the first fragment that names the size -- before any buffer is allocated.
 """
 
 from __future__ import annotations
 
 import struct
-from collections.abc import Hashable
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 
 MAGIC_SHORT = 0x4C433032  # "LC02"
@@ -58,6 +63,17 @@ def fragments(channel: str, payload: bytes, seqno: int = 0, size: int = 65_000) 
     return out
 
 
+def channel_problem(channel: str) -> str | None:
+    """Why liblcm cannot send on ``channel`` (it raises ValueError deep in publish), or None."""
+    if not channel:
+        return "an empty channel name"
+    if "\0" in channel:
+        return "a NUL byte in the channel name"
+    if len(channel.encode()) > MAX_CHANNEL_LENGTH:
+        return f"a channel name over {MAX_CHANNEL_LENGTH} bytes"
+    return None
+
+
 @dataclass
 class _Partial:
     size: int
@@ -65,24 +81,36 @@ class _Partial:
     data: bytearray
     channel: str | None = None
     seen: set[int] = field(default_factory=set)
+    #: Bytes the fragments carried (a duplicate counted once): all of ``size`` or nothing is delivered.
+    got: int = 0
 
 
 class Reassembler:
     """Turns datagrams into ``(channel, payload)`` messages; one per receiving socket.
 
     ``dropped`` counts datagrams that were not LCM or were damaged (liblcm's ``udp_discarded_bad``
-    plus the fragments it drops), ``evicted`` the partial messages pushed out by the bounds.
+    plus the fragments it drops), ``evicted`` the partial messages pushed out by the bounds,
+    ``oversize`` the fragments of messages over ``max_message_size`` (or over ``size_limit`` of
+    their channel), dropped before anything was allocated for them.
     """
 
     def __init__(
-        self, max_partial: int = MAX_PARTIAL_MESSAGES, max_partial_bytes: int = MAX_PARTIAL_BYTES
+        self,
+        max_partial: int = MAX_PARTIAL_MESSAGES,
+        max_partial_bytes: int = MAX_PARTIAL_BYTES,
+        *,
+        max_message_size: int = MAX_MESSAGE_SIZE,
+        size_limit: Callable[[str], int] | None = None,
     ) -> None:
         self._partial: dict[tuple[Hashable, int], _Partial] = {}
         self._partial_bytes = 0
         self._max_partial = max_partial
         self._max_partial_bytes = max_partial_bytes
+        self._max_message = min(max_message_size, MAX_MESSAGE_SIZE)
+        self._size_limit = size_limit
         self.dropped = 0
         self.evicted = 0
+        self.oversize = 0
 
     def short(self, datagram: bytes) -> tuple[str, bytes] | None:
         """A short (``LC02``) datagram's channel and payload, or None when it is damaged."""
@@ -117,6 +145,11 @@ class Reassembler:
         if size > MAX_MESSAGE_SIZE or count == 0:
             self.dropped += 1
             return None
+        if size > self._max_message:
+            self.oversize += 1
+            if partial is not None:
+                self._forget(key)
+            return None
         start = _LONG.size
         channel = None
         if number == 0:
@@ -130,6 +163,11 @@ class Reassembler:
                 self.dropped += 1
                 return None
             start = end + 1
+            if self._size_limit is not None and size > self._size_limit(channel):
+                self.oversize += 1
+                if partial is not None:
+                    self._forget(key)
+                return None
         chunk = memoryview(datagram)[start:]
         if offset + len(chunk) > size:
             self.dropped += 1
@@ -153,10 +191,13 @@ class Reassembler:
         if number not in partial.seen:  # a duplicated fragment is not a missing one found
             partial.seen.add(number)
             partial.remaining -= 1
+            partial.got += len(chunk)
         if partial.remaining > 0:
             return None
         self._forget(key)
-        if partial.channel is None:  # every fragment counted but fragment 0 never came (forged count)
+        if partial.channel is None or partial.got < partial.size:
+            # every fragment counted but fragment 0 never came, or the fragments did not carry the
+            # size they claimed (forged count): never deliver bytes nobody sent
             self.dropped += 1
             return None
         return partial.channel, bytes(partial.data)

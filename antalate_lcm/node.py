@@ -71,6 +71,9 @@ class Context:
     bus: Bus
     executor: Executor
     inproc_bus: str | None = None
+    #: Every agent of the swarm runs in this process (``antalate agent`` without ``--processes``,
+    #: the demo): a process-local bus (memq://) then reaches every peer a behavior asks for.
+    whole_swarm: bool = False
     #: Buses whose missing swarm key a node of this process has already warned of: a thousand
     #: agents in one process (``antalate agent --agents 1000``) would say it a thousand times and
     #: bury every other line of the start.
@@ -84,7 +87,7 @@ class Context:
         return cls(Bus(config.buses), Executor())
 
     @classmethod
-    def in_process(cls, buses: Mapping[str, str]) -> Context:
+    def in_process(cls, buses: Mapping[str, str], *, whole_swarm: bool = False) -> Context:
         """A context for every node of one or more agents in this process (``antalate agent``, demo).
 
         Internal topics (MC_STATE, HLC_STATE, VELOCITY_CMD, ...) are delivered between this
@@ -93,7 +96,9 @@ class Context:
         """
         if INPROC_BUS in buses:
             raise AntalateError(f"bus name {INPROC_BUS!r} is reserved for the in-process bus")
-        return cls(Bus({**buses, INPROC_BUS: "memq://"}), Executor(), inproc_bus=INPROC_BUS)
+        return cls(
+            Bus({**buses, INPROC_BUS: "memq://"}), Executor(), inproc_bus=INPROC_BUS, whole_swarm=whole_swarm
+        )
 
     def close(self) -> None:
         self.executor.stop()
@@ -138,6 +143,8 @@ class Node:
         self._specs = config.topic_specs()
         self._publishers: dict[Any, _Publisher] = {}
         self._subs: list[Subscription] = []
+        #: subscribe_all's pattern subscription -> its own-channel subscription (unsubscribed together).
+        self._companions: dict[Subscription, Subscription] = {}
         self._timers: list[Timer] = []
         self.started = False
         sec = config.security
@@ -173,6 +180,7 @@ class Node:
                 self.context.bus.unsubscribe(sub)
             self._timers.clear()
             self._subs.clear()
+            self._companions.clear()
             self.on_stop()
 
         self.context.executor.run_sync(shutdown)
@@ -376,17 +384,27 @@ class Node:
     ) -> Subscription:
         """Deliver ``topic`` from every agent (template fields not given match anything).
 
-        Always from the configured bus, never the in-process one: peers may be other processes.
+        Other agents' messages come from the configured bus, never the in-process one: peers may be
+        other processes. This agent's own channel, when the pattern covers it, is delivered once,
+        from where :meth:`subscribe` takes it (the in-process bus in one process): the copy that
+        also comes back over the network (multicast loops back; the same LCM instance's exact and
+        pattern subscriptions decode separately) is dropped by channel before any check, so the
+        replay guard never sees this agent's message twice (it logged "replayed or out of order").
         """
         spec = self.topic_spec(topic)
         bus = self.config.topic_buses(topic)[0]
         self._check_exposure(topic, bus)
         pattern = re.compile(channel_regex(spec.channel, **fields))
         bound = is_internal(topic) and "{agent}" in spec.channel
+        own = self.channel(topic, **fields) if "{agent}" in spec.channel else None
+        if own is not None and not pattern.fullmatch(own):
+            own = None
         # Channel -> match, so a steady stream of known channels costs no regex per message.
         matches: dict[str, TopicMatch] = {}
 
         def deliver(channel: str, msg: Any) -> None:  # on the executor's loop thread
+            if channel == own:
+                return
             match = matches.get(channel)
             if match is None:
                 m = pattern.fullmatch(channel)
@@ -398,9 +416,27 @@ class Node:
 
         sub = self.context.bus.subscribe(bus, pattern.pattern, spec.msg_type, deliver, regex=True)
         self._subs.append(sub)
+        if own is not None:
+            m = pattern.fullmatch(own)
+            own_match = TopicMatch(own, m.groupdict() if m else {})
+            own_bus = self._subscribe_bus(topic)
+            if own_bus != bus:
+                self._check_exposure(topic, own_bus)
+            sender = self.agent if bound else None
+
+            def deliver_own(_channel: str, msg: Any) -> None:  # on the executor's loop thread
+                if self._admit(own_match.channel, msg, sender):
+                    handler(msg, own_match)
+
+            companion = self.context.bus.subscribe(own_bus, own, spec.msg_type, deliver_own)
+            self._subs.append(companion)
+            self._companions[sub] = companion
         return sub
 
     def unsubscribe(self, sub: Subscription) -> None:
+        companion = self._companions.pop(sub, None)
+        if companion is not None:  # subscribe_all's own-channel half goes with it
+            self.unsubscribe(companion)
         self.context.bus.unsubscribe(sub)
         if sub in self._subs:
             self._subs.remove(sub)

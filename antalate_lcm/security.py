@@ -325,6 +325,51 @@ class Authenticator:
         return problem
 
 
+MEMBER_LABEL = b"antalate group member v1"
+
+
+@dataclass(frozen=True)
+class MemberProof:
+    """Liveliness-token names that prove "member M of group G was alive at time T" with the swarm key.
+
+    A bridge election counts the tokens under a group key (docs/wan.md); anyone who reaches the
+    router can declare a token there, so each one is named ``MEMBER.MS.MAC`` (MS: wall-clock
+    milliseconds, MAC: HMAC-SHA256 of the swarm key over group, member and time, 128 bits) and is
+    re-declared every ``refresh`` seconds. A token is believed while its time is within ``window``
+    (+ ``refresh``) of the reader's clock: a copied token keeps a member alive that long at most.
+    """
+
+    keys: tuple[str, ...]
+    window: float = 5.0
+    refresh: float = 1.0
+
+    @staticmethod
+    def _mac(key: str, group: str, member: str, ms: int) -> str:
+        text = b"%s\n%s\n%s\n%d" % (MEMBER_LABEL, group.encode(), member.encode(), ms)
+        return hmac.new(key.encode(), text, hashlib.sha256).hexdigest()[:32]
+
+    def token(self, group: str, member: str, now: float) -> str:
+        ms = int(now * 1000)
+        return f"{member}.{ms}.{self._mac(self.keys[0], group, member, ms)}"
+
+    def check(self, group: str, name: str, now: float) -> tuple[str, float] | str:
+        """(member, time) of a valid, fresh token name, else why it is not believed."""
+        member, _, rest = name.partition(".")
+        ms_text, _, mac = rest.partition(".")
+        if not member or not ms_text.isdigit() or len(mac) != 32:
+            return "not a signed member token"
+        ms = int(ms_text)
+        if not any(hmac.compare_digest(self._mac(k, group, member, ms), mac) for k in self.keys):
+            return "its MAC does not match the swarm key"
+        age = now - ms / 1000
+        if abs(age) > self.window + self.refresh:
+            return f"stale (age {age:+.1f} s, window {self.window:g} s)"
+        return member, ms / 1000
+
+    def fresh(self, t: float, now: float) -> bool:
+        return now - t <= self.window + self.refresh
+
+
 def network_reachable(url: str) -> bool:
     """Whether a bus URL can carry datagrams from other hosts (anything but memq:// and file://)."""
     scheme = url.split("://", 1)[0].lower()

@@ -21,6 +21,7 @@ from antalate_lcm.msgs import (
     operator_cmd_t,
     payload_t,
     peer_detection_t,
+    peer_scan_t,
     telemetry_t,
     velocity_cmd_t,
 )
@@ -53,6 +54,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         behavior_state_t,
         arbiter_status_t,
         peer_detection_t,
+        peer_scan_t,
     )
 }
 
@@ -77,6 +79,7 @@ TOPICS: dict[str, TopicSpec] = {
     "OPERATOR_FEEDBACK": TopicSpec(payload_t, "{agent}/OPERATOR_FEEDBACK"),
     "ARBITER": TopicSpec(arbiter_status_t, "{agent}/ARBITER/{arbiter}"),
     "PEER_DETECTION": TopicSpec(peer_detection_t, "{agent}/PEER_DETECTION"),
+    "PEER_SCAN": TopicSpec(peer_scan_t, "{agent}/PEER_SCAN"),
     "SWARM_OPERATOR_CMD": TopicSpec(operator_cmd_t, "SWARM/OPERATOR_CMD"),
     "SWARM_DIRECTION_CMD": TopicSpec(direction_cmd_t, "SWARM/DIRECTION_CMD"),
 }

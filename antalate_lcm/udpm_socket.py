@@ -52,9 +52,9 @@ def udpm_socket(url: str) -> socket.socket:
 class UdpmReceiver:
     """A udpm socket and its reassembler; :meth:`drain` hands every complete message to ``deliver``."""
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, reassembler: Reassembler | None = None) -> None:
         self.sock = udpm_socket(url)
-        self.reassembler = Reassembler()
+        self.reassembler = reassembler or Reassembler()
 
     def fileno(self) -> int:
         return self.sock.fileno()

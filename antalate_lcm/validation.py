@@ -12,7 +12,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t, payload_t, velocity_cmd_t
+from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t, payload_t, peer_scan_t, velocity_cmd_t
 
 #: m: a takeoff altitude above this is a typo or an attack (legal ceilings are ~120 m).
 MAX_TAKEOFF_ALTITUDE = 1000.0
@@ -81,11 +81,38 @@ def _payload(msg: payload_t) -> str | None:
     return None
 
 
+#: m: farther than this, a peer "detection" is nonsense (no sensor, no station sector is that big).
+MAX_PEER_RANGE = 1e6
+
+
+def _peer_scan(msg: peer_scan_t) -> str | None:
+    problem = _finite("max_range", float(msg.max_range), 0.0, MAX_PEER_RANGE) or _finite(
+        "fov", float(msg.fov), 0.0, 360.0
+    )
+    if problem:
+        return problem
+    arrays = (msg.range, msg.bearing, msg.elevation, msg.rel_forward, msg.rel_right, msg.id)
+    if msg.n < 0 or any(len(a) != msg.n for a in arrays):
+        return f"n is {msg.n} but the arrays hold {', '.join(str(len(a)) for a in arrays)} entries"
+    for i in range(msg.n):
+        problem = (
+            _finite(f"range[{i}]", float(msg.range[i]), 0.0, MAX_PEER_RANGE)
+            or _finite(f"bearing[{i}]", float(msg.bearing[i]), -180.0, 180.0)
+            or _finite(f"elevation[{i}]", float(msg.elevation[i]), -90.0, 90.0)
+            or _finite(f"rel_forward[{i}]", float(msg.rel_forward[i]), -MAX_VELOCITY, MAX_VELOCITY)
+            or _finite(f"rel_right[{i}]", float(msg.rel_right[i]), -MAX_VELOCITY, MAX_VELOCITY)
+        )
+        if problem:
+            return problem
+    return None
+
+
 _CHECKS: dict[type, Callable[[Any], str | None]] = {
     operator_cmd_t: _operator_cmd,
     direction_cmd_t: _direction,
     velocity_cmd_t: _velocity,
     payload_t: _payload,
+    peer_scan_t: _peer_scan,
 }
 
 

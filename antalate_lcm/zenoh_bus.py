@@ -19,6 +19,15 @@ Why it is built this way:
 - A copy a bridge forwarded (attachment ``antalate-bridge:...``) is delivered once per subscription
   even when two bridges forward the same message: identical bytes on one channel within
   :data:`DEDUP_WINDOW` are one message (every antalate message has its own ``header.seq``/utime).
+- Whatever a sender does, the state kept for it is bounded (issue 29: 10,000 new channel names once
+  cost a bridge 29 MiB it never gave back). A declared publisher (a put costs 0.6 µs instead of ~6 µs)
+  is kept only for a channel published at least :data:`HOT_AFTER` times, at most
+  :data:`MAX_PUBLISHERS` of them (least recently used undeclared first), declared at most
+  :data:`DECLARE_RATE` a second: a declaration costs ~450 µs and ~3 KB that Zenoh keeps after the
+  undeclaration. Every other channel goes by ``session.put``, which keeps nothing. The duplicate
+  memory holds at most :data:`MAX_SEEN` entries per subscription.
+- ``max_message_size`` (the bridge sets it from its size limits) makes Zenoh itself drop a larger
+  incoming message before reassembling it; the link stays up.
 """
 
 from __future__ import annotations
@@ -37,8 +46,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from antalate_lcm._ratelimit import RateLimitedLog, TokenBucket
 from antalate_lcm.errors import BusUnavailable
 from antalate_lcm.lcm_url import LcmUrl, parse_lcm_url
+from antalate_lcm.security import MemberProof
 
 log = logging.getLogger("antalate.zenoh")
 
@@ -52,6 +63,17 @@ DEDUP_WINDOW = 2.0
 DEFAULT_LEASE_MS = 3000
 #: LCM's default queue capacity per subscription (the bus raises it).
 DEFAULT_CAPACITY = 30
+#: Publications of a channel before it gets a declared publisher of its own.
+HOT_AFTER = 3
+#: Declared publishers kept at most (the least recently used is undeclared first).
+MAX_PUBLISHERS = 256
+#: Publisher declarations per second at most (and at once): the rest go by ``session.put``.
+DECLARE_RATE = 20.0
+DECLARE_BURST = 64.0
+#: Channels whose publications are counted towards :data:`HOT_AFTER` (least recent forgotten first).
+MAX_COUNTED = 4096
+#: Forwarded messages each subscription remembers at most against duplicates (oldest forgotten first).
+MAX_SEEN = 65_536
 
 _SPECIAL = ".^$*+?()[]{}|\\"
 _LITERAL = re.compile(r"(?:[^.^$*+?()\[\]{}|\\]|\\[.^$*+?()\[\]{}|\\])*")
@@ -89,7 +111,7 @@ def literal_channel(regex: str) -> str | None:
     return re.sub(r"\\(.)", r"\1", regex)
 
 
-def zenoh_config(u: LcmUrl) -> Any:
+def zenoh_config(u: LcmUrl, *, max_message_size: int | None = None) -> Any:
     """A ``zenoh.Config`` for a parsed ``zenoh://`` URL. Multicast scouting is off unless ``scout=1``:
     a bus reaches exactly the endpoints its config names, never whatever answers on the LAN."""
     import zenoh
@@ -122,6 +144,8 @@ def zenoh_config(u: LcmUrl) -> Any:
         # A cut link is noticed within the lease (Zenoh's default, 10 s, outlives a short outage's
         # TCP backoff), then the client reconnects at most 1 s after the link is back.
         config.insert_json5("transport/link/tx/lease", opts.get("lease", str(DEFAULT_LEASE_MS)))
+    if max_message_size is not None:
+        config.insert_json5("transport/link/rx/max_message_size", str(max_message_size))
     return config
 
 
@@ -150,7 +174,7 @@ class ZenohSubscription:
 class ZenohLCM:
     """A Zenoh session that looks like an ``lcm.LCM`` instance to the bus."""
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, *, max_message_size: int | None = None) -> None:
         try:
             u = parse_lcm_url(url)
         except ValueError as exc:
@@ -167,11 +191,14 @@ class ZenohLCM:
                 url, "the Zenoh library is not installed: pip install 'antalate[zenoh]'"
             ) from None
         self._zenoh = zenoh
-        self._config = zenoh_config(u)
+        self._config = zenoh_config(u, max_message_size=max_message_size)
         self._session: Any = None
         self._subs: list[ZenohSubscription] = []
         self._groups: list[_Group] = []
-        self._publishers: dict[str, Any] = {}
+        self._publishers: collections.OrderedDict[str, Any] = collections.OrderedDict()
+        self._counts: collections.OrderedDict[str, int] = collections.OrderedDict()
+        self._declarations = TokenBucket(DECLARE_RATE, DECLARE_BURST)
+        self._pub_lock = threading.Lock()  # the publisher cache (publish may be called from any thread)
         self._queue: collections.deque[tuple[ZenohSubscription, str, bytes, bytes | None]] = (
             collections.deque()
         )
@@ -184,6 +211,10 @@ class ZenohLCM:
         self._opened = threading.Event()
         #: Samples dropped because a subscription's queue was full.
         self.dropped = 0
+        #: Liveliness tokens ignored because they were not signed with the group's key.
+        self.ignored_tokens = 0
+        self._log = RateLimitedLog(log, period=10.0)
+        self._refresher: threading.Thread | None = None
         try:
             self._open()
         except zenoh.ZError as exc:
@@ -219,6 +250,10 @@ class ZenohLCM:
             return
 
     @property
+    def closed(self) -> bool:
+        return self._closed
+
+    @property
     def connected(self) -> bool:
         """Whether the session is open (a client reached its router at least once)."""
         return self._opened.is_set()
@@ -226,22 +261,43 @@ class ZenohLCM:
     # ------------------------------------------------------------------ lcm.LCM's interface
     def publish(self, channel: str, data: bytes, attachment: bytes | None = None) -> None:
         """Send ``data`` on ``channel``; raises OSError when the session is closed (like a dead socket)."""
-        publisher = self._publishers.get(channel)
+        session = self._session
+        if session is None:
+            if self._closed:
+                raise OSError(f"Zenoh session {self.url} is closed")
+            raise OSError(f"Zenoh session {self.url}: the router has not been reached yet")
         try:
-            if publisher is None:
-                if self._closed:
-                    raise OSError(f"Zenoh session {self.url} is closed")
-                if self._session is None:
-                    raise OSError(f"Zenoh session {self.url}: the router has not been reached yet")
-                publisher = self._publishers[channel] = self._session.declare_publisher(
-                    channel_key(self.prefix, channel), express=self._express
-                )
-            if attachment is None:
-                publisher.put(data)
-            else:
+            publisher = self._publisher(session, channel)
+            if publisher is not None:
                 publisher.put(data, attachment=attachment)
+            else:
+                session.put(
+                    channel_key(self.prefix, channel), data, express=self._express, attachment=attachment
+                )
         except self._zenoh.ZError as exc:
             raise OSError(f"Zenoh session {self.url}: {exc}") from None
+
+    def _publisher(self, session: Any, channel: str) -> Any:
+        """The channel's declared publisher, declared now if it has become hot; None: use session.put."""
+        with self._pub_lock:
+            publisher = self._publishers.get(channel)
+            if publisher is not None:
+                self._publishers.move_to_end(channel)
+                return publisher
+            counts = self._counts
+            n = counts.pop(channel, 0) + 1
+            if n < HOT_AFTER or self._declarations.take(None, time.monotonic()) > 0:
+                counts[channel] = n
+                if len(counts) > MAX_COUNTED:
+                    counts.popitem(last=False)
+                return None
+            if len(self._publishers) >= MAX_PUBLISHERS:
+                _, old = self._publishers.popitem(last=False)
+                with contextlib.suppress(self._zenoh.ZError):
+                    old.undeclare()
+            publisher = session.declare_publisher(channel_key(self.prefix, channel), express=self._express)
+            self._publishers[channel] = publisher
+            return publisher
 
     def subscribe(
         self, channel_regex: str, handler: LcmHandler, *, remote_only: bool = False, attachments: bool = False
@@ -260,31 +316,78 @@ class ZenohLCM:
                 self._declare(sub)
         return sub
 
-    def join_group(self, group: str, member: str, on_change: Callable[[frozenset[str]], None]) -> None:
+    def join_group(
+        self,
+        group: str,
+        member: str,
+        on_change: Callable[[frozenset[str]], None],
+        proof: MemberProof | None = None,
+    ) -> None:
         """Be ``member`` of ``group`` (a Zenoh liveliness token) and hear who else is, now and as it
         changes: ``on_change(members)``, this member always included. A member whose session dies
-        leaves the group within the link lease. ``group`` and ``member``: key chunks (no ``/``)."""
-        g = _Group(f"{self.prefix}-groups/{group}", member, on_change)
+        leaves the group within the link lease. ``group`` and ``member``: key chunks (no ``/`` or ``.``).
+
+        With a ``proof`` (the swarm key) only tokens signed with it count, re-declared every
+        ``proof.refresh`` s; any other token is logged (rate-limited) and ignored (issue 29: an
+        outsider's token once took the election over)."""
+        g = _Group(f"{self.prefix}-groups/{group}", group, member, on_change, proof)
         with self._subs_lock:
             self._groups.append(g)
             if self._session is not None:
                 self._declare_group(g)
+        if proof is not None and self._refresher is None:
+            self._refresher = threading.Thread(
+                target=self._refresh_groups,
+                args=(proof.refresh,),
+                name=f"zenoh-groups {self.url}",
+                daemon=True,
+            )
+            self._refresher.start()
+
+    def _token_name(self, g: _Group) -> str:
+        return g.member if g.proof is None else g.proof.token(g.group, g.member, time.time())
 
     def _declare_group(self, g: _Group) -> None:
         liveliness = self._session.liveliness()
-        g.token = liveliness.declare_token(f"{g.key}/{g.member}")
+        g.token = liveliness.declare_token(f"{g.key}/{self._token_name(g)}")
 
         def changed(sample: Any) -> None:
-            who = str(sample.key_expr).rsplit("/", 1)[-1]
-            with g.lock:
-                if sample.kind == self._zenoh.SampleKind.DELETE:
-                    g.members.discard(who)
-                else:
-                    g.members.add(who)
-                members = frozenset(g.members | {g.member})
-            g.on_change(members)
+            name = str(sample.key_expr).rsplit("/", 1)[-1]
+            alive = sample.kind != self._zenoh.SampleKind.DELETE
+            problem = g.seen(name, alive, time.time())
+            if problem is not None:
+                self.ignored_tokens += 1
+                self._log.log(
+                    (g.key, "token"),
+                    logging.WARNING,
+                    "%s: ignored a liveliness token in %s that is not from a bridge of this swarm (%s): %s",
+                    self.url,
+                    g.key,
+                    problem,
+                    name[:80],
+                )
+            g.report()
 
         g.sub = liveliness.declare_subscriber(f"{g.key}/*", changed, history=True)
+
+    def _refresh_groups(self, period: float) -> None:
+        """Re-declare each signed token (the new one first: the member never leaves) and forget
+        members whose newest token went stale."""
+        while not self._closed:
+            time.sleep(period)
+            with self._subs_lock:
+                if self._session is None:
+                    continue
+                for g in self._groups:
+                    if g.proof is None:
+                        continue
+                    old = g.token
+                    with contextlib.suppress(self._zenoh.ZError):
+                        g.token = self._session.liveliness().declare_token(f"{g.key}/{self._token_name(g)}")
+                        if old is not None:
+                            old.undeclare()
+                    g.expire(time.time())
+                    g.report()
 
     def _declare(self, sub: ZenohSubscription) -> None:
         key = channel_key(self.prefix, sub.channel) if sub.channel is not None else f"{self.prefix}/**"
@@ -345,7 +448,9 @@ class ZenohLCM:
                 session.close()
         except Exception:  # noqa: BLE001 - closing must not fail a shutdown
             log.debug("closing %s", self.url, exc_info=True)
-        self._publishers.clear()
+        with self._pub_lock:
+            self._publishers.clear()
+            self._counts.clear()
         self._rsock.close()
         self._wsock.close()
 
@@ -393,13 +498,62 @@ class ZenohLCM:
 
 @dataclass(eq=False)
 class _Group:
+    """Who is in one group: the live token names of each member (pure; the clock is passed)."""
+
     key: str
+    group: str
     member: str
     on_change: Callable[[frozenset[str]], None]
-    members: set[str] = field(default_factory=set)
+    proof: MemberProof | None = None
+    #: member -> {token name: the time it proves (0 without a proof)}
+    tokens: dict[str, dict[str, float]] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)
+    report_lock: threading.Lock = field(default_factory=threading.Lock)
+    reported: frozenset[str] | None = None
     token: Any = None
     sub: Any = None
+
+    def seen(self, name: str, alive: bool, now: float) -> str | None:
+        """A token appeared or went away; why it does not count, or None."""
+        if self.proof is None:
+            who, t = name, 0.0
+        else:
+            checked = self.proof.check(self.group, name, now)
+            if isinstance(checked, str):
+                return None if not alive else checked  # a forged token going away changes nothing
+            who, t = checked
+        with self.lock:
+            if alive:
+                self.tokens.setdefault(who, {})[name] = t
+            else:
+                mine = self.tokens.get(who, {})
+                mine.pop(name, None)
+                if not mine:
+                    self.tokens.pop(who, None)
+        return None
+
+    def expire(self, now: float) -> None:
+        if self.proof is None:
+            return
+        with self.lock:
+            for who in list(self.tokens):
+                fresh = {n: t for n, t in self.tokens[who].items() if self.proof.fresh(t, now)}
+                if fresh:
+                    self.tokens[who] = fresh
+                else:
+                    del self.tokens[who]
+
+    def members(self) -> frozenset[str]:
+        with self.lock:
+            return frozenset(self.tokens) | {self.member}
+
+    def report(self) -> None:
+        """Tell ``on_change`` the members if they changed (in order: Zenoh's and the refresher's threads)."""
+        with self.report_lock:
+            members = self.members()
+            if members != self.reported:
+                self.reported = members
+                self.on_change(members)
 
 
 def _duplicate(sub: ZenohSubscription, channel: str, data: bytes) -> bool:
@@ -414,6 +568,8 @@ def _duplicate(sub: ZenohSubscription, channel: str, data: bytes) -> bool:
         del seen[oldest]
     last = seen.pop(key, None)
     seen[key] = now
+    if len(seen) > MAX_SEEN:
+        seen.popitem(last=False)
     return last is not None
 
 

@@ -41,11 +41,13 @@ class MemoryAgent:
         operator: dict[str, Any] | None = None,
         adapter: Autopilot | None = None,
         name: str = "memory",
+        safety: dict[str, Any] | None = None,
     ) -> None:
         doc = {
             "agent": {"name": name},
             "buses": {"lan": "memq://"},
             "hlc": {"autopilot": autopilot, **(hlc or {}), "autopilot_params": params},
+            "safety": safety or {},
             "bma": [
                 {
                     "name": "operator",

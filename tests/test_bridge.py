@@ -6,13 +6,18 @@ from __future__ import annotations
 import json
 import socket
 import subprocess
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from antalate_lcm.bridge import Memory, Throttle, load_bridge_config
+from antalate_lcm.bridge import Bridge, BridgeConfig, Direction, Memory, Throttle, load_bridge_config
 from antalate_lcm.errors import ConfigError
+from antalate_lcm.security import MemberProof
+from antalate_lcm.zenoh_bus import BRIDGE_MARK, _Group
 from tests.netns import NetNamespace
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
@@ -162,3 +167,83 @@ def test_two_bridges_on_one_lan_deliver_once_each_way_and_fail_over(netns: NetNa
     assert len(standby) == 1 and standby[0]["not_forwarded_standby"] > 0, r["bridges"]
     # The elected bridge stops: the other one forwards from then on, still once.
     assert r["took_over"] and r["lan_copies_after_failover"] == 1
+
+
+# ------------------------------------------------------------------- any message, never an exception
+@pytest.fixture(scope="module")
+def loop_bridge() -> Iterator[Bridge]:
+    """A real bridge between an in-process LCM bus and a Zenoh peer listening on loopback."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    config = BridgeConfig.model_validate(
+        {
+            "buses": {"lan": "memq://", "wan": f"zenoh://?listen=tcp/127.0.0.1:{port}&mode=peer"},
+            "bridge": {"between": ["lan", "wan"]},
+        }
+    )
+    bridge = Bridge(config)
+    bridge.start()
+    yield bridge
+    bridge.close()
+
+
+def _accounted(d: Direction) -> int:
+    throttled = sum(t.superseded for _, t in d.limits)
+    return (
+        d.forwarded
+        + d.not_selected
+        + sum(d.dropped.values())
+        + d.seen
+        + d.same_origin
+        + d.standby
+        + throttled
+    )
+
+
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    source=st.sampled_from(["lan", "wan"]),
+    channel=st.one_of(st.text(max_size=80), st.sampled_from(["", "\0", "a\0b", "t/x", "c" * 64])),
+    data=st.binary(max_size=3000),
+    attachment=st.one_of(
+        st.none(), st.binary(max_size=64), st.binary(max_size=40).map(lambda b: BRIDGE_MARK + b)
+    ),
+)
+def test_any_message_is_forwarded_or_counted_never_raised(
+    loop_bridge: Bridge, source: str, channel: str, data: bytes, attachment: bytes | None
+) -> None:
+    """Issue 29.1 as a property: keys, attachments and payloads as an outsider may send them."""
+    d = loop_bridge.directions[source]
+    before = _accounted(d)
+    loop_bridge._on_message(source, channel, data, attachment)  # raises nothing, whatever it holds
+    if source == "wan":  # exactly one outcome (the LAN side also hears the copies looped back to it)
+        assert _accounted(d) == before + 1
+    else:
+        assert _accounted(d) >= before + 1
+    assert all(t.is_alive() for t in loop_bridge._threads)
+
+
+# ------------------------------------------------------------------------------ the election's tokens
+def test_a_member_token_is_believed_only_when_signed_and_fresh() -> None:
+    proof = MemberProof(("k1", "k0"), window=5.0, refresh=1.0)
+    name = proof.token("g", "abc123", 1000.0)
+    assert proof.check("g", name, 1000.5) == ("abc123", 1000.0)
+    assert MemberProof(("k0", "k1")).check("g", name, 1000.5) == ("abc123", 1000.0)  # rotation: both check
+    assert "MAC" in str(MemberProof(("other",)).check("g", name, 1000.5))
+    assert "MAC" in str(proof.check("other-group", name, 1000.5))  # not valid in another site's group
+    assert "stale" in str(proof.check("g", name, 1007.0))
+    assert "not a signed" in str(proof.check("g", "0", 1000.0))
+
+
+def test_a_group_counts_signed_members_and_forgets_stale_ones() -> None:
+    reported: list[frozenset[str]] = []
+    proof = MemberProof(("k",), window=5.0, refresh=1.0)
+    g = _Group("p-groups/g", "g", "me", reported.append, proof)
+    assert g.seen("0", True, 100.0) is not None  # the outsider's token of issue 29.3
+    assert g.seen(proof.token("g", "zz", 100.0), True, 100.0) is None
+    g.report()
+    assert reported == [frozenset({"me", "zz"})]
+    g.expire(106.5)  # zz stopped refreshing: gone after window + refresh
+    g.report()
+    assert reported[-1] == frozenset({"me"})

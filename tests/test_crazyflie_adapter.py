@@ -21,6 +21,7 @@ from antalate_lcm.autopilot.base import AutopilotError, Frame  # noqa: E402
 from antalate_lcm.autopilot.crazyflie import CFLIB_MISSING, CrazyflieAutopilot  # noqa: E402
 from antalate_lcm.geo import distance  # noqa: E402
 from tests.emulators.crazyflie_emulator import CrazyflieEmulator  # noqa: E402
+from tests.emulators.crazyradio import Crazyradio, install  # noqa: E402
 from tests.polling import wait_for  # noqa: E402
 
 FAST = {"climb_speed": 2.0, "land_speed": 1.0, "rtl_speed": 2.0, "connect_timeout": 5.0}
@@ -43,6 +44,27 @@ def rig() -> Iterator[Callable[..., tuple[CrazyflieEmulator, CrazyflieAutopilot]
     for e, ap in made:
         ap.close()
         e.stop()
+
+
+@pytest.fixture
+def radio_rig() -> Iterator[Callable[..., tuple[CrazyflieEmulator, CrazyflieAutopilot, Crazyradio]]]:
+    """The emulator behind an emulated Crazyradio dongle: cflib's own radio:// driver, acks and all."""
+    dongle = Crazyradio()
+    uninstall = install(dongle)
+    made: list[tuple[CrazyflieEmulator, CrazyflieAutopilot]] = []
+
+    def make(**params: Any) -> tuple[CrazyflieEmulator, CrazyflieAutopilot, Crazyradio]:
+        e = CrazyflieEmulator(radio=True).start()
+        ap = CrazyflieAutopilot({"uri": dongle.add(e), **FAST, **params})
+        made.append((e, ap))
+        ap.connect()
+        return e, ap, dongle
+
+    yield make
+    for e, ap in made:
+        ap.close()
+        e.stop()
+    uninstall()
 
 
 def airborne(emu: CrazyflieEmulator, ap: CrazyflieAutopilot, alt: float = 1.0) -> None:
@@ -280,39 +302,47 @@ def test_a_stale_link_hold_is_resent_until_it_arrives(rig: Callable[..., Any]) -
     assert snap.z >= z_silent and abs(snap.vz) < 0.05  # held where it got to, no longer climbing
 
 
-def test_cflib_closing_the_link_in_a_hover_still_lands_blindly_once_reopened(rig: Callable[..., Any]) -> None:
-    """cflib's radio driver closes the link after 100 lost packets (radiodriver.py). The adapter's loop
-    keeps its timers while it reopens the link: link_loss_land decides the landing (the operator sees
-    LANDING, "link lost"), and it goes out on the new link; the firmware lands (answered 0)."""
-    emu, ap = rig(connect_timeout=1.5, link_loss_land=1.0)
+def test_cflib_closing_the_link_in_a_hover_still_lands_blindly_once_reopened(
+    radio_rig: Callable[..., Any],
+) -> None:
+    """Over cflib's radio:// driver: the Crazyflie's radio goes silent, the driver resends until 100
+    packets went unacknowledged (radiodriver.py) and closes the link. The adapter's loop keeps its
+    timers while it reopens the link: link_loss_land decides the landing (the operator sees LANDING,
+    "link lost"), and it goes out on the new link; the firmware lands (answered 0)."""
+    emu, ap, dongle = radio_rig(link_loss_land=1.0)
     airborne(emu, ap)
     emu.set_silent(True)
-    ap._cf._link_error_cb("Too many packets lost")  # what cflib's RadioDriver calls when it gives up
-    assert wait_for(lambda: not ap.state().connected)
+    t0 = time.monotonic()
+    assert wait_for(lambda: not ap.state().connected, timeout=3.0)
+    assert dongle.lost >= 100 and time.monotonic() - t0 < 2.0  # cflib gave up, as on a radio
     assert wait_for(lambda: ap.state().flight_mode.name == "LANDING", timeout=3.0)
     assert "link lost" in ap.state().failsafe
+    with pytest.raises(AutopilotError, match="not connected.*Too many packets lost"):
+        ap.land()
     assert emu.snapshot().flying  # hovering under the high-level commander meanwhile
     emu.set_silent(False)
     assert wait_for(lambda: ap.state().connected, timeout=10.0)
     assert wait_for(lambda: ("land", 0) in emu.hl_answers, timeout=3.0)  # sent on the new link
     assert wait_for(lambda: ap.state().landed, timeout=10.0)
-    assert emu.falls == 0
+    assert emu.falls == 0 and ap.reconnects >= 1
 
 
-def test_cflib_closing_the_link_mid_stream_turns_the_stream_into_a_hold(rig: Callable[..., Any]) -> None:
-    """The same closed link while streaming: the adapter turns the stream into a hold (HL_HOLD) and
-    then a blind landing at once, to be sent when the link reopens; nothing gets through meanwhile,
-    so the firmware's watchdog levels the vehicle at 0.5 s and cuts it at 2 s (supervisor.c). On the
-    new link the adapter reads it down and locked and says so (mode LOCKED)."""
-    emu, ap = rig(connect_timeout=1.5, link_loss_land=2.5)
+def test_cflib_closing_the_link_mid_stream_turns_the_stream_into_a_hold(
+    radio_rig: Callable[..., Any],
+) -> None:
+    """The same closed radio link while streaming: the adapter turns the stream into a hold (HL_HOLD)
+    and then a blind landing, to be sent when the link reopens; nothing gets through meanwhile, so the
+    firmware's watchdog levels the vehicle at 0.5 s and cuts it at 2 s (supervisor.c). On the new link
+    the adapter reads it down and locked and says so (mode LOCKED)."""
+    emu, ap, _ = radio_rig(link_loss_land=2.5)
     airborne(emu, ap)
     for _ in range(6):
         ap.set_velocity(0.3, 0.0, 0.0, 0.0, Frame.NED)
         time.sleep(0.05)
     emu.set_silent(True)
-    ap._cf._link_error_cb("Too many packets lost")  # (cflib's UDP close takes ~1 s of this)
-    assert ap.state().mode == "HL_HOLD" and not ap.state().connected
-    assert wait_for(lambda: ap.state().flight_mode.name == "LANDING", timeout=3.0)
+    assert wait_for(lambda: not ap.state().connected, timeout=3.0)
+    assert wait_for(lambda: ap.state().mode == "HL_HOLD", timeout=1.0)
+    assert wait_for(lambda: ap.state().flight_mode.name == "LANDING", timeout=4.0)
     emu.set_silent(False)
     assert wait_for(lambda: ap.state().connected, timeout=10.0)
     assert emu.snapshot().locked and emu.falls == 1  # the outage outlasted the watchdog's 2 s

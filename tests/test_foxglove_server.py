@@ -30,7 +30,9 @@ def _schema_of(channel: dict[str, Any]) -> dict[str, Any]:
 
 
 @pytest.mark.netns
-def test_reference_client_receives_live_positions_with_the_advertised_schemas(netns, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_reference_client_receives_live_positions_with_the_advertised_schemas(
+    netns, probe, tmp_path: Path
+) -> None:  # type: ignore[no-untyped-def]
     modules = node_modules()
     agents_cfg = tmp_path / "sim.toml"
     agents_cfg.write_text(tomli_w.dumps(agent_config("sim")))
@@ -46,6 +48,10 @@ def test_reference_client_receives_live_positions_with_the_advertised_schemas(ne
         assert server.stdout is not None
         line = server.stdout.readline()
         assert f"ws://127.0.0.1:{PORT} (read-only)" in line, line
+        # hostile or broken senders: garbage on an agent's channel, a fix of NaNs, a foreign channel
+        probe.raw("x-9/TELEMETRY", b"\x00garbage")
+        probe.publish("x-9/TELEMETRY", "telemetry_t", header={"agent": "x-9"}, lat=float("nan"), lon=1e300)
+        probe.raw("NOT/ANTALATE", b"whatever")
         topics = ["sim-01/location", "sim-02/location", "swarm/scene", "sim-01/TELEMETRY", "sim-02/MC_STATE"]
         done = netns.run(
             ["node", str(CLIENT), f"ws://127.0.0.1:{PORT}", "3", "20000", *topics],
@@ -58,6 +64,9 @@ def test_reference_client_receives_live_positions_with_the_advertised_schemas(ne
         # read-only: the server offers a client no way to publish, call or set anything
         assert report["serverInfo"]["capabilities"] == []
         channels = {c["topic"]: c for c in report["channels"]}
+        # the NaN fix is served as it was sent (as "NaN"), but put on no map; nothing else got through
+        assert "x-9/TELEMETRY" in channels and "x-9/location" not in channels
+        assert "NOT/ANTALATE" not in channels and server.poll() is None
         assert channels["sim-01/location"]["schemaName"] == foxglove_msgs.LOCATION_FIX
         assert channels["swarm/scene"]["schemaName"] == foxglove_msgs.SCENE_UPDATE
         assert channels["sim-01/TELEMETRY"]["schemaName"] == "antalate_lcm.msgs.telemetry_t"

@@ -63,7 +63,16 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
     (
         "applications",
         frozenset(
-            {"operator_tui", "behaviors", "bridge", "spy", "types_cmd", "mcap_record", "foxglove_server"}
+            {
+                "operator_tui",
+                "behaviors",
+                "bridge",
+                "spy",
+                "types_cmd",
+                "mcap_record",
+                "foxglove_server",
+                "gcs",
+            }
         ),
     ),
     ("composition root", frozenset({"runtime", "cli"})),

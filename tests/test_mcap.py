@@ -249,6 +249,16 @@ def test_raw_keeps_the_lcm_bytes_and_reads_back_as_the_log(tmp_path: Path) -> No
         assert got.agents["a-1"].mc_states == want.agents["a-1"].mc_states
         assert got.directions == want.directions
     assert read_log(out).undecodable == want.undecodable == {"a-2/TELEMETRY": 1}
+    # plot reads it too, and names its PNG after the MCAP file
+    from tests.synthetic_logs import square_swarm
+
+    swarm = tmp_path / "swarm.mcap"
+    assert main(["export", str(square_swarm().write(tmp_path / "swarm.lcm")), "-o", str(swarm)]) == 0
+    assert main(["plot", str(swarm), "-q"]) == 0
+    assert (tmp_path / "swarm.png").stat().st_size > 10_000
+    assert analyze_log(swarm).to_json() == analyze_log(tmp_path / "swarm.lcm").to_json() | {
+        "path": str(swarm)
+    }
 
 
 def test_bad_inputs_are_one_line_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -233,3 +233,20 @@ def test_without_the_filter_the_same_attack_collides() -> None:
         command(probe, operator_cmd_t.TAKEOFF, 1)
         assert all_in(flight, names, McState.MISSION, 20)
         assert wait_for(lambda: flight.min_sep < 1.0, 10)
+
+
+def test_no_peer_information_lands_per_the_policy() -> None:
+    """A lone agent told to expect a peer says so (an ERROR-free WARNING naming min_peers) and lands."""
+    home = offset(LAT0, LON0, 0.0, 0.0)
+    safety = {**SAFETY, "min_peers": 1, "no_peers": "land"}
+    configs = [config("lone", home, offset(LAT0, LON0, 50.0, 0.0), safety)]
+    with swarm(configs, None) as (flight, probe, hlcs):
+        assert all_in(flight, ["lone"], McState.STANDBY, 10)
+        command(probe, operator_cmd_t.TAKEOFF, 1)
+        assert all_in(flight, ["lone"], McState.MISSION, 20)
+        assert all_in(flight, ["lone"], McState.STANDBY, 30)  # landed on its own: MISSION -> LAND -> STANDBY
+        ap = hlcs[0].autopilot
+        assert isinstance(ap, SimAutopilot) and not ap.in_air
+        assert math.hypot(ap.north, ap.east) < 2.0  # it did not fly off at the behavior's command
+    texts = [r.text for r in flight.safety_reports]
+    assert any("no peer information: 0 fresh peer(s) of min_peers 1" in t for t in texts), texts

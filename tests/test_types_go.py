@@ -84,7 +84,13 @@ def test_output_is_lcm_gens_for_every_type_it_can_write(tmp_path: Path) -> None:
         assert unchecked == expected.replace(generated_by, _golang.GENERATED_BY), lcm.stem
         compared.append(lcm.stem)
     # the comparison covers the types lcm-gen can write; when an lcm-gen fixes its crash it covers all
-    assert len(compared) >= 9 and set(crashed) <= {"header_t", "arbiter_status_t", "payload_t"}, crashed
+    # (peer_scan_t: variable-length arrays, the crash _golang.py exists for)
+    assert len(compared) >= 9 and set(crashed) <= {
+        "header_t",
+        "arbiter_status_t",
+        "payload_t",
+        "peer_scan_t",
+    }, crashed
 
 
 def _unguarded_reads(go: str) -> list[str]:

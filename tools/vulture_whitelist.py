@@ -67,7 +67,6 @@ _.state_error_for
 _.voltage_sag
 _.battery_warning_at
 _.state_file
-_.fov  # station/_file.py: [station] table, mapped onto StationSettings by name
 _.command_ttl
 _.pending_commands  # station/_models.py: a field of the JSON the API returns (docs/station-protocol.md)
 
@@ -122,5 +121,9 @@ _.row_count  # AgentTable: tests/test_tui.py
 _.render_map  # swarm_map's pure renderer: tests/test_tui_model.py
 _.repaints  # SwarmMap: repaints only on a changed picture (tests/test_tui.py)
 _.layouts_skipped  # the event log's skipped layouts (tests/test_tui.py)
-_.relative  # PeerTable: the documented peer API (docs/behaviors.md, "Peers")
+_.Gathering  # entry points (pyproject): the canonical swarm rules and the simulated peer sensor
+_.Flocking
+_.Dispersion
+_.PeerSensor
+_.has_velocity  # peer_scan_t field, written by the peer sensor, read by its consumers
 _.CONTINUE  # safety.filter.Policy: chosen by value from [safety] no_peers (Policy("continue"))

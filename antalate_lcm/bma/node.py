@@ -14,15 +14,18 @@ from typing import Any
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.behavior import Behavior, BehaviorContext, failure_reason
 from antalate_lcm.bma.arbiter import Arbiter
-from antalate_lcm.bma.plan import BehaviorPlan, plan_bma
+from antalate_lcm.bma.plan import PEER_TOPICS, BehaviorPlan, check_peer_buses, plan_bma
 from antalate_lcm.config import BmaConfig, Config
-from antalate_lcm.msgs import arbiter_status_t, mc_state_t
-from antalate_lcm.node import Context, Node
+from antalate_lcm.msgs import arbiter_status_t, mc_state_t, telemetry_t
+from antalate_lcm.node import Context, Node, TopicMatch
+from antalate_lcm.peers import PeerTable
 from antalate_lcm.vocabulary import McState, name_of
 
 #: s: the longest restart back-off, and how long a behavior must run for its failures to be forgotten.
 _MAX_BACKOFF = 60.0
 _STREAK_RESET = 60.0
+#: s between two sweeps of the peer table for agents no longer heard.
+_PEER_SWEEP = 5.0
 
 
 class _Slot:
@@ -59,6 +62,11 @@ class BmaNode(Node):
         #: failure, and forgets them once the behavior has run for ``_STREAK_RESET`` s).
         self._streak: dict[str, int] = {}
         self._started_at: dict[str, float] = {}
+        #: The swarm's latest telemetry, for the behaviors that declare ``uses_peers`` (None if none does).
+        self.peers: PeerTable | None = None
+        if any(p.cls.uses_peers for p in self.plan.behaviors):
+            check_peer_buses(config, whole_swarm=context.whole_swarm)
+            self.peers = PeerTable(self.agent)
 
     # ------------------------------------------------------------------ views (executor thread or tests)
     @property
@@ -77,6 +85,8 @@ class BmaNode(Node):
 
     # ------------------------------------------------------------------ lifecycle
     def on_start(self) -> None:
+        if self.peers is not None:
+            self._listen_to_peers(self.peers)
         for name, slot in self._slots.items():
             self._construct(name, slot)
         self._publish_status = self.state_publisher(
@@ -95,6 +105,22 @@ class BmaNode(Node):
             or "no behaviors",
         )
 
+    def _listen_to_peers(self, table: PeerTable) -> None:
+        """Feed ``table`` from every agent's TELEMETRY and MC_STATE on the swarm bus: one
+        subscription per arbiter, whatever the number of behaviors reading it; this agent's own
+        messages once, from the in-process bus (``Node.subscribe_all``)."""
+        telemetry, state = PEER_TOPICS
+
+        def on_telemetry(msg: telemetry_t, match: TopicMatch) -> None:
+            table.update_telemetry(match.fields.get("agent") or msg.header.agent, msg, self.now)
+
+        def on_state(msg: mc_state_t, match: TopicMatch) -> None:
+            table.update_state(match.fields.get("agent") or msg.header.agent, int(msg.state), self.now)
+
+        self.subscribe_all(telemetry, on_telemetry)
+        self.subscribe_all(state, on_state)
+        self.create_timer(_PEER_SWEEP, lambda: table.forget(self.now))
+
     def on_stop(self) -> None:
         for name in reversed(self._arbiter.active()):
             self._deactivate(name, why="arbiter stopping")
@@ -112,6 +138,7 @@ class BmaNode(Node):
             plan.topics,
             state=lambda: self._arbiter.state,
             on_error=partial(self._fail, name),
+            peers=self.peers if plan.cls.uses_peers else None,
         )
         slot.ctx = ctx
         try:

@@ -48,6 +48,42 @@ class BmaPlan:
     behaviors: tuple[BehaviorPlan, ...]
 
 
+#: Topics a behavior's ``ctx.peers`` is fed from (docs/behaviors.md, "Peers").
+PEER_TOPICS = ("TELEMETRY", "MC_STATE")
+
+
+def peer_readers(config: Config) -> list[str]:
+    """The keys (``bma[0].behaviors[1]``) of the behaviors that declare ``uses_peers``."""
+    out: list[str] = []
+    for bma in config.bma:
+        plan = plan_bma(config, bma)
+        out.extend(b.key for b in plan.behaviors if b.cls.uses_peers)
+    return out
+
+
+def check_peer_buses(config: Config, *, whole_swarm: bool) -> None:
+    """Raise :class:`ConfigError` when a behavior asks for peers that its config cannot let it hear.
+
+    Peers are heard on the bus their TELEMETRY and MC_STATE travel on. memq:// never leaves its
+    process: fine when the whole swarm shares the process (``whole_swarm``), a silent split of the
+    swarm otherwise (``--processes N``, one agent per host, a BMA in a process of its own).
+    """
+    readers = peer_readers(config)
+    if not readers:
+        return
+    for topic in PEER_TOPICS:
+        bus = config.topic_buses(topic)[0]
+        url = config.buses[bus]
+        if url.split(":", 1)[0] == "memq" and not whole_swarm:
+            raise ConfigError(
+                config.source,
+                f"buses.{bus}",
+                f"a bus other processes reach (udpm://, zenoh://) for {topic}, which {readers[0]} "
+                f"reads as its peers (uses_peers): {url!r} stays inside one process, and these agents "
+                "run in several (--processes, or nodes in processes of their own)",
+            )
+
+
 def validate_bma_config(config: Config) -> None:
     """Check every ``[[bma]]`` of ``config``; raises :class:`ConfigError` naming the dotted key.
 

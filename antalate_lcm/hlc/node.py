@@ -17,7 +17,7 @@ import math
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
-from typing import Any
+from typing import Any, cast
 
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.autopilot import Autopilot, AutopilotError, AutopilotState, Frame, load_autopilot
@@ -31,7 +31,7 @@ from antalate_lcm.hlc.machine import (
     HlcOutcome,
     HlcParams,
 )
-from antalate_lcm.hlc.safety import Filtered, SafetyLayer, describe
+from antalate_lcm.hlc.safety import Filtered, SafetyLayer, describe, new_picture
 from antalate_lcm.hlc.velocity_guard import (
     GuardDecision,
     Velocity,
@@ -49,8 +49,54 @@ _CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
 #: s between two SAFETY hlc_error_t of the same kind (separation, fence, conflict): the console and
 #: the log see every episode without a message per set-point.
 _SAFETY_REPORT_PERIOD = 1.0
+#: s between sweeps of the swarm picture (stale agents out of the grid, silent ones forgotten).
+_SWEEP_PERIOD = 0.25
 #: HLC states in which the filtered return leg flies (the machine's RTL action started it).
 _RETURNING = (HlcState.RTL, HlcState.LOW_BATTERY)
+
+
+class _SharedPicture:
+    """The `SwarmPicture` of one process (one `Context`), fed by one hidden node for all its HLCs."""
+
+    def __init__(self, config: Config, context: Context) -> None:
+        self.picture = new_picture(config)
+        self.feeder = Node(config, context, name="safety-picture")
+        self.users = 0
+
+    def join(self) -> None:
+        self.users += 1
+        if self.users > 1:
+            return
+        feeder, picture = self.feeder, self.picture
+        feeder.start()
+
+        def on_telemetry(msg: telemetry_t, m: TopicMatch) -> None:
+            picture.feed(m.fields.get("agent", ""), msg, feeder.now)
+
+        feeder.subscribe_all("TELEMETRY", on_telemetry)
+        feeder.subscribe_all(
+            "MC_STATE", lambda msg, m: picture.state(m.fields.get("agent", ""), msg.state, feeder.now)
+        )
+        feeder.create_timer(_SWEEP_PERIOD, lambda: picture.sweep(feeder.now))
+
+    def leave(self) -> bool:
+        """False once the last HLC left (the feeder is stopped)."""
+        self.users -= 1
+        if self.users > 0:
+            return True
+        self.feeder.stop()
+        return False
+
+
+#: id(Context) -> its shared picture. A context lives as long as its process's nodes.
+_PICTURES: dict[int, _SharedPicture] = {}
+
+
+def _picture(config: Config, context: Context) -> _SharedPicture:
+    shared = _PICTURES.get(id(context))
+    if shared is None:
+        shared = _PICTURES[id(context)] = _SharedPicture(config, context)
+    return shared
 
 
 def make_autopilot(config: Config, context: Context) -> Autopilot:
@@ -96,12 +142,18 @@ class HlcNode(Node):
         self._reject_log = RateLimitedLog(self.log, period=5.0)
         self._publish_state: Callable[[], None] = lambda: None
         #: The separation and fence filter (docs/safety.md), None when [safety] is not enabled.
-        self.safety = SafetyLayer(self.agent, config) if config.safety.enabled else None
+        self._shared: _SharedPicture | None = None
+        self.safety: SafetyLayer | None = None
+        if config.safety.enabled:
+            self._shared = _picture(config, context)
+            self.safety = SafetyLayer(self.agent, config, self._shared.picture)
         self._wish: tuple[Velocity, float] | None = None  # the last velocity a behavior asked for, when
         self._modified = False  # the filter changed the last set-point it saw
+        self._filtered_at = -math.inf  # `now` of the last set-point filtered
         self._returning = False  # flying the filtered return leg (RTL with [safety] rtl = "filtered")
         self._safety_landing = False  # the filter's policy asked the vehicle to land
         self._reported: dict[str, float] = {}  # SAFETY report kind -> `now` of the last one
+        self._fence_mirrored = False  # the fence was written into the autopilot's own (once per start)
 
     @property
     def state(self) -> HlcState:
@@ -113,9 +165,8 @@ class HlcNode(Node):
             self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"hlc-io-{self.agent}")
         self.subscribe("MC_STATE", self._on_mc_state)
         self.subscribe("VELOCITY_CMD", self._on_velocity)
-        if self.safety is not None:
-            self.subscribe_all("TELEMETRY", self._on_peer_telemetry)
-            self.subscribe_all("MC_STATE", self._on_peer_mc_state)
+        if self._shared is not None:
+            self._shared.join()
         self._publish_state = self.state_publisher("HLC_STATE", self._state_msg, self.config.hlc.republish_hz)
         control, telemetry = 1.0 / self.config.hlc.control_hz, 1.0 / self.config.hlc.telemetry_hz
         self.create_timer(control, self._control, first_delay=self.first_delay(control))
@@ -124,6 +175,9 @@ class HlcNode(Node):
         self._connect()
 
     def on_stop(self) -> None:
+        shared, self._shared = self._shared, None
+        if shared is not None and not shared.leave():
+            _PICTURES.pop(id(self.context), None)
         io, self._io = self._io, None
         if io is not None:
             io.shutdown(wait=False, cancel_futures=True)
@@ -219,14 +273,6 @@ class HlcNode(Node):
         )
         self._handle(self.machine.on_mc_state(msg.state, self.now, takeoff_altitude=alt))
 
-    def _on_peer_telemetry(self, msg: telemetry_t, match: TopicMatch) -> None:
-        if self.safety is not None and self.started:
-            self.safety.on_telemetry(match.fields.get("agent", ""), msg, self.now)
-
-    def _on_peer_mc_state(self, msg: mc_state_t, match: TopicMatch) -> None:
-        if self.safety is not None and self.started:
-            self.safety.on_mc_state(match.fields.get("agent", ""), msg.state, self.now)
-
     def _on_velocity(self, msg: velocity_cmd_t) -> None:
         if not self.started:
             return
@@ -314,6 +360,7 @@ class HlcNode(Node):
             return v
         self._act_on(out)
         self._modified = out.decision.modified
+        self._filtered_at = self.now
         if not out.decision.modified:
             return v
         return Velocity(out.vn, out.ve, out.vd, v.yaw_rate, Frame.NED)
@@ -322,6 +369,8 @@ class HlcNode(Node):
         """Every control tick: the filtered return leg, or the last wish re-filtered as peers move
         (a behavior may command at 1 Hz; the filter must not wait for it)."""
         assert self.safety is not None
+        if not self._fence_mirrored:
+            self._mirror_fence()
         state = self.machine.state
         if self._returning and state not in _RETURNING:
             self._returning = False  # the MC landed it, a pilot took it, ...
@@ -345,6 +394,8 @@ class HlcNode(Node):
         if not mission_flight(state, self.mc_state):
             self._wish = None
             return
+        if not self._modified and now - self._filtered_at < 2.0 / self.config.hlc.control_hz:
+            return  # a behavior commanding at 10 Hz or more is filtered on every command already
         wish = self._wish
         fresh = wish is not None and now - wish[1] <= self.config.hlc.velocity_timeout
         v = wish[0] if wish is not None and fresh else Velocity.hover()
@@ -370,6 +421,41 @@ class HlcNode(Node):
         self._reported[kind] = now
         severity = Severity.ERROR if conflict else Severity.WARNING
         self._error(HlcError(ErrorCode.SAFETY, severity, describe(d)))
+
+    def _mirror_fence(self) -> None:
+        """Write the swarm fence into an ArduPilot's FENCE_* parameters and read them back, once, on the
+        ground with a position fix (antalate_lcm.autopilot.mavlink.fence_mirror): it holds if we die."""
+        safety, fence_config = self.safety, self.config.safety.fence
+        if safety is None or fence_config is None or self.autopilot.name != "mavlink" or not self.connected:
+            return
+        s = self.snapshot
+        here = safety.position(s)
+        fence = safety.params.fence
+        if here is None or fence is None or s.in_air or s.armed:
+            return
+        self._fence_mirrored = True
+        from antalate_lcm.autopilot.mavlink.fence_mirror import ParamLink, fence_parameters, mirror
+
+        wanted = fence_parameters(fence, (here[0], here[1]), fence_config.outside)
+        link = cast(ParamLink, self.autopilot)
+
+        def call() -> None:
+            problems = mirror(link, wanted)
+            if problems:
+                raise AutopilotError("; ".join(problems))
+
+        def done(ok: bool, detail: str) -> None:
+            if not self.started:
+                return
+            shown = ", ".join(f"{k} {v:g}" for k, v in wanted.items())
+            if ok:
+                text = f"safety: fence mirrored into the autopilot and read back: {shown}"
+                self._error(HlcError(ErrorCode.SAFETY, Severity.INFO, text))
+            else:
+                text = f"safety: the autopilot does not hold the fence ({detail}); wanted {shown}"
+                self._error(HlcError(ErrorCode.SAFETY, Severity.WARNING, text))
+
+        self._run(call, done)
 
     def _after_safety_action(self, ok: bool, detail: str) -> None:
         if not ok:

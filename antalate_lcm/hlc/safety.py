@@ -15,8 +15,7 @@ from dataclasses import dataclass, replace
 from antalate_lcm.autopilot.base import AutopilotState, Frame
 from antalate_lcm.config import Config, SafetyConfig
 from antalate_lcm.geo import FlatFrame, body_to_ne
-from antalate_lcm.msgs import telemetry_t
-from antalate_lcm.peers import PeerTable
+from antalate_lcm.hlc.swarm_picture import SwarmPicture
 from antalate_lcm.safety.barrier import Vec
 from antalate_lcm.safety.filter import FilterParams, Policy, SafetyDecision, SafetyFilter
 from antalate_lcm.safety.separation import PeerView, SeparationParams
@@ -36,6 +35,14 @@ _UNKNOWN_VEHICLE = (4.0, 2.0, 0.5)
 _HOME_REACHED = 0.5
 #: MC states in which a peer's own HLC runs this filter (it takes half of each pair's duty).
 _FILTERING_STATES = frozenset({"MISSION", "RTL"})
+
+
+def new_picture(config: Config) -> SwarmPicture:
+    """A swarm picture for agents of this config, its grid cell the filter's horizon."""
+    s = config.safety
+    origin = (s.origin[0], s.origin[1]) if s.origin else None
+    horizon = SafetyFilter(filter_params(config)).horizon
+    return SwarmPicture(cell=horizon, stale_after=s.stale_after, forget_after=s.forget_after, origin=origin)
 
 
 def filter_params(config: Config) -> FilterParams:
@@ -74,57 +81,34 @@ class Filtered:
 
 
 class SafetyLayer:
-    """One agent's filter state: peers, origin, home, and the last wish (re-filtered every tick)."""
+    """One agent's filter state: its filter, its home, and the swarm picture it shares with the
+    other agents of its process (`SwarmPicture`)."""
 
-    def __init__(self, agent: str, config: Config) -> None:
+    def __init__(self, agent: str, config: Config, picture: SwarmPicture | None = None) -> None:
         self.agent = agent
         self.config: SafetyConfig = config.safety
         self.params = filter_params(config)
         self._filter: SafetyFilter | None = None
-        #: Fed only once the frame is fixed (`locate`), so peers and this vehicle share one origin.
-        self.peers = PeerTable(
-            agent, stale_after=self.config.stale_after, forget_after=self.config.forget_after
-        )
-        self._frame: FlatFrame | None = None
+        self.picture = picture if picture is not None else new_picture(config)
         self.home: tuple[float, float] | None = None  # (north, east) of the takeoff point
-        if self.config.origin:
-            self.locate(self.config.origin[0], self.config.origin[1])
+        if self.picture.frame is not None:
+            self._fix(self.picture.frame)
+
+    def _fix(self, frame: FlatFrame) -> None:
+        """The frame is known: place the fence in it and build the filter."""
+        fence = self.config.fence
+        if fence is not None:
+            self.params = replace(self.params, fence=fence.geofence((frame.lat0, frame.lon0)))
+        self._filter = SafetyFilter(self.params)
 
     # ------------------------------------------------------------------ inputs
-    def locate(self, lat: float, lon: float) -> None:
-        """Fix the local frame at (lat, lon) (the [safety] origin, else the first valid position)."""
-        if self._frame is not None:
-            return
-        self._frame = FlatFrame(lat, lon)
-        self.peers = PeerTable(
-            self.agent,
-            origin=(lat, lon),
-            stale_after=self.config.stale_after,
-            forget_after=self.config.forget_after,
-        )
-        fence = self.config.fence
-        params = self.params
-        if fence is not None:
-            params = replace(params, fence=fence.geofence((lat, lon)))
-            self.params = params
-        self._filter = SafetyFilter(params)
-
-    def on_telemetry(self, agent: str, msg: telemetry_t, now: float) -> None:
-        if agent != self.agent and self._frame is not None:
-            self.peers.update_telemetry(agent, msg, now)
-
-    def on_mc_state(self, agent: str, state: int, now: float) -> None:
-        if agent != self.agent:
-            self.peers.update_state(agent, state, now)
-
     def position(self, s: AutopilotState) -> Vec | None:
         """(north, east, up) of a snapshot in the local frame, None without a valid fix."""
-        if not (math.isfinite(s.lat) and math.isfinite(s.lon)):
+        if not (math.isfinite(s.lat) and math.isfinite(s.lon) and -90.0 <= s.lat <= 90.0):
             return None
-        if self._frame is None:
-            self.locate(s.lat, s.lon)
-        frame = self._frame
-        assert frame is not None
+        frame = self.picture.place(s.lat, s.lon)
+        if self._filter is None:
+            self._fix(frame)
         north, east = frame.to_ne(s.lat, s.lon)
         return north, east, s.alt
 
@@ -135,9 +119,17 @@ class SafetyLayer:
             self.home = (here[0], here[1])
 
     # ------------------------------------------------------------------ the filter
-    def views(self, now: float) -> list[PeerView]:
+    def views(self, here: Vec, now: float) -> list[PeerView]:
+        """The peers near `here` as the filter sees them."""
+        assert self._filter is not None
         out = []
-        for p in self.peers.peers(now, max_age=self.config.forget_after):
+        horizon = self._filter.horizon
+        north, east = here[0], here[1]
+        for p in self.picture.near(self.agent, north, east, horizon):
+            age = max(0.0, now - p.received)
+            reach = horizon + self.params.separation.peer_speed * age
+            if abs(p.north - north) > reach or abs(p.east - east) > reach:
+                continue  # in a neighbouring cell but out of reach: no constraint, no object
             out.append(
                 PeerView(
                     p.agent,
@@ -147,8 +139,8 @@ class SafetyLayer:
                     p.vn,
                     p.ve,
                     -p.vd,
-                    age=max(0.0, now - p.received),
-                    cooperative=p.in_air and p.mc_state in _FILTERING_STATES,
+                    age,
+                    p.in_air and p.mc_state in _FILTERING_STATES,
                 )
             )
         return out
@@ -164,7 +156,14 @@ class SafetyLayer:
             vn, ve = body_to_ne(vx, vy, s.heading)
         else:
             vn, ve = vx, vy
-        decision = self._filter.filter(self.agent, here, (s.vn, s.ve, -s.vd), (vn, ve, -vz), self.views(now))
+        decision = self._filter.filter(
+            self.agent,
+            here,
+            (s.vn, s.ve, -s.vd),
+            (vn, ve, -vz),
+            self.views(here, now),
+            fresh_peers=self.picture.fresh(self.agent),
+        )
         u = decision.velocity
         return Filtered(u[0], u[1], -u[2], decision)
 
@@ -180,7 +179,14 @@ class SafetyLayer:
             return None
         speed = min(self.config.rtl_speed, self.params.separation.gamma * dist)
         wish = (dn / dist * speed, de / dist * speed, 0.0)
-        decision = self._filter.filter(self.agent, here, (s.vn, s.ve, -s.vd), wish, self.views(now))
+        decision = self._filter.filter(
+            self.agent,
+            here,
+            (s.vn, s.ve, -s.vd),
+            wish,
+            self.views(here, now),
+            fresh_peers=self.picture.fresh(self.agent),
+        )
         u = decision.velocity
         return Filtered(u[0], u[1], -u[2], decision)
 

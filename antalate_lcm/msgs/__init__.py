@@ -14,5 +14,6 @@ from .mc_state_t import mc_state_t as mc_state_t
 from .operator_cmd_t import operator_cmd_t as operator_cmd_t
 from .payload_t import payload_t as payload_t
 from .peer_detection_t import peer_detection_t as peer_detection_t
+from .peer_scan_t import peer_scan_t as peer_scan_t
 from .telemetry_t import telemetry_t as telemetry_t
 from .velocity_cmd_t import velocity_cmd_t as velocity_cmd_t

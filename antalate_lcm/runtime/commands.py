@@ -81,6 +81,10 @@ def _cmd_agent(args: argparse.Namespace) -> int:
     if args.shard:
         configs = shard(configs, *parse_shard(args.shard))
     elif processes > 1:  # same channels, agents spread over processes (one loop, one core each)
+        from antalate_lcm.bma.plan import check_peer_buses
+
+        for cfg in configs:  # before any process starts: one line naming the key, not a split swarm
+            check_peer_buses(cfg, whole_swarm=False)
         argv = [
             sys.executable,
             "-m",
@@ -93,7 +97,7 @@ def _cmd_agent(args: argparse.Namespace) -> int:
         argv += ["--agents", str(args.agents), "--spacing", str(args.spacing)]
         return run_processes(lambda i, n: [*argv, "--shard", f"{i}/{n}"], min(processes, len(configs)))
     # Internal topics between this process's nodes in memory: a spoofed LAN datagram never reaches them.
-    context = Context.in_process(shared_buses(configs))
+    context = Context.in_process(shared_buses(configs), whole_swarm=not args.shard)
     nodes = [node for cfg in configs for node in agent_nodes(cfg, context)]
     return run_until_signal(context, nodes)
 

@@ -30,6 +30,8 @@ Vec = tuple[float, float, float]
 #: Dykstra sweeps; each sweep projects onto every constraint once. Enough for a few cm/s of optimality
 #: with the handful of active constraints a swarm produces; feasibility does not depend on it.
 _SWEEPS = 24
+#: Working-set rounds: each adds the constraints the last projection still violated.
+_ROUNDS = 4
 #: Slack of the final feasibility check (m/s): below float noise of the products involved.
 _EPS = 1e-9
 
@@ -78,6 +80,25 @@ def _project_halfspace(u: Vec, c: Constraint) -> Vec:
     return u[0] - k * c.a[0], u[1] - k * c.a[1], u[2] - k * c.a[2]
 
 
+def _dykstra(u: Vec, sets: list[Constraint], h_max: float, v_max: float) -> Vec:
+    """Dykstra's projection of `u` onto the half-spaces `sets` and the speed cylinder (the last set)."""
+    m = len(sets) + 1
+    x = u
+    incr: list[Vec] = [(0.0, 0.0, 0.0)] * m
+    for _ in range(_SWEEPS):
+        moved = 0.0
+        for i in range(m):
+            p = incr[i]
+            y = (x[0] + p[0], x[1] + p[1], x[2] + p[2])
+            z = clamp_speed(y, h_max, v_max) if i == m - 1 else _project_halfspace(y, sets[i])
+            incr[i] = (y[0] - z[0], y[1] - z[1], y[2] - z[2])
+            moved += abs(z[0] - x[0]) + abs(z[1] - x[1]) + abs(z[2] - x[2])
+            x = z
+        if moved < 1e-6:
+            break
+    return x
+
+
 def solve(
     wish: Vec, constraints: list[Constraint], h_max: float, v_max: float, *, vertical_weight: float = 1.0
 ) -> Solution:
@@ -98,22 +119,18 @@ def solve(
     violated = [c for c in constraints if _dot(c.a, u) > c.b + _EPS]
     if not violated:
         return Solution(u, True, ())
-    # Dykstra over the constraints that can bind at all plus the speed cylinder (the last set).
-    sets = constraints
-    m = len(sets) + 1
+    # Dykstra over a working set (the violated constraints plus the speed cylinder), grown by any
+    # constraint the result still violates: a handful of sets instead of every neighbour's.
+    work = list(violated)
+    held = {id(c) for c in work}
     x = u
-    incr: list[Vec] = [(0.0, 0.0, 0.0)] * m
-    for _ in range(_SWEEPS):
-        moved = 0.0
-        for i in range(m):
-            p = incr[i]
-            y = (x[0] + p[0], x[1] + p[1], x[2] + p[2])
-            z = clamp_speed(y, h_max, v_max) if i == m - 1 else _project_halfspace(y, sets[i])
-            incr[i] = (y[0] - z[0], y[1] - z[1], y[2] - z[2])
-            moved += abs(z[0] - x[0]) + abs(z[1] - x[1]) + abs(z[2] - x[2])
-            x = z
-        if moved < 1e-6:
+    for _ in range(_ROUNDS):
+        x = _dykstra(u, work, h_max, v_max)
+        more = [c for c in constraints if id(c) not in held and _dot(c.a, x) > c.b + _EPS]
+        if not more:
             break
+        work.extend(more)
+        held.update(id(c) for c in more)
     if all(c.b >= 0.0 for c in constraints):
         # Hover is safe: scale towards it until nothing is violated (exact feasibility).
         s = 1.0

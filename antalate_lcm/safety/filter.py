@@ -68,6 +68,13 @@ class SafetyFilter:
         #: Beyond this margin over the radius a barrier allows more than our full speed: skip it.
         self._reach = 2.0 * math.hypot(params.max_horizontal, params.max_vertical) / sep.gamma
 
+    @property
+    def horizon(self) -> float:
+        """How far (m, from this agent's led position) a fresh peer can matter: radius, reach, and
+        the uncertainty of a report just short of stale. A spatial index asks this far."""
+        sep = self.params.separation
+        return sep.radius + self._reach + sep.peer_speed * sep.stale_after
+
     def filter(
         self,
         me: str,
@@ -77,10 +84,13 @@ class SafetyFilter:
         peers: list[PeerView],
         *,
         landing: bool = False,
+        fresh_peers: int | None = None,
     ) -> SafetyDecision:
         """The velocity to send for `wish` from `position` at `velocity` (all north, east, up).
 
         `landing` drops the fence floor (the vehicle is coming down through it on purpose).
+        `fresh_peers` is how many peers are heard at all (for ``min_peers``) when `peers` holds only
+        the near ones (a spatial index); None counts the fresh ones in `peers`.
         """
         p = self.params
         sep = p.separation
@@ -95,7 +105,9 @@ class SafetyFilter:
             )
         name = nearest.name if nearest is not None else ""
         action, reason = "", ""
-        fresh = sum(1 for peer in peers if peer.age <= sep.stale_after) if p.min_peers else 0
+        fresh = fresh_peers
+        if fresh is None:
+            fresh = sum(1 for peer in peers if peer.age <= sep.stale_after) if p.min_peers else 0
         if fresh < p.min_peers:
             reason = f"no peer information: {fresh} fresh peer(s) of min_peers {p.min_peers}"
             if p.no_peers is Policy.HOVER:

@@ -43,12 +43,13 @@ from dataclasses import dataclass
 from antalate_lcm.safety.barrier import Constraint
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class PeerView:
     """What the filter needs to know of one other agent, in the filter's local frame.
 
     Positions in metres (north, east, up), velocities in m/s, `age` in seconds since the report was
-    taken (receipt time plus any known latency).
+    taken (receipt time plus any known latency). Not frozen: one is built per neighbour per set-point
+    (a frozen dataclass's constructor costs twice as much), and nothing keeps it.
     """
 
     name: str

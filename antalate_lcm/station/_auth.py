@@ -15,7 +15,6 @@ import hashlib
 import hmac
 import math
 import secrets
-from collections.abc import Hashable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -82,39 +81,6 @@ class Operator:
 
     def may(self, role: Role) -> bool:
         return ROLES.index(self.role) >= ROLES.index(role)
-
-
-class TokenBucket:
-    """Rate limits by key: ``rate`` per second sustained, ``burst`` at once.
-
-    ``take`` returns 0 when allowed, else the seconds until one more is allowed (Retry-After).
-    Full buckets are forgotten by `sweep`, so memory follows the active keys, not every address
-    that ever knocked.
-    """
-
-    def __init__(self, rate: float, burst: float) -> None:
-        self.rate = rate
-        self.burst = burst
-        self._buckets: dict[Hashable, tuple[float, float]] = {}
-
-    def take(self, key: Hashable, now: float) -> float:
-        level, last = self._buckets.get(key, (self.burst, now))
-        level = min(self.burst, level + (now - last) * self.rate)
-        if level < 1.0:
-            self._buckets[key] = (level, now)
-            return (1.0 - level) / self.rate
-        self._buckets[key] = (level - 1.0, now)
-        return 0.0
-
-    def sweep(self, now: float) -> None:
-        full = [
-            k for k, (level, last) in self._buckets.items() if level + (now - last) * self.rate >= self.burst
-        ]
-        for k in full:
-            del self._buckets[k]
-
-    def __len__(self) -> int:
-        return len(self._buckets)
 
 
 def retry_after_header(seconds: float) -> str:

@@ -15,10 +15,11 @@ import secrets
 from collections import deque
 from dataclasses import dataclass, field
 
+from antalate_lcm._ratelimit import TokenBucket
 from antalate_lcm.errors import AntalateError
 
 from . import sector
-from ._auth import TokenBucket, check_registration, new_token, sha256_hex
+from ._auth import check_registration, new_token, sha256_hex
 from ._db import AgentRow, LatestState, StationDB
 from ._models import (
     AGENT_NAME,

@@ -92,6 +92,7 @@ import struct
 import threading
 import time
 import zlib
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -101,6 +102,7 @@ if TYPE_CHECKING:  # cflib only when a memory link is asked for
 
 Address = tuple[str, int]
 _MEMORY_PEER: Address = ("memory", 0)  # the sender of packets off a memory link
+_RADIO_PEER: Address = ("radio", 0)  # the sender of packets off a Crazyradio (tests/emulators/crazyradio.py)
 
 # CRTP ports (cflib/crtp/crtpstack.py)
 PORT_PARAM, PORT_COMMANDER, PORT_MEM, PORT_LOG, PORT_GENERIC, PORT_HL, PORT_SUPERVISOR = 2, 3, 4, 5, 7, 8, 9
@@ -285,20 +287,25 @@ class CrazyflieEmulator:
         auto_shutdown: bool = False,
         clock: Callable[[], float] = time.monotonic,
         memory: str | None = None,
+        radio: bool = False,
     ) -> None:
-        """Bind ``host:port`` (``udp://``), or with `memory` register ``memory://MEMORY`` and bind nothing."""
+        """Bind ``host:port`` (``udp://``), or with `memory` register ``memory://MEMORY`` and bind nothing,
+        or with `radio` bind nothing and answer `radio_exchange` (a `crazyradio.Crazyradio` calls it)."""
         self.clock = clock
         self._lock = threading.RLock()
         self._sock: socket.socket | None = None
         self._memory: MemoryLink | None = None
-        if memory is None:
-            self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            self._sock.bind((host, port))
-            self._sock.settimeout(0.1)
-        else:
+        #: over a radio, replies wait here for the next acknowledgement to carry them
+        self._radio_out: deque[bytes] | None = deque() if radio else None
+        self.radio_uri = ""  # set by the dongle the emulator is added to
+        if memory is not None:
             from antalate_lcm.autopilot.crazyflie.memory import MemoryLink
 
             self._memory = MemoryLink(memory, lambda packet: self._on_datagram(packet, _MEMORY_PEER))
+        elif not radio:
+            self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self._sock.bind((host, port))
+            self._sock.settimeout(0.1)
         self._peer: Address | None = None
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -366,6 +373,8 @@ class CrazyflieEmulator:
     def uri(self) -> str:
         if self._memory is not None:
             return self._memory.uri
+        if self._radio_out is not None:
+            return self.radio_uri
         assert self._sock is not None
         host, port = self._sock.getsockname()[:2]
         return f"udp://{host}:{port}"
@@ -507,6 +516,9 @@ class CrazyflieEmulator:
         if self.silent or self.shut_down or self._peer is None:
             return
         packet = bytes([(port << 4) | 0x0C | channel]) + data[:30]
+        if self._radio_out is not None:
+            self._radio_out.append(packet)
+            return
         if self._memory is not None:
             self._memory.push(packet)
             return
@@ -524,6 +536,18 @@ class CrazyflieEmulator:
             except OSError:
                 return
             self._on_datagram(data, sender)
+
+    def radio_exchange(self, packet: bytes) -> bytes | None:
+        """One radio packet from the host: the ack payload (the next queued reply, maybe empty), or
+        None when the radio does not acknowledge (silent, powered off)."""
+        with self._lock:
+            if self.silent or self.shut_down:
+                self.dropped += 1
+                return None
+            if packet and packet[0] != 0xFF:  # 0xFF...: a null poll (or the safelink handshake)
+                self._on_datagram(packet, _RADIO_PEER)
+            self._peer = _RADIO_PEER
+            return self._radio_out.popleft() if self._radio_out else b""
 
     def _on_datagram(self, data: bytes, sender: Address) -> None:
         """One CRTP packet from the client, off the UDP socket or a memory link (the same bytes)."""

@@ -233,6 +233,10 @@ PARAMS: dict[str, tuple[float, int]] = {
     "FENCE_ACTION": (1, _I8),
     "FENCE_RADIUS": (300.0, _R32),
     "FENCE_ALT_MAX": (100.0, _R32),
+    # AC_Fence.h defaults: FENCE_TYPE 7 (alt max | circle | polygon), ALT_MIN -10 m, MARGIN 2 m.
+    "FENCE_TYPE": (7, _I8),
+    "FENCE_ALT_MIN": (-10.0, _R32),
+    "FENCE_MARGIN": (2.0, _R32),
     "BATT_MONITOR": (4, _I8),
     "BATT_LOW_VOLT": (10.5, _R32),
     "BATT_CRT_VOLT": (0.0, _R32),

@@ -87,6 +87,7 @@ class Copter:
         home: tuple[float, float, float, float] = HOME,
         hlc: dict[str, Any] | None = None,
         autopilot: dict[str, Any] | None = None,
+        nodes: tuple[str, ...] = ("agent",),
     ) -> None:
         self.netns, self.instance, self.name = netns, instance, name
         workdir.mkdir(parents=True, exist_ok=True)
@@ -140,11 +141,17 @@ class Copter:
             "security": {"insecure": True},  # the probe plays an unsigned operator
         }
         self.agent = AgentProcesses(netns, workdir, doc)
-        self.agent.start("agent")
+        self.nodes = nodes
+        for node in nodes:
+            self.start(node)
         self.gcs.ok(op="connect")
 
-    def restart_agent(self) -> None:
-        self.agent.start("agent")
+    def start(self, node: str) -> None:
+        """Start ``node`` ("agent", or "hlc", "mc", "bma" each in its own process)."""
+        if node == "bma":
+            self.agent.start("bma", "--name", "pilot")
+        else:
+            self.agent.start(node)
 
     def stop(self) -> None:
         self.agent.stop()

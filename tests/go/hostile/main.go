@@ -53,6 +53,7 @@ var types = map[string]func() message{
 	"operator_cmd_t":   func() message { return &msgs.AntalateLcmMsgsOperatorCmdT{} },
 	"payload_t":        func() message { return &msgs.AntalateLcmMsgsPayloadT{} },
 	"peer_detection_t": func() message { return &msgs.AntalateLcmMsgsPeerDetectionT{} },
+	"peer_scan_t":      func() message { return &msgs.AntalateLcmMsgsPeerScanT{} },
 	"telemetry_t":      func() message { return &msgs.AntalateLcmMsgsTelemetryT{} },
 	"velocity_cmd_t":   func() message { return &msgs.AntalateLcmMsgsVelocityCmdT{} },
 	"demo.maps.cell_t": func() message { return &maps.DemoMapsCellT{} },

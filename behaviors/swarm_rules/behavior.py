@@ -1,0 +1,168 @@
+"""``gathering``, ``flocking``, ``dispersion``: the canonical swarm rules (``logic.py``) as plugins.
+
+Each reads only the public peer table (``ctx.peers``, ``uses_peers = True``): every other agent's
+latest telemetry, heard on the swarm bus in every launch mode. Each publishes an NED
+``velocity_cmd_t`` on VELOCITY_CMD at its tick rate (altitude held: vz = 0) while active, and one zero
+command on deactivation so the vehicle hovers at once. Until this agent's own position is known
+the rules ask for nothing (zero velocity).
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import zlib
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from antalate_lcm.behavior import Behavior, BehaviorContext
+from antalate_lcm.msgs import velocity_cmd_t
+from behaviors.swarm_rules.logic import (
+    DispersionParams,
+    FlockingParams,
+    GatheringParams,
+    Neighbour,
+    Vec,
+    dispersion,
+    flocking,
+    gathering,
+)
+
+_SPEED = Field(default=1.5, gt=0, allow_inf_nan=False)
+_SEPARATION = Field(default=3.0, ge=0, allow_inf_nan=False)
+#: 1/s; 0.25 per agent keeps a closing pair critically damped under the simulator's 0.5 s lag (logic.separate).
+_GAIN = Field(default=0.25, gt=0, allow_inf_nan=False)
+
+
+class _PeerRule(Behavior):
+    """The plumbing the three rules share: neighbours from ``ctx.peers``, a velocity out."""
+
+    topics = {"VELOCITY_CMD": velocity_cmd_t}
+    activate_on = ("MISSION",)
+    tick_hz = 10.0
+    uses_peers = True
+
+    def __init__(self, ctx: BehaviorContext) -> None:
+        super().__init__(ctx)
+        self.last: Vec = (0.0, 0.0)
+
+    def neighbours(self) -> list[Neighbour] | None:
+        """The fresh peers relative to this agent; None until this agent's own position is known."""
+        table = self.ctx.peers
+        if table.me is None:
+            return None
+        out = []
+        for peer in table.peers(self.ctx.now):
+            rel = table.relative(peer)
+            if rel is not None:
+                out.append(Neighbour(rel[0], rel[1], peer.vn, peer.ve))
+        return out
+
+    def on_activate(self) -> None:
+        self.log.info("%s with %d peers heard", self.ctx.name, len(self.ctx.peers.peers(self.ctx.now)))
+
+    def tick(self, dt: float) -> None:
+        neighbours = self.neighbours()
+        self.last = (0.0, 0.0) if neighbours is None else self.rule(neighbours)
+        self._publish(*self.last)
+
+    def rule(self, neighbours: list[Neighbour]) -> Vec:
+        raise NotImplementedError
+
+    def on_deactivate(self) -> None:
+        self.last = (0.0, 0.0)
+        self._publish(0.0, 0.0)
+
+    def _publish(self, vn: float, ve: float) -> None:
+        msg = velocity_cmd_t()
+        msg.frame = velocity_cmd_t.NED
+        msg.vx, msg.vy, msg.vz, msg.yaw_rate = vn, ve, 0.0, 0.0
+        self.ctx.publish("VELOCITY_CMD", msg)
+
+    def status(self) -> dict[str, Any]:
+        """A snapshot for tests and debugging."""
+        return {"peers": len(self.ctx.peers.peers(self.ctx.now)), "velocity": self.last}
+
+
+class Gathering(_PeerRule):
+    """Aggregation: towards the centroid of the peers, never nearer than ``separation`` to any."""
+
+    class Params(BaseModel):
+        model_config = ConfigDict(extra="forbid", frozen=True)
+        speed: float = _SPEED
+        gain: float = Field(default=0.4, gt=0, allow_inf_nan=False)
+        separation: float = _SEPARATION
+        margin: float = Field(default=0.3, ge=0, allow_inf_nan=False)
+        separation_gain: float = Field(default=0.5, gt=0, allow_inf_nan=False)
+        stop_radius: float = Field(default=4.5, ge=0, allow_inf_nan=False)
+        jitter: float = Field(default=0.5, ge=0, allow_inf_nan=False)
+        cushion: float = Field(default=1.0, ge=0, allow_inf_nan=False)
+        #: Seed of the jitter; 0 = one fixed by the agent's name (repeatable per agent, different between agents).
+        seed: int = 0
+
+    def __init__(self, ctx: BehaviorContext) -> None:
+        super().__init__(ctx)
+        p = self.params.model_dump()
+        self.rng = random.Random(p.pop("seed") or zlib.crc32(ctx.agent.encode()))
+        self.rule_params = GatheringParams(**p)
+
+    def rule(self, neighbours: list[Neighbour]) -> Vec:
+        angle = self.rng.uniform(0.0, 2.0 * math.pi)
+        return gathering(neighbours, self.rule_params, (math.cos(angle), math.sin(angle)))
+
+
+class Flocking(_PeerRule):
+    """Reynolds/Vicsek flocking: separation, alignment, cohesion at a cruise speed."""
+
+    class Params(BaseModel):
+        model_config = ConfigDict(extra="forbid", frozen=True)
+        speed: float = _SPEED
+        neighbourhood: float = Field(default=0.0, ge=0, allow_inf_nan=False)
+        alignment: float = Field(default=3.0, ge=0, allow_inf_nan=False)
+        cohesion: float = Field(default=0.05, ge=0, allow_inf_nan=False)
+        separation: float = _SEPARATION
+        margin: float = Field(default=0.5, ge=0, allow_inf_nan=False)
+        separation_gain: float = _GAIN
+        #: deg: the heading an agent sets off on while nobody moves; omitted = one fixed by its name
+        #: (so the flock starts in disorder and alignment has to agree on one).
+        heading: float | None = Field(default=None, allow_inf_nan=False)
+
+    def __init__(self, ctx: BehaviorContext) -> None:
+        super().__init__(ctx)
+        p = self.params.model_dump()
+        if p["heading"] is None:
+            p["heading"] = float(zlib.crc32(ctx.agent.encode()) % 360)
+        self.rule_params = FlockingParams(**p)
+
+    def rule(self, neighbours: list[Neighbour]) -> Vec:
+        me = self.ctx.peers.me
+        own = (me.vn, me.ve) if me is not None else (0.0, 0.0)
+        return flocking(own, neighbours, self.rule_params)
+
+
+class Dispersion(_PeerRule):
+    """Area coverage: spread to ``spacing`` from every peer, within ``area_radius`` of the takeoff point."""
+
+    class Params(BaseModel):
+        model_config = ConfigDict(extra="forbid", frozen=True)
+        speed: float = _SPEED
+        spacing: float = Field(default=10.0, gt=0, allow_inf_nan=False)
+        area_radius: float = Field(default=30.0, ge=0, allow_inf_nan=False)
+        separation: float = _SEPARATION
+        margin: float = Field(default=0.3, ge=0, allow_inf_nan=False)
+        separation_gain: float = _GAIN
+
+    def __init__(self, ctx: BehaviorContext) -> None:
+        super().__init__(ctx)
+        self.rule_params = DispersionParams(**self.params.model_dump())
+        #: (north, east) of the first position this behavior saw, in the table's frame.
+        self.home: tuple[float, float] | None = None
+
+    def rule(self, neighbours: list[Neighbour]) -> Vec:
+        me = self.ctx.peers.me
+        if me is None:
+            return 0.0, 0.0
+        if self.home is None:
+            self.home = (me.north, me.east)
+        return dispersion((self.home[0] - me.north, self.home[1] - me.east), neighbours, self.rule_params)

@@ -249,13 +249,17 @@ def test_run_with_the_console_in_a_real_terminal(tmp_path: Path) -> None:
     log = tmp_path / "console.lcm"
     argv = [sys.executable, "-m", "antalate_lcm.cli", "run", str(config), "--agents", "2", "-o", str(log)]
     env = _env()
-    cmd = f"cd {shlex.quote(str(tmp_path))} && PYTHONPATH={shlex.quote(env['PYTHONPATH'])} {shlex.join(argv)}"
+    # TMPDIR: the nodes' log file (named at the end) stays in the test's folder
+    where = shlex.quote(str(tmp_path))
+    cmd = f"cd {where} && TMPDIR={where} PYTHONPATH={shlex.quote(env['PYTHONPATH'])} {shlex.join(argv)}"
     cmd += "; echo RUN-EXITED-$?; sleep 60"
     with Tmux(cmd, session="run") as term:
         fly_one_sortie(term, "e-0", 2)
         term.keys("q")
         assert wait_for(lambda: "RUN-EXITED-0" in term.screen(200), 30), term.screen(200)
         assert "phase mission:" in term.screen(200)
+    (node_log,) = tmp_path.glob("antalate-run-*.log")
+    assert "antalate.mc.e-01" in node_log.read_text()  # the nodes' lines went there, not on the console
     record = read_log(log)
     assert sorted(record.agents) == ["e-01", "e-02"]
     assert all("MISSION" in [c.state for c in a.mc_states] for a in record.agents.values())

@@ -64,7 +64,6 @@ import math
 import threading
 import time
 from collections.abc import Callable, Mapping
-from functools import partial
 from typing import Any, ClassVar
 
 from pydantic import BaseModel
@@ -179,6 +178,7 @@ class TelloAutopilot(Autopilot):
         #: (command, deadline): an answer still owed by a command settled by the state (a take-off whose
         #: "ok" is late or lost); the next control command waits for it, so it cannot pass for its own
         self._owed: tuple[str, float] | None = None
+        self._sent_at = -math.inf  # clock() when the waiting command went out
         self._units = maths.VelocityUnitCheck()
 
     # ================================================================= the Autopilot contract
@@ -264,7 +264,7 @@ class TelloAutopilot(Autopilot):
             sent = self.clock()
         try:
             answer = self._exchange(
-                "takeoff", self._p.takeoff_timeout, settled=lambda: self._move_settled(sent), done_in_air=True
+                "takeoff", self._p.takeoff_timeout, settled=self._move_settled, done_in_air=True
             )
         except _Preempted:
             raise AutopilotError("takeoff interrupted (land, rtl or emergency)") from None
@@ -409,6 +409,12 @@ class TelloAutopilot(Autopilot):
         """Dead-reckoned metres north/east of home (for tests and tools)."""
         with self._lock:
             return self._north, self._east
+
+    @property
+    def dead_reckoning_problem(self) -> str:
+        """Why the state's velocities cannot be dead-reckoned (`maths.VelocityUnitCheck`); "" while none."""
+        with self._lock:
+            return self._units.problem
 
     @property
     def takeoff_point(self) -> tuple[float, float]:
@@ -579,6 +585,8 @@ class TelloAutopilot(Autopilot):
                     self._heard()
                 replies.clear()  # late replies to earlier commands, which would pass for this one's
                 self._send_raw(text)
+                with self._lock:
+                    self._sent_at = self.clock()
                 deadline = self.clock() + timeout
                 while True:
                     while replies:
@@ -606,12 +614,16 @@ class TelloAutopilot(Autopilot):
                 with self._lock:
                     self._pending = None
 
-    def _move_settled(self, sent: float) -> bool:
-        """A take-off or up/down whose answer was lost is over (lock held): flying, height steady."""
+    def _move_settled(self) -> bool:
+        """A take-off or up/down whose answer was lost is over (lock held): flying, height steady.
+
+        Timed from when the command went out (`_sent_at`), not from the call: a wait for an owed
+        answer may come first, hovering, and that hover is not this move settling.
+        """
         now = self.clock()
         return (
             self._air.value
-            and now - sent >= _SETTLED
+            and now - self._sent_at >= _SETTLED
             and now - self._height_changed >= _SETTLED
             and abs(self._reading.vd) < 0.05
         )
@@ -729,11 +741,10 @@ class TelloAutopilot(Autopilot):
                 if maths.climb_done(self._reading.height, alt):
                     return
             cm = max(_UP_MIN_CM, round(abs(delta) * 100))
-            sent = self.clock()
             answer = self._exchange(
                 f"{'up' if delta > 0 else 'down'} {min(cm, _UP_MAX_CM)}",
                 self._p.takeoff_timeout,
-                settled=partial(self._move_settled, sent),
+                settled=self._move_settled,
                 done_in_air=True,
             )
             if answer not in ("ok", ""):

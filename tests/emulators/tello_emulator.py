@@ -19,7 +19,8 @@ Protocol (what the real Tello does, and so what this emulates):
   *answer* before its next answered command, and ``TIME_BTW_RC_CONTROL_COMMANDS`` = 0.001 s for ``rc``):
   a datagram other than ``rc`` that arrives less than ``command_spacing`` (0.1 s) after the last one
   the Tello took, or after its last reply, is **ignored** -- not carried out, never answered
-  (`ignored` keeps it). ``emergency`` is no exception (djitellopy's ``send_command_without_return``
+  (`ignored` keeps it; DJITelloPy issue #43 is where 0.1 s was settled on, from use, since neither the
+  SDK guides nor DJI's own samples give a figure: the worst case an adapter must survive). ``emergency`` is no exception (djitellopy's ``send_command_without_return``
   carries the same comment); ``rc`` is.
 * ``takeoff`` climbs to ``takeoff_height`` (0.8 m) in ``takeoff_time`` (2.5 s), then hovers there
   ``takeoff_settle`` s more (0 by default) before it answers ``ok``: a real Tello orients itself with
@@ -32,9 +33,11 @@ Protocol (what the real Tello does, and so what this emulates):
   range``, motion on the ground ``error Motor stop``, unknown words ``unknown command: WORD``; ``cw/ccw x`` turn at ``rotate_rate``. While one of these is
   running other motion commands get ``error``; ``stop`` cancels it (the cancelled command is never
   answered) and answers ``ok``. ``emergency`` stops the motors (the drone drops to the ground) and, like
-  ``rc``, gets **no reply** (Tello SDK 2.0 user guide: "emergency -- stop motors immediately", and
-  djitellopy's ``Tello.emergency`` and ``send_rc_control`` both use ``send_command_without_return``;
-  a reply would be taken as the answer to its next command).
+  ``rc``, gets **no reply**: the SDK 2.0 user guide lists "ok / error" for it, but real units do not
+  answer (DJITelloPy issue #125, a Tello on firmware 01.04.92.01; dji-sdk/Tello-Python issue #85, a
+  Tello EDU, which DJI's support called a known issue), so djitellopy 2.5's ``Tello.emergency`` sends
+  it with ``send_command_without_return``, as ``send_rc_control`` sends ``rc``; a reply would be
+  taken as the answer to the next command.
 * ``rc a b c d``: stick values -100..100 for left/right, forward/back, up/down, yaw, held until the next
   ``rc``. Full stick (100) is ``max_speed`` m/s horizontally, ``max_vertical_speed`` m/s vertically and
   ``max_yaw_rate`` deg/s; values scale linearly, and the velocity follows with a first-order lag of

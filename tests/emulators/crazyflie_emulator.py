@@ -127,7 +127,7 @@ PARAM_CORE, PARAM_GROUP, PARAM_START = 0x20, 0x80, 1
 PARAM_FORMATS = {0x08: "<B", 0x09: "<H", 0x0A: "<I", 0x00: "<b", 0x01: "<h", 0x02: "<i", 0x06: "<f"}
 
 PROTOCOL_VERSION = 12  # src/modules/interface/crtp.h
-FIRMWARE_VERSION = "2025.02"
+FIRMWARE_VERSION = "2026.08"  # the tag the behaviours below were read at
 LOG_MAX_BLOCKS, LOG_MAX_OPS = 16, 128
 WDT_STABILIZE, WDT_SHUTDOWN = 0.5, 2.0  # supervisor.c COMMANDER_WDT_TIMEOUT_*
 LOW_VOLTAGE, CRITICAL_LOW_VOLTAGE = 3.2, 3.0  # platform_defaults_cf2.h DEFAULT_BAT_(CRITICAL_)LOW_VOLTAGE

@@ -139,3 +139,9 @@ def test_a_ground_speed_beyond_a_tello_is_a_unit_problem() -> None:
     assert not check.update(1.0, 0.0, 5.0, 0.0, 0.0)
     assert check.update(1.0, 0.0, 9.0, 0.0, 0.1)
     assert "beyond a Tello's 8 m/s" in check.problem
+
+
+def test_a_vgz_that_stays_zero_leaves_the_unit_unchecked_not_wrong() -> None:
+    check = maths.VelocityUnitCheck()
+    assert _climb(check, 0.0)  # said once (a warning), but no problem
+    assert not check.problem and "not checked" in check.unchecked

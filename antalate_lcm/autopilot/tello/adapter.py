@@ -781,8 +781,10 @@ class TelloAutopilot(Autopilot):
         if self._reading.height != before.height:
             self._height_changed = now
         r = self._reading
-        if self._units.update(r.height, r.vd, r.vn, r.ve, now):
-            log.warning("Tello %s: dead reckoning unreliable: %s", self.host, self._units.problem)
+        if self._p.velocity_unit_check and self._units.update(r.height, r.vd, r.vn, r.ve, now):
+            u = self._units
+            why = f"dead reckoning unreliable: {u.problem}" if u.problem else u.unchecked
+            log.warning("Tello %s: %s", self.host, why)
         if previous is not None and self._in_air():
             self._north, self._east = maths.dead_reckon(
                 self._north,

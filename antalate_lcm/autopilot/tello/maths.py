@@ -147,6 +147,8 @@ def rtl_leg(
     return dn / dist * v, de / dist * v, dist
 
 
+_VGZ_SILENT = 0.05  # |ratio| below this: vgz was not reported at all (no unit to check)
+
 #: m/s: a DJI Tello's top speed (its specification: 8 m/s); a ground speed read above it is a unit error.
 MAX_PLAUSIBLE_SPEED = 8.0
 
@@ -168,6 +170,9 @@ class VelocityUnitCheck:
     low: float = 0.5
     high: float = 2.0
     problem: str = ""
+    #: set when a climb passed with ``vgz`` reading zero throughout: a Tello that does not report it
+    #: cannot be checked (that is no evidence of a wrong unit, so it is not a `problem`)
+    unchecked: str = ""
     ratio: float = math.nan  # the last comparison's integrated/measured change
     _anchor: float | None = None  # the height the comparison started from
     _anchor_t: float = 0.0
@@ -175,7 +180,8 @@ class VelocityUnitCheck:
     _last: tuple[float, float] | None = None  # (t, climb rate m/s) of the previous sample
 
     def update(self, height: float, vd: float, vn: float, ve: float, now: float) -> bool:
-        """Feed one packet (m, m/s down, m/s north/east as read); True when a problem is first found."""
+        """Feed one packet (m, m/s down, m/s north/east as read); True when a `problem` is first found
+        (or the unit first found `unchecked`)."""
         if self.problem:
             return False
         speed = math.hypot(vn, ve)
@@ -196,7 +202,13 @@ class VelocityUnitCheck:
         elif abs(change) >= self.min_change:
             self.ratio = self._integral / change
             self._restart(height, now)
-            if not self.low <= abs(self.ratio) <= self.high:
+            if abs(self.ratio) < _VGZ_SILENT:
+                first = not self.unchecked
+                self.unchecked = (
+                    f"vgz read 0 while the height changed {change:+.2f} m: the unit is not checked"
+                )
+                return first
+            elif not self.low <= abs(self.ratio) <= self.high:
                 self.problem = (
                     f"the state's vgz integrates to {self.ratio * change:+.2f} m while the height changed "
                     f"{change:+.2f} m (x{abs(self.ratio):.2g}): its velocities are not in the dm/s dead "

@@ -533,19 +533,20 @@ class TelloAutopilot(Autopilot):
         for that command's answer (and the Tello, still in its take-off, refuses a move with "error").
         Ends at the owed answer, its deadline, or a pre-emption.
         """
-        while self._owed is not None:
+        while (owed := self._owed) is not None:  # land/emergency clear it from other threads
+            what, deadline = owed
             if replies:
                 answer = replies.pop(0).decode("utf-8", "replace").strip()
                 self._heard()
-                log.info("Tello %s: the late answer to %r came: %r", self.host, self._owed[0], answer)
+                log.info("Tello %s: the late answer to %r came: %r", self.host, what, answer)
                 self._owed = None
                 return
             with self._lock:
                 self._ingest()
                 if self._preempt != generation:
-                    raise _Preempted(f"pre-empted while waiting for the answer to {self._owed[0]!r}")
-            if self.clock() >= self._owed[1]:
-                log.info("Tello %s: no answer to %r came (lost)", self.host, self._owed[0])
+                    raise _Preempted(f"pre-empted while waiting for the answer to {what!r}")
+            if self.clock() >= deadline:
+                log.info("Tello %s: no answer to %r came (lost)", self.host, what)
                 self._owed = None
                 return
             if self._stop.is_set():

@@ -1,11 +1,12 @@
-"""Every example of the README, docs/behaviors.md and docs/tutorial.md runs (tests/doc_snippets.py).
+"""Every example of the README, docs/behaviors.md, experiments.md, simulator.md and tutorial.md runs
+(tests/doc_snippets.py).
 
 - Python blocks are imported as modules: every behavior class they define must pass the config
   loader's checks as a plugin (``module:Class``), and every ``test_*`` function they define is run.
 - TOML blocks are loaded the way antalate loads them: an agent config (a fragment of ``[[bma]]`` or
   ``[[bma.behaviors]]`` completed into a whole config) by ``load_config`` and every plugin check, an
   experiment script by ``load_script``, a ``pyproject.toml`` fragment's entry points by importing them.
-- Shell blocks of the README and docs/behaviors.md: every ``antalate`` command is parsed by
+- Shell blocks of the other docs: every ``antalate`` command is parsed by
   antalate's parser and what it names (a config, an experiment) is checked as the command would
   before starting; ``make`` targets, repository scripts, examples and extras must exist.
 - docs/tutorial.md runs for real, in a private network namespace, in a temporary folder: its shell
@@ -40,7 +41,7 @@ from antalate_lcm.runtime.agent import validate
 from antalate_lcm.runtime.script import load_script
 from tests.doc_snippets import REPO, Block, blocks, check_antalate, commands, is_antalate
 
-DOCS = ["README.md", "docs/behaviors.md"]
+DOCS = ["README.md", "docs/behaviors.md", "docs/experiments.md", "docs/simulator.md"]
 TUTORIAL = "docs/tutorial.md"
 #: What the docs' Python blocks import besides antalate: the worked example's package.
 EXAMPLE_PATHS = [REPO / "examples" / "my_behavior"]
@@ -120,11 +121,15 @@ SHELL = _of({"sh", "bash", "console"}, DOCS)
 _MAKE_TARGET = re.compile(r"^([\w.-]+):", re.M)
 
 
-def _check_command(words: list[str], where: str, generated: frozenset[str] = frozenset()) -> None:
+def _check_command(
+    words: list[str], where: str, generated: frozenset[str] = frozenset(), folder: str = "."
+) -> None:
     """``generated``: the files an ``antalate new behavior`` earlier in the block writes; a command
-    naming one is parsed only (the tutorial's test installs and flies such a package for real)."""
+    naming one (from ``folder``, where the block's ``cd`` went) is parsed only: the tutorial's test
+    installs and flies such a package for real."""
+    named = {os.path.normpath(os.path.join(folder, w)) for w in words}
     if is_antalate(words):
-        check_antalate(words[1:], REPO, parse_only=bool(generated & {os.path.normpath(w) for w in words}))
+        check_antalate(words[1:], REPO, parse_only=bool(generated & named))
     elif words[0] == "make":
         targets = set(_MAKE_TARGET.findall((REPO / "Makefile").read_text()))
         assert set(words[1:]) <= targets, f"{where}: make {' '.join(words[1:])}: not a Makefile target"
@@ -160,9 +165,14 @@ def _generated(words: list[str]) -> set[str]:
 @pytest.mark.parametrize("block", SHELL, ids=_ids(SHELL))
 def test_shell_commands_parse_and_name_what_exists(block: Block) -> None:
     generated: set[str] = set()
+    folder = "."
     for words in commands(block.text):
+        if words[0] == "cd":
+            folder = os.path.normpath(os.path.join(folder, words[1]))
+            assert folder in generated or (REPO / folder).is_dir(), f"{block.id}: cd {words[1]}"
+            continue
         generated |= _generated(words)
-        _check_command(words, block.id, frozenset(generated))
+        _check_command(words, block.id, frozenset(generated), folder)
 
 
 def test_the_command_splitter() -> None:

@@ -12,7 +12,11 @@ listens from this process with raw LCM, and prints:
 - the agent processes' RSS (summed; target < 1 GiB per 1,000 agents), CPU (% of one core, summed)
   and CPU per agent: microseconds of CPU per agent-second, which shows how the cost grows with N.
 
-    python benchmarks/agents.py [N ...] [--processes P]      (default: 500 1000 2000)
+    python benchmarks/agents.py [N ...] [--processes P] [--safety]      (default: 500 1000 2000)
+
+``--safety`` turns the separation filter on in every agent (``[safety] enabled``, docs/safety.md):
+each process then feeds one swarm picture with every agent's telemetry, and each HLC filters its
+velocity set-points in flight; benchmarks/safety_filter.py runs 1,000 agents both ways in one run.
 
 Figures only (docs/design.md §12): the machine is shared, so the load average is printed beside them.
 
@@ -100,14 +104,17 @@ def udp_drops(port: int) -> dict[int, int]:
     return out
 
 
-def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
+def run(n: int, tmp: Path, processes: int | None, safety: bool = False) -> dict[str, float]:
     import lcm
 
     from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
     from antalate_lcm.udpm_socket import UdpmReceiver
 
     cfg = tmp / "bench.toml"
-    cfg.write_text(f'[agent]\nname = "b"\n[buses]\nlan = "{URL}"\n[hlc]\nautopilot = "sim"\n')
+    text = f'[agent]\nname = "b"\n[buses]\nlan = "{URL}"\n[hlc]\nautopilot = "sim"\n'
+    if safety:
+        text += "[safety]\nenabled = true\n"
+    cfg.write_text(text)
     log = open(tmp / f"agents-{n}.log", "w")  # noqa: SIM115
     argv = [
         sys.executable,
@@ -244,9 +251,13 @@ def main() -> None:
         type=int,
         help="agent processes (default: one per 1,000 agents; 0: no --processes option)",
     )
+    parser.add_argument(
+        "--safety", action="store_true", help="every agent with the separation filter on ([safety] enabled)"
+    )
     args = parser.parse_args()
     ensure_private_netns()
     print(f"CPUs: {os.cpu_count()}; load average {os.getloadavg()[0]:.2f} at start")
+    print(f"separation filter ([safety] enabled): {'on' if args.safety else 'off'}")
     print(
         f"{'agents':>6} {'procs':>5} {'STANDBY s':>9} {'telem Hz min/mean':>18} {'MC react p50/p99/max ms':>24} "
         f"{'HLC react p50/max ms':>21} {'RSS MiB':>8} {'CPU %':>6} {'us/agent-s':>10}  verdict"
@@ -254,7 +265,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.sizes:
             procs = args.processes if args.processes is not None else math.ceil(n / 1000)
-            r = run(n, Path(tmp), args.processes)
+            r = run(n, Path(tmp), args.processes, args.safety)
             if "error" in r:
                 print(
                     f"{n:>6} {procs:>5}  only {int(r['error'])} agents reached STANDBY within 60 s",

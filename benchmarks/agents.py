@@ -113,7 +113,9 @@ def run(n: int, tmp: Path, processes: int | None, safety: bool = False) -> dict[
     cfg = tmp / "bench.toml"
     text = f'[agent]\nname = "b"\n[buses]\nlan = "{URL}"\n[hlc]\nautopilot = "sim"\n'
     if safety:
-        text += "[safety]\nenabled = true\n"
+        # The filter's swarm picture hears every agent's TELEMETRY on the LAN: unsigned only by
+        # choice (a private namespace here; a real swarm sets [security] swarm_key, docs/security.md).
+        text += "[safety]\nenabled = true\n[security]\ninsecure = true\n"
     cfg.write_text(text)
     log = open(tmp / f"agents-{n}.log", "w")  # noqa: SIM115
     argv = [
@@ -179,6 +181,9 @@ def run(n: int, tmp: Path, processes: int | None, safety: bool = False) -> dict[
         while len(standby) < n and time.time() < deadline:
             time.sleep(0.1)
         if len(standby) < n:
+            log.flush()
+            tail = (tmp / f"agents-{n}.log").read_text().splitlines()[-5:]
+            print("\n".join(f"    agent log: {line}" for line in tail), flush=True)
             return {"n": n, "error": float(len(standby))}
         standby_s = time.perf_counter() - started
         time.sleep(2.0)  # settle

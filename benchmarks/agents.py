@@ -10,7 +10,9 @@ listens from this process with raw LCM, and prints:
   received), p50 / p99 / max over the agents (target max < 100 ms),
 - the HLC reaction (MC TAKEOFF → HLC TAKEOFF, the next link in the chain),
 - the agent processes' RSS (summed; target < 1 GiB per 1,000 agents), CPU (% of one core, summed)
-  and CPU per agent: microseconds of CPU per agent-second, which shows how the cost grows with N.
+  and CPU per agent: microseconds of CPU per agent-second, which shows how the cost grows with N;
+- then, every agent in MISSION hovering (homes 8 m apart), the same telemetry rate and CPU in flight
+  (with ``--safety`` every HLC then filters its set-point each control tick).
 
     python benchmarks/agents.py [N ...] [--processes P] [--safety]      (default: 500 1000 2000)
 
@@ -145,6 +147,7 @@ def run(n: int, tmp: Path, processes: int | None, safety: bool = False) -> dict[
     mc_takeoff: dict[str, float] = {}
     hlc_takeoff: dict[str, float] = {}
     standby: set[str] = set()
+    mission: set[str] = set()
 
     def on_msg(channel: str, data: bytes) -> None:
         agent, _, topic = channel.partition("/")
@@ -158,6 +161,8 @@ def run(n: int, tmp: Path, processes: int | None, safety: bool = False) -> dict[
                     standby.add(agent)
                 elif st == mc_state_t.TAKEOFF and agent not in mc_takeoff:
                     mc_takeoff[agent] = now
+                elif st == mc_state_t.MISSION:
+                    mission.add(agent)
             elif (
                 topic == "HLC_STATE"
                 and hlc_state_t.decode(data).state == hlc_state_t.TAKEOFF
@@ -213,6 +218,28 @@ def run(n: int, tmp: Path, processes: int | None, safety: bool = False) -> dict[
         with lock:
             mc_lat = [(t - sent) * 1000 for t in mc_takeoff.values()]
             hlc_lat = [(hlc_takeoff[a] - mc_takeoff[a]) * 1000 for a in hlc_takeoff if a in mc_takeoff]
+        # In flight: every agent hovering in MISSION (with --safety each HLC filters its set-point on
+        # every control tick against its neighbours, 8 m apart), the same 5 s window.
+        deadline3 = time.time() + 60
+        while len(mission) < n and time.time() < deadline3:
+            time.sleep(0.2)
+        flight: dict[str, float] = {"flying": float(len(mission))}
+        if len(mission) == n:
+            time.sleep(2.0)
+            with lock:
+                telem.clear()
+            cpu2 = proc_stats(proc.pid)[1]
+            t2 = time.perf_counter()
+            time.sleep(5.0)
+            window2 = time.perf_counter() - t2
+            cpu3 = proc_stats(proc.pid)[1]
+            with lock:
+                flown = [telem.get(a, 0) / window2 for a in mission]
+            flight.update(
+                flight_hz_min=min(flown),
+                flight_cpu_pct=100 * (cpu3 - cpu2) / window2,
+                flight_us_per_agent_s=(cpu3 - cpu2) / window2 / n * 1e6,
+            )
         return {
             "n": n,
             "standby_s": standby_s,
@@ -229,6 +256,7 @@ def run(n: int, tmp: Path, processes: int | None, safety: bool = False) -> dict[
             "us_per_agent_s": (cpu1 - cpu0) / window / n * 1e6,
             "listener_dropped": dropped.get(mine, 0),
             "agents_dropped": sum(d for ino, d in dropped.items() if ino != mine),
+            **flight,
         }
     finally:
         stop.set()
@@ -291,6 +319,17 @@ def main() -> None:
                 f"{r['us_per_agent_s']:>10.0f}  {'OK' if ok else 'over target'}  (load {os.getloadavg()[0]:.2f})",
                 flush=True,
             )
+            if "flight_cpu_pct" in r:
+                print(
+                    f"{'':>12} in flight (all {n} in MISSION, hovering): telemetry min {r['flight_hz_min']:.1f} Hz, "
+                    f"CPU {r['flight_cpu_pct']:.0f} %, {r['flight_us_per_agent_s']:.0f} us/agent-s",
+                    flush=True,
+                )
+            else:
+                print(
+                    f"{'':>12} in flight: only {r['flying']:.0f} of {n} reached MISSION within 60 s",
+                    flush=True,
+                )
             print(
                 f"{'':>12} kernel drops in the telemetry window: this listener's socket {r['listener_dropped']:.0f}, "
                 f"the agent processes' sockets {r['agents_dropped']:.0f}",

@@ -12,6 +12,7 @@ Requests (one JSON object a line), one JSON reply line each:
 - ``{"op": "mark"}``: starts a new record (``modes``, ``texts``, ``max_alt`` count from here);
 - ``{"op": "record"}``: the mode changes and STATUSTEXTs (with their severity) since the last mark;
 - ``{"op": "set_param", "name": N, "value": V}``: PARAM_SET, confirmed by PARAM_VALUE;
+- ``{"op": "get_param", "name": N}``: PARAM_REQUEST_READ, the vehicle's PARAM_VALUE (``value``);
 - ``{"op": "set_mode", "mode": M}``: MAV_CMD_DO_SET_MODE as a pilot's ground station would;
 - ``{"op": "relay", "mode": "pass" | "cut" | "stall"}``: the adapter's link (`relay.Relay`).
 
@@ -147,6 +148,14 @@ class Gcs:
                 return {"ok": True}
         return {"ok": False, "error": f"{name} = {value} not confirmed: {self.params.get(name)}"}
 
+    def get_param(self, name: str) -> dict[str, Any]:
+        for _ in range(3):
+            sent = time.monotonic()
+            self.conn.mav.param_request_read_send(*self.target, name.encode(), -1)
+            if self._wait(lambda sent=sent: self.params.get(name, (0.0, -1.0))[1] >= sent, ACK_TIMEOUT):
+                return {"ok": True, "value": self.params[name][0]}
+        return {"ok": False, "error": f"no PARAM_VALUE for {name}"}
+
     def set_mode(self, mode: str) -> dict[str, Any]:
         sent = time.monotonic()
         cmd = mav.MAV_CMD_DO_SET_MODE
@@ -163,6 +172,8 @@ class Gcs:
             return self.set_param(req["name"], float(req["value"]))
         if op == "set_mode":
             return self.set_mode(req["mode"])
+        if op == "get_param":
+            return self.get_param(req["name"])
         with self.lock:
             if op == "state":
                 return {"ok": True, **self.state, "max_alt": self.max_alt, "home": self.home is not None}

@@ -88,6 +88,7 @@ class Copter:
         hlc: dict[str, Any] | None = None,
         autopilot: dict[str, Any] | None = None,
         nodes: tuple[str, ...] = ("agent",),
+        sections: dict[str, Any] | None = None,
     ) -> None:
         self.netns, self.instance, self.name = netns, instance, name
         workdir.mkdir(parents=True, exist_ok=True)
@@ -103,7 +104,7 @@ class Copter:
                 "--speedup",
                 f"{speedup:g}",
                 "--home",
-                ",".join(f"{x:g}" for x in home),
+                ",".join(f"{x:.10g}" for x in home),  # ":g" kept 6 digits: 21 m off in longitude
                 "--defaults",
                 str(binary.parent / "copter.parm"),
                 "--instance",
@@ -139,6 +140,7 @@ class Copter:
                 }
             ],
             "security": {"insecure": True},  # the probe plays an unsigned operator
+            **(sections or {}),  # more config sections ([safety], ...)
         }
         self.agent = AgentProcesses(netns, workdir, doc)
         self.nodes = nodes

@@ -200,3 +200,20 @@ def test_radio_failsafe_names_the_rtl_and_clears_with_the_radio() -> None:
     v.update(mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, b"Radio Failsafe Cleared", 0, 0), 9.0)
     v.update(status(True), 9.1)
     assert "RC failsafe" not in v.failsafes.active
+
+
+def test_a_command_is_spent_once_the_vehicle_leaves_for_another_mode() -> None:
+    """The operator's LAND, a battery failsafe's RTL, then its critical LAND -- all within the command
+    window: the last LAND is the failsafe's, not ours (ArduCopter 4.6.3: BATT_FS_LOW_ACT 2, CRT_ACT 1)."""
+    land = dialect.COPTER_MODES["LAND"]
+    v = Vehicle(command_window=5.0)
+    v.update(heartbeat(GUIDED, armed=True), 0.0)
+    v.commanded = ("LAND", 0.5)
+    v.update(heartbeat(land, armed=True), 1.0)
+    assert v.failsafes.reason == ""
+    v.update(mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, b"Battery Failsafe", 0, 0), 2.0)
+    v.update(heartbeat(RTL, armed=True), 2.1)
+    assert v.failsafes.reason == "battery failsafe"
+    v.update(mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, b"Battery Failsafe", 0, 0), 3.0)
+    v.update(heartbeat(land, armed=True), 3.1)
+    assert v.failsafes.reason == "battery failsafe" and v.autopilot_state(3.1).failsafe == "battery failsafe"

@@ -252,6 +252,10 @@ class Vehicle:
             and self.commanded[0] == self.mode
             and now - self.commanded[1] <= self.command_window
         )
+        if previous != msg.custom_mode and not commanded and self.commanded is not None:
+            # The vehicle left for a mode we did not ask for (a failsafe, a pilot): our command is spent.
+            # Kept, a failsafe's LAND seconds after the operator's LAND -> failsafe RTL would count as ours.
+            self.commanded = None
         self.failsafes.on_mode(self.mode, now, commanded=commanded)
         if previous != msg.custom_mode and self.failsafes.reason:
             log.warning("autopilot failsafe (%s): mode %s", self.failsafes.reason, self.mode)

@@ -148,6 +148,10 @@ class McOutcome:
         return self.transition is not None
 
 
+#: An observation that changed nothing (immutable, so one serves every tick and every republish).
+_ACCEPTED = McOutcome(True)
+
+
 _Guard = Callable[["MissionControl"], bool]
 
 
@@ -268,7 +272,13 @@ class MissionControl:
 
     def __init__(self, params: McParams | None = None, *, table: tuple[McRow, ...] = MC_TABLE) -> None:
         self.params = params or McParams()
-        self._table = table
+        #: (state, event) -> its rows in table order (an HLC state heard 5 times a second per agent
+        #: reads a few rows, not the table).
+        rows: dict[tuple[McState, McEvent], tuple[McRow, ...]] = {}
+        for row in table:
+            for source in row.sources:
+                rows[(source, row.event)] = (*rows.get((source, row.event), ()), row)
+        self._rows = rows
         self.state: McState = McState.INIT
         self.entered_at: float | None = None
         self.last_command_seq: int = 0
@@ -342,7 +352,7 @@ class MissionControl:
         event = McEvent.of_hlc(hlc)
         row = self._match(event)
         if row is None:
-            return McOutcome(True)
+            return _ACCEPTED
         transition = self._apply(row, event, f"HLC {hlc.name}", now)
         return McOutcome(True, transition, reason=transition.reason)
 
@@ -367,13 +377,13 @@ class MissionControl:
                 detail = f"HLC still READY after {timeout:g} s"
                 transition = self._apply(row, McEvent.TAKEOFF_ACK_TIMEOUT, detail, now)
                 return McOutcome(True, transition, reason=transition.reason)
-        return McOutcome(True)
+        return _ACCEPTED
 
     # ----------------------------------------------------------------- the table
 
     def _match(self, event: McEvent) -> McRow | None:
-        for row in self._table:
-            if row.event is event and self.state in row.sources and (row.guard is None or row.guard(self)):
+        for row in self._rows.get((self.state, event), ()):
+            if row.guard is None or row.guard(self):
                 return row
         return None
 

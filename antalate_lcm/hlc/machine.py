@@ -165,6 +165,10 @@ Action.HOVER = Action(ActionKind.HOVER)
 class HlcEvent(enum.Enum):
     """Inputs of the table, derived from observations (see the module docstring)."""
 
+    # Members are singletons compared by identity: identity's hash (in C) instead of Enum's, which
+    # hashes the name in Python on every table lookup (several per control tick per agent).
+    __hash__ = object.__hash__
+
     LINK_UP = "LINK_UP"  # INIT: autopilot connected, link fresh, MC heard, vehicle on the ground
     RESYNC_AIRBORNE = "RESYNC_AIRBORNE"  # INIT: armed and in air, autopilot in GUIDED
     RESYNC_LANDING = "RESYNC_LANDING"  # INIT: armed and in air, autopilot landing

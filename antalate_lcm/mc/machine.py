@@ -85,13 +85,23 @@ class McEvent(enum.Enum):
     TAKEOFF_ACK_TIMEOUT = "TAKEOFF_ACK_TIMEOUT"
     HLC_TIMEOUT = "HLC_TIMEOUT"  # no hlc_state_t for McParams.hlc_timeout
 
+    # Members are singletons compared by identity: identity's hash (in C) instead of Enum's, which
+    # hashes the name in Python on every table lookup (5 HLC states a second per agent).
+    __hash__ = object.__hash__
+
     @classmethod
     def of_hlc(cls, state: HlcState) -> McEvent:
-        return cls[f"HLC_{state.name}"]
+        return _OF_HLC[state]
 
     @classmethod
     def of_command(cls, command: Command) -> McEvent:
         return cls[f"OP_{command.name}"]
+
+
+#: HLC state -> the event its hlc_state_t is (HLC_<name>).
+_OF_HLC = {state: McEvent[f"HLC_{state.name}"] for state in HlcState}
+#: The HLC's states by value: a lookup, not ``HlcState(value)`` (the enum's call), per hlc_state_t heard.
+_HLC_STATES: dict[int, HlcState] = {int(state): state for state in HlcState}
 
 
 @dataclass(frozen=True)
@@ -340,9 +350,8 @@ class MissionControl:
 
     def on_hlc_state(self, state: HlcState | int, now: float) -> McOutcome:
         """An ``hlc_state_t`` was heard (republished at 5 Hz: most observations change nothing)."""
-        try:
-            hlc = HlcState(state)
-        except ValueError:
+        hlc = _HLC_STATES.get(state)
+        if hlc is None:
             return McOutcome(False, reason=f"unknown HLC state {state!r}")
         self.hlc_changed = hlc is not self.hlc_state
         self.hlc_state = hlc

@@ -90,7 +90,7 @@ def test_a_command_too_soon_after_the_last_answer_is_ignored_but_rc_and_spaced_o
     """djitellopy's TIME_BTW_COMMANDS (0.1 s): a closer command is neither carried out nor answered."""
     assert client.ask("battery?") == "100"
     client.spacing = 0.0  # a client that does not wait, as the adapter did before
-    assert client.no_reply("takeoff", wait=0.3)  # sent at once after the answer: ignored
+    assert client.no_reply("takeoff", wait=0.3)  # sent at once after battery? (and its answer): ignored
     assert not emu.snapshot().flying
     assert [c.text for c in emu.ignored] == ["takeoff"]
     client.send("rc 0 0 0 0")  # rc is never spaced (TIME_BTW_RC_CONTROL_COMMANDS 0.001 s)
@@ -117,9 +117,13 @@ def test_emergency_is_never_answered_and_a_slow_takeoff_answers_after_its_settle
         client.cmd.settimeout(3.0)
         assert client.cmd.recvfrom(1024)[0] == b"ok"  # takeoff's, once it has settled
         assert time.monotonic() - t0 >= 1.25
-        client.send("emergency")  # at once after that answer: not heard either
+        client.spacing = 0.0
+        client.send("speed?")
+        client.send("emergency")  # at once after a command: not heard either
         time.sleep(0.05)
         assert [c.text for c in emu.ignored] == ["emergency"] and emu.snapshot().flying
+        assert client.cmd.recvfrom(1024)[0] != b""  # speed?'s answer
+        client.spacing = 0.1
         client._quiet_since = time.monotonic()  # noqa: SLF001 - the answer above, read past the client
         assert client.no_reply("emergency", wait=0.5)  # spaced: heard, and never answered
         assert not emu.snapshot().flying and emu.snapshot().z == 0.0

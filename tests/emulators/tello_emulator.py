@@ -15,10 +15,13 @@ Protocol (what the real Tello does, and so what this emulates):
   non-EDU Tello). Before SDK mode other commands are answered ``error`` (an emulator choice; ``rc`` and
   ``emergency`` never get a reply).
 * **Command spacing** (djitellopy ``Tello.TIME_BTW_COMMANDS`` = 0.1 s, whose comment says "Commands
-  very consecutive makes the drone not respond to them"; djitellopy waits that long after the last
-  *answer* before its next answered command, and ``TIME_BTW_RC_CONTROL_COMMANDS`` = 0.001 s for ``rc``):
-  a datagram other than ``rc`` that arrives less than ``command_spacing`` (0.1 s) after the last one
-  the Tello took, or after its last reply, is **ignored** -- not carried out, never answered
+  very consecutive makes the drone not respond to them", and ``TIME_BTW_RC_CONTROL_COMMANDS`` = 0.001 s
+  for ``rc``): a datagram other than ``rc`` that arrives less than ``command_spacing`` (0.1 s) after
+  the last one the Tello took is **ignored**. Measured from the last command, not from the last reply:
+  djitellopy 2.5.0 means to wait 0.1 s after the answer, but ``send_command_with_return`` sleeps
+  ``diff`` instead of ``TIME_BTW_COMMANDS - diff`` and notices the answer only at its next 0.1 s poll,
+  so what it really guarantees (and real Tellos answer) is 0.1 s between two commands, with the next one
+  sometimes a few ms after the previous answer -- not carried out, never answered
   (`ignored` keeps it; DJITelloPy issue #43 is where 0.1 s was settled on, from use, since neither the
   SDK guides nor DJI's own samples give a figure: the worst case an adapter must survive). ``emergency`` is no exception (djitellopy's ``send_command_without_return``
   carries the same comment); ``rc`` is.
@@ -526,7 +529,6 @@ class TelloEmulator:
                 self._lost_replies.append((command, text))
                 return
             self._replies.append((text, dest))
-            self._busy_until = max(self._busy_until, time.monotonic() + self.command_spacing)
         self._send(text.encode("utf-8"), dest)
 
     def _send_state(self) -> None:

@@ -44,28 +44,46 @@ print(json.dumps({"before": before, "wanted": wanted, "problems": problems, "aft
 """.replace("PORT", str(14540 + INSTANCE))
 
 
+def link_commands(workdir: Path) -> None:
+    """PX4's shell commands (``px4-param`` ...) runnable from `workdir`: the build's symlinks to ``bin/px4``
+    may have become 3-byte text files in a copy that keeps files only, and the launcher puts
+    ``WORKDIR/.rc`` first on PATH, so links there make such a copy start (harmless for an intact one)."""
+    bin_dir = RUN.parent / "bin"
+    rc = workdir / ".rc"
+    rc.mkdir(parents=True, exist_ok=True)
+    for command in bin_dir.glob("px4-*"):
+        if command.suffix or os.access(command, os.X_OK):
+            continue
+        link = rc / command.name
+        if not link.is_symlink():
+            link.symlink_to(bin_dir / "px4")
+
+
 @pytest.fixture(scope="module")
-def px4(tmp_path_factory: pytest.TempPathFactory) -> Iterator[NetNamespace]:
+def px4(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[NetNamespace, Path]]:
     reason = _netns_reason() or ("" if RUN.is_file() else f"no PX4 SITL at {RUN} (../shared/sitl/README.md)")
     if reason:
         pytest.skip(reason)
     work = tmp_path_factory.mktemp("px4")
+    link_commands(work / "px4")
     with NetNamespace() as ns:
         proc = ns.popen(
-            ["sh", str(RUN), str(INSTANCE), str(work)],
+            ["sh", str(RUN), str(INSTANCE), str(work / "px4")],
             env={**child_env(), "PX4_PARAMS": "SDLOG_MODE=-1"},
+            stdin=subprocess.DEVNULL,
             stdout=open(work / "px4.log", "w"),  # noqa: SIM115 - closed with the process
             stderr=subprocess.STDOUT,
         )
         try:
-            yield ns
+            yield ns, work / "px4.log"
         finally:
             stop_process(proc)
 
 
-def test_the_gf_parameters_are_written_and_read_back(px4: NetNamespace) -> None:
-    out = px4.run([sys.executable, "-c", SCRIPT], timeout=180, cwd=str(REPO))
-    assert out.returncode == 0, out.stderr[-2000:]
+def test_the_gf_parameters_are_written_and_read_back(px4: tuple[NetNamespace, Path]) -> None:
+    ns, px4_log = px4
+    out = ns.run([sys.executable, "-c", SCRIPT], timeout=180, cwd=str(REPO))
+    assert out.returncode == 0, out.stderr[-2000:] + (px4_log.read_text()[-2000:] if px4_log.exists() else "")
     r = json.loads(out.stdout.strip().splitlines()[-1])
     print(f"\nPX4 GF_* before {r['before']}, wanted {r['wanted']}, read back {r['after']}")
     assert r["problems"] == []

@@ -23,6 +23,7 @@ from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.autopilot import Autopilot, AutopilotError, AutopilotState, Frame, load_autopilot
 from antalate_lcm.config import Config
 from antalate_lcm.hlc.machine import (
+    NOTHING,
     Action,
     ActionKind,
     ErrorCode,
@@ -311,11 +312,13 @@ class HlcNode(Node):
         if not self.started:
             return
         now = self.now
-        self.snapshot = self._poll(now)
+        snapshot = self.snapshot = self._poll(now)
         self._polled_at = now
-        self._handle(self.machine.on_autopilot(self.snapshot, now, fault=self._state_fault))
-        self._handle(self.machine.tick(now))
-        stale = self.velocity_guard.tick(now, self.machine.state, self.mc_state, self._link_age())
+        machine = self.machine
+        self._handle(machine.on_autopilot(snapshot, now, fault=self._state_fault))
+        self._handle(machine.tick(now))
+        # The link's age now is the snapshot's: it was polled at `now` (see _link_age).
+        stale = self.velocity_guard.tick(now, machine.state, self.mc_state, self.snapshot.link_age)
         if stale is not None:
             self._apply(stale, "velocity timeout")
         if self.safety is not None:
@@ -466,6 +469,8 @@ class HlcNode(Node):
             self.log.warning("safety: autopilot command failed: %s", detail or "refused")
 
     def _handle(self, outcome: HlcOutcome) -> None:
+        if outcome is NOTHING:  # most inputs (a snapshot 20 times a second) change nothing
+            return
         t = outcome.transition
         if t is not None:
             if t.to_state is HlcState.TAKEOFF and self.safety is not None:

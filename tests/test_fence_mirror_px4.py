@@ -6,7 +6,6 @@ private network namespace, under the shared SITL lock like every firmware test (
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -16,13 +15,11 @@ import pytest
 
 from tests.conftest import _netns_reason
 from tests.netns import REPO, NetNamespace, child_env, stop_process
+from tests.sitl_px4.harness import link_commands, sitl_dir, sitl_missing
 
 pytestmark = [pytest.mark.netns, pytest.mark.timeout(240)]
 
 INSTANCE = 8
-RUN = Path(
-    os.environ.get("ANTALATE_PX4_SITL", str(REPO / ".." / "shared" / "sitl" / "px4" / "run-px4-sih.sh"))
-)
 
 #: Run inside the namespace: connect, mirror, read back; one JSON line out.
 SCRIPT = """
@@ -44,31 +41,16 @@ print(json.dumps({"before": before, "wanted": wanted, "problems": problems, "aft
 """.replace("PORT", str(14540 + INSTANCE))
 
 
-def link_commands(workdir: Path) -> None:
-    """PX4's shell commands (``px4-param`` ...) runnable from `workdir`: the build's symlinks to ``bin/px4``
-    may have become 3-byte text files in a copy that keeps files only, and the launcher puts
-    ``WORKDIR/.rc`` first on PATH, so links there make such a copy start (harmless for an intact one)."""
-    bin_dir = RUN.parent / "bin"
-    rc = workdir / ".rc"
-    rc.mkdir(parents=True, exist_ok=True)
-    for command in bin_dir.glob("px4-*"):
-        if command.suffix or os.access(command, os.X_OK):
-            continue
-        link = rc / command.name
-        if not link.is_symlink():
-            link.symlink_to(bin_dir / "px4")
-
-
 @pytest.fixture(scope="module")
 def px4(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[NetNamespace, Path]]:
-    reason = _netns_reason() or ("" if RUN.is_file() else f"no PX4 SITL at {RUN} (../shared/sitl/README.md)")
+    reason = sitl_missing() or _netns_reason()
     if reason:
         pytest.skip(reason)
     work = tmp_path_factory.mktemp("px4")
     link_commands(work / "px4")
     with NetNamespace() as ns:
         proc = ns.popen(
-            ["sh", str(RUN), str(INSTANCE), str(work / "px4")],
+            ["sh", str(sitl_dir() / "run-px4-sih.sh"), str(INSTANCE), str(work / "px4")],
             env={**child_env(), "PX4_PARAMS": "SDLOG_MODE=-1"},
             stdin=subprocess.DEVNULL,
             stdout=open(work / "px4.log", "w"),  # noqa: SIM115 - closed with the process

@@ -107,7 +107,11 @@ def all_mc(probe: Probe, state: int, timeout: float, since: int) -> None:
 
 
 class Sampler:
-    """Every vehicle's own position (SERIAL1) at 10 Hz: the minimum pairwise separation of those in the air."""
+    """Every vehicle's own position (SERIAL1) at 10 Hz: the minimum pairwise separation of those in the air.
+
+    While it runs it is the only caller of the `gcs` helpers (one JSON pipe each, no lock: two threads
+    on it would take each other's replies); the test reads the vehicles' states from `latest`.
+    """
 
     def __init__(self, copters: dict[str, Copter]) -> None:
         self.copters = copters
@@ -116,6 +120,7 @@ class Sampler:
         self.min_3d = math.inf
         self.when: Any = None
         self.samples = 0
+        self.latest: dict[str, dict[str, Any]] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
@@ -123,7 +128,7 @@ class Sampler:
         while not self._stop.wait(0.1):
             where = []
             for name, c in self.copters.items():
-                s = c.gcs.state()
+                s = self.latest[name] = c.gcs.state()
                 if s.get("lat") is None or s["alt"] < 1.0:
                     continue
                 north, east = self.frame.to_ne(s["lat"], s["lon"])
@@ -142,7 +147,8 @@ class Sampler:
 
     def __exit__(self, *_: object) -> None:
         self._stop.set()
-        self._thread.join(5)
+        self._thread.join(30)
+        assert not self._thread.is_alive(), "the sampler is stuck on a gcs call"
 
 
 def test_three_arducopters_commanded_at_their_centroid_keep_apart_with_the_fence_in_the_vehicle(
@@ -182,7 +188,7 @@ def test_three_arducopters_commanded_at_their_centroid_keep_apart_with_the_fence
         rtl = probe.mark()
         swarm_command(probe, O.RTL)
         all_mc(probe, M.STANDBY, timeout=150, since=rtl)
-        assert wait_for(lambda: not any(c.gcs.state()["armed"] for c in copters.values()), 30, 0.5)
+        assert wait_for(lambda: not any(sampler.latest[n]["armed"] for n in HOMES), 30, 0.5)
     landed = time.monotonic()
     stop_process(logger)  # SIGTERM reaches lcm-logger itself: the file is complete
     analysis = subprocess.run(

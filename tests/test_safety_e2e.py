@@ -311,8 +311,9 @@ def test_no_peer_information_lands_per_the_policy() -> None:
 
 def test_operator_land_from_the_tight_cluster(tmp_path: Path) -> None:
     """Nine agents squeezed at their centroid, then the operator's LAND: each descends where it is (the
-    autopilot's own vertical landing). The filter keeps the cluster at one height, so the vertical
-    descents keep the horizontal separation it left them with (docs/safety.md, landing)."""
+    autopilot's own vertical landing, unfiltered). The separation of the agents in the air holds; a
+    pair the filter stacked lands closer than the radius to the one already down, which this does
+    not count (docs/safety.md, landing: prefer RTL from a cluster)."""
     n, spacing = 9, 6.0
     homes = grid(n, spacing)
     centroid = offset(LAT0, LON0, spacing, spacing)

@@ -3,9 +3,9 @@ operator_remote.toml), no LAN and no bridge: only the bus URLs differ from a LAN
 
 Everything runs in a private namespace (the agent's own bus is multicast on lo): ``antalate router``
 on loopback, ``antalate agent`` with the example config, and the LAN tests' operator (the console's
-command tracker) on the example operator config. Twice: on ``tcp/``, and through a router with
-mutual TLS (``antalate lab-ca``; the agent and the operator each with a certificate of their own,
-issue 29 finding 7).
+command tracker) on the example operator config. Three times: on ``tcp/``; through a router with
+mutual TLS (``antalate lab-ca``; the agent and the operator each with a certificate of their own);
+through a TLS router with a users file (each with its own ``auth=`` file) (issue 29 finding 7).
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def _config(name: str, out: Path, extra: dict[str, object], url: str = URL) -> P
 
 
 @pytest.mark.timeout(120)
-@pytest.mark.parametrize("link", ["tcp", "mtls"])
+@pytest.mark.parametrize("link", ["tcp", "mtls", "tls-users"])
 def test_an_agent_on_zenoh_is_flown_by_an_operator_on_zenoh(
     netns: NetNamespace, tmp_path: Path, link: str
 ) -> None:
@@ -77,6 +77,18 @@ def test_an_agent_on_zenoh_is_flown_by_an_operator_on_zenoh(
         router_args = ["--listen", endpoint, "--tls-cert", str(pki / "router.pem"),
                        "--tls-key", str(pki / "router.key"), "--ca", str(pki / "ca.pem")]  # fmt: skip
         urls = {who: mtls_url(pki, who, endpoint) for who in urls}
+    elif link == "tls-users":  # TLS for privacy, a password per client (files, never in the config)
+        pki = lab_ca(tmp_path / "pki")
+        endpoint = f"tls/127.0.0.1:{PORT}"
+        (tmp_path / "users.txt").write_text("agent:agent-secret-1\noperator:operator-secret-2\n")
+        for who, secret in (("agent", "agent-secret-1"), ("operator", "operator-secret-2")):
+            (tmp_path / f"{who}.auth").write_text(f"{who}:{secret}\n")
+        router_args = ["--listen", endpoint, "--tls-cert", str(pki / "router.pem"),
+                       "--tls-key", str(pki / "router.key"), "--users", str(tmp_path / "users.txt")]  # fmt: skip
+        urls = {
+            who: f"zenoh://?connect={endpoint}&mode=client&ca={pki / 'ca.pem'}&auth={tmp_path / f'{who}.auth'}"
+            for who in urls
+        }
     with open(router_log, "w") as rlog, open(agent_log, "w") as alog:
         netns.antalate(
             "router",
@@ -124,5 +136,6 @@ def test_an_agent_on_zenoh_is_flown_by_an_operator_on_zenoh(
         finally:
             op.quit()
     assert "Traceback" not in agent_log.read_text()
-    if link == "mtls":
-        assert "(mutual TLS, keys under antalate only)" in router_log.read_text()
+    said = {"mtls": "(mutual TLS, keys under antalate only)", "tls-users": "(TLS, users file, keys under"}
+    if link in said:
+        assert said[link] in router_log.read_text()

@@ -169,3 +169,20 @@ def test_cli_radius_alone_and_options_that_need_it(
     assert "--margin needs --radius or --safety CONFIG" in capsys.readouterr().err
     assert main(["analyze", str(log)]) == 0
     assert "safety (radius" not in capsys.readouterr().out  # no limits, no section
+
+
+def test_cli_json_holds_the_safety_numbers(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    assert main(["analyze", str(head_on(tmp_path)), "--radius", "5", "--margin", "0.5", "--json"]) == 0
+    safety = json.loads(capsys.readouterr().out)["safety"]
+    assert safety["min_separation"] == pytest.approx(4.0, abs=0.01) and safety["min_pair"] == ["a", "b"]
+    assert [(m["a"], m["b"]) for m in safety["near_misses"]] == [("a", "b")]
+    assert safety["limits"] == {
+        "radius": 5.0,
+        "vertical": None,
+        "margin": 0.5,
+        "near_miss": None,
+        "fence": None,
+        "origin": None,
+    }

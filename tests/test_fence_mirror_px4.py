@@ -6,7 +6,6 @@ private network namespace, under the shared SITL lock like every firmware test (
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -16,13 +15,11 @@ import pytest
 
 from tests.conftest import _netns_reason
 from tests.netns import REPO, NetNamespace, child_env, stop_process
+from tests.sitl_px4.harness import link_commands, sitl_dir, sitl_missing
 
 pytestmark = [pytest.mark.netns, pytest.mark.timeout(240)]
 
 INSTANCE = 8
-RUN = Path(
-    os.environ.get("ANTALATE_PX4_SITL", str(REPO / ".." / "shared" / "sitl" / "px4" / "run-px4-sih.sh"))
-)
 
 #: Run inside the namespace: connect, mirror, read back; one JSON line out.
 SCRIPT = """
@@ -45,27 +42,30 @@ print(json.dumps({"before": before, "wanted": wanted, "problems": problems, "aft
 
 
 @pytest.fixture(scope="module")
-def px4(tmp_path_factory: pytest.TempPathFactory) -> Iterator[NetNamespace]:
-    reason = _netns_reason() or ("" if RUN.is_file() else f"no PX4 SITL at {RUN} (../shared/sitl/README.md)")
+def px4(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[NetNamespace, Path]]:
+    reason = sitl_missing() or _netns_reason()
     if reason:
         pytest.skip(reason)
     work = tmp_path_factory.mktemp("px4")
+    link_commands(work / "px4")
     with NetNamespace() as ns:
         proc = ns.popen(
-            ["sh", str(RUN), str(INSTANCE), str(work)],
+            ["sh", str(sitl_dir() / "run-px4-sih.sh"), str(INSTANCE), str(work / "px4")],
             env={**child_env(), "PX4_PARAMS": "SDLOG_MODE=-1"},
+            stdin=subprocess.DEVNULL,
             stdout=open(work / "px4.log", "w"),  # noqa: SIM115 - closed with the process
             stderr=subprocess.STDOUT,
         )
         try:
-            yield ns
+            yield ns, work / "px4.log"
         finally:
             stop_process(proc)
 
 
-def test_the_gf_parameters_are_written_and_read_back(px4: NetNamespace) -> None:
-    out = px4.run([sys.executable, "-c", SCRIPT], timeout=180, cwd=str(REPO))
-    assert out.returncode == 0, out.stderr[-2000:]
+def test_the_gf_parameters_are_written_and_read_back(px4: tuple[NetNamespace, Path]) -> None:
+    ns, px4_log = px4
+    out = ns.run([sys.executable, "-c", SCRIPT], timeout=180, cwd=str(REPO))
+    assert out.returncode == 0, out.stderr[-2000:] + (px4_log.read_text()[-2000:] if px4_log.exists() else "")
     r = json.loads(out.stdout.strip().splitlines()[-1])
     print(f"\nPX4 GF_* before {r['before']}, wanted {r['wanted']}, read back {r['after']}")
     assert r["problems"] == []

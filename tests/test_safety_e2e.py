@@ -311,8 +311,9 @@ def test_no_peer_information_lands_per_the_policy() -> None:
 
 def test_operator_land_from_the_tight_cluster(tmp_path: Path) -> None:
     """Nine agents squeezed at their centroid, then the operator's LAND: each descends where it is (the
-    autopilot's own vertical landing). The filter keeps the cluster at one height, so the vertical
-    descents keep the horizontal separation it left them with (docs/safety.md, landing)."""
+    autopilot's own vertical landing, unfiltered). The separation of the agents in the air holds; a
+    pair the filter stacked lands closer than the radius to the one already down, which this does
+    not count (docs/safety.md, landing: prefer RTL from a cluster)."""
     n, spacing = 9, 6.0
     homes = grid(n, spacing)
     centroid = offset(LAT0, LON0, spacing, spacing)
@@ -335,3 +336,34 @@ def test_operator_land_from_the_tight_cluster(tmp_path: Path) -> None:
     )
     assert flight.min_sep >= RADIUS - MARGIN, flight.when
     analyze(log, SAFETY, tmp_path, names)
+
+
+def test_taking_off_closer_than_the_radius_is_reported_then_separated_in_mission() -> None:
+    """Two agents placed 1.5 m apart (radius 3 m): each HLC says so at take-off (the vertical climb
+    keeps the distance), and once in MISSION the filter parts them to the radius."""
+    homes = [offset(LAT0, LON0, 0.0, 0.0), offset(LAT0, LON0, 0.0, 1.5)]
+    names = ["t0", "t1"]
+    # each flies at a point beyond the other: the behaviors push them together
+    targets = [offset(LAT0, LON0, 0.0, 30.0), offset(LAT0, LON0, 0.0, -30.0)]
+    configs = [config(names[i], homes[i], targets[i], SAFETY) for i in range(2)]
+    with swarm(configs, None) as (flight, probe, hlcs):
+        assert all_in(flight, names, McState.STANDBY, 10), flight.mc
+        time.sleep(1.0)  # each has heard the other's telemetry (an unheard neighbour cannot be named)
+        command(probe, operator_cmd_t.TAKEOFF, 1)
+        assert all_in(flight, names, McState.MISSION, 20), flight.mc
+
+        def apart() -> float:
+            a, b = (h.autopilot for h in hlcs)
+            assert isinstance(a, SimAutopilot) and isinstance(b, SimAutopilot)
+            pa = flight.frame.to_ne(*a.home.to_latlon(a.north, a.east))
+            pb = flight.frame.to_ne(*b.home.to_latlon(b.north, b.east))
+            return separation(pa[0] - pb[0], pa[1] - pb[1], a.alt - b.alt, RADIUS / VERTICAL)
+
+        assert wait_for(lambda: apart() >= RADIUS - MARGIN, 15), apart()
+    texts = [r.text for r in flight.safety_reports]
+    for me, other in (("t0", "t1"), ("t1", "t0")):
+        assert any(
+            f"taking off closer than the 3 m radius to {other} at 1.5 m" in r.text and r.header.agent == me
+            for r in flight.safety_reports
+        ), texts
+    assert any("cannot keep separation" in t for t in texts), texts

@@ -476,6 +476,15 @@ class HlcNode(Node):
             if t.to_state is HlcState.TAKEOFF and self.safety is not None:
                 self.safety.mark_home(self.snapshot)
                 self._safety_landing = False
+                crowd = self.safety.crowded(self.snapshot, self.now)
+                if crowd:
+                    radius = self.safety.params.separation.radius
+                    near = ", ".join(f"{a} at {d:.1f} m" for a, d in crowd)
+                    text = (
+                        f"safety: taking off closer than the {radius:g} m radius to {near}: the climb keeps"
+                        " that distance; the filter separates them only in MISSION"
+                    )
+                    self._error(HlcError(ErrorCode.SAFETY, Severity.WARNING, text))
             level = logging.INFO
             if t.to_state is HlcState.LLC_DOWN:
                 level = logging.ERROR

@@ -122,6 +122,20 @@ class SafetyLayer:
         if here is not None:
             self.home = (here[0], here[1])
 
+    def crowded(self, s: AutopilotState, now: float) -> list[tuple[str, float]]:
+        """The fresh peers standing or flying closer than the radius horizontally, nearest first: a
+        vertical take-off from here keeps that distance (docs/safety.md, take-off)."""
+        here = self.position(s)
+        if here is None:
+            return []
+        radius = self.params.separation.radius
+        out = []
+        for p in self.picture.near(self.agent, here[0], here[1], radius):
+            d = math.hypot(p.north - here[0], p.east - here[1])
+            if d < radius and now - p.received <= self.config.stale_after:
+                out.append((p.agent, d))
+        return sorted(out, key=lambda x: x[1])
+
     # ------------------------------------------------------------------ the filter
     def views(self, here: Vec, now: float) -> list[PeerView]:
         """The peers near `here` as the filter sees them."""

@@ -5,13 +5,17 @@ Instances 5, 6 and 7 (other SITL modules use 0..4), homes 12-14 m apart. The swa
 into each vehicle's FENCE_* parameters by its HLC on the ground and read back here on the vehicle's
 second link (SERIAL1), as the vehicle itself holds it. Ground truth for the separation is the vehicles'
 own GLOBAL_POSITION_INT on that second link, sampled at 10 Hz for the whole flight: its minimum must
-stay at or above the radius minus the ArduCopter margin of docs/safety.md.
+stay at or above the radius minus the ArduCopter margin of docs/safety.md. The bus is recorded with
+``antalate log`` for the whole flight, and ``antalate analyze LOG --safety AGENT_CONFIG`` must find
+the same from the swarm's own telemetry.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -27,7 +31,7 @@ from antalate_lcm.msgs import operator_cmd_t as O
 from antalate_lcm.safety.geofence import Geofence
 from antalate_lcm.safety.separation import separation
 from tests.conftest import Probe
-from tests.netns import NetNamespace
+from tests.netns import NetNamespace, stop_process
 from tests.polling import wait_for
 from tests.sitl_arducopter.harness import HOME, Copter
 
@@ -103,7 +107,11 @@ def all_mc(probe: Probe, state: int, timeout: float, since: int) -> None:
 
 
 class Sampler:
-    """Every vehicle's own position (SERIAL1) at 10 Hz: the minimum pairwise separation of those in the air."""
+    """Every vehicle's own position (SERIAL1) at 10 Hz: the minimum pairwise separation of those in the air.
+
+    While it runs it is the only caller of the `gcs` helpers (one JSON pipe each, no lock: two threads
+    on it would take each other's replies); the test reads the vehicles' states from `latest`.
+    """
 
     def __init__(self, copters: dict[str, Copter]) -> None:
         self.copters = copters
@@ -112,6 +120,7 @@ class Sampler:
         self.min_3d = math.inf
         self.when: Any = None
         self.samples = 0
+        self.latest: dict[str, dict[str, Any]] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
@@ -119,7 +128,7 @@ class Sampler:
         while not self._stop.wait(0.1):
             where = []
             for name, c in self.copters.items():
-                s = c.gcs.state()
+                s = self.latest[name] = c.gcs.state()
                 if s.get("lat") is None or s["alt"] < 1.0:
                     continue
                 north, east = self.frame.to_ne(s["lat"], s["lon"])
@@ -138,11 +147,12 @@ class Sampler:
 
     def __exit__(self, *_: object) -> None:
         self._stop.set()
-        self._thread.join(5)
+        self._thread.join(30)
+        assert not self._thread.is_alive(), "the sampler is stuck on a gcs call"
 
 
 def test_three_arducopters_commanded_at_their_centroid_keep_apart_with_the_fence_in_the_vehicle(
-    copters: dict[str, Copter], sitl_probe: Probe
+    copters: dict[str, Copter], sitl_probe: Probe, sitl_netns: NetNamespace, sitl_dir: Path
 ) -> None:
     probe = sitl_probe
     started = time.monotonic()
@@ -163,6 +173,12 @@ def test_three_arducopters_commanded_at_their_centroid_keep_apart_with_the_fence
             assert got == pytest.approx(value, abs=0.05), (name, param, got, value)
     ready = time.monotonic()
     mark = probe.mark()
+    config = copters["ac5"].agent.path  # every agent's [safety] is the same
+    log = sitl_dir / "flight.lcm"
+    logger = sitl_netns.antalate(
+        "log", str(config), "-o", str(log), stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+    )
+    assert logger.stdout is not None and "logging bus" in logger.stdout.readline()
     with Sampler(copters) as sampler:
         swarm_command(probe, O.TAKEOFF)
         all_mc(probe, M.MISSION, timeout=150, since=mark)
@@ -172,8 +188,18 @@ def test_three_arducopters_commanded_at_their_centroid_keep_apart_with_the_fence
         rtl = probe.mark()
         swarm_command(probe, O.RTL)
         all_mc(probe, M.STANDBY, timeout=150, since=rtl)
-        assert wait_for(lambda: not any(c.gcs.state()["armed"] for c in copters.values()), 30, 0.5)
+        assert wait_for(lambda: not any(sampler.latest[n]["armed"] for n in HOMES), 30, 0.5)
     landed = time.monotonic()
+    stop_process(logger)  # SIGTERM reaches lcm-logger itself: the file is complete
+    analysis = subprocess.run(
+        [sys.executable, "-m", "antalate_lcm.cli", "analyze", str(log), "--safety", str(config)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    ).stdout
+    section = analysis[analysis.index("safety (radius") :]
+    print(f"\nantalate analyze {log.name} --safety {config.name}:\n{section}")
     reports = [
         e["text"]
         for name in HOMES
@@ -189,6 +215,8 @@ def test_three_arducopters_commanded_at_their_centroid_keep_apart_with_the_fence
     )
     assert any("modified by separation" in r for r in reports), reports
     assert sampler.min_sep >= RADIUS - MARGIN, sampler.when
+    assert f"radius - margin = {RADIUS - MARGIN:.2f} m: OK" in section, section
+    assert "fence breaches     0" in section and "3 of 3 agent(s) flew MISSION; 3 back in STANDBY" in section
     # every one came home through the filter and landed within a couple of metres of its home
     for name, home in HOMES.items():
         s = copters[name].gcs.state()

@@ -27,7 +27,7 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from antalate_lcm.analysis.model import DirectionCommand, SwarmRecord
+from antalate_lcm.analysis.model import DirectionCommand, FaultRecord, SwarmRecord
 from antalate_lcm.analysis.phases import Window, flight_phases, mission_window
 from antalate_lcm.analysis.swarm import (
     DEFAULT_MIN_SPEED,
@@ -101,6 +101,8 @@ class Analysis:
     phases: list[PhaseMetrics] = field(default_factory=list)
     #: The swarm metrics every ``bin_s`` s over the whole log.
     series: list[SwarmSample] = field(default_factory=list)
+    #: The faults an experiment's script injected, in the order they happened (with broadcast reception).
+    faults: list[FaultRecord] = field(default_factory=list)
     #: Every agent's trajectory in the local frame (left out of :meth:`to_json` unless asked for).
     tracks: dict[str, Track] = field(default_factory=dict)
 
@@ -284,6 +286,7 @@ def analyze(
         events=record.events,
         window=mission_window(record),
         mc_timelines={a: [(c.t, c.state) for c in r.mc_states] for a, r in sorted(record.agents.items())},
+        faults=list(record.faults),
     )
     result.cohesion = cohesion_series(tracks, t_first, t_last, bin_s, max_age)
     result.tracks = tracks
@@ -393,5 +396,23 @@ def format_summary(a: Analysis) -> str:
                 f"drift {d.start:.1f}..{d.end:.1f} s: centroid heading {d.heading:.1f} deg, {d.distance:.1f} m at "
                 f"{d.speed:.2f} m/s over {d.agents} agent(s); {cmd}; error {d.error:+.1f} deg"
             )
+    lines += format_faults(a.faults)
     lines.extend(f"note: {n}" for n in a.notes)
     return "\n".join(lines)
+
+
+def format_faults(faults: list[FaultRecord]) -> list[str]:
+    """The faults of the log, one line each (s since the log's start)."""
+    if not faults:
+        return []
+    lines = ["faults injected by the experiment's script (s since the log's start):"]
+    for f in faults:
+        if f.kind == "broadcast":
+            heard, offered = f.detail.get("heard"), f.detail.get("offered")
+            lines.append(
+                f"  broadcast reception {f.agent}: heard {heard} of {offered} (p = {f.detail.get('reception')})"
+            )
+            continue
+        extra = ", ".join(f"{k} {v}" for k, v in sorted(f.detail.items()) if k not in ("at", "fault"))
+        lines.append(f"  {f.t:7.1f}  {f.kind} {f.event:<6} {f.agent}" + (f" ({extra})" if extra else ""))
+    return lines

@@ -340,6 +340,7 @@ def _fly_scripted(
         operator.interference = injector.gate  # a link loss cuts the operator's side too
         injector.mission_start = lambda: operator.mission_started
         injector.excuse = operator.excused.add
+        operator.on_finish.append(injector.summarize)
     ended = children.done if children is not None else threading.Event()
     run_until_signal(context, [*nodes, operator], poll=lambda: operator.finished or ended.is_set())
     outcome.code = 0 if operator.phase is Phase.DONE else 1

@@ -421,7 +421,9 @@ class FaultInjector(Node):
         msg.header.seq = self._seq
         self.context.bus.publish(self._bus, FAULT_CHANNEL, msg.encode())
 
-    def on_stop(self) -> None:
+    def summarize(self) -> None:
+        """Write what each agent heard of the broadcasts (at the end of the script: once the nodes
+        stop, nothing published reaches the recorder any more)."""
         for agent, reception in sorted(self.gate.broadcast.items()):
             self._publish_record(
                 {

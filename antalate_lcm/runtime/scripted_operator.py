@@ -10,7 +10,7 @@ like a stick: ``direction_follow`` hovers after 3 s without one).
 from __future__ import annotations
 
 import enum
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from antalate_lcm.config import Config
@@ -93,6 +93,8 @@ class ScriptedOperator(Node):
         self.mission_started: float | None = None
         #: Agents the experiment's script crashed or cut off for good: no longer waited for.
         self.excused: set[str] = set()
+        #: Called on the executor thread as the script ends (DONE or FAILED), before any node stops.
+        self.on_finish: list[Callable[[], None]] = []
 
     def on_start(self) -> None:
         self._t0 = self._phase_at = self.now
@@ -124,6 +126,9 @@ class ScriptedOperator(Node):
         self._phase_at = self.now
         if phase is Phase.MISSION:
             self.mission_started = self.now
+        if self.finished:
+            for fn in self.on_finish:
+                fn()
         self._last_sent = -1e9
 
     def _broadcast(self, command: Command) -> None:

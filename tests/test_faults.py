@@ -146,6 +146,18 @@ def _raw(path: Path, channel: str) -> list[tuple[float, Any]]:
             "delay > 0",
         ),
         ('kind = "link_loss"\nagent = []\nat = 1', "fault[0].agent", "at least one agent"),
+        ('kind = "vehicle"\nagent = "e-01"\nat = 1', "fault[0].vehicle", "failsafe, pilot_takeover"),
+        ('kind = "vehicle"\nagent = "e-01"\nat = 1\nvehicle = "fire"', "fault[0].vehicle", "Input should be"),
+        (
+            'kind = "vehicle"\nagent = "e-01"\nat = 1\nvehicle = "link_loss"\nfailsafe = "land"',
+            "fault[0].failsafe",
+            "only with vehicle = 'failsafe'",
+        ),
+        (
+            'kind = "vehicle"\nagent = "e-01"\nat = 1\nvehicle = "pilot_takeover"\nduration = 3',
+            "fault[0].duration",
+            "happens once",
+        ),
         (
             'kind = "link_loss"\nagent = "e-01"\nat = 1\nlevel = 3',
             "fault[0].level",
@@ -263,19 +275,20 @@ def test_fault_probability_hits_agents_reproducibly() -> None:
 # ----------------------------------------------------------------------------- flights
 @pytest.fixture(scope="module")
 def dead_and_frozen(tmp_path_factory: pytest.TempPathFactory) -> tuple[Outcome, SwarmRecord]:
-    """4 agents east at 2 m/s: e-01 crashes, e-02 freezes 2 s, e-03's position reads 20 m north
-    for 2 s, e-04 claims HOLD for 2 s while flying its mission."""
+    """5 agents east at 2 m/s: e-01 crashes, e-02 freezes 2 s, e-03's position reads 20 m north
+    for 2 s, e-04 claims HOLD for 2 s while flying its mission, e-05's vehicle lands on a failsafe."""
     return _fly(
         tmp_path_factory.mktemp("faults-a"),
         "a",
-        4,
+        5,
         "mission_time = 8.0\n"
         + EAST
         + '[[fault]]\nkind = "crash"\nagent = "e-01"\nat = 2.0\n'
         + '[[fault]]\nkind = "freeze"\nagent = "e-02"\nat = 2.0\nduration = 2.0\n'
         + '[[fault]]\nkind = "sensor"\nsensor = "position"\nmode = "bias"\noffset = [20.0, 0.0]\n'
         + 'agent = "e-03"\nat = 3.0\nduration = 2.0\n'
-        + '[[fault]]\nkind = "byzantine"\nstate = "HOLD"\nagent = "e-04"\nat = 1.0\nduration = 2.0\n',
+        + '[[fault]]\nkind = "byzantine"\nstate = "HOLD"\nagent = "e-04"\nat = 1.0\nduration = 2.0\n'
+        + '[[fault]]\nkind = "vehicle"\nvehicle = "failsafe"\nfailsafe = "land"\nagent = "e-05"\nat = 2.0\n',
     )
 
 
@@ -296,11 +309,12 @@ def test_each_fault_is_recorded_when_and_for_whom_the_script_says(
             ("e-03", "sensor", "end"),
             ("e-04", "byzantine", "start"),
             ("e-04", "byzantine", "end"),
+            ("e-05", "vehicle", "start"),
         ]
     )
     mission = max(next(c.t for c in rec.mc_states if c.state == "MISSION") for rec in record.agents.values())
     for f in record.faults:  # at the script's time (s after the whole swarm entered MISSION)
-        due = {"crash": 2.0, "freeze": 2.0, "sensor": 3.0, "byzantine": 1.0}[f.kind]
+        due = {"crash": 2.0, "freeze": 2.0, "sensor": 3.0, "byzantine": 1.0, "vehicle": 2.0}[f.kind]
         due += float(str(f.detail.get("duration", 0.0))) if f.event == "end" else 0.0
         assert due <= f.t - mission <= due + 0.6, (f, mission)
         assert f.detail["at"] == pytest.approx(due, abs=0.2)
@@ -364,6 +378,18 @@ def test_a_byzantine_agent_claims_a_state_it_is_not_in(dead_and_frozen: tuple[Ou
     # ... while its own nodes knew the truth: it flew on east at the commanded speed
     during = [s.ve for s in record.agents["e-04"].telemetry if start + 0.3 < s.t < end]
     assert during and min(during) > 1.5
+
+
+def test_a_vehicle_failsafe_lands_the_agent(dead_and_frozen: tuple[Outcome, SwarmRecord]) -> None:
+    outcome, record = dead_and_frozen
+    fault = _faults(record, "e-05", "vehicle")["start"]
+    assert fault.detail["vehicle"] == "failsafe" and fault.detail["failsafe"] == "land"
+    states = [(c.t, c.state) for c in record.agents["e-05"].mc_states]
+    land = next(t for t, s in states if s == "LAND")
+    assert fault.t - 0.1 <= land <= fault.t + 0.6
+    assert "RTL" not in [s for _, s in states] and states[-1][1] == "STANDBY"
+    assert not record.agents["e-05"].telemetry[-1].in_air
+    assert "fault: vehicle failsafe start e-05" in outcome.report
 
 
 @pytest.fixture(scope="module")

@@ -19,6 +19,9 @@ timers run. The behaviors, MC, HLC and configs are the ones that fly; nothing is
 * battery: the sim vehicle's battery drops to ``level`` percent, and/or drains ``drain`` %/min
   more (the sim's own failsafes then act: a battery warning, LAND when empty).
 * link_loss: the operator hears nothing from the agent and the agent nothing from the operator.
+* vehicle: the sim vehicle's own faults (antalate_lcm/autopilot/sim.py): its failsafe (``rtl``,
+  ``land`` or ``brake``), a pilot takeover, a lost link between the HLC and the vehicle, or an
+  adapter whose ``state()`` raises, for ``duration`` s (the last two).
 * packet_loss: the agent's messages on ``topics`` are lost with probability ``loss`` and/or
   delayed ``delay`` s, sent (``out``), received from the network (``in``) or both.
 
@@ -42,7 +45,7 @@ from antalate_lcm.geo import offset as geo_offset
 from antalate_lcm.geo import wrap_180
 from antalate_lcm.msgs import mc_state_t, payload_t, peer_scan_t, telemetry_t
 from antalate_lcm.node import Context, Node
-from antalate_lcm.runtime.script import FaultStep, Script
+from antalate_lcm.runtime.script import VEHICLE_EVENTS, FaultStep, Script
 from antalate_lcm.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE, OPERATOR_INPUTS, Message
 from antalate_lcm.vocabulary import McState
 
@@ -354,12 +357,15 @@ class FaultInjector(Node):
 
     def _begin(self, since: float, p: _Planned) -> None:
         step = p.step
-        if step.kind == "battery":
+        if step.kind == "vehicle":
+            self._vehicle(p, start=True)
+        elif step.kind == "battery":
             p.ended = True  # happens once; a drain goes on to the end
             vehicle = self._vehicles[p.agent]
             if step.level is not None:
                 vehicle.set_battery(min(float(vehicle.battery), step.level))
             if step.drain is not None:
+                self._drain()  # the other drains up to now, at their rates
                 self._drains[p.agent] = self._drains.get(p.agent, 0.0) + step.drain
                 self._last_drain = self.now
         else:
@@ -371,8 +377,28 @@ class FaultInjector(Node):
                 self.excuse(p.agent)  # the operator waits no more for an agent it can never hear again
         self._record(since, p, "start")
 
+    def _vehicle(self, p: _Planned, *, start: bool) -> None:
+        """The sim's own fault injection, on the executor thread as every call of the HLC."""
+        vehicle, what = self._vehicles[p.agent], p.step.vehicle
+        if what == "failsafe":
+            vehicle.trigger_failsafe(p.step.failsafe, "failsafe injected by the experiment's script")
+        elif what == "pilot_takeover":
+            vehicle.pilot_takeover()
+        elif what == "link_loss":
+            vehicle.set_link_loss(start)
+        elif what == "state_error":
+            vehicle.set_state_error(
+                "fault injected by the experiment's script: state() failed" if start else None
+            )
+        if what in VEHICLE_EVENTS:
+            p.ended = True
+
     def _end(self, since: float, p: _Planned) -> None:
         p.ended = True
+        if p.step.kind == "vehicle":
+            self._vehicle(p, start=False)
+            self._record(since, p, "end")
+            return
         kinds = self.gate.active.get(p.agent, {})
         actives = kinds.get(p.step.kind, [])
         kinds[p.step.kind] = [a for a in actives if a.index != p.index]
@@ -395,7 +421,8 @@ class FaultInjector(Node):
     def _record(self, since: float, p: _Planned, event: str) -> None:
         step = p.step
         detail = step.model_dump(exclude_defaults=True, exclude={"kind", "agent", "at"})
-        self.events.append((since, p.agent, step.kind, event))
+        label = " ".join(x for x in (step.kind, step.sensor, step.vehicle) if x)
+        self.events.append((since, p.agent, label, event))
         log.info(
             "fault %s %s of %s at %.2f s of the mission %s", step.kind, event, p.agent, since, detail or ""
         )

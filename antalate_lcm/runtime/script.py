@@ -15,7 +15,7 @@
     seed = 0                  # seed of every random draw below (fault probabilities, losses)
 
     [[fault]]                 # optional, any number: docs/experiments.md, "Faults"
-    kind = "crash"            # crash|freeze|sensor|byzantine|battery|link_loss|packet_loss
+    kind = "crash"            # crash|freeze|sensor|byzantine|battery|link_loss|packet_loss|vehicle
     agent = "sim-03"          # an agent, a list of agents, or "*" (every agent)
     at = 12.0                 # s after the whole swarm entered MISSION
     probability = 1.0         # each agent named is hit with this probability
@@ -46,7 +46,9 @@ from antalate_lcm.strict import StrictError, validate_strict
 from antalate_lcm.topics import TOPICS
 from antalate_lcm.vocabulary import McState
 
-FaultKind = Literal["crash", "freeze", "sensor", "byzantine", "battery", "link_loss", "packet_loss"]
+FaultKind = Literal[
+    "crash", "freeze", "sensor", "byzantine", "battery", "link_loss", "packet_loss", "vehicle"
+]
 #: Every agent of the experiment, in a fault's ``agent``.
 EVERY_AGENT = "*"
 
@@ -85,6 +87,9 @@ class FaultStep(BaseModel):
     loss: float = Field(default=0.0, ge=0, le=1, allow_inf_nan=False)
     delay: float = Field(default=0.0, ge=0, le=60, allow_inf_nan=False)
     direction: Literal["in", "out", "both"] = "both"
+    #: A fault of the sim vehicle itself (antalate_lcm/autopilot/sim.py's fault injection).
+    vehicle: Literal["failsafe", "pilot_takeover", "link_loss", "state_error"] | None = None
+    failsafe: Literal["rtl", "land", "brake"] = "rtl"
 
     def agents(self, names: list[str]) -> list[str]:
         """The agents this fault names, among ``names`` (``"*"``: all of them)."""
@@ -102,7 +107,10 @@ _KIND_KEYS: dict[str, set[str]] = {
     "battery": {"level", "drain"},
     "link_loss": {"duration"},
     "packet_loss": {"duration", "topics", "loss", "delay", "direction"},
+    "vehicle": {"duration", "vehicle", "failsafe"},
 }
+#: Vehicle faults that happen once (the others last ``duration`` s).
+VEHICLE_EVENTS = frozenset({"failsafe", "pilot_takeover"})
 
 
 def _check_fault(f: FaultStep) -> tuple[str, str] | None:
@@ -134,6 +142,13 @@ def _check_fault(f: FaultStep) -> tuple[str, str] | None:
     elif f.kind == "battery":
         if not given & {"level", "drain"}:
             return "kind", "a battery fault needs level (percent, at once) or drain (percent/min)"
+    elif f.kind == "vehicle":
+        if f.vehicle is None:
+            return "vehicle", "failsafe, pilot_takeover, link_loss or state_error"
+        if "failsafe" in given and f.vehicle != "failsafe":
+            return "failsafe", f"only with vehicle = 'failsafe' (got {f.vehicle!r})"
+        if "duration" in given and f.vehicle in VEHICLE_EVENTS:
+            return "duration", f"a {f.vehicle} happens once: no duration"
     elif f.kind == "packet_loss":
         if not f.topics:
             return "topics", f"the topics it hits, of {', '.join(TOPICS)}"

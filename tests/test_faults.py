@@ -21,11 +21,15 @@ import pytest
 
 from antalate_lcm.analysis import analyze_log, format_summary, read_log
 from antalate_lcm.analysis.model import FaultRecord, SwarmRecord
+from antalate_lcm.bus import Bus
+from antalate_lcm.config import load_config
 from antalate_lcm.errors import AntalateError, ConfigError
+from antalate_lcm.executor import Executor
 from antalate_lcm.geo import FlatFrame
-from antalate_lcm.msgs import peer_scan_t, telemetry_t
+from antalate_lcm.msgs import mc_state_t, operator_cmd_t, peer_scan_t, telemetry_t
+from antalate_lcm.node import Context, Node
 from antalate_lcm.runtime.experiment import Experiment, Outcome, run
-from antalate_lcm.runtime.faults import BroadcastReception, plan
+from antalate_lcm.runtime.faults import BroadcastReception, FaultGate, plan
 from antalate_lcm.runtime.script import Script, load_script, parse_script
 
 CONFIG = """
@@ -270,6 +274,74 @@ def test_fault_probability_hits_agents_reproducibly() -> None:
     assert [p.hit for p in plan(script, names)] == [p.hit for p in planned]
     reseeded = plan(script.model_copy(update={"seed": 5}), names)
     assert [p.hit for p in reseeded] != [p.hit for p in planned]
+
+
+# ----------------------------------------------------------------------------- the gate, message by message
+def _gate_with(tmp_path: Path, fault: dict[str, Any]) -> tuple[FaultGate, Node, Node]:
+    """A gate with ``fault`` active on agent e-01, and e-01's node and the operator's (never started)."""
+    config = load_config(_write(tmp_path / "swarm.toml", CONFIG))
+    context = Context(Bus({"lan": "memq://"}), Executor())
+    script = Script.model_validate({"mission_time": 9.0, "fault": [{"agent": "e-01", "at": 0.0, **fault}]})
+    gate = FaultGate()
+    (planned,) = plan(script, ["e-01", "e-02"])
+    gate.activate(planned.step, 0, "e-01", seed=1)
+    return (
+        gate,
+        Node(config.with_agent_name("e-01"), context),
+        Node(config.with_agent_name("operator"), context),
+    )
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def _from(agent: str, seq: int, msg: Any = None) -> Any:
+    msg = msg if msg is not None else telemetry_t()
+    msg.header.agent, msg.header.seq, msg.header.utime = agent, seq, seq
+    return msg
+
+
+def test_packet_loss_in_drops_what_the_agent_hears_from_others_only(tmp_path: Path) -> None:
+    gate, node, _ = _gate_with(
+        tmp_path, {"kind": "packet_loss", "topics": ["TELEMETRY"], "loss": 0.4, "direction": "in"}
+    )
+    heard: list[Any] = []
+    receive = gate.receiving(node, "TELEMETRY", heard.append)
+    for seq in range(2000):
+        receive(_from("e-02", seq))
+    lo, hi = _binomial_99(2000, 0.6)
+    assert lo <= len(heard) <= hi
+    heard.clear()
+    for seq in range(100):  # its own telemetry is not from the network
+        receive(_from("e-01", seq))
+    assert len(heard) == 100
+    other_topic = gate.receiving(node, "MC_STATE", heard.append)
+    heard.clear()
+    for seq in range(100):
+        other_topic(_from("e-02", seq, mc_state_t()))
+    assert len(heard) == 100
+
+
+def test_link_loss_cuts_both_sides_and_nothing_else(tmp_path: Path) -> None:
+    gate, node, operator = _gate_with(tmp_path, {"kind": "link_loss"})
+    operator.kind = "operator"
+    heard: list[Any] = []
+    for topic in ("SWARM_OPERATOR_CMD", "OPERATOR_CMD", "SWARM_DIRECTION_CMD"):
+        gate.receiving(node, topic, heard.append)(_from("operator", 1, operator_cmd_t()))
+    assert heard == []
+    gate.receiving(node, "TELEMETRY", heard.append)(_from("e-02", 1))  # peers still reach it
+    gate.receiving(operator, "MC_STATE", heard.append)(
+        _from("e-01", 1, mc_state_t())
+    )  # the operator hears nothing
+    gate.receiving(operator, "MC_STATE", heard.append)(_from("e-02", 1, mc_state_t()))
+    assert [m.header.agent for m in heard] == ["e-02", "e-02"]
+    assert not gate.silenced("e-01") and gate.link_lost("e-01") and not gate.link_lost("e-02")
+    (step,) = gate.active["e-01"]["link_loss"]
+    gate.deactivate(step.step, 0, "e-01")
+    gate.receiving(node, "OPERATOR_CMD", heard.append)(_from("operator", 2, operator_cmd_t()))
+    assert len(heard) == 3 and gate.active == {}
 
 
 # ----------------------------------------------------------------------------- flights

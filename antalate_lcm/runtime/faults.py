@@ -131,6 +131,20 @@ class FaultGate:
         kinds = self.active.get(agent)
         return kinds is not None and bool(kinds.get("crash") or kinds.get("freeze"))
 
+    def activate(self, step: FaultStep, index: int, agent: str, seed: int) -> None:
+        """Fault ``index`` of the script holds ``agent`` from now on (its losses drawn from a stream
+        seeded by (seed, fault, agent))."""
+        rng = random.Random(f"packets/{seed}/{index}/{agent}")
+        self.active.setdefault(agent, {}).setdefault(step.kind, []).append(_Active(step, index, agent, rng))
+
+    def deactivate(self, step: FaultStep, index: int, agent: str) -> None:
+        kinds = self.active.get(agent, {})
+        kinds[step.kind] = [a for a in kinds.get(step.kind, []) if a.index != index]
+        if not kinds[step.kind]:
+            del kinds[step.kind]
+        if not kinds:
+            self.active.pop(agent, None)
+
     def link_lost(self, agent: str) -> bool:
         return bool(self._of(agent, "link_loss"))
 
@@ -369,10 +383,7 @@ class FaultInjector(Node):
                 self._drains[p.agent] = self._drains.get(p.agent, 0.0) + step.drain
                 self._last_drain = self.now
         else:
-            rng = random.Random(f"packets/{self.seed}/{p.index}/{p.agent}")
-            self.gate.active.setdefault(p.agent, {}).setdefault(step.kind, []).append(
-                _Active(step, p.index, p.agent, rng)
-            )
+            self.gate.activate(step, p.index, p.agent, self.seed)
             if step.kind == "crash" or (step.kind in ("freeze", "link_loss") and step.duration == 0.0):
                 self.excuse(p.agent)  # the operator waits no more for an agent it can never hear again
         self._record(since, p, "start")
@@ -399,13 +410,7 @@ class FaultInjector(Node):
             self._vehicle(p, start=False)
             self._record(since, p, "end")
             return
-        kinds = self.gate.active.get(p.agent, {})
-        actives = kinds.get(p.step.kind, [])
-        kinds[p.step.kind] = [a for a in actives if a.index != p.index]
-        if not kinds[p.step.kind]:
-            del kinds[p.step.kind]
-        if not kinds:
-            self.gate.active.pop(p.agent, None)
+        self.gate.deactivate(p.step, p.index, p.agent)
         self._record(since, p, "end")
 
     def _drain(self) -> None:

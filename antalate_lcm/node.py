@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from antalate_lcm import validation
+from antalate_lcm._fastcodec import encode as fast_encode
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.bus import Bus, Subscription
 from antalate_lcm.config import Config
@@ -348,15 +349,18 @@ class Node:
         header.seq = seq
         if self.interference is not None:
             return self.interference.send(self, topic, msg, pub.buses, pub.channel)
-        data = self.seal(msg)
+        key = self.security.key  # SecurityPolicy.enabled is bool(key), without a property call
+        data = signed_bytes(msg, key) if key else fast_encode(msg)
         ok = True
+        publish = self.context.bus.publish
         for bus in pub.buses:
-            ok = self.context.bus.publish(bus, pub.channel, data) and ok
+            ok = publish(bus, pub.channel, data) and ok
         return ok
 
     def seal(self, msg: Message) -> bytes:
         """The bytes of a stamped message: signed with the swarm key if there is one."""
-        return signed_bytes(msg, self.security.key) if self.security.enabled else msg.encode()
+        key = self.security.key
+        return signed_bytes(msg, key) if key else fast_encode(msg)
 
     def _publish_buses(self, topic: str) -> list[str]:
         """The topic's buses (plus the in-process bus for an internal topic), one per distinct URL."""

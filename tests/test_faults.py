@@ -468,7 +468,8 @@ def test_a_vehicle_failsafe_lands_the_agent(dead_and_frozen: tuple[Outcome, Swar
 def lossy(tmp_path_factory: pytest.TempPathFactory) -> tuple[Outcome, SwarmRecord]:
     """5 agents east at 2 m/s: e-01 lies 30 m east of itself, then loses the operator over the
     RTL; e-02 loses half its telemetry and delays the rest 0.4 s; e-03's battery drops to 30 %
-    and drains 60 %/min; e-04's peer sensor reads 5 m long; e-05's position sticks."""
+    and drains 60 %/min; e-04's peer sensor reads 5 m long; e-05's position sticks, and a crash
+    with probability 0 spares it."""
     return _fly(
         tmp_path_factory.mktemp("faults-b"),
         "b",
@@ -483,7 +484,8 @@ def lossy(tmp_path_factory: pytest.TempPathFactory) -> tuple[Outcome, SwarmRecor
         + '[[fault]]\nkind = "sensor"\nsensor = "peers"\nmode = "bias"\nrange_bias = 5.0\n'
         + 'agent = "e-04"\nat = 1.0\nduration = 3.0\n'
         + '[[fault]]\nkind = "sensor"\nsensor = "position"\nmode = "stuck"\nagent = "e-05"\nat = 1.0\n'
-        + "duration = 2.0\n",
+        + "duration = 2.0\n"
+        + '[[fault]]\nkind = "crash"\nagent = "e-05"\nat = 4.0\nprobability = 0.0\n',
     )
 
 
@@ -499,6 +501,10 @@ def test_the_lossy_flight_comes_back_with_every_fault_recorded(lossy: tuple[Outc
         ("e-05", "sensor"),
     }
     assert "link_loss start e-01" in outcome.report
+    # a fault whose probability drew no hit is recorded as spared, and spares the agent
+    (spared,) = [f for f in record.faults if f.kind == "crash"]
+    assert (spared.agent, spared.event) == ("e-05", "spared")
+    assert record.agents["e-05"].mc_states[-1].state == "STANDBY"
 
 
 def test_a_byzantine_position_fools_the_others_not_itself(lossy: tuple[Outcome, SwarmRecord]) -> None:

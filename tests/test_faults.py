@@ -327,6 +327,7 @@ def test_packet_loss_in_drops_what_the_agent_hears_from_others_only(tmp_path: Pa
 def test_link_loss_cuts_both_sides_and_nothing_else(tmp_path: Path) -> None:
     gate, node, operator = _gate_with(tmp_path, {"kind": "link_loss"})
     operator.kind = "operator"
+    reception = gate.broadcast["e-01"] = BroadcastReception(1.0, 1, "e-01")
     heard: list[Any] = []
     for topic in ("SWARM_OPERATOR_CMD", "OPERATOR_CMD", "SWARM_DIRECTION_CMD"):
         gate.receiving(node, topic, heard.append)(_from("operator", 1, operator_cmd_t()))
@@ -342,6 +343,9 @@ def test_link_loss_cuts_both_sides_and_nothing_else(tmp_path: Path) -> None:
     gate.deactivate(step.step, 0, "e-01")
     gate.receiving(node, "OPERATOR_CMD", heard.append)(_from("operator", 2, operator_cmd_t()))
     assert len(heard) == 3 and gate.active == {}
+    assert reception.offered == 0  # the broadcasts of the outage were never offered to it
+    gate.receiving(node, "SWARM_OPERATOR_CMD", heard.append)(_from("operator", 3, operator_cmd_t()))
+    assert len(heard) == 4 and (reception.offered, reception.heard) == (1, 1)
 
 
 # ----------------------------------------------------------------------------- flights

@@ -226,14 +226,15 @@ class FaultGate:
                     int(header.utime),
                 )
                 msg = truth.get(key, msg)
+            active = bool(self.active.get(agent))
+            if active and (self.silenced(agent) or (from_operator and self.link_lost(agent))):
+                return  # a dead, frozen or cut-off agent is offered nothing: no broadcast draw either
             if reception is not None and not reception.admit(
                 (topic, str(header.agent), int(header.seq), int(header.utime))
             ):
                 return
-            if not self.active.get(agent):
+            if not active:
                 handler(msg, *rest)
-                return
-            if self.silenced(agent) or (from_operator and self.link_lost(agent)):
                 return
             delay = 0.0
             if header.agent != agent:  # from the network: another agent, the operator

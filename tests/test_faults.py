@@ -202,6 +202,21 @@ def test_faults_on_unknown_agents_or_elsewhere_fail_before_anything_flies(tmp_pa
     assert not out.exists()
 
 
+def test_the_cli_names_the_script_and_the_key(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from antalate_lcm.cli import main
+
+    config = _write(tmp_path / "swarm.toml", CONFIG)
+    script = _write(
+        tmp_path / "s.toml", 'mission_time = 6\n[[fault]]\nkind = "freeze"\nagent = ["e-01", "e-9"]\nat = 1\n'
+    )
+    out = tmp_path / "x.lcm"
+    argv = ["run", str(config), "--agents", "2", "--headless", "--script", str(script), "-o", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{script}: fault[0].agent" in err and "(got 'e-9')" in err
+    assert not out.exists()
+
+
 # ----------------------------------------------------------------------------- pure: draws
 def _binomial_99(n: int, p: float) -> tuple[int, int]:
     """The exact central 99 % interval of Binomial(n, p): [lo, hi] with P(X < lo), P(X > hi) <= 0.5 %."""

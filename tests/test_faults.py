@@ -199,6 +199,12 @@ def test_faults_on_unknown_agents_or_elsewhere_fail_before_anything_flies(tmp_pa
     udpm.write_text(CONFIG.replace('"memq://"', '"udpm://239.255.76.67:7667?ttl=0"'))
     with pytest.raises(AntalateError, match=r"needs the agents in this process \(--processes 1\)"):
         run(Experiment(str(udpm), agents=3, processes=2, script=script, output=str(out)))
+    mavlink = _write(tmp_path / "mavlink.toml", CONFIG.replace('autopilot = "sim"', 'autopilot = "mavlink"'))
+    for kind, keys in (("battery", {"level": 10.0}), ("vehicle", {"vehicle": "failsafe"})):
+        fault = {"kind": kind, "agent": "e", "at": 1.0, **keys}
+        script = parse_script({"mission_time": 6, "fault": [fault]}, "s.toml")
+        with pytest.raises(ConfigError, match=rf"fault\[0\]\.kind: a {kind} fault on a simulated vehicle"):
+            run(Experiment(str(mavlink), script=script, output=str(out), script_source="s.toml"))
     assert not out.exists()
 
 

@@ -152,11 +152,11 @@ def check_interference(exp: Experiment, script: Script, configs: list[Config]) -
             f"{exp.script_source}: [[fault]] needs --headless (its times count from the scripted MISSION)"
         )
     for i, f in enumerate(script.fault):
-        if f.kind == "battery" and configs[0].hlc.autopilot != "sim":
+        if f.kind in ("battery", "vehicle") and configs[0].hlc.autopilot != "sim":
             raise ConfigError(
                 exp.script_source,
                 f"fault[{i}].kind",
-                "a battery fault on a simulated vehicle (hlc.autopilot = 'sim')",
+                f"a {f.kind} fault on a simulated vehicle (hlc.autopilot = 'sim')",
             )
     check_fault_agents(script, [c.agent.name for c in configs], exp.script_source)
     if script.broadcast.reception < 1.0 and configs[0].hlc.autopilot != "sim":

@@ -659,3 +659,31 @@ def test_lossy_broadcasts_reach_each_agent_with_the_configured_probability(tmp_p
     assert offered >= 15 and lo <= heard <= hi, summaries
     assert "broadcast: e-01 heard" in outcome.report
     assert "broadcast reception e-02: heard" in format_summary(analyze_log(record.path))
+
+
+@pytest.mark.netns
+def test_lossy_broadcasts_across_processes(netns, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """With the agents over 2 processes (udpm multicast in a namespace) each process loses the
+    broadcasts at its own agents, from the same per-agent streams, and reports what each heard."""
+    import sys
+
+    from tests.netns import child_env
+
+    # the peer sensor hears the other process's agents on the LAN: no swarm key in a test namespace
+    udpm = CONFIG.replace('"memq://"', '"udpm://239.255.76.67:7667?ttl=0"') + "[security]\ninsecure = true\n"
+    config = _write(tmp_path / "swarm.toml", udpm)
+    script = _write(
+        tmp_path / "s.toml", "mission_time = 5.0\nseed = 2\n" + EAST + "[broadcast]\nreception = 0.5\n"
+    )
+    argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", "WARNING", "run", str(config)]
+    argv += ["--agents", "4", "--processes", "2", "--headless", "--script", str(script)]
+    argv += ["-o", str(tmp_path / "c.lcm")]
+    flight = netns.run(argv, timeout=180, cwd=tmp_path, env=child_env())
+    assert flight.returncode == 0, flight.stdout + flight.stderr
+    assert "OK: 4 agent(s), all back in STANDBY" in flight.stdout
+    lines = [line for line in flight.stderr.splitlines() if line.startswith("broadcast: ")]
+    assert sorted(line.split()[1] for line in lines) == ["e-01", "e-02", "e-03", "e-04"], flight.stderr
+    counts = [(int(line.split()[3]), int(line.split()[5])) for line in lines]  # heard, offered
+    offered, heard = sum(o for _, o in counts), sum(h for h, _ in counts)
+    lo, hi = _binomial_99(offered, 0.5)
+    assert offered >= 20 and lo <= heard <= hi, lines

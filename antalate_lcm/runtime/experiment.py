@@ -144,9 +144,10 @@ def check_interference(exp: Experiment, script: Script, configs: list[Config]) -
     operator (their times count from its MISSION); each fault names agents that fly."""
     if not script.interferes:
         return
-    what = "[[fault]]" if script.fault else "[broadcast] reception < 1"
-    if min(exp.processes, len(configs)) > 1:
-        raise AntalateError(f"{exp.script_source}: {what} needs the agents in this process (--processes 1)")
+    if script.fault and min(exp.processes, len(configs)) > 1:
+        raise AntalateError(
+            f"{exp.script_source}: [[fault]] needs the agents in this process (--processes 1)"
+        )
     if script.fault and not exp.headless:
         raise AntalateError(
             f"{exp.script_source}: [[fault]] needs --headless (its times count from the scripted MISSION)"
@@ -172,14 +173,15 @@ def _interfere(
     if not script.interferes:
         return None
     from antalate_lcm.hlc.node import HlcNode
-    from antalate_lcm.runtime.faults import BroadcastReception, FaultGate, FaultInjector
+    from antalate_lcm.runtime.faults import FaultGate, FaultInjector, lossy_broadcasts
 
     names = [c.agent.name for c in configs]
-    gate = FaultGate()
+    agents = [n for n in nodes if n.kind != "recorder"]
     if script.broadcast.reception < 1.0:
-        gate.broadcast = {n: BroadcastReception(script.broadcast.reception, script.seed, n) for n in names}
-    for node in nodes:
-        if node.kind != "recorder":
+        gate = lossy_broadcasts(agents, script.broadcast.reception, script.seed)
+    else:
+        gate = FaultGate()
+        for node in agents:
             node.interference = gate
     vehicles = {n.agent: n.autopilot for n in nodes if isinstance(n, HlcNode)}
     return FaultInjector(
@@ -210,6 +212,9 @@ def _operator(configs: list[Config], context: Context, script: Script) -> Script
 def _child_argv(exp: Experiment) -> Callable[[int, int], list[str]]:
     argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", exp.log_level, "agent", exp.config_path]
     argv += ["--agents", str(exp.agents), "--spacing", str(exp.spacing)]
+    script = exp.script or load_script(None)
+    if script.broadcast.reception < 1.0:  # each process loses broadcasts at its own agents
+        argv += ["--broadcast-reception", repr(script.broadcast.reception), "--seed", str(script.seed)]
     return lambda i, n: [*argv, "--shard", f"{i}/{n}"]
 
 

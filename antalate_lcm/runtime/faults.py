@@ -252,6 +252,27 @@ class FaultGate:
         return agent_receives
 
 
+def lossy_broadcasts(nodes: list[Node], reception: float, seed: int) -> FaultGate:
+    """A gate that loses broadcasts at the agents of ``nodes`` (each agent its own stream), set on
+    every one of them; ``antalate agent --shard`` does this in each process of ``antalate run``."""
+    names = sorted({n.agent for n in nodes})
+    gate = FaultGate(broadcast={n: BroadcastReception(reception, seed, n) for n in names})
+    for node in nodes:
+        node.interference = gate
+    return gate
+
+
+def broadcast_report(gate: FaultGate) -> list[str]:
+    """What each agent heard of the broadcasts, one line each."""
+    lines = []
+    for agent, r in sorted(gate.broadcast.items()):
+        share = f"{r.heard / r.offered:.0%}" if r.offered else "-"
+        lines.append(
+            f"broadcast: {agent} heard {r.heard} of {r.offered} broadcast messages ({share}; p = {r.probability:g})"
+        )
+    return lines
+
+
 def _copy(msg: Message) -> Any:
     return type(msg).decode(msg.encode())
 
@@ -475,9 +496,4 @@ class FaultInjector(Node):
             f"fault: {kind} {event} {agent} at {t:.1f} s of the mission"
             for t, agent, kind, event in self.events
         ]
-        for agent, r in sorted(self.gate.broadcast.items()):
-            share = f"{r.heard / r.offered:.0%}" if r.offered else "-"
-            lines.append(
-                f"broadcast: {agent} heard {r.heard} of {r.offered} broadcast messages ({share}; p = {r.probability:g})"
-            )
-        return lines
+        return lines + broadcast_report(self.gate)

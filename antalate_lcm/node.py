@@ -22,7 +22,7 @@ import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from antalate_lcm import validation
 from antalate_lcm._fastcodec import encode as fast_encode
@@ -59,6 +59,23 @@ INSECURE_REMINDER = 60.0
 
 class InsecureBus(AntalateError):
     """A node would consume an internal topic from a network-reachable bus with no swarm key."""
+
+
+class Interference(Protocol):
+    """What an experiment does to a simulated agent's traffic and timers (faults, lossy broadcasts:
+    :mod:`antalate_lcm.runtime.faults`); a node without one (every real flight) pays nothing."""
+
+    def send(self, node: Node, topic: str, msg: Message, buses: list[str], channel: str) -> bool:
+        """Send the stamped ``msg`` (or not, or late, or altered) on ``buses``."""
+        ...
+
+    def receiving(self, node: Node, topic: str, handler: Callable[..., None]) -> Callable[..., None]:
+        """``handler`` behind this interference: what ``node`` will consume of ``topic``."""
+        ...
+
+    def silenced(self, agent: str) -> bool:
+        """Whether ``agent``'s software is dead or frozen now (its timers do not run)."""
+        ...
 
 
 @dataclass
@@ -132,6 +149,8 @@ class Node:
     """
 
     kind = "node"
+    #: An experiment's faults and lossy broadcasts, set before :meth:`start` (None: none).
+    interference: Interference | None = None
     #: Wall clock for ``header.utime`` and the replay window (tests and the console inject theirs).
     wallclock: Callable[[], float] = staticmethod(time.time)
 
@@ -328,6 +347,8 @@ class Node:
         header.utime = utime
         header.agent = self.agent
         header.seq = seq
+        if self.interference is not None:
+            return self.interference.send(self, topic, msg, pub.buses, pub.channel)
         key = self.security.key  # SecurityPolicy.enabled is bool(key), without a property call
         data = signed_bytes(msg, key) if key else fast_encode(msg)
         ok = True
@@ -335,6 +356,11 @@ class Node:
         for bus in pub.buses:
             ok = publish(bus, pub.channel, data) and ok
         return ok
+
+    def seal(self, msg: Message) -> bytes:
+        """The bytes of a stamped message: signed with the swarm key if there is one."""
+        key = self.security.key
+        return signed_bytes(msg, key) if key else fast_encode(msg)
 
     def _publish_buses(self, topic: str) -> list[str]:
         """The topic's buses (plus the in-process bus for an internal topic), one per distinct URL."""
@@ -360,6 +386,8 @@ class Node:
     def subscribe(self, topic: str, handler: Callable[[Any], None], **fields: str) -> Subscription:
         """Deliver this agent's ``topic`` (decoded, authenticated, validated) to ``handler`` on the
         executor thread."""
+        if self.interference is not None:
+            handler = self.interference.receiving(self, topic, handler)
         spec = self.topic_spec(topic)
         bus = self._subscribe_bus(topic)
         self._check_exposure(topic, bus)
@@ -394,6 +422,8 @@ class Node:
         pattern subscriptions decode separately) is dropped by channel before any check, so the
         replay guard never sees this agent's message twice (it logged "replayed or out of order").
         """
+        if self.interference is not None:
+            handler = self.interference.receiving(self, topic, handler)
         spec = self.topic_spec(topic)
         bus = self.config.topic_buses(topic)[0]
         self._check_exposure(topic, bus)
@@ -448,11 +478,26 @@ class Node:
     def create_timer(
         self, period: float, fn: Callable[[], Any], *, first_delay: float | None = None
     ) -> Timer:
+        fn = self._interfered(fn)
         timer = self.context.executor.create_timer(period, fn, first_delay=first_delay)
         self._timers.append(timer)
         return timer
 
+    def _interfered(self, fn: Callable[[], Any]) -> Callable[[], Any]:
+        """``fn``, skipped while the experiment holds this agent dead or frozen."""
+        interference = self.interference
+        if interference is None:
+            return fn
+        agent = self.agent
+
+        def run() -> Any:
+            return None if interference.silenced(agent) else fn()
+
+        return run
+
     def call_later(self, delay: float, fn: Callable[[], Any]) -> Timer:
+        fn = self._interfered(fn)
+
         def fire() -> None:
             if timer in self._timers:  # a one-shot leaves the list once it ran, so it never grows
                 self._timers.remove(timer)

@@ -106,7 +106,6 @@ _.reconnects  # CrazyflieAutopilot: link recoveries (tests/test_crazyflie_adapte
 _.reports_ok  # OscNode: reports the station accepted (tests/test_osc.py)
 _.reporting  # OscNode: whether the exchange with the station runs (tests/test_osc.py)
 _.set_refuse_arm  # SimAutopilot fault knobs for tests and the demo
-_.set_battery
 _.set_time_scale
 _.sim_time
 _.position_ne  # TelloAutopilot dead reckoning (tests/test_tello_adapter.py)

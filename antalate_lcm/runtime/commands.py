@@ -99,7 +99,15 @@ def _cmd_agent(args: argparse.Namespace) -> int:
     # Internal topics between this process's nodes in memory: a spoofed LAN datagram never reaches them.
     context = Context.in_process(shared_buses(configs), whole_swarm=not args.shard)
     nodes = [node for cfg in configs for node in agent_nodes(cfg, context)]
-    return run_until_signal(context, nodes)
+    if args.broadcast_reception is None:
+        return run_until_signal(context, nodes)
+    from antalate_lcm.runtime.faults import broadcast_report, lossy_broadcasts
+
+    gate = lossy_broadcasts(nodes, args.broadcast_reception, args.seed)
+    code = run_until_signal(context, nodes)
+    for line in broadcast_report(gate):
+        print(line, file=sys.stderr, flush=True)
+    return code
 
 
 def _cmd_tui(args: argparse.Namespace) -> int:
@@ -341,6 +349,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="spread the agents over P processes (default: one per core from 500 agents)",
     )
     p.add_argument("--shard", help=argparse.SUPPRESS)  # INDEX/COUNT: one of those processes
+    # antalate run's [broadcast] reception and seed, for the agents of one of its processes
+    p.add_argument("--broadcast-reception", type=float, help=argparse.SUPPRESS)
+    p.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
     p.set_defaults(func=_cmd_agent)
 
     p = sub.add_parser("tui", help="the operator console (a Textual app on the LAN bus)")

@@ -268,3 +268,14 @@ def test_params_have_px4_defaults_and_refuse_arducopters_guid_timeout() -> None:
         Px4Autopilot({"velocity_resend_hz": 1.0})  # PX4 needs >= 2 Hz
     with pytest.raises(ValueError, match="offboard_lead"):
         Px4Autopilot({"offboard_lead": "1"})
+
+
+@pytest.mark.parametrize(
+    ("frame", "wire"), [(Frame.NED, mav.MAV_FRAME_LOCAL_NED), (Frame.BODY, mav.MAV_FRAME_BODY_NED)]
+)
+def test_setpoints_use_the_frames_px4_accepts(frame: Frame, wire: int) -> None:
+    """PX4 1.15.4 SITL answered BODY_OFFSET_NED (ArduCopter's BODY) with "coordinate frame 9
+    unsupported" and dropped the set-point: BODY is BODY_NED for PX4."""
+    rules = OffboardRules(resend_period=0.1, timeout=1.0, stale_after=1.0)
+    assert rules.new(frame, 1.0, 0.0, 0.0, 0.0, 0.0).frame == wire
+    assert rules.hover(0.0).frame == mav.MAV_FRAME_LOCAL_NED

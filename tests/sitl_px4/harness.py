@@ -117,7 +117,8 @@ class Px4(SitlVehicle):
         self.gcs.ok(op="connect")
 
     def boot(self) -> None:
-        """Start PX4 (the launcher wipes its stored parameters: the test's are set again)."""
+        """Start PX4: the first time with the airframe's parameters and the test's, later with what PX4
+        stored (the adapter's writes kept, as on a real vehicle: the launcher's PX4_KEEP_PARAMS)."""
         link_commands(self.workdir / "px4")
         self.booted_at = time.monotonic()
         self.flown = False
@@ -138,6 +139,7 @@ class Px4(SitlVehicle):
         that needs a second flight restarts PX4 (~40 s to ready).
         """
         stop_process(self.sitl)
+        self._env["PX4_KEEP_PARAMS"] = "1"
 
     def state(self) -> dict[str, Any]:
         """PX4's own picture of this vehicle (its GCS link)."""

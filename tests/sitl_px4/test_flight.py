@@ -64,18 +64,19 @@ def repaired(request: pytest.FixtureRequest, px4: Px4, sitl_probe: Probe) -> Ite
         flight.back_on_the_ground(px4, sitl_probe, "AUTO.LAND")
 
 
-def flying(px4: Px4, probe: Probe) -> bool:
-    state = px4.state()
-    return (
-        bool(state["armed"])
-        and probe.wait(f"{AGENT}/MC_STATE", "mc_state_t", timeout=2, since=probe.mark(), state=M.MISSION)
-        is not None
-    )
+def flying(px4: Px4, probe: Probe, mc_states: tuple[int, ...]) -> bool:
+    """PX4 armed and the MC in one of `mc_states`."""
+    if not px4.state()["armed"]:
+        return False
+    mark = probe.mark()
+    channel = f"{AGENT}/MC_STATE"
+    return any(probe.wait(channel, "mc_state_t", timeout=2, since=mark, state=s) for s in mc_states)
 
 
-def airborne(px4: Px4, probe: Probe) -> None:
-    """The vehicle flying in MISSION: as it is, or taken off -- PX4 restarted first if it has flown."""
-    if flying(px4, probe):
+def airborne(px4: Px4, probe: Probe, mc_states: tuple[int, ...] = (M.MISSION,)) -> None:
+    """The vehicle flying in MISSION (or holding, for `test_rtl_…`): as it is, or taken off -- PX4
+    restarted first if it has flown."""
+    if flying(px4, probe, mc_states):
         return
     flight.back_on_the_ground(px4, probe, "AUTO.LAND")
     if px4.flown:
@@ -123,12 +124,16 @@ def test_boot_take_off_and_mission_east_at_1_m_s(px4: Px4, sitl_probe: Probe) ->
     state = px4.state()
     assert state["armed"] and state["alt"] > 4.0 and state["mode"] == "AUTO.LOITER", state
     wait_state(probe, "mc", M.MISSION, timeout=10, since=probe.mark())
-    fly_east(px4, probe, 3.0, speed=1.0)  # the stream's lead, the OFFBOARD switch, the acceleration
+    fly_east(px4, probe, 4.0, speed=1.0)  # the stream's lead, the OFFBOARD switch, the acceleration
     assert px4.state()["mode"] == "OFFBOARD", px4.state()
-    ve, vn, moved = east_speed(px4, probe, 5.0)
-    TIMINGS["east_speed"] = ve
-    assert 0.8 < ve < 1.15 and abs(vn) < 0.2, (ve, vn, moved)
-    assert moved["east"] > 4.0, moved  # GLOBAL_POSITION_INT from home agrees
+    ve, vn, moved = east_speed(px4, probe, 6.0)
+    TIMINGS.update(east_speed=ve, north_speed=vn, east_vy_at_end=moved["vy"], target_vy=moved["target_vy"])
+    # PX4 is told 1 m/s east (its POSITION_TARGET_LOCAL_NED) and flies east at its own pace: SIH closes
+    # in on a velocity set-point slowly, and slower on a loaded CPU (its fly_sih.py at 1 m/s: 0.77 m/s
+    # after 1 s, 0.91 m/s after 4 s; in these tests 0.49-0.85 m/s over 5 s)
+    assert abs(moved["target_vy"] - 1.0) < 0.01 and abs(moved["target_vx"]) < 0.01, moved
+    assert 0.4 < ve < 1.2 and abs(vn) < 0.25, (ve, vn, moved)
+    assert moved["east"] > 3.0, moved  # GLOBAL_POSITION_INT from home agrees
     assert errors(probe, mark) == []
 
 
@@ -157,38 +162,39 @@ def test_behavior_going_silent_hovers_in_offboard(px4: Px4, sitl_probe: Probe) -
     direction(probe, 0.0, 0.0, active=False)
 
 
-def test_hlc_restart_in_flight_resyncs_without_arming_or_taking_off(px4: Px4, sitl_probe: Probe) -> None:
-    """The HLC killed while PX4 hovers and started again: it finds PX4 flying (Hold, or OFFBOARD with the
-    dead HLC's stream gone), resyncs without arming or taking off, and flies the operator's direction
-    (OFFBOARD) again."""
+def test_hlc_killed_in_offboard_and_restarted_resyncs_to_px4s_hold(px4: Px4, sitl_probe: Probe) -> None:
+    """The HLC killed while PX4 flies east in OFFBOARD: its set-point stream stops, PX4 holds on its
+    offboard-loss failsafe after COM_OF_LOSS_T (COM_OBL_RC_ACT = Hold); the HLC started again finds
+    PX4 holding on a failsafe and resyncs to HOLD -- no arming, no take-off -- and the MC holds too,
+    waiting for the operator. (A restarted HLC that finds PX4 in its own Hold resyncs to AIRBORNE:
+    tests/test_px4_units.py.)"""
     probe = sitl_probe
     airborne(px4, probe)
+    fly_east(px4, probe, 3.0, speed=1.0)
+    assert px4.state()["mode"] == "OFFBOARD", px4.state()
     px4.gcs.ok(op="mark")
     px4.agent.kill("hlc")
-    time.sleep(1.0)
+    killed = time.monotonic()
+    assert wait_for(lambda: px4.state()["mode"] == "AUTO.LOITER", timeout=10, interval=0.1), px4.state()
+    TIMINGS["hlc_killed_to_px4_hold"] = time.monotonic() - killed
     mark = probe.mark()
     px4.start("hlc")
-    resync = wait_state(probe, "hlc", H.AIRBORNE, timeout=30, since=mark)
+    resync = wait_state(probe, "hlc", H.HOLD, timeout=30, since=mark)
     log = px4.agent.log("hlc")
     record = px4.gcs.ok(op="record")
     print(f"\nHLC restart: PX4 modes {record['modes']}; HLC {resync['reason']!r}")
-    assert "INIT -> AIRBORNE" in log and "autopilot ARM" not in log and "autopilot TAKEOFF" not in log
-    assert {m["state"] for m in probe.history(f"{AGENT}/MC_STATE", "mc_state_t", since=mark)} <= {
-        M.MISSION,
-        M.HLC_LOST,
-    }
-    wait_state(probe, "mc", M.MISSION, timeout=10, since=probe.mark())
-    start = px4.state()
-    fly_east(px4, probe, 6.0, speed=1.0)  # it still obeys: the stream's lead, OFFBOARD, ~3 s at 1 m/s
-    assert px4.state()["mode"] == "OFFBOARD" and px4.state()["east"] - start["east"] > 2.0, px4.state()
-    direction(probe, 0.0, 0.0, active=False)
+    assert "restart resync" in resync["reason"] and "failsafe" in resync["reason"], resync
+    assert "autopilot ARM" not in log and "autopilot TAKEOFF" not in log, log[-2000:]
+    assert [m for _, m in record["modes"]] == ["AUTO.LOITER"], record["modes"]
+    assert px4.state()["armed"] and px4.state()["alt"] > 3.0, px4.state()
+    wait_state(probe, "mc", M.HOLD, timeout=10, since=mark)
 
 
 def test_rtl_lands_at_home_and_the_mc_is_in_standby(px4: Px4, sitl_probe: Probe) -> None:
-    """The operator's RTL: PX4's AUTO.RTL (home at RTL_RETURN_ALT), landed, disarmed; HLC READY, MC
-    STANDBY; no error on the way."""
+    """The operator's RTL (from the HOLD the previous test leaves, or from MISSION): PX4's AUTO.RTL
+    (home at RTL_RETURN_ALT), landed, disarmed; HLC READY, MC STANDBY; no error on the way."""
     probe = sitl_probe
-    airborne(px4, probe)
+    airborne(px4, probe, (M.MISSION, M.HOLD))
     mark = probe.mark()
     px4.gcs.ok(op="mark")
     command(probe, O.RTL)
@@ -226,7 +232,9 @@ def test_link_cut_5_s_in_flight_then_restored(px4: Px4, sitl_probe: Probe) -> No
     assert modes[:1] == ["AUTO.LOITER"], modes  # PX4's offboard-loss failsafe: Hold
     assert abs(at_restore["east"] - late["east"]) < 0.5, (late, at_restore)  # it stopped by itself
     wait_state(probe, "mc", M.RTL, timeout=15, since=mark)
-    assert any("regained" in e for e in errors(probe, mark)), errors(probe, mark)
+    assert wait_for(lambda: any("regained" in e for e in errors(probe, mark)), timeout=5), errors(probe, mark)
+    states = hlc_states(probe, mark)
+    assert any(s == H.HOLD and "offboard loss" in r for s, r in states), states  # PX4's failsafe, named
     print(f"HLC states after the cut: {hlc_states(probe, mark)}; errors: {errors(probe, mark)}")
     home = landed(px4, probe, mark)
     assert abs(home["north"]) < 2.0 and abs(home["east"]) < 2.0, home

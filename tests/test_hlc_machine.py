@@ -461,6 +461,32 @@ def test_low_battery_fires_once() -> None:
     assert h.state is H.LOW_BATTERY
 
 
+def test_a_battery_failsafe_hold_after_low_battery_stays_hold_instead_of_alternating() -> None:
+    """PX4 1.15.4 SITL: the HLC's LOW_BATTERY RTL, then PX4's battery failsafe holds COM_FAIL_ACT_T
+    (5 s) before its action; HOLD's low-battery row fired again, FAILSAFE_HOLD again, ... dozens of
+    transitions and RTL commands a second. Now: LOW_BATTERY once, then HOLD until PX4 acts."""
+    h = hlc_in(H.AIRBORNE)
+    assert h.on_autopilot(flying(battery=19.0), T0 + 20).actions == (Action.RTL,)
+    held = flying(battery=15.0, flight_mode=FlightMode.HOLD, mode="AUTO.LOITER", failsafe="battery failsafe")
+    assert h.on_autopilot(held, T0 + 21).transition is not None
+    assert h.state is H.HOLD
+    for i in range(10):
+        assert h.on_autopilot(held, T0 + 21.05 + 0.05 * i).transition is None
+    assert h.state is H.HOLD
+    landing = replace(held, flight_mode=FlightMode.LANDING, mode="AUTO.LAND")
+    assert h.on_autopilot(landing, T0 + 27).transition is not None
+    assert h.state is H.LANDING
+
+
+def test_a_fence_hold_with_a_low_battery_still_returns_once() -> None:
+    h = hlc_in(H.AIRBORNE)
+    held = flying(flight_mode=FlightMode.HOLD, mode="BRAKE", failsafe="fence breach")
+    h.on_autopilot(held, T0 + 20)
+    assert h.state is H.HOLD
+    assert h.on_autopilot(replace(held, battery=19.0), T0 + 21).actions == (Action.RTL,)
+    assert h.state is H.LOW_BATTERY
+
+
 @pytest.mark.parametrize("state", [H.RTL, H.LANDING, H.MANUAL, H.READY, H.TAKEOFF])
 def test_low_battery_does_not_reroute_a_vehicle_already_coming_down(state: HlcState) -> None:
     h = hlc_in(state)

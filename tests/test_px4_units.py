@@ -4,6 +4,7 @@ and the failsafe-parameter checks (hand-made MAVLink messages, no sockets, no SI
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -14,6 +15,8 @@ from antalate_lcm.autopilot.mavlink.setpoints import Verdict
 from antalate_lcm.autopilot.px4 import Px4Autopilot, Px4Params, failsafe, modes, vehicle_checks
 from antalate_lcm.autopilot.px4.offboard import OffboardRules
 from antalate_lcm.autopilot.px4.vehicle import Px4Vehicle, decode_param, encode_param
+from antalate_lcm.config import load_config
+from antalate_lcm.runtime.agent import validate
 
 HOLD = modes.pack(modes.AUTO, modes.AUTO_LOITER)
 TAKEOFF = modes.pack(modes.AUTO, modes.AUTO_TAKEOFF)
@@ -268,3 +271,29 @@ def test_params_have_px4_defaults_and_refuse_arducopters_guid_timeout() -> None:
         Px4Autopilot({"velocity_resend_hz": 1.0})  # PX4 needs >= 2 Hz
     with pytest.raises(ValueError, match="offboard_lead"):
         Px4Autopilot({"offboard_lead": "1"})
+
+
+@pytest.mark.parametrize(
+    ("frame", "wire"), [(Frame.NED, mav.MAV_FRAME_LOCAL_NED), (Frame.BODY, mav.MAV_FRAME_BODY_NED)]
+)
+def test_setpoints_use_the_frames_px4_accepts(frame: Frame, wire: int) -> None:
+    """PX4 1.15.4 SITL answered BODY_OFFSET_NED (ArduCopter's BODY) with "coordinate frame 9
+    unsupported" and dropped the set-point: BODY is BODY_NED for PX4."""
+    rules = OffboardRules(resend_period=0.1, timeout=1.0, stale_after=1.0)
+    assert rules.new(frame, 1.0, 0.0, 0.0, 0.0, 0.0).frame == wire
+    assert rules.hover(0.0).frame == mav.MAV_FRAME_LOCAL_NED
+
+
+def test_the_px4_sitl_example_loads_and_flies_sitl_instance_0() -> None:
+    """examples/px4_sitl.toml through the config loader and the adapter's own parameter model: PX4
+    SITL instance 0's offboard link, the defaults docs/px4.md gives."""
+    config = load_config(Path(__file__).resolve().parent.parent / "examples" / "px4_sitl.toml")
+    validate(config)
+    assert config.hlc.autopilot == "px4"
+    params = Px4Params.model_validate(config.hlc.autopilot_params)
+    assert params.connection == "udpin:127.0.0.1:14540"
+    assert (params.velocity_resend_hz, params.offboard_lead, params.max_offboard_loss_timeout) == (
+        10.0,
+        1.0,
+        1.0,
+    )

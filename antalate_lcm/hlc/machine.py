@@ -40,7 +40,10 @@ Failsafe rows (docs/design.md §6 and docs/failsafes.md), and the choices behind
   heard the autopilot's fence BRAKE must not override that BRAKE. The same guard applies to the
   new RTL/LOW_BATTERY + MC LAND rows (land now instead of flying home). AIRBORNE + MC HOLD -> HOLD
   with HOVER (an MC holding by policy after an HLC restart). HOLD counts as a flying, autonomous
-  state for the low-battery, pilot-takeover, landed and link-lost rows.
+  state for the low-battery, pilot-takeover, landed and link-lost rows -- the low-battery row once a
+  flight (until READY): a failsafe Hold that comes after the HLC's own LOW_BATTERY RTL (PX4's battery
+  failsafe holds COM_FAIL_ACT_T before its action) stays HOLD, where LOW_BATTERY and FAILSAFE_HOLD
+  would otherwise alternate at the poll rate, an RTL command each time (seen with PX4 1.15.4 SITL).
 * **Low battery** is the first of: percentage <= ``low_battery``, volts per cell <= ``low_cell_voltage``,
   or the vehicle's own `AutopilotState.battery_warning`; the reason says which.
 
@@ -339,6 +342,11 @@ def _mc_changed_since_entry(m: HighLevelControl) -> bool:
     return m.mc_moved
 
 
+def _battery_not_handled(m: HighLevelControl) -> bool:
+    """No LOW_BATTERY yet this flight (see the module docstring: HOLD's low-battery row fires once)."""
+    return not m.low_battery_handled
+
+
 def _s(*states: HlcState) -> frozenset[HlcState]:
     return frozenset(states)
 
@@ -549,10 +557,18 @@ HLC_TABLE: tuple[HlcRow, ...] = (
         extra=True,
     ),
     HlcRow(
-        _s(S.GAINING_ALTITUDE, S.AIRBORNE, S.HOLD),
+        _s(S.GAINING_ALTITUDE, S.AIRBORNE),
         E.LOW_BATTERY,
         S.LOW_BATTERY,
         "battery low: returning home",
+        effect=_fx(Action.RTL, error=(ErrorCode.LOW_BATTERY, Severity.WARNING)),
+    ),
+    HlcRow(
+        _s(S.HOLD),
+        E.LOW_BATTERY,
+        S.LOW_BATTERY,
+        "battery low: returning home",
+        guard=_battery_not_handled,
         effect=_fx(Action.RTL, error=(ErrorCode.LOW_BATTERY, Severity.WARNING)),
     ),
 )
@@ -577,6 +593,7 @@ class HighLevelControl:
         self.mc_state: int | None = None  # last MC state heard (an McState value), None = never
         self.autopilot: AutopilotState | None = None  # last snapshot
         self.mc_state_at_entry: int | None = None  # the MC's state when `state` began
+        self.low_battery_handled = False  # LOW_BATTERY was entered since the last READY
         self.mc_moved = False  # the MC has been in another state than `mc_state_at_entry` since
         self.reason = "waiting for the autopilot and the MC"  # why the HLC is in `state` (hlc_state_t.reason)
         self._mc_takeoff_altitude = 0.0
@@ -807,6 +824,8 @@ class HighLevelControl:
                 return HlcOutcome(actions=actions, errors=errors, reason=reason)
             transition = HlcTransition(self.state, row.target, event, reason, now)
             self.state = row.target
+            if row.target in (HlcState.LOW_BATTERY, HlcState.READY):
+                self.low_battery_handled = row.target is HlcState.LOW_BATTERY
             self.entered_at = now
             self.mc_state_at_entry = self.mc_state
             self.mc_moved = False

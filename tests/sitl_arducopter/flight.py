@@ -61,12 +61,12 @@ def hlc_states(probe: Probe, since: int, agent: str = AGENT) -> list[tuple[int, 
     return seen
 
 
-def take_off(vehicle: SitlVehicle, probe: Probe) -> int:
-    """From STANDBY on the ground to MISSION at 5 m; the probe mark when it got there."""
+def take_off(vehicle: SitlVehicle, probe: Probe, timeout: float = 60) -> int:
+    """From STANDBY on the ground to MISSION at 5 m (within `timeout` s); the probe mark when it got there."""
     wait_state(probe, "mc", M.STANDBY, timeout=60, since=probe.mark())
     mark = probe.mark()
     command(probe, O.TAKEOFF)
-    wait_state(probe, "mc", M.MISSION, timeout=60, since=mark)
+    wait_state(probe, "mc", M.MISSION, timeout=timeout, since=mark)
     wait_state(probe, "hlc", H.AIRBORNE, timeout=30, since=mark)
     return probe.mark()
 

@@ -15,7 +15,8 @@ Requests (one JSON object a line), one JSON reply line each:
 - ``{"op": "connect"}``: connect to SERIAL1 (SITL opens it once SERIAL0, the relay, has its client);
 - ``{"op": "state"}``: the latest mode, armed, landed state, relative altitude, metres north/east of home,
   battery voltage and the highest altitude since the last ``mark``; with PX4 also its own local position
-  (``x``/``y``/``z``/``vx``/``vy``, LOCAL_POSITION_NED) and ``battery_remaining`` (%); ``"system": S``
+  (``x``/``y``/``z``/``vx``/``vy``, LOCAL_POSITION_NED), the velocity it is told to fly (``target_vx``,
+  ``target_vy``, POSITION_TARGET_LOCAL_NED) and ``battery_remaining`` (%); ``"system": S``
   picks one of several vehicles on the link (default: the last heard);
 - ``{"op": "mark"}``: starts a new record (``modes``, ``texts``, ``max_alt`` count from here);
 - ``{"op": "record"}``: the mode changes and STATUSTEXTs (with their severity) since the last mark;
@@ -57,7 +58,7 @@ SLOW_STREAMS = {
     mav.MAVLINK_MSG_ID_ATTITUDE: 0,
     mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 0,
     mav.MAVLINK_MSG_ID_ATTITUDE_TARGET: 0,
-    mav.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 0,
+    mav.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 2,  # what PX4 is told to fly
     mav.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 0,
     mav.MAVLINK_MSG_ID_RC_CHANNELS: 0,
     mav.MAVLINK_MSG_ID_OPTICAL_FLOW_RAD: 0,
@@ -152,6 +153,8 @@ class Gcs:
                     state.update(
                         x=msg.x, y=msg.y, z=msg.z, vx=msg.vx, vy=msg.vy, time_boot=msg.time_boot_ms / 1e3
                     )
+                elif t == "POSITION_TARGET_LOCAL_NED":
+                    state.update(target_vx=msg.vx, target_vy=msg.vy, target_frame=msg.coordinate_frame)
                 elif t == "HOME_POSITION":
                     self.homes[system] = (msg.latitude / 1e7, msg.longitude / 1e7)
                 elif t == "EXTENDED_SYS_STATE":

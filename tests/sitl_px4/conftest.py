@@ -7,7 +7,8 @@ ArduCopter SITL tests'.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
+from typing import Any
 
 import pytest
 
@@ -26,3 +27,12 @@ def sitl_netns() -> Iterator[NetNamespace]:
         pytest.skip(reason)
     with NetNamespace() as ns:
         yield ns
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Generator[None, Any, Any]:
+    """Each phase's report on its test item (``rep_call``): a flight test lands the vehicle only after
+    a failure."""
+    report = yield
+    setattr(item, f"rep_{report.when}", report)
+    return report

@@ -85,6 +85,8 @@ def test_three_px4s_fly_dovrat_swarm_and_come_home(swarm: list[Px4], sitl_probe:
         wait_state(probe, "hlc", H.AIRBORNE, timeout=150, since=mark, agent=v.name)
         wait_state(probe, "mc", M.MISSION, timeout=30, since=mark, agent=v.name)
     TIMINGS["takeoff_to_all_airborne"] = time.monotonic() - sent
+    for v in swarm:  # the behavior's first set-points, the stream's lead, the OFFBOARD switch
+        assert wait_for(lambda v=v: v.state()["mode"] == "OFFBOARD", timeout=15, interval=0.2), v.state()
     start = {v.name: v.state() for v in swarm}
     headings: dict[str, list[float]] = {v.name: [] for v in swarm}
     end = time.monotonic() + 12.0

@@ -12,6 +12,12 @@ GUID_TIMEOUT would forget:
   flies, and the vehicle hovers in OFFBOARD under the adapter's stream instead of falling into PX4's
   offboard-loss failsafe (which is left for when antalate itself is gone or cut off);
 * nothing goes into a stale link (`SetpointRules.stale`); the stream resumes with zero when it is fresh;
+* BODY velocities go as MAV_FRAME_BODY_NED: PX4 1.15.4 takes only LOCAL_NED and BODY_NED (vx/vy
+  rotated by its yaw, vz down) and drops anything else -- ArduCopter's BODY_OFFSET_NED included -- with
+  "SET_POSITION_TARGET_LOCAL_NED coordinate frame 9 unsupported" (src/modules/mavlink/
+  mavlink_receiver.cpp, ``handle_message_set_position_target_local_ned``): the real PX4 showed it, when
+  the HLC's BODY-frame hover left PX4 without a valid set-point and it fell into its offboard-loss
+  failsafe;
 * a zero set-point never switches to OFFBOARD (PX4's Hold and the end of its take-off hover already),
   and the vehicle is only switched from a mode the adapter owns (after our take-off); a pilot's or a
   failsafe's mode is never overridden.
@@ -21,10 +27,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
 from antalate_lcm.autopilot.base import Frame
 from antalate_lcm.autopilot.mavlink.setpoints import Setpoint, SetpointRules, Verdict
 from antalate_lcm.autopilot.mavlink.vehicle import Vehicle
 from antalate_lcm.autopilot.px4 import modes
+
+#: The SET_POSITION_TARGET_LOCAL_NED frames PX4 accepts, by antalate frame (module docstring).
+FRAMES: dict[Frame, int] = {Frame.NED: mav.MAV_FRAME_LOCAL_NED, Frame.BODY: mav.MAV_FRAME_BODY_NED}
 
 
 def _offboard(vehicle: Vehicle) -> bool:
@@ -41,6 +52,9 @@ class OffboardRules(SetpointRules):
     """`SetpointRules` for PX4: continuous streaming in OFFBOARD (module docstring); ``lead`` in s."""
 
     lead: float = 1.0
+
+    def new(self, frame: Frame, vx: float, vy: float, vz: float, yaw_rate: float, now: float) -> Setpoint:
+        return Setpoint(FRAMES[Frame(frame)], vx, vy, vz, yaw_rate, now, now + self.resend_period)
 
     def judge(self, vehicle: Vehicle, sp: Setpoint, now: float) -> Verdict:
         if not (_switchable(vehicle) and (_offboard(vehicle) or vehicle.mode == modes.HOLD)):

@@ -5,12 +5,17 @@
 with ``copter.parm`` beside it; ../shared/sitl/README.md), a `gcs` helper that relays the agent's TCP
 link to SERIAL0 (so the test can cut or stall it) and watches the vehicle on SERIAL1, and the agent (MC +
 HLC with the ``mavlink`` adapter + a BMA running ``direction_follow``, or ``dovrat_swarm``).
+
+``backend="emulator"`` puts the project's ArduCopter emulator (tests/emulators/mavlink_vehicle.py, its
+``arducopter`` profile) where the firmware was, on the same TCP port, behind the same relay and ground
+station: the comparison tests fly one scenario table against both.
 """
 
 from __future__ import annotations
 
 import os
 import subprocess
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -44,11 +49,11 @@ def sitl_missing() -> str | None:
 class Gcs(JsonLinesProcess):
     """Client of `gcs`: the vehicle's own record, a second ground station, and the link's relay."""
 
-    def __init__(self, netns: NetNamespace, instance: int) -> None:
+    def __init__(self, netns: NetNamespace, instance: int, serial1: int | None = None) -> None:
         proc = netns.python(
             "-m",
             "tests.sitl_arducopter.gcs",
-            f"tcp:127.0.0.1:{5762 + 10 * instance}",
+            f"tcp:127.0.0.1:{5762 + 10 * instance if serial1 is None else serial1}",
             str(RELAY_PORT + 10 * instance),
             str(5760 + 10 * instance),
             stdin=subprocess.PIPE,
@@ -71,6 +76,10 @@ class Gcs(JsonLinesProcess):
     def relay(self, mode: str) -> None:
         self.ok(op="relay", mode=mode)
 
+    def command(self, command: int, *params: float) -> None:
+        """COMMAND_LONG from the second ground station, ACCEPTED (MAV_CMD_BATTERY_RESET, ...)."""
+        self.ok(op="command", command=command, params=list(params))
+
 
 class Copter:
     """SITL instance ``instance`` (system id instance + 1) and the agent ``name`` that flies it."""
@@ -88,34 +97,16 @@ class Copter:
         hlc: dict[str, Any] | None = None,
         autopilot: dict[str, Any] | None = None,
         nodes: tuple[str, ...] = ("agent",),
+        backend: str = "arducopter",
     ) -> None:
-        self.netns, self.instance, self.name = netns, instance, name
+        self.netns, self.instance, self.name, self.backend = netns, instance, name, backend
         workdir.mkdir(parents=True, exist_ok=True)
         self.workdir = workdir
-        self.gcs = Gcs(netns, instance)  # the relay listens before the agent connects
-        binary = sitl_binary()
+        # the relay listens before the agent connects; the emulator takes any number of TCP clients, so
+        # its "SERIAL1" is SERIAL0's port
+        self.gcs = Gcs(netns, instance, 5760 + 10 * instance if backend == "emulator" else None)
         self.booted_at = time.monotonic()
-        self.sitl = netns.popen(
-            [
-                str(binary),
-                "--model",
-                "+",
-                "--speedup",
-                f"{speedup:g}",
-                "--home",
-                ",".join(f"{x:g}" for x in home),
-                "--defaults",
-                str(binary.parent / "copter.parm"),
-                "--instance",
-                str(instance),
-                "-w",
-                "--sysid",
-                str(instance + 1),
-            ],
-            cwd=str(workdir),
-            stdout=open(workdir / "sitl.log", "w"),  # noqa: SIM115 - closed with the process
-            stderr=subprocess.STDOUT,
-        )
+        self.sitl = self._emulator(home) if backend == "emulator" else self._sitl(workdir, speedup, home)
         doc: dict[str, Any] = {
             "agent": {"name": name},
             "buses": {"lan": MCAST_URL},
@@ -145,6 +136,55 @@ class Copter:
         for node in nodes:
             self.start(node)
         self.gcs.ok(op="connect")
+
+    def _sitl(
+        self, workdir: Path, speedup: float, home: tuple[float, float, float, float]
+    ) -> subprocess.Popen[str]:
+        binary = sitl_binary()
+        return self.netns.popen(
+            [
+                str(binary),
+                "--model",
+                "+",
+                "--speedup",
+                f"{speedup:g}",
+                "--home",
+                ",".join(f"{x:g}" for x in home),
+                "--defaults",
+                str(binary.parent / "copter.parm"),
+                "--instance",
+                str(self.instance),
+                "-w",
+                "--sysid",
+                str(self.instance + 1),
+            ],
+            cwd=str(workdir),
+            stdout=open(workdir / "sitl.log", "w"),  # noqa: SIM115 - closed with the process
+            stderr=subprocess.STDOUT,
+        )
+
+    def _emulator(self, home: tuple[float, float, float, float]) -> subprocess.Popen[str]:
+        return self.netns.popen(
+            [
+                sys.executable,
+                "-m",
+                "tests.emulators.mavlink_vehicle",
+                "--profile",
+                "arducopter",
+                "--udp-port",
+                "-1",
+                "--tcp-port",
+                str(5760 + 10 * self.instance),
+                "--sysid",
+                str(self.instance + 1),
+                "--home=" + ",".join(f"{x:g}" for x in home[:3]),  # "=": the latitude starts with "-"
+                "--log-level",
+                "INFO",
+            ],
+            cwd=str(REPO),
+            stdout=open(self.workdir / "emulator.log", "w"),  # noqa: SIM115 - closed with the process
+            stderr=subprocess.STDOUT,
+        )
 
     def start(self, node: str) -> None:
         """Start ``node`` ("agent", or "hlc", "mc", "bma" each in its own process)."""

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from antalate_lcm import validation
+from antalate_lcm._fastcodec import encode as fast_encode
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.bus import Bus, Subscription
 from antalate_lcm.config import Config
@@ -327,10 +328,12 @@ class Node:
         header.utime = utime
         header.agent = self.agent
         header.seq = seq
-        data = signed_bytes(msg, self.security.key) if self.security.enabled else msg.encode()
+        key = self.security.key  # SecurityPolicy.enabled is bool(key), without a property call
+        data = signed_bytes(msg, key) if key else fast_encode(msg)
         ok = True
+        publish = self.context.bus.publish
         for bus in pub.buses:
-            ok = self.context.bus.publish(bus, pub.channel, data) and ok
+            ok = publish(bus, pub.channel, data) and ok
         return ok
 
     def _publish_buses(self, topic: str) -> list[str]:

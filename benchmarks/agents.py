@@ -10,9 +10,15 @@ listens from this process with raw LCM, and prints:
   received), p50 / p99 / max over the agents (target max < 100 ms),
 - the HLC reaction (MC TAKEOFF → HLC TAKEOFF, the next link in the chain),
 - the agent processes' RSS (summed; target < 1 GiB per 1,000 agents), CPU (% of one core, summed)
-  and CPU per agent: microseconds of CPU per agent-second, which shows how the cost grows with N.
+  and CPU per agent: microseconds of CPU per agent-second, which shows how the cost grows with N;
+- then, every agent in MISSION hovering (homes 8 m apart), the same telemetry rate and CPU in flight
+  (with ``--safety`` every HLC then filters its set-point each control tick).
 
-    python benchmarks/agents.py [N ...] [--processes P]      (default: 500 1000 2000)
+    python benchmarks/agents.py [N ...] [--processes P] [--safety]      (default: 500 1000 2000)
+
+``--safety`` turns the separation filter on in every agent (``[safety] enabled``, docs/safety.md):
+each process then feeds one swarm picture with every agent's telemetry, and each HLC filters its
+velocity set-points in flight; benchmarks/safety_filter.py runs 1,000 agents both ways in one run.
 
 Figures only (docs/design.md §12): the machine is shared, so the load average is printed beside them.
 
@@ -100,14 +106,19 @@ def udp_drops(port: int) -> dict[int, int]:
     return out
 
 
-def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
+def run(n: int, tmp: Path, processes: int | None, safety: bool = False) -> dict[str, float]:
     import lcm
 
     from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
     from antalate_lcm.udpm_socket import UdpmReceiver
 
     cfg = tmp / "bench.toml"
-    cfg.write_text(f'[agent]\nname = "b"\n[buses]\nlan = "{URL}"\n[hlc]\nautopilot = "sim"\n')
+    text = f'[agent]\nname = "b"\n[buses]\nlan = "{URL}"\n[hlc]\nautopilot = "sim"\n'
+    if safety:
+        # The filter's swarm picture hears every agent's TELEMETRY on the LAN: unsigned only by
+        # choice (a private namespace here; a real swarm sets [security] swarm_key, docs/security.md).
+        text += "[safety]\nenabled = true\n[security]\ninsecure = true\n"
+    cfg.write_text(text)
     log = open(tmp / f"agents-{n}.log", "w")  # noqa: SIM115
     argv = [
         sys.executable,
@@ -136,6 +147,7 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
     mc_takeoff: dict[str, float] = {}
     hlc_takeoff: dict[str, float] = {}
     standby: set[str] = set()
+    mission: set[str] = set()
 
     def on_msg(channel: str, data: bytes) -> None:
         agent, _, topic = channel.partition("/")
@@ -149,6 +161,8 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
                     standby.add(agent)
                 elif st == mc_state_t.TAKEOFF and agent not in mc_takeoff:
                     mc_takeoff[agent] = now
+                elif st == mc_state_t.MISSION:
+                    mission.add(agent)
             elif (
                 topic == "HLC_STATE"
                 and hlc_state_t.decode(data).state == hlc_state_t.TAKEOFF
@@ -172,6 +186,9 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
         while len(standby) < n and time.time() < deadline:
             time.sleep(0.1)
         if len(standby) < n:
+            log.flush()
+            tail = (tmp / f"agents-{n}.log").read_text().splitlines()[-5:]
+            print("\n".join(f"    agent log: {line}" for line in tail), flush=True)
             return {"n": n, "error": float(len(standby))}
         standby_s = time.perf_counter() - started
         time.sleep(2.0)  # settle
@@ -201,6 +218,28 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
         with lock:
             mc_lat = [(t - sent) * 1000 for t in mc_takeoff.values()]
             hlc_lat = [(hlc_takeoff[a] - mc_takeoff[a]) * 1000 for a in hlc_takeoff if a in mc_takeoff]
+        # In flight: every agent hovering in MISSION (with --safety each HLC filters its set-point on
+        # every control tick against its neighbours, 8 m apart), the same 5 s window.
+        deadline3 = time.time() + 60
+        while len(mission) < n and time.time() < deadline3:
+            time.sleep(0.2)
+        flight: dict[str, float] = {"flying": float(len(mission))}
+        if len(mission) == n:
+            time.sleep(2.0)
+            with lock:
+                telem.clear()
+            cpu2 = proc_stats(proc.pid)[1]
+            t2 = time.perf_counter()
+            time.sleep(5.0)
+            window2 = time.perf_counter() - t2
+            cpu3 = proc_stats(proc.pid)[1]
+            with lock:
+                flown = [telem.get(a, 0) / window2 for a in mission]
+            flight.update(
+                flight_hz_min=min(flown),
+                flight_cpu_pct=100 * (cpu3 - cpu2) / window2,
+                flight_us_per_agent_s=(cpu3 - cpu2) / window2 / n * 1e6,
+            )
         return {
             "n": n,
             "standby_s": standby_s,
@@ -217,6 +256,7 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
             "us_per_agent_s": (cpu1 - cpu0) / window / n * 1e6,
             "listener_dropped": dropped.get(mine, 0),
             "agents_dropped": sum(d for ino, d in dropped.items() if ino != mine),
+            **flight,
         }
     finally:
         stop.set()
@@ -244,9 +284,13 @@ def main() -> None:
         type=int,
         help="agent processes (default: one per 1,000 agents; 0: no --processes option)",
     )
+    parser.add_argument(
+        "--safety", action="store_true", help="every agent with the separation filter on ([safety] enabled)"
+    )
     args = parser.parse_args()
     ensure_private_netns()
     print(f"CPUs: {os.cpu_count()}; load average {os.getloadavg()[0]:.2f} at start")
+    print(f"separation filter ([safety] enabled): {'on' if args.safety else 'off'}")
     print(
         f"{'agents':>6} {'procs':>5} {'STANDBY s':>9} {'telem Hz min/mean':>18} {'MC react p50/p99/max ms':>24} "
         f"{'HLC react p50/max ms':>21} {'RSS MiB':>8} {'CPU %':>6} {'us/agent-s':>10}  verdict"
@@ -254,7 +298,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.sizes:
             procs = args.processes if args.processes is not None else math.ceil(n / 1000)
-            r = run(n, Path(tmp), args.processes)
+            r = run(n, Path(tmp), args.processes, args.safety)
             if "error" in r:
                 print(
                     f"{n:>6} {procs:>5}  only {int(r['error'])} agents reached STANDBY within 60 s",
@@ -275,6 +319,17 @@ def main() -> None:
                 f"{r['us_per_agent_s']:>10.0f}  {'OK' if ok else 'over target'}  (load {os.getloadavg()[0]:.2f})",
                 flush=True,
             )
+            if "flight_cpu_pct" in r:
+                print(
+                    f"{'':>12} in flight (all {n} in MISSION, hovering): telemetry min {r['flight_hz_min']:.1f} Hz, "
+                    f"CPU {r['flight_cpu_pct']:.0f} %, {r['flight_us_per_agent_s']:.0f} us/agent-s",
+                    flush=True,
+                )
+            else:
+                print(
+                    f"{'':>12} in flight: only {r['flying']:.0f} of {n} reached MISSION within 60 s",
+                    flush=True,
+                )
             print(
                 f"{'':>12} kernel drops in the telemetry window: this listener's socket {r['listener_dropped']:.0f}, "
                 f"the agent processes' sockets {r['agents_dropped']:.0f}",

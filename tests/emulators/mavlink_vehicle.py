@@ -142,6 +142,28 @@ BRISK: dict[str, Any] = {
     "land_detect_time": 0.2,
 }
 
+#: ArduCopter 4.6.3 (SITL, copter.parm) as it flies: WPNAV_SPEED_UP 2.5 m/s, WPNAV_SPEED_DN 1.5 m/s above
+#: LAND_ALT_LOW 10 m, LAND_SPEED 0.5 m/s below, WPNAV_SPEED 10 m/s home, RTL_ALT 15 m, RTL_LOIT_TIME 5 s,
+#: the land detector's ~1 s; the boot is seconds, not SITL's ~40 s (nothing compared depends on it).
+#: The profile the comparison tests (tests/sitl_arducopter/test_failsafes.py) fly against the firmware.
+ARDUCOPTER: dict[str, Any] = {
+    "boot_delay": 1.0,
+    "ekf_delay": 3.0,
+    "gps_delay": 2.0,
+    "climb_rate": 2.5,
+    "max_climb_rate": 2.5,
+    "land_speed": 0.5,
+    "land_speed_high": 1.5,
+    "land_alt_low": 10.0,
+    "max_descent_rate": 1.5,
+    "rtl_speed": 10.0,
+    "rtl_alt": 15.0,
+    "rtl_loiter_time": 5.0,
+    "velocity_tau": 0.5,
+    "land_detect_time": 1.0,
+    "battery_drain": 0.0,
+}
+
 COPTER_MODES: dict[str, int] = {
     "STABILIZE": 0,
     "ACRO": 1,
@@ -1498,11 +1520,13 @@ class MavlinkVehicle:
                 return (dn / dist * speed, de / dist * speed, 0.0)
             self._rtl_phase = "loiter"
             self._rtl_loiter_end = now + self._params["RTL_LOIT_TIME"] / 1000.0
+        # over home it holds the position (loiter, then the landing's position controller)
+        hold = (max(-2.0, min(2.0, hn - self._n)), max(-2.0, min(2.0, he - self._e)))
         if self._rtl_phase == "loiter":
             if now < self._rtl_loiter_end:
-                return (0.0, 0.0, 0.0)
+                return (hold[0], hold[1], 0.0)
             self._rtl_phase = "land"
-        return (0.0, 0.0, self._land_rate(alt))
+        return (hold[0], hold[1], self._land_rate(alt))
 
     def _land_rate(self, alt: float) -> float:
         """mode_land.cpp: LAND_SPEED below LAND_ALT_LOW, the faster descent (WPNAV_SPEED_DN) above it."""
@@ -1539,7 +1563,8 @@ class MavlinkVehicle:
         enc = self._encoder
         boot_ms = int((now - self._t0) * 1000) & 0xFFFFFFFF
         pos_ok = self._position_ok(now)
-        lat, lon = self._latlon() if pos_ok else (0.0, 0.0)
+        # without GPS the AHRS still reports its last (dead-reckoned) position, as 4.6.3 SITL does
+        lat, lon = self._latlon() if pos_ok or self._gps_off_since is not None else (0.0, 0.0)
         alt = -self._d
         home_alt = self._home[2] if self._home else self.origin[2]
         yaw_rad = math.radians(((self._yaw + 180.0) % 360.0) - 180.0)
@@ -1901,9 +1926,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tcp-port", type=int, default=-1, help="-1 disables TCP, 0 picks a free port")
     parser.add_argument("--udp-target", default=None, help="HOST:PORT to push to (like SITL's udpclient)")
     parser.add_argument("--home", default=None, help="LAT,LON[,ALT]")
-    parser.add_argument("--boot-delay", type=float, default=0.5)
-    parser.add_argument("--ekf-delay", type=float, default=1.0)
-    parser.add_argument("--gps-delay", type=float, default=1.0)
+    parser.add_argument("--sysid", type=int, default=1, help="MAVLink system id (SYSID_THISMAV)")
+    parser.add_argument(
+        "--profile",
+        choices=("default", "arducopter"),
+        default="default",
+        help="arducopter: ArduCopter 4.6.3's speeds and parameter defaults (ARDUCOPTER)",
+    )
+    parser.add_argument("--boot-delay", type=float, default=None)
+    parser.add_argument("--ekf-delay", type=float, default=None)
+    parser.add_argument("--gps-delay", type=float, default=None)
     parser.add_argument("--battery", type=float, default=100.0)
     parser.add_argument("--refuse-arm", action="store_true")
     parser.add_argument(
@@ -1918,7 +1950,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
 
-    kwargs: dict[str, Any] = {}
+    kwargs: dict[str, Any] = dict(ARDUCOPTER) if args.profile == "arducopter" else {}
+    for name in ("boot_delay", "ekf_delay", "gps_delay"):
+        if getattr(args, name) is not None:
+            kwargs[name] = getattr(args, name)
     if args.home:
         parts = [float(v) for v in args.home.split(",")]
         kwargs.update(home_lat=parts[0], home_lon=parts[1])
@@ -1938,9 +1973,7 @@ def main(argv: list[str] | None = None) -> int:
         args.host,
         None if args.udp_port < 0 else args.udp_port,
         None if args.tcp_port < 0 else args.tcp_port,
-        boot_delay=args.boot_delay,
-        ekf_delay=args.ekf_delay,
-        gps_delay=args.gps_delay,
+        sysid=args.sysid,
         battery=args.battery,
         **kwargs,
     )

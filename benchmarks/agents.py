@@ -12,9 +12,24 @@ listens from this process with raw LCM, and prints:
 - the agent processes' RSS (summed; target < 1 GiB per 1,000 agents), CPU (% of one core, summed)
   and CPU per agent: microseconds of CPU per agent-second, which shows how the cost grows with N.
 
-    python benchmarks/agents.py [N ...] [--processes P]      (default: 500 1000 2000)
+    python benchmarks/agents.py [N ...] [--processes P] [--repeat R] [--busy] [--tree DIR]
+                                                            (default sizes: 500 1000 2000)
 
 Figures only (docs/design.md §12): the machine is shared, so the load average is printed beside them.
+
+A reference workload is measured in the same run, just before each size starts, so figures from two
+machines (or two moments of one) can be compared: ``ref`` is the CPU time one raw-lcm message costs
+this machine now -- build a ``telemetry_t``, encode it with lcm-gen, ``lcm.publish`` it on the same
+udpm URL, decode it -- in µs (the mean of 20,000), and ``x ref`` is the agents' CPU per agent-second
+divided by it: how many such raw messages' worth of CPU one simulated agent costs a second. An agent
+publishes 20 messages a second (telemetry at 10 Hz, its MC and HLC states at 5 Hz each), so 20 x
+would be an agent that costs no more than raw lcm sending its traffic. The ratio moves much less
+than the µs with the machine's speed and load (see docs/benchmarks.md).
+
+``--busy``: a second process spins on the other core for the whole run (a pure-Python loop), the
+"something else running" of a laptop. ``--tree DIR``: run the agents from another checkout of
+antalate (PYTHONPATH), e.g. ``git worktree add /tmp/base <commit>``, for a baseline measured in the
+same session with the same listener and reference. ``--repeat R``: each size R times.
 
 Measured 2026-11-24 on the 2-core machine (load average 1.0-1.3), once every process read udpm:// on
 its own loop instead of liblcm's receive thread (which spent a quarter of a core per agent process
@@ -100,7 +115,44 @@ def udp_drops(port: int) -> dict[int, int]:
     return out
 
 
-def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
+#: Messages the reference workload sends (about 0.1 s of CPU on the 2-core machine class).
+REFERENCE_MESSAGES = 20_000
+
+
+def reference(url: str = URL) -> float:
+    """CPU µs this thread spends per raw-lcm message: build, encode, publish (udpm), decode.
+
+    The same message mix an agent sends, through liblcm rather than antalate: the yardstick the
+    agents' µs per agent-second is divided by. Thread CPU time, so a busy machine slows it the way
+    it slows the agents (caches, frequency) but preemption does not count.
+    """
+    import lcm
+
+    from antalate_lcm.msgs import telemetry_t
+
+    lc = lcm.LCM(url)
+    msg = telemetry_t()
+    msg.header.agent = "ref-001"
+    msg.mode = "GUIDED"
+    t0 = time.thread_time()
+    for i in range(REFERENCE_MESSAGES):
+        msg.header.seq = i
+        msg.lat = 32.0 + i * 1e-7
+        data = msg.encode()
+        lc.publish("ref-001/TELEMETRY", data)
+        telemetry_t.decode(data)
+    return (time.thread_time() - t0) / REFERENCE_MESSAGES * 1e6
+
+
+def busy_loop(stop_at: float) -> None:
+    """The --busy process: pure Python arithmetic until ``stop_at`` (monotonic)."""
+    x = 0
+    while time.monotonic() < stop_at:
+        for i in range(10_000):
+            x = (x * 31 + i) % 1_000_003
+
+
+def run(n: int, tmp: Path, processes: int | None, tree: Path | None = None) -> dict[str, float]:
     import lcm
 
     from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
@@ -122,8 +174,11 @@ def run(n: int, tmp: Path, processes: int | None) -> dict[str, float]:
     ]
     if processes != 0:  # 0: leave the option out (a tree from before --processes, for a baseline)
         argv += ["--processes", str(processes or math.ceil(n / 1000))]
+    env = None
+    if tree is not None:  # the agents from another checkout; the listener stays this tree's
+        env = dict(os.environ, PYTHONPATH=str(tree))
     started = time.perf_counter()
-    proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT)
+    proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=tree)
     lc = lcm.LCM(URL)  # to send the TAKEOFF
     # Listening on antalate's own udpm reader (antalate_lcm/udpm_socket.py): no liblcm receive thread
     # competing with the agents for the two cores; the kernel's drop count of this socket says
@@ -244,42 +299,67 @@ def main() -> None:
         type=int,
         help="agent processes (default: one per 1,000 agents; 0: no --processes option)",
     )
+    parser.add_argument("--repeat", type=int, default=1, help="runs of each size")
+    parser.add_argument("--busy", action="store_true", help="a second process spins for the whole run")
+    parser.add_argument("--tree", type=Path, help="run the agents from this checkout (a baseline)")
     args = parser.parse_args()
     ensure_private_netns()
-    print(f"CPUs: {os.cpu_count()}; load average {os.getloadavg()[0]:.2f} at start")
+    tree = args.tree.resolve() if args.tree else None
+    which = tree or Path(__file__).resolve().parent.parent
+    commit = subprocess.run(
+        ["git", "-C", str(which), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+    ).stdout.strip()
+    print(
+        f"CPUs: {os.cpu_count()}; load average {os.getloadavg()[0]:.2f} at start; agents from {which} "
+        f"({commit or '?'}){'; a second process busy' if args.busy else ''}"
+    )
+    busy = None
+    if args.busy:
+        import multiprocessing
+
+        busy = multiprocessing.Process(target=busy_loop, args=(time.monotonic() + 3600,), daemon=True)
+        busy.start()
     print(
         f"{'agents':>6} {'procs':>5} {'STANDBY s':>9} {'telem Hz min/mean':>18} {'MC react p50/p99/max ms':>24} "
-        f"{'HLC react p50/max ms':>21} {'RSS MiB':>8} {'CPU %':>6} {'us/agent-s':>10}  verdict"
+        f"{'HLC react p50/max ms':>21} {'RSS MiB':>8} {'CPU %':>6} {'us/agent-s':>10} {'ref us':>6} {'x ref':>6}"
+        "  verdict"
     )
-    with tempfile.TemporaryDirectory() as tmp:
-        for n in args.sizes:
-            procs = args.processes if args.processes is not None else math.ceil(n / 1000)
-            r = run(n, Path(tmp), args.processes)
-            if "error" in r:
-                print(
-                    f"{n:>6} {procs:>5}  only {int(r['error'])} agents reached STANDBY within 60 s",
-                    flush=True,
-                )
-                continue
-            ok = (
-                r["standby_s"] <= 30
-                and r["telemetry_hz_min"] >= 9.5
-                and r["mc_max_ms"] < 100
-                and r["mc_reacted"] == n
-                and r["rss_mib"] < 1024 * max(1.0, n / 1000)
-            )
-            print(
-                f"{n:>6} {procs:>5} {r['standby_s']:>9.1f} {r['telemetry_hz_min']:>8.1f}/{r['telemetry_hz_mean']:<9.1f} "
-                f"{r['mc_p50_ms']:>8.1f}/{r['mc_p99_ms']:.1f}/{r['mc_max_ms']:<8.1f} "
-                f"{r['hlc_p50_ms']:>10.1f}/{r['hlc_max_ms']:<10.1f} {r['rss_mib']:>8.0f} {r['cpu_pct']:>6.0f} "
-                f"{r['us_per_agent_s']:>10.0f}  {'OK' if ok else 'over target'}  (load {os.getloadavg()[0]:.2f})",
-                flush=True,
-            )
-            print(
-                f"{'':>12} kernel drops in the telemetry window: this listener's socket {r['listener_dropped']:.0f}, "
-                f"the agent processes' sockets {r['agents_dropped']:.0f}",
-                flush=True,
-            )
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            for n in [size for size in args.sizes for _ in range(args.repeat)]:
+                _measure(n, Path(tmp), args.processes, tree)
+    finally:
+        if busy is not None:
+            busy.terminate()
+
+
+def _measure(n: int, tmp: Path, processes: int | None, tree: Path | None) -> None:
+    procs = processes if processes is not None else math.ceil(n / 1000)
+    ref = reference()
+    r = run(n, tmp, processes, tree)
+    if "error" in r:
+        print(f"{n:>6} {procs:>5}  only {int(r['error'])} agents reached STANDBY within 60 s", flush=True)
+        return
+    ok = (
+        r["standby_s"] <= 30
+        and r["telemetry_hz_min"] >= 9.5
+        and r["mc_max_ms"] < 100
+        and r["mc_reacted"] == n
+        and r["rss_mib"] < 1024 * max(1.0, n / 1000)
+    )
+    print(
+        f"{n:>6} {procs:>5} {r['standby_s']:>9.1f} {r['telemetry_hz_min']:>8.1f}/{r['telemetry_hz_mean']:<9.1f} "
+        f"{r['mc_p50_ms']:>8.1f}/{r['mc_p99_ms']:.1f}/{r['mc_max_ms']:<8.1f} "
+        f"{r['hlc_p50_ms']:>10.1f}/{r['hlc_max_ms']:<10.1f} {r['rss_mib']:>8.0f} {r['cpu_pct']:>6.0f} "
+        f"{r['us_per_agent_s']:>10.0f} {ref:>6.2f} {r['us_per_agent_s'] / ref:>6.0f}  "
+        f"{'OK' if ok else 'over target'}  (load {os.getloadavg()[0]:.2f})",
+        flush=True,
+    )
+    print(
+        f"{'':>12} kernel drops in the telemetry window: this listener's socket {r['listener_dropped']:.0f}, "
+        f"the agent processes' sockets {r['agents_dropped']:.0f}",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":

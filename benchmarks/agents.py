@@ -19,8 +19,8 @@ Figures only (docs/design.md §12): the machine is shared, so the load average i
 
 A reference workload is measured in the same run, just before each size starts, so figures from two
 machines (or two moments of one) can be compared: ``ref`` is the CPU time one raw-lcm message costs
-this machine now -- build a ``telemetry_t``, encode it with lcm-gen, ``lcm.publish`` it on the same
-udpm URL, decode it -- in µs (the mean of 20,000), and ``x ref`` is the agents' CPU per agent-second
+this machine now -- take one of a thousand senders' ``telemetry_t``, encode it with lcm-gen,
+``lcm.publish`` it on the same udpm URL, decode it -- in µs (the mean of 20,000), and ``x ref`` is the agents' CPU per agent-second
 divided by it: how many such raw messages' worth of CPU one simulated agent costs a second. An agent
 publishes 20 messages a second (telemetry at 10 Hz, its MC and HLC states at 5 Hz each), so 20 x
 would be an agent that costs no more than raw lcm sending its traffic. The ratio moves much less
@@ -131,15 +131,21 @@ def reference(url: str = URL) -> float:
     from antalate_lcm.msgs import telemetry_t
 
     lc = lcm.LCM(url)
-    msg = telemetry_t()
-    msg.header.agent = "ref-001"
-    msg.mode = "GUIDED"
+    # A thousand senders' messages in turn, as a thousand agents' are: a working set the size of
+    # a swarm's, not one message hot in the cache.
+    msgs = []
+    for k in range(1000):
+        msg = telemetry_t()
+        msg.header.agent = f"ref-{k:03d}"
+        msg.mode = "GUIDED"
+        msgs.append((f"ref-{k:03d}/TELEMETRY", msg))
     t0 = time.thread_time()
     for i in range(REFERENCE_MESSAGES):
+        channel, msg = msgs[i % 1000]
         msg.header.seq = i
         msg.lat = 32.0 + i * 1e-7
         data = msg.encode()
-        lc.publish("ref-001/TELEMETRY", data)
+        lc.publish(channel, data)
         telemetry_t.decode(data)
     return (time.thread_time() - t0) / REFERENCE_MESSAGES * 1e6
 

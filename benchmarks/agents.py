@@ -10,10 +10,16 @@ listens from this process with raw LCM, and prints:
   received), p50 / p99 / max over the agents (target max < 100 ms),
 - the HLC reaction (MC TAKEOFF → HLC TAKEOFF, the next link in the chain),
 - the agent processes' RSS (summed; target < 1 GiB per 1,000 agents), CPU (% of one core, summed)
-  and CPU per agent: microseconds of CPU per agent-second, which shows how the cost grows with N.
+  and CPU per agent: microseconds of CPU per agent-second, which shows how the cost grows with N;
+- then, every agent in MISSION hovering (homes 8 m apart), the same telemetry rate and CPU in flight
+  (with ``--safety`` every HLC then filters its set-point each control tick).
 
-    python benchmarks/agents.py [N ...] [--processes P] [--repeat R] [--busy] [--tree DIR]
+    python benchmarks/agents.py [N ...] [--processes P] [--safety] [--repeat R] [--busy] [--tree DIR]
                                                             (default sizes: 500 1000 2000)
+
+``--safety`` turns the separation filter on in every agent (``[safety] enabled``, docs/safety.md):
+each process then feeds one swarm picture with every agent's telemetry, and each HLC filters its
+velocity set-points in flight; benchmarks/safety_filter.py runs 1,000 agents both ways in one run.
 
 Figures only (docs/design.md §12): the machine is shared, so the load average is printed beside them.
 
@@ -156,14 +162,21 @@ def busy_loop(stop_at: float) -> None:
             x = (x * 31 + i) % 1_000_003
 
 
-def run(n: int, tmp: Path, processes: int | None, tree: Path | None = None) -> dict[str, float]:
+def run(
+    n: int, tmp: Path, processes: int | None, safety: bool = False, tree: Path | None = None
+) -> dict[str, float]:
     import lcm
 
     from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
     from antalate_lcm.udpm_socket import UdpmReceiver
 
     cfg = tmp / "bench.toml"
-    cfg.write_text(f'[agent]\nname = "b"\n[buses]\nlan = "{URL}"\n[hlc]\nautopilot = "sim"\n')
+    text = f'[agent]\nname = "b"\n[buses]\nlan = "{URL}"\n[hlc]\nautopilot = "sim"\n'
+    if safety:
+        # The filter's swarm picture hears every agent's TELEMETRY on the LAN: unsigned only by
+        # choice (a private namespace here; a real swarm sets [security] swarm_key, docs/security.md).
+        text += "[safety]\nenabled = true\n[security]\ninsecure = true\n"
+    cfg.write_text(text)
     log = open(tmp / f"agents-{n}.log", "w")  # noqa: SIM115
     argv = [
         sys.executable,
@@ -195,6 +208,7 @@ def run(n: int, tmp: Path, processes: int | None, tree: Path | None = None) -> d
     mc_takeoff: dict[str, float] = {}
     hlc_takeoff: dict[str, float] = {}
     standby: set[str] = set()
+    mission: set[str] = set()
 
     def on_msg(channel: str, data: bytes) -> None:
         agent, _, topic = channel.partition("/")
@@ -208,6 +222,8 @@ def run(n: int, tmp: Path, processes: int | None, tree: Path | None = None) -> d
                     standby.add(agent)
                 elif st == mc_state_t.TAKEOFF and agent not in mc_takeoff:
                     mc_takeoff[agent] = now
+                elif st == mc_state_t.MISSION:
+                    mission.add(agent)
             elif (
                 topic == "HLC_STATE"
                 and hlc_state_t.decode(data).state == hlc_state_t.TAKEOFF
@@ -231,6 +247,9 @@ def run(n: int, tmp: Path, processes: int | None, tree: Path | None = None) -> d
         while len(standby) < n and time.time() < deadline:
             time.sleep(0.1)
         if len(standby) < n:
+            log.flush()
+            tail = (tmp / f"agents-{n}.log").read_text().splitlines()[-5:]
+            print("\n".join(f"    agent log: {line}" for line in tail), flush=True)
             return {"n": n, "error": float(len(standby))}
         standby_s = time.perf_counter() - started
         time.sleep(2.0)  # settle
@@ -260,6 +279,28 @@ def run(n: int, tmp: Path, processes: int | None, tree: Path | None = None) -> d
         with lock:
             mc_lat = [(t - sent) * 1000 for t in mc_takeoff.values()]
             hlc_lat = [(hlc_takeoff[a] - mc_takeoff[a]) * 1000 for a in hlc_takeoff if a in mc_takeoff]
+        # In flight: every agent hovering in MISSION (with --safety each HLC filters its set-point on
+        # every control tick against its neighbours, 8 m apart), the same 5 s window.
+        deadline3 = time.time() + 60
+        while len(mission) < n and time.time() < deadline3:
+            time.sleep(0.2)
+        flight: dict[str, float] = {"flying": float(len(mission))}
+        if len(mission) == n:
+            time.sleep(2.0)
+            with lock:
+                telem.clear()
+            cpu2 = proc_stats(proc.pid)[1]
+            t2 = time.perf_counter()
+            time.sleep(5.0)
+            window2 = time.perf_counter() - t2
+            cpu3 = proc_stats(proc.pid)[1]
+            with lock:
+                flown = [telem.get(a, 0) / window2 for a in mission]
+            flight.update(
+                flight_hz_min=min(flown),
+                flight_cpu_pct=100 * (cpu3 - cpu2) / window2,
+                flight_us_per_agent_s=(cpu3 - cpu2) / window2 / n * 1e6,
+            )
         return {
             "n": n,
             "standby_s": standby_s,
@@ -276,6 +317,7 @@ def run(n: int, tmp: Path, processes: int | None, tree: Path | None = None) -> d
             "us_per_agent_s": (cpu1 - cpu0) / window / n * 1e6,
             "listener_dropped": dropped.get(mine, 0),
             "agents_dropped": sum(d for ino, d in dropped.items() if ino != mine),
+            **flight,
         }
     finally:
         stop.set()
@@ -303,6 +345,9 @@ def main() -> None:
         type=int,
         help="agent processes (default: one per 1,000 agents; 0: no --processes option)",
     )
+    parser.add_argument(
+        "--safety", action="store_true", help="every agent with the separation filter on ([safety] enabled)"
+    )
     parser.add_argument("--repeat", type=int, default=1, help="runs of each size")
     parser.add_argument("--busy", action="store_true", help="a second process spins for the whole run")
     parser.add_argument("--tree", type=Path, help="run the agents from this checkout (a baseline)")
@@ -317,6 +362,7 @@ def main() -> None:
         f"CPUs: {os.cpu_count()}; load average {os.getloadavg()[0]:.2f} at start; agents from {which} "
         f"({commit or '?'}){'; a second process busy' if args.busy else ''}"
     )
+    print(f"separation filter ([safety] enabled): {'on' if args.safety else 'off'}")
     busy = None
     if args.busy:
         import multiprocessing
@@ -332,16 +378,16 @@ def main() -> None:
     try:
         with tempfile.TemporaryDirectory() as tmp:
             for n in [size for size in args.sizes for _ in range(args.repeat)]:
-                _measure(n, Path(tmp), args.processes, tree)
+                _measure(n, Path(tmp), args.processes, args.safety, tree)
     finally:
         if busy is not None:
             busy.terminate()
 
 
-def _measure(n: int, tmp: Path, processes: int | None, tree: Path | None) -> None:
+def _measure(n: int, tmp: Path, processes: int | None, safety: bool, tree: Path | None) -> None:
     procs = processes if processes is not None else math.ceil(n / 1000)
     ref = reference()
-    r = run(n, tmp, processes, tree)
+    r = run(n, tmp, processes, safety, tree)
     if "error" in r:
         print(f"{n:>6} {procs:>5}  only {int(r['error'])} agents reached STANDBY within 60 s", flush=True)
         return
@@ -368,6 +414,14 @@ def _measure(n: int, tmp: Path, processes: int | None, tree: Path | None) -> Non
         f"the agent processes' sockets {r['agents_dropped']:.0f}",
         flush=True,
     )
+    if "flight_cpu_pct" in r:
+        print(
+            f"{'':>12} in flight (all {n} in MISSION, hovering): telemetry min {r['flight_hz_min']:.1f} Hz, "
+            f"CPU {r['flight_cpu_pct']:.0f} %, {r['flight_us_per_agent_s']:.0f} us/agent-s",
+            flush=True,
+        )
+    else:
+        print(f"{'':>12} in flight: only {r['flying']:.0f} of {n} reached MISSION within 60 s", flush=True)
 
 
 if __name__ == "__main__":

@@ -124,6 +124,28 @@ def test_our_takeoff_ends_in_our_hold_and_our_offboard_is_ours() -> None:
     assert v.ours and v.flying_guided
 
 
+@pytest.mark.parametrize(
+    ("mode", "armed", "status", "expected"),
+    [
+        (HOLD, True, mav.MAV_STATE_ACTIVE, FlightMode.GUIDED),  # hovering after our take-off or our stop
+        (OFFBOARD, True, mav.MAV_STATE_ACTIVE, FlightMode.GUIDED),
+        (HOLD, True, mav.MAV_STATE_CRITICAL, FlightMode.HOLD),  # a failsafe's Hold stays the failsafe's
+        (POSCTL, True, mav.MAV_STATE_ACTIVE, FlightMode.MANUAL),  # a pilot's stick mode
+    ],
+)
+def test_an_adapter_restarted_in_flight_takes_px4s_hold_and_offboard_as_its_own(
+    mode: int, armed: bool, status: int, expected: FlightMode
+) -> None:
+    """The real PX4 showed it: an HLC restarted in flight found PX4 in Hold, and took it for a pilot."""
+    v = Px4Vehicle()
+    v.update(in_air(), 0.0)
+    v.update(heartbeat(mode, armed, status), 0.0)  # the first HEARTBEAT this adapter hears
+    assert v.autopilot_state(0.0).flight_mode is expected
+    assert v.ours is (expected is FlightMode.GUIDED)
+    v.update(heartbeat(POSCTL, armed, status), 1.0)  # the pilot's next mode change is still a pilot's
+    assert v.autopilot_state(1.0).flight_mode is not FlightMode.GUIDED
+
+
 def test_a_pilots_mode_change_is_manual_and_drops_the_setpoint() -> None:
     v = flying(OFFBOARD)
     update = v.update(heartbeat(HOLD), 2.0)  # another ground station's Hold, no failsafe flag

@@ -111,6 +111,7 @@ _.set_time_scale
 _.sim_time
 _.position_ne  # TelloAutopilot dead reckoning (tests/test_tello_adapter.py)
 _.takeoff_point
+_.dead_reckoning_problem  # TelloAutopilot: the velocity unit check for tools (tests/test_tello_adapter.py)
 _.from_wgs84  # crazyflie frames: the inverse, checked round trip (tests/test_crazyflie_units.py)
 _.block_size  # crazyflie log blocks fit one packet (tests/test_crazyflie_units.py)
 _.LOG_MAX_BYTES

@@ -17,11 +17,11 @@ from typing import Any
 
 import lcm
 
-from antalate_lcm.analysis.model import DirectionCommand, SwarmRecord, TelemetrySample
+from antalate_lcm.analysis.model import DirectionCommand, SafetyEvent, SwarmRecord, TelemetrySample
 from antalate_lcm.bus import captured_stderr
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.mcap_log import McapEvents, is_mcap, read_events
-from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, telemetry_t
+from antalate_lcm.msgs import direction_cmd_t, hlc_error_t, hlc_state_t, mc_state_t, telemetry_t
 from antalate_lcm.topics import TOPICS, route
 from antalate_lcm.vocabulary import HlcState, McState, name_of
 
@@ -29,7 +29,9 @@ from antalate_lcm.vocabulary import HlcState, McState, name_of
 LOG_SYNC_WORD = 0xEDA1DA01
 
 #: Topics the analysis decodes.
-_USED = ("SWARM_DIRECTION_CMD", "MC_STATE", "HLC_STATE", "TELEMETRY", "DIRECTION_CMD")
+_USED = ("SWARM_DIRECTION_CMD", "MC_STATE", "HLC_STATE", "TELEMETRY", "DIRECTION_CMD", "HLC_ERROR")
+#: ``hlc_error_t.code`` of the safety filter's reports (antalate_lcm.hlc.machine.ErrorCode.SAFETY).
+SAFETY_CODE = 14
 
 
 def check_log_file(path: str | Path) -> Path:
@@ -188,3 +190,5 @@ def _decode_into(
         rec.add_state(rec.mc_states, t, name_of(McState, msg.state) or f"?{msg.state}")
     elif isinstance(msg, hlc_state_t):
         rec.add_state(rec.hlc_states, t, name_of(HlcState, msg.state) or f"?{msg.state}")
+    elif isinstance(msg, hlc_error_t) and msg.code == SAFETY_CODE:
+        record.safety_events.append(SafetyEvent(t, rec.name, int(msg.severity), str(msg.text)))

@@ -29,6 +29,7 @@ from typing import Any
 
 from antalate_lcm.analysis.model import DirectionCommand, SwarmRecord
 from antalate_lcm.analysis.phases import Window, flight_phases, mission_window
+from antalate_lcm.analysis.safety import SafetyAnalysis, SafetyLimits, analyze_safety, format_safety
 from antalate_lcm.analysis.swarm import (
     DEFAULT_MIN_SPEED,
     DEFAULT_RANGE_M,
@@ -103,6 +104,8 @@ class Analysis:
     series: list[SwarmSample] = field(default_factory=list)
     #: Every agent's trajectory in the local frame (left out of :meth:`to_json` unless asked for).
     tracks: dict[str, Track] = field(default_factory=dict)
+    #: Separation, near-misses, fence breaches and SAFETY reports (analysis/safety.py), when limits were given.
+    safety: SafetyAnalysis | None = None
 
     def phase(self, name: str) -> PhaseMetrics | None:
         """The metrics of the phase called ``name`` ("takeoff", "mission", "return"), if the log has it."""
@@ -262,9 +265,11 @@ def analyze(
     min_speed: float = DEFAULT_MIN_SPEED,
     radius_below: float | None = None,
     radius_above: float | None = None,
+    safety: SafetyLimits | None = None,
 ) -> Analysis:
     """Cohesion over time, the mission window's cohesion ratio, the drift against the command, and
-    the swarm metrics of :mod:`.swarm` over time and per flight phase.
+    the swarm metrics of :mod:`.swarm` over time and per flight phase; with `safety`, the checks of
+    :mod:`.safety` against those limits.
 
     ``azimuth`` overrides the log's direction commands (for logs recorded without the operator's
     channels, or to ask how far the swarm went in some other direction). ``step``, ``range_m``,
@@ -301,6 +306,8 @@ def analyze(
         )
         for phase in flight_phases(record, result.window)
     ]
+    if safety is not None:
+        result.safety = analyze_safety(record, safety, origin, step=step, max_age=max_age)
     window = result.window
     if window is None:
         result.notes.append("no mission window: the swarm never flew a mission together")
@@ -393,5 +400,7 @@ def format_summary(a: Analysis) -> str:
                 f"drift {d.start:.1f}..{d.end:.1f} s: centroid heading {d.heading:.1f} deg, {d.distance:.1f} m at "
                 f"{d.speed:.2f} m/s over {d.agents} agent(s); {cmd}; error {d.error:+.1f} deg"
             )
+    if a.safety is not None:
+        lines += format_safety(a.safety)
     lines.extend(f"note: {n}" for n in a.notes)
     return "\n".join(lines)

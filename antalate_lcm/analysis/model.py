@@ -48,6 +48,19 @@ class DirectionCommand:
     sender: str
 
 
+@dataclass(frozen=True, slots=True)
+class SafetyEvent:
+    """A SAFETY report of an agent's HLC (``hlc_error_t`` code 14, docs/safety.md): its command was
+    modified (by separation or fence), it could not keep a constraint, it had no peer information,
+    or its fence was mirrored into the autopilot."""
+
+    t: float
+    agent: str
+    #: ``hlc_error_t.severity``: 0 INFO, 1 WARNING, 2 ERROR, 3 CRITICAL.
+    severity: int
+    text: str
+
+
 @dataclass
 class AgentRecord:
     """Everything one agent published that the analysis uses."""
@@ -75,6 +88,8 @@ class SwarmRecord:
     events: int = 0
     agents: dict[str, AgentRecord] = field(default_factory=dict)
     directions: list[DirectionCommand] = field(default_factory=list)
+    #: Every SAFETY report of the agents' HLCs, in log order.
+    safety_events: list[SafetyEvent] = field(default_factory=list)
     #: Events on antalate channels that did not decode as their type (garbage, other versions), by channel.
     undecodable: dict[str, int] = field(default_factory=dict)
     #: Events on channels that are not antalate's, by channel.

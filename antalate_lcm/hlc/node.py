@@ -436,10 +436,12 @@ class HlcNode(Node):
         self._error(HlcError(ErrorCode.SAFETY, severity, describe(d)))
 
     def _mirror_fence(self) -> None:
-        """Write the swarm fence into an ArduPilot's FENCE_* parameters and read them back, once, on the
-        ground with a position fix (antalate_lcm.autopilot.mavlink.fence_mirror): it holds if we die."""
+        """Write the swarm fence into the autopilot's own fence parameters and read them back, once, on
+        the ground with a position fix: ArduPilot's FENCE_* (antalate_lcm.autopilot.mavlink.fence_mirror),
+        PX4's GF_* (antalate_lcm.autopilot.px4.fence_mirror). It holds if we die."""
         safety, fence_config = self.safety, self.config.safety.fence
-        if safety is None or fence_config is None or self.autopilot.name != "mavlink" or not self.connected:
+        kind = self.autopilot.name
+        if safety is None or fence_config is None or kind not in ("mavlink", "px4") or not self.connected:
             return
         s = self.snapshot
         here = safety.position(s)
@@ -447,13 +449,15 @@ class HlcNode(Node):
         if here is None or fence is None or s.in_air or s.armed:
             return
         self._fence_mirrored = True
-        from antalate_lcm.autopilot.mavlink.fence_mirror import ParamLink, fence_parameters, mirror
+        from antalate_lcm.autopilot.mavlink import fence_mirror as ardupilot
+        from antalate_lcm.autopilot.px4 import fence_mirror as px4
 
-        wanted = fence_parameters(fence, (here[0], here[1]), fence_config.outside)
-        link = cast(ParamLink, self.autopilot)
+        module = px4 if kind == "px4" else ardupilot
+        wanted = module.fence_parameters(fence, (here[0], here[1]), fence_config.outside)
+        link = cast(ardupilot.ParamLink, self.autopilot)
 
         def call() -> None:
-            problems = mirror(link, wanted)
+            problems = module.mirror(link, wanted)
             if problems:
                 raise AutopilotError("; ".join(problems))
 

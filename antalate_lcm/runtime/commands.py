@@ -214,7 +214,39 @@ def _analysis_options(args: argparse.Namespace) -> dict[str, Any]:
         "min_speed": args.min_speed,
         "radius_below": args.radius_below,
         "radius_above": args.radius_above,
+        "safety": _safety_limits(args),
     }
+
+
+def _safety_limits(args: argparse.Namespace) -> Any:
+    """The `SafetyLimits` of ``--safety CONFIG`` and ``--radius``/``--vertical``/``--margin``/``--near-miss``
+    (None when neither a config nor a radius is given: no safety section)."""
+    from antalate_lcm.analysis import SafetyLimits
+    from antalate_lcm.hlc.safety import MEASURED_MARGIN, filter_params
+
+    radius, vertical, margin = args.radius, args.vertical, args.margin
+    fence, origin = None, None
+    if args.safety is not None:
+        config = load_config(args.safety)
+        sep = filter_params(config).separation
+        radius = radius if radius is not None else sep.radius
+        vertical = vertical if vertical is not None else sep.vertical
+        if margin is None:
+            margin = MEASURED_MARGIN.get(config.hlc.autopilot, 0.0)
+        s = config.safety
+        if s.origin:
+            origin = (s.origin[0], s.origin[1])
+        elif s.fence is not None and s.fence.polygon_wgs84:
+            first = s.fence.polygon_wgs84[0]
+            origin = (first[0], first[1])  # any point will do as the frame of a WGS84 fence
+        if s.fence is not None and origin is not None:
+            fence = s.fence.geofence(origin)
+    if radius is None:
+        for flag in ("vertical", "margin", "near_miss"):
+            if getattr(args, flag) is not None:
+                raise AntalateError(f"--{flag.replace('_', '-')} needs --radius or --safety CONFIG")
+        return None
+    return SafetyLimits(radius, vertical, margin or 0.0, args.near_miss, fence, origin)
 
 
 def _add_analysis_options(p: argparse.ArgumentParser) -> None:
@@ -257,6 +289,29 @@ def _add_analysis_options(p: argparse.ArgumentParser) -> None:
         type=_positive,
         metavar="M",
         help="report when the radius first rises above M metres",
+    )
+    p.add_argument(
+        "--safety",
+        metavar="CONFIG",
+        help="check separation, near-misses and the fence against this agent config's [safety] (docs/safety.md)",
+    )
+    p.add_argument(
+        "--radius", type=_positive, metavar="M", help="separation radius, m (overrides --safety's)"
+    )
+    p.add_argument(
+        "--vertical", type=_positive, metavar="M", help="separation half-height, m (default: 3-D distance)"
+    )
+    p.add_argument(
+        "--margin",
+        type=float,
+        metavar="M",
+        help="m below the radius still within the documented margin (default: the vehicle's, docs/safety.md)",
+    )
+    p.add_argument(
+        "--near-miss",
+        type=_positive,
+        metavar="M",
+        help="encounters closer than M m are near-misses (default: the radius)",
     )
 
 

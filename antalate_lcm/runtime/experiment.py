@@ -206,9 +206,12 @@ def run(exp: Experiment) -> Outcome:
     configs, bus, out = prepare(exp)
     processes = min(exp.processes, len(configs))
     buses = shared_buses(configs)
-    # One process: every agent's internal topics in memory, as `antalate agent` runs them. Several:
-    # this process only commands and records, on the configured buses.
-    context = Context.in_process(buses) if processes == 1 else Context(Bus(buses), Executor())
+    # One process: every agent's internal topics in memory, as `antalate agent` runs them, and the
+    # whole swarm here (a peer behavior may hear its peers on memq://). Several: this process only
+    # commands and records, on the configured buses.
+    context = (
+        Context.in_process(buses, whole_swarm=True) if processes == 1 else Context(Bus(buses), Executor())
+    )
     recorder = LogRecorder(configs[0].with_agent_name("recorder"), context, bus=bus, path=out)
     nodes: list[Node] = [recorder]
     if processes == 1:

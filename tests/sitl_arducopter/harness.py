@@ -5,6 +5,7 @@
 with ``copter.parm`` beside it; ../shared/sitl/README.md), a `gcs` helper that relays the agent's TCP
 link to SERIAL0 (so the test can cut or stall it) and watches the vehicle on SERIAL1, and the agent (MC +
 HLC with the ``mavlink`` adapter + a BMA running ``direction_follow``, or ``dovrat_swarm``).
+`SitlVehicle`, `Gcs` and `agent_doc` are shared with the PX4 SITL tests (tests/sitl_px4/harness.py).
 """
 
 from __future__ import annotations
@@ -42,15 +43,16 @@ def sitl_missing() -> str | None:
 
 
 class Gcs(JsonLinesProcess):
-    """Client of `gcs`: the vehicle's own record, a second ground station, and the link's relay."""
+    """Client of `gcs`: the vehicle's own record, a second ground station, and the link's relay.
 
-    def __init__(self, netns: NetNamespace, instance: int) -> None:
+    ``args``: `gcs`'s command line (its link to the vehicle, ``--stack``, the relay).
+    """
+
+    def __init__(self, netns: NetNamespace, *args: str) -> None:
         proc = netns.python(
             "-m",
             "tests.sitl_arducopter.gcs",
-            f"tcp:127.0.0.1:{5762 + 10 * instance}",
-            str(RELAY_PORT + 10 * instance),
-            str(5760 + 10 * instance),
+            *args,
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
@@ -62,17 +64,86 @@ class Gcs(JsonLinesProcess):
         assert reply["ok"], reply
         return reply
 
-    def state(self) -> dict[str, Any]:
-        return self.ok(op="state")
+    def state(self, system: int | None = None) -> dict[str, Any]:
+        return self.ok(op="state") if system is None else self.ok(op="state", system=system)
 
-    def set_param(self, name: str, value: float) -> None:
-        self.ok(op="set_param", name=name, value=value)
+    def set_param(self, name: str, value: float, *, integer: bool = False) -> None:
+        self.ok(op="set_param", name=name, value=value, int=integer)
 
     def relay(self, mode: str) -> None:
         self.ok(op="relay", mode=mode)
 
 
-class Copter:
+def agent_doc(
+    name: str,
+    adapter: str,
+    connection: str,
+    *,
+    bma: list[dict[str, Any]] | None = None,
+    hlc: dict[str, Any] | None = None,
+    autopilot: dict[str, Any] | None = None,
+    sections: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """The agent's config for a SITL vehicle: MC + HLC (`adapter` on `connection`) + a BMA flying
+    ``direction_follow`` in MISSION unless `bma` says otherwise; `sections` adds more ([safety], ...)."""
+    return {
+        "agent": {"name": name},
+        "buses": {"lan": MCAST_URL},
+        "hlc": {
+            "autopilot": adapter,
+            "default_takeoff_altitude": 5.0,
+            "gain_altitude_timeout": 40.0,
+            **(hlc or {}),
+            "autopilot_params": {
+                "connection": connection,
+                "ready_timeout": 120.0,
+                "stream_rate_hz": 10.0,
+                **(autopilot or {}),
+            },
+        },
+        "bma": bma
+        or [
+            {
+                "name": "pilot",
+                "behaviors": [{"plugin": "direction_follow", "activate_on": ["MISSION"]}],
+            }
+        ],
+        "security": {"insecure": True},  # the probe plays an unsigned operator
+        **(sections or {}),
+    }
+
+
+class SitlVehicle:
+    """A SITL firmware process, the `Gcs` beside it and the agent that flies it (subclasses start them)."""
+
+    netns: NetNamespace
+    name: str
+    gcs: Gcs
+    sitl: subprocess.Popen[str]
+    agent: AgentProcesses
+    nodes: tuple[str, ...]
+    booted_at: float
+
+    def start(self, node: str) -> None:
+        """Start ``node`` ("agent", or "hlc", "mc", "bma" each in its own process)."""
+        if node == "bma":
+            self.agent.start("bma", "--name", "pilot")
+        else:
+            self.agent.start(node)
+
+    def start_agent(self, workdir: Path, doc: dict[str, Any], nodes: tuple[str, ...]) -> None:
+        self.agent = AgentProcesses(self.netns, workdir, doc)
+        self.nodes = nodes
+        for node in nodes:
+            self.start(node)
+
+    def stop(self) -> None:
+        self.agent.stop()
+        stop_process(self.sitl)
+        stop_process(self.gcs.proc)
+
+
+class Copter(SitlVehicle):
     """SITL instance ``instance`` (system id instance + 1) and the agent ``name`` that flies it."""
 
     def __init__(
@@ -88,11 +159,18 @@ class Copter:
         hlc: dict[str, Any] | None = None,
         autopilot: dict[str, Any] | None = None,
         nodes: tuple[str, ...] = ("agent",),
+        sections: dict[str, Any] | None = None,
     ) -> None:
         self.netns, self.instance, self.name = netns, instance, name
         workdir.mkdir(parents=True, exist_ok=True)
         self.workdir = workdir
-        self.gcs = Gcs(netns, instance)  # the relay listens before the agent connects
+        # the relay listens before the agent connects
+        self.gcs = Gcs(
+            netns,
+            f"tcp:127.0.0.1:{5762 + 10 * instance}",
+            "--tcp-relay",
+            f"{RELAY_PORT + 10 * instance}:{5760 + 10 * instance}",
+        )
         binary = sitl_binary()
         self.booted_at = time.monotonic()
         self.sitl = netns.popen(
@@ -103,7 +181,7 @@ class Copter:
                 "--speedup",
                 f"{speedup:g}",
                 "--home",
-                ",".join(f"{x:g}" for x in home),
+                ",".join(f"{x:.10g}" for x in home),  # ":g" kept 6 digits: 21 m off in longitude
                 "--defaults",
                 str(binary.parent / "copter.parm"),
                 "--instance",
@@ -116,44 +194,7 @@ class Copter:
             stdout=open(workdir / "sitl.log", "w"),  # noqa: SIM115 - closed with the process
             stderr=subprocess.STDOUT,
         )
-        doc: dict[str, Any] = {
-            "agent": {"name": name},
-            "buses": {"lan": MCAST_URL},
-            "hlc": {
-                "autopilot": "mavlink",
-                "default_takeoff_altitude": 5.0,
-                "gain_altitude_timeout": 40.0,
-                **(hlc or {}),
-                "autopilot_params": {
-                    "connection": f"tcp:127.0.0.1:{RELAY_PORT + 10 * instance}",
-                    "ready_timeout": 120.0,
-                    "stream_rate_hz": 10.0,
-                    **(autopilot or {}),
-                },
-            },
-            "bma": bma
-            or [
-                {
-                    "name": "pilot",
-                    "behaviors": [{"plugin": "direction_follow", "activate_on": ["MISSION"]}],
-                }
-            ],
-            "security": {"insecure": True},  # the probe plays an unsigned operator
-        }
-        self.agent = AgentProcesses(netns, workdir, doc)
-        self.nodes = nodes
-        for node in nodes:
-            self.start(node)
+        connection = f"tcp:127.0.0.1:{RELAY_PORT + 10 * instance}"
+        doc = agent_doc(name, "mavlink", connection, bma=bma, hlc=hlc, autopilot=autopilot, sections=sections)
+        self.start_agent(workdir, doc, nodes)
         self.gcs.ok(op="connect")
-
-    def start(self, node: str) -> None:
-        """Start ``node`` ("agent", or "hlc", "mc", "bma" each in its own process)."""
-        if node == "bma":
-            self.agent.start("bma", "--name", "pilot")
-        else:
-            self.agent.start(node)
-
-    def stop(self) -> None:
-        self.agent.stop()
-        stop_process(self.sitl)
-        stop_process(self.gcs.proc)

@@ -79,3 +79,65 @@ class Relay:
                     continue
             with contextlib.suppress(OSError):
                 dst.sendall(data)
+
+
+class UdpRelay:
+    """`Relay`'s modes for a UDP link (PX4's offboard link): between a vehicle that sends to
+    ``listen_port`` and an adapter listening (``udpin``) on ``adapter_port``.
+
+    PX4 SITL instance N sends its offboard link to 14540+N from 14580+N (../shared/sitl/px4/README.txt):
+    the relay takes 14540+N, forwards what PX4 sends to the adapter from a socket of its own, and what the
+    adapter answers to wherever PX4 last sent from. ``stall`` holds datagrams and ``pass`` delivers them in
+    order, as the TCP relay does with its bytes.
+    """
+
+    def __init__(self, listen_port: int, adapter_port: int, host: str = "127.0.0.1") -> None:
+        self.mode = "pass"
+        self._lock = threading.Lock()
+        self._held: dict[str, list[bytes]] = {"up": [], "down": []}
+        self._vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._vehicle.bind((host, listen_port))
+        self._adapter = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._adapter.bind((host, 0))
+        self._adapter_addr = (host, adapter_port)
+        self._vehicle_addr: tuple[str, int] | None = None
+        threading.Thread(target=self._pump, args=("down",), daemon=True).start()
+        threading.Thread(target=self._pump, args=("up",), daemon=True).start()
+
+    def set_mode(self, mode: str) -> None:
+        if mode not in MODES:
+            raise ValueError(f"relay mode {mode!r}: one of {MODES}")
+        with self._lock:
+            self.mode = mode
+            if mode != "pass":
+                return
+            held = {k: list(v) for k, v in self._held.items()}
+            for v in self._held.values():
+                v.clear()
+        for key, datagrams in held.items():
+            for data in datagrams:
+                self._send(key, data)
+
+    def _send(self, key: str, data: bytes) -> None:
+        with contextlib.suppress(OSError):
+            if key == "down":
+                self._adapter.sendto(data, self._adapter_addr)
+            elif self._vehicle_addr is not None:
+                self._vehicle.sendto(data, self._vehicle_addr)
+
+    def _pump(self, key: str) -> None:
+        sock = self._vehicle if key == "down" else self._adapter
+        while True:
+            try:
+                data, addr = sock.recvfrom(65536)
+            except OSError:
+                continue  # ICMP port unreachable while the adapter is not listening yet
+            with self._lock:
+                if key == "down":
+                    self._vehicle_addr = addr
+                if self.mode == "cut":
+                    continue
+                if self.mode == "stall":
+                    self._held[key].append(data)
+                    continue
+            self._send(key, data)

@@ -8,11 +8,9 @@ and what the vehicle did by its own telemetry on a second MAVLink link (`gcs`), 
 
 from __future__ import annotations
 
-import itertools
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -22,99 +20,28 @@ from antalate_lcm.msgs import operator_cmd_t as O
 from tests.conftest import Probe
 from tests.netns import NetNamespace
 from tests.polling import wait_for
+from tests.sitl_arducopter import flight
+from tests.sitl_arducopter.flight import (
+    AGENT,
+    command,
+    direction,
+    errors,
+    fly_east,
+    landed,
+    take_off,
+    wait_state,
+)
 from tests.sitl_arducopter.harness import Copter
 
 pytestmark = [pytest.mark.netns, pytest.mark.timeout(300)]
-AGENT = "copter"
-_seq = itertools.count(1)
 TIMINGS: dict[str, float] = {}
-
-
-def command(probe: Probe, cmd: int) -> None:
-    probe.publish(
-        f"{AGENT}/OPERATOR_CMD", "operator_cmd_t", header={"seq": next(_seq), "agent": "op"}, command=cmd
-    )
-
-
-def direction(probe: Probe, azimuth: float, speed: float, active: bool = True) -> None:
-    probe.publish(
-        f"{AGENT}/DIRECTION_CMD",
-        "direction_cmd_t",
-        header={"seq": next(_seq), "agent": "op"},
-        active=active,
-        azimuth=azimuth,
-        speed=speed,
-    )
-
-
-def wait_state(probe: Probe, node: str, state: int, timeout: float, since: int = 0) -> dict[str, Any]:
-    channel = "MC_STATE" if node == "mc" else "HLC_STATE"
-    msg = probe.wait(f"{AGENT}/{channel}", f"{node}_state_t", timeout=timeout, since=since, state=state)
-    assert msg is not None, f"{node} never reached {state} within {timeout} s"
-    return msg
-
-
-def errors(probe: Probe, since: int) -> list[str]:
-    return [e["text"] for e in probe.history(f"{AGENT}/HLC_ERROR", "hlc_error_t", since=since)]
-
-
-def hlc_states(probe: Probe, since: int) -> list[tuple[int, str]]:
-    """The HLC's states and reasons since `since`, each change once."""
-    seen: list[tuple[int, str]] = []
-    for m in probe.history(f"{AGENT}/HLC_STATE", "hlc_state_t", since=since):
-        if not seen or seen[-1][0] != m["state"]:
-            seen.append((m["state"], m["reason"]))
-    return seen
-
-
-def take_off(copter: Copter, probe: Probe) -> int:
-    """From STANDBY on the ground to MISSION at 5 m; the probe mark when it got there."""
-    wait_state(probe, "mc", M.STANDBY, timeout=60, since=probe.mark())
-    mark = probe.mark()
-    command(probe, O.TAKEOFF)
-    wait_state(probe, "mc", M.MISSION, timeout=60, since=mark)
-    wait_state(probe, "hlc", H.AIRBORNE, timeout=30, since=mark)
-    return probe.mark()
-
-
-def landed(copter: Copter, probe: Probe, since: int, timeout: float = 120) -> dict[str, Any]:
-    """Wait for the MC's STANDBY with the vehicle on the ground and disarmed (its own telemetry)."""
-    wait_state(probe, "mc", M.STANDBY, timeout=timeout, since=since)
-    wait_state(probe, "hlc", H.READY, timeout=10, since=since)
-
-    def disarmed() -> dict[str, Any] | None:
-        state = copter.gcs.state()
-        return None if state["armed"] else state
-
-    state = wait_for(disarmed, timeout=15, interval=0.2)
-    assert state, copter.gcs.state()
-    return state
-
-
-def fly_east(copter: Copter, probe: Probe, seconds: float, speed: float = 3.0) -> None:
-    """The operator's direction east for `seconds` (repeated every 0.5 s, as the console does every 1 s)."""
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        direction(probe, 90.0, speed)
-        time.sleep(0.5)
 
 
 @pytest.fixture(autouse=True)
 def back_on_the_ground(request: pytest.FixtureRequest) -> Iterator[None]:
     """After each test the vehicle is on the ground, disarmed, the MC in STANDBY: a failed test lands it."""
     yield
-    copter: Copter = request.getfixturevalue("copter")
-    probe: Probe = request.getfixturevalue("sitl_probe")
-    copter.gcs.relay("pass")
-    for node in copter.nodes:
-        if node not in copter.agent.procs or not copter.agent.alive(node):
-            copter.start(node)
-    if copter.gcs.state()["armed"]:
-        command(probe, O.LAND)
-        if not wait_for(lambda: not copter.gcs.state()["armed"], timeout=60, interval=0.5):
-            copter.gcs.ok(op="set_mode", mode="LAND")
-            wait_for(lambda: not copter.gcs.state()["armed"], timeout=60, interval=0.5)
-    wait_state(probe, "mc", M.STANDBY, timeout=30, since=probe.mark())
+    flight.back_on_the_ground(request.getfixturevalue("copter"), request.getfixturevalue("sitl_probe"))
 
 
 @pytest.fixture(scope="module")

@@ -72,6 +72,11 @@ RTL_MODES = frozenset({"AUTO.RTL"})
 LAND_MODES = frozenset({"AUTO.LAND", "AUTO.PRECLAND"})
 #: Modes only the adapter's own commands lead to (with our NAV_TAKEOFF or our OFFBOARD switch).
 GUIDED_MODES = frozenset({"OFFBOARD", "AUTO.TAKEOFF"})
+#: Modes an adapter that starts with PX4 already flying takes as its own (an HLC restarted in flight):
+#: PX4 hovers in Hold after our take-off and when our set-points stop, and OFFBOARD is a companion's. PX4
+#: does not say who asked for a Hold, so a pilot's Hold found at start is taken too -- the pilot's next
+#: mode change is still seen as a takeover.
+RESYNC_MODES = frozenset({"OFFBOARD", HOLD})
 
 
 def split(custom_mode: int) -> tuple[int, int]:

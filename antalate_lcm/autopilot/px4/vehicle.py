@@ -217,7 +217,10 @@ class Px4Vehicle(Vehicle):
             )
             # PX4 ends our take-off in Hold by itself (commander: AUTO_TAKEOFF finished -> AUTO_LOITER).
             takeoff_done = self.ours and previous_mode == "AUTO.TAKEOFF" and mode == modes.HOLD
-            self.ours = (commanded or takeoff_done) and not self.failsafe_flag
+            # An adapter (re)started in flight finds PX4 in OFFBOARD or Hold without a failsafe: where our
+            # take-off, hold and set-points leave it, so it resyncs as ours (`modes.RESYNC_MODES`).
+            adopted = previous is None and self.armed and mode in modes.RESYNC_MODES
+            self.ours = (commanded or takeoff_done or adopted) and not self.failsafe_flag
             # A failsafe's hold (COM_FAIL_ACT_T) followed by its action is one failsafe: keep its reason.
             carried, self.px4_failsafe = self.px4_failsafe, ""
             if previous is not None:

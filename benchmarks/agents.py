@@ -38,11 +38,12 @@ the machine's speed (docs/simulator.md, "Many agents in one process").
 antalate (PYTHONPATH), e.g. ``git worktree add /tmp/base <commit>``, for a baseline measured in the
 same session with the same listener and reference. ``--repeat R``: each size R times.
 
-Measured 2026-11-26 on the 2-core machine shared with six other jobs (load average 3-7), 3 runs
-each, the commit before (3616f4f) and this one alternating: an agent costs 80-96 x ref here
-(527-648 us/agent-s at 10 Hz, ref 6.1-6.8 us), 110-139 x before (713-990 us); RSS 69 MiB per 1,000
-agents; 1,000 agents in one process got 36-42 % of a core at that load and held 6.4-8.7 Hz, 2,000
-over 2 processes 3.1-8.6 Hz; no kernel drops in any run. The table: docs/simulator.md.
+Measured 2026-11-26 on the 2-core machine, the commit before (3616f4f) and this one alternating,
+>= 3 runs each: at load average 1.0-1.9 an agent costs 94-108 x ref (588-676 us/agent-s, ref
+6.2-6.4 us), 121-126 x before; 1,000 agents in one process: STANDBY 0.9-1.0 s, telemetry min
+9.8-10.0 Hz, MC max 27-44 ms, RSS 68 MiB, 59-68 % of a core. At load 3-7 (six other jobs): 79-96 x
+ref here, 110-139 x before, and 1,000 agents got 36-42 % of a core and held 6.4-8.7 Hz. No kernel
+drops in any run. The tables: docs/simulator.md.
 """
 
 from __future__ import annotations

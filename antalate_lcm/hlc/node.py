@@ -168,10 +168,20 @@ class HlcNode(Node):
         self.subscribe("VELOCITY_CMD", self._on_velocity)
         if self._shared is not None:
             self._shared.join()
-        self._publish_state = self.state_publisher("HLC_STATE", self._state_msg, self.config.hlc.republish_hz)
-        control, telemetry = 1.0 / self.config.hlc.control_hz, 1.0 / self.config.hlc.telemetry_hz
-        self.create_timer(control, self._control, first_delay=self.first_delay(control))
-        self.create_timer(telemetry, self._publish_telemetry, first_delay=self.first_delay(telemetry))
+        h = self.config.hlc
+        self._publish_state = self.state_publisher(
+            "HLC_STATE", self._state_msg, h.republish_hz, periodic=False
+        )
+        # One timer when the rates allow (20, 10 and 5 Hz by default): telemetry and the state go
+        # out right after the control tick whose snapshot they report.
+        self.ticker(
+            h.control_hz,
+            [
+                (h.control_hz, self._control),
+                (h.telemetry_hz, self._publish_telemetry),
+                (h.republish_hz, self._publish_state),
+            ],
+        )
         self._publish_state()
         self._connect()
 

@@ -57,6 +57,9 @@ class Witness:
         self.arrived: dict[bytes, float] = {}
         self.lan_bytes = {name: 0 for name in LANS}
         self.zenoh_bytes = 0
+        self.zenoh_distinct: set[bytes] = (
+            set()
+        )  # payloads seen since mark (a second bridge's copy is not new)
         self.send = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.send.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
         self.sub = self.session.declare_subscriber("antalate/**", self._on_sample)
@@ -73,6 +76,7 @@ class Witness:
         data = sample.payload.to_bytes()
         with self.lock:
             self.zenoh_bytes += len(data)
+            self.zenoh_distinct.add(data)
         self._seen(b"zenoh" + data)
 
     def _read_lan(self, name: str, sock: socket.socket) -> None:
@@ -141,10 +145,17 @@ class Witness:
             with self.lock:
                 self.lan_bytes = dict.fromkeys(LANS, 0)
                 self.zenoh_bytes = 0
+                self.zenoh_distinct = set()
             return {"ok": True}
         if op == "bytes":
             with self.lock:
-                return {"ok": True, "lan": dict(self.lan_bytes), "zenoh": self.zenoh_bytes}
+                distinct = sum(len(d) for d in self.zenoh_distinct)
+                return {
+                    "ok": True,
+                    "lan": dict(self.lan_bytes),
+                    "zenoh": self.zenoh_bytes,
+                    "zenoh_distinct": distinct,
+                }
         return {"ok": False, "error": f"unknown op {op!r}"}
 
 

@@ -366,4 +366,13 @@ def test_taking_off_closer_than_the_radius_is_reported_then_separated_in_mission
             f"taking off closer than the 3 m radius to {other} at 1.5 m" in r.text and r.header.agent == me
             for r in flight.safety_reports
         ), texts
-    assert any("cannot keep separation" in t for t in texts), texts
+    # in MISSION the filter acts on the squeeze: at the first report it may already find a velocity that
+    # keeps the barrier (it then says it modified one) or not yet (it says it cannot keep separation);
+    # which depends on how far the climb's drift took them by then (test_safety_filter has the second)
+    assert any(
+        f"nearest {other} at" in r.text
+        and ("cannot keep separation" in r.text or "modified by separation" in r.text)
+        for r in flight.safety_reports
+        for other in names
+        if r.header.agent != other
+    ), texts

@@ -317,3 +317,12 @@ def test_invalid_parameters_are_refused() -> None:
         SeparationParams(radius=1.0, vertical=1.0, gamma=math.nan, peer_speed=1.0, stale_after=1.0)
     with pytest.raises(ValueError, match="lead"):
         SeparationParams(radius=1.0, vertical=1.0, gamma=1.0, peer_speed=1.0, stale_after=1.0, lead=-1)
+
+
+def test_boxed_in_inside_the_margin_it_says_it_cannot_keep_separation() -> None:
+    """Four peers 1 m away on every side (radius 3 m): no velocity keeps every barrier, so the filter
+    backs off as best it can and says so, naming the pair (the e2e take-off test's squeeze, exactly)."""
+    box = [PeerView(n, dn, de, 10.0) for n, dn, de in (("b", 1, 0), ("c", -1, 0), ("d", 0, 1), ("e", 0, -1))]
+    d = make_filter().filter("a", (0.0, 0.0, 10.0), (0, 0, 0), (VMAX, 0.0, 0.0), box)
+    assert d.by == "separation" and d.nearest_distance == 1.0
+    assert d.reason.startswith("cannot keep separation (") and "inside the margin" in d.reason

@@ -162,7 +162,11 @@ class VelocityUnitCheck:
     measures on its own: every take-off climbs 0.8 m, enough to tell decimetres from centimetres or
     metres per second (a factor of ten) through the decimetre rounding of both. A ratio outside
     [`low`, `high`] over a climb or descent of `min_change` m, or a ground speed above a Tello's
-    top speed, is a `problem`; it stays (a unit does not change in flight).
+    top speed, is a `problem`; it stays (a unit does not change in flight). A ratio beyond
+    [1/`far`, `far`] is a problem at once (a wrong unit is off by ten: the take-off's own 0.8 m
+    climb shows it); one merely outside [`low`, `high`] must be so in `strikes` comparisons in a row:
+    a single comparison over a fast take-off or landing, seen in a handful of 10 Hz packets with both
+    fields rounded to decimetres, once fell outside that range with the right unit.
     """
 
     min_change: float = 0.5  # m of height change that makes a comparison
@@ -174,6 +178,9 @@ class VelocityUnitCheck:
     #: cannot be checked (that is no evidence of a wrong unit, so it is not a `problem`)
     unchecked: str = ""
     ratio: float = math.nan  # the last comparison's integrated/measured change
+    strikes: int = 2
+    far: float = 5.0
+    _out: int = 0  # comparisons out of range in a row
     _anchor: float | None = None  # the height the comparison started from
     _anchor_t: float = 0.0
     _integral: float = 0.0  # m climbed according to vgz since the anchor
@@ -208,7 +215,12 @@ class VelocityUnitCheck:
                     f"vgz read 0 while the height changed {change:+.2f} m: the unit is not checked"
                 )
                 return first
-            elif not self.low <= abs(self.ratio) <= self.high:
+            elif self.low <= abs(self.ratio) <= self.high:
+                self._out = 0
+            else:
+                self._out += 1
+                if self._out < self.strikes and 1.0 / self.far <= abs(self.ratio) <= self.far:
+                    return False
                 self.problem = (
                     f"the state's vgz integrates to {self.ratio * change:+.2f} m while the height changed "
                     f"{change:+.2f} m (x{abs(self.ratio):.2g}): its velocities are not in the dm/s dead "

@@ -16,7 +16,6 @@ back after its scenario, and the next take-off shows the EKF failsafe did not st
 
 from __future__ import annotations
 
-import itertools
 import json
 import os
 import time
@@ -35,11 +34,10 @@ from antalate_lcm.msgs import operator_cmd_t as O
 from tests.conftest import MCAST_URL, Probe, _netns_reason
 from tests.netns import NetNamespace
 from tests.polling import wait_for
+from tests.sitl_arducopter.flight import AGENT, command, direction, wait_state
 from tests.sitl_arducopter.harness import Copter, sitl_missing
 
 pytestmark = [pytest.mark.netns, pytest.mark.timeout(400)]
-AGENT = "copter"
-_seq = itertools.count(1)
 HLC_NAMES = {v: k for k, v in vars(H).items() if k.isupper() and isinstance(v, int)}
 MC_NAMES = {v: k for k, v in vars(M).items() if k.isupper() and isinstance(v, int)}
 #: Where each run's observations go as JSON lines (docs/ardupilot.md's comparison table is made from it).
@@ -107,30 +105,6 @@ SCENARIOS = (BATTERY, GPS, RC, FENCE)
 # ---------------------------------------------------------------------------------- operator's side
 
 
-def command(probe: Probe, cmd: int) -> None:
-    probe.publish(
-        f"{AGENT}/OPERATOR_CMD", "operator_cmd_t", header={"seq": next(_seq), "agent": "op"}, command=cmd
-    )
-
-
-def east(probe: Probe, speed: float) -> None:
-    probe.publish(
-        f"{AGENT}/DIRECTION_CMD",
-        "direction_cmd_t",
-        header={"seq": next(_seq), "agent": "op"},
-        active=True,
-        azimuth=90.0,
-        speed=speed,
-    )
-
-
-def wait_state(probe: Probe, node: str, state: int, timeout: float, since: int = 0) -> dict[str, Any]:
-    channel = "MC_STATE" if node == "mc" else "HLC_STATE"
-    msg = probe.wait(f"{AGENT}/{channel}", f"{node}_state_t", timeout=timeout, since=since, state=state)
-    assert msg is not None, f"{node} never reached {state} within {timeout} s"
-    return msg
-
-
 def named(reason: str) -> str:
     """The failsafe a state's reason or an error's text names ("" for none)."""
     return next((f for f in fs.PRIORITY if f in reason), "")
@@ -183,7 +157,7 @@ def fence(copter: Copter, probe: Probe) -> None:
     no breach, no failsafe (the emulator does not model AC_Avoid)."""
     end = time.monotonic() + 4.0
     while time.monotonic() < end:
-        east(probe, 3.0)
+        direction(probe, 90.0, 3.0)
         time.sleep(0.5)
     assert copter.gcs.state()["east"] > 6.0, copter.gcs.state()
     copter.gcs.set_param("FENCE_ENABLE", 1)

@@ -9,12 +9,10 @@ point. One boot for the module (three copters need ~40-60 s to be ready together
 
 from __future__ import annotations
 
-import itertools
 import math
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -25,30 +23,17 @@ from antalate_lcm.msgs import operator_cmd_t as O
 from tests.conftest import Probe
 from tests.netns import NetNamespace
 from tests.polling import wait_for
+from tests.sitl_arducopter.flight import command, wait_state
 from tests.sitl_arducopter.harness import HOME, Copter
 
 pytestmark = [pytest.mark.netns, pytest.mark.timeout(400)]
 NAMES = ("copter1", "copter2", "copter3")
 SPACING = 6.0  # m east between the homes
-_seq = itertools.count(1)
 
 
 def home(i: int) -> tuple[float, float, float, float]:
     lat, lon = geo.offset(HOME[0], HOME[1], 0.0, SPACING * i)
     return (lat, lon, HOME[2], HOME[3])
-
-
-def command(probe: Probe, agent: str, cmd: int) -> None:
-    probe.publish(
-        f"{agent}/OPERATOR_CMD", "operator_cmd_t", header={"seq": next(_seq), "agent": "op"}, command=cmd
-    )
-
-
-def wait_state(probe: Probe, agent: str, node: str, state: int, timeout: float, since: int) -> dict[str, Any]:
-    channel = "MC_STATE" if node == "mc" else "HLC_STATE"
-    msg = probe.wait(f"{agent}/{channel}", f"{node}_state_t", timeout=timeout, since=since, state=state)
-    assert msg is not None, f"{agent}: {node} never reached {state} within {timeout} s"
-    return msg
 
 
 @pytest.fixture(scope="module")
@@ -82,15 +67,15 @@ def test_three_sitl_copters_fly_dovrat_swarm_and_come_home(swarm: list[Copter], 
     probe = sitl_probe
     start = probe.mark()
     for name in NAMES:
-        wait_state(probe, name, "mc", M.STANDBY, timeout=120, since=0)
+        wait_state(probe, "mc", agent=name, state=M.STANDBY, timeout=120, since=0)
     for c in swarm:  # three MAVLink systems, one each
         assert wait_for(lambda c=c: c.gcs.state()["home"], timeout=60, interval=0.5), c.name
     sent = time.monotonic()
     for name in NAMES:
-        command(probe, name, O.TAKEOFF)
+        command(probe, O.TAKEOFF, agent=name)
     for name in NAMES:
-        wait_state(probe, name, "mc", M.MISSION, timeout=180, since=start)
-        wait_state(probe, name, "hlc", H.AIRBORNE, timeout=60, since=start)
+        wait_state(probe, "mc", agent=name, state=M.MISSION, timeout=180, since=start)
+        wait_state(probe, "hlc", agent=name, state=H.AIRBORNE, timeout=60, since=start)
     print(f"\nswarm: all three AIRBORNE {time.monotonic() - sent:.1f} s after TAKEOFF")
     begin = [c.gcs.state() for c in swarm]
     time.sleep(8.0)  # dovrat_swarm flies them: forward along the heading, turning without a peer ahead
@@ -100,12 +85,12 @@ def test_three_sitl_copters_fly_dovrat_swarm_and_come_home(swarm: list[Copter], 
         assert math.hypot(b["north"] - a["north"], b["east"] - a["east"]) > 4.0, (c.name, a, b)
     mark = probe.mark()
     for name in NAMES:
-        command(probe, name, O.RTL)
+        command(probe, O.RTL, agent=name)
     for name in NAMES:
-        wait_state(probe, name, "mc", M.RTL, timeout=15, since=mark)
+        wait_state(probe, "mc", agent=name, state=M.RTL, timeout=15, since=mark)
     for name in NAMES:
-        wait_state(probe, name, "mc", M.STANDBY, timeout=120, since=mark)
-        wait_state(probe, name, "hlc", H.READY, timeout=15, since=mark)
+        wait_state(probe, "mc", agent=name, state=M.STANDBY, timeout=120, since=mark)
+        wait_state(probe, "hlc", agent=name, state=H.READY, timeout=15, since=mark)
     for c in swarm:
         assert wait_for(lambda c=c: not c.gcs.state()["armed"], timeout=20, interval=0.3), c.name
         down = c.gcs.state()

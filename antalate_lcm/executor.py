@@ -108,8 +108,8 @@ class Executor:
         ``asyncio.run_coroutine_threadsafe(coro, executor.loop)``)."""
         return self._loop
 
-    def _direct(self) -> bool:
-        """True when the loop's structures may be touched from here: on its thread, or before it runs."""
+    def on_loop(self) -> bool:
+        """True on the loop's thread (or before the loop runs): its structures may be touched directly."""
         return self._ident == threading.get_ident() or not self._started
 
     # ------------------------------------------------------------------ scheduling (any thread)
@@ -117,7 +117,7 @@ class Executor:
         """Run ``fn(*args)`` on the loop thread, after what is already queued (in call order)."""
         loop = self._loop
         try:
-            if self._direct():
+            if self.on_loop():
                 loop.call_soon(self._invoke, fn, args)
             else:
                 loop.call_soon_threadsafe(self._invoke, fn, args)
@@ -141,7 +141,7 @@ class Executor:
         return timer
 
     def _schedule(self, timer: Timer, delay: float) -> None:
-        if self._direct():
+        if self.on_loop():
             self._arm(timer, self._loop.time() + max(delay, 0.0))
         else:
             self.call_soon(lambda: self._arm(timer, self._loop.time() + max(delay, 0.0)))
@@ -229,7 +229,7 @@ class Executor:
         self._readers[fd] = callback
         if urgent:
             self._urgent = (*self._urgent, callback)
-        if self._direct():
+        if self.on_loop():
             self._loop.add_reader(fd, callback)
         else:
             self.run_sync(lambda: self._loop.add_reader(fd, callback))
@@ -241,7 +241,7 @@ class Executor:
         self._urgent = tuple(c for c in self._urgent if c is not callback)
         if self._loop.is_closed():
             return
-        if self._direct():
+        if self.on_loop():
             self._loop.remove_reader(fd)
         else:
             self.run_sync(lambda: self._loop.remove_reader(fd))

@@ -20,7 +20,12 @@ zenoh      key prefix (empty:            ``connect``, ``listen`` (comma-separate
            ``antalate``)                 ``tcp/HOST:PORT``), ``mode`` (peer or client), ``scout``
                                          (0/1: multicast scouting), ``express`` (0/1: no batching),
                                          ``lease`` (ms a silent link lives; default 3000),
-                                         ``config`` (a Zenoh JSON5 file applied first)
+                                         ``config`` (a Zenoh JSON5 file applied first);
+                                         ``ca``, ``cert``, ``cert_key`` (PEM files: the CA the
+                                         router's certificate must chain to; this node's
+                                         certificate and key for mutual TLS), ``auth`` (a file
+                                         holding ``user:password``), ``plain`` (1: allow ``tcp/``
+                                         endpoints although TLS is configured)
 =========  ============================  ===================================================
 
 ``zenoh://`` is antalate's own (not liblcm's): the same LCM-encoded bytes over Zenoh, one key
@@ -124,6 +129,13 @@ OPTIONS: dict[str, dict[str, Callable[[str], str | None]]] = {
         ),
         "lease": _int("lease", 500, 3_600_000, "a link lease in milliseconds, 500 to 3600000"),
         "config": lambda v: None if v else "the path of a Zenoh JSON5 config file for option config",
+        "ca": lambda v: (
+            None if v else "the path of a PEM file (the CA of the router's certificate) for option ca"
+        ),
+        "cert": lambda v: None if v else "the path of a PEM certificate for option cert",
+        "cert_key": lambda v: None if v else "the path of the PEM private key of cert for option cert_key",
+        "auth": lambda v: None if v else "the path of a file holding user:password for option auth",
+        "plain": lambda v: None if v in ("0", "1") else f"0 or 1 for option plain, not {v!r}",
     },
 }
 PROVIDERS = tuple(OPTIONS)
@@ -131,6 +143,15 @@ PROVIDERS = tuple(OPTIONS)
 
 #: Zenoh link protocols whose address is HOST:PORT (zenoh also has unixsock-stream/PATH).
 _ZENOH_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+#: The ones that encrypt and authenticate (TLS; QUIC runs TLS 1.3).
+ZENOH_SECURE_PROTOCOLS = ("tls", "quic")
+
+
+def zenoh_plain_endpoints(endpoints: Sequence[str]) -> list[str]:
+    """The endpoints that carry no TLS (``tcp/``, ``udp/``, ``ws/``; a Unix socket stays on the host)."""
+    return [e for e in endpoints if e.partition("/")[0] not in (*ZENOH_SECURE_PROTOCOLS, "unixsock-stream")]
+
+
 _ZENOH_CHUNK = re.compile(r"[^*$?#%/\s]+")
 
 
@@ -171,11 +192,24 @@ def _zenoh(u: LcmUrl) -> LcmUrl:
             f"a Zenoh key prefix after zenoh:// (chunks separated by /, none empty, no * $ ? # % or spaces), "
             f"not {u.network!r}"
         )
-    if u.options.get("mode") == "client" and "connect" not in u.options:
+    opts = u.options
+    if opts.get("mode") == "client" and "connect" not in opts:
         raise ValueError(
             "option connect with mode=client (the router to reach, e.g. connect=tcp/192.0.2.10:7447)"
         )
-    return LcmUrl(u.url, u.provider, prefix, u.options)
+    if ("cert" in opts) != ("cert_key" in opts):
+        raise ValueError("options cert and cert_key together (this node's certificate and its private key)")
+    if ("ca" in opts or "cert" in opts) and opts.get("plain") != "1":
+        # TLS configured: a tcp/ endpoint would send the swarm's traffic in clear to whoever answers
+        plain = zenoh_plain_endpoints(
+            [e for o in ("connect", "listen") for e in opts.get(o, "").split(",") if e]
+        )
+        if plain:
+            raise ValueError(
+                f"tls/ or quic/ endpoints with TLS configured (ca/cert), not {', '.join(plain)} "
+                "(add plain=1 to allow an unencrypted endpoint)"
+            )
+    return LcmUrl(u.url, u.provider, prefix, opts)
 
 
 def _split(url: str) -> LcmUrl:
@@ -324,4 +358,5 @@ __all__ = [
     "open_failure",
     "parse_lcm_url",
     "zenoh_endpoints_problem",
+    "zenoh_plain_endpoints",
 ]

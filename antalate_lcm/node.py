@@ -16,15 +16,17 @@ between them on an in-process bus, so no datagram from the network reaches them.
 from __future__ import annotations
 
 import logging
+import math
 import re
 import time
 import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from antalate_lcm import validation
+from antalate_lcm._fastcodec import encode as fast_encode
 from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.bus import Bus, Subscription
 from antalate_lcm.config import Config
@@ -58,6 +60,23 @@ INSECURE_REMINDER = 60.0
 
 class InsecureBus(AntalateError):
     """A node would consume an internal topic from a network-reachable bus with no swarm key."""
+
+
+class Interference(Protocol):
+    """What an experiment does to a simulated agent's traffic and timers (faults, lossy broadcasts:
+    :mod:`antalate_lcm.runtime.faults`); a node without one (every real flight) pays nothing."""
+
+    def send(self, node: Node, topic: str, msg: Message, buses: list[str], channel: str) -> bool:
+        """Send the stamped ``msg`` (or not, or late, or altered) on ``buses``."""
+        ...
+
+    def receiving(self, node: Node, topic: str, handler: Callable[..., None]) -> Callable[..., None]:
+        """``handler`` behind this interference: what ``node`` will consume of ``topic``."""
+        ...
+
+    def silenced(self, agent: str) -> bool:
+        """Whether ``agent``'s software is dead or frozen now (its timers do not run)."""
+        ...
 
 
 @dataclass
@@ -131,6 +150,8 @@ class Node:
     """
 
     kind = "node"
+    #: An experiment's faults and lossy broadcasts, set before :meth:`start` (None: none).
+    interference: Interference | None = None
     #: Wall clock for ``header.utime`` and the replay window (tests and the console inject theirs).
     wallclock: Callable[[], float] = staticmethod(time.time)
 
@@ -327,11 +348,20 @@ class Node:
         header.utime = utime
         header.agent = self.agent
         header.seq = seq
-        data = signed_bytes(msg, self.security.key) if self.security.enabled else msg.encode()
+        if self.interference is not None:
+            return self.interference.send(self, topic, msg, pub.buses, pub.channel)
+        key = self.security.key  # SecurityPolicy.enabled is bool(key), without a property call
+        data = signed_bytes(msg, key) if key else fast_encode(msg)
         ok = True
+        publish = self.context.bus.publish
         for bus in pub.buses:
-            ok = self.context.bus.publish(bus, pub.channel, data) and ok
+            ok = publish(bus, pub.channel, data) and ok
         return ok
+
+    def seal(self, msg: Message) -> bytes:
+        """The bytes of a stamped message: signed with the swarm key if there is one."""
+        key = self.security.key
+        return signed_bytes(msg, key) if key else fast_encode(msg)
 
     def _publish_buses(self, topic: str) -> list[str]:
         """The topic's buses (plus the in-process bus for an internal topic), one per distinct URL."""
@@ -357,6 +387,8 @@ class Node:
     def subscribe(self, topic: str, handler: Callable[[Any], None], **fields: str) -> Subscription:
         """Deliver this agent's ``topic`` (decoded, authenticated, validated) to ``handler`` on the
         executor thread."""
+        if self.interference is not None:
+            handler = self.interference.receiving(self, topic, handler)
         spec = self.topic_spec(topic)
         bus = self._subscribe_bus(topic)
         self._check_exposure(topic, bus)
@@ -391,6 +423,8 @@ class Node:
         pattern subscriptions decode separately) is dropped by channel before any check, so the
         replay guard never sees this agent's message twice (it logged "replayed or out of order").
         """
+        if self.interference is not None:
+            handler = self.interference.receiving(self, topic, handler)
         spec = self.topic_spec(topic)
         bus = self.config.topic_buses(topic)[0]
         self._check_exposure(topic, bus)
@@ -445,11 +479,26 @@ class Node:
     def create_timer(
         self, period: float, fn: Callable[[], Any], *, first_delay: float | None = None
     ) -> Timer:
+        fn = self._interfered(fn)
         timer = self.context.executor.create_timer(period, fn, first_delay=first_delay)
         self._timers.append(timer)
         return timer
 
+    def _interfered(self, fn: Callable[[], Any]) -> Callable[[], Any]:
+        """``fn``, skipped while the experiment holds this agent dead or frozen."""
+        interference = self.interference
+        if interference is None:
+            return fn
+        agent = self.agent
+
+        def run() -> Any:
+            return None if interference.silenced(agent) else fn()
+
+        return run
+
     def call_later(self, delay: float, fn: Callable[[], Any]) -> Timer:
+        fn = self._interfered(fn)
+
         def fire() -> None:
             if timer in self._timers:  # a one-shot leaves the list once it ran, so it never grows
                 self._timers.remove(timer)
@@ -465,19 +514,79 @@ class Node:
         return self.context.executor.clock()
 
     def state_publisher(
-        self, topic: str, build: Callable[[], Any], hz: float, **fields: str
+        self, topic: str, build: Callable[[], Any], hz: float, *, periodic: bool = True, **fields: str
     ) -> Callable[[], None]:
         """Publish ``build()`` every ``1/hz`` s, and whenever the returned function is called.
 
         State messages go out periodically as well as on change (docs/design.md §4) so a node that starts
-        late or loses a packet converges within one period.
+        late or loses a packet converges within one period. ``periodic=False``: the caller runs the
+        returned function every ``1/hz`` s itself, from a timer it already has (see `ticker`).
         """
 
         def publish_now() -> None:
             self.publish(topic, build(), seq=None, **fields)
 
-        self.create_timer(1.0 / hz, publish_now, first_delay=self.first_delay(1.0 / hz))
+        if periodic:
+            self.create_timer(1.0 / hz, publish_now, first_delay=self.first_delay(1.0 / hz))
         return publish_now
+
+    def ticker(
+        self,
+        hz: float,
+        jobs: list[tuple[float, Callable[[], Any]]],
+        *,
+        clock: Callable[[], float] | None = None,
+    ) -> None:
+        """Run each ``(rate, fn)`` of ``jobs`` at its rate, on as few timers as the rates allow.
+
+        A job whose rate divides ``hz`` (the first job's, the fastest) runs on the first job's
+        timer, right after it, on the runs where its own period has come round; any other job
+        gets a timer of its own. A thousand simulated agents in one process ran 50 timers a second
+        each (HLC control, telemetry and state, MC tick and state) where 30 do, and a telemetry
+        message built a tick after the snapshot it reports found it out of the cache.
+
+        A shared job keeps its own due time, not a count of runs: when a loaded executor skips
+        runs of the timer (it never bursts to catch up), the job still runs at its rate on the
+        runs that remain, as its own timer would. Each job's exception is logged on its own.
+        ``clock``: the time of each run (the run's due time unless a test gives its own).
+        """
+        period = 1.0 / hz
+        shared: list[list[Any]] = []  # [period, due, fn]
+        for rate, fn in jobs:
+            every = round(hz / rate)
+            if every >= 1 and abs(hz / every - rate) <= 1e-9 * rate:
+                shared.append([1.0 / rate, -math.inf, fn])
+            else:
+                self.create_timer(1.0 / rate, fn, first_delay=self.first_delay(1.0 / rate))
+        if not shared:
+            return
+        slack = period / 2  # a run a little early (the timer's millisecond slots) is on time
+        log = self.log
+        timer: Timer | None = None
+
+        def scheduled() -> float:
+            # The time this run of the timer was due: exact, where the loop's clock is the one
+            # read when its iteration began (every slot of a backlog run in one iteration reads
+            # the same, and jobs then looked early and were skipped).
+            assert timer is not None
+            return timer.due
+
+        now_of = clock or scheduled
+
+        def tick() -> None:
+            now = now_of()
+            for job in shared:
+                job_period, due, fn = job
+                if now < due - slack:
+                    continue
+                # As the executor re-arms a timer: the next period, or a period from now if behind.
+                job[1] = due + job_period if now < due + job_period else now + job_period
+                try:
+                    fn()
+                except Exception:
+                    log.exception("%s raised; the node carries on", getattr(fn, "__qualname__", fn))
+
+        timer = self.create_timer(period, tick, first_delay=self.first_delay(period))
 
     def first_delay(self, period: float) -> float:
         """When a periodic timer of this agent first runs: within one ``period``, at a phase fixed

@@ -28,6 +28,7 @@ from enum import Enum
 from pathlib import Path
 from typing import Any
 
+from antalate_lcm._fastcodec import encode as fast_encode
 from antalate_lcm.topics import Message  # every antalate message starts with header_t (mac_len, mac)
 
 log = logging.getLogger("antalate.security")
@@ -38,7 +39,7 @@ def _unsigned_bytes(msg: Message) -> bytes:
     saved_len, saved_mac = header.mac_len, header.mac
     header.mac_len, header.mac = 0, b""
     try:
-        return msg.encode()
+        return fast_encode(msg)
     finally:
         header.mac_len, header.mac = saved_len, saved_mac
 

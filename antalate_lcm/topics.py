@@ -90,6 +90,11 @@ OPERATOR_INPUTS = frozenset(
     {"OPERATOR_CMD", "DIRECTION_CMD", "OPERATOR_PAYLOAD", "SWARM_OPERATOR_CMD", "SWARM_DIRECTION_CMD"}
 )
 
+#: Where an experiment records the faults it injects (``payload_t`` of :data:`FAULT_CONTENT_TYPE`,
+#: one JSON object each: antalate_lcm.runtime.faults), read back by ``antalate analyze``.
+FAULT_CHANNEL = "ANTALATE/FAULT"
+FAULT_CONTENT_TYPE = "application/vnd.antalate.fault+json"
+
 #: Message types whose replay memory (per-sender high-water utime) survives a restart: the ones an
 #: operator sends. State and velocity messages are superseded within a period anyway.
 PERSISTED_TYPES = frozenset({"operator_cmd_t", "direction_cmd_t", "payload_t"})

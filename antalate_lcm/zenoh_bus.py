@@ -37,6 +37,7 @@ import contextlib
 import hashlib
 import json
 import logging
+import os
 import re
 import select
 import socket
@@ -44,6 +45,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from antalate_lcm._ratelimit import RateLimitedLog, TokenBucket
@@ -146,7 +148,52 @@ def zenoh_config(u: LcmUrl, *, max_message_size: int | None = None) -> Any:
         config.insert_json5("transport/link/tx/lease", opts.get("lease", str(DEFAULT_LEASE_MS)))
     if max_message_size is not None:
         config.insert_json5("transport/link/rx/max_message_size", str(max_message_size))
+    tls = tls_settings(ca=opts.get("ca"), cert=opts.get("cert"), key=opts.get("cert_key"))
+    if tls:
+        config.insert_json5("transport/link/tls", json.dumps(tls))
+    if "auth" in opts:
+        user, password = read_credentials(opts["auth"])
+        config.insert_json5("transport/auth/usrpwd", json.dumps({"user": user, "password": password}))
     return config
+
+
+def readable_file(path: str, what: str) -> str:
+    """``path`` made absolute, or ValueError naming ``what`` (Zenoh's own error is a Rust backtrace)."""
+    p = os.path.abspath(os.path.expanduser(path))
+    if not os.access(p, os.R_OK) or not os.path.isfile(p):
+        raise ValueError(f"{what} {path!r} is not a readable file")
+    return p
+
+
+def tls_settings(
+    *, ca: str | None = None, cert: str | None = None, key: str | None = None, listen: bool = False
+) -> dict[str, Any]:
+    """Zenoh's ``transport/link/tls`` for PEM files, all of them paths (never inline secrets).
+
+    ``ca``: the CA a peer's certificate must chain to (a client checks the router's; a router with
+    it asks every client for a certificate: mutual TLS). ``cert``/``key``: this node's own, shown to
+    the router (client) or to clients (``listen``)."""
+    tls: dict[str, Any] = {}
+    if ca:
+        tls["root_ca_certificate"] = readable_file(ca, "the CA certificate")
+    if cert and key:
+        side = "listen" if listen else "connect"
+        tls[f"{side}_certificate"] = readable_file(cert, "the certificate")
+        tls[f"{side}_private_key"] = readable_file(key, "the private key")
+        if not listen:
+            tls["enable_mtls"] = True  # without it Zenoh's client never shows its certificate
+    if listen and ca:
+        tls["enable_mtls"] = True
+    return tls
+
+
+def read_credentials(path: str) -> tuple[str, str]:
+    """``user:password`` from the first line of a file (the secret stays out of the config file)."""
+    line = Path(readable_file(path, "the credentials file")).read_text().splitlines()
+    user, sep, password = (line[0] if line else "").strip().partition(":")
+    if not sep or not user or not password:
+        raise ValueError(f"the credentials file {path!r} must hold one line user:password")
+    return user, password
 
 
 @dataclass(eq=False)
@@ -177,8 +224,8 @@ class ZenohLCM:
     def __init__(self, url: str, *, max_message_size: int | None = None) -> None:
         try:
             u = parse_lcm_url(url)
-        except ValueError as exc:
-            raise BusUnavailable(url, f"expected {exc}") from None
+        except ValueError as exc:  # a TLS or credentials file that is not there
+            raise BusUnavailable(url, str(exc)) from None
         if u.provider != "zenoh":
             raise BusUnavailable(url, "expected a zenoh:// URL")
         self.url = url
@@ -191,7 +238,10 @@ class ZenohLCM:
                 url, "the Zenoh library is not installed: pip install 'antalate[zenoh]'"
             ) from None
         self._zenoh = zenoh
-        self._config = zenoh_config(u, max_message_size=max_message_size)
+        try:
+            self._config = zenoh_config(u, max_message_size=max_message_size)
+        except ValueError as exc:  # a TLS or credentials file that is not there
+            raise BusUnavailable(url, str(exc)) from None
         self._session: Any = None
         self._subs: list[ZenohSubscription] = []
         self._groups: list[_Group] = []
@@ -581,4 +631,7 @@ __all__ = [
     "channel_key",
     "key_channel",
     "literal_channel",
+    "read_credentials",
+    "readable_file",
+    "tls_settings",
 ]

@@ -41,12 +41,17 @@ every message, in the same run: the sender stamps ``header.utime`` and signs (HM
 ``header.mac``), the receiver runs the node's :class:`~antalate_lcm.security.Authenticator` (MAC,
 window, replay guard) before counting or echoing; the echo re-stamps and re-signs its pong. So one
 round trip holds two signatures and two checks. The cost of one ``sign`` and one check is also timed
-alone, in this process. Takes about 110 s; never more than 150 s. Figures only: nothing here is a
+alone, in this process. Takes about 140 s; never more than 190 s. Figures only: nothing here is a
 timed assertion (docs/design.md §12).
 
 Zenoh (``zenoh``, docs/wan.md): the same Bus on a ``zenoh://`` URL, client mode, through an
 ``antalate router`` process on loopback (so every message crosses two TCP links and the router), in
 the same run as udpm and raw lcm. Targets: p50 at most 2x the Bus on udpm, 50k msg/s lossless.
+
+Zenoh with mutual TLS (``zenoh-tls``, issue 29): the same again through a second ``antalate router``
+with ``--tls-cert --tls-key --ca`` (a CA from ``antalate lab-ca``, a client certificate per
+process), so the cost of TLS on the router path stands beside plain TCP in the same run. Both routers
+run their default access control (keys under ``antalate`` only).
 """
 
 from __future__ import annotations
@@ -81,7 +86,7 @@ from antalate_lcm.security import Authenticator, SecurityPolicy, signed_bytes  #
 PORTS = {"raw": 7667, "bus": 7668, "raw-thread": 7670, "bus-signed": 7671, "node": 7672}
 BUS_MODULES = {"bus": "antalate_lcm.bus", "bus-signed": "antalate_lcm.bus"}
 SWARM_KEY = "benchmark-swarm-key-0123456789abcdef"
-TIME_LIMIT = 150.0  # seconds for the whole run, namespace included
+TIME_LIMIT = 190.0  # seconds for the whole run, namespace included
 RATES = (10_000, 20_000, 30_000, 40_000, 50_000, 60_000, 80_000, 100_000, 120_000, 150_000)
 KEEP_UP = 0.05  # s: the sink must finish this soon after the last message was sent
 BLOCK = 100  # pings per turn
@@ -94,11 +99,21 @@ NODE_TARGETS = {"p50 ratio": 1.05, "p99 bus us": 1000.0, "throughput ratio": 0.9
 PORTS["zenoh"] = 7673
 BUS_MODULES["zenoh"] = "antalate_lcm.bus"
 ZENOH_TARGETS = {"p50 ratio to bus": 2.0, "throughput": 50_000.0}
+PORTS["zenoh-tls"] = 7674
+BUS_MODULES["zenoh-tls"] = "antalate_lcm.bus"
+#: Where the run's lab CA is (set by the inner process before the peers start; they inherit it).
+PKI_ENV = "ANTALATE_BENCH_PKI"
 
 
 def url(api: str) -> str:
     if api == "zenoh":
         return f"zenoh://?connect=tcp/127.0.0.1:{PORTS['zenoh']}&mode=client"
+    if api == "zenoh-tls":
+        pki = Path(os.environ[PKI_ENV])
+        return (
+            f"zenoh://?connect=tls/127.0.0.1:{PORTS['zenoh-tls']}&mode=client&ca={pki / 'ca.pem'}"
+            f"&cert={pki / 'bench.pem'}&cert_key={pki / 'bench.key'}"
+        )
     return f"udpm://239.255.76.67:{PORTS[api]}?ttl=0&recv_buf_size=4194304"
 
 
@@ -639,24 +654,26 @@ def throughput(apis: list[str], seconds: float, burst: int, deadline: float) -> 
 # -- orchestration ---------------------------------------------------------------------------------
 
 
-def zenoh_router() -> subprocess.Popen[str] | None:
-    """``antalate router`` on loopback for the zenoh column; None (column left out) without eclipse-zenoh."""
+def zenoh_router(api: str = "zenoh") -> subprocess.Popen[str] | None:
+    """``antalate router`` on loopback for the zenoh column (``zenoh-tls``: with mutual TLS, a lab CA
+    made first); None (column left out) without eclipse-zenoh."""
     try:
         import zenoh  # noqa: F401
     except ImportError:
         print("zenoh: eclipse-zenoh is not installed, no zenoh column (pip install -e '.[zenoh]')")
         return None
+    cli = [sys.executable, "-m", "antalate_lcm.cli"]
+    listen = ["--listen", f"tcp/127.0.0.1:{PORTS[api]}"]
+    if api == "zenoh-tls":
+        import tempfile
+
+        pki = Path(tempfile.mkdtemp(prefix="antalate-bench-pki-"))
+        subprocess.run([*cli, "lab-ca", str(pki), "--client", "bench"], check=True, capture_output=True)
+        os.environ[PKI_ENV] = str(pki)
+        listen = ["--listen", f"tls/127.0.0.1:{PORTS[api]}", "--tls-cert", str(pki / "router.pem"),
+                  "--tls-key", str(pki / "router.key"), "--ca", str(pki / "ca.pem")]  # fmt: skip
     proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "antalate_lcm.cli",
-            "--log-level",
-            "WARNING",
-            "router",
-            "--listen",
-            f"tcp/127.0.0.1:{PORTS['zenoh']}",
-        ],
+        [*cli, "--log-level", "ERROR", "router", *listen],
         stdout=subprocess.PIPE,
         text=True,
         cwd=str(REPO),
@@ -687,9 +704,10 @@ def inside(args: argparse.Namespace) -> int:
     latency_apis = ["raw", "bus", "bus-signed", "raw-thread", "node"]
     size = len(make_msg().encode())
     router = zenoh_router()
-    if router is not None:
-        apis.append("zenoh")
-        latency_apis.append("zenoh")
+    tls_router = zenoh_router("zenoh-tls") if router is not None else None
+    if router is not None and tls_router is not None:
+        apis += ["zenoh", "zenoh-tls"]
+        latency_apis += ["zenoh", "zenoh-tls"]
     print(
         f"message: telemetry_t, {size} bytes; URL {url('raw')} (one port per API); queue capacity {DEFAULT_QUEUE_CAPACITY}"
     )
@@ -754,8 +772,22 @@ def inside(args: argparse.Namespace) -> int:
             f"  lossless throughput signed {tp['bus-signed']['lossless'] / 1000:.0f}k vs unsigned "
             f"{tp['bus']['lossless'] / 1000:.0f}k msg/s ({tp['bus-signed']['lossless'] / tp['bus']['lossless']:.2f}x)"
         )
-    if router is not None:
+    if router is not None and tls_router is not None:
         stop_router(router)
+        stop_router(tls_router)
+        if rt:
+            print(
+                f"mutual TLS on the router path: round trip p50 {rt['zenoh-tls']['p50']:.1f} us vs tcp "
+                f"{rt['zenoh']['p50']:.1f} us ({rt['zenoh-tls']['p50'] - rt['zenoh']['p50']:+.1f} us), p99 "
+                f"{rt['zenoh-tls']['p99']:.1f} vs {rt['zenoh']['p99']:.1f} us"
+            )
+        if tp and tp["zenoh"]["lossless"]:
+            print(
+                f"  lossless throughput tls {tp['zenoh-tls']['lossless'] / 1000:.0f}k vs tcp "
+                f"{tp['zenoh']['lossless'] / 1000:.0f}k msg/s "
+                f"({tp['zenoh-tls']['lossless'] / tp['zenoh']['lossless']:.2f}x); burst "
+                f"{tp['zenoh-tls']['burst']['rate'] / 1000:.0f}k vs {tp['zenoh']['burst']['rate'] / 1000:.0f}k msg/s sent"
+            )
         p50 = rt["zenoh"]["p50"] / rt["bus"]["p50"] if rt else nan
         lossless = tp["zenoh"]["lossless"] if tp else nan
         print("zenoh (through antalate router on loopback) against its targets:")

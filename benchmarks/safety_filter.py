@@ -10,9 +10,9 @@ centroid at 5 m/s (the interior agents' constraints are active). Printed:
   and its share of one core at 20 Hz for all N agents;
 - the picture's cost per telemetry message fed (µs), and its share of one core at 10 Hz telemetry;
 - the same filter with ``--spacing 30`` apart (nobody near: the fast path);
-- then ``benchmarks/agents.py 1000`` (1,000 simulated agents in one process without the filter),
-  whose last column is the whole agent's CPU per agent-second: the filter's µs per agent-second
-  (20 calls + 10 telemetry feeds) is printed beside it.
+- then ``benchmarks/agents.py 1000`` twice, without and with the filter (``--safety``: 1,000 simulated
+  agents in one process, every HLC fed the swarm picture): the 1,000-agents-per-process figures
+  (STANDBY time, telemetry rate, reaction times, RSS, CPU per agent-second) both ways, in the same run.
 
     python benchmarks/safety_filter.py [--sizes 20 200 1000] [--ticks 20] [--no-agents]
 
@@ -115,9 +115,10 @@ def main() -> None:
             )
     if args.no_agents:
         return
-    print("\nbenchmarks/agents.py 1000 (no filter), the same run:", flush=True)
     agents = Path(__file__).resolve().parent / "agents.py"
-    subprocess.run([sys.executable, str(agents), "1000"], check=False)
+    for extra in ([], ["--safety"]):
+        print(f"\nbenchmarks/agents.py 1000 {' '.join(extra)}, the same run:", flush=True)
+        subprocess.run([sys.executable, str(agents), "1000", *extra], check=False)
 
 
 if __name__ == "__main__":

@@ -373,6 +373,7 @@ class OperatorApp(App[None]):
                 direction=self.direction,
                 scope_all=self.direction_all,
                 selected=self.selected,
+                safety=model.safety_summary(now),
             )
         )
 

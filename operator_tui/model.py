@@ -342,6 +342,48 @@ class SwarmModel:
                 north, east = self.origin.to_ne(tel.lat, tel.lon)
                 yield view, north, east
 
+    def safety_summary(self, now: float, *, recent: float = 2.0, reach: float = 20.0) -> SafetySummary | None:
+        """What the status bar says of the separation filter (docs/safety.md): how many agents had
+        their command modified in the last `recent` s (by separation, fence or both), and the closest
+        pair of agents in the air within `reach` m. None until a SAFETY report was heard at all (a
+        swarm without the filter shows nothing)."""
+        reports = [v.last_safety for v in self.agents.values() if v.last_safety is not None]
+        if not reports:
+            return None
+        modified: dict[str, int] = {}
+        for r in reports:
+            if now - r.at <= recent and "modified by " in r.text:
+                by = r.text.split("modified by ", 1)[1].split(";", 1)[0].strip()
+                modified[by] = modified.get(by, 0) + 1
+        # The closest pair by a grid of `reach`-wide cells: every pair within `reach` is in
+        # neighbouring cells, and a thousand agents cost a thousand lookups, not half a million.
+        cells: dict[tuple[int, int], list[tuple[str, float, float, float]]] = {}
+        for view, north, east in self.positions():
+            tel = view.telemetry
+            if tel is None or not tel.in_air or view.stale:
+                continue
+            key = (math.floor(north / reach), math.floor(east / reach))
+            cells.setdefault(key, []).append((view.name, north, east, tel.alt))
+        closest: tuple[float, str, str] | None = None
+        for (ci, cj), members in cells.items():
+            near = [m for di in (-1, 0, 1) for dj in (-1, 0, 1) for m in cells.get((ci + di, cj + dj), ())]
+            for a in members:
+                for b in near:
+                    if b[0] <= a[0]:
+                        continue
+                    d = math.dist(a[1:], b[1:])
+                    if d <= reach and (closest is None or d < closest[0]):
+                        closest = (d, a[0], b[0])
+        return SafetySummary(modified, closest)
+
+
+@dataclass(frozen=True)
+class SafetySummary:
+    #: Agents whose command was modified lately, by who modified it ("separation", "fence", ...).
+    modified: dict[str, int]
+    #: (3-D distance m, a, b) of the closest pair in the air within reach; None when none is that close.
+    closest: tuple[float, str, str] | None
+
 
 def natural_key(name: str) -> tuple[Any, ...]:
     """Sort key that orders embedded numbers numerically (``uav2`` < ``uav10``)."""

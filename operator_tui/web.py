@@ -11,8 +11,17 @@ terminal over a WebSocket to xterm.js. What antalate adds to the stock server:
   and gives the browser a session cookie; a ``read-only`` key cannot fly, so it is refused. A
   console that listens beyond loopback without keys is refused unless ``--no-auth`` says so:
   whoever reaches the page commands the swarm.
-* **WebSocket origin check**, so another web site open in the operator's browser cannot drive the
-  console through the cookie.
+* **Host and Origin checks** (issue 29), so another web site open in the operator's browser can
+  drive the console neither through the cookie nor by DNS rebinding: a page at ``evil.example``
+  whose name is re-pointed at 127.0.0.1 reaches this server *same-origin* as far as the browser
+  knows, so comparing Origin with the request's own Host proves nothing. Every request's Host must
+  be an address the server listens on or a name of :func:`allowed_hosts` (loopback names for a
+  loopback server, ``--allow-host`` for the rest); a WebSocket's or a sign-in's Origin must be that
+  same host. Anything else is 403, with or without sign-in.
+* **Sign-in that cannot be guessed at speed or outlive its key**: attempts are limited per address
+  (429 with ``Retry-After``), the keys file is re-read when it changes (a removed key's sessions and
+  open consoles end within :data:`KEYS_POLL_S`), and sign-ins are logged once per address and outcome
+  per :data:`LOG_PERIOD_S` with a count of the rest.
 * **One name per tab** (``operator-web1``, ``operator-web2``, ...): two consoles under one name would
   trip the agents' per-sender replay guard (docs/security.md).
 """
@@ -21,19 +30,22 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import hmac
 import ipaddress
 import itertools
 import logging
+import os
 import secrets
 import shlex
 import sys
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from antalate_lcm._ratelimit import RateLimitedLog, TokenBucket
 from antalate_lcm.errors import AntalateError
 
 if TYPE_CHECKING:
@@ -48,6 +60,15 @@ DEFAULT_PORT = 8000
 SESSION_COOKIE = "antalate_console"
 SESSION_TTL_S = 12 * 3600.0
 TEMPLATES = Path(__file__).resolve().parent / "web_templates"
+#: Sign-in attempts per address: this many at once, then one per :data:`SIGN_IN_EVERY_S`.
+SIGN_IN_BURST = 5
+SIGN_IN_EVERY_S = 6.0
+#: How often the keys file is looked at (s): a removed key's sessions end within this.
+KEYS_POLL_S = 1.0
+#: Sign-ins are logged once per address and outcome per this period (s), with a count of the rest.
+LOG_PERIOD_S = 60.0
+#: The names a loopback console answers to (besides loopback addresses).
+LOOPBACK_NAMES = ("localhost",)
 
 
 # ------------------------------------------------------------------------------------------ access
@@ -67,7 +88,8 @@ class ConsoleAccess:
 
     keys: tuple[ApiKey, ...]
     ttl_s: float = SESSION_TTL_S
-    sessions: dict[str, tuple[str, float]] = field(default_factory=dict)
+    #: token -> (holder's name, the SHA-256 of the key it signed in with, expiry)
+    sessions: dict[str, tuple[str, str, float]] = field(default_factory=dict)
 
     def login(self, key: str, now: float) -> tuple[str, str] | Refusal:
         """A new session (token, holder's name) for a valid operator key, else why not."""
@@ -85,7 +107,7 @@ class ConsoleAccess:
             )
         self._expire(now)
         token = secrets.token_urlsafe(32)
-        self.sessions[token] = (match.name, now + self.ttl_s)
+        self.sessions[token] = (match.name, match.sha256, now + self.ttl_s)
         return token, match.name
 
     def holder(self, token: str | None, now: float) -> str | None:
@@ -93,14 +115,58 @@ class ConsoleAccess:
         if not token:
             return None
         entry = self.sessions.get(token)
-        if entry is None or entry[1] < now:
+        if entry is None or entry[2] < now:
             self.sessions.pop(token, None)
             return None
         return entry[0]
 
-    def _expire(self, now: float) -> None:
-        for token in [t for t, (_, until) in self.sessions.items() if until < now]:
+    def replace_keys(self, keys: tuple[ApiKey, ...]) -> list[str]:
+        """Take the keys file's new contents; end the sessions of keys no longer there as operator
+        keys and return their tokens (their open consoles must be closed too)."""
+        self.keys = keys
+        valid = {k.sha256 for k in keys if k.role == "operator"}
+        ended = [t for t, (_, digest, _) in self.sessions.items() if digest not in valid]
+        for token in ended:
             del self.sessions[token]
+        return ended
+
+    def _expire(self, now: float) -> None:
+        for token in [t for t, (_, _, until) in self.sessions.items() if until < now]:
+            del self.sessions[token]
+
+
+@dataclass
+class KeysFile:
+    """The keys file, re-read when its (mtime, size, inode) changes. A file that cannot be read or
+    holds no operator key is taken as *no keys* (fail closed: every session ends) and said so."""
+
+    path: str
+    stamp: tuple[int, int, int] | None = None
+
+    def _stamp(self) -> tuple[int, int, int] | None:
+        try:
+            st = os.stat(self.path)
+        except OSError:
+            return None
+        return (st.st_mtime_ns, st.st_size, st.st_ino)
+
+    def load(self) -> tuple[ApiKey, ...]:
+        self.stamp = self._stamp()
+        return load_keys(self.path)
+
+    def changed(self) -> tuple[ApiKey, ...] | None:
+        """The new keys if the file changed since the last look, else None."""
+        stamp = self._stamp()
+        if stamp == self.stamp:
+            return None
+        self.stamp = stamp
+        try:
+            return load_keys(self.path)
+        except (AntalateError, OSError) as exc:
+            log.error(
+                "console keys file %s unusable, every session ended until it is fixed: %s", self.path, exc
+            )
+            return ()
 
 
 def load_keys(path: str) -> tuple[ApiKey, ...]:
@@ -122,9 +188,53 @@ def is_loopback(host: str) -> bool:
         return False
 
 
+def allowed_hosts(listen: str, extra: Iterable[str] = ()) -> frozenset[str]:
+    """The host names (lower case, IPv6 without brackets) a request's Host may carry by name.
+
+    An IP literal is checked apart (:func:`host_allowed`): DNS rebinding needs a *name* the attacker
+    controls, so a name is accepted only when listed: the listen address itself, ``localhost`` for a
+    loopback server, and ``--allow-host``."""
+    names = {listen.lower().strip("[]"), *(h.lower().strip("[]") for h in extra)}
+    if is_loopback(listen):
+        names.update(LOOPBACK_NAMES)
+    return frozenset(names)
+
+
+def _split_host(host_header: str) -> str:
+    """The host part of a Host header (``[::1]:8000`` -> ``::1``, ``Name:80`` -> ``name``)."""
+    h = host_header.strip().lower()
+    if h.startswith("["):
+        return h[1 : h.find("]")] if "]" in h else h
+    return h.rsplit(":", 1)[0] if h.count(":") == 1 else h
+
+
+def host_allowed(host_header: str | None, listen: str, names: frozenset[str]) -> bool:
+    """Whether a request's Host names this server: a listed name, or an address it listens on (any
+    address when it listens on all of them; only a loopback one when it listens on loopback)."""
+    if not host_header:
+        return False
+    host = _split_host(host_header)
+    if host in names:
+        return True
+    try:
+        address = ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    try:
+        bound = ipaddress.ip_address(listen.strip("[]"))
+    except ValueError:  # listening on a name: only the names given count
+        return False
+    if bound.is_unspecified:
+        return True
+    if bound.is_loopback:
+        return address.is_loopback
+    return address == bound
+
+
 def same_origin(origin: str | None, scheme: str, host: str) -> bool:
-    """Browsers send Origin with every WebSocket; a client without one cannot be a cross-site page."""
-    return origin is None or origin == f"{scheme}://{host}"
+    """Browsers send Origin with every WebSocket and form POST; a client without one cannot be a
+    cross-site page. ``host`` is the request's Host, already checked by :func:`host_allowed`."""
+    return origin is None or origin.lower() == f"{scheme}://{host}".lower()
 
 
 def console_command(config: str | None, name: str) -> str:
@@ -148,9 +258,12 @@ def make_server(
     host: str,
     port: int,
     access: ConsoleAccess | None,
+    allow_hosts: Iterable[str] = (),
+    keys_file: KeysFile | None = None,
     clock: Callable[[], float] = time.time,
 ) -> Any:
-    """The textual-serve server with antalate's page, credential and per-tab names."""
+    """The textual-serve server with antalate's page, credential and per-tab names; ``keys_file``
+    (where ``access``'s keys came from) is watched for changes."""
     import aiohttp_jinja2
     import jinja2
     import textual_serve
@@ -159,7 +272,14 @@ def make_server(
     from textual_serve.server import Server, to_int
 
     statics = Path(textual_serve.__file__).resolve().parent / "static"
+    KEYS_WATCHER = web.AppKey("keys_watcher", asyncio.Task[None])
     tabs = itertools.count(1)
+    names = allowed_hosts(host, allow_hosts)
+    attempts = TokenBucket(1.0 / SIGN_IN_EVERY_S, SIGN_IN_BURST)
+    sign_ins = RateLimitedLog(log, period=LOG_PERIOD_S, clock=clock)
+    refusals = RateLimitedLog(log, period=LOG_PERIOD_S, clock=clock)
+    #: session token -> the consoles (WebSockets) it opened, closed when its key is removed
+    consoles: dict[str, set[web.WebSocketResponse]] = {}
 
     class ConsoleServer(Server):
         async def _make_app(self) -> web.Application:
@@ -175,12 +295,22 @@ def make_server(
                 ]
             )
             app.on_startup.append(self.on_startup)
+            app.on_cleanup.append(self.on_cleanup)
             return app
 
         @web.middleware
         async def _guard(
             self, request: web.Request, handler: Callable[[web.Request], Awaitable[web.StreamResponse]]
         ) -> web.StreamResponse:
+            if not host_allowed(request.headers.get("Host"), host, names):
+                refusals.log(
+                    (request.remote, "host"),
+                    logging.WARNING,
+                    "console request from %s for another host refused (DNS rebinding?): Host %r",
+                    request.remote,
+                    request.headers.get("Host", "")[:100],
+                )
+                raise web.HTTPForbidden(text="unknown Host: this console answers only to its own address")
             if access is None or request.path == "/login" or request.path.startswith("/static/"):
                 return await handler(request)
             if access.holder(request.cookies.get(SESSION_COOKIE), clock()) is None:
@@ -211,15 +341,44 @@ def make_server(
         async def handle_login(self, request: web.Request) -> web.Response:
             if access is None:
                 raise web.HTTPSeeOther("/")
+            scheme = "https" if request.secure else "http"
+            if not same_origin(request.headers.get("Origin"), scheme, request.host):
+                raise web.HTTPForbidden(text="cross-origin sign-in refused")
+            now = clock()
+            wait = attempts.take(request.remote, now)
+            attempts.sweep(now)
+            if wait > 0:
+                refusals.log(
+                    (request.remote, "throttled"),
+                    logging.WARNING,
+                    "console sign-in attempts from %s throttled",
+                    request.remote,
+                )
+                raise web.HTTPTooManyRequests(
+                    text=f"too many sign-in attempts: try again in {wait:.0f} s",
+                    headers={"Retry-After": str(max(1, int(wait + 0.999)))},
+                )
             form = await request.post()
-            result = access.login(str(form.get("key", "")), clock())
+            result = access.login(str(form.get("key", "")), now)
             if isinstance(result, Refusal):
-                log.warning("console sign-in refused from %s: %s", request.remote, result.text)
+                sign_ins.log(
+                    (request.remote, "refused"),
+                    logging.WARNING,
+                    "console sign-in refused from %s: %s",
+                    request.remote,
+                    result.text,
+                )
                 response = aiohttp_jinja2.render_template("login.html", request, {"problem": result.text})
                 response.set_status(result.status)
                 return response
             token, holder = result
-            log.info("console signed in from %s with the key of %r", request.remote, holder)
+            sign_ins.log(
+                (request.remote, "signed in"),
+                logging.INFO,
+                "console signed in from %s with the key of %r",
+                request.remote,
+                holder,
+            )
             response = web.HTTPSeeOther("/")
             response.set_cookie(
                 SESSION_COOKIE,
@@ -248,8 +407,11 @@ def make_server(
             async def close_websocket() -> None:  # AppService awaits it and wants no result
                 await websocket.close()
 
+            token = request.cookies.get(SESSION_COOKIE, "")
             try:
                 await websocket.prepare(request)
+                if access is not None:
+                    consoles.setdefault(token, set()).add(websocket)
                 app_service = AppService(
                     console_command(config, tab_name),
                     write_bytes=websocket.send_bytes,
@@ -282,17 +444,51 @@ def make_server(
             except Exception:  # a browser's garbage must not take the server down
                 log.exception("console %s: WebSocket error", tab_name)
             finally:
+                mine = consoles.get(token)
+                if mine is not None:
+                    mine.discard(websocket)
+                    if not mine:
+                        del consoles[token]
                 if app_service is not None:
                     await app_service.stop()
                 log.info("console %s closed", tab_name)
             return websocket
 
+        async def _watch_keys(self) -> None:
+            """Re-read the keys file when it changes; end the sessions, and close the consoles, of
+            every key it no longer holds."""
+            assert access is not None and keys_file is not None
+            while True:
+                await asyncio.sleep(KEYS_POLL_S)
+                keys = keys_file.changed()
+                if keys is None:
+                    continue
+                ended = access.replace_keys(keys)
+                log.warning(
+                    "console keys file %s re-read: %d operator key(s); %d session(s) of removed keys ended",
+                    keys_file.path,
+                    sum(k.role == "operator" for k in keys),
+                    len(ended),
+                )
+                for token in ended:
+                    for websocket in list(consoles.pop(token, ())):
+                        await websocket.close(code=4401, message=b"your key was removed")
+
         async def on_startup(self, app: web.Application) -> None:
+            if access is not None and keys_file is not None:
+                app[KEYS_WATCHER] = asyncio.get_running_loop().create_task(self._watch_keys())
             who = "operator API key required" if access is not None else "NO sign-in"
             print(
                 f"antalate tui --web: serving the console on http://{self.host}:{self.port}/ ({who})",
                 flush=True,
             )
+
+        async def on_cleanup(self, app: web.Application) -> None:
+            watcher = app.get(KEYS_WATCHER)
+            if watcher is not None:
+                watcher.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await watcher
 
     return ConsoleServer(
         command=console_command(config, name),
@@ -305,7 +501,14 @@ def make_server(
 
 
 def serve(
-    config: str | None, *, name: str | None, host: str, port: int, keys_file: str | None, no_auth: bool
+    config: str | None,
+    *,
+    name: str | None,
+    host: str,
+    port: int,
+    keys_file: str | None,
+    no_auth: bool,
+    allow_hosts: tuple[str, ...] = (),
 ) -> int:
     """Serve until SIGINT/SIGTERM. Refuses an open console on the network before it listens."""
     try:
@@ -317,7 +520,13 @@ def serve(
 
         # a bad config is one clear line now, not a broken page later
         name = name or load_config(config).agent.name
-    access = ConsoleAccess(load_keys(keys_file)) if keys_file else None
+    keys = KeysFile(keys_file) if keys_file else None
+    access = ConsoleAccess(keys.load()) if keys is not None else None
+    if access is None and allow_hosts and not no_auth:
+        raise AntalateError(
+            "refusing --allow-host on a console without sign-in: a loopback console without keys answers "
+            "only to 127.0.0.1, localhost and [::1]. Give --keys STATION_TOML, or pass --no-auth"
+        )
     if access is None and not is_loopback(host) and not no_auth:
         raise AntalateError(
             f"refusing to serve the console on {host} without sign-in: anyone who reaches it commands the "
@@ -327,7 +536,15 @@ def serve(
         log.warning(
             "the console on %s:%d has NO sign-in: anyone who reaches it commands the swarm", host, port
         )
-    server = make_server(config, name=name or "operator", host=host, port=port, access=access)
+    server = make_server(
+        config,
+        name=name or "operator",
+        host=host,
+        port=port,
+        access=access,
+        allow_hosts=allow_hosts,
+        keys_file=keys,
+    )
     try:
         server.serve()
     except OSError as exc:
@@ -348,6 +565,14 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "--keys", metavar="STATION_TOML", help="--web: sign in with the operator API keys of this file"
     )
     p.add_argument("--no-auth", action="store_true", help="--web: allow no sign-in beyond loopback (unsafe)")
+    p.add_argument(
+        "--allow-host",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="--web: a host name the console answers to besides its listen address (repeatable); "
+        "any other Host is refused (DNS rebinding)",
+    )
     terminal = p.get_default("func")
 
     def run(args: argparse.Namespace) -> int:
@@ -360,6 +585,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
             port=args.port,
             keys_file=args.keys,
             no_auth=args.no_auth,
+            allow_hosts=tuple(args.allow_host),
         )
 
     p.set_defaults(func=run)

@@ -8,7 +8,7 @@ from pathlib import Path
 import lcm
 
 from antalate_lcm.geo import offset
-from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, telemetry_t
+from antalate_lcm.msgs import direction_cmd_t, hlc_error_t, hlc_state_t, mc_state_t, telemetry_t
 
 LAT0, LON0 = 32.7767, 35.0231
 T0 = 1_700_000_000_000_000  # µs: the log's first event
@@ -34,11 +34,12 @@ class LogWriter:
         in_air: bool = True,
         vn: float = 0.0,
         ve: float = 0.0,
+        alt: float = 5.0,
     ) -> None:
         msg = telemetry_t()
         msg.header.agent = agent
         msg.lat, msg.lon = offset(LAT0, LON0, north, east)
-        msg.alt, msg.in_air, msg.mode = 5.0, in_air, "GUIDED"
+        msg.alt, msg.in_air, msg.mode = alt, in_air, "GUIDED"
         msg.vn, msg.ve = vn, ve
         self.add(t, f"{agent}/TELEMETRY", msg.encode())
 
@@ -54,6 +55,12 @@ class LogWriter:
         msg.state = state
         msg.autopilot = "sim"
         self.add(t, f"{agent}/HLC_STATE", msg.encode())
+
+    def error(self, t: float, agent: str, code: int, severity: int, text: str) -> None:
+        msg = hlc_error_t()
+        msg.header.agent = agent
+        msg.code, msg.severity, msg.text = code, severity, text
+        self.add(t, f"{agent}/HLC_ERROR", msg.encode())
 
     def direction(
         self,

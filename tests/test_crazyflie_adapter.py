@@ -68,7 +68,8 @@ def radio_rig() -> Iterator[Callable[..., tuple[CrazyflieEmulator, CrazyflieAuto
 
 
 def airborne(emu: CrazyflieEmulator, ap: CrazyflieAutopilot, alt: float = 1.0) -> None:
-    assert ap.arm(), ap.last_refusal
+    # arm() refuses until the estimator's variances have come in their log block (its first period)
+    assert wait_for(ap.arm, timeout=2.0, interval=0.05), ap.last_refusal
     ap.takeoff(alt)
     assert wait_for(lambda: ap.state().alt >= 0.98 * alt and emu.snapshot().hl_kind == "hold")
 
@@ -395,3 +396,25 @@ def test_a_takeoff_the_firmware_refuses_is_reported_with_its_reason(rig: Callabl
     with pytest.raises(AutopilotError, match="EBUSY"):
         ap.takeoff(1.0)
     assert time.monotonic() - t0 < 2.0 and emu.snapshot().z == 0.0
+
+
+def test_a_takeoff_while_flying_or_landing_is_refused_and_what_it_was_doing_goes_on(
+    rig: Callable[..., Any],
+) -> None:
+    """planner.c plan_takeoff refuses unless its planner is idle (a hover's trajectory, a landing): the
+    adapter says so instead of reading the flying bit as a take-off done, and the hold or the landing
+    goes on (the landing still ends disarmed)."""
+    emu, ap = rig(land_speed=0.5)
+    airborne(emu, ap, 0.8)
+    mode = ap.state().mode
+    with pytest.raises(AutopilotError, match="flying .*land first"):
+        ap.takeoff(1.5)
+    assert ap.state().mode == mode and emu.snapshot().hl_kind == "hold"
+    ap.land()
+    assert wait_for(lambda: emu.snapshot().hl_kind == "land")
+    with pytest.raises(AutopilotError, match="flying .*land first"):
+        ap.takeoff(1.5)
+    assert ap.state().flight_mode.name == "LANDING"
+    assert [name for name, _ in emu.hl_commands].count("takeoff") == 1
+    assert wait_for(lambda: ap.state().landed and not ap.state().armed, timeout=6.0)
+    assert emu.falls == 0

@@ -330,3 +330,25 @@ def test_cflib_closing_the_link_in_flight_stops_the_motors(emu: CrazyflieEmulato
     close(scf)
     assert wait_for(lambda: not emu.snapshot().flying)
     assert wait_for(lambda: emu.snapshot().z == 0.0) and emu.falls == 1  # it falls at 1 g
+
+
+def test_the_flying_bit_stays_two_seconds_after_the_motors_stop_and_the_landed_timeout_follows() -> None:
+    """supervisor.c IS_FLYING_HYSTERESIS_THRESHOLD (2 s), then LANDING_TIMEOUT_MS (3 s) in Landed."""
+    now = [100.0]
+    emu = CrazyflieEmulator(clock=lambda: now[0], auto_arming=False)
+    try:
+        emu.armed = emu.motors = True  # spinning on the floor, as at the end of a landing
+        emu._step(0.01, now[0])  # noqa: SLF001 - one physics step on a clock of the test's own
+        emu._motors_off(now[0])  # noqa: SLF001 - the planner's null set-point
+        for t, flying_bit, armed in (
+            (1.9, True, True),
+            (2.1, False, True),
+            (4.9, False, True),
+            (5.1, False, False),
+        ):
+            now[0] = 100.0 + t
+            emu._step(0.01, now[0])  # noqa: SLF001
+            assert not emu.flying and emu.flying_bit() == flying_bit and emu.armed == armed, t
+            assert bool(emu.supervisor_info() & 1 << 4) == flying_bit  # the bitfield's "is flying"
+    finally:
+        emu.stop()

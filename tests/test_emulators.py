@@ -8,6 +8,7 @@ MAVLink: the real pymavlink client over UDP (both directions of set-up) and TCP.
 from __future__ import annotations
 
 import json
+import math
 import signal
 import socket
 import subprocess
@@ -27,6 +28,9 @@ from tests.emulators.tello_emulator import TelloEmulator
 
 # -- Tello helpers ----------------------------------------------------------------------------------
 
+#: djitellopy's ``Tello.TIME_BTW_COMMANDS``: what the emulator needs between commands, as a Tello does.
+TIME_BTW_COMMANDS = Tello.TIME_BTW_COMMANDS
+
 
 class TelloClient:
     """A bare SDK client: one UDP socket for commands, one for state (what djitellopy does, minus binding 8889)."""
@@ -38,14 +42,21 @@ class TelloClient:
         self.state.bind(("127.0.0.1", 0))
         self.state_port = self.state.getsockname()[1]
         self.emulator: tuple[str, int] = ("127.0.0.1", 8889)
+        self.spacing = TIME_BTW_COMMANDS
+        self._quiet_since = -math.inf  # the last non-rc command sent or reply received
 
     def send(self, text: str) -> None:
+        """One datagram; a non-rc one no sooner than `spacing` after the last command or reply (djitellopy)."""
+        if text.split()[:1] != ["rc"]:
+            time.sleep(max(0.0, self._quiet_since + self.spacing - time.monotonic()))
+            self._quiet_since = time.monotonic()
         self.cmd.sendto(text.encode(), self.emulator)
 
     def ask(self, text: str, timeout: float = 3.0) -> str:
         self.send(text)
         self.cmd.settimeout(timeout)
         data, sender = self.cmd.recvfrom(1024)
+        self._quiet_since = time.monotonic()
         assert sender == self.emulator, "replies must come from the address the emulator is bound to"
         return data.decode()
 
@@ -56,6 +67,7 @@ class TelloClient:
             self.cmd.recvfrom(1024)
         except TimeoutError:
             return True
+        self._quiet_since = time.monotonic()
         return False
 
     def state_packets(self, duration: float) -> list[str]:

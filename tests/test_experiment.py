@@ -154,6 +154,26 @@ def test_run_flies_the_script_records_and_prints_the_metrics(
     )
 
 
+def test_a_shipped_peer_rule_flies_in_one_process_on_memq(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """examples/swarm_rules/flocking.toml as shipped (memq://, no swarm key): the whole swarm is in
+    this process, so a peer behavior hears its peers and is not refused as a split swarm."""
+    example = Path(__file__).resolve().parent.parent / "examples" / "swarm_rules" / "flocking.toml"
+    script = tmp_path / "script.toml"
+    script.write_text("mission_time = 4.0\n[analyze]\nrange = 30.0\n")
+    out = tmp_path / "flock.lcm"
+    code = main(
+        ["--log-level", "WARNING", "run", str(example), "--agents", "3", "--spacing", "6", "--headless"]
+        + ["--script", str(script), "-o", str(out)]
+    )
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert "OK: 3 agent(s), all back in STANDBY" in text
+    mission = analyze_log(out).phase("mission")  # they flew: the rule heard its peers and moved
+    assert mission is not None and mission.polarisation is not None and mission.polarisation.max > 0.9
+
+
 # ----------------------------------------------------------------------------- antalate new behavior
 def test_new_behavior_refuses_bad_names_and_existing_folders(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]

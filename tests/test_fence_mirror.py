@@ -94,3 +94,18 @@ def test_the_hlc_mirrors_its_fence_before_flying_and_says_so() -> None:
     finally:
         agent.stop()
         vehicle.stop()
+
+
+def test_px4_gets_the_same_cylinder_in_its_gf_parameters_without_a_floor() -> None:
+    """PX4 v1.15.4 (geofence_params.c): GF_MAX_HOR_DIST around home, GF_MAX_VER_DIST above it, GF_ACTION
+    (2 Hold, 3 Return, 5 Land); no floor parameter, the action written last."""
+    from antalate_lcm.autopilot.px4.fence_mirror import ORDER as PX4_ORDER
+    from antalate_lcm.autopilot.px4.fence_mirror import fence_parameters as px4_parameters
+
+    p = px4_parameters(FENCE, (0.0, 0.0))
+    assert p == {"GF_MAX_HOR_DIST": pytest.approx(66.0, abs=0.05), "GF_MAX_VER_DIST": 60.0, "GF_ACTION": 3.0}
+    assert list(p) == list(PX4_ORDER) and PX4_ORDER[-1] == "GF_ACTION"
+    assert px4_parameters(FENCE, (10.0, 0.0), "land")["GF_ACTION"] == 5.0
+    assert px4_parameters(FENCE, (0.0, 0.0), "hover")["GF_ACTION"] == 2.0
+    # from a home 10 m north the farthest vertex is (-30, +-40): 56.57 m + 2 m margin
+    assert px4_parameters(FENCE, (10.0, 0.0))["GF_MAX_HOR_DIST"] == pytest.approx(58.6, abs=0.05)

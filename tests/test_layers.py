@@ -33,6 +33,7 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
             {
                 "errors",
                 "_ratelimit",
+                "_fastcodec",
                 "_codegen",
                 "_golang",
                 "_golang_parse",

@@ -332,7 +332,11 @@ def test_agent_process_flies_a_whole_mission_over_tcp(
 def test_hlc_restart_mid_flight_resyncs_without_arming_or_taking_off(
     netns: NetNamespace, probe: Probe, emulator: EmulatorProcess, tmp_path: Path
 ) -> None:
-    agent = AgentProcesses(netns, tmp_path, process_doc("copter", f"udpout:127.0.0.1:{emulator.udp_port}"))
+    doc = process_doc("copter", f"udpout:127.0.0.1:{emulator.udp_port}")
+    # The restart is what is tested, not the MC's watchdog: a restarted HLC on a loaded machine takes more
+    # than the 1 s the MC's default 2 s leaves it (Python, pymavlink, the link) and HLC_LOST would come first.
+    doc["mc"] = {"hlc_timeout": 10.0}
+    agent = AgentProcesses(netns, tmp_path, doc)
     agent.start("hlc")
     agent.start("mc")
     try:

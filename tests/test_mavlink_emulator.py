@@ -151,3 +151,155 @@ def test_signature_checked_before_the_timestamp_as_ardupilot_does() -> None:
     assert peer.parse(signed(b"\x02" * 32, 3600)) == [] and peer.rejected == 1  # forged: a later timestamp
     assert [m.get_type() for m in peer.parse(signed(key, 1))] == ["HEARTBEAT"]  # genuine still accepted
     assert peer.parse(signed(key, 0.5)) == [] and peer.rejected == 2  # a replayed (older) one is not
+
+
+# -- held to ArduCopter 4.6.3's source: events.cpp, mode_rtl.cpp, mode_land.cpp --------------------------
+
+GCS_FS = {"FS_GCS_ENABLE": 1, "SYSID_MYGCS": 245, "FS_GCS_TIMEOUT": 1.0}
+
+
+def landing_from(ap: MavlinkAutopilot, v: MavlinkVehicle, alt: float) -> None:
+    """Take off to `alt` and start the operator's LAND (LAND_SPEED 0.3 m/s: it is still landing later)."""
+    fly(ap, v, alt=alt)
+    ap.land()
+    vehicle_until(v, lambda s: s.mode == "LAND" and s.vd > 0.1, 3)
+
+
+@pytest.mark.parametrize(("options", "mode"), [(16, "RTL"), (16 | 8, "LAND")])
+def test_gcs_failsafe_during_land_returns_unless_fs_options_continue_landing(
+    made: list[Any], options: int, mode: str
+) -> None:
+    """events.cpp failsafe_gcs_on_event: a landing is not exempt; only FS_OPTIONS bit 3 (continue if
+    landing) keeps it landing. The adapter names the failsafe either way, and an RTL stays autonomous."""
+    v, ap = pair(
+        made, {**GCS_FS, "FS_OPTIONS": options}, land_speed=0.3, land_alt_low=10.0, land_speed_high=0.3
+    )
+    landing_from(ap, v, 3.0)
+    v.drop_uplink()  # the GCS's heartbeats stop arriving; the vehicle still reports
+    vehicle_until(v, lambda s: v.gcs_failsafe, 3)
+    time.sleep(0.3)
+    assert v.snapshot().mode == mode and v.snapshot().armed
+    if mode == "RTL":
+        s = state_until(ap, lambda s: s.mode == "RTL", 3)
+        assert s.failsafe == "GCS failsafe" and s.autonomous and ("GCS failsafe", "RTL") in v.failsafe_modes
+    else:
+        assert "GCS Failsafe - Continuing Landing" in v.statustexts
+        assert ap.state().flight_mode.name == "LANDING"
+    v.drop_uplink(False)
+
+
+def test_battery_failsafe_during_land_returns_and_the_rtl_is_named(made: list[Any]) -> None:
+    """events.cpp handle_battery_failsafe with BATT_FS_LOW_ACT 2 while landing: RTL (as ArduCopter 4.6.3
+    SITL does: "Battery 1 is low", "Battery Failsafe", LAND -> RTL, measured); critical + LAND: LAND."""
+    v, ap = pair(
+        made,
+        {
+            "BATT_LOW_VOLT": 11.0,
+            "BATT_CRT_VOLT": 10.0,
+            "BATT_LOW_TIMER": 1,
+            "BATT_FS_LOW_ACT": 2,
+            "BATT_FS_CRT_ACT": 1,
+        },
+        land_speed=0.3,
+        land_alt_low=10.0,
+        land_speed_high=0.3,
+        battery_drain=0.0,
+    )
+    landing_from(ap, v, 3.0)
+    v.set_param("SIM_BATT_VOLTAGE", 10.8)
+    s = state_until(ap, lambda s: s.mode == "RTL", 4)
+    assert s.failsafe == "battery failsafe" and s.autonomous and s.battery_warning == "low"
+    assert "Battery Failsafe" in v.statustexts
+    v.set_param("SIM_BATT_VOLTAGE", 9.8)
+    s = state_until(ap, lambda s: s.mode == "LAND", 4)
+    assert s.failsafe == "battery failsafe" and s.battery_warning == "critical"
+
+
+def test_rtl_climbs_to_rtl_alt_returns_loiters_then_lands(made: list[Any]) -> None:
+    """mode_rtl.cpp: the return altitude is max(RTL_ALT, current + RTL_CLIMB_MIN), lowered by the cone
+    (RTL_CONE_SLOPE x distance) near home; the copter climbs before it turns home, loiters RTL_LOIT_TIME
+    over home, then lands. A swarm's altitude separation therefore changes on an RTL."""
+    v, ap = pair(made, {"RTL_ALT": 600, "RTL_CLIMB_MIN": 0, "RTL_LOIT_TIME": 1500}, rtl_speed=6.0)
+    fly(ap, v, alt=2.0)
+    for _ in range(30):  # 3 s east at 4 m/s: ~10 m from home
+        ap.set_velocity(0.0, 4.0, 0.0, 0.0, Frame.NED)
+        time.sleep(0.1)
+    vehicle_until(v, lambda s: s.east > 8.0, 3)
+    ap.rtl()
+    s = v.snapshot()
+    assert s.rtl_alt == pytest.approx(6.0) and s.rtl_phase == "climb"  # 10 m x 3 > 6 m: RTL_ALT
+    east_at_climb = s.east
+    vehicle_until(v, lambda s: s.rtl_phase == "return", 6)
+    s = v.snapshot()
+    assert s.alt >= 5.8 and abs(s.east - east_at_climb) < 1.0  # straight up first, then home
+    vehicle_until(v, lambda s: s.rtl_phase == "loiter", 6)
+    loiter = time.monotonic()
+    vehicle_until(v, lambda s: s.rtl_phase == "land", 3)
+    assert time.monotonic() - loiter >= 1.3  # RTL_LOIT_TIME 1.5 s
+    vehicle_until(v, lambda s: not s.armed, 10)
+    # near home the cone keeps the return low: 1 m out at 2 m, RTL_ALT 6 m -> max(1 x 3, 2 m) = 3 m
+    assert state_until(ap, lambda s: not s.armed, 3)
+    fly(ap, v, alt=2.0)
+    ap.set_velocity(0.0, 1.0, 0.0, 0.0, Frame.NED)
+    vehicle_until(v, lambda s: s.east > 0.8, 3)
+    ap.rtl()
+    assert 2.0 <= v.snapshot().rtl_alt < 4.5
+
+
+def test_gcs_failsafe_in_a_pilot_mode_continues_by_default(made: list[Any]) -> None:
+    """FS_OPTIONS 16 (the default): a GCS failsafe in LOITER leaves the pilot flying; the adapter keeps
+    saying MANUAL, no failsafe attributed."""
+    v, ap = pair(made, GCS_FS)
+    fly(ap, v, alt=1.5)
+    assert v.pilot_switch_mode("LOITER")
+    state_until(ap, lambda s: s.mode == "LOITER", 2)
+    v.drop_uplink()
+    vehicle_until(v, lambda s: v.gcs_failsafe, 3)
+    assert "GCS Failsafe - Continuing Pilot Control" in v.statustexts
+    time.sleep(0.5)
+    s = ap.state()
+    assert v.snapshot().mode == "LOITER" and s.flight_mode.name == "MANUAL" and s.failsafe == ""
+    v.drop_uplink(False)
+
+
+def test_failsafe_land_pauses_4_s_before_descending(made: list[Any]) -> None:
+    """mode_land.cpp / events.cpp set_mode_land_with_pause: a failsafe's LAND hovers LAND_WITH_DELAY_MS
+    (4 s) first; the adapter names the EKF failsafe while it does."""
+    v, ap = pair(made, {})
+    fly(ap, v, alt=2.0)
+    v.fail_ekf()
+    s = state_until(ap, lambda s: s.mode == "LAND", 3)
+    assert s.failsafe == "EKF failsafe" and s.flight_mode.name == "LANDING"
+    start, alt = time.monotonic(), v.snapshot().alt
+    time.sleep(3.0)
+    assert v.snapshot().alt > alt - 0.2  # still hovering
+    vehicle_until(v, lambda s: s.alt < alt - 0.5, 3)
+    assert time.monotonic() - start >= 3.0
+    v.fail_ekf(False)
+    assert v.wait_until(lambda s: "EKF Failsafe Cleared" in v.statustexts, 2)
+
+
+def test_radio_failsafe_rtl_is_named_and_clears(made: list[Any]) -> None:
+    """events.cpp failsafe_radio_on_event with FS_THR_ENABLE 1: "Radio Failsafe" and RTL (ArduCopter 4.6.3
+    SITL with SIM_RC_FAIL 1 does it within 0.1 s, measured); the adapter says "RC failsafe"."""
+    v, ap = pair(made, {})
+    fly(ap, v, alt=2.0)
+    v.set_param("SIM_RC_FAIL", 1)
+    s = state_until(ap, lambda s: s.mode == "RTL", 3)
+    assert s.failsafe == "RC failsafe" and s.autonomous and "Radio Failsafe" in v.statustexts
+    v.set_param("SIM_RC_FAIL", 0)
+    assert v.wait_until(lambda s: "Radio Failsafe Cleared" in v.statustexts, 2)
+
+
+def test_gps_loss_lands_by_the_ekf_failsafe_and_recovers(made: list[Any]) -> None:
+    """SIM_GPS_DISABLE 1: the EKF dead-reckons ~6 s (measured on 4.6.3 SITL), then "EKF variance",
+    "EKF Failsafe: changed to LAND Mode"; GPS back: "EKF Failsafe Cleared" and the vehicle ready again."""
+    v, ap = pair(made, {})
+    fly(ap, v, alt=2.0)
+    v.set_param("SIM_GPS_DISABLE", 1)
+    s = state_until(ap, lambda s: s.mode == "LAND", 10)
+    assert s.failsafe == "EKF failsafe" and "EKF Failsafe: changed to LAND Mode" in v.statustexts
+    vehicle_until(v, lambda s: not s.armed, 12)
+    v.set_param("SIM_GPS_DISABLE", 0)
+    assert v.wait_until(lambda s: "EKF Failsafe Cleared" in v.statustexts and s.ekf_position_ok, 3)
+    assert ap.arm() is True  # nothing the failsafe left behind stays latched

@@ -124,7 +124,7 @@ def test_fence_breach_is_a_failsafe_not_a_pilot(
     s = state_until(ap, lambda s: s.mode == mode, 5)
     hlc.halt()
     assert v.fence_breached and ("fence breach", mode) in v.failsafe_modes
-    assert any(t.startswith("Fence Breached") for t in v.statustexts)
+    assert any(t.endswith("fence breached") for t in v.statustexts)  # AC_Fence, as 4.6.3 SITL says it
     assert s.flight_mode is flight_mode and s.autonomous and s.failsafe == "fence breach", s
     assert not ap.resending  # out of GUIDED: no old target is kept alive
     if mode == "RTL":

@@ -176,3 +176,44 @@ def test_the_health_bit_is_a_level_and_a_healthy_report_clears_a_kept_warning() 
     # a monitor that stops reading in flight is unknown, not low
     v.update(sys_status(False, 0, -1), 3.0)
     assert v.autopilot_state(3.0).battery_warning == "" and any("battery unknown" in r for r in v.not_ready())
+
+
+def test_radio_failsafe_names_the_rtl_and_clears_with_the_radio() -> None:
+    """ArduCopter 4.6.3 SITL, SIM_RC_FAIL 1 in GUIDED (FS_THR_ENABLE 1): "Radio Failsafe", the RC_RECEIVER
+    health bit cleared and RTL in the same tenth of a second (measured); the radio back: "Radio Failsafe
+    Cleared" and the bit set again. The RTL is the radio failsafe's, not a pilot's and not unexplained."""
+    rc = mav.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
+
+    def status(healthy: bool) -> Any:
+        return mav.MAVLink_sys_status_message(
+            rc, rc, rc if healthy else 0, 0, 12600, -1, 100, 0, 0, 0, 0, 0, 0
+        )
+
+    v = Vehicle()
+    v.update(heartbeat(GUIDED, armed=True, status=mav.MAV_STATE_ACTIVE), 0.0)
+    v.update(status(True), 0.5)
+    v.update(mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, b"Radio Failsafe", 0, 0), 1.0)
+    v.update(heartbeat(RTL, armed=True, status=mav.MAV_STATE_CRITICAL), 1.05)
+    v.update(status(False), 1.1)
+    state = v.autopilot_state(1.1)
+    assert state.failsafe == "RC failsafe" and state.flight_mode is FlightMode.RTL and state.autonomous
+    v.update(mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, b"Radio Failsafe Cleared", 0, 0), 9.0)
+    v.update(status(True), 9.1)
+    assert "RC failsafe" not in v.failsafes.active
+
+
+def test_a_command_is_spent_once_the_vehicle_leaves_for_another_mode() -> None:
+    """The operator's LAND, a battery failsafe's RTL, then its critical LAND -- all within the command
+    window: the last LAND is the failsafe's, not ours (ArduCopter 4.6.3: BATT_FS_LOW_ACT 2, CRT_ACT 1)."""
+    land = dialect.COPTER_MODES["LAND"]
+    v = Vehicle(command_window=5.0)
+    v.update(heartbeat(GUIDED, armed=True), 0.0)
+    v.commanded = ("LAND", 0.5)
+    v.update(heartbeat(land, armed=True), 1.0)
+    assert v.failsafes.reason == ""
+    v.update(mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, b"Battery Failsafe", 0, 0), 2.0)
+    v.update(heartbeat(RTL, armed=True), 2.1)
+    assert v.failsafes.reason == "battery failsafe"
+    v.update(mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, b"Battery Failsafe", 0, 0), 3.0)
+    v.update(heartbeat(land, armed=True), 3.1)
+    assert v.failsafes.reason == "battery failsafe" and v.autopilot_state(3.1).failsafe == "battery failsafe"

@@ -35,6 +35,7 @@ from antalate_lcm.msgs import (
     operator_cmd_t,
     payload_t,
     peer_detection_t,
+    peer_scan_t,
     telemetry_t,
     velocity_cmd_t,
 )
@@ -55,7 +56,7 @@ def _header(msg: Any, agent: str, seq: int, mac: bytes = b"") -> Any:
 
 
 def every_type_log(path: Path) -> Path:
-    """One message of every antalate topic (all 11 message types, header_t in each), with the values
+    """One message of every antalate topic (all 12 message types, header_t in each), with the values
     that are easy to get wrong: signatures, arrays, bytes, negative numbers, non-finite floats,
     unicode; plus a foreign channel, LCM's self-test and a damaged message."""
     w = LogWriter()
@@ -102,6 +103,11 @@ def every_type_log(path: Path) -> Path:
     pd = _header(peer_detection_t(), "a-1", 13)
     pd.detected, pd.count, pd.nearest_range, pd.nearest_bearing = True, 2, 4.5, -30.0
     w.add(1.0, "a-1/PEER_DETECTION", pd.encode())
+    ps = _header(peer_scan_t(), "a-1", 14)
+    ps.max_range, ps.fov, ps.has_velocity, ps.n = 20.0, 360.0, True, 2
+    ps.range, ps.bearing, ps.elevation = [4.5, 12.25], [-30.0, 179.5], [0.0, -5.0]
+    ps.rel_forward, ps.rel_right, ps.id = [0.5, -1.0], [0.0, 2.0], ["", "a-2 ✓"]
+    w.add(1.05, "a-1/PEER_SCAN", ps.encode())
     w.add(1.1, "LCM_SELF_TEST", b"self test")
     w.add(1.2, "a-2/TELEMETRY", b"\x01\x02 not a telemetry_t")
     return w.write(path)
@@ -131,8 +137,8 @@ def assert_same_fields(lcm_value: Any, json_value: Any, where: str) -> None:
             assert_same_fields(getattr(lcm_value, name), json_value[name], f"{where}.{name}")
     elif isinstance(lcm_value, bytes):
         assert base64.b64decode(json_value) == lcm_value, where
-    elif isinstance(lcm_value, list):
-        assert len(json_value) == len(lcm_value), where
+    elif isinstance(lcm_value, (list, tuple)):  # liblcm decodes numeric arrays as tuples
+        assert isinstance(json_value, list) and len(json_value) == len(lcm_value), where
         for i, (a, b) in enumerate(zip(lcm_value, json_value, strict=True)):
             assert_same_fields(a, b, f"{where}[{i}]")
     elif isinstance(lcm_value, float) and not math.isfinite(lcm_value):
@@ -187,7 +193,7 @@ def test_every_type_round_trips_through_mcap(tmp_path: Path) -> None:
     assert main(["export", str(src), "-o", str(out)]) == 0
     types = check_against_lcm(src, out)
     # behavior_state_t has no default channel (a behavior names its own): the next test covers it
-    assert types == set(MESSAGE_TYPES) - {"behavior_state_t"} and len(types) == 10
+    assert types == set(MESSAGE_TYPES) - {"behavior_state_t"} and len(types) == len(MESSAGE_TYPES) - 1
     assert validate_all(out) > 12
     by_topic: dict[str, list[dict[str, Any]]] = {}
     for schema, channel, message in mcap_messages(out):
@@ -208,7 +214,7 @@ def test_every_type_round_trips_through_mcap(tmp_path: Path) -> None:
 
 
 def test_behavior_state_and_header_fields_by_schema() -> None:
-    """The twelfth type, behavior_state_t, rides on channels a behavior names (no default template),
+    """behavior_state_t rides on channels a behavior names (no default template),
     so it is checked through the writer directly; header_t is the nested object of every schema."""
     b = _header(behavior_state_t(), "a-1", 1, b"\x01\x02")
     b.state = "SEARCH"
@@ -220,7 +226,7 @@ def test_behavior_state_and_header_fields_by_schema() -> None:
     for name in lcm_json.structs():
         if name != "header_t":
             assert lcm_json.schema(name)["properties"]["header"] == header_schema
-    assert len(lcm_json.structs()) == 12
+    assert len(lcm_json.structs()) == len(MESSAGE_TYPES) + 1  # with header_t
     # units and meanings from the .lcm comments reach the schema
     props = lcm_json.schema("telemetry_t")["properties"]
     assert "m/s" in props["vn"]["description"] and "percent" in props["battery"]["description"]

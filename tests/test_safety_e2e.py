@@ -4,18 +4,27 @@ behaviors that command them into each other and out of the fence, then RTL and l
 Ground truth is the simulators' own positions, sampled every 50 ms on the executor thread (not the
 telemetry the filter sees): the minimum pairwise separation over the whole flight must stay at or
 above the configured radius minus the margin of docs/safety.md, with no fence breach, and every
-agent must still take off, fly its mission, come home and land.
+agent must still take off, fly its mission, come home and land. Every flight is also recorded to an
+LCM log in the test's folder, and ``antalate analyze --safety`` (a subprocess, as a user runs it) must
+find the same from the log alone: minimum separation over the whole log at or above radius minus margin,
+no fence breach, every agent in MISSION and back on the ground.
 """
 
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
+import tomli_w
+
+from antalate_lcm.analysis import SafetyLimits, analyze_log
 from antalate_lcm.autopilot.sim import SimAutopilot
 from antalate_lcm.bus import Bus
 from antalate_lcm.config import Config, parse_config
@@ -25,6 +34,7 @@ from antalate_lcm.hlc.node import HlcNode
 from antalate_lcm.msgs import hlc_error_t, mc_state_t, operator_cmd_t
 from antalate_lcm.node import Context, Node, TopicMatch
 from antalate_lcm.runtime.agent import agent_nodes
+from antalate_lcm.runtime.recorder import LogRecorder
 from antalate_lcm.safety.geofence import Geofence
 from antalate_lcm.safety.separation import separation
 from antalate_lcm.vocabulary import McState
@@ -86,9 +96,12 @@ def config(
 
 
 @contextmanager
-def swarm(configs: list[Config], fence: Geofence | None) -> Iterator[tuple[Flight, Node, list[HlcNode]]]:
+def swarm(
+    configs: list[Config], fence: Geofence | None, log: Path | None = None
+) -> Iterator[tuple[Flight, Node, list[HlcNode]]]:
     context = Context(Bus({"lan": "memq://"}), Executor())
     probe = Node(configs[0].with_agent_name("probe"), context, name="probe")
+    recorder = LogRecorder(configs[0], context, bus="lan", path=str(log)) if log is not None else None
     nodes = [node for cfg in configs for node in agent_nodes(cfg, context)]
     hlcs = [n for n in nodes if isinstance(n, HlcNode)]
     flight = Flight(FlatFrame(LAT0, LON0), fence)
@@ -124,6 +137,8 @@ def swarm(configs: list[Config], fence: Geofence | None) -> Iterator[tuple[Fligh
             flight.safety_reports.append(msg)
 
     context.executor.start()
+    if recorder is not None:
+        recorder.start()
     probe.start()
     probe.subscribe_all("MC_STATE", on_mc)
     probe.subscribe_all("HLC_ERROR", on_error)
@@ -136,6 +151,8 @@ def swarm(configs: list[Config], fence: Geofence | None) -> Iterator[tuple[Fligh
         for node in nodes:
             node.stop()
         probe.stop()
+        if recorder is not None:
+            recorder.stop()
         context.close()
 
 
@@ -167,14 +184,50 @@ def grid(n: int, spacing: float) -> list[tuple[float, float]]:
 SAFETY = {"enabled": True, "radius": RADIUS}
 
 
-def test_twenty_agents_commanded_at_the_centroid_keep_apart_then_come_home_from_the_cluster() -> None:
+def analyze(log: Path, safety: dict[str, Any], tmp_path: Path, names: list[str]) -> str:
+    """``antalate analyze LOG --safety CONFIG`` on the flight's log (printed), then the same numbers
+    in-process, checked: separation, breaches, the mission flown."""
+    cfg = tmp_path / "safety.toml"
+    cfg.write_text(tomli_w.dumps({"agent": {"name": "x"}, "hlc": {"autopilot": "sim"}, "safety": safety}))
+    out = subprocess.run(
+        [sys.executable, "-m", "antalate_lcm.cli", "analyze", str(log), "--safety", str(cfg)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    ).stdout
+    section = out[out.index("safety (radius") :]
+    print(f"\nantalate analyze {log.name} --safety {cfg.name}:\n{section}")
+    fence_doc = safety.get("fence")
+    fence = None
+    if fence_doc is not None:
+        fence = Geofence(
+            tuple((p[0], p[1]) for p in fence_doc["polygon"]),
+            fence_doc["floor"],
+            fence_doc["ceiling"],
+            fence_doc["margin"],
+        )
+    limits = SafetyLimits(RADIUS, VERTICAL, MARGIN, None, fence, (LAT0, LON0))
+    result = analyze_log(log, safety=limits).safety
+    assert result is not None
+    assert result.min_separation is not None and result.min_separation >= RADIUS - MARGIN, section
+    assert result.losses == [] and result.breaches == [], section
+    assert sorted(result.flew_mission) == sorted(names) and sorted(result.landed) == sorted(names), section
+    assert f"radius - margin = {RADIUS - MARGIN:.2f} m: OK" in section
+    return section
+
+
+def test_twenty_agents_commanded_at_the_centroid_keep_apart_then_come_home_from_the_cluster(
+    tmp_path: Path,
+) -> None:
     n, spacing = 20, 6.0
     homes = grid(n, spacing)
     side = math.ceil(math.sqrt(n))
     centroid = offset(LAT0, LON0, (n // side - 1) * spacing / 2, (side - 1) * spacing / 2)
     names = [f"c{i:02d}" for i in range(n)]
     configs = [config(names[i], homes[i], centroid, SAFETY) for i in range(n)]
-    with swarm(configs, None) as (flight, probe, hlcs):
+    log = tmp_path / "centroid.lcm"
+    with swarm(configs, None, log) as (flight, probe, hlcs):
         fly_mission(flight, probe, names, mission=8.0)
     print(
         f"\n20 at the centroid: min separation {flight.min_sep:.2f} m ({flight.min_pair}), 3-D {flight.min_3d:.2f} m,"
@@ -188,9 +241,10 @@ def test_twenty_agents_commanded_at_the_centroid_keep_apart_then_come_home_from_
         ap = h.autopilot
         assert isinstance(ap, SimAutopilot)
         assert not ap.in_air and math.hypot(ap.north, ap.east) < 1.0, (h.agent, ap.north, ap.east)
+    analyze(log, SAFETY, tmp_path, names)
 
 
-def test_head_on_pairs_and_agents_sent_out_of_the_fence() -> None:
+def test_head_on_pairs_and_agents_sent_out_of_the_fence(tmp_path: Path) -> None:
     # Four pairs 24 m apart fly at each other's start; two agents fly at a point 40 m outside the fence.
     fence = Geofence(((-15.0, -15.0), (-15.0, 45.0), (45.0, 45.0), (45.0, -15.0)), 0.0, 30.0, 2.0)
     safety = {
@@ -209,7 +263,8 @@ def test_head_on_pairs_and_agents_sent_out_of_the_fence() -> None:
         home = offset(LAT0, LON0, 36.0, 8.0 + 8.0 * k)
         names.append(f"out{k}")
         configs.append(config(f"out{k}", home, offset(LAT0, LON0, 85.0, 8.0 + 8.0 * k), safety))
-    with swarm(configs, fence) as (flight, probe, _):
+    log = tmp_path / "head-on-fence.lcm"
+    with swarm(configs, fence, log) as (flight, probe, _):
         fly_mission(flight, probe, names, mission=9.0)
     print(
         f"\nhead-on pairs and fence: min separation {flight.min_sep:.2f} m ({flight.min_pair}), 3-D {flight.min_3d:.2f} m,"
@@ -219,6 +274,8 @@ def test_head_on_pairs_and_agents_sent_out_of_the_fence() -> None:
     assert flight.min_sep >= RADIUS - MARGIN, flight.min_pair
     assert flight.breaches == []
     assert any("fence" in r.text for r in flight.safety_reports)
+    section = analyze(log, safety, tmp_path, names)
+    assert "fence breaches     0" in section
 
 
 def test_without_the_filter_the_same_attack_collides() -> None:
@@ -250,3 +307,63 @@ def test_no_peer_information_lands_per_the_policy() -> None:
         assert math.hypot(ap.north, ap.east) < 2.0  # it did not fly off at the behavior's command
     texts = [r.text for r in flight.safety_reports]
     assert any("no peer information: 0 fresh peer(s) of min_peers 1" in t for t in texts), texts
+
+
+def test_operator_land_from_the_tight_cluster(tmp_path: Path) -> None:
+    """Nine agents squeezed at their centroid, then the operator's LAND: each descends where it is (the
+    autopilot's own vertical landing, unfiltered). The separation of the agents in the air holds; a
+    pair the filter stacked lands closer than the radius to the one already down, which this does
+    not count (docs/safety.md, landing: prefer RTL from a cluster)."""
+    n, spacing = 9, 6.0
+    homes = grid(n, spacing)
+    centroid = offset(LAT0, LON0, spacing, spacing)
+    names = [f"l{i}" for i in range(n)]
+    configs = [config(names[i], homes[i], centroid, SAFETY) for i in range(n)]
+    log = tmp_path / "land.lcm"
+    with swarm(configs, None, log) as (flight, probe, hlcs):
+        assert all_in(flight, names, McState.STANDBY, 10), flight.mc
+        command(probe, operator_cmd_t.TAKEOFF, 1)
+        assert all_in(flight, names, McState.MISSION, 20), flight.mc
+        time.sleep(8.0)
+        command(probe, operator_cmd_t.LAND, 2)
+        assert all_in(flight, names, McState.STANDBY, 60), flight.mc
+        sims = [h.autopilot for h in hlcs if isinstance(h.autopilot, SimAutopilot)]
+        assert len(sims) == n and not any(ap.in_air for ap in sims)
+        spread = [math.hypot(ap.north, ap.east) for ap in sims]
+    print(
+        f"\nLAND from the cluster: min separation {flight.min_sep:.2f} m ({flight.min_pair}), 3-D {flight.min_3d:.2f} m;"
+        f" landed {min(spread):.1f} .. {max(spread):.1f} m from home"
+    )
+    assert flight.min_sep >= RADIUS - MARGIN, flight.when
+    analyze(log, SAFETY, tmp_path, names)
+
+
+def test_taking_off_closer_than_the_radius_is_reported_then_separated_in_mission() -> None:
+    """Two agents placed 1.5 m apart (radius 3 m): each HLC says so at take-off (the vertical climb
+    keeps the distance), and once in MISSION the filter parts them to the radius."""
+    homes = [offset(LAT0, LON0, 0.0, 0.0), offset(LAT0, LON0, 0.0, 1.5)]
+    names = ["t0", "t1"]
+    # each flies at a point beyond the other: the behaviors push them together
+    targets = [offset(LAT0, LON0, 0.0, 30.0), offset(LAT0, LON0, 0.0, -30.0)]
+    configs = [config(names[i], homes[i], targets[i], SAFETY) for i in range(2)]
+    with swarm(configs, None) as (flight, probe, hlcs):
+        assert all_in(flight, names, McState.STANDBY, 10), flight.mc
+        time.sleep(1.0)  # each has heard the other's telemetry (an unheard neighbour cannot be named)
+        command(probe, operator_cmd_t.TAKEOFF, 1)
+        assert all_in(flight, names, McState.MISSION, 20), flight.mc
+
+        def apart() -> float:
+            a, b = (h.autopilot for h in hlcs)
+            assert isinstance(a, SimAutopilot) and isinstance(b, SimAutopilot)
+            pa = flight.frame.to_ne(*a.home.to_latlon(a.north, a.east))
+            pb = flight.frame.to_ne(*b.home.to_latlon(b.north, b.east))
+            return separation(pa[0] - pb[0], pa[1] - pb[1], a.alt - b.alt, RADIUS / VERTICAL)
+
+        assert wait_for(lambda: apart() >= RADIUS - MARGIN, 15), apart()
+    texts = [r.text for r in flight.safety_reports]
+    for me, other in (("t0", "t1"), ("t1", "t0")):
+        assert any(
+            f"taking off closer than the 3 m radius to {other} at 1.5 m" in r.text and r.header.agent == me
+            for r in flight.safety_reports
+        ), texts
+    assert any("cannot keep separation" in t for t in texts), texts

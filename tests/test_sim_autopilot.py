@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import FrozenInstanceError
+from dataclasses import FrozenInstanceError, asdict, fields
 from typing import Any
 
 import pytest
@@ -97,6 +97,21 @@ def test_initial_state_at_home() -> None:
     assert s.mode == "GUIDED" and s.autonomous and s.flight_mode is FlightMode.GUIDED
     with pytest.raises(FrozenInstanceError):
         s.alt = 3.0  # type: ignore[misc]
+
+
+def test_snapshot_is_a_whole_autopilot_state() -> None:
+    """The sim builds its 20-a-second snapshots without the dataclass's __init__ (sim._state_of): each
+    holds every field, the same state the constructor makes, and stays frozen and hashable."""
+    sim, clock = make(cells=4, battery_warning_at=99.99)
+    assert sim.arm()
+    sim.takeoff(5.0)
+    for s in (sim.state(), run(sim, clock, 1.0), run(sim, clock, 3.0)):
+        assert set(vars(s)) == {f.name for f in fields(AutopilotState)}
+        rebuilt = AutopilotState(**asdict(s))
+        assert rebuilt == s and hash(rebuilt) == hash(s) and repr(rebuilt) == repr(s)
+    assert s.in_air and s.battery_warning and math.isfinite(s.voltage)
+    with pytest.raises(FrozenInstanceError):
+        s.battery = 50.0  # type: ignore[misc]
 
 
 def test_configurable_home_and_heading() -> None:

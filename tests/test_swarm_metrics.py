@@ -242,6 +242,26 @@ def test_closest_approach_when_and_which_pair_and_polarisation(tmp_path: Path) -
     assert aligned.polarisation.min == pytest.approx(1.0, abs=1e-6)
 
 
+def test_a_velocity_step_at_the_rtl_does_not_leak_into_the_mission(tmp_path: Path) -> None:
+    """Four agents fly north together at 1 m/s; the RTL comes at 5.05 s, between two reports, and
+    the next report (5.1 s) has each flying home at 4 m/s, every one its own way. The mission ends
+    at 5.05 s: its last sample holds the report of 5.0 s (all north, polarisation 1), not a blend
+    of the two reports (0.13 here; 0.26 for a real flock at 0.9996)."""
+
+    def north_then_home(name: str, t: float) -> tuple[float, float, float, float]:
+        n0, e0 = CORNERS[name]
+        if t <= 5.0:
+            return n0 + t, e0, 1.0, 0.0
+        return n0 + 5.0, e0, -4.0 * n0 / R0, -4.0 * e0 / R0
+
+    states = [(0.0, mc_state_t.STANDBY), (0.5, mc_state_t.MISSION), (5.05, mc_state_t.RTL)]
+    result = analyze_log(_flight(tmp_path / "rtl.lcm", north_then_home, until=7.0, states=states))
+    mission = result.phase("mission")
+    assert mission is not None and mission.phase.end == pytest.approx(5.05)
+    pol = mission.polarisation
+    assert pol is not None and (pol.start, pol.end, pol.min) == pytest.approx((1.0, 1.0, 1.0), abs=1e-9)
+
+
 def test_connectivity_first_split(tmp_path: Path) -> None:
     def chain(name: str, t: float) -> tuple[float, float, float, float]:
         i = int(name[-1]) - 1  # 0, 8, 16 m east, static; a-4 from 24 m, leaving at 0.3 m/s

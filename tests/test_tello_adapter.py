@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 import time
@@ -96,7 +97,11 @@ for line in sys.stdin:
             result = {**asdict(s), "flight_mode": s.flight_mode.value}
         elif op == "extra":
             ap = adapters[name]
-            result = {"position_ne": ap.position_ne, "takeoff_point": ap.takeoff_point}
+            result = {
+                "position_ne": ap.position_ne,
+                "takeoff_point": ap.takeoff_point,
+                "dead_reckoning_problem": ap.dead_reckoning_problem,
+            }
         else:
             raise ValueError(f"unknown op {op}")
         out = {"ok": True, "result": result}
@@ -312,6 +317,7 @@ def test_takeoff_climbs_to_the_target_altitude(
     texts = emu.command_texts()
     assert "takeoff" in texts
     assert any(t.startswith("up ") for t in texts) == (mode == "up")
+    assert driver.extra()["dead_reckoning_problem"] == ""  # vgz (dm/s) agreed with the climb
     driver.fails("takeoff", 2.0)  # already flying
     driver.call("land")
     assert not emu.snapshot().flying
@@ -581,6 +587,87 @@ def test_land_rtl_and_emergency_preempt_a_waiting_takeoff(
     driver.wait(lambda s: s["mode"] == "GROUND" and not s["in_air"], timeout=3)
     texts = emu.command_texts()
     assert texts.count("takeoff") == 1 and sent in texts
+
+
+@pytest.mark.netns
+def test_commands_are_spaced_so_the_tello_hears_each_one_and_emergency_waits_for_no_answer(
+    driver: Driver, emulator: Callable[..., TelloEmulator]
+) -> None:
+    """A Tello ignores a command 0.1 s after the last one or its answer (djitellopy TIME_BTW_COMMANDS).
+
+    The HLC arms (``battery?``) and takes off back to back: the take-off used to go out on the heels
+    of the answer and was never heard (the adapter then timed out). ``emergency`` is never answered:
+    it returns at once, spaced too, and the Tello drops.
+    """
+    emu = emulator()
+    driver.new()
+    driver.call("connect")
+    assert driver.call("arm") is True
+    driver.call("takeoff", 0.8)
+    assert emu.snapshot().flying
+    assert driver.call("arm") is True
+    replies = len(emu.replies)
+    reply = driver.request(op="call", name="main", method="emergency", args=[])
+    assert reply["ok"] and reply["elapsed"] < 0.5, reply
+    assert emu.wait_until(lambda s: not s.flying and s.z == 0.0, timeout=1)
+    assert emu.ignored == []
+    heard = [c for c in emu.commands if not c.text.startswith("rc ")]
+    assert [c.text for c in heard] == ["command", "battery?", "takeoff", "battery?", "emergency"]
+    assert min(b.t - a.t for a, b in zip(heard, heard[1:], strict=False)) >= 0.1
+    assert len(emu.replies) == replies  # nothing answered the emergency
+    assert driver.wait(lambda s: s["mode"] == "GROUND" and not s["in_air"], timeout=2)
+
+
+@pytest.mark.netns
+def test_a_slow_takeoff_is_not_reported_as_a_failure(
+    driver: Driver, emulator: Callable[..., TelloEmulator]
+) -> None:
+    """Take-off's "ok" 4 s after it, twice this test's command_timeout (2 s) as DJITelloPy #31's
+    > 7 s is to the default 7 s; the Tello hovers meanwhile.
+
+    The state settles the take-off a second after the climb stops; the ``up`` to the altitude then
+    waits for the late "ok" (sent before it, the Tello answered "error" -- still in its take-off -- and
+    the adapter reported the climb refused; and the late "ok" would have passed for up's answer).
+    """
+    emu = emulator(takeoff_time=1.0, takeoff_settle=3.0)
+    driver.new(takeoff_altitude_mode="up", takeoff_timeout=20)
+    driver.call("connect")
+    reply = driver.request(op="call", name="main", method="takeoff", args=[1.5])
+    heard = [
+        (round(c.t - emu.commands[0].t, 2), c.text) for c in emu.commands if not c.text.startswith("rc ")
+    ]
+    assert reply["ok"], (reply, heard, emu.replies)
+    assert reply["elapsed"] >= 4.0, reply  # the climb went after the take-off's own "ok"
+    assert [text for text, _ in emu.replies].count("error") == 0
+    assert [text.split()[0] for _, text in heard] == ["command", "takeoff", "up"]  # one up, heard
+    assert emu.snapshot().z == pytest.approx(1.5, abs=0.12)
+    s = driver.state()
+    assert s["mode"] == "GUIDED" and s["in_air"]
+    driver.call("land")
+    assert not emu.snapshot().flying
+
+
+@pytest.mark.netns
+def test_velocities_not_in_dm_per_s_are_found_and_rtl_lands_where_it_is(
+    driver: Driver, emulator: Callable[..., TelloEmulator]
+) -> None:
+    """The SDK leaves vgx/vgy/vgz's unit open; a Tello reporting cm/s is found by its take-off climb.
+
+    Dead reckoning would put home ten times too far: the RTL is refused and the Tello lands here.
+    """
+    emu = emulator(velocity_scale=100.0, land_speed=0.5)
+    driver.new()
+    driver.call("connect")
+    driver.call("takeoff", 0.8)
+    problem = driver.extra()["dead_reckoning_problem"]
+    ratio = re.search(r"\(x([0-9.]+)\)", problem)
+    assert ratio and 5 < float(ratio.group(1)) < 20 and "dm/s" in problem, problem
+    fail = driver.fails("rtl")
+    assert "dead reckoning unreliable" in fail["error"], fail
+    s = driver.wait(lambda s: s["mode"] == "LAND", timeout=1)  # what the HLC shows while it lands
+    assert s["flight_mode"] == "LANDING" and "RTL failed: dead reckoning unreliable" in s["failsafe"], s
+    assert emu.wait_until(lambda s: not s.flying, timeout=5)
+    driver.wait(lambda s: s["mode"] == "GROUND" and not s["in_air"], timeout=3)
 
 
 @pytest.mark.netns

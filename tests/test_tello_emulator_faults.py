@@ -82,3 +82,56 @@ def test_vertical_time_constant(emu: TelloEmulator, client: TelloClient) -> None
         client.send("rc 0 0 0 0")
         assert emu.wait_until(lambda s: abs(s.vz) < 0.01, timeout=3)
     assert speeds[0.15] > 0.4 > speeds[0.6] > 0.0, speeds
+
+
+def test_a_command_too_soon_after_the_last_answer_is_ignored_but_rc_and_spaced_ones_are_heard(
+    emu: TelloEmulator, client: TelloClient
+) -> None:
+    """djitellopy's TIME_BTW_COMMANDS (0.1 s): a closer command is neither carried out nor answered."""
+    assert client.ask("battery?") == "100"
+    client.spacing = 0.0  # a client that does not wait, as the adapter did before
+    assert client.no_reply("takeoff", wait=0.3)  # sent at once after battery? (and its answer): ignored
+    assert not emu.snapshot().flying
+    assert [c.text for c in emu.ignored] == ["takeoff"]
+    client.send("rc 0 0 0 0")  # rc is never spaced (TIME_BTW_RC_CONTROL_COMMANDS 0.001 s)
+    time.sleep(0.05)
+    assert emu.command_texts()[-1] == "rc 0 0 0 0" and len(emu.ignored) == 1
+    client.spacing = 0.1
+    assert client.ask("takeoff") == "ok"  # 0.1 s after the last one: heard
+    assert emu.snapshot().flying
+
+
+def test_emergency_is_never_answered_and_a_slow_takeoff_answers_after_its_settle(
+    client: TelloClient,
+) -> None:
+    """takeoff's "ok" comes takeoff_time + takeoff_settle after it (DJITelloPy #31: > 7 s on real units)."""
+    with TelloEmulator(
+        "127.0.0.1", 0, state_port=client.state_port, takeoff_time=0.3, takeoff_settle=1.0
+    ) as emu:
+        client.emulator = emu.address
+        assert client.ask("command") == "ok"
+        t0 = time.monotonic()
+        client.send("takeoff")
+        assert emu.wait_until(lambda s: s.z >= 0.79, timeout=2)
+        assert client.ask("up 50") == "error"  # the take-off is still the running manoeuvre
+        client.cmd.settimeout(3.0)
+        assert client.cmd.recvfrom(1024)[0] == b"ok"  # takeoff's, once it has settled
+        assert time.monotonic() - t0 >= 1.25
+        client.spacing = 0.0
+        client.send("speed?")
+        client.send("emergency")  # at once after a command: not heard either
+        time.sleep(0.05)
+        assert [c.text for c in emu.ignored] == ["emergency"] and emu.snapshot().flying
+        assert client.cmd.recvfrom(1024)[0] != b""  # speed?'s answer
+        client.spacing = 0.1
+        client._quiet_since = time.monotonic()  # noqa: SLF001 - the answer above, read past the client
+        assert client.no_reply("emergency", wait=0.5)  # spaced: heard, and never answered
+        assert not emu.snapshot().flying and emu.snapshot().z == 0.0
+
+
+def test_velocity_scale_sets_the_state_units() -> None:
+    e = TelloEmulator("127.0.0.1", 0)
+    e._vx, e._vz = 0.5, 0.3  # noqa: SLF001 - the truth, to read its report
+    assert field(e.state_line(), "vgx") == "5" and field(e.state_line(), "vgz") == "-3"  # dm/s
+    e.velocity_scale = 100.0
+    assert field(e.state_line(), "vgx") == "50" and field(e.state_line(), "vgz") == "-30"  # cm/s

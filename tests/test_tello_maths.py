@@ -107,3 +107,41 @@ def test_a_state_packet_read_in_the_adapters_units() -> None:
     body = validated({"velocity_frame": "body"})
     turned = telemetry.read({"yaw": 90, "vgx": 10}, body, 0.0, telemetry.StateReading())
     assert (turned.vn, turned.ve) == pytest.approx((0.0, 1.0), abs=1e-9)  # forward, facing east
+
+
+def _climb(check: maths.VelocityUnitCheck, scale: float, speed: float = 0.5) -> bool:
+    """A climb of 1 m at `speed` seen at 10 Hz: height in decimetres, vgz as read assuming dm/s."""
+    found = False
+    for i in range(int(1.0 / speed * 10) + 1):
+        t = i * 0.1
+        height = round(min(speed * t, 1.0) * 10) / 10
+        vd = -round(speed * scale) / 10.0  # the integer field divided by 10, as telemetry.read does
+        found = check.update(height, vd, 0.0, 0.0, t) or found
+    return found
+
+
+def test_velocity_units_agree_with_the_height_when_dm_per_s() -> None:
+    check = maths.VelocityUnitCheck()
+    assert not _climb(check, 10.0)
+    assert not check.problem and 0.5 <= check.ratio <= 2.0
+
+
+@pytest.mark.parametrize(("scale", "factor"), [(100.0, "x10"), (1.0, "x0.1")])
+def test_velocity_units_other_than_dm_per_s_are_found_by_the_climb(scale: float, factor: str) -> None:
+    check = maths.VelocityUnitCheck()
+    assert _climb(check, scale, speed=1.0 if scale == 1.0 else 0.5)
+    assert factor in check.problem and "dm/s" in check.problem
+    assert not check.update(2.0, 0.0, 0.0, 0.0, 100.0)  # said once, and it stays
+
+
+def test_a_ground_speed_beyond_a_tello_is_a_unit_problem() -> None:
+    check = maths.VelocityUnitCheck()
+    assert not check.update(1.0, 0.0, 5.0, 0.0, 0.0)
+    assert check.update(1.0, 0.0, 9.0, 0.0, 0.1)
+    assert "beyond a Tello's 8 m/s" in check.problem
+
+
+def test_a_vgz_that_stays_zero_leaves_the_unit_unchecked_not_wrong() -> None:
+    check = maths.VelocityUnitCheck()
+    assert _climb(check, 0.0)  # said once (a warning), but no problem
+    assert not check.problem and "not checked" in check.unchecked

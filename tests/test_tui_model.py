@@ -111,6 +111,64 @@ def test_the_latest_safety_report_is_kept_apart_and_shown_in_the_detail() -> Non
     assert "autopilot LAND failed" in text
 
 
+def test_the_status_bar_says_who_is_being_modified_and_the_closest_pair_in_the_air() -> None:
+    """docs/safety.md: the swarm-wide line -- how many commands the filter is modifying (by whom) and
+    the closest pair of agents in the air (3-D); nothing for a swarm that never sent a SAFETY report."""
+    from antalate_lcm.geo import offset
+    from operator_tui.commands import DirectionControl
+    from operator_tui.widgets.panels import status_text
+
+    model = SwarmModel()
+    where = {"a": (0.0, 0.0, 10.0), "b": (3.0, 4.0, 10.0), "c": (0.0, 1.0, 0.0), "d": (100.0, 0.0, 10.0)}
+    for name, (north, east, alt) in where.items():
+        m = tel(*offset(47.0, 8.0, north, east), alt=alt)
+        m.in_air = alt > 0  # c stands on the ground beside a: not a pair in the air
+        model.apply("TELEMETRY", name, m, 0.0, 1000.0)
+    assert model.safety_summary(0.0) is None  # no SAFETY report heard: no filter, no line
+
+    def report(agent: str, text: str, at: float) -> None:
+        e = hlc_error_t()
+        e.code, e.severity, e.text = 14, hlc_error_t.WARNING, text
+        model.apply("HLC_ERROR", agent, e, at, 1000.0 + at)
+
+    report("a", "safety: velocity modified by separation; nearest b at 5.00 m", 1.0)
+    report("b", "safety: velocity modified by separation; nearest a at 5.00 m", 1.5)
+    report("d", "safety: velocity modified by fence; nearest a at 100.00 m", 0.2)  # 2.8 s old at 3.0
+    summary = model.safety_summary(3.0)
+    assert summary is not None
+    assert summary.modified == {"separation": 2}
+    assert summary.closest is not None and summary.closest[1:] == ("a", "b")
+    assert summary.closest[0] == pytest.approx(5.0, abs=0.01)
+    line = status_text(
+        bus="memq://",
+        agents=4,
+        stale=0,
+        pending=0,
+        failed=0,
+        direction=DirectionControl(),
+        scope_all=True,
+        selected=None,
+        safety=summary,
+    ).plain
+    assert line.endswith("safety modifying 2 by separation  closest a-b 5.0 m")
+    later = model.safety_summary(10.0)
+    assert later is not None and later.modified == {}
+    assert (
+        "safety idle"
+        in status_text(
+            bus="memq://",
+            agents=4,
+            stale=0,
+            pending=0,
+            failed=0,
+            direction=DirectionControl(),
+            scope_all=True,
+            selected=None,
+            safety=later,
+        ).plain
+    )
+
+
 def test_stale_agents_are_marked_once_and_kept() -> None:
     model = SwarmModel(stale_after=3.0)
     model.apply("MC_STATE", "a", mc(1), 0.0, 1000.0)

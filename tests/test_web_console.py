@@ -72,6 +72,46 @@ def test_loopback_hosts(host: str, loopback: bool) -> None:
     assert web.is_loopback(host) is loopback
 
 
+@pytest.mark.parametrize(
+    ("listen", "extra", "host", "allowed"),
+    [
+        ("127.0.0.1", (), "127.0.0.1:8000", True),
+        ("127.0.0.1", (), "localhost:8000", True),
+        ("127.0.0.1", (), "LOCALHOST", True),
+        ("127.0.0.1", (), "[::1]:8000", True),
+        ("127.0.0.1", (), "127.0.0.2:8000", True),  # loopback all the same
+        ("127.0.0.1", (), "10.0.0.5:8000", False),  # an address this server does not listen on
+        ("127.0.0.1", (), "evil.example:8000", False),  # DNS rebinding
+        ("127.0.0.1", (), "localhost.evil.example", False),
+        ("127.0.0.1", (), "", False),
+        ("127.0.0.1", ("console.lan",), "console.lan:8000", True),
+        ("10.0.0.5", (), "10.0.0.5:8000", True),
+        ("10.0.0.5", (), "localhost:8000", False),  # not on loopback: localhost is another machine's name
+        ("10.0.0.5", (), "10.0.0.6", False),
+        ("0.0.0.0", (), "192.0.2.7:8000", True),  # any address of ours; an IP literal cannot be rebound
+        ("0.0.0.0", (), "evil.example", False),
+        ("::", ("field.example",), "[2001:db8::1]:8000", True),
+        ("::", ("field.example",), "FIELD.example:8000", True),
+    ],
+)
+def test_which_hosts_a_console_answers_to(
+    listen: str, extra: tuple[str, ...], host: str, allowed: bool
+) -> None:
+    assert web.host_allowed(host, listen, web.allowed_hosts(listen, extra)) is allowed
+
+
+def test_replacing_the_keys_ends_the_sessions_of_removed_or_demoted_keys() -> None:
+    carol = new_api_key()
+    access = web.ConsoleAccess((*KEYS, ApiKey(name="carol", role="operator", sha256=sha256_hex(carol))))
+    alice_token, _ = access.login(OPERATOR_KEY, now=0.0)
+    carol_token, _ = access.login(carol, now=0.0)
+    demoted = ApiKey(name="carol", role="read-only", sha256=sha256_hex(carol))
+    assert access.replace_keys((*KEYS, demoted)) == [carol_token]
+    assert access.holder(carol_token, now=1.0) is None and access.holder(alice_token, now=1.0) == "alice"
+    assert isinstance(access.login(carol, now=1.0), web.Refusal)
+    assert access.replace_keys(()) == [alice_token]  # an unusable keys file: nobody stays signed in
+
+
 # -- the real aiohttp app, in-process --------------------------------------------------------------
 
 

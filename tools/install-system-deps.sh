@@ -40,6 +40,7 @@ need podman podman
 need mmdebstrap mmdebstrap
 need node nodejs
 need npm npm
+need openssl openssl  # antalate lab-ca and the TLS router tests
 if [ -w /proc/sys/fs/binfmt_misc/register ] && [ ! -e /proc/sys/fs/binfmt_misc/qemu-aarch64 ]; then
   want+=(qemu-user-static binfmt-support)
 fi

@@ -106,11 +106,11 @@ _.reconnects  # CrazyflieAutopilot: link recoveries (tests/test_crazyflie_adapte
 _.reports_ok  # OscNode: reports the station accepted (tests/test_osc.py)
 _.reporting  # OscNode: whether the exchange with the station runs (tests/test_osc.py)
 _.set_refuse_arm  # SimAutopilot fault knobs for tests and the demo
-_.set_battery
 _.set_time_scale
 _.sim_time
 _.position_ne  # TelloAutopilot dead reckoning (tests/test_tello_adapter.py)
 _.takeoff_point
+_.dead_reckoning_problem  # TelloAutopilot: the velocity unit check for tools (tests/test_tello_adapter.py)
 _.from_wgs84  # crazyflie frames: the inverse, checked round trip (tests/test_crazyflie_units.py)
 _.block_size  # crazyflie log blocks fit one packet (tests/test_crazyflie_units.py)
 _.LOG_MAX_BYTES

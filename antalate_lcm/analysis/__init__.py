@@ -7,6 +7,8 @@
   docstring), and gathers the swarm metrics of :mod:`.swarm` (radius, separation, nearest
   neighbours, polarisation, connectivity, crossings) per flight phase (:mod:`.phases`), built on
   the one-instant geometry of :mod:`.geometry`.
+* :mod:`.safety` checks the log against a swarm's separation radius and fence (near-misses, breaches,
+  the HLCs' SAFETY reports), when ``antalate analyze`` is given them (docs/safety.md).
 * :mod:`.plot` draws one PNG (matplotlib, Agg backend).
 
 ``antalate analyze LOG`` and ``antalate plot LOG`` are thin wrappers around :func:`analyze_log`
@@ -38,11 +40,13 @@ from antalate_lcm.analysis.metrics import (
 from antalate_lcm.analysis.model import (
     AgentRecord,
     DirectionCommand,
+    SafetyEvent,
     StateChange,
     SwarmRecord,
     TelemetrySample,
 )
 from antalate_lcm.analysis.phases import PHASES, FlightPhase, Window, flight_phases, mission_window
+from antalate_lcm.analysis.safety import Encounter, SafetyAnalysis, SafetyLimits, analyze_safety
 from antalate_lcm.analysis.swarm import (
     DEFAULT_MIN_SPEED,
     DEFAULT_RANGE_M,
@@ -78,6 +82,7 @@ def analyze_log(
     min_speed: float = DEFAULT_MIN_SPEED,
     radius_below: float | None = None,
     radius_above: float | None = None,
+    safety: SafetyLimits | None = None,
 ) -> Analysis:
     """Read ``path`` and analyse it (raises ``AntalateError`` for a file that is not a usable log).
 
@@ -94,6 +99,7 @@ def analyze_log(
         min_speed=min_speed,
         radius_below=radius_below,
         radius_above=radius_above,
+        safety=safety,
     )
 
 
@@ -136,6 +142,10 @@ __all__ = [
     "Separation",
     "SwarmSample",
     "DirectionCommand",
+    "Encounter",
+    "SafetyAnalysis",
+    "SafetyEvent",
+    "SafetyLimits",
     "Drift",
     "StateChange",
     "SwarmRecord",
@@ -144,6 +154,7 @@ __all__ = [
     "Window",
     "analyze",
     "analyze_log",
+    "analyze_safety",
     "check_log_file",
     "cohesion_at",
     "cohesion_series",

@@ -11,25 +11,34 @@ counted and skipped, never fatal. Only a file that is not an LCM log at all is a
 
 from __future__ import annotations
 
+import json
 import struct
 from pathlib import Path
 from typing import Any
 
 import lcm
 
-from antalate_lcm.analysis.model import DirectionCommand, SwarmRecord, TelemetrySample
+from antalate_lcm.analysis.model import (
+    DirectionCommand,
+    FaultRecord,
+    SafetyEvent,
+    SwarmRecord,
+    TelemetrySample,
+)
 from antalate_lcm.bus import captured_stderr
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.mcap_log import McapEvents, is_mcap, read_events
-from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, telemetry_t
-from antalate_lcm.topics import TOPICS, route
+from antalate_lcm.msgs import direction_cmd_t, hlc_error_t, hlc_state_t, mc_state_t, payload_t, telemetry_t
+from antalate_lcm.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE, TOPICS, route
 from antalate_lcm.vocabulary import HlcState, McState, name_of
 
 #: Every LCM log event starts with this sync word (big-endian), so a file that does not is no log.
 LOG_SYNC_WORD = 0xEDA1DA01
 
 #: Topics the analysis decodes.
-_USED = ("SWARM_DIRECTION_CMD", "MC_STATE", "HLC_STATE", "TELEMETRY", "DIRECTION_CMD")
+_USED = ("SWARM_DIRECTION_CMD", "MC_STATE", "HLC_STATE", "TELEMETRY", "DIRECTION_CMD", "HLC_ERROR")
+#: ``hlc_error_t.code`` of the safety filter's reports (antalate_lcm.hlc.machine.ErrorCode.SAFETY).
+SAFETY_CODE = 14
 
 
 def check_log_file(path: str | Path) -> Path:
@@ -129,6 +138,9 @@ class _Reader:
         if channel not in self.routes:
             self.routes[channel] = route(channel)
         routed = self.routes[channel]
+        if channel == FAULT_CHANNEL:
+            _fault_into(record, channel, t, data)
+            return
         if routed is None and channel == "LCM_SELF_TEST":
             # Every LCM instance multicasts one when it starts: the library's, not garbage.
             record.unused[channel] = record.unused.get(channel, 0) + 1
@@ -137,6 +149,20 @@ class _Reader:
             record.unknown[channel] = record.unknown.get(channel, 0) + 1
             return
         _decode_into(record, routed, channel, t, data, self.last_direction)
+
+
+def _fault_into(record: SwarmRecord, channel: str, t: float, data: bytes) -> None:
+    """One fault record (an experiment's), or counted undecodable."""
+    try:
+        msg = payload_t.decode(data)
+        if msg.content_type != FAULT_CONTENT_TYPE:
+            raise ValueError(msg.content_type)
+        fields = json.loads(bytes(msg.data))
+        agent, kind, event = str(fields.pop("agent")), str(fields.pop("kind")), str(fields.pop("event"))
+    except Exception:  # noqa: BLE001 - any garbage is counted, never fatal
+        record.undecodable[channel] = record.undecodable.get(channel, 0) + 1
+        return
+    record.faults.append(FaultRecord(t, agent, kind, event, fields))
 
 
 def _decode_into(
@@ -188,3 +214,5 @@ def _decode_into(
         rec.add_state(rec.mc_states, t, name_of(McState, msg.state) or f"?{msg.state}")
     elif isinstance(msg, hlc_state_t):
         rec.add_state(rec.hlc_states, t, name_of(HlcState, msg.state) or f"?{msg.state}")
+    elif isinstance(msg, hlc_error_t) and msg.code == SAFETY_CODE:
+        record.safety_events.append(SafetyEvent(t, rec.name, int(msg.severity), str(msg.text)))

@@ -27,8 +27,9 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from antalate_lcm.analysis.model import DirectionCommand, SwarmRecord
+from antalate_lcm.analysis.model import DirectionCommand, FaultRecord, SwarmRecord
 from antalate_lcm.analysis.phases import Window, flight_phases, mission_window
+from antalate_lcm.analysis.safety import SafetyAnalysis, SafetyLimits, analyze_safety, format_safety
 from antalate_lcm.analysis.swarm import (
     DEFAULT_MIN_SPEED,
     DEFAULT_RANGE_M,
@@ -101,8 +102,12 @@ class Analysis:
     phases: list[PhaseMetrics] = field(default_factory=list)
     #: The swarm metrics every ``bin_s`` s over the whole log.
     series: list[SwarmSample] = field(default_factory=list)
+    #: The faults an experiment's script injected, in the order they happened (with broadcast reception).
+    faults: list[FaultRecord] = field(default_factory=list)
     #: Every agent's trajectory in the local frame (left out of :meth:`to_json` unless asked for).
     tracks: dict[str, Track] = field(default_factory=dict)
+    #: Separation, near-misses, fence breaches and SAFETY reports (analysis/safety.py), when limits were given.
+    safety: SafetyAnalysis | None = None
 
     def phase(self, name: str) -> PhaseMetrics | None:
         """The metrics of the phase called ``name`` ("takeoff", "mission", "return"), if the log has it."""
@@ -262,9 +267,11 @@ def analyze(
     min_speed: float = DEFAULT_MIN_SPEED,
     radius_below: float | None = None,
     radius_above: float | None = None,
+    safety: SafetyLimits | None = None,
 ) -> Analysis:
     """Cohesion over time, the mission window's cohesion ratio, the drift against the command, and
-    the swarm metrics of :mod:`.swarm` over time and per flight phase.
+    the swarm metrics of :mod:`.swarm` over time and per flight phase; with `safety`, the checks of
+    :mod:`.safety` against those limits.
 
     ``azimuth`` overrides the log's direction commands (for logs recorded without the operator's
     channels, or to ask how far the swarm went in some other direction). ``step``, ``range_m``,
@@ -284,6 +291,7 @@ def analyze(
         events=record.events,
         window=mission_window(record),
         mc_timelines={a: [(c.t, c.state) for c in r.mc_states] for a, r in sorted(record.agents.items())},
+        faults=list(record.faults),
     )
     result.cohesion = cohesion_series(tracks, t_first, t_last, bin_s, max_age)
     result.tracks = tracks
@@ -301,6 +309,8 @@ def analyze(
         )
         for phase in flight_phases(record, result.window)
     ]
+    if safety is not None:
+        result.safety = analyze_safety(record, safety, origin, step=step, max_age=max_age)
     window = result.window
     if window is None:
         result.notes.append("no mission window: the swarm never flew a mission together")
@@ -393,5 +403,25 @@ def format_summary(a: Analysis) -> str:
                 f"drift {d.start:.1f}..{d.end:.1f} s: centroid heading {d.heading:.1f} deg, {d.distance:.1f} m at "
                 f"{d.speed:.2f} m/s over {d.agents} agent(s); {cmd}; error {d.error:+.1f} deg"
             )
+    if a.safety is not None:
+        lines += format_safety(a.safety)
+    lines += format_faults(a.faults)
     lines.extend(f"note: {n}" for n in a.notes)
     return "\n".join(lines)
+
+
+def format_faults(faults: list[FaultRecord]) -> list[str]:
+    """The faults of the log, one line each (s since the log's start)."""
+    if not faults:
+        return []
+    lines = ["faults injected by the experiment's script (s since the log's start):"]
+    for f in faults:
+        if f.kind == "broadcast":
+            heard, offered = f.detail.get("heard"), f.detail.get("offered")
+            lines.append(
+                f"  broadcast reception {f.agent}: heard {heard} of {offered} (p = {f.detail.get('reception')})"
+            )
+            continue
+        extra = ", ".join(f"{k} {v}" for k, v in sorted(f.detail.items()) if k not in ("at", "fault"))
+        lines.append(f"  {f.t:7.1f}  {f.kind} {f.event:<6} {f.agent}" + (f" ({extra})" if extra else ""))
+    return lines

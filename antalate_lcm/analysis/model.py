@@ -48,6 +48,35 @@ class DirectionCommand:
     sender: str
 
 
+@dataclass(frozen=True, slots=True)
+class FaultRecord:
+    """A fault an experiment's script injected (``antalate run``: docs/experiments.md, "Faults"), or
+    an agent's broadcast reception, as recorded on the fault channel."""
+
+    #: s since the log's first event
+    t: float
+    agent: str
+    #: crash, freeze, sensor, byzantine, battery, link_loss, packet_loss; or broadcast
+    kind: str
+    #: start, end, spared (the probability drew no fault); summary (broadcast)
+    event: str
+    #: The rest of the record: the fault's keys (duration, offset, ...), or offered/heard.
+    detail: dict[str, object] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class SafetyEvent:
+    """A SAFETY report of an agent's HLC (``hlc_error_t`` code 14, docs/safety.md): its command was
+    modified (by separation or fence), it could not keep a constraint, it had no peer information,
+    or its fence was mirrored into the autopilot."""
+
+    t: float
+    agent: str
+    #: ``hlc_error_t.severity``: 0 INFO, 1 WARNING, 2 ERROR, 3 CRITICAL.
+    severity: int
+    text: str
+
+
 @dataclass
 class AgentRecord:
     """Everything one agent published that the analysis uses."""
@@ -75,6 +104,9 @@ class SwarmRecord:
     events: int = 0
     agents: dict[str, AgentRecord] = field(default_factory=dict)
     directions: list[DirectionCommand] = field(default_factory=list)
+    faults: list[FaultRecord] = field(default_factory=list)
+    #: Every SAFETY report of the agents' HLCs, in log order.
+    safety_events: list[SafetyEvent] = field(default_factory=list)
     #: Events on antalate channels that did not decode as their type (garbage, other versions), by channel.
     undecodable: dict[str, int] = field(default_factory=dict)
     #: Events on channels that are not antalate's, by channel.

@@ -185,15 +185,42 @@ def _timelines(ax, record: SwarmRecord, analysis: Analysis) -> None:  # type: ig
     for d in record.directions:
         if not d.target:
             ax.axvline(d.t, color="crimson", lw=0.8, ls=":")
+    _faults(ax, record, names)
     ax.set_yticks([i + 0.45 for i in range(len(names))], names, fontsize=7)
     ax.set_ylim(len(names), 0)
     ax.set_xlim(0, max(end, 1e-3))
     ax.set_xlabel("time since the log's start (s)")
-    ax.set_title("MC state per agent (thin bar: HLC state; dotted: direction commands)")
+    title = "MC state per agent (thin bar: HLC state; dotted: directions"
+    ax.set_title(title + ("; black: faults)" if any(f.kind != "broadcast" for f in record.faults) else ")"))
     order = [s for s in STATE_COLORS if s in seen]
     ax.legend(
         handles=[Patch(color=STATE_COLORS[s], label=s) for s in order], fontsize=7, ncol=4, loc="lower right"
     )
+
+
+def _faults(ax, record: SwarmRecord, names: list[str]) -> None:  # type: ignore[no-untyped-def]
+    """An experiment's injected faults on their agents' rows: a line from start to end (to the end of
+    the log for one that lasts), an X where one happens once, labelled with the kind."""
+    rows = {name: i for i, name in enumerate(names)}
+    starts: dict[tuple[str, str, object], float] = {}
+    for f in record.faults:
+        row = rows.get(f.agent)
+        if row is None or f.kind == "broadcast" or f.event == "spared":
+            continue
+        key = (f.agent, f.kind, f.detail.get("fault"))
+        if f.event == "start":
+            starts[key] = f.t
+            label = " ".join(
+                str(x) for x in (f.kind, f.detail.get("sensor", ""), f.detail.get("vehicle", "")) if x
+            )
+            ax.plot([f.t], [row + 0.35], "X", color="black", ms=6, label="_fault")
+            ax.annotate(label, (f.t, row + 0.35), xytext=(3, -2), textcoords="offset points", fontsize=6)
+        elif f.event == "end" and key in starts:
+            ax.plot([starts.pop(key), f.t], [row + 0.35, row + 0.35], "-", color="black", lw=1.5)
+    for (agent, kind, _index), t in starts.items():
+        lasting = {"crash", "freeze", "sensor", "byzantine", "link_loss", "packet_loss"}
+        if kind in lasting:
+            ax.plot([t, record.duration], [rows[agent] + 0.35] * 2, "-", color="black", lw=1.5, alpha=0.5)
 
 
 def _shade_phases(ax, analysis: Analysis, *, labels: bool) -> None:  # type: ignore[no-untyped-def]

@@ -50,6 +50,17 @@ class Track:
         return self._interpolated(self.north, self.east, t, max_age)
 
     def velocity_at(self, t: float, max_age: float) -> tuple[float, float] | None:
-        """(vn, ve) at ``t``, interpolated like :meth:`position_at`; None when silent or when the
-        track carries no velocities."""
-        return self._interpolated(self.vn, self.ve, t, max_age) if self.vn else None
+        """(vn, ve) last reported at or before ``t`` (at most ``max_age`` old); None when silent or
+        when the track carries no velocities.
+
+        Held, not interpolated: a velocity can step between two reports (the simulator's RTL sets
+        5 m/s home at once), and interpolating across the step invents a velocity nobody flew. At
+        the end of a mission, which is the instant of the first RTL, it made a flock flying at
+        polarisation 0.9996 read 0.26.
+        """
+        if not self.vn:
+            return None
+        i = bisect.bisect_right(self.t, t)
+        if i == 0 or t - self.t[i - 1] > max_age:
+            return None
+        return self.vn[i - 1], self.ve[i - 1]

@@ -23,6 +23,7 @@ from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.autopilot import Autopilot, AutopilotError, AutopilotState, Frame, load_autopilot
 from antalate_lcm.config import Config
 from antalate_lcm.hlc.machine import (
+    NOTHING,
     Action,
     ActionKind,
     ErrorCode,
@@ -167,10 +168,20 @@ class HlcNode(Node):
         self.subscribe("VELOCITY_CMD", self._on_velocity)
         if self._shared is not None:
             self._shared.join()
-        self._publish_state = self.state_publisher("HLC_STATE", self._state_msg, self.config.hlc.republish_hz)
-        control, telemetry = 1.0 / self.config.hlc.control_hz, 1.0 / self.config.hlc.telemetry_hz
-        self.create_timer(control, self._control, first_delay=self.first_delay(control))
-        self.create_timer(telemetry, self._publish_telemetry, first_delay=self.first_delay(telemetry))
+        h = self.config.hlc
+        self._publish_state = self.state_publisher(
+            "HLC_STATE", self._state_msg, h.republish_hz, periodic=False
+        )
+        # One timer when the rates allow (20, 10 and 5 Hz by default): telemetry and the state go
+        # out right after the control tick whose snapshot they report.
+        self.ticker(
+            h.control_hz,
+            [
+                (h.control_hz, self._control),
+                (h.telemetry_hz, self._publish_telemetry),
+                (h.republish_hz, self._publish_state),
+            ],
+        )
         self._publish_state()
         self._connect()
 
@@ -311,11 +322,13 @@ class HlcNode(Node):
         if not self.started:
             return
         now = self.now
-        self.snapshot = self._poll(now)
+        snapshot = self.snapshot = self._poll(now)
         self._polled_at = now
-        self._handle(self.machine.on_autopilot(self.snapshot, now, fault=self._state_fault))
-        self._handle(self.machine.tick(now))
-        stale = self.velocity_guard.tick(now, self.machine.state, self.mc_state, self._link_age())
+        machine = self.machine
+        self._handle(machine.on_autopilot(snapshot, now, fault=self._state_fault))
+        self._handle(machine.tick(now))
+        # The link's age now is the snapshot's: it was polled at `now` (see _link_age).
+        stale = self.velocity_guard.tick(now, machine.state, self.mc_state, self.snapshot.link_age)
         if stale is not None:
             self._apply(stale, "velocity timeout")
         if self.safety is not None:
@@ -423,10 +436,12 @@ class HlcNode(Node):
         self._error(HlcError(ErrorCode.SAFETY, severity, describe(d)))
 
     def _mirror_fence(self) -> None:
-        """Write the swarm fence into an ArduPilot's FENCE_* parameters and read them back, once, on the
-        ground with a position fix (antalate_lcm.autopilot.mavlink.fence_mirror): it holds if we die."""
+        """Write the swarm fence into the autopilot's own fence parameters and read them back, once, on
+        the ground with a position fix: ArduPilot's FENCE_* (antalate_lcm.autopilot.mavlink.fence_mirror),
+        PX4's GF_* (antalate_lcm.autopilot.px4.fence_mirror). It holds if we die."""
         safety, fence_config = self.safety, self.config.safety.fence
-        if safety is None or fence_config is None or self.autopilot.name != "mavlink" or not self.connected:
+        kind = self.autopilot.name
+        if safety is None or fence_config is None or kind not in ("mavlink", "px4") or not self.connected:
             return
         s = self.snapshot
         here = safety.position(s)
@@ -434,13 +449,15 @@ class HlcNode(Node):
         if here is None or fence is None or s.in_air or s.armed:
             return
         self._fence_mirrored = True
-        from antalate_lcm.autopilot.mavlink.fence_mirror import ParamLink, fence_parameters, mirror
+        from antalate_lcm.autopilot.mavlink import fence_mirror as ardupilot
+        from antalate_lcm.autopilot.px4 import fence_mirror as px4
 
-        wanted = fence_parameters(fence, (here[0], here[1]), fence_config.outside)
-        link = cast(ParamLink, self.autopilot)
+        module = px4 if kind == "px4" else ardupilot
+        wanted = module.fence_parameters(fence, (here[0], here[1]), fence_config.outside)
+        link = cast(ardupilot.ParamLink, self.autopilot)
 
         def call() -> None:
-            problems = mirror(link, wanted)
+            problems = module.mirror(link, wanted)
             if problems:
                 raise AutopilotError("; ".join(problems))
 
@@ -462,11 +479,22 @@ class HlcNode(Node):
             self.log.warning("safety: autopilot command failed: %s", detail or "refused")
 
     def _handle(self, outcome: HlcOutcome) -> None:
+        if outcome is NOTHING:  # most inputs (a snapshot 20 times a second) change nothing
+            return
         t = outcome.transition
         if t is not None:
             if t.to_state is HlcState.TAKEOFF and self.safety is not None:
                 self.safety.mark_home(self.snapshot)
                 self._safety_landing = False
+                crowd = self.safety.crowded(self.snapshot, self.now)
+                if crowd:
+                    radius = self.safety.params.separation.radius
+                    near = ", ".join(f"{a} at {d:.1f} m" for a, d in crowd)
+                    text = (
+                        f"safety: taking off closer than the {radius:g} m radius to {near}: the climb keeps"
+                        " that distance; the filter separates them only in MISSION"
+                    )
+                    self._error(HlcError(ErrorCode.SAFETY, Severity.WARNING, text))
             level = logging.INFO
             if t.to_state is HlcState.LLC_DOWN:
                 level = logging.ERROR

@@ -31,6 +31,10 @@ VEHICLE_DEFAULTS: dict[str, tuple[float, float, float]] = {
     "crazyflie": (0.4, 0.3, 0.2),
 }
 _UNKNOWN_VEHICLE = (4.0, 2.0, 0.5)
+#: m: how far below the radius the closest approach came in the measured worst cases of docs/safety.md
+#: (sim: tests/test_safety_e2e.py; mavlink: three ArduCopter SITL, tests/sitl_arducopter/test_safety.py).
+#: `antalate analyze --safety` compares the log's minimum separation with radius minus this.
+MEASURED_MARGIN: dict[str, float] = {"sim": 0.5, "mavlink": 1.0}
 #: m (horizontal) from home at which the filtered return leg ends and the vehicle lands.
 _HOME_REACHED = 0.5
 #: MC states in which a peer's own HLC runs this filter (it takes half of each pair's duty).
@@ -117,6 +121,20 @@ class SafetyLayer:
         here = self.position(s)
         if here is not None:
             self.home = (here[0], here[1])
+
+    def crowded(self, s: AutopilotState, now: float) -> list[tuple[str, float]]:
+        """The fresh peers standing or flying closer than the radius horizontally, nearest first: a
+        vertical take-off from here keeps that distance (docs/safety.md, take-off)."""
+        here = self.position(s)
+        if here is None:
+            return []
+        radius = self.params.separation.radius
+        out = []
+        for p in self.picture.near(self.agent, here[0], here[1], radius):
+            d = math.hypot(p.north - here[0], p.east - here[1])
+            if d < radius and now - p.received <= self.config.stale_after:
+                out.append((p.agent, d))
+        return sorted(out, key=lambda x: x[1])
 
     # ------------------------------------------------------------------ the filter
     def views(self, here: Vec, now: float) -> list[PeerView]:

@@ -58,6 +58,7 @@ is READY when the command is accepted, so "HLC READY" alone would cancel every t
 from __future__ import annotations
 
 import enum
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -85,13 +86,23 @@ class McEvent(enum.Enum):
     TAKEOFF_ACK_TIMEOUT = "TAKEOFF_ACK_TIMEOUT"
     HLC_TIMEOUT = "HLC_TIMEOUT"  # no hlc_state_t for McParams.hlc_timeout
 
+    # Members are singletons compared by identity: identity's hash (in C) instead of Enum's, which
+    # hashes the name in Python on every table lookup (5 HLC states a second per agent).
+    __hash__ = object.__hash__
+
     @classmethod
     def of_hlc(cls, state: HlcState) -> McEvent:
-        return cls[f"HLC_{state.name}"]
+        return _OF_HLC[state]
 
     @classmethod
     def of_command(cls, command: Command) -> McEvent:
         return cls[f"OP_{command.name}"]
+
+
+#: HLC state -> the event its hlc_state_t is (HLC_<name>).
+_OF_HLC = {state: McEvent[f"HLC_{state.name}"] for state in HlcState}
+#: The HLC's states by value: a lookup, not ``HlcState(value)`` (the enum's call), per hlc_state_t heard.
+_HLC_STATES: dict[int, HlcState] = {int(state): state for state in HlcState}
 
 
 @dataclass(frozen=True)
@@ -146,6 +157,10 @@ class McOutcome:
     @property
     def changed(self) -> bool:
         return self.transition is not None
+
+
+#: An observation that changed nothing (immutable, so one serves every tick and every republish).
+_ACCEPTED = McOutcome(True)
 
 
 _Guard = Callable[["MissionControl"], bool]
@@ -263,12 +278,24 @@ _ACCEPTED_IN: dict[McEvent, tuple[McState, ...]] = {
 }
 
 
+@functools.cache
+def _index(table: tuple[McRow, ...]) -> dict[tuple[McState, McEvent], tuple[McRow, ...]]:
+    """(state, event) -> its rows, in table order: a match reads a few rows, not the table, and
+    an event no row of the state takes is not worth deriving. Built once per table and shared
+    by every machine of the process (a thousand agents' machines each had their own: 14 MiB)."""
+    rows: dict[tuple[McState, McEvent], tuple[McRow, ...]] = {}
+    for row in table:
+        for source in row.sources:
+            rows[(source, row.event)] = (*rows.get((source, row.event), ()), row)
+    return rows
+
+
 class MissionControl:
     """The MC machine. Read `state`, `last_command_seq`, `takeoff_altitude`; feed it inputs."""
 
     def __init__(self, params: McParams | None = None, *, table: tuple[McRow, ...] = MC_TABLE) -> None:
         self.params = params or McParams()
-        self._table = table
+        self._rows = _index(table)
         self.state: McState = McState.INIT
         self.entered_at: float | None = None
         self.last_command_seq: int = 0
@@ -330,9 +357,8 @@ class MissionControl:
 
     def on_hlc_state(self, state: HlcState | int, now: float) -> McOutcome:
         """An ``hlc_state_t`` was heard (republished at 5 Hz: most observations change nothing)."""
-        try:
-            hlc = HlcState(state)
-        except ValueError:
+        hlc = _HLC_STATES.get(state)
+        if hlc is None:
             return McOutcome(False, reason=f"unknown HLC state {state!r}")
         self.hlc_changed = hlc is not self.hlc_state
         self.hlc_state = hlc
@@ -342,7 +368,7 @@ class MissionControl:
         event = McEvent.of_hlc(hlc)
         row = self._match(event)
         if row is None:
-            return McOutcome(True)
+            return _ACCEPTED
         transition = self._apply(row, event, f"HLC {hlc.name}", now)
         return McOutcome(True, transition, reason=transition.reason)
 
@@ -367,13 +393,13 @@ class MissionControl:
                 detail = f"HLC still READY after {timeout:g} s"
                 transition = self._apply(row, McEvent.TAKEOFF_ACK_TIMEOUT, detail, now)
                 return McOutcome(True, transition, reason=transition.reason)
-        return McOutcome(True)
+        return _ACCEPTED
 
     # ----------------------------------------------------------------- the table
 
     def _match(self, event: McEvent) -> McRow | None:
-        for row in self._table:
-            if row.event is event and self.state in row.sources and (row.guard is None or row.guard(self)):
+        for row in self._rows.get((self.state, event), ()):
+            if row.guard is None or row.guard(self):
                 return row
         return None
 

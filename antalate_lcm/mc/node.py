@@ -43,8 +43,10 @@ class McNode(Node):
         self.subscribe("OPERATOR_CMD", self._on_command)
         self.subscribe("SWARM_OPERATOR_CMD", self._on_command)
         self.subscribe("HLC_STATE", self._on_hlc_state)
-        self.create_timer(_TICK_PERIOD, self._tick, first_delay=self.first_delay(_TICK_PERIOD))
-        self._publish_state = self.state_publisher("MC_STATE", self._state_msg, self.config.mc.republish_hz)
+        hz = self.config.mc.republish_hz
+        self._publish_state = self.state_publisher("MC_STATE", self._state_msg, hz, periodic=False)
+        # One timer when the rates allow (10 Hz tick, 5 Hz state by default).
+        self.ticker(1.0 / _TICK_PERIOD, [(1.0 / _TICK_PERIOD, self._tick), (hz, self._publish_state)])
         self._publish_state()
         self.log.info("MC started in %s", self.machine.state.name)
 

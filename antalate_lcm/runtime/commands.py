@@ -99,7 +99,15 @@ def _cmd_agent(args: argparse.Namespace) -> int:
     # Internal topics between this process's nodes in memory: a spoofed LAN datagram never reaches them.
     context = Context.in_process(shared_buses(configs), whole_swarm=not args.shard)
     nodes = [node for cfg in configs for node in agent_nodes(cfg, context)]
-    return run_until_signal(context, nodes)
+    if args.broadcast_reception is None:
+        return run_until_signal(context, nodes)
+    from antalate_lcm.runtime.faults import broadcast_report, lossy_broadcasts
+
+    gate = lossy_broadcasts(nodes, args.broadcast_reception, args.seed)
+    code = run_until_signal(context, nodes)
+    for line in broadcast_report(gate):
+        print(line, file=sys.stderr, flush=True)
+    return code
 
 
 def _cmd_tui(args: argparse.Namespace) -> int:
@@ -214,7 +222,39 @@ def _analysis_options(args: argparse.Namespace) -> dict[str, Any]:
         "min_speed": args.min_speed,
         "radius_below": args.radius_below,
         "radius_above": args.radius_above,
+        "safety": _safety_limits(args),
     }
+
+
+def _safety_limits(args: argparse.Namespace) -> Any:
+    """The `SafetyLimits` of ``--safety CONFIG`` and ``--radius``/``--vertical``/``--margin``/``--near-miss``
+    (None when neither a config nor a radius is given: no safety section)."""
+    from antalate_lcm.analysis import SafetyLimits
+    from antalate_lcm.hlc.safety import MEASURED_MARGIN, filter_params
+
+    radius, vertical, margin = args.radius, args.vertical, args.margin
+    fence, origin = None, None
+    if args.safety is not None:
+        config = load_config(args.safety)
+        sep = filter_params(config).separation
+        radius = radius if radius is not None else sep.radius
+        vertical = vertical if vertical is not None else sep.vertical
+        if margin is None:
+            margin = MEASURED_MARGIN.get(config.hlc.autopilot, 0.0)
+        s = config.safety
+        if s.origin:
+            origin = (s.origin[0], s.origin[1])
+        elif s.fence is not None and s.fence.polygon_wgs84:
+            first = s.fence.polygon_wgs84[0]
+            origin = (first[0], first[1])  # any point will do as the frame of a WGS84 fence
+        if s.fence is not None and origin is not None:
+            fence = s.fence.geofence(origin)
+    if radius is None:
+        for flag in ("vertical", "margin", "near_miss"):
+            if getattr(args, flag) is not None:
+                raise AntalateError(f"--{flag.replace('_', '-')} needs --radius or --safety CONFIG")
+        return None
+    return SafetyLimits(radius, vertical, margin or 0.0, args.near_miss, fence, origin)
 
 
 def _add_analysis_options(p: argparse.ArgumentParser) -> None:
@@ -258,6 +298,29 @@ def _add_analysis_options(p: argparse.ArgumentParser) -> None:
         metavar="M",
         help="report when the radius first rises above M metres",
     )
+    p.add_argument(
+        "--safety",
+        metavar="CONFIG",
+        help="check separation, near-misses and the fence against this agent config's [safety] (docs/safety.md)",
+    )
+    p.add_argument(
+        "--radius", type=_positive, metavar="M", help="separation radius, m (overrides --safety's)"
+    )
+    p.add_argument(
+        "--vertical", type=_positive, metavar="M", help="separation half-height, m (default: 3-D distance)"
+    )
+    p.add_argument(
+        "--margin",
+        type=float,
+        metavar="M",
+        help="m below the radius still within the documented margin (default: the vehicle's, docs/safety.md)",
+    )
+    p.add_argument(
+        "--near-miss",
+        type=_positive,
+        metavar="M",
+        help="encounters closer than M m are near-misses (default: the radius)",
+    )
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -286,6 +349,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="spread the agents over P processes (default: one per core from 500 agents)",
     )
     p.add_argument("--shard", help=argparse.SUPPRESS)  # INDEX/COUNT: one of those processes
+    # antalate run's [broadcast] reception and seed, for the agents of one of its processes
+    p.add_argument("--broadcast-reception", type=float, help=argparse.SUPPRESS)
+    p.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
     p.set_defaults(func=_cmd_agent)
 
     p = sub.add_parser("tui", help="the operator console (a Textual app on the LAN bus)")

@@ -68,7 +68,7 @@ def open_context(url: str) -> tuple[Context, str]:
         url = "memq://"
     finally:
         probe.close()
-    return Context.in_process({"lan": url}), url
+    return Context.in_process({"lan": url}, whole_swarm=True), url  # every agent of the demo is here
 
 
 def build_swarm(n: int, url: str, *, station: str | None = None, swarm_key: str = "") -> list[Config]:

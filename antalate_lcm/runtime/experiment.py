@@ -41,11 +41,12 @@ from antalate_lcm.runtime.agent import (
 )
 from antalate_lcm.runtime.launch import run_until_signal
 from antalate_lcm.runtime.recorder import LogRecorder
-from antalate_lcm.runtime.script import Script, load_script
+from antalate_lcm.runtime.script import Script, check_fault_agents, load_script
 from antalate_lcm.runtime.scripted_operator import DirectionAt, Phase, ScriptedOperator
 
 if TYPE_CHECKING:
     from antalate_lcm.analysis import Analysis
+    from antalate_lcm.runtime.faults import FaultInjector
 
 #: Topics this process must hear or send when the agents are in other processes.
 _OPERATOR_TOPICS = ("MC_STATE", "TELEMETRY", "SWARM_OPERATOR_CMD", "SWARM_DIRECTION_CMD")
@@ -65,6 +66,8 @@ class Experiment:
     headless: bool = True
     force: bool = False
     log_level: str = "INFO"
+    #: Where the script came from, for the errors that name its keys.
+    script_source: str = "script"
 
 
 def default_log_path() -> str:
@@ -125,6 +128,8 @@ def prepare(exp: Experiment) -> tuple[list[Config], str, str]:
         validate(cfg)
     bus = record_bus(base, exp.bus)
     check_reach(base, min(exp.processes, len(configs)), bus)
+    if exp.script is not None:
+        check_interference(exp, exp.script, configs)
     out = exp.output or default_log_path()
     if os.path.exists(out) and not exp.force:
         raise AntalateError(f"{out} exists: pass --force to overwrite it, or -o another file")
@@ -132,6 +137,64 @@ def prepare(exp: Experiment) -> tuple[list[Config], str, str]:
     if not parent.is_dir():
         raise AntalateError(f"cannot write the log {out}: {parent} is not a folder")
     return configs, bus, out
+
+
+def check_interference(exp: Experiment, script: Script, configs: list[Config]) -> None:
+    """Faults and lossy broadcasts act on simulated agents in this process, under the scripted
+    operator (their times count from its MISSION); each fault names agents that fly."""
+    if not script.interferes:
+        return
+    if script.fault and min(exp.processes, len(configs)) > 1:
+        raise AntalateError(
+            f"{exp.script_source}: [[fault]] needs the agents in this process (--processes 1)"
+        )
+    if script.fault and not exp.headless:
+        raise AntalateError(
+            f"{exp.script_source}: [[fault]] needs --headless (its times count from the scripted MISSION)"
+        )
+    for i, f in enumerate(script.fault):
+        if f.kind in ("battery", "vehicle") and configs[0].hlc.autopilot != "sim":
+            raise ConfigError(
+                exp.script_source,
+                f"fault[{i}].kind",
+                f"a {f.kind} fault on a simulated vehicle (hlc.autopilot = 'sim')",
+            )
+    check_fault_agents(script, [c.agent.name for c in configs], exp.script_source)
+    if script.broadcast.reception < 1.0 and configs[0].hlc.autopilot != "sim":
+        raise ConfigError(
+            exp.script_source, "broadcast.reception", "simulated agents (hlc.autopilot = 'sim')"
+        )
+
+
+def _interfere(
+    configs: list[Config], context: Context, nodes: list[Node], script: Script, bus: str
+) -> FaultInjector | None:
+    """Put the script's faults and broadcast losses between the agents' nodes and the bus."""
+    if not script.interferes:
+        return None
+    from antalate_lcm.hlc.node import HlcNode
+    from antalate_lcm.runtime.faults import FaultGate, FaultInjector, lossy_broadcasts
+
+    names = [c.agent.name for c in configs]
+    agents = [n for n in nodes if n.kind != "recorder"]
+    if script.broadcast.reception < 1.0:
+        gate = lossy_broadcasts(agents, script.broadcast.reception, script.seed)
+    else:
+        gate = FaultGate()
+        for node in agents:
+            node.interference = gate
+    vehicles = {n.agent: n.autopilot for n in nodes if isinstance(n, HlcNode)}
+    return FaultInjector(
+        configs[0].with_agent_name("faults"),
+        context,
+        script=script,
+        agents=names,
+        gate=gate,
+        bus=bus,
+        mission_start=lambda: None,
+        excuse=lambda _agent: None,
+        vehicles=vehicles,
+    )
 
 
 def _operator(configs: list[Config], context: Context, script: Script) -> ScriptedOperator:
@@ -149,6 +212,9 @@ def _operator(configs: list[Config], context: Context, script: Script) -> Script
 def _child_argv(exp: Experiment) -> Callable[[int, int], list[str]]:
     argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", exp.log_level, "agent", exp.config_path]
     argv += ["--agents", str(exp.agents), "--spacing", str(exp.spacing)]
+    script = exp.script or load_script(None)
+    if script.broadcast.reception < 1.0:  # each process loses broadcasts at its own agents
+        argv += ["--broadcast-reception", repr(script.broadcast.reception), "--seed", str(script.seed)]
     return lambda i, n: [*argv, "--shard", f"{i}/{n}"]
 
 
@@ -206,26 +272,34 @@ def run(exp: Experiment) -> Outcome:
     configs, bus, out = prepare(exp)
     processes = min(exp.processes, len(configs))
     buses = shared_buses(configs)
-    # One process: every agent's internal topics in memory, as `antalate agent` runs them. Several:
-    # this process only commands and records, on the configured buses.
-    context = Context.in_process(buses) if processes == 1 else Context(Bus(buses), Executor())
+    # One process: every agent's internal topics in memory, as `antalate agent` runs them, and the
+    # whole swarm here (a peer behavior may hear its peers on memq://). Several: this process only
+    # commands and records, on the configured buses.
+    context = (
+        Context.in_process(buses, whole_swarm=True) if processes == 1 else Context(Bus(buses), Executor())
+    )
     recorder = LogRecorder(configs[0].with_agent_name("recorder"), context, bus=bus, path=out)
     nodes: list[Node] = [recorder]
     if processes == 1:
         nodes += [node for cfg in configs for node in agent_nodes(cfg, context)]
+    injector = _interfere(configs, context, nodes, script, bus)
+    if injector is not None:
+        nodes.append(injector)
     # With the console, every log line goes to a file: they would tear the console's screen.
     node_log = "" if exp.headless else _temp_log()
     children = _AgentProcesses(exp, processes, node_log) if processes > 1 else None
     outcome = Outcome(1, out, bus, 0, node_log=node_log)
     try:
         if exp.headless:
-            _fly_scripted(configs, context, nodes, script, children, outcome)
+            _fly_scripted(configs, context, nodes, script, children, outcome, injector)
         else:
             outcome.code = _run_console(configs[0], context, nodes, node_log)
     finally:
         if children is not None:
             children.stop()
     outcome.messages = recorder.events
+    if injector is not None:
+        outcome.report = "\n".join([outcome.report, *injector.report()]).strip()
     _measure(outcome, script)
     return outcome
 
@@ -264,8 +338,14 @@ def _fly_scripted(
     script: Script,
     children: _AgentProcesses | None,
     outcome: Outcome,
+    injector: FaultInjector | None = None,
 ) -> None:
     operator = _operator(configs, context, script)
+    if injector is not None:
+        operator.interference = injector.gate  # a link loss cuts the operator's side too
+        injector.mission_start = lambda: operator.mission_started
+        injector.excuse = operator.excused.add
+        operator.on_finish.append(injector.summarize)
     ended = children.done if children is not None else threading.Event()
     run_until_signal(context, [*nodes, operator], poll=lambda: operator.finished or ended.is_set())
     outcome.code = 0 if operator.phase is Phase.DONE else 1
@@ -342,6 +422,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             processes=args.processes,
             spacing=args.spacing,
             script=load_script(args.script),
+            script_source=args.script or "script",
             output=args.output,
             bus=args.bus,
             headless=args.headless,

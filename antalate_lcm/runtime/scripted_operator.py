@@ -10,7 +10,7 @@ like a stick: ``direction_follow`` hovers after 3 s without one).
 from __future__ import annotations
 
 import enum
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from antalate_lcm.config import Config
@@ -89,6 +89,12 @@ class ScriptedOperator(Node):
         self._last_sent = -1e9
         self._current: DirectionAt | None = None
         self._direction_sent = -1e9
+        #: When the whole swarm entered MISSION (executor clock), None before.
+        self.mission_started: float | None = None
+        #: Agents the experiment's script crashed or cut off for good: no longer waited for.
+        self.excused: set[str] = set()
+        #: Called on the executor thread as the script ends (DONE or FAILED), before any node stops.
+        self.on_finish: list[Callable[[], None]] = []
 
     def on_start(self) -> None:
         self._t0 = self._phase_at = self.now
@@ -112,12 +118,17 @@ class ScriptedOperator(Node):
         self.timelines.setdefault(agent, Timeline()).add(self.elapsed, state)
 
     def _states(self) -> list[McState | None]:
-        return [t.current for t in self.timelines.values()]
+        return [t.current for a, t in self.timelines.items() if a not in self.excused]
 
     def _enter(self, phase: Phase) -> None:
         self.log.info("phase: %s (%.1f s)", phase.value, self.elapsed)
         self.phase = phase
         self._phase_at = self.now
+        if phase is Phase.MISSION:
+            self.mission_started = self.now
+        if self.finished:
+            for fn in self.on_finish:
+                fn()
         self._last_sent = -1e9
 
     def _broadcast(self, command: Command) -> None:
@@ -187,7 +198,10 @@ class ScriptedOperator(Node):
         self._send("SWARM_DIRECTION_CMD", msg)
 
     def report(self) -> str:
-        lines = [f"{name}: {tl.render()}" for name, tl in sorted(self.timelines.items())]
+        lines = [
+            f"{name}: {tl.render()}" + (" (lost to a fault of the script)" if name in self.excused else "")
+            for name, tl in sorted(self.timelines.items())
+        ]
         ok = self.phase is Phase.DONE
         lines.append(
             f"{'OK' if ok else 'FAILED'}: {len(self.timelines)} agent(s), "

@@ -16,7 +16,7 @@ from textual.widgets import RichLog, Static
 
 from antalate_lcm.vocabulary import Severity
 from operator_tui.commands import DirectionControl, Status, TrackedCommand, applies
-from operator_tui.model import AgentView, Event, heading_arrow
+from operator_tui.model import AgentView, Event, SafetySummary, heading_arrow
 from operator_tui.widgets.palette import SEVERITY_STYLE, battery_style, hlc_style, mc_style
 
 if TYPE_CHECKING:
@@ -50,6 +50,7 @@ def status_text(
     direction: DirectionControl,
     scope_all: bool,
     selected: str | None,
+    safety: SafetySummary | None = None,
 ) -> Text:
     t = Text()
     t.append(" antalate operator ", "bold reverse")
@@ -65,6 +66,16 @@ def status_text(
     t.append("ALL" if scope_all else (selected or "(none)"), "bold magenta" if scope_all else "bold")
     t.append(f" {direction.azimuth:03.0f}°{heading_arrow(direction.azimuth)} {direction.speed:.1f} m/s ")
     t.append("ON" if direction.active else "off", "bold green" if direction.active else "grey62")
+    if safety is not None:
+        t.append("  safety ")
+        if safety.modified:
+            shown = ", ".join(f"{n} by {by}" for by, n in sorted(safety.modified.items()))
+            t.append(f"modifying {shown}", "bold yellow")
+        else:
+            t.append("idle", "grey62")
+        if safety.closest is not None:
+            d, a, b = safety.closest
+            t.append(f"  closest {a}-{b} {d:.1f} m")
     return t
 
 

@@ -55,6 +55,10 @@ tests drive the real cflib. The behaviours below were checked against the firmwa
   trajectory), ``land`` while landing (planner.c ``plan_takeoff``/``plan_land``) -- or ``EBUSY``
   (16) while the supervisor says it cannot fly (stabilizer.c ``crtpCommanderBlock(!canFly)``), or
   ``ENOEXEC`` (8) for an unknown command. `hl_answers` keeps them.
+* **Flying bit** (supervisor.c ``isFlyingCheck``, ``IS_FLYING_HYSTERESIS_THRESHOLD`` 2 s): thrust over
+  idle, or within 2 s since there was -- ``sys.isFlying`` and the bitfield's "is flying" stay set 2 s
+  after the motors stop (a landing, a fall), and the supervisor enters Landed (its landed timeout's
+  start, supervisor_state_machine.c) only then. `flying` is the truth (the motors turn).
 * **Supervisor** (port 9): state bitfield request (``0x0C`` -> ``0x8C`` + uint16), arm/disarm
   (``0x01`` -> ``0x81, success, is_armed``; refused while locked), emergency stop (``0x03``:
   motors off, locked). **Auto-arming** (``auto_arming``, default on: Kconfig
@@ -127,9 +131,10 @@ PARAM_CORE, PARAM_GROUP, PARAM_START = 0x20, 0x80, 1
 PARAM_FORMATS = {0x08: "<B", 0x09: "<H", 0x0A: "<I", 0x00: "<b", 0x01: "<h", 0x02: "<i", 0x06: "<f"}
 
 PROTOCOL_VERSION = 12  # src/modules/interface/crtp.h
-FIRMWARE_VERSION = "2025.02"
+FIRMWARE_VERSION = "2026.08"  # the tag the behaviours below were read at
 LOG_MAX_BLOCKS, LOG_MAX_OPS = 16, 128
 WDT_STABILIZE, WDT_SHUTDOWN = 0.5, 2.0  # supervisor.c COMMANDER_WDT_TIMEOUT_*
+FLYING_HYSTERESIS = 2.0  # supervisor.c IS_FLYING_HYSTERESIS_THRESHOLD: "flying" this long after thrust
 LOW_VOLTAGE, CRITICAL_LOW_VOLTAGE = 3.2, 3.0  # platform_defaults_cf2.h DEFAULT_BAT_(CRITICAL_)LOW_VOLTAGE
 LOW_DURATION = 5.0  # platform_defaults_cf2.h DEFAULT_BAT_LOW_DURATION_TO_TRIGGER_SEC (both timers)
 LANDING_TIMEOUT = 3.0  # platform_defaults.h LANDING_TIMEOUT_MS: landed this long -> disarm
@@ -334,6 +339,7 @@ class CrazyflieEmulator:
         self._traj: _Trajectory | None = None
         self._traj_finished = False
         self._landed_at: float | None = None
+        self._thrust_at = -math.inf  # clock() when the motors last ran (the flying bit's hysteresis)
         self._streaming = False
         self._sp_kind = ""  # "world" or "hover"
         self._sp: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
@@ -455,8 +461,14 @@ class CrazyflieEmulator:
 
     @property
     def flying(self) -> bool:
-        """supervisor.c isFlyingCheck: a motor above idle thrust (so also on the first centimetres)."""
+        """The motors turn: the vehicle's truth (also on the first centimetres)."""
         return self.motors
+
+    def flying_bit(self) -> bool:
+        """supervisor.c isFlyingCheck, as reported: thrust over idle, *or* within the 2 s since it was
+        (``IS_FLYING_HYSTERESIS_THRESHOLD``) -- a Crazyflie reads flying 2 s after its motors stop, and
+        the supervisor goes Flying -> Landed (supervisor_state_machine.c) only then."""
+        return self.motors or self.clock() - self._thrust_at < FLYING_HYSTERESIS
 
     @property
     def pm_state(self) -> int:
@@ -470,7 +482,7 @@ class CrazyflieEmulator:
             BIT_CAN_BE_ARMED: can_arm,
             BIT_IS_ARMED: self.armed,
             BIT_CAN_FLY: self.armed and can_arm,
-            BIT_IS_FLYING: self.flying,
+            BIT_IS_FLYING: self.flying_bit(),
             BIT_IS_TUMBLED: self.crashed,
             BIT_IS_LOCKED: self.locked,
             BIT_IS_CRASHED: self.crashed,
@@ -505,7 +517,7 @@ class CrazyflieEmulator:
             "kalman.varPY": variance,
             "kalman.varPZ": variance,
             "sys.canfly": int(self.armed and not self.locked),
-            "sys.isFlying": int(self.flying),
+            "sys.isFlying": int(self.flying_bit()),
             "sys.isTumbled": int(self.crashed),
             "supervisor.info": self.supervisor_info(),
         }
@@ -871,6 +883,8 @@ class CrazyflieEmulator:
         if self.motors and self.drain > 0:
             self.vbat = max(self.vbat - self.drain * dt, 2.5)
         self._track_battery(now)
+        if self.motors:
+            self._thrust_at = now
         if not self.motors:
             if self.z > 0.0:  # falling
                 self.vz -= GRAVITY * dt
@@ -935,7 +949,9 @@ class CrazyflieEmulator:
     def _supervise_ground(self, now: float) -> None:
         """supervisor.c: landed for landed_timeout -> disarm; auto-arming re-arms (motors off)."""
         landed = self._landed_at is not None and self.z <= 0.0
-        if self.armed and landed and now - (self._landed_at or now) >= self.landed_timeout:
+        # Landed is entered once the flying bit drops (its hysteresis), the timeout counts from there
+        since = max(self._landed_at or now, self._thrust_at + FLYING_HYSTERESIS)
+        if self.armed and landed and now - since >= self.landed_timeout:
             self._disarm()  # Landed -> Reset
             self._landed_at = None
         if (

@@ -142,6 +142,28 @@ BRISK: dict[str, Any] = {
     "land_detect_time": 0.2,
 }
 
+#: ArduCopter 4.6.3 (SITL, copter.parm) as it flies: WPNAV_SPEED_UP 2.5 m/s, WPNAV_SPEED_DN 1.5 m/s above
+#: LAND_ALT_LOW 10 m, LAND_SPEED 0.5 m/s below, WPNAV_SPEED 10 m/s home, RTL_ALT 15 m, RTL_LOIT_TIME 5 s,
+#: the land detector's ~1 s; the boot is seconds, not SITL's ~40 s (nothing compared depends on it).
+#: The profile the comparison tests (tests/sitl_arducopter/test_failsafes.py) fly against the firmware.
+ARDUCOPTER: dict[str, Any] = {
+    "boot_delay": 1.0,
+    "ekf_delay": 3.0,
+    "gps_delay": 2.0,
+    "climb_rate": 2.5,
+    "max_climb_rate": 2.5,
+    "land_speed": 0.5,
+    "land_speed_high": 1.5,
+    "land_alt_low": 10.0,
+    "max_descent_rate": 1.5,
+    "rtl_speed": 10.0,
+    "rtl_alt": 15.0,
+    "rtl_loiter_time": 5.0,
+    "velocity_tau": 0.5,
+    "land_detect_time": 1.0,
+    "battery_drain": 0.0,
+}
+
 COPTER_MODES: dict[str, int] = {
     "STABILIZE": 0,
     "ACRO": 1,
@@ -222,6 +244,7 @@ DATA_STREAMS: dict[int, tuple[str, ...]] = {
 FORCE_MAGIC = 21196  # param2 of ARM_DISARM that bypasses checks (ArduPilot convention)
 
 _I8, _I16, _R32 = mav2.MAV_PARAM_TYPE_INT8, mav2.MAV_PARAM_TYPE_INT16, mav2.MAV_PARAM_TYPE_REAL32
+_I32 = mav2.MAV_PARAM_TYPE_INT32
 #: ArduCopter 4.x parameters the emulator keeps: name -> (default, MAV_PARAM_TYPE).
 PARAMS: dict[str, tuple[float, int]] = {
     "SYSID_THISMAV": (1, _I16),
@@ -246,8 +269,48 @@ PARAMS: dict[str, tuple[float, int]] = {
     "FS_EKF_ACTION": (1, _I8),
     "FS_EKF_THRESH": (0.8, _R32),
     "DISARM_DELAY": (10, _I8),
+    # Parameters.cpp (Copter-4.6.3): FS_OPTIONS 16 = continue a GCS failsafe in pilot-controlled modes;
+    # FS_THR_ENABLE 1 = radio failsafe RTL (copter.parm keeps 1). The RTL's: RTL_ALT cm (set from the
+    # constructor's `rtl_alt`), RTL_CLIMB_MIN cm, RTL_LOIT_TIME ms (from `rtl_loiter_time`), RTL_CONE_SLOPE;
+    # LAND_SPEED cm/s (from `land_speed`).
+    "FS_OPTIONS": (16, _I32),
+    "FS_THR_ENABLE": (1, _I8),
+    "RTL_ALT": (1500, _I32),
+    "RTL_CLIMB_MIN": (0, _I16),
+    "RTL_LOIT_TIME": (5000, _I32),
+    "RTL_CONE_SLOPE": (3.0, _R32),
+    "LAND_SPEED": (50, _I16),
+    # SITL's failure injection (libraries/SITL/SITL.cpp): the pack's voltage (applied when set), the GPS
+    # switched off, the RC receiver's pulses stopped (1).
+    "SIM_BATT_VOLTAGE": (12.6, _R32),
+    "SIM_GPS_DISABLE": (0, _I8),
+    "SIM_RC_FAIL": (0, _I8),
 }
+#: FS_OPTIONS bits (ArduCopter/Copter.h FailsafeOption, Copter-4.6.3).
+FS_OPT_RC_CONTINUE_IF_GUIDED = 1 << 2
+FS_OPT_CONTINUE_IF_LANDING = 1 << 3
+FS_OPT_GCS_CONTINUE_IF_PILOT_CONTROL = 1 << 4
+#: Modes whose Mode::is_autopilot() is true (ArduCopter/mode.h): the others are a pilot's.
+AUTOPILOT_MODES = frozenset(
+    {
+        "AUTO",
+        "CIRCLE",
+        "GUIDED",
+        "GUIDED_NOGPS",
+        "LAND",
+        "RTL",
+        "SMART_RTL",
+        "AUTO_RTL",
+        "FOLLOW",
+        "AVOID_ADSB",
+    }
+)
+LAND_WITH_DELAY = 4.0  # s: mode_land.cpp LAND_WITH_DELAY_MS, the pause of a failsafe's LAND before descending
+RTL_ALT_MIN = 2.0  # m: mode_rtl.cpp RTL_ALT_MIN (200 cm), the lowest an RTL returns at
+RTL_MIN_CONE_SLOPE = 0.5  # mode_rtl.cpp: a smaller RTL_CONE_SLOPE turns the cone off
+GPS_DEAD_RECKONING = 6.0  # s the EKF keeps a position without GPS (measured, ArduCopter 4.6.3 SITL: ~6-7 s)
 _FS_GCS_MODES = {1: "RTL", 2: "RTL", 3: "RTL", 4: "RTL", 5: "LAND", 6: "RTL", 7: "BRAKE"}
+_FS_THR_MODES = {1: "RTL", 2: "RTL", 3: "LAND", 4: "RTL", 5: "LAND"}  # radio.cpp / events.cpp, no SmartRTL
 _FENCE_MODES = {1: "RTL", 2: "LAND", 3: "RTL", 4: "BRAKE", 5: "RTL"}
 _BATT_MODES = {1: "LAND", 2: "RTL", 3: "RTL", 4: "RTL", 6: "RTL"}
 _EKF_BAD_FOR = 1.0  # s of bad variances before ArduCopter's EKF failsafe (ekf_check: 10 checks at 10 Hz)
@@ -311,7 +374,8 @@ class VehicleSnapshot:
     home: tuple[float, float, float] | None  # lat, lon, alt AMSL
     link_up: bool
     guided_submode: str | None  # takeoff | velocity | position | hover (GUIDED only)
-    rtl_phase: str | None  # climb | return | land (RTL only)
+    rtl_phase: str | None  # climb | return | loiter | land (RTL only)
+    rtl_alt: float  # m: the altitude the current (or last) RTL returns at
 
 
 @dataclass(frozen=True)
@@ -413,6 +477,7 @@ class MavlinkVehicle:
         land_alt_low: float = 2.0,
         rtl_speed: float = 5.0,
         rtl_alt: float = 0.0,
+        rtl_loiter_time: float = 0.0,
         max_speed: float = 10.0,
         max_climb_rate: float = 2.5,
         max_descent_rate: float = 1.5,
@@ -445,8 +510,8 @@ class MavlinkVehicle:
         self.initial_mode = initial_mode
         self.boot_delay, self.ekf_delay, self.gps_delay = boot_delay, ekf_delay, gps_delay
         self.climb_rate = climb_rate
-        self.land_speed, self.land_speed_high, self.land_alt_low = land_speed, land_speed_high, land_alt_low
-        self.rtl_speed, self.rtl_alt = rtl_speed, rtl_alt
+        self.land_speed_high, self.land_alt_low = land_speed_high, land_alt_low
+        self.rtl_speed = rtl_speed
         self.max_speed, self.max_climb_rate, self.max_descent_rate = (
             max_speed,
             max_climb_rate,
@@ -466,6 +531,9 @@ class MavlinkVehicle:
         self._params: dict[str, float] = {name: float(default) for name, (default, _t) in table.items()}
         self._param_types: dict[str, int] = {name: ptype for name, (_d, ptype) in table.items()}
         self._params["GUID_TIMEOUT"] = float(guided_timeout)
+        self._params["RTL_ALT"] = float(round(rtl_alt * 100))
+        self._params["RTL_LOIT_TIME"] = float(round(rtl_loiter_time * 1000))
+        self._params["LAND_SPEED"] = float(round(land_speed * 100))
         self._params["SYSID_THISMAV"] = float(sysid)
         for name, value in (params or {}).items():
             if name not in self._params:
@@ -520,6 +588,9 @@ class MavlinkVehicle:
         self._target_yaw_rate = 0.0
         self._last_target = 0.0
         self._rtl_phase: str | None = None
+        self._rtl_alt = 0.0  # m: the altitude this RTL returns at (`_rtl_target_alt`)
+        self._rtl_loiter_end = 0.0  # time.monotonic() the RTL's loiter over home ends
+        self._land_pause_until = 0.0  # a failsafe's LAND hovers until then (LAND_WITH_DELAY)
         self._received: deque[Received] = deque(maxlen=20000)
         self._acks: list[tuple[int, int]] = []
         self._texts: list[str] = []
@@ -534,8 +605,11 @@ class MavlinkVehicle:
         self._voltage_override: float | None = None
         self._batt_low_since: float | None = None
         self._batt_failsafe = 0  # 0 none, 1 low, 2 critical (latched, as AP_BattMonitor does)
+        self._batt_action = 0  # the BATT_FS_*_ACT of that failsafe
         self._ekf_bad_since: float | None = None
         self._ekf_failsafe = False
+        self._gps_off_since: float | None = None  # SIM_GPS_DISABLE: when the GPS went off
+        self._rc_failsafe = False
         self.failsafe_modes: list[tuple[str, str]] = []  # (failsafe, mode) actions taken, for assertions
         # link cut with buffering (cut_link / restore_link)
         self._cut = False
@@ -658,6 +732,7 @@ class MavlinkVehicle:
                 link_up=self._link_up,
                 guided_submode=self._guided if self._mode == "GUIDED" else None,
                 rtl_phase=self._rtl_phase if self._mode == "RTL" else None,
+                rtl_alt=self._rtl_alt,
             )
 
     def wait_until(self, predicate: Callable[[VehicleSnapshot], bool], timeout: float) -> bool:
@@ -751,8 +826,6 @@ class MavlinkVehicle:
         """EKF variances above FS_EKF_THRESH (True) or back to normal (False)."""
         with self._lock:
             self._ekf_bad_since = time.monotonic() if failed else None
-            if not failed:
-                self._ekf_failsafe = False
 
     def inject(self, msg: Any, key: bytes | None = None, sysid: int | None = None) -> None:
         """Send `msg` as someone else on the link would: unsigned, or signed with `key` (not ours)."""
@@ -771,6 +844,13 @@ class MavlinkVehicle:
         with self._lock:
             return self._set_mode(mode.upper(), time.monotonic(), source="pilot") == mav2.MAV_RESULT_ACCEPTED
 
+    def set_param(self, name: str, value: float) -> None:
+        """A parameter set as a PARAM_SET from a ground station sets it (SIM_* failures included)."""
+        with self._lock:
+            if name not in self._params:
+                raise ValueError(f"unknown emulated parameter {name!r}")
+            self._apply_param(name, float(value), time.monotonic())
+
     def set_battery(self, pct: float) -> None:
         with self._lock:
             self._battery = max(0.0, min(100.0, float(pct)))
@@ -778,10 +858,23 @@ class MavlinkVehicle:
     # -- state helpers (lock held) -----------------------------------------------------------------
 
     def _gps_fix(self, now: float) -> bool:
-        return now - self._t0 >= self.gps_delay
+        return now - self._t0 >= self.gps_delay and self._gps_off_since is None
+
+    def _gps_lost(self, now: float) -> bool:
+        """SIM_GPS_DISABLE for longer than the EKF dead-reckons: no position any more."""
+        return self._gps_off_since is not None and now - self._gps_off_since >= GPS_DEAD_RECKONING
 
     def _position_ok(self, now: float) -> bool:
+        if self._gps_off_since is not None:
+            return self._ekf_announced and not self._gps_lost(now)
         return self._booted and self._gps_fix(now) and now - self._t0 >= self.ekf_delay
+
+    def _landing(self) -> bool:
+        """Mode::is_landing(): LAND, or an RTL in its final descent (mode_rtl.cpp)."""
+        return self._mode == "LAND" or (self._mode == "RTL" and self._rtl_phase == "land")
+
+    def _land_complete(self) -> bool:
+        return self._on_ground and self._takeoff_alt is None
 
     def _system_status(self, now: float) -> int:
         if not self._booted:
@@ -842,8 +935,24 @@ class MavlinkVehicle:
         self._target_yaw = None
         self._target_yaw_rate = 0.0
         self._rtl_phase = "climb" if mode == "RTL" else None
+        if mode == "RTL":
+            self._rtl_alt = self._rtl_target_alt()
+        self._land_pause_until = 0.0
         self._takeoff_alt = None  # a mode change ends a guided takeoff
         return mav2.MAV_RESULT_ACCEPTED
+
+    def _rtl_target_alt(self) -> float:
+        """The altitude an RTL returns at (mode_rtl.cpp ModeRTL::compute_return_target, Copter-4.6.3):
+        RTL_ALT, but at least the current altitude + RTL_CLIMB_MIN and RTL_ALT_MIN; near home the cone
+        (RTL_CONE_SLOPE x the distance home) lowers it, never below that minimum."""
+        alt = -self._d
+        min_alt = max(RTL_ALT_MIN, alt + max(0.0, self._params["RTL_CLIMB_MIN"] / 100.0))
+        target = max(self._params["RTL_ALT"] / 100.0, min_alt)
+        slope = self._params["RTL_CONE_SLOPE"]
+        if slope >= RTL_MIN_CONE_SLOPE:
+            hn, he = self._home_ned()
+            target = min(target, max(math.hypot(self._n - hn, self._e - he) * slope, min_alt))
+        return target
 
     def _arm(self, force: bool, now: float) -> int:
         if self.refuse_arm:
@@ -952,6 +1061,11 @@ class MavlinkVehicle:
             return self._set_mode("RTL", now, "NAV_RETURN_TO_LAUNCH")
         if cmd == mav2.MAV_CMD_CONDITION_YAW:
             return self._condition_yaw(p)
+        if cmd == mav2.MAV_CMD_BATTERY_RESET:
+            # AP_BattMonitor::reset_remaining_mask: the remaining charge set, the failsafe cleared
+            self._battery = max(0.0, min(100.0, float(p[1])))
+            self._batt_failsafe, self._batt_action, self._batt_low_since = 0, 0, None
+            return mav2.MAV_RESULT_ACCEPTED
         if cmd == mav2.MAV_CMD_SET_MESSAGE_INTERVAL:
             return self._set_interval(int(p[0]), p[1])
         if cmd == mav2.MAV_CMD_REQUEST_MESSAGE:
@@ -1101,9 +1215,20 @@ class MavlinkVehicle:
         value = float(msg.param_value)
         if self._param_types[name] != _R32:
             value = float(round(value))
-        self._params[name] = value
         LOG.info("parameter %s = %g (PARAM_SET from %d)", name, value, msg.get_srcSystem())
+        self._apply_param(name, value, now)
         self._outbox.append(self._param_value(name))
+
+    def _apply_param(self, name: str, value: float, now: float) -> None:
+        self._params[name] = value
+        if name == "SIM_BATT_VOLTAGE":
+            self._voltage_override = value
+        elif name == "SIM_GPS_DISABLE":
+            off = round(value) != 0
+            if off and self._gps_off_since is None:
+                self._gps_off_since = now
+            elif not off:
+                self._gps_off_since = None
 
     _HANDLERS: dict[str, Callable[[MavlinkVehicle, Any, float], None]] = {
         "HEARTBEAT": _on_heartbeat,
@@ -1153,36 +1278,95 @@ class MavlinkVehicle:
     # -- failsafes (I/O thread, lock held) ----------------------------------------------------------
 
     def _failsafe_mode(self, failsafe: str, mode: str, now: float) -> None:
-        """Switch to the failsafe's mode as ArduCopter's set_mode_or_land does (LAND if it is refused)."""
-        if self._mode == mode or (self._mode == "LAND" and mode != "LAND"):
-            return  # already doing it, or landing: a failsafe never interrupts a landing
+        """events.cpp do_failsafe_action: set_mode_RTL_or_land_with_pause for RTL (LAND if RTL is refused),
+        set_mode_land_with_pause for LAND (mode_land.cpp: a LAND_WITH_DELAY hover before descending).
+        Copter::set_mode to the mode it is already in changes nothing (no restart, no pause)."""
+        if self._mode == mode:
+            return
         if self._set_mode(mode, now, source=failsafe) != mav2.MAV_RESULT_ACCEPTED:
             self._set_mode("LAND", now, source=failsafe)
+        if self._mode == "LAND":
+            self._land_pause_until = now + LAND_WITH_DELAY
         self.failsafe_modes.append((failsafe, self._mode))
+
+    def _fs_option(self, bit: int) -> bool:
+        return bool(round(self._params["FS_OPTIONS"]) & bit)
+
+    def _battery_land_priority(self) -> bool:
+        """AP_BattMonitor has failsafed with LAND or TERMINATE (priority <= FAILSAFE_LAND_PRIORITY)."""
+        return self._batt_failsafe > 0 and self._batt_action in (1, 5)
 
     def _failsafes(self, now: float) -> None:
         self._gcs_check(now)
+        self._rc_check(now)
         self._fence_check(now)
         self._battery_check(now)
         self._ekf_check(now)
 
     def _gcs_check(self, now: float) -> None:
+        """events.cpp failsafe_gcs_check / failsafe_gcs_on_event (Copter-4.6.3)."""
         action = round(self._params["FS_GCS_ENABLE"])
         if action == 0 or self._gcs_seen == 0.0:
             return
         lost = now - self._gcs_seen > self._params["FS_GCS_TIMEOUT"]
         if lost and not self._gcs_failsafe:
             self._gcs_failsafe = True
-            if self._armed and self._on_ground and self._takeoff_alt is None:
+            mode = _FS_GCS_MODES.get(action, "RTL")
+            if not self._armed:
+                self._text("GCS Failsafe", mav2.MAV_SEVERITY_WARNING)
+                return
+            if self._land_complete():
                 self._text("GCS Failsafe - Disarming", mav2.MAV_SEVERITY_WARNING)
                 self._disarm("GCS failsafe")
+                return
+            if self._landing() and self._battery_land_priority():
+                self._text("GCS + Battery Failsafe - Continuing Landing", mav2.MAV_SEVERITY_WARNING)
+                mode = "LAND"
+            elif self._landing() and self._fs_option(FS_OPT_CONTINUE_IF_LANDING):
+                self._text("GCS Failsafe - Continuing Landing", mav2.MAV_SEVERITY_WARNING)
+                mode = "LAND"
+            elif self._fs_option(FS_OPT_GCS_CONTINUE_IF_PILOT_CONTROL) and self._mode not in AUTOPILOT_MODES:
+                self._text("GCS Failsafe - Continuing Pilot Control", mav2.MAV_SEVERITY_WARNING)
+                return
             else:
                 self._text("GCS Failsafe", mav2.MAV_SEVERITY_WARNING)
-                if self._armed:
-                    self._failsafe_mode("GCS failsafe", _FS_GCS_MODES.get(action, "RTL"), now)
+            self._failsafe_mode("GCS failsafe", mode, now)
         elif not lost and self._gcs_failsafe:
             self._gcs_failsafe = False
             self._text("GCS Failsafe Cleared", mav2.MAV_SEVERITY_WARNING)
+
+    def _rc_check(self, now: float) -> None:
+        """radio.cpp (no pulses with SIM_RC_FAIL 1) and events.cpp failsafe_radio_on_event / _off_event."""
+        lost = round(self._params["SIM_RC_FAIL"]) == 1
+        if lost == self._rc_failsafe:
+            return
+        self._rc_failsafe = lost
+        if not lost:
+            self._text("Radio Failsafe Cleared", mav2.MAV_SEVERITY_WARNING)
+            return
+        action = round(self._params["FS_THR_ENABLE"])
+        mode = _FS_THR_MODES.get(action, "LAND") if action else ""
+        if self._land_complete():
+            self._text("Radio Failsafe - Disarming", mav2.MAV_SEVERITY_WARNING)
+            self._disarm("radio failsafe")
+            return
+        if self._landing() and self._battery_land_priority():
+            self._text("Radio + Battery Failsafe - Continuing Landing", mav2.MAV_SEVERITY_WARNING)
+            mode = "LAND"
+        elif self._landing() and self._fs_option(FS_OPT_CONTINUE_IF_LANDING):
+            self._text("Radio Failsafe - Continuing Landing", mav2.MAV_SEVERITY_WARNING)
+            mode = "LAND"
+        elif (
+            self._mode == "GUIDED"
+            and self._fs_option(FS_OPT_RC_CONTINUE_IF_GUIDED)
+            and round(self._params["FS_GCS_ENABLE"])
+        ):
+            self._text("Radio Failsafe - Continuing Guided Mode", mav2.MAV_SEVERITY_WARNING)
+            return
+        else:
+            self._text("Radio Failsafe", mav2.MAV_SEVERITY_WARNING)
+        if mode and self._armed:
+            self._failsafe_mode("RC failsafe", mode, now)
 
     def _fence_check(self, now: float) -> None:
         if not round(self._params["FENCE_ENABLE"]) or not self._armed:
@@ -1196,10 +1380,13 @@ class MavlinkVehicle:
             self._fence_breaches += 1
             self._fence_breach_type = mav2.FENCE_BREACH_BOUNDARY if outside else mav2.FENCE_BREACH_MAXALT
             self._fence_breach_time = int((now - self._t0) * 1000)
-            self._text(f"Fence Breached: {'Circle' if outside else 'Max Alt'}", mav2.MAV_SEVERITY_CRITICAL)
+            # AC_Fence (Copter-4.6.3 SITL says "Circle fence breached", NOTICE)
+            self._text(f"{'Circle' if outside else 'Max Alt'} fence breached", mav2.MAV_SEVERITY_NOTICE)
             action = round(self._params["FENCE_ACTION"])
             if action in _FENCE_MODES:
                 self._failsafe_mode("fence breach", _FENCE_MODES[action], now)
+        elif self._fence_breached and not breached:
+            self._text("Fence breach cleared", mav2.MAV_SEVERITY_NOTICE)
         self._fence_breached = breached
 
     def _voltage(self) -> float:
@@ -1222,11 +1409,22 @@ class MavlinkVehicle:
             return
         level = 2 if critical else 1
         if level <= self._batt_failsafe:
-            return  # AP_BattMonitor latches the worst failsafe seen
+            return  # AP_BattMonitor latches the worst failsafe seen (until MAV_CMD_BATTERY_RESET)
         self._batt_failsafe = level
         word = "critical" if level == 2 else "low"
         self._text(f"Battery 1 is {word} {volts:.2f}V used 0 mAh", mav2.MAV_SEVERITY_WARNING)
         action = round(self._params["BATT_FS_CRT_ACT" if level == 2 else "BATT_FS_LOW_ACT"])
+        self._batt_action = action
+        # events.cpp handle_battery_failsafe (Copter-4.6.3)
+        if self._land_complete():
+            self._text("Battery Failsafe - Disarming", mav2.MAV_SEVERITY_WARNING)
+            self._disarm("battery failsafe")
+            return
+        if self._landing() and self._fs_option(FS_OPT_CONTINUE_IF_LANDING) and action != 0:
+            self._text("Battery Failsafe - Continuing Landing", mav2.MAV_SEVERITY_WARNING)
+            action = 1
+        else:
+            self._text("Battery Failsafe", mav2.MAV_SEVERITY_WARNING)
         if not self._armed or action == 0:
             return
         if action == 5:
@@ -1234,11 +1432,28 @@ class MavlinkVehicle:
         elif action in _BATT_MODES:
             self._failsafe_mode("battery failsafe", _BATT_MODES[action], now)
 
-    def _ekf_bad(self) -> bool:
-        return self._ekf_bad_since is not None
+    def _ekf_bad_from(self, now: float) -> float | None:
+        """Since when the EKF's variances are over FS_EKF_THRESH (fail_ekf, or the GPS off too long)."""
+        if self._ekf_bad_since is not None:
+            return self._ekf_bad_since
+        if self._gps_off_since is not None and self._gps_lost(now):
+            return self._gps_off_since + GPS_DEAD_RECKONING
+        return None
+
+    def _ekf_bad(self, now: float) -> bool:
+        return self._ekf_bad_from(now) is not None
 
     def _ekf_check(self, now: float) -> None:
-        if self._ekf_bad_since is None or self._ekf_failsafe or now - self._ekf_bad_since < _EKF_BAD_FOR:
+        """ekf_check.cpp (Copter-4.6.3): 1 s of bad variances -> "EKF variance" and FS_EKF_ACTION
+        (failsafe_ekf_event: set_mode_land_with_pause, ALT_HOLD for 2); good again -> "EKF Failsafe
+        Cleared" (failsafe_ekf_off_event)."""
+        since = self._ekf_bad_from(now)
+        if since is None:
+            if self._ekf_failsafe:
+                self._ekf_failsafe = False
+                self._text("EKF Failsafe Cleared", mav2.MAV_SEVERITY_CRITICAL)
+            return
+        if self._ekf_failsafe or now - since < _EKF_BAD_FOR:
             return
         self._ekf_failsafe = True
         self._text("EKF variance", mav2.MAV_SEVERITY_CRITICAL)
@@ -1248,6 +1463,7 @@ class MavlinkVehicle:
         needs_position = self._mode in POSITION_MODES
         if action == 3 or (action == 1 and needs_position):
             self._failsafe_mode("EKF failsafe", "LAND", now)
+            self._text("EKF Failsafe: changed to LAND Mode", mav2.MAV_SEVERITY_CRITICAL)
         elif action == 2 and needs_position:
             self._failsafe_mode("EKF failsafe", "ALT_HOLD", now)
 
@@ -1276,8 +1492,8 @@ class MavlinkVehicle:
                     vel = self._target_vel
             yaw_rate = self._yaw_control()
         elif self._mode == "RTL":
-            vel = self._rtl(alt)
-        elif self._mode == "LAND":
+            vel = self._rtl(alt, now)
+        elif self._mode == "LAND" and now >= self._land_pause_until:
             vel = (0.0, 0.0, self._land_rate(alt))
         return self._limit(vel), yaw_rate
 
@@ -1288,11 +1504,13 @@ class MavlinkVehicle:
             return max(-self.yaw_rate_max, min(self.yaw_rate_max, rate))
         return max(-self.yaw_rate_max, min(self.yaw_rate_max, self._target_yaw_rate))
 
-    def _rtl(self, alt: float) -> tuple[float, float, float]:
+    def _rtl(self, alt: float, now: float) -> tuple[float, float, float]:
+        """mode_rtl.cpp (Copter-4.6.3): climb straight up to the return altitude, fly home at it, loiter
+        RTL_LOIT_TIME over home, then land (RTL_ALT_FINAL 0)."""
         hn, he = self._home_ned()
         if self._rtl_phase == "climb":
-            if alt < self.rtl_alt - 0.1:
-                return (0.0, 0.0, -self.max_climb_rate)
+            if alt < self._rtl_alt - 0.1:
+                return (0.0, 0.0, -min(self.max_climb_rate, 2.5 * (self._rtl_alt - alt) + 0.3))
             self._rtl_phase = "return"
         if self._rtl_phase == "return":
             dn, de = hn - self._n, he - self._e
@@ -1300,11 +1518,19 @@ class MavlinkVehicle:
             if dist > 0.3:
                 speed = min(self.rtl_speed, 2.5 * dist)
                 return (dn / dist * speed, de / dist * speed, 0.0)
+            self._rtl_phase = "loiter"
+            self._rtl_loiter_end = now + self._params["RTL_LOIT_TIME"] / 1000.0
+        # over home it holds the position (loiter, then the landing's position controller)
+        hold = (max(-2.0, min(2.0, hn - self._n)), max(-2.0, min(2.0, he - self._e)))
+        if self._rtl_phase == "loiter":
+            if now < self._rtl_loiter_end:
+                return (hold[0], hold[1], 0.0)
             self._rtl_phase = "land"
-        return (0.0, 0.0, self._land_rate(alt))
+        return (hold[0], hold[1], self._land_rate(alt))
 
     def _land_rate(self, alt: float) -> float:
-        return self.land_speed_high if alt > self.land_alt_low else self.land_speed
+        """mode_land.cpp: LAND_SPEED below LAND_ALT_LOW, the faster descent (WPNAV_SPEED_DN) above it."""
+        return self.land_speed_high if alt > self.land_alt_low else self._params["LAND_SPEED"] / 100.0
 
     def _limit(self, vel: tuple[float, float, float]) -> tuple[float, float, float]:
         vn, ve, vd = vel
@@ -1337,7 +1563,8 @@ class MavlinkVehicle:
         enc = self._encoder
         boot_ms = int((now - self._t0) * 1000) & 0xFFFFFFFF
         pos_ok = self._position_ok(now)
-        lat, lon = self._latlon() if pos_ok else (0.0, 0.0)
+        # without GPS the AHRS still reports its last (dead-reckoned) position, as 4.6.3 SITL does
+        lat, lon = self._latlon() if pos_ok or self._gps_off_since is not None else (0.0, 0.0)
         alt = -self._d
         home_alt = self._home[2] if self._home else self.origin[2]
         yaw_rad = math.radians(((self._yaw + 180.0) % 360.0) - 180.0)
@@ -1383,6 +1610,7 @@ class MavlinkVehicle:
         if name == "SYS_STATUS":
             # GCS_MAVLINK::update_sensor_status_flags: a sensor is present/enabled, and healthy or not
             present = _SENSORS | mav2.MAV_SYS_STATUS_PREARM_CHECK | mav2.MAV_SYS_STATUS_AHRS
+            present |= mav2.MAV_SYS_STATUS_SENSOR_RC_RECEIVER  # SITL's RC input, seen since boot
             if round(self._params["BATT_MONITOR"]):
                 present |= mav2.MAV_SYS_STATUS_SENSOR_BATTERY
             if round(self._params["FENCE_ENABLE"]):
@@ -1394,8 +1622,10 @@ class MavlinkVehicle:
                 health &= ~mav2.MAV_SYS_STATUS_SENSOR_BATTERY
             if self._fence_breached:
                 health &= ~mav2.MAV_SYS_STATUS_GEOFENCE
-            if self._ekf_bad():
+            if self._ekf_bad(now):
                 health &= ~mav2.MAV_SYS_STATUS_AHRS
+            if self._rc_failsafe:
+                health &= ~mav2.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
             current = 1500 if self._armed else 50  # cA
             remaining = round(self._battery) if self.report_remaining else -1
             return enc.sys_status_encode(
@@ -1470,8 +1700,9 @@ class MavlinkVehicle:
                 int((now - self._t0) * 1e6), mav2.GPS_FIX_TYPE_NO_GPS, 0, 0, 0, 65535, 65535, 0, 65535, 0
             )
         if name == "EKF_STATUS_REPORT":
-            if self._ekf_bad():
-                return enc.ekf_status_report_encode(_EKF_GOOD, 1.2, 1.3, 0.9, 0.5, 0.0)
+            if self._ekf_bad(now):
+                good = _EKF_GOOD if self._ekf_bad_since is not None else _EKF_NO_POSITION
+                return enc.ekf_status_report_encode(good, 1.2, 1.3, 0.9, 0.5, 0.0)
             if not self._booted:
                 return enc.ekf_status_report_encode(mav2.EKF_UNINITIALIZED, 1.0, 1.0, 1.0, 1.0, 0.0)
             if pos_ok:
@@ -1695,9 +1926,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tcp-port", type=int, default=-1, help="-1 disables TCP, 0 picks a free port")
     parser.add_argument("--udp-target", default=None, help="HOST:PORT to push to (like SITL's udpclient)")
     parser.add_argument("--home", default=None, help="LAT,LON[,ALT]")
-    parser.add_argument("--boot-delay", type=float, default=0.5)
-    parser.add_argument("--ekf-delay", type=float, default=1.0)
-    parser.add_argument("--gps-delay", type=float, default=1.0)
+    parser.add_argument("--sysid", type=int, default=1, help="MAVLink system id (SYSID_THISMAV)")
+    parser.add_argument(
+        "--profile",
+        choices=("default", "arducopter"),
+        default="default",
+        help="arducopter: ArduCopter 4.6.3's speeds and parameter defaults (ARDUCOPTER)",
+    )
+    parser.add_argument("--boot-delay", type=float, default=None)
+    parser.add_argument("--ekf-delay", type=float, default=None)
+    parser.add_argument("--gps-delay", type=float, default=None)
     parser.add_argument("--battery", type=float, default=100.0)
     parser.add_argument("--refuse-arm", action="store_true")
     parser.add_argument(
@@ -1712,7 +1950,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
 
-    kwargs: dict[str, Any] = {}
+    kwargs: dict[str, Any] = dict(ARDUCOPTER) if args.profile == "arducopter" else {}
+    for name in ("boot_delay", "ekf_delay", "gps_delay"):
+        if getattr(args, name) is not None:
+            kwargs[name] = getattr(args, name)
     if args.home:
         parts = [float(v) for v in args.home.split(",")]
         kwargs.update(home_lat=parts[0], home_lon=parts[1])
@@ -1732,9 +1973,7 @@ def main(argv: list[str] | None = None) -> int:
         args.host,
         None if args.udp_port < 0 else args.udp_port,
         None if args.tcp_port < 0 else args.tcp_port,
-        boot_delay=args.boot_delay,
-        ekf_delay=args.ekf_delay,
-        gps_delay=args.gps_delay,
+        sysid=args.sysid,
         battery=args.battery,
         **kwargs,
     )

@@ -14,15 +14,33 @@ Protocol (what the real Tello does, and so what this emulates):
   (one line; the ``mid..mpry`` mission-pad block is dropped with ``mission_pad_fields=False``, as on a
   non-EDU Tello). Before SDK mode other commands are answered ``error`` (an emulator choice; ``rc`` and
   ``emergency`` never get a reply).
-* ``takeoff`` climbs to ``takeoff_height`` (0.8 m) in ``takeoff_time`` (2.5 s) and answers ``ok`` only
-  once there; ``land`` descends at ``land_speed`` and answers when down. ``up/down/left/right/forward/back
+* **Command spacing** (djitellopy ``Tello.TIME_BTW_COMMANDS`` = 0.1 s, whose comment says "Commands
+  very consecutive makes the drone not respond to them", and ``TIME_BTW_RC_CONTROL_COMMANDS`` = 0.001 s
+  for ``rc``): a datagram other than ``rc`` that arrives less than ``command_spacing`` (0.1 s) after
+  the last one the Tello took is **ignored**. Measured from the last command, not from the last reply:
+  djitellopy 2.5.0 means to wait 0.1 s after the answer, but ``send_command_with_return`` sleeps
+  ``diff`` instead of ``TIME_BTW_COMMANDS - diff`` and notices the answer only at its next 0.1 s poll,
+  so what it really guarantees (and real Tellos answer) is 0.1 s between two commands, with the next one
+  sometimes a few ms after the previous answer -- not carried out, never answered
+  (`ignored` keeps it; DJITelloPy issue #43 is where 0.1 s was settled on, from use, since neither the
+  SDK guides nor DJI's own samples give a figure: the worst case an adapter must survive). ``emergency`` is no exception (djitellopy's ``send_command_without_return``
+  carries the same comment); ``rc`` is.
+* ``takeoff`` climbs to ``takeoff_height`` (0.8 m) in ``takeoff_time`` (2.5 s), then hovers there
+  ``takeoff_settle`` s more (0 by default) before it answers ``ok``: a real Tello orients itself with
+  its camera and sensors first, and its ``ok`` has been reported more than 7 s after the command
+  (DJITelloPy issue #31, which raised djitellopy's ``TAKEOFF_TIMEOUT`` to 20 s; its
+  ``RESPONSE_TIMEOUT`` for other commands is 7 s). Until the ``ok`` the take-off is the running
+  manoeuvre: other motion commands get ``error`` and ``rc`` is not flown; ``land`` descends at ``land_speed`` and answers when down. ``up/down/left/right/forward/back
   x`` (20..500 cm) fly at the ``speed`` setting and ``go x y z speed`` (body frame: x forward, y left,
   z up, cm; 10..100 cm/s) at its own speed, answering when done; out-of-range values get ``out of
   range``, motion on the ground ``error Motor stop``, unknown words ``unknown command: WORD``; ``cw/ccw x`` turn at ``rotate_rate``. While one of these is
   running other motion commands get ``error``; ``stop`` cancels it (the cancelled command is never
   answered) and answers ``ok``. ``emergency`` stops the motors (the drone drops to the ground) and, like
-  ``rc``, gets **no reply** (djitellopy sends both without waiting; a reply would be taken as the answer
-  to its next command).
+  ``rc``, gets **no reply**: the SDK 2.0 user guide lists "ok / error" for it, but real units do not
+  answer (DJITelloPy issue #125, a Tello on firmware 01.04.92.01; dji-sdk/Tello-Python issue #85, a
+  Tello EDU, which DJI's support called a known issue), so djitellopy 2.5's ``Tello.emergency`` sends
+  it with ``send_command_without_return``, as ``send_rc_control`` sends ``rc``; a reply would be
+  taken as the answer to the next command.
 * ``rc a b c d``: stick values -100..100 for left/right, forward/back, up/down, yaw, held until the next
   ``rc``. Full stick (100) is ``max_speed`` m/s horizontally, ``max_vertical_speed`` m/s vertically and
   ``max_yaw_rate`` deg/s; values scale linearly, and the velocity follows with a first-order lag of
@@ -40,7 +58,10 @@ Frames and units of the emulated state (documented because the SDK guide leaves 
   Tello had at power-on (yaw 0), y 90 degrees clockwise from it (to the right), z up = height above
   the take-off point. ``yaw`` is degrees, clockwise positive, in (-180, 180], 0 at power-on.
 * State line: ``vgx, vgy`` are that ground frame's x and y velocities and ``vgz`` the vertical velocity
-  *positive down*, all in **dm/s** (integer decimetres per second, the unit the Tello reports);
+  *positive down*, all in **dm/s** (integer decimetres per second). The SDK 2.0/3.0 guides name the
+  fields ("vgx: x-axis speed") without a unit, and djitellopy's ``get_speed_x`` says only "int:
+  speed"; dm/s is the community's reading. ``velocity_scale`` (10: state units per m/s) sets
+  another (100 = cm/s), so a test can show what an adapter does when the assumption is wrong;
   ``h`` is the height in cm with the Tello's decimetre resolution; ``tof`` is cm from the ground (10
   when landed); ``baro`` is metres (arbitrary datum; the SDK 2.0 guide: "baro? get barometer value (m)",
   a ``%.2f`` in the state line, although djitellopy's ``get_barometer`` docstring says cm);
@@ -144,6 +165,8 @@ class _Maneuver:
     reply_to: Address | None = None
     lands: bool = False
     hold_until: float = 0.0  # monotonic time before which it is not done (flip)
+    settle: float = 0.0  # s it stays at the target before it is done (a take-off orienting itself)
+    reached_at: float | None = None  # when it got to the target
 
 
 def _wrap180(deg: float) -> float:
@@ -191,6 +214,9 @@ class TelloEmulator:
         height_resolution_cm: int = 10,
         height_rounding: str = "round",
         memory: bool = False,
+        command_spacing: float = 0.1,
+        takeoff_settle: float = 0.0,
+        velocity_scale: float = 10.0,
     ) -> None:
         """Bind ``host:port`` (``port=0``: a free port) or adopt ``sock`` (already bound, e.g. in a netns).
 
@@ -231,6 +257,9 @@ class TelloEmulator:
         if height_rounding not in ("round", "floor"):
             raise ValueError(f"height_rounding must be 'round' or 'floor', got {height_rounding!r}")
         self.height_rounding = height_rounding
+        self.command_spacing = command_spacing  # s: closer non-rc datagrams are ignored (djitellopy)
+        self.takeoff_settle = takeoff_settle  # s hovering at the take-off height before "ok"
+        self.velocity_scale = velocity_scale  # state-line units per m/s of vgx/vgy/vgz (10: dm/s)
 
         # Fault switches: plain attributes so a test can flip them at any time.
         self.refuse_takeoff = False
@@ -261,6 +290,8 @@ class TelloEmulator:
         self._state_packets = 0
         self._commands: list[TelloCommand] = []
         self._replies: list[tuple[str, Address]] = []
+        self._ignored: list[TelloCommand] = []
+        self._busy_until = -math.inf  # monotonic time before which a non-rc datagram is ignored
 
     # -- lifecycle ---------------------------------------------------------------------------------
 
@@ -340,6 +371,12 @@ class TelloEmulator:
         with self._lock:
             return list(self._replies)
 
+    @property
+    def ignored(self) -> list[TelloCommand]:
+        """Datagrams ignored because they came within ``command_spacing`` (oldest first, a copy)."""
+        with self._lock:
+            return list(self._ignored)
+
     def command_texts(self) -> list[str]:
         return [c.text for c in self.commands]
 
@@ -413,9 +450,9 @@ class TelloEmulator:
                 f"pitch:{pitch}",
                 f"roll:{roll}",
                 f"yaw:{round(_wrap180(self._yaw))}",
-                f"vgx:{round(self._vx * 10)}",
-                f"vgy:{round(self._vy * 10)}",
-                f"vgz:{round(-self._vz * 10)}",
+                f"vgx:{round(self._vx * self.velocity_scale)}",
+                f"vgy:{round(self._vy * self.velocity_scale)}",
+                f"vgz:{round(-self._vz * self.velocity_scale)}",
                 f"templ:{templ}",
                 f"temph:{templ + 2}",
                 f"tof:{round(self._z * 100) + 10}",
@@ -523,6 +560,11 @@ class TelloEmulator:
         with self._lock:
             if now < self._silent_until:
                 return  # lost on the way: not a command the Tello heard
+            if text.split()[:1] != ["rc"]:
+                if now < self._busy_until:  # too soon after the last command or reply: not heard
+                    self._ignored.append(TelloCommand(now, text, sender))
+                    return
+                self._busy_until = now + self.command_spacing
             self._commands.append(TelloCommand(now, text, sender))
             self._last_command = now
             reply = self._handle(text, sender, now)
@@ -596,6 +638,7 @@ class TelloEmulator:
             (self._x, self._y, self.takeoff_height),
             speed=self.takeoff_height / max(self.takeoff_time, 1e-3),
             reply_to=sender,
+            settle=self.takeoff_settle,
         )
         return None
 
@@ -789,7 +832,9 @@ class TelloEmulator:
             else:
                 self._yaw += math.copysign(turn, dyaw)
                 at_target = False
-        if not at_target or now < m.hold_until:
+        if at_target and m.reached_at is None:
+            m.reached_at = now
+        if not at_target or now < m.hold_until or now < (m.reached_at or now) + m.settle:
             return None
         self._maneuver = None
         self._last_command = now  # the 15 s auto-land count starts when a command has been executed
@@ -846,6 +891,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--state-target", type=_address, default=None, help="HOST:PORT for state packets")
     parser.add_argument("--takeoff-time", type=float, default=2.5)
     parser.add_argument("--takeoff-height", type=float, default=0.8)
+    parser.add_argument("--takeoff-settle", type=float, default=0.0, help="s hovering before takeoff's ok")
     parser.add_argument("--land-speed", type=float, default=0.6)
     parser.add_argument("--max-speed", type=float, default=1.0, help="m/s at rc 100")
     parser.add_argument("--auto-land-timeout", type=float, default=15.0)
@@ -875,6 +921,7 @@ def main(argv: list[str] | None = None) -> int:
         state_port=args.state_port,
         state_target=args.state_target,
         takeoff_time=args.takeoff_time,
+        takeoff_settle=args.takeoff_settle,
         takeoff_height=args.takeoff_height,
         land_speed=args.land_speed,
         max_speed=args.max_speed,

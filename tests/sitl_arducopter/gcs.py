@@ -14,15 +14,18 @@ simulator's SIM_* parameters. It talks as system 250, so neither the vehicle's G
 Requests (one JSON object a line), one JSON reply line each:
 - ``{"op": "connect"}``: connect to SERIAL1 (SITL opens it once SERIAL0, the relay, has its client);
 - ``{"op": "state"}``: the latest mode, armed, landed state, relative altitude, metres north/east of home,
-  battery voltage and the highest altitude since the last ``mark``; with PX4 also its own local position
-  (``x``/``y``/``z``/``vx``/``vy``, LOCAL_POSITION_NED), the velocity it is told to fly (``target_vx``,
-  ``target_vy``, POSITION_TARGET_LOCAL_NED) and ``battery_remaining`` (%); ``"system": S``
-  picks one of several vehicles on the link (default: the last heard);
+  battery voltage and health (SYS_STATUS ``battery_healthy``) and the highest altitude since the last
+  ``mark``; with PX4 also its own local position (``x``/``y``/``z``/``vx``/``vy``, LOCAL_POSITION_NED),
+  the velocity it is told to fly (``target_vx``, ``target_vy``, POSITION_TARGET_LOCAL_NED) and
+  ``battery_remaining`` (%); ``"system": S`` picks one of several vehicles on the link (default: the
+  last heard);
 - ``{"op": "mark"}``: starts a new record (``modes``, ``texts``, ``max_alt`` count from here);
 - ``{"op": "record"}``: the mode changes and STATUSTEXTs (with their severity) since the last mark;
 - ``{"op": "set_param", "name": N, "value": V}``: PARAM_SET, confirmed by PARAM_VALUE (``"int": true``
   for a PX4 integer parameter);
+- ``{"op": "get_param", "name": N}``: PARAM_REQUEST_READ, the vehicle's PARAM_VALUE (``value``);
 - ``{"op": "set_mode", "mode": M}``: MAV_CMD_DO_SET_MODE as a pilot's ground station would;
+- ``{"op": "command", "command": C, "params": [...]}``: any COMMAND_LONG, answered by its COMMAND_ACK;
 - ``{"op": "relay", "mode": "pass" | "cut" | "stall"}``: the adapter's link (`relay.Relay`, `relay.UdpRelay`).
 
 ``python -m tests.sitl_arducopter.gcs URL [--stack px4] [--tcp-relay LISTEN:UPSTREAM | --udp-relay
@@ -160,6 +163,8 @@ class Gcs:
                     state["landed_state"] = msg.landed_state
                 elif t == "SYS_STATUS":
                     state["voltage"] = msg.voltage_battery / 1000.0
+                    bit = mav.MAV_SYS_STATUS_SENSOR_BATTERY
+                    state["battery_healthy"] = bool(msg.onboard_control_sensors_health & bit)
                 elif t == "BATTERY_STATUS":
                     state["battery_remaining"] = msg.battery_remaining
                 elif t == "STATUSTEXT":
@@ -222,6 +227,14 @@ class Gcs:
                 return {"ok": True}
         return {"ok": False, "error": f"{name} = {value} not confirmed: {self.params.get(name)}"}
 
+    def get_param(self, name: str) -> dict[str, Any]:
+        for _ in range(3):
+            sent = time.monotonic()
+            self.conn.mav.param_request_read_send(*self.target, name.encode(), -1)
+            if self._wait(lambda sent=sent: self.params.get(name, (0.0, -1.0))[1] >= sent, ACK_TIMEOUT):
+                return {"ok": True, "value": self.params[name][0]}
+        return {"ok": False, "error": f"no PARAM_VALUE for {name}"}
+
     def set_mode(self, mode: str) -> dict[str, Any]:
         sent = time.monotonic()
         cmd = mav.MAV_CMD_DO_SET_MODE
@@ -233,12 +246,23 @@ class Gcs:
             return {"ok": False, "error": "no COMMAND_ACK"}
         return {"ok": self.acks[cmd][0] == mav.MAV_RESULT_ACCEPTED, "result": self.acks[cmd][0]}
 
+    def command(self, command: int, params: list[float]) -> dict[str, Any]:
+        sent = time.monotonic()
+        self.conn.mav.command_long_send(*self.target, command, 0, *(list(params) + [0.0] * 7)[:7])
+        if not self._wait(lambda: command in self.acks and self.acks[command][1] >= sent, ACK_TIMEOUT):
+            return {"ok": False, "error": f"no COMMAND_ACK for {command}"}
+        return {"ok": self.acks[command][0] == mav.MAV_RESULT_ACCEPTED, "result": self.acks[command][0]}
+
     def handle(self, req: dict[str, Any]) -> dict[str, Any]:
         op = req["op"]
         if op == "set_param":
             return self.set_param(req["name"], float(req["value"]), bool(req.get("int")))
+        if op == "command":
+            return self.command(int(req["command"]), [float(p) for p in req.get("params", [])])
         if op == "set_mode":
             return self.set_mode(req["mode"])
+        if op == "get_param":
+            return self.get_param(req["name"])
         with self.lock:
             if op == "state":
                 system = req.get("system", self.target[0])

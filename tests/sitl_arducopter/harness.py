@@ -6,12 +6,17 @@ with ``copter.parm`` beside it; ../shared/sitl/README.md), a `gcs` helper that r
 link to SERIAL0 (so the test can cut or stall it) and watches the vehicle on SERIAL1, and the agent (MC +
 HLC with the ``mavlink`` adapter + a BMA running ``direction_follow``, or ``dovrat_swarm``).
 `SitlVehicle`, `Gcs` and `agent_doc` are shared with the PX4 SITL tests (tests/sitl_px4/harness.py).
+
+``backend="emulator"`` puts the project's ArduCopter emulator (tests/emulators/mavlink_vehicle.py, its
+``arducopter`` profile) where the firmware was, on the same TCP port, behind the same relay and ground
+station: the comparison tests fly one scenario table against both.
 """
 
 from __future__ import annotations
 
 import os
 import subprocess
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -73,6 +78,10 @@ class Gcs(JsonLinesProcess):
     def relay(self, mode: str) -> None:
         self.ok(op="relay", mode=mode)
 
+    def command(self, command: int, *params: float) -> None:
+        """COMMAND_LONG from the second ground station, ACCEPTED (MAV_CMD_BATTERY_RESET, ...)."""
+        self.ok(op="command", command=command, params=list(params))
+
 
 def agent_doc(
     name: str,
@@ -82,9 +91,10 @@ def agent_doc(
     bma: list[dict[str, Any]] | None = None,
     hlc: dict[str, Any] | None = None,
     autopilot: dict[str, Any] | None = None,
+    sections: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The agent's config for a SITL vehicle: MC + HLC (`adapter` on `connection`) + a BMA flying
-    ``direction_follow`` in MISSION unless `bma` says otherwise."""
+    ``direction_follow`` in MISSION unless `bma` says otherwise; `sections` adds more ([safety], ...)."""
     return {
         "agent": {"name": name},
         "buses": {"lan": MCAST_URL},
@@ -108,6 +118,7 @@ def agent_doc(
             }
         ],
         "security": {"insecure": True},  # the probe plays an unsigned operator
+        **(sections or {}),
     }
 
 
@@ -157,20 +168,56 @@ class Copter(SitlVehicle):
         hlc: dict[str, Any] | None = None,
         autopilot: dict[str, Any] | None = None,
         nodes: tuple[str, ...] = ("agent",),
+        sections: dict[str, Any] | None = None,
+        backend: str = "arducopter",
     ) -> None:
-        self.netns, self.instance, self.name = netns, instance, name
+        self.netns, self.instance, self.name, self.backend = netns, instance, name, backend
         workdir.mkdir(parents=True, exist_ok=True)
         self.workdir = workdir
-        # the relay listens before the agent connects
+        serial0 = 5760 + 10 * instance
+        # the relay listens before the agent connects; the emulator takes any number of TCP clients, so
+        # its "SERIAL1" is SERIAL0's port
         self.gcs = Gcs(
             netns,
-            f"tcp:127.0.0.1:{5762 + 10 * instance}",
+            f"tcp:127.0.0.1:{serial0 if backend == 'emulator' else serial0 + 2}",
             "--tcp-relay",
-            f"{RELAY_PORT + 10 * instance}:{5760 + 10 * instance}",
+            f"{RELAY_PORT + 10 * instance}:{serial0}",
         )
-        binary = sitl_binary()
         self.booted_at = time.monotonic()
-        self.sitl = netns.popen(
+        self.sitl = self._emulator(home) if backend == "emulator" else self._sitl(workdir, speedup, home)
+        connection = f"tcp:127.0.0.1:{RELAY_PORT + 10 * instance}"
+        doc = agent_doc(name, "mavlink", connection, bma=bma, hlc=hlc, autopilot=autopilot, sections=sections)
+        self.start_agent(workdir, doc, nodes)
+        self.gcs.ok(op="connect")
+
+    def _emulator(self, home: tuple[float, float, float, float]) -> subprocess.Popen[str]:
+        return self.netns.popen(
+            [
+                sys.executable,
+                "-m",
+                "tests.emulators.mavlink_vehicle",
+                "--profile",
+                "arducopter",
+                "--udp-port",
+                "-1",
+                "--tcp-port",
+                str(5760 + 10 * self.instance),
+                "--sysid",
+                str(self.instance + 1),
+                "--home=" + ",".join(f"{x:.10g}" for x in home[:3]),  # "=": the latitude starts with "-"
+                "--log-level",
+                "INFO",
+            ],
+            cwd=str(REPO),
+            stdout=open(self.workdir / "emulator.log", "w"),  # noqa: SIM115 - closed with the process
+            stderr=subprocess.STDOUT,
+        )
+
+    def _sitl(
+        self, workdir: Path, speedup: float, home: tuple[float, float, float, float]
+    ) -> subprocess.Popen[str]:
+        binary = sitl_binary()
+        return self.netns.popen(
             [
                 str(binary),
                 "--model",
@@ -178,20 +225,16 @@ class Copter(SitlVehicle):
                 "--speedup",
                 f"{speedup:g}",
                 "--home",
-                ",".join(f"{x:g}" for x in home),
+                ",".join(f"{x:.10g}" for x in home),  # ":g" kept 6 digits: 21 m off in longitude
                 "--defaults",
                 str(binary.parent / "copter.parm"),
                 "--instance",
-                str(instance),
+                str(self.instance),
                 "-w",
                 "--sysid",
-                str(instance + 1),
+                str(self.instance + 1),
             ],
             cwd=str(workdir),
             stdout=open(workdir / "sitl.log", "w"),  # noqa: SIM115 - closed with the process
             stderr=subprocess.STDOUT,
         )
-        connection = f"tcp:127.0.0.1:{RELAY_PORT + 10 * instance}"
-        doc = agent_doc(name, "mavlink", connection, bma=bma, hlc=hlc, autopilot=autopilot)
-        self.start_agent(workdir, doc, nodes)
-        self.gcs.ok(op="connect")

@@ -9,6 +9,9 @@ One test, in phases (the set-up costs more than each phase):
   operator sees them stale, and sees them again within 5 s of the cut ending;
 * RTL: everyone back in STANDBY, every command acknowledged;
 * ``lcm-logger`` at site A recorded the five agents' telemetry, through the bridges.
+
+It runs twice: on ``tcp/``, and with mutual TLS on every Zenoh link (``antalate lab-ca``: the router's
+certificate for its address, one per site's bridge; issue 29 finding 7).
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from antalate_lcm.analysis import read_log
 from antalate_lcm.runtime.commands import native_lcm_tool
 from tests.lan.swarm import EXAMPLES, SWARM_KEY, VEHICLES, OperatorClient, _merge, tomllib, vehicle_config
 from tests.lan.topology import Wan
+from tests.wan.test_zenoh_agent import lab_ca, mtls_url
 
 pytestmark = [pytest.mark.lan, pytest.mark.timeout(150), pytest.mark.usefixtures("need_wan")]
 
@@ -36,9 +40,14 @@ ROUTER_PORT = 7447
 TELEMETRY_RATE = 4.0
 
 
-def bridge_config(out: Path, site: str, router: str, *, cap: bool) -> Path:
+def bridge_config(out: Path, site: str, router: str, *, cap: bool, pki: Path | None = None) -> Path:
+    wan = (
+        mtls_url(pki, f"site-{site}", f"tls/{router}:{ROUTER_PORT}")
+        if pki is not None
+        else f"zenoh://?connect=tcp/{router}:{ROUTER_PORT}&mode=client"
+    )
     doc: dict[str, Any] = {
-        "buses": {"lan": LAN_URL, "wan": f"zenoh://?connect=tcp/{router}:{ROUTER_PORT}&mode=client"},
+        "buses": {"lan": LAN_URL, "wan": wan},
         "bridge": {"between": ["lan", "wan"], "site": site},
     }
     if cap:
@@ -76,21 +85,29 @@ def stop_loggers(wan: Wan) -> None:
                 stop_process(proc)
 
 
-def test_operator_at_site_a_flies_the_agents_of_site_b_through_the_router(tmp_path: Path) -> None:
+@pytest.mark.parametrize("link", ["tcp", "mtls"])
+def test_operator_at_site_a_flies_the_agents_of_site_b_through_the_router(tmp_path: Path, link: str) -> None:
     with Wan({"a": ["op", "gw"], "b": ["uavs", "gw"], "c": ["router"]}) as wan:
         router = wan["c", "router"]
         logger = native_lcm_tool("lcm-logger")
         log_a, log_b = tmp_path / "site-a.lcm", tmp_path / "site-b.lcm"
 
-        router.antalate("router", "--listen", f"tcp/0.0.0.0:{ROUTER_PORT}", log=tmp_path / "router.log")
+        pki = None
+        router_args = ["--listen", f"tcp/0.0.0.0:{ROUTER_PORT}"]
+        if link == "mtls":
+            # the router's certificate names the address the bridges connect to; one per site
+            pki = lab_ca(tmp_path / "pki", "site-a", "site-b", host=router.address)
+            router_args = ["--listen", f"tls/0.0.0.0:{ROUTER_PORT}", "--tls-cert", str(pki / "router.pem"),
+                           "--tls-key", str(pki / "router.key"), "--ca", str(pki / "ca.pem")]  # fmt: skip
+        router.antalate("router", *router_args, log=tmp_path / "router.log")
         wan["a", "gw"].antalate(
             "bridge",
-            str(bridge_config(tmp_path, "a", router.address, cap=False)),
+            str(bridge_config(tmp_path, "a", router.address, cap=False, pki=pki)),
             log=tmp_path / "bridge-a.log",
         )
         wan["b", "gw"].antalate(
             "bridge",
-            str(bridge_config(tmp_path, "b", router.address, cap=True)),
+            str(bridge_config(tmp_path, "b", router.address, cap=True, pki=pki)),
             log=tmp_path / "bridge-b.log",
         )
         wan["a", "op"].popen(

@@ -3,12 +3,15 @@ operator_remote.toml), no LAN and no bridge: only the bus URLs differ from a LAN
 
 Everything runs in a private namespace (the agent's own bus is multicast on lo): ``antalate router``
 on loopback, ``antalate agent`` with the example config, and the LAN tests' operator (the console's
-command tracker) on the example operator config.
+command tracker) on the example operator config. Three times: on ``tcp/``; through a router with
+mutual TLS (``antalate lab-ca``; the agent and the operator each with a certificate of their own);
+through a TLS router with a users file (each with its own ``auth=`` file) (issue 29 finding 7).
 """
 
 from __future__ import annotations
 
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -27,25 +30,69 @@ PORT = 7447
 URL = f"zenoh://?connect=tcp/127.0.0.1:{PORT}&mode=client"
 
 
-def _config(name: str, out: Path, extra: dict[str, object]) -> Path:
+def lab_ca(out: Path, *clients: str, host: str = "127.0.0.1") -> Path:
+    """``antalate lab-ca``: a CA, the router's certificate for ``host`` and one per client."""
+    args = [a for c in clients for a in ("--client", c)]
+    made = subprocess.run(
+        [sys.executable, "-m", "antalate_lcm.cli", "lab-ca", str(out), "--host", host, *args],
+        capture_output=True,
+        text=True,
+        cwd=str(REPO),
+        timeout=60,
+    )
+    assert made.returncode == 0, made.stderr
+    return out
+
+
+def mtls_url(pki: Path, client: str, endpoint: str) -> str:
+    """A zenoh:// client URL with mutual TLS: the CA, and this client's certificate and key."""
+    return (
+        f"zenoh://?connect={endpoint}&mode=client&ca={pki / 'ca.pem'}"
+        f"&cert={pki / f'{client}.pem'}&cert_key={pki / f'{client}.key'}"
+    )
+
+
+def _config(name: str, out: Path, extra: dict[str, object], url: str = URL) -> Path:
     doc = tomllib.loads((EXAMPLES / name).read_text())
-    assert any(url.startswith("zenoh://") for url in doc["buses"].values()), name
-    for bus, url in doc["buses"].items():
-        if url.startswith("zenoh://"):
-            doc["buses"][bus] = URL  # the example's router address -> the one on this loopback
+    assert any(u.startswith("zenoh://") for u in doc["buses"].values()), name
+    for bus, example in doc["buses"].items():
+        if example.startswith("zenoh://"):
+            doc["buses"][bus] = url  # the example's router address -> the one on this loopback
     path = out / name
     path.write_text(tomli_w.dumps(_merge(doc, extra)))
     return path
 
 
 @pytest.mark.timeout(120)
-def test_an_agent_on_zenoh_is_flown_by_an_operator_on_zenoh(netns: NetNamespace, tmp_path: Path) -> None:
+@pytest.mark.parametrize("link", ["tcp", "mtls", "tls-users"])
+def test_an_agent_on_zenoh_is_flown_by_an_operator_on_zenoh(
+    netns: NetNamespace, tmp_path: Path, link: str
+) -> None:
     router_log, agent_log = tmp_path / "router.log", tmp_path / "agent.log"
+    router_args = ["--listen", f"tcp/127.0.0.1:{PORT}"]
+    urls = {"agent": URL, "operator": URL}
+    if link == "mtls":
+        pki = lab_ca(tmp_path / "pki", "agent", "operator")
+        endpoint = f"tls/127.0.0.1:{PORT}"
+        router_args = ["--listen", endpoint, "--tls-cert", str(pki / "router.pem"),
+                       "--tls-key", str(pki / "router.key"), "--ca", str(pki / "ca.pem")]  # fmt: skip
+        urls = {who: mtls_url(pki, who, endpoint) for who in urls}
+    elif link == "tls-users":  # TLS for privacy, a password per client (files, never in the config)
+        pki = lab_ca(tmp_path / "pki")
+        endpoint = f"tls/127.0.0.1:{PORT}"
+        (tmp_path / "users.txt").write_text("agent:agent-secret-1\noperator:operator-secret-2\n")
+        for who, secret in (("agent", "agent-secret-1"), ("operator", "operator-secret-2")):
+            (tmp_path / f"{who}.auth").write_text(f"{who}:{secret}\n")
+        router_args = ["--listen", endpoint, "--tls-cert", str(pki / "router.pem"),
+                       "--tls-key", str(pki / "router.key"), "--users", str(tmp_path / "users.txt")]  # fmt: skip
+        urls = {
+            who: f"zenoh://?connect={endpoint}&mode=client&ca={pki / 'ca.pem'}&auth={tmp_path / f'{who}.auth'}"
+            for who in urls
+        }
     with open(router_log, "w") as rlog, open(agent_log, "w") as alog:
         netns.antalate(
             "router",
-            "--listen",
-            f"tcp/127.0.0.1:{PORT}",
+            *router_args,
             stdout=rlog,
             stderr=subprocess.STDOUT,
             cwd=str(REPO),
@@ -57,9 +104,12 @@ def test_an_agent_on_zenoh_is_flown_by_an_operator_on_zenoh(netns: NetNamespace,
                 "hlc": {"default_takeoff_altitude": 3.0, "autopilot_params": FAST_SIM},
                 "security": {"swarm_key": KEY, "state_dir": str(tmp_path / "state")},
             },
+            urls["agent"],
         )
         netns.antalate("agent", str(agent), stdout=alog, stderr=subprocess.STDOUT, cwd=str(REPO))
-        operator = _config("operator_remote.toml", tmp_path, {"security": {"swarm_key": KEY}})
+        operator = _config(
+            "operator_remote.toml", tmp_path, {"security": {"swarm_key": KEY}}, urls["operator"]
+        )
         op = OperatorClient(
             netns.python(
                 "-m",
@@ -86,3 +136,6 @@ def test_an_agent_on_zenoh_is_flown_by_an_operator_on_zenoh(netns: NetNamespace,
         finally:
             op.quit()
     assert "Traceback" not in agent_log.read_text()
+    said = {"mtls": "(mutual TLS, keys under antalate only)", "tls-users": "(TLS, users file, keys under"}
+    if link in said:
+        assert said[link] in router_log.read_text()

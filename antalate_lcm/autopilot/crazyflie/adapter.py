@@ -194,6 +194,7 @@ class CrazyflieAutopilot(Autopilot):
         #: when sent, how to send it again); resent by the control loop (see the module docstring)
         self._hl_pending: tuple[int, float, str] | None = None
         self._hl_refused: tuple[int, int] | None = None  # (command byte, result) of the last refusal
+        self._takeoff_accepted = False  # the firmware answered the last take-off 0 (its planner took it)
         self._critical_since = math.inf
         self._blind_land_at = -math.inf
         self._blind_landing = False  # landings sent into a lost link: resent once it answers again
@@ -333,6 +334,8 @@ class CrazyflieAutopilot(Autopilot):
                 self._hl_pending = None
             if result != 0:
                 self._hl_refused = (cmd, result)
+            elif cmd == _HL_TAKEOFF:
+                self._takeoff_accepted = True
 
     def _on_log(self, _timestamp: int, data: dict[str, Any], _config: Any) -> None:
         with self._lock:
@@ -445,35 +448,51 @@ class CrazyflieAutopilot(Autopilot):
             r = self._reading
             if not r.flags.armed or self._ground_idle:
                 raise AutopilotError("not armed")
+            if r.flags.flying and self._mode != IDLE:
+                # planner.c plan_takeoff answers 1 unless its planner is idle; worse, mid-stream the
+                # stream has stopped the planner, which would take it while the stream's priority
+                # stays up and the stream ends: the watchdog's cut 2 s later
+                raise AutopilotError(
+                    f"takeoff refused: the Crazyflie is flying ({_MODE_NAMES[self._mode]}); "
+                    "its planner takes off only when idle: land first"
+                )
             self._leave_stream(cf)
             self._hl_pending = None
+            mode0, home0 = self._mode, self._home
             self._home = (r.x, r.y)
             self._set_mode(TAKEOFF)
             self._takeoff_alt = alt
             self._failsafe = ""
             self._hl_refused = None
+            self._takeoff_accepted = False
             z0 = r.z
+            was_flying = r.flags.flying
         cf.high_level_commander.takeoff(alt, takeoff_duration(z0, alt, self._p.climb_speed), yaw=None)
         deadline = self.clock() + self._p.takeoff_confirm
         while self.clock() < deadline:
             r = self._reading
-            if r.flags.flying or r.z > z0 + 0.05:
+            refused = self._hl_refused if self._hl_refused and self._hl_refused[0] == _HL_TAKEOFF else None
+            # Lifting, or flying by the firmware's word -- but a flying bit already set when the
+            # command went (a hover, a landing still running) is no take-off: the planner refuses
+            # one unless idle (planner.c plan_takeoff) and only its answer says which.
+            flying = r.flags.flying and (not was_flying or self._takeoff_accepted)
+            if refused is None and (flying or r.z > z0 + 0.05):
                 return
-            refused = self._hl_refused
-            if refused is not None and refused[0] == _HL_TAKEOFF:
-                with self._lock:
-                    self._set_mode(IDLE)
+            if refused is not None:
+                with self._lock:  # what it was doing goes on (a hover, a landing)
+                    self._set_mode(mode0 if was_flying else IDLE)
+                    self._home = home0 if was_flying else self._home
                 raise AutopilotError(
                     "the Crazyflie refused the take-off: "
                     + (
                         "its supervisor cannot fly (EBUSY: not armed, locked or crashed)"
                         if refused[1] == 16
-                        else f"its planner is busy with a trajectory (result {refused[1]})"
+                        else f"its planner is busy with a trajectory or a landing (result {refused[1]})"
                     )
                 )
             time.sleep(0.02)
         with self._lock:
-            self._set_mode(IDLE)
+            self._set_mode(mode0 if was_flying else IDLE)
         blocker = self._reading.flags.arm_blocker()
         raise AutopilotError(
             f"the Crazyflie did not take off within {self._p.takeoff_confirm:g} s: "

@@ -19,10 +19,12 @@ FENCE = "fence breach"
 BATTERY = "battery failsafe"
 EKF = "EKF failsafe"
 GCS = "GCS failsafe"
+RC = "RC failsafe"
 #: Reported first when several are active at once: the one the operator must act on first.
-PRIORITY = (FENCE, BATTERY, EKF, GCS)
+PRIORITY = (FENCE, BATTERY, EKF, GCS, RC)
 
-#: ArduCopter modes a failsafe can choose (FENCE_ACTION, BATT_FS_*_ACT, FS_EKF_ACTION, FS_GCS_ENABLE).
+#: ArduCopter modes a failsafe can choose (FENCE_ACTION, BATT_FS_*_ACT, FS_EKF_ACTION, FS_GCS_ENABLE,
+#: FS_THR_ENABLE).
 FAILSAFE_MODES = frozenset({"RTL", "SMART_RTL", "AUTO_RTL", "LAND", "BRAKE", "ALT_HOLD"})
 
 #: How each ArduCopter mode is classified for the HLC when nobody's failsafe explains it.
@@ -39,16 +41,19 @@ FLIGHT_MODES: dict[str, FlightMode] = {
 #: FENCE_STATUS / BATTERY_STATUS at their stream rate.
 ATTRIBUTION_WINDOW = 5.0
 
-# STATUSTEXT lines ArduPilot sends when a failsafe fires (AP_BattMonitor "Battery 1 is low 10.40V used
-# 1200 mAh"; Copter's "GCS Failsafe", "EKF variance", "EKF Failsafe: changed to LAND Mode"; the fence's
-# "Fence Breached"), and the ones that clear it.
+# STATUSTEXT lines ArduPilot sends when a failsafe fires, as ArduCopter 4.6.3 SITL says them: AP_BattMonitor
+# "Battery 1 is low 10.80V used 401 mAh" then events.cpp "Battery Failsafe"; "GCS Failsafe"; ekf_check.cpp
+# "EKF variance", "EKF Failsafe: changed to LAND Mode"; AC_Fence "Circle fence breached"; events.cpp
+# failsafe_radio_on_event "Radio Failsafe" (or "Radio Failsafe - Continuing Landing" ...); and the lines
+# that clear them ("Radio Failsafe Cleared", "EKF Failsafe Cleared", "Fence breach cleared").
 _TEXTS: tuple[tuple[re.Pattern[str], str], ...] = (
     (re.compile(r"fence.*breach|breach.*fence", re.I), FENCE),
     (re.compile(r"\bbattery\b.*\b(low|critical|failsafe)\b|\bbatt(ery)? failsafe", re.I), BATTERY),
     (re.compile(r"\bEKF (failsafe|variance)", re.I), EKF),
     (re.compile(r"\bGCS failsafe\b", re.I), GCS),
+    (re.compile(r"\bradio failsafe\b", re.I), RC),
 )
-_CLEARED = re.compile(r"failsafe cleared|cleared.*failsafe", re.I)
+_CLEARED = re.compile(r"failsafe cleared|cleared.*failsafe|breach cleared", re.I)
 _BATTERY_LEVEL = re.compile(r"\bbattery\b.*\b(low|critical)\b", re.I)
 
 

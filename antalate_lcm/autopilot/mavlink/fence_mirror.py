@@ -62,10 +62,10 @@ def fence_parameters(fence: Geofence, home: tuple[float, float], outside: str = 
     }
 
 
-def mismatches(wanted: dict[str, float], read: dict[str, float]) -> list[str]:
+def mismatches(wanted: dict[str, float], read: dict[str, float], order: tuple[str, ...] = ORDER) -> list[str]:
     """What the vehicle reports differently from `wanted` (float32 parameters: 1e-3 relative slack)."""
     out = []
-    for name in ORDER:
+    for name in order:
         if name not in wanted:
             continue
         got = read.get(name)
@@ -76,23 +76,23 @@ def mismatches(wanted: dict[str, float], read: dict[str, float]) -> list[str]:
     return out
 
 
-def mirror(link: ParamLink, wanted: dict[str, float]) -> list[str]:
-    """Write `wanted` (in `ORDER`), read it all back; the mismatches ([] = the vehicle holds the fence).
+def mirror(link: ParamLink, wanted: dict[str, float], order: tuple[str, ...] = ORDER) -> list[str]:
+    """Write `wanted` (in `order`), read it all back; the mismatches ([] = the vehicle holds the fence).
 
     A parameter the firmware does not have (FENCE_ALT_MIN before Copter 4.1) is reported, not fatal:
     the rest of the fence still holds.
     """
     problems = []
-    for name in ORDER:
+    for name in order:
         if name in wanted:
             try:
                 link.set_param(name, wanted[name])
             except Exception as exc:  # noqa: BLE001 - AutopilotError, or a link that died meanwhile
                 problems.append(f"{name}: {exc}")
-    names = [n for n in ORDER if n in wanted]
+    names = [n for n in order if n in wanted]
     problems.extend(
         m
-        for m in mismatches(wanted, link.read_params(names))
+        for m in mismatches(wanted, link.read_params(names), order)
         if not any(m.startswith(p.split(":")[0]) for p in problems)
     )
     return problems

@@ -33,11 +33,14 @@ from antalate_lcm.geo import wrap_360
 log = logging.getLogger("antalate.autopilot.mavlink")
 
 #: SYS_STATUS sensors whose health bit dropping is a failsafe (ArduPilot clears GEOFENCE on a breach,
-#: BATTERY on a battery failsafe, AHRS when the EKF is unhealthy).
+#: BATTERY on a battery failsafe, AHRS when the EKF is unhealthy, RC_RECEIVER while the radio is lost --
+#: ArduCopter 4.6.3 SITL with SIM_RC_FAIL 1 clears it with "Radio Failsafe" and sets it again with
+#: "Radio Failsafe Cleared"; the bit is present only once RC input has ever been seen).
 HEALTH_FAILSAFES = (
     (mav.MAV_SYS_STATUS_GEOFENCE, fs.FENCE),
     (mav.MAV_SYS_STATUS_SENSOR_BATTERY, fs.BATTERY),
     (mav.MAV_SYS_STATUS_AHRS, fs.EKF),
+    (mav.MAV_SYS_STATUS_SENSOR_RC_RECEIVER, fs.RC),
 )
 #: BATTERY_STATUS charge_state -> `AutopilotState.battery_warning`.
 CHARGE_WARNINGS = {
@@ -249,6 +252,10 @@ class Vehicle:
             and self.commanded[0] == self.mode
             and now - self.commanded[1] <= self.command_window
         )
+        if previous != msg.custom_mode and not commanded and self.commanded is not None:
+            # The vehicle left for a mode we did not ask for (a failsafe, a pilot): our command is spent.
+            # Kept, a failsafe's LAND seconds after the operator's LAND -> failsafe RTL would count as ours.
+            self.commanded = None
         self.failsafes.on_mode(self.mode, now, commanded=commanded)
         if previous != msg.custom_mode and self.failsafes.reason:
             log.warning("autopilot failsafe (%s): mode %s", self.failsafes.reason, self.mode)

@@ -64,7 +64,6 @@ import math
 import threading
 import time
 from collections.abc import Callable, Mapping
-from functools import partial
 from typing import Any, ClassVar
 
 from pydantic import BaseModel
@@ -174,6 +173,13 @@ class TelloAutopilot(Autopilot):
         self._lost_in_air = False  # the Tello was flying when the link was lost
         self._last_probe = -math.inf
         self._unattended_until: float | None = None  # after a link loss: land unless commanded by then
+        self._space_lock = threading.Lock()  # one non-rc datagram at a time, spaced (`_spaced`)
+        self._quiet_since = -math.inf  # clock() of the last non-rc datagram sent or answer received
+        #: (command, deadline): an answer still owed by a command settled by the state (a take-off whose
+        #: "ok" is late or lost); the next control command waits for it, so it cannot pass for its own
+        self._owed: tuple[str, float] | None = None
+        self._sent_at = -math.inf  # clock() when the waiting command went out
+        self._units = maths.VelocityUnitCheck()
 
     # ================================================================= the Autopilot contract
 
@@ -254,10 +260,11 @@ class TelloAutopilot(Autopilot):
             self._setpoint = None
             self._climb_target = None
             self._failsafe = ""
+            self._owed = None
             sent = self.clock()
         try:
             answer = self._exchange(
-                "takeoff", self._p.takeoff_timeout, settled=lambda: self._move_settled(sent), done_in_air=True
+                "takeoff", self._p.takeoff_timeout, settled=self._move_settled, done_in_air=True
             )
         except _Preempted:
             raise AutopilotError("takeoff interrupted (land, rtl or emergency)") from None
@@ -273,6 +280,8 @@ class TelloAutopilot(Autopilot):
             raise AutopilotError(f"the Tello at {self.host} refused 'takeoff': {answer!r}")
         with self._lock:
             self._air.reset(True)  # it said so (or the packets did): no half second of doubt
+            if not answer:  # its "ok" may still come (DJITelloPy #31: > 7 s), or was lost
+                self._owed = ("takeoff", sent + self._p.takeoff_timeout)
         if not answer:
             log.warning(
                 "Tello %s: no answer to 'takeoff', but the state shows it up at %.1f m: going on",
@@ -300,6 +309,7 @@ class TelloAutopilot(Autopilot):
             self._setpoint = None
             self._climb_target = None
             self._preempt += 1  # a waiting takeoff/up gives up at once
+            self._owed = None  # a landing supersedes a take-off still running
             if self._phase is _Phase.GROUND and not self._in_air():
                 return  # nothing to land
             self._phase = _Phase.LAND
@@ -319,6 +329,11 @@ class TelloAutopilot(Autopilot):
             self._setpoint = None
             self._climb_target = None
             self._failsafe = ""
+            if self._units.problem:
+                # home is where dead reckoning says, and it is not to be believed: land here
+                reason = f"dead reckoning unreliable ({self._units.problem}); landing here"
+                self._rtl_abort(reason)
+                raise AutopilotError(reason)
             self._phase = _Phase.RTL
             self._rtl_start = self.clock()
             tn, te = self._takeoff_point
@@ -383,6 +398,9 @@ class TelloAutopilot(Autopilot):
             self._phase = _Phase.GROUND
             self._air.reset(False)  # it drops: not "flying though we did not take off"
             self._land_due = None
+            self._owed = None
+        # never answered (SDK guide; djitellopy sends it without waiting): nothing to wait for but the
+        # command spacing, without which the Tello would not hear it
         self._send_raw("emergency")
         log.warning("Tello %s: emergency (motors stopped)", self.host)
 
@@ -391,6 +409,12 @@ class TelloAutopilot(Autopilot):
         """Dead-reckoned metres north/east of home (for tests and tools)."""
         with self._lock:
             return self._north, self._east
+
+    @property
+    def dead_reckoning_problem(self) -> str:
+        """Why the state's velocities cannot be dead-reckoned (`maths.VelocityUnitCheck`); "" while none."""
+        with self._lock:
+            return self._units.problem
 
     @property
     def takeoff_point(self) -> tuple[float, float]:
@@ -470,16 +494,64 @@ class TelloAutopilot(Autopilot):
         return link.replies()
 
     def _send_raw(self, text: str) -> None:
-        """One datagram to the Tello through the link (no wait, no retry)."""
+        """One datagram to the Tello through the link (no retry); any but ``rc`` spaced (`_spaced`)."""
         link = self._link
         if link is None:
             raise AutopilotError(f"{text!r}: not connected to the Tello at {self.host}")
         try:
-            link.send(text)
+            if text.startswith("rc "):
+                link.send(text)
+            else:
+                with self._space_lock:
+                    self._await_spacing()
+                    link.send(text)
+                    self._quiet_since = self.clock()
         except OSError as exc:
             raise AutopilotError(f"{text!r} to the Tello at {self.host} failed: {exc!r}") from exc
         finally:
             self._last_sent = self.clock()
+
+    def _await_spacing(self) -> None:
+        """Sleep until ``command_spacing`` has passed since the last non-rc datagram or answer.
+
+        A Tello ignores a command that comes too soon after the previous one or its answer, without a
+        reply (djitellopy waits ``Tello.TIME_BTW_COMMANDS`` = 0.1 s after each answer: "Commands very
+        consecutive makes the drone not respond to them"). ``rc`` is exempt, as in djitellopy
+        (``TIME_BTW_RC_CONTROL_COMMANDS`` = 0.001 s)."""
+        wait = self._quiet_since + self._p.command_spacing - self.clock()
+        if wait > 0:
+            time.sleep(wait)
+
+    def _heard(self) -> None:
+        """An answer came: the next command is spaced from now."""
+        self._quiet_since = max(self._quiet_since, self.clock())
+
+    def _settle_owed(self, replies: list[bytes], generation: int) -> None:
+        """Wait for an answer a command settled by the state still owes, before a control command.
+
+        Replies carry no id: a take-off's late "ok" arriving after the next command was sent would pass
+        for that command's answer (and the Tello, still in its take-off, refuses a move with "error").
+        Ends at the owed answer, its deadline, or a pre-emption.
+        """
+        while (owed := self._owed) is not None:  # land/emergency clear it from other threads
+            what, deadline = owed
+            if replies:
+                answer = replies.pop(0).decode("utf-8", "replace").strip()
+                self._heard()
+                log.info("Tello %s: the late answer to %r came: %r", self.host, what, answer)
+                self._owed = None
+                return
+            with self._lock:
+                self._ingest()
+                if self._preempt != generation:
+                    raise _Preempted(f"pre-empted while waiting for the answer to {what!r}")
+            if self.clock() >= deadline:
+                log.info("Tello %s: no answer to %r came (lost)", self.host, what)
+                self._owed = None
+                return
+            if self._stop.is_set():
+                raise AutopilotError("the adapter is closing")
+            time.sleep(_POLL)
 
     def _exchange(
         self,
@@ -506,12 +578,21 @@ class TelloAutopilot(Autopilot):
                 self._pending = text
             try:
                 replies = self._replies()
+                if preemptible and not text.endswith("?"):
+                    self._settle_owed(replies, generation)  # (a read skips a stray "ok" itself)
+                with self._space_lock:
+                    self._await_spacing()
+                if replies:
+                    self._heard()
                 replies.clear()  # late replies to earlier commands, which would pass for this one's
                 self._send_raw(text)
+                with self._lock:
+                    self._sent_at = self.clock()
                 deadline = self.clock() + timeout
                 while True:
                     while replies:
                         answer = replies.pop(0).decode("utf-8", "replace").strip()
+                        self._heard()
                         if text.endswith("?") and answer.lower() == "ok":
                             continue  # a read is never answered "ok": a late reply to a control command
                         return answer
@@ -534,12 +615,16 @@ class TelloAutopilot(Autopilot):
                 with self._lock:
                     self._pending = None
 
-    def _move_settled(self, sent: float) -> bool:
-        """A take-off or up/down whose answer was lost is over (lock held): flying, height steady."""
+    def _move_settled(self) -> bool:
+        """A take-off or up/down whose answer was lost is over (lock held): flying, height steady.
+
+        Timed from when the command went out (`_sent_at`), not from the call: a wait for an owed
+        answer may come first, hovering, and that hover is not this move settling.
+        """
         now = self.clock()
         return (
             self._air.value
-            and now - sent >= _SETTLED
+            and now - self._sent_at >= _SETTLED
             and now - self._height_changed >= _SETTLED
             and abs(self._reading.vd) < 0.05
         )
@@ -657,11 +742,10 @@ class TelloAutopilot(Autopilot):
                 if maths.climb_done(self._reading.height, alt):
                     return
             cm = max(_UP_MIN_CM, round(abs(delta) * 100))
-            sent = self.clock()
             answer = self._exchange(
                 f"{'up' if delta > 0 else 'down'} {min(cm, _UP_MAX_CM)}",
                 self._p.takeoff_timeout,
-                settled=partial(self._move_settled, sent),
+                settled=self._move_settled,
                 done_in_air=True,
             )
             if answer not in ("ok", ""):
@@ -697,6 +781,11 @@ class TelloAutopilot(Autopilot):
         self._reading = telemetry.read(raw, self._p, self._home_heading, before)
         if self._reading.height != before.height:
             self._height_changed = now
+        r = self._reading
+        if self._p.velocity_unit_check and self._units.update(r.height, r.vd, r.vn, r.ve, now):
+            u = self._units
+            why = f"dead reckoning unreliable: {u.problem}" if u.problem else u.unchecked
+            log.warning("Tello %s: %s", self.host, why)
         if previous is not None and self._in_air():
             self._north, self._east = maths.dead_reckon(
                 self._north,
@@ -835,7 +924,10 @@ class TelloAutopilot(Autopilot):
         if link is None:
             return
         try:
-            link.send("command")  # the "ok" is dropped by the next exchange
+            with self._space_lock:
+                self._await_spacing()
+                link.send("command")  # the "ok" is dropped by the next exchange
+                self._quiet_since = self.clock()
         except OSError as exc:
             self._ratelog.log(("probe",), logging.WARNING, "Tello %s: probe not sent: %s", self.host, exc)
 

@@ -145,3 +145,77 @@ def rtl_leg(
         return 0.0, 0.0, 0.0
     v = max(min_speed, min(speed, gain * dist))
     return dn / dist * v, de / dist * v, dist
+
+
+_VGZ_SILENT = 0.05  # |ratio| below this: vgz was not reported at all (no unit to check)
+
+#: m/s: a DJI Tello's top speed (its specification: 8 m/s); a ground speed read above it is a unit error.
+MAX_PLAUSIBLE_SPEED = 8.0
+
+
+@dataclass
+class VelocityUnitCheck:
+    """Checks at run time the one assumption dead reckoning rests on: the state's velocities are dm/s.
+
+    The SDK guides name ``vgx/vgy/vgz`` without a unit. ``vgz`` is reported with them and, assumed in
+    the same unit, integrates to the climb that the height (``h`` or ``tof``, in metres by the SDK)
+    measures on its own: every take-off climbs 0.8 m, enough to tell decimetres from centimetres or
+    metres per second (a factor of ten) through the decimetre rounding of both. A ratio outside
+    [`low`, `high`] over a climb or descent of `min_change` m, or a ground speed above a Tello's
+    top speed, is a `problem`; it stays (a unit does not change in flight).
+    """
+
+    min_change: float = 0.5  # m of height change that makes a comparison
+    max_window: float = 10.0  # s: a slower change is drift, not a comparison
+    low: float = 0.5
+    high: float = 2.0
+    problem: str = ""
+    #: set when a climb passed with ``vgz`` reading zero throughout: a Tello that does not report it
+    #: cannot be checked (that is no evidence of a wrong unit, so it is not a `problem`)
+    unchecked: str = ""
+    ratio: float = math.nan  # the last comparison's integrated/measured change
+    _anchor: float | None = None  # the height the comparison started from
+    _anchor_t: float = 0.0
+    _integral: float = 0.0  # m climbed according to vgz since the anchor
+    _last: tuple[float, float] | None = None  # (t, climb rate m/s) of the previous sample
+
+    def update(self, height: float, vd: float, vn: float, ve: float, now: float) -> bool:
+        """Feed one packet (m, m/s down, m/s north/east as read); True when a `problem` is first found
+        (or the unit first found `unchecked`)."""
+        if self.problem:
+            return False
+        speed = math.hypot(vn, ve)
+        if speed > MAX_PLAUSIBLE_SPEED:
+            self.problem = (
+                f"the state's vgx/vgy read as {speed:.1f} m/s, beyond a Tello's {MAX_PLAUSIBLE_SPEED:g} m/s: "
+                "they are not in the dm/s dead reckoning assumes"
+            )
+            return True
+        last, self._last = self._last, (now, -vd)
+        if last is None or not 0.0 < now - last[0] <= _MAX_DR_GAP or self._anchor is None:
+            self._restart(height, now)
+            return False
+        self._integral += 0.5 * (last[1] - vd) * (now - last[0])
+        change = height - self._anchor
+        if now - self._anchor_t > self.max_window:
+            self._restart(height, now)
+        elif abs(change) >= self.min_change:
+            self.ratio = self._integral / change
+            self._restart(height, now)
+            if abs(self.ratio) < _VGZ_SILENT:
+                first = not self.unchecked
+                self.unchecked = (
+                    f"vgz read 0 while the height changed {change:+.2f} m: the unit is not checked"
+                )
+                return first
+            elif not self.low <= abs(self.ratio) <= self.high:
+                self.problem = (
+                    f"the state's vgz integrates to {self.ratio * change:+.2f} m while the height changed "
+                    f"{change:+.2f} m (x{abs(self.ratio):.2g}): its velocities are not in the dm/s dead "
+                    "reckoning assumes"
+                )
+                return True
+        return False
+
+    def _restart(self, height: float, now: float) -> None:
+        self._anchor, self._anchor_t, self._integral = height, now, 0.0

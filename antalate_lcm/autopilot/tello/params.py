@@ -53,6 +53,10 @@ class Params(BaseModel):
         default=7.0, gt=0, allow_inf_nan=False
     )  # s for an answer (command, battery?)
     takeoff_timeout: float = Field(default=20.0, gt=0, allow_inf_nan=False)  # s for takeoff/land/up to finish
+    velocity_unit_check: bool = True  # check vgx/vgy/vgz are dm/s against the height; RTL refused if not
+    command_spacing: float = Field(
+        default=0.15, ge=0.1, le=1.0, allow_inf_nan=False
+    )  # s between commands (not rc) and after an answer: a Tello ignores closer ones
     retry_count: int = Field(default=3, ge=1)  # attempts of `command` at connect
     state_timeout: float = Field(default=2.0, gt=0, allow_inf_nan=False)  # s connect() waits for state
     link_loss_timeout: float = Field(

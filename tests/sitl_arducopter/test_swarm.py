@@ -1,0 +1,114 @@
+"""Three real ArduCopter 4.6.3 SITL instances (``--instance 0..2``, ``--sysid 1..3``) flown as one swarm by
+three agents running ``dovrat_swarm``, in one network namespace on one LCM bus.
+
+What the operator sees for each agent (MC STANDBY -> MISSION -> RTL -> STANDBY, HLC AIRBORNE -> RTL ->
+READY, no ``hlc_error_t``), and what each vehicle did by its own telemetry: each is its own MAVLink
+system, flies the swarm rule (forward along its heading, turning), and comes home to its own take-off
+point. One boot for the module (three copters need ~40-60 s to be ready together on 2 cores).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from antalate_lcm import geo
+from antalate_lcm.msgs import hlc_state_t as H
+from antalate_lcm.msgs import mc_state_t as M
+from antalate_lcm.msgs import operator_cmd_t as O
+from tests.conftest import Probe
+from tests.netns import NetNamespace
+from tests.polling import wait_for
+from tests.sitl_arducopter.harness import HOME, Copter
+
+pytestmark = [pytest.mark.netns, pytest.mark.timeout(400)]
+NAMES = ("copter1", "copter2", "copter3")
+SPACING = 6.0  # m east between the homes
+_seq = itertools.count(1)
+
+
+def home(i: int) -> tuple[float, float, float, float]:
+    lat, lon = geo.offset(HOME[0], HOME[1], 0.0, SPACING * i)
+    return (lat, lon, HOME[2], HOME[3])
+
+
+def command(probe: Probe, agent: str, cmd: int) -> None:
+    probe.publish(
+        f"{agent}/OPERATOR_CMD", "operator_cmd_t", header={"seq": next(_seq), "agent": "op"}, command=cmd
+    )
+
+
+def wait_state(probe: Probe, agent: str, node: str, state: int, timeout: float, since: int) -> dict[str, Any]:
+    channel = "MC_STATE" if node == "mc" else "HLC_STATE"
+    msg = probe.wait(f"{agent}/{channel}", f"{node}_state_t", timeout=timeout, since=since, state=state)
+    assert msg is not None, f"{agent}: {node} never reached {state} within {timeout} s"
+    return msg
+
+
+@pytest.fixture(scope="module")
+def swarm(sitl_netns: NetNamespace, sitl_dir: Path) -> Iterator[list[Copter]]:
+    bma = [
+        {
+            "name": "mission",
+            "behaviors": [
+                {
+                    "plugin": "dovrat_swarm",
+                    "activate_on": ["MISSION"],
+                    "params": {"forward_speed": 1.5, "sharp_turn_rate": 20.0},
+                }
+            ],
+        }
+    ]
+    copters: list[Copter] = []
+    try:
+        for i, name in enumerate(NAMES):
+            copters.append(Copter(sitl_netns, sitl_dir / name, instance=i, name=name, bma=bma, home=home(i)))
+        for c in copters:
+            c.gcs.set_param("LAND_SPEED", 150)
+            c.gcs.set_param("RTL_ALT", 800)  # cm: a shorter climb before the return
+        yield copters
+    finally:
+        for c in copters:
+            c.stop()
+
+
+def test_three_sitl_copters_fly_dovrat_swarm_and_come_home(swarm: list[Copter], sitl_probe: Probe) -> None:
+    probe = sitl_probe
+    start = probe.mark()
+    for name in NAMES:
+        wait_state(probe, name, "mc", M.STANDBY, timeout=120, since=0)
+    for c in swarm:  # three MAVLink systems, one each
+        assert wait_for(lambda c=c: c.gcs.state()["home"], timeout=60, interval=0.5), c.name
+    sent = time.monotonic()
+    for name in NAMES:
+        command(probe, name, O.TAKEOFF)
+    for name in NAMES:
+        wait_state(probe, name, "mc", M.MISSION, timeout=180, since=start)
+        wait_state(probe, name, "hlc", H.AIRBORNE, timeout=60, since=start)
+    print(f"\nswarm: all three AIRBORNE {time.monotonic() - sent:.1f} s after TAKEOFF")
+    begin = [c.gcs.state() for c in swarm]
+    time.sleep(8.0)  # dovrat_swarm flies them: forward along the heading, turning without a peer ahead
+    moved = [c.gcs.state() for c in swarm]
+    for c, a, b in zip(swarm, begin, moved, strict=True):
+        assert b["mode"] == "GUIDED" and b["armed"] and b["alt"] > 4.0, (c.name, b)
+        assert math.hypot(b["north"] - a["north"], b["east"] - a["east"]) > 4.0, (c.name, a, b)
+    mark = probe.mark()
+    for name in NAMES:
+        command(probe, name, O.RTL)
+    for name in NAMES:
+        wait_state(probe, name, "mc", M.RTL, timeout=15, since=mark)
+    for name in NAMES:
+        wait_state(probe, name, "mc", M.STANDBY, timeout=120, since=mark)
+        wait_state(probe, name, "hlc", H.READY, timeout=15, since=mark)
+    for c in swarm:
+        assert wait_for(lambda c=c: not c.gcs.state()["armed"], timeout=20, interval=0.3), c.name
+        down = c.gcs.state()
+        assert abs(down["north"]) < 2.0 and abs(down["east"]) < 2.0, (c.name, down)  # its own home
+    for name in NAMES:
+        assert probe.history(f"{name}/HLC_ERROR", "hlc_error_t", since=start) == [], name

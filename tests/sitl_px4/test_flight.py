@@ -153,7 +153,10 @@ def test_behavior_going_silent_hovers_in_offboard(px4: Px4, sitl_probe: Probe) -
         ve, vn, state = east_speed(px4, probe, 2.0)
     finally:
         os.killpg(bma.pid, signal.SIGCONT)
-    assert abs(ve) < 0.15 and abs(vn) < 0.15, (ve, vn, state)
+    # PX4 is told zero (its POSITION_TARGET_LOCAL_NED) and slows down at SIH's pace: a stale 1 m/s
+    # flown on would keep it near 1 m/s
+    assert abs(state["target_vy"]) < 0.01 and abs(state["target_vx"]) < 0.01, state
+    assert abs(ve) < 0.3 and abs(vn) < 0.3, (ve, vn, state)
     assert state["mode"] == "OFFBOARD" and state["armed"], state
     assert [s for s, _ in hlc_states(probe, mark)] == [H.AIRBORNE], hlc_states(probe, mark)
     assert "hover: no velocity command for" in px4.agent.log("hlc")
@@ -204,7 +207,13 @@ def test_rtl_lands_at_home_and_the_mc_is_in_standby(px4: Px4, sitl_probe: Probe)
     modes = [m for _, m in px4.gcs.ok(op="record")["modes"]]
     assert modes[:1] == ["AUTO.RTL"], modes
     assert abs(down["north"]) < 2.0 and abs(down["east"]) < 2.0, down
-    assert errors(probe, mark) == []
+    states, errs = hlc_states(probe, mark), errors(probe, mark)
+    print(f"\nRTL: HLC {states}; errors {errs}")
+    # From PX4's failsafe Hold the HLC may show HOLD again for a poll, until PX4's HEARTBEAT confirms the
+    # RTL ("autopilot returning on its own" then): never a pilot, never a link or arming error
+    assert H.MANUAL not in [s for s, _ in states], states
+    transient = ("autopilot failsafe: holding position", "autopilot returning on its own")
+    assert not [e for e in errs if not e.startswith(transient)], errs
 
 
 def test_link_cut_5_s_in_flight_then_restored(px4: Px4, sitl_probe: Probe) -> None:

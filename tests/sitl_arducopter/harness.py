@@ -14,10 +14,14 @@ station: the comparison tests fly one scenario table against both.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import os
 import subprocess
 import sys
+import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +33,24 @@ from tests.netns import REPO, NetNamespace, stop_process
 DEFAULT_SITL = REPO / ".." / "shared" / "sitl" / "arducopter" / "arducopter"
 HOME = (-35.363261, 149.165230, 584.0, 353.0)
 RELAY_PORT = 15760  # + 10 N: where the agent connects
+
+
+@contextlib.contextmanager
+def one_sitl_swarm_at_a_time() -> Iterator[None]:
+    """Held by a module that flies three SITL vehicles at once, for as long as they fly.
+
+    Three ArduCopters and three PX4s booted together on two cores (the suite's two workers each in
+    such a module) starved the simulators: a PX4 lost its simulated sensors and never took off, and
+    an ArduCopter swarm came 1 cm inside its margin. One such module at a time across the workers;
+    the other worker's single-vehicle modules and the rest of the suite go on beside it.
+    """
+    path = Path(tempfile.gettempdir()) / "antalate-sitl-swarm.lock"
+    with path.open("a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 def sitl_binary() -> Path:

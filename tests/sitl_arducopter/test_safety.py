@@ -33,7 +33,7 @@ from antalate_lcm.safety.separation import separation
 from tests.conftest import Probe
 from tests.netns import NetNamespace, stop_process
 from tests.polling import wait_for
-from tests.sitl_arducopter.harness import HOME, Copter
+from tests.sitl_arducopter.harness import HOME, Copter, one_sitl_swarm_at_a_time
 
 pytestmark = [pytest.mark.netns, pytest.mark.timeout(420)]
 
@@ -68,6 +68,13 @@ def fly_at_centroid() -> list[dict[str, Any]]:
             ],
         }
     ]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _one_sitl_swarm_at_a_time() -> Iterator[None]:
+    """Before the vehicles boot (autouse fixtures come first in their scope)."""
+    with one_sitl_swarm_at_a_time():
+        yield
 
 
 @pytest.fixture(scope="module")

@@ -24,7 +24,7 @@ from tests.conftest import Probe
 from tests.netns import NetNamespace
 from tests.polling import wait_for
 from tests.sitl_arducopter.flight import command, wait_state
-from tests.sitl_arducopter.harness import HOME, Copter
+from tests.sitl_arducopter.harness import HOME, Copter, one_sitl_swarm_at_a_time
 
 pytestmark = [pytest.mark.netns, pytest.mark.timeout(400)]
 NAMES = ("copter1", "copter2", "copter3")
@@ -34,6 +34,13 @@ SPACING = 6.0  # m east between the homes
 def home(i: int) -> tuple[float, float, float, float]:
     lat, lon = geo.offset(HOME[0], HOME[1], 0.0, SPACING * i)
     return (lat, lon, HOME[2], HOME[3])
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _one_sitl_swarm_at_a_time() -> Iterator[None]:
+    """Before the vehicles boot (autouse fixtures come first in their scope)."""
+    with one_sitl_swarm_at_a_time():
+        yield
 
 
 @pytest.fixture(scope="module")

@@ -25,6 +25,7 @@ from tests.conftest import Probe
 from tests.netns import NetNamespace, stop_process
 from tests.polling import wait_for
 from tests.sitl_arducopter.flight import wait_state
+from tests.sitl_arducopter.harness import one_sitl_swarm_at_a_time
 from tests.sitl_px4.harness import SIH_HOME, Px4, px4_gcs
 
 pytestmark = [pytest.mark.netns, pytest.mark.timeout(420)]
@@ -39,6 +40,13 @@ TIMINGS: dict[str, float] = {}
 def swarm_command(probe: Probe, cmd: int, seq: list[int] = [0]) -> None:  # noqa: B006 - a counter
     seq[0] += 1
     probe.publish("SWARM/OPERATOR_CMD", "operator_cmd_t", header={"seq": seq[0], "agent": "op"}, command=cmd)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _one_sitl_swarm_at_a_time() -> Iterator[None]:
+    """Before the vehicles boot (autouse fixtures come first in their scope)."""
+    with one_sitl_swarm_at_a_time():
+        yield
 
 
 @pytest.fixture(scope="module")

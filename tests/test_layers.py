@@ -58,7 +58,19 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
     ("vehicles", frozenset({"autopilot"})),
     (
         "core",
-        frozenset({"zenoh_bus", "executor", "bus", "config", "node", "behavior", "antalate_lcm", "mcap_log"}),
+        frozenset(
+            {
+                "zenoh_bus",
+                "executor",
+                "simclock",
+                "bus",
+                "config",
+                "node",
+                "behavior",
+                "antalate_lcm",
+                "mcap_log",
+            }
+        ),
     ),
     ("domain", frozenset({"mc", "hlc", "bma", "osc", "station", "analysis"})),
     (

@@ -75,6 +75,8 @@ class Experiment:
     speed: float | None = None
     #: ``--seed``: the script's seed (every draw); with ``speed`` the run is a pure function of it.
     seed: int | None = None
+    #: False: no metrics at the end (benchmarks/simtime.py times the flight, not the analysis).
+    measure: bool = True
 
 
 def default_log_path() -> str:
@@ -264,6 +266,8 @@ class Outcome:
     real_s: float = 0.0
     #: Simulated seconds it covered (``--speed``), None on the wall clock.
     simulated_s: float | None = None
+    #: CPU seconds this process spent meanwhile (all its threads).
+    cpu_s: float = 0.0
 
     def text(self) -> str:
         """What ``antalate run`` prints."""
@@ -298,6 +302,7 @@ class Outcome:
             "problem": self.problem or None,
             "real_s": self.real_s,
             "simulated_s": self.simulated_s,
+            "cpu_s": self.cpu_s,
         }
 
 
@@ -335,7 +340,7 @@ def run(exp: Experiment) -> Outcome:
     node_log = "" if exp.headless else _temp_log()
     children = _AgentProcesses(exp, processes, node_log) if processes > 1 else None
     outcome = Outcome(1, out, bus, 0, node_log=node_log)
-    started = time.monotonic()
+    started, cpu = time.monotonic(), time.process_time()
     try:
         if exp.headless:
             _fly_scripted(configs, context, nodes, script, children, outcome, injector, clock)
@@ -344,7 +349,7 @@ def run(exp: Experiment) -> Outcome:
     finally:
         if children is not None:
             children.stop()
-    outcome.real_s = time.monotonic() - started
+    outcome.real_s, outcome.cpu_s = time.monotonic() - started, time.process_time() - cpu
     if clock is not None:
         outcome.simulated_s = clock.elapsed
         from antalate_lcm.runtime.replay import write_record
@@ -353,7 +358,10 @@ def run(exp: Experiment) -> Outcome:
     outcome.messages = recorder.events
     if injector is not None:
         outcome.report = "\n".join([outcome.report, *injector.report()]).strip()
-    _measure(outcome, script)
+    if exp.measure:
+        _measure(outcome, script)
+    else:
+        outcome.problem = "not measured"
     return outcome
 
 

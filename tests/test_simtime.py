@@ -88,6 +88,7 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     d = tmp_path_factory.mktemp("simtime")
     (d / "swarm.toml").write_text(CONFIG.format(speed=2.0))
     (d / "changed.toml").write_text(CONFIG.format(speed=2.5))
+    (d / "mavlink.toml").write_text(CONFIG.format(speed=2.0).replace('"sim"', '"mavlink"'))
     (d / "script.toml").write_text(SCRIPT)
     return d
 
@@ -193,16 +194,21 @@ def test_replay_needs_the_run_record(files: Path, recorded: Path, capsys: pytest
 
 
 @pytest.mark.parametrize(
-    ("argv", "words"),
+    ("config", "argv", "words"),
     [
-        (["--speed", "max", "--processes", "2", "--headless"], "drop --processes 2"),
-        (["--speed", "max"], "--speed needs --headless"),
+        ("swarm.toml", ["--speed", "max", "--processes", "2", "--headless"], "drop --processes 2"),
+        ("swarm.toml", ["--speed", "max"], "--speed needs --headless"),
+        (
+            "mavlink.toml",
+            ["--agents", "1", "--speed", "max", "--headless"],
+            "hlc.autopilot: 'sim' with --speed",
+        ),
     ],
 )
 def test_simulated_time_refuses_what_it_cannot_run_in_one_line(
-    files: Path, argv: list[str], words: str, capsys: pytest.CaptureFixture[str]
+    files: Path, config: str, argv: list[str], words: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert main(["run", str(files / "swarm.toml"), "--agents", "3", "-o", str(files / "x.lcm"), *argv]) == 2
+    assert main(["run", str(files / config), "--agents", "3", "-o", str(files / "x.lcm"), *argv]) == 2
     err = capsys.readouterr().err
     assert words in err and err.count("\n") == 1
     assert not (files / "x.lcm").exists()

@@ -139,6 +139,12 @@ def prepare(exp: Experiment) -> tuple[list[Config], str, str]:
     check_unique_agent_names(configs, agents=exp.agents)
     for cfg in configs:
         validate(cfg)
+    if exp.speed is not None and base.hlc.autopilot != "sim":
+        raise ConfigError(
+            base.source,
+            "hlc.autopilot",
+            f"'sim' with --speed: a {base.hlc.autopilot!r} vehicle flies in real time, not on a simulated clock",
+        )
     bus = record_bus(base, exp.bus)
     check_reach(base, min(exp.processes, len(configs)), bus)
     if exp.script is not None:

@@ -73,15 +73,12 @@ class SimClock:
         self.held = False
         self._real0, self._sim0 = time.monotonic(), self.t
 
-    def advance(self, by: float) -> None:
-        """Move time ``by`` s (the loop found nothing to do before then), at most ``speed`` times
-        faster than real time."""
-        target = self.t + by
-        if not math.isinf(self.speed):
-            wait = self._real0 + (target - self._sim0) / self.speed - time.monotonic()
-            if wait > 0:
-                time.sleep(wait)
-        self.t = target
+    def real_wait(self, by: float) -> float:
+        """Real seconds to wait before moving time ``by`` s, so it runs at most ``speed`` times
+        faster than real time (0 at ``max``, and for a run that has fallen behind)."""
+        if math.isinf(self.speed):
+            return 0.0
+        return max(0.0, self._real0 + (self.t + by - self._sim0) / self.speed - time.monotonic())
 
 
 class _SimSelector(selectors.BaseSelector):
@@ -110,7 +107,12 @@ class _SimSelector(selectors.BaseSelector):
         ready = self._inner.select(0)
         if ready or timeout <= 0:
             return ready
-        clock.advance(timeout)
+        wait = clock.real_wait(timeout)
+        if wait > 0:  # --speed N: wait, yet wake for another thread's call (a stop, say)
+            ready = self._inner.select(wait)
+            if ready:
+                return ready
+        clock.t += timeout  # nothing to do before the next timer: it is its time
         return []
 
     def close(self) -> None:

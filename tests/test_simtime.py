@@ -89,6 +89,9 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (d / "swarm.toml").write_text(CONFIG.format(speed=2.0))
     (d / "changed.toml").write_text(CONFIG.format(speed=2.5))
     (d / "mavlink.toml").write_text(CONFIG.format(speed=2.0).replace('"sim"', '"mavlink"'))
+    (d / "osc.toml").write_text(
+        CONFIG.format(speed=2.0) + '[osc]\nenabled = true\nserver = "http://127.0.0.1:9"\n'
+    )
     (d / "script.toml").write_text(SCRIPT)
     return d
 
@@ -203,6 +206,7 @@ def test_replay_needs_the_run_record(files: Path, recorded: Path, capsys: pytest
             ["--agents", "1", "--speed", "max", "--headless"],
             "hlc.autopilot: 'sim' with --speed",
         ),
+        ("osc.toml", ["--speed", "max", "--headless"], "osc.enabled: false with --speed"),
     ],
 )
 def test_simulated_time_refuses_what_it_cannot_run_in_one_line(

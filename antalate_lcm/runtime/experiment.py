@@ -145,6 +145,12 @@ def prepare(exp: Experiment) -> tuple[list[Config], str, str]:
             "hlc.autopilot",
             f"'sim' with --speed: a {base.hlc.autopilot!r} vehicle flies in real time, not on a simulated clock",
         )
+    if exp.speed is not None and base.osc.enabled:
+        raise ConfigError(
+            base.source,
+            "osc.enabled",
+            "false with --speed: the OSC's station answers over HTTP in real time, not on a simulated clock",
+        )
     bus = record_bus(base, exp.bus)
     check_reach(base, min(exp.processes, len(configs)), bus)
     if exp.script is not None:

@@ -230,9 +230,14 @@ def replay(log: str | Path, *, config: str | None = None, keep: str | None = Non
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
+    quiet = logging.getLogger("antalate")
+    level = quiet.level
     if args.log_level == "INFO":  # the default: the replayed nodes' lines would bury the verdict
-        logging.getLogger("antalate").setLevel(logging.WARNING)
-    result = replay(args.log, config=args.config, keep=args.output)
+        quiet.setLevel(logging.WARNING)
+    try:
+        result = replay(args.log, config=args.config, keep=args.output)
+    finally:
+        quiet.setLevel(level)
     print(result.text(), flush=True)
     return 0 if result.divergence is None else 1
 

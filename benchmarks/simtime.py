@@ -16,8 +16,10 @@ shared, so its load average is printed beside the figures (docs/design.md §12).
 
     python benchmarks/simtime.py [N ...] [--mission S] [--no-wall]      (default sizes: 100 1000)
 
-Measured 2026-11-26 on the 2-core machine shared with other jobs: see docs/experiments.md,
-"Simulated time".
+Measured 2026-11-26 on the 2-core machine shared with other jobs (docs/experiments.md, "Simulated
+time, seeds and replay"): 100 agents 11.3x real time at load 1.7-2.6 (11.8x per CPU second), 5.5x at
+load 8; 1,000 agents 0.7x at load 1.7-5.4 (1.0x per CPU second), 0.3x at load 8. The goals (20x,
+2x) are not met: an agent's nodes compute about 1 ms of CPU per simulated second.
 """
 
 from __future__ import annotations

@@ -27,11 +27,11 @@ from typing import Any, Protocol
 
 from antalate_lcm import validation
 from antalate_lcm._fastcodec import encode as fast_encode
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.bus import Bus, Subscription
 from antalate_lcm.config import Config
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.executor import Executor, Timer
+from antalate_lcm.ratelimit import RateLimitedLog
 from antalate_lcm.security import (
     Authenticator,
     HighWaterStore,

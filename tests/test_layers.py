@@ -32,7 +32,7 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
         frozenset(
             {
                 "errors",
-                "_ratelimit",
+                "ratelimit",
                 "_fastcodec",
                 "_codegen",
                 "_golang",

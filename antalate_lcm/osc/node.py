@@ -29,12 +29,12 @@ from typing import Any
 import httpx
 
 from antalate_lcm import validation
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.config import Config
 from antalate_lcm.errors import AntalateError, ConfigError
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, payload_t, telemetry_t
 from antalate_lcm.node import Context, Node
 from antalate_lcm.osc import wire
+from antalate_lcm.ratelimit import RateLimitedLog
 
 # httpx logs every request at INFO: one line per report per agent would drown an agent's log.
 logging.getLogger("httpx").setLevel(logging.WARNING)

@@ -61,7 +61,7 @@ class Table(Generic[StateT, EventT, ViewT, RowT]):
     process shares it (a thousand agents' machines each indexing their own took 14 MiB).
     """
 
-    __slots__ = ("rows", "_index")
+    __slots__ = ("rows", "_index", "_taken")
 
     def __init__(self, rows: Iterable[RowT]) -> None:
         self.rows: tuple[RowT, ...] = tuple(rows)
@@ -70,6 +70,12 @@ class Table(Generic[StateT, EventT, ViewT, RowT]):
             for source in row.sources:
                 index[(source, row.event)] = (*index.get((source, row.event), ()), row)
         self._index = index
+        taken: dict[StateT, set[EventT]] = {}
+        for state, event in index:
+            taken.setdefault(state, set()).add(event)
+        self._taken: dict[StateT, frozenset[EventT]] = {
+            state: frozenset(events) for state, events in taken.items()
+        }
 
     def __iter__(self) -> Iterator[RowT]:
         return iter(self.rows)
@@ -84,9 +90,10 @@ class Table(Generic[StateT, EventT, ViewT, RowT]):
                 return row
         return None
 
-    def takes(self, state: StateT, event: EventT) -> bool:
-        """Whether a row of `state` takes `event`, guards aside: an event it does not is not worth deriving."""
-        return (state, event) in self._index
+    def events_taken(self, state: StateT) -> frozenset[EventT]:
+        """The events some row of `state` takes, guards aside: an event outside it is not worth deriving
+        (a set the machine tests membership in, so asking costs no call per event)."""
+        return self._taken.get(state, frozenset())
 
     def sources_of(self, event: EventT) -> frozenset[StateT]:
         """Every state some row takes `event` in (e.g. for "accepted in …" rejection messages)."""

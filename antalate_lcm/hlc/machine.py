@@ -771,13 +771,13 @@ class HighLevelControl:
             ]
         if self.state is HlcState.LLC_DOWN:
             return self._regained_events(ap) if self._link_fresh(ap) else []
-        # Only events a row of this state takes are derived (`Table.takes`): the rest would be passed
-        # over by `_fire` anyway, and their reasons cost more than the rest of the tick.
-        state, takes = self.state, self._table.takes
+        # Only events a row of this state takes are derived (`Table.events_taken`): the rest would be
+        # passed over by `_fire` anyway, and their reasons cost more than the rest of the tick.
+        takes = self._table.events_taken(self.state)
         events: list[tuple[HlcEvent, str]] = []
-        if takes(state, HlcEvent.LANDED) and ap.landed:
+        if HlcEvent.LANDED in takes and ap.landed:
             events.append((HlcEvent.LANDED, f"on the ground and disarmed (mode {ap.mode or '?'})"))
-        if takes(state, HlcEvent.PILOT_TAKEOVER) and ap.armed and pilot_in_control(ap):
+        if HlcEvent.PILOT_TAKEOVER in takes and ap.armed and pilot_in_control(ap):
             events.append(
                 (HlcEvent.PILOT_TAKEOVER, f"autopilot left autonomous control (mode {ap.mode or '?'})")
             )
@@ -795,15 +795,15 @@ class HighLevelControl:
                     f"{ap.failsafe}; autopilot switched to {ap.mode or ap.flight_mode.name}",
                 )
             )
-        if ap.flight_mode is FlightMode.LANDING and takes(state, HlcEvent.AUTOPILOT_LAND):
+        if ap.flight_mode is FlightMode.LANDING and HlcEvent.AUTOPILOT_LAND in takes:
             events.append((HlcEvent.AUTOPILOT_LAND, f"autopilot switched to {ap.mode or 'LAND'}"))
-        if ap.flight_mode is FlightMode.RTL and takes(state, HlcEvent.AUTOPILOT_RTL):
+        if ap.flight_mode is FlightMode.RTL and HlcEvent.AUTOPILOT_RTL in takes:
             events.append((HlcEvent.AUTOPILOT_RTL, f"autopilot switched to {ap.mode or 'RTL'}"))
-        if takes(state, HlcEvent.LOW_BATTERY):
+        if HlcEvent.LOW_BATTERY in takes:
             low = self.battery_low_reason()
             if low:
                 events.append((HlcEvent.LOW_BATTERY, low))
-        if takes(state, HlcEvent.ALTITUDE_REACHED) and altitude_reached(
+        if HlcEvent.ALTITUDE_REACHED in takes and altitude_reached(
             ap.alt, self._target_altitude, p.airborne_fraction
         ):
             events.append(

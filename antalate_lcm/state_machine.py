@@ -57,7 +57,7 @@ class Table(Generic[StateT, EventT, ViewT, RowT]):
     """A machine's rows in priority order, indexed by (state, event).
 
     The index means a match reads a few rows rather than the table, and lets a machine skip deriving an
-    event no row of its state takes (`takes`). A module builds its table once and every machine of the
+    event no row of its state takes (`events_taken`). A module builds its table once and every machine of the
     process shares it (a thousand agents' machines each indexing their own took 14 MiB).
     """
 
@@ -79,9 +79,6 @@ class Table(Generic[StateT, EventT, ViewT, RowT]):
 
     def __iter__(self) -> Iterator[RowT]:
         return iter(self.rows)
-
-    def __len__(self) -> int:
-        return len(self.rows)
 
     def match(self, state: StateT, event: EventT, view: ViewT) -> RowT | None:
         """The first row of `state` taking `event` whose guard holds for `view` (the machine), or None."""

@@ -41,7 +41,7 @@ lint: setup
 	$(VENV)/bin/mypy --cache-dir $(VENV)/.mypy_cache
 
 gen: setup
-	$(PY) -m antalate_lcm._codegen
+	$(PY) -m antalate_lcm.tools.codegen
 
 bench: setup
 	$(PY) benchmarks/bus.py

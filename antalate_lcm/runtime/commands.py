@@ -190,7 +190,7 @@ def native_lcm_tool(name: str) -> str:
 
     import lcm
 
-    from antalate_lcm._codegen import lcm_tool
+    from antalate_lcm.tools.codegen import lcm_tool
 
     native = Path(lcm.__file__).resolve().parent.parent / "bin" / name
     if native.is_file() and os.access(native, os.X_OK):

@@ -259,6 +259,7 @@ class Outcome:
             "log": self.log,
             "bus": self.bus,
             "messages": self.messages,
+            "report": self.report or None,
             "timelines": {a: [{"t": t, "state": s} for t, s in tl] for a, tl in self.timelines.items()},
             "node_log": self.node_log or None,
             "analysis": self.analysis.to_json() if self.analysis is not None else None,

@@ -147,7 +147,22 @@ def _raw(path: Path, channel: str) -> list[tuple[float, Any]]:
         (
             'kind = "packet_loss"\nagent = "e-01"\nat = 1\ntopics = ["TELEMETRY"]',
             "fault[0].loss",
-            "delay > 0",
+            "a delay > 0 or a bandwidth",
+        ),
+        (
+            'kind = "packet_loss"\nagent = "e-01"\nat = 1\ntopics = ["TELEMETRY"]\nloss = 0.1\nburst = 100',
+            "fault[0].burst",
+            "a burst with a bandwidth",
+        ),
+        (
+            'kind = "packet_loss"\nagent = "e-01"\nat = 1\ntopics = ["TELEMETRY"]\nbandwidth = 0',
+            "fault[0].bandwidth",
+            "greater than 0",
+        ),
+        (
+            'kind = "freeze"\nagent = "e-01"\nat = 1\nbandwidth = 100',
+            "fault[0].bandwidth",
+            "not a key of a freeze",
         ),
         ('kind = "link_loss"\nagent = []\nat = 1', "fault[0].agent", "at least one agent"),
         ('kind = "vehicle"\nagent = "e-01"\nat = 1', "fault[0].vehicle", "failsafe, pilot_takeover"),
@@ -345,6 +360,29 @@ def test_packet_loss_in_drops_what_the_agent_hears_from_others_only(tmp_path: Pa
     assert len(heard) == 100
 
 
+def test_a_bandwidth_cap_on_what_an_agent_hears_passes_its_bucket_only(tmp_path: Path) -> None:
+    gate, node, _ = _gate_with(
+        tmp_path,
+        {
+            "kind": "packet_loss",
+            "topics": ["TELEMETRY"],
+            "bandwidth": 100.0,
+            "burst": 500.0,
+            "direction": "in",
+        },
+    )
+    heard: list[Any] = []
+    receive = gate.receiving(node, "TELEMETRY", heard.append)
+    size = len(_from("e-02", 0).encode())
+    for seq in range(50):  # at once: the bucket's 500 bytes, and the trickle of 100 bytes/s meanwhile
+        receive(_from("e-02", seq))
+    assert len(heard) in (500 // size, 500 // size + 1), (len(heard), size)
+    heard.clear()
+    for seq in range(50):  # its own telemetry does not come from the network
+        receive(_from("e-01", seq))
+    assert len(heard) == 50
+
+
 def test_link_loss_cuts_both_sides_and_nothing_else(tmp_path: Path) -> None:
     gate, node, operator = _gate_with(tmp_path, {"kind": "link_loss"})
     operator.kind = "operator"
@@ -507,11 +545,11 @@ def lossy(tmp_path_factory: pytest.TempPathFactory) -> tuple[Outcome, SwarmRecor
     """5 agents east at 2 m/s: e-01 lies 30 m east of itself, then loses the operator over the
     RTL; e-02 loses half its telemetry and delays the rest 0.4 s; e-03's battery drops to 30 %
     and drains 60 %/min; e-04's peer sensor reads 5 m long; e-05's position sticks, and a crash
-    with probability 0 spares it."""
+    with probability 0 spares it; e-06's telemetry out is capped at 500 bytes/s."""
     return _fly(
         tmp_path_factory.mktemp("faults-b"),
         "b",
-        5,
+        6,
         "mission_time = 7.0\nseed = 11\n"
         + EAST
         + '[[fault]]\nkind = "byzantine"\noffset = [0.0, 30.0]\nagent = "e-01"\nat = 1.0\nduration = 2.0\n'
@@ -523,7 +561,9 @@ def lossy(tmp_path_factory: pytest.TempPathFactory) -> tuple[Outcome, SwarmRecor
         + 'agent = "e-04"\nat = 1.0\nduration = 3.0\n'
         + '[[fault]]\nkind = "sensor"\nsensor = "position"\nmode = "stuck"\nagent = "e-05"\nat = 1.0\n'
         + "duration = 2.0\n"
-        + '[[fault]]\nkind = "crash"\nagent = "e-05"\nat = 4.0\nprobability = 0.0\n',
+        + '[[fault]]\nkind = "crash"\nagent = "e-05"\nat = 4.0\nprobability = 0.0\n'
+        + '[[fault]]\nkind = "packet_loss"\nagent = "e-06"\nat = 1.0\nduration = 4.0\n'
+        + 'topics = ["TELEMETRY"]\nbandwidth = 500.0\nburst = 200.0\ndirection = "out"\n',
     )
 
 
@@ -537,6 +577,7 @@ def test_the_lossy_flight_comes_back_with_every_fault_recorded(lossy: tuple[Outc
         ("e-03", "battery"),
         ("e-04", "sensor"),
         ("e-05", "sensor"),
+        ("e-06", "packet_loss"),
     }
     assert "link_loss start e-01" in outcome.report
     # a fault whose probability drew no hit is recorded as spared, and spares the agent
@@ -606,6 +647,33 @@ def test_packet_loss_and_delay_on_the_chosen_topic(lossy: tuple[Outcome, SwarmRe
 
     assert 0.39 < lag(lossy2) < 0.8
     assert lag(window("e-02", end + 1.0, end + 3.0)) < 0.2
+
+
+def test_a_bandwidth_cap_holds_the_delivered_rate_under_it(lossy: tuple[Outcome, SwarmRecord]) -> None:
+    """e-06 offers 10 telemetry messages a second (about 840 bytes/s); through a cap of 500 bytes/s
+    (a bucket of 200 bytes) the log receives what the cap lets through, and no more."""
+    _, record = lossy
+    cap = _faults(record, "e-06", "packet_loss")
+    start, end = cap["start"].t, cap["end"].t
+    assert cap["start"].detail["bandwidth"] == 500.0 and cap["start"].detail["burst"] == 200.0
+    sizes: dict[str, list[tuple[float, int]]] = {"e-06": [], "e-03": []}
+    t0 = None
+    for event in lcm.EventLog(record.path, "r"):
+        t0 = event.timestamp if t0 is None else t0
+        agent = event.channel.split("/")[0]
+        if event.channel.endswith("/TELEMETRY") and agent in sizes:
+            sizes[agent].append(((event.timestamp - t0) / 1e6, len(event.data)))
+
+    def rate(agent: str, a: float, b: float) -> float:
+        return sum(n for t, n in sizes[agent] if a <= t < b) / (b - a)
+
+    window = (start + 0.2, end - 0.2)
+    offered = rate("e-03", *window)  # an agent without a cap, the same messages
+    delivered = rate("e-06", *window)
+    assert offered > 700.0, offered
+    # within the cap (what the bucket held at the start may come on top), and not far below it
+    assert 0.75 * 500.0 < delivered <= 500.0 + 200.0 / (window[1] - window[0]), (delivered, offered)
+    assert rate("e-06", end + 0.5, end + 2.0) > 700.0  # the cap ends with the fault
 
 
 def test_a_battery_fault_drops_and_drains_the_sim_battery(lossy: tuple[Outcome, SwarmRecord]) -> None:

@@ -23,7 +23,9 @@ timers run. The behaviors, MC, HLC and configs are the ones that fly; nothing is
   ``land`` or ``brake``), a pilot takeover, a lost link between the HLC and the vehicle, or an
   adapter whose ``state()`` raises, for ``duration`` s (the last two).
 * packet_loss: the agent's messages on ``topics`` are lost with probability ``loss`` and/or
-  delayed ``delay`` s, sent (``out``), received from the network (``in``) or both.
+  delayed ``delay`` s, sent (``out``), received from the network (``in``) or both; with
+  ``bandwidth`` the topics together carry at most that many bytes a second each way (a token
+  bucket of ``burst`` bytes, a policer: a message the bucket cannot pay for is lost).
 
 Each fault is drawn per agent with its ``probability`` from the script's ``seed`` (so a run with
 the same script hits the same agents), and each start, end and spared draw is written to the
@@ -41,6 +43,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from antalate_lcm._ratelimit import TokenBucket
 from antalate_lcm.geo import offset as geo_offset
 from antalate_lcm.geo import wrap_180
 from antalate_lcm.msgs import mc_state_t, payload_t, peer_scan_t, telemetry_t
@@ -100,6 +103,12 @@ class _Active:
     rng: random.Random
     #: A stuck sensor's reading, captured from the first message after the start.
     stuck: Message | None = None
+    #: A bandwidth cap's token buckets (keys "out" and "in": each way has its own).
+    bucket: TokenBucket | None = None
+
+    def over_cap(self, way: str, size: int, now: float) -> bool:
+        """Whether ``size`` bytes more exceed the cap this way now (they are lost then)."""
+        return self.bucket is not None and self.bucket.take(way, now, float(size)) > 0.0
 
 
 @dataclass
@@ -135,7 +144,11 @@ class FaultGate:
         """Fault ``index`` of the script holds ``agent`` from now on (its losses drawn from a stream
         seeded by (seed, fault, agent))."""
         rng = random.Random(f"packets/{seed}/{index}/{agent}")
-        self.active.setdefault(agent, {}).setdefault(step.kind, []).append(_Active(step, index, agent, rng))
+        bucket = None
+        if step.bandwidth is not None:
+            bucket = TokenBucket(step.bandwidth, step.burst if step.burst is not None else step.bandwidth)
+        active = _Active(step, index, agent, rng, bucket=bucket)
+        self.active.setdefault(agent, {}).setdefault(step.kind, []).append(active)
 
     def deactivate(self, step: FaultStep, index: int, agent: str) -> None:
         kinds = self.active.get(agent, {})
@@ -195,6 +208,10 @@ class FaultGate:
             if len(self._truth) > _REMEMBERED:
                 del self._truth[next(iter(self._truth))]
         data = node.seal(msg)
+        for fault in self._of(agent, "packet_loss"):
+            step = fault.step
+            if topic in step.topics and step.direction != "in" and fault.over_cap("out", len(data), node.now):
+                return ok
         if delay > 0.0:
             node.context.executor.call_later(delay, lambda: [bus.publish(b, channel, data) for b in network])
             return ok
@@ -242,6 +259,8 @@ class FaultGate:
                     step = fault.step
                     if topic in step.topics and step.direction != "out":
                         if step.loss > 0.0 and fault.rng.random() < step.loss:
+                            return
+                        if fault.bucket is not None and fault.over_cap("in", len(msg.encode()), node.now):
                             return
                         delay = max(delay, step.delay)
             if delay > 0.0:

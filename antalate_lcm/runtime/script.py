@@ -87,6 +87,10 @@ class FaultStep(BaseModel):
     loss: float = Field(default=0.0, ge=0, le=1, allow_inf_nan=False)
     delay: float = Field(default=0.0, ge=0, le=60, allow_inf_nan=False)
     direction: Literal["in", "out", "both"] = "both"
+    #: Bytes per second the topics may carry together, each way (a token bucket; beyond it a
+    #: message is lost), and the bytes it lets through at once (default: one second's worth).
+    bandwidth: float | None = Field(default=None, gt=0, le=1e9, allow_inf_nan=False)
+    burst: float | None = Field(default=None, gt=0, le=1e9, allow_inf_nan=False)
     #: A fault of the sim vehicle itself (antalate_lcm/autopilot/sim.py's fault injection).
     vehicle: Literal["failsafe", "pilot_takeover", "link_loss", "state_error"] | None = None
     failsafe: Literal["rtl", "land", "brake"] = "rtl"
@@ -106,7 +110,7 @@ _KIND_KEYS: dict[str, set[str]] = {
     "byzantine": {"duration", "offset", "state"},
     "battery": {"level", "drain"},
     "link_loss": {"duration"},
-    "packet_loss": {"duration", "topics", "loss", "delay", "direction"},
+    "packet_loss": {"duration", "topics", "loss", "delay", "direction", "bandwidth", "burst"},
     "vehicle": {"duration", "vehicle", "failsafe"},
 }
 #: Vehicle faults that happen once (the others last ``duration`` s).
@@ -155,8 +159,10 @@ def _check_fault(f: FaultStep) -> tuple[str, str] | None:
         unknown = next((t for t in f.topics if t not in TOPICS), None)
         if unknown is not None:
             return "topics", f"topics of {', '.join(TOPICS)} (got {unknown!r})"
-        if f.loss == 0.0 and f.delay == 0.0:
-            return "loss", "a loss probability > 0 or a delay > 0"
+        if f.loss == 0.0 and f.delay == 0.0 and f.bandwidth is None:
+            return "loss", "a loss probability > 0, a delay > 0 or a bandwidth (bytes/s)"
+        if f.burst is not None and f.bandwidth is None:
+            return "burst", "a burst with a bandwidth (bytes/s)"
     if isinstance(f.agent, tuple) and not f.agent:
         return "agent", "at least one agent"
     return None

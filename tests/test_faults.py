@@ -11,8 +11,10 @@ messages against the exact 99 % binomial interval.
 from __future__ import annotations
 
 import bisect
+import json
 import math
 import statistics
+import time
 from pathlib import Path
 from typing import Any
 
@@ -210,10 +212,6 @@ def test_faults_on_unknown_agents_or_elsewhere_fail_before_anything_flies(tmp_pa
     script = parse_script({"mission_time": 6, "fault": [{**crash, "agent": "e-01"}]}, "s.toml")
     with pytest.raises(AntalateError, match=r"needs --headless"):
         run(Experiment(str(config), agents=3, script=script, output=str(out), headless=False))
-    udpm = tmp_path / "udpm.toml"  # never opened: the check comes first
-    udpm.write_text(CONFIG.replace('"memq://"', '"udpm://239.255.76.67:7667?ttl=0"'))
-    with pytest.raises(AntalateError, match=r"needs the agents in this process \(--processes 1\)"):
-        run(Experiment(str(udpm), agents=3, processes=2, script=script, output=str(out)))
     mavlink = _write(tmp_path / "mavlink.toml", CONFIG.replace('autopilot = "sim"', 'autopilot = "mavlink"'))
     for kind, keys in (("battery", {"level": 10.0}), ("vehicle", {"vehicle": "failsafe"})):
         fault = {"kind": kind, "agent": "e", "at": 1.0, **keys}
@@ -727,6 +725,101 @@ def test_lossy_broadcasts_reach_each_agent_with_the_configured_probability(tmp_p
     assert offered >= 15 and lo <= heard <= hi, summaries
     assert "broadcast: e-01 heard" in outcome.report
     assert "broadcast reception e-02: heard" in format_summary(analyze_log(record.path))
+
+
+def test_only_signed_fault_records_are_believed(tmp_path: Path) -> None:
+    """With a swarm key, a forged "mission start" (or "crash") record on the LAN is dropped: it
+    would start an agent process's faults early, or excuse an agent the operator should wait for."""
+    from antalate_lcm.msgs import payload_t
+    from antalate_lcm.runtime.fault_processes import read_record
+    from antalate_lcm.security import generate_key
+    from antalate_lcm.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE
+
+    config = load_config(
+        _write(tmp_path / "k.toml", CONFIG + f'[security]\nswarm_key = "{generate_key()}"\n')
+    )
+    node = Node(config.with_agent_name("faults-0of2"), Context(Bus({"lan": "memq://"}), Executor()))
+    record = {"agent": "operator", "kind": "mission", "event": "start", "at": 0.0}
+
+    def message(seq: int, content_type: str = FAULT_CONTENT_TYPE, data: bytes | None = None) -> payload_t:
+        msg = payload_t()
+        msg.content_type = content_type
+        msg.data = data if data is not None else json.dumps(record).encode()
+        msg.size = len(msg.data)
+        msg.header.agent, msg.header.seq = "faults", seq
+        msg.header.utime = int(time.time() * 1e6)
+        return msg
+
+    forged = message(1)
+    assert read_record(node, payload_t.decode(forged.encode()), FAULT_CHANNEL) is None
+    signed = payload_t.decode(node.seal(message(2)))
+    assert read_record(node, signed, FAULT_CHANNEL) == record
+    other = payload_t.decode(node.seal(message(3, content_type="text/plain")))
+    assert read_record(node, other, FAULT_CHANNEL) is None
+    garbage = payload_t.decode(node.seal(message(4, data=b"{not json")))
+    assert read_record(node, garbage, FAULT_CHANNEL) is None
+
+
+@pytest.mark.netns
+def test_faults_across_processes(netns, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """4 agents over 2 processes (udpm multicast in a namespace, signed with a swarm key): each
+    agent process injects the faults of its own agents, timed from the operator's record of the
+    mission's start, and their records reach the log; the operator waits no more for the crashed
+    agent (in the other process)."""
+    import sys
+
+    from antalate_lcm.security import generate_key
+    from tests.netns import child_env
+
+    udpm = CONFIG.replace('"memq://"', '"udpm://239.255.76.67:7667?ttl=0"')
+    config = _write(tmp_path / "swarm.toml", udpm + f'[security]\nswarm_key = "{generate_key()}"\n')
+    script = _write(
+        tmp_path / "s.toml",
+        "mission_time = 5.0\nseed = 3\n"
+        + EAST
+        + '[[fault]]\nkind = "crash"\nagent = "e-01"\nat = 1.0\n'
+        + '[[fault]]\nkind = "freeze"\nagent = "e-03"\nat = 1.0\nduration = 2.0\n'
+        + '[[fault]]\nkind = "sensor"\nsensor = "position"\nmode = "bias"\noffset = [20.0, 0.0]\n'
+        + 'agent = "e-04"\nat = 2.0\nduration = 2.0\n'
+        + '[[fault]]\nkind = "freeze"\nagent = "e-02"\nat = 1.0\nprobability = 0.0\n',
+    )
+    log = tmp_path / "f.lcm"
+    argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", "WARNING", "run", str(config)]
+    argv += ["--agents", "4", "--processes", "2", "--headless", "--script", str(script), "-o", str(log)]
+    env = child_env()
+    env["XDG_STATE_HOME"] = str(tmp_path / "state")  # the swarm key's replay memory
+    flight = netns.run(argv, timeout=180, cwd=tmp_path, env=env)
+    assert flight.returncode == 0, flight.stdout + flight.stderr
+    assert "(lost to a fault of the script)" in flight.stdout and "fault: crash start e-01" in flight.stdout
+    record = read_log(log)
+    (mission,) = [f for f in record.faults if f.kind == "mission"]
+    assert (mission.agent, mission.event) == ("operator", "start")
+    got = sorted((f.agent, f.kind, f.event) for f in record.faults if f.kind != "mission")
+    assert got == [
+        ("e-01", "crash", "start"),
+        ("e-02", "freeze", "spared"),
+        ("e-03", "freeze", "end"),
+        ("e-03", "freeze", "start"),
+        ("e-04", "sensor", "end"),
+        ("e-04", "sensor", "start"),
+    ], got
+    for f in record.faults:  # at the script's time after the operator's mission start
+        if f.kind == "mission":
+            continue
+        due = float(str(f.detail["at"]))
+        assert due - 0.05 <= f.t - mission.t <= due + 0.6, (f, mission)
+    crash = _faults(record, "e-01", "crash")["start"]
+    assert crash.t - 1.0 < record.agents["e-01"].last_heard <= crash.t + 0.1
+    freeze = _faults(record, "e-03", "freeze")
+    times = [s.t for s in record.agents["e-03"].telemetry]
+    assert not [t for t in times if freeze["start"].t + 0.1 < t < freeze["end"].t - 0.1]
+    bias = _faults(record, "e-04", "sensor")
+    e4, e2 = _ne(record, "e-04"), _ne(record, "e-02")  # e-02 and e-04 fly east one above the other
+    during = _gap(e4, e2, 1, bias["start"].t + 0.3, bias["end"].t - 0.3)
+    before = _gap(e4, e2, 1, bias["start"].t - 1.0, bias["start"].t - 0.1)
+    assert during - before == pytest.approx(20.0, abs=1.5)
+    for agent in ("e-02", "e-03", "e-04"):
+        assert record.agents[agent].mc_states[-1].state == "STANDBY"
 
 
 @pytest.mark.netns

@@ -490,9 +490,9 @@ class FaultInjector(Node):
         msg.size, msg.data = len(data), data
         self._seq += 1
         msg.header.utime = int(self.wallclock() * 1_000_000)
-        msg.header.agent = "faults"
+        msg.header.agent = self.agent  # one sender per process: each has its own seq
         msg.header.seq = self._seq
-        self.context.bus.publish(self._bus, FAULT_CHANNEL, msg.encode())
+        self.context.bus.publish(self._bus, FAULT_CHANNEL, self.seal(msg))
 
     def summarize(self) -> None:
         """Write what each agent heard of the broadcasts (at the end of the script: once the nodes

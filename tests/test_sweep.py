@@ -126,6 +126,18 @@ def test_a_sweep_of_dovrat_swarm_over_two_parameters_and_five_seeds(
     assert [r["run"] for r in rows] == [str(r["run"]) for r in table]
     assert float(rows[3]["radius_max"]) == pytest.approx(table[3]["radius_max"], rel=1e-5)
     print(f"sweep of 20 runs: {took:.1f} s")
+    # the plotting example of docs/experiments.md draws it
+    import subprocess
+    import sys
+
+    plot = Path(__file__).resolve().parent.parent / "examples" / "sweep" / "plot_sweep.py"
+    png = tmp_path / "sweep.png"
+    argv = [sys.executable, str(plot), str(out / "results.csv"), "--x", speed, "--lines", turn]
+    done = subprocess.run(
+        [*argv, "--metric", "radius_max", "-o", str(png)], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == f"{png}: radius_max of 20 runs" and png.stat().st_size > 10_000
 
 
 def test_a_failed_or_timed_out_run_is_a_failed_row_and_the_sweep_goes_on(tmp_path: Path) -> None:

@@ -137,7 +137,7 @@ def metrics_row(analysis: dict[str, Any] | None) -> dict[str, Any]:
         radius_above_after=extent("radius_above", "after"),
         drift_error_deg=sum(abs(d["error"]) for d in drifts) / len(drifts) if drifts else None,
         drift_speed=sum(d["speed"] for d in drifts) / len(drifts) if drifts else None,
-        faults=sum(1 for f in faults if f["event"] == "start"),
+        faults=sum(1 for f in faults if f["event"] == "start" and f["kind"] != "mission"),
         broadcast_offered=sum(int(s["offered"]) for s in summaries) if summaries else None,
         broadcast_heard=sum(int(s["heard"]) for s in summaries) if summaries else None,
     )

@@ -13,6 +13,7 @@ from __future__ import annotations
 import bisect
 import json
 import math
+import re
 import statistics
 import time
 from pathlib import Path
@@ -179,6 +180,13 @@ def _raw(path: Path, channel: str) -> list[tuple[float, Any]]:
             "fault[0].duration",
             "happens once",
         ),
+        ('kind = "crash"\nagent = "e-01"\nat = 3\nat_latest = 2', "fault[0].at_latest", "from at = 3 on"),
+        ('kind = "crash"\nagent = "e-01"\nat = 3\nat_latest = 6', "fault[0].at_latest", "below mission_time"),
+        (
+            'kind = "crash"\nagent = "e-01"\nat = 1\nsince = "takeoff"',
+            "fault[0].since",
+            "'mission' or 'start'",
+        ),
         (
             'kind = "link_loss"\nagent = "e-01"\nat = 1\nlevel = 3',
             "fault[0].level",
@@ -280,6 +288,26 @@ def test_broadcast_reception_is_per_message_per_agent_and_reproducible() -> None
     assert [one.admit(k) for k in keys[:50]] == first and one.offered == 50
     with pytest.raises(ValueError, match=r"in \[0, 1\]"):
         BroadcastReception(1.5, 1, "e-01")
+
+
+def test_random_fault_times_are_drawn_per_agent_from_the_seed() -> None:
+    def script(seed: int, **extra: Any) -> Script:
+        fault = {"kind": "crash", "agent": "*", "at": 2.0, "probability": 0.5, **extra}
+        return Script.model_validate({"mission_time": 9.0, "seed": seed, "fault": [fault]})
+
+    names = [f"a-{i:03d}" for i in range(1, 1001)]
+    drawn = plan(script(4, at_latest=6.0), names)
+    times = [p.at for p in drawn]
+    assert 2.0 <= min(times) < 2.1 and 5.9 < max(times) <= 6.0
+    assert statistics.mean(times) == pytest.approx(4.0, abs=0.15)  # uniform: sd of the mean 0.04
+    assert [p.at for p in plan(script(4, at_latest=6.0), names)] == times
+    assert [p.at for p in plan(script(5, at_latest=6.0), names)] != times
+    # who is hit does not depend on when: the same agents as with a fixed time
+    assert [p.hit for p in drawn] == [p.hit for p in plan(script(4), names)]
+    assert {p.at for p in plan(script(4), names)} == {2.0}
+    # a run may be longer than its mission: from the start of the run, any time is fine
+    late = {"kind": "crash", "agent": "*", "at": 30.0, "since": "start"}
+    assert parse_script({"mission_time": 5.0, "fault": [late]}, "s.toml").fault[0].at == 30.0
 
 
 def test_fault_probability_hits_agents_reproducibly() -> None:
@@ -536,6 +564,41 @@ def test_the_plot_marks_the_faults_on_their_agents(dead_and_frozen: tuple[Outcom
     assert set(marks) == {"crash", "freeze", "sensor position", "byzantine", "vehicle failsafe"}
     crash = _faults(record, "e-01", "crash")["start"]
     assert marks["crash"] == (crash.t, pytest.approx(0.35))  # on e-01's row, at its time
+
+
+def test_faults_before_the_mission_and_at_random_times(tmp_path: Path) -> None:
+    """e-01 crashes as the run starts, on the ground: the operator takes off the others and waits
+    no more for it; e-02 freezes from 0.5 s of the run for 1 s, while the swarm takes off; e-03's
+    position is biased from a time drawn in [0.5, 1.5] s of the mission."""
+    script_text = (
+        "mission_time = 3.0\nseed = 6\n"
+        + EAST
+        + '[[fault]]\nkind = "crash"\nagent = "e-01"\nat = 0.0\nsince = "start"\n'
+        + '[[fault]]\nkind = "freeze"\nagent = "e-02"\nat = 0.5\nduration = 1.0\nsince = "start"\n'
+        + '[[fault]]\nkind = "sensor"\nsensor = "position"\nmode = "bias"\noffset = [20.0, 0.0]\n'
+        + 'agent = "e-03"\nat = 0.5\nat_latest = 1.5\nduration = 1.0\n'
+    )
+    outcome, record = _fly(tmp_path, "early", 3, script_text)
+    assert outcome.code == 0, outcome.report
+    assert re.search(r"fault: crash start e-01 at 0\.[01] s of the run", outcome.report), outcome.report
+    states = {a: [c.state for c in rec.mc_states] for a, rec in record.agents.items()}
+    assert "TAKEOFF" not in states["e-01"]  # it never left the ground
+    assert states["e-02"][-1] == states["e-03"][-1] == "STANDBY" and "MISSION" in states["e-02"]
+    mission = max(
+        next(c.t for c in record.agents[a].mc_states if c.state == "MISSION") for a in ("e-02", "e-03")
+    )
+    crash = _faults(record, "e-01", "crash")["start"]
+    freeze = _faults(record, "e-02", "freeze")
+    assert crash.t < freeze["start"].t < mission and crash.detail["since"] == "start"
+    assert freeze["end"].t - freeze["start"].t == pytest.approx(1.0, abs=0.2)
+    # the drawn time is plan()'s, counted from the mission's start, and recorded
+    (drawn,) = [
+        p.at for p in plan(load_script(tmp_path / "early.toml"), ["e-01", "e-02", "e-03"]) if p.index == 2
+    ]
+    bias = _faults(record, "e-03", "sensor")["start"]
+    assert 0.5 <= drawn <= 1.5 and bias.detail["at"] == pytest.approx(drawn, abs=0.1)
+    assert bias.detail["at_latest"] == 1.5
+    assert drawn - 0.05 <= bias.t - mission <= drawn + 0.6
 
 
 @pytest.fixture(scope="module")

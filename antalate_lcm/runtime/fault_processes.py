@@ -151,7 +151,7 @@ class FaultRelay(FaultInjector):
         at = record.get("at")
         since = float(at) if isinstance(at, int | float) else 0.0
         label = " ".join(x for x in (step.kind, step.sensor, step.vehicle) if x)
-        self.events.append((since, agent, label, event))
+        self.events.append((since, agent, label, event, step.since))
         if event == "start":
             if kind == "crash" or (kind in ("freeze", "link_loss") and step.duration == 0.0):
                 self.excuse(agent)

@@ -117,6 +117,8 @@ class _Planned:
     step: FaultStep
     agent: str
     hit: bool
+    #: When it comes (s since its ``since``): the step's ``at``, or drawn up to its ``at_latest``.
+    at: float = 0.0
     started: bool = False
     ended: bool = False
 
@@ -349,7 +351,10 @@ def plan(script: Script, agents: list[str]) -> list[_Planned]:
     for i, step in enumerate(script.fault):
         for agent in step.agents(agents):
             hit = random.Random(f"fault/{script.seed}/{i}/{agent}").random() < step.probability
-            out.append(_Planned(i, step, agent, hit))
+            at = step.at
+            if step.at_latest is not None:  # a stream of its own: the hits stay those of a fixed time
+                at = random.Random(f"fault-at/{script.seed}/{i}/{agent}").uniform(step.at, step.at_latest)
+            out.append(_Planned(i, step, agent, hit, at))
     return out
 
 
@@ -385,28 +390,32 @@ class FaultInjector(Node):
         self._drains: dict[str, float] = {}
         self._last_drain = 0.0
         self._seq = 0
-        #: What happened, in order: (s after MISSION, agent, kind, event).
-        self.events: list[tuple[float, str, str, str]] = []
+        #: When this node started (the clock of the faults with since = "start").
+        self.run_start = 0.0
+        #: What happened, in order: (s since its origin, agent, kind, event, origin: mission or start).
+        self.events: list[tuple[float, str, str, str, str]] = []
 
     def on_start(self) -> None:
+        self.run_start = self.now
         self.create_timer(_STEP, self._step)
 
     def _step(self) -> None:
-        start = self.mission_start()
-        if start is None:
-            return
-        since = self.now - start
+        mission = self.mission_start()
         for p in self.planned:
             if p.ended:
                 continue
-            if not p.started and since >= p.step.at:
+            start = self.run_start if p.step.since == "start" else mission
+            if start is None:
+                continue
+            since = self.now - start
+            if not p.started and since >= p.at:
                 p.started = True
                 if not p.hit:
                     p.ended = True
                     self._record(since, p, "spared")
                     continue
                 self._begin(since, p)
-            elif p.started and p.step.duration > 0.0 and since >= p.step.at + p.step.duration:
+            elif p.started and p.step.duration > 0.0 and since >= p.at + p.step.duration:
                 self._end(since, p)
         self._drain()
 
@@ -468,7 +477,7 @@ class FaultInjector(Node):
         step = p.step
         detail = step.model_dump(exclude_defaults=True, exclude={"kind", "agent", "at"})
         label = " ".join(x for x in (step.kind, step.sensor, step.vehicle) if x)
-        self.events.append((since, p.agent, label, event))
+        self.events.append((since, p.agent, label, event, step.since))
         log.info(
             "fault %s %s of %s at %.2f s of the mission %s", step.kind, event, p.agent, since, detail or ""
         )
@@ -512,7 +521,7 @@ class FaultInjector(Node):
     def report(self) -> list[str]:
         """Lines for the run's report: each fault that happened, and what each agent heard."""
         lines = [
-            f"fault: {kind} {event} {agent} at {t:.1f} s of the mission"
-            for t, agent, kind, event in self.events
+            f"fault: {kind} {event} {agent} at {t:.1f} s of the {'mission' if origin == 'mission' else 'run'}"
+            for t, agent, kind, event, origin in self.events
         ]
         return lines + broadcast_report(self.gate)

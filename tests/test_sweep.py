@@ -189,6 +189,36 @@ def test_an_interrupted_sweep_keeps_its_rows(tmp_path: Path) -> None:
     assert not (out / "runs" / "0002").exists()
 
 
+def test_ctrl_c_stops_the_sweep_with_its_rows_written(tmp_path: Path) -> None:
+    """SIGINT to ``antalate sweep`` (as Ctrl-C on its terminal): the runs in flight stop in order and
+    are rows, the exit status is 130."""
+    import signal
+    import subprocess
+    import sys
+
+    spec = _files(
+        tmp_path,
+        'config = "swarm.toml"\nagents = 2\nseeds = [1, 2, 3]\n[parameters]\n"script.mission_time" = [30.0]\n',
+    )
+    out = tmp_path / "r"
+    argv = [sys.executable, "-m", "antalate_lcm.cli", "sweep", str(spec), "-o", str(out), "-j", "1"]
+    sweep = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not (out / "runs" / "0000" / "output.log").exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        time.sleep(1.0)
+        sweep.send_signal(signal.SIGINT)
+        stdout, stderr = sweep.communicate(timeout=60)
+    finally:
+        if sweep.poll() is None:
+            sweep.kill()
+    assert sweep.returncode == 130, stdout + stderr
+    assert "1 of 3 runs, 1 failed (interrupted: the rows so far are written)" in stdout
+    rows = json.loads((out / "results.json").read_text())
+    assert [(r["run"], r["status"]) for r in rows] == [(0, "interrupted")]
+
+
 @pytest.mark.parametrize(
     ("spec", "key", "what"),
     [
@@ -347,6 +377,39 @@ def test_parallel_slots_get_their_own_udpm_ports(tmp_path: Path) -> None:
     check_slots(sweep, 1)
     with pytest.raises(AntalateError, match=r"parallel slot 1 would share port 7767 with slot 0's bus 'b'"):
         check_slots(sweep, 2)
+
+
+@pytest.mark.netns
+def test_parallel_runs_on_udpm_never_hear_each_other(netns, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """Two runs at once on one multicast group (a namespace): each slot on its own port, each log
+    holds its own run's agents and faults only."""
+    import sys
+
+    from tests.netns import child_env
+
+    udpm = CONFIG.replace('lan = "memq://"', 'lan = "udpm://239.255.76.67:7667?ttl=0"')
+    spec = _files(
+        tmp_path,
+        'config = "swarm.toml"\nscript = "script.toml"\nagents = 2\nseeds = [1, 2]\n',
+        config=udpm + "[security]\ninsecure = true\n",
+        script='mission_time = 2.0\n[[fault]]\nkind = "freeze"\nagent = "d-02"\nat = 0.5\nduration = 1.0\n',
+    )
+    out = tmp_path / "r"
+    argv = [sys.executable, "-m", "antalate_lcm.cli", "sweep", str(spec), "-o", str(out), "-j", "2"]
+    done = netns.run(argv, timeout=180, cwd=tmp_path, env=child_env())
+    assert done.returncode == 0, done.stdout + done.stderr
+    ports = []
+    for run in ("0000", "0001"):
+        outcome = json.loads((out / "runs" / run / "outcome.json").read_text())
+        analysis = outcome["analysis"]
+        assert analysis["agents"] == ["d-01", "d-02"]
+        assert [(f["agent"], f["kind"], f["event"]) for f in analysis["faults"]] == [
+            ("d-02", "freeze", "start"),
+            ("d-02", "freeze", "end"),
+        ]
+        assert "OK: 2 agent(s)" in outcome["report"]
+        ports.append(read_toml_file(out / "runs" / run / "config.toml")["buses"]["lan"])
+    assert sorted(ports) == ["udpm://239.255.76.67:7667?ttl=0", "udpm://239.255.76.67:7767?ttl=0"]
 
 
 def test_metrics_of_a_run_without_analysis_are_empty_and_the_bar_draws_in_place() -> None:

@@ -349,6 +349,11 @@ def test_expansion_order_and_the_documents_of_a_run(tmp_path: Path) -> None:
     assert config["hlc"]["autopilot_params"]["tau"] == 0.25
     assert config["bma"][0]["behaviors"][0]["params"]["turn_direction"] == -1
     assert script == {"mission_time": 30.0, "broadcast": {"reception": 0.5}, "seed": 0}
+    assert sweep.run_timeout(sweep.points[0]) == 30.0 + 180.0 + 60.0  # its script's mission and timeout
+    longer = load_sweep(
+        _files(tmp_path, 'config = "swarm.toml"\n[parameters]\n"script.mission_time" = [5.0, 500.0]\n')
+    )
+    assert [longer.run_timeout(p) for p in longer.points] == [245.0, 740.0]
     assert sweep.config_doc["hlc"]["autopilot_params"] == {
         "climb_rate": 5.0,
         "descent_rate": 4.0,

@@ -188,6 +188,8 @@ class _Run:
     started: float
     out: IO[bytes]
     err: IO[bytes]
+    #: s it may take before the sweep stops it.
+    timeout: float
     stopping: str = ""
     stop_sent: float = 0.0
 
@@ -283,7 +285,7 @@ def _start(sweep: Sweep, point: Point, out_dir: Path, slot: int, jobs: int) -> _
         start_new_session=True,  # a Ctrl-C reaches the sweep, which stops its runs in order
         preexec_fn=_die_with_parent,
     )
-    return _Run(point, folder, slot, proc, time.monotonic(), out, err)
+    return _Run(point, folder, slot, proc, time.monotonic(), out, err, sweep.run_timeout(point))
 
 
 def _finish(run: _Run, code: int, out_dir: Path) -> dict[str, Any]:
@@ -414,7 +416,6 @@ def run_sweep(
     result = SweepResult(table)
     pending = list(sweep.points)
     running: dict[int, _Run] = {}  # by slot
-    timeout = sweep.run_timeout()
     try:
         while pending or running:
             if stop() and not result.interrupted:
@@ -431,8 +432,8 @@ def run_sweep(
             for slot, run in list(running.items()):
                 code = run.proc.poll()
                 if code is None:
-                    if not run.stopping and now - run.started > timeout:
-                        _stop(run, f"timed out after {timeout:.0f} s (the sweep's timeout)")
+                    if not run.stopping and now - run.started > run.timeout:
+                        _stop(run, f"timed out after {run.timeout:.0f} s (the sweep's timeout)")
                     elif run.stopping and now - run.stop_sent > STOP_GRACE:
                         run.proc.kill()
                     continue

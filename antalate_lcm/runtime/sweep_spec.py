@@ -89,10 +89,11 @@ class Sweep:
     def parameters(self) -> list[str]:
         return list(self.spec.parameters)
 
-    def run_timeout(self) -> float:
+    def run_timeout(self, point: Point) -> float:
+        """s the run of ``point`` may take: the spec's timeout, else what its own script allows."""
         if self.spec.timeout is not None:
             return self.spec.timeout
-        script = parse_script(self.script_doc, self.source)
+        script = parse_script(self.documents(point)[1], self.source)
         return script.mission_time + script.timeout + RUN_MARGIN
 
     def documents(self, point: Point) -> tuple[dict[str, Any], dict[str, Any]]:

@@ -823,6 +823,62 @@ def test_only_signed_fault_records_are_believed(tmp_path: Path) -> None:
     assert read_record(node, garbage, FAULT_CHANNEL) is None
 
 
+def test_the_operators_process_acts_on_the_agent_processes_records(tmp_path: Path) -> None:
+    """With the agents elsewhere, the operator's side reads their records: a crash (or a freeze for
+    good) excuses the agent, a lost link cuts the operator's side until its end; a record that
+    names no fault of the script, or the wrong kind, changes nothing."""
+    from antalate_lcm.msgs import payload_t
+    from antalate_lcm.runtime.fault_processes import FaultRelay
+    from antalate_lcm.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE
+
+    config = load_config(_write(tmp_path / "swarm.toml", CONFIG))
+    script = Script.model_validate(
+        {
+            "mission_time": 9.0,
+            "fault": [
+                {"kind": "link_loss", "agent": "e-02", "at": 1.0, "duration": 2.0},
+                {"kind": "crash", "agent": "e-01", "at": 1.0},
+                {"kind": "freeze", "agent": "e-03", "at": 1.0},
+            ],
+        }
+    )
+    excused: list[str] = []
+    relay = FaultRelay(
+        config.with_agent_name("faults"),
+        Context(Bus({"lan": "memq://"}), Executor()),
+        script=script,
+        gate=FaultGate(),
+        bus="lan",
+        excuse=excused.append,
+    )
+
+    def hear(**record: Any) -> None:
+        msg = payload_t()
+        msg.content_type = FAULT_CONTENT_TYPE
+        msg.data = json.dumps(record).encode()
+        msg.size = len(msg.data)
+        relay._heard(FAULT_CHANNEL, msg)
+
+    hear(agent="e-02", kind="link_loss", event="start", at=1.0, fault=0)
+    assert relay.gate.link_lost("e-02") and excused == []  # it comes back: still waited for
+    hear(agent="e-01", kind="crash", event="start", at=1.0, fault=1)
+    hear(agent="e-03", kind="freeze", event="start", at=1.0, fault=2)
+    assert excused == ["e-01", "e-03"]
+    hear(agent="e-04", kind="crash", event="start", at=1.0, fault=7)  # no such fault
+    hear(agent="e-04", kind="crash", event="start", at=1.0, fault=0)  # fault 0 is no crash
+    hear(agent="e-04", kind="crash", event="start", at=1.0, fault="1")
+    hear(agent="operator", kind="mission", event="start", at=0.0)
+    assert excused == ["e-01", "e-03"]
+    hear(agent="e-02", kind="link_loss", event="end", at=3.0, fault=0)
+    assert not relay.gate.link_lost("e-02")
+    assert relay.report() == [
+        "fault: link_loss start e-02 at 1.0 s of the mission",
+        "fault: crash start e-01 at 1.0 s of the mission",
+        "fault: freeze start e-03 at 1.0 s of the mission",
+        "fault: link_loss end e-02 at 3.0 s of the mission",
+    ]
+
+
 @pytest.mark.netns
 def test_faults_across_processes(netns, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """4 agents over 2 processes (udpm multicast in a namespace, signed with a swarm key): each

@@ -425,5 +425,9 @@ def test_metrics_of_a_run_without_analysis_are_empty_and_the_bar_draws_in_place(
     bar.draw(running=2)
     bar.close()
     text = stream.getvalue()
-    assert text.startswith("\r[#######.......................] 1/4 runs, 2 running, 1 failed, 0:00")
-    assert "to go)" in text and text.endswith("\n") and "sweep:" not in text
+    # a failed run is a line above the bar; an ok one only moves the bar
+    assert text.startswith("\rsweep: 1/4 run 0 (a=1 seed=0) failed: x in 1.0 s\x1b[K\n")
+    assert "\r[#######.......................] 1/4 runs, 2 running, 1 failed, 0:00" in text
+    bar.ended({"status": "ok", "run": 1, "reason": "", "wall_s": 1.0}, "a=1 seed=1")
+    assert stream.getvalue() == text
+    assert "to go)" in text and text.endswith("\n")

@@ -348,13 +348,13 @@ class Progress:
     def ended(self, row: dict[str, Any], label: str) -> None:
         self.done += 1
         self.failed += row["status"] != "ok"
+        what = "ok" if row["status"] == "ok" else f"{row['status']}: {row['reason']}"
+        line = f"sweep: {self.done}/{self.total} run {row['run']} ({label}) {what} in {row['wall_s']:.1f} s"
         if not self.tty:
-            what = "ok" if row["status"] == "ok" else f"{row['status']}: {row['reason']}"
-            print(
-                f"sweep: {self.done}/{self.total} run {row['run']} ({label}) {what} in {row['wall_s']:.1f} s",
-                file=self.stream,
-                flush=True,
-            )
+            print(line, file=self.stream, flush=True)
+        elif row["status"] != "ok":  # above the bar, which the next draw puts back
+            self.stream.write("\r" + line + "\x1b[K\n")
+            self.stream.flush()
 
     def draw(self, running: int = 0) -> None:
         if not self.tty:
@@ -373,6 +373,10 @@ class Progress:
         if self.tty:
             self.stream.write("\n")
             self.stream.flush()
+
+
+def _count(n: int, what: str) -> str:
+    return f"{n} {what}" + ("" if n == 1 else "s")
 
 
 def _mmss(seconds: float) -> str:
@@ -475,8 +479,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     try:
         progress = Progress(len(sweep.points), sys.stderr)
         print(
-            f"sweep: {len(sweep.points)} runs ({len(sweep.points) // len(sweep.seeds)} points x "
-            f"{len(sweep.seeds)} seeds), {jobs} at a time, into {out_dir}",
+            f"sweep: {len(sweep.points)} runs ({_count(len(sweep.points) // len(sweep.seeds), 'point')} x "
+            f"{_count(len(sweep.seeds), 'seed')}), {jobs} at a time, into {out_dir}",
             file=sys.stderr,
             flush=True,
         )

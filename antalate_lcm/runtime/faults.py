@@ -43,11 +43,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from antalate_lcm._ratelimit import TokenBucket
 from antalate_lcm.geo import offset as geo_offset
 from antalate_lcm.geo import wrap_180
 from antalate_lcm.msgs import mc_state_t, payload_t, peer_scan_t, telemetry_t
 from antalate_lcm.node import Context, Node
+from antalate_lcm.ratelimit import TokenBucket
 from antalate_lcm.runtime.script import VEHICLE_EVENTS, FaultStep, Script
 from antalate_lcm.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE, OPERATOR_INPUTS, Message
 from antalate_lcm.vocabulary import McState

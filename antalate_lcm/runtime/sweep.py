@@ -144,7 +144,7 @@ def metrics_row(analysis: dict[str, Any] | None) -> dict[str, Any]:
     return row
 
 
-class Table:
+class ResultsTable:
     """``results.csv`` and ``results.json``, rewritten whole after each row (a temporary file renamed
     over the old one): a reader, or an interrupted sweep, always finds a complete table."""
 
@@ -387,7 +387,7 @@ def _mmss(seconds: float) -> str:
 # ----------------------------------------------------------------------------- the sweep
 @dataclass
 class SweepResult:
-    table: Table
+    table: ResultsTable
     interrupted: bool = False
     rows: list[dict[str, Any]] = field(default_factory=list)
 
@@ -415,7 +415,7 @@ def run_sweep(
     stop: Callable[[], bool] = lambda: False,
 ) -> SweepResult:
     """Run every point, ``jobs`` at a time, until done or ``stop()``; the table is on disk throughout."""
-    table = Table(out_dir, columns(sweep))
+    table = ResultsTable(out_dir, columns(sweep))
     table.write()
     result = SweepResult(table)
     pending = list(sweep.points)

@@ -20,21 +20,13 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from pydantic import BaseModel, ConfigDict
 
 from antalate_lcm.bus import Subscription
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.errors import BehaviorError as BehaviorError
 from antalate_lcm.executor import Timer
 from antalate_lcm.peers import PeerTable
 from antalate_lcm.topics import Message
 
 if TYPE_CHECKING:
     from antalate_lcm.node import Node
-
-
-class BehaviorError(AntalateError):
-    """Raise this for an expected failure; its message alone is reported (no exception type name).
-
-    E.g. ``raise BehaviorError("ffmpeg not found: apt-get install ffmpeg")`` shows up in the
-    operator console as exactly that, which is more useful than ``FileNotFoundError: [Errno 2] ...``.
-    """
 
 
 class NoParams(BaseModel):

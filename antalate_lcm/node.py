@@ -27,11 +27,12 @@ from typing import Any, Protocol
 
 from antalate_lcm import validation
 from antalate_lcm._fastcodec import encode as fast_encode
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.bus import Bus, Subscription
 from antalate_lcm.config import Config
 from antalate_lcm.errors import AntalateError
+from antalate_lcm.errors import InsecureBus as InsecureBus
 from antalate_lcm.executor import Executor, Timer
+from antalate_lcm.ratelimit import RateLimitedLog
 from antalate_lcm.security import (
     Authenticator,
     HighWaterStore,
@@ -56,10 +57,6 @@ INPROC_BUS = "_inproc"
 _PHASES = 1000
 #: s between the reminders an insecure node logs.
 INSECURE_REMINDER = 60.0
-
-
-class InsecureBus(AntalateError):
-    """A node would consume an internal topic from a network-reachable bus with no swarm key."""
 
 
 class Interference(Protocol):

@@ -187,7 +187,7 @@ def make_app(
     )
 
 
-async def until(pilot: Any, app: OperatorApp, cond: Callable[[], Any], timeout: float = 3.0) -> Any:
+async def until(pilot: Any, app: OperatorApp, cond: Callable[[], Any], timeout: float = 10.0) -> Any:
     """Refresh the app until ``cond()`` holds (messages cross two threads before the UI sees them)."""
     deadline = time.monotonic() + timeout
     while True:

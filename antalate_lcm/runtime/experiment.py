@@ -182,10 +182,6 @@ def check_interference(exp: Experiment, script: Script, configs: list[Config]) -
     operator (their times count from its MISSION); each fault names agents that fly."""
     if not script.interferes:
         return
-    if script.fault and min(exp.processes, len(configs)) > 1:
-        raise AntalateError(
-            f"{exp.script_source}: [[fault]] needs the agents in this process (--processes 1)"
-        )
     if script.fault and not exp.headless:
         raise AntalateError(
             f"{exp.script_source}: [[fault]] needs --headless (its times count from the scripted MISSION)"
@@ -205,11 +201,17 @@ def check_interference(exp: Experiment, script: Script, configs: list[Config]) -
 
 
 def _interfere(
-    configs: list[Config], context: Context, nodes: list[Node], script: Script, bus: str
+    configs: list[Config], context: Context, nodes: list[Node], script: Script, bus: str, processes: int = 1
 ) -> FaultInjector | None:
     """Put the script's faults and broadcast losses between the agents' nodes and the bus."""
     if not script.interferes:
         return None
+    if processes > 1:  # the agent processes inject them: runtime/fault_processes.py
+        from antalate_lcm.runtime.fault_processes import FaultRelay
+        from antalate_lcm.runtime.faults import FaultGate
+
+        config = configs[0].with_agent_name("faults")
+        return FaultRelay(config, context, script=script, gate=FaultGate(), bus=bus, excuse=lambda _a: None)
     from antalate_lcm.hlc.node import HlcNode
     from antalate_lcm.runtime.faults import FaultGate, FaultInjector, lossy_broadcasts
 
@@ -253,6 +255,9 @@ def _child_argv(exp: Experiment) -> Callable[[int, int], list[str]]:
     script = exp.script or load_script(None)
     if script.broadcast.reception < 1.0:  # each process loses broadcasts at its own agents
         argv += ["--broadcast-reception", repr(script.broadcast.reception), "--seed", str(script.seed)]
+    if script.fault:  # ... and injects the faults into them (runtime/fault_processes.py)
+        bus = record_bus(load_config(exp.config_path), exp.bus)
+        argv += ["--faults", script.model_dump_json(), "--fault-bus", bus]
     return lambda i, n: [*argv, "--shard", f"{i}/{n}"]
 
 
@@ -308,6 +313,7 @@ class Outcome:
             "log": self.log,
             "bus": self.bus,
             "messages": self.messages,
+            "report": self.report or None,
             "timelines": {a: [{"t": t, "state": s} for t, s in tl] for a, tl in self.timelines.items()},
             "node_log": self.node_log or None,
             "analysis": self.analysis.to_json() if self.analysis is not None else None,
@@ -345,7 +351,7 @@ def run(exp: Experiment) -> Outcome:
     nodes: list[Node] = [recorder]
     if processes == 1:
         nodes += [node for cfg in configs for node in agent_nodes(cfg, context)]
-    injector = _interfere(configs, context, nodes, script, bus)
+    injector = _interfere(configs, context, nodes, script, bus, processes)
     if injector is not None:
         nodes.append(injector)
     # With the console, every log line goes to a file: they would tear the console's screen.

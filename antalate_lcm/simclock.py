@@ -29,7 +29,8 @@ import time
 from typing import Any
 
 #: Wall-clock time (s since 1970) of simulated time zero: fixed, so message headers, signatures
-#: and logs are the same on every run (2027-01-15; a date, not a time anyone's replay memory holds).
+#: and logs are the same on every run (2027-01-15 08:00 UTC: no replay memory of a real flight
+#: holds a time that late yet).
 SIM_EPOCH = 1_800_000_000.0
 #: Simulated monotonic time at the start: far from 0, as ``time.monotonic()`` is on a machine
 #: that has been up a day (node code may use 0 for "never").
@@ -48,7 +49,7 @@ class SimClock:
         self.t = SIM_START
         #: While held, time stands still and the loop waits for real events (see hold()).
         self.held = held
-        self._real0 = 0.0
+        self._real0 = time.monotonic()
         self._sim0 = SIM_START
 
     def monotonic(self) -> float:

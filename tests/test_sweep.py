@@ -84,12 +84,31 @@ def _files(folder: Path, spec: str = SPEC, config: str = CONFIG, script: str = S
     return path
 
 
+def test_a_sweep_on_simulated_time_repeats_itself_byte_for_byte(tmp_path: Path) -> None:
+    """``speed = "max"``: each run on simulated time (antalate run --speed), so a point and a seed are
+    one log; two sweeps of the same spec write the same bytes, and a second seed another."""
+    from antalate_lcm.cli import main
+
+    spec = SPEC.replace("seeds = 5", 'seeds = [3, 4]\nspeed = "max"').split("[parameters]")[0]
+    path = _files(tmp_path, spec + '[parameters]\n"behavior.dovrat_swarm.forward_speed" = [1.5]\n')
+    logs = []
+    for name in ("a", "b"):
+        assert main(["sweep", str(path), "-o", str(tmp_path / name), "--jobs", "2"]) == 0
+        table = json.loads((tmp_path / name / "results.json").read_text())
+        assert [r["status"] for r in table] == ["ok", "ok"], table
+        outcome = json.loads((tmp_path / name / table[0]["log"]).with_name("outcome.json").read_text())
+        assert outcome["simulated_s"], outcome  # flown on simulated time
+        logs.append([(tmp_path / name / r["log"]).read_bytes() for r in table])
+    assert logs[0][0] == logs[1][0] and logs[0][1] == logs[1][1]
+    assert logs[0][0] != logs[0][1]
+
+
 def test_a_sweep_of_dovrat_swarm_over_two_parameters_and_five_seeds(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from antalate_lcm.cli import main
 
-    spec = _files(tmp_path)
+    spec = _files(tmp_path, SPEC.replace("seeds = 5", 'seeds = 5\nspeed = "max"'))  # simulated time: quick
     out = tmp_path / "results"
     started = time.monotonic()
     assert main(["sweep", str(spec), "-o", str(out), "--jobs", "2"]) == 0
@@ -232,6 +251,9 @@ def test_ctrl_c_stops_the_sweep_with_its_rows_written(tmp_path: Path) -> None:
         ('config = "swarm.toml"\nseeds = "5"\n', "seeds", "a count, or a list of integer seeds (got '5')"),
         ('config = "swarm.toml"\nseeds = [1, 2.5]\n', "seeds", "(got [1, 2.5])"),
         ('config = "swarm.toml"\nagents = 0\n', "agents", "greater than or equal to 1"),
+        ('config = "swarm.toml"\nspeed = 0.0\n', "speed", '"max" or a number > 0 (got 0.0)'),
+        ('config = "swarm.toml"\nspeed = "fast"\n', "speed", "max"),
+        ('config = "swarm.toml"\nspeed = "max"\nprocesses = 2\n', "speed", "simulated time runs in one"),
         (
             'config = "swarm.toml"\n[parameters]\n"speed" = [1.0]\n',
             'parameters."speed"',

@@ -254,6 +254,8 @@ def run_argv(sweep: Sweep, folder: Path, log_level: str = "WARNING") -> list[str
         "--spacing",
         repr(spec.spacing),
     ]
+    if spec.speed is not None:  # simulated time: the run is a function of its script's seed
+        argv += ["--speed", spec.speed if isinstance(spec.speed, str) else repr(spec.speed)]
     argv += [
         "--headless",
         "--script",

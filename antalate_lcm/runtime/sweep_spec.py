@@ -11,6 +11,8 @@ written, no process started; docs/experiments.md, "Sweeps").
     seeds = [1, 2, 3, 4, 5]   # the script's seed of each run; or a count: seeds = 5 is 0, 1, 2, 3, 4
     timeout = 600.0           # s one run may take before it is stopped and recorded as failed
                               # (default: the script's mission_time + timeout + 60)
+    speed = "max"             # each run on simulated time (antalate run --speed): "max" or N times
+                              # real time; a run is then a function of its seed (default: wall clock)
 
     [parameters]              # each key a list of values; every combination, with every seed, is one run
     "behavior.dovrat_swarm.forward_speed" = [1.0, 2.0]   # a param of every behavior of that plugin
@@ -48,6 +50,11 @@ RUN_MARGIN = 60.0
 Value = bool | int | float | str
 
 
+def _is_speed(value: Any) -> bool:
+    """A number of times real time (``antalate run --speed N``)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and 0 < value < math.inf
+
+
 class SweepSpec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -59,6 +66,9 @@ class SweepSpec(BaseModel):
     #: A count or a list of seeds (checked by :func:`parse_spec`: a union's errors name its arms).
     seeds: Any = 1
     timeout: float | None = Field(default=None, gt=0, allow_inf_nan=False)
+    #: ``antalate run --speed`` of every run: "max" or a number > 0 (None: the wall clock).
+    #: (checked by :func:`parse_spec`, as ``seeds``: a union's errors name its arms)
+    speed: Any = None
     parameters: dict[str, list[Value]] = Field(default_factory=dict)
 
 
@@ -132,6 +142,10 @@ def parse_spec(table: dict[str, Any], source: str) -> SweepSpec:
             raise ConfigError(source, "seeds", f"seeds >= 0 (got {bad})")
         if len(set(spec.seeds)) != len(spec.seeds):
             raise ConfigError(source, "seeds", "each seed once (a repeated seed repeats a run)")
+    if spec.speed not in (None, "max") and not _is_speed(spec.speed):
+        raise ConfigError(source, "speed", f'"max" or a number > 0 (got {spec.speed!r})')
+    if spec.speed is not None and spec.processes > 1:  # as antalate run --speed refuses it
+        raise ConfigError(source, "speed", "simulated time runs in one process: drop processes or speed")
     for name, values in spec.parameters.items():
         key = f"parameters.{json.dumps(name)}"
         prefix, _, rest = name.partition(".")

@@ -152,8 +152,9 @@ def test_close_leaves_no_thread_and_no_socket() -> None:
     import gc
 
     gc.collect()
-    assert threading.active_count() == before_threads
-    assert fds() == before_fds
+    # at most as many as before: a test before this one on the same worker may still be closing its own
+    assert threading.active_count() <= before_threads
+    assert fds() <= before_fds
 
 
 def test_unknown_bus_is_a_clear_error(bus: Bus) -> None:

@@ -287,7 +287,9 @@ def test_real_djitellopy_against_emulator() -> None:
         TelloEmulator(sock=net.udp_socket("a", (net.addr_a, 8889)), takeoff_time=0.5) as emu,
     ):
         done = net.run_python("b", DJITELLOPY_SCRIPT, timeout=60)
-        assert done.returncode == 0, done.stderr
+        # what the emulator heard and ignored (too soon after the last command), when djitellopy gave up
+        heard = [(round(c.t, 3), c.text) for c in emu.commands]
+        assert done.returncode == 0, (done.stderr, heard, [(round(c.t, 3), c.text) for c in emu.ignored])
         out = json.loads(done.stdout.strip().splitlines()[-1])
         snap = emu.snapshot()
     assert out["battery"] == 100 and out["battery_q"] == 100 and out["sdk"] == "20"

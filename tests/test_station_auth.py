@@ -195,7 +195,8 @@ def test_reports_per_agent_are_rate_limited(db_path: str) -> None:
 
 
 def test_requests_per_address_are_rate_limited(db_path: str) -> None:
-    limits = RateLimits(address_reports_per_second=1.0, address_burst=4)
+    # one refill in 20 s: six requests on a loaded machine took over 2 s, and 1/s refilled the bucket
+    limits = RateLimits(address_reports_per_second=0.05, address_burst=4)
     with StationServer(settings_for(db_path, rate_limits=limits)) as srv:
         codes = [httpx.get(f"{srv.url}/api/station").status_code for _ in range(6)]
         assert codes[:4] == [200] * 4 and codes[-1] == 429

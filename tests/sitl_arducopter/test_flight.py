@@ -115,7 +115,8 @@ def test_link_cut_5_s_in_flight_then_restored(copter: Copter, sitl_probe: Probe)
     # second (3 m at the operator's speed; measured 0.57 m), still in GUIDED
     assert abs(at_restore["east"] - late["east"]) < 1.0 and at_restore["mode"] == "GUIDED", (late, at_restore)
     wait_state(probe, "mc", M.RTL, timeout=15, since=mark)
-    assert any("regained" in e for e in errors(probe, mark)), errors(probe, mark)
+    # the HLC's report and the MC's RTL travel on two channels: the report may reach the probe second
+    assert wait_for(lambda: any("regained" in e for e in errors(probe, mark)), timeout=5), errors(probe, mark)
     home = landed(copter, probe, mark)
     assert abs(home["north"]) < 2.0 and abs(home["east"]) < 2.0, home
 

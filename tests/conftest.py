@@ -6,7 +6,7 @@ import subprocess
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import pytest
 
@@ -27,7 +27,7 @@ def pytest_runtest_logreport(report: pytest.TestReport) -> None:
     """Tally the attacks (here, in the process that prints the summary: the xdist controller too)."""
     for key, value in report.user_properties:
         if key == ATTACK_PROPERTY:
-            name, verdict = value
+            name, verdict = cast("tuple[str, str]", value)  # tests/security/conftest.py records the pair
             _ATTACKS[name] = verdict
 
 
@@ -84,10 +84,13 @@ class Probe(JsonLinesProcess):
         return reply.get("msg") if reply["ok"] else None
 
     def history(self, channel: str, type_name: str, since: int = 0) -> list[dict[str, Any]]:
-        return self.call(op="history", channel=channel, type=type_name, since=since)["msgs"]
+        msgs: list[dict[str, Any]] = self.call(op="history", channel=channel, type=type_name, since=since)[
+            "msgs"
+        ]
+        return msgs
 
     def mark(self) -> int:
-        return self.call(op="mark")["index"]
+        return int(self.call(op="mark")["index"])
 
 
 @pytest.fixture

@@ -23,7 +23,8 @@ class JsonLinesProcess:
         if not line:
             err = self.proc.stderr.read() if self.proc.stderr else ""
             raise RuntimeError(f"{self.what} exited: {err[-2000:]}")
-        return json.loads(line)
+        reply: dict[str, Any] = json.loads(line)
+        return reply
 
     def call(self, **req: Any) -> dict[str, Any]:
         assert self.proc.stdin is not None

@@ -14,6 +14,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -73,23 +74,27 @@ class NetNamespace:
         """The command line that runs ``argv`` inside this namespace."""
         return ["nsenter", "-t", str(self.pid), "-U", "-n", "--preserve-credentials", "--", *argv]
 
-    def popen(self, argv: Sequence[str], **kwargs: object) -> subprocess.Popen[str]:
+    def popen(self, argv: Sequence[str], **kwargs: Any) -> subprocess.Popen[str]:
+        """``kwargs`` are Popen's (any of them, as a caller would pass them to Popen itself)."""
         kwargs.setdefault("env", child_env())
         kwargs.setdefault("text", True)
         kwargs.setdefault("start_new_session", True)
-        proc: subprocess.Popen[str] = subprocess.Popen(self.wrap(argv), **kwargs)  # type: ignore[call-overload]
+        proc: subprocess.Popen[str] = subprocess.Popen(self.wrap(argv), **kwargs)
         self._children.append(proc)
         return proc
 
     def run(
-        self, argv: Sequence[str], timeout: float = 60, **kwargs: object
+        self, argv: Sequence[str], timeout: float = 60, **kwargs: Any
     ) -> subprocess.CompletedProcess[str]:
-        return subprocess.run(self.wrap(argv), timeout=timeout, capture_output=True, text=True, **kwargs)  # type: ignore[call-overload]
+        done: subprocess.CompletedProcess[str] = subprocess.run(
+            self.wrap(argv), timeout=timeout, capture_output=True, text=True, **kwargs
+        )
+        return done
 
-    def python(self, *args: str, **kwargs: object) -> subprocess.Popen[str]:
+    def python(self, *args: str, **kwargs: Any) -> subprocess.Popen[str]:
         return self.popen([sys.executable, *args], **kwargs)
 
-    def antalate(self, *args: str, **kwargs: object) -> subprocess.Popen[str]:
+    def antalate(self, *args: str, **kwargs: Any) -> subprocess.Popen[str]:
         return self.python("-m", "antalate_lcm.cli", *args, **kwargs)
 
     def close(self) -> None:

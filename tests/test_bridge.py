@@ -135,7 +135,8 @@ def _scenario(netns: NetNamespace, name: str) -> dict[str, Any]:
     )
     out, err = proc.communicate(timeout=90)
     assert proc.returncode == 0, err[-3000:]
-    return json.loads(out.strip().splitlines()[-1])
+    summary: dict[str, Any] = json.loads(out.strip().splitlines()[-1])
+    return summary
 
 
 def test_two_sites_get_everything_once_and_nothing_loops(netns: NetNamespace) -> None:

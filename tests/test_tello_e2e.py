@@ -26,7 +26,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-import tomllib
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised only on 3.10
+    import tomli as tomllib
 
 from tests.emulators.netns_pair import REPO, NetnsPair, netns_pair_unavailable
 from tests.emulators.tello_emulator import TelloEmulator

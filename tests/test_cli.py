@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -13,14 +14,16 @@ from tests.netns import netns_unavailable
 REPO = Path(__file__).resolve().parent.parent
 
 
-def antalate(*args: str, timeout: float = 60, **kw: object) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
+def antalate(*args: str, timeout: float = 60, **kw: Any) -> subprocess.CompletedProcess[str]:
+    """``kw`` are subprocess.run's."""
+    done: subprocess.CompletedProcess[str] = subprocess.run(
         [sys.executable, "-m", "antalate_lcm.cli", *args],
         capture_output=True,
         text=True,
         timeout=timeout,
         **kw,
-    )  # type: ignore[call-overload]
+    )
+    return done
 
 
 def test_help_lists_every_command() -> None:
@@ -221,7 +224,13 @@ def test_agent_runs_and_stops_cleanly_on_sigterm(tmp_path: Path) -> None:
     )
     lines: queue.Queue[str] = queue.Queue()
     assert proc.stderr is not None
-    reader = threading.Thread(target=lambda: [lines.put(ln) for ln in proc.stderr], daemon=True)  # type: ignore[union-attr]
+    stderr = proc.stderr
+
+    def pump() -> None:
+        for ln in stderr:
+            lines.put(ln)
+
+    reader = threading.Thread(target=pump, daemon=True)
     reader.start()
     standby: set[str] = set()
     seen: list[str] = []

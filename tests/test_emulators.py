@@ -405,7 +405,7 @@ def test_mavlink_boot_mode_revert_and_arming_gate() -> None:
     client = mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=255)
     try:
         port = client.port.getsockname()[1]
-        params = {
+        params: dict[str, Any] = {
             "boot_delay": 0.6,
             "ekf_delay": 1.3,
             "gps_delay": 1.3,

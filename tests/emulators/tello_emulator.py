@@ -177,6 +177,15 @@ def _wrap180(deg: float) -> float:
     return wrapped - 180.0
 
 
+def _move_handler(name: str) -> Callable[[TelloEmulator, list[str], Address, float], str | None]:
+    """The handler of one motion command (``up``, ``forward``…): all share ``_cmd_move``."""
+
+    def handle(emu: TelloEmulator, args: list[str], sender: Address, now: float) -> str | None:
+        return emu._cmd_move(name, args, sender)
+
+    return handle
+
+
 class TelloEmulator:
     """An emulated Tello on one UDP socket; ``start()``/``stop()`` or ``with``. All methods are thread-safe."""
 
@@ -777,10 +786,7 @@ class TelloEmulator:
         "stop": _cmd_stop,
         "go": _cmd_go,
         "flip": _cmd_flip,
-        **{
-            name: (lambda self, args, sender, now, _n=name: self._cmd_move(_n, args, sender))
-            for name in MOTION_COMMANDS
-        },
+        **{name: _move_handler(name) for name in MOTION_COMMANDS},
         "cw": lambda self, args, sender, now: self._cmd_rotate("cw", args, sender),
         "ccw": lambda self, args, sender, now: self._cmd_rotate("ccw", args, sender),
     }

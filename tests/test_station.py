@@ -101,13 +101,15 @@ def report(
     }
     r = c.post("/api/report", json=body)
     assert r.status_code == 200, r.text
-    return r.json()
+    answer: dict[str, Any] = r.json()
+    return answer
 
 
 def detection(reply: dict[str, Any]) -> dict[str, Any]:
     payload = reply["payload"]
     assert payload["content_type"] == "application/json"
-    return json.loads(payload["data"])
+    found: dict[str, Any] = json.loads(payload["data"])
+    return found
 
 
 # -- tokens ------------------------------------------------------------------------------------------

@@ -127,7 +127,8 @@ class Driver:
         line = self.proc.stdout.readline()
         if not line:
             raise RuntimeError(f"driver died: {self.log_path.read_text()}")
-        return json.loads(line)
+        reply: dict[str, Any] = json.loads(line)
+        return reply
 
     def new(self, name: str = "main", **params: Any) -> None:
         reply = self.request(op="new", name=name, params={**FAST, **params})
@@ -146,10 +147,12 @@ class Driver:
     def state(self, name: str = "main") -> dict[str, Any]:
         reply = self.request(op="state", name=name)
         assert reply["ok"], reply
-        return reply["result"]
+        state: dict[str, Any] = reply["result"]
+        return state
 
     def extra(self, name: str = "main") -> dict[str, Any]:
-        return self.request(op="extra", name=name)["result"]
+        extra: dict[str, Any] = self.request(op="extra", name=name)["result"]
+        return extra
 
     def wait(
         self, pred: Callable[[dict[str, Any]], bool], timeout: float, name: str = "main"

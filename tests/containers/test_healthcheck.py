@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
@@ -82,7 +83,7 @@ def test_a_config_that_does_not_load_or_a_foreign_command_is_unhealthy(
     assert health(netns, "antalate keygen") == (0, "healthy (antalate keygen)")
 
 
-def load_healthcheck():  # type: ignore[no-untyped-def]
+def load_healthcheck() -> ModuleType:
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("antalate_healthcheck", HEALTHCHECK)

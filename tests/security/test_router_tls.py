@@ -94,10 +94,12 @@ class Lab:
             ),
             "tls_peer",
         )
-        for name in self.logs:
-            assert wait_for(lambda n=name: "listening on" in self.logs[n].read_text(), 30), self.logs[
-                name
-            ].read_text()
+        for log in self.logs.values():
+
+            def listening(log: Path = log) -> bool:
+                return "listening on" in log.read_text()
+
+            assert wait_for(listening, 30), log.read_text()
 
     def site(self, site: str) -> dict[str, str]:
         return {

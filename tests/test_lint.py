@@ -1,5 +1,5 @@
-"""The tree stays `ruff` clean and formatted, and `mypy --strict` passes on the packages (pyproject.toml
-holds the rules of both)."""
+"""The tree stays `ruff` clean and formatted, and `mypy --strict` passes on the packages and on tests/
+(pyproject.toml holds the rules of both)."""
 
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def test_ruff_format() -> None:
 
 
 def test_mypy_strict() -> None:
-    """pyproject's [tool.mypy]: strict over antalate_lcm, operator_tui and behaviors, as Python 3.10."""
+    """pyproject's [tool.mypy]: strict over antalate_lcm, operator_tui, behaviors and tests, as Python 3.10."""
     if importlib.util.find_spec("mypy") is None:
         pytest.skip("mypy is not installed (pip install -e '.[dev]')")
     proc = subprocess.run(

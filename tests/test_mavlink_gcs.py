@@ -23,8 +23,8 @@ from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t
 from antalate_lcm.security import generate_key
 from antalate_lcm.vocabulary import Command, HlcState, McState
 from tests.agent_harness import agent_config
-from tests.conftest import MCAST_URL
-from tests.netns import stop_process
+from tests.conftest import MCAST_URL, Probe
+from tests.netns import NetNamespace, stop_process
 from tests.polling import wait_for
 
 MAVPROXY = Path(sys.executable).parent / "mavproxy.py"
@@ -214,8 +214,8 @@ def _gcs(netns: Any, cfg: Path, *extra: str) -> tuple[subprocess.Popen[str], dic
 
 @pytest.mark.netns
 def test_mavproxy_sees_five_vehicles_and_flies_them_only_when_commands_are_on(
-    netns, probe, tmp_path: Path
-) -> None:  # type: ignore[no-untyped-def]
+    netns: NetNamespace, probe: Probe, tmp_path: Path
+) -> None:
     if not MAVPROXY.exists():
         pytest.skip("MAVProxy is not installed (pip install MAVProxy: the dev extra has it)")
     key = generate_key()
@@ -255,9 +255,11 @@ def test_mavproxy_sees_five_vehicles_and_flies_them_only_when_commands_are_on(
         for name in names:
             # refused: two seconds of telemetry after the takeoff, every one on the ground, MC in STANDBY
             telemetry = f"{name}/TELEMETRY"
-            assert wait_for(
-                lambda ch=telemetry: len(probe.history(ch, "telemetry_t", since=refused_at)) >= 20, timeout=15
-            )
+
+            def recorded(ch: str = telemetry) -> bool:
+                return len(probe.history(ch, "telemetry_t", since=refused_at)) >= 20
+
+            assert wait_for(recorded, timeout=15)
             since = probe.history(telemetry, "telemetry_t", since=refused_at)
             assert not any(t["in_air"] or t["armed"] for t in since), name
             states = {m["state"] for m in probe.history(f"{name}/MC_STATE", "mc_state_t", since=refused_at)}

@@ -646,6 +646,7 @@ class CrazyflieEmulator:
         cmd = data[0]
         block_id = data[1] if len(data) > 1 else 0
         ret = 8  # ENOEXEC
+        block: _Block | None
         if cmd in (6, 7):  # create / append V2
             settings = data[2:]
             ops = [

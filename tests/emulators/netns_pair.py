@@ -219,10 +219,11 @@ class NetnsPair:
     def _wait_link_up(self, timeout: float = 5.0) -> None:
         """Carrier takes a moment after ``ip link set up``; packets sent before it are lost."""
         deadline = time.monotonic() + timeout
-        for side, dev in (("a", "veth_a"), ("b", "veth_b")):
+        sides: tuple[tuple[Side, str], ...] = (("a", "veth_a"), ("b", "veth_b"))
+        for side, dev in sides:
             while (
                 "state UP" not in self.run(side, ["ip", "-o", "link", "show", "dev", dev], timeout=10).stdout
-            ):  # type: ignore[arg-type]
+            ):
                 if time.monotonic() > deadline:
                     raise RuntimeError(f"{dev} in namespace {side} did not come up")
                 time.sleep(0.01)

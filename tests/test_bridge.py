@@ -18,11 +18,10 @@ from antalate_lcm.bridge import Bridge, BridgeConfig, Direction, Memory, Throttl
 from antalate_lcm.errors import ConfigError
 from antalate_lcm.security import MemberProof
 from antalate_lcm.zenoh_bus import BRIDGE_MARK, _Group
+from tests import REPO
 from tests.netns import NetNamespace
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
-
-REPO = Path(__file__).resolve().parent.parent
 
 
 # ------------------------------------------------------------------------------------ pure parts

@@ -20,9 +20,10 @@ import pytest
 
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
+from tests import REPO
 from tests.agent_harness import AgentProcesses, agent_config
 from tests.conftest import MCAST_URL, Probe
-from tests.netns import REPO, NetNamespace
+from tests.netns import NetNamespace
 from tests.polling import wait_for
 
 pytestmark = pytest.mark.netns

@@ -9,9 +9,8 @@ from typing import Any
 
 import pytest
 
+from tests import REPO
 from tests.netns import netns_unavailable
-
-REPO = Path(__file__).resolve().parent.parent
 
 
 def antalate(*args: str, timeout: float = 60, **kw: Any) -> subprocess.CompletedProcess[str]:

@@ -22,8 +22,9 @@ from djitellopy import Tello
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
+from tests import REPO
 from tests.emulators.mavlink_vehicle import COPTER_MODES, MavlinkVehicle
-from tests.emulators.netns_pair import REPO, NetnsPair, netns_pair_unavailable
+from tests.emulators.netns_pair import NetnsPair, netns_pair_unavailable
 from tests.emulators.tello_emulator import TelloEmulator
 
 # -- Tello helpers ----------------------------------------------------------------------------------

@@ -13,8 +13,9 @@ from pathlib import Path
 
 import pytest
 
+from tests import REPO
 from tests.conftest import _netns_reason
-from tests.netns import REPO, NetNamespace, child_env, stop_process
+from tests.netns import NetNamespace, child_env, stop_process
 from tests.sitl_px4.harness import link_commands, sitl_dir, sitl_missing
 
 pytestmark = [pytest.mark.netns, pytest.mark.timeout(240)]

@@ -22,8 +22,7 @@ from antalate_lcm.analysis.plot import MATPLOTLIB_MISSING
 from antalate_lcm.autopilot import AutopilotError
 from antalate_lcm.autopilot.tello import DJITELLOPY_MISSING, TelloAutopilot
 from antalate_lcm.config import load_config
-
-REPO = Path(__file__).resolve().parents[1]
+from tests import REPO
 
 
 def antalate_without(module: str, *argv: str, **kw: Any) -> subprocess.Popen[str]:

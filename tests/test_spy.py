@@ -29,8 +29,9 @@ import pytest
 from antalate_lcm import _codegen, spy
 from antalate_lcm.msgs import header_t, mc_state_t, telemetry_t
 from antalate_lcm.topics import Message
+from tests import REPO
 from tests.lcm_tables import dimensions, fingerprint, slots, typenames
-from tests.netns import REPO, NetNamespace, group_members, netns_unavailable, stop_process
+from tests.netns import NetNamespace, group_members, netns_unavailable, stop_process
 from tests.polling import wait_for
 
 JAVA_SRC = Path(__file__).resolve().parent / "java" / "DecodeCheck.java"

@@ -22,10 +22,10 @@ from antalate_lcm.errors import AntalateError
 from antalate_lcm.station import StationServer, StationSettings, default_db_path, models, run_station
 from antalate_lcm.station._auth import sha256_hex
 from antalate_lcm.station._settings import ApiKey
+from tests import REPO
 from tests.test_station_sector import place
 
 ORIGIN = (32.7767, 35.0231)
-REPO = Path(__file__).resolve().parents[1]
 OPERATOR_KEY = "antk_test-operator-key-0123456789abcdefghijklmnopq"
 READER_KEY = "antk_test-reader-key-0123456789abcdefghijklmnopqrs"
 API_KEYS = (

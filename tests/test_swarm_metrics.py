@@ -25,6 +25,7 @@ from antalate_lcm.analysis.geometry import (
 from antalate_lcm.analysis.swarm import sample_times
 from antalate_lcm.cli import main
 from antalate_lcm.msgs import mc_state_t
+from tests import REPO
 from tests.synthetic_logs import CORNERS, LogWriter
 
 R0 = 10 * math.sqrt(2)  # a corner's distance to the centre of the 20 m square
@@ -337,7 +338,7 @@ def test_the_python_example_of_docs_logging_runs(
     """docs/logging.md's Python example, as written, on a log called mission.lcm."""
     import shutil
 
-    doc = (Path(__file__).resolve().parent.parent / "docs" / "logging.md").read_text()
+    doc = (REPO / "docs" / "logging.md").read_text()
     block = doc.split("The same from Python, with the trajectories:", 1)[1].split("```python\n", 1)[1]
     code = block.split("```", 1)[0]
     shutil.copy(gathering[0], tmp_path / "mission.lcm")

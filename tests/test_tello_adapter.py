@@ -27,6 +27,7 @@ import pytest
 from antalate_lcm.autopilot import load_autopilot
 from antalate_lcm.autopilot.tello import DEFAULTS, TelloAutopilot
 from antalate_lcm.geo import FlatFrame
+from tests import REPO
 from tests.emulators.netns_pair import NetnsPair, netns_pair_unavailable
 from tests.emulators.tello_emulator import TelloEmulator
 
@@ -750,7 +751,6 @@ def test_params_documented_and_example_valid() -> None:
     """Every parameter is in docs/tello.md and examples/tello.toml, and the example loads."""
     from antalate_lcm.config import load_config
     from antalate_lcm.runtime.agent import validate
-    from tests.emulators.netns_pair import REPO
 
     doc = (REPO / "docs" / "tello.md").read_text()
     config = load_config(REPO / "examples" / "tello.toml")

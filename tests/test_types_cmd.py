@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from antalate_lcm import _codegen, types_cmd
-from tests.netns import REPO
+from tests import REPO
 
 TYPE_NAMES = sorted(p.stem for p in _codegen.SOURCE_LCMTYPES_DIR.glob("*.lcm"))
 

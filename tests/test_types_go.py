@@ -23,7 +23,7 @@ from antalate_lcm import _codegen, _golang, security, types_cmd
 from antalate_lcm._golang_parse import fingerprint, parse_files
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.msgs import arbiter_status_t, header_t, operator_cmd_t, payload_t
-from tests.netns import REPO
+from tests import REPO
 
 ROUNDTRIP = REPO / "tests" / "go" / "roundtrip" / "main.go"
 HOSTILE = REPO / "tests" / "go" / "hostile" / "main.go"

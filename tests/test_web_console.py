@@ -29,9 +29,10 @@ from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.station._auth import new_api_key, sha256_hex
 from antalate_lcm.station._settings import ApiKey
 from operator_tui import web
+from tests import REPO
 from tests.agent_harness import agent_config
 from tests.conftest import MCAST_URL, Probe
-from tests.netns import REPO, NetNamespace, stop_process
+from tests.netns import NetNamespace, stop_process
 from tests.polling import wait_for
 
 OPERATOR_KEY, READER_KEY = new_api_key(), new_api_key()

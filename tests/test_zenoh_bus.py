@@ -19,6 +19,7 @@ from antalate_lcm.errors import ConfigError  # noqa: E402
 from antalate_lcm.msgs import mc_state_t, telemetry_t  # noqa: E402
 from antalate_lcm.runtime.router import router_config  # noqa: E402
 from antalate_lcm.zenoh_bus import ZenohLCM, channel_key, key_channel, literal_channel  # noqa: E402
+from tests import REPO  # noqa: E402
 from tests.polling import wait_for  # noqa: E402
 
 
@@ -377,7 +378,7 @@ def test_the_router_command_says_what_is_wrong(capsys: pytest.CaptureFixture[str
 
 @pytest.mark.parametrize("name", ["agent_zenoh.toml", "operator_remote.toml"])
 def test_the_wan_example_configs_load(name: str) -> None:
-    config = load_config(Path(__file__).resolve().parent.parent / "examples" / "wan" / name)
+    config = load_config(REPO / "examples" / "wan" / name)
     assert any(u.startswith("zenoh://") for u in config.buses.values())
 
 

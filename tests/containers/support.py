@@ -18,7 +18,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
 
-from tests.netns import REPO, stop_process
+from tests import REPO
+from tests.netns import stop_process
 
 _SETUP = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && echo ready && exec sleep 100000"
 

@@ -10,9 +10,10 @@ from types import ModuleType
 
 import pytest
 
+from tests import REPO
 from tests.agent_harness import AgentProcesses, agent_config
 from tests.conftest import Probe
-from tests.netns import REPO, NetNamespace, stop_process
+from tests.netns import NetNamespace, stop_process
 from tests.polling import wait_for
 
 pytestmark = pytest.mark.netns

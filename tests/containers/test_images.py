@@ -23,6 +23,7 @@ from pathlib import Path
 import pytest
 import tomli_w
 
+from tests import REPO
 from tests.agent_harness import agent_config
 from tests.containers.conftest import Image
 from tests.containers.support import Podman, RootNetns, load_build_module
@@ -310,7 +311,7 @@ def test_build_script_refuses_without_its_tools(tmp_path: Path) -> None:
     """The user's entry point says what is missing instead of failing half-way (runs everywhere)."""
     env = dict(os.environ, PATH=str(tmp_path))  # no podman, no mmdebstrap
     proc = subprocess.run(
-        [sys.executable, str(Path(__file__).resolve().parents[2] / "containers" / "build_image.py")],
+        [sys.executable, str(REPO / "containers" / "build_image.py")],
         capture_output=True,
         text=True,
         env=env,

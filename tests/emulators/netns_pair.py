@@ -39,12 +39,10 @@ import subprocess
 import sys
 import time
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Literal
 
+from tests import REPO
 from tests.netns import stop_process
-
-REPO = Path(__file__).resolve().parents[2]
 
 Side = Literal["a", "b"]
 

@@ -21,9 +21,10 @@ from typing import Any
 
 import pytest
 
+from tests import REPO
 from tests.conftest import _netns_reason
 from tests.jsonl import JsonLinesProcess
-from tests.netns import REPO, NetNamespace
+from tests.netns import NetNamespace
 from tests.polling import wait_for
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")

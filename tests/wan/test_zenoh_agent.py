@@ -17,6 +17,8 @@ from pathlib import Path
 import pytest
 import tomli_w
 
+from tests import REPO
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - exercised only on 3.10
@@ -28,7 +30,6 @@ from tests.netns import NetNamespace
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
 
-REPO = Path(__file__).resolve().parents[2]
 EXAMPLES = REPO / "examples" / "wan"
 KEY = "zenoh-test-swarm-key"
 PORT = 7447

@@ -451,14 +451,6 @@ class CrazyflieEmulator:
                 self._traj.kind if self._traj else "",
             )
 
-    def wait_until(self, predicate: Callable[[CrazyflieSnapshot], bool], timeout: float) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if predicate(self.snapshot()):
-                return True
-            time.sleep(0.02)
-        return predicate(self.snapshot())
-
     @property
     def flying(self) -> bool:
         """The motors turn: the vehicle's truth (also on the first centimetres)."""

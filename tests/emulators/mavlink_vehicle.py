@@ -120,6 +120,7 @@ from typing import Any
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
 from antalate_lcm.autopilot.mavlink.link import MemoryLink
+from tests.polling import wait_for
 
 LOG = logging.getLogger("antalate.tests.mavlink_vehicle")
 
@@ -751,14 +752,9 @@ class MavlinkVehicle:
             )
 
     def wait_until(self, predicate: Callable[[VehicleSnapshot], bool], timeout: float) -> bool:
-        """Poll ``predicate(snapshot())`` until true (True) or ``timeout`` s pass (False)."""
-        deadline = time.monotonic() + timeout
-        while True:
-            if predicate(self.snapshot()):
-                return True
-            if time.monotonic() >= deadline:
-                return False
-            time.sleep(0.02)
+        """``predicate(snapshot())`` polled with tests/polling.py's ``wait_for``: True once it holds,
+        False if ``timeout`` s pass first."""
+        return wait_for(lambda: predicate(self.snapshot()), timeout)
 
     @property
     def received(self) -> list[Received]:

@@ -114,6 +114,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 from antalate_lcm.autopilot.tello.link import MemoryLink
+from tests.polling import wait_for
 
 LOG = logging.getLogger("antalate.tests.tello_emulator")
 
@@ -390,14 +391,9 @@ class TelloEmulator:
         return [c.text for c in self.commands]
 
     def wait_until(self, predicate: Callable[[TelloSnapshot], bool], timeout: float) -> bool:
-        """Poll ``predicate(snapshot())`` until true (True) or ``timeout`` s pass (False)."""
-        deadline = time.monotonic() + timeout
-        while True:
-            if predicate(self.snapshot()):
-                return True
-            if time.monotonic() >= deadline:
-                return False
-            time.sleep(0.02)
+        """``predicate(snapshot())`` polled with tests/polling.py's ``wait_for``: True once it holds,
+        False if ``timeout`` s pass first."""
+        return wait_for(lambda: predicate(self.snapshot()), timeout)
 
     # -- fault injection -------------------------------------------------------------------------
 

@@ -255,24 +255,6 @@ def test_agent_runs_and_stops_cleanly_on_sigterm(tmp_path: Path) -> None:
     reader.join(timeout=5)
 
 
-_OPEN_BUSES = """
-import json, sys
-from antalate_lcm.bus import open_lcm
-from antalate_lcm.errors import AntalateError
-from antalate_lcm.lcm_url import open_failure
-out = {}
-for url in sys.argv[1:]:
-    try:
-        open_lcm(url).fileno()
-        out[url] = "opened"
-    except AntalateError as exc:
-        out[url] = type(exc).__name__ + ": " + str(exc).splitlines()[0]
-# liblcm failing for another reason on a routed group must not be blamed on the route
-out["routed group, liblcm refused"] = type(open_failure("udpm://239.255.76.68:7668", ["Couldn't create LCM"])).__name__
-print(json.dumps(out))
-"""
-
-
 def test_no_multicast_route_message_only_when_the_route_is_missing() -> None:
     """In a namespace that routes only 239.255.76.68 (an agent's own bus, docs/lan.md) to lo."""
     import json
@@ -288,9 +270,9 @@ def test_no_multicast_route_message_only_when_the_route_is_missing() -> None:
         "http://127.0.0.1:8080",
         "file:///nonexistent/flight.lcm",
     ]
-    script = 'ip link set lo up && ip route add 239.255.76.68/32 dev lo && exec "$0" -c "$1" "$@"'
+    script = 'ip link set lo up && ip route add 239.255.76.68/32 dev lo && exec "$0" -m tests.children.open_buses "$@"'
     proc = subprocess.run(
-        ["unshare", "-rn", "sh", "-c", script, sys.executable, _OPEN_BUSES, *urls],
+        ["unshare", "-rn", "sh", "-c", script, sys.executable, *urls],
         capture_output=True,
         text=True,
         timeout=60,

@@ -2,6 +2,12 @@
 
 ``NetNamespace`` starts a holder process with ``unshare -rn`` (works unprivileged, and as root in
 CI), brings ``lo`` up and adds the multicast route, then runs commands inside it with ``nsenter``.
+Its root mode (``NetNamespace(root=True)``: ``unshare -n``, no user namespace) is for what must stay
+real root inside, like podman (tests/containers).
+
+The other topologies are built differently and live apart: two namespaces joined by a veth pair
+(tests/emulators/netns_pair.py) and the named namespaces on bridges of the LAN and WAN tests
+(tests/lan/topology.py).
 """
 
 from __future__ import annotations
@@ -44,15 +50,29 @@ def netns_unavailable() -> str | None:
 
 
 class NetNamespace:
-    """A private network namespace with multicast routed on ``lo``. Use as a context manager."""
+    """A private network namespace with multicast routed on ``lo``. Use as a context manager (or
+    ``start()`` and ``close()``).
 
-    def __init__(self) -> None:
+    ``root=False`` (the default): a user namespace too (``unshare -rn``), which works unprivileged.
+    ``root=True``: a network namespace only (``unshare -n``, needs root), so what runs in it stays
+    real root; its holder leads a session of its own."""
+
+    def __init__(self, *, root: bool = False) -> None:
+        self.root = root
         self._holder: subprocess.Popen[str] | None = None
         self._children: list[subprocess.Popen[str]] = []
 
     def __enter__(self) -> NetNamespace:
+        return self.start()
+
+    def start(self) -> NetNamespace:
+        unshare = ["unshare", "-n"] if self.root else ["unshare", "-rn"]
         self._holder = subprocess.Popen(
-            ["unshare", "-rn", "sh", "-c", _SETUP], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+            [*unshare, "sh", "-c", _SETUP],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=self.root,
         )
         assert self._holder.stdout is not None
         line = self._holder.stdout.readline().strip()
@@ -72,6 +92,8 @@ class NetNamespace:
 
     def wrap(self, argv: Sequence[str]) -> list[str]:
         """The command line that runs ``argv`` inside this namespace."""
+        if self.root:
+            return ["nsenter", "-t", str(self.pid), "-n", "--", *argv]
         return ["nsenter", "-t", str(self.pid), "-U", "-n", "--preserve-credentials", "--", *argv]
 
     def popen(self, argv: Sequence[str], **kwargs: Any) -> subprocess.Popen[str]:

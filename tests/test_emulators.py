@@ -255,29 +255,6 @@ def test_tello_cli(tello_client: TelloClient) -> None:
             proc.wait()
 
 
-DJITELLOPY_SCRIPT = r"""
-import json, logging, time
-from djitellopy import Tello
-Tello.LOGGER.setLevel(logging.WARNING)
-t = Tello()  # 192.168.10.1, the emulator's address in the other namespace
-t.connect()
-out = {"battery": t.get_battery(), "sdk": t.query_sdk_version(), "battery_q": t.query_battery()}
-t.takeoff()
-time.sleep(0.15)
-out["h_flying"] = t.get_height()
-for _ in range(8):
-    t.send_rc_control(0, 50, 0, 0)
-    time.sleep(0.1)
-out["vgx"] = t.get_speed_x()
-t.send_rc_control(0, 0, 0, 0)
-t.land()
-time.sleep(0.15)
-out["h_landed"] = t.get_height()
-t.end()
-print(json.dumps(out))
-"""
-
-
 @pytest.mark.netns
 def test_real_djitellopy_against_emulator() -> None:
     reason = netns_pair_unavailable()
@@ -287,7 +264,7 @@ def test_real_djitellopy_against_emulator() -> None:
         NetnsPair() as net,
         TelloEmulator(sock=net.udp_socket("a", (net.addr_a, 8889)), takeoff_time=0.5) as emu,
     ):
-        done = net.run_python("b", DJITELLOPY_SCRIPT, timeout=60)
+        done = net.run("b", [sys.executable, "-m", "tests.children.djitellopy_flight"], timeout=60)
         assert done.returncode == 0, done.stderr
         out = json.loads(done.stdout.strip().splitlines()[-1])
         snap = emu.snapshot()

@@ -447,14 +447,7 @@ def test_two_tellos_in_one_process(driver: Driver, emulator: Callable[..., Tello
 @pytest.mark.netns
 def test_port_in_use_by_another_process(net: NetnsPair, driver: Driver) -> None:
     """The driver process holds 8889 in namespace b: a second process there cannot fly a Tello."""
-    script = (
-        "from antalate_lcm.autopilot.tello import TelloAutopilot\n"
-        "try:\n"
-        "    TelloAutopilot({}).connect()\n"
-        "except Exception as exc:\n"
-        "    print(type(exc).__name__, exc)\n"
-    )
-    done = net.run_python("b", script, timeout=30)
+    done = net.run("b", [sys.executable, "-m", "tests.children.tello_connect"], timeout=30)
     assert done.stdout.startswith("AutopilotError") and "8889" in done.stdout, done.stdout + done.stderr
 
 

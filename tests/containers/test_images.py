@@ -26,8 +26,9 @@ import tomli_w
 from tests import REPO
 from tests.agent_harness import agent_config
 from tests.containers.conftest import Image
-from tests.containers.support import Podman, RootNetns, load_build_module
+from tests.containers.support import Podman, load_build_module
 from tests.lan.swarm import OperatorClient
+from tests.netns import NetNamespace
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 
@@ -143,8 +144,8 @@ def test_every_node_kind_imports_in_the_image_as_its_user(built_image: Image, im
 
 
 @pytest.fixture
-def netns() -> Iterator[RootNetns]:
-    ns = RootNetns()
+def netns() -> Iterator[NetNamespace]:
+    ns = NetNamespace(root=True).start()
     try:
         yield ns
     finally:
@@ -152,7 +153,7 @@ def netns() -> Iterator[RootNetns]:
 
 
 def test_a_mission_with_every_node_in_its_own_container(
-    antalate_image: Image, netns: RootNetns, tmp_path: Path
+    antalate_image: Image, netns: NetNamespace, tmp_path: Path
 ) -> None:
     pod = antalate_image.podman.in_netns(netns)
     tag = antalate_image.tag

@@ -120,7 +120,7 @@ from typing import Any
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
 from antalate_lcm.autopilot.mavlink.link import MemoryLink
-from tests.polling import wait_for
+from tests.harness.polling import wait_for
 
 LOG = logging.getLogger("antalate.tests.mavlink_vehicle")
 

@@ -42,7 +42,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
 from tests import REPO
-from tests.netns import stop_process
+from tests.harness.process import stop_process
 
 Side = Literal["a", "b"]
 

@@ -114,7 +114,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 from antalate_lcm.autopilot.tello.link import MemoryLink
-from tests.polling import wait_for
+from tests.harness.polling import wait_for
 
 LOG = logging.getLogger("antalate.tests.tello_emulator")
 

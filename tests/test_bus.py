@@ -15,6 +15,7 @@ import pytest
 from antalate_lcm.bus import Bus
 from antalate_lcm.errors import MulticastUnavailable
 from antalate_lcm.msgs import mc_state_t, telemetry_t
+from tests import REPO
 from tests.conftest import MCAST_URL, Probe
 from tests.netns import NetNamespace
 from tests.polling import wait_for
@@ -208,9 +209,19 @@ def test_no_multicast_route_gives_the_fix() -> None:
     reason = netns_unavailable()
     if reason:
         pytest.skip(f"no private network namespace: {reason}")
-    code = "from antalate_lcm.bus import Bus; Bus({'lan': 'udpm://239.255.76.67:7667?ttl=1'}).open()"
     proc = subprocess.run(
-        ["unshare", "-rn", sys.executable, "-c", code], capture_output=True, text=True, timeout=30
+        [
+            "unshare",
+            "-rn",
+            sys.executable,
+            "-m",
+            "tests.children.open_bus",
+            "udpm://239.255.76.67:7667?ttl=1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        cwd=REPO,
     )
     assert proc.returncode != 0
     assert "MulticastUnavailable" in proc.stderr

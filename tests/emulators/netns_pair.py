@@ -156,12 +156,6 @@ class NetnsPair:
         )
         return done
 
-    def run_python(
-        self, side: Side, code: str, timeout: float = 60, **kwargs: Any
-    ) -> subprocess.CompletedProcess[str]:
-        """Run a Python snippet inside ``side`` with this interpreter (djitellopy scripts, adapters...)."""
-        return self.run(side, [sys.executable, "-c", code], timeout=timeout, **kwargs)
-
     def udp_socket(self, side: Side, bind: tuple[str, int]) -> socket.socket:
         """A UDP socket bound to ``bind`` inside ``side``, usable from this process (see module doc)."""
         return self._socket(side, "udp", bind)

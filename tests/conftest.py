@@ -10,13 +10,13 @@ from typing import TYPE_CHECKING, Any, cast
 
 import pytest
 
-from tests.jsonl import JsonLinesProcess
-from tests.netns import NetNamespace, netns_unavailable
+from tests.harness.jsonl import JsonLinesProcess
+from tests.harness.netns import MCAST_URL as MCAST_URL
+from tests.harness.netns import NetNamespace, netns_unavailable
 
 if TYPE_CHECKING:
-    from tests.agent_harness import AgentProcesses
+    from tests.harness.agents import AgentProcesses
 
-MCAST_URL = "udpm://239.255.76.67:7667?ttl=0"
 _NETNS_REASON: list[str | None] = []
 #: The ``user_properties`` key of an attack's verdict (tests/security/conftest.py judges each attack).
 ATTACK_PROPERTY = "antalate-attack"

@@ -20,6 +20,9 @@ from typing import Any
 
 from tests.harness.process import child_env, stop_process
 
+#: A bus on the multicast route every namespace here has (ttl=0: it never leaves the namespace).
+MCAST_URL = "udpm://239.255.76.67:7667?ttl=0"
+
 _SETUP = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && echo ready && exec sleep 100000"
 
 

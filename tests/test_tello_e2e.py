@@ -28,14 +28,13 @@ from typing import Any
 import pytest
 
 from tests import REPO
+from tests.emulators.netns_pair import NetnsPair, netns_pair_unavailable
+from tests.emulators.tello_emulator import TelloEmulator
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - exercised only on 3.10
     import tomli as tomllib
-
-from tests.emulators.netns_pair import NetnsPair, netns_pair_unavailable
-from tests.emulators.tello_emulator import TelloEmulator
 
 pytestmark = pytest.mark.netns
 

@@ -209,28 +209,28 @@ def telemetry(app: OperatorApp, name: str) -> Telemetry:
     return tel
 
 
+async def wait_count(pilot: Any, app: OperatorApp, read: Callable[[], list[T]], n: int) -> list[T]:
+    """What ``read()`` returns once it holds ``n`` items or more."""
+
+    def enough() -> list[T] | None:
+        items = read()
+        return items if len(items) >= n else None
+
+    items = await until(pilot, app, enough)
+    assert items is not None
+    return items
+
+
 async def wait_sent(
     pilot: Any, app: OperatorApp, swarm: FakeSwarm, n: int
 ) -> list[tuple[str, operator_cmd_t]]:
-    def enough() -> list[tuple[str, operator_cmd_t]] | None:
-        sent = swarm.sent()
-        return sent if len(sent) >= n else None
-
-    sent = await until(pilot, app, enough)
-    assert sent is not None
-    return sent
+    return await wait_count(pilot, app, swarm.sent, n)
 
 
 async def wait_dirs(
     pilot: Any, app: OperatorApp, swarm: FakeSwarm, n: int
 ) -> list[tuple[str, direction_cmd_t]]:
-    def enough() -> list[tuple[str, direction_cmd_t]] | None:
-        sent = swarm.sent_directions()
-        return sent if len(sent) >= n else None
-
-    sent = await until(pilot, app, enough)
-    assert sent is not None
-    return sent
+    return await wait_count(pilot, app, swarm.sent_directions, n)
 
 
 async def settle(pilot: Any) -> None:

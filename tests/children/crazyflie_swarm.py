@@ -25,17 +25,8 @@ from antalate_lcm.node import Context, Node, TopicMatch
 from antalate_lcm.runtime.agent import agent_nodes, shared_buses, validate
 from antalate_lcm.runtime.scripted_operator import ScriptedOperator
 from antalate_lcm.vocabulary import HlcState, McState
+from tests.children.events import emit
 from tests.emulators.crazyflie_emulator import CrazyflieEmulator
-
-T0 = time.monotonic()
-OUT = threading.Lock()
-
-
-def emit(**event: Any) -> None:
-    event["t"] = round(time.monotonic() - T0, 3)
-    with OUT:
-        sys.stdout.write(json.dumps(event) + "\n")
-        sys.stdout.flush()
 
 
 class Recorder(Node):

@@ -13,8 +13,6 @@ from __future__ import annotations
 import json
 import logging
 import sys
-import threading
-import time
 from typing import Any
 
 from antalate_lcm.config import Config, parse_config
@@ -23,16 +21,7 @@ from antalate_lcm.msgs import direction_cmd_t
 from antalate_lcm.node import Context, Node
 from antalate_lcm.runtime.agent import agent_nodes, validate
 from antalate_lcm.vocabulary import HlcState, McState
-
-T0 = time.monotonic()
-OUT = threading.Lock()
-
-
-def emit(**event: Any) -> None:
-    event["t"] = round(time.monotonic() - T0, 3)
-    with OUT:
-        sys.stdout.write(json.dumps(event) + "\n")
-        sys.stdout.flush()
+from tests.children.events import emit
 
 
 class Recorder(Node):

@@ -33,7 +33,6 @@ also exit by themselves when the test process dies, because they block reading a
 from __future__ import annotations
 
 import os
-import shutil
 import socket
 import subprocess
 import sys
@@ -42,6 +41,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
 from tests import REPO
+from tests.harness.netns import unavailable_because
 from tests.harness.process import stop_process
 
 Side = Literal["a", "b"]
@@ -51,17 +51,9 @@ _READY = "echo ready && exec cat"
 
 def netns_pair_unavailable() -> str | None:
     """Why a veth-joined namespace pair cannot be made here, or None when it can (tests skip on it)."""
-    for tool in ("unshare", "nsenter", "ip"):
-        if shutil.which(tool) is None:
-            return f"{tool} is not installed (Debian/Ubuntu: apt-get install util-linux iproute2)"
-    probe = subprocess.run(
-        ["unshare", "-rn", "sh", "-c", "ip link add t0 type veth peer name t1"],
-        capture_output=True,
-        text=True,
+    return unavailable_because(
+        "ip link add t0 type veth peer name t1", "cannot create a veth pair in a private namespace"
     )
-    if probe.returncode != 0:
-        return f"cannot create a veth pair in a private namespace: {probe.stderr.strip()}"
-    return None
 
 
 class NetnsPair:

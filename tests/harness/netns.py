@@ -26,17 +26,21 @@ MCAST_URL = "udpm://239.255.76.67:7667?ttl=0"
 _SETUP = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && echo ready && exec sleep 100000"
 
 
-def netns_unavailable() -> str | None:
-    """The reason private namespaces cannot be made here, or None when they can."""
+def unavailable_because(script: str, failure: str) -> str | None:
+    """Why ``script`` cannot run in a fresh private namespace here (a tool missing, or ``failure`` and
+    what the kernel said), or None when it can: the reason a test skips on."""
     for tool in ("unshare", "nsenter", "ip"):
         if shutil.which(tool) is None:
             return f"{tool} is not installed (Debian/Ubuntu: apt-get install util-linux iproute2)"
-    probe = subprocess.run(
-        ["unshare", "-rn", "sh", "-c", "ip link set lo up"], capture_output=True, text=True
-    )
+    probe = subprocess.run(["unshare", "-rn", "sh", "-c", script], capture_output=True, text=True)
     if probe.returncode != 0:
-        return f"cannot create a network namespace (unshare -rn): {probe.stderr.strip()}"
+        return f"{failure}: {probe.stderr.strip()}"
     return None
+
+
+def netns_unavailable() -> str | None:
+    """The reason private namespaces cannot be made here, or None when they can."""
+    return unavailable_because("ip link set lo up", "cannot create a network namespace (unshare -rn)")
 
 
 class NetNamespace:

@@ -25,10 +25,12 @@ demo: setup
 demo-headless: setup
 	$(VENV)/bin/antalate demo --headless --agents 5
 
-# Two workers: the suite mostly waits (vehicles climbing, links timing out), so two halve it on two
-# cores. A module's tests stay on one worker, in order (--dist loadfile): its module-scoped fixtures
-# (a built wheel, an emulator) are made once, and tests that build on the one before keep their order.
-TEST_WORKERS ?= 2
+# Four workers on two cores: the suite mostly waits (vehicles climbing, firmware booting, links timing
+# out; load stayed under 3 with four), so more workers than cores shorten it. A module's tests stay on
+# one worker, in order (--dist loadfile): its module-scoped fixtures (a built wheel, a booted SITL
+# vehicle) are made once, and tests that build on the one before keep their order. The modules go out
+# longest first from tests/module_times.json (tests/scheduling.py), the SITL swarms as one unit.
+TEST_WORKERS ?= 4
 
 test: setup sysdeps
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
@@ -39,7 +41,7 @@ lint: setup
 	$(VENV)/bin/mypy --cache-dir $(VENV)/.mypy_cache
 
 gen: setup
-	$(PY) -m antalate_lcm._codegen
+	$(PY) -m antalate_lcm.tools.codegen
 
 bench: setup
 	$(PY) benchmarks/bus.py

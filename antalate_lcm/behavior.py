@@ -12,6 +12,7 @@ the BMA and its other behaviors carry on. See ``docs/behaviors.md``.
 from __future__ import annotations
 
 import logging
+import zlib
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -19,21 +20,13 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from pydantic import BaseModel, ConfigDict
 
 from antalate_lcm.bus import Subscription
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.errors import BehaviorError as BehaviorError
 from antalate_lcm.executor import Timer
 from antalate_lcm.peers import PeerTable
 from antalate_lcm.topics import Message
 
 if TYPE_CHECKING:
     from antalate_lcm.node import Node
-
-
-class BehaviorError(AntalateError):
-    """Raise this for an expected failure; its message alone is reported (no exception type name).
-
-    E.g. ``raise BehaviorError("ffmpeg not found: apt-get install ffmpeg")`` shows up in the
-    operator console as exactly that, which is more useful than ``FileNotFoundError: [Errno 2] ...``.
-    """
 
 
 class NoParams(BaseModel):
@@ -135,6 +128,16 @@ class BehaviorContext:
         self._persistent_timers: list[Timer] = []
 
     # ------------------------------------------------------------------ facts
+    @property
+    def seed(self) -> int | None:
+        """A seed for this behavior's random draws, derived from the run's (``antalate run --seed``,
+        and always on simulated time), this agent and this behavior: seed a ``random.Random`` with
+        it and the run stays a function of its seed. None when the run has none."""
+        run_seed = self._node.context.seed
+        if run_seed is None:
+            return None
+        return zlib.crc32(f"{run_seed}/{self.agent}/{self.name}".encode())
+
     @property
     def now(self) -> float:
         """Monotonic seconds on the executor's clock; use it for every timeout and rate."""

@@ -56,10 +56,10 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.errors import ConfigError
 from antalate_lcm.lcm_datagram import MAX_MESSAGE_SIZE, Reassembler, channel_problem
 from antalate_lcm.lcm_url import bus_url_problem
+from antalate_lcm.ratelimit import RateLimitedLog
 from antalate_lcm.security import MemberProof
 from antalate_lcm.zenoh_bus import BRIDGE_MARK
 

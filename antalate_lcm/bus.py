@@ -46,9 +46,9 @@ from typing import Any
 
 import lcm
 
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.executor import Executor
 from antalate_lcm.lcm_url import open_failure
+from antalate_lcm.ratelimit import RateLimitedLog
 from antalate_lcm.topics import Message
 from antalate_lcm.udpm_socket import UdpmReceiver
 

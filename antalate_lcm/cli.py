@@ -87,7 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _registrars() -> list[Callable[[argparse._SubParsersAction[argparse.ArgumentParser]], None]]:
     """Subcommands registered by the modules that implement them (imported lazily to start fast)."""
     from antalate_lcm import foxglove_server, gcs, mcap_record
-    from antalate_lcm.runtime import commands, experiment, router, scaffold
+    from antalate_lcm.runtime import commands, experiment, replay, router, scaffold, sweep
     from antalate_lcm.station import cli as station_cli
 
     return [
@@ -95,6 +95,8 @@ def _registrars() -> list[Callable[[argparse._SubParsersAction[argparse.Argument
         station_cli.register,
         router.register,
         experiment.register,
+        replay.register,
+        sweep.register,
         scaffold.register,
         mcap_record.register,
         foxglove_server.register,

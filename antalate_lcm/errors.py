@@ -2,8 +2,13 @@
 
 `AntalateError` is the root of every exception the package defines (``tests/test_layers.py`` checks
 it), so ``except AntalateError`` (the CLI, the console) catches whatever antalate raises on purpose.
-Exceptions defined elsewhere keep the standard base their callers already catch as a second base
-(``AutopilotError(AntalateError, RuntimeError)``, ``ReplyError(AntalateError, ValueError)``).
+They are all defined here, as httpx keeps its exceptions in one module, so the whole hierarchy reads in
+one place; the module that raises one re-exports it under its old name (``antalate_lcm.autopilot.
+AutopilotError``, ``antalate_lcm.strict.StrictError``, …), which is where docs and behaviors import it
+from. An exception a caller used to catch by a standard base keeps that base as a second one
+(``AutopilotError(AntalateError, RuntimeError)``, ``ReplyError(AntalateError, ValueError)``). Private
+control flow that never leaves its module (``_KeyedError``, ``_TooLarge``, the Tello's ``_Preempted``)
+stays beside the code that raises and catches it.
 """
 
 from __future__ import annotations
@@ -54,3 +59,94 @@ class MulticastUnavailable(BusUnavailable):
 
 class PluginNotFound(AntalateError):
     """A behavior or autopilot name that no entry point and no ``module:Class`` provides."""
+
+
+# Vehicles (antalate_lcm.autopilot)
+
+
+class AutopilotError(AntalateError, RuntimeError):
+    """A command the vehicle refused, did not acknowledge, or cannot perform in its current state."""
+
+
+class UnknownAutopilotError(PluginNotFound, LookupError):
+    """The configured autopilot matches no registered adapter, or cannot be loaded.
+
+    A `PluginNotFound` (the CLI prints it without a traceback) and a `LookupError`.
+    """
+
+
+class LinkClosed(AntalateError, ConnectionError):
+    """The link was closed by our side (`MavLink.close`)."""
+
+
+class PeerClosed(AntalateError, ConnectionError):
+    """The other end closed a stream link (pymavlink would otherwise just keep returning nothing)."""
+
+
+# Configuration and plugins
+
+
+class StrictError(AntalateError, ValueError):
+    """One invalid value: ``key`` is the dotted path inside the validated table ('' = the table)."""
+
+    def __init__(self, key: str, message: str) -> None:
+        super().__init__(f"{key}: {message}" if key else message)
+        self.key = key
+        self.message = message
+
+
+# Nodes and behaviors
+
+
+class InsecureBus(AntalateError):
+    """A node would consume an internal topic from a network-reachable bus with no swarm key."""
+
+
+class BehaviorError(AntalateError):
+    """Raise this for an expected failure; its message alone is reported (no exception type name).
+
+    E.g. ``raise BehaviorError("ffmpeg not found: apt-get install ffmpeg")`` shows up in the
+    operator console as exactly that, which is more useful than ``FileNotFoundError: [Errno 2] ...``.
+    """
+
+
+# The station and its clients (the OSC, an operator's StationClient)
+
+
+class ServerProblem(AntalateError):
+    """One failed exchange with the station (down, timeout, wrong status, oversized or invalid reply)."""
+
+    def __init__(self, text: str, retry_after: float = 0.0) -> None:
+        super().__init__(text)
+        self.retry_after = retry_after
+
+
+class ReplyError(AntalateError, ValueError):
+    """A reply the OSC will not act on; the message says what was wrong with it."""
+
+
+class StationDBError(AntalateError):
+    """The database file cannot be used (unreadable, from a newer antalate, not a station database)."""
+
+
+class UnknownTarget(AntalateError, LookupError):
+    """A command addressed to a name or id the station has never seen."""
+
+
+class Refused(AntalateError):
+    """A request the station turns down: an HTTP status, a sentence, and for 429 when to retry."""
+
+    def __init__(self, status: int, detail: str, retry_after: float | None = None) -> None:
+        super().__init__(detail)
+        self.status = status
+        self.detail = detail
+        self.retry_after = retry_after
+
+
+class StationClientError(AntalateError):
+    """The station refused a request: the HTTP status and its one-sentence reason."""
+
+    def __init__(self, status: int, detail: str) -> None:
+        super().__init__(f"station answered {status}: {detail}")
+        self.status = status
+        self.detail = detail

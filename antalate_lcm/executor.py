@@ -22,7 +22,10 @@ import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import Future
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
+
+if TYPE_CHECKING:
+    from antalate_lcm.simclock import SimClock
 
 log = logging.getLogger("antalate.executor")
 #: Timers are run in 1 ms slots: those due in the same millisecond share one loop handle (a
@@ -85,11 +88,22 @@ class Timer:
 class Executor:
     """One event loop on one thread: LCM descriptors, timers and callbacks of a process's nodes."""
 
-    def __init__(self, name: str = "antalate-executor", clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        name: str = "antalate-executor",
+        clock: Callable[[], float] = time.monotonic,
+        *,
+        sim: SimClock | None = None,
+    ) -> None:
         self.name = name
+        #: Simulated time (``antalate run --speed``, :mod:`antalate_lcm.simclock`): the loop, its
+        #: timers, ``clock`` and ``wallclock`` all run on it. None: the wall clock, on uvloop.
+        self.sim = sim
         #: What nodes read as ``now`` (timers themselves run on the loop's monotonic clock).
-        self.clock = clock
-        self._loop = new_event_loop()
+        self.clock = clock if sim is None else sim.monotonic
+        #: What nodes stamp their headers with and check the replay window against.
+        self.wallclock: Callable[[], float] = time.time if sim is None else sim.wall
+        self._loop = self._new_loop()
         self._readers: dict[int, Callable[[], None]] = {}
         #: Readers that are also called between timers of a long slot (they must never block).
         self._urgent: tuple[Callable[[], None], ...] = ()
@@ -101,6 +115,13 @@ class Executor:
         self._running = False
         #: Worst delay seen between a timer's due time and its run (s): the executor's headroom.
         self.max_timer_lag = 0.0
+
+    def _new_loop(self) -> asyncio.AbstractEventLoop:
+        if self.sim is None:
+            return new_event_loop()
+        from antalate_lcm.simclock import SimEventLoop
+
+        return SimEventLoop(self.sim)
 
     @property
     def loop(self) -> asyncio.AbstractEventLoop:
@@ -257,7 +278,7 @@ class Executor:
 
     def _prepare(self) -> None:
         if self._loop.is_closed():  # restarted after stop(): a fresh loop, the same descriptors
-            self._loop = new_event_loop()
+            self._loop = self._new_loop()
             self._slots.clear()  # their handles died with the old loop (as a timer did before slots)
             for fd, callback in self._readers.items():
                 self._loop.add_reader(fd, callback)

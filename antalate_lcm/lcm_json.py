@@ -2,7 +2,7 @@
 
 Foxglove, PlotJuggler and the ``mcap`` tools read JSON-encoded MCAP channels field by field when
 each channel carries a JSON Schema; deriving the schemas from the ``.lcm`` definitions (with the
-reader the Go emitter uses, ``_golang_parse``) keeps them, their field names and the units written in
+reader the Go emitter uses, ``tools.lcm_parse``) keeps them, their field names and the units written in
 the comments in step with the wire contract, with nothing to maintain by hand.
 
 The encoding is lossless, so a JSON message turns back into the same LCM bytes (:func:`from_json`):
@@ -18,10 +18,10 @@ import functools
 import math
 from typing import Any
 
-from antalate_lcm import _codegen
-from antalate_lcm._golang_parse import Member, Struct, parse_files
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.msgs import header_t
+from antalate_lcm.tools import codegen
+from antalate_lcm.tools.lcm_parse import Member, Struct, parse_files
 from antalate_lcm.topics import MESSAGE_TYPES
 
 #: The one schema encoding and message encoding the MCAP spec and the Foxglove protocol name for JSON.
@@ -35,10 +35,10 @@ _INT_BITS = {"int8_t": 8, "int16_t": 16, "int32_t": 32, "int64_t": 64}
 @functools.cache
 def structs() -> dict[str, Struct]:
     """Every ``.lcm`` struct by its short name (``telemetry_t``), parsed once per process."""
-    files = _codegen.lcm_files()
+    files = codegen.lcm_files()
     if not files:
         raise AntalateError(
-            f"no .lcm files in {_codegen.LCMTYPES_DIR}: this antalate was installed without its message "
+            f"no .lcm files in {codegen.LCMTYPES_DIR}: this antalate was installed without its message "
             "definitions (rebuild the wheel from a checkout)"
         )
     return {s.name.short: s for s in parse_files(files).values()}

@@ -27,11 +27,12 @@ from typing import Any, Protocol
 
 from antalate_lcm import validation
 from antalate_lcm._fastcodec import encode as fast_encode
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.bus import Bus, Subscription
 from antalate_lcm.config import Config
 from antalate_lcm.errors import AntalateError
+from antalate_lcm.errors import InsecureBus as InsecureBus
 from antalate_lcm.executor import Executor, Timer
+from antalate_lcm.ratelimit import RateLimitedLog
 from antalate_lcm.security import (
     Authenticator,
     HighWaterStore,
@@ -56,10 +57,6 @@ INPROC_BUS = "_inproc"
 _PHASES = 1000
 #: s between the reminders an insecure node logs.
 INSECURE_REMINDER = 60.0
-
-
-class InsecureBus(AntalateError):
-    """A node would consume an internal topic from a network-reachable bus with no swarm key."""
 
 
 class Interference(Protocol):
@@ -97,6 +94,10 @@ class Context:
     #: agents in one process (``antalate agent --agents 1000``) would say it a thousand times and
     #: bury every other line of the start.
     open_warned: set[str] = field(default_factory=set, repr=False)
+    #: The run's seed (``antalate run --seed``, and always on simulated time): the agents' timer
+    #: phases and the behaviors' random draws (``BehaviorContext.seed``) derive from it, so a run
+    #: is a function of it. None: phases fixed by the agents' names, behaviors seed as they like.
+    seed: int | None = None
 
     def __post_init__(self) -> None:
         self.bus.attach(self.executor)  # the bus's descriptors are read on the nodes' loop
@@ -106,17 +107,23 @@ class Context:
         return cls(Bus(config.buses), Executor())
 
     @classmethod
-    def in_process(cls, buses: Mapping[str, str], *, whole_swarm: bool = False) -> Context:
+    def in_process(
+        cls, buses: Mapping[str, str], *, whole_swarm: bool = False, executor: Executor | None = None
+    ) -> Context:
         """A context for every node of one or more agents in this process (``antalate agent``, demo).
 
         Internal topics (MC_STATE, HLC_STATE, VELOCITY_CMD, ...) are delivered between this
         process's nodes over memq:// and still published on the configured buses for the operator
         and the tools; a spoofed datagram on the LAN never reaches the MC or the HLC.
+        ``executor``: the loop to run them on (one on simulated time: ``antalate run --speed``).
         """
         if INPROC_BUS in buses:
             raise AntalateError(f"bus name {INPROC_BUS!r} is reserved for the in-process bus")
         return cls(
-            Bus({**buses, INPROC_BUS: "memq://"}), Executor(), inproc_bus=INPROC_BUS, whole_swarm=whole_swarm
+            Bus({**buses, INPROC_BUS: "memq://"}),
+            executor or Executor(),
+            inproc_bus=INPROC_BUS,
+            whole_swarm=whole_swarm,
         )
 
     def close(self) -> None:
@@ -161,6 +168,8 @@ class Node:
         self.agent = config.agent.name
         self.name = name or self.kind
         self.log = logging.getLogger(f"antalate.{self.kind}.{self.agent}")
+        if context.executor.sim is not None:  # simulated time: headers and the replay window on it
+            self.wallclock = context.executor.wallclock
         self._specs = config.topic_specs()
         self._publishers: dict[Any, _Publisher] = {}
         self._subs: list[Subscription] = []
@@ -228,7 +237,11 @@ class Node:
 
     def replay_state_dir(self) -> Path | None:
         """Where this node keeps its replay memory: ``[security] state_dir``, else the user's state
-        directory, else (every bus memq:// or file://, nothing survives the process anyway) nowhere."""
+        directory, else (every bus memq:// or file://, nothing survives the process anyway) nowhere.
+        On simulated time nowhere: every run's clock starts at the same date, and a memory of the
+        last run would refuse the next one's messages as replays."""
+        if self.context.executor.sim is not None:
+            return None
         if self.config.security.state_dir:
             return Path(self.config.security.state_dir).expanduser()
         if any(network_reachable(url) for url in self.config.buses.values()):
@@ -593,5 +606,8 @@ class Node:
         by the agent's name, so a thousand agents started together do not all run in the same tick
         (one of 1,000 phases, so a period's runs spread over its every millisecond: 16 phases sent
         a thousand agents' datagrams in bursts that overflowed receive buffers; an agent's nodes
-        share their phase)."""
-        return period * (1.0 - (zlib.crc32(self.agent.encode()) % _PHASES) / _PHASES)
+        share their phase). With a run seed (``Context.seed``) the phase is drawn from it as well:
+        another seed starts the agents in another order, as agents switched on by hand would be."""
+        seed = self.context.seed
+        name = self.agent if seed is None else f"{seed}/{self.agent}"
+        return period * (1.0 - (zlib.crc32(name.encode()) % _PHASES) / _PHASES)

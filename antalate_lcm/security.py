@@ -284,7 +284,7 @@ class Authenticator:
         wallclock: Callable[[], float] = time.time,
         log_period: float = 10.0,
     ) -> None:
-        from antalate_lcm._ratelimit import RateLimitedLog
+        from antalate_lcm.ratelimit import RateLimitedLog
 
         self.policy = policy
         self.replay_guard = replay_guard or ReplayGuard()

@@ -16,8 +16,8 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from antalate_lcm import _codegen
 from antalate_lcm.errors import AntalateError
+from antalate_lcm.tools import codegen
 
 JDK_HINT = "install a JDK (Debian/Ubuntu: sudo apt-get install default-jdk-headless)"
 
@@ -38,7 +38,7 @@ def cache_dir() -> Path:
 
 def types_digest() -> str:
     h = hashlib.sha256()
-    for path in _codegen.lcm_files():
+    for path in codegen.lcm_files():
         h.update(path.name.encode())
         h.update(path.read_bytes())
     return h.hexdigest()[:16]
@@ -56,7 +56,7 @@ def build_types_jar(cache: Path | None = None) -> Path:
     cache.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         src, classes = Path(tmp) / "src", Path(tmp) / "classes"
-        _codegen.generate_java(src)
+        codegen.generate_java(src)
         sources = [str(p) for p in src.rglob("*.java")]
         classes.mkdir()
         proc = subprocess.run(
@@ -77,7 +77,7 @@ def build_types_jar(cache: Path | None = None) -> Path:
 def spy_command(url: str, types_jar: Path) -> tuple[list[str], dict[str, str]]:
     env = dict(os.environ)
     env["CLASSPATH"] = os.pathsep.join(p for p in (str(types_jar), env.get("CLASSPATH", "")) if p)
-    return [_codegen.lcm_tool("lcm-spy"), f"--lcm-url={url}"], env
+    return [codegen.lcm_tool("lcm-spy"), f"--lcm-url={url}"], env
 
 
 def run_spy(url: str) -> int:

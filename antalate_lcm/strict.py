@@ -25,18 +25,9 @@ from typing import Any, Literal, TypeVar, Union, get_args, get_origin
 
 from pydantic import BaseModel, ValidationError
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.errors import StrictError as StrictError
 
 M = TypeVar("M", bound=BaseModel)
-
-
-class StrictError(AntalateError, ValueError):
-    """One invalid value: ``key`` is the dotted path inside the validated table ('' = the table)."""
-
-    def __init__(self, key: str, message: str) -> None:
-        super().__init__(f"{key}: {message}" if key else message)
-        self.key = key
-        self.message = message
 
 
 def dotted(loc: tuple[Any, ...] | list[Any]) -> str:

@@ -6,7 +6,7 @@ whose fingerprints match the Python nodes exactly, without the source tree. ``--
 the definitions themselves, for a build that runs its own ``lcm-gen``.
 
 Go is the exception: lcm-gen 1.5.3's Go emitter crashes on ``header_t.mac`` (a variable-length
-array, in every message), so ``_golang`` writes the Go lcm-gen would have written (same API, wire
+array, in every message), so ``tools.golang`` writes the Go lcm-gen would have written (same API, wire
 format and fingerprints; ``tests/test_types_go.py`` compares the two).
 """
 
@@ -17,8 +17,8 @@ import subprocess
 import time
 from pathlib import Path
 
-from antalate_lcm import _codegen, _golang
 from antalate_lcm.errors import AntalateError
+from antalate_lcm.tools import codegen, golang
 
 # lcm-gen's switches per language: emit, then where the files go (C: sources and headers apart is
 # lcm-gen's default too, one folder is what a small node's Makefile wants).
@@ -38,15 +38,15 @@ def lcm_gen_command(lang: str, out: Path, files: list[Path]) -> list[str]:
     if lang not in _LCM_GEN_ARGS:
         raise AntalateError(f"unknown language {lang!r}: one of {', '.join(LANGUAGES)}")
     args = [a.format(out=out) for a in _LCM_GEN_ARGS[lang]]
-    return [_codegen.lcm_tool("lcm-gen"), *args, *map(str, files)]
+    return [codegen.lcm_tool("lcm-gen"), *args, *map(str, files)]
 
 
 def write_types(lang: str, out: Path) -> list[Path]:
     """Write the bindings (or the ``.lcm`` files) into ``out``; returns the files written, sorted."""
-    files = _codegen.lcm_files()
+    files = codegen.lcm_files()
     if not files:
         raise AntalateError(
-            f"no .lcm files in {_codegen.LCMTYPES_DIR}: this antalate was installed without its message "
+            f"no .lcm files in {codegen.LCMTYPES_DIR}: this antalate was installed without its message "
             "definitions (rebuild the wheel from a checkout)"
         )
     try:
@@ -58,7 +58,7 @@ def write_types(lang: str, out: Path) -> list[Path]:
             shutil.copy2(src, out / src.name)
         return sorted(out / src.name for src in files)
     if lang == "go":
-        return _golang.write_go(files, out)
+        return golang.write_go(files, out)
     try:
         cmd = lcm_gen_command(lang, out, files)
     except FileNotFoundError as exc:

@@ -48,9 +48,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from antalate_lcm._ratelimit import RateLimitedLog, TokenBucket
 from antalate_lcm.errors import BusUnavailable
 from antalate_lcm.lcm_url import LcmUrl, parse_lcm_url
+from antalate_lcm.ratelimit import RateLimitedLog, TokenBucket
 from antalate_lcm.security import MemberProof
 
 log = logging.getLogger("antalate.zenoh")

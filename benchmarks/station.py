@@ -48,8 +48,7 @@ import httpx
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from antalate_lcm.station import StationServer, StationSettings  # noqa: E402
-from antalate_lcm.station._settings import RateLimits  # noqa: E402
+from antalate_lcm.station import RateLimits, StationServer, StationSettings  # noqa: E402
 from antalate_lcm.station._spatial import GridIndex  # noqa: E402
 from antalate_lcm.station.sector import detect, search_box  # noqa: E402
 

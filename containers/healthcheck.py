@@ -93,8 +93,7 @@ def plan(cmdline: list[str]) -> Check:
 
 
 def _station_url(args: argparse.Namespace) -> str:
-    from antalate_lcm.station._file import load_station_file
-    from antalate_lcm.station._settings import DEFAULT_PORT
+    from antalate_lcm.station import DEFAULT_PORT, load_station_file
 
     host, port, tls = "127.0.0.1", DEFAULT_PORT, bool(args.tls_cert)
     if args.config:

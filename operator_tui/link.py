@@ -27,11 +27,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.bus import Subscription
 from antalate_lcm.config import Config
 from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
 from antalate_lcm.node import Context, Node
+from antalate_lcm.ratelimit import RateLimitedLog
 from antalate_lcm.security import check_datagram
 from antalate_lcm.topics import Message, channel_regex
 from operator_tui.commands import COMMANDS

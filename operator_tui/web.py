@@ -45,13 +45,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from antalate_lcm._ratelimit import RateLimitedLog, TokenBucket
 from antalate_lcm.errors import AntalateError
+from antalate_lcm.ratelimit import RateLimitedLog, TokenBucket
 
 if TYPE_CHECKING:
     from aiohttp import web
 
-    from antalate_lcm.station._settings import ApiKey
+    from antalate_lcm.station import ApiKey
 
 log = logging.getLogger("antalate.tui.web")
 
@@ -93,7 +93,7 @@ class ConsoleAccess:
 
     def login(self, key: str, now: float) -> tuple[str, str] | Refusal:
         """A new session (token, holder's name) for a valid operator key, else why not."""
-        from antalate_lcm.station._auth import sha256_hex
+        from antalate_lcm.station import sha256_hex
 
         digest = sha256_hex(key.strip())
         match = next((k for k in self.keys if hmac.compare_digest(k.sha256, digest)), None)
@@ -171,7 +171,7 @@ class KeysFile:
 
 def load_keys(path: str) -> tuple[ApiKey, ...]:
     """The ``[[api_keys]]`` of a station config (or of a file holding only those tables)."""
-    from antalate_lcm.station._file import load_station_file
+    from antalate_lcm.station import load_station_file
 
     keys = load_station_file(path).settings.api_keys
     if not any(k.role == "operator" for k in keys):

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import pytest
 
+from tests import scheduling
 from tests.harness.jsonl import JsonLinesProcess
 from tests.harness.netns import MCAST_URL as MCAST_URL
 from tests.harness.netns import NetNamespace, netns_unavailable
@@ -25,10 +26,28 @@ _ATTACKS: dict[str, str] = {}
 
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:
     """Tally the attacks (here, in the process that prints the summary: the xdist controller too)."""
+    scheduling.record(report)
     for key, value in report.user_properties:
         if key == ATTACK_PROPERTY:
             name, verdict = cast("tuple[str, str]", value)  # tests/security/conftest.py records the pair
             _ATTACKS[name] = verdict
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    scheduling.longest_first(items)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """`make test`'s ``--dist loadfile``, longest modules first (tests/scheduling.py)."""
+    if config.getoption("dist", None) != "loadfile":
+        return None
+    return scheduling.make_scheduler(config, log)
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    if not hasattr(session.config, "workerinput"):  # the controller (or a run without xdist)
+        scheduling.write_recorded()
 
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:

@@ -132,6 +132,11 @@ def check_antalate(args: list[str], cwd: Path, *, parse_only: bool = False) -> N
                 )
             )
         return
+    if ns.command == "sweep":  # the spec, and every run it makes, as `antalate sweep` checks them
+        from antalate_lcm.runtime.sweep import load_sweep
+
+        load_sweep(cwd / ns.spec)
+        return
     config = getattr(ns, "config", None)
     if ns.command in _CONFIG_COMMANDS and isinstance(config, str) and config.endswith(".toml"):
         from antalate_lcm.config import load_config

@@ -242,18 +242,26 @@ def test_cli_bad_file_is_one_line_and_status_2(tmp_path: Path, capsys: pytest.Ca
 def test_antalate_log_records_and_lcm_logplayer_replays(netns, probe, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """The stock-tools recipe of docs/logging.md, end to end on real multicast in a namespace."""
     import subprocess
-    import time
 
     from antalate_lcm.runtime.commands import native_lcm_tool
     from tests.conftest import MCAST_URL
     from tests.netns import stop_process
+    from tests.polling import wait_for
 
     cfg = tmp_path / "operator.toml"
     cfg.write_text(f'[agent]\nname = "operator"\n[buses]\nlan = "{MCAST_URL}"\n')
     log = tmp_path / "mission.lcm"
     logger = netns.antalate("log", str(cfg), "-o", str(log), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     assert logger.stdout is not None and "logging bus 'lan'" in logger.stdout.readline()
-    time.sleep(0.5)  # lcm-logger subscribes right after exec
+
+    # lcm-logger subscribes right after exec, which a loaded machine makes later than the 0.5 s once
+    # waited here (5 of 20 messages went unrecorded at load 7): an unrelated agent's state until one is on
+    # disk (the logger flushes every 100 ms)
+    def logging_now() -> bool:
+        probe.publish("x-0/MC_STATE", "mc_state_t", header={"agent": "x-0"}, state=3)
+        return log.exists() and log.stat().st_size > 0
+
+    assert wait_for(logging_now, 20, interval=0.2)
     for k in range(20):
         probe.publish("x-1/MC_STATE", "mc_state_t", header={"agent": "x-1", "seq": k}, state=3)
         lat, lon = offset(LAT0, LON0, 0.0, float(k))
@@ -274,7 +282,16 @@ def test_antalate_log_records_and_lcm_logplayer_replays(netns, probe, tmp_path: 
         azimuth=90.0,
         speed=1.0,
     )
-    time.sleep(0.5)
+
+    def logged() -> int:
+        """The direction, published last, is on disk: lcm-logger writes through a buffer it flushes
+        when a message comes 100 ms after the last flush, so the unrelated agent's state goes on."""
+        import lcm
+
+        probe.publish("x-0/MC_STATE", "mc_state_t", header={"agent": "x-0"}, state=3)
+        return sum(e.channel == "SWARM/DIRECTION_CMD" for e in lcm.EventLog(str(log), "r"))
+
+    assert wait_for(logged, 20, interval=0.2)
     assert stop_process(logger) in (0, -15)  # SIGTERM reaches lcm-logger itself: the file is complete
     record = read_log(log)
     assert len(record.agents["x-1"].telemetry) == 20

@@ -108,6 +108,11 @@ def test_toml_blocks_load(block: Block, importable: Path) -> None:
             for name, value in points.items():
                 assert EntryPoint(name, value, group).load(), (block.id, name)
         return
+    if "seeds" in doc or "parameters" in doc:  # an antalate sweep spec
+        from antalate_lcm.runtime.sweep_spec import parse_spec
+
+        parse_spec(doc, block.id)
+        return
     if "mission_time" in doc:
         path = importable / "script.toml"
         path.write_text(block.text)

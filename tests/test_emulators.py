@@ -383,10 +383,12 @@ def test_mavlink_boot_mode_revert_and_arming_gate() -> None:
     client = mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=255)
     try:
         port = client.port.getsockname()[1]
+        # phases long enough for a loaded machine to see each one (BOOT then CALIBRATING each half of
+        # boot_delay, then no position until ekf/gps_delay); 0.6/1.3 s were missed at load 7
         params: dict[str, Any] = {
-            "boot_delay": 0.6,
-            "ekf_delay": 1.3,
-            "gps_delay": 1.3,
+            "boot_delay": 3.0,
+            "ekf_delay": 6.0,
+            "gps_delay": 6.0,
             "heartbeat_rate": 8.0,
             "stream_rates": {"GPS_RAW_INT": 5.0, "EKF_STATUS_REPORT": 5.0},
         }
@@ -403,9 +405,9 @@ def test_mavlink_boot_mode_revert_and_arming_gate() -> None:
             assert set_mode(client, "GUIDED") == mav2.MAV_RESULT_ACCEPTED
             assert recv(client, "HEARTBEAT", lambda m: m.custom_mode == COPTER_MODES["GUIDED"], timeout=1)
             assert recv(
-                client, "HEARTBEAT", lambda m: m.system_status == mav2.MAV_STATE_CALIBRATING, timeout=1
+                client, "HEARTBEAT", lambda m: m.system_status == mav2.MAV_STATE_CALIBRATING, timeout=3
             )
-            hb = recv(client, "HEARTBEAT", lambda m: m.system_status == mav2.MAV_STATE_STANDBY, timeout=2)
+            hb = recv(client, "HEARTBEAT", lambda m: m.system_status == mav2.MAV_STATE_STANDBY, timeout=4)
             assert hb is not None and hb.custom_mode == COPTER_MODES["STABILIZE"]
             # booted, but no GPS fix / EKF position yet
             gps = recv(client, "GPS_RAW_INT")
@@ -416,8 +418,8 @@ def test_mavlink_boot_mode_revert_and_arming_gate() -> None:
             # the reason arrives as STATUSTEXT just before the ACK (mavutil keeps the last of each type)
             assert client.messages["STATUSTEXT"].text == "PreArm: GPS 1: Bad fix"
             assert set_mode(client, "GUIDED") == mav2.MAV_RESULT_FAILED  # needs a position now
-            assert recv(client, "GPS_RAW_INT", lambda m: m.fix_type == 3, timeout=3)
-            assert recv(client, "EKF_STATUS_REPORT", lambda m: m.flags & mav2.EKF_POS_HORIZ_ABS, timeout=3)
+            assert recv(client, "GPS_RAW_INT", lambda m: m.fix_type == 3, timeout=6)
+            assert recv(client, "EKF_STATUS_REPORT", lambda m: m.flags & mav2.EKF_POS_HORIZ_ABS, timeout=6)
             assert recv(client, "GLOBAL_POSITION_INT", lambda m: m.lat != 0, timeout=2)
             assert arm(client) == mav2.MAV_RESULT_ACCEPTED
             hb = recv(client, "HEARTBEAT", lambda m: m.base_mode & mav2.MAV_MODE_FLAG_SAFETY_ARMED, timeout=1)

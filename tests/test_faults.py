@@ -11,8 +11,11 @@ messages against the exact 99 % binomial interval.
 from __future__ import annotations
 
 import bisect
+import json
 import math
+import re
 import statistics
+import time
 from pathlib import Path
 from typing import Any
 
@@ -147,7 +150,22 @@ def _raw(path: Path, channel: str) -> list[tuple[float, Any]]:
         (
             'kind = "packet_loss"\nagent = "e-01"\nat = 1\ntopics = ["TELEMETRY"]',
             "fault[0].loss",
-            "delay > 0",
+            "a delay > 0 or a bandwidth",
+        ),
+        (
+            'kind = "packet_loss"\nagent = "e-01"\nat = 1\ntopics = ["TELEMETRY"]\nloss = 0.1\nburst = 100',
+            "fault[0].burst",
+            "a burst with a bandwidth",
+        ),
+        (
+            'kind = "packet_loss"\nagent = "e-01"\nat = 1\ntopics = ["TELEMETRY"]\nbandwidth = 0',
+            "fault[0].bandwidth",
+            "greater than 0",
+        ),
+        (
+            'kind = "freeze"\nagent = "e-01"\nat = 1\nbandwidth = 100',
+            "fault[0].bandwidth",
+            "not a key of a freeze",
         ),
         ('kind = "link_loss"\nagent = []\nat = 1', "fault[0].agent", "at least one agent"),
         ('kind = "vehicle"\nagent = "e-01"\nat = 1', "fault[0].vehicle", "failsafe, pilot_takeover"),
@@ -161,6 +179,13 @@ def _raw(path: Path, channel: str) -> list[tuple[float, Any]]:
             'kind = "vehicle"\nagent = "e-01"\nat = 1\nvehicle = "pilot_takeover"\nduration = 3',
             "fault[0].duration",
             "happens once",
+        ),
+        ('kind = "crash"\nagent = "e-01"\nat = 3\nat_latest = 2', "fault[0].at_latest", "from at = 3 on"),
+        ('kind = "crash"\nagent = "e-01"\nat = 3\nat_latest = 6', "fault[0].at_latest", "below mission_time"),
+        (
+            'kind = "crash"\nagent = "e-01"\nat = 1\nsince = "takeoff"',
+            "fault[0].since",
+            "'mission' or 'start'",
         ),
         (
             'kind = "link_loss"\nagent = "e-01"\nat = 1\nlevel = 3',
@@ -195,10 +220,6 @@ def test_faults_on_unknown_agents_or_elsewhere_fail_before_anything_flies(tmp_pa
     script = parse_script({"mission_time": 6, "fault": [{**crash, "agent": "e-01"}]}, "s.toml")
     with pytest.raises(AntalateError, match=r"needs --headless"):
         run(Experiment(str(config), agents=3, script=script, output=str(out), headless=False))
-    udpm = tmp_path / "udpm.toml"  # never opened: the check comes first
-    udpm.write_text(CONFIG.replace('"memq://"', '"udpm://239.255.76.67:7667?ttl=0"'))
-    with pytest.raises(AntalateError, match=r"needs the agents in this process \(--processes 1\)"):
-        run(Experiment(str(udpm), agents=3, processes=2, script=script, output=str(out)))
     mavlink = _write(tmp_path / "mavlink.toml", CONFIG.replace('autopilot = "sim"', 'autopilot = "mavlink"'))
     for kind, keys in (("battery", {"level": 10.0}), ("vehicle", {"vehicle": "failsafe"})):
         fault = {"kind": kind, "agent": "e", "at": 1.0, **keys}
@@ -267,6 +288,26 @@ def test_broadcast_reception_is_per_message_per_agent_and_reproducible() -> None
     assert [one.admit(k) for k in keys[:50]] == first and one.offered == 50
     with pytest.raises(ValueError, match=r"in \[0, 1\]"):
         BroadcastReception(1.5, 1, "e-01")
+
+
+def test_random_fault_times_are_drawn_per_agent_from_the_seed() -> None:
+    def script(seed: int, **extra: Any) -> Script:
+        fault = {"kind": "crash", "agent": "*", "at": 2.0, "probability": 0.5, **extra}
+        return Script.model_validate({"mission_time": 9.0, "seed": seed, "fault": [fault]})
+
+    names = [f"a-{i:03d}" for i in range(1, 1001)]
+    drawn = plan(script(4, at_latest=6.0), names)
+    times = [p.at for p in drawn]
+    assert 2.0 <= min(times) < 2.1 and 5.9 < max(times) <= 6.0
+    assert statistics.mean(times) == pytest.approx(4.0, abs=0.15)  # uniform: sd of the mean 0.04
+    assert [p.at for p in plan(script(4, at_latest=6.0), names)] == times
+    assert [p.at for p in plan(script(5, at_latest=6.0), names)] != times
+    # who is hit does not depend on when: the same agents as with a fixed time
+    assert [p.hit for p in drawn] == [p.hit for p in plan(script(4), names)]
+    assert {p.at for p in plan(script(4), names)} == {2.0}
+    # a run may be longer than its mission: from the start of the run, any time is fine
+    late = {"kind": "crash", "agent": "*", "at": 30.0, "since": "start"}
+    assert parse_script({"mission_time": 5.0, "fault": [late]}, "s.toml").fault[0].at == 30.0
 
 
 def test_fault_probability_hits_agents_reproducibly() -> None:
@@ -343,6 +384,29 @@ def test_packet_loss_in_drops_what_the_agent_hears_from_others_only(tmp_path: Pa
     for seq in range(100):
         other_topic(_from("e-02", seq, mc_state_t()))
     assert len(heard) == 100
+
+
+def test_a_bandwidth_cap_on_what_an_agent_hears_passes_its_bucket_only(tmp_path: Path) -> None:
+    gate, node, _ = _gate_with(
+        tmp_path,
+        {
+            "kind": "packet_loss",
+            "topics": ["TELEMETRY"],
+            "bandwidth": 100.0,
+            "burst": 500.0,
+            "direction": "in",
+        },
+    )
+    heard: list[Any] = []
+    receive = gate.receiving(node, "TELEMETRY", heard.append)
+    size = len(_from("e-02", 0).encode())
+    for seq in range(50):  # at once: the bucket's 500 bytes, and the trickle of 100 bytes/s meanwhile
+        receive(_from("e-02", seq))
+    assert len(heard) in (500 // size, 500 // size + 1), (len(heard), size)
+    heard.clear()
+    for seq in range(50):  # its own telemetry does not come from the network
+        receive(_from("e-01", seq))
+    assert len(heard) == 50
 
 
 def test_link_loss_cuts_both_sides_and_nothing_else(tmp_path: Path) -> None:
@@ -502,16 +566,51 @@ def test_the_plot_marks_the_faults_on_their_agents(dead_and_frozen: tuple[Outcom
     assert marks["crash"] == (crash.t, pytest.approx(0.35))  # on e-01's row, at its time
 
 
+def test_faults_before_the_mission_and_at_random_times(tmp_path: Path) -> None:
+    """e-01 crashes as the run starts, on the ground: the operator takes off the others and waits
+    no more for it; e-02 freezes from 0.5 s of the run for 1 s, while the swarm takes off; e-03's
+    position is biased from a time drawn in [0.5, 1.5] s of the mission."""
+    script_text = (
+        "mission_time = 3.0\nseed = 6\n"
+        + EAST
+        + '[[fault]]\nkind = "crash"\nagent = "e-01"\nat = 0.0\nsince = "start"\n'
+        + '[[fault]]\nkind = "freeze"\nagent = "e-02"\nat = 0.5\nduration = 1.0\nsince = "start"\n'
+        + '[[fault]]\nkind = "sensor"\nsensor = "position"\nmode = "bias"\noffset = [20.0, 0.0]\n'
+        + 'agent = "e-03"\nat = 0.5\nat_latest = 1.5\nduration = 1.0\n'
+    )
+    outcome, record = _fly(tmp_path, "early", 3, script_text)
+    assert outcome.code == 0, outcome.report
+    assert re.search(r"fault: crash start e-01 at 0\.[01] s of the run", outcome.report), outcome.report
+    states = {a: [c.state for c in rec.mc_states] for a, rec in record.agents.items()}
+    assert "TAKEOFF" not in states["e-01"]  # it never left the ground
+    assert states["e-02"][-1] == states["e-03"][-1] == "STANDBY" and "MISSION" in states["e-02"]
+    mission = max(
+        next(c.t for c in record.agents[a].mc_states if c.state == "MISSION") for a in ("e-02", "e-03")
+    )
+    crash = _faults(record, "e-01", "crash")["start"]
+    freeze = _faults(record, "e-02", "freeze")
+    assert crash.t < freeze["start"].t < mission and crash.detail["since"] == "start"
+    assert freeze["end"].t - freeze["start"].t == pytest.approx(1.0, abs=0.2)
+    # the drawn time is plan()'s, counted from the mission's start, and recorded
+    (drawn,) = [
+        p.at for p in plan(load_script(tmp_path / "early.toml"), ["e-01", "e-02", "e-03"]) if p.index == 2
+    ]
+    bias = _faults(record, "e-03", "sensor")["start"]
+    assert 0.5 <= drawn <= 1.5 and bias.detail["at"] == pytest.approx(drawn, abs=0.1)
+    assert bias.detail["at_latest"] == 1.5
+    assert drawn - 0.05 <= bias.t - mission <= drawn + 0.6
+
+
 @pytest.fixture(scope="module")
 def lossy(tmp_path_factory: pytest.TempPathFactory) -> tuple[Outcome, SwarmRecord]:
     """5 agents east at 2 m/s: e-01 lies 30 m east of itself, then loses the operator over the
     RTL; e-02 loses half its telemetry and delays the rest 0.4 s; e-03's battery drops to 30 %
     and drains 60 %/min; e-04's peer sensor reads 5 m long; e-05's position sticks, and a crash
-    with probability 0 spares it."""
+    with probability 0 spares it; e-06's telemetry out is capped at 500 bytes/s."""
     return _fly(
         tmp_path_factory.mktemp("faults-b"),
         "b",
-        5,
+        6,
         "mission_time = 7.0\nseed = 11\n"
         + EAST
         + '[[fault]]\nkind = "byzantine"\noffset = [0.0, 30.0]\nagent = "e-01"\nat = 1.0\nduration = 2.0\n'
@@ -523,7 +622,9 @@ def lossy(tmp_path_factory: pytest.TempPathFactory) -> tuple[Outcome, SwarmRecor
         + 'agent = "e-04"\nat = 1.0\nduration = 3.0\n'
         + '[[fault]]\nkind = "sensor"\nsensor = "position"\nmode = "stuck"\nagent = "e-05"\nat = 1.0\n'
         + "duration = 2.0\n"
-        + '[[fault]]\nkind = "crash"\nagent = "e-05"\nat = 4.0\nprobability = 0.0\n',
+        + '[[fault]]\nkind = "crash"\nagent = "e-05"\nat = 4.0\nprobability = 0.0\n'
+        + '[[fault]]\nkind = "packet_loss"\nagent = "e-06"\nat = 1.0\nduration = 4.0\n'
+        + 'topics = ["TELEMETRY"]\nbandwidth = 500.0\nburst = 200.0\ndirection = "out"\n',
     )
 
 
@@ -537,6 +638,7 @@ def test_the_lossy_flight_comes_back_with_every_fault_recorded(lossy: tuple[Outc
         ("e-03", "battery"),
         ("e-04", "sensor"),
         ("e-05", "sensor"),
+        ("e-06", "packet_loss"),
     }
     assert "link_loss start e-01" in outcome.report
     # a fault whose probability drew no hit is recorded as spared, and spares the agent
@@ -608,6 +710,33 @@ def test_packet_loss_and_delay_on_the_chosen_topic(lossy: tuple[Outcome, SwarmRe
     assert lag(window("e-02", end + 1.0, end + 3.0)) < 0.2
 
 
+def test_a_bandwidth_cap_holds_the_delivered_rate_under_it(lossy: tuple[Outcome, SwarmRecord]) -> None:
+    """e-06 offers 10 telemetry messages a second (about 840 bytes/s); through a cap of 500 bytes/s
+    (a bucket of 200 bytes) the log receives what the cap lets through, and no more."""
+    _, record = lossy
+    cap = _faults(record, "e-06", "packet_loss")
+    start, end = cap["start"].t, cap["end"].t
+    assert cap["start"].detail["bandwidth"] == 500.0 and cap["start"].detail["burst"] == 200.0
+    sizes: dict[str, list[tuple[float, int]]] = {"e-06": [], "e-03": []}
+    t0 = None
+    for event in lcm.EventLog(record.path, "r"):
+        t0 = event.timestamp if t0 is None else t0
+        agent = event.channel.split("/")[0]
+        if event.channel.endswith("/TELEMETRY") and agent in sizes:
+            sizes[agent].append(((event.timestamp - t0) / 1e6, len(event.data)))
+
+    def rate(agent: str, a: float, b: float) -> float:
+        return sum(n for t, n in sizes[agent] if a <= t < b) / (b - a)
+
+    window = (start + 0.2, end - 0.2)
+    offered = rate("e-03", *window)  # an agent without a cap, the same messages
+    delivered = rate("e-06", *window)
+    assert offered > 700.0, offered
+    # within the cap (what the bucket held at the start may come on top), and not far below it
+    assert 0.75 * 500.0 < delivered <= 500.0 + 200.0 / (window[1] - window[0]), (delivered, offered)
+    assert rate("e-06", end + 0.5, end + 2.0) > 700.0  # the cap ends with the fault
+
+
 def test_a_battery_fault_drops_and_drains_the_sim_battery(lossy: tuple[Outcome, SwarmRecord]) -> None:
     _, record = lossy
     fault = _faults(record, "e-03", "battery")["start"]
@@ -659,6 +788,157 @@ def test_lossy_broadcasts_reach_each_agent_with_the_configured_probability(tmp_p
     assert offered >= 15 and lo <= heard <= hi, summaries
     assert "broadcast: e-01 heard" in outcome.report
     assert "broadcast reception e-02: heard" in format_summary(analyze_log(record.path))
+
+
+def test_only_signed_fault_records_are_believed(tmp_path: Path) -> None:
+    """With a swarm key, a forged "mission start" (or "crash") record on the LAN is dropped: it
+    would start an agent process's faults early, or excuse an agent the operator should wait for."""
+    from antalate_lcm.msgs import payload_t
+    from antalate_lcm.runtime.fault_processes import read_record
+    from antalate_lcm.security import generate_key
+    from antalate_lcm.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE
+
+    config = load_config(
+        _write(tmp_path / "k.toml", CONFIG + f'[security]\nswarm_key = "{generate_key()}"\n')
+    )
+    node = Node(config.with_agent_name("faults-0of2"), Context(Bus({"lan": "memq://"}), Executor()))
+    record = {"agent": "operator", "kind": "mission", "event": "start", "at": 0.0}
+
+    def message(seq: int, content_type: str = FAULT_CONTENT_TYPE, data: bytes | None = None) -> payload_t:
+        msg = payload_t()
+        msg.content_type = content_type
+        msg.data = data if data is not None else json.dumps(record).encode()
+        msg.size = len(msg.data)
+        msg.header.agent, msg.header.seq = "faults", seq
+        msg.header.utime = int(time.time() * 1e6)
+        return msg
+
+    forged = message(1)
+    assert read_record(node, payload_t.decode(forged.encode()), FAULT_CHANNEL) is None
+    signed = payload_t.decode(node.seal(message(2)))
+    assert read_record(node, signed, FAULT_CHANNEL) == record
+    other = payload_t.decode(node.seal(message(3, content_type="text/plain")))
+    assert read_record(node, other, FAULT_CHANNEL) is None
+    garbage = payload_t.decode(node.seal(message(4, data=b"{not json")))
+    assert read_record(node, garbage, FAULT_CHANNEL) is None
+
+
+def test_the_operators_process_acts_on_the_agent_processes_records(tmp_path: Path) -> None:
+    """With the agents elsewhere, the operator's side reads their records: a crash (or a freeze for
+    good) excuses the agent, a lost link cuts the operator's side until its end; a record that
+    names no fault of the script, or the wrong kind, changes nothing."""
+    from antalate_lcm.msgs import payload_t
+    from antalate_lcm.runtime.fault_processes import FaultRelay
+    from antalate_lcm.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE
+
+    config = load_config(_write(tmp_path / "swarm.toml", CONFIG))
+    script = Script.model_validate(
+        {
+            "mission_time": 9.0,
+            "fault": [
+                {"kind": "link_loss", "agent": "e-02", "at": 1.0, "duration": 2.0},
+                {"kind": "crash", "agent": "e-01", "at": 1.0},
+                {"kind": "freeze", "agent": "e-03", "at": 1.0},
+            ],
+        }
+    )
+    excused: list[str] = []
+    relay = FaultRelay(
+        config.with_agent_name("faults"),
+        Context(Bus({"lan": "memq://"}), Executor()),
+        script=script,
+        gate=FaultGate(),
+        bus="lan",
+        excuse=excused.append,
+    )
+
+    def hear(**record: Any) -> None:
+        msg = payload_t()
+        msg.content_type = FAULT_CONTENT_TYPE
+        msg.data = json.dumps(record).encode()
+        msg.size = len(msg.data)
+        relay._heard(FAULT_CHANNEL, msg)
+
+    hear(agent="e-02", kind="link_loss", event="start", at=1.0, fault=0)
+    assert relay.gate.link_lost("e-02") and excused == []  # it comes back: still waited for
+    hear(agent="e-01", kind="crash", event="start", at=1.0, fault=1)
+    hear(agent="e-03", kind="freeze", event="start", at=1.0, fault=2)
+    assert excused == ["e-01", "e-03"]
+    hear(agent="e-04", kind="crash", event="start", at=1.0, fault=7)  # no such fault
+    hear(agent="e-04", kind="crash", event="start", at=1.0, fault=0)  # fault 0 is no crash
+    hear(agent="e-04", kind="crash", event="start", at=1.0, fault="1")
+    hear(agent="operator", kind="mission", event="start", at=0.0)
+    assert excused == ["e-01", "e-03"]
+    hear(agent="e-02", kind="link_loss", event="end", at=3.0, fault=0)
+    assert not relay.gate.link_lost("e-02")
+    assert relay.report() == [
+        "fault: link_loss start e-02 at 1.0 s of the mission",
+        "fault: crash start e-01 at 1.0 s of the mission",
+        "fault: freeze start e-03 at 1.0 s of the mission",
+        "fault: link_loss end e-02 at 3.0 s of the mission",
+    ]
+
+
+@pytest.mark.netns
+def test_faults_across_processes(netns, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """4 agents over 2 processes (udpm multicast in a namespace, signed with a swarm key): each
+    agent process injects the faults of its own agents, timed from the operator's record of the
+    mission's start, and their records reach the log; the operator waits no more for the crashed
+    agent (in the other process)."""
+    import sys
+
+    from antalate_lcm.security import generate_key
+    from tests.netns import child_env
+
+    udpm = CONFIG.replace('"memq://"', '"udpm://239.255.76.67:7667?ttl=0"')
+    config = _write(tmp_path / "swarm.toml", udpm + f'[security]\nswarm_key = "{generate_key()}"\n')
+    script = _write(
+        tmp_path / "s.toml",
+        "mission_time = 5.0\nseed = 3\n"
+        + EAST
+        + '[[fault]]\nkind = "crash"\nagent = "e-01"\nat = 1.0\n'
+        + '[[fault]]\nkind = "freeze"\nagent = "e-03"\nat = 1.0\nduration = 2.0\n'
+        + '[[fault]]\nkind = "sensor"\nsensor = "position"\nmode = "bias"\noffset = [20.0, 0.0]\n'
+        + 'agent = "e-04"\nat = 2.0\nduration = 2.0\n'
+        + '[[fault]]\nkind = "freeze"\nagent = "e-02"\nat = 1.0\nprobability = 0.0\n',
+    )
+    log = tmp_path / "f.lcm"
+    argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", "WARNING", "run", str(config)]
+    argv += ["--agents", "4", "--processes", "2", "--headless", "--script", str(script), "-o", str(log)]
+    env = child_env()
+    env["XDG_STATE_HOME"] = str(tmp_path / "state")  # the swarm key's replay memory
+    flight = netns.run(argv, timeout=180, cwd=tmp_path, env=env)
+    assert flight.returncode == 0, flight.stdout + flight.stderr
+    assert "(lost to a fault of the script)" in flight.stdout and "fault: crash start e-01" in flight.stdout
+    record = read_log(log)
+    (mission,) = [f for f in record.faults if f.kind == "mission"]
+    assert (mission.agent, mission.event) == ("operator", "start")
+    got = sorted((f.agent, f.kind, f.event) for f in record.faults if f.kind != "mission")
+    assert got == [
+        ("e-01", "crash", "start"),
+        ("e-02", "freeze", "spared"),
+        ("e-03", "freeze", "end"),
+        ("e-03", "freeze", "start"),
+        ("e-04", "sensor", "end"),
+        ("e-04", "sensor", "start"),
+    ], got
+    for f in record.faults:  # at the script's time after the operator's mission start
+        if f.kind == "mission":
+            continue
+        due = float(str(f.detail["at"]))
+        assert due - 0.05 <= f.t - mission.t <= due + 0.6, (f, mission)
+    crash = _faults(record, "e-01", "crash")["start"]
+    assert crash.t - 1.0 < record.agents["e-01"].last_heard <= crash.t + 0.1
+    freeze = _faults(record, "e-03", "freeze")
+    times = [s.t for s in record.agents["e-03"].telemetry]
+    assert not [t for t in times if freeze["start"].t + 0.1 < t < freeze["end"].t - 0.1]
+    bias = _faults(record, "e-04", "sensor")
+    e4, e2 = _ne(record, "e-04"), _ne(record, "e-02")  # e-02 and e-04 fly east one above the other
+    during = _gap(e4, e2, 1, bias["start"].t + 0.3, bias["end"].t - 0.3)
+    before = _gap(e4, e2, 1, bias["start"].t - 1.0, bias["start"].t - 0.1)
+    assert during - before == pytest.approx(20.0, abs=1.5)
+    for agent in ("e-02", "e-03", "e-04"):
+        assert record.agents[agent].mc_states[-1].state == "STANDBY"
 
 
 @pytest.mark.netns

@@ -32,11 +32,10 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
         frozenset(
             {
                 "errors",
-                "_ratelimit",
+                "ratelimit",
                 "_fastcodec",
-                "_codegen",
-                "_golang",
-                "_golang_parse",
+                "tools",
+                "state_machine",
                 "vocabulary",
                 "topics",
                 "validation",
@@ -58,7 +57,19 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
     ("vehicles", frozenset({"autopilot"})),
     (
         "core",
-        frozenset({"zenoh_bus", "executor", "bus", "config", "node", "behavior", "antalate_lcm", "mcap_log"}),
+        frozenset(
+            {
+                "zenoh_bus",
+                "executor",
+                "simclock",
+                "bus",
+                "config",
+                "node",
+                "behavior",
+                "antalate_lcm",
+                "mcap_log",
+            }
+        ),
     ),
     ("domain", frozenset({"mc", "hlc", "bma", "osc", "station", "analysis"})),
     (
@@ -205,6 +216,44 @@ def test_no_private_name_is_imported_from_another_package() -> None:
     assert leaks == []
 
 
+def _package_of(module: str) -> str:
+    return module if _is_package(module) else module.rpartition(".")[0]
+
+
+def _private_module_leaks(imports: list[Import]) -> list[str]:
+    """Imports of a private module (``pkg._mod``, or anything below it) from outside ``pkg``."""
+    leaks = []
+    for imp in imports:
+        parts = imp.target.split(".")
+        private = [i for i, part in enumerate(parts) if part.startswith("_") and not part.startswith("__")]
+        if private and _package_of(imp.module) != ".".join(parts[: private[0]]):
+            leaks.append(_where(imp))
+    return leaks
+
+
+def test_no_private_module_is_imported_from_another_package() -> None:
+    """``pkg._mod`` is ``pkg``'s own (Textual's rule): another package, a subpackage included, imports
+    what ``pkg`` makes public -- a name its ``__init__`` re-exports, or a public module."""
+    assert _private_module_leaks(ALL_IMPORTS) == []
+
+
+def test_the_private_module_rule_rejects_what_it_is_about() -> None:
+    """The rule sees ``import``, ``from pkg import _mod`` and ``from pkg._mod import name`` from outside,
+    and lets the owning package (its ``__init__`` and its modules) use its own private modules."""
+    outside = [
+        Import("operator_tui.web", 1, "antalate_lcm.station._auth", "sha256_hex"),
+        Import("antalate_lcm.runtime.commands", 2, "antalate_lcm._fastcodec", None),
+        Import("behaviors.x", 3, "antalate_lcm.station._file", None),
+    ]
+    inside = [
+        Import("antalate_lcm.station", 4, "antalate_lcm.station._models", None),
+        Import("antalate_lcm.station.cli", 5, "antalate_lcm.station._auth", "new_api_key"),
+        Import("antalate_lcm.node", 6, "antalate_lcm._fastcodec", "encode"),
+    ]
+    assert len(_private_module_leaks(outside)) == 3
+    assert _private_module_leaks(inside) == []
+
+
 def test_the_checks_see_function_level_and_relative_imports() -> None:
     """The parser finds what the rules are about: an import inside a function, a relative import."""
     found = {(imp.module, imp.target) for imp in ALL_IMPORTS}
@@ -281,7 +330,7 @@ KNOWN_DOUBLES = {
     "MemoryLink",  # autopilot/mavlink/link.py, autopilot/crazyflie/memory.py
     "Telemetry",  # station/_models.py (JSON), operator_tui/model.py
     "Verdict",  # hlc/velocity_guard.py, autopilot/mavlink/setpoints.py
-    "_Writer",  # _golang.py, autopilot/mavlink/link.py
+    "_Writer",  # tools/golang.py, autopilot/mavlink/link.py
 }
 
 

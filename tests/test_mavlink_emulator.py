@@ -34,7 +34,9 @@ def pair(
 ) -> tuple[MavlinkVehicle, MavlinkAutopilot]:
     v = MavlinkVehicle("127.0.0.1", 0, **{**FAST, "params": params, **vehicle}).start()
     made.append(v)
-    ap = make_ap(v.udp_url)
+    # FS_GCS_TIMEOUT is 1 s here (the firmware's least is 2 s; shorter tests): at the adapter's default
+    # 1 Hz a heartbeat late by a loaded machine's scheduling tripped the failsafe before the test cut them
+    ap = make_ap(v.udp_url, heartbeat_hz=4.0)
     made.append(ap)
     ap.connect()
     return v, ap

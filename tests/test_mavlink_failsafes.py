@@ -44,7 +44,9 @@ def pair(
 ) -> tuple[MavlinkVehicle, MavlinkAutopilot]:
     v = started(params, **(vehicle or {}))
     made.append(v)
-    ap = make_ap(v.tcp_url if tcp else v.udp_url, **ap_params)
+    # FS_GCS_TIMEOUT is 1 s in some of these (the firmware's least is 2 s; shorter tests): at the
+    # adapter's default 1 Hz a heartbeat late by a loaded machine tripped it before the test cut them
+    ap = make_ap(v.tcp_url if tcp else v.udp_url, **{"heartbeat_hz": 4.0, **ap_params})
     made.append(ap)
     ap.connect()
     return v, ap

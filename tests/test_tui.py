@@ -189,7 +189,7 @@ def make_app(
     )
 
 
-async def until(pilot: Any, app: OperatorApp, cond: Callable[[], T], timeout: float = 3.0) -> T:
+async def until(pilot: Any, app: OperatorApp, cond: Callable[[], T], timeout: float = 10.0) -> T:
     """Refresh the app until ``cond()`` holds (messages cross two threads before the UI sees them)."""
     deadline = time.monotonic() + timeout
     while True:

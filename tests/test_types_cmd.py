@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm import _codegen, types_cmd
+from antalate_lcm import types_cmd
+from antalate_lcm.tools import codegen as _codegen
 from tests import REPO
 
 TYPE_NAMES = sorted(p.stem for p in _codegen.SOURCE_LCMTYPES_DIR.glob("*.lcm"))

@@ -20,7 +20,8 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm import _codegen, spy
+from antalate_lcm import spy
+from antalate_lcm.tools import codegen as _codegen
 from tests.netns import NetNamespace, netns_unavailable, stop_process
 from tests.polling import wait_for
 from tests.test_spy import _jdk_is_headless, _marked_processes, _read_until
@@ -93,7 +94,7 @@ def test_the_installed_package_is_the_wheel_with_its_lcm_files(wheel_venv: Wheel
         [
             str(wheel_venv.bin / "python"),
             "-c",
-            "import antalate_lcm._codegen as c; print(c.LCMTYPES_DIR); print(*[p.name for p in c.lcm_files()])",
+            "import antalate_lcm.tools.codegen as c; print(c.LCMTYPES_DIR); print(*[p.name for p in c.lcm_files()])",
         ],
         cwd=wheel_venv.home,
         env=wheel_venv.env(),

@@ -114,7 +114,7 @@ _.dead_reckoning_problem  # TelloAutopilot: the velocity unit check for tools (t
 _.from_wgs84  # crazyflie frames: the inverse, checked round trip (tests/test_crazyflie_units.py)
 _.block_size  # crazyflie log blocks fit one packet (tests/test_crazyflie_units.py)
 _.LOG_MAX_BYTES
-_.stale_packaged_types  # _codegen: the bindings-are-current checks (tests/test_types_cmd.py)
+_.stale_packaged_types  # tools/codegen.py: the bindings-are-current checks (tests/test_types_cmd.py)
 _.stale_files  # tests/test_codegen.py
 _.wait_stopped  # VideoCapture: tests/test_video_capture.py
 _.row_count  # AgentTable: tests/test_tui.py

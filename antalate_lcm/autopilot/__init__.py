@@ -13,6 +13,7 @@ import inspect
 
 from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, FlightMode, Frame
 from antalate_lcm.errors import PluginNotFound
+from antalate_lcm.errors import UnknownAutopilotError as UnknownAutopilotError
 from antalate_lcm.plugins import AUTOPILOTS, group_entry_points, load_plugin
 
 ENTRY_POINT_GROUP = AUTOPILOTS
@@ -28,13 +29,6 @@ __all__ = [
     "available_autopilots",
     "load_autopilot",
 ]
-
-
-class UnknownAutopilotError(PluginNotFound, LookupError):
-    """The configured autopilot matches no registered adapter, or cannot be loaded.
-
-    A `PluginNotFound` (the CLI prints it without a traceback) and a `LookupError`.
-    """
 
 
 def available_autopilots() -> dict[str, str]:

@@ -41,15 +41,11 @@ from typing import Any, ClassVar
 
 from pydantic import BaseModel
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.errors import AutopilotError as AutopilotError
 from antalate_lcm.msgs import velocity_cmd_t
 from antalate_lcm.strict import validate_strict
 
 Clock = Callable[[], float]
-
-
-class AutopilotError(AntalateError, RuntimeError):
-    """A command the vehicle refused, did not acknowledge, or cannot perform in its current state."""
 
 
 class Frame(enum.IntEnum):

@@ -11,7 +11,6 @@ from collections.abc import Callable
 from functools import partial
 from typing import Any
 
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.behavior import Behavior, BehaviorContext, failure_reason
 from antalate_lcm.bma.arbiter import Arbiter
 from antalate_lcm.bma.plan import PEER_TOPICS, BehaviorPlan, check_peer_buses, plan_bma
@@ -19,6 +18,7 @@ from antalate_lcm.config import BmaConfig, Config
 from antalate_lcm.msgs import arbiter_status_t, mc_state_t, telemetry_t
 from antalate_lcm.node import Context, Node, TopicMatch
 from antalate_lcm.peers import PeerTable
+from antalate_lcm.ratelimit import RateLimitedLog
 from antalate_lcm.vocabulary import McState, name_of
 
 #: s: the longest restart back-off, and how long a behavior must run for its failures to be forgotten.

@@ -85,13 +85,13 @@ Error codes are the `ErrorCode` enum below (``hlc_error_t.code``).
 from __future__ import annotations
 
 import enum
-import functools
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, Protocol
 
 from antalate_lcm.autopilot.base import AutopilotState, FlightMode, altitude_reached
+from antalate_lcm.state_machine import Row, Table, Transition
 from antalate_lcm.vocabulary import HlcState, McState, Severity
 
 
@@ -266,15 +266,8 @@ class HlcParams:
             raise ValueError(f"HlcParams.low_battery must be in [0, 100), got {self.low_battery!r}")
 
 
-@dataclass(frozen=True)
-class HlcTransition:
-    """A state change, with the event and a human-readable reason, for the node's log."""
-
-    from_state: HlcState
-    to_state: HlcState
-    event: HlcEvent
-    reason: str
-    at: float
+#: A state change, with the event and a human-readable reason, for the node's log.
+HlcTransition = Transition[HlcState, HlcEvent]
 
 
 @dataclass(frozen=True)
@@ -294,56 +287,62 @@ class HlcOutcome:
 #: The outcome of an input that changed nothing (immutable, so one serves every tick).
 NOTHING = HlcOutcome()
 
-_Effect = Callable[["HighLevelControl", str], tuple[tuple[Action, ...], tuple[HlcError, ...]]]
-_Guard = Callable[["HighLevelControl"], bool]
+
+class HlcView(Protocol):
+    """What the HLC table's guards and effects may read of the machine (read-only: see
+    `antalate_lcm.state_machine`)."""
+
+    @property
+    def mc_state(self) -> int | None: ...
+    @property
+    def mc_moved(self) -> bool: ...
+    @property
+    def low_battery_handled(self) -> bool: ...
+    @property
+    def target_altitude(self) -> float: ...
+    def battery_low_reason(self) -> str: ...
+
+
+_Effect = Callable[[HlcView, str], tuple[tuple[Action, ...], tuple[HlcError, ...]]]
 
 
 @dataclass(frozen=True)
-class HlcRow:
-    """One table row. `target` None means "stay" (a refusal that only reports an error)."""
+class HlcRow(Row[HlcState, HlcEvent, HlcView]):
+    """A row of the HLC table: `Row` (`target` None means "stay": a refusal that only reports an error;
+    `extra`: not in docs/design.md §6, see the module docstring) and the `effect` that yields the actions
+    to perform and the errors to publish."""
 
-    sources: frozenset[HlcState]
-    event: HlcEvent
-    target: HlcState | None
-    why: str
-    guard: _Guard | None = None
     effect: _Effect | None = None
-    extra: bool = False  # not in docs/design.md §6 (see the module docstring)
 
 
 def _fx(*actions: Action, error: tuple[ErrorCode, Severity] | None = None) -> _Effect:
     """An effect that performs `actions` and, optionally, reports an error whose text is the detail."""
 
-    def effect(_m: HighLevelControl, detail: str) -> tuple[tuple[Action, ...], tuple[HlcError, ...]]:
+    def effect(_m: HlcView, detail: str) -> tuple[tuple[Action, ...], tuple[HlcError, ...]]:
         errors = () if error is None else (HlcError(error[0], error[1], detail),)
         return actions, errors
 
     return effect
 
 
-def _fx_start_takeoff(m: HighLevelControl, _detail: str) -> tuple[tuple[Action, ...], tuple[HlcError, ...]]:
-    m._target_altitude = m._requested_altitude()
-    return (Action.ARM,), ()
-
-
-def _fx_climb(m: HighLevelControl, _detail: str) -> tuple[tuple[Action, ...], tuple[HlcError, ...]]:
+def _fx_climb(m: HlcView, _detail: str) -> tuple[tuple[Action, ...], tuple[HlcError, ...]]:
     return (Action.takeoff(m.target_altitude),), ()
 
 
-def _battery_low(m: HighLevelControl) -> bool:
-    return m._battery_is_low()
+def _battery_low(m: HlcView) -> bool:
+    return bool(m.battery_low_reason())
 
 
-def _mc_left_takeoff(m: HighLevelControl) -> bool:
+def _mc_left_takeoff(m: HlcView) -> bool:
     return m.mc_state != McState.TAKEOFF
 
 
-def _mc_changed_since_entry(m: HighLevelControl) -> bool:
+def _mc_changed_since_entry(m: HlcView) -> bool:
     """The MC has been in another state since this HLC state began (see the module docstring)."""
     return m.mc_moved
 
 
-def _battery_not_handled(m: HighLevelControl) -> bool:
+def _battery_not_handled(m: HlcView) -> bool:
     """No LOW_BATTERY yet this flight (see the module docstring: HOLD's low-battery row fires once)."""
     return not m.low_battery_handled
 
@@ -361,239 +360,251 @@ _REGAINED = (ErrorCode.LINK_REGAINED, Severity.WARNING)
 _ALL_BUT_INIT = frozenset(S) - {S.INIT, S.LLC_DOWN}
 
 #: The HLC transition table, in priority order (the first row matching state, event and guard wins).
-HLC_TABLE: tuple[HlcRow, ...] = (
-    HlcRow(
-        _ALL_BUT_INIT,
-        E.LINK_LOST,
-        S.LLC_DOWN,
-        "autopilot link lost",
-        effect=_fx(error=(ErrorCode.LINK_LOST, Severity.CRITICAL)),
-    ),
-    HlcRow(_s(S.INIT), E.LINK_UP, S.READY, "autopilot connected and MC heard"),
-    HlcRow(_s(S.INIT), E.RESYNC_AIRBORNE, S.AIRBORNE, "restart resync: vehicle flying under our control"),
-    HlcRow(_s(S.INIT), E.RESYNC_LANDING, S.LANDING, "restart resync: vehicle landing"),
-    HlcRow(_s(S.INIT), E.RESYNC_RTL, S.RTL, "restart resync: vehicle returning to launch"),
-    HlcRow(_s(S.INIT), E.RESYNC_MANUAL, S.MANUAL, "restart resync: pilot in control"),
-    HlcRow(_s(S.INIT), E.RESYNC_HOLD, S.HOLD, "restart resync: autopilot holding on a failsafe"),
-    HlcRow(
-        _s(S.LLC_DOWN),
-        E.LINK_REGAINED_GROUND,
-        S.READY,
-        "autopilot link regained, vehicle on the ground",
-        effect=_fx(error=(ErrorCode.LINK_REGAINED, Severity.INFO)),
-    ),
-    HlcRow(
-        _s(S.LLC_DOWN),
-        E.LINK_REGAINED_GUIDED,
-        S.HOLD,
-        "autopilot link regained in the air: stop and wait for the MC",
-        effect=_fx(Action.HOVER, error=_REGAINED),
-    ),
-    HlcRow(
-        _s(S.LLC_DOWN),
-        E.LINK_REGAINED_RTL,
-        S.RTL,
-        "autopilot link regained, vehicle returning",
-        effect=_fx(error=_REGAINED),
-    ),
-    HlcRow(
-        _s(S.LLC_DOWN),
-        E.LINK_REGAINED_LANDING,
-        S.LANDING,
-        "autopilot link regained, vehicle landing",
-        effect=_fx(error=_REGAINED),
-    ),
-    HlcRow(
-        _s(S.LLC_DOWN),
-        E.LINK_REGAINED_HOLD,
-        S.HOLD,
-        "autopilot link regained, vehicle holding",
-        effect=_fx(error=_REGAINED),
-    ),
-    HlcRow(
-        _s(S.LLC_DOWN),
-        E.LINK_REGAINED_MANUAL,
-        S.MANUAL,
-        "autopilot link regained, pilot in control",
-        effect=_fx(error=_REGAINED),
-    ),
-    HlcRow(
-        _s(S.READY),
-        E.MC_TAKEOFF,
-        None,
-        "takeoff refused: battery low",
-        guard=_battery_low,
-        effect=_fx(error=(ErrorCode.TAKEOFF_REFUSED_LOW_BATTERY, Severity.ERROR)),
-    ),
-    HlcRow(_s(S.READY), E.MC_TAKEOFF, S.TAKEOFF, "MC TAKEOFF: arming", effect=_fx_start_takeoff),
-    HlcRow(
-        _s(S.TAKEOFF),
-        E.ARMED,
-        S.READY,
-        "takeoff cancelled by the MC while arming",
-        guard=_mc_left_takeoff,
-        effect=_fx(Action.DISARM, error=(ErrorCode.TAKEOFF_CANCELLED, Severity.INFO)),
-        extra=True,
-    ),
-    HlcRow(_s(S.TAKEOFF), E.ARMED, S.GAINING_ALTITUDE, "armed: taking off", effect=_fx_climb),
-    HlcRow(
-        _s(S.TAKEOFF),
-        E.ARM_FAILED,
-        S.READY,
-        "arming failed",
-        effect=_fx(error=(ErrorCode.ARM_FAILED, Severity.ERROR)),
-    ),
-    HlcRow(
-        _s(S.GAINING_ALTITUDE), E.ALTITUDE_REACHED, S.AIRBORNE, "altitude reached", effect=_fx(Action.HOVER)
-    ),
-    HlcRow(
-        _s(S.GAINING_ALTITUDE),
-        E.TAKEOFF_FAILED,
-        S.LANDING,
-        "the autopilot refused the takeoff: landing",
-        effect=_fx(Action.LAND, error=(ErrorCode.TAKEOFF_REFUSED, Severity.ERROR)),
-        extra=True,
-    ),
-    HlcRow(
-        _s(S.GAINING_ALTITUDE),
-        E.GAIN_ALTITUDE_TIMEOUT,
-        S.LANDING,
-        "altitude not gained in time: landing",
-        effect=_fx(Action.LAND, error=(ErrorCode.GAIN_ALTITUDE_TIMEOUT, Severity.WARNING)),
-    ),
-    HlcRow(_s(S.AIRBORNE), E.MC_RTL, S.RTL, "MC RTL", effect=_fx(Action.RTL)),
-    HlcRow(_s(S.AIRBORNE), E.MC_LAND, S.LANDING, "MC LAND", effect=_fx(Action.LAND)),
-    HlcRow(
-        _s(S.GAINING_ALTITUDE), E.MC_RTL, S.RTL, "MC RTL during takeoff", effect=_fx(Action.RTL), extra=True
-    ),
-    HlcRow(
-        _s(S.GAINING_ALTITUDE),
-        E.MC_LAND,
-        S.LANDING,
-        "MC LAND during takeoff",
-        effect=_fx(Action.LAND),
-        extra=True,
-    ),
-    HlcRow(_s(S.RTL, S.LANDING, S.LOW_BATTERY, S.MANUAL, S.HOLD), E.LANDED, S.READY, "landed and disarmed"),
-    HlcRow(
-        _s(S.AIRBORNE),
-        E.LANDED,
-        S.READY,
-        "vehicle landed on its own",
-        effect=_fx(error=(ErrorCode.UNEXPECTED_LANDING, Severity.WARNING)),
-        extra=True,
-    ),
-    HlcRow(
-        _AUTONOMOUS,
-        E.PILOT_TAKEOVER,
-        S.MANUAL,
-        "pilot took over",
-        effect=_fx(error=(ErrorCode.PILOT_TAKEOVER, Severity.WARNING)),
-    ),
-    # The autopilot's failsafes: follow the vehicle, never MANUAL (the failsafe's reason is in the error).
-    HlcRow(
-        _FLYING - {S.RTL, S.LOW_BATTERY},
-        E.FAILSAFE_RTL,
-        S.RTL,
-        "autopilot failsafe: returning",
-        effect=_fx(error=_FAILSAFE),
-    ),
-    HlcRow(
-        _FLYING - {S.LANDING},
-        E.FAILSAFE_LAND,
-        S.LANDING,
-        "autopilot failsafe: landing",
-        effect=_fx(error=_FAILSAFE),
-    ),
-    HlcRow(
-        _FLYING - {S.HOLD},
-        E.FAILSAFE_HOLD,
-        S.HOLD,
-        "autopilot failsafe: holding position",
-        effect=_fx(error=_FAILSAFE),
-    ),
-    # HOLD waits for the MC; the MC's RTL/LAND must be new since HOLD began (not a republish).
-    HlcRow(_s(S.HOLD), E.MC_RTL, S.RTL, "MC RTL", guard=_mc_changed_since_entry, effect=_fx(Action.RTL)),
-    HlcRow(
-        _s(S.HOLD), E.MC_LAND, S.LANDING, "MC LAND", guard=_mc_changed_since_entry, effect=_fx(Action.LAND)
-    ),
-    HlcRow(
-        _s(S.RTL, S.LOW_BATTERY),
-        E.MC_LAND,
-        S.LANDING,
-        "MC LAND while returning",
-        guard=_mc_changed_since_entry,
-        effect=_fx(Action.LAND),
-    ),
-    HlcRow(_s(S.AIRBORNE), E.MC_HOLD, S.HOLD, "MC HOLD: stop and wait", effect=_fx(Action.HOVER)),
-    HlcRow(
-        _s(S.HOLD),
-        E.AUTOPILOT_LAND,
-        S.LANDING,
-        "autopilot landing on its own",
-        effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)),
-    ),
-    HlcRow(
-        _s(S.HOLD),
-        E.AUTOPILOT_RTL,
-        S.RTL,
-        "autopilot returning on its own",
-        effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)),
-    ),
-    HlcRow(
-        _s(S.GAINING_ALTITUDE, S.AIRBORNE),
-        E.AUTOPILOT_LAND,
-        S.LANDING,
-        "autopilot landing on its own",
-        effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)),
-        extra=True,
-    ),
-    HlcRow(_s(S.RTL), E.AUTOPILOT_LAND, S.LANDING, "RTL final descent", extra=True),
-    HlcRow(
-        _s(S.GAINING_ALTITUDE, S.AIRBORNE),
-        E.AUTOPILOT_RTL,
-        S.RTL,
-        "autopilot returning on its own",
-        effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)),
-        extra=True,
-    ),
-    HlcRow(
-        _s(S.GAINING_ALTITUDE, S.AIRBORNE),
-        E.LOW_BATTERY,
-        S.LOW_BATTERY,
-        "battery low: returning home",
-        effect=_fx(Action.RTL, error=(ErrorCode.LOW_BATTERY, Severity.WARNING)),
-    ),
-    HlcRow(
-        _s(S.HOLD),
-        E.LOW_BATTERY,
-        S.LOW_BATTERY,
-        "battery low: returning home",
-        guard=_battery_not_handled,
-        effect=_fx(Action.RTL, error=(ErrorCode.LOW_BATTERY, Severity.WARNING)),
-    ),
+HLC_TABLE: Table[HlcState, HlcEvent, HlcView, HlcRow] = Table(
+    (
+        HlcRow(
+            _ALL_BUT_INIT,
+            E.LINK_LOST,
+            S.LLC_DOWN,
+            "autopilot link lost",
+            effect=_fx(error=(ErrorCode.LINK_LOST, Severity.CRITICAL)),
+        ),
+        HlcRow(_s(S.INIT), E.LINK_UP, S.READY, "autopilot connected and MC heard"),
+        HlcRow(_s(S.INIT), E.RESYNC_AIRBORNE, S.AIRBORNE, "restart resync: vehicle flying under our control"),
+        HlcRow(_s(S.INIT), E.RESYNC_LANDING, S.LANDING, "restart resync: vehicle landing"),
+        HlcRow(_s(S.INIT), E.RESYNC_RTL, S.RTL, "restart resync: vehicle returning to launch"),
+        HlcRow(_s(S.INIT), E.RESYNC_MANUAL, S.MANUAL, "restart resync: pilot in control"),
+        HlcRow(_s(S.INIT), E.RESYNC_HOLD, S.HOLD, "restart resync: autopilot holding on a failsafe"),
+        HlcRow(
+            _s(S.LLC_DOWN),
+            E.LINK_REGAINED_GROUND,
+            S.READY,
+            "autopilot link regained, vehicle on the ground",
+            effect=_fx(error=(ErrorCode.LINK_REGAINED, Severity.INFO)),
+        ),
+        HlcRow(
+            _s(S.LLC_DOWN),
+            E.LINK_REGAINED_GUIDED,
+            S.HOLD,
+            "autopilot link regained in the air: stop and wait for the MC",
+            effect=_fx(Action.HOVER, error=_REGAINED),
+        ),
+        HlcRow(
+            _s(S.LLC_DOWN),
+            E.LINK_REGAINED_RTL,
+            S.RTL,
+            "autopilot link regained, vehicle returning",
+            effect=_fx(error=_REGAINED),
+        ),
+        HlcRow(
+            _s(S.LLC_DOWN),
+            E.LINK_REGAINED_LANDING,
+            S.LANDING,
+            "autopilot link regained, vehicle landing",
+            effect=_fx(error=_REGAINED),
+        ),
+        HlcRow(
+            _s(S.LLC_DOWN),
+            E.LINK_REGAINED_HOLD,
+            S.HOLD,
+            "autopilot link regained, vehicle holding",
+            effect=_fx(error=_REGAINED),
+        ),
+        HlcRow(
+            _s(S.LLC_DOWN),
+            E.LINK_REGAINED_MANUAL,
+            S.MANUAL,
+            "autopilot link regained, pilot in control",
+            effect=_fx(error=_REGAINED),
+        ),
+        HlcRow(
+            _s(S.READY),
+            E.MC_TAKEOFF,
+            None,
+            "takeoff refused: battery low",
+            guard=_battery_low,
+            effect=_fx(error=(ErrorCode.TAKEOFF_REFUSED_LOW_BATTERY, Severity.ERROR)),
+        ),
+        # Entering TAKEOFF latches the requested altitude (`HighLevelControl._fire`) before the effects run.
+        HlcRow(_s(S.READY), E.MC_TAKEOFF, S.TAKEOFF, "MC TAKEOFF: arming", effect=_fx(Action.ARM)),
+        HlcRow(
+            _s(S.TAKEOFF),
+            E.ARMED,
+            S.READY,
+            "takeoff cancelled by the MC while arming",
+            guard=_mc_left_takeoff,
+            effect=_fx(Action.DISARM, error=(ErrorCode.TAKEOFF_CANCELLED, Severity.INFO)),
+            extra=True,
+        ),
+        HlcRow(_s(S.TAKEOFF), E.ARMED, S.GAINING_ALTITUDE, "armed: taking off", effect=_fx_climb),
+        HlcRow(
+            _s(S.TAKEOFF),
+            E.ARM_FAILED,
+            S.READY,
+            "arming failed",
+            effect=_fx(error=(ErrorCode.ARM_FAILED, Severity.ERROR)),
+        ),
+        HlcRow(
+            _s(S.GAINING_ALTITUDE),
+            E.ALTITUDE_REACHED,
+            S.AIRBORNE,
+            "altitude reached",
+            effect=_fx(Action.HOVER),
+        ),
+        HlcRow(
+            _s(S.GAINING_ALTITUDE),
+            E.TAKEOFF_FAILED,
+            S.LANDING,
+            "the autopilot refused the takeoff: landing",
+            effect=_fx(Action.LAND, error=(ErrorCode.TAKEOFF_REFUSED, Severity.ERROR)),
+            extra=True,
+        ),
+        HlcRow(
+            _s(S.GAINING_ALTITUDE),
+            E.GAIN_ALTITUDE_TIMEOUT,
+            S.LANDING,
+            "altitude not gained in time: landing",
+            effect=_fx(Action.LAND, error=(ErrorCode.GAIN_ALTITUDE_TIMEOUT, Severity.WARNING)),
+        ),
+        HlcRow(_s(S.AIRBORNE), E.MC_RTL, S.RTL, "MC RTL", effect=_fx(Action.RTL)),
+        HlcRow(_s(S.AIRBORNE), E.MC_LAND, S.LANDING, "MC LAND", effect=_fx(Action.LAND)),
+        HlcRow(
+            _s(S.GAINING_ALTITUDE),
+            E.MC_RTL,
+            S.RTL,
+            "MC RTL during takeoff",
+            effect=_fx(Action.RTL),
+            extra=True,
+        ),
+        HlcRow(
+            _s(S.GAINING_ALTITUDE),
+            E.MC_LAND,
+            S.LANDING,
+            "MC LAND during takeoff",
+            effect=_fx(Action.LAND),
+            extra=True,
+        ),
+        HlcRow(
+            _s(S.RTL, S.LANDING, S.LOW_BATTERY, S.MANUAL, S.HOLD), E.LANDED, S.READY, "landed and disarmed"
+        ),
+        HlcRow(
+            _s(S.AIRBORNE),
+            E.LANDED,
+            S.READY,
+            "vehicle landed on its own",
+            effect=_fx(error=(ErrorCode.UNEXPECTED_LANDING, Severity.WARNING)),
+            extra=True,
+        ),
+        HlcRow(
+            _AUTONOMOUS,
+            E.PILOT_TAKEOVER,
+            S.MANUAL,
+            "pilot took over",
+            effect=_fx(error=(ErrorCode.PILOT_TAKEOVER, Severity.WARNING)),
+        ),
+        # The autopilot's failsafes: follow the vehicle, never MANUAL (the failsafe's reason is in the error).
+        HlcRow(
+            _FLYING - {S.RTL, S.LOW_BATTERY},
+            E.FAILSAFE_RTL,
+            S.RTL,
+            "autopilot failsafe: returning",
+            effect=_fx(error=_FAILSAFE),
+        ),
+        HlcRow(
+            _FLYING - {S.LANDING},
+            E.FAILSAFE_LAND,
+            S.LANDING,
+            "autopilot failsafe: landing",
+            effect=_fx(error=_FAILSAFE),
+        ),
+        HlcRow(
+            _FLYING - {S.HOLD},
+            E.FAILSAFE_HOLD,
+            S.HOLD,
+            "autopilot failsafe: holding position",
+            effect=_fx(error=_FAILSAFE),
+        ),
+        # HOLD waits for the MC; the MC's RTL/LAND must be new since HOLD began (not a republish).
+        HlcRow(_s(S.HOLD), E.MC_RTL, S.RTL, "MC RTL", guard=_mc_changed_since_entry, effect=_fx(Action.RTL)),
+        HlcRow(
+            _s(S.HOLD),
+            E.MC_LAND,
+            S.LANDING,
+            "MC LAND",
+            guard=_mc_changed_since_entry,
+            effect=_fx(Action.LAND),
+        ),
+        HlcRow(
+            _s(S.RTL, S.LOW_BATTERY),
+            E.MC_LAND,
+            S.LANDING,
+            "MC LAND while returning",
+            guard=_mc_changed_since_entry,
+            effect=_fx(Action.LAND),
+        ),
+        HlcRow(_s(S.AIRBORNE), E.MC_HOLD, S.HOLD, "MC HOLD: stop and wait", effect=_fx(Action.HOVER)),
+        HlcRow(
+            _s(S.HOLD),
+            E.AUTOPILOT_LAND,
+            S.LANDING,
+            "autopilot landing on its own",
+            effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)),
+        ),
+        HlcRow(
+            _s(S.HOLD),
+            E.AUTOPILOT_RTL,
+            S.RTL,
+            "autopilot returning on its own",
+            effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)),
+        ),
+        HlcRow(
+            _s(S.GAINING_ALTITUDE, S.AIRBORNE),
+            E.AUTOPILOT_LAND,
+            S.LANDING,
+            "autopilot landing on its own",
+            effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)),
+            extra=True,
+        ),
+        HlcRow(_s(S.RTL), E.AUTOPILOT_LAND, S.LANDING, "RTL final descent", extra=True),
+        HlcRow(
+            _s(S.GAINING_ALTITUDE, S.AIRBORNE),
+            E.AUTOPILOT_RTL,
+            S.RTL,
+            "autopilot returning on its own",
+            effect=_fx(error=(ErrorCode.AUTOPILOT_TOOK_OVER, Severity.WARNING)),
+            extra=True,
+        ),
+        HlcRow(
+            _s(S.GAINING_ALTITUDE, S.AIRBORNE),
+            E.LOW_BATTERY,
+            S.LOW_BATTERY,
+            "battery low: returning home",
+            effect=_fx(Action.RTL, error=(ErrorCode.LOW_BATTERY, Severity.WARNING)),
+        ),
+        HlcRow(
+            _s(S.HOLD),
+            E.LOW_BATTERY,
+            S.LOW_BATTERY,
+            "battery low: returning home",
+            guard=_battery_not_handled,
+            effect=_fx(Action.RTL, error=(ErrorCode.LOW_BATTERY, Severity.WARNING)),
+        ),
+    )
 )
 del S, E
-
-
-@functools.cache
-def _index(table: tuple[HlcRow, ...]) -> dict[tuple[HlcState, HlcEvent], tuple[HlcRow, ...]]:
-    """(state, event) -> its rows, in table order: a match reads a few rows, not the table, and
-    an event no row of the state takes is not worth deriving. Built once per table and shared
-    by every machine of the process (a thousand agents' machines each had their own: 14 MiB)."""
-    rows: dict[tuple[HlcState, HlcEvent], tuple[HlcRow, ...]] = {}
-    for row in table:
-        for source in row.sources:
-            rows[(source, row.event)] = (*rows.get((source, row.event), ()), row)
-    return rows
 
 
 class HighLevelControl:
     """The HLC machine. Read `state`; feed observations; perform the returned actions."""
 
-    def __init__(self, params: HlcParams | None = None, *, table: tuple[HlcRow, ...] = HLC_TABLE) -> None:
+    def __init__(
+        self,
+        params: HlcParams | None = None,
+        *,
+        table: Table[HlcState, HlcEvent, HlcView, HlcRow] = HLC_TABLE,
+    ) -> None:
         self.params = params or HlcParams()
-        self._rows = _index(table)
+        self._table = table
         self.state: HlcState = HlcState.INIT
         self.entered_at: float | None = None  # `now` of the last transition
         self.mc_state: int | None = None  # last MC state heard (an McState value), None = never
@@ -621,9 +632,6 @@ class HighLevelControl:
         if math.isfinite(requested) and requested > 0.0:
             return requested
         return self.params.default_takeoff_altitude
-
-    def _battery_is_low(self) -> bool:
-        return bool(self.battery_low_reason())
 
     def battery_low_reason(self) -> str:
         """Why the battery counts as low ("" if it does not): percentage, volts per cell or the vehicle's
@@ -763,13 +771,13 @@ class HighLevelControl:
             ]
         if self.state is HlcState.LLC_DOWN:
             return self._regained_events(ap) if self._link_fresh(ap) else []
-        # Only events a row of this state takes are derived (`_takes`): the rest would be passed
-        # over by `_fire` anyway, and their reasons cost more than the rest of the tick.
-        takes = self._takes
+        # Only events a row of this state takes are derived (`Table.events_taken`): the rest would be
+        # passed over by `_fire` anyway, and their reasons cost more than the rest of the tick.
+        takes = self._table.events_taken(self.state)
         events: list[tuple[HlcEvent, str]] = []
-        if takes(HlcEvent.LANDED) and ap.landed:
+        if HlcEvent.LANDED in takes and ap.landed:
             events.append((HlcEvent.LANDED, f"on the ground and disarmed (mode {ap.mode or '?'})"))
-        if takes(HlcEvent.PILOT_TAKEOVER) and ap.armed and pilot_in_control(ap):
+        if HlcEvent.PILOT_TAKEOVER in takes and ap.armed and pilot_in_control(ap):
             events.append(
                 (HlcEvent.PILOT_TAKEOVER, f"autopilot left autonomous control (mode {ap.mode or '?'})")
             )
@@ -787,15 +795,15 @@ class HighLevelControl:
                     f"{ap.failsafe}; autopilot switched to {ap.mode or ap.flight_mode.name}",
                 )
             )
-        if ap.flight_mode is FlightMode.LANDING and takes(HlcEvent.AUTOPILOT_LAND):
+        if ap.flight_mode is FlightMode.LANDING and HlcEvent.AUTOPILOT_LAND in takes:
             events.append((HlcEvent.AUTOPILOT_LAND, f"autopilot switched to {ap.mode or 'LAND'}"))
-        if ap.flight_mode is FlightMode.RTL and takes(HlcEvent.AUTOPILOT_RTL):
+        if ap.flight_mode is FlightMode.RTL and HlcEvent.AUTOPILOT_RTL in takes:
             events.append((HlcEvent.AUTOPILOT_RTL, f"autopilot switched to {ap.mode or 'RTL'}"))
-        if takes(HlcEvent.LOW_BATTERY):
+        if HlcEvent.LOW_BATTERY in takes:
             low = self.battery_low_reason()
             if low:
                 events.append((HlcEvent.LOW_BATTERY, low))
-        if takes(HlcEvent.ALTITUDE_REACHED) and altitude_reached(
+        if HlcEvent.ALTITUDE_REACHED in takes and altitude_reached(
             ap.alt, self._target_altitude, p.airborne_fraction
         ):
             events.append(
@@ -808,23 +816,14 @@ class HighLevelControl:
 
     # ----------------------------------------------------------------- the table
 
-    def _match(self, event: HlcEvent) -> HlcRow | None:
-        for row in self._rows.get((self.state, event), ()):
-            if row.guard is None or row.guard(self):
-                return row
-        return None
-
-    def _takes(self, event: HlcEvent) -> bool:
-        """Whether a row of the current state takes ``event`` (guards aside): an event it is not is
-        not worth deriving, `_match` would pass it over."""
-        return (self.state, event) in self._rows
-
     def _fire(self, events: Iterable[tuple[HlcEvent, str]], now: float) -> HlcOutcome:
         for event, detail in events:
-            row = self._match(event)
+            row = self._table.match(self.state, event, self)
             if row is None:
                 continue
             reason = f"{row.why} ({detail})" if detail else row.why
+            if row.target is HlcState.TAKEOFF:
+                self._target_altitude = self._requested_altitude()  # latched when the HLC leaves READY
             actions, errors = row.effect(self, reason) if row.effect is not None else ((), ())
             if row.target is None:
                 return HlcOutcome(actions=actions, errors=errors, reason=reason)

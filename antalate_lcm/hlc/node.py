@@ -19,7 +19,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from typing import Any, cast
 
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.autopilot import Autopilot, AutopilotError, AutopilotState, Frame, load_autopilot
 from antalate_lcm.config import Config
 from antalate_lcm.hlc.machine import (
@@ -44,6 +43,7 @@ from antalate_lcm.hlc.velocity_guard import (
 )
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t, velocity_cmd_t
 from antalate_lcm.node import Context, Node, TopicMatch
+from antalate_lcm.ratelimit import RateLimitedLog
 from antalate_lcm.vocabulary import HlcState, Severity
 
 _CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link

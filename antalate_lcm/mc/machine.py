@@ -58,11 +58,12 @@ is READY when the command is accepted, so "HLC READY" alone would cancel every t
 from __future__ import annotations
 
 import enum
-import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
+from antalate_lcm.state_machine import Row, Table, Transition
 from antalate_lcm.vocabulary import Command, HlcState, McState
 
 
@@ -130,15 +131,8 @@ class McParams:
 LINK_REGAINED_POLICIES: dict[str, McState] = {"rtl": McState.RTL, "land": McState.LAND, "hold": McState.HOLD}
 
 
-@dataclass(frozen=True)
-class McTransition:
-    """A state change with its cause, for the node's log."""
-
-    from_state: McState
-    to_state: McState
-    event: McEvent
-    reason: str
-    at: float
+#: A state change with its cause, for the node's log.
+McTransition = Transition[McState, McEvent]
 
 
 @dataclass(frozen=True)
@@ -163,33 +157,38 @@ class McOutcome:
 _ACCEPTED = McOutcome(True)
 
 
-_Guard = Callable[["MissionControl"], bool]
+class McView(Protocol):
+    """What the MC table's guards may read of the machine (read-only: see `antalate_lcm.state_machine`)."""
+
+    @property
+    def params(self) -> McParams: ...
+    @property
+    def hlc_state(self) -> HlcState | None: ...
+    @property
+    def hlc_changed(self) -> bool: ...
+    @property
+    def hlc_left_ready(self) -> bool: ...
 
 
-@dataclass(frozen=True)
-class McRow:
-    sources: frozenset[McState]
-    event: McEvent
-    target: McState
-    why: str
-    guard: _Guard | None = None
-    extra: bool = False  # not in docs/design.md §5 (see the module docstring)
+#: A row of the MC table; `extra` marks one not in docs/design.md §5 (see the module docstring).
+McRow = Row[McState, McEvent, McView]
+_Guard = Callable[[McView], bool]
 
 
-def _hlc_left_ready(mc: MissionControl) -> bool:
+def _hlc_left_ready(mc: McView) -> bool:
     return mc.hlc_left_ready
 
 
-def _hlc_changed(mc: MissionControl) -> bool:
+def _hlc_changed(mc: McView) -> bool:
     return mc.hlc_changed
 
 
-def _hlc_link_up(mc: MissionControl) -> bool:
+def _hlc_link_up(mc: McView) -> bool:
     return mc.hlc_state not in (None, HlcState.LLC_DOWN, HlcState.INIT)
 
 
 def _policy(target: McState) -> _Guard:
-    def guard(mc: MissionControl) -> bool:
+    def guard(mc: McView) -> bool:
         return LINK_REGAINED_POLICIES[mc.params.on_link_regained] is target
 
     return guard
@@ -204,98 +203,106 @@ E = McEvent
 _RESYNC = frozenset({S.INIT, S.HLC_LOST})  # where the MC takes the HLC's word for what is going on
 
 #: The MC transition table, in priority order (the first row matching state, event and guard wins).
-MC_TABLE: tuple[McRow, ...] = (
-    McRow(
-        frozenset(S) - {S.ERROR},
-        E.HLC_LLC_DOWN,
-        S.ERROR,
-        "HLC lost its autopilot link: the vehicle is on its own failsafe until the link is back",
-    ),
-    McRow(frozenset(S) - {S.INIT, S.HLC_LOST}, E.HLC_TIMEOUT, S.HLC_LOST, "HLC lost"),
-    McRow(_RESYNC, E.HLC_READY, S.STANDBY, "HLC ready"),
-    McRow(_RESYNC, E.HLC_GAINING_ALTITUDE, S.TAKEOFF, "restart resync: HLC gaining altitude"),
-    McRow(_RESYNC, E.HLC_AIRBORNE, S.MISSION, "restart resync: HLC airborne"),
-    McRow(_RESYNC, E.HLC_RTL, S.RTL, "restart resync: HLC returning"),
-    McRow(_RESYNC, E.HLC_LANDING, S.LAND, "restart resync: HLC landing"),
-    McRow(_RESYNC, E.HLC_MANUAL, S.MANUAL, "restart resync: pilot in control"),
-    McRow(_RESYNC, E.HLC_HOLD, S.HOLD, "restart resync: vehicle holding"),
-    McRow(_RESYNC, E.HLC_LOW_BATTERY, S.RTL, "restart resync: HLC returning on low battery", extra=True),
-    McRow(_s(S.STANDBY), E.OP_TAKEOFF, S.TAKEOFF, "operator TAKEOFF"),
-    McRow(_s(S.TAKEOFF), E.HLC_AIRBORNE, S.MISSION, "HLC airborne"),
-    McRow(_s(S.TAKEOFF), E.HLC_READY, S.STANDBY, "HLC back to READY: takeoff failed", guard=_hlc_left_ready),
-    McRow(_s(S.TAKEOFF), E.TAKEOFF_ACK_TIMEOUT, S.STANDBY, "HLC never left READY: takeoff not acknowledged"),
-    McRow(_s(S.TAKEOFF), E.HLC_LANDING, S.LAND, "HLC landing: altitude not gained"),
-    McRow(_s(S.TAKEOFF, S.MISSION, S.RTL, S.HOLD), E.OP_LAND, S.LAND, "operator LAND"),
-    McRow(_s(S.TAKEOFF, S.MISSION, S.HOLD), E.OP_RTL, S.RTL, "operator RTL"),
-    McRow(
-        _s(S.ERROR), E.OP_LAND, S.LAND, "operator LAND with the HLC reporting its link up", guard=_hlc_link_up
-    ),
-    McRow(
-        _s(S.ERROR), E.OP_RTL, S.RTL, "operator RTL with the HLC reporting its link up", guard=_hlc_link_up
-    ),
-    McRow(_s(S.TAKEOFF, S.MISSION, S.HOLD), E.HLC_LOW_BATTERY, S.RTL, "HLC low battery: returning"),
-    McRow(_s(S.RTL, S.HOLD), E.HLC_LANDING, S.LAND, "HLC landing"),
-    McRow(_s(S.RTL, S.LAND, S.HOLD), E.HLC_READY, S.STANDBY, "landed and disarmed"),
-    McRow(_s(S.TAKEOFF, S.MISSION, S.RTL, S.LAND, S.HOLD), E.HLC_MANUAL, S.MANUAL, "pilot override"),
-    McRow(_s(S.MANUAL), E.HLC_READY, S.STANDBY, "pilot landed and disarmed"),
-    McRow(_s(S.TAKEOFF, S.MISSION), E.HLC_RTL, S.RTL, "vehicle returning on its own", extra=True),
-    McRow(_s(S.MISSION), E.HLC_LANDING, S.LAND, "vehicle landing on its own", extra=True),
-    McRow(_s(S.MISSION), E.HLC_READY, S.STANDBY, "vehicle landed on its own", extra=True),
-    # The vehicle's own failsafes: follow what it does (never MANUAL for an autopilot's decision).
-    McRow(
-        _s(S.TAKEOFF, S.MISSION, S.RTL, S.LAND, S.MANUAL),
-        E.HLC_HOLD,
-        S.HOLD,
-        "vehicle holding on its own",
-        guard=_hlc_changed,
-    ),
-    McRow(_s(S.LAND, S.MANUAL, S.HOLD), E.HLC_RTL, S.RTL, "vehicle returning on its own", guard=_hlc_changed),
-    McRow(_s(S.MANUAL), E.HLC_LANDING, S.LAND, "vehicle landing on its own"),
-    # The autopilot link is back (ERROR is only entered on HLC LLC_DOWN).
-    McRow(_s(S.ERROR), E.HLC_READY, S.STANDBY, "autopilot link regained, vehicle on the ground"),
-    McRow(_s(S.ERROR), E.HLC_RTL, S.RTL, "autopilot link regained, vehicle returning on its own"),
-    McRow(_s(S.ERROR), E.HLC_LANDING, S.LAND, "autopilot link regained, vehicle landing on its own"),
-    McRow(_s(S.ERROR), E.HLC_LOW_BATTERY, S.RTL, "autopilot link regained, vehicle returning on low battery"),
-    McRow(_s(S.ERROR), E.HLC_MANUAL, S.MANUAL, "autopilot link regained, pilot in control"),
-    *(
+MC_TABLE: Table[McState, McEvent, McView, McRow] = Table(
+    (
+        McRow(
+            frozenset(S) - {S.ERROR},
+            E.HLC_LLC_DOWN,
+            S.ERROR,
+            "HLC lost its autopilot link: the vehicle is on its own failsafe until the link is back",
+        ),
+        McRow(frozenset(S) - {S.INIT, S.HLC_LOST}, E.HLC_TIMEOUT, S.HLC_LOST, "HLC lost"),
+        McRow(_RESYNC, E.HLC_READY, S.STANDBY, "HLC ready"),
+        McRow(_RESYNC, E.HLC_GAINING_ALTITUDE, S.TAKEOFF, "restart resync: HLC gaining altitude"),
+        McRow(_RESYNC, E.HLC_AIRBORNE, S.MISSION, "restart resync: HLC airborne"),
+        McRow(_RESYNC, E.HLC_RTL, S.RTL, "restart resync: HLC returning"),
+        McRow(_RESYNC, E.HLC_LANDING, S.LAND, "restart resync: HLC landing"),
+        McRow(_RESYNC, E.HLC_MANUAL, S.MANUAL, "restart resync: pilot in control"),
+        McRow(_RESYNC, E.HLC_HOLD, S.HOLD, "restart resync: vehicle holding"),
+        McRow(_RESYNC, E.HLC_LOW_BATTERY, S.RTL, "restart resync: HLC returning on low battery", extra=True),
+        McRow(_s(S.STANDBY), E.OP_TAKEOFF, S.TAKEOFF, "operator TAKEOFF"),
+        McRow(_s(S.TAKEOFF), E.HLC_AIRBORNE, S.MISSION, "HLC airborne"),
+        McRow(
+            _s(S.TAKEOFF), E.HLC_READY, S.STANDBY, "HLC back to READY: takeoff failed", guard=_hlc_left_ready
+        ),
+        McRow(
+            _s(S.TAKEOFF), E.TAKEOFF_ACK_TIMEOUT, S.STANDBY, "HLC never left READY: takeoff not acknowledged"
+        ),
+        McRow(_s(S.TAKEOFF), E.HLC_LANDING, S.LAND, "HLC landing: altitude not gained"),
+        McRow(_s(S.TAKEOFF, S.MISSION, S.RTL, S.HOLD), E.OP_LAND, S.LAND, "operator LAND"),
+        McRow(_s(S.TAKEOFF, S.MISSION, S.HOLD), E.OP_RTL, S.RTL, "operator RTL"),
         McRow(
             _s(S.ERROR),
-            event,
-            target,
-            f"autopilot link regained in the air: on_link_regained = {policy}",
-            guard=_policy(target),
-        )
-        for event in (E.HLC_HOLD, E.HLC_AIRBORNE)
-        for policy, target in LINK_REGAINED_POLICIES.items()
-    ),
+            E.OP_LAND,
+            S.LAND,
+            "operator LAND with the HLC reporting its link up",
+            guard=_hlc_link_up,
+        ),
+        McRow(
+            _s(S.ERROR),
+            E.OP_RTL,
+            S.RTL,
+            "operator RTL with the HLC reporting its link up",
+            guard=_hlc_link_up,
+        ),
+        McRow(_s(S.TAKEOFF, S.MISSION, S.HOLD), E.HLC_LOW_BATTERY, S.RTL, "HLC low battery: returning"),
+        McRow(_s(S.RTL, S.HOLD), E.HLC_LANDING, S.LAND, "HLC landing"),
+        McRow(_s(S.RTL, S.LAND, S.HOLD), E.HLC_READY, S.STANDBY, "landed and disarmed"),
+        McRow(_s(S.TAKEOFF, S.MISSION, S.RTL, S.LAND, S.HOLD), E.HLC_MANUAL, S.MANUAL, "pilot override"),
+        McRow(_s(S.MANUAL), E.HLC_READY, S.STANDBY, "pilot landed and disarmed"),
+        McRow(_s(S.TAKEOFF, S.MISSION), E.HLC_RTL, S.RTL, "vehicle returning on its own", extra=True),
+        McRow(_s(S.MISSION), E.HLC_LANDING, S.LAND, "vehicle landing on its own", extra=True),
+        McRow(_s(S.MISSION), E.HLC_READY, S.STANDBY, "vehicle landed on its own", extra=True),
+        # The vehicle's own failsafes: follow what it does (never MANUAL for an autopilot's decision).
+        McRow(
+            _s(S.TAKEOFF, S.MISSION, S.RTL, S.LAND, S.MANUAL),
+            E.HLC_HOLD,
+            S.HOLD,
+            "vehicle holding on its own",
+            guard=_hlc_changed,
+        ),
+        McRow(
+            _s(S.LAND, S.MANUAL, S.HOLD), E.HLC_RTL, S.RTL, "vehicle returning on its own", guard=_hlc_changed
+        ),
+        McRow(_s(S.MANUAL), E.HLC_LANDING, S.LAND, "vehicle landing on its own"),
+        # The autopilot link is back (ERROR is only entered on HLC LLC_DOWN).
+        McRow(_s(S.ERROR), E.HLC_READY, S.STANDBY, "autopilot link regained, vehicle on the ground"),
+        McRow(_s(S.ERROR), E.HLC_RTL, S.RTL, "autopilot link regained, vehicle returning on its own"),
+        McRow(_s(S.ERROR), E.HLC_LANDING, S.LAND, "autopilot link regained, vehicle landing on its own"),
+        McRow(
+            _s(S.ERROR), E.HLC_LOW_BATTERY, S.RTL, "autopilot link regained, vehicle returning on low battery"
+        ),
+        McRow(_s(S.ERROR), E.HLC_MANUAL, S.MANUAL, "autopilot link regained, pilot in control"),
+        *(
+            McRow(
+                _s(S.ERROR),
+                event,
+                target,
+                f"autopilot link regained in the air: on_link_regained = {policy}",
+                guard=_policy(target),
+            )
+            for event in (E.HLC_HOLD, E.HLC_AIRBORNE)
+            for policy, target in LINK_REGAINED_POLICIES.items()
+        ),
+    )
 )
 del S, E
 
 #: For rejection messages: in which states each command is accepted.
 _ACCEPTED_IN: dict[McEvent, tuple[McState, ...]] = {
-    event: tuple(sorted({s for row in MC_TABLE if row.event is event for s in row.sources}))
+    event: tuple(sorted(MC_TABLE.sources_of(event)))
     for event in (McEvent.OP_TAKEOFF, McEvent.OP_LAND, McEvent.OP_RTL)
 }
-
-
-@functools.cache
-def _index(table: tuple[McRow, ...]) -> dict[tuple[McState, McEvent], tuple[McRow, ...]]:
-    """(state, event) -> its rows, in table order: a match reads a few rows, not the table, and
-    an event no row of the state takes is not worth deriving. Built once per table and shared
-    by every machine of the process (a thousand agents' machines each had their own: 14 MiB)."""
-    rows: dict[tuple[McState, McEvent], tuple[McRow, ...]] = {}
-    for row in table:
-        for source in row.sources:
-            rows[(source, row.event)] = (*rows.get((source, row.event), ()), row)
-    return rows
 
 
 class MissionControl:
     """The MC machine. Read `state`, `last_command_seq`, `takeoff_altitude`; feed it inputs."""
 
-    def __init__(self, params: McParams | None = None, *, table: tuple[McRow, ...] = MC_TABLE) -> None:
+    def __init__(
+        self, params: McParams | None = None, *, table: Table[McState, McEvent, McView, McRow] = MC_TABLE
+    ) -> None:
         self.params = params or McParams()
-        self._rows = _index(table)
+        self._table = table
         self.state: McState = McState.INIT
         self.entered_at: float | None = None
         self.last_command_seq: int = 0
@@ -333,7 +340,7 @@ class MissionControl:
         if cmd is Command.TAKEOFF and not (math.isfinite(altitude) and altitude >= 0.0):
             return McOutcome(False, reason=f"{label} rejected: altitude {altitude!r} is not a number >= 0")
         event = McEvent.of_command(cmd)
-        row = self._match(event)
+        row = self._table.match(self.state, event, self)
         if row is None:
             allowed = ", ".join(s.name for s in _ACCEPTED_IN[event])
             why = f"accepted in {allowed}"
@@ -366,7 +373,7 @@ class MissionControl:
         if self.state is McState.TAKEOFF and hlc is not HlcState.READY:
             self.hlc_left_ready = True
         event = McEvent.of_hlc(hlc)
-        row = self._match(event)
+        row = self._table.match(self.state, event, self)
         if row is None:
             return _ACCEPTED
         transition = self._apply(row, event, f"HLC {hlc.name}", now)
@@ -376,7 +383,7 @@ class MissionControl:
         """Time passes: fires HLC_TIMEOUT when the HLC fell silent, TAKEOFF_ACK_TIMEOUT when it ignored a TAKEOFF."""
         silent = None if self.hlc_heard_at is None else now - self.hlc_heard_at
         if silent is not None and silent >= self.params.hlc_timeout:
-            row = self._match(McEvent.HLC_TIMEOUT)
+            row = self._table.match(self.state, McEvent.HLC_TIMEOUT, self)
             if row is not None:
                 detail = f"HLC silent for {silent:.1f} s; the vehicle is on its own GCS failsafe"
                 transition = self._apply(row, McEvent.HLC_TIMEOUT, detail, now)
@@ -388,7 +395,7 @@ class MissionControl:
             and self.entered_at is not None
             and now - self.entered_at >= timeout
         ):
-            row = self._match(McEvent.TAKEOFF_ACK_TIMEOUT)
+            row = self._table.match(self.state, McEvent.TAKEOFF_ACK_TIMEOUT, self)
             if row is not None:
                 detail = f"HLC still READY after {timeout:g} s"
                 transition = self._apply(row, McEvent.TAKEOFF_ACK_TIMEOUT, detail, now)
@@ -397,18 +404,15 @@ class MissionControl:
 
     # ----------------------------------------------------------------- the table
 
-    def _match(self, event: McEvent) -> McRow | None:
-        for row in self._rows.get((self.state, event), ()):
-            if row.guard is None or row.guard(self):
-                return row
-        return None
-
     def _apply(self, row: McRow, event: McEvent, detail: str, now: float) -> McTransition:
-        transition = McTransition(self.state, row.target, event, f"{row.why} ({detail})", now)
-        self.state = row.target
+        target = row.target
+        if target is None:  # every MC row changes state (the HLC's table has the rows that stay)
+            raise ValueError(f"an MC row must name a target state: {row}")
+        transition = McTransition(self.state, target, event, f"{row.why} ({detail})", now)
+        self.state = target
         self.reason = transition.reason
         self.entered_at = now
-        if row.target is McState.TAKEOFF:
+        if target is McState.TAKEOFF:
             # A resync into TAKEOFF comes from an HLC that already left READY.
             self.hlc_left_ready = self.hlc_state not in (None, HlcState.READY)
         return transition

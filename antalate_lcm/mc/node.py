@@ -11,11 +11,11 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.config import Config
 from antalate_lcm.mc.machine import McOutcome, McParams, MissionControl
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
 from antalate_lcm.node import Context, Node
+from antalate_lcm.ratelimit import RateLimitedLog
 from antalate_lcm.vocabulary import Command, McState, name_of
 
 _TICK_PERIOD = 0.1  # s: resolution of the takeoff-acknowledgement timeout and the HLC watchdog

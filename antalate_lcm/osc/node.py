@@ -29,23 +29,16 @@ from typing import Any
 import httpx
 
 from antalate_lcm import validation
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.config import Config
-from antalate_lcm.errors import AntalateError, ConfigError
+from antalate_lcm.errors import ConfigError
+from antalate_lcm.errors import ServerProblem as ServerProblem
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, payload_t, telemetry_t
 from antalate_lcm.node import Context, Node
 from antalate_lcm.osc import wire
+from antalate_lcm.ratelimit import RateLimitedLog
 
 # httpx logs every request at INFO: one line per report per agent would drown an agent's log.
 logging.getLogger("httpx").setLevel(logging.WARNING)
-
-
-class ServerProblem(AntalateError):
-    """One failed exchange with the station (down, timeout, wrong status, oversized or invalid reply)."""
-
-    def __init__(self, text: str, retry_after: float = 0.0) -> None:
-        super().__init__(text)
-        self.retry_after = retry_after
 
 
 def _retry_after(response: httpx.Response) -> float:

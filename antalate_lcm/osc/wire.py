@@ -14,17 +14,12 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.errors import ReplyError as ReplyError
 from antalate_lcm.msgs import direction_cmd_t, hlc_state_t, mc_state_t, operator_cmd_t, payload_t, telemetry_t
-from antalate_lcm.station import models
-from antalate_lcm.station._auth import registration_key, registration_mac
+from antalate_lcm.station import models, registration_key, registration_mac
 from antalate_lcm.vocabulary import Command, HlcState, McState, name_of
 
 _TELEMETRY_FIELDS = ("lat", "lon", "alt", "heading", "vn", "ve", "vd", "battery", "armed", "in_air", "mode")
-
-
-class ReplyError(AntalateError, ValueError):
-    """A reply the OSC will not act on; the message says what was wrong with it."""
 
 
 def registration(

@@ -99,11 +99,21 @@ def _cmd_agent(args: argparse.Namespace) -> int:
     # Internal topics between this process's nodes in memory: a spoofed LAN datagram never reaches them.
     context = Context.in_process(shared_buses(configs), whole_swarm=not args.shard)
     nodes = [node for cfg in configs for node in agent_nodes(cfg, context)]
-    if args.broadcast_reception is None:
+    if args.broadcast_reception is None and args.faults is None:
         return run_until_signal(context, nodes)
     from antalate_lcm.runtime.faults import broadcast_report, lossy_broadcasts
 
-    gate = lossy_broadcasts(nodes, args.broadcast_reception, args.seed)
+    if args.faults is not None:  # antalate run's [[fault]]s, injected into this process's agents
+        from antalate_lcm.runtime.fault_processes import shard_faults
+        from antalate_lcm.runtime.script import Script
+
+        script = Script.model_validate_json(args.faults)
+        name = "faults-" + (args.shard or "0/1").replace("/", "of")
+        injector = shard_faults(configs, context, nodes, script, bus=args.fault_bus, name=name)
+        gate = injector.gate
+        nodes.append(injector)
+    else:
+        gate = lossy_broadcasts(nodes, args.broadcast_reception, args.seed)
     code = run_until_signal(context, nodes)
     for line in broadcast_report(gate):
         print(line, file=sys.stderr, flush=True)
@@ -190,7 +200,7 @@ def native_lcm_tool(name: str) -> str:
 
     import lcm
 
-    from antalate_lcm._codegen import lcm_tool
+    from antalate_lcm.tools.codegen import lcm_tool
 
     native = Path(lcm.__file__).resolve().parent.parent / "bin" / name
     if native.is_file() and os.access(native, os.X_OK):
@@ -352,6 +362,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     # antalate run's [broadcast] reception and seed, for the agents of one of its processes
     p.add_argument("--broadcast-reception", type=float, help=argparse.SUPPRESS)
     p.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
+    # ... and its script (JSON) when it injects faults, with the bus their records go to
+    p.add_argument("--faults", help=argparse.SUPPRESS)
+    p.add_argument("--fault-bus", default="lan", help=argparse.SUPPRESS)
     p.set_defaults(func=_cmd_agent)
 
     p = sub.add_parser("tui", help="the operator console (a Textual app on the LAN bus)")

@@ -86,8 +86,7 @@ def start_station(swarm_key: str = "", api_key: str = "") -> StationServer:
     key); ``api_key`` lets the demo's operator use the station's API (``antalate command``). Every
     agent registers from 127.0.0.1 at once, so the per-address registration limit is off.
     """
-    from antalate_lcm.station._auth import registration_key, sha256_hex
-    from antalate_lcm.station._settings import ApiKey, RateLimits
+    from antalate_lcm.station import ApiKey, RateLimits, registration_key, sha256_hex
 
     server = StationServer(
         StationSettings(

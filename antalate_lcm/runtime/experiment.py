@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import os
 import sys
 import threading
@@ -43,6 +44,7 @@ from antalate_lcm.runtime.launch import run_until_signal
 from antalate_lcm.runtime.recorder import LogRecorder
 from antalate_lcm.runtime.script import Script, check_fault_agents, load_script
 from antalate_lcm.runtime.scripted_operator import DirectionAt, Phase, ScriptedOperator
+from antalate_lcm.simclock import SimClock
 
 if TYPE_CHECKING:
     from antalate_lcm.analysis import Analysis
@@ -68,6 +70,13 @@ class Experiment:
     log_level: str = "INFO"
     #: Where the script came from, for the errors that name its keys.
     script_source: str = "script"
+    #: Simulated time (``--speed``): simulated seconds per real second at most, ``math.inf`` as
+    #: fast as this process computes; None: the wall clock.
+    speed: float | None = None
+    #: ``--seed``: the script's seed (every draw); with ``speed`` the run is a pure function of it.
+    seed: int | None = None
+    #: False: no metrics at the end (benchmarks/simtime.py times the flight, not the analysis).
+    measure: bool = True
 
 
 def default_log_path() -> str:
@@ -121,11 +130,27 @@ def prepare(exp: Experiment) -> tuple[list[Config], str, str]:
         raise AntalateError(f"--agents wants a number >= 1 (got {exp.agents})")
     if exp.processes < 1:
         raise AntalateError(f"--processes wants a number >= 1 (got {exp.processes})")
+    if exp.speed is not None:
+        check_simulated(exp)
+    if exp.seed is not None and exp.seed < 0:
+        raise AntalateError(f"--seed wants a number >= 0 (got {exp.seed})")
     base = load_config(exp.config_path)
     configs = swarm_configs(base, exp.agents, spacing=exp.spacing)
     check_unique_agent_names(configs, agents=exp.agents)
     for cfg in configs:
         validate(cfg)
+    if exp.speed is not None and base.hlc.autopilot != "sim":
+        raise ConfigError(
+            base.source,
+            "hlc.autopilot",
+            f"'sim' with --speed: a {base.hlc.autopilot!r} vehicle flies in real time, not on a simulated clock",
+        )
+    if exp.speed is not None and base.osc.enabled:
+        raise ConfigError(
+            base.source,
+            "osc.enabled",
+            "false with --speed: the OSC's station answers over HTTP in real time, not on a simulated clock",
+        )
     bus = record_bus(base, exp.bus)
     check_reach(base, min(exp.processes, len(configs)), bus)
     if exp.script is not None:
@@ -139,15 +164,24 @@ def prepare(exp: Experiment) -> tuple[list[Config], str, str]:
     return configs, bus, out
 
 
+def check_simulated(exp: Experiment) -> None:
+    """Simulated time runs on this process's one loop: every agent in it, the scripted operator."""
+    if not exp.speed or exp.speed <= 0 or math.isnan(exp.speed):
+        raise AntalateError(f"--speed wants 'max' or a number > 0 (got {exp.speed})")
+    if exp.processes > 1 and exp.agents > 1:
+        raise AntalateError(
+            f"--speed runs every agent in this process on one simulated clock; processes do not share "
+            f"it yet: drop --processes {exp.processes}"
+        )
+    if not exp.headless:
+        raise AntalateError("--speed needs --headless: the operator console runs on the wall clock")
+
+
 def check_interference(exp: Experiment, script: Script, configs: list[Config]) -> None:
     """Faults and lossy broadcasts act on simulated agents in this process, under the scripted
     operator (their times count from its MISSION); each fault names agents that fly."""
     if not script.interferes:
         return
-    if script.fault and min(exp.processes, len(configs)) > 1:
-        raise AntalateError(
-            f"{exp.script_source}: [[fault]] needs the agents in this process (--processes 1)"
-        )
     if script.fault and not exp.headless:
         raise AntalateError(
             f"{exp.script_source}: [[fault]] needs --headless (its times count from the scripted MISSION)"
@@ -167,11 +201,17 @@ def check_interference(exp: Experiment, script: Script, configs: list[Config]) -
 
 
 def _interfere(
-    configs: list[Config], context: Context, nodes: list[Node], script: Script, bus: str
+    configs: list[Config], context: Context, nodes: list[Node], script: Script, bus: str, processes: int = 1
 ) -> FaultInjector | None:
     """Put the script's faults and broadcast losses between the agents' nodes and the bus."""
     if not script.interferes:
         return None
+    if processes > 1:  # the agent processes inject them: runtime/fault_processes.py
+        from antalate_lcm.runtime.fault_processes import FaultRelay
+        from antalate_lcm.runtime.faults import FaultGate
+
+        config = configs[0].with_agent_name("faults")
+        return FaultRelay(config, context, script=script, gate=FaultGate(), bus=bus, excuse=lambda _a: None)
     from antalate_lcm.hlc.node import HlcNode
     from antalate_lcm.runtime.faults import FaultGate, FaultInjector, lossy_broadcasts
 
@@ -215,6 +255,9 @@ def _child_argv(exp: Experiment) -> Callable[[int, int], list[str]]:
     script = exp.script or load_script(None)
     if script.broadcast.reception < 1.0:  # each process loses broadcasts at its own agents
         argv += ["--broadcast-reception", repr(script.broadcast.reception), "--seed", str(script.seed)]
+    if script.fault:  # ... and injects the faults into them (runtime/fault_processes.py)
+        bus = record_bus(load_config(exp.config_path), exp.bus)
+        argv += ["--faults", script.model_dump_json(), "--fault-bus", bus]
     return lambda i, n: [*argv, "--shard", f"{i}/{n}"]
 
 
@@ -236,6 +279,12 @@ class Outcome:
     problem: str = ""
     #: With the console: the file that holds the nodes' log lines.
     node_log: str = ""
+    #: Real seconds the flight took (nodes started to nodes stopped).
+    real_s: float = 0.0
+    #: Simulated seconds it covered (``--speed``), None on the wall clock.
+    simulated_s: float | None = None
+    #: CPU seconds this process spent meanwhile (all its threads).
+    cpu_s: float = 0.0
 
     def text(self) -> str:
         """What ``antalate run`` prints."""
@@ -243,6 +292,11 @@ class Outcome:
         if self.node_log:
             lines.append(f"the nodes' log lines are in {self.node_log}")
         lines.append(f"log: {self.log} ({self.messages} messages on bus {self.bus!r})")
+        if self.simulated_s is not None:
+            lines.append(
+                f"simulated time: {self.simulated_s:.1f} s in {self.real_s:.1f} s real "
+                f"({self.simulated_s / max(self.real_s, 1e-9):.1f}x real time)"
+            )
         if self.analysis is not None:
             from antalate_lcm.analysis import format_summary
 
@@ -259,48 +313,73 @@ class Outcome:
             "log": self.log,
             "bus": self.bus,
             "messages": self.messages,
+            "report": self.report or None,
             "timelines": {a: [{"t": t, "state": s} for t, s in tl] for a, tl in self.timelines.items()},
             "node_log": self.node_log or None,
             "analysis": self.analysis.to_json() if self.analysis is not None else None,
             "problem": self.problem or None,
+            "real_s": self.real_s,
+            "simulated_s": self.simulated_s,
+            "cpu_s": self.cpu_s,
         }
 
 
 def run(exp: Experiment) -> Outcome:
     """Fly the experiment, then measure its log (every check first: :func:`prepare`)."""
     script = exp.script or load_script(None)
+    if exp.seed is not None:
+        script = script.model_copy(update={"seed": exp.seed})
     configs, bus, out = prepare(exp)
     processes = min(exp.processes, len(configs))
     buses = shared_buses(configs)
+    clock = None if exp.speed is None else SimClock(exp.speed, held=True)
+    if clock is not None:
+        # Simulated agents in one process on simulated time: a datagram through the kernel would
+        # come back at a real moment, not a simulated one, so every bus stays in the process.
+        buses = {name: url if url.startswith(_IN_PROCESS) else "memq://" for name, url in buses.items()}
     # One process: every agent's internal topics in memory, as `antalate agent` runs them, and the
     # whole swarm here (a peer behavior may hear its peers on memq://). Several: this process only
     # commands and records, on the configured buses.
     context = (
-        Context.in_process(buses, whole_swarm=True) if processes == 1 else Context(Bus(buses), Executor())
+        Context.in_process(buses, whole_swarm=True, executor=Executor(sim=clock))
+        if processes == 1
+        else Context(Bus(buses), Executor())
     )
+    if clock is not None or exp.seed is not None:
+        context.seed = script.seed
     recorder = LogRecorder(configs[0].with_agent_name("recorder"), context, bus=bus, path=out)
     nodes: list[Node] = [recorder]
     if processes == 1:
         nodes += [node for cfg in configs for node in agent_nodes(cfg, context)]
-    injector = _interfere(configs, context, nodes, script, bus)
+    injector = _interfere(configs, context, nodes, script, bus, processes)
     if injector is not None:
         nodes.append(injector)
     # With the console, every log line goes to a file: they would tear the console's screen.
     node_log = "" if exp.headless else _temp_log()
     children = _AgentProcesses(exp, processes, node_log) if processes > 1 else None
     outcome = Outcome(1, out, bus, 0, node_log=node_log)
+    started, cpu = time.monotonic(), time.process_time()
     try:
         if exp.headless:
-            _fly_scripted(configs, context, nodes, script, children, outcome, injector)
+            _fly_scripted(configs, context, nodes, script, children, outcome, injector, clock)
         else:
             outcome.code = _run_console(configs[0], context, nodes, node_log)
     finally:
         if children is not None:
             children.stop()
+    outcome.real_s, outcome.cpu_s = time.monotonic() - started, time.process_time() - cpu
+    if clock is not None:
+        outcome.simulated_s = clock.elapsed
+        from antalate_lcm.runtime.replay import write_record
+
+        write_record(exp, script, out)
     outcome.messages = recorder.events
     if injector is not None:
         outcome.report = "\n".join([outcome.report, *injector.report()]).strip()
-    _measure(outcome, script)
+    if exp.measure:
+        _measure(outcome, script)
+    else:
+        outcome.problem = "not measured"
     return outcome
 
 
@@ -339,6 +418,7 @@ def _fly_scripted(
     children: _AgentProcesses | None,
     outcome: Outcome,
     injector: FaultInjector | None = None,
+    clock: SimClock | None = None,
 ) -> None:
     operator = _operator(configs, context, script)
     if injector is not None:
@@ -347,7 +427,23 @@ def _fly_scripted(
         injector.excuse = operator.excused.add
         operator.on_finish.append(injector.summarize)
     ended = children.done if children is not None else threading.Event()
-    run_until_signal(context, [*nodes, operator], poll=lambda: operator.finished or ended.is_set())
+    release = None
+    if clock is not None:
+        # Time stands still while the nodes start (from this thread, in batches) and once the
+        # script has ended (the nodes stop from this thread): what is recorded never depends on
+        # how fast this thread is.
+        operator.on_finish.append(clock.hold)
+        sim = clock
+
+        def release() -> None:
+            context.executor.call_soon(sim.release)
+
+    run_until_signal(
+        context,
+        [*nodes, operator],
+        poll=lambda: operator.finished or ended.is_set(),
+        started_all=release,
+    )
     outcome.code = 0 if operator.phase is Phase.DONE else 1
     if not operator.finished:
         if ended.is_set():
@@ -428,6 +524,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             headless=args.headless,
             force=args.force,
             log_level=args.log_level,
+            speed=args.speed,
+            seed=args.seed,
         )
     )
     print(json.dumps(outcome.to_json(), indent=1) if args.json else outcome.text(), flush=True)
@@ -462,4 +560,30 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--headless", action="store_true", help="the script's operator flies (no console); for scripts and CI"
     )
+    p.add_argument(
+        "--speed",
+        type=parse_speed,
+        metavar="max|N",
+        help="simulated time: as fast as this process computes (max) or at most N times real time",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        metavar="S",
+        help="the script's seed; with --speed the run (its log, byte for byte) is a function of "
+        "config, script and S, and `antalate replay LOG` checks it",
+    )
     p.set_defaults(func=_cmd_run)
+
+
+def parse_speed(text: str) -> float:
+    """``--speed``: ``max`` (math.inf) or a number > 0."""
+    if text == "max":
+        return math.inf
+    try:
+        speed = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'max' or a number > 0, got {text!r}") from None
+    if not speed > 0 or math.isinf(speed):
+        raise argparse.ArgumentTypeError(f"'max' or a number > 0, got {text!r}")
+    return speed

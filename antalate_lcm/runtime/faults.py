@@ -23,7 +23,9 @@ timers run. The behaviors, MC, HLC and configs are the ones that fly; nothing is
   ``land`` or ``brake``), a pilot takeover, a lost link between the HLC and the vehicle, or an
   adapter whose ``state()`` raises, for ``duration`` s (the last two).
 * packet_loss: the agent's messages on ``topics`` are lost with probability ``loss`` and/or
-  delayed ``delay`` s, sent (``out``), received from the network (``in``) or both.
+  delayed ``delay`` s, sent (``out``), received from the network (``in``) or both; with
+  ``bandwidth`` the topics together carry at most that many bytes a second each way (a token
+  bucket of ``burst`` bytes, a policer: a message the bucket cannot pay for is lost).
 
 Each fault is drawn per agent with its ``probability`` from the script's ``seed`` (so a run with
 the same script hits the same agents), and each start, end and spared draw is written to the
@@ -45,6 +47,7 @@ from antalate_lcm.geo import offset as geo_offset
 from antalate_lcm.geo import wrap_180
 from antalate_lcm.msgs import mc_state_t, payload_t, peer_scan_t, telemetry_t
 from antalate_lcm.node import Context, Node
+from antalate_lcm.ratelimit import TokenBucket
 from antalate_lcm.runtime.script import VEHICLE_EVENTS, FaultStep, Script
 from antalate_lcm.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE, OPERATOR_INPUTS, Message
 from antalate_lcm.vocabulary import McState
@@ -100,6 +103,12 @@ class _Active:
     rng: random.Random
     #: A stuck sensor's reading, captured from the first message after the start.
     stuck: Message | None = None
+    #: A bandwidth cap's token buckets (keys "out" and "in": each way has its own).
+    bucket: TokenBucket | None = None
+
+    def over_cap(self, way: str, size: int, now: float) -> bool:
+        """Whether ``size`` bytes more exceed the cap this way now (they are lost then)."""
+        return self.bucket is not None and self.bucket.take(way, now, float(size)) > 0.0
 
 
 @dataclass
@@ -108,6 +117,8 @@ class _Planned:
     step: FaultStep
     agent: str
     hit: bool
+    #: When it comes (s since its ``since``): the step's ``at``, or drawn up to its ``at_latest``.
+    at: float = 0.0
     started: bool = False
     ended: bool = False
 
@@ -135,7 +146,11 @@ class FaultGate:
         """Fault ``index`` of the script holds ``agent`` from now on (its losses drawn from a stream
         seeded by (seed, fault, agent))."""
         rng = random.Random(f"packets/{seed}/{index}/{agent}")
-        self.active.setdefault(agent, {}).setdefault(step.kind, []).append(_Active(step, index, agent, rng))
+        bucket = None
+        if step.bandwidth is not None:
+            bucket = TokenBucket(step.bandwidth, step.burst if step.burst is not None else step.bandwidth)
+        active = _Active(step, index, agent, rng, bucket=bucket)
+        self.active.setdefault(agent, {}).setdefault(step.kind, []).append(active)
 
     def deactivate(self, step: FaultStep, index: int, agent: str) -> None:
         kinds = self.active.get(agent, {})
@@ -195,6 +210,10 @@ class FaultGate:
             if len(self._truth) > _REMEMBERED:
                 del self._truth[next(iter(self._truth))]
         data = node.seal(msg)
+        for fault in self._of(agent, "packet_loss"):
+            step = fault.step
+            if topic in step.topics and step.direction != "in" and fault.over_cap("out", len(data), node.now):
+                return ok
         if delay > 0.0:
             node.context.executor.call_later(delay, lambda: [bus.publish(b, channel, data) for b in network])
             return ok
@@ -242,6 +261,8 @@ class FaultGate:
                     step = fault.step
                     if topic in step.topics and step.direction != "out":
                         if step.loss > 0.0 and fault.rng.random() < step.loss:
+                            return
+                        if fault.bucket is not None and fault.over_cap("in", len(msg.encode()), node.now):
                             return
                         delay = max(delay, step.delay)
             if delay > 0.0:
@@ -330,7 +351,10 @@ def plan(script: Script, agents: list[str]) -> list[_Planned]:
     for i, step in enumerate(script.fault):
         for agent in step.agents(agents):
             hit = random.Random(f"fault/{script.seed}/{i}/{agent}").random() < step.probability
-            out.append(_Planned(i, step, agent, hit))
+            at = step.at
+            if step.at_latest is not None:  # a stream of its own: the hits stay those of a fixed time
+                at = random.Random(f"fault-at/{script.seed}/{i}/{agent}").uniform(step.at, step.at_latest)
+            out.append(_Planned(i, step, agent, hit, at))
     return out
 
 
@@ -366,28 +390,32 @@ class FaultInjector(Node):
         self._drains: dict[str, float] = {}
         self._last_drain = 0.0
         self._seq = 0
-        #: What happened, in order: (s after MISSION, agent, kind, event).
-        self.events: list[tuple[float, str, str, str]] = []
+        #: When this node started (the clock of the faults with since = "start").
+        self.run_start = 0.0
+        #: What happened, in order: (s since its origin, agent, kind, event, origin: mission or start).
+        self.events: list[tuple[float, str, str, str, str]] = []
 
     def on_start(self) -> None:
+        self.run_start = self.now
         self.create_timer(_STEP, self._step)
 
     def _step(self) -> None:
-        start = self.mission_start()
-        if start is None:
-            return
-        since = self.now - start
+        mission = self.mission_start()
         for p in self.planned:
             if p.ended:
                 continue
-            if not p.started and since >= p.step.at:
+            start = self.run_start if p.step.since == "start" else mission
+            if start is None:
+                continue
+            since = self.now - start
+            if not p.started and since >= p.at:
                 p.started = True
                 if not p.hit:
                     p.ended = True
                     self._record(since, p, "spared")
                     continue
                 self._begin(since, p)
-            elif p.started and p.step.duration > 0.0 and since >= p.step.at + p.step.duration:
+            elif p.started and p.step.duration > 0.0 and since >= p.at + p.step.duration:
                 self._end(since, p)
         self._drain()
 
@@ -449,7 +477,7 @@ class FaultInjector(Node):
         step = p.step
         detail = step.model_dump(exclude_defaults=True, exclude={"kind", "agent", "at"})
         label = " ".join(x for x in (step.kind, step.sensor, step.vehicle) if x)
-        self.events.append((since, p.agent, label, event))
+        self.events.append((since, p.agent, label, event, step.since))
         log.info(
             "fault %s %s of %s at %.2f s of the mission %s", step.kind, event, p.agent, since, detail or ""
         )
@@ -471,9 +499,9 @@ class FaultInjector(Node):
         msg.size, msg.data = len(data), data
         self._seq += 1
         msg.header.utime = int(self.wallclock() * 1_000_000)
-        msg.header.agent = "faults"
+        msg.header.agent = self.agent  # one sender per process: each has its own seq
         msg.header.seq = self._seq
-        self.context.bus.publish(self._bus, FAULT_CHANNEL, msg.encode())
+        self.context.bus.publish(self._bus, FAULT_CHANNEL, self.seal(msg))
 
     def summarize(self) -> None:
         """Write what each agent heard of the broadcasts (at the end of the script: once the nodes
@@ -493,7 +521,7 @@ class FaultInjector(Node):
     def report(self) -> list[str]:
         """Lines for the run's report: each fault that happened, and what each agent heard."""
         lines = [
-            f"fault: {kind} {event} {agent} at {t:.1f} s of the mission"
-            for t, agent, kind, event in self.events
+            f"fault: {kind} {event} {agent} at {t:.1f} s of the {'mission' if origin == 'mission' else 'run'}"
+            for t, agent, kind, event, origin in self.events
         ]
         return lines + broadcast_report(self.gate)

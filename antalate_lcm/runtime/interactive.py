@@ -17,7 +17,7 @@ from antalate_lcm.node import Node
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.runtime.demo import DEMO_URL, build_swarm, open_context, start_station
 from antalate_lcm.security import generate_key
-from antalate_lcm.station._auth import new_api_key
+from antalate_lcm.station import new_api_key
 
 
 @contextlib.contextmanager

@@ -45,10 +45,13 @@ def run_until_signal(
     *,
     stop_event: threading.Event | None = None,
     poll: Callable[[], bool] | None = None,
+    started_all: Callable[[], None] | None = None,
 ) -> int:
     """Start ``nodes`` and block until a signal, ``stop_event`` or ``poll()`` returning True.
 
     The bus is opened before any node starts so a missing multicast route is reported up front.
+    ``started_all`` is called (on this thread) once every node has started: simulated time is
+    released there, so no node's timers ran while the others were still starting.
     """
     stop = stop_event or threading.Event()
     # The handler only raises a flag: it runs on the main thread between two bytecodes, possibly
@@ -78,6 +81,8 @@ def run_until_signal(
 
         for i in range(0, len(nodes), START_BATCH):
             context.executor.run_sync(partial(start_batch, nodes[i : i + START_BATCH]), timeout=STOP_TIMEOUT)
+        if started_all is not None:
+            started_all()
         while not (signalled or stop.is_set()):
             time.sleep(0.2)
             if poll is not None and poll():

@@ -8,8 +8,6 @@ misses nothing at the start: the subscription exists before the first agent node
 
 from __future__ import annotations
 
-import time
-
 import lcm
 
 from antalate_lcm.bus import Subscription
@@ -19,7 +17,8 @@ from antalate_lcm.node import Context, Node
 
 
 class LogRecorder(Node):
-    """A node that writes every message heard on ``bus`` (its channel, bytes and arrival time)."""
+    """A node that writes every message heard on ``bus`` (its channel, bytes and arrival time on the
+    nodes' wall clock: simulated with ``antalate run --speed``)."""
 
     kind = "recorder"
 
@@ -40,7 +39,7 @@ class LogRecorder(Node):
 
     def _write(self, channel: str, data: bytes) -> None:  # on the executor's loop thread
         if self._log is not None:
-            self._log.write_event(int(time.time() * 1e6), channel, data)
+            self._log.write_event(int(self.wallclock() * 1e6), channel, data)
             self.events += 1
 
     def on_stop(self) -> None:

@@ -18,6 +18,8 @@
     kind = "crash"            # crash|freeze|sensor|byzantine|battery|link_loss|packet_loss|vehicle
     agent = "sim-03"          # an agent, a list of agents, or "*" (every agent)
     at = 12.0                 # s after the whole swarm entered MISSION
+    at_latest = 20.0          # optional: each agent's time drawn in [at, at_latest] from the seed
+    since = "mission"         # or "start": at counts from the start of the run (before take-off)
     probability = 1.0         # each agent named is hit with this probability
 
     [broadcast]               # optional: lossy broadcast control (Segall & Bruckstein)
@@ -70,6 +72,10 @@ class FaultStep(BaseModel):
     kind: FaultKind
     agent: str | tuple[str, ...]
     at: float = Field(ge=0, allow_inf_nan=False)
+    #: With it, each agent's fault comes at a time drawn uniformly in [at, at_latest] from the seed.
+    at_latest: float | None = Field(default=None, ge=0, allow_inf_nan=False)
+    #: What ``at`` counts from: the whole swarm in MISSION, or the start of the run (before take-off).
+    since: Literal["mission", "start"] = "mission"
     #: s the fault lasts; 0 = to the end of the run.
     duration: float = Field(default=0.0, ge=0, allow_inf_nan=False)
     probability: float = Field(default=1.0, ge=0, le=1, allow_inf_nan=False)
@@ -87,6 +93,10 @@ class FaultStep(BaseModel):
     loss: float = Field(default=0.0, ge=0, le=1, allow_inf_nan=False)
     delay: float = Field(default=0.0, ge=0, le=60, allow_inf_nan=False)
     direction: Literal["in", "out", "both"] = "both"
+    #: Bytes per second the topics may carry together, each way (a token bucket; beyond it a
+    #: message is lost), and the bytes it lets through at once (default: one second's worth).
+    bandwidth: float | None = Field(default=None, gt=0, le=1e9, allow_inf_nan=False)
+    burst: float | None = Field(default=None, gt=0, le=1e9, allow_inf_nan=False)
     #: A fault of the sim vehicle itself (antalate_lcm/autopilot/sim.py's fault injection).
     vehicle: Literal["failsafe", "pilot_takeover", "link_loss", "state_error"] | None = None
     failsafe: Literal["rtl", "land", "brake"] = "rtl"
@@ -97,7 +107,7 @@ class FaultStep(BaseModel):
         return list(names) if EVERY_AGENT in wanted else [n for n in names if n in wanted]
 
 
-_COMMON = {"kind", "agent", "at", "probability"}
+_COMMON = {"kind", "agent", "at", "at_latest", "since", "probability"}
 #: The keys each kind takes beyond ``kind, agent, at, probability``.
 _KIND_KEYS: dict[str, set[str]] = {
     "crash": set(),
@@ -106,7 +116,7 @@ _KIND_KEYS: dict[str, set[str]] = {
     "byzantine": {"duration", "offset", "state"},
     "battery": {"level", "drain"},
     "link_loss": {"duration"},
-    "packet_loss": {"duration", "topics", "loss", "delay", "direction"},
+    "packet_loss": {"duration", "topics", "loss", "delay", "direction", "bandwidth", "burst"},
     "vehicle": {"duration", "vehicle", "failsafe"},
 }
 #: Vehicle faults that happen once (the others last ``duration`` s).
@@ -155,8 +165,10 @@ def _check_fault(f: FaultStep) -> tuple[str, str] | None:
         unknown = next((t for t in f.topics if t not in TOPICS), None)
         if unknown is not None:
             return "topics", f"topics of {', '.join(TOPICS)} (got {unknown!r})"
-        if f.loss == 0.0 and f.delay == 0.0:
-            return "loss", "a loss probability > 0 or a delay > 0"
+        if f.loss == 0.0 and f.delay == 0.0 and f.bandwidth is None:
+            return "loss", "a loss probability > 0, a delay > 0 or a bandwidth (bytes/s)"
+        if f.burst is not None and f.bandwidth is None:
+            return "burst", "a burst with a bandwidth (bytes/s)"
     if isinstance(f.agent, tuple) and not f.agent:
         return "agent", "at least one agent"
     return None
@@ -224,12 +236,18 @@ def parse_script(table: dict[str, object], source: str) -> Script:
         problem = _check_fault(f)
         if problem is not None:
             raise ConfigError(source, f"fault[{i}].{problem[0]}", problem[1])
-        if f.at >= script.mission_time:
+        if f.at_latest is not None and f.at_latest < f.at:
             raise ConfigError(
-                source,
-                f"fault[{i}].at",
-                f"a time within the mission, below mission_time = {script.mission_time:g} (got {f.at:g})",
+                source, f"fault[{i}].at_latest", f"a time from at = {f.at:g} on (got {f.at_latest:g})"
             )
+        for key, t in (("at", f.at), ("at_latest", f.at_latest)):
+            if f.since == "mission" and t is not None and t >= script.mission_time:
+                raise ConfigError(
+                    source,
+                    f"fault[{i}].{key}",
+                    f"a time within the mission, below mission_time = {script.mission_time:g} (got {t:g}; "
+                    "since = 'start' counts from the start of the run)",
+                )
     return script
 
 

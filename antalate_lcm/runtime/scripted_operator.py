@@ -156,7 +156,10 @@ class ScriptedOperator(Node):
             self._enter(Phase.FAILED)
             return
         if self.phase is Phase.WAITING:
-            if len(states) >= self.expected_agents and all(s is McState.STANDBY for s in states):
+            # an agent the script crashed before the take-off is waited for no more
+            if len(states) >= self.expected_agents - len(self.excused) and all(
+                s is McState.STANDBY for s in states
+            ):
                 self._enter(Phase.TAKING_OFF)
         elif self.phase is Phase.TAKING_OFF:
             if all(s is McState.MISSION for s in states):

@@ -5,6 +5,10 @@ Public API (the underscored modules are private):
 * `create_app` — the FastAPI app, for embedding in another ASGI server;
 * `StationSettings`, `default_db_path`, `DEFAULT_HOST`, `DEFAULT_PORT` — parameters and defaults;
 * `run_station` — serve until interrupted (what ``antalate station`` calls);
+* `load_station_file`, `StationFile`, `ApiKey`, `RateLimits` — the station file (``[station]``, API keys,
+  rate limits), which the web console reads for its keys and the demo writes;
+* `registration_key`, `registration_mac` — how an OSC proves at registration that it holds the swarm
+  key; `new_api_key`, `sha256_hex` — an operator API key and the digest the station stores of it;
 * `StationServer` — the station in a background thread (tests, demos, benchmarks);
 * the wire models (`ReportRequest`, `ReportReply`, `Telemetry`, `Feedback`, `Payload`,
   `OperatorCommand`, `DirectionCommand`, `PeerDetection`, `CommandRequest`, …), also as the
@@ -25,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 from . import _models as models
 from . import sector
+from ._auth import new_api_key, registration_key, registration_mac, sha256_hex
 from ._models import (
     AgentInfo,
     CommandRequest,
@@ -41,13 +46,20 @@ from ._models import (
     ReportRequest,
     Telemetry,
 )
-from ._settings import DEFAULT_HOST, DEFAULT_PORT, StationSettings, default_db_path
+from ._settings import DEFAULT_HOST, DEFAULT_PORT, ApiKey, RateLimits, StationSettings, default_db_path
 
 if TYPE_CHECKING:
     from ._app import create_app
+    from ._file import StationFile, load_station_file
     from ._server import StationServer, run_station
 
-_LAZY = {"create_app": "._app", "run_station": "._server", "StationServer": "._server"}
+_LAZY = {
+    "create_app": "._app",
+    "run_station": "._server",
+    "StationServer": "._server",
+    "load_station_file": "._file",
+    "StationFile": "._file",
+}
 
 
 def __getattr__(name: str) -> Any:
@@ -63,6 +75,7 @@ __all__ = [
     "DEFAULT_HOST",
     "DEFAULT_PORT",
     "AgentInfo",
+    "ApiKey",
     "CommandRequest",
     "CommandResponse",
     "Direction",
@@ -73,14 +86,21 @@ __all__ = [
     "Payload",
     "PeerDetection",
     "QueuedCommand",
+    "RateLimits",
     "ReportReply",
     "ReportRequest",
+    "StationFile",
     "StationServer",
     "StationSettings",
     "Telemetry",
     "create_app",
     "default_db_path",
+    "load_station_file",
     "models",
+    "new_api_key",
+    "registration_key",
+    "registration_mac",
     "run_station",
     "sector",
+    "sha256_hex",
 ]

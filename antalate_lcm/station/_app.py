@@ -22,6 +22,8 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from pydantic import TypeAdapter, ValidationError
 from pydantic.json_schema import models_json_schema
 
+from antalate_lcm.errors import Refused, UnknownTarget
+
 from ._auth import Operator, Role, retry_after_header, sha256_hex
 from ._db import StationDB
 from ._models import (
@@ -34,7 +36,7 @@ from ._models import (
     ReportRequest,
 )
 from ._settings import StationSettings
-from ._station import Refused, Station, UnknownTarget
+from ._station import Station
 
 log = logging.getLogger("antalate.station")
 

@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.errors import StationDBError
 
 from ._models import Telemetry
 from ._settings import MEMORY
@@ -118,10 +118,6 @@ class LatestState:
     mc_state: str | None
     hlc_state: str | None
     telemetry: Telemetry | None
-
-
-class StationDBError(AntalateError):
-    """The database file cannot be used (unreadable, from a newer antalate, not a station database)."""
 
 
 class StationDB:

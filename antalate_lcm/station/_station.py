@@ -15,8 +15,8 @@ import secrets
 from collections import deque
 from dataclasses import dataclass, field
 
-from antalate_lcm._ratelimit import TokenBucket
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.errors import Refused, UnknownTarget
+from antalate_lcm.ratelimit import TokenBucket
 
 from . import sector
 from ._auth import check_registration, new_token, sha256_hex
@@ -39,20 +39,6 @@ from ._settings import StationSettings
 from ._spatial import GridIndex
 
 log = logging.getLogger("antalate.station")
-
-
-class UnknownTarget(AntalateError, LookupError):
-    """A command addressed to a name or id the station has never seen."""
-
-
-class Refused(AntalateError):
-    """A request the station turns down: an HTTP status, a sentence, and for 429 when to retry."""
-
-    def __init__(self, status: int, detail: str, retry_after: float | None = None) -> None:
-        super().__init__(detail)
-        self.status = status
-        self.detail = detail
-        self.retry_after = retry_after
 
 
 def _bucket(rate: float | None, burst: int) -> TokenBucket | None:

@@ -22,21 +22,12 @@ from typing import Any, get_args
 
 import httpx
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.errors import StationClientError as StationClientError
 from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
 from antalate_lcm.security import sign
 from antalate_lcm.vocabulary import Command, CommandName
 
 COMMANDS: tuple[CommandName, ...] = get_args(CommandName)
-
-
-class StationClientError(AntalateError):
-    """The station refused a request: the HTTP status and its one-sentence reason."""
-
-    def __init__(self, status: int, detail: str) -> None:
-        super().__init__(f"station answered {status}: {detail}")
-        self.status = status
-        self.detail = detail
 
 
 def wrap_azimuth(azimuth: float) -> float:

@@ -18,7 +18,6 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.behavior import Behavior, BehaviorContext
 from antalate_lcm.msgs import (
     direction_cmd_t,
@@ -27,6 +26,7 @@ from antalate_lcm.msgs import (
     telemetry_t,
     velocity_cmd_t,
 )
+from antalate_lcm.ratelimit import RateLimitedLog
 from behaviors.dovrat_swarm.logic import (
     Detection,
     DetectionTracker,

@@ -34,7 +34,7 @@ class PeerSensor(Behavior):
         dropout: float = Field(default=0.0, ge=0, le=1, allow_inf_nan=False)
         velocity: bool = False
         identities: bool = False
-        #: Seed of the noise and dropout; 0 = a different one every run.
+        #: Seed of the noise and dropout; 0 = the run's (`antalate run --seed`), else a different one every run.
         seed: int = 0
 
     topics = {"PEER_SCAN": peer_scan_t}
@@ -48,7 +48,8 @@ class PeerSensor(Behavior):
         self.sensor = SensorParams(
             p.max_range, p.fov, p.range_noise, p.bearing_noise, p.dropout, p.velocity, p.identities
         )
-        self.rng = random.Random(p.seed or None)
+        # The param's seed, else the run's (antalate run --seed), else a fresh one each run.
+        self.rng = random.Random(p.seed or ctx.seed)
 
     def on_activate(self) -> None:
         self.log.info(

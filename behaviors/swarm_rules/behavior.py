@@ -104,7 +104,8 @@ class Gathering(_PeerRule):
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
         p = self.params.model_dump()
-        self.rng = random.Random(p.pop("seed") or zlib.crc32(ctx.agent.encode()))
+        # The param's seed, else the run's (antalate run --seed), else one fixed by the agent's name.
+        self.rng = random.Random(p.pop("seed") or ctx.seed or zlib.crc32(ctx.agent.encode()))
         self.rule_params = GatheringParams(**p)
 
     def rule(self, neighbours: list[Neighbour]) -> Vec:

@@ -101,12 +101,14 @@ The CLI prints ``READY <host> <port>`` once bound and a JSON snapshot of the fin
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import math
 import select
 import signal
 import socket
+import struct
 import sys
 import threading
 import time
@@ -120,6 +122,26 @@ LOG = logging.getLogger("antalate.tests.tello_emulator")
 
 Address = tuple[str, int]
 _MEMORY_SENDER: Address = ("memory", 8889)  # where commands off a memory link come from
+#: Linux's SO_TIMESTAMPNS (= SCM_TIMESTAMPNS; Python's socket module does not name it): the kernel stamps
+#: each datagram on arrival, so the command spacing is measured between arrivals, as a Tello hears them,
+#: not between the moments a loaded test machine got round to reading them (two commands 0.1 s apart,
+#: the first read late, looked 50 ms apart and the second was wrongly ignored)
+_SO_TIMESTAMPNS = 35
+
+
+def _stamp_arrivals(sock: socket.socket) -> None:
+    with contextlib.suppress(OSError):  # not Linux: spacing from the moment a datagram is read
+        sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+
+
+def _arrival(ancillary: list[tuple[int, int, bytes]]) -> float | None:
+    """A datagram's kernel arrival time on `time.monotonic`'s clock (None: not stamped)."""
+    for level, kind, data in ancillary:
+        if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(data) >= 16:
+            sec, nsec = struct.unpack("qq", data[:16])
+            stamped: float = sec + nsec * 1e-9
+            return time.monotonic() - max(0.0, time.time() - stamped)
+    return None
 
 
 @dataclass(frozen=True)
@@ -476,6 +498,8 @@ class TelloEmulator:
 
     def _run(self) -> None:
         sock = self._sock
+        if sock is not None:
+            _stamp_arrivals(sock)
         tick = 1.0 / self.tick_rate
         state_period = 1.0 / self.state_rate
         last = time.monotonic()
@@ -493,11 +517,11 @@ class TelloEmulator:
                     break  # socket closed under us: stop() is in progress
             if ready and sock is not None:
                 try:
-                    data, sender = sock.recvfrom(4096)
+                    data, ancillary, _, sender = sock.recvmsg(4096, 64)
                 except OSError:
                     data = b""
                 if data:
-                    self._on_datagram(data, sender)
+                    self._on_datagram(data, sender, _arrival(ancillary))
             now = time.monotonic()
             if now >= next_tick:
                 self._step(now - last, now)
@@ -555,13 +579,13 @@ class TelloEmulator:
 
     # -- command handling ------------------------------------------------------------------------
 
-    def _on_datagram(self, data: bytes, sender: Address) -> None:
+    def _on_datagram(self, data: bytes, sender: Address, arrived: float | None = None) -> None:
         try:
             text = data.decode("utf-8").strip()
         except UnicodeDecodeError:
             self._reply("error", sender)
             return
-        now = time.monotonic()
+        now = time.monotonic() if arrived is None else arrived
         with self._lock:
             if now < self._silent_until:
                 return  # lost on the way: not a command the Tello heard

@@ -168,7 +168,7 @@ def test_three_arducopters_commanded_at_their_centroid_keep_apart_with_the_fence
     frame = FlatFrame(HOME[0], HOME[1])
     fence = Geofence(tuple((n, e) for n, e in FENCE["polygon"]), 0.0, 30.0, 2.0)
     for name, home in HOMES.items():
-        said = probe.wait(f"{name}/HLC_ERROR", "hlc_error_t", timeout=60, since=0, code=14, severity=0)
+        said = probe.wait(f"{name}/HLC_ERROR", "hlc_error_t", timeout=120, since=0, code=14, severity=0)
         assert said is not None and "read back" in said["text"], probe.history(
             f"{name}/HLC_ERROR", "hlc_error_t"
         )

@@ -82,7 +82,6 @@ from typing import Any, ClassVar, cast
 from pydantic import BaseModel
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.autopilot.base import (
     Autopilot,
     AutopilotError,
@@ -109,6 +108,7 @@ from antalate_lcm.autopilot.mavlink.signing import signing_key
 from antalate_lcm.autopilot.mavlink.streams import StreamRequest
 from antalate_lcm.autopilot.mavlink.vehicle import Vehicle
 from antalate_lcm.autopilot.mavlink.vehicle_checks import Finding
+from antalate_lcm.ratelimit import RateLimitedLog
 
 log = logging.getLogger("antalate.autopilot.mavlink")
 

@@ -29,19 +29,12 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from antalate_lcm.autopilot.mavlink.signing import allow_unsigned, verify_signature_first
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.errors import LinkClosed as LinkClosed
+from antalate_lcm.errors import PeerClosed as PeerClosed
 
 log = logging.getLogger("antalate.autopilot.mavlink")
 
 __all__ = ["LinkClosed", "MavLink", "MemoryLink", "PymavlinkLink", "PeerClosed"]
-
-
-class LinkClosed(AntalateError, ConnectionError):
-    """The link was closed by our side (`MavLink.close`)."""
-
-
-class PeerClosed(AntalateError, ConnectionError):
-    """The other end closed a stream link (pymavlink would otherwise just keep returning nothing)."""
 
 
 class MavLink(abc.ABC):

@@ -68,7 +68,6 @@ from typing import Any, ClassVar
 
 from pydantic import BaseModel
 
-from antalate_lcm._ratelimit import RateLimitedLog
 from antalate_lcm.autopilot.base import (
     Autopilot,
     AutopilotError,
@@ -83,6 +82,7 @@ from antalate_lcm.autopilot.tello import maths, telemetry
 from antalate_lcm.autopilot.tello.link import LinkOpener, TelloLink, open_djitellopy
 from antalate_lcm.autopilot.tello.params import Params, validated
 from antalate_lcm.geo import FlatFrame, wrap_360
+from antalate_lcm.ratelimit import RateLimitedLog
 
 log = logging.getLogger("antalate.autopilot.tello")
 

@@ -1,4 +1,4 @@
-"""Read ``.lcm`` definitions the way lcm-gen does, for the Go emitter (``_golang.py``).
+"""Read ``.lcm`` definitions the way lcm-gen does, for the Go emitter (``tools/golang.py``).
 
 lcm-gen 1.5.3 cannot write Go for a type with a variable-length array (docs/other-languages.md),
 so antalate emits Go itself; to emit what lcm-gen would, it must see a type as lcm-gen's parser

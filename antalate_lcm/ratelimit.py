@@ -53,13 +53,14 @@ class TokenBucket:
         self.burst = burst
         self._buckets: dict[Hashable, tuple[float, float]] = {}
 
-    def take(self, key: Hashable, now: float) -> float:
+    def take(self, key: Hashable, now: float, cost: float = 1.0) -> float:
+        """``cost`` units (a byte count for a bandwidth cap) now, or the seconds until they would be."""
         level, last = self._buckets.get(key, (self.burst, now))
         level = min(self.burst, level + (now - last) * self.rate)
-        if level < 1.0:
+        if level < cost:
             self._buckets[key] = (level, now)
-            return (1.0 - level) / self.rate
-        self._buckets[key] = (level - 1.0, now)
+            return (cost - level) / self.rate
+        self._buckets[key] = (level - cost, now)
         return 0.0
 
     def sweep(self, now: float) -> None:

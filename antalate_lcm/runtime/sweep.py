@@ -1,0 +1,519 @@
+"""``antalate sweep SPEC``: many ``antalate run`` experiments over parameters and seeds, one table.
+
+The spec (TOML, :mod:`.sweep_spec`) names a config, a script, the parameters' values and the seeds;
+every combination with every seed is one run: one ``antalate run --headless --json`` child process
+(its own bus, its own failure), in ``OUT/runs/NNNN/`` with the exact config and script it flew, its
+LCM log and its output. The runs go in parallel (``--jobs``, default one per core); each one that
+ends adds one row to ``OUT/results.csv`` and ``OUT/results.json`` at once (parameters, seed,
+status, and the swarm metrics of ``antalate analyze``), so an interrupted sweep keeps every row it
+finished. A run that fails (a flight that does not come back, a process that dies, a time-out) is
+a row with ``status = failed`` and its ``reason``, and the sweep carries on.
+
+Parallel runs must not hear each other: ``memq://`` buses stay inside their run's process; with
+``--jobs`` above 1 the ``udpm://`` buses of the k-th parallel slot get the port + 100 k (the same
+group), and ``zenoh://`` buses are refused.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import FrameType
+from typing import IO, Any
+from urllib.parse import urlsplit, urlunsplit
+
+from antalate_lcm.config import read_toml_file
+from antalate_lcm.errors import AntalateError, ConfigError
+from antalate_lcm.runtime.sweep_spec import Point, Sweep, build, dumps_toml, parse_spec
+
+#: Port offset between two parallel slots' udpm:// buses.
+SLOT_PORT_STEP = 100
+#: s a run has to stop after SIGINT (its nodes stop in order) before it is killed.
+STOP_GRACE = 30.0
+#: The table's columns before the parameters and after them (the metrics: :func:`metrics_row`).
+HEAD = ("run",)
+TAIL = ("seed", "status", "reason", "wall_s", "messages")
+METRICS = (
+    "agents",
+    "mission_s",
+    "radius_start",
+    "radius_end",
+    "radius_max",
+    "radius_mean",
+    "mean_distance_mean",
+    "min_separation",
+    "nn_median",
+    "polarisation_mean",
+    "polarisation_end",
+    "connected_fraction",
+    "cohesion_ratio",
+    "radius_below_after",
+    "radius_above_after",
+    "drift_error_deg",
+    "drift_speed",
+    "faults",
+    "broadcast_offered",
+    "broadcast_heard",
+    "log",
+)
+
+
+def load_sweep(path: str | Path) -> Sweep:
+    """Read a spec and the config and script it names, and check every run (one-line errors)."""
+    p = Path(path)
+    spec = parse_spec(read_toml_file(p), str(p))
+    config_path = p.parent / spec.config
+    if not config_path.is_file():
+        raise ConfigError(str(p), "config", f"an agent config file ({config_path} is not one)")
+    script_doc = None
+    if spec.script is not None:
+        script_path = p.parent / spec.script
+        if not script_path.is_file():
+            raise ConfigError(str(p), "script", f"an experiment script file ({script_path} is not one)")
+        script_doc = read_toml_file(script_path)
+        from antalate_lcm.runtime.script import parse_script
+
+        parse_script(script_doc, str(script_path))  # its own errors name its own file
+    return build(spec, read_toml_file(config_path), script_doc, str(p))
+
+
+# ----------------------------------------------------------------------------- the table
+def columns(sweep: Sweep) -> list[str]:
+    return [*HEAD, *sweep.parameters, *TAIL, *METRICS]
+
+
+def _phase(analysis: dict[str, Any], name: str) -> dict[str, Any]:
+    return next((p for p in analysis.get("phases", []) if p["phase"]["name"] == name), {})
+
+
+def metrics_row(analysis: dict[str, Any] | None) -> dict[str, Any]:
+    """The table's metrics from ``antalate run --json``'s ``analysis`` (None: every metric empty).
+
+    Over the mission phase (the whole swarm in MISSION; docs/logging.md, "Analyse"): the radius at
+    its start and end, its largest and mean value; the mean distance to the centroid (mean); the
+    minimum separation; the median nearest-neighbour distance; the polarisation (mean, end); the
+    fraction of samples with the proximity graph connected; the cohesion ratio; the seconds from
+    the mission's start to the script's radius_below / radius_above crossings; the mean absolute
+    drift error against the commanded directions and the centroid's mean speed; the faults started,
+    and the broadcasts offered to and heard by the agents.
+    """
+    row: dict[str, Any] = dict.fromkeys(METRICS)
+    if analysis is None:
+        return row
+    mission = _phase(analysis, "mission")
+
+    def extent(key: str, what: str) -> Any:
+        value = mission.get(key)
+        return value.get(what) if isinstance(value, dict) else None
+
+    window = analysis.get("window")
+    drifts = [d for d in analysis.get("drift", []) if d.get("error") is not None]
+    faults = analysis.get("faults", [])
+    summaries = [f["detail"] for f in faults if f["kind"] == "broadcast" and f["event"] == "summary"]
+    row.update(
+        agents=len(analysis.get("agents", [])),
+        mission_s=(window["end"] - window["start"]) if window else None,
+        radius_start=extent("radius", "start"),
+        radius_end=extent("radius", "end"),
+        radius_max=extent("radius", "max"),
+        radius_mean=extent("radius", "mean"),
+        mean_distance_mean=extent("mean_distance", "mean"),
+        min_separation=extent("min_separation", "distance"),
+        nn_median=extent("nearest_neighbour", "median"),
+        polarisation_mean=extent("polarisation", "mean"),
+        polarisation_end=extent("polarisation", "end"),
+        connected_fraction=extent("connectivity", "connected_fraction"),
+        cohesion_ratio=analysis.get("cohesion_ratio"),
+        radius_below_after=extent("radius_below", "after"),
+        radius_above_after=extent("radius_above", "after"),
+        drift_error_deg=sum(abs(d["error"]) for d in drifts) / len(drifts) if drifts else None,
+        drift_speed=sum(d["speed"] for d in drifts) / len(drifts) if drifts else None,
+        faults=sum(1 for f in faults if f["event"] == "start" and f["kind"] != "mission"),
+        broadcast_offered=sum(int(s["offered"]) for s in summaries) if summaries else None,
+        broadcast_heard=sum(int(s["heard"]) for s in summaries) if summaries else None,
+    )
+    return row
+
+
+class ResultsTable:
+    """``results.csv`` and ``results.json``, rewritten whole after each row (a temporary file renamed
+    over the old one): a reader, or an interrupted sweep, always finds a complete table."""
+
+    def __init__(self, folder: Path, cols: list[str]) -> None:
+        self.csv = folder / "results.csv"
+        self.json = folder / "results.json"
+        self.columns = cols
+        self.rows: list[dict[str, Any]] = []
+
+    def add(self, row: dict[str, Any]) -> None:
+        self.rows.append({c: row.get(c) for c in self.columns})
+        self.rows.sort(key=lambda r: int(r["run"]))
+        self.write()
+
+    def write(self) -> None:
+        tmp = self.csv.with_suffix(".csv.tmp")
+        with tmp.open("w", newline="", encoding="utf-8") as f:
+            writer = csv.DictWriter(f, fieldnames=self.columns)
+            writer.writeheader()
+            for row in self.rows:
+                writer.writerow({k: _cell(v) for k, v in row.items()})
+        tmp.replace(self.csv)
+        tmp = self.json.with_suffix(".json.tmp")
+        tmp.write_text(json.dumps(self.rows, indent=1) + "\n", encoding="utf-8")
+        tmp.replace(self.json)
+
+
+def _cell(value: Any) -> Any:
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return "" if value is None else value
+
+
+# ----------------------------------------------------------------------------- one run
+@dataclass
+class _Run:
+    point: Point
+    folder: Path
+    slot: int
+    proc: subprocess.Popen[bytes]
+    started: float
+    out: IO[bytes]
+    err: IO[bytes]
+    #: s it may take before the sweep stops it.
+    timeout: float
+    stopping: str = ""
+    stop_sent: float = 0.0
+
+
+def slot_buses(config: dict[str, Any], slot: int, jobs: int) -> None:
+    """Keep parallel runs apart: the ``udpm://`` buses of slot k on port + 100 k (none with one job)."""
+    buses = config.get("buses")
+    if jobs <= 1 or not isinstance(buses, dict):
+        return
+    for name, url in buses.items():
+        if not isinstance(url, str):
+            continue
+        if url.startswith("zenoh://"):
+            raise AntalateError(
+                f"buses.{name} = {url!r}: parallel runs on one zenoh network would hear each other; "
+                "use --jobs 1, or memq:// / udpm:// buses"
+            )
+        if url.startswith("udpm://") and slot:
+            parts = urlsplit(url)
+            port = (parts.port or 7667) + SLOT_PORT_STEP * slot
+            if port > 65535:
+                raise AntalateError(
+                    f"buses.{name}: no port for parallel slot {slot} ({port} > 65535): use fewer --jobs"
+                )
+            netloc = f"{parts.hostname}:{port}"
+            buses[name] = urlunsplit(parts._replace(netloc=netloc))
+
+
+def check_slots(sweep: Sweep, jobs: int) -> None:
+    """Every slot's buses are valid and apart from the other slots' (before anything flies)."""
+    used: dict[int, tuple[int, str]] = {}
+    for slot in range(jobs):
+        config, _ = sweep.documents(sweep.points[0])
+        slot_buses(config, slot, jobs)
+        for name, url in config.get("buses", {}).items():
+            if isinstance(url, str) and url.startswith("udpm://"):
+                port = urlsplit(url).port or 7667
+                other = used.setdefault(port, (slot, name))
+                if other[0] != slot:
+                    raise AntalateError(
+                        f"buses.{name}: parallel slot {slot} would share port {port} with slot {other[0]}'s "
+                        f"bus {other[1]!r}; use --jobs 1 or ports more than {SLOT_PORT_STEP * jobs} apart"
+                    )
+
+
+def run_argv(sweep: Sweep, folder: Path, log_level: str = "WARNING") -> list[str]:
+    spec = sweep.spec
+    argv = [
+        sys.executable,
+        "-m",
+        "antalate_lcm.cli",
+        "--log-level",
+        log_level,
+        "run",
+        str(folder / "config.toml"),
+    ]
+    argv += [
+        "--agents",
+        str(spec.agents),
+        "--processes",
+        str(spec.processes),
+        "--spacing",
+        repr(spec.spacing),
+    ]
+    if spec.speed is not None:  # simulated time: the run is a function of its script's seed
+        argv += ["--speed", spec.speed if isinstance(spec.speed, str) else repr(spec.speed)]
+    argv += [
+        "--headless",
+        "--script",
+        str(folder / "script.toml"),
+        "-o",
+        str(folder / "flight.lcm"),
+        "-f",
+        "--json",
+    ]
+    return argv
+
+
+def _start(sweep: Sweep, point: Point, out_dir: Path, slot: int, jobs: int) -> _Run:
+    from antalate_lcm.runtime.agent import _die_with_parent
+
+    folder = out_dir / "runs" / f"{point.index:04d}"
+    folder.mkdir(parents=True, exist_ok=True)
+    config, script = sweep.documents(point)
+    slot_buses(config, slot, jobs)
+    (folder / "config.toml").write_text(dumps_toml(config), encoding="utf-8")
+    (folder / "script.toml").write_text(dumps_toml(script), encoding="utf-8")
+    out = (folder / "outcome.json").open("wb")
+    err = (folder / "output.log").open("wb")
+    proc = subprocess.Popen(
+        run_argv(sweep, folder),
+        stdout=out,
+        stderr=err,
+        stdin=subprocess.DEVNULL,
+        start_new_session=True,  # a Ctrl-C reaches the sweep, which stops its runs in order
+        preexec_fn=_die_with_parent,
+    )
+    return _Run(point, folder, slot, proc, time.monotonic(), out, err, sweep.run_timeout(point))
+
+
+def _finish(run: _Run, code: int, out_dir: Path) -> dict[str, Any]:
+    """The run's row, from its exit status, its JSON outcome and its stderr."""
+    run.out.close()
+    run.err.close()
+    wall = time.monotonic() - run.started
+    row: dict[str, Any] = {"run": run.point.index, "seed": run.point.seed, "wall_s": round(wall, 2)}
+    row.update(dict(run.point.values))
+    outcome: dict[str, Any] | None = None
+    try:
+        outcome = json.loads((run.folder / "outcome.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        outcome = None
+    analysis = outcome.get("analysis") if outcome else None
+    row.update(metrics_row(analysis))
+    row["messages"] = outcome.get("messages") if outcome else None
+    log = run.folder / "flight.lcm"
+    row["log"] = os.path.relpath(log, out_dir) if log.exists() else None
+    if code == 0 and outcome is not None and outcome.get("ok"):
+        row["status"], row["reason"] = "ok", ""
+        return row
+    row["status"] = "interrupted" if run.stopping == "interrupted" else "failed"
+    row["reason"] = run.stopping or _reason(code, outcome, run.folder / "output.log")
+    return row
+
+
+def _reason(code: int, outcome: dict[str, Any] | None, stderr: Path) -> str:
+    if code < 0:
+        return f"killed by {signal.Signals(-code).name}"
+    if outcome is not None:
+        failed = [line for line in str(outcome.get("report", "")).splitlines() if line.startswith("FAILED")]
+        if failed:
+            return failed[0]
+        if outcome.get("problem"):
+            return f"no metrics: {outcome['problem']}"
+    try:
+        lines = [
+            line for line in stderr.read_text(encoding="utf-8", errors="replace").splitlines() if line.strip()
+        ]
+    except OSError:
+        lines = []
+    errors = [line for line in lines if line.startswith("antalate:") or "Error" in line]
+    last = (errors or lines or [""])[-1].strip()
+    return f"exit status {code}" + (f": {last}" if last else "")
+
+
+# ----------------------------------------------------------------------------- progress
+class Progress:
+    """A bar redrawn in place on a terminal; one plain line per finished run otherwise (CI logs)."""
+
+    def __init__(self, total: int, stream: IO[str], tty: bool | None = None) -> None:
+        self.total = total
+        self.stream = stream
+        self.tty = stream.isatty() if tty is None else tty
+        self.done = 0
+        self.failed = 0
+        self.start = time.monotonic()
+
+    def ended(self, row: dict[str, Any], label: str) -> None:
+        self.done += 1
+        self.failed += row["status"] != "ok"
+        what = "ok" if row["status"] == "ok" else f"{row['status']}: {row['reason']}"
+        line = f"sweep: {self.done}/{self.total} run {row['run']} ({label}) {what} in {row['wall_s']:.1f} s"
+        if not self.tty:
+            print(line, file=self.stream, flush=True)
+        elif row["status"] != "ok":  # above the bar, which the next draw puts back
+            self.stream.write("\r" + line + "\x1b[K\n")
+            self.stream.flush()
+
+    def draw(self, running: int = 0) -> None:
+        if not self.tty:
+            return
+        width = 30
+        filled = int(width * self.done / self.total) if self.total else width
+        elapsed = time.monotonic() - self.start
+        eta = elapsed / self.done * (self.total - self.done) if self.done else None
+        bar = "#" * filled + "." * (width - filled)
+        text = f"\r[{bar}] {self.done}/{self.total} runs, {running} running, {self.failed} failed, {_mmss(elapsed)}"
+        text += f" (about {_mmss(eta)} to go)" if eta is not None else ""
+        self.stream.write(text + "\x1b[K")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _count(n: int, what: str) -> str:
+    return f"{n} {what}" + ("" if n == 1 else "s")
+
+
+def _mmss(seconds: float) -> str:
+    s = int(seconds)
+    return f"{s // 60}:{s % 60:02d}"
+
+
+# ----------------------------------------------------------------------------- the sweep
+@dataclass
+class SweepResult:
+    table: ResultsTable
+    interrupted: bool = False
+    rows: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def failed(self) -> int:
+        return sum(1 for r in self.table.rows if r["status"] != "ok")
+
+
+def prepare_output(out_dir: Path, force: bool) -> None:
+    if out_dir.exists() and not out_dir.is_dir():
+        raise AntalateError(f"{out_dir} exists and is not a folder")
+    if (out_dir / "results.csv").exists() and not force:
+        raise AntalateError(
+            f"{out_dir} holds a sweep's results: pass --force to overwrite them, or -o another folder"
+        )
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+
+def run_sweep(
+    sweep: Sweep,
+    out_dir: Path,
+    *,
+    jobs: int,
+    progress: Progress,
+    stop: Callable[[], bool] = lambda: False,
+) -> SweepResult:
+    """Run every point, ``jobs`` at a time, until done or ``stop()``; the table is on disk throughout."""
+    table = ResultsTable(out_dir, columns(sweep))
+    table.write()
+    result = SweepResult(table)
+    pending = list(sweep.points)
+    running: dict[int, _Run] = {}  # by slot
+    try:
+        while pending or running:
+            if stop() and not result.interrupted:
+                result.interrupted = True
+                pending.clear()
+                for run in running.values():
+                    _stop(run, "interrupted")
+            while pending and len(running) < jobs:
+                slot = next(s for s in range(jobs) if s not in running)
+                running[slot] = _start(sweep, pending.pop(0), out_dir, slot, jobs)
+            progress.draw(running=len(running))
+            time.sleep(0.1)
+            now = time.monotonic()
+            for slot, run in list(running.items()):
+                code = run.proc.poll()
+                if code is None:
+                    if not run.stopping and now - run.started > run.timeout:
+                        _stop(run, f"timed out after {run.timeout:.0f} s (the sweep's timeout)")
+                    elif run.stopping and now - run.stop_sent > STOP_GRACE:
+                        run.proc.kill()
+                    continue
+                del running[slot]
+                row = _finish(run, code, out_dir)
+                table.add(row)
+                result.rows.append(row)
+                progress.ended(row, run.point.label())
+    finally:
+        for run in running.values():  # an exception here: leave no run behind
+            if run.proc.poll() is None:
+                run.proc.kill()
+                run.proc.wait()
+        progress.close()
+    return result
+
+
+def _stop(run: _Run, why: str) -> None:
+    run.stopping, run.stop_sent = why, time.monotonic()
+    if run.proc.poll() is None:
+        run.proc.send_signal(signal.SIGINT)  # `antalate run` lands its agents and writes its outcome
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    sweep = load_sweep(args.spec)
+    jobs = args.jobs if args.jobs is not None else (os.cpu_count() or 1)
+    if jobs < 1:
+        raise AntalateError(f"--jobs wants a number >= 1 (got {jobs})")
+    jobs = min(jobs, len(sweep.points))
+    check_slots(sweep, jobs)
+    out_dir = Path(args.output or Path(args.spec).with_suffix("").name + "-results")
+    prepare_output(out_dir, args.force)
+    signalled: list[int] = []
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        signalled.append(signum)
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        progress = Progress(len(sweep.points), sys.stderr)
+        print(
+            f"sweep: {len(sweep.points)} runs ({_count(len(sweep.points) // len(sweep.seeds), 'point')} x "
+            f"{_count(len(sweep.seeds), 'seed')}), {jobs} at a time, into {out_dir}",
+            file=sys.stderr,
+            flush=True,
+        )
+        result = run_sweep(sweep, out_dir, jobs=jobs, progress=progress, stop=lambda: bool(signalled))
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    rows = result.table.rows
+    print(
+        f"{len(rows)} of {len(sweep.points)} runs, {result.failed} failed"
+        + (" (interrupted: the rows so far are written)" if result.interrupted else "")
+        + f"; table: {result.table.csv} and {result.table.json}",
+        flush=True,
+    )
+    if result.interrupted:
+        return 130
+    return 1 if result.failed else 0
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``sweep`` to the ``antalate`` parser (docs/experiments.md, "Sweeps")."""
+    p = sub.add_parser(
+        "sweep",
+        help="run `antalate run` over parameters and seeds in parallel; one table (CSV, JSON) of the metrics",
+    )
+    p.add_argument("spec", help="sweep spec (TOML): config, script, agents, seeds, [parameters]")
+    p.add_argument(
+        "-o", "--output", metavar="DIR", help="folder of the table and the runs (default: SPEC-results)"
+    )
+    p.add_argument("-j", "--jobs", type=int, metavar="J", help="runs at a time (default: one per core)")
+    p.add_argument(
+        "-f", "--force", action="store_true", help="overwrite the results of an earlier sweep in DIR"
+    )
+    p.set_defaults(func=_cmd_sweep)

@@ -1,0 +1,145 @@
+"""How much faster than real time a simulated swarm flies on simulated time (``antalate run --speed max``),
+beside the same flight on the wall clock.
+
+For each N it flies the same experiment twice, each in a fresh process: N agents (MC + HLC + sim +
+BMA with ``dovrat_swarm``, every bus in memory, the in-process recorder writing every message),
+the default script's operator (take off, a direction at 5 s, a ``--mission`` s mission, RTL), seed 1:
+
+- ``--speed max``: the simulated seconds the flight covered, the real seconds it took, their ratio
+  (the speed-up over real time; goal: >= 20x for 100 agents, >= 2x for 1,000 on one core), and the
+  CPU seconds it used (simulated / CPU is the speed-up the process would get with a core to itself);
+- the wall clock: the real seconds of the same flight and the share of a core it took (above 100 %
+  the process cannot keep up: its timers run late, as ``benchmarks/agents.py`` shows).
+
+The metrics of ``antalate run`` are skipped (their analysis is not the flight). The machine is
+shared, so its load average is printed beside the figures (docs/design.md §12).
+
+    python benchmarks/simtime.py [N ...] [--mission S] [--no-wall]      (default sizes: 100 1000)
+
+Measured 2026-11-26 on the 2-core machine shared with other jobs (docs/experiments.md, "Simulated
+time, seeds and replay"): 100 agents 11.3x real time at load 1.7-2.6 (11.8x per CPU second), 5.5x at
+load 8; 1,000 agents 0.7x at load 1.7-5.4 (1.0x per CPU second), 0.3x at load 8. The goals (20x,
+2x) are not met: an agent's nodes compute about 1 ms of CPU per simulated second.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+CONFIG = """
+[agent]
+name = "b"
+[buses]
+lan = "memq://"
+[topics]
+default_bus = "lan"
+[hlc]
+autopilot = "sim"
+default_takeoff_altitude = 5.0
+[[bma]]
+name = "swarm"
+[[bma.behaviors]]
+plugin = "dovrat_swarm"
+activate_on = ["MISSION"]
+[bma.behaviors.params]
+forward_speed = 2.0
+"""
+SCRIPT = """
+mission_time = {mission}
+timeout = 600.0
+[[direction]]
+at = 5.0
+azimuth = 90.0
+"""
+
+
+def child(config: str, agents: int, script: str, out: str, speed: str) -> None:
+    """One flight in this process; its outcome as JSON on stdout."""
+    import logging
+    import math
+
+    from antalate_lcm.runtime.experiment import Experiment, run
+    from antalate_lcm.runtime.script import load_script
+
+    logging.basicConfig(level=logging.WARNING)
+    outcome = run(
+        Experiment(
+            config_path=config,
+            agents=agents,
+            script=load_script(script),
+            output=out,
+            force=True,
+            speed=math.inf if speed == "max" else None,
+            seed=1,
+            measure=False,
+        )
+    )
+    print(
+        json.dumps(
+            {"code": outcome.code, **{k: outcome.to_json()[k] for k in ("real_s", "simulated_s", "cpu_s")}}
+        )
+    )
+
+
+def fly(tmp: Path, agents: int, speed: str) -> dict[str, float]:
+    proc = subprocess.run(
+        [sys.executable, __file__, "--child", str(tmp / "swarm.toml"), str(agents), str(tmp / "script.toml")]
+        + [str(tmp / f"{agents}-{speed}.lcm"), speed],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    lines = proc.stdout.strip().splitlines()
+    if proc.returncode != 0 or not lines:
+        sys.exit(f"the flight of {agents} agents ({speed}) failed:\n{proc.stdout}\n{proc.stderr[-3000:]}")
+    result: dict[str, float] = json.loads(lines[-1])
+    if result["code"] != 0:
+        print(f"  (the flight of {agents} agents, {speed}, did not end with every agent in STANDBY)")
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("sizes", nargs="*", type=int, default=[100, 1000])
+    parser.add_argument("--mission", type=float, default=30.0, help="s of mission (default 30)")
+    parser.add_argument("--no-wall", action="store_true", help="only the run on simulated time")
+    parser.add_argument("--child", nargs=5, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        config, agents, script, out, speed = args.child
+        child(config, int(agents), script, out, speed)
+        return
+    with tempfile.TemporaryDirectory(prefix="antalate-simtime-") as d:
+        tmp = Path(d)
+        (tmp / "swarm.toml").write_text(CONFIG)
+        (tmp / "script.toml").write_text(SCRIPT.format(mission=args.mission))
+        print(
+            f"{'agents':>6}  {'simulated':>9}  {'real':>7}  {'speed-up':>8}  {'cpu':>7}  {'sim/cpu':>7}   wall clock: real, core   load"
+        )
+        for n in args.sizes:
+            load_before = os.getloadavg()[0]
+            sim = fly(tmp, n, "max")
+            wall = None if args.no_wall else fly(tmp, n, "wall")
+            load = f"{load_before:.1f}-{os.getloadavg()[0]:.1f}"
+            s, r, c = sim["simulated_s"], sim["real_s"], sim["cpu_s"]
+            w = (
+                "-"
+                if wall is None
+                else f"{wall['real_s']:7.1f} s, {100 * wall['cpu_s'] / wall['real_s']:4.0f} %"
+            )
+            print(
+                f"{n:>6}  {s:>7.1f} s  {r:>5.1f} s  {s / r:>7.1f}x  {c:>5.1f} s  {s / c:>6.1f}x   {w}   {load}",
+                flush=True,
+            )
+
+
+if __name__ == "__main__":
+    main()

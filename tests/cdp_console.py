@@ -59,7 +59,8 @@ class Page:
             if reply.get("id") == msg_id:
                 if "error" in reply:
                     raise RuntimeError(f"{method}: {reply['error']}")
-                return reply.get("result", {})
+                result: dict[str, Any] = reply.get("result", {})
+                return result
             self._event(reply)
 
     def _event(self, event: dict[str, Any]) -> None:
@@ -100,7 +101,12 @@ class Page:
     def press(self, char: str) -> None:
         code = f"Key{char.upper()}"
         modifiers = 8 if char.isupper() else 0  # Shift
-        key = {"key": char, "code": code, "windowsVirtualKeyCode": ord(char.upper()), "modifiers": modifiers}
+        key: dict[str, Any] = {
+            "key": char,
+            "code": code,
+            "windowsVirtualKeyCode": ord(char.upper()),
+            "modifiers": modifiers,
+        }
         self.call("Input.dispatchKeyEvent", type="keyDown", text=char, **key)
         self.call("Input.dispatchKeyEvent", type="keyUp", **key)
 

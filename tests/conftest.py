@@ -6,18 +6,18 @@ import subprocess
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import pytest
 
 from tests import scheduling
-from tests.jsonl import JsonLinesProcess
-from tests.netns import NetNamespace, netns_unavailable
+from tests.harness.jsonl import JsonLinesProcess
+from tests.harness.netns import MCAST_URL as MCAST_URL
+from tests.harness.netns import NetNamespace, netns_unavailable
 
 if TYPE_CHECKING:
-    from tests.agent_harness import AgentProcesses
+    from tests.harness.agents import AgentProcesses
 
-MCAST_URL = "udpm://239.255.76.67:7667?ttl=0"
 _NETNS_REASON: list[str | None] = []
 #: The ``user_properties`` key of an attack's verdict (tests/security/conftest.py judges each attack).
 ATTACK_PROPERTY = "antalate-attack"
@@ -29,7 +29,7 @@ def pytest_runtest_logreport(report: pytest.TestReport) -> None:
     scheduling.record(report)
     for key, value in report.user_properties:
         if key == ATTACK_PROPERTY:
-            name, verdict = value
+            name, verdict = cast("tuple[str, str]", value)  # tests/security/conftest.py records the pair
             _ATTACKS[name] = verdict
 
 
@@ -103,10 +103,13 @@ class Probe(JsonLinesProcess):
         return reply.get("msg") if reply["ok"] else None
 
     def history(self, channel: str, type_name: str, since: int = 0) -> list[dict[str, Any]]:
-        return self.call(op="history", channel=channel, type=type_name, since=since)["msgs"]
+        msgs: list[dict[str, Any]] = self.call(op="history", channel=channel, type=type_name, since=since)[
+            "msgs"
+        ]
+        return msgs
 
     def mark(self) -> int:
-        return self.call(op="mark")["index"]
+        return int(self.call(op="mark")["index"])
 
 
 @pytest.fixture

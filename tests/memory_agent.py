@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 from antalate_lcm.autopilot.base import Autopilot
 from antalate_lcm.bus import Bus
@@ -27,6 +27,10 @@ from tests.polling import wait_for
 class Seen:
     t: float
     state: int
+
+
+#: A MemoryAgent or a subclass: ``start()`` returns the agent it started, typed as itself.
+Agent = TypeVar("Agent", bound="MemoryAgent")
 
 
 class MemoryAgent:
@@ -72,7 +76,7 @@ class MemoryAgent:
             assert isinstance(self.nodes[0], HlcNode)
             self.nodes[0] = HlcNode(self.config, self.context, adapter)
 
-    def start(self) -> MemoryAgent:
+    def start(self: Agent) -> Agent:
         self.context.executor.start()
         self.probe.start()
         self.probe.subscribe("MC_STATE", lambda m: self._seen(self.mc, m))

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.netns import REPO
+from tests import REPO
 
 NPM_DIR = REPO / ".cache" / "npm-tools"
 #: What the tests need, pinned to the majors they were written against.

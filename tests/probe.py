@@ -119,8 +119,8 @@ def main() -> None:
                     cond.wait(min(remaining, 0.2))
         elif op == "history":
             with cond:
-                hits = decoded(re.compile(req["channel"]), req["type"], req.get("since", 0))
-                reply = {"ok": True, "msgs": [d for _, d in hits]}
+                recorded = decoded(re.compile(req["channel"]), req["type"], req.get("since", 0))
+                reply = {"ok": True, "msgs": [d for _, d in recorded]}
         elif op == "mark":
             with cond:
                 reply = {"ok": True, "index": len(seen)}

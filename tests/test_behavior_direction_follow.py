@@ -6,6 +6,7 @@ import math
 
 import pytest
 
+from antalate_lcm.config import Config
 from antalate_lcm.msgs import direction_cmd_t, velocity_cmd_t
 from antalate_lcm.plugins import BEHAVIORS, load_plugin
 from behaviors.direction_follow import Direction, DirectionFollow, follow_velocity
@@ -37,7 +38,7 @@ def test_registered() -> None:
     assert load_plugin(BEHAVIORS, "direction_follow", object) is DirectionFollow
 
 
-def _config(**params: float) -> object:
+def _config(**params: float) -> Config:
     behavior = {"plugin": "direction_follow", "params": {"timeout": 0.5, **params}, "tick_hz": 20.0}
     return make_config([{"name": "steer", "behaviors": [behavior]}])
 

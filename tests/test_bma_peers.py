@@ -22,7 +22,8 @@ from antalate_lcm.executor import Executor
 from antalate_lcm.msgs import mc_state_t, telemetry_t
 from antalate_lcm.node import Context, Node, TopicMatch
 from antalate_lcm.peers import PeerTable
-from tests.netns import REPO, child_env
+from tests import REPO
+from tests.netns import child_env
 from tests.polling import wait_for
 
 KEY = "peer-test-key"

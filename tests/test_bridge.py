@@ -18,11 +18,10 @@ from antalate_lcm.bridge import Bridge, BridgeConfig, Direction, Memory, Throttl
 from antalate_lcm.errors import ConfigError
 from antalate_lcm.security import MemberProof
 from antalate_lcm.zenoh_bus import BRIDGE_MARK, _Group
+from tests import REPO
 from tests.netns import NetNamespace
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
-
-REPO = Path(__file__).resolve().parent.parent
 
 
 # ------------------------------------------------------------------------------------ pure parts
@@ -135,7 +134,8 @@ def _scenario(netns: NetNamespace, name: str) -> dict[str, Any]:
     )
     out, err = proc.communicate(timeout=90)
     assert proc.returncode == 0, err[-3000:]
-    return json.loads(out.strip().splitlines()[-1])
+    summary: dict[str, Any] = json.loads(out.strip().splitlines()[-1])
+    return summary
 
 
 def test_two_sites_get_everything_once_and_nothing_loops(netns: NetNamespace) -> None:

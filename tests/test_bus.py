@@ -15,6 +15,7 @@ import pytest
 from antalate_lcm.bus import Bus
 from antalate_lcm.errors import MulticastUnavailable
 from antalate_lcm.msgs import mc_state_t, telemetry_t
+from tests import REPO
 from tests.conftest import MCAST_URL, Probe
 from tests.netns import NetNamespace
 from tests.polling import wait_for
@@ -164,38 +165,19 @@ def test_unknown_bus_is_a_clear_error(bus: Bus) -> None:
 
 # --------------------------------------------------------------------------- real multicast
 
-_PUBLISHER = """
-import sys, time
-from antalate_lcm.bus import Bus
-from antalate_lcm.msgs import telemetry_t
-b = Bus({"lan": sys.argv[1]})
-for i in range(200):
-    m = telemetry_t(); m.header.seq = i; m.lat = 32.0 + i * 1e-6; m.mode = "SIM"
-    b.publish("lan", "alpha/TELEMETRY", m)
-    time.sleep(0.002)
-b.close()
-"""
-
 
 def test_two_processes_over_multicast(netns: NetNamespace, probe: Probe) -> None:
-    sub_script = """
-import sys, time
-from antalate_lcm.bus import Bus
-from antalate_lcm.msgs import telemetry_t
-b = Bus({"lan": sys.argv[1]})
-got = []
-b.subscribe("lan", "alpha/TELEMETRY", telemetry_t, lambda ch, m: got.append(m.header.seq))
-print("ready", flush=True)
-deadline = time.time() + 10
-while len(got) < 200 and time.time() < deadline:
-    time.sleep(0.01)
-print(len(got), got == list(range(200)), flush=True)
-b.close()
-"""
-    sub = netns.python("-c", sub_script, MCAST_URL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    sub = netns.python(
+        "-m",
+        "tests.children.bus_subscriber",
+        MCAST_URL,
+        "order",
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     assert sub.stdout is not None
     assert sub.stdout.readline().strip() == "ready"
-    pub = netns.python("-c", _PUBLISHER, MCAST_URL, stderr=subprocess.PIPE)
+    pub = netns.python("-m", "tests.children.bus_publisher", MCAST_URL, stderr=subprocess.PIPE)
     assert pub.wait(20) == 0
     assert sub.stdout.readline().split() == ["200", "True"]
     # the probe (a third process, raw lcm) saw the same stream
@@ -204,25 +186,18 @@ b.close()
 
 
 def test_garbage_datagrams_over_multicast_do_not_kill_a_subscriber(netns: NetNamespace, probe: Probe) -> None:
-    sub_script = """
-import sys, time
-from antalate_lcm.bus import Bus
-from antalate_lcm.msgs import telemetry_t
-b = Bus({"lan": sys.argv[1]})
-got = []
-b.subscribe("lan", "alpha/TELEMETRY", telemetry_t, lambda ch, m: got.append(m.header.seq))
-print("ready", flush=True)
-deadline = time.time() + 10
-while len(got) < 200 and time.time() < deadline:
-    time.sleep(0.01)
-print(len(got), b.decode_errors().get("alpha/TELEMETRY", 0), flush=True)
-b.close()
-"""
-    sub = netns.python("-c", sub_script, MCAST_URL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    sub = netns.python(
+        "-m",
+        "tests.children.bus_subscriber",
+        MCAST_URL,
+        "decode-errors",
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     assert sub.stdout is not None and sub.stdout.readline().strip() == "ready"
     for data in (b"\xff" * 40, telemetry_t().encode()[:10], b"x"):
         probe.raw("alpha/TELEMETRY", data)
-    pub = netns.python("-c", _PUBLISHER, MCAST_URL, stderr=subprocess.PIPE)
+    pub = netns.python("-m", "tests.children.bus_publisher", MCAST_URL, stderr=subprocess.PIPE)
     assert pub.wait(20) == 0
     assert sub.stdout.readline().split() == ["200", "3"]
     assert sub.wait(5) == 0
@@ -235,9 +210,19 @@ def test_no_multicast_route_gives_the_fix() -> None:
     reason = netns_unavailable()
     if reason:
         pytest.skip(f"no private network namespace: {reason}")
-    code = "from antalate_lcm.bus import Bus; Bus({'lan': 'udpm://239.255.76.67:7667?ttl=1'}).open()"
     proc = subprocess.run(
-        ["unshare", "-rn", sys.executable, "-c", code], capture_output=True, text=True, timeout=30
+        [
+            "unshare",
+            "-rn",
+            sys.executable,
+            "-m",
+            "tests.children.open_bus",
+            "udpm://239.255.76.67:7667?ttl=1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        cwd=REPO,
     )
     assert proc.returncode != 0
     assert "MulticastUnavailable" in proc.stderr

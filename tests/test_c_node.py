@@ -20,9 +20,10 @@ import pytest
 
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
+from tests import REPO
 from tests.agent_harness import AgentProcesses, agent_config
 from tests.conftest import MCAST_URL, Probe
-from tests.netns import REPO, NetNamespace
+from tests.netns import NetNamespace
 from tests.polling import wait_for
 
 pytestmark = pytest.mark.netns
@@ -160,13 +161,14 @@ def test_c_node_signs_for_a_keyed_agent_and_a_wrong_key_is_refused(
             code, events, stderr = run_c_node(netns, c_node, key=key, ack_timeout=3)
             assert code == 1 and events[-1]["event"] == "timeout", f"{events}\n{stderr}"
             assert events[-1]["state"] == M.STANDBY and events[-1]["last_command_seq"] == 0
-            assert wait_for(
-                lambda why=why: (
+
+            def dropped(why: str = why) -> bool:
+                return (
                     f"dropped operator_cmd_t on alpha/OPERATOR_CMD from 'c-node' seq 1: {why}"
                     in agent.log("mc")
-                ),
-                10,
-            ), agent.log("mc")
+                )
+
+            assert wait_for(dropped, 10), agent.log("mc")
         assert agent.alive("mc") and agent.alive("hlc")
         # the right key: accepted and flown; the agent's own state messages are signed too
         code, events, stderr = run_c_node(netns, c_node, key=KEY)

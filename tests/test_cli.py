@@ -5,22 +5,24 @@ from __future__ import annotations
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
+from tests import REPO
 from tests.netns import netns_unavailable
 
-REPO = Path(__file__).resolve().parent.parent
 
-
-def antalate(*args: str, timeout: float = 60, **kw: object) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
+def antalate(*args: str, timeout: float = 60, **kw: Any) -> subprocess.CompletedProcess[str]:
+    """``kw`` are subprocess.run's."""
+    done: subprocess.CompletedProcess[str] = subprocess.run(
         [sys.executable, "-m", "antalate_lcm.cli", *args],
         capture_output=True,
         text=True,
         timeout=timeout,
         **kw,
-    )  # type: ignore[call-overload]
+    )
+    return done
 
 
 def test_help_lists_every_command() -> None:
@@ -221,7 +223,13 @@ def test_agent_runs_and_stops_cleanly_on_sigterm(tmp_path: Path) -> None:
     )
     lines: queue.Queue[str] = queue.Queue()
     assert proc.stderr is not None
-    reader = threading.Thread(target=lambda: [lines.put(ln) for ln in proc.stderr], daemon=True)  # type: ignore[union-attr]
+    stderr = proc.stderr
+
+    def pump() -> None:
+        for ln in stderr:
+            lines.put(ln)
+
+    reader = threading.Thread(target=pump, daemon=True)
     reader.start()
     standby: set[str] = set()
     seen: list[str] = []
@@ -247,24 +255,6 @@ def test_agent_runs_and_stops_cleanly_on_sigterm(tmp_path: Path) -> None:
     reader.join(timeout=5)
 
 
-_OPEN_BUSES = """
-import json, sys
-from antalate_lcm.bus import open_lcm
-from antalate_lcm.errors import AntalateError
-from antalate_lcm.lcm_url import open_failure
-out = {}
-for url in sys.argv[1:]:
-    try:
-        open_lcm(url).fileno()
-        out[url] = "opened"
-    except AntalateError as exc:
-        out[url] = type(exc).__name__ + ": " + str(exc).splitlines()[0]
-# liblcm failing for another reason on a routed group must not be blamed on the route
-out["routed group, liblcm refused"] = type(open_failure("udpm://239.255.76.68:7668", ["Couldn't create LCM"])).__name__
-print(json.dumps(out))
-"""
-
-
 def test_no_multicast_route_message_only_when_the_route_is_missing() -> None:
     """In a namespace that routes only 239.255.76.68 (an agent's own bus, docs/lan.md) to lo."""
     import json
@@ -280,9 +270,9 @@ def test_no_multicast_route_message_only_when_the_route_is_missing() -> None:
         "http://127.0.0.1:8080",
         "file:///nonexistent/flight.lcm",
     ]
-    script = 'ip link set lo up && ip route add 239.255.76.68/32 dev lo && exec "$0" -c "$1" "$@"'
+    script = 'ip link set lo up && ip route add 239.255.76.68/32 dev lo && exec "$0" -m tests.children.open_buses "$@"'
     proc = subprocess.run(
-        ["unshare", "-rn", "sh", "-c", script, sys.executable, _OPEN_BUSES, *urls],
+        ["unshare", "-rn", "sh", "-c", script, sys.executable, *urls],
         capture_output=True,
         text=True,
         timeout=60,

@@ -11,6 +11,7 @@ import pytest
 
 from antalate_lcm.tools import codegen as _codegen
 from antalate_lcm.topics import MESSAGE_TYPES
+from tests.lcm_tables import dimensions, slots, typenames
 
 
 def test_generated_code_is_fresh() -> None:
@@ -65,27 +66,34 @@ def _stub_fields(name: str) -> dict[str, str]:
     }
 
 
+def set_length(msg: object, dims: list[str | int], n: int) -> None:
+    """Set the length field a variable-length array's first dimension names."""
+    field = dims[0]
+    assert isinstance(field, str), f"a fixed-size array ({field}) has no length field"
+    setattr(msg, field, n)
+
+
 def test_stub_field_types_are_what_decode_produces() -> None:
     """Decode a message with every array filled and compare each field's runtime type with its stub."""
     header_fields = _stub_fields("header_t")
     assert header_fields == {"utime": "int", "agent": "str", "seq": "int", "mac_len": "int", "mac": "bytes"}
     for name, msg_type in MESSAGE_TYPES.items():
         fields = _stub_fields(name)
-        assert list(fields) == list(msg_type.__slots__)
+        assert list(fields) == list(slots(msg_type))
         msg = msg_type()
         msg.header.mac, msg.header.mac_len = b"\x01\x02", 2
-        for slot, dims in zip(msg_type.__slots__, msg_type.__dimensions__, strict=True):
+        for slot, dims in zip(slots(msg_type), dimensions(msg_type), strict=True):
             if dims and fields[slot] == "list[str]":
                 setattr(msg, slot, ["a", "b"])
-                setattr(msg, dims[0], 2)
+                set_length(msg, dims, 2)
             elif dims and fields[slot] == "bytes":
                 setattr(msg, slot, b"xy")
-                setattr(msg, dims[0], 2)
+                set_length(msg, dims, 2)
             elif dims and fields[slot] in ("Sequence[float]", "Sequence[int]", "list[bool]"):
                 # several arrays may share one length field (peer_scan_t): fill every one of them
                 item = {"Sequence[float]": 1.5, "Sequence[int]": 3, "list[bool]": True}[fields[slot]]
                 setattr(msg, slot, [item, item])
-                setattr(msg, dims[0], 2)
+                set_length(msg, dims, 2)
         decoded = msg_type.decode(msg.encode())
         for slot, annotation in fields.items():
             value = getattr(decoded, slot)
@@ -103,5 +111,5 @@ def test_stub_field_types_are_what_decode_produces() -> None:
 
 def test_every_message_starts_with_a_header() -> None:
     for msg_type in MESSAGE_TYPES.values():
-        assert msg_type.__slots__[0] == "header"
-        assert msg_type.__typenames__[0] == "antalate_lcm.msgs.header_t"
+        assert slots(msg_type)[0] == "header"
+        assert typenames(msg_type)[0] == "antalate_lcm.msgs.header_t"

@@ -8,8 +8,7 @@ import pytest
 
 from antalate_lcm.config import Config, check_unique_agent_names, load_config, parse_config
 from antalate_lcm.errors import ConfigError
-
-REPO = Path(__file__).resolve().parent.parent
+from tests import REPO
 
 
 def write(tmp_path: Path, text: str) -> Path:

@@ -32,106 +32,6 @@ from tests.netns import NetNamespace
 pytest.importorskip("cflib")
 pytestmark = pytest.mark.netns
 
-DRIVER = r"""
-import json, logging, sys, threading, time
-from antalate_lcm.config import parse_config
-from antalate_lcm.hlc.machine import ErrorCode
-from antalate_lcm.vocabulary import HlcState, McState
-from antalate_lcm.msgs import direction_cmd_t
-from antalate_lcm.node import Context, Node
-from antalate_lcm.runtime.agent import agent_nodes, shared_buses, validate
-from antalate_lcm.runtime.scripted_operator import ScriptedOperator
-from tests.emulators.crazyflie_emulator import CrazyflieEmulator
-
-logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(name)s %(message)s")
-T0 = time.monotonic()
-OUT = threading.Lock()
-
-def emit(**event):
-    event["t"] = round(time.monotonic() - T0, 3)
-    with OUT:
-        sys.stdout.write(json.dumps(event) + "\n")
-        sys.stdout.flush()
-
-spec = json.loads(sys.argv[1])
-emus, configs = [], []
-for item in spec["agents"]:
-    emu = CrazyflieEmulator(**item["emu"]).start()
-    emus.append(emu)
-    doc = item["doc"]
-    doc["hlc"]["autopilot_params"]["uri"] = emu.uri
-    config = parse_config(doc, "<test>")
-    validate(config)
-    configs.append(config)
-names = [c.agent.name for c in configs]
-
-class Recorder(Node):
-    kind = "recorder"
-    def on_start(self):
-        self.last = {}
-        self.direction = None
-        self.subscribe_all("MC_STATE", lambda m, match: self.state("mc", m.header.agent, McState(m.state).name))
-        self.subscribe_all("HLC_STATE", lambda m, match: self.state("hlc", m.header.agent, HlcState(m.state).name))
-        self.subscribe_all("HLC_ERROR", lambda m, match: emit(kind="error", agent=m.header.agent,
-                                                               code=ErrorCode(m.code).name, text=m.text))
-        self.create_timer(0.1, self.tick)
-    def state(self, kind, agent, name):
-        if self.last.get((kind, agent)) != name:
-            self.last[(kind, agent)] = name
-            emit(kind=kind, agent=agent, state=name)
-    def tick(self):
-        for name, emu in zip(names, emus):
-            s = emu.snapshot()
-            emit(kind="emu", agent=name, x=s.x, y=s.y, z=s.z, vx=s.vx, vy=s.vy, vz=s.vz, armed=s.armed,
-                 flying=s.flying, vbat=s.vbat)
-        if self.direction is not None and self.now - self.direction[2] >= 0.5:
-            self.send_direction(*self.direction[:2])
-    def send_direction(self, azimuth, speed):
-        msg = direction_cmd_t()
-        msg.active, msg.azimuth, msg.speed, msg.target = speed > 0, azimuth, speed, ""
-        self.publish("SWARM_DIRECTION_CMD", msg)
-        self.direction = (azimuth, speed, self.now) if speed > 0 else None
-
-context = Context.in_process(shared_buses(configs))
-recorder = Recorder(configs[0].with_agent_name("recorder"), context)
-nodes = [recorder] + [n for c in configs for n in agent_nodes(c, context)]
-operator = None
-if spec.get("operator"):
-    operator = ScriptedOperator(configs[0].with_agent_name("operator"), context, expected_agents=len(configs),
-                                mission_time=spec["operator"]["mission_time"], timeout=120.0)
-    nodes.append(operator)
-context.bus.open()
-context.executor.start()
-for node in nodes:
-    node.start()
-emit(kind="started")
-
-def watch_operator():
-    while not operator.finished:
-        time.sleep(0.1)
-    emit(kind="operator", phase=operator.phase.name, report=operator.report())
-
-if operator is not None:
-    threading.Thread(target=watch_operator, daemon=True).start()
-for line in sys.stdin:
-    words = line.split()
-    if words == ["stop"]:
-        break
-    if words[:1] == ["silent"]:
-        emus[int(words[1])].set_silent(words[2] == "1")
-        emit(kind="silent", agent=names[int(words[1])], on=words[2] == "1")
-    elif words[:1] == ["battery"]:
-        emus[int(words[1])].set_battery(float(words[2]))
-    elif words[:1] == ["direction"]:
-        context.executor.call_soon(recorder.send_direction, float(words[1]), float(words[2]))
-for node in reversed(nodes):
-    node.stop()
-context.close()
-for emu in emus:
-    emu.stop()
-emit(kind="stopped")
-"""
-
 KEY = "crazyflie-e2e-swarm-key"
 FAST_AP: dict[str, Any] = {"climb_speed": 1.0, "land_speed": 0.6, "rtl_speed": 1.0, "connect_timeout": 8.0}
 
@@ -285,7 +185,12 @@ def fly(netns: NetNamespace, tmp_path: Path) -> Iterator[Callable[..., Driver]]:
         log_path = tmp_path / f"driver{len(started)}.log"
         with open(log_path, "w") as log:
             proc = netns.python(
-                "-c", DRIVER, json.dumps(spec), stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log
+                "-m",
+                "tests.children.crazyflie_swarm",
+                json.dumps(spec),
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=log,
             )
         driver = Driver(proc, log_path)
         started.append(driver)

@@ -23,6 +23,7 @@ from antalate_lcm.autopilot.crazyflie.telemetry import (
     estimator_problem,
 )
 from antalate_lcm.geo import distance_bearing
+from tests import REPO
 
 LAT, LON = 32.7767, 35.0231
 
@@ -230,7 +231,6 @@ def test_params_documented_and_example_valid() -> None:
     from antalate_lcm.autopilot.crazyflie import DEFAULTS
     from antalate_lcm.config import load_config
     from antalate_lcm.runtime.agent import validate
-    from tests.netns import REPO
 
     doc = (REPO / "docs" / "crazyflie.md").read_text()
     config = load_config(REPO / "examples" / "crazyflie.toml")

@@ -30,6 +30,8 @@ from typing import Any
 import pytest
 import tomli_w
 
+from tests import REPO
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - the oldest supported Python
@@ -39,7 +41,7 @@ from antalate_lcm.behavior import Behavior
 from antalate_lcm.config import load_config
 from antalate_lcm.runtime.agent import validate
 from antalate_lcm.runtime.script import load_script
-from tests.doc_snippets import REPO, Block, blocks, check_antalate, commands, is_antalate
+from tests.doc_snippets import Block, blocks, check_antalate, commands, is_antalate
 
 DOCS = ["README.md", "docs/behaviors.md", "docs/experiments.md", "docs/simulator.md"]
 TUTORIAL = "docs/tutorial.md"

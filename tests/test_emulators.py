@@ -22,8 +22,9 @@ from djitellopy import Tello
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
+from tests import REPO
 from tests.emulators.mavlink_vehicle import COPTER_MODES, MavlinkVehicle
-from tests.emulators.netns_pair import REPO, NetnsPair, netns_pair_unavailable
+from tests.emulators.netns_pair import NetnsPair, netns_pair_unavailable
 from tests.emulators.tello_emulator import TelloEmulator
 
 # -- Tello helpers ----------------------------------------------------------------------------------
@@ -254,29 +255,6 @@ def test_tello_cli(tello_client: TelloClient) -> None:
             proc.wait()
 
 
-DJITELLOPY_SCRIPT = r"""
-import json, logging, time
-from djitellopy import Tello
-Tello.LOGGER.setLevel(logging.WARNING)
-t = Tello()  # 192.168.10.1, the emulator's address in the other namespace
-t.connect()
-out = {"battery": t.get_battery(), "sdk": t.query_sdk_version(), "battery_q": t.query_battery()}
-t.takeoff()
-time.sleep(0.15)
-out["h_flying"] = t.get_height()
-for _ in range(8):
-    t.send_rc_control(0, 50, 0, 0)
-    time.sleep(0.1)
-out["vgx"] = t.get_speed_x()
-t.send_rc_control(0, 0, 0, 0)
-t.land()
-time.sleep(0.15)
-out["h_landed"] = t.get_height()
-t.end()
-print(json.dumps(out))
-"""
-
-
 @pytest.mark.netns
 def test_real_djitellopy_against_emulator() -> None:
     reason = netns_pair_unavailable()
@@ -286,7 +264,7 @@ def test_real_djitellopy_against_emulator() -> None:
         NetnsPair() as net,
         TelloEmulator(sock=net.udp_socket("a", (net.addr_a, 8889)), takeoff_time=0.5) as emu,
     ):
-        done = net.run_python("b", DJITELLOPY_SCRIPT, timeout=60)
+        done = net.run("b", [sys.executable, "-m", "tests.children.djitellopy_flight"], timeout=60)
         # what the emulator heard and ignored (too soon after the last command), when djitellopy gave up
         heard = [(round(c.t, 3), c.text) for c in emu.commands]
         assert done.returncode == 0, (done.stderr, heard, [(round(c.t, 3), c.text) for c in emu.ignored])
@@ -409,7 +387,7 @@ def test_mavlink_boot_mode_revert_and_arming_gate() -> None:
         port = client.port.getsockname()[1]
         # phases long enough for a loaded machine to see each one (BOOT then CALIBRATING each half of
         # boot_delay, then no position until ekf/gps_delay); 0.6/1.3 s were missed at load 7
-        params = {
+        params: dict[str, Any] = {
             "boot_delay": 3.0,
             "ekf_delay": 6.0,
             "gps_delay": 6.0,

@@ -5,15 +5,22 @@ from __future__ import annotations
 import asyncio
 import threading
 import time
+from collections.abc import Iterator
 
+import lcm
 import pytest
 
 from antalate_lcm.executor import Executor
 from tests.polling import wait_for
 
 
+def handle_pending(lc: lcm.LCM) -> None:
+    """A reader's callback: what is waiting on ``lc``, without blocking the loop."""
+    lc.handle_timeout(0)
+
+
 @pytest.fixture
-def ex() -> Executor:
+def ex() -> Iterator[Executor]:
     e = Executor()
     e.start()
     yield e
@@ -73,7 +80,7 @@ def test_a_readable_descriptor_is_handled_on_the_loop_thread(ex: Executor) -> No
     lc = lcm.LCM("memq://")
     seen: list[tuple[bytes, str]] = []
     lc.subscribe("C", lambda _ch, data: seen.append((data, threading.current_thread().name)))
-    ex.add_reader(lc.fileno(), lambda: lc.handle_timeout(0))
+    ex.add_reader(lc.fileno(), lambda: handle_pending(lc))
     for i in range(50):
         lc.publish("C", bytes([i]))
     assert wait_for(lambda: len(seen) == 50, 2)
@@ -90,7 +97,11 @@ def test_timers_created_from_another_thread_run_on_the_loop(ex: Executor) -> Non
     done = threading.Event()
 
     def schedule() -> None:
-        ex.call_later(0.01, lambda: (names.append(threading.current_thread().name), done.set()))
+        def record() -> None:
+            names.append(threading.current_thread().name)
+            done.set()
+
+        ex.call_later(0.01, record)
 
     worker = threading.Thread(target=schedule)
     worker.start()
@@ -126,7 +137,7 @@ def test_restart_after_stop_watches_the_same_descriptors() -> None:
     got: list[bytes] = []
     lc.subscribe("C", lambda _ch, data: got.append(data))
     e = Executor()
-    e.add_reader(lc.fileno(), lambda: lc.handle_timeout(0))
+    e.add_reader(lc.fileno(), lambda: handle_pending(lc))
     e.start()
     lc.publish("C", b"1")
     assert wait_for(lambda: got == [b"1"], 2)

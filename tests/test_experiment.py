@@ -20,6 +20,7 @@ from antalate_lcm.errors import AntalateError, ConfigError
 from antalate_lcm.runtime.experiment import Experiment, run
 from antalate_lcm.runtime.scaffold import files, write_behavior
 from antalate_lcm.runtime.script import load_script, parse_script
+from tests import REPO
 
 MEMQ_CONFIG = """
 [agent]
@@ -159,7 +160,7 @@ def test_a_shipped_peer_rule_flies_in_one_process_on_memq(
 ) -> None:
     """examples/swarm_rules/flocking.toml as shipped (memq://, no swarm key): the whole swarm is in
     this process, so a peer behavior hears its peers and is not refused as a split swarm."""
-    example = Path(__file__).resolve().parent.parent / "examples" / "swarm_rules" / "flocking.toml"
+    example = REPO / "examples" / "swarm_rules" / "flocking.toml"
     script = tmp_path / "script.toml"
     script.write_text("mission_time = 4.0\n[analyze]\nrange = 30.0\n")
     out = tmp_path / "flock.lcm"

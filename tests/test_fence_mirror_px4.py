@@ -13,32 +13,14 @@ from pathlib import Path
 
 import pytest
 
+from tests import REPO
 from tests.conftest import _netns_reason
-from tests.netns import REPO, NetNamespace, child_env, stop_process
+from tests.netns import NetNamespace, child_env, stop_process
 from tests.sitl_px4.harness import link_commands, sitl_dir, sitl_missing
 
 pytestmark = [pytest.mark.netns, pytest.mark.timeout(240)]
 
 INSTANCE = 8
-
-#: Run inside the namespace: connect, mirror, read back; one JSON line out.
-SCRIPT = """
-import json
-from antalate_lcm.autopilot.px4 import Px4Autopilot
-from antalate_lcm.autopilot.px4.fence_mirror import ORDER, fence_parameters, mirror
-from antalate_lcm.safety.geofence import Geofence
-fence = Geofence(((-30.0, -40.0), (-30.0, 40.0), (50.0, 40.0), (50.0, -40.0)), 0.0, 60.0, 2.0)
-ap = Px4Autopilot({"connection": "udpin:127.0.0.1:PORT", "connect_timeout": 90.0})
-ap.connect()
-try:
-    before = ap.read_params(list(ORDER))
-    wanted = fence_parameters(fence, (0.0, 0.0), "land")
-    problems = mirror(ap, wanted)
-    after = ap.read_params(list(ORDER))
-finally:
-    ap.close()
-print(json.dumps({"before": before, "wanted": wanted, "problems": problems, "after": after}))
-""".replace("PORT", str(14540 + INSTANCE))
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +46,12 @@ def px4(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[NetNamespace
 
 def test_the_gf_parameters_are_written_and_read_back(px4: tuple[NetNamespace, Path]) -> None:
     ns, px4_log = px4
-    out = ns.run([sys.executable, "-c", SCRIPT], timeout=180, cwd=str(REPO))
+    # connect, mirror, read back; one JSON line out
+    out = ns.run(
+        [sys.executable, "-m", "tests.children.px4_fence_mirror", str(14540 + INSTANCE)],
+        timeout=180,
+        cwd=str(REPO),
+    )
     assert out.returncode == 0, out.stderr[-2000:] + (px4_log.read_text()[-2000:] if px4_log.exists() else "")
     r = json.loads(out.stdout.strip().splitlines()[-1])
     print(f"\nPX4 GF_* before {r['before']}, wanted {r['wanted']}, read back {r['after']}")

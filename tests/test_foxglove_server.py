@@ -15,8 +15,8 @@ import tomli_w
 from antalate_lcm import foxglove_msgs, lcm_json
 from antalate_lcm.cli import main
 from tests.agent_harness import agent_config
-from tests.conftest import MCAST_URL
-from tests.netns import stop_process
+from tests.conftest import MCAST_URL, Probe
+from tests.netns import NetNamespace, stop_process
 from tests.npm_tools import node_modules
 
 CLIENT = Path(__file__).parent / "node" / "foxglove_client.mjs"
@@ -31,8 +31,8 @@ def _schema_of(channel: dict[str, Any]) -> dict[str, Any]:
 
 @pytest.mark.netns
 def test_reference_client_receives_live_positions_with_the_advertised_schemas(
-    netns, probe, tmp_path: Path
-) -> None:  # type: ignore[no-untyped-def]
+    netns: NetNamespace, probe: Probe, tmp_path: Path
+) -> None:
     modules = node_modules()
     agents_cfg = tmp_path / "sim.toml"
     agents_cfg.write_text(tomli_w.dumps(agent_config("sim")))

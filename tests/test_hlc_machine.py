@@ -76,6 +76,12 @@ def hlc_in(state: HlcState, params: HlcParams | None = None) -> HighLevelControl
 Input = tuple[str, object]
 
 
+def state_of(h: HighLevelControl) -> HlcState:
+    """The state read afresh: mypy keeps ``h.state`` narrowed by an earlier assert across the calls
+    that change it."""
+    return h.state
+
+
 def feed(h: HighLevelControl, what: Input, now: float = T0 + 10) -> HlcOutcome:
     kind, value = what
     if kind == "mc":
@@ -285,11 +291,11 @@ def test_a_refused_takeoff_lands_at_once() -> None:
     h.on_action_result(ActionKind.ARM, True, T0 + 1.1)
     assert h.state is H.GAINING_ALTITUDE
     outcome = h.on_action_result(ActionKind.TAKEOFF, False, T0 + 1.2, "error")
-    assert h.state is H.LANDING
+    assert state_of(h) is H.LANDING
     assert Action.LAND in outcome.actions
     assert [e.code for e in outcome.errors] == [ErrorCode.TAKEOFF_REFUSED]
     assert h.on_autopilot(GROUND, T0 + 1.3).transition is not None
-    assert h.state is H.READY
+    assert state_of(h) is H.READY
 
 
 # -------------------------------------------------------------------------------- INIT
@@ -300,7 +306,7 @@ def test_init_to_ready_needs_both_autopilot_and_mc() -> None:
     assert h.on_autopilot(GROUND, T0).transition is None  # no MC yet
     assert h.state is H.INIT
     outcome = h.on_mc_state(M.STANDBY, T0 + 1)  # the MC arrives second
-    assert h.state is H.READY and outcome.actions == ()
+    assert state_of(h) is H.READY and outcome.actions == ()
 
     h = HighLevelControl()
     assert h.on_mc_state(M.INIT, T0).transition is None  # no autopilot yet
@@ -405,7 +411,7 @@ def test_failed_arm_does_not_rearm_on_mc_republish_but_on_the_next_command() -> 
         assert h.on_mc_state(M.TAKEOFF, T0 + 2.2 + i * 0.2) == HlcOutcome()
     h.on_mc_state(M.STANDBY, T0 + 4)
     assert h.on_mc_state(M.TAKEOFF, T0 + 5).actions == (Action.ARM,)
-    assert h.state is H.TAKEOFF
+    assert state_of(h) is H.TAKEOFF
 
 
 def test_arm_failure_detail_reaches_the_error_text() -> None:
@@ -429,7 +435,7 @@ def test_takeoff_cancelled_while_arming() -> None:
     h.on_mc_state(M.LAND, T0 + 1.5)  # the operator changed their mind before the arm result
     assert h.state is H.TAKEOFF
     outcome = h.on_action_result(ActionKind.ARM, True, T0 + 2)
-    assert h.state is H.READY
+    assert state_of(h) is H.READY
     assert outcome.actions == (Action.DISARM,)
     assert [(e.code, e.severity) for e in outcome.errors] == [(ErrorCode.TAKEOFF_CANCELLED, Severity.INFO)]
 
@@ -475,7 +481,7 @@ def test_a_battery_failsafe_hold_after_low_battery_stays_hold_instead_of_alterna
     assert h.state is H.HOLD
     landing = replace(held, flight_mode=FlightMode.LANDING, mode="AUTO.LAND")
     assert h.on_autopilot(landing, T0 + 27).transition is not None
-    assert h.state is H.LANDING
+    assert state_of(h) is H.LANDING
 
 
 def test_a_fence_hold_with_a_low_battery_still_returns_once() -> None:
@@ -484,7 +490,7 @@ def test_a_fence_hold_with_a_low_battery_still_returns_once() -> None:
     h.on_autopilot(held, T0 + 20)
     assert h.state is H.HOLD
     assert h.on_autopilot(replace(held, battery=19.0), T0 + 21).actions == (Action.RTL,)
-    assert h.state is H.LOW_BATTERY
+    assert state_of(h) is H.LOW_BATTERY
 
 
 @pytest.mark.parametrize("state", [H.RTL, H.LANDING, H.MANUAL, H.READY, H.TAKEOFF])
@@ -523,10 +529,10 @@ def test_an_mc_state_republished_since_before_a_failsafe_does_not_override_it(mc
     h.on_mc_state(mc_state, T0 + 10)
     assert h.state in (H.RTL, H.LANDING)
     assert h.on_autopilot(FS_HOLD, T0 + 11).transition is not None
-    assert h.state is H.HOLD
+    assert state_of(h) is H.HOLD
     for i in range(5):
         assert h.on_mc_state(mc_state, T0 + 11.1 + i * 0.2) == HlcOutcome()
-    assert h.state is H.HOLD
+    assert state_of(h) is H.HOLD
     h.on_mc_state(M.HOLD, T0 + 12)  # the MC follows the vehicle
     outcome = h.on_mc_state(M.RTL, T0 + 13)  # the operator's RTL: new since HOLD began
     assert h.state is H.RTL and outcome.actions == (Action.RTL,)
@@ -543,7 +549,7 @@ def test_a_failsafe_rtl_then_the_operators_land() -> None:
     assert h.on_mc_state(M.MISSION, T0 + 10.1) == HlcOutcome()  # republished before the MC heard
     assert h.on_mc_state(M.RTL, T0 + 10.3) == HlcOutcome()  # the MC follows
     assert h.on_mc_state(M.LAND, T0 + 11).actions == (Action.LAND,)
-    assert h.state is H.LANDING
+    assert state_of(h) is H.LANDING
 
 
 def test_no_takeover_without_armed_vehicle_or_in_takeoff() -> None:
@@ -586,7 +592,7 @@ def test_link_regained_in_guided_holds_then_follows_the_mc() -> None:
     assert "link regained" in h.reason
     assert h.on_mc_state(M.ERROR, T0 + 25.1) == HlcOutcome()  # the MC has not decided yet
     assert h.on_mc_state(M.RTL, T0 + 25.3).actions == (Action.RTL,)  # its on_link_regained policy
-    assert h.state is H.RTL
+    assert state_of(h) is H.RTL
 
 
 def test_state_raising_is_a_stale_link_with_the_fault_as_reason() -> None:

@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 
 from antalate_lcm.errors import AntalateError
+from tests import REPO
 
-REPO = Path(__file__).resolve().parent.parent
 PACKAGES = ("antalate_lcm", "operator_tui", "behaviors")
 
 #: Lowest first. A unit is a subpackage or a top-level module of antalate_lcm (by its name), or a

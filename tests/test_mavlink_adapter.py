@@ -17,6 +17,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav2
 
 from antalate_lcm.autopilot import AutopilotError, AutopilotState, FlightMode, Frame, load_autopilot
 from antalate_lcm.autopilot.mavlink import DEFAULTS, VELOCITY_TYPE_MASK, MavlinkAutopilot, Params
+from tests import REPO
 from tests.emulators.mavlink_vehicle import MavlinkVehicle, VehicleSnapshot
 from tests.polling import wait_for
 
@@ -455,7 +456,6 @@ def test_params_documented_and_example_valid() -> None:
     """Every parameter is in docs/ardupilot.md and examples/arducopter_sitl.toml, and the example loads."""
     from antalate_lcm.config import load_config
     from antalate_lcm.runtime.agent import validate
-    from tests.netns import REPO
 
     doc = (REPO / "docs" / "ardupilot.md").read_text()
     config = load_config(REPO / "examples" / "arducopter_sitl.toml")

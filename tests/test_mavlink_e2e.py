@@ -312,9 +312,8 @@ def test_agent_process_flies_a_whole_mission_over_tcp(
         assert probe.wait("sitl/MC_STATE", "mc_state_t", timeout=20, since=mark, state=M.STANDBY)
         down = probe.wait("sitl/TELEMETRY", "telemetry_t", since=mark, timeout=2, armed=False, in_air=False)
         assert down is not None and down["mode"] == "RTL" and down["alt"] == 0.0
-        assert (
-            probe.wait("sitl/HLC_STATE", "hlc_state_t", since=mark, state=H.READY)["autopilot"] == "mavlink"
-        )
+        ready = probe.wait("sitl/HLC_STATE", "hlc_state_t", since=mark, state=H.READY)
+        assert ready is not None and ready["autopilot"] == "mavlink"
         assert agent.alive("agent")
     finally:
         codes = agent.stop()

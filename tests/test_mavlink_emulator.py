@@ -15,7 +15,7 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
-from antalate_lcm.autopilot import Frame
+from antalate_lcm.autopilot import FlightMode, Frame
 from antalate_lcm.autopilot.mavlink import MavlinkAutopilot
 from tests.emulators.mavlink_vehicle import PARAMS, MavlinkVehicle
 from tests.test_mavlink_adapter import FAST, fly, make_ap, state_until, vehicle_until
@@ -147,7 +147,8 @@ def test_signature_checked_before_the_timestamp_as_ardupilot_does() -> None:
         enc = mav2.MAVLink(None, srcSystem=245, srcComponent=191)
         enc.signing.secret_key, enc.signing.sign_outgoing, enc.signing.link_id = with_key, True, 7
         enc.signing.timestamp = int((time.time() - 1420070400 + seconds_ahead) * 1e5)
-        return enc.heartbeat_encode(mav2.MAV_TYPE_GCS, mav2.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(enc)
+        frame: bytes = enc.heartbeat_encode(mav2.MAV_TYPE_GCS, mav2.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(enc)
+        return frame
 
     assert [m.get_type() for m in peer.parse(signed(key, 0))] == ["HEARTBEAT"]
     assert peer.parse(signed(b"\x02" * 32, 3600)) == [] and peer.rejected == 1  # forged: a later timestamp
@@ -186,7 +187,7 @@ def test_gcs_failsafe_during_land_returns_unless_fs_options_continue_landing(
         assert s.failsafe == "GCS failsafe" and s.autonomous and ("GCS failsafe", "RTL") in v.failsafe_modes
     else:
         assert "GCS Failsafe - Continuing Landing" in v.statustexts
-        assert ap.state().flight_mode.name == "LANDING"
+        assert ap.state().flight_mode is FlightMode.LANDING
     v.drop_uplink(False)
 
 
@@ -260,7 +261,7 @@ def test_gcs_failsafe_in_a_pilot_mode_continues_by_default(made: list[Any]) -> N
     assert "GCS Failsafe - Continuing Pilot Control" in v.statustexts
     time.sleep(0.5)
     s = ap.state()
-    assert v.snapshot().mode == "LOITER" and s.flight_mode.name == "MANUAL" and s.failsafe == ""
+    assert v.snapshot().mode == "LOITER" and s.flight_mode is FlightMode.MANUAL and s.failsafe == ""
     v.drop_uplink(False)
 
 
@@ -271,7 +272,7 @@ def test_failsafe_land_pauses_4_s_before_descending(made: list[Any]) -> None:
     fly(ap, v, alt=2.0)
     v.fail_ekf()
     s = state_until(ap, lambda s: s.mode == "LAND", 3)
-    assert s.failsafe == "EKF failsafe" and s.flight_mode.name == "LANDING"
+    assert s.failsafe == "EKF failsafe" and s.flight_mode is FlightMode.LANDING
     start, alt = time.monotonic(), v.snapshot().alt
     time.sleep(3.0)
     assert v.snapshot().alt > alt - 0.2  # still hovering

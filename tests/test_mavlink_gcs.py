@@ -23,27 +23,12 @@ from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t
 from antalate_lcm.security import generate_key
 from antalate_lcm.vocabulary import Command, HlcState, McState
 from tests.agent_harness import agent_config
-from tests.conftest import MCAST_URL
-from tests.netns import stop_process
+from tests.conftest import MCAST_URL, Probe
+from tests.netns import NetNamespace, child_env, stop_process
 from tests.polling import wait_for
 
 MAVPROXY = Path(sys.executable).parent / "mavproxy.py"
 AGENTS = 5
-#: What MAVProxy forwards on an --out: the last GLOBAL_POSITION_INT of each system id, once N system
-#: ids were heard for a second (or after T s).
-LISTEN = """
-import json, sys, time
-from pymavlink import mavutil
-link = mavutil.mavlink_connection(f"udpin:127.0.0.1:{sys.argv[1]}")
-last, end, full = {}, time.monotonic() + float(sys.argv[3]), None
-while time.monotonic() < end and (full is None or time.monotonic() < full + 1):
-    if full is None and len(last) >= int(sys.argv[2]):
-        full = time.monotonic()
-    m = link.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=0.5)
-    if m is not None:
-        last[m.get_srcSystem()] = (m.lat, m.lon)
-print(json.dumps(last))
-"""
 
 
 # ----------------------------------------------------------------------------- the mapping, pure
@@ -214,8 +199,8 @@ def _gcs(netns: Any, cfg: Path, *extra: str) -> tuple[subprocess.Popen[str], dic
 
 @pytest.mark.netns
 def test_mavproxy_sees_five_vehicles_and_flies_them_only_when_commands_are_on(
-    netns, probe, tmp_path: Path
-) -> None:  # type: ignore[no-untyped-def]
+    netns: NetNamespace, probe: Probe, tmp_path: Path
+) -> None:
     if not MAVPROXY.exists():
         pytest.skip("MAVProxy is not installed (pip install MAVProxy: the dev extra has it)")
     key = generate_key()
@@ -232,7 +217,7 @@ def test_mavproxy_sees_five_vehicles_and_flies_them_only_when_commands_are_on(
     gcs, sysids, gcs_lines = _gcs(netns, gcs_cfg, "--port", "14551")
     (tmp_path / "off").mkdir()
     forwarded = netns.popen(
-        [sys.executable, "-c", LISTEN, "14600", str(AGENTS), "30"],
+        [sys.executable, "-m", "tests.children.mavlink_listen", "14600", str(AGENTS), "30"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )
@@ -255,9 +240,11 @@ def test_mavproxy_sees_five_vehicles_and_flies_them_only_when_commands_are_on(
         for name in names:
             # refused: two seconds of telemetry after the takeoff, every one on the ground, MC in STANDBY
             telemetry = f"{name}/TELEMETRY"
-            assert wait_for(
-                lambda ch=telemetry: len(probe.history(ch, "telemetry_t", since=refused_at)) >= 20, timeout=15
-            )
+
+            def recorded(ch: str = telemetry) -> bool:
+                return len(probe.history(ch, "telemetry_t", since=refused_at)) >= 20
+
+            assert wait_for(recorded, timeout=15)
             since = probe.history(telemetry, "telemetry_t", since=refused_at)
             assert not any(t["in_air"] or t["armed"] for t in since), name
             states = {m["state"] for m in probe.history(f"{name}/MC_STATE", "mc_state_t", since=refused_at)}
@@ -266,14 +253,7 @@ def test_mavproxy_sees_five_vehicles_and_flies_them_only_when_commands_are_on(
             lat, lon = heard[str(sysids[name])]
             assert (lat, lon) == (round(t["lat"] * 1e7), round(t["lon"] * 1e7)), name
         # garbage at the endpoint is dropped; the server keeps serving
-        netns.run(
-            [
-                sys.executable,
-                "-c",
-                "import os,socket; s=socket.socket(socket.AF_INET,socket.SOCK_DGRAM)\n"
-                "for _ in range(50): s.sendto(b'\\xfd' + os.urandom(60), ('127.0.0.1', 14551))",
-            ]
-        )
+        netns.run([sys.executable, "-m", "tests.children.mavlink_garbage", "14551"], env=child_env())
         assert gcs.poll() is None
         assert stop_process(gcs) == 0
         summary = wait_for(

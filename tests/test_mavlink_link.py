@@ -15,6 +15,13 @@ from antalate_lcm.autopilot.mavlink.link import LinkClosed, MemoryLink, _convert
 KEY = bytes(range(32))
 
 
+def received(link: MemoryLink) -> Any:
+    """The next message off ``link``; a second without one fails the test."""
+    msg = link.recv(1.0)
+    assert msg is not None, "nothing received within 1 s"
+    return msg
+
+
 def echo_ack(msg: Any) -> Iterable[Any]:
     if msg.get_type() == "COMMAND_LONG":
         yield mav.MAVLink_command_ack_message(msg.command, mav.MAV_RESULT_ACCEPTED, 0, 0, 245, 191)
@@ -42,11 +49,11 @@ def test_frames_are_real_bytes_both_ways() -> None:
 def test_answering_link_replies_through_the_codec() -> None:
     link = MemoryLink.answering(echo_ack)
     link.send(dialect.command_long((1, 1), mav.MAV_CMD_DO_SET_MODE, 0, 1, 4))
-    reply = link.recv(1.0)
+    reply = received(link)
     assert reply.get_type() == "COMMAND_ACK" and reply.command == mav.MAV_CMD_DO_SET_MODE
     assert (reply.get_srcSystem(), reply.get_srcComponent()) == (1, 1)
     link.push(mav.MAVLink_extended_sys_state_message(0, mav.MAV_LANDED_STATE_IN_AIR))
-    assert link.recv(1.0).landed_state == mav.MAV_LANDED_STATE_IN_AIR
+    assert received(link).landed_state == mav.MAV_LANDED_STATE_IN_AIR
     with pytest.raises(TypeError):
         MemoryLink(lambda _data: None).push(dialect.gcs_heartbeat())
 
@@ -60,24 +67,24 @@ def test_a_failing_handler_is_logged_and_the_link_goes_on(caplog: pytest.LogCapt
     link = MemoryLink.answering(broken)
     link.send(dialect.gcs_heartbeat())  # the sender (the adapter's transmit thread) is not hit
     link.send(dialect.command_long((1, 1), mav.MAV_CMD_NAV_TAKEOFF, 0))
-    assert link.recv(1.0).get_type() == "COMMAND_ACK"
+    assert received(link).get_type() == "COMMAND_ACK"
     assert "MemoryLink handler failed on HEARTBEAT" in caplog.text
 
 
 def test_signed_link_drops_what_the_vehicle_sends_without_the_key() -> None:
     signed = MemoryLink.answering(echo_ack, signing_key=KEY)
     signed.send(dialect.command_long((1, 1), mav.MAV_CMD_NAV_TAKEOFF, 0))
-    assert signed.recv(1.0).get_type() == "COMMAND_ACK"  # both ends share the key
+    assert received(signed).get_type() == "COMMAND_ACK"  # both ends share the key
     forged = mav.MAVLink(None, srcSystem=1, srcComponent=1)
     signed.feed(mav.MAVLink_heartbeat_message(2, 3, 0, 4, 3, 3).pack(forged))  # unsigned
-    bad = signed.recv(1.0)
+    bad = received(signed)
     assert bad.get_type() == "BAD_DATA" and "signature" in str(bad.reason)
     mismatched = MemoryLink.answering(echo_ack, signing_key=bytes(32))
     wire: list[bytes] = []
     ours = MemoryLink(wire.append, signing_key=KEY)
     ours.send(dialect.command_long((1, 1), mav.MAV_CMD_NAV_TAKEOFF, 0))
     mismatched.feed(wire[0])  # our signed frame, parsed by a link with another key
-    assert mismatched.recv(1.0).get_type() == "BAD_DATA"
+    assert received(mismatched).get_type() == "BAD_DATA"
 
 
 def test_closed_link_refuses_to_send_and_receive() -> None:

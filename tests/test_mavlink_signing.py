@@ -18,6 +18,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav2
 
 from antalate_lcm.autopilot import AutopilotError, Frame
 from antalate_lcm.autopilot.mavlink import MavlinkAutopilot
+from antalate_lcm.autopilot.mavlink.link import PymavlinkLink
 from antalate_lcm.autopilot.mavlink.signing import signing_key
 from tests.emulators.mavlink_vehicle import COPTER_MODES, MavlinkVehicle
 from tests.polling import wait_for
@@ -126,7 +127,9 @@ def test_forged_unsigned_messages_on_a_signed_link_change_nothing(made: list[Any
     forger = mav2.MAVLink(None, srcSystem=245, srcComponent=191)  # signed, wrong key, a later timestamp
     forger.signing.secret_key, forger.signing.sign_outgoing = b"\x02" * 32, True
     forger.signing.timestamp = int((time.time() - 1420070400 + 3600) * 1e5)
-    forger.signing.link_id = ap._link.codec.signing.link_id  # our stream: an attacker reads it off any frame
+    ours = ap._link
+    assert isinstance(ours, PymavlinkLink)
+    forger.signing.link_id = ours.codec.signing.link_id  # our stream: an attacker reads it off any frame
     rtl = forger.command_long_encode(1, 1, mav2.MAV_CMD_NAV_RETURN_TO_LAUNCH, 0, 0, 0, 0, 0, 0, 0, 0)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.sendto(land.pack(attacker), ("127.0.0.1", v.udp_port))

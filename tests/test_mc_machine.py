@@ -5,6 +5,7 @@ failsafe rows: link regained by policy, HOLD, HLC_LOST and its resync, following
 from __future__ import annotations
 
 from dataclasses import FrozenInstanceError
+from typing import Any
 
 import pytest
 
@@ -24,6 +25,12 @@ C = Command
 T0 = 1000.0
 
 # -------------------------------------------------------------------------------- helpers
+
+
+def state_of(mc: MissionControl) -> McState:
+    """The state read afresh: mypy keeps ``mc.state`` narrowed by an earlier assert across the calls
+    that change it."""
+    return mc.state
 
 
 def mc_in(state: McState, params: McParams | None = None) -> MissionControl:
@@ -221,7 +228,7 @@ def test_resync_into_takeoff_then_hlc_ready_means_takeoff_failed() -> None:
     mc.on_hlc_state(H.GAINING_ALTITUDE, T0)
     assert mc.state is M.TAKEOFF
     mc.on_hlc_state(H.READY, T0 + 1)
-    assert mc.state is M.STANDBY
+    assert state_of(mc) is M.STANDBY
 
 
 def test_error_waits_while_the_hlc_reports_llc_down() -> None:
@@ -291,7 +298,7 @@ def test_autopilot_failsafe_rtl_is_followed_and_the_operator_can_still_land() ->
     outcome = mc.on_hlc_state(H.RTL, T0 + 5)
     assert mc.state is M.RTL and "on its own" in outcome.reason
     assert mc.on_command(C.LAND, 5, T0 + 6, sender="op").accepted
-    assert mc.state is M.LAND
+    assert state_of(mc) is M.LAND
 
 
 def test_hlc_lost_after_the_timeout_and_resync_when_heard_again() -> None:
@@ -307,7 +314,7 @@ def test_hlc_lost_after_the_timeout_and_resync_when_heard_again() -> None:
         assert not rejected.accepted and "nobody can execute it" in rejected.reason
     assert mc.on_hlc_state(H.INIT, T0 + 12).transition is None  # a new HLC, not synced yet
     outcome = mc.on_hlc_state(H.RTL, T0 + 13)
-    assert mc.state is M.RTL and "resync" in outcome.reason
+    assert state_of(mc) is M.RTL and "resync" in outcome.reason
     assert mc.last_command_seq == 1  # the resync acknowledged nothing
 
 
@@ -341,7 +348,7 @@ def test_takeoff_ack_timeout_uses_the_injected_time() -> None:
     assert mc.tick(53.99).transition is None
     mc.on_hlc_state(H.READY, 53.995)  # the HLC is still READY: no change
     outcome = mc.tick(54.0)
-    assert mc.state is M.STANDBY
+    assert state_of(mc) is M.STANDBY
     assert outcome.transition is not None and outcome.transition.event is McEvent.TAKEOFF_ACK_TIMEOUT
     assert "4 s" in outcome.reason
     assert mc.last_command_seq == 7  # the command was accepted; it just did not work
@@ -427,7 +434,7 @@ def test_plain_ints_from_the_wire_are_accepted() -> None:
     mc.on_hlc_state(hlc_state_value := 1, T0)  # READY as it arrives in hlc_state_t.state
     assert hlc_state_value == H.READY and mc.state is M.STANDBY
     assert mc.on_command(operator_cmd_t.TAKEOFF, 1, T0).accepted
-    assert mc.state is M.TAKEOFF
+    assert state_of(mc) is M.TAKEOFF
 
 
 # -------------------------------------------------------------------------------- duplicates
@@ -480,7 +487,7 @@ def test_duplicates_are_forgotten_after_the_window() -> None:
     assert mc.on_command(C.TAKEOFF, 1, 105.0, sender="op").duplicate
     assert mc.state is M.STANDBY
     outcome = mc.on_command(C.TAKEOFF, 1, 111.0, sender="op")
-    assert outcome.accepted and not outcome.duplicate and mc.state is M.TAKEOFF
+    assert outcome.accepted and not outcome.duplicate and state_of(mc) is M.TAKEOFF
 
 
 def test_rejected_command_redelivered_is_evaluated_again() -> None:
@@ -494,5 +501,6 @@ def test_rejected_command_redelivered_is_evaluated_again() -> None:
 @pytest.mark.parametrize("field", ["takeoff_ack_timeout", "duplicate_window", "hlc_timeout"])
 @pytest.mark.parametrize("value", [0.0, -1.0, float("nan"), float("inf")])
 def test_params_validated(field: str, value: float) -> None:
+    bad: dict[str, Any] = {field: value}
     with pytest.raises(ValueError, match=field):
-        McParams(**{field: value})
+        McParams(**bad)

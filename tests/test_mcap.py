@@ -152,7 +152,7 @@ def assert_same_fields(lcm_value: Any, json_value: Any, where: str) -> None:
 def check_against_lcm(lcm_path: Path, mcap_path: Path) -> set[str]:
     """Every antalate message of the LCM log is in the MCAP file, in order, with the same fields, at
     the same log time; returns the types seen."""
-    originals = {}
+    originals: dict[str, list[tuple[int, bytes]]] = {}
     for utime, channel, data in lcm_events(lcm_path):
         originals.setdefault(channel, []).append((utime, data))
     seen: dict[str, int] = {}
@@ -302,7 +302,7 @@ def test_bad_inputs_are_one_line_errors(tmp_path: Path, capsys: pytest.CaptureFi
         raw_writer.add_message(cid, T0 * 1000 + 1, b"{not json", T0 * 1000)
         t = _header(telemetry_t(), "a-1", 1)
         raw_writer.add_message(cid, T0 * 1000 + 2, json.dumps(lcm_json.to_json(t)).encode(), T0 * 1000)
-        raw_writer.finish()
+        raw_writer.finish()  # type: ignore[no-untyped-call]  # mcap's Writer.finish has no annotation
     record = read_log(edited)
     assert record.undecodable == {"a-1/TELEMETRY": 2} and len(record.agents["a-1"].telemetry) == 1
 

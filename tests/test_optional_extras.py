@@ -13,6 +13,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 import tomli_w
@@ -21,24 +22,24 @@ from antalate_lcm.analysis.plot import MATPLOTLIB_MISSING
 from antalate_lcm.autopilot import AutopilotError
 from antalate_lcm.autopilot.tello import DJITELLOPY_MISSING, TelloAutopilot
 from antalate_lcm.config import load_config
+from tests import REPO
 
-REPO = Path(__file__).resolve().parents[1]
 
-
-def antalate_without(module: str, *argv: str, **kw: object) -> subprocess.Popen[str]:
+def antalate_without(module: str, *argv: str, **kw: Any) -> subprocess.Popen[str]:
     """``antalate ARGV`` in a fresh interpreter in which ``import MODULE`` fails."""
     code = (
         f"import sys; sys.modules[{module!r}] = None; from antalate_lcm.cli import main; "
         f"sys.exit(main({list(argv)!r}))"
     )
-    return subprocess.Popen(
+    proc: subprocess.Popen[str] = subprocess.Popen(
         [sys.executable, "-c", code],
         cwd=REPO,
         text=True,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         **kw,
-    )  # type: ignore[call-overload]
+    )
+    return proc
 
 
 def tello_config(tmp_path: Path) -> Path:

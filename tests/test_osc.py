@@ -145,6 +145,7 @@ class _Garbage(http.server.BaseHTTPRequestHandler):
 
     def do_POST(self) -> None:  # noqa: N802 - http.server's API
         self.rfile.read(int(self.headers.get("Content-Length", 0)))
+        assert isinstance(self.server, GarbageServer)
         body, status = {
             "bad_json": (b"{not json", 200),
             "wrong_fields": (
@@ -159,7 +160,7 @@ class _Garbage(http.server.BaseHTTPRequestHandler):
             "status": (b'{"detail": "boom"}', 500),
             "html": (b"<html>proxy error</html>", 502),
             "partial_cmd": (json.dumps({"token": "t", "operator_cmd": {"command": "LAND"}}).encode(), 200),
-        }[self.server.mode]  # type: ignore[attr-defined]
+        }[self.server.mode]
         self.send_response(status)
         self.send_header("Content-Type", "application/json")
         self.send_header("Content-Length", str(len(body)))
@@ -167,9 +168,17 @@ class _Garbage(http.server.BaseHTTPRequestHandler):
         self.wfile.write(body)
 
 
+class GarbageServer(http.server.ThreadingHTTPServer):
+    """The broken station's server: ``mode`` picks the garbage its handler replies."""
+
+    def __init__(self) -> None:
+        super().__init__(("127.0.0.1", 0), _Garbage)
+        self.mode = ""
+
+
 @pytest.fixture
-def garbage_server() -> Iterator[http.server.ThreadingHTTPServer]:
-    srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _Garbage)
+def garbage_server() -> Iterator[GarbageServer]:
+    srv = GarbageServer()
     th = threading.Thread(target=srv.serve_forever, daemon=True)
     th.start()
     yield srv
@@ -179,9 +188,9 @@ def garbage_server() -> Iterator[http.server.ThreadingHTTPServer]:
 
 @pytest.mark.parametrize("mode", ["bad_json", "wrong_fields", "nan", "huge", "status", "html", "partial_cmd"])
 def test_garbage_replies_are_ignored_and_retried(
-    garbage_server: http.server.ThreadingHTTPServer, mode: str, caplog: pytest.LogCaptureFixture
+    garbage_server: GarbageServer, mode: str, caplog: pytest.LogCaptureFixture
 ) -> None:
-    garbage_server.mode = mode  # type: ignore[attr-defined]
+    garbage_server.mode = mode
     node, ctx, got = make_osc(f"http://127.0.0.1:{garbage_server.server_address[1]}", max_reply_bytes=65536)
     try:
         feed_state(ctx)
@@ -315,7 +324,8 @@ class _Liar(http.server.BaseHTTPRequestHandler):
 
     def do_POST(self) -> None:  # noqa: N802 - http.server's API
         self.rfile.read(int(self.headers.get("Content-Length", 0)))
-        replies: list[dict[str, Any]] = self.server.replies  # type: ignore[attr-defined]
+        assert isinstance(self.server, LiarServer)
+        replies = self.server.replies
         body = json.dumps(replies.pop(0) if replies else {"token": "t"}).encode()
         self.send_response(200)
         self.send_header("Content-Type", "application/json")
@@ -324,10 +334,17 @@ class _Liar(http.server.BaseHTTPRequestHandler):
         self.wfile.write(body)
 
 
+class LiarServer(http.server.ThreadingHTTPServer):
+    """The lying station's server: the replies its handler hands out, in turn."""
+
+    def __init__(self) -> None:
+        super().__init__(("127.0.0.1", 0), _Liar)
+        self.replies: list[dict[str, Any]] = []
+
+
 @pytest.fixture
-def liar() -> Iterator[http.server.ThreadingHTTPServer]:
-    srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _Liar)
-    srv.replies = []  # type: ignore[attr-defined]
+def liar() -> Iterator[LiarServer]:
+    srv = LiarServer()
     th = threading.Thread(target=srv.serve_forever, daemon=True)
     th.start()
     yield srv
@@ -348,7 +365,7 @@ def signed_cmd(
 
 
 def test_a_lying_station_cannot_make_up_retarget_or_replay_commands(
-    liar: http.server.ThreadingHTTPServer, caplog: pytest.LogCaptureFixture
+    liar: LiarServer, caplog: pytest.LogCaptureFixture
 ) -> None:
     caplog.set_level(logging.WARNING)
     good = signed_cmd("LAND", seq=7)
@@ -361,7 +378,7 @@ def test_a_lying_station_cannot_make_up_retarget_or_replay_commands(
     unsigned_dir = {"active": True, "azimuth": 90.0, "speed": 5.0, "seq": 14}
     liar.replies = [
         {"token": "t", "operator_cmd": c}
-        for c in (  # type: ignore[attr-defined]
+        for c in (
             unsigned,
             forged,
             tampered,
@@ -372,10 +389,10 @@ def test_a_lying_station_cannot_make_up_retarget_or_replay_commands(
             good,
         )
     ]
-    liar.replies.append({"token": "t", "direction_cmd": unsigned_dir})  # type: ignore[attr-defined]
+    liar.replies.append({"token": "t", "direction_cmd": unsigned_dir})
     node, ctx, got = make_osc(f"http://127.0.0.1:{liar.server_address[1]}", security={"swarm_key": KEY})
     try:
-        assert wait_for(lambda: not liar.replies and node.reports_ok >= 10, 10)  # type: ignore[attr-defined]
+        assert wait_for(lambda: not liar.replies and node.reports_ok >= 10, 10)
         time.sleep(0.3)
         assert [(m.header.seq, m.header.agent, m.command) for m in got["cmd"]] == [
             (7, "console", operator_cmd_t.LAND)
@@ -391,8 +408,8 @@ def test_a_lying_station_cannot_make_up_retarget_or_replay_commands(
         ctx.close()
 
 
-def test_without_a_key_station_commands_pass_unsigned(liar: http.server.ThreadingHTTPServer) -> None:
-    liar.replies = [{"token": "t", "operator_cmd": {"command": "RTL", "seq": 3}}]  # type: ignore[attr-defined]
+def test_without_a_key_station_commands_pass_unsigned(liar: LiarServer) -> None:
+    liar.replies = [{"token": "t", "operator_cmd": {"command": "RTL", "seq": 3}}]
     node, ctx, got = make_osc(f"http://127.0.0.1:{liar.server_address[1]}")
     try:
         assert wait_for(lambda: got["cmd"], 5)

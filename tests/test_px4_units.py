@@ -4,7 +4,6 @@ and the failsafe-parameter checks (hand-made MAVLink messages, no sockets, no SI
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -17,6 +16,7 @@ from antalate_lcm.autopilot.px4.offboard import OffboardRules
 from antalate_lcm.autopilot.px4.vehicle import Px4Vehicle, decode_param, encode_param
 from antalate_lcm.config import load_config
 from antalate_lcm.runtime.agent import validate
+from tests import REPO
 
 HOLD = modes.pack(modes.AUTO, modes.AUTO_LOITER)
 TAKEOFF = modes.pack(modes.AUTO, modes.AUTO_TAKEOFF)
@@ -287,7 +287,7 @@ def test_setpoints_use_the_frames_px4_accepts(frame: Frame, wire: int) -> None:
 def test_the_px4_sitl_example_loads_and_flies_sitl_instance_0() -> None:
     """examples/px4_sitl.toml through the config loader and the adapter's own parameter model: PX4
     SITL instance 0's offboard link, the defaults docs/px4.md gives."""
-    config = load_config(Path(__file__).resolve().parent.parent / "examples" / "px4_sitl.toml")
+    config = load_config(REPO / "examples" / "px4_sitl.toml")
     validate(config)
     assert config.hlc.autopilot == "px4"
     params = Px4Params.model_validate(config.hlc.autopilot_params)

@@ -71,7 +71,7 @@ def test_contract_basics() -> None:
     assert issubclass(SimAutopilot, Autopilot)
     with pytest.raises(TypeError):
         Autopilot()  # type: ignore[abstract]
-    assert Frame.BODY == 0 and Frame.NED == 1
+    assert int(Frame.BODY) == 0 and int(Frame.NED) == 1
 
 
 def test_state_before_connect_and_after_close() -> None:

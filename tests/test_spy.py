@@ -29,7 +29,10 @@ import pytest
 from antalate_lcm import spy
 from antalate_lcm.msgs import header_t, mc_state_t, telemetry_t
 from antalate_lcm.tools import codegen as _codegen
-from tests.netns import REPO, NetNamespace, group_members, netns_unavailable, stop_process
+from antalate_lcm.topics import Message
+from tests import REPO
+from tests.lcm_tables import dimensions, fingerprint, slots, typenames
+from tests.netns import NetNamespace, group_members, netns_unavailable, stop_process
 from tests.polling import wait_for
 
 JAVA_SRC = Path(__file__).resolve().parent / "java" / "DecodeCheck.java"
@@ -42,15 +45,17 @@ needs_java = pytest.mark.skipif(
 )
 
 
-def msg_class(type_name: str) -> type:
+def msg_class(type_name: str) -> type[Message]:
     """The generated Python class for an LCM type name, short (``telemetry_t``) or qualified."""
     short = type_name.rsplit(".", 1)[-1]
-    return getattr(importlib.import_module(f"antalate_lcm.msgs.{short}"), short)
+    cls: type[Message] = getattr(importlib.import_module(f"antalate_lcm.msgs.{short}"), short)
+    return cls
 
 
 def f32(x: float) -> float:
     """What a Python float becomes once it travels as an LCM ``float``."""
-    return struct.unpack(">f", struct.pack(">f", x))[0]
+    single: float = struct.unpack(">f", struct.pack(">f", x))[0]
+    return single
 
 
 # -- messages with known values --------------------------------------------------------------------
@@ -93,7 +98,7 @@ def sample(msg_type: type, salt: int = 1) -> Any:
     """
     msg = msg_type()
     for k, (name, tname, dims) in enumerate(
-        zip(msg_type.__slots__, msg_type.__typenames__, msg_type.__dimensions__, strict=True)
+        zip(slots(msg_type), typenames(msg_type), dimensions(msg_type), strict=True)
     ):
         s = salt * 31 + k
         if dims is None:
@@ -134,10 +139,8 @@ def scalar(tname: str, s: int) -> Any:
 def assert_same(py: Any, java: Any, msg_type: type, path: str) -> None:
     """``py`` is the Python-decoded message, ``java`` the JSON DecodeCheck printed for it."""
     assert isinstance(java, dict), f"{path}: Java gave {java!r}"
-    assert set(java) == set(msg_type.__slots__), f"{path}: Java fields {sorted(java)}"
-    for name, tname, dims in zip(
-        msg_type.__slots__, msg_type.__typenames__, msg_type.__dimensions__, strict=True
-    ):
+    assert set(java) == set(slots(msg_type)), f"{path}: Java fields {sorted(java)}"
+    for name, tname, dims in zip(slots(msg_type), typenames(msg_type), dimensions(msg_type), strict=True):
         pv, jv = getattr(py, name), java[name]
         where = f"{path}.{name}"
         if dims is not None and tname == "byte":
@@ -243,7 +246,7 @@ def test_java_decodes_what_python_encodes(java_cp: str, tmp_path: Path) -> None:
 @needs_java
 def test_lcm_spy_type_database_maps_every_fingerprint(java_cp: str) -> None:
     """lcm-spy's own classpath scan (LCMTypeDatabase) maps each Python fingerprint to the right class."""
-    args = [f"{name}={msg_class(name)._get_packed_fingerprint().hex()}" for name in TYPE_NAMES]
+    args = [f"{name}={fingerprint(msg_class(name)).hex()}" for name in TYPE_NAMES]
     lines = run_java(java_cp, "spytypes", *args)
     found = dict(line.split("=", 1) for line in lines if "=" in line and not line.startswith(" "))
     assert found == {name: f"antalate_lcm.msgs.{name}" for name in TYPE_NAMES}

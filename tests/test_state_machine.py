@@ -12,8 +12,7 @@ from pathlib import Path
 from typing import Protocol
 
 from antalate_lcm.state_machine import Row, Table
-
-REPO = Path(__file__).resolve().parent.parent
+from tests import REPO
 
 
 class S(enum.Enum):

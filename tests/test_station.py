@@ -22,10 +22,10 @@ from antalate_lcm.errors import AntalateError
 from antalate_lcm.station import StationServer, StationSettings, default_db_path, models, run_station
 from antalate_lcm.station._auth import sha256_hex
 from antalate_lcm.station._settings import ApiKey
+from tests import REPO
 from tests.test_station_sector import place
 
 ORIGIN = (32.7767, 35.0231)
-REPO = Path(__file__).resolve().parents[1]
 OPERATOR_KEY = "antk_test-operator-key-0123456789abcdefghijklmnopq"
 READER_KEY = "antk_test-reader-key-0123456789abcdefghijklmnopqrs"
 API_KEYS = (
@@ -101,13 +101,15 @@ def report(
     }
     r = c.post("/api/report", json=body)
     assert r.status_code == 200, r.text
-    return r.json()
+    answer: dict[str, Any] = r.json()
+    return answer
 
 
 def detection(reply: dict[str, Any]) -> dict[str, Any]:
     payload = reply["payload"]
     assert payload["content_type"] == "application/json"
-    return json.loads(payload["data"])
+    found: dict[str, Any] = json.loads(payload["data"])
+    return found
 
 
 # -- tokens ------------------------------------------------------------------------------------------

@@ -25,6 +25,7 @@ from antalate_lcm.analysis.geometry import (
 from antalate_lcm.analysis.swarm import sample_times
 from antalate_lcm.cli import main
 from antalate_lcm.msgs import mc_state_t
+from tests import REPO
 from tests.synthetic_logs import CORNERS, LogWriter
 
 R0 = 10 * math.sqrt(2)  # a corner's distance to the centre of the 20 m square
@@ -33,7 +34,7 @@ R0 = 10 * math.sqrt(2)  # a corner's distance to the centre of the 20 m square
 # ----------------------------------------------------------------------------- one instant
 def test_closest_pair_nearest_neighbours_and_components() -> None:
     pts = {"a": (0.0, 0.0), "b": (0.0, 3.0), "c": (0.0, 10.0), "d": (20.0, 0.0)}
-    assert closest_pair(pts) == (pytest.approx(3.0), "a", "b")
+    assert closest_pair(pts) == pytest.approx((3.0, "a", "b"))
     assert closest_pair({"a": (0.0, 0.0)}) is None
     assert nearest_neighbour_distances(pts) == pytest.approx({"a": 3.0, "b": 3.0, "c": 7.0, "d": 20.0})
     assert nearest_neighbour_distances({"a": (1.0, 1.0)}) == {}
@@ -42,7 +43,8 @@ def test_closest_pair_nearest_neighbours_and_components() -> None:
     assert components(pts, 6.9) == [{"a", "b"}, {"c"}, {"d"}]
     assert components(pts, 25.0) == [{"a", "b", "c", "d"}]
     # ties: the pair whose names sort first
-    assert closest_pair({"z": (0.0, 0.0), "y": (0.0, 1.0), "x": (0.0, 2.0)})[1:] == ("x", "y")
+    tie = closest_pair({"z": (0.0, 0.0), "y": (0.0, 1.0), "x": (0.0, 2.0)})
+    assert tie is not None and tie[1:] == ("x", "y")
 
 
 def test_polarisation_known_values() -> None:
@@ -124,11 +126,10 @@ def gathering(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Analysis]
 
 def test_phases_keep_takeoff_mission_and_return_apart(gathering: tuple[Path, Analysis]) -> None:
     _, result = gathering
-    assert [(p.phase.name, p.phase.start, p.phase.end) for p in result.phases] == [
-        ("takeoff", pytest.approx(1.0), pytest.approx(3.0)),
-        ("mission", pytest.approx(3.0), pytest.approx(13.0)),
-        ("return", pytest.approx(13.0), pytest.approx(17.0)),
-    ]
+    assert [p.phase.name for p in result.phases] == ["takeoff", "mission", "return"]
+    assert [t for p in result.phases for t in (p.phase.start, p.phase.end)] == pytest.approx(
+        [1.0, 3.0, 3.0, 13.0, 13.0, 17.0]
+    )
     mission, ret = result.phase("mission"), result.phase("return")
     assert mission is not None and ret is not None
     assert mission.samples == 101  # 3.0, 3.1, ..., 13.0
@@ -142,9 +143,9 @@ def test_radius_and_mean_distance_start_end_min_max(gathering: tuple[Path, Analy
     mission = gathering[1].phase("mission")
     assert mission is not None and mission.radius is not None and mission.mean_distance is not None
     r = mission.radius
-    assert (r.start, r.end) == (pytest.approx(R0, abs=1e-3), pytest.approx(0.2 * R0, abs=1e-3))
-    assert (r.min, r.min_t) == (pytest.approx(0.2 * R0, abs=1e-3), pytest.approx(13.0))
-    assert (r.max, r.max_t) == (pytest.approx(R0, abs=1e-3), pytest.approx(3.0, abs=0.05))
+    assert (r.start, r.end) == pytest.approx((R0, 0.2 * R0), abs=1e-3)
+    assert r.min == pytest.approx(0.2 * R0, abs=1e-3) and r.min_t == pytest.approx(13.0)
+    assert r.max == pytest.approx(R0, abs=1e-3) and r.max_t == pytest.approx(3.0, abs=0.05)
     # the mean of a linear fall sampled evenly: the middle value, k = 0.6
     assert r.mean == pytest.approx(0.6 * R0, abs=1e-3)
     m = mission.mean_distance  # symmetric swarm: every agent at the radius
@@ -180,15 +181,15 @@ def test_min_separation_nearest_neighbours_connectivity(gathering: tuple[Path, A
     nn = mission.nearest_neighbour
     assert nn is not None
     assert nn.count == 4 * 101
-    assert (nn.min, nn.max) == (pytest.approx(4.0, abs=1e-3), pytest.approx(20.0, abs=1e-3))
-    assert (nn.median, nn.mean) == (pytest.approx(12.0, abs=1e-3), pytest.approx(12.0, abs=1e-3))
+    assert (nn.min, nn.max) == pytest.approx((4.0, 20.0), abs=1e-3)
+    assert (nn.median, nn.mean) == pytest.approx((12.0, 12.0), abs=1e-3)
     assert nn.p10 == pytest.approx(4.0 + 0.1 * 16.0, abs=1e-3)
     # connected at 10 m once the side is at most 10 m: k <= 0.5 from 9.25 s, i.e. the 38 samples 9.3..13.0
     c = mission.connectivity
     assert c is not None and c.range_m == 10.0
     assert c.connected_fraction == pytest.approx(38 / 101)
     assert c.first_split_t == pytest.approx(3.0)
-    assert (c.min_largest, c.min_largest_t) == (1, pytest.approx(3.0))
+    assert c.min_largest == 1 and c.min_largest_t == pytest.approx(3.0)
     # gathering: every agent heads for the centre, so the headings cancel out exactly
     assert mission.polarisation is not None and mission.polarisation.max == pytest.approx(0.0, abs=1e-6)
 
@@ -199,8 +200,8 @@ def test_the_python_api_returns_the_trajectories(gathering: tuple[Path, Analysis
     a1 = result.tracks["a-1"]
     assert len(a1.t) == 181
     i = a1.t.index(8.0)  # k = 0.6 in the mission
-    assert (a1.north[i], a1.east[i]) == (pytest.approx(6.0, abs=1e-3), pytest.approx(6.0, abs=1e-3))
-    assert (a1.vn[i], a1.ve[i]) == (pytest.approx(-0.8, abs=1e-6), pytest.approx(-0.8, abs=1e-6))
+    assert (a1.north[i], a1.east[i]) == pytest.approx((6.0, 6.0), abs=1e-3)
+    assert (a1.vn[i], a1.ve[i]) == pytest.approx((-0.8, -0.8), abs=1e-6)
     # the series over the whole log, every bin (1 s)
     assert [s.t for s in result.series] == [float(k) for k in range(19)]
     assert result.series[8].radius == pytest.approx(0.6 * R0, abs=1e-3)
@@ -227,12 +228,8 @@ def test_closest_approach_when_and_which_pair_and_polarisation(tmp_path: Path) -
     assert mission is not None and [p.phase.name for p in result.phases] == ["mission"]
     sep = mission.min_separation
     assert sep is not None
-    assert (sep.distance, sep.t, sep.a, sep.b) == (
-        pytest.approx(2.0, abs=1e-3),
-        pytest.approx(10.0),
-        "a-1",
-        "a-2",
-    )
+    assert sep.distance == pytest.approx(2.0, abs=1e-3) and sep.t == pytest.approx(10.0)
+    assert (sep.a, sep.b) == ("a-1", "a-2")
     # three east, one west: |(0, 2/4)| = 0.5 all along
     pol = mission.polarisation
     assert pol is not None
@@ -273,7 +270,7 @@ def test_connectivity_first_split(tmp_path: Path) -> None:
     # the gap 8 + 0.3 t exceeds 10 m after 6.67 s: the 6.7 s sample; 0.0..6.6 connected = 67 of 201
     assert c.first_split_t == pytest.approx(6.7)
     assert c.connected_fraction == pytest.approx(67 / 201)
-    assert (c.min_largest, c.min_largest_t) == (3, pytest.approx(6.7))
+    assert c.min_largest == 3 and c.min_largest_t == pytest.approx(6.7)
     assert mission.polarisation is None  # one moving agent: no order parameter
 
 
@@ -341,7 +338,7 @@ def test_the_python_example_of_docs_logging_runs(
     """docs/logging.md's Python example, as written, on a log called mission.lcm."""
     import shutil
 
-    doc = (Path(__file__).resolve().parent.parent / "docs" / "logging.md").read_text()
+    doc = (REPO / "docs" / "logging.md").read_text()
     block = doc.split("The same from Python, with the trajectories:", 1)[1].split("```python\n", 1)[1]
     code = block.split("```", 1)[0]
     shutil.copy(gathering[0], tmp_path / "mission.lcm")

@@ -29,6 +29,7 @@ from antalate_lcm.runtime.sweep import (
     slot_buses,
 )
 from antalate_lcm.runtime.sweep_spec import dumps_toml, expand, parse_spec
+from tests import REPO
 
 CONFIG = """
 [agent]
@@ -149,7 +150,7 @@ def test_a_sweep_of_dovrat_swarm_over_two_parameters_and_five_seeds(
     import subprocess
     import sys
 
-    plot = Path(__file__).resolve().parent.parent / "examples" / "sweep" / "plot_sweep.py"
+    plot = REPO / "examples" / "sweep" / "plot_sweep.py"
     png = tmp_path / "sweep.png"
     argv = [sys.executable, str(plot), str(out / "results.csv"), "--x", speed, "--lines", turn]
     done = subprocess.run(

@@ -27,6 +27,7 @@ import pytest
 from antalate_lcm.autopilot import load_autopilot
 from antalate_lcm.autopilot.tello import DEFAULTS, TelloAutopilot
 from antalate_lcm.geo import FlatFrame
+from tests import REPO
 from tests.emulators.netns_pair import NetnsPair, netns_pair_unavailable
 from tests.emulators.tello_emulator import TelloEmulator
 
@@ -46,75 +47,9 @@ FAST: dict[str, Any] = {
 #: Emulator settings to match: a brisk takeoff and landing.
 EMU: dict[str, Any] = {"takeoff_time": 0.5, "land_speed": 2.0}
 
-DRIVER = r"""
-import json, logging, sys, threading, time
-from dataclasses import asdict
-logging.basicConfig(level=logging.WARNING, stream=sys.stderr, format="%(asctime)s %(name)s %(message)s")
-from antalate_lcm.autopilot.base import Frame
-from antalate_lcm.autopilot.tello import TelloAutopilot
-
-adapters = {}
-background = {}
-
-def run_call(name, method, args):
-    try:
-        return {"ok": True, "result": getattr(adapters[name], method)(*args)}
-    except Exception as exc:
-        return {"ok": False, "type": type(exc).__name__, "error": str(exc)}
-
-for line in sys.stdin:
-    req = json.loads(line)
-    name = req.get("name", "main")
-    t0 = time.monotonic()
-    try:
-        op = req["op"]
-        if op == "new":
-            old = adapters.pop(name, None)
-            if old is not None:
-                old.close()
-            adapters[name] = TelloAutopilot(req["params"])
-            result = None
-        elif op == "call":
-            args = list(req.get("args", []))
-            if req["method"] == "set_velocity":
-                args[4] = Frame[args[4]]
-            result = getattr(adapters[name], req["method"])(*args)
-        elif op == "start":  # a call on a thread of its own (another caller while one blocks)
-            box = {"t0": time.monotonic()}
-            def target(box=box, name=name, req=req):
-                box.update(run_call(name, req["method"], list(req.get("args", []))))
-                box["elapsed"] = time.monotonic() - box["t0"]
-            box["thread"] = threading.Thread(target=target, daemon=True)
-            background[req["tag"]] = box
-            box["thread"].start()
-            result = None
-        elif op == "result":
-            box = background.pop(req["tag"])
-            box["thread"].join(req.get("timeout", 30))
-            result = {k: v for k, v in box.items() if k not in ("thread", "t0")}
-        elif op == "state":
-            s = adapters[name].state()
-            result = {**asdict(s), "flight_mode": s.flight_mode.value}
-        elif op == "extra":
-            ap = adapters[name]
-            result = {
-                "position_ne": ap.position_ne,
-                "takeoff_point": ap.takeoff_point,
-                "dead_reckoning_problem": ap.dead_reckoning_problem,
-            }
-        else:
-            raise ValueError(f"unknown op {op}")
-        out = {"ok": True, "result": result}
-    except Exception as exc:
-        out = {"ok": False, "type": type(exc).__name__, "error": str(exc)}
-    out["elapsed"] = time.monotonic() - t0
-    sys.stdout.write(json.dumps(out) + "\n")
-    sys.stdout.flush()
-"""
-
 
 class Driver:
-    """The test's end of the driver process in namespace b."""
+    """The test's end of the driver process in namespace b (tests/children/tello_driver.py)."""
 
     def __init__(self, proc: subprocess.Popen[str], log_path: Path) -> None:
         self.proc = proc
@@ -127,7 +62,8 @@ class Driver:
         line = self.proc.stdout.readline()
         if not line:
             raise RuntimeError(f"driver died: {self.log_path.read_text()}")
-        return json.loads(line)
+        reply: dict[str, Any] = json.loads(line)
+        return reply
 
     def new(self, name: str = "main", **params: Any) -> None:
         reply = self.request(op="new", name=name, params={**FAST, **params})
@@ -146,10 +82,12 @@ class Driver:
     def state(self, name: str = "main") -> dict[str, Any]:
         reply = self.request(op="state", name=name)
         assert reply["ok"], reply
-        return reply["result"]
+        state: dict[str, Any] = reply["result"]
+        return state
 
     def extra(self, name: str = "main") -> dict[str, Any]:
-        return self.request(op="extra", name=name)["result"]
+        extra: dict[str, Any] = self.request(op="extra", name=name)["result"]
+        return extra
 
     def wait(
         self, pred: Callable[[dict[str, Any]], bool], timeout: float, name: str = "main"
@@ -252,7 +190,11 @@ def driver(net: NetnsPair, tmp_path_factory: pytest.TempPathFactory) -> Iterator
     log_path = tmp_path_factory.mktemp("tello") / "driver.log"
     with open(log_path, "w") as log:
         proc = net.popen(
-            "b", [sys.executable, "-c", DRIVER], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log
+            "b",
+            [sys.executable, "-m", "tests.children.tello_driver"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=log,
         )
         yield Driver(proc, log_path)
 
@@ -505,14 +447,7 @@ def test_two_tellos_in_one_process(driver: Driver, emulator: Callable[..., Tello
 @pytest.mark.netns
 def test_port_in_use_by_another_process(net: NetnsPair, driver: Driver) -> None:
     """The driver process holds 8889 in namespace b: a second process there cannot fly a Tello."""
-    script = (
-        "from antalate_lcm.autopilot.tello import TelloAutopilot\n"
-        "try:\n"
-        "    TelloAutopilot({}).connect()\n"
-        "except Exception as exc:\n"
-        "    print(type(exc).__name__, exc)\n"
-    )
-    done = net.run_python("b", script, timeout=30)
+    done = net.run("b", [sys.executable, "-m", "tests.children.tello_connect"], timeout=30)
     assert done.stdout.startswith("AutopilotError") and "8889" in done.stdout, done.stdout + done.stderr
 
 
@@ -747,7 +682,6 @@ def test_params_documented_and_example_valid() -> None:
     """Every parameter is in docs/tello.md and examples/tello.toml, and the example loads."""
     from antalate_lcm.config import load_config
     from antalate_lcm.runtime.agent import validate
-    from tests.emulators.netns_pair import REPO
 
     doc = (REPO / "docs" / "tello.md").read_text()
     config = load_config(REPO / "examples" / "tello.toml")

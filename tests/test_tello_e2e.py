@@ -26,73 +26,17 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-import tomllib
 
-from tests.emulators.netns_pair import REPO, NetnsPair, netns_pair_unavailable
+from tests import REPO
+from tests.emulators.netns_pair import NetnsPair, netns_pair_unavailable
 from tests.emulators.tello_emulator import TelloEmulator
 
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised only on 3.10
+    import tomli as tomllib
+
 pytestmark = pytest.mark.netns
-
-AGENT = r"""
-import json, logging, sys, threading, time
-from antalate_lcm.config import parse_config
-from antalate_lcm.hlc.machine import ErrorCode
-from antalate_lcm.vocabulary import HlcState, McState
-from antalate_lcm.node import Context, Node
-from antalate_lcm.runtime.agent import agent_nodes, validate
-
-logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(name)s %(message)s")
-T0 = time.monotonic()
-OUT = threading.Lock()
-
-def emit(**event):
-    event["t"] = round(time.monotonic() - T0, 3)
-    with OUT:
-        sys.stdout.write(json.dumps(event) + "\n")
-        sys.stdout.flush()
-
-class Recorder(Node):
-    kind = "recorder"
-    def on_start(self):
-        self.last = {}
-        self.telemetry_at = 0.0
-        self.subscribe("MC_STATE", lambda m: self.state("mc", McState(m.state).name))
-        self.subscribe("HLC_STATE", lambda m: self.state("hlc", HlcState(m.state).name))
-        self.subscribe("HLC_ERROR", lambda m: emit(kind="error", code=ErrorCode(m.code).name, text=m.text))
-        self.subscribe("TELEMETRY", self.telemetry)
-    def state(self, kind, name):
-        if self.last.get(kind) != name:
-            self.last[kind] = name
-            emit(kind=kind, state=name)
-    def telemetry(self, m):
-        if self.now - self.telemetry_at >= 1.0:
-            self.telemetry_at = self.now
-            emit(kind="telemetry", lat=m.lat, lon=m.lon, alt=m.alt, heading=m.heading, battery=m.battery,
-                 mode=m.mode, in_air=m.in_air)
-
-config = parse_config(json.loads(sys.argv[1]), "<test>")
-validate(config)
-context = Context.create(config)
-nodes = [Recorder(config, context), *agent_nodes(config, context)]  # first: it hears INIT
-context.bus.open()
-context.executor.start()
-for node in nodes:
-    node.start()
-emit(kind="started")
-from antalate_lcm.msgs import direction_cmd_t
-for line in sys.stdin:
-    words = line.split()
-    if words == ["stop"]:
-        break
-    if words[:1] == ["direction"]:  # direction AZIMUTH SPEED: what the console's direction keys send
-        msg = direction_cmd_t()
-        msg.active, msg.azimuth, msg.speed, msg.target = float(words[2]) > 0, float(words[1]), float(words[2]), ""
-        context.executor.call_soon(nodes[0].publish, "DIRECTION_CMD", msg)
-for node in reversed(nodes):
-    node.stop()
-context.close()
-emit(kind="stopped")
-"""
 
 #: The emulator: brisk takeoff and landing, auto-landing after 3 s without commands.
 EMU: dict[str, Any] = {"takeoff_time": 0.5, "land_speed": 2.0, "auto_land_timeout": 3.0}
@@ -257,7 +201,7 @@ def fly(net: NetnsPair, tmp_path: Path) -> Iterator[Callable[..., tuple[Agent, T
         log = open(log_path, "w")  # noqa: SIM115 - the child process holds it; closed below
         proc = net.popen(
             "b",
-            [sys.executable, "-c", AGENT, json.dumps(doc)],
+            [sys.executable, "-m", "tests.children.tello_agent", json.dumps(doc)],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=log,

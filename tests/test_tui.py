@@ -15,7 +15,7 @@ import sys
 import threading
 import time
 from collections.abc import AsyncIterator, Callable, Iterator
-from typing import Any
+from typing import Any, TypeVar
 
 import pytest
 
@@ -36,12 +36,14 @@ from antalate_lcm.security import sign, verify
 from antalate_lcm.vocabulary import Command, name_of
 from operator_tui.app import SLICE_ITEMS, ConsoleSettings, OperatorApp
 from operator_tui.commands import Status
-from operator_tui.model import EventKind
+from operator_tui.model import EventKind, Telemetry
 from operator_tui.screens import ConfirmScreen, HelpScreen
 from operator_tui.widgets.agent_table import COLUMNS, AgentTable
 from operator_tui.widgets.panels import EventLog
 from operator_tui.widgets.swarm_map import SwarmMap, points_from
 from tests.netns import NetNamespace, netns_unavailable
+
+T = TypeVar("T")
 
 FIRST_SEQ = 1000
 WALL0 = 1_800_000_000.0
@@ -187,7 +189,7 @@ def make_app(
     )
 
 
-async def until(pilot: Any, app: OperatorApp, cond: Callable[[], Any], timeout: float = 10.0) -> Any:
+async def until(pilot: Any, app: OperatorApp, cond: Callable[[], T], timeout: float = 10.0) -> T:
     """Refresh the app until ``cond()`` holds (messages cross two threads before the UI sees them)."""
     deadline = time.monotonic() + timeout
     while True:
@@ -200,16 +202,35 @@ async def until(pilot: Any, app: OperatorApp, cond: Callable[[], Any], timeout: 
         await pilot.pause(0.02)
 
 
+def telemetry(app: OperatorApp, name: str) -> Telemetry:
+    """The agent's last decoded telemetry (it must have one by then)."""
+    tel = app.model.agents[name].telemetry
+    assert tel is not None, f"{name} has no telemetry yet"
+    return tel
+
+
+async def wait_count(pilot: Any, app: OperatorApp, read: Callable[[], list[T]], n: int) -> list[T]:
+    """What ``read()`` returns once it holds ``n`` items or more."""
+
+    def enough() -> list[T] | None:
+        items = read()
+        return items if len(items) >= n else None
+
+    items = await until(pilot, app, enough)
+    assert items is not None
+    return items
+
+
 async def wait_sent(
     pilot: Any, app: OperatorApp, swarm: FakeSwarm, n: int
 ) -> list[tuple[str, operator_cmd_t]]:
-    return await until(pilot, app, lambda: (sent := swarm.sent()) and len(sent) >= n and sent)
+    return await wait_count(pilot, app, swarm.sent, n)
 
 
 async def wait_dirs(
     pilot: Any, app: OperatorApp, swarm: FakeSwarm, n: int
 ) -> list[tuple[str, direction_cmd_t]]:
-    return await until(pilot, app, lambda: (sent := swarm.sent_directions()) and len(sent) >= n and sent)
+    return await wait_count(pilot, app, swarm.sent_directions, n)
 
 
 async def settle(pilot: Any) -> None:
@@ -523,7 +544,7 @@ async def test_a_keyed_console_takes_no_forged_acknowledgement_or_state(
 
 async def test_help_screen_and_footer(two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm) -> None:
     app, pilot = two_agents
-    footer = {b.key for b in app.screen.active_bindings.values() if True for b in [b.binding] if b.show}
+    footer = {a.binding.key for a in app.screen.active_bindings.values() if a.binding.show}
     assert {"t", "T", "l", "L", "r", "R", "a", "d", "w", "s", "space", "D", "question_mark", "q"} <= footer
     await pilot.press("question_mark")
     assert isinstance(app.screen, HelpScreen)
@@ -581,12 +602,12 @@ async def test_the_map_is_fixed_rate_and_repaints_only_when_its_picture_changes(
     app.refresh_now()
     shown = swarm_map.points
     swarm.tel("bravo", lat=47.3990, lon=8.5470, heading=90.0)
-    await until(pilot, app, lambda: app.model.agents["bravo"].telemetry.lat == 47.3990)
+    await until(pilot, app, lambda: telemetry(app, "bravo").lat == 47.3990)
     assert swarm_map.points != shown
     shown = swarm_map.points
     swarm.tel("bravo", lat=47.3995, lon=8.5475, heading=90.0)
     deadline = time.monotonic() + 5.0
-    while app.model.agents["bravo"].telemetry.lat != 47.3995:
+    while telemetry(app, "bravo").lat != 47.3995:
         assert time.monotonic() < deadline
         await app.refresh_sliced()
         await pilot.pause(0.02)
@@ -622,12 +643,12 @@ async def test_off_screen_telemetry_is_decoded_when_shown(
             assert time.monotonic() < deadline, "the telemetry never reached the console"
             await asyncio.sleep(0.02)
         await app.refresh_sliced()
-        assert app.model.agents[shown].telemetry.battery == 50.0
-        assert app.model.agents[hidden].telemetry.battery == 90.0, "off screen: not decoded yet"
+        assert telemetry(app, shown).battery == 50.0
+        assert telemetry(app, hidden).battery == 90.0, "off screen: not decoded yet"
         assert app.model.agents[hidden].messages == heard + 1, "but heard"
         clock.advance(ConsoleSettings().map_interval)
         await app.refresh_sliced()
-        assert app.model.agents[hidden].telemetry.battery == 50.0, "the map's turn: every position"
+        assert telemetry(app, hidden).battery == 50.0, "the map's turn: every position"
 
 
 async def test_appending_events_does_not_lay_out_the_screen(two_agents: tuple[OperatorApp, Any]) -> None:

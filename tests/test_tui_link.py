@@ -92,7 +92,11 @@ def test_a_state_republished_unchanged_is_not_decoded_again(node: OperatorNode) 
     first = node.drain()[0].msg
     for n, (state, ack) in enumerate([(mc_state_t.STANDBY, 3), (mc_state_t.MISSION, 3)], start=2):
         bus.publish("lan", "a/MC_STATE", _mc("a", state, ack))  # a fresh header each time, like a republish
-        assert wait_for(lambda n=n: node.received == n, 2)
+
+        def received(n: int = n) -> bool:
+            return node.received == n
+
+        assert wait_for(received, 2)
         (item,) = node.drain()
         if state == mc_state_t.STANDBY:
             assert item.msg is first and node.unchanged == 1, "same body: the decoded message stands"

@@ -7,10 +7,17 @@ import random
 import pytest
 
 from antalate_lcm.msgs import arbiter_status_t, hlc_error_t, hlc_state_t, mc_state_t, telemetry_t
-from operator_tui.commands import CommandTracker, DirectionControl, Status, applies
-from operator_tui.model import EventKind, Severity, SwarmModel, heading_arrow, natural_key
+from antalate_lcm.vocabulary import Severity
+from operator_tui.commands import CommandTracker, DirectionControl, Status, TrackedCommand, applies
+from operator_tui.model import EventKind, SwarmModel, heading_arrow, natural_key
 from operator_tui.widgets.agent_table import format_age, row_cells
 from operator_tui.widgets.swarm_map import MapPoint, render_map
+
+
+def status_of(cmd: TrackedCommand) -> Status:
+    """The status read afresh: mypy keeps ``cmd.status`` narrowed by an earlier assert across the calls
+    that change it."""
+    return cmd.status
 
 
 def mc(state: int, last: int = 0) -> mc_state_t:
@@ -237,7 +244,7 @@ def test_resend_keeps_the_seq_then_fails_with_a_likely_reason() -> None:
     assert "a likely rejected it (MC STANDBY; LAND applies in HOLD/MISSION/RTL/TAKEOFF)" in cmd.reason
     assert "3 sends" in cmd.reason
     (late,) = tr.observe("a", 10, 7.0)  # the link came back: it had been accepted after all
-    assert cmd.status is Status.ACKED and cmd.reason == "acked late (7.0 s)" and "late" in late.text
+    assert status_of(cmd) is Status.ACKED and cmd.reason == "acked late (7.0 s)" and "late" in late.text
     assert tr.observe("a", 10, 7.2) == []
     other = tr.new("LAND", "b", 10.0, expected=[])
     tr.tick(13.0, mc_state_of=lambda a: "MISSION", is_stale=lambda a: True)
@@ -256,7 +263,7 @@ def test_broadcast_waits_for_every_live_agent() -> None:
     assert cmd.status is Status.PENDING and cmd.missing == ["b", "c"]
     tr.observe("b", 1, 0.2)
     _, (update,) = tr.tick(5.0)
-    assert cmd.status is Status.FAILED
+    assert status_of(cmd) is Status.FAILED
     assert cmd.reason.startswith("2/3 acked") and "c: no ack" in cmd.reason and update.failed
     ok = tr.new("LAND", "", 6.0, expected=["a", "b"])
     tr.observe("a", ok.seq, 6.1)
@@ -270,7 +277,7 @@ def test_broadcast_with_no_known_agent_counts_whoever_acks() -> None:
     tr.observe("a", 1, 0.5)
     assert cmd.status is Status.PENDING
     tr.tick(2.0)
-    assert cmd.status is Status.ACKED
+    assert status_of(cmd) is Status.ACKED
     lonely = tr.new("TAKEOFF", "", 3.0, expected=[])
     tr.tick(5.0)
     assert lonely.status is Status.FAILED and "none was known" in lonely.reason

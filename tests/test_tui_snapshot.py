@@ -106,11 +106,9 @@ async def test_main_screen_snapshot(context: Context, swarm: FakeSwarm, clock: F
         # Four seconds on: everybody but echo keeps publishing, so echo goes stale.
         clock.advance(0.5)
         for name in ("alpha", "bravo", "charlie", "delta"):
-            swarm.mc(
-                name,
-                app.model.agents[name].mc_state and mc_state_t.__dict__[app.model.agents[name].mc_state],
-                last=takeoff.header.seq if name == "alpha" else 0,
-            )
+            state = app.model.agents[name].mc_state
+            assert state, f"{name} has no MC state yet"
+            swarm.mc(name, mc_state_t.__dict__[state], last=takeoff.header.seq if name == "alpha" else 0)
         await until(
             pilot, app, lambda: all(app.model.agents[n].last_heard == clock() for n in ("alpha", "delta"))
         )

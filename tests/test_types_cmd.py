@@ -13,7 +13,7 @@ import pytest
 
 from antalate_lcm import types_cmd
 from antalate_lcm.tools import codegen as _codegen
-from tests.netns import REPO
+from tests import REPO
 
 TYPE_NAMES = sorted(p.stem for p in _codegen.SOURCE_LCMTYPES_DIR.glob("*.lcm"))
 

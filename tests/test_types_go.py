@@ -25,7 +25,7 @@ from antalate_lcm.msgs import arbiter_status_t, header_t, operator_cmd_t, payloa
 from antalate_lcm.tools import codegen as _codegen
 from antalate_lcm.tools import golang as _golang
 from antalate_lcm.tools.lcm_parse import fingerprint, parse_files
-from tests.netns import REPO
+from tests import REPO
 
 ROUNDTRIP = REPO / "tests" / "go" / "roundtrip" / "main.go"
 HOSTILE = REPO / "tests" / "go" / "hostile" / "main.go"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import pytest
 
@@ -64,7 +65,8 @@ def test_plain_ints_from_the_wire() -> None:
 @pytest.mark.parametrize("field", ["vx", "vy", "vz", "yaw"])
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
 def test_non_finite_rejected(field: str, bad: float) -> None:
-    d = check(cmd(**{field: bad}))
+    fields: dict[str, Any] = {field: bad}
+    d = check(cmd(**fields))
     assert d.verdict is Verdict.REJECT and d.send is None
     assert "non-finite" in d.reason and ("yaw_rate" if field == "yaw" else field) in d.reason
 

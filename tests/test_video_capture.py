@@ -53,7 +53,8 @@ def _probe(path: Path) -> dict[str, Any]:
         timeout=20,
         check=True,
     )
-    return json.loads(out.stdout)
+    report: dict[str, Any] = json.loads(out.stdout)
+    return report
 
 
 @needs_ffmpeg

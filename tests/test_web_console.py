@@ -23,14 +23,16 @@ from typing import Any
 import pytest
 import tomli_w
 from aiohttp.test_utils import TestClient, TestServer
+from aiohttp.web import Application, Request
 
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.station._auth import new_api_key, sha256_hex
 from antalate_lcm.station._settings import ApiKey
 from operator_tui import web
+from tests import REPO
 from tests.agent_harness import agent_config
 from tests.conftest import MCAST_URL, Probe
-from tests.netns import REPO, NetNamespace, stop_process
+from tests.netns import NetNamespace, stop_process
 from tests.polling import wait_for
 
 OPERATOR_KEY, READER_KEY = new_api_key(), new_api_key()
@@ -49,6 +51,13 @@ def keys_toml() -> str:
 # -- sign-in logic (pure) --------------------------------------------------------------------------
 
 
+def session(access: web.ConsoleAccess, key: str, now: float) -> tuple[str, str]:
+    """A session the key must open: (token, holder)."""
+    opened = access.login(key, now=now)
+    assert not isinstance(opened, web.Refusal), opened
+    return opened
+
+
 def test_only_an_operator_key_opens_a_session_and_sessions_expire() -> None:
     access = web.ConsoleAccess(KEYS, ttl_s=100.0)
     assert access.login("antk_not-a-key", now=0.0) == web.Refusal(401, "Unknown API key.")
@@ -56,7 +65,7 @@ def test_only_an_operator_key_opens_a_session_and_sessions_expire() -> None:
     assert (
         isinstance(refused, web.Refusal) and refused.status == 403 and "needs an operator key" in refused.text
     )
-    token, holder = access.login(f"  {OPERATOR_KEY}\n", now=0.0)  # pasted with blanks
+    token, holder = session(access, f"  {OPERATOR_KEY}\n", now=0.0)  # pasted with blanks
     assert holder == "alice"
     assert access.holder(token, now=50.0) == "alice"
     assert access.holder("forged-token", now=50.0) is None and access.holder(None, now=50.0) is None
@@ -103,8 +112,8 @@ def test_which_hosts_a_console_answers_to(
 def test_replacing_the_keys_ends_the_sessions_of_removed_or_demoted_keys() -> None:
     carol = new_api_key()
     access = web.ConsoleAccess((*KEYS, ApiKey(name="carol", role="operator", sha256=sha256_hex(carol))))
-    alice_token, _ = access.login(OPERATOR_KEY, now=0.0)
-    carol_token, _ = access.login(carol, now=0.0)
+    alice_token, _ = session(access, OPERATOR_KEY, now=0.0)
+    carol_token, _ = session(access, carol, now=0.0)
     demoted = ApiKey(name="carol", role="read-only", sha256=sha256_hex(carol))
     assert access.replace_keys((*KEYS, demoted)) == [carol_token]
     assert access.holder(carol_token, now=1.0) is None and access.holder(alice_token, now=1.0) == "alice"
@@ -115,7 +124,7 @@ def test_replacing_the_keys_ends_the_sessions_of_removed_or_demoted_keys() -> No
 # -- the real aiohttp app, in-process --------------------------------------------------------------
 
 
-async def client_for(access: web.ConsoleAccess | None) -> TestClient:
+async def client_for(access: web.ConsoleAccess | None) -> TestClient[Request, Application]:
     server = web.make_server(None, name="operator", host="127.0.0.1", port=0, access=access)
     client = TestClient(TestServer(await server._make_app(), host="127.0.0.1"))
     await client.start_server()

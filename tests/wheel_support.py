@@ -8,7 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from tests.netns import REPO
+from tests import REPO
 
 
 def source_files() -> list[str]:

@@ -17,7 +17,9 @@ AGENT = "sim-01"
 def layout_json() -> str:
     from foxglove import layouts as fl
 
-    def item(panel: object, proportion: float = 1.0) -> fl.SplitItem:
+    def item(
+        panel: fl.BasePanel | fl.TabContainer | fl.StackContainer | fl.SplitContainer, proportion: float = 1.0
+    ) -> fl.SplitItem:
         return fl.SplitItem(proportion=proportion, content=panel)
 
     swarm_map = fl.MapPanel(title="Swarm map (every {agent}/location)", config=fl.MapConfig(layer="map"))

@@ -20,7 +20,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.containers.support import Podman, RootNetns, load_build_module, podman_unavailable
+from tests.containers.support import Podman, load_build_module, podman_unavailable
+from tests.netns import NetNamespace
 from tests.wheel_support import build_wheel
 
 
@@ -55,7 +56,7 @@ def built_image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Image]:
     imported: Podman | None = None  # the first storage the base went into: enough to build
     base = ""
     # every container of the session runs on the host network of a private namespace: never the host's
-    netns = RootNetns()
+    netns = NetNamespace(root=True).start()
     # podman's own folders on a short path: conmon's sockets live there (sun_path is 108 bytes)
     podman_root = Path(tempfile.mkdtemp(prefix="antalate-ct-", dir="/var/tmp"))
     for driver in ("overlay", "vfs"):  # vfs where overlay cannot be mounted (nested containers)

@@ -3,7 +3,7 @@
 Everything podman keeps for these tests lives under one folder (``--root``, ``--runroot``,
 ``--tmpdir``), so the host's images and containers are never touched and the folder goes with the
 test. ``--network host`` puts a container in the network namespace of the podman that started it:
-started through :class:`RootNetns` (``unshare -n``, root), that is a private namespace with only
+started through tests.netns.NetNamespace in its root mode (``unshare -n``), that is a private namespace with only
 ``lo`` and the multicast route, never the host's network.
 """
 
@@ -14,13 +14,11 @@ import os
 import shutil
 import subprocess
 import sys
-from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
 
-from tests.netns import REPO, stop_process
-
-_SETUP = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && echo ready && exec sleep 100000"
+from tests import REPO
+from tests.netns import NetNamespace
 
 
 def load_build_module() -> ModuleType:
@@ -53,47 +51,10 @@ def podman_unavailable() -> str | None:
     return None
 
 
-class RootNetns:
-    """A network namespace (no user namespace: podman must stay real root) with multicast on lo."""
-
-    def __init__(self) -> None:
-        self.holder = subprocess.Popen(
-            ["unshare", "-n", "sh", "-c", _SETUP],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            start_new_session=True,
-        )
-        assert self.holder.stdout is not None
-        if self.holder.stdout.readline().strip() != "ready":
-            err = self.holder.stderr.read() if self.holder.stderr else ""
-            stop_process(self.holder)
-            raise RuntimeError(f"network namespace set-up failed: {err.strip()}")
-        self.children: list[subprocess.Popen[str]] = []
-
-    def wrap(self, argv: Sequence[str]) -> list[str]:
-        return ["nsenter", "-t", str(self.holder.pid), "-n", "--", *argv]
-
-    def popen(self, argv: Sequence[str], **kwargs: object) -> subprocess.Popen[str]:
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p)
-        kwargs.setdefault("env", env)
-        kwargs.setdefault("text", True)
-        kwargs.setdefault("start_new_session", True)
-        proc: subprocess.Popen[str] = subprocess.Popen(self.wrap(argv), **kwargs)  # type: ignore[call-overload]
-        self.children.append(proc)
-        return proc
-
-    def close(self) -> None:
-        for proc in self.children:
-            stop_process(proc)
-        stop_process(self.holder)
-
-
 class Podman:
     """``podman`` with storage under ``root`` and no systemd (cgroupfs, events to a file)."""
 
-    def __init__(self, root: Path, driver: str, netns: RootNetns | None = None) -> None:
+    def __init__(self, root: Path, driver: str, netns: NetNamespace | None = None) -> None:
         self.root = root
         self.driver = driver
         self.netns = netns
@@ -127,7 +88,7 @@ class Podman:
             self.command(*args), capture_output=True, text=True, timeout=timeout, env=self.env()
         )
 
-    def in_netns(self, netns: RootNetns) -> Podman:
+    def in_netns(self, netns: NetNamespace) -> Podman:
         other = Podman(self.root, self.driver, netns)
         other.run_flags = list(self.run_flags)
         return other

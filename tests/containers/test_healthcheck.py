@@ -6,12 +6,14 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
+from tests import REPO
 from tests.agent_harness import AgentProcesses, agent_config
 from tests.conftest import Probe
-from tests.netns import REPO, NetNamespace, stop_process
+from tests.netns import NetNamespace, stop_process
 from tests.polling import wait_for
 
 pytestmark = pytest.mark.netns
@@ -82,7 +84,7 @@ def test_a_config_that_does_not_load_or_a_foreign_command_is_unhealthy(
     assert health(netns, "antalate keygen") == (0, "healthy (antalate keygen)")
 
 
-def load_healthcheck():  # type: ignore[no-untyped-def]
+def load_healthcheck() -> ModuleType:
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("antalate_healthcheck", HEALTHCHECK)

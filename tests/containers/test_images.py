@@ -23,10 +23,12 @@ from pathlib import Path
 import pytest
 import tomli_w
 
+from tests import REPO
 from tests.agent_harness import agent_config
 from tests.containers.conftest import Image
-from tests.containers.support import Podman, RootNetns, load_build_module
+from tests.containers.support import Podman, load_build_module
 from tests.lan.swarm import OperatorClient
+from tests.netns import NetNamespace
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 
@@ -142,8 +144,8 @@ def test_every_node_kind_imports_in_the_image_as_its_user(built_image: Image, im
 
 
 @pytest.fixture
-def netns() -> Iterator[RootNetns]:
-    ns = RootNetns()
+def netns() -> Iterator[NetNamespace]:
+    ns = NetNamespace(root=True).start()
     try:
         yield ns
     finally:
@@ -151,7 +153,7 @@ def netns() -> Iterator[RootNetns]:
 
 
 def test_a_mission_with_every_node_in_its_own_container(
-    antalate_image: Image, netns: RootNetns, tmp_path: Path
+    antalate_image: Image, netns: NetNamespace, tmp_path: Path
 ) -> None:
     pod = antalate_image.podman.in_netns(netns)
     tag = antalate_image.tag
@@ -310,7 +312,7 @@ def test_build_script_refuses_without_its_tools(tmp_path: Path) -> None:
     """The user's entry point says what is missing instead of failing half-way (runs everywhere)."""
     env = dict(os.environ, PATH=str(tmp_path))  # no podman, no mmdebstrap
     proc = subprocess.run(
-        [sys.executable, str(Path(__file__).resolve().parents[2] / "containers" / "build_image.py")],
+        [sys.executable, str(REPO / "containers" / "build_image.py")],
         capture_output=True,
         text=True,
         env=env,

@@ -451,14 +451,6 @@ class CrazyflieEmulator:
                 self._traj.kind if self._traj else "",
             )
 
-    def wait_until(self, predicate: Callable[[CrazyflieSnapshot], bool], timeout: float) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if predicate(self.snapshot()):
-                return True
-            time.sleep(0.02)
-        return predicate(self.snapshot())
-
     @property
     def flying(self) -> bool:
         """The motors turn: the vehicle's truth (also on the first centimetres)."""
@@ -646,6 +638,7 @@ class CrazyflieEmulator:
         cmd = data[0]
         block_id = data[1] if len(data) > 1 else 0
         ret = 8  # ENOEXEC
+        block: _Block | None
         if cmd in (6, 7):  # create / append V2
             settings = data[2:]
             ops = [

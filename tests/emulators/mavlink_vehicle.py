@@ -120,8 +120,24 @@ from typing import Any
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
 from antalate_lcm.autopilot.mavlink.link import MemoryLink
+from tests.harness.polling import wait_for
 
 LOG = logging.getLogger("antalate.tests.mavlink_vehicle")
+
+#: pymavlink's dialect ships no types: the enum values the emulator returns, typed once here.
+MAV_LANDED_STATE_IN_AIR: int = mav2.MAV_LANDED_STATE_IN_AIR
+MAV_LANDED_STATE_LANDING: int = mav2.MAV_LANDED_STATE_LANDING
+MAV_LANDED_STATE_ON_GROUND: int = mav2.MAV_LANDED_STATE_ON_GROUND
+MAV_LANDED_STATE_TAKEOFF: int = mav2.MAV_LANDED_STATE_TAKEOFF
+MAV_RESULT_ACCEPTED: int = mav2.MAV_RESULT_ACCEPTED
+MAV_RESULT_DENIED: int = mav2.MAV_RESULT_DENIED
+MAV_RESULT_FAILED: int = mav2.MAV_RESULT_FAILED
+MAV_RESULT_UNSUPPORTED: int = mav2.MAV_RESULT_UNSUPPORTED
+MAV_STATE_ACTIVE: int = mav2.MAV_STATE_ACTIVE
+MAV_STATE_BOOT: int = mav2.MAV_STATE_BOOT
+MAV_STATE_CALIBRATING: int = mav2.MAV_STATE_CALIBRATING
+MAV_STATE_STANDBY: int = mav2.MAV_STATE_STANDBY
+
 
 Address = tuple[str, int]
 
@@ -410,7 +426,7 @@ class _Peer:
             self.parser.signing.allow_unsigned_callback = lambda _mav, msg_id: (
                 msg_id == mav2.MAVLINK_MSG_ID_RADIO_STATUS
             )
-            self.parser.check_signature = self._check_signature  # type: ignore[method-assign]
+            self.parser.check_signature = self._check_signature
 
     def _check_signature(self, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
         """The C library's mavlink_signature_check (what ArduPilot runs): the signature first, then the
@@ -736,14 +752,9 @@ class MavlinkVehicle:
             )
 
     def wait_until(self, predicate: Callable[[VehicleSnapshot], bool], timeout: float) -> bool:
-        """Poll ``predicate(snapshot())`` until true (True) or ``timeout`` s pass (False)."""
-        deadline = time.monotonic() + timeout
-        while True:
-            if predicate(self.snapshot()):
-                return True
-            if time.monotonic() >= deadline:
-                return False
-            time.sleep(0.02)
+        """``predicate(snapshot())`` polled with tests/polling.py's ``wait_for``: True once it holds,
+        False if ``timeout`` s pass first."""
+        return wait_for(lambda: predicate(self.snapshot()), timeout)
 
     @property
     def received(self) -> list[Received]:
@@ -842,7 +853,7 @@ class MavlinkVehicle:
     def pilot_switch_mode(self, mode: str) -> bool:
         """A pilot's RC mode switch: no COMMAND_ACK; GUIDED targets are dropped. False if refused."""
         with self._lock:
-            return self._set_mode(mode.upper(), time.monotonic(), source="pilot") == mav2.MAV_RESULT_ACCEPTED
+            return self._set_mode(mode.upper(), time.monotonic(), source="pilot") == MAV_RESULT_ACCEPTED
 
     def set_param(self, name: str, value: float) -> None:
         """A parameter set as a PARAM_SET from a ground station sets it (SIM_* failures included)."""
@@ -878,17 +889,17 @@ class MavlinkVehicle:
 
     def _system_status(self, now: float) -> int:
         if not self._booted:
-            return mav2.MAV_STATE_BOOT if now - self._t0 < self.boot_delay / 2 else mav2.MAV_STATE_CALIBRATING
-        return mav2.MAV_STATE_ACTIVE if self._armed else mav2.MAV_STATE_STANDBY
+            return MAV_STATE_BOOT if now - self._t0 < self.boot_delay / 2 else MAV_STATE_CALIBRATING
+        return MAV_STATE_ACTIVE if self._armed else MAV_STATE_STANDBY
 
     def _landed_state(self) -> int:
         if not self._armed or (self._on_ground and self._takeoff_alt is None):
-            return mav2.MAV_LANDED_STATE_ON_GROUND
+            return MAV_LANDED_STATE_ON_GROUND
         if self._mode == "GUIDED" and self._guided == "takeoff":
-            return mav2.MAV_LANDED_STATE_TAKEOFF
+            return MAV_LANDED_STATE_TAKEOFF
         if self._mode == "LAND" or (self._mode == "RTL" and self._rtl_phase == "land"):
-            return mav2.MAV_LANDED_STATE_LANDING
-        return mav2.MAV_LANDED_STATE_IN_AIR
+            return MAV_LANDED_STATE_LANDING
+        return MAV_LANDED_STATE_IN_AIR
 
     def _latlon(self, n: float | None = None, e: float | None = None) -> tuple[float, float]:
         n = self._n if n is None else n
@@ -919,14 +930,14 @@ class MavlinkVehicle:
 
     def _set_mode(self, mode: str, now: float, source: str) -> int:
         if mode not in COPTER_MODES:
-            return mav2.MAV_RESULT_FAILED
+            return MAV_RESULT_FAILED
         if self._booted:
             if mode in POSITION_MODES and not self._position_ok(now):
                 self._text(f"Flight mode change failed: {mode} requires position", mav2.MAV_SEVERITY_WARNING)
-                return mav2.MAV_RESULT_FAILED
+                return MAV_RESULT_FAILED
             if mode == "AUTO":
                 self._text("Flight mode change failed: no mission", mav2.MAV_SEVERITY_WARNING)
-                return mav2.MAV_RESULT_FAILED
+                return MAV_RESULT_FAILED
         LOG.info("mode %s -> %s (%s)", self._mode, mode, source)
         self._mode = mode
         self._guided = "hover"
@@ -939,7 +950,7 @@ class MavlinkVehicle:
             self._rtl_alt = self._rtl_target_alt()
         self._land_pause_until = 0.0
         self._takeoff_alt = None  # a mode change ends a guided takeoff
-        return mav2.MAV_RESULT_ACCEPTED
+        return MAV_RESULT_ACCEPTED
 
     def _rtl_target_alt(self) -> float:
         """The altitude an RTL returns at (mode_rtl.cpp ModeRTL::compute_return_target, Copter-4.6.3):
@@ -957,28 +968,28 @@ class MavlinkVehicle:
     def _arm(self, force: bool, now: float) -> int:
         if self.refuse_arm:
             self._text("PreArm: fault injected (refuse_arm)", mav2.MAV_SEVERITY_CRITICAL)
-            return mav2.MAV_RESULT_FAILED
+            return MAV_RESULT_FAILED
         if not self._booted:
             self._text("PreArm: System not initialised", mav2.MAV_SEVERITY_CRITICAL)
-            return mav2.MAV_RESULT_FAILED
+            return MAV_RESULT_FAILED
         if self._armed:
-            return mav2.MAV_RESULT_ACCEPTED
+            return MAV_RESULT_ACCEPTED
         if self._mode in NOT_ARMABLE:
             self._text("Arm: Mode not armable", mav2.MAV_SEVERITY_CRITICAL)
-            return mav2.MAV_RESULT_FAILED
+            return MAV_RESULT_FAILED
         if not force:
             if not self._gps_fix(now):
                 self._text("PreArm: GPS 1: Bad fix", mav2.MAV_SEVERITY_CRITICAL)
-                return mav2.MAV_RESULT_FAILED
+                return MAV_RESULT_FAILED
             if not self._position_ok(now):
                 self._text("PreArm: Need Position Estimate", mav2.MAV_SEVERITY_CRITICAL)
-                return mav2.MAV_RESULT_FAILED
+                return MAV_RESULT_FAILED
         self._armed = True
         self._ground_since = now
         if self._position_ok(now):
             self._set_home_here()
         self._text("Arming motors")
-        return mav2.MAV_RESULT_ACCEPTED
+        return MAV_RESULT_ACCEPTED
 
     def _disarm(self, reason: str) -> None:
         if not self._armed:
@@ -992,10 +1003,10 @@ class MavlinkVehicle:
 
     def _takeoff(self, alt: float, now: float) -> int:
         if self._mode != "GUIDED" or not self._armed or not self._on_ground or alt <= 0:
-            return mav2.MAV_RESULT_FAILED
+            return MAV_RESULT_FAILED
         self._takeoff_alt = alt
         self._guided = "takeoff"
-        return mav2.MAV_RESULT_ACCEPTED
+        return MAV_RESULT_ACCEPTED
 
     # -- message handling (I/O thread, lock held) ----------------------------------------------------
 
@@ -1023,7 +1034,7 @@ class MavlinkVehicle:
         if not self._for_me(msg, with_component=False):
             return
         if not msg.base_mode & mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            self._ack(msg, mav2.MAVLINK_MSG_ID_SET_MODE, mav2.MAV_RESULT_FAILED)
+            self._ack(msg, mav2.MAVLINK_MSG_ID_SET_MODE, MAV_RESULT_FAILED)
             return
         name = MODE_NAMES.get(msg.custom_mode, "")
         self._ack(msg, mav2.MAVLINK_MSG_ID_SET_MODE, self._set_mode(name, now, "SET_MODE"))
@@ -1046,12 +1057,12 @@ class MavlinkVehicle:
                 return self._arm(force, now)
             if self._armed and not self._on_ground and not force:
                 self._text("Disarm: vehicle is flying", mav2.MAV_SEVERITY_WARNING)
-                return mav2.MAV_RESULT_FAILED
+                return MAV_RESULT_FAILED
             self._disarm("command")
-            return mav2.MAV_RESULT_ACCEPTED
+            return MAV_RESULT_ACCEPTED
         if cmd == mav2.MAV_CMD_DO_SET_MODE:
             if not int(p[0]) & mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-                return mav2.MAV_RESULT_FAILED
+                return MAV_RESULT_FAILED
             return self._set_mode(MODE_NAMES.get(int(p[1]), ""), now, "DO_SET_MODE")
         if cmd == mav2.MAV_CMD_NAV_TAKEOFF:
             return self._takeoff(float(p[6]), now)
@@ -1065,7 +1076,7 @@ class MavlinkVehicle:
             # AP_BattMonitor::reset_remaining_mask: the remaining charge set, the failsafe cleared
             self._battery = max(0.0, min(100.0, float(p[1])))
             self._batt_failsafe, self._batt_action, self._batt_low_since = 0, 0, None
-            return mav2.MAV_RESULT_ACCEPTED
+            return MAV_RESULT_ACCEPTED
         if cmd == mav2.MAV_CMD_SET_MESSAGE_INTERVAL:
             return self._set_interval(int(p[0]), p[1])
         if cmd == mav2.MAV_CMD_REQUEST_MESSAGE:
@@ -1074,11 +1085,11 @@ class MavlinkVehicle:
             return self._request_message(mav2.MAVLINK_MSG_ID_HOME_POSITION, now)
         if cmd == mav2.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             return self._request_message(mav2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, now)
-        return mav2.MAV_RESULT_UNSUPPORTED
+        return MAV_RESULT_UNSUPPORTED
 
     def _condition_yaw(self, p: tuple[float, ...]) -> int:
         if self._mode != "GUIDED" or not self._armed or self._on_ground:
-            return mav2.MAV_RESULT_FAILED
+            return MAV_RESULT_FAILED
         angle, direction, relative = p[0], p[2], p[3]
         if relative:
             self._target_yaw = self._yaw + (angle if direction >= 0 else -angle)
@@ -1086,12 +1097,12 @@ class MavlinkVehicle:
             delta = (angle - self._yaw + 180.0) % 360.0 - 180.0
             self._target_yaw = self._yaw + delta
         self._target_yaw_rate = 0.0
-        return mav2.MAV_RESULT_ACCEPTED
+        return MAV_RESULT_ACCEPTED
 
     def _set_interval(self, msg_id: int, interval_us: float) -> int:
         name = _MSG_NAMES.get(msg_id)
         if name is None or name not in self._rates:
-            return mav2.MAV_RESULT_FAILED
+            return MAV_RESULT_FAILED
         if interval_us < 0:
             rate = 0.0
         elif interval_us == 0:
@@ -1100,19 +1111,19 @@ class MavlinkVehicle:
             rate = 1e6 / interval_us
         self._rates[name] = rate
         self._next_send.pop(name, None)
-        return mav2.MAV_RESULT_ACCEPTED
+        return MAV_RESULT_ACCEPTED
 
     def _request_message(self, msg_id: int, now: float) -> int:
         name = _MSG_NAMES.get(msg_id)
         if name is None or (name not in self._rates and name != "AUTOPILOT_VERSION"):
-            return mav2.MAV_RESULT_UNSUPPORTED
+            return MAV_RESULT_UNSUPPORTED
         if name == "HOME_POSITION" and self._home is None:
-            return mav2.MAV_RESULT_FAILED
+            return MAV_RESULT_FAILED
         msg = self._make(name, now)
         if msg is None:
-            return mav2.MAV_RESULT_DENIED
+            return MAV_RESULT_DENIED
         self._after_ack.append(msg)
-        return mav2.MAV_RESULT_ACCEPTED
+        return MAV_RESULT_ACCEPTED
 
     def _on_request_data_stream(self, msg: Any, now: float) -> None:
         if not self._for_me(msg):
@@ -1283,7 +1294,7 @@ class MavlinkVehicle:
         Copter::set_mode to the mode it is already in changes nothing (no restart, no pause)."""
         if self._mode == mode:
             return
-        if self._set_mode(mode, now, source=failsafe) != mav2.MAV_RESULT_ACCEPTED:
+        if self._set_mode(mode, now, source=failsafe) != MAV_RESULT_ACCEPTED:
             self._set_mode("LAND", now, source=failsafe)
         if self._mode == "LAND":
             self._land_pause_until = now + LAND_WITH_DELAY

@@ -22,7 +22,7 @@ process sends and receives on side a's network::
     with NetnsPair() as net:
         sock = net.udp_socket("a", (net.addr_a, 8889))
         with TelloEmulator(sock=sock) as tello:
-            result = net.run_python("b", DJITELLOPY_SCRIPT, timeout=30)
+            result = net.run("b", [sys.executable, "-m", "tests.children.djitellopy_flight"], timeout=30)
             assert tello.snapshot().z > 0.5 ...
 
 Extra addresses (``extra_addrs_a``) let several emulators (a swarm of Tellos) share side a. Everything
@@ -33,53 +33,27 @@ also exit by themselves when the test process dies, because they block reading a
 from __future__ import annotations
 
 import os
-import shutil
 import socket
 import subprocess
 import sys
 import time
 from collections.abc import Mapping, Sequence
-from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
-from tests.netns import stop_process
-
-REPO = Path(__file__).resolve().parents[2]
+from tests import REPO
+from tests.harness.netns import unavailable_because
+from tests.harness.process import stop_process
 
 Side = Literal["a", "b"]
 
 _READY = "echo ready && exec cat"
 
-# Runs inside a namespace: bind a socket there and hand its descriptor back to the test process.
-_SOCKET_HELPER = """
-import socket, sys
-kind, host, port, unix_fd = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
-unix = socket.socket(fileno=unix_fd)
-if kind == "udp":
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-else:
-    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-s.bind((host, port))
-if kind == "tcp":
-    s.listen(8)
-socket.send_fds(unix, [b"ok"], [s.fileno()])
-"""
-
 
 def netns_pair_unavailable() -> str | None:
     """Why a veth-joined namespace pair cannot be made here, or None when it can (tests skip on it)."""
-    for tool in ("unshare", "nsenter", "ip"):
-        if shutil.which(tool) is None:
-            return f"{tool} is not installed (Debian/Ubuntu: apt-get install util-linux iproute2)"
-    probe = subprocess.run(
-        ["unshare", "-rn", "sh", "-c", "ip link add t0 type veth peer name t1"],
-        capture_output=True,
-        text=True,
+    return unavailable_because(
+        "ip link add t0 type veth peer name t1", "cannot create a veth pair in a private namespace"
     )
-    if probe.returncode != 0:
-        return f"cannot create a veth pair in a private namespace: {probe.stderr.strip()}"
-    return None
 
 
 class NetnsPair:
@@ -110,13 +84,17 @@ class NetnsPair:
                 "a",
                 f"ip link set lo up && ip link add veth_a type veth peer name veth_b netns {self.pid('b')}",
             )
-            for side, dev, addr in (("a", "veth_a", self.addr_a), ("b", "veth_b", self.addr_b)):
+            sides: tuple[tuple[Side, str, str], ...] = (
+                ("a", "veth_a", self.addr_a),
+                ("b", "veth_b", self.addr_b),
+            )
+            for side, dev, addr in sides:
                 script = [f"ip link set lo up && ip addr add {addr}/{self.prefix_len} dev {dev}"]
                 script += [
                     f"ip addr add {extra}/{self.prefix_len} dev {dev}" for extra in self.extra_addrs[side]
                 ]
                 script.append(f"ip link set {dev} up")
-                self._check(side, " && ".join(script))  # type: ignore[arg-type]
+                self._check(side, " && ".join(script))
             self._wait_link_up()
         except BaseException:
             self.close()
@@ -148,31 +126,27 @@ class NetnsPair:
         """The command line that runs ``argv`` inside ``side``."""
         return ["nsenter", "-t", str(self.pid(side)), "-U", "-n", "--preserve-credentials", "--", *argv]
 
-    def popen(self, side: Side, argv: Sequence[str], **kwargs: object) -> subprocess.Popen[str]:
-        """Start ``argv`` inside ``side``; it is stopped by ``close()``. The repo is on PYTHONPATH."""
-        kwargs.setdefault("env", _env(kwargs.pop("extra_env", None)))  # type: ignore[arg-type]
+    def popen(self, side: Side, argv: Sequence[str], **kwargs: Any) -> subprocess.Popen[str]:
+        """Start ``argv`` inside ``side``; it is stopped by ``close()``. The repo is on PYTHONPATH.
+        ``kwargs`` are Popen's, plus ``extra_env`` (added to the environment)."""
+        kwargs.setdefault("env", _env(kwargs.pop("extra_env", None)))
         kwargs.setdefault("text", True)
         kwargs.setdefault("start_new_session", True)
         kwargs.setdefault("cwd", str(REPO))
-        proc: subprocess.Popen[str] = subprocess.Popen(self.wrap(side, argv), **kwargs)  # type: ignore[call-overload]
+        proc: subprocess.Popen[str] = subprocess.Popen(self.wrap(side, argv), **kwargs)
         self._children.append(proc)
         return proc
 
     def run(
-        self, side: Side, argv: Sequence[str], timeout: float = 60, **kwargs: object
+        self, side: Side, argv: Sequence[str], timeout: float = 60, **kwargs: Any
     ) -> subprocess.CompletedProcess[str]:
         """Run ``argv`` inside ``side`` to completion (stdout/stderr captured as text)."""
-        kwargs.setdefault("env", _env(kwargs.pop("extra_env", None)))  # type: ignore[arg-type]
+        kwargs.setdefault("env", _env(kwargs.pop("extra_env", None)))
         kwargs.setdefault("cwd", str(REPO))
-        return subprocess.run(  # type: ignore[call-overload, no-any-return]
+        done: subprocess.CompletedProcess[str] = subprocess.run(
             self.wrap(side, argv), timeout=timeout, capture_output=True, text=True, **kwargs
         )
-
-    def run_python(
-        self, side: Side, code: str, timeout: float = 60, **kwargs: object
-    ) -> subprocess.CompletedProcess[str]:
-        """Run a Python snippet inside ``side`` with this interpreter (djitellopy scripts, adapters...)."""
-        return self.run(side, [sys.executable, "-c", code], timeout=timeout, **kwargs)
+        return done
 
     def udp_socket(self, side: Side, bind: tuple[str, int]) -> socket.socket:
         """A UDP socket bound to ``bind`` inside ``side``, usable from this process (see module doc)."""
@@ -187,9 +161,24 @@ class NetnsPair:
     def _socket(self, side: Side, kind: str, bind: tuple[str, int]) -> socket.socket:
         mine, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_DGRAM)
         try:
-            argv = [sys.executable, "-c", _SOCKET_HELPER, kind, bind[0], str(bind[1]), str(theirs.fileno())]
+            # tests/children/bind_socket.py binds it there and hands the descriptor back
+            argv = [
+                sys.executable,
+                "-m",
+                "tests.children.bind_socket",
+                kind,
+                bind[0],
+                str(bind[1]),
+                str(theirs.fileno()),
+            ]
             done = subprocess.run(
-                self.wrap(side, argv), pass_fds=[theirs.fileno()], capture_output=True, text=True, timeout=30
+                self.wrap(side, argv),
+                pass_fds=[theirs.fileno()],
+                capture_output=True,
+                text=True,
+                timeout=30,
+                env=_env(),
+                cwd=str(REPO),
             )
             theirs.close()
             if done.returncode != 0:
@@ -219,10 +208,11 @@ class NetnsPair:
     def _wait_link_up(self, timeout: float = 5.0) -> None:
         """Carrier takes a moment after ``ip link set up``; packets sent before it are lost."""
         deadline = time.monotonic() + timeout
-        for side, dev in (("a", "veth_a"), ("b", "veth_b")):
+        sides: tuple[tuple[Side, str], ...] = (("a", "veth_a"), ("b", "veth_b"))
+        for side, dev in sides:
             while (
                 "state UP" not in self.run(side, ["ip", "-o", "link", "show", "dev", dev], timeout=10).stdout
-            ):  # type: ignore[arg-type]
+            ):
                 if time.monotonic() > deadline:
                     raise RuntimeError(f"{dev} in namespace {side} did not come up")
                 time.sleep(0.01)

@@ -116,6 +116,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 from antalate_lcm.autopilot.tello.link import MemoryLink
+from tests.harness.polling import wait_for
 
 LOG = logging.getLogger("antalate.tests.tello_emulator")
 
@@ -138,7 +139,8 @@ def _arrival(ancillary: list[tuple[int, int, bytes]]) -> float | None:
     for level, kind, data in ancillary:
         if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(data) >= 16:
             sec, nsec = struct.unpack("qq", data[:16])
-            return time.monotonic() - max(0.0, time.time() - (sec + nsec * 1e-9))
+            stamped: float = sec + nsec * 1e-9
+            return time.monotonic() - max(0.0, time.time() - stamped)
     return None
 
 
@@ -196,6 +198,15 @@ def _wrap180(deg: float) -> float:
     if wrapped <= 0:
         wrapped += 360.0
     return wrapped - 180.0
+
+
+def _move_handler(name: str) -> Callable[[TelloEmulator, list[str], Address, float], str | None]:
+    """The handler of one motion command (``up``, ``forward``…): all share ``_cmd_move``."""
+
+    def handle(emu: TelloEmulator, args: list[str], sender: Address, now: float) -> str | None:
+        return emu._cmd_move(name, args, sender)
+
+    return handle
 
 
 class TelloEmulator:
@@ -402,14 +413,9 @@ class TelloEmulator:
         return [c.text for c in self.commands]
 
     def wait_until(self, predicate: Callable[[TelloSnapshot], bool], timeout: float) -> bool:
-        """Poll ``predicate(snapshot())`` until true (True) or ``timeout`` s pass (False)."""
-        deadline = time.monotonic() + timeout
-        while True:
-            if predicate(self.snapshot()):
-                return True
-            if time.monotonic() >= deadline:
-                return False
-            time.sleep(0.02)
+        """``predicate(snapshot())`` polled with tests/polling.py's ``wait_for``: True once it holds,
+        False if ``timeout`` s pass first."""
+        return wait_for(lambda: predicate(self.snapshot()), timeout)
 
     # -- fault injection -------------------------------------------------------------------------
 
@@ -800,10 +806,7 @@ class TelloEmulator:
         "stop": _cmd_stop,
         "go": _cmd_go,
         "flip": _cmd_flip,
-        **{
-            name: (lambda self, args, sender, now, _n=name: self._cmd_move(_n, args, sender))
-            for name in MOTION_COMMANDS
-        },
+        **{name: _move_handler(name) for name in MOTION_COMMANDS},
         "cw": lambda self, args, sender, now: self._cmd_rotate("cw", args, sender),
         "ccw": lambda self, args, sender, now: self._cmd_rotate("ccw", args, sender),
     }

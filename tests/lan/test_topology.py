@@ -7,6 +7,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from typing import Any
 
 import pytest
 
@@ -38,10 +39,11 @@ def sender(host: Host, url: str, n: int, period: float, channel: str = "TEST") -
     )
 
 
-def result(proc: subprocess.Popen[str], timeout: float = 30) -> dict:
+def result(proc: subprocess.Popen[str], timeout: float = 30) -> dict[str, Any]:
     out, err = proc.communicate(timeout=timeout)
     assert proc.returncode == 0, err
-    return json.loads(out.strip().splitlines()[-1])
+    summary: dict[str, Any] = json.loads(out.strip().splitlines()[-1])
+    return summary
 
 
 def test_lan_bus_crosses_the_switch_and_the_local_bus_stays_home(make_lan: Callable[..., Lan]) -> None:

@@ -70,9 +70,9 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any, TypeVar
 
+from tests import REPO
 from tests.netns import child_env, stop_process
 
-REPO = Path(__file__).resolve().parents[2]
 PREFIX = "antalate-lan"
 SUBNET = "10.77.0"
 #: The WAN's sites are 10.81.<site>.0/24, their router 10.81.<site>.1.

@@ -7,8 +7,10 @@ succeeded M`` (a failed test, or an xfail, is an attack that succeeded).
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
+from typing import Any
 
+import pluggy
 import pytest
 
 from antalate_lcm.geo import offset
@@ -32,7 +34,9 @@ def _attack(item: pytest.Item) -> str | None:
 
 
 @pytest.hookimpl(hookwrapper=True)
-def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[None]:
+def pytest_runtest_makereport(
+    item: pytest.Item, call: pytest.CallInfo[None]
+) -> Generator[None, pluggy.Result[pytest.TestReport], None]:
     """Judge the attack where the test ran and attach the verdict to the report (``user_properties``
     travel with it to the process that prints the summary: tests/conftest.py, also under xdist)."""
     outcome = yield
@@ -101,7 +105,9 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
             )
         s.start_agents_process("alpha-delta", ["alpha", "delta"])
         for name, north in (("bravo", 80.0), ("charlie", 120.0)):
-            extra = {"osc": {**osc, "token_file": str(tmp / f"{name}.token")}} if name == "charlie" else {}
+            extra: dict[str, Any] = (
+                {"osc": {**osc, "token_file": str(tmp / f"{name}.token")}} if name == "charlie" else {}
+            )
             run = s.agent(name, agent_doc(name, tmp / "state", home=_home(north), **extra))
             run.start("hlc")
             run.start("mc")

@@ -96,9 +96,9 @@ class PeerClient(JsonLinesProcess):
         self, channel: str, type_name: str, pick: str = "last", since: int = 0, **where: Any
     ) -> dict[str, Any]:
         """Resend, byte for byte, a message recorded off the network."""
-        return self._ok(op="replay", channel=channel, type=type_name, where=where, pick=pick, since=since)[
-            "msg"
-        ]
+        reply = self._ok(op="replay", channel=channel, type=type_name, where=where, pick=pick, since=since)
+        msg: dict[str, Any] = reply["msg"]
+        return msg
 
     def capture(self, channel: str, type_name: str, since: int = 0, **where: Any) -> bytes:
         """The bytes of the last message recorded on ``channel`` matching ``where``."""
@@ -128,9 +128,11 @@ class PeerClient(JsonLinesProcess):
     def history(
         self, channel: str, type_name: str, since: int = 0, genuine: bool = False
     ) -> list[dict[str, Any]]:
-        return self._ok(
+        reply = self._ok(
             op="history", channel=channel, type=type_name, since=since, genuine=genuine and not DISARMED
-        )["msgs"]
+        )
+        msgs: list[dict[str, Any]] = reply["msgs"]
+        return msgs
 
     def mark(self) -> int:
         return int(self._ok(op="mark")["index"])
@@ -177,7 +179,8 @@ class PeerClient(JsonLinesProcess):
             content=content,
             source=source,
         )
-        return reply["responses"]
+        responses: list[dict[str, Any]] = reply["responses"]
+        return responses
 
     def http1(self, method: str, path: str, json_body: Any = None, **kw: Any) -> dict[str, Any]:
         return self.http(method, path, json_body, **kw)[0]
@@ -204,9 +207,10 @@ class Vehicle:
         return float((self.vn**2 + self.ve**2) ** 0.5)
 
     def distance(self, other: Vehicle) -> float:
-        return (
-            (self.north - other.north) ** 2 + (self.east - other.east) ** 2 + (self.alt - other.alt) ** 2
-        ) ** 0.5
+        return float(
+            ((self.north - other.north) ** 2 + (self.east - other.east) ** 2 + (self.alt - other.alt) ** 2)
+            ** 0.5
+        )
 
 
 class AgentRun:

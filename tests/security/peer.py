@@ -217,15 +217,15 @@ class Peer:
             deadline = time.time() + req.get("timeout", 10)
             with self.cond:
                 while True:
-                    hits = [
+                    found = [
                         d
                         for _, d in self._decoded(
                             req["channel"], req["type"], req.get("since", 0), req.get("genuine", False)
                         )
                         if matches(d, req.get("where", {}))
                     ]
-                    if hits:
-                        return {"ok": True, "msg": hits[0]}
+                    if found:
+                        return {"ok": True, "msg": found[0]}
                     remaining = deadline - time.time()
                     if remaining <= 0:
                         return {"ok": False}

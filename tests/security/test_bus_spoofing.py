@@ -9,6 +9,7 @@ signed); alpha and delta run in one ``antalate agent`` process (internal topics 
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import pytest
 
@@ -21,7 +22,7 @@ SPOOF_SECONDS = 1.5
 RATE_HZ = 20.0
 
 
-def stream(attacker: PeerClient, channel: str, type_name: str, **fields: object) -> None:
+def stream(attacker: PeerClient, channel: str, type_name: str, **fields: Any) -> None:
     """Publish a freshly stamped spoof at RATE_HZ for SPOOF_SECONDS, out-shouting the genuine 5 Hz state."""
     end = time.monotonic() + SPOOF_SECONDS
     seq = 900_000

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import statistics
 import time
+from typing import Any
 
 import pytest
 
@@ -64,7 +65,7 @@ def still_swarming(swarm: Swarm, operator: PeerClient, delta: AgentRun) -> None:
     assert delta.mc_state() == "MISSION", delta.transitions("mc")
 
 
-def signed(operator: PeerClient, swarm: Swarm, channel: str, type_name: str, **fields: object) -> None:
+def signed(operator: PeerClient, swarm: Swarm, channel: str, type_name: str, **fields: Any) -> None:
     operator.publish(
         channel, type_name, sign=True, header={"agent": OPERATOR, "seq": swarm.next_seq()}, **fields
     )

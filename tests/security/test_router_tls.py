@@ -21,9 +21,10 @@ from typing import Any
 
 import pytest
 
+from tests import REPO
 from tests.conftest import _netns_reason
 from tests.jsonl import JsonLinesProcess
-from tests.netns import REPO, NetNamespace
+from tests.netns import NetNamespace
 from tests.polling import wait_for
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
@@ -94,10 +95,12 @@ class Lab:
             ),
             "tls_peer",
         )
-        for name in self.logs:
-            assert wait_for(lambda n=name: "listening on" in self.logs[n].read_text(), 30), self.logs[
-                name
-            ].read_text()
+        for log in self.logs.values():
+
+            def listening(log: Path = log) -> bool:
+                return "listening on" in log.read_text()
+
+            assert wait_for(listening, 30), log.read_text()
 
     def site(self, site: str) -> dict[str, str]:
         return {

@@ -146,7 +146,14 @@ def test_tokens_are_never_listed(
 def report(
     token: str | None, name: str | None = "alpha", lat_lon: tuple[float, float] = FAR, **extra: Any
 ) -> dict[str, Any]:
-    tel = {"lat": lat_lon[0], "lon": lat_lon[1], "heading": 0.0, "alt": 50.0, "in_air": True, "armed": True}
+    tel: dict[str, Any] = {
+        "lat": lat_lon[0],
+        "lon": lat_lon[1],
+        "heading": 0.0,
+        "alt": 50.0,
+        "in_air": True,
+        "armed": True,
+    }
     if name is not None:
         tel["agent"] = name
     return {"token": token, "mc_state": "MISSION", "hlc_state": "AIRBORNE", "telemetry": tel, **extra}

@@ -28,6 +28,7 @@ import tomli_w
 from antalate_lcm.bridge import origin_tag
 from antalate_lcm.lcm_datagram import fragments, short_datagram
 from antalate_lcm.zenoh_bus import BRIDGE_MARK
+from tests import REPO
 from tests.conftest import _netns_reason
 from tests.jsonl import JsonLinesProcess
 from tests.netns import NetNamespace
@@ -35,7 +36,6 @@ from tests.polling import wait_for
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
 
-REPO = Path(__file__).resolve().parents[2]
 LAN_A = "udpm://239.255.76.67:7667?ttl=0"
 LAN_B = "udpm://239.255.76.69:7669?ttl=0"
 LAN_C = "udpm://239.255.76.71:7671?ttl=0"

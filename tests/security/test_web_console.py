@@ -28,7 +28,8 @@ from aiohttp.test_utils import TestServer
 from antalate_lcm.station._auth import new_api_key, sha256_hex
 from antalate_lcm.station._settings import ApiKey
 from operator_tui import web
-from tests.netns import REPO, stop_process
+from tests import REPO
+from tests.netns import stop_process
 from tests.polling import wait_for
 
 ALICE, CAROL, READER = new_api_key(), new_api_key(), new_api_key()

@@ -28,9 +28,14 @@ import tomli_w
 
 from antalate_lcm.analysis import read_log
 from antalate_lcm.runtime.commands import native_lcm_tool
-from tests.lan.swarm import EXAMPLES, SWARM_KEY, VEHICLES, OperatorClient, _merge, tomllib, vehicle_config
+from tests.lan.swarm import EXAMPLES, SWARM_KEY, VEHICLES, OperatorClient, _merge, vehicle_config
 from tests.lan.topology import Wan
 from tests.wan.test_zenoh_agent import lab_ca, mtls_url
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised only on 3.10
+    import tomli as tomllib
 
 pytestmark = [pytest.mark.lan, pytest.mark.timeout(150), pytest.mark.usefixtures("need_wan")]
 

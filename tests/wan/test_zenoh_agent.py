@@ -17,13 +17,18 @@ from pathlib import Path
 import pytest
 import tomli_w
 
+from tests import REPO
 from tests.agent_harness import FAST_SIM
-from tests.lan.swarm import OperatorClient, _merge, tomllib
+from tests.lan.swarm import OperatorClient, _merge
 from tests.netns import NetNamespace
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised only on 3.10
+    import tomli as tomllib
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
 
-REPO = Path(__file__).resolve().parents[2]
 EXAMPLES = REPO / "examples" / "wan"
 KEY = "zenoh-test-swarm-key"
 PORT = 7447

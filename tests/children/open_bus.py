@@ -1,0 +1,14 @@
+"""Open a bus on URL and let whatever it raises end the process (its traceback on stderr is what the
+test reads).
+
+    python -m tests.children.open_bus URL
+"""
+
+from __future__ import annotations
+
+import sys
+
+from antalate_lcm.bus import Bus
+
+if __name__ == "__main__":
+    Bus({"lan": sys.argv[1]}).open()

@@ -1,6 +1,6 @@
 """Ground stations see the swarm: ``antalate mavlink-gcs`` (docs/tools.md). ``view`` is the pure
 mapping between agents and MAVLink vehicles, ``server`` the node, the UDP link and the command; this
-module only registers the subcommand (pymavlink is imported when it runs, not at every start)."""
+module only holds the subcommand's arguments and handler (pymavlink is imported when it runs, not at every start)."""
 
 from __future__ import annotations
 

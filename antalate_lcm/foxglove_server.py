@@ -133,7 +133,7 @@ def serve(url: str, *, host: str, port: int, no_auth: bool, stop: threading.Even
     return 0
 
 
-def _cmd_foxglove(args: argparse.Namespace) -> int:
+def cmd_foxglove(args: argparse.Namespace) -> int:
     from antalate_lcm.config import load_config
 
     config = load_config(args.config)
@@ -144,10 +144,7 @@ def _cmd_foxglove(args: argparse.Namespace) -> int:
     return serve(url, host=args.host, port=args.port, no_auth=args.no_auth)
 
 
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser(
-        "foxglove", help="serve the swarm live to Foxglove (WebSocket, read-only): docs/tools.md"
-    )
+def foxglove_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", nargs="?", help="config with the bus (default: the embedded defaults)")
     p.add_argument(
         "--bus", help="bus name from the config (default: 'lan' if declared, else the default bus)"
@@ -161,4 +158,3 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         action="store_true",
         help="allow a --host beyond loopback (anyone who reaches it sees the swarm)",
     )
-    p.set_defaults(func=_cmd_foxglove)

@@ -82,7 +82,7 @@ def record(url: str, out_path: str, *, channel: str = ".*", raw: bool = False, f
     return 0
 
 
-def _cmd_export(args: argparse.Namespace) -> int:
+def cmd_export(args: argparse.Namespace) -> int:
     from antalate_lcm.analysis import check_log_file
 
     source = check_log_file(args.log)
@@ -95,10 +95,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser("export", help="convert an LCM log to MCAP (Foxglove, PlotJuggler): docs/tools.md")
+def export_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", help="LCM log file (lcm-logger, antalate log)")
     p.add_argument("-o", "--output", help="MCAP file (default: the log's name with .mcap)")
     p.add_argument("--raw", action="store_true", help="keep each message's LCM bytes too (raw/CHANNEL)")
     p.add_argument("-f", "--force", action="store_true", help="overwrite the MCAP file if it exists")
-    p.set_defaults(func=_cmd_export)

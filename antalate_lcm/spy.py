@@ -7,6 +7,7 @@ lcm wheel, and cache the jar until ``lcmtypes/`` changes.
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import os
 import shutil
@@ -89,3 +90,24 @@ def run_spy(url: str) -> int:
             f"xvfb-run -a (Debian/Ubuntu: sudo apt-get install xvfb). Types jar: {jar}"
         )
     return subprocess.call(cmd, env=env)
+
+
+def spy_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("config", nargs="?", help="config file (default: the embedded defaults)")
+    p.add_argument("--bus", help="bus name from the config (default: the default bus)")
+
+
+def cmd_spy(args: argparse.Namespace) -> int:
+    from antalate_lcm.config import load_config
+
+    config = load_config(args.config)
+    url = config.buses.get(args.bus) if args.bus else config.buses.get(config.topics.default_bus)
+    if url is None:
+        raise AntalateError(
+            f"no bus named {args.bus!r} in {config.source}; declared: {', '.join(config.buses)}"
+        )
+    if url.startswith("zenoh://"):
+        from antalate_lcm.lcm_url import ZENOH_NOT_LCM
+
+        raise AntalateError(f"cannot spy on {url}: {ZENOH_NOT_LCM}")
+    return run_spy(url)

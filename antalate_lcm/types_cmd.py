@@ -12,6 +12,7 @@ format and fingerprints; ``tests/test_types_go.py`` compares the two).
 
 from __future__ import annotations
 
+import argparse
 import shutil
 import subprocess
 import time
@@ -76,3 +77,14 @@ def run(lang: str, out: str) -> int:
     written = write_types(lang, Path(out))
     print(f"antalate types: {len(written)} {lang} files in {out}")
     return 0
+
+
+def types_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--lang", required=True, choices=LANGUAGES, help="target language, or lcm for the .lcm files"
+    )
+    p.add_argument("--out", required=True, help="folder to write into (created if missing)")
+
+
+def cmd_types(args: argparse.Namespace) -> int:
+    return run(args.lang, args.out)

@@ -28,7 +28,6 @@ terminal over a WebSocket to xterm.js. What antalate adds to the stock server:
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import hmac
@@ -550,42 +549,3 @@ def serve(
     except OSError as exc:
         raise AntalateError(f"cannot serve the console on {host}:{port}: {exc.strerror or exc}") from None
     return 0
-
-
-# ------------------------------------------------------------------------------------------ CLI
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``--web`` and its options to the ``tui`` subcommand that ``antalate_lcm.runtime`` defines."""
-    p = sub.choices["tui"]
-    p.add_argument("--web", action="store_true", help="serve the console to a browser (textual-serve)")
-    p.add_argument(
-        "--host", default=DEFAULT_HOST, help=f"--web: address to listen on (default {DEFAULT_HOST})"
-    )
-    p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"--web: port (default {DEFAULT_PORT})")
-    p.add_argument(
-        "--keys", metavar="STATION_TOML", help="--web: sign in with the operator API keys of this file"
-    )
-    p.add_argument("--no-auth", action="store_true", help="--web: allow no sign-in beyond loopback (unsafe)")
-    p.add_argument(
-        "--allow-host",
-        action="append",
-        default=[],
-        metavar="NAME",
-        help="--web: a host name the console answers to besides its listen address (repeatable); "
-        "any other Host is refused (DNS rebinding)",
-    )
-    terminal = p.get_default("func")
-
-    def run(args: argparse.Namespace) -> int:
-        if not args.web:
-            return int(terminal(args))
-        return serve(
-            args.config,
-            name=args.name,
-            host=args.host,
-            port=args.port,
-            keys_file=args.keys,
-            no_auth=args.no_auth,
-            allow_hosts=tuple(args.allow_host),
-        )
-
-    p.set_defaults(func=run)

@@ -1,6 +1,6 @@
 """Ground stations see the swarm: ``antalate mavlink-gcs`` (docs/tools.md). ``view`` is the pure
 mapping between agents and MAVLink vehicles, ``server`` the node, the UDP link and the command; this
-module only registers the subcommand (pymavlink is imported when it runs, not at every start)."""
+module only holds the subcommand's arguments and handler (pymavlink is imported when it runs, not at every start)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 14551  # QGroundControl listens on 14550 itself; this is the one it connects to
 
 
-def _cmd(args: argparse.Namespace) -> int:
+def cmd_mavlink_gcs(args: argparse.Namespace) -> int:
     from antalate_lcm.config import load_config
     from antalate_lcm.gcs.server import serve
 
@@ -26,10 +26,7 @@ def _cmd(args: argparse.Namespace) -> int:
     )
 
 
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser(
-        "mavlink-gcs", help="every agent as a MAVLink vehicle for QGroundControl/MAVProxy: docs/tools.md"
-    )
+def mavlink_gcs_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", help="config with the bus (and [security] swarm_key for --commands)")
     p.add_argument(
         "--host", default=DEFAULT_HOST, help=f"address a ground station connects to (default {DEFAULT_HOST})"
@@ -57,4 +54,3 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--no-auth", action="store_true", help="allow an address beyond loopback (unsafe, docs/tools.md)"
     )
-    p.set_defaults(func=_cmd)

@@ -27,25 +27,25 @@ def _run_single(args: argparse.Namespace, make: Callable[[Config, Context], list
     return run_until_signal(context, make(config, context))
 
 
-def _cmd_mc(args: argparse.Namespace) -> int:
+def cmd_mc(args: argparse.Namespace) -> int:
     from antalate_lcm.mc.node import McNode
 
     return _run_single(args, lambda cfg, ctx: [McNode(cfg, ctx)])
 
 
-def _cmd_hlc(args: argparse.Namespace) -> int:
+def cmd_hlc(args: argparse.Namespace) -> int:
     from antalate_lcm.hlc.node import HlcNode
 
     return _run_single(args, lambda cfg, ctx: [HlcNode(cfg, ctx)])
 
 
-def _cmd_osc(args: argparse.Namespace) -> int:
+def cmd_osc(args: argparse.Namespace) -> int:
     from antalate_lcm.osc import OscNode
 
     return _run_single(args, lambda cfg, ctx: [OscNode(cfg, ctx)])
 
 
-def _cmd_bma(args: argparse.Namespace) -> int:
+def cmd_bma(args: argparse.Namespace) -> int:
     from antalate_lcm.bma.node import BmaNode
 
     def make(cfg: Config, ctx: Context) -> list[Node]:
@@ -58,7 +58,7 @@ def _cmd_bma(args: argparse.Namespace) -> int:
     return _run_single(args, make)
 
 
-def _cmd_agent(args: argparse.Namespace) -> int:
+def cmd_agent(args: argparse.Namespace) -> int:
     from antalate_lcm.runtime.agent import (
         agent_nodes,
         default_processes,
@@ -120,14 +120,7 @@ def _cmd_agent(args: argparse.Namespace) -> int:
     return code
 
 
-def _cmd_tui(args: argparse.Namespace) -> int:
-    import operator_tui
-
-    config = load_config(args.config) if args.config else load_config(None).with_agent_name("operator")
-    return operator_tui.run(config, name=args.name or config.agent.name)
-
-
-def _cmd_demo(args: argparse.Namespace) -> int:
+def cmd_demo(args: argparse.Namespace) -> int:
     from antalate_lcm.runtime import demo
 
     direction = (args.azimuth, args.speed) if args.azimuth is not None else None
@@ -138,7 +131,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return run_interactive(args.agents)
 
 
-def _cmd_analyze(args: argparse.Namespace) -> int:
+def cmd_analyze(args: argparse.Namespace) -> int:
     import json
 
     from antalate_lcm.analysis import analyze_log, format_summary
@@ -151,7 +144,7 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_plot(args: argparse.Namespace) -> int:
+def cmd_plot(args: argparse.Namespace) -> int:
     from antalate_lcm.analysis import format_summary, plot_log
 
     path, result = plot_log(args.log, args.output, goals=args.goal or (), **_analysis_options(args))
@@ -161,7 +154,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_log(args: argparse.Namespace) -> int:
+def cmd_log(args: argparse.Namespace) -> int:
     """``lcm-logger`` on a bus of the config: the stock tool, so the log replays with ``lcm-logplayer``.
 
     This process *becomes* lcm-logger (exec), so Ctrl-C or SIGTERM reach the logger itself and it
@@ -333,23 +326,17 @@ def _add_analysis_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add the node-running subcommands to the ``antalate`` parser."""
-    for name, func, help_text in (
-        ("mc", _cmd_mc, "run the Mission Control node of an agent"),
-        ("hlc", _cmd_hlc, "run the High-Level Control node (and its autopilot) of an agent"),
-        ("osc", _cmd_osc, "run the Operator Station Client of an agent (needs [osc] server)"),
-    ):
-        p = sub.add_parser(name, help=help_text)
-        p.add_argument("config", help="agent config file (TOML)")
-        p.set_defaults(func=func)
+def node_arguments(p: argparse.ArgumentParser) -> None:
+    """``mc``, ``hlc`` and ``osc``: one node of one agent."""
+    p.add_argument("config", help="agent config file (TOML)")
 
-    p = sub.add_parser("bma", help="run one Behavior Module Arbiter of an agent")
+
+def bma_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", help="agent config file (TOML)")
     p.add_argument("--name", required=True, help="the [[bma]] name in the config")
-    p.set_defaults(func=_cmd_bma)
 
-    p = sub.add_parser("agent", help="run every node of one or more agents in one process")
+
+def agent_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", nargs="+", help="agent config file(s): one per vehicle")
     p.add_argument("--agents", type=int, default=1, help="N simulated agents from each config (sim only)")
     p.add_argument("--spacing", type=float, default=8.0, help="metres between simulated homes (default 8)")
@@ -365,14 +352,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     # ... and its script (JSON) when it injects faults, with the bus their records go to
     p.add_argument("--faults", help=argparse.SUPPRESS)
     p.add_argument("--fault-bus", default="lan", help=argparse.SUPPRESS)
-    p.set_defaults(func=_cmd_agent)
 
-    p = sub.add_parser("tui", help="the operator console (a Textual app on the LAN bus)")
-    p.add_argument("config", nargs="?", help="config with the LAN bus (default: the embedded defaults)")
-    p.add_argument("--name", help="the console's own name on the bus (default: the config's agent name)")
-    p.set_defaults(func=_cmd_tui)
 
-    p = sub.add_parser("demo", help="fly a simulated swarm (the template application)")
+def demo_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--agents", type=int, default=5, help="number of simulated agents (default 5)")
     p.add_argument(
         "--headless", action="store_true", help="no console: a scripted operator flies one mission"
@@ -382,18 +364,15 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--azimuth", type=float, help="direction command during the mission, deg (headless)")
     p.add_argument("--speed", type=float, default=1.0, help="direction command speed, m/s (headless)")
-    p.set_defaults(func=_cmd_demo)
 
-    p = sub.add_parser(
-        "analyze",
-        help="swarm metrics from an LCM log, per phase: radius, separation, polarisation, connectivity, drift",
-    )
+
+def analyze_arguments(p: argparse.ArgumentParser) -> None:
     _add_analysis_options(p)
     p.add_argument("--json", action="store_true", help="print every number as JSON instead of the summary")
     p.add_argument("--tracks", action="store_true", help="with --json: every agent's trajectory too")
-    p.set_defaults(func=_cmd_analyze)
 
-    p = sub.add_parser("plot", help="PNG of trajectories, state timelines and cohesion from an LCM log")
+
+def plot_arguments(p: argparse.ArgumentParser) -> None:
     _add_analysis_options(p)
     p.add_argument("-o", "--output", help="PNG file (default: the log's name with .png)")
     p.add_argument("-q", "--quiet", action="store_true", help="do not print the analysis summary")
@@ -404,9 +383,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         metavar="M",
         help="draw a goal radius of M metres on the cohesion panel (repeatable; none by default)",
     )
-    p.set_defaults(func=_cmd_plot)
 
-    p = sub.add_parser("log", help="record a bus to an LCM log file (lcm-logger on the config's bus)")
+
+def log_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", nargs="?", help="config file (default: the embedded defaults)")
     p.add_argument(
         "-o", "--output", help="log file; NAME.mcap records MCAP (default: antalate-YYYYmmdd-HHMMSS.lcm)"
@@ -417,4 +396,3 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--channel", default=".*", help="channel regex to record (default: every channel)")
     p.add_argument("-f", "--force", action="store_true", help="overwrite the log file if it exists")
     p.add_argument("--raw", action="store_true", help="MCAP: keep each message's LCM bytes too (raw/CHANNEL)")
-    p.set_defaults(func=_cmd_log)

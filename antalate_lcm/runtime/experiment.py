@@ -508,7 +508,7 @@ def _measure(outcome: Outcome, script: Script) -> None:
         outcome.problem = str(exc)
 
 
-def _cmd_run(args: argparse.Namespace) -> int:
+def cmd_run(args: argparse.Namespace) -> int:
     import json
 
     outcome = run(
@@ -532,12 +532,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return outcome.code
 
 
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``run`` to the ``antalate`` parser (docs/experiments.md)."""
-    p = sub.add_parser(
-        "run",
-        help="fly a config with N simulated agents and a scripted operator, record it, print the swarm metrics",
-    )
+def run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", help="agent config file (TOML), e.g. the one `antalate new behavior` wrote")
     p.add_argument(
         "--agents", type=int, default=1, metavar="N", help="N simulated agents from the config (default 1)"
@@ -573,7 +568,6 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="the script's seed; with --speed the run (its log, byte for byte) is a function of "
         "config, script and S, and `antalate replay LOG` checks it",
     )
-    p.set_defaults(func=_cmd_run)
 
 
 def parse_speed(text: str) -> float:

@@ -229,7 +229,7 @@ def replay(log: str | Path, *, config: str | None = None, keep: str | None = Non
         return ReplayResult(outcome.messages, first_divergence(log, out), notes)
 
 
-def _cmd_replay(args: argparse.Namespace) -> int:
+def cmd_replay(args: argparse.Namespace) -> int:
     quiet = logging.getLogger("antalate")
     level = quiet.level
     if args.log_level == "INFO":  # the default: the replayed nodes' lines would bury the verdict
@@ -242,15 +242,9 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0 if result.divergence is None else 1
 
 
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``replay`` to the ``antalate`` parser (docs/experiments.md)."""
-    p = sub.add_parser(
-        "replay",
-        help="run a recorded `antalate run --speed` experiment again; report the first divergence",
-    )
+def replay_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", help="the LCM log of a run on simulated time (its LOG.run.json beside it)")
     p.add_argument("--config", metavar="FILE", help="replay with this config instead of the recorded one")
     p.add_argument(
         "-o", "--output", metavar="LOG", help="keep the replayed log here (default: a temporary file)"
     )
-    p.set_defaults(func=_cmd_replay)

@@ -182,7 +182,7 @@ def run_router(
     return 0
 
 
-def _cmd_router(args: argparse.Namespace) -> int:
+def cmd_router(args: argparse.Namespace) -> int:
     from antalate_lcm.zenoh_bus import DEFAULT_LEASE_MS
 
     listen = args.listen or [DEFAULT_TLS_LISTEN if args.tls_cert else DEFAULT_LISTEN]
@@ -214,7 +214,7 @@ def run_bridge(config_path: str, *, stop: threading.Event | None = None) -> int:
     return 0
 
 
-def _cmd_bridge(args: argparse.Namespace) -> int:
+def cmd_bridge(args: argparse.Namespace) -> int:
     return run_bridge(args.config)
 
 
@@ -324,7 +324,7 @@ def make_lab_ca(out: Path, *, hosts: list[str], clients: list[str], days: int = 
     return written
 
 
-def _cmd_lab_ca(args: argparse.Namespace) -> int:
+def cmd_lab_ca(args: argparse.Namespace) -> int:
     names = args.client or []
     bad = [n for n in names if not n or "/" in n or n in ("ca", "router") or n.startswith(".")]
     if bad:
@@ -335,9 +335,7 @@ def _cmd_lab_ca(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``router``, ``bridge`` and ``lab-ca`` to the ``antalate`` parser (docs/wan.md)."""
-    p = sub.add_parser("router", help="a Zenoh router for zenoh:// buses across networks (docs/wan.md)")
+def router_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--listen",
         action="append",
@@ -358,17 +356,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help=f"key prefix a client may use, repeatable (default {DEFAULT_PREFIX}; the zenoh:// URL's network)",
     )
     p.add_argument("--plain", action="store_true", help="allow tcp/ endpoints beside TLS (unencrypted)")
-    p.set_defaults(func=_cmd_router)
 
-    p = sub.add_parser(
-        "bridge", help="forward channels between two buses, e.g. a LAN and Zenoh (docs/wan.md)"
-    )
+
+def bridge_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", help="bridge config (TOML: [buses] and [bridge])")
-    p.set_defaults(func=_cmd_bridge)
 
-    p = sub.add_parser(
-        "lab-ca", help="a throw-away CA and certificates for a TLS router and its clients (docs/wan.md)"
-    )
+
+def lab_ca_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("dir", help="where to write ca.pem, router.pem, NAME.pem and their keys")
     p.add_argument(
         "--host",
@@ -380,4 +374,3 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "--client", action="append", metavar="NAME", help="a client certificate (a site), repeatable"
     )
     p.add_argument("--days", type=int, default=30, help="validity in days (default 30)")
-    p.set_defaults(func=_cmd_lab_ca)

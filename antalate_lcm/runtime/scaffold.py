@@ -195,7 +195,7 @@ def write_behavior(name: str, folder: str | Path = ".") -> Path:
     return root
 
 
-def _cmd_new(args: argparse.Namespace) -> int:
+def cmd_new(args: argparse.Namespace) -> int:
     root = write_behavior(args.name, args.dir)
     print(f"wrote the behavior package {root}:")
     for rel in files(args.name):
@@ -207,13 +207,11 @@ def _cmd_new(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``new`` to the ``antalate`` parser (docs/experiments.md)."""
-    p = sub.add_parser("new", help="write a new behavior package that installs and flies as generated")
+def new_arguments(p: argparse.ArgumentParser) -> None:
+    """``new KIND``: one kind today; ``cmd_new`` writes it (``antalate new`` itself runs it)."""
     kinds = p.add_subparsers(dest="kind", metavar="KIND", required=True)
     b = kinds.add_parser(
         "behavior", help="a behavior plugin package: pyproject, Params, pure logic, test, config"
     )
     b.add_argument("name", help="package and plugin name (lower case, digits, underscores)")
     b.add_argument("--dir", default=".", help="folder to create NAME in (default: the current one)")
-    b.set_defaults(func=_cmd_new)

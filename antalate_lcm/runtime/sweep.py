@@ -463,7 +463,7 @@ def _stop(run: _Run, why: str) -> None:
         run.proc.send_signal(signal.SIGINT)  # `antalate run` lands its agents and writes its outcome
 
 
-def _cmd_sweep(args: argparse.Namespace) -> int:
+def cmd_sweep(args: argparse.Namespace) -> int:
     sweep = load_sweep(args.spec)
     jobs = args.jobs if args.jobs is not None else (os.cpu_count() or 1)
     if jobs < 1:
@@ -502,12 +502,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return 1 if result.failed else 0
 
 
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``sweep`` to the ``antalate`` parser (docs/experiments.md, "Sweeps")."""
-    p = sub.add_parser(
-        "sweep",
-        help="run `antalate run` over parameters and seeds in parallel; one table (CSV, JSON) of the metrics",
-    )
+def sweep_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("spec", help="sweep spec (TOML): config, script, agents, seeds, [parameters]")
     p.add_argument(
         "-o", "--output", metavar="DIR", help="folder of the table and the runs (default: SPEC-results)"
@@ -516,4 +511,3 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "-f", "--force", action="store_true", help="overwrite the results of an earlier sweep in DIR"
     )
-    p.set_defaults(func=_cmd_sweep)

@@ -14,7 +14,7 @@ from antalate_lcm.errors import AntalateError
 from ._settings import DEFAULT_HOST, DEFAULT_PORT
 
 
-def _cmd_station(args: argparse.Namespace) -> int:
+def cmd_station(args: argparse.Namespace) -> int:
     from ._file import load_station_file
     from ._server import run_station
     from ._settings import StationSettings
@@ -74,7 +74,7 @@ def _swarm_key(args: argparse.Namespace) -> str | None:
     return None
 
 
-def _cmd_station_key(args: argparse.Namespace) -> int:
+def cmd_station_key(args: argparse.Namespace) -> int:
     from ._auth import new_api_key, registration_key, sha256_hex
 
     if args.kind == "api":
@@ -93,7 +93,7 @@ def _cmd_station_key(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_command(args: argparse.Namespace) -> int:
+def cmd_command(args: argparse.Namespace) -> int:
     from .client import StationClient, StationClientError
 
     api_key = args.api_key or os.environ.get("ANTALATE_API_KEY")
@@ -134,9 +134,7 @@ def _cmd_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``station``, ``station-key`` and ``command`` to the ``antalate`` parser."""
-    p = sub.add_parser("station", help="run the reference operator station (HTTP(S) + SQLite)")
+def station_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", help="station config file (TOML: [station], [rate_limits], [[api_keys]])")
     p.add_argument(
         "--db", help="SQLite file (default: in the user's data directory; ':memory:' keeps nothing)"
@@ -150,9 +148,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--tls-cert", help="PEM certificate (chain): serve HTTPS")
     p.add_argument("--tls-key", help="PEM private key of --tls-cert")
-    p.set_defaults(func=_cmd_station)
 
-    p = sub.add_parser("station-key", help="make an API key, or the station's registration key")
+
+def station_key_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "kind",
         choices=("api", "registration"),
@@ -164,11 +162,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--swarm-key-file", help="registration: a file holding the swarm key")
     p.add_argument("--agent-config", help="registration: an agent config with [security] swarm_key")
-    p.set_defaults(func=_cmd_station_key)
 
-    p = sub.add_parser(
-        "command", help="send an operator command through a station (signed with the swarm key)"
-    )
+
+def command_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "action",
         choices=("TAKEOFF", "LAND", "RTL", "direction", "agents"),
@@ -186,4 +182,3 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--stop", action="store_true", help="direction: tell the agents to stop following one")
     p.add_argument("--sender", default="station-client", help="operator name in the signed header")
     p.add_argument("--ca-file", help="CA certificate (PEM) that signed the station's TLS certificate")
-    p.set_defaults(func=_cmd_command)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -34,6 +35,14 @@ SPACING = 6.0  # m east between the homes
 def home(i: int) -> tuple[float, float, float, float]:
     lat, lon = geo.offset(HOME[0], HOME[1], 0.0, SPACING * i)
     return (lat, lon, HOME[2], HOME[3])
+
+
+def has_home(copter: Copter) -> bool:
+    return bool(copter.gcs.state()["home"])
+
+
+def disarmed(copter: Copter) -> bool:
+    return not copter.gcs.state()["armed"]
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -76,7 +85,7 @@ def test_three_sitl_copters_fly_dovrat_swarm_and_come_home(swarm: list[Copter], 
     for name in NAMES:
         wait_state(probe, "mc", agent=name, state=M.STANDBY, timeout=120, since=0)
     for c in swarm:  # three MAVLink systems, one each
-        assert wait_for(lambda c=c: c.gcs.state()["home"], timeout=60, interval=0.5), c.name
+        assert wait_for(partial(has_home, c), timeout=60, interval=0.5), c.name
     sent = time.monotonic()
     for name in NAMES:
         command(probe, O.TAKEOFF, agent=name)
@@ -99,7 +108,7 @@ def test_three_sitl_copters_fly_dovrat_swarm_and_come_home(swarm: list[Copter], 
         wait_state(probe, "mc", agent=name, state=M.STANDBY, timeout=120, since=mark)
         wait_state(probe, "hlc", agent=name, state=H.READY, timeout=15, since=mark)
     for c in swarm:
-        assert wait_for(lambda c=c: not c.gcs.state()["armed"], timeout=20, interval=0.3), c.name
+        assert wait_for(partial(disarmed, c), timeout=20, interval=0.3), c.name
         down = c.gcs.state()
         assert abs(down["north"]) < 2.0 and abs(down["east"]) < 2.0, (c.name, down)  # its own home
     for name in NAMES:

@@ -12,6 +12,7 @@ import itertools
 import math
 import time
 from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +41,10 @@ TIMINGS: dict[str, float] = {}
 def swarm_command(probe: Probe, cmd: int, seq: list[int] = [0]) -> None:  # noqa: B006 - a counter
     seq[0] += 1
     probe.publish("SWARM/OPERATOR_CMD", "operator_cmd_t", header={"seq": seq[0], "agent": "op"}, command=cmd)
+
+
+def in_mode(vehicle: Px4, mode: str) -> bool:
+    return bool(vehicle.state()["mode"] == mode)
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -94,7 +99,7 @@ def test_three_px4s_fly_dovrat_swarm_and_come_home(swarm: list[Px4], sitl_probe:
         wait_state(probe, "mc", M.MISSION, timeout=30, since=mark, agent=v.name)
     TIMINGS["takeoff_to_all_airborne"] = time.monotonic() - sent
     for v in swarm:  # the behavior's first set-points, the stream's lead, the OFFBOARD switch
-        assert wait_for(lambda v=v: v.state()["mode"] == "OFFBOARD", timeout=15, interval=0.2), v.state()
+        assert wait_for(partial(in_mode, v, "OFFBOARD"), timeout=15, interval=0.2), v.state()
     start = {v.name: v.state() for v in swarm}
     headings: dict[str, list[float]] = {v.name: [] for v in swarm}
     end = time.monotonic() + 12.0

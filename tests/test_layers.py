@@ -54,7 +54,6 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
             }
         ),
     ),
-    ("vehicles", frozenset({"autopilot"})),
     (
         "core",
         frozenset(
@@ -66,12 +65,12 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
                 "config",
                 "node",
                 "behavior",
-                "antalate_lcm",
                 "mcap_log",
             }
         ),
     ),
-    ("domain", frozenset({"mc", "hlc", "bma", "osc", "station", "analysis"})),
+    ("vehicles", frozenset({"autopilot"})),
+    ("domain", frozenset({"mc", "hlc", "bma", "osc", "station", "analysis", "plan", "antalate_lcm"})),
     (
         "applications",
         frozenset(

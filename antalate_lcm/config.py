@@ -176,7 +176,7 @@ class HlcConfig(_Section):
         # One canonical spelling: `autopilot = "sim"` with `[hlc.autopilot_params]`. The earlier
         # `[hlc.autopilot]` table (docs/design.md's first draft: `name = "sim"` in it, or
         # `adapter = "sim"` beside it, or neither for the sim) still loads, with a warning from
-        # `antalate_lcm.plan` (docs/config in docs/design.md §11).
+        # `antalate_lcm.plan` (docs/design.md §11, "Config").
         table_keys: frozenset[str] | None = None
         name_key = "hlc.autopilot"
         if isinstance(data, dict) and isinstance(data.get("autopilot"), dict):

@@ -75,8 +75,7 @@ def _cmd_agent(args: argparse.Namespace) -> int:
     for path in args.config:
         configs.extend(swarm_configs(load_config(path), args.agents, spacing=args.spacing))
     check_unique_agent_names(configs, agents=args.agents)  # names the file and agent.name
-    for cfg in configs:
-        validate(cfg)
+    plans = {id(cfg): validate(cfg) for cfg in configs}  # plugins resolved once, built from below
     processes = args.processes or default_processes(len(configs))
     if args.shard:
         configs = shard(configs, *parse_shard(args.shard))
@@ -98,7 +97,7 @@ def _cmd_agent(args: argparse.Namespace) -> int:
         return run_processes(lambda i, n: [*argv, "--shard", f"{i}/{n}"], min(processes, len(configs)))
     # Internal topics between this process's nodes in memory: a spoofed LAN datagram never reaches them.
     context = Context.in_process(shared_buses(configs), whole_swarm=not args.shard)
-    nodes = [node for cfg in configs for node in agent_nodes(cfg, context)]
+    nodes = [node for cfg in configs for node in agent_nodes(cfg, context, plans[id(cfg)])]
     if args.broadcast_reception is None and args.faults is None:
         return run_until_signal(context, nodes)
     from antalate_lcm.runtime.faults import broadcast_report, lossy_broadcasts

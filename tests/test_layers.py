@@ -318,7 +318,7 @@ def test_exceptions_keep_the_stdlib_base_callers_catch(qualified: str, stdlib: t
 # ------------------------------------------------------------------------------ one name, one class
 
 #: Class names defined in more than one module on purpose or not yet resolved. ``Params`` is the
-#: adapters' convention (each adapter's ``[hlc.autopilot]`` model, reached as ``<adapter>.Params``).
+#: adapters' convention (each adapter's ``[hlc.autopilot_params]`` model, reached as ``<adapter>.Params``).
 #: The others are known doubles left to their owners (issue #14); remove a line when it is resolved,
 #: never add one for a new class: give it a name of its own.
 KNOWN_DOUBLES = {

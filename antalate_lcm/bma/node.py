@@ -66,7 +66,7 @@ class BmaNode(Node):
         #: The swarm's latest telemetry, for the behaviors that declare ``uses_peers`` (None if none does).
         self.peers: PeerTable | None = None
         if any(p.cls.uses_peers for p in self.plan.behaviors):
-            check_peer_buses(config, whole_swarm=context.whole_swarm)
+            check_peer_buses(config, whole_swarm=context.whole_swarm, plans=[self.plan])
             self.peers = PeerTable(self.agent)
 
     # ------------------------------------------------------------------ views (executor thread or tests)

@@ -24,7 +24,7 @@ from antalate_lcm.geo import offset
 from antalate_lcm.hlc.node import HlcNode
 from antalate_lcm.mc.node import McNode
 from antalate_lcm.node import Context, Node
-from antalate_lcm.plan import AgentPlan, plan_agent
+from antalate_lcm.plan import AgentPlan, plan_agent, plan_autopilot
 
 log = logging.getLogger("antalate.agent")
 
@@ -65,6 +65,7 @@ def swarm_configs(
     if n == 1:
         return [config]
     if config.hlc.autopilot != "sim":
+        plan_autopilot(config)  # the adapter's own mistakes first: they are what to fix in the file
         raise ConfigError(
             config.source,
             "hlc.autopilot",

@@ -83,7 +83,7 @@ def _cmd_agent(args: argparse.Namespace) -> int:
         from antalate_lcm.bma.plan import check_peer_buses
 
         for cfg in configs:  # before any process starts: one line naming the key, not a split swarm
-            check_peer_buses(cfg, whole_swarm=False)
+            check_peer_buses(cfg, whole_swarm=False, plans=plans[id(cfg)].bmas)
         argv = [
             sys.executable,
             "-m",

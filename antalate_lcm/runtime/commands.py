@@ -10,48 +10,54 @@ import argparse
 import os
 import sys
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from antalate_lcm.config import Config, check_unique_agent_names, load_config
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.node import Context, Node
 
+if TYPE_CHECKING:  # the plan imports every adapter's registry: only the commands that run nodes need it
+    from antalate_lcm.plan import AgentPlan
 
-def _run_single(args: argparse.Namespace, make: Callable[[Config, Context], list[Node]]) -> int:
+
+def _run_single(args: argparse.Namespace, make: Callable[[AgentPlan, Context], list[Node]]) -> int:
     from antalate_lcm.runtime.agent import validate
     from antalate_lcm.runtime.launch import run_until_signal
 
     config = load_config(args.config)
-    validate(config)
+    plan = validate(config)  # the node is built from what was checked
     context = Context.create(config)
-    return run_until_signal(context, make(config, context))
+    return run_until_signal(context, make(plan, context))
 
 
 def _cmd_mc(args: argparse.Namespace) -> int:
     from antalate_lcm.mc.node import McNode
 
-    return _run_single(args, lambda cfg, ctx: [McNode(cfg, ctx)])
+    return _run_single(args, lambda plan, ctx: [McNode(plan.config, ctx)])
 
 
 def _cmd_hlc(args: argparse.Namespace) -> int:
     from antalate_lcm.hlc.node import HlcNode
 
-    return _run_single(args, lambda cfg, ctx: [HlcNode(cfg, ctx)])
+    return _run_single(
+        args, lambda plan, ctx: [HlcNode(plan.config, ctx, plan.autopilot.build(ctx.executor.clock))]
+    )
 
 
 def _cmd_osc(args: argparse.Namespace) -> int:
     from antalate_lcm.osc import OscNode
 
-    return _run_single(args, lambda cfg, ctx: [OscNode(cfg, ctx)])
+    return _run_single(args, lambda plan, ctx: [OscNode(plan.config, ctx)])
 
 
 def _cmd_bma(args: argparse.Namespace) -> int:
     from antalate_lcm.bma.node import BmaNode
 
-    def make(cfg: Config, ctx: Context) -> list[Node]:
-        for bma in cfg.bma:
-            if bma.name == args.name:
-                return [BmaNode(cfg, ctx, bma)]
+    def make(plan: AgentPlan, ctx: Context) -> list[Node]:
+        cfg = plan.config
+        for bma in plan.bmas:
+            if bma.config.name == args.name:
+                return [BmaNode(cfg, ctx, bma.config, bma)]
         names = ", ".join(b.name for b in cfg.bma) or "none"
         raise AntalateError(f"no [[bma]] named {args.name!r} in {cfg.source}; declared: {names}")
 

@@ -15,14 +15,23 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 from urllib.parse import urlsplit
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ModelWrapValidatorHandler,
+    PrivateAttr,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from antalate_lcm.errors import ConfigError
 from antalate_lcm.geo import FlatFrame
 from antalate_lcm.lcm_url import EXAMPLES as LCM_URL_EXAMPLES
 from antalate_lcm.lcm_url import bus_url_problem
 from antalate_lcm.safety.geofence import Geofence
-from antalate_lcm.strict import StrictError, describe, dotted, find_datetime
+from antalate_lcm.strict import describe, dotted, find_datetime
 from antalate_lcm.topics import MESSAGE_TYPES, TOPICS, TopicSpec
 
 if sys.version_info >= (3, 11):
@@ -136,7 +145,7 @@ class McConfig(_Section):
 
 class HlcConfig(_Section):
     autopilot: str = "sim"
-    #: Parameters handed to the autopilot adapter, as written ([hlc.autopilot] table).
+    #: Parameters handed to the autopilot adapter, as written ([hlc.autopilot_params] table).
     autopilot_params: dict[str, Any] = Field(default_factory=dict)
     telemetry_hz: Positive = 10.0
     republish_hz: Positive = 5.0
@@ -154,19 +163,53 @@ class HlcConfig(_Section):
     max_vertical_speed: Positive = 2.0
     max_yaw_rate: Positive = 90.0
 
-    @model_validator(mode="before")
+    #: Where the user wrote the adapter's name (``hlc.autopilot``, ``hlc.autopilot.name`` or
+    #: ``hlc.adapter``), so a bad name is reported at the key they typed.
+    _autopilot_name_key: str = PrivateAttr(default="hlc.autopilot")
+    #: The keys of a deprecated ``[hlc.autopilot]`` table, None when the canonical spelling was used:
+    #: a bad param is reported in the table that holds it.
+    _autopilot_table: frozenset[str] | None = PrivateAttr(default=None)
+
+    @model_validator(mode="wrap")
     @classmethod
-    def _split_autopilot_table(cls, data: Any) -> Any:
-        # TOML lets users write both `autopilot = "sim"` and `[hlc.autopilot] home_lat = ...`
-        # only if the table is named differently; we accept `[hlc.autopilot_params]` and also
-        # `autopilot = { name = "sim", ... }` so the DESIGN's `[hlc.autopilot]` table works.
+    def _split_autopilot_table(cls, data: Any, handler: ModelWrapValidatorHandler[HlcConfig]) -> HlcConfig:
+        # One canonical spelling: `autopilot = "sim"` with `[hlc.autopilot_params]`. The earlier
+        # `[hlc.autopilot]` table (docs/design.md's first draft: `name = "sim"` in it, or
+        # `adapter = "sim"` beside it, or neither for the sim) still loads, with a warning from
+        # `antalate_lcm.plan` (docs/design.md §11, "Config").
+        table_keys: frozenset[str] | None = None
+        name_key = "hlc.autopilot"
         if isinstance(data, dict) and isinstance(data.get("autopilot"), dict):
             data = dict(data)
             table = dict(data.pop("autopilot"))
+            table_keys = frozenset(table)
+            if "name" in table:
+                name_key = "hlc.autopilot.name"
+            elif "adapter" in data:
+                name_key = "hlc.adapter"
             name = table.pop("name", data.pop("adapter", "sim"))
             data["autopilot"] = name
             data["autopilot_params"] = {**table, **data.get("autopilot_params", {})}
-        return data
+        model = handler(data)
+        model._autopilot_name_key = name_key
+        model._autopilot_table = table_keys
+        return model
+
+    @property
+    def autopilot_name_key(self) -> str:
+        return self._autopilot_name_key
+
+    def autopilot_param_key(self, field: str) -> str:
+        """The dotted key of the adapter param ``field`` ("" = the table itself), in the table the user wrote."""
+        table = self._autopilot_table
+        in_table = table is not None and (field in table or field not in self.autopilot_params)
+        prefix = "hlc.autopilot" if in_table else "hlc.autopilot_params"
+        return f"{prefix}.{field}" if field else prefix
+
+    @property
+    def autopilot_spelling_deprecated(self) -> bool:
+        """Whether the adapter was given by a ``[hlc.autopilot]`` table, not the canonical spelling."""
+        return self._autopilot_table is not None
 
 
 class FenceConfig(_Section):
@@ -421,9 +464,9 @@ def anonymous_token() -> str:
 def parse_config(data: dict[str, Any], source: str = "<config>") -> Config:
     """Validate an already-parsed TOML document; see :func:`load_config`.
 
-    Strict throughout: values are taken as TOML typed them (see `antalate_lcm.strict`). The
-    autopilot adapter is loaded and its params validated by its own model, so a config that loads
-    is one the HLC can start with.
+    Strict throughout: values are taken as TOML typed them (see `antalate_lcm.strict`). Plugins
+    (the autopilot adapter, behaviors) are not imported here: `antalate_lcm.plan.plan_agent` resolves
+    them and validates their params, the one place that does, so a config is data and nothing else.
     """
     where = find_datetime(data)
     if where is not None:
@@ -443,47 +486,9 @@ def parse_config(data: dict[str, Any], source: str = "<config>") -> Config:
             raise ConfigError(source, ctx_err.key, message) from None
         err = describe(exc)
         raise ConfigError(source, err.key, err.message) from None
-    _check_autopilot(config, data)
     if not config.agent.name:
         config = config.with_agent_name(anonymous_token())
     return config
-
-
-def _check_autopilot(config: Config, data: dict[str, Any]) -> None:
-    """Load the configured adapter and validate its params with its own model (``params_model``).
-
-    Errors name the table the user wrote: ``[hlc.autopilot]`` (design style) or
-    ``[hlc.autopilot_params]``.
-    """
-    from antalate_lcm.autopilot import UnknownAutopilotError, load_autopilot
-
-    hlc = data.get("hlc")
-    table = hlc.get("autopilot") if isinstance(hlc, dict) else None
-    design_style = isinstance(table, dict)
-    try:
-        cls = load_autopilot(config.hlc.autopilot)
-    except UnknownAutopilotError as exc:
-        key = "hlc.autopilot.name" if design_style and "name" in table else "hlc.autopilot"  # type: ignore[operator]
-        raise ConfigError(config.source, key, str(exc)) from None
-    params = config.hlc.autopilot_params
-    try:
-        if cls.params_model is not None:
-            cls.validate_params(params)
-        else:
-            cls(params)  # the contract: no I/O before connect(); unknown keys raise ValueError
-    except StrictError as exc:
-        field = exc.key.split(".", 1)[0].split("[", 1)[0]
-        in_table = design_style and (field in table or field not in params)  # type: ignore[operator]
-        prefix = "hlc.autopilot" if in_table else "hlc.autopilot_params"
-        raise ConfigError(config.source, f"{prefix}.{exc.key}" if exc.key else prefix, exc.message) from None
-    except (ValueError, TypeError) as exc:
-        prefix = "hlc.autopilot" if design_style else "hlc.autopilot_params"
-        raise ConfigError(config.source, prefix, str(exc)) from None
-    except Exception as exc:  # noqa: BLE001 - a third-party constructor breaking its contract
-        prefix = "hlc.autopilot" if design_style else "hlc.autopilot_params"
-        raise ConfigError(
-            config.source, prefix, f"params the adapter accepts; its constructor failed: {exc!r}"
-        ) from None
 
 
 def check_unique_agent_names(configs: Sequence[Config], *, agents: int = 1) -> None:

@@ -8,6 +8,7 @@ import pytest
 
 from antalate_lcm.config import Config, check_unique_agent_names, load_config, parse_config
 from antalate_lcm.errors import ConfigError
+from antalate_lcm.plan import load_plan
 from tests import REPO
 
 
@@ -60,6 +61,55 @@ def test_design_style_autopilot_table(tmp_path: Path) -> None:
     cfg = load_config(write(tmp_path, '[hlc.autopilot]\nname = "tello"\nhost = "192.168.10.1"\n'))
     assert cfg.hlc.autopilot == "tello"
     assert cfg.hlc.autopilot_params == {"host": "192.168.10.1"}
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        '[hlc.autopilot]\nname = "sim"\ntau = 0.4\n',  # the design draft's table, name inside
+        '[hlc]\nautopilot = { name = "sim", tau = 0.4 }\n',  # the same, inline
+        '[hlc]\nadapter = "sim"\n[hlc.autopilot]\ntau = 0.4\n',  # the name beside the table
+        "[hlc.autopilot]\ntau = 0.4\n",  # no name: the sim
+    ],
+)
+def test_deprecated_autopilot_spellings_load_the_same_plan_with_a_warning(tmp_path: Path, text: str) -> None:
+    canonical = load_plan(write(tmp_path, '[hlc]\nautopilot = "sim"\n[hlc.autopilot_params]\ntau = 0.4\n'))
+    path = write(tmp_path, text)
+    with pytest.warns(
+        FutureWarning, match=r"\[hlc.autopilot\] table is deprecated.*autopilot = \"sim\""
+    ) as seen:
+        plan = load_plan(path)
+    assert str(path) in str(seen[0].message)
+    assert (plan.autopilot.name, plan.autopilot.cls, dict(plan.autopilot.params)) == (
+        "sim",
+        canonical.autopilot.cls,
+        {"tau": 0.4},
+    )
+    assert plan.autopilot.model == canonical.autopilot.model
+
+
+def test_the_canonical_autopilot_spelling_warns_nothing(tmp_path: Path) -> None:
+    import warnings
+
+    path = write(tmp_path, '[hlc]\nautopilot = "sim"\n[hlc.autopilot_params]\ntau = 0.4\n')
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        plan = load_plan(path)
+    assert plan.autopilot.build(lambda: 0.0).params == {"tau": 0.4}
+
+
+def test_a_bad_adapter_name_beside_the_table_names_hlc_adapter(tmp_path: Path) -> None:
+    err = assert_config_error(
+        write(tmp_path, '[hlc]\nadapter = "simm"\n[hlc.autopilot]\ntau = 0.4\n'), "hlc.adapter", "'simm'"
+    )
+    _installed_listed(err.expected)
+
+
+def test_a_config_loads_without_importing_its_plugins(tmp_path: Path) -> None:
+    """The config is data: plugins are resolved once, by the plan (`antalate_lcm.plan`)."""
+    path = write(tmp_path, '[hlc]\nautopilot = "nope"\n')
+    assert load_config(path).hlc.autopilot == "nope"
+    assert_config_error(path, "hlc.autopilot", "there is no adapter 'nope'")
 
 
 @pytest.mark.parametrize(
@@ -137,9 +187,11 @@ DOVRAT = "[[bma]]\nname = 'a'\n[[bma.behaviors]]\nplugin = 'dovrat_swarm'\nactiv
 
 
 def assert_config_error(path: Path, key: str, *expected: str) -> ConfigError:
-    """``path`` fails to load with one line naming the file, ``key`` and each ``expected`` phrase."""
+    """``path`` fails to load with one line naming the file, ``key`` and each ``expected`` phrase.
+
+    Loaded as every command does: the config, then its plugins and their params (`load_plan`)."""
     with pytest.raises(ConfigError) as info:
-        load_config(path)
+        load_plan(path)
     err = info.value
     assert (err.file, err.key) == (str(path), key), str(err)
     for phrase in expected:

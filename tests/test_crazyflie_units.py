@@ -254,13 +254,13 @@ def test_params_documented_and_example_valid() -> None:
 def test_config_loader_names_the_bad_autopilot_param(
     tmp_path: Any, table: str, key: str, phrase: str
 ) -> None:
-    """The config loader applies the adapter's params_model before anything starts (one line, the key)."""
-    from antalate_lcm.config import load_config
+    """The plan applies the adapter's params_model before anything starts (one line, the key)."""
     from antalate_lcm.errors import ConfigError
+    from antalate_lcm.plan import load_plan
 
     path = tmp_path / "cf.toml"
     path.write_text(f'[hlc]\nautopilot = "crazyflie"\n[hlc.autopilot_params]\n{table}\n')
     with pytest.raises(ConfigError) as info:
-        load_config(path)
+        load_plan(path)
     assert info.value.key == f"hlc.autopilot_params.{key}" and phrase in info.value.expected, str(info.value)
     assert "\n" not in str(info.value)

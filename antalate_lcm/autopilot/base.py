@@ -8,11 +8,11 @@ Constructor contract
 --------------------
 Every adapter is constructed as ``Cls(params, *, clock=time.monotonic)``:
 
-* ``params`` is the ``[hlc.autopilot]`` table of the config as a plain ``dict`` (unknown keys should
+* ``params`` is the ``[hlc.autopilot_params]`` table of the config as a plain ``dict`` (unknown keys should
   raise `ValueError` naming the key, so a typo does not silently fall back to a default);
   an adapter declares them as a pydantic model in `Autopilot.params_model`
-  (``ConfigDict(extra="forbid", strict=True)``), which the config loader validates before anything
-  starts, so an error names ``hlc.autopilot.<field>``; `Autopilot.validate_params` applies the same
+  (``ConfigDict(extra="forbid", strict=True)``), which `antalate_lcm.plan` validates before anything
+  starts, so an error names ``hlc.autopilot_params.<field>``; `Autopilot.validate_params` applies the same
   rules in the constructor;
 * ``clock`` is a monotonic clock in seconds. Adapters must take every timestamp from it (link age,
   dead reckoning, simulation), never from `time` directly, so tests can drive them with a fake clock.
@@ -173,9 +173,9 @@ class Autopilot(ABC):
     #: then runs them on a worker thread of its own, so one slow vehicle never stalls the executor
     #: that every agent in the process shares. Only an in-process adapter should set it False.
     blocking: ClassVar[bool] = True
-    #: The params (``[hlc.autopilot]`` table) as a pydantic model with ``extra="forbid"`` and
+    #: The params (``[hlc.autopilot_params]`` table) as a pydantic model with ``extra="forbid"`` and
     #: ``strict=True``: validated when the config is loaded, so a typo, a wrong type or an
-    #: out-of-range value stops the program naming ``hlc.autopilot.<field>`` before any node starts.
+    #: out-of-range value stops the program naming ``hlc.autopilot_params.<field>`` before any node starts.
     #: None = the adapter checks its params in its constructor only.
     params_model: ClassVar[type[BaseModel] | None] = None
     #: Why the last `arm` returned False (e.g. ArduCopter's PreArm text), "" when the adapter cannot

@@ -82,7 +82,7 @@ from antalate_lcm.geo import FlatFrame, body_to_ne, wrap_360
 #: The scheduled faults' parameters (s of flight after takeoff, 0 = never).
 _SCHEDULED_FAULTS = ("takeover_after", "link_loss_after", "failsafe_after", "state_error_after")
 
-#: Parameters and their defaults (``[hlc.autopilot]`` with ``autopilot = "sim"``).
+#: Parameters and their defaults (``[hlc.autopilot_params]`` with ``autopilot = "sim"``).
 DEFAULTS: dict[str, Any] = {
     "home_lat": 32.7767,  # deg; Technion, Haifa
     "home_lon": 35.0231,  # deg
@@ -131,7 +131,7 @@ def _num(key: str, *, ge: float | None = None, gt: float | None = None, le: floa
 
 
 class Params(BaseModel):
-    """The ``[hlc.autopilot]`` table of ``autopilot = "sim"``: every key of `DEFAULTS`, typed and bounded.
+    """The ``[hlc.autopilot_params]`` table of ``autopilot = "sim"``: every key of `DEFAULTS`, typed and bounded.
 
     Validated when the config is loaded (`Autopilot.params_model`): a negative delay or rate, a
     battery over 100 % or ``link_loss = "yes"`` stops the program naming the key.

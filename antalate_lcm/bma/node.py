@@ -13,7 +13,7 @@ from typing import Any
 
 from antalate_lcm.behavior import Behavior, BehaviorContext, failure_reason
 from antalate_lcm.bma.arbiter import Arbiter
-from antalate_lcm.bma.plan import PEER_TOPICS, BehaviorPlan, check_peer_buses, plan_bma
+from antalate_lcm.bma.plan import PEER_TOPICS, BehaviorPlan, BmaPlan, check_peer_buses, plan_bma
 from antalate_lcm.config import BmaConfig, Config
 from antalate_lcm.msgs import arbiter_status_t, mc_state_t, telemetry_t
 from antalate_lcm.node import Context, Node, TopicMatch
@@ -40,7 +40,8 @@ class _Slot:
 class BmaNode(Node):
     """One ``[[bma]]`` of the config.
 
-    Construction resolves the plan (loads plugins, validates params) and raises
+    Construction takes the arbiter's plan (`antalate_lcm.plan.plan_agent`), or resolves it (loads
+    plugins, validates params) and raises
     :class:`~antalate_lcm.errors.ConfigError` on a bad config; behaviors are instantiated in
     :meth:`start`, on the executor thread, where a failing constructor is contained like any other
     behavior failure.
@@ -48,10 +49,10 @@ class BmaNode(Node):
 
     kind = "bma"
 
-    def __init__(self, config: Config, context: Context, bma: BmaConfig) -> None:
+    def __init__(self, config: Config, context: Context, bma: BmaConfig, plan: BmaPlan | None = None) -> None:
         super().__init__(config, context, name=bma.name)
         self.bma = bma
-        self.plan = plan_bma(config, bma)
+        self.plan = plan if plan is not None else plan_bma(config, bma)
         self.log = logging.getLogger(f"antalate.bma.{self.agent}.{bma.name}")
         self._slots: dict[str, _Slot] = {p.name: _Slot(p) for p in self.plan.behaviors}
         self._arbiter = Arbiter({p.name: p.rule for p in self.plan.behaviors})
@@ -65,7 +66,7 @@ class BmaNode(Node):
         #: The swarm's latest telemetry, for the behaviors that declare ``uses_peers`` (None if none does).
         self.peers: PeerTable | None = None
         if any(p.cls.uses_peers for p in self.plan.behaviors):
-            check_peer_buses(config, whole_swarm=context.whole_swarm)
+            check_peer_buses(config, whole_swarm=context.whole_swarm, plans=[self.plan])
             self.peers = PeerTable(self.agent)
 
     # ------------------------------------------------------------------ views (executor thread or tests)

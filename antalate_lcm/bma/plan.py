@@ -7,6 +7,7 @@ starts (docs/design.md §11). The BMA node uses the same plan, so what was valid
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -52,23 +53,22 @@ class BmaPlan:
 PEER_TOPICS = ("TELEMETRY", "MC_STATE")
 
 
-def peer_readers(config: Config) -> list[str]:
-    """The keys (``bma[0].behaviors[1]``) of the behaviors that declare ``uses_peers``."""
-    out: list[str] = []
-    for bma in config.bma:
-        plan = plan_bma(config, bma)
-        out.extend(b.key for b in plan.behaviors if b.cls.uses_peers)
-    return out
+def peer_readers(config: Config, plans: Sequence[BmaPlan] | None = None) -> list[str]:
+    """The keys (``bma[0].behaviors[1]``) of the behaviors that declare ``uses_peers``, in ``plans``
+    (the config's arbiters, already resolved) or else in every arbiter of ``config``."""
+    if plans is None:
+        plans = [plan_bma(config, bma) for bma in config.bma]
+    return [b.key for plan in plans for b in plan.behaviors if b.cls.uses_peers]
 
 
-def check_peer_buses(config: Config, *, whole_swarm: bool) -> None:
+def check_peer_buses(config: Config, *, whole_swarm: bool, plans: Sequence[BmaPlan] | None = None) -> None:
     """Raise :class:`ConfigError` when a behavior asks for peers that its config cannot let it hear.
 
     Peers are heard on the bus their TELEMETRY and MC_STATE travel on. memq:// never leaves its
     process: fine when the whole swarm shares the process (``whole_swarm``), a silent split of the
     swarm otherwise (``--processes N``, one agent per host, a BMA in a process of its own).
     """
-    readers = peer_readers(config)
+    readers = peer_readers(config, plans)
     if not readers:
         return
     for topic in PEER_TOPICS:

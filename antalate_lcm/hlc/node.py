@@ -19,7 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from typing import Any, cast
 
-from antalate_lcm.autopilot import Autopilot, AutopilotError, AutopilotState, Frame, load_autopilot
+from antalate_lcm.autopilot import Autopilot, AutopilotError, AutopilotState, Frame
 from antalate_lcm.config import Config
 from antalate_lcm.hlc.machine import (
     NOTHING,
@@ -43,6 +43,7 @@ from antalate_lcm.hlc.velocity_guard import (
 )
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t, velocity_cmd_t
 from antalate_lcm.node import Context, Node, TopicMatch
+from antalate_lcm.plan import plan_autopilot
 from antalate_lcm.ratelimit import RateLimitedLog
 from antalate_lcm.vocabulary import HlcState, Severity
 
@@ -101,8 +102,7 @@ def _picture(config: Config, context: Context) -> _SharedPicture:
 
 
 def make_autopilot(config: Config, context: Context) -> Autopilot:
-    cls = load_autopilot(config.hlc.autopilot)
-    return cls(config.hlc.autopilot_params, clock=context.executor.clock)
+    return plan_autopilot(config).build(context.executor.clock)
 
 
 class HlcNode(Node):

@@ -24,34 +24,28 @@ from antalate_lcm.geo import offset
 from antalate_lcm.hlc.node import HlcNode
 from antalate_lcm.mc.node import McNode
 from antalate_lcm.node import Context, Node
+from antalate_lcm.plan import AgentPlan, plan_agent, plan_autopilot
 
 log = logging.getLogger("antalate.agent")
 
 
-def validate(config: Config) -> None:
-    """Every check that needs plugins loaded (behaviors, the autopilot, their params), before any node
+def validate(config: Config) -> AgentPlan:
+    """Every plugin of the agent loaded and its params checked (`antalate_lcm.plan`), before any node
     starts, so a typo never surfaces mid-flight."""
-    from antalate_lcm.autopilot import load_autopilot
-    from antalate_lcm.bma import validate_bma_config
-    from antalate_lcm.errors import PluginNotFound
-
-    validate_bma_config(config)
-    try:
-        cls = load_autopilot(config.hlc.autopilot)
-    except PluginNotFound as exc:
-        raise ConfigError(config.source, "hlc.autopilot", str(exc)) from None
-    try:
-        cls(config.hlc.autopilot_params)  # adapters do no I/O until connect(): this only checks params
-    except (ValueError, TypeError) as exc:
-        raise ConfigError(config.source, "hlc.autopilot_params", str(exc)) from None
+    return plan_agent(config)
 
 
-def agent_nodes(config: Config, context: Context) -> list[Node]:
-    """The nodes of one agent, in start order: HLC first so the MC hears its state at once."""
+def agent_nodes(config: Config, context: Context, plan: AgentPlan | None = None) -> list[Node]:
+    """The nodes of one agent, in start order: HLC first so the MC hears its state at once.
+
+    Built from ``plan`` (made by `validate`; made here when not given), so what was checked runs.
+    """
     from antalate_lcm.bma.node import BmaNode
 
-    nodes: list[Node] = [HlcNode(config, context), McNode(config, context)]
-    nodes.extend(BmaNode(config, context, bma) for bma in config.bma)
+    plan = plan if plan is not None else plan_agent(config)
+    autopilot = plan.autopilot.build(context.executor.clock)
+    nodes: list[Node] = [HlcNode(config, context, autopilot), McNode(config, context)]
+    nodes.extend(BmaNode(config, context, bma.config, bma) for bma in plan.bmas)
     if config.osc.enabled:
         from antalate_lcm.osc.node import OscNode
 
@@ -71,6 +65,7 @@ def swarm_configs(
     if n == 1:
         return [config]
     if config.hlc.autopilot != "sim":
+        plan_autopilot(config)  # the adapter's own mistakes first: they are what to fix in the file
         raise ConfigError(
             config.source,
             "hlc.autopilot",

@@ -10,48 +10,54 @@ import argparse
 import os
 import sys
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from antalate_lcm.config import Config, check_unique_agent_names, load_config
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.node import Context, Node
 
+if TYPE_CHECKING:  # the plan imports every adapter's registry: only the commands that run nodes need it
+    from antalate_lcm.plan import AgentPlan
 
-def _run_single(args: argparse.Namespace, make: Callable[[Config, Context], list[Node]]) -> int:
+
+def _run_single(args: argparse.Namespace, make: Callable[[AgentPlan, Context], list[Node]]) -> int:
     from antalate_lcm.runtime.agent import validate
     from antalate_lcm.runtime.launch import run_until_signal
 
     config = load_config(args.config)
-    validate(config)
+    plan = validate(config)  # the node is built from what was checked
     context = Context.create(config)
-    return run_until_signal(context, make(config, context))
+    return run_until_signal(context, make(plan, context))
 
 
 def cmd_mc(args: argparse.Namespace) -> int:
     from antalate_lcm.mc.node import McNode
 
-    return _run_single(args, lambda cfg, ctx: [McNode(cfg, ctx)])
+    return _run_single(args, lambda plan, ctx: [McNode(plan.config, ctx)])
 
 
 def cmd_hlc(args: argparse.Namespace) -> int:
     from antalate_lcm.hlc.node import HlcNode
 
-    return _run_single(args, lambda cfg, ctx: [HlcNode(cfg, ctx)])
+    return _run_single(
+        args, lambda plan, ctx: [HlcNode(plan.config, ctx, plan.autopilot.build(ctx.executor.clock))]
+    )
 
 
 def cmd_osc(args: argparse.Namespace) -> int:
     from antalate_lcm.osc import OscNode
 
-    return _run_single(args, lambda cfg, ctx: [OscNode(cfg, ctx)])
+    return _run_single(args, lambda plan, ctx: [OscNode(plan.config, ctx)])
 
 
 def cmd_bma(args: argparse.Namespace) -> int:
     from antalate_lcm.bma.node import BmaNode
 
-    def make(cfg: Config, ctx: Context) -> list[Node]:
-        for bma in cfg.bma:
-            if bma.name == args.name:
-                return [BmaNode(cfg, ctx, bma)]
+    def make(plan: AgentPlan, ctx: Context) -> list[Node]:
+        cfg = plan.config
+        for bma in plan.bmas:
+            if bma.config.name == args.name:
+                return [BmaNode(cfg, ctx, bma.config, bma)]
         names = ", ".join(b.name for b in cfg.bma) or "none"
         raise AntalateError(f"no [[bma]] named {args.name!r} in {cfg.source}; declared: {names}")
 
@@ -75,8 +81,7 @@ def cmd_agent(args: argparse.Namespace) -> int:
     for path in args.config:
         configs.extend(swarm_configs(load_config(path), args.agents, spacing=args.spacing))
     check_unique_agent_names(configs, agents=args.agents)  # names the file and agent.name
-    for cfg in configs:
-        validate(cfg)
+    plans = {id(cfg): validate(cfg) for cfg in configs}  # plugins resolved once, built from below
     processes = args.processes or default_processes(len(configs))
     if args.shard:
         configs = shard(configs, *parse_shard(args.shard))
@@ -84,7 +89,7 @@ def cmd_agent(args: argparse.Namespace) -> int:
         from antalate_lcm.bma.plan import check_peer_buses
 
         for cfg in configs:  # before any process starts: one line naming the key, not a split swarm
-            check_peer_buses(cfg, whole_swarm=False)
+            check_peer_buses(cfg, whole_swarm=False, plans=plans[id(cfg)].bmas)
         argv = [
             sys.executable,
             "-m",
@@ -98,7 +103,7 @@ def cmd_agent(args: argparse.Namespace) -> int:
         return run_processes(lambda i, n: [*argv, "--shard", f"{i}/{n}"], min(processes, len(configs)))
     # Internal topics between this process's nodes in memory: a spoofed LAN datagram never reaches them.
     context = Context.in_process(shared_buses(configs), whole_swarm=not args.shard)
-    nodes = [node for cfg in configs for node in agent_nodes(cfg, context)]
+    nodes = [node for cfg in configs for node in agent_nodes(cfg, context, plans[id(cfg)])]
     if args.broadcast_reception is None and args.faults is None:
         return run_until_signal(context, nodes)
     from antalate_lcm.runtime.faults import broadcast_report, lossy_broadcasts

@@ -20,8 +20,11 @@ Protocol (what the real Tello does, and so what this emulates):
   the last one the Tello took is **ignored**. Measured from the last command, not from the last reply:
   djitellopy 2.5.0 means to wait 0.1 s after the answer, but ``send_command_with_return`` sleeps
   ``diff`` instead of ``TIME_BTW_COMMANDS - diff`` and notices the answer only at its next 0.1 s poll,
-  so what it really guarantees (and real Tellos answer) is 0.1 s between two commands, with the next one
-  sometimes a few ms after the previous answer -- not carried out, never answered
+  so what it usually gives (and real Tellos answer) is 0.1 s between two commands, with the next one
+  sometimes a few ms after the previous answer. Not always: when the answer is already there at its
+  first look (it checks before its first 0.1 s sleep), the next command goes at once -- against this
+  emulator, which answers within a millisecond, a loaded machine that delays djitellopy's thread after
+  its send does that (measured: ``sdk?`` then ``battery?`` 1 ms apart). A command too close is not carried out, never answered
   (`ignored` keeps it; DJITelloPy issue #43 is where 0.1 s was settled on, from use, since neither the
   SDK guides nor DJI's own samples give a figure: the worst case an adapter must survive). ``emergency`` is no exception (djitellopy's ``send_command_without_return``
   carries the same comment); ``rc`` is.

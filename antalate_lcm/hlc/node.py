@@ -155,6 +155,8 @@ class HlcNode(Node):
         self._safety_landing = False  # the filter's policy asked the vehicle to land
         self._reported: dict[str, float] = {}  # SAFETY report kind -> `now` of the last one
         self._fence_mirrored = False  # the fence was written into the autopilot's own (once per start)
+        self._clock: Callable[[], float] = context.executor.clock
+        self._state: Callable[[], AutopilotState] = self.autopilot.state
 
     @property
     def state(self) -> HlcState:
@@ -162,6 +164,9 @@ class HlcNode(Node):
 
     # ------------------------------------------------------------------ lifecycle
     def on_start(self) -> None:
+        #: The executor's clock and the adapter's ``state``, bound once for the 20 Hz control tick.
+        self._clock = self.context.executor.clock
+        self._state = self.autopilot.state
         if self.autopilot.blocking:
             self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"hlc-io-{self.agent}")
         self.subscribe("MC_STATE", self._on_mc_state)
@@ -302,7 +307,7 @@ class HlcNode(Node):
     def _poll(self, now: float) -> AutopilotState:
         """The adapter's snapshot, or the last good one aged by the time since when ``state()`` raises."""
         try:
-            snapshot = self.autopilot.state()
+            snapshot = self._state()
         except Exception as exc:  # noqa: BLE001 - an adapter bug is a stale link, not a dead HLC
             fault = f"autopilot {self.autopilot.name} state() raised {type(exc).__name__}: {exc}"
             if fault != self._state_fault:
@@ -321,12 +326,17 @@ class HlcNode(Node):
     def _control(self) -> None:
         if not self.started:
             return
-        now = self.now
+        now = self._clock()
         snapshot = self.snapshot = self._poll(now)
         self._polled_at = now
         machine = self.machine
-        self._handle(machine.on_autopilot(snapshot, now, fault=self._state_fault))
-        self._handle(machine.tick(now))
+        # 20 times a second per agent: most outcomes are NOTHING, checked here rather than in a call.
+        outcome = machine.on_autopilot(snapshot, now, fault=self._state_fault)
+        if outcome is not NOTHING:
+            self._handle(outcome)
+        outcome = machine.tick(now)
+        if outcome is not NOTHING:
+            self._handle(outcome)
         # The link's age now is the snapshot's: it was polled at `now` (see _link_age).
         stale = self.velocity_guard.tick(now, machine.state, self.mc_state, self.snapshot.link_age)
         if stale is not None:

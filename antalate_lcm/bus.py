@@ -619,25 +619,17 @@ class Bus:
         try:
             self._link(bus).publish(channel, data)
         except OSError as exc:
-            return self._publish_failed(bus, channel, exc)
+            return self.publish_failed(bus, channel, exc)
         return True
 
-    def sender(self, bus: str) -> Callable[[str, bytes], bool]:
-        """``publish`` on ``bus`` for encoded bytes, with the bus looked up once (a node's publisher
-        keeps it: 20 messages a second per simulated agent, one lookup and one call less each)."""
-        send = self._link(bus).publish
-        failed = self._publish_failed
+    def sender(self, bus: str) -> Callable[[str, bytes], None]:
+        """The send function of ``bus`` for encoded bytes, looked up once (a node's publisher keeps
+        it: 20 messages a second per simulated agent, a lookup and two calls less each). It raises
+        what ``publish`` would log: the caller reports an OSError through :meth:`publish_failed`."""
+        return self._link(bus).publish
 
-        def sender(channel: str, data: bytes) -> bool:
-            try:
-                send(channel, data)
-            except OSError as exc:
-                return failed(bus, channel, exc)
-            return True
-
-        return sender
-
-    def _publish_failed(self, bus: str, channel: str, exc: OSError) -> bool:
+    def publish_failed(self, bus: str, channel: str, exc: OSError) -> bool:
+        """Count and log (rate-limited) a send that failed with ``exc``; False, what publish returns."""
         self.publish_errors += 1
         self._publish_log.log((bus, channel), logging.WARNING, "cannot send on %s %s: %s", bus, channel, exc)
         return False

@@ -129,7 +129,7 @@ class _Publisher:
     buses: list[str]
     channel: str
     #: Each bus's send function (`Bus.sender`), resolved once: 20 publishes a second per agent.
-    senders: list[Callable[[str, bytes], bool]]
+    senders: list[tuple[str, Callable[[str, bytes], None]]]
     seq: int = 0
 
 
@@ -352,17 +352,18 @@ class Node:
         key = self.security.key  # SecurityPolicy.enabled is bool(key), without a property call
         data = signed_bytes(msg, key) if key else fast_encode(msg)
         channel = pub.channel
-        if len(pub.senders) == 1:  # the common case: one bus, no loop
-            return pub.senders[0](channel, data)
         ok = True
-        for send in pub.senders:
-            ok = send(channel, data) and ok
+        for bus, send in pub.senders:
+            try:
+                send(channel, data)
+            except OSError as exc:
+                ok = self.context.bus.publish_failed(bus, channel, exc) and ok
         return ok
 
     def _publisher(self, topic: str, fields: dict[str, str]) -> _Publisher:
         buses = self._publish_buses(topic)
         bus = self.context.bus
-        pub = _Publisher(buses, self.channel(topic, **fields), [bus.sender(name) for name in buses])
+        pub = _Publisher(buses, self.channel(topic, **fields), [(name, bus.sender(name)) for name in buses])
         self._publishers[(topic, tuple(sorted(fields.items()))) if fields else topic] = pub
         return pub
 

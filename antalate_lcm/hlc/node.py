@@ -156,6 +156,7 @@ class HlcNode(Node):
         self._reported: dict[str, float] = {}  # SAFETY report kind -> `now` of the last one
         self._fence_mirrored = False  # the fence was written into the autopilot's own (once per start)
         self._clock: Callable[[], float] = context.executor.clock
+        self._telemetry = telemetry_t()
         self._state: Callable[[], AutopilotState] = self.autopilot.state
 
     @property
@@ -309,25 +310,39 @@ class HlcNode(Node):
         try:
             snapshot = self._state()
         except Exception as exc:  # noqa: BLE001 - an adapter bug is a stale link, not a dead HLC
-            fault = f"autopilot {self.autopilot.name} state() raised {type(exc).__name__}: {exc}"
-            if fault != self._state_fault:
-                self.log.debug("%s", fault, exc_info=True)
-            self._state_fault = fault
-            self._fault_log.log(("state",), logging.WARNING, "%s", fault)
-            if self._good_at is None:
-                return replace(self._good, link_age=math.inf)
-            return replace(self._good, link_age=self._good.link_age + max(0.0, now - self._good_at))
+            return self._stale(now, exc)
         if self._state_fault:
             self.log.warning("autopilot %s state() works again", self.autopilot.name)
             self._state_fault = ""
         self._good, self._good_at = snapshot, now
         return snapshot
 
+    def _stale(self, now: float, exc: Exception) -> AutopilotState:
+        """``state()`` raised ``exc``: the last good snapshot, its link aged by the time since."""
+        fault = f"autopilot {self.autopilot.name} state() raised {type(exc).__name__}: {exc}"
+        if fault != self._state_fault:
+            self.log.debug("%s", fault, exc_info=True)
+        self._state_fault = fault
+        self._fault_log.log(("state",), logging.WARNING, "%s", fault)
+        if self._good_at is None:
+            return replace(self._good, link_age=math.inf)
+        return replace(self._good, link_age=self._good.link_age + max(0.0, now - self._good_at))
+
     def _control(self) -> None:
         if not self.started:
             return
         now = self._clock()
-        snapshot = self.snapshot = self._poll(now)
+        # _poll, inlined (20 times a second per agent).
+        try:
+            snapshot = self._state()
+        except Exception as exc:  # noqa: BLE001 - an adapter bug is a stale link, not a dead HLC
+            snapshot = self._stale(now, exc)
+        else:
+            if self._state_fault:
+                self.log.warning("autopilot %s state() works again", self.autopilot.name)
+                self._state_fault = ""
+            self._good, self._good_at = snapshot, now
+        self.snapshot = snapshot
         self._polled_at = now
         machine = self.machine
         # 20 times a second per agent: most outcomes are NOTHING, checked here rather than in a call.
@@ -541,7 +556,9 @@ class HlcNode(Node):
         s = self.snapshot
         if not s.connected:
             return
-        msg = telemetry_t()
+        # One message, refilled 10 times a second (publish stamps its header and encodes it at
+        # once); a fresh one where an experiment's interference may hold on to it.
+        msg = self._telemetry if self.interference is None else telemetry_t()
         msg.lat, msg.lon, msg.alt = s.lat, s.lon, s.alt
         msg.heading, msg.vn, msg.ve, msg.vd = s.heading, s.vn, s.ve, s.vd
         msg.battery, msg.armed, msg.in_air, msg.mode = s.battery, s.armed, s.in_air, s.mode

@@ -305,18 +305,6 @@ class HlcNode(Node):
             return math.inf
         return self.snapshot.link_age + max(0.0, self.now - self._polled_at)
 
-    def _poll(self, now: float) -> AutopilotState:
-        """The adapter's snapshot, or the last good one aged by the time since when ``state()`` raises."""
-        try:
-            snapshot = self._state()
-        except Exception as exc:  # noqa: BLE001 - an adapter bug is a stale link, not a dead HLC
-            return self._stale(now, exc)
-        if self._state_fault:
-            self.log.warning("autopilot %s state() works again", self.autopilot.name)
-            self._state_fault = ""
-        self._good, self._good_at = snapshot, now
-        return snapshot
-
     def _stale(self, now: float, exc: Exception) -> AutopilotState:
         """``state()`` raised ``exc``: the last good snapshot, its link aged by the time since."""
         fault = f"autopilot {self.autopilot.name} state() raised {type(exc).__name__}: {exc}"
@@ -332,7 +320,7 @@ class HlcNode(Node):
         if not self.started:
             return
         now = self._clock()
-        # _poll, inlined (20 times a second per agent).
+        # The adapter's snapshot, or the last good one aged by the time since when state() raises.
         try:
             snapshot = self._state()
         except Exception as exc:  # noqa: BLE001 - an adapter bug is a stale link, not a dead HLC

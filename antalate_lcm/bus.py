@@ -169,6 +169,12 @@ class _Link:
         #: Once a subscription of this link could want the process's own messages (a pattern, or a
         #: channel it publishes), they are heard again, for good.
         self._hear_own = False
+        #: (own address, topics) the receive socket's filter drops by (see _own_filter).
+        self._filter: tuple[tuple[str, int] | None, frozenset[str] | None] = (None, None)
+        #: The kernel refused a socket filter: every datagram is read, as liblcm's thread reads it.
+        self._unfiltered = False
+        #: The last ``/``-part of every channel ever subscribed exactly (what the filter lets through).
+        self._topics: frozenset[str] = frozenset()
         self._damaged_seen = 0
         self._capacity = queue_capacity
         # Routing tables are replaced, never mutated, so the loop reads them without a lock.
@@ -210,11 +216,15 @@ class _Link:
                         route.lcm_sub = lc.subscribe(lcm_literal(sub.channel), partial(self._on_exact, route))
                         route.lcm_sub.set_queue_capacity(self._capacity)
                     self._routes = {**self._routes, sub.channel: route}
+                    topic = sub.channel.rsplit("/", 1)[-1]
+                    if topic not in self._topics:
+                        self._topics = self._topics | {topic}
                 route.subs = (*route.subs, sub)
             else:
-                if own:  # it may match what this process sends: hear that again first
-                    self._hear_own_messages()
                 self._patterns = (*self._patterns, sub)
+                if own:  # it may match anything, this process's own datagrams included
+                    self._hear_own = True
+                    self._own_filter()
                 if self._star is None and not own:
                     self._star = lc.subscribe(".*", self._on_pattern)
                     self._star.set_queue_capacity(self._capacity)
@@ -233,29 +243,39 @@ class _Link:
             ex.add_reader(fd, on_readable, urgent=own)
 
     def _own_filter(self) -> None:
-        """Under the lock: let the receive socket drop this process's own datagrams while no
-        subscription of the link can want them (no pattern; a channel it publishes and also
-        subscribes turns it off in :meth:`publish`). The copy that loops back was read and dropped
-        by channel anyway, 20,000 a second for a thousand simulated agents."""
-        if self._ignoring or self._hear_own or self._patterns:
+        """Under the lock: have the kernel drop, on the receive socket, what no subscription of the
+        link can want: the process's own datagrams (while no pattern, and no channel it both
+        publishes and subscribes: then :meth:`publish` turns that off) and the short messages of
+        channels whose last ``/``-part no exact subscription has (while no pattern). A thousand
+        simulated agents read their own 20,000 datagrams a second and every other agent process's
+        only to drop them by channel."""
+        receiver = self._receiver
+        if receiver is None:
             return
-        receiver, sender = self._receiver, self._sender
-        if receiver is None or sender is None:
+        own: tuple[str, int] | None = None
+        topics: frozenset[str] | None = None
+        if not self._patterns and not self._unfiltered:
+            if self._sender is not None and not self._hear_own:
+                own = self._sender.address
+            if self._topics:
+                topics = self._topics
+        if (own, topics) == self._filter:
             return
         try:
-            receiver.ignore(sender.address)
+            if not receiver.filter(own, topics):  # too many topics for one filter: own ones only
+                topics = None
+                receiver.filter(own, None)
         except OSError as exc:  # a kernel without socket filters: read and drop, as before
-            log.debug("cannot filter the own datagrams on %s: %s", self.url, exc)
-            self._hear_own = True
+            log.debug("cannot filter datagrams on %s: %s", self.url, exc)
+            self._unfiltered = True
             return
-        self._ignoring = True
+        self._filter = (own, topics)
+        self._ignoring = own is not None
 
     def _hear_own_messages(self) -> None:
         """Under the lock: the receive socket hears this process's own datagrams again, for good."""
         self._hear_own = True
-        if self._ignoring and self._receiver is not None:
-            self._ignoring = False
-            self._receiver.ignore(None)
+        self._own_filter()
 
     def _open_receiver(self) -> UdpmReceiver:
         try:

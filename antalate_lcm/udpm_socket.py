@@ -14,9 +14,12 @@ port with liblcm processes and the stock tools.
 ``lcm_udpm_publish`` sends a short message (``LC02``, its sequence number, the channel and the
 message; ``lcm_udpm.c``), and leaves anything larger to liblcm's fragmenting publish. Its socket's
 address is known, so the process's own receive socket can drop what the process itself sent in the
-kernel (`UdpmReceiver.ignore`, a classic BPF filter on the source address and port): multicast
+kernel (`UdpmReceiver.filter`, a classic BPF filter on the source address and port): multicast
 loops every datagram back to every socket of the group on the host, the sender's own included, and a
-thousand simulated agents read their own 20,000 datagrams a second only to drop them by channel.
+thousand simulated agents read their own 20,000 datagrams a second only to drop them by channel. The
+same filter can drop the short messages of every channel whose last part (after its last ``/``) is
+not one the process subscribes to: an agent process keeps a few commands out of every other agent
+process's telemetry and state.
 """
 
 from __future__ import annotations
@@ -72,9 +75,11 @@ class UdpmReceiver:
     def fileno(self) -> int:
         return self.sock.fileno()
 
-    def ignore(self, address: tuple[str, int] | None) -> None:
-        """Drop what ``address`` (this process's `UdpmSender`) sends, in the kernel; None: stop."""
-        _ignore(self.sock, address)
+    def filter(self, own: tuple[str, int] | None, topics: frozenset[str] | None) -> bool:
+        """Let the kernel drop what ``own`` (this process's `UdpmSender`) sends and, with ``topics``,
+        every short message whose channel's last ``/``-part is none of them (both None: hear all).
+        False (nothing changed) when that many topics do not fit a socket filter."""
+        return _attach(self.sock, own, topics)
 
     def drain(self, deliver: Callable[[str, bytes], None], limit: int) -> int:
         """Read up to ``limit`` datagrams that are waiting (never blocks); returns how many were read."""
@@ -100,40 +105,95 @@ class UdpmReceiver:
         self.sock.close()
 
 
-def _own_datagram_filter(address: tuple[str, int]) -> tuple[bytes, ctypes.Array[ctypes.c_char]]:
-    """A classic BPF program (``struct sock_fprog`` and its code) that drops IPv4 datagrams from
-    ``address`` (ip, port) and accepts every other one. Offsets are from the network header
-    (``SKF_NET_OFF``), so they do not depend on where the kernel has the UDP header; a header with
-    options is accepted (never dropped by mistake)."""
-    net = -0x100000  # SKF_NET_OFF
-    ld_w, ld_h, ld_b = 0x20, 0x28, 0x30  # BPF_LD | BPF_W/H/B | BPF_ABS
-    jeq, and_k, ret = 0x15, 0x54, 0x06  # BPF_JMP|BPF_JEQ|BPF_K, BPF_ALU|BPF_AND|BPF_K, BPF_RET|BPF_K
-    ip = struct.unpack(">I", socket.inet_aton(address[0]))[0]
-    code = [
-        (ld_w, 0, 0, net + 12),  # source address
-        (jeq, 0, 5, ip),  # another host: accept
-        (ld_b, 0, 0, net),
-        (and_k, 0, 0, 0xF),  # IHL
-        (jeq, 0, 2, 5),  # IP options: accept
-        (ld_h, 0, 0, net + 20),  # UDP source port
-        (jeq, 1, 0, address[1]),  # ours: drop
-        (ret, 0, 0, 0xFFFFFFFF),
-        (ret, 0, 0, 0),
+#: Classic BPF opcodes (linux/filter.h) and SKF_NET_OFF: offsets from the network header, so they
+#: do not depend on where the kernel has the UDP header when the filter runs.
+_LD_W, _LD_H, _LD_B = 0x20, 0x28, 0x30  # BPF_LD | BPF_W/H/B | BPF_ABS
+_JEQ, _AND, _RET = 0x15, 0x54, 0x06  # BPF_JMP|BPF_JEQ|BPF_K, BPF_ALU|BPF_AND|BPF_K, BPF_RET|BPF_K
+_NET = -0x100000
+_ACCEPT, _DROP = 0xFFFFFFFF, 0
+_CHANNEL = _NET + 20 + 8 + 8  # IPv4 header without options, UDP header, LC02 magic and seqno
+_MAX_CODE = 4096  # BPF_MAXINSNS
+
+
+def _topic_block(length: int, topics: list[bytes]) -> list[tuple[int, int, int, int]]:
+    """Code for a channel of ``length`` bytes (its NUL found there): accept it when it is one of
+    ``topics`` or ends with ``/`` and one of them, else drop."""
+    code: list[tuple[int, int, int, int]] = []
+    for topic in topics:
+        m = len(topic)
+        if m > length:
+            continue
+        at = _CHANNEL + length - m
+        checks: list[tuple[int, int, int]] = []  # (load op, offset, value)
+        k = 0
+        while k < m:
+            size = 4 if m - k >= 4 else 2 if m - k >= 2 else 1
+            op = {4: _LD_W, 2: _LD_H, 1: _LD_B}[size]
+            checks.append((op, at + k, int.from_bytes(topic[k : k + size], "big")))
+            k += size
+        if m < length:
+            checks.append((_LD_B, at - 1, ord("/")))
+        n = 2 * len(checks) + 1  # this topic's code: a load and a test per check, then accept
+        for i, (op, offset, value) in enumerate(checks):
+            code.append((op, 0, 0, offset))
+            code.append((_JEQ, 0, n - 2 * i - 2, value))  # a mismatch: past this topic's accept
+        code.append((_RET, 0, 0, _ACCEPT))
+    code.append((_RET, 0, 0, _DROP))
+    return code
+
+
+def _program(own: tuple[str, int] | None, topics: frozenset[str] | None) -> list[tuple[int, int, int, int]]:
+    """A classic BPF program: drop IPv4 datagrams from ``own`` (ip, port); with ``topics``, drop an
+    ``LC02`` datagram unless its channel is a topic or ends with ``/`` and a topic. Anything else
+    (a header with options, fragments, what is not LCM) is accepted: the reader deals with it."""
+    code: list[tuple[int, int, int, int]] = [
+        (_LD_B, 0, 0, _NET),
+        (_AND, 0, 0, 0xF),  # IHL
+        (_JEQ, 1, 0, 5),
+        (_RET, 0, 0, _ACCEPT),  # IP options: not ours to judge
     ]
+    if own is not None:
+        ip = struct.unpack(">I", socket.inet_aton(own[0]))[0]
+        code += [
+            (_LD_W, 0, 0, _NET + 12),  # source address
+            (_JEQ, 0, 3, ip),
+            (_LD_H, 0, 0, _NET + 20),  # UDP source port
+            (_JEQ, 0, 1, own[1]),
+            (_RET, 0, 0, _DROP),  # this process's own datagram
+        ]
+    if topics is not None:
+        names = sorted(t.encode("utf-8") for t in topics)
+        code += [
+            (_LD_W, 0, 0, _NET + 28),
+            (_JEQ, 1, 0, int.from_bytes(SHORT_MAGIC_BYTES, "big")),
+            (_RET, 0, 0, _ACCEPT),  # fragments and what is not LCM
+        ]
+        for length in range(MAX_CHANNEL_LENGTH + 1):  # the channel's NUL at _CHANNEL + length
+            block = _topic_block(length, names)
+            code.append((_LD_B, 0, 0, _CHANNEL + length))
+            code.append((_JEQ, 0, len(block), 0))  # not the NUL: the next length
+            code += block
+        code.append((_RET, 0, 0, _ACCEPT))  # no NUL where a channel ends: the reader counts it
+    else:
+        code.append((_RET, 0, 0, _ACCEPT))
+    return code
+
+
+def _attach(sock: socket.socket, own: tuple[str, int] | None, topics: frozenset[str] | None) -> bool:
+    """Filter ``sock`` as `_program` says (both None: no filter); False when the program would be
+    too long for the kernel (too many topics) and nothing was changed."""
+    if own is None and topics is None:
+        sock.setsockopt(socket.SOL_SOCKET, _SO_DETACH_FILTER, b"\0" * 4)
+        return True
+    code = _program(own, topics)
+    if len(code) > _MAX_CODE or any(jt > 255 or jf > 255 for _, jt, jf, _ in code):
+        return False
     buf = ctypes.create_string_buffer(
         b"".join(struct.pack("HBBI", c, t, f, k & 0xFFFFFFFF) for c, t, f, k in code)
     )
-    return struct.pack("HL", len(code), ctypes.addressof(buf)), buf
-
-
-def _ignore(sock: socket.socket, address: tuple[str, int] | None) -> None:
-    """Drop datagrams from ``address`` on ``sock`` in the kernel (None: hear every sender again)."""
-    if address is None:
-        sock.setsockopt(socket.SOL_SOCKET, _SO_DETACH_FILTER, b"\0" * 4)
-        return
-    prog, code = _own_datagram_filter(address)
-    sock.setsockopt(socket.SOL_SOCKET, _SO_ATTACH_FILTER, prog)  # the kernel copies the program
-    del code
+    # The kernel copies the program: the buffer may go once setsockopt returns.
+    sock.setsockopt(socket.SOL_SOCKET, _SO_ATTACH_FILTER, struct.pack("HL", len(code), ctypes.addressof(buf)))
+    return True
 
 
 class UdpmSender:

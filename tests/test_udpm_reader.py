@@ -120,10 +120,11 @@ def test_own_reader_and_liblcm_on_one_group(netns: NetNamespace) -> None:
 
 
 _OWN_SCRIPT = r"""
-import json, os, sys, time
+import json, os, socket, struct, sys, time
 import lcm
 from pathlib import Path
 from antalate_lcm.bus import Bus
+from antalate_lcm.lcm_datagram import short_datagram
 
 A = sys.argv[1]
 out = {}
@@ -163,6 +164,20 @@ out["own_copies_dropped_in_the_kernel"] = until(lambda: drops(own) - before == 2
 peer.publish("a", "IN", b"from peer")
 lc.publish("IN", b"from liblcm")
 out["others_heard"] = until(lambda: got["in"] == [b"from peer", b"from liblcm"])
+# another process's channels whose last part nobody here subscribes to: dropped in the kernel too
+before = drops(own)
+for i in range(10):
+    peer.publish("a", "b-9/TELEMETRY", b"t%d" % i)
+out["other_topics_dropped_in_the_kernel"] = until(lambda: drops(own) - before == 10)
+# a channel with a subscribed last part passes the filter and is dropped by channel; a datagram
+# the filter cannot read (an LC02 header and nothing more) goes; reception carries on after both
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+s.sendto(short_datagram("x/IN", b"not mine"), ("239.255.76.67", 7667))
+s.sendto(struct.pack(">II", 0x4C433032, 9), ("239.255.76.67", 7667))
+s.sendto(short_datagram("IN", b"after"), ("239.255.76.67", 7667))
+out["hears_after_hostile"] = until(lambda: got["in"][2:] == [b"after"])
+s.close()
 # a subscriber of a channel the process publishes: its own messages are heard again
 own.subscribe("a", "OUT", None, lambda ch, d: got["out"].append(d))
 own.publish("a", "OUT", b"mine")
@@ -179,7 +194,8 @@ print(json.dumps(out), flush=True)
 def test_a_process_drops_its_own_datagrams_until_it_subscribes_to_them(netns: NetNamespace) -> None:
     """The own sender's datagrams loop back to the own socket: dropped in the kernel while no
     subscription of the bus wants them, heard by everyone else, and heard again (for good) once the
-    process subscribes to a channel it publishes on."""
+    process subscribes to a channel it publishes on. Other processes' channels whose last part no
+    subscription has are dropped in the kernel as well; a damaged datagram does not stop reception."""
     proc = netns.python("-c", _OWN_SCRIPT, GROUP_A, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err

@@ -8,16 +8,28 @@ wants (a process's own publications loop back) dropped after one ``recvfrom``
 (``benchmarks/bus.py``, ``benchmarks/tui.py``, ``benchmarks/agents.py``). The socket is set up as
 liblcm sets up its own (``_setup_recv_parts``: ``SO_REUSEADDR``, ``recv_buf_size`` as
 ``SO_RCVBUF``, bound to the group and port, the group joined on every interface), so it shares the
-port with liblcm processes and the stock tools. Publishing stays with liblcm.
+port with liblcm processes and the stock tools.
+
+`UdpmSender` publishes what fits one datagram from a socket of its own, as liblcm's
+``lcm_udpm_publish`` sends a short message (``LC02``, its sequence number, the channel and the
+message; ``lcm_udpm.c``), and leaves anything larger to liblcm's fragmenting publish. Its socket's
+address is known, so the process's own receive socket can drop what the process itself sent in the
+kernel (`UdpmReceiver.filter`, a classic BPF filter on the source address and port): multicast
+loops every datagram back to every socket of the group on the host, the sender's own included, and a
+thousand simulated agents read their own 20,000 datagrams a second only to drop them by channel. The
+same filter can drop the short messages of every channel whose last part (after its last ``/``) is
+not one the process subscribes to: an agent process keeps a few commands out of every other agent
+process's telemetry and state.
 """
 
 from __future__ import annotations
 
+import ctypes
 import socket
 import struct
 from collections.abc import Callable
 
-from antalate_lcm.lcm_datagram import SHORT_MAGIC_BYTES, Reassembler
+from antalate_lcm.lcm_datagram import MAX_CHANNEL_LENGTH, SHORT_MAGIC_BYTES, Reassembler
 from antalate_lcm.lcm_url import parse_lcm_url
 
 #: The largest UDP payload; liblcm reads into 65,535 bytes too.
@@ -26,6 +38,10 @@ _DATAGRAM = 65_535
 #: ``net.core.rmem_max``). liblcm asks for nothing, but its thread empties the socket into a ring
 #: buffer of its own whatever Python is doing; here the kernel's buffer is the only queue.
 DEFAULT_RCVBUF = 4 << 20
+#: liblcm's LCM_SHORT_MESSAGE_MAX_SIZE: channel, its NUL and the message in one datagram at most.
+SHORT_MESSAGE_MAX = 65_499
+#: setsockopt options of Linux (asm-generic/socket.h); the socket module does not name them.
+_SO_ATTACH_FILTER, _SO_DETACH_FILTER = 26, 27
 
 
 def udpm_socket(url: str) -> socket.socket:
@@ -59,6 +75,12 @@ class UdpmReceiver:
     def fileno(self) -> int:
         return self.sock.fileno()
 
+    def filter(self, own: tuple[str, int] | None, topics: frozenset[str] | None) -> bool:
+        """Let the kernel drop what ``own`` (this process's `UdpmSender`) sends and, with ``topics``,
+        every short message whose channel's last ``/``-part is none of them (both None: hear all).
+        False (nothing changed) when that many topics do not fit a socket filter."""
+        return _attach(self.sock, own, topics)
+
     def drain(self, deliver: Callable[[str, bytes], None], limit: int) -> int:
         """Read up to ``limit`` datagrams that are waiting (never blocks); returns how many were read."""
         recvfrom = self.sock.recvfrom
@@ -81,3 +103,148 @@ class UdpmReceiver:
 
     def close(self) -> None:
         self.sock.close()
+
+
+#: Classic BPF opcodes (linux/filter.h) and SKF_NET_OFF: offsets from the network header, so they
+#: do not depend on where the kernel has the UDP header when the filter runs.
+_LD_W, _LD_H, _LD_B = 0x20, 0x28, 0x30  # BPF_LD | BPF_W/H/B | BPF_ABS
+_JEQ, _AND, _RET = 0x15, 0x54, 0x06  # BPF_JMP|BPF_JEQ|BPF_K, BPF_ALU|BPF_AND|BPF_K, BPF_RET|BPF_K
+_NET = -0x100000
+_ACCEPT, _DROP = 0xFFFFFFFF, 0
+_CHANNEL = _NET + 20 + 8 + 8  # IPv4 header without options, UDP header, LC02 magic and seqno
+_MAX_CODE = 4096  # BPF_MAXINSNS
+
+
+def _topic_block(length: int, topics: list[bytes]) -> list[tuple[int, int, int, int]]:
+    """Code for a channel of ``length`` bytes (its NUL found there): accept it when it is one of
+    ``topics`` or ends with ``/`` and one of them, else drop."""
+    code: list[tuple[int, int, int, int]] = []
+    for topic in topics:
+        m = len(topic)
+        if m > length:
+            continue
+        at = _CHANNEL + length - m
+        checks: list[tuple[int, int, int]] = []  # (load op, offset, value)
+        k = 0
+        while k < m:
+            size = 4 if m - k >= 4 else 2 if m - k >= 2 else 1
+            op = {4: _LD_W, 2: _LD_H, 1: _LD_B}[size]
+            checks.append((op, at + k, int.from_bytes(topic[k : k + size], "big")))
+            k += size
+        if m < length:
+            checks.append((_LD_B, at - 1, ord("/")))
+        n = 2 * len(checks) + 1  # this topic's code: a load and a test per check, then accept
+        for i, (op, offset, value) in enumerate(checks):
+            code.append((op, 0, 0, offset))
+            code.append((_JEQ, 0, n - 2 * i - 2, value))  # a mismatch: past this topic's accept
+        code.append((_RET, 0, 0, _ACCEPT))
+    code.append((_RET, 0, 0, _DROP))
+    return code
+
+
+def _program(own: tuple[str, int] | None, topics: frozenset[str] | None) -> list[tuple[int, int, int, int]]:
+    """A classic BPF program: drop IPv4 datagrams from ``own`` (ip, port); with ``topics``, drop an
+    ``LC02`` datagram unless its channel is a topic or ends with ``/`` and a topic. Anything else
+    (a header with options, fragments, what is not LCM) is accepted: the reader deals with it."""
+    code: list[tuple[int, int, int, int]] = [
+        (_LD_B, 0, 0, _NET),
+        (_AND, 0, 0, 0xF),  # IHL
+        (_JEQ, 1, 0, 5),
+        (_RET, 0, 0, _ACCEPT),  # IP options: not ours to judge
+    ]
+    if own is not None:
+        ip = struct.unpack(">I", socket.inet_aton(own[0]))[0]
+        code += [
+            (_LD_W, 0, 0, _NET + 12),  # source address
+            (_JEQ, 0, 3, ip),
+            (_LD_H, 0, 0, _NET + 20),  # UDP source port
+            (_JEQ, 0, 1, own[1]),
+            (_RET, 0, 0, _DROP),  # this process's own datagram
+        ]
+    if topics is not None:
+        names = sorted(t.encode("utf-8") for t in topics)
+        code += [
+            (_LD_W, 0, 0, _NET + 28),
+            (_JEQ, 1, 0, int.from_bytes(SHORT_MAGIC_BYTES, "big")),
+            (_RET, 0, 0, _ACCEPT),  # fragments and what is not LCM
+        ]
+        for length in range(MAX_CHANNEL_LENGTH + 1):  # the channel's NUL at _CHANNEL + length
+            block = _topic_block(length, names)
+            code.append((_LD_B, 0, 0, _CHANNEL + length))
+            code.append((_JEQ, 0, len(block), 0))  # not the NUL: the next length
+            code += block
+        code.append((_RET, 0, 0, _ACCEPT))  # no NUL where a channel ends: the reader counts it
+    else:
+        code.append((_RET, 0, 0, _ACCEPT))
+    return code
+
+
+def _attach(sock: socket.socket, own: tuple[str, int] | None, topics: frozenset[str] | None) -> bool:
+    """Filter ``sock`` as `_program` says (both None: no filter); False when the program would be
+    too long for the kernel (too many topics) and nothing was changed."""
+    if own is None and topics is None:
+        sock.setsockopt(socket.SOL_SOCKET, _SO_DETACH_FILTER, b"\0" * 4)
+        return True
+    code = _program(own, topics)
+    if len(code) > _MAX_CODE or any(jt > 255 or jf > 255 for _, jt, jf, _ in code):
+        return False
+    buf = ctypes.create_string_buffer(
+        b"".join(struct.pack("HBBI", c, t, f, k & 0xFFFFFFFF) for c, t, f, k in code)
+    )
+    # The kernel copies the program: the buffer may go once setsockopt returns.
+    sock.setsockopt(socket.SOL_SOCKET, _SO_ATTACH_FILTER, struct.pack("HL", len(code), ctypes.addressof(buf)))
+    return True
+
+
+class UdpmSender:
+    """Sends the short messages of a ``udpm://`` bus as liblcm does, from a socket whose address is known.
+
+    :meth:`publish` returns False for a message that does not fit one datagram or a channel liblcm
+    would refuse: the caller then publishes it with liblcm (which fragments or reports it).
+    """
+
+    def __init__(self, url: str) -> None:
+        u = parse_lcm_url(url)
+        if u.provider != "udpm":
+            raise ValueError(f"not a udpm:// URL: {url!r}")
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            # As liblcm's send socket: the URL's TTL (0 = this host only) and loopback on, so other
+            # processes of this host hear it.
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, int(u.options.get("ttl", "0")))
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+            # Connected: the route (so the source address) is chosen once, and each send skips
+            # parsing an address.
+            sock.connect((u.host, u.port))
+        except OSError:
+            sock.close()
+            raise
+        self.sock = sock
+        #: (source address, port) of every datagram this sender sends.
+        self.address: tuple[str, int] = sock.getsockname()
+        self._send = sock.send
+        self._seqno = 0
+        #: channel -> its bytes and NUL (bounded: a process publishes on a fixed set of channels).
+        self._names: dict[str, bytes] = {}
+
+    def publish(self, channel: str, data: bytes) -> bool:
+        """Send one ``LC02`` datagram; False (nothing sent) when liblcm must send it instead."""
+        name = self._names.get(channel)
+        if name is None:
+            name = channel.encode("utf-8") + b"\0"
+            if len(name) > MAX_CHANNEL_LENGTH + 1:
+                return False
+            if len(self._names) < 100_000:
+                self._names[channel] = name
+        if len(name) + len(data) > SHORT_MESSAGE_MAX:
+            return False
+        seqno = self._seqno
+        self._seqno = (seqno + 1) & 0xFFFFFFFF
+        self._send(b"".join((SHORT_MAGIC_BYTES, _SEQNO(seqno), name, data)))
+        return True
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+_SEQNO = struct.Struct(">I").pack

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 import antalate_lcm.msgs as msgs
-from antalate_lcm._fastcodec import encode, encoder
+from antalate_lcm._fastcodec import decoder, encode, encoder
 
 TYPES = [
     getattr(msgs, name)
@@ -76,3 +76,49 @@ def test_a_bad_field_fails_as_lcm_gen_fails() -> None:
     state.state = 300  # int8_t
     with pytest.raises(struct.error):
         encode(state)
+
+
+def _fields(msg: Any) -> dict[str, Any]:
+    """Every field of a decoded message, the header's included, with its type (bool stays bool)."""
+    out = {name: (type(getattr(msg, name)), getattr(msg, name)) for name in msg.__slots__ if name != "header"}
+    h = msg.header
+    out.update({f"header.{n}": (type(getattr(h, n)), getattr(h, n)) for n in h.__slots__})
+    return out
+
+
+@pytest.mark.parametrize("cls", TYPES, ids=lambda c: c.__name__)
+def test_fast_decoding_gives_lcm_gens_fields(cls: Any) -> None:
+    if "header" not in cls.__slots__:
+        assert decoder(cls) is cls.decode
+        return
+    r = random.Random("decode " + cls.__name__)
+    for _ in range(50):
+        msg = cls()
+        _fill(msg, r)
+        data = msg.encode()
+        assert _fields(decoder(cls)(data)) == _fields(cls.decode(data))
+        assert _fields(decoder(cls)(data + b"trailing")) == _fields(cls.decode(data + b"trailing"))
+
+
+@pytest.mark.parametrize("cls", [msgs.telemetry_t, msgs.mc_state_t, msgs.hlc_state_t, msgs.operator_cmd_t])
+def test_a_damaged_message_fails_or_decodes_as_lcm_gens(cls: Any) -> None:
+    """Every truncation, a wrong fingerprint and a negative or oversized MAC length: the same
+    exception type as lcm-gen's decode, or the same fields where lcm-gen's reads what is there."""
+    assert decoder(cls) is not cls.decode
+    msg = cls()
+    msg.header.agent, msg.header.mac_len, msg.header.mac = "b-001", 4, b"\x01\x02\x03\x04"
+    data = msg.encode()
+    at = 8 + 8 + 4 + len("b-001") + 1 + 4  # the header's mac_len
+    damaged = [data[:n] for n in range(len(data))]
+    damaged += [b"\0" * 8 + data[8:], data[:at] + struct.pack(">h", -3) + data[at + 2 :]]
+    damaged += [data[:at] + struct.pack(">h", 30_000) + data[at + 2 :]]
+    for bad in damaged:
+        try:
+            expected: Any = _fields(cls.decode(bad))
+        except Exception as exc:  # noqa: BLE001 - its type is what is compared
+            expected = type(exc)
+        try:
+            got: Any = _fields(decoder(cls)(bad))
+        except Exception as exc:  # noqa: BLE001
+            got = type(exc)
+        assert got == expected, (len(bad), bad)

@@ -372,7 +372,8 @@ class SimAutopilot(Autopilot):
 
     def state(self) -> AutopilotState:
         self._advance()
-        self._scheduled_faults()
+        if self._ends or self._scheduled:  # most sims schedule no fault: no call 20 times a second
+            self._scheduled_faults()
         if self._state_file and self._connected:
             self._persist()
         if self._state_error is not None:

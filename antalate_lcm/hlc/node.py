@@ -155,6 +155,9 @@ class HlcNode(Node):
         self._safety_landing = False  # the filter's policy asked the vehicle to land
         self._reported: dict[str, float] = {}  # SAFETY report kind -> `now` of the last one
         self._fence_mirrored = False  # the fence was written into the autopilot's own (once per start)
+        self._clock: Callable[[], float] = context.executor.clock
+        self._telemetry = telemetry_t()
+        self._state: Callable[[], AutopilotState] = self.autopilot.state
 
     @property
     def state(self) -> HlcState:
@@ -162,6 +165,9 @@ class HlcNode(Node):
 
     # ------------------------------------------------------------------ lifecycle
     def on_start(self) -> None:
+        #: The executor's clock and the adapter's ``state``, bound once for the 20 Hz control tick.
+        self._clock = self.context.executor.clock
+        self._state = self.autopilot.state
         if self.autopilot.blocking:
             self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"hlc-io-{self.agent}")
         self.subscribe("MC_STATE", self._on_mc_state)
@@ -299,34 +305,41 @@ class HlcNode(Node):
             return math.inf
         return self.snapshot.link_age + max(0.0, self.now - self._polled_at)
 
-    def _poll(self, now: float) -> AutopilotState:
-        """The adapter's snapshot, or the last good one aged by the time since when ``state()`` raises."""
-        try:
-            snapshot = self.autopilot.state()
-        except Exception as exc:  # noqa: BLE001 - an adapter bug is a stale link, not a dead HLC
-            fault = f"autopilot {self.autopilot.name} state() raised {type(exc).__name__}: {exc}"
-            if fault != self._state_fault:
-                self.log.debug("%s", fault, exc_info=True)
-            self._state_fault = fault
-            self._fault_log.log(("state",), logging.WARNING, "%s", fault)
-            if self._good_at is None:
-                return replace(self._good, link_age=math.inf)
-            return replace(self._good, link_age=self._good.link_age + max(0.0, now - self._good_at))
-        if self._state_fault:
-            self.log.warning("autopilot %s state() works again", self.autopilot.name)
-            self._state_fault = ""
-        self._good, self._good_at = snapshot, now
-        return snapshot
+    def _stale(self, now: float, exc: Exception) -> AutopilotState:
+        """``state()`` raised ``exc``: the last good snapshot, its link aged by the time since."""
+        fault = f"autopilot {self.autopilot.name} state() raised {type(exc).__name__}: {exc}"
+        if fault != self._state_fault:
+            self.log.debug("%s", fault, exc_info=True)
+        self._state_fault = fault
+        self._fault_log.log(("state",), logging.WARNING, "%s", fault)
+        if self._good_at is None:
+            return replace(self._good, link_age=math.inf)
+        return replace(self._good, link_age=self._good.link_age + max(0.0, now - self._good_at))
 
     def _control(self) -> None:
         if not self.started:
             return
-        now = self.now
-        snapshot = self.snapshot = self._poll(now)
+        now = self._clock()
+        # The adapter's snapshot, or the last good one aged by the time since when state() raises.
+        try:
+            snapshot = self._state()
+        except Exception as exc:  # noqa: BLE001 - an adapter bug is a stale link, not a dead HLC
+            snapshot = self._stale(now, exc)
+        else:
+            if self._state_fault:
+                self.log.warning("autopilot %s state() works again", self.autopilot.name)
+                self._state_fault = ""
+            self._good, self._good_at = snapshot, now
+        self.snapshot = snapshot
         self._polled_at = now
         machine = self.machine
-        self._handle(machine.on_autopilot(snapshot, now, fault=self._state_fault))
-        self._handle(machine.tick(now))
+        # 20 times a second per agent: most outcomes are NOTHING, checked here rather than in a call.
+        outcome = machine.on_autopilot(snapshot, now, fault=self._state_fault)
+        if outcome is not NOTHING:
+            self._handle(outcome)
+        outcome = machine.tick(now)
+        if outcome is not NOTHING:
+            self._handle(outcome)
         # The link's age now is the snapshot's: it was polled at `now` (see _link_age).
         stale = self.velocity_guard.tick(now, machine.state, self.mc_state, self.snapshot.link_age)
         if stale is not None:
@@ -531,7 +544,9 @@ class HlcNode(Node):
         s = self.snapshot
         if not s.connected:
             return
-        msg = telemetry_t()
+        # One message, refilled 10 times a second (publish stamps its header and encodes it at
+        # once); a fresh one where an experiment's interference may hold on to it.
+        msg = self._telemetry if self.interference is None else telemetry_t()
         msg.lat, msg.lon, msg.alt = s.lat, s.lon, s.alt
         msg.heading, msg.vn, msg.ve, msg.vd = s.heading, s.vn, s.ve, s.vd
         msg.battery, msg.armed, msg.in_air, msg.mode = s.battery, s.armed, s.in_air, s.mode

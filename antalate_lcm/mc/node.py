@@ -38,6 +38,7 @@ class McNode(Node):
         #: Rejected commands are logged once per (command, state) per period: well-formed junk
         #: repeated at line rate must not drown the log.
         self._reject_log = RateLimitedLog(self.log, period=10.0)
+        self._clock = context.executor.clock  # `now`, without the property (the 10 Hz tick reads it)
 
     def on_start(self) -> None:
         self.subscribe("OPERATOR_CMD", self._on_command)
@@ -76,10 +77,15 @@ class McNode(Node):
         self._report(outcome, f"operator {name} (seq {cmd.header.seq} from {sender or '?'})")
 
     def _on_hlc_state(self, msg: hlc_state_t) -> None:
-        self._report(self.machine.on_hlc_state(msg.state, self.now), "HLC state")
+        outcome = self.machine.on_hlc_state(msg.state, self._clock())
+        if outcome.transition is not None or not outcome.accepted or outcome.duplicate:
+            self._report(outcome, "HLC state")
 
     def _tick(self) -> None:
-        self._report(self.machine.tick(self.now), "timer")
+        # 10 times a second per agent, and nearly always an outcome _report does nothing with.
+        outcome = self.machine.tick(self._clock())
+        if outcome.transition is not None or not outcome.accepted or outcome.duplicate:
+            self._report(outcome, "timer")
 
     # ------------------------------------------------------------------ outputs
     def _report(self, outcome: McOutcome, what: str) -> None:

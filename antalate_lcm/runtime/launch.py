@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import logging
 import signal
 import threading
@@ -81,6 +82,10 @@ def run_until_signal(
 
         for i in range(0, len(nodes), START_BATCH):
             context.executor.run_sync(partial(start_batch, nodes[i : i + START_BATCH]), timeout=STOP_TIMEOUT)
+        # What the start built lives as long as the process: out of the collector's sight, so a
+        # full collection does not walk a thousand agents' nodes (2 x 130 ms in 10 s measured with
+        # 1,000 simulated agents, a pause every agent of the process felt).
+        gc.freeze()
         if started_all is not None:
             started_all()
         while not (signalled or stop.is_set()):

@@ -213,16 +213,22 @@ class UdpmSender:
             # processes of this host hear it.
             sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, int(u.options.get("ttl", "0")))
             sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
-            # Connected: the route (so the source address) is chosen once, and each send skips
-            # parsing an address.
-            sock.connect((u.host, u.port))
+            # Not connected, as liblcm's ("don't use connect() on the actual transmit socket, because
+            # linux then has problems multicasting to localhost", lcm_udpm.c): connected, a ttl=0
+            # bus routed through lo reached no one. Bound to a port of its own; the source address
+            # is the one the route gives, found with a connected socket that sends nothing.
+            sock.bind(("0.0.0.0", 0))
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+                probe.connect((u.host, u.port))
+                source = probe.getsockname()[0]
         except OSError:
             sock.close()
             raise
         self.sock = sock
         #: (source address, port) of every datagram this sender sends.
-        self.address: tuple[str, int] = sock.getsockname()
-        self._send = sock.send
+        self.address: tuple[str, int] = (source, sock.getsockname()[1])
+        sendto, group = sock.sendto, (u.host, u.port)
+        self._send: Callable[[bytes], int] = lambda data: sendto(data, group)
         self._seqno = 0
         #: channel -> its bytes and NUL (bounded: a process publishes on a fixed set of channels).
         self._names: dict[str, bytes] = {}

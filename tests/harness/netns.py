@@ -90,12 +90,16 @@ class NetNamespace:
             return ["nsenter", "-t", str(self.pid), "-n", "--", *argv]
         return ["nsenter", "-t", str(self.pid), "-U", "-n", "--preserve-credentials", "--", *argv]
 
-    def popen(self, argv: Sequence[str], **kwargs: Any) -> subprocess.Popen[str]:
-        """``kwargs`` are Popen's (any of them, as a caller would pass them to Popen itself)."""
+    def popen(
+        self, argv: Sequence[str], *, outside: Sequence[str] = (), **kwargs: Any
+    ) -> subprocess.Popen[str]:
+        """``kwargs`` are Popen's (any of them, as a caller would pass them to Popen itself);
+        ``outside``: a command run on the host that runs the way in (``nice -n -10``: a priority is
+        the host's, which the namespace's own root cannot raise)."""
         kwargs.setdefault("env", child_env())
         kwargs.setdefault("text", True)
         kwargs.setdefault("start_new_session", True)
-        proc: subprocess.Popen[str] = subprocess.Popen(self.wrap(argv), **kwargs)
+        proc: subprocess.Popen[str] = subprocess.Popen([*outside, *self.wrap(argv)], **kwargs)
         self._children.append(proc)
         return proc
 

@@ -149,7 +149,9 @@ def test_behavior_going_silent_hovers_in_offboard(px4: Px4, sitl_probe: Probe) -
     bma = px4.agent.procs["bma"]
     os.killpg(bma.pid, signal.SIGSTOP)
     try:
-        fly_east(px4, probe, 3.0, speed=1.0)  # the operator still points east; the behavior is silent
+        # the operator still points east; the behavior is silent (5 s: SIH slows down at its own pace,
+        # measured 0.31 m/s left 3 s after the hover began on a loaded machine)
+        fly_east(px4, probe, 5.0, speed=1.0)
         ve, vn, state = east_speed(px4, probe, 2.0)
     finally:
         os.killpg(bma.pid, signal.SIGCONT)

@@ -6,11 +6,13 @@ most tests first) the real-firmware modules, each a few long tests, came last an
 had finished. Here the modules go out longest first (a greedy longest-processing-time schedule) from
 the times measured in ``tests/module_times.json``; a module not in it counts as `DEFAULT_S`.
 
-The modules that fly three SITL vehicles at once form one unit (`SWARM_UNIT`), run one after another
-on one worker: flown together on two cores they starved each other's simulators (a PX4 lost its
-simulated sensors, an ArduCopter swarm came 1 cm inside its margin). Their file lock
-(`one_sitl_swarm_at_a_time`) still keeps them apart when the suite is run some other way; the unit
-keeps the lock from idling a worker.
+The real-firmware modules form two units (`SITL_UNITS`), each run module after module on one worker,
+so that at most two of them fly at once: the modules that fly three vehicles at once with PX4's own
+flight in one, ArduCopter's flight and failsafes in the other. Six SITL vehicles booting at once on two
+cores (four workers each in a SITL module) made PX4's simulated baro and compass time out after
+take-off ("Failsafe: blind land") in two full runs of four; three ArduCopters and three PX4s flown
+together had starved each other's simulators before. The swarm modules' file lock
+(`one_sitl_swarm_at_a_time`) still keeps them apart when the suite is run some other way.
 
 ``ANTALATE_MODULE_TIMES=FILE pytest ...`` writes the run's own times per module to FILE, in the format
 of ``tests/module_times.json``, to refresh it.
@@ -29,14 +31,15 @@ import pytest
 TIMES_FILE = Path(__file__).with_name("module_times.json")
 #: s: a module that was not measured (new since the file was written)
 DEFAULT_S = 5.0
-SWARM_UNIT = "sitl-swarms"
-SWARM_MODULES = frozenset(
-    {
-        "tests/sitl_arducopter/test_safety.py",
-        "tests/sitl_arducopter/test_swarm.py",
-        "tests/sitl_px4/test_swarm.py",
-    }
-)
+#: module -> its unit (the modules not named are each a unit of their own)
+SITL_UNITS = {
+    "tests/sitl_arducopter/test_safety.py": "sitl-swarms-and-px4",
+    "tests/sitl_arducopter/test_swarm.py": "sitl-swarms-and-px4",
+    "tests/sitl_px4/test_flight.py": "sitl-swarms-and-px4",
+    "tests/sitl_px4/test_swarm.py": "sitl-swarms-and-px4",
+    "tests/sitl_arducopter/test_flight.py": "sitl-arducopter",
+    "tests/sitl_arducopter/test_failsafes.py": "sitl-arducopter",
+}
 _RECORDED: defaultdict[str, float] = defaultdict(float)
 
 
@@ -45,9 +48,9 @@ def module_of(nodeid: str) -> str:
 
 
 def unit_of(nodeid: str) -> str:
-    """The work unit a test belongs to: its module, or `SWARM_UNIT`."""
+    """The work unit a test belongs to: its module, or its module's `SITL_UNITS` entry."""
     module = module_of(nodeid)
-    return SWARM_UNIT if module in SWARM_MODULES else module
+    return SITL_UNITS.get(module, module)
 
 
 def measured_times() -> dict[str, float]:
@@ -77,7 +80,7 @@ def longest_first(items: list[pytest.Item]) -> None:
 
 
 def make_scheduler(config: pytest.Config, log: Any) -> Any:
-    """xdist's per-file scheduler, with the swarm modules as one unit and the collection's order kept."""
+    """xdist's per-file scheduler, with the SITL units and the collection's order kept."""
     from xdist.scheduler import LoadFileScheduling
 
     class LongestFirst(LoadFileScheduling):  # type: ignore[misc]  # xdist has no type hints

@@ -79,14 +79,19 @@ class Timer:
 
     __slots__ = ("period", "fn", "oneshot", "cancelled", "due", "quantum")
 
-    def __init__(self, period: float, fn: Callable[[], Any], *, oneshot: bool = False) -> None:
+    def __init__(
+        self, period: float, fn: Callable[[], Any], *, oneshot: bool = False, lockstep: bool = False
+    ) -> None:
         self.period = period
         self.fn = fn
         self.oneshot = oneshot
         self.cancelled = False
         self.due = 0.0
-        #: Slots (ms) its runs are rounded up to a multiple of (see _QUANTUM_PER_PERIOD).
-        self.quantum = max(1, min(_MAX_QUANTUM_MS, int(period * _SLOTS_PER_S / _QUANTUM_PER_PERIOD)))
+        #: Slots (ms) its runs are rounded up to a multiple of (see _QUANTUM_PER_PERIOD); on simulated
+        #: time (``lockstep``) each run at its time, in 1 ms slots, not up to a tenth of its period late.
+        self.quantum = (
+            1 if lockstep else max(1, min(_MAX_QUANTUM_MS, int(period * _SLOTS_PER_S / _QUANTUM_PER_PERIOD)))
+        )
 
     def cancel(self) -> None:
         # A flag, checked before each run: asyncio's handles are not thread-safe, and a cancelled
@@ -161,18 +166,16 @@ class Executor:
         """Run ``fn`` every ``period`` s; the first run after ``first_delay`` (default: one period)."""
         if period <= 0:
             raise ValueError("timer period must be > 0")
-        timer = Timer(period, fn)
+        timer = Timer(period, fn, lockstep=self.sim is not None)
         self._schedule(timer, period if first_delay is None else first_delay)
         return timer
 
     def call_later(self, delay: float, fn: Callable[[], Any]) -> Timer:
-        timer = Timer(delay, fn, oneshot=True)
+        timer = Timer(delay, fn, oneshot=True, lockstep=self.sim is not None)
         self._schedule(timer, delay)
         return timer
 
     def _schedule(self, timer: Timer, delay: float) -> None:
-        if self.sim is not None:  # lockstep: each timer at its time (1 ms slots), not a tenth late
-            timer.quantum = 1
         if self.on_loop():
             self._arm(timer, self._loop.time() + max(delay, 0.0))
         else:

@@ -70,13 +70,12 @@ def longest_first(items: list[pytest.Item]) -> None:
         unit_s[unit_of(module)] += times.get(module, DEFAULT_S)
     for index, item in enumerate(items):
         first.setdefault(unit_of(item.nodeid), index)
-    position = {id(item): i for i, item in enumerate(items)}
 
-    def key(item: pytest.Item) -> tuple[float, int, int]:
+    def key(item: pytest.Item) -> tuple[float, int]:
         unit = unit_of(item.nodeid)
-        return (-unit_s[unit], first[unit], position[id(item)])
+        return (-unit_s[unit], first[unit])
 
-    items.sort(key=key)
+    items.sort(key=key)  # stable: a unit's tests keep their order
 
 
 def make_scheduler(config: pytest.Config, log: Any) -> Any:

@@ -26,7 +26,7 @@ import asyncio
 import math
 import selectors
 import time
-from typing import Any
+from typing import Any, Protocol
 
 #: Wall-clock time (s since 1970) of simulated time zero: fixed, so message headers, signatures
 #: and logs are the same on every run (2027-01-15 08:00 UTC: no replay memory of a real flight
@@ -39,8 +39,18 @@ SIM_START = 100_000.0
 _HELD_WAIT = 0.05
 
 
+class Coordinated(Protocol):
+    """The clock of one of several processes on one simulated time
+    (:class:`antalate_lcm.runtime.time_coordinator.ClockLink`): it moves only when told to."""
+
+    def idle(self, next_due: float) -> None:
+        """The loop has nothing left to do now; its next timer is due at ``next_due``."""
+        ...
+
+
 class SimClock:
-    """Simulated seconds, advanced by a :class:`SimEventLoop` (and only by it)."""
+    """Simulated seconds, advanced by a :class:`SimEventLoop` (and only by it), or, with a
+    :attr:`link`, by the processes' coordinator."""
 
     def __init__(self, speed: float = math.inf, *, held: bool = False) -> None:
         if not speed > 0:
@@ -51,6 +61,9 @@ class SimClock:
         self.held = held
         self._real0 = time.monotonic()
         self._sim0 = SIM_START
+        #: Several processes on this time (``--processes P``): the loop reports to it when idle and
+        #: waits for its answer instead of moving time itself.
+        self.link: Coordinated | None = None
 
     def monotonic(self) -> float:
         """The executor's ``clock``: simulated seconds."""
@@ -102,12 +115,21 @@ class _SimSelector(selectors.BaseSelector):
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
         clock = self._clock
         if timeout is None:  # nothing scheduled: only another thread can give the loop work
+            if clock.link is not None and not clock.held:  # ... or another process's message
+                ready = self._inner.select(0)
+                if ready:
+                    return ready
+                clock.link.idle(math.inf)
             return self._inner.select(None)
         if clock.held:
             return self._inner.select(min(timeout, _HELD_WAIT))
         ready = self._inner.select(0)
         if ready or timeout <= 0:
             return ready
+        link = clock.link
+        if link is not None:  # another process may yet send something for now: ask, then wait
+            link.idle(clock.t + timeout)
+            return self._inner.select(None)
         wait = clock.real_wait(timeout)
         if wait > 0:  # --speed N: wait, yet wake for another thread's call (a stop, say)
             ready = self._inner.select(wait)

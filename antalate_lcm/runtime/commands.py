@@ -101,11 +101,14 @@ def cmd_agent(args: argparse.Namespace) -> int:
         ]
         argv += ["--agents", str(args.agents), "--spacing", str(args.spacing)]
         return run_processes(lambda i, n: [*argv, "--shard", f"{i}/{n}"], min(processes, len(configs)))
-    # Internal topics between this process's nodes in memory: a spoofed LAN datagram never reaches them.
-    context = Context.in_process(shared_buses(configs), whole_swarm=not args.shard)
+    if args.sim_clock:  # antalate run --speed --processes P: this shard on the run's clock
+        context, release = _on_shared_clock(args, shared_buses(configs))
+    else:
+        # Internal topics between this process's nodes in memory: a spoofed LAN datagram never reaches them.
+        context, release = Context.in_process(shared_buses(configs), whole_swarm=not args.shard), None
     nodes = [node for cfg in configs for node in agent_nodes(cfg, context, plans[id(cfg)])]
     if args.broadcast_reception is None and args.faults is None:
-        return run_until_signal(context, nodes)
+        return run_until_signal(context, nodes, started_all=release)
     from antalate_lcm.runtime.faults import broadcast_report, lossy_broadcasts
 
     if args.faults is not None:  # antalate run's [[fault]]s, injected into this process's agents
@@ -119,10 +122,30 @@ def cmd_agent(args: argparse.Namespace) -> int:
         nodes.append(injector)
     else:
         gate = lossy_broadcasts(nodes, args.broadcast_reception, args.seed)
-    code = run_until_signal(context, nodes)
+    code = run_until_signal(context, nodes, started_all=release)
     for line in broadcast_report(gate):
         print(line, file=sys.stderr, flush=True)
     return code
+
+
+def _on_shared_clock(args: argparse.Namespace, buses: dict[str, str]) -> tuple[Context, Callable[[], None]]:
+    """The context of an agent process of ``antalate run --speed --processes P``: its loop on
+    simulated time, joined to the run's clock (runtime/time_coordinator.py), held until every node
+    of the process has started; and what releases it then."""
+    from antalate_lcm.executor import Executor
+    from antalate_lcm.runtime.agent import parse_shard
+    from antalate_lcm.runtime.time_coordinator import join, simulated_buses
+    from antalate_lcm.simclock import SimClock
+
+    if not args.shard:
+        raise AntalateError("--sim-clock is for the agent processes of `antalate run` (with --shard)")
+    clock = SimClock(held=True)
+    simulated, crossing = simulated_buses(buses)
+    context = Context.in_process(simulated, executor=Executor(sim=clock))
+    context.seed = args.seed
+    index, _count = parse_shard(args.shard)
+    join(args.sim_clock, index + 1, clock, context.bus, context.executor, crossing)
+    return context, lambda: context.executor.call_soon(clock.release)
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -357,6 +380,8 @@ def agent_arguments(p: argparse.ArgumentParser) -> None:
     # ... and its script (JSON) when it injects faults, with the bus their records go to
     p.add_argument("--faults", help=argparse.SUPPRESS)
     p.add_argument("--fault-bus", default="lan", help=argparse.SUPPRESS)
+    # the socket of antalate run's simulated clock, shared by its processes (time_coordinator)
+    p.add_argument("--sim-clock", help=argparse.SUPPRESS)
 
 
 def demo_arguments(p: argparse.ArgumentParser) -> None:

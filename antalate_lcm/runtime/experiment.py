@@ -44,6 +44,7 @@ from antalate_lcm.runtime.launch import run_until_signal
 from antalate_lcm.runtime.recorder import LogRecorder
 from antalate_lcm.runtime.script import Script, check_fault_agents, load_script
 from antalate_lcm.runtime.scripted_operator import DirectionAt, Phase, ScriptedOperator
+from antalate_lcm.runtime.time_coordinator import TimeCoordinator, join, simulated_buses
 from antalate_lcm.simclock import SimClock
 
 if TYPE_CHECKING:
@@ -165,14 +166,9 @@ def prepare(exp: Experiment) -> tuple[list[Config], str, str]:
 
 
 def check_simulated(exp: Experiment) -> None:
-    """Simulated time runs on this process's one loop: every agent in it, the scripted operator."""
+    """Simulated time needs a number, and the scripted operator (the console runs on the wall clock)."""
     if not exp.speed or exp.speed <= 0 or math.isnan(exp.speed):
         raise AntalateError(f"--speed wants 'max' or a number > 0 (got {exp.speed})")
-    if exp.processes > 1 and exp.agents > 1:
-        raise AntalateError(
-            f"--speed runs every agent in this process on one simulated clock; processes do not share "
-            f"it yet: drop --processes {exp.processes}"
-        )
     if not exp.headless:
         raise AntalateError("--speed needs --headless: the operator console runs on the wall clock")
 
@@ -249,12 +245,18 @@ def _operator(configs: list[Config], context: Context, script: Script) -> Script
     )
 
 
-def _child_argv(exp: Experiment) -> Callable[[int, int], list[str]]:
+def _child_argv(exp: Experiment, clock: str | None = None) -> Callable[[int, int], list[str]]:
     argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", exp.log_level, "agent", exp.config_path]
     argv += ["--agents", str(exp.agents), "--spacing", str(exp.spacing)]
     script = exp.script or load_script(None)
+    if exp.seed is not None:
+        script = script.model_copy(update={"seed": exp.seed})
     if script.broadcast.reception < 1.0:  # each process loses broadcasts at its own agents
-        argv += ["--broadcast-reception", repr(script.broadcast.reception), "--seed", str(script.seed)]
+        argv += ["--broadcast-reception", repr(script.broadcast.reception)]
+    if script.broadcast.reception < 1.0 or clock is not None:  # ... and its timers' phases with it
+        argv += ["--seed", str(script.seed)]
+    if clock is not None:  # the shared simulated clock (time_coordinator)
+        argv += ["--sim-clock", clock]
     if script.fault:  # ... and injects the faults into them (runtime/fault_processes.py)
         bus = record_bus(load_config(exp.config_path), exp.bus)
         argv += ["--faults", script.model_dump_json(), "--fault-bus", bus]
@@ -332,8 +334,15 @@ def run(exp: Experiment) -> Outcome:
     configs, bus, out = prepare(exp)
     processes = min(exp.processes, len(configs))
     buses = shared_buses(configs)
-    clock = None if exp.speed is None else SimClock(exp.speed, held=True)
-    if clock is not None:
+    # Several processes on simulated time: one clock for all, served from here (time_coordinator).
+    coordinator = (
+        TimeCoordinator(processes + 1, exp.speed) if exp.speed is not None and processes > 1 else None
+    )
+    clock = None if exp.speed is None else SimClock(math.inf if coordinator else exp.speed, held=True)
+    crossing: list[str] = []
+    if coordinator is not None:
+        buses, crossing = simulated_buses(buses)
+    elif clock is not None:
         # Simulated agents in one process on simulated time: a datagram through the kernel would
         # come back at a real moment, not a simulated one, so every bus stays in the process.
         buses = {name: url if url.startswith(_IN_PROCESS) else "memq://" for name, url in buses.items()}
@@ -343,10 +352,13 @@ def run(exp: Experiment) -> Outcome:
     context = (
         Context.in_process(buses, whole_swarm=True, executor=Executor(sim=clock))
         if processes == 1
-        else Context(Bus(buses), Executor())
+        else Context(Bus(buses), Executor(sim=clock))
     )
     if clock is not None or exp.seed is not None:
         context.seed = script.seed
+    link = None
+    if coordinator is not None and clock is not None:
+        link = join(coordinator.address, 0, clock, context.bus, context.executor, crossing)
     recorder = LogRecorder(configs[0].with_agent_name("recorder"), context, bus=bus, path=out)
     nodes: list[Node] = [recorder]
     if processes == 1:
@@ -356,17 +368,24 @@ def run(exp: Experiment) -> Outcome:
         nodes.append(injector)
     # With the console, every log line goes to a file: they would tear the console's screen.
     node_log = "" if exp.headless else _temp_log()
-    children = _AgentProcesses(exp, processes, node_log) if processes > 1 else None
+    clock_address = coordinator.address if coordinator is not None else None
+    children = _AgentProcesses(exp, processes, node_log, clock_address) if processes > 1 else None
     outcome = Outcome(1, out, bus, 0, node_log=node_log)
     started, cpu = time.monotonic(), time.process_time()
     try:
         if exp.headless:
-            _fly_scripted(configs, context, nodes, script, children, outcome, injector, clock)
+            _fly_scripted(configs, context, nodes, script, children, outcome, injector, clock, coordinator)
         else:
             outcome.code = _run_console(configs[0], context, nodes, node_log)
     finally:
+        if coordinator is not None:
+            coordinator.finish()
         if children is not None:
             children.stop()
+        if link is not None:
+            link.close()
+        if coordinator is not None:
+            coordinator.close()
     outcome.real_s, outcome.cpu_s = time.monotonic() - started, time.process_time() - cpu
     if clock is not None:
         outcome.simulated_s = clock.elapsed
@@ -386,21 +405,21 @@ def run(exp: Experiment) -> Outcome:
 class _AgentProcesses:
     """The agents' processes (``antalate agent --shard``), supervised from a thread of this one."""
 
-    def __init__(self, exp: Experiment, count: int, node_log: str) -> None:
+    def __init__(self, exp: Experiment, count: int, node_log: str, clock: str | None = None) -> None:
         self.done = threading.Event()
         self._stop = threading.Event()
         self._thread = threading.Thread(
-            target=self._supervise, args=(exp, count, node_log), name="agent-processes", daemon=True
+            target=self._supervise, args=(exp, count, node_log, clock), name="agent-processes", daemon=True
         )
         self._thread.start()
 
-    def _supervise(self, exp: Experiment, count: int, node_log: str) -> None:
+    def _supervise(self, exp: Experiment, count: int, node_log: str, clock: str | None) -> None:
         try:
             if not node_log:
-                run_processes(_child_argv(exp), count, stop=self._stop)
+                run_processes(_child_argv(exp, clock), count, stop=self._stop)
             else:
                 with open(node_log, "ab") as output:
-                    run_processes(_child_argv(exp), count, stop=self._stop, output=output)
+                    run_processes(_child_argv(exp, clock), count, stop=self._stop, output=output)
         finally:
             self.done.set()
 
@@ -419,6 +438,7 @@ def _fly_scripted(
     outcome: Outcome,
     injector: FaultInjector | None = None,
     clock: SimClock | None = None,
+    coordinator: TimeCoordinator | None = None,
 ) -> None:
     operator = _operator(configs, context, script)
     if injector is not None:
@@ -441,12 +461,16 @@ def _fly_scripted(
     run_until_signal(
         context,
         [*nodes, operator],
-        poll=lambda: operator.finished or ended.is_set(),
+        poll=lambda: (
+            operator.finished or ended.is_set() or (coordinator is not None and coordinator.lost.is_set())
+        ),
         started_all=release,
     )
     outcome.code = 0 if operator.phase is Phase.DONE else 1
     if not operator.finished:
-        if ended.is_set():
+        if coordinator is not None and coordinator.failure:
+            operator.reason = coordinator.failure
+        elif ended.is_set():
             operator.reason = "an agent process ended before the experiment did"
         else:  # run_until_signal only returns early on SIGINT or SIGTERM
             operator.reason, outcome.code = "interrupted (SIGINT or SIGTERM)", 130

@@ -1,0 +1,388 @@
+"""One simulated clock for the processes of ``antalate run --speed max|N --processes P``.
+
+The operator's process (``antalate run``) serves a :class:`TimeCoordinator` on a Unix socket, from
+a thread; it and each agent process (``antalate agent --shard i/P --sim-clock ADDRESS``) run their
+loop on a :class:`~antalate_lcm.simclock.SimClock` joined to it by a :class:`ClockLink`. The
+rule they follow is :mod:`antalate_lcm.runtime.time_grant` (why it keeps the lockstep and the
+run deterministic is said there); here is only its I/O:
+
+- Every bus that crosses processes (UDP multicast, Zenoh) becomes, in each process, a private
+  ``memq://NAME`` bus: a datagram through the kernel would arrive at a real moment, not a
+  simulated one, and in an order set by the scheduler. The link hears every message published
+  on it (a pattern subscription) and carries it in its next report; the messages of the other
+  processes it is handed come back on that bus, still at the time they were sent.
+- A process reports when its loop has nothing left to do now (the simulated clock's selector
+  calls :meth:`ClockLink.idle` where a lone process would move its clock), then waits on the
+  coordinator's socket; its answer (deliver these, or move to ``t``) is read on the loop thread.
+- A process whose socket closes before the run ends (it died, it was killed) stops the run: the
+  coordinator says which one and at what simulated time (:attr:`TimeCoordinator.failure`), and
+  sets :attr:`TimeCoordinator.lost` for ``antalate run`` to stop the others.
+
+The frames, both ways: kind (1 byte), round (u64), a float (a report's next timer, an advance's
+time, a hello's process index), the payload's length (u32), the payload (messages).
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import logging
+import math
+import os
+import selectors
+import shutil
+import signal
+import socket
+import struct
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+
+from antalate_lcm.bus import Bus
+from antalate_lcm.executor import Executor
+from antalate_lcm.runtime.time_grant import (
+    Advance,
+    Deliver,
+    Report,
+    decide,
+    decode_messages,
+    encode_message,
+    merge,
+    pace,
+)
+from antalate_lcm.simclock import SIM_START, SimClock
+
+log = logging.getLogger("antalate.simclock")
+
+_FRAME = struct.Struct("<cQdI")
+_HELLO, _REPORT, _DELIVER, _ADVANCE = b"H", b"R", b"D", b"A"
+#: Bus schemes that cross processes: on simulated time each becomes a memq:// bus of its own.
+_CROSSING = ("udpm://", "zenoh://")
+#: Longest real wait (s) of the coordinator between two looks at whether it is being closed.
+_PACE_STEP = 0.05
+
+
+def simulated_buses(buses: Mapping[str, str]) -> tuple[dict[str, str], list[str]]:
+    """The buses of a process on the shared simulated clock, and those its link carries: each bus
+    that crosses processes becomes ``memq://NAME`` (one private bus per name, so the link never
+    hears the agents' internal topics on the in-process bus)."""
+    crossing = sorted(name for name, url in buses.items() if url.startswith(_CROSSING))
+    return {name: f"memq://{name}" if name in crossing else url for name, url in buses.items()}, crossing
+
+
+def _frame(kind: bytes, round_: int, value: float, payload: bytes = b"") -> bytes:
+    return _FRAME.pack(kind, round_, value, len(payload)) + payload
+
+
+def _read_exactly(sock: socket.socket, n: int) -> bytes:
+    buf = bytearray()
+    while len(buf) < n:
+        chunk = sock.recv(n - len(buf))
+        if not chunk:
+            raise ConnectionError("the simulated clock's coordinator closed the connection")
+        buf += chunk
+    return bytes(buf)
+
+
+class ClockLink:
+    """A process's side: reports when its loop is idle, applies the coordinator's answers."""
+
+    def __init__(self, address: str, index: int, clock: SimClock) -> None:
+        self.index = index
+        self._clock = clock
+        self._address = address
+        self._sock: socket.socket | None = None
+        self._executor: Executor | None = None
+        self._bus: Bus | None = None
+        #: Messages published here since the last report, encoded.
+        self._outbox: list[bytes] = []
+        #: Per bus: the others' messages published here by the link, not yet heard back.
+        self._echo: dict[str, collections.deque[bytes]] = {}
+        self._round = 0
+        #: The next timer of the report awaiting its answer (None: no report waits).
+        self._reported: float | None = None
+        #: Rounds answered and messages carried each way (benchmarks, tests).
+        self.rounds = 0
+        self.sent = 0
+        self.received = 0
+
+    def bridge(self, bus: Bus, names: Sequence[str]) -> None:
+        """Carry every message published on ``names`` of ``bus`` (memq:// buses) to the others."""
+        self._bus = bus
+        for name in names:
+            self._echo[name] = collections.deque()
+            bus.subscribe(name, ".*", None, self._hearer(name), regex=True)
+
+    def _hearer(self, name: str) -> Callable[[str, bytes], None]:
+        echo = self._echo[name]
+        outbox = self._outbox
+
+        def heard(channel: str, data: bytes) -> None:
+            # The others' messages come back here in the order the link published them, after
+            # any message published here before them: the head is the next one to drop.
+            if echo and echo[0] == data:
+                echo.popleft()
+                return
+            outbox.append(encode_message(name, channel, data))
+
+        return heard
+
+    def start(self, executor: Executor) -> None:
+        """Join the coordinator (before the loop runs); from now on the clock moves only by it."""
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            sock.connect(self._address)
+            sock.sendall(_frame(_HELLO, 0, float(self.index)))
+        except OSError as exc:
+            sock.close()
+            raise ConnectionError(f"cannot join the simulated clock at {self._address}: {exc}") from None
+        self._sock, self._executor = sock, executor
+        self._clock.link = self
+        executor.add_reader(sock.fileno(), self._readable)
+
+    def idle(self, next_due: float) -> None:
+        """The loop has nothing left to do now; its next timer is at ``next_due``. A report waits
+        for its answer unless this process has had work since (another thread's call): then the
+        new report adds to it."""
+        sock = self._sock
+        if sock is None:
+            return
+        if self._reported is not None and not self._outbox and next_due >= self._reported:
+            return
+        payload = b"".join(self._outbox)
+        self.sent += len(self._outbox)
+        self._outbox.clear()
+        self._reported = next_due
+        try:
+            sock.sendall(_frame(_REPORT, self._round, next_due, payload))
+        except OSError:
+            self._lost()
+
+    def _readable(self) -> None:
+        sock = self._sock
+        if sock is None:
+            return
+        try:
+            kind, round_, value, size = _FRAME.unpack(_read_exactly(sock, _FRAME.size))
+            payload = _read_exactly(sock, size) if size else b""
+        except (OSError, ConnectionError, struct.error):
+            self._lost()
+            return
+        self._round, self._reported = round_, None
+        self.rounds += 1
+        if kind == _ADVANCE:
+            if value > self._clock.t:
+                self._clock.t = value
+        elif kind == _DELIVER:
+            self._deliver(payload)
+
+    def _deliver(self, payload: bytes) -> None:
+        bus = self._bus
+        assert bus is not None
+        for name, channel, data in decode_messages(payload):
+            self._echo[name].append(data)
+            bus.publish(name, channel, data)
+            self.received += 1
+
+    def _lost(self) -> None:
+        """The coordinator is gone (the operator's process died): stop this process, as Ctrl-C."""
+        if self._sock is None:
+            return
+        log.error("lost the simulated clock's coordinator; stopping this process")
+        self.close()
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    def close(self) -> None:
+        sock, self._sock = self._sock, None
+        self._clock.link = None
+        if sock is None:
+            return
+        if self._executor is not None:
+            with contextlib.suppress(RuntimeError, ValueError):
+                self._executor.remove_reader(sock.fileno())
+        sock.close()
+
+
+class _Peer:
+    __slots__ = ("sock", "index", "buf")
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.sock = sock
+        self.index: int | None = None
+        self.buf = bytearray()
+
+
+class TimeCoordinator:
+    """Serves :func:`~antalate_lcm.runtime.time_grant.decide` to ``count`` processes (index 0:
+    this one, ``i + 1``: ``--shard i/P``), from a thread, on a Unix socket in a temporary folder."""
+
+    def __init__(self, count: int, speed: float = math.inf) -> None:
+        self.count = count
+        self.speed = speed
+        self._dir = tempfile.mkdtemp(prefix="antalate-clock-")
+        self.address = os.path.join(self._dir, "clock")
+        self._server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self._server.bind(self.address)
+        self._server.listen(count)
+        self._selector = selectors.DefaultSelector()
+        self._selector.register(self._server, selectors.EVENT_READ)
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._selector.register(self._wake_r, selectors.EVENT_READ)
+        self._peers: list[_Peer | None] = [None] * count
+        self._reports: list[Report | None] = [None] * count
+        #: Messages of reports that came after their round was decided: into the next one.
+        self._carry: list[bytes] = [b""] * count
+        self._round = 0
+        #: The current simulated time (the clocks' ``t``).
+        self.t = SIM_START
+        self._paced: tuple[float, float] | None = None
+        #: Set when a process left before :meth:`finish`; :attr:`failure` says which and when.
+        self.lost = threading.Event()
+        self.failure = ""
+        self._finished = False
+        self._closing = False
+        self.rounds = 0
+        self._thread = threading.Thread(target=self._serve, name="sim-clock", daemon=True)
+        self._thread.start()
+
+    def finish(self) -> None:
+        """The run has ended: processes leaving now are stopping, not failing."""
+        self._finished = True
+
+    def close(self) -> None:
+        self._finished = self._closing = True
+        with contextlib.suppress(OSError):
+            self._wake_w.send(b"x")
+        self._thread.join(timeout=5)
+        for peer in self._peers:
+            if peer is not None:
+                peer.sock.close()
+        for s in (self._server, self._wake_r, self._wake_w):
+            s.close()
+        self._selector.close()
+        shutil.rmtree(self._dir, ignore_errors=True)
+
+    # ------------------------------------------------------------------ the thread
+    def _serve(self) -> None:
+        pending: list[_Peer] = []  # connected, not yet said who they are
+        while not self._closing:
+            for key, _ in self._selector.select():
+                if key.fileobj is self._server:
+                    conn, _addr = self._server.accept()
+                    peer = _Peer(conn)
+                    pending.append(peer)
+                    self._selector.register(conn, selectors.EVENT_READ, peer)
+                elif key.fileobj is self._wake_r:
+                    return
+                else:
+                    peer = key.data
+                    if not self._read(peer):
+                        self._selector.unregister(peer.sock)
+                        if peer in pending:
+                            pending.remove(peer)
+                        self._left(peer)
+                        continue
+                    if peer.index is not None and peer in pending:
+                        pending.remove(peer)
+            self._step()
+
+    def _read(self, peer: _Peer) -> bool:
+        try:
+            chunk = peer.sock.recv(1 << 20)
+        except OSError:
+            return False
+        if not chunk:
+            return False
+        peer.buf += chunk
+        buf = peer.buf
+        while len(buf) >= _FRAME.size:
+            kind, round_, value, size = _FRAME.unpack_from(buf)
+            end = _FRAME.size + size
+            if len(buf) < end:
+                break
+            payload = bytes(buf[_FRAME.size : end])
+            del buf[:end]
+            if kind == _HELLO:
+                index = int(value)
+                if not 0 <= index < self.count or self._peers[index] is not None:
+                    log.error("the simulated clock refused a process calling itself %d", index)
+                    return False
+                peer.index = index
+                self._peers[index] = peer
+            elif kind == _REPORT and peer.index is not None:
+                i = peer.index
+                if round_ == self._round:
+                    self._reports[i] = merge(self._reports[i], Report(value, self._carry[i] + payload))
+                    self._carry[i] = b""
+                else:  # a report of a round already decided: its messages go with the next one
+                    self._carry[i] += payload
+        return True
+
+    def _left(self, peer: _Peer) -> None:
+        peer.sock.close()
+        if peer.index is not None:
+            self._peers[peer.index] = None
+        if self._finished:
+            return
+        who = (
+            "the operator's process" if peer.index == 0 else f"agent process {peer.index} of {self.count - 1}"
+        )
+        if peer.index is None:
+            who = "a process that never said which it was"
+        self.failure = (
+            f"{who} left the simulated clock at {self.t - SIM_START:.3f} s of simulated time "
+            "(it died, or was killed); the run stops"
+        )
+        log.error("%s", self.failure)
+        self.lost.set()
+
+    def _step(self) -> None:
+        """Decide the round if every process has reported (several times while each decision is
+        answered at once: a round of processes that all report nothing new)."""
+        if self.lost.is_set():
+            return
+        decision = decide(self._reports)
+        if decision is None:
+            return
+        self._round += 1
+        self.rounds += 1
+        self._reports = [None] * self.count
+        if isinstance(decision, Deliver):
+            for peer, batch in zip(self._peers, decision.batches, strict=True):
+                self._send(peer, _frame(_DELIVER, self._round, self.t, batch))
+            return
+        assert isinstance(decision, Advance)
+        self._pace(decision.t)
+        self.t = decision.t
+        frame = _frame(_ADVANCE, self._round, decision.t)
+        for peer in self._peers:
+            self._send(peer, frame)
+
+    def _pace(self, t: float) -> None:
+        """``--speed N``: time runs at most N times real time from the first grant on."""
+        if math.isinf(self.speed):
+            return
+        if self._paced is None:
+            self._paced = (time.monotonic(), self.t)
+        real0, sim0 = self._paced
+        while not self._closing and (wait := pace(self.speed, real0, sim0, t, time.monotonic())) > 0:
+            time.sleep(min(wait, _PACE_STEP))
+
+    def _send(self, peer: _Peer | None, frame: bytes) -> None:
+        if peer is None:
+            return
+        try:
+            peer.sock.sendall(frame)
+        except OSError:  # its end is closed: its read says so next
+            log.debug("cannot send to process %s", peer.index)
+
+
+def join(
+    address: str, index: int, clock: SimClock, bus: Bus, executor: Executor, buses: Sequence[str]
+) -> ClockLink:
+    """This process on the shared clock: its crossing ``buses`` carried, its loop joined."""
+    link = ClockLink(address, index, clock)
+    link.bridge(bus, buses)
+    link.start(executor)
+    return link

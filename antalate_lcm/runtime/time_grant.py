@@ -1,0 +1,103 @@
+"""The rule by which the processes of one ``antalate run --speed --processes P`` agree on time.
+
+Pure logic, no I/O (the sockets are in :mod:`antalate_lcm.runtime.time_coordinator`), so it is
+tested on its own. Each process (the operator's, index 0, and each agent process) runs its loop on
+a :class:`~antalate_lcm.simclock.SimClock` at the same simulated time ``t``; when it has nothing
+left to do at ``t`` it *reports*: the time of its next timer and every message it published since
+its last report on the buses that cross processes, in publish order. Once every process has
+reported (every one idle at ``t``, so none can still send at ``t``):
+
+- if any report carried messages, each process is handed the others' messages, ordered by process
+  index and then publish order, and delivers them still at ``t`` (what it sends in answer is
+  reported next, still at ``t``: a round of the same instant);
+- else nothing is in flight: time moves to the earliest next timer of all, for every process.
+
+So no process runs a timer at ``t' > t`` while another still has work at ``t``, and a message sent
+at ``t`` reaches every other process before it moves past ``t``. Messages travel only through the
+reports (never on a socket a process reads at its own pace), and a round's order depends only on
+what each process sent: with a seed, the run is as deterministic as one process's.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+
+#: A message in a report: bus name length, channel length, data length; then the three.
+_MESSAGE = struct.Struct("<BHI")
+
+
+@dataclass(frozen=True)
+class Report:
+    """One process idle at the current simulated time."""
+
+    #: Simulated time of its next timer (``math.inf``: none).
+    next_due: float
+    #: Its messages since its last report, encoded (:func:`encode_message`), in publish order.
+    messages: bytes = b""
+
+
+@dataclass(frozen=True)
+class Deliver:
+    """Messages to deliver at the current time: ``batches[i]`` for process ``i`` (the others')."""
+
+    batches: tuple[bytes, ...]
+
+
+@dataclass(frozen=True)
+class Advance:
+    """Nothing in flight: every process moves to ``t``."""
+
+    t: float
+
+
+def decide(reports: Sequence[Report | None]) -> Deliver | Advance | None:
+    """What the processes do next, given each one's report (None: it still works, or has not
+    joined yet); None: wait for the missing reports."""
+    if not reports or any(r is None for r in reports):
+        return None
+    done = [r for r in reports if r is not None]
+    if any(r.messages for r in done):
+        return Deliver(
+            tuple(b"".join(o.messages for j, o in enumerate(done) if j != i) for i in range(len(done)))
+        )
+    t = min(r.next_due for r in done)
+    # No timer anywhere and nothing in flight: only another thread (a stop) can give work now.
+    return None if math.isinf(t) else Advance(t)
+
+
+def merge(old: Report | None, new: Report) -> Report:
+    """A process that reported and then had work again (another thread's call, never a timer's)
+    reports anew: its messages add up, its next timer is the new one."""
+    return new if old is None else Report(new.next_due, old.messages + new.messages)
+
+
+def encode_message(bus: str, channel: str, data: bytes) -> bytes:
+    """One message as reports carry it."""
+    b, c = bus.encode(), channel.encode()
+    return _MESSAGE.pack(len(b), len(c), len(data)) + b + c + data
+
+
+def decode_messages(blob: bytes) -> Iterator[tuple[str, str, bytes]]:
+    """The (bus, channel, data) of each message in ``blob``, in order."""
+    view, i, n = memoryview(blob), 0, len(blob)
+    size = _MESSAGE.size
+    while i < n:
+        lb, lc, ld = _MESSAGE.unpack_from(blob, i)
+        i += size
+        bus = bytes(view[i : i + lb]).decode()
+        i += lb
+        channel = bytes(view[i : i + lc]).decode()
+        i += lc
+        yield bus, channel, bytes(view[i : i + ld])
+        i += ld
+
+
+def pace(speed: float, real0: float, sim0: float, t: float, real_now: float) -> float:
+    """Real seconds to wait before time moves to ``t`` so it runs at most ``speed`` times real time
+    since (``real0``, ``sim0``); 0 at ``max`` and for a run that has fallen behind."""
+    if math.isinf(speed):
+        return 0.0
+    return max(0.0, real0 + (t - sim0) / speed - real_now)

@@ -199,7 +199,6 @@ def test_replay_needs_the_run_record(files: Path, recorded: Path, capsys: pytest
 @pytest.mark.parametrize(
     ("config", "argv", "words"),
     [
-        ("swarm.toml", ["--speed", "max", "--processes", "2", "--headless"], "drop --processes 2"),
         ("swarm.toml", ["--speed", "max"], "--speed needs --headless"),
         (
             "mavlink.toml",

@@ -287,6 +287,9 @@ class Outcome:
     simulated_s: float | None = None
     #: CPU seconds this process spent meanwhile (all its threads).
     cpu_s: float = 0.0
+    #: Rounds of the processes' shared clock (``--speed`` with ``--processes``): deliveries and
+    #: advances, each a message to every process and its answer; None in one process.
+    clock_rounds: int | None = None
 
     def text(self) -> str:
         """What ``antalate run`` prints."""
@@ -295,9 +298,10 @@ class Outcome:
             lines.append(f"the nodes' log lines are in {self.node_log}")
         lines.append(f"log: {self.log} ({self.messages} messages on bus {self.bus!r})")
         if self.simulated_s is not None:
+            rounds = "" if self.clock_rounds is None else f"; {self.clock_rounds} rounds of the shared clock"
             lines.append(
                 f"simulated time: {self.simulated_s:.1f} s in {self.real_s:.1f} s real "
-                f"({self.simulated_s / max(self.real_s, 1e-9):.1f}x real time)"
+                f"({self.simulated_s / max(self.real_s, 1e-9):.1f}x real time{rounds})"
             )
         if self.analysis is not None:
             from antalate_lcm.analysis import format_summary
@@ -386,6 +390,7 @@ def run(exp: Experiment) -> Outcome:
             link.close()
         if coordinator is not None:
             coordinator.close()
+            outcome.clock_rounds = coordinator.rounds
     outcome.real_s, outcome.cpu_s = time.monotonic() - started, time.process_time() - cpu
     if clock is not None:
         outcome.simulated_s = clock.elapsed

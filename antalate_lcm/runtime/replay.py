@@ -52,6 +52,7 @@ def write_record(exp: Experiment, script: Script, log: str) -> None:
         "config": str(config),
         "config_sha256": file_sha256(config),
         "agents": exp.agents,
+        "processes": exp.processes,
         "spacing": exp.spacing,
         "bus": exp.bus,
         "speed": "max" if exp.speed is None or math.isinf(exp.speed) else exp.speed,
@@ -216,6 +217,7 @@ def replay(log: str | Path, *, config: str | None = None, keep: str | None = Non
             Experiment(
                 config_path=config_path,
                 agents=int(record["agents"]),
+                processes=int(record.get("processes", 1)),
                 spacing=float(record["spacing"]),
                 script=script,
                 output=out,

@@ -102,10 +102,6 @@ class ClockLink:
         self._round = 0
         #: The next timer of the report awaiting its answer (None: no report waits).
         self._reported: float | None = None
-        #: Rounds answered and messages carried each way (benchmarks, tests).
-        self.rounds = 0
-        self.sent = 0
-        self.received = 0
 
     def bridge(self, bus: Bus, names: Sequence[str]) -> None:
         """Carry every message published on ``names`` of ``bus`` (memq:// buses) to the others."""
@@ -151,7 +147,6 @@ class ClockLink:
         if self._reported is not None and not self._outbox and next_due >= self._reported:
             return
         payload = b"".join(self._outbox)
-        self.sent += len(self._outbox)
         self._outbox.clear()
         self._reported = next_due
         try:
@@ -170,7 +165,6 @@ class ClockLink:
             self._lost()
             return
         self._round, self._reported = round_, None
-        self.rounds += 1
         if kind == _ADVANCE:
             if value > self._clock.t:
                 self._clock.t = value
@@ -183,7 +177,6 @@ class ClockLink:
         for name, channel, data in decode_messages(payload):
             self._echo[name].append(data)
             bus.publish(name, channel, data)
-            self.received += 1
 
     def _lost(self) -> None:
         """The coordinator is gone (the operator's process died): stop this process, as Ctrl-C."""
@@ -242,6 +235,7 @@ class TimeCoordinator:
         self.failure = ""
         self._finished = False
         self._closing = False
+        #: Rounds decided (deliveries and advances): what the shared clock costs (benchmarks/simtime.py).
         self.rounds = 0
         self._thread = threading.Thread(target=self._serve, name="sim-clock", daemon=True)
         self._thread.start()

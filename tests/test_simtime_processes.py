@@ -1,0 +1,219 @@
+"""Simulated time over several processes (``antalate run --speed --processes P``): one clock for all.
+
+The grant rule (``runtime/time_grant.py``) is checked on its own; then real runs: the operator's
+process and two ``antalate agent --shard`` processes, MC, HLC, BMA with ``dovrat_swarm`` and the
+sim for 10 agents, with lossy broadcasts, a freeze and seeded packet losses, recorded and hashed
+message by message (``tests/test_simtime.py`` does the same in one process); a run replayed gives
+the same messages, another seed others; and a process killed mid-run stops the run in one message.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from antalate_lcm.cli import main
+from antalate_lcm.runtime.experiment import Experiment, run
+from antalate_lcm.runtime.replay import read_record
+from antalate_lcm.runtime.script import load_script
+from antalate_lcm.runtime.time_coordinator import simulated_buses
+from antalate_lcm.runtime.time_grant import (
+    Advance,
+    Deliver,
+    Report,
+    decide,
+    decode_messages,
+    encode_message,
+    merge,
+    pace,
+)
+from tests.harness.polling import wait_for
+from tests.test_simtime import CONFIG, SCRIPT, message_hashes
+
+AGENTS = 10
+PROCESSES = 2
+
+
+# ----------------------------------------------------------------------------- the rule
+def test_no_grant_while_a_process_still_works_or_has_not_joined() -> None:
+    assert decide([Report(5.0), None, Report(3.0)]) is None
+    assert decide([]) is None
+
+
+def test_time_moves_to_the_earliest_next_timer_once_nothing_is_in_flight() -> None:
+    assert decide([Report(5.0), Report(3.25), Report(math.inf)]) == Advance(3.25)
+    # Nothing scheduled anywhere: nothing on simulated time can happen, so no grant.
+    assert decide([Report(math.inf), Report(math.inf)]) is None
+
+
+def test_messages_sent_now_reach_the_others_now_in_process_order() -> None:
+    a, b = encode_message("lan", "A/X", b"1"), encode_message("lan", "B/X", b"22")
+    c = encode_message("wan", "C/Y", b"")
+    decision = decide([Report(1.0, a), Report(0.5, b + c), Report(2.0)])
+    # Not an advance to 0.5, though that is the earliest timer: the messages are delivered first.
+    assert decision == Deliver((b + c, a, a + b + c))
+    assert list(decode_messages(a + b + c)) == [
+        ("lan", "A/X", b"1"),
+        ("lan", "B/X", b"22"),
+        ("wan", "C/Y", b""),
+    ]
+
+
+def test_a_second_report_adds_its_messages_and_replaces_the_next_timer() -> None:
+    first = Report(4.0, encode_message("lan", "A", b"x"))
+    assert merge(None, first) == first
+    assert merge(first, Report(2.0, encode_message("lan", "B", b"y"))) == Report(
+        2.0, encode_message("lan", "A", b"x") + encode_message("lan", "B", b"y")
+    )
+
+
+def test_a_speed_paces_the_grants_and_max_never_waits() -> None:
+    assert pace(math.inf, 0.0, 100.0, 1e6, 0.0) == 0.0
+    assert pace(2.0, 10.0, 100.0, 104.0, 10.5) == pytest.approx(1.5)  # 4 s at 2x: 2 s from 10.0
+    assert pace(2.0, 10.0, 100.0, 104.0, 13.0) == 0.0  # behind: at once
+
+
+def test_only_the_buses_that_cross_processes_are_carried() -> None:
+    buses = {
+        "lan": "udpm://239.255.76.99:7699?ttl=0",
+        "wan": "zenoh://",
+        "mine": "memq://",
+        "log": "file:///x",
+    }
+    simulated, crossing = simulated_buses(buses)
+    assert crossing == ["lan", "wan"]
+    assert simulated == {"lan": "memq://lan", "wan": "memq://wan", "mine": "memq://", "log": "file:///x"}
+
+
+# ----------------------------------------------------------------------------- real runs
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("simtime-processes")
+    (d / "swarm.toml").write_text(CONFIG.format(speed=2.0))
+    (d / "script.toml").write_text(SCRIPT)
+    (d / "long.toml").write_text("mission_time = 60.0\n")
+    (d / "endless.toml").write_text("mission_time = 3600.0\n")
+    return d
+
+
+def fly(files: Path, seed: int, name: str, *, agents: int = AGENTS, script: str = "script.toml") -> Path:
+    out = files / name
+    outcome = run(
+        Experiment(
+            config_path=str(files / "swarm.toml"),
+            agents=agents,
+            processes=PROCESSES,
+            script=load_script(files / script),
+            output=str(out),
+            force=True,
+            speed=math.inf,
+            seed=seed,
+            log_level="WARNING",
+            measure=False,
+        )
+    )
+    assert outcome.code == 0, outcome.text()
+    assert outcome.simulated_s is not None and outcome.simulated_s > 6.0
+    return out
+
+
+def test_processes_on_one_clock_give_the_same_messages_for_a_seed_and_others_for_another(
+    files: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    recorded = fly(files, 1, "seed1.lcm")
+    first = message_hashes(recorded)
+    assert len(first) > 2500  # 10 agents' states, telemetry, commands and the faults' records
+    assert read_record(recorded)["processes"] == PROCESSES
+    capsys.readouterr()
+    # The replay flies it again over two processes (new ones, with their own hash seeds) and
+    # compares every message.
+    assert main(["replay", str(recorded)]) == 0
+    assert "replay matches the recording" in capsys.readouterr().out
+
+    other = message_hashes(fly(files, 2, "seed2.lcm"))
+    assert other != first
+
+
+def test_processes_on_one_clock_run_faster_than_real_time(files: Path) -> None:
+    out = files / "long.lcm"
+    outcome = run(
+        Experiment(
+            config_path=str(files / "swarm.toml"),
+            agents=2,
+            processes=PROCESSES,
+            script=load_script(files / "long.toml"),
+            output=str(out),
+            force=True,
+            speed=math.inf,
+            seed=1,
+            log_level="WARNING",
+            measure=False,
+        )
+    )
+    assert outcome.code == 0, outcome.text()
+    # A 60 s mission and its take-off and return, over three processes, in less real time than
+    # it covered (a few seconds on an idle machine: the margin is for a loaded one).
+    assert outcome.simulated_s is not None and outcome.simulated_s > 60.0
+    assert outcome.real_s < outcome.simulated_s, outcome.text()
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = Path(f"/proc/{entry}/stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(entry))
+    return out
+
+
+def test_a_process_killed_mid_run_stops_the_run_with_one_clear_message(files: Path) -> None:
+    out = files / "killed.lcm"
+    argv = [
+        sys.executable,
+        "-m",
+        "antalate_lcm.cli",
+        "--log-level",
+        "WARNING",
+        "run",
+        str(files / "swarm.toml"),
+    ]
+    argv += [
+        "--agents",
+        "4",
+        "--processes",
+        str(PROCESSES),
+        "--headless",
+        "--script",
+        str(files / "endless.toml"),
+    ]
+    argv += ["-o", str(out), "--speed", "max", "--seed", "1"]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        # Flying: both agent processes up, and the log growing (every process has joined the clock).
+        children = wait_for(lambda: len(_children(proc.pid)) == PROCESSES and _children(proc.pid), timeout=60)
+        assert children, "the agent processes never started"
+        assert wait_for(lambda: out.exists() and out.stat().st_size > 200_000, timeout=60), (
+            "the run never flew"
+        )
+        victim = max(children)  # the second agent process
+        os.kill(victim, signal.SIGKILL)
+        text, _ = proc.communicate(timeout=120)  # a hang fails here
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 1, text
+    assert "FAILED" in text and "(it died, or was killed)" in text, text
+    assert f"agent process {1 + sorted(children).index(victim)} of 2 left the simulated clock at" in text, (
+        text
+    )

@@ -59,10 +59,11 @@ azimuth = 90.0
 """
 
 
-def child(config: str, agents: int, script: str, out: str, speed: str) -> None:
-    """One flight in this process; its outcome as JSON on stdout."""
+def child(config: str, agents: int, script: str, out: str, speed: str, processes: int) -> None:
+    """One flight from this process (and its agent processes); its outcome as JSON on stdout."""
     import logging
     import math
+    import resource
 
     from antalate_lcm.runtime.experiment import Experiment, run
     from antalate_lcm.runtime.script import load_script
@@ -72,25 +73,30 @@ def child(config: str, agents: int, script: str, out: str, speed: str) -> None:
         Experiment(
             config_path=config,
             agents=agents,
+            processes=processes,
             script=load_script(script),
             output=out,
             force=True,
             speed=math.inf if speed == "max" else None,
             seed=1,
+            log_level="WARNING",
             measure=False,
         )
     )
-    print(
-        json.dumps(
-            {"code": outcome.code, **{k: outcome.to_json()[k] for k in ("real_s", "simulated_s", "cpu_s")}}
-        )
-    )
+    # The agent processes' CPU (waited for, so counted here) beside this one's.
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    result = {k: outcome.to_json()[k] for k in ("real_s", "simulated_s", "cpu_s")}
+    result["cpu_s"] += children.ru_utime + children.ru_stime
+    print(json.dumps({"code": outcome.code, "rounds": outcome.clock_rounds, **result}))
 
 
-def fly(tmp: Path, agents: int, speed: str) -> dict[str, float]:
+def fly(tmp: Path, agents: int, speed: str, processes: int = 1) -> dict[str, float]:
+    # Agents in other processes are reached over a bus that crosses processes (on simulated time
+    # it never touches the network: runtime/time_coordinator.py).
+    config = tmp / ("swarm.toml" if processes == 1 else "swarm-udpm.toml")
     proc = subprocess.run(
-        [sys.executable, __file__, "--child", str(tmp / "swarm.toml"), str(agents), str(tmp / "script.toml")]
-        + [str(tmp / f"{agents}-{speed}.lcm"), speed],
+        [sys.executable, __file__, "--child", str(config), str(agents), str(tmp / "script.toml")]
+        + [str(tmp / f"{agents}-{speed}-{processes}.lcm"), speed, str(processes)],
         capture_output=True,
         text=True,
         check=False,
@@ -110,35 +116,49 @@ def main() -> None:
     )
     parser.add_argument("sizes", nargs="*", type=int, default=[100, 1000])
     parser.add_argument("--mission", type=float, default=30.0, help="s of mission (default 30)")
-    parser.add_argument("--no-wall", action="store_true", help="only the run on simulated time")
-    parser.add_argument("--child", nargs=5, help=argparse.SUPPRESS)
+    parser.add_argument("--no-wall", action="store_true", help="only the runs on simulated time")
+    parser.add_argument(
+        "--processes",
+        type=int,
+        default=2,
+        metavar="P",
+        help="also fly each size over P agent processes on one simulated clock (default 2; 1: not)",
+    )
+    parser.add_argument("--child", nargs=6, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        config, agents, script, out, speed = args.child
-        child(config, int(agents), script, out, speed)
+        config, agents, script, out, speed, processes = args.child
+        child(config, int(agents), script, out, speed, int(processes))
         return
     with tempfile.TemporaryDirectory(prefix="antalate-simtime-") as d:
         tmp = Path(d)
         (tmp / "swarm.toml").write_text(CONFIG)
+        (tmp / "swarm-udpm.toml").write_text(CONFIG.replace('"memq://"', '"udpm://239.255.76.98:7698?ttl=0"'))
         (tmp / "script.toml").write_text(SCRIPT.format(mission=args.mission))
         print(
-            f"{'agents':>6}  {'simulated':>9}  {'real':>7}  {'speed-up':>8}  {'cpu':>7}  {'sim/cpu':>7}   wall clock: real, core   load"
+            f"{'agents':>6}  {'procs':>5}  {'simulated':>9}  {'real':>7}  {'speed-up':>8}  {'cpu':>7}  "
+            f"{'sim/cpu':>7}   wall clock: real, core   load   rounds/sim s"
         )
         for n in args.sizes:
             load_before = os.getloadavg()[0]
-            sim = fly(tmp, n, "max")
+            sims = [(1, fly(tmp, n, "max"))]
+            if args.processes > 1:
+                sims.append((args.processes, fly(tmp, n, "max", args.processes)))
             wall = None if args.no_wall else fly(tmp, n, "wall")
             load = f"{load_before:.1f}-{os.getloadavg()[0]:.1f}"
-            s, r, c = sim["simulated_s"], sim["real_s"], sim["cpu_s"]
-            w = (
-                "-"
-                if wall is None
-                else f"{wall['real_s']:7.1f} s, {100 * wall['cpu_s'] / wall['real_s']:4.0f} %"
-            )
-            print(
-                f"{n:>6}  {s:>7.1f} s  {r:>5.1f} s  {s / r:>7.1f}x  {c:>5.1f} s  {s / c:>6.1f}x   {w}   {load}",
-                flush=True,
-            )
+            for p, sim in sims:
+                s, r, c = sim["simulated_s"], sim["real_s"], sim["cpu_s"]
+                w = (
+                    "-"
+                    if wall is None or p > 1
+                    else f"{wall['real_s']:7.1f} s, {100 * wall['cpu_s'] / wall['real_s']:4.0f} %"
+                )
+                rounds = "-" if sim.get("rounds") is None else f"{sim['rounds'] / s:.0f}"
+                print(
+                    f"{n:>6}  {p:>5}  {s:>7.1f} s  {r:>5.1f} s  {s / r:>7.1f}x  {c:>5.1f} s  {s / c:>6.1f}x"
+                    f"   {w}   {load}   {rounds}",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

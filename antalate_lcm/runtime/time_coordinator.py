@@ -42,7 +42,6 @@ from collections.abc import Callable, Mapping, Sequence
 from antalate_lcm.bus import Bus
 from antalate_lcm.executor import Executor
 from antalate_lcm.runtime.time_grant import (
-    Advance,
     Deliver,
     Report,
     decide,
@@ -50,6 +49,8 @@ from antalate_lcm.runtime.time_grant import (
     encode_message,
     merge,
     pace,
+    remaining,
+    woken,
 )
 from antalate_lcm.simclock import SIM_START, SimClock
 
@@ -165,10 +166,9 @@ class ClockLink:
             self._lost()
             return
         self._round, self._reported = round_, None
-        if kind == _ADVANCE:
-            if value > self._clock.t:
-                self._clock.t = value
-        elif kind == _DELIVER:
+        if value > self._clock.t:  # an advance's time, or a delivery's (moved past while asleep)
+            self._clock.t = value
+        if kind == _DELIVER:
             self._deliver(payload)
 
     def _deliver(self, payload: bytes) -> None:
@@ -227,6 +227,8 @@ class TimeCoordinator:
         #: Messages of reports that came after their round was decided: into the next one.
         self._carry: list[bytes] = [b""] * count
         self._round = 0
+        #: The round each process was last woken in: its reports carry it.
+        self._asked = [0] * count
         #: The current simulated time (the clocks' ``t``).
         self.t = SIM_START
         self._paced: tuple[float, float] | None = None
@@ -306,7 +308,7 @@ class TimeCoordinator:
                 self._peers[index] = peer
             elif kind == _REPORT and peer.index is not None:
                 i = peer.index
-                if round_ == self._round:
+                if round_ == self._asked[i]:
                     self._reports[i] = merge(self._reports[i], Report(value, self._carry[i] + payload))
                     self._carry[i] = b""
                 else:  # a report of a round already decided: its messages go with the next one
@@ -341,17 +343,19 @@ class TimeCoordinator:
             return
         self._round += 1
         self.rounds += 1
-        self._reports = [None] * self.count
+        wake = woken(decision)
+        self._reports = remaining(self._reports, decision)
+        for i in wake:
+            self._asked[i] = self._round
         if isinstance(decision, Deliver):
-            for peer, batch in zip(self._peers, decision.batches, strict=True):
-                self._send(peer, _frame(_DELIVER, self._round, self.t, batch))
+            for i in wake:
+                self._send(self._peers[i], _frame(_DELIVER, self._round, self.t, decision.batches[i]))
             return
-        assert isinstance(decision, Advance)
         self._pace(decision.t)
         self.t = decision.t
         frame = _frame(_ADVANCE, self._round, decision.t)
-        for peer in self._peers:
-            self._send(peer, frame)
+        for i in wake:
+            self._send(self._peers[i], frame)
 
     def _pace(self, t: float) -> None:
         """``--speed N``: time runs at most N times real time from the first grant on."""

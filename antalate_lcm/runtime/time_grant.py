@@ -41,16 +41,19 @@ class Report:
 
 @dataclass(frozen=True)
 class Deliver:
-    """Messages to deliver at the current time: ``batches[i]`` for process ``i`` (the others')."""
+    """Messages to deliver at the current time: ``batches[i]`` for process ``i`` (the others'; a
+    process given none is not woken: it would only report the same again)."""
 
     batches: tuple[bytes, ...]
 
 
 @dataclass(frozen=True)
 class Advance:
-    """Nothing in flight: every process moves to ``t``."""
+    """Nothing in flight: time moves to ``t``. Only the processes with a timer due then are woken
+    (``woken``); the others move to ``t`` when they are next woken (a delivery says its time)."""
 
     t: float
+    woken: tuple[int, ...]
 
 
 def decide(reports: Sequence[Report | None]) -> Deliver | Advance | None:
@@ -65,7 +68,23 @@ def decide(reports: Sequence[Report | None]) -> Deliver | Advance | None:
         )
     t = min(r.next_due for r in done)
     # No timer anywhere and nothing in flight: only another thread (a stop) can give work now.
-    return None if math.isinf(t) else Advance(t)
+    if math.isinf(t):
+        return None
+    return Advance(t, tuple(i for i, r in enumerate(done) if r.next_due <= t))
+
+
+def woken(decision: Deliver | Advance) -> tuple[int, ...]:
+    """The processes a decision wakes (each reports again once it is idle)."""
+    if isinstance(decision, Advance):
+        return decision.woken
+    return tuple(i for i, batch in enumerate(decision.batches) if batch)
+
+
+def remaining(reports: Sequence[Report | None], decision: Deliver | Advance) -> list[Report | None]:
+    """The reports that still hold after ``decision``: those of the processes it does not wake,
+    their messages handed on."""
+    awake = set(woken(decision))
+    return [None if i in awake or r is None else Report(r.next_due) for i, r in enumerate(reports)]
 
 
 def merge(old: Report | None, new: Report) -> Report:

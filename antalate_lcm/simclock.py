@@ -18,6 +18,10 @@ compute). A run slower than that keeps its lockstep and simply takes longer (as 
 run falls behind); a run on a held clock (:meth:`SimClock.hold`) waits, in real time, for events
 from other threads and does not advance (the experiment holds it while its nodes start and after
 the operator has finished, so what is recorded does not depend on how fast another thread is).
+
+Over several processes (``antalate run --speed --processes P``) each one's clock has a ``link``
+(:class:`antalate_lcm.runtime.time_coordinator.ClockLink`): where a lone loop would move its clock,
+it reports to the processes' coordinator and waits, and the coordinator moves it (and paces it).
 """
 
 from __future__ import annotations

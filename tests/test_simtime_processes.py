@@ -32,6 +32,8 @@ from antalate_lcm.runtime.time_grant import (
     encode_message,
     merge,
     pace,
+    remaining,
+    woken,
 )
 from tests.harness.polling import wait_for
 from tests.test_simtime import CONFIG, SCRIPT, message_hashes
@@ -47,7 +49,15 @@ def test_no_grant_while_a_process_still_works_or_has_not_joined() -> None:
 
 
 def test_time_moves_to_the_earliest_next_timer_once_nothing_is_in_flight() -> None:
-    assert decide([Report(5.0), Report(3.25), Report(math.inf)]) == Advance(3.25)
+    decision = decide([Report(5.0), Report(3.25), Report(math.inf), Report(3.25)])
+    # Only the processes with a timer then are woken; the others keep their reports.
+    assert decision == Advance(3.25, (1, 3))
+    assert remaining([Report(5.0), Report(3.25), Report(math.inf), Report(3.25)], decision) == [
+        Report(5.0),
+        None,
+        Report(math.inf),
+        None,
+    ]
     # Nothing scheduled anywhere: nothing on simulated time can happen, so no grant.
     assert decide([Report(math.inf), Report(math.inf)]) is None
 
@@ -58,6 +68,11 @@ def test_messages_sent_now_reach_the_others_now_in_process_order() -> None:
     decision = decide([Report(1.0, a), Report(0.5, b + c), Report(2.0)])
     # Not an advance to 0.5, though that is the earliest timer: the messages are delivered first.
     assert decision == Deliver((b + c, a, a + b + c))
+    assert woken(decision) == (0, 1, 2)
+    # A process given nothing sleeps on, its report kept without the messages now handed on.
+    alone = decide([Report(1.0, a), Report(0.5), Report(2.0)])
+    assert alone == Deliver((b"", a, a)) and woken(alone) == (1, 2)
+    assert remaining([Report(1.0, a), Report(0.5), Report(2.0)], alone) == [Report(1.0), None, None]
     assert list(decode_messages(a + b + c)) == [
         ("lan", "A/X", b"1"),
         ("lan", "B/X", b"22"),

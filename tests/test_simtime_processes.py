@@ -232,3 +232,21 @@ def test_a_process_killed_mid_run_stops_the_run_with_one_clear_message(files: Pa
     assert f"agent process {1 + sorted(children).index(victim)} of 2 left the simulated clock at" in text, (
         text
     )
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (
+            ["--shard", "0/2", "--sim-clock", "/nonexistent/clock"],
+            "cannot join the simulated clock at /nonexistent",
+        ),
+        (["--sim-clock", "/nonexistent/clock"], "--sim-clock is for the agent processes of `antalate run`"),
+    ],
+)
+def test_an_agent_process_without_its_clock_says_so_in_one_line(
+    files: Path, argv: list[str], words: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["agent", str(files / "swarm.toml"), *argv]) == 2
+    err = capsys.readouterr().err
+    assert words in err and err.count("\n") == 1

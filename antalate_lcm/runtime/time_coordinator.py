@@ -40,6 +40,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 
 from antalate_lcm.bus import Bus
+from antalate_lcm.errors import AntalateError
 from antalate_lcm.executor import Executor
 from antalate_lcm.runtime.time_grant import (
     Deliver,
@@ -133,7 +134,7 @@ class ClockLink:
             sock.sendall(_frame(_HELLO, 0, float(self.index)))
         except OSError as exc:
             sock.close()
-            raise ConnectionError(f"cannot join the simulated clock at {self._address}: {exc}") from None
+            raise AntalateError(f"cannot join the simulated clock at {self._address}: {exc}") from None
         self._sock, self._executor = sock, executor
         self._clock.link = self
         executor.add_reader(sock.fileno(), self._readable)

@@ -26,9 +26,12 @@ from antalate_lcm.runtime.time_coordinator import simulated_buses
 from antalate_lcm.runtime.time_grant import (
     Advance,
     Deliver,
+    Interest,
     Report,
+    add_interest,
     decide,
     decode_messages,
+    encode_interest,
     encode_message,
     merge,
     pace,
@@ -250,3 +253,20 @@ def test_an_agent_process_without_its_clock_says_so_in_one_line(
     assert main(["agent", str(files / "swarm.toml"), *argv]) == 2
     err = capsys.readouterr().err
     assert words in err and err.count("\n") == 1
+
+
+def test_a_process_is_handed_only_what_it_subscribes_to() -> None:
+    mc, tel = encode_message("lan", "a-01/MC_STATE", b"s"), encode_message("lan", "a-01/TELEMETRY", b"t")
+    cmd = encode_message("lan", "SWARM_OPERATOR_CMD", b"c")
+    recorder, agents, quiet = Interest(), Interest(), Interest()
+    add_interest(recorder, encode_interest([("lan", ".*", True)]))
+    add_interest(
+        agents, encode_interest([("lan", "SWARM_OPERATOR_CMD", False), ("lan", "b-.*/TELEMETRY", True)])
+    )
+    # The agents' process does not want another's MC state or telemetry, the recorder wants all.
+    decision = decide([Report(1.0, cmd), Report(1.0, mc + tel), Report(1.0)], [recorder, agents, quiet])
+    assert decision == Deliver((mc + tel, cmd, b""))
+    # Messages nobody else wants are no round of their own: time moves on.
+    assert decide([Report(1.0), Report(1.0, mc + tel), Report(2.0)], [quiet, quiet, agents]) == Advance(
+        1.0, (0, 1)
+    )

@@ -133,18 +133,20 @@ def _on_shared_clock(args: argparse.Namespace, buses: dict[str, str]) -> tuple[C
     simulated time, joined to the run's clock (runtime/time_coordinator.py), held until every node
     of the process has started; and what releases it then."""
     from antalate_lcm.executor import Executor
+    from antalate_lcm.node import INPROC_BUS
     from antalate_lcm.runtime.agent import parse_shard
-    from antalate_lcm.runtime.time_coordinator import join, simulated_buses
+    from antalate_lcm.runtime.time_coordinator import SimulatedBus, join, simulated_buses
     from antalate_lcm.simclock import SimClock
 
     if not args.shard:
         raise AntalateError("--sim-clock is for the agent processes of `antalate run` (with --shard)")
     clock = SimClock(held=True)
     simulated, crossing = simulated_buses(buses)
-    context = Context.in_process(simulated, executor=Executor(sim=clock))
-    context.seed = args.seed
+    # As Context.in_process, on a bus that notes what the nodes subscribe to on the crossing buses.
+    bus = SimulatedBus({**simulated, INPROC_BUS: "memq://"}, crossing)
+    context = Context(bus, Executor(sim=clock), inproc_bus=INPROC_BUS, seed=args.seed)
     index, _count = parse_shard(args.shard)
-    join(args.sim_clock, index + 1, clock, context.bus, context.executor, crossing)
+    join(args.sim_clock, index + 1, clock, bus, context.executor, crossing)
     return context, lambda: context.executor.call_soon(clock.release)
 
 

@@ -38,15 +38,19 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
-from antalate_lcm.bus import Bus
+from antalate_lcm.bus import Bus, Handler, Subscription
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.executor import Executor
 from antalate_lcm.runtime.time_grant import (
     Deliver,
+    Interest,
     Report,
+    add_interest,
     decide,
     decode_messages,
+    encode_interest,
     encode_message,
     merge,
     pace,
@@ -58,7 +62,7 @@ from antalate_lcm.simclock import SIM_START, SimClock
 log = logging.getLogger("antalate.simclock")
 
 _FRAME = struct.Struct("<cQdI")
-_HELLO, _REPORT, _DELIVER, _ADVANCE = b"H", b"R", b"D", b"A"
+_HELLO, _INTEREST, _REPORT, _DELIVER, _ADVANCE = b"H", b"I", b"R", b"D", b"A"
 #: Bus schemes that cross processes: on simulated time each becomes a memq:// bus of its own.
 _CROSSING = ("udpm://", "zenoh://")
 #: Longest real wait (s) of the coordinator between two looks at whether it is being closed.
@@ -73,18 +77,48 @@ def simulated_buses(buses: Mapping[str, str]) -> tuple[dict[str, str], list[str]
     return {name: f"memq://{name}" if name in crossing else url for name, url in buses.items()}, crossing
 
 
+class SimulatedBus(Bus):
+    """The bus of a process on the shared clock: notes what its nodes subscribe to on the buses
+    that cross processes, so that the coordinator hands it only those messages."""
+
+    def __init__(self, urls: Mapping[str, str], crossing: Sequence[str]) -> None:
+        super().__init__(urls)
+        self._crossing = frozenset(crossing)
+        #: (bus, channel, regex) subscribed since the link last said so.
+        self.new_interest: list[tuple[str, str, bool]] = []
+
+    def subscribe(
+        self, bus: str, channel: str, msg_type: Any, handler: Handler, *, regex: bool = False
+    ) -> Subscription:
+        sub = super().subscribe(bus, channel, msg_type, handler, regex=regex)
+        if bus in self._crossing:
+            self.new_interest.append((bus, channel, regex))
+        return sub
+
+
 def _frame(kind: bytes, round_: int, value: float, payload: bytes = b"") -> bytes:
     return _FRAME.pack(kind, round_, value, len(payload)) + payload
 
 
-def _read_exactly(sock: socket.socket, n: int) -> bytes:
-    buf = bytearray()
-    while len(buf) < n:
-        chunk = sock.recv(n - len(buf))
-        if not chunk:
-            raise ConnectionError("the simulated clock's coordinator closed the connection")
-        buf += chunk
-    return bytes(buf)
+def _frames(sock: socket.socket, buf: bytearray) -> list[tuple[bytes, int, float, bytes]]:
+    """The frames readable now on ``sock`` (one ``recv`` for a whole frame, the usual case), after
+    those begun in ``buf``; a frame begun is read to its end (its sender writes it whole)."""
+    chunk = sock.recv(1 << 20)
+    if not chunk:
+        raise ConnectionError("the simulated clock's coordinator closed the connection")
+    buf += chunk
+    out = []
+    while len(buf) >= _FRAME.size:
+        kind, round_, value, size = _FRAME.unpack_from(buf)
+        end = _FRAME.size + size
+        while len(buf) < end:
+            more = sock.recv(end - len(buf))
+            if not more:
+                raise ConnectionError("the simulated clock's coordinator closed the connection")
+            buf += more
+        out.append((kind, round_, value, bytes(buf[_FRAME.size : end])))
+        del buf[:end]
+    return out
 
 
 class ClockLink:
@@ -96,21 +130,23 @@ class ClockLink:
         self._address = address
         self._sock: socket.socket | None = None
         self._executor: Executor | None = None
-        self._bus: Bus | None = None
+        self._bus: SimulatedBus | None = None
         #: Messages published here since the last report, encoded.
         self._outbox: list[bytes] = []
         #: Per bus: the others' messages published here by the link, not yet heard back.
         self._echo: dict[str, collections.deque[bytes]] = {}
         self._round = 0
+        #: A frame from the coordinator begun, not yet whole.
+        self._inbuf = bytearray()
         #: The next timer of the report awaiting its answer (None: no report waits).
         self._reported: float | None = None
 
-    def bridge(self, bus: Bus, names: Sequence[str]) -> None:
+    def bridge(self, bus: SimulatedBus, names: Sequence[str]) -> None:
         """Carry every message published on ``names`` of ``bus`` (memq:// buses) to the others."""
         self._bus = bus
         for name in names:
             self._echo[name] = collections.deque()
-            bus.subscribe(name, ".*", None, self._hearer(name), regex=True)
+            Bus.subscribe(bus, name, ".*", None, self._hearer(name), regex=True)  # not an interest
 
     def _hearer(self, name: str) -> Callable[[str, bytes], None]:
         echo = self._echo[name]
@@ -151,8 +187,13 @@ class ClockLink:
         payload = b"".join(self._outbox)
         self._outbox.clear()
         self._reported = next_due
+        frame = _frame(_REPORT, self._round, next_due, payload)
+        bus = self._bus
+        if bus is not None and bus.new_interest:  # what it now subscribes to, before what it sent
+            frame = _frame(_INTEREST, self._round, 0.0, encode_interest(bus.new_interest)) + frame
+            bus.new_interest.clear()
         try:
-            sock.sendall(_frame(_REPORT, self._round, next_due, payload))
+            sock.sendall(frame)
         except OSError:
             self._lost()
 
@@ -161,16 +202,16 @@ class ClockLink:
         if sock is None:
             return
         try:
-            kind, round_, value, size = _FRAME.unpack(_read_exactly(sock, _FRAME.size))
-            payload = _read_exactly(sock, size) if size else b""
-        except (OSError, ConnectionError, struct.error):
+            frames = _frames(sock, self._inbuf)
+        except OSError:  # ConnectionError included: the coordinator is gone
             self._lost()
             return
-        self._round, self._reported = round_, None
-        if value > self._clock.t:  # an advance's time, or a delivery's (moved past while asleep)
-            self._clock.t = value
-        if kind == _DELIVER:
-            self._deliver(payload)
+        for kind, round_, value, payload in frames:
+            self._round, self._reported = round_, None
+            if value > self._clock.t:  # an advance's time, or a delivery's (moved past while asleep)
+                self._clock.t = value
+            if kind == _DELIVER:
+                self._deliver(payload)
 
     def _deliver(self, payload: bytes) -> None:
         bus = self._bus
@@ -225,6 +266,7 @@ class TimeCoordinator:
         self._selector.register(self._wake_r, selectors.EVENT_READ)
         self._peers: list[_Peer | None] = [None] * count
         self._reports: list[Report | None] = [None] * count
+        self._interests = [Interest() for _ in range(count)]
         #: Messages of reports that came after their round was decided: into the next one.
         self._carry: list[bytes] = [b""] * count
         self._round = 0
@@ -307,6 +349,8 @@ class TimeCoordinator:
                     return False
                 peer.index = index
                 self._peers[index] = peer
+            elif kind == _INTEREST and peer.index is not None:
+                add_interest(self._interests[peer.index], payload)
             elif kind == _REPORT and peer.index is not None:
                 i = peer.index
                 if round_ == self._asked[i]:
@@ -339,7 +383,7 @@ class TimeCoordinator:
         answered at once: a round of processes that all report nothing new)."""
         if self.lost.is_set():
             return
-        decision = decide(self._reports)
+        decision = decide(self._reports, self._interests)
         if decision is None:
             return
         self._round += 1
@@ -378,7 +422,7 @@ class TimeCoordinator:
 
 
 def join(
-    address: str, index: int, clock: SimClock, bus: Bus, executor: Executor, buses: Sequence[str]
+    address: str, index: int, clock: SimClock, bus: SimulatedBus, executor: Executor, buses: Sequence[str]
 ) -> ClockLink:
     """This process on the shared clock: its crossing ``buses`` carried, its loop joined."""
     link = ClockLink(address, index, clock)

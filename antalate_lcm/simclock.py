@@ -47,8 +47,9 @@ class Coordinated(Protocol):
     """The clock of one of several processes on one simulated time
     (:class:`antalate_lcm.runtime.time_coordinator.ClockLink`): it moves only when told to."""
 
-    def idle(self, next_due: float) -> None:
-        """The loop has nothing left to do now; its next timer is due at ``next_due``."""
+    def idle(self, next_due: float) -> bool:
+        """The loop has nothing left to do now; its next timer is due at ``next_due``. True: the
+        clock has moved or work is queued already (look again); False: wait for the answer."""
         ...
 
 
@@ -123,7 +124,8 @@ class _SimSelector(selectors.BaseSelector):
                 ready = self._inner.select(0)
                 if ready:
                     return ready
-                clock.link.idle(math.inf)
+                if clock.link.idle(math.inf):
+                    return []
             return self._inner.select(None)
         if clock.held:
             return self._inner.select(min(timeout, _HELD_WAIT))
@@ -132,7 +134,8 @@ class _SimSelector(selectors.BaseSelector):
             return ready
         link = clock.link
         if link is not None:  # another process may yet send something for now: ask, then wait
-            link.idle(clock.t + timeout)
+            if link.idle(clock.t + timeout):
+                return []
             return self._inner.select(None)
         wait = clock.real_wait(timeout)
         if wait > 0:  # --speed N: wait, yet wake for another thread's call (a stop, say)

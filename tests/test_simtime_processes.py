@@ -270,3 +270,24 @@ def test_a_process_is_handed_only_what_it_subscribes_to() -> None:
     assert decide([Report(1.0), Report(1.0, mc + tel), Report(2.0)], [quiet, quiet, agents]) == Advance(
         1.0, (0, 1)
     )
+
+
+def test_a_speed_bounds_the_shared_clock(files: Path) -> None:
+    outcome = run(
+        Experiment(
+            config_path=str(files / "swarm.toml"),
+            agents=2,
+            processes=PROCESSES,
+            script=load_script(files / "long.toml").model_copy(update={"mission_time": 4.0}),
+            output=str(files / "paced.lcm"),
+            force=True,
+            speed=4.0,
+            seed=1,
+            log_level="WARNING",
+            measure=False,
+        )
+    )
+    assert outcome.code == 0, outcome.text()
+    # Never faster than 4x real time (a lower bound: a loaded machine only makes it slower; the
+    # same flight at max takes about a second).
+    assert outcome.simulated_s is not None and outcome.real_s >= outcome.simulated_s / 4.0

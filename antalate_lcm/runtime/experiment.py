@@ -44,7 +44,7 @@ from antalate_lcm.runtime.launch import run_until_signal
 from antalate_lcm.runtime.recorder import LogRecorder
 from antalate_lcm.runtime.script import Script, check_fault_agents, load_script
 from antalate_lcm.runtime.scripted_operator import DirectionAt, Phase, ScriptedOperator
-from antalate_lcm.runtime.time_coordinator import SimulatedBus, TimeCoordinator, join, simulated_buses
+from antalate_lcm.runtime.time_coordinator import SimulatedBus, TimeCoordinator, simulated_buses
 from antalate_lcm.simclock import SimClock
 
 if TYPE_CHECKING:
@@ -360,9 +360,8 @@ def run(exp: Experiment) -> Outcome:
     )
     if clock is not None or exp.seed is not None:
         context.seed = script.seed
-    link = None
     if coordinator is not None and clock is not None and isinstance(context.bus, SimulatedBus):
-        link = join(coordinator.address, 0, clock, context.bus, context.executor, crossing)
+        coordinator.serve(clock, context.bus, context.executor, crossing)
     recorder = LogRecorder(configs[0].with_agent_name("recorder"), context, bus=bus, path=out)
     nodes: list[Node] = [recorder]
     if processes == 1:
@@ -386,8 +385,6 @@ def run(exp: Experiment) -> Outcome:
             coordinator.finish()
         if children is not None:
             children.stop()
-        if link is not None:
-            link.close()
         if coordinator is not None:
             coordinator.close()
             outcome.clock_rounds = coordinator.rounds

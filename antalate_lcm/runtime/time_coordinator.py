@@ -1,25 +1,30 @@
 """One simulated clock for the processes of ``antalate run --speed max|N --processes P``.
 
-The operator's process (``antalate run``) serves a :class:`TimeCoordinator` on a Unix socket, from
-a thread; it and each agent process (``antalate agent --shard i/P --sim-clock ADDRESS``) run their
-loop on a :class:`~antalate_lcm.simclock.SimClock` joined to it by a :class:`ClockLink`. The
-rule they follow is :mod:`antalate_lcm.runtime.time_grant` (why it keeps the lockstep and the
-run deterministic is said there); here is only its I/O:
+The operator's process (``antalate run``) serves a :class:`TimeCoordinator` on a Unix socket, on
+its own loop; it and each agent process (``antalate agent --shard i/P --sim-clock ADDRESS``) run
+their loop on a :class:`~antalate_lcm.simclock.SimClock` joined to it by a link
+(:class:`LocalLink` in the operator's process, :class:`SocketLink` in an agent process). The rule
+they follow is :mod:`antalate_lcm.runtime.time_grant` (why it keeps the lockstep and the run
+deterministic is said there); here is only its I/O:
 
 - Every bus that crosses processes (UDP multicast, Zenoh) becomes, in each process, a private
   ``memq://NAME`` bus: a datagram through the kernel would arrive at a real moment, not a
   simulated one, and in an order set by the scheduler. The link hears every message published
-  on it (a pattern subscription) and carries it in its next report; the messages of the other
-  processes it is handed come back on that bus, still at the time they were sent.
+  on it (a pattern subscription) and carries it in its next report, with what the process's
+  nodes subscribed to on it since (:class:`SimulatedBus`); the messages of the other processes
+  it is handed come back on that bus, still at the time they were sent.
 - A process reports when its loop has nothing left to do now (the simulated clock's selector
   calls :meth:`ClockLink.idle` where a lone process would move its clock), then waits on the
   coordinator's socket; its answer (deliver these, or move to ``t``) is read on the loop thread.
+  The operator's process reports and is answered by calls, on its own loop: a round that only
+  hands the recorder the agents' messages costs it no system call and no thread switch.
 - A process whose socket closes before the run ends (it died, it was killed) stops the run: the
   coordinator says which one and at what simulated time (:attr:`TimeCoordinator.failure`), and
   sets :attr:`TimeCoordinator.lost` for ``antalate run`` to stop the others.
 
-The frames, both ways: kind (1 byte), round (u64), a float (a report's next timer, an advance's
-time, a hello's process index), the payload's length (u32), the payload (messages).
+The frames, both ways: kind (1 byte), round (u64), a float (a report's next timer, an answer's
+time, a hello's process index), the payload's length (u32), the payload (messages; the
+subscriptions of an interest frame, which precedes its report).
 """
 
 from __future__ import annotations
@@ -29,7 +34,6 @@ import contextlib
 import logging
 import math
 import os
-import selectors
 import shutil
 import signal
 import socket
@@ -122,22 +126,19 @@ def _frames(sock: socket.socket, buf: bytearray) -> list[tuple[bytes, int, float
 
 
 class ClockLink:
-    """A process's side: reports when its loop is idle, applies the coordinator's answers."""
+    """A process's side: reports when its loop is idle, applies the coordinator's answers. This
+    one reports over the coordinator's socket (an agent process); :class:`LocalLink` in the
+    coordinator's own process."""
 
-    def __init__(self, address: str, index: int, clock: SimClock) -> None:
+    def __init__(self, index: int, clock: SimClock) -> None:
         self.index = index
         self._clock = clock
-        self._address = address
-        self._sock: socket.socket | None = None
-        self._executor: Executor | None = None
         self._bus: SimulatedBus | None = None
         #: Messages published here since the last report, encoded.
         self._outbox: list[bytes] = []
         #: Per bus: the others' messages published here by the link, not yet heard back.
         self._echo: dict[str, collections.deque[bytes]] = {}
         self._round = 0
-        #: A frame from the coordinator begun, not yet whole.
-        self._inbuf = bytearray()
         #: The next timer of the report awaiting its answer (None: no report waits).
         self._reported: float | None = None
 
@@ -162,6 +163,50 @@ class ClockLink:
 
         return heard
 
+    def idle(self, next_due: float) -> bool:
+        """The loop has nothing left to do now; its next timer is at ``next_due``. A report waits
+        for its answer unless this process has had work since (another thread's call): then the
+        new report adds to it. True when the answer came at once (the loop looks again)."""
+        if self._reported is not None and not self._outbox and next_due >= self._reported:
+            return False
+        payload = b"".join(self._outbox)
+        self._outbox.clear()
+        self._reported = next_due
+        bus = self._bus
+        interest = b""
+        if bus is not None and bus.new_interest:  # what it now subscribes to, before what it sent
+            interest = encode_interest(bus.new_interest)
+            bus.new_interest.clear()
+        return self._report(next_due, interest, payload)
+
+    def _report(self, next_due: float, interest: bytes, payload: bytes) -> bool:
+        raise NotImplementedError
+
+    def apply(self, kind: bytes, round_: int, value: float, payload: bytes) -> None:
+        """The coordinator's answer: move to ``value`` (an advance's time, or a delivery's: this
+        process may have slept through advances), and deliver a delivery's messages."""
+        self._round, self._reported = round_, None
+        if value > self._clock.t:
+            self._clock.t = value
+        if kind == _DELIVER:
+            bus = self._bus
+            assert bus is not None
+            for name, channel, data in decode_messages(payload):
+                self._echo[name].append(data)
+                bus.publish(name, channel, data)
+
+
+class SocketLink(ClockLink):
+    """An agent process's link: the coordinator is in the operator's process, over its socket."""
+
+    def __init__(self, address: str, index: int, clock: SimClock) -> None:
+        super().__init__(index, clock)
+        self._address = address
+        self._sock: socket.socket | None = None
+        self._executor: Executor | None = None
+        #: A frame from the coordinator begun, not yet whole.
+        self._inbuf = bytearray()
+
     def start(self, executor: Executor) -> None:
         """Join the coordinator (before the loop runs); from now on the clock moves only by it."""
         sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -175,27 +220,18 @@ class ClockLink:
         self._clock.link = self
         executor.add_reader(sock.fileno(), self._readable)
 
-    def idle(self, next_due: float) -> None:
-        """The loop has nothing left to do now; its next timer is at ``next_due``. A report waits
-        for its answer unless this process has had work since (another thread's call): then the
-        new report adds to it."""
+    def _report(self, next_due: float, interest: bytes, payload: bytes) -> bool:
         sock = self._sock
         if sock is None:
-            return
-        if self._reported is not None and not self._outbox and next_due >= self._reported:
-            return
-        payload = b"".join(self._outbox)
-        self._outbox.clear()
-        self._reported = next_due
+            return False
         frame = _frame(_REPORT, self._round, next_due, payload)
-        bus = self._bus
-        if bus is not None and bus.new_interest:  # what it now subscribes to, before what it sent
-            frame = _frame(_INTEREST, self._round, 0.0, encode_interest(bus.new_interest)) + frame
-            bus.new_interest.clear()
+        if interest:
+            frame = _frame(_INTEREST, self._round, 0.0, interest) + frame
         try:
             sock.sendall(frame)
         except OSError:
             self._lost()
+        return False
 
     def _readable(self) -> None:
         sock = self._sock
@@ -206,19 +242,8 @@ class ClockLink:
         except OSError:  # ConnectionError included: the coordinator is gone
             self._lost()
             return
-        for kind, round_, value, payload in frames:
-            self._round, self._reported = round_, None
-            if value > self._clock.t:  # an advance's time, or a delivery's (moved past while asleep)
-                self._clock.t = value
-            if kind == _DELIVER:
-                self._deliver(payload)
-
-    def _deliver(self, payload: bytes) -> None:
-        bus = self._bus
-        assert bus is not None
-        for name, channel, data in decode_messages(payload):
-            self._echo[name].append(data)
-            bus.publish(name, channel, data)
+        for frame in frames:
+            self.apply(*frame)
 
     def _lost(self) -> None:
         """The coordinator is gone (the operator's process died): stop this process, as Ctrl-C."""
@@ -239,6 +264,25 @@ class ClockLink:
         sock.close()
 
 
+class LocalLink(ClockLink):
+    """The link of the coordinator's own process (index 0): its reports and answers are calls."""
+
+    def __init__(self, coordinator: TimeCoordinator, clock: SimClock) -> None:
+        super().__init__(0, clock)
+        self._coordinator = coordinator
+        #: An answer came while this process reported.
+        self._answered = False
+
+    def _report(self, next_due: float, interest: bytes, payload: bytes) -> bool:
+        self._answered = False
+        self._coordinator.report(0, self._round, next_due, interest, payload)
+        return self._answered
+
+    def apply(self, kind: bytes, round_: int, value: float, payload: bytes) -> None:
+        self._answered = True
+        super().apply(kind, round_, value, payload)
+
+
 class _Peer:
     __slots__ = ("sock", "index", "buf")
 
@@ -250,7 +294,10 @@ class _Peer:
 
 class TimeCoordinator:
     """Serves :func:`~antalate_lcm.runtime.time_grant.decide` to ``count`` processes (index 0:
-    this one, ``i + 1``: ``--shard i/P``), from a thread, on a Unix socket in a temporary folder."""
+    this one, ``i + 1``: ``--shard i/P``) on a Unix socket in a temporary folder, on this
+    process's own loop (:meth:`serve`): its reports and answers are calls, not messages, and a
+    round that concerns only this process (the recorder given the agents' messages) costs no
+    system call."""
 
     def __init__(self, count: int, speed: float = math.inf) -> None:
         self.count = count
@@ -260,11 +307,10 @@ class TimeCoordinator:
         self._server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         self._server.bind(self.address)
         self._server.listen(count)
-        self._selector = selectors.DefaultSelector()
-        self._selector.register(self._server, selectors.EVENT_READ)
-        self._wake_r, self._wake_w = socket.socketpair()
-        self._selector.register(self._wake_r, selectors.EVENT_READ)
+        self._executor: Executor | None = None
+        self._local: LocalLink | None = None
         self._peers: list[_Peer | None] = [None] * count
+        self._pending: list[_Peer] = []  # connected, not yet said which process they are
         self._reports: list[Report | None] = [None] * count
         self._interests = [Interest() for _ in range(count)]
         #: Messages of reports that came after their round was decided: into the next one.
@@ -279,51 +325,60 @@ class TimeCoordinator:
         self.lost = threading.Event()
         self.failure = ""
         self._finished = False
-        self._closing = False
         #: Rounds decided (deliveries and advances): what the shared clock costs (benchmarks/simtime.py).
         self.rounds = 0
-        self._thread = threading.Thread(target=self._serve, name="sim-clock", daemon=True)
-        self._thread.start()
+
+    def serve(self, clock: SimClock, bus: SimulatedBus, executor: Executor, buses: Sequence[str]) -> None:
+        """Serve on ``executor``'s loop (before it runs), this process joined as index 0."""
+        link = LocalLink(self, clock)
+        link.bridge(bus, buses)
+        self._local, self._executor = link, executor
+        clock.link = link
+        executor.add_reader(self._server.fileno(), self._accept)
 
     def finish(self) -> None:
         """The run has ended: processes leaving now are stopping, not failing."""
         self._finished = True
 
     def close(self) -> None:
-        self._finished = self._closing = True
-        with contextlib.suppress(OSError):
-            self._wake_w.send(b"x")
-        self._thread.join(timeout=5)
-        for peer in self._peers:
+        """After the loop has stopped: the sockets and their folder."""
+        self._finished = True
+        for peer in [*self._peers, *self._pending]:
             if peer is not None:
                 peer.sock.close()
-        for s in (self._server, self._wake_r, self._wake_w):
-            s.close()
-        self._selector.close()
+        self._server.close()
         shutil.rmtree(self._dir, ignore_errors=True)
 
-    # ------------------------------------------------------------------ the thread
-    def _serve(self) -> None:
-        pending: list[_Peer] = []  # connected, not yet said who they are
-        while not self._closing:
-            for key, _ in self._selector.select():
-                if key.fileobj is self._server:
-                    conn, _addr = self._server.accept()
-                    peer = _Peer(conn)
-                    pending.append(peer)
-                    self._selector.register(conn, selectors.EVENT_READ, peer)
-                elif key.fileobj is self._wake_r:
-                    return
-                else:
-                    peer = key.data
-                    if not self._read(peer):
-                        self._selector.unregister(peer.sock)
-                        if peer in pending:
-                            pending.remove(peer)
-                        self._left(peer)
-                        continue
-                    if peer.index is not None and peer in pending:
-                        pending.remove(peer)
+    # ------------------------------------------------------------------ on the loop
+    def _accept(self) -> None:
+        conn, _addr = self._server.accept()
+        peer = _Peer(conn)
+        self._pending.append(peer)
+        assert self._executor is not None
+        self._executor.add_reader(conn.fileno(), lambda: self._readable(peer))
+
+    def _readable(self, peer: _Peer) -> None:
+        if not self._read(peer):
+            assert self._executor is not None
+            self._executor.remove_reader(peer.sock.fileno())
+            if peer in self._pending:
+                self._pending.remove(peer)
+            self._left(peer)
+            return
+        if peer.index is not None and peer in self._pending:
+            self._pending.remove(peer)
+        self._step()
+
+    def report(self, index: int, round_: int, next_due: float, interest: bytes, payload: bytes) -> None:
+        """Process ``index`` is idle (what it subscribed to since, what it sent); decide if all are."""
+        if interest:
+            add_interest(self._interests[index], interest)
+        if round_ == self._asked[index]:
+            self._reports[index] = merge(self._reports[index], Report(next_due, self._carry[index] + payload))
+            self._carry[index] = b""
+        else:  # a report of a round already decided: its messages go with the next one
+            self._carry[index] += payload
+        if index == 0:
             self._step()
 
     def _read(self, peer: _Peer) -> bool:
@@ -335,6 +390,7 @@ class TimeCoordinator:
             return False
         peer.buf += chunk
         buf = peer.buf
+        interest = b""
         while len(buf) >= _FRAME.size:
             kind, round_, value, size = _FRAME.unpack_from(buf)
             end = _FRAME.size + size
@@ -344,20 +400,16 @@ class TimeCoordinator:
             del buf[:end]
             if kind == _HELLO:
                 index = int(value)
-                if not 0 <= index < self.count or self._peers[index] is not None:
+                if not 0 < index < self.count or self._peers[index] is not None:
                     log.error("the simulated clock refused a process calling itself %d", index)
                     return False
                 peer.index = index
                 self._peers[index] = peer
-            elif kind == _INTEREST and peer.index is not None:
-                add_interest(self._interests[peer.index], payload)
+            elif kind == _INTEREST:
+                interest += payload
             elif kind == _REPORT and peer.index is not None:
-                i = peer.index
-                if round_ == self._asked[i]:
-                    self._reports[i] = merge(self._reports[i], Report(value, self._carry[i] + payload))
-                    self._carry[i] = b""
-                else:  # a report of a round already decided: its messages go with the next one
-                    self._carry[i] += payload
+                self.report(peer.index, round_, value, interest, payload)
+                interest = b""
         return True
 
     def _left(self, peer: _Peer) -> None:
@@ -366,9 +418,7 @@ class TimeCoordinator:
             self._peers[peer.index] = None
         if self._finished:
             return
-        who = (
-            "the operator's process" if peer.index == 0 else f"agent process {peer.index} of {self.count - 1}"
-        )
+        who = f"agent process {peer.index} of {self.count - 1}"
         if peer.index is None:
             who = "a process that never said which it was"
         self.failure = (
@@ -379,8 +429,7 @@ class TimeCoordinator:
         self.lost.set()
 
     def _step(self) -> None:
-        """Decide the round if every process has reported (several times while each decision is
-        answered at once: a round of processes that all report nothing new)."""
+        """Decide the round if every process has reported, and answer the processes it wakes."""
         if self.lost.is_set():
             return
         decision = decide(self._reports, self._interests)
@@ -394,38 +443,43 @@ class TimeCoordinator:
             self._asked[i] = self._round
         if isinstance(decision, Deliver):
             for i in wake:
-                self._send(self._peers[i], _frame(_DELIVER, self._round, self.t, decision.batches[i]))
+                self._answer(i, _DELIVER, self.t, decision.batches[i])
             return
         self._pace(decision.t)
         self.t = decision.t
-        frame = _frame(_ADVANCE, self._round, decision.t)
         for i in wake:
-            self._send(self._peers[i], frame)
+            self._answer(i, _ADVANCE, decision.t, b"")
 
     def _pace(self, t: float) -> None:
-        """``--speed N``: time runs at most N times real time from the first grant on."""
+        """``--speed N``: time runs at most N times real time from the first grant on (the loop
+        waits: every process is idle, nothing else can happen before ``t``)."""
         if math.isinf(self.speed):
             return
         if self._paced is None:
             self._paced = (time.monotonic(), self.t)
         real0, sim0 = self._paced
-        while not self._closing and (wait := pace(self.speed, real0, sim0, t, time.monotonic())) > 0:
+        while not self._finished and (wait := pace(self.speed, real0, sim0, t, time.monotonic())) > 0:
             time.sleep(min(wait, _PACE_STEP))
 
-    def _send(self, peer: _Peer | None, frame: bytes) -> None:
+    def _answer(self, index: int, kind: bytes, value: float, payload: bytes) -> None:
+        if index == 0:
+            assert self._local is not None
+            self._local.apply(kind, self._round, value, payload)
+            return
+        peer = self._peers[index]
         if peer is None:
             return
         try:
-            peer.sock.sendall(frame)
+            peer.sock.sendall(_frame(kind, self._round, value, payload))
         except OSError:  # its end is closed: its read says so next
-            log.debug("cannot send to process %s", peer.index)
+            log.debug("cannot send to process %s", index)
 
 
 def join(
     address: str, index: int, clock: SimClock, bus: SimulatedBus, executor: Executor, buses: Sequence[str]
-) -> ClockLink:
-    """This process on the shared clock: its crossing ``buses`` carried, its loop joined."""
-    link = ClockLink(address, index, clock)
+) -> SocketLink:
+    """An agent process on the shared clock: its crossing ``buses`` carried, its loop joined."""
+    link = SocketLink(address, index, clock)
     link.bridge(bus, buses)
     link.start(executor)
     return link

@@ -12,17 +12,26 @@ from __future__ import annotations
 import math
 import os
 import signal
+import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
 from antalate_lcm.cli import main
+from antalate_lcm.executor import Executor
 from antalate_lcm.runtime.experiment import Experiment, run
 from antalate_lcm.runtime.replay import read_record
 from antalate_lcm.runtime.script import load_script
-from antalate_lcm.runtime.time_coordinator import simulated_buses
+from antalate_lcm.runtime.time_coordinator import (
+    _FRAME,
+    SimulatedBus,
+    TimeCoordinator,
+    _frame,
+    simulated_buses,
+)
 from antalate_lcm.runtime.time_grant import (
     Advance,
     Deliver,
@@ -38,6 +47,7 @@ from antalate_lcm.runtime.time_grant import (
     remaining,
     woken,
 )
+from antalate_lcm.simclock import SIM_START, SimClock
 from tests.harness.polling import wait_for
 from tests.test_simtime import CONFIG, SCRIPT, message_hashes
 
@@ -291,3 +301,53 @@ def test_a_speed_bounds_the_shared_clock(files: Path) -> None:
     # Never faster than 4x real time (a lower bound: a loaded machine only makes it slower; the
     # same flight at max takes about a second).
     assert outcome.simulated_s is not None and outcome.real_s >= outcome.simulated_s / 4.0
+
+
+def _recv_frame(sock: socket.socket) -> tuple[bytes, int, float, bytes]:
+    sock.settimeout(30)
+    head = b""
+    while len(head) < _FRAME.size:
+        head += sock.recv(_FRAME.size - len(head))
+    kind, round_, value, size = _FRAME.unpack(head)
+    payload = b""
+    while len(payload) < size:
+        payload += sock.recv(size - len(payload))
+    return kind, round_, value, payload
+
+
+def test_the_coordinator_hears_a_process_whose_subscriptions_take_several_reads() -> None:
+    """A thousand agents' subscriptions are more than one read of the socket: lost, the agents
+    never heard the operator (what a 1,000-agent run over two processes did)."""
+    clock = SimClock()
+    executor = Executor(sim=clock)
+    bus = SimulatedBus({"lan": "memq://lan"}, ["lan"])
+    bus.attach(executor)
+    coordinator = TimeCoordinator(2)
+    coordinator.serve(clock, bus, executor, ["lan"])
+
+    def operator() -> None:  # this process's timer, 1 s in: a message the agent wants, one not
+        bus.publish("lan", "agent-19999/OPERATOR_CMD", b"take off")
+        bus.publish("lan", "agent-19999/MC_STATE", b"not wanted")
+
+    executor.call_later(1.0, operator)
+    executor.start()
+    agent = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        agent.connect(coordinator.address)
+        agent.sendall(_frame(b"H", 0, 1.0))
+        wanted = [("lan", f"agent-{i:05d}/OPERATOR_CMD", False) for i in range(20_000)]
+        interest = _frame(b"I", 0, 0.0, encode_interest(wanted))
+        assert len(interest) > 500_000
+        agent.sendall(interest)
+        time.sleep(0.2)  # the coordinator reads it all, over several reads, before the report comes
+        agent.sendall(_frame(b"R", 0, SIM_START + 1.0))
+        kind, round_, t, _ = _recv_frame(agent)
+        assert kind == b"A" and t == SIM_START + 1.0  # both timers are due then
+        agent.sendall(_frame(b"R", round_, SIM_START + 2.0))
+        kind, _, t, payload = _recv_frame(agent)
+        assert kind == b"D" and t == SIM_START + 1.0
+        assert list(decode_messages(payload)) == [("lan", "agent-19999/OPERATOR_CMD", b"take off")]
+    finally:
+        agent.close()
+        executor.stop()
+        coordinator.close()

@@ -390,7 +390,6 @@ class TimeCoordinator:
             return False
         peer.buf += chunk
         buf = peer.buf
-        interest = b""
         while len(buf) >= _FRAME.size:
             kind, round_, value, size = _FRAME.unpack_from(buf)
             end = _FRAME.size + size
@@ -405,11 +404,12 @@ class TimeCoordinator:
                     return False
                 peer.index = index
                 self._peers[index] = peer
-            elif kind == _INTEREST:
-                interest += payload
+            elif kind == _INTEREST and peer.index is not None:
+                # At once: its report may come in a later read (a thousand agents' subscriptions
+                # are more than one read), and it must be known before that report is.
+                add_interest(self._interests[peer.index], payload)
             elif kind == _REPORT and peer.index is not None:
-                self.report(peer.index, round_, value, interest, payload)
-                interest = b""
+                self.report(peer.index, round_, value, b"", payload)
         return True
 
     def _left(self, peer: _Peer) -> None:

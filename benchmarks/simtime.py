@@ -1,20 +1,25 @@
 """How much faster than real time a simulated swarm flies on simulated time (``antalate run --speed max``),
 beside the same flight on the wall clock.
 
-For each N it flies the same experiment twice, each in a fresh process: N agents (MC + HLC + sim +
-BMA with ``dovrat_swarm``, every bus in memory, the in-process recorder writing every message),
-the default script's operator (take off, a direction at 5 s, a ``--mission`` s mission, RTL), seed 1:
+For each N it flies the same experiment three times, each from a fresh process: N agents (MC + HLC +
+sim + BMA with ``dovrat_swarm``, every bus in memory, the in-process recorder writing every
+message), the default script's operator (take off, a direction at 5 s, a ``--mission`` s mission,
+RTL), seed 1:
 
-- ``--speed max``: the simulated seconds the flight covered, the real seconds it took, their ratio
-  (the speed-up over real time; goal: >= 20x for 100 agents, >= 2x for 1,000 on one core), and the
-  CPU seconds it used (simulated / CPU is the speed-up the process would get with a core to itself);
+- ``--speed max`` in one process: the simulated seconds the flight covered, the real seconds it
+  took, their ratio (the speed-up over real time; goal: >= 20x for 100 agents, >= 2x for 1,000 on
+  one core), and the CPU seconds it used (simulated / CPU is the speed-up the process would get
+  with a core to itself);
+- ``--speed max --processes P`` (``--processes``, default 2; 1: not flown): the same over P agent
+  processes and the operator's, on one simulated clock (runtime/time_coordinator.py), the CPU of
+  all of them, and the rounds of the shared clock per simulated second (what it costs);
 - the wall clock: the real seconds of the same flight and the share of a core it took (above 100 %
   the process cannot keep up: its timers run late, as ``benchmarks/agents.py`` shows).
 
 The metrics of ``antalate run`` are skipped (their analysis is not the flight). The machine is
 shared, so its load average is printed beside the figures (docs/design.md §12).
 
-    python benchmarks/simtime.py [N ...] [--mission S] [--no-wall]      (default sizes: 100 1000)
+    python benchmarks/simtime.py [N ...] [--mission S] [--no-wall] [--processes P]   (sizes: 100 1000)
 
 Measured 2026-11-26 on the 2-core machine shared with other jobs (docs/experiments.md, "Simulated
 time, seeds and replay"): 100 agents 11.3x real time at load 1.7-2.6 (11.8x per CPU second), 5.5x at

@@ -24,7 +24,11 @@ shared, so its load average is printed beside the figures (docs/design.md §12).
 Measured 2026-11-26 on the 2-core machine shared with other jobs (docs/experiments.md, "Simulated
 time, seeds and replay"): 100 agents 11.3x real time at load 1.7-2.6 (11.8x per CPU second), 5.5x at
 load 8; 1,000 agents 0.7x at load 1.7-5.4 (1.0x per CPU second), 0.3x at load 8. The goals (20x,
-2x) are not met: an agent's nodes compute about 1 ms of CPU per simulated second.
+2x) are not met: an agent's nodes compute about 1 ms of CPU per simulated second. Over two agent
+processes on one simulated clock (docs/experiments.md, "Simulated time over several processes"):
+100 agents 2.5x at load 3.5 (one process 11.8x in the same run: 1,800 rounds of the shared clock
+per simulated second cost more than the agents compute), 1,000 agents 0.3x at load 8.7 against
+0.2x in one process.
 """
 
 from __future__ import annotations

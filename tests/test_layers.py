@@ -40,9 +40,7 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
                 "topics",
                 "validation",
                 "geo",
-                "lcm_url",
-                "lcm_datagram",
-                "udpm_socket",
+                "transports",
                 "strict",
                 "plugins",
                 "security",
@@ -58,7 +56,6 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
         "core",
         frozenset(
             {
-                "zenoh_bus",
                 "executor",
                 "simclock",
                 "bus",

@@ -1,6 +1,7 @@
 """The ``zenoh://`` transport: antalate's LCM-encoded messages over Zenoh, past the first router.
 
-It offers the small part of ``lcm.LCM`` the bus uses -- ``publish``, ``subscribe`` (a channel regex
+:class:`Zenoh` checks its URLs (endpoints, TLS, credentials) and opens a :class:`ZenohLCM`. That
+offers the small part of ``lcm.LCM`` the bus uses -- ``publish``, ``subscribe`` (a channel regex
 matched whole, as liblcm does) with ``set_queue_capacity``, ``unsubscribe``, ``handle``,
 ``handle_timeout`` and ``fileno`` -- so :class:`antalate_lcm.bus.Bus` drives it exactly like an LCM
 instance, and so would an event loop waiting on ``fileno()``.
@@ -35,6 +36,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import hashlib
+import ipaddress
 import json
 import logging
 import os
@@ -43,15 +45,22 @@ import select
 import socket
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Protocol
 
 from antalate_lcm.errors import BusUnavailable
-from antalate_lcm.lcm_url import LcmUrl, parse_lcm_url
 from antalate_lcm.ratelimit import RateLimitedLog, TokenBucket
-from antalate_lcm.security import MemberProof
+from antalate_lcm.transports.base import (
+    HOSTNAME,
+    Connection,
+    LcmUrl,
+    OptionCheck,
+    Transport,
+    int_option,
+    port_problem,
+)
 
 log = logging.getLogger("antalate.zenoh")
 
@@ -76,6 +85,130 @@ DECLARE_BURST = 64.0
 MAX_COUNTED = 4096
 #: Forwarded messages each subscription remembers at most against duplicates (oldest forgotten first).
 MAX_SEEN = 65_536
+
+#: Why the LCM tools cannot open a zenoh:// bus, and what to do instead.
+ZENOH_NOT_LCM = (
+    "a zenoh:// bus is antalate's own, not an LCM provider: the LCM tools (lcm-logger, lcm-spy) cannot "
+    "open it; log or spy a LAN bus joined to it by antalate bridge (docs/wan.md)"
+)
+
+#: Zenoh link protocols whose address is HOST:PORT (zenoh also has unixsock-stream/PATH).
+_ZENOH_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+#: The ones that encrypt and authenticate (TLS; QUIC runs TLS 1.3).
+ZENOH_SECURE_PROTOCOLS = ("tls", "quic")
+_ZENOH_CHUNK = re.compile(r"[^*$?#%/\s]+")
+
+
+def zenoh_plain_endpoints(endpoints: Sequence[str]) -> list[str]:
+    """The endpoints that carry no TLS (``tcp/``, ``udp/``, ``ws/``; a Unix socket stays on the host)."""
+    return [e for e in endpoints if e.partition("/")[0] not in (*ZENOH_SECURE_PROTOCOLS, "unixsock-stream")]
+
+
+def zenoh_endpoints_problem(option: str, value: str) -> str | None:
+    """A problem with a comma-separated list of Zenoh endpoints (``tcp/10.0.0.3:7447``), or None."""
+    if not value:
+        return f"Zenoh endpoints for option {option}, e.g. {option}=tcp/192.0.2.10:7447"
+    for endpoint in value.split(","):
+        proto, sep, address = endpoint.partition("/")
+        if proto == "unixsock-stream" and sep and address:
+            continue
+        if proto not in _ZENOH_PROTOCOLS or not sep:
+            return (
+                f"a Zenoh endpoint PROTOCOL/HOST:PORT ({', '.join(_ZENOH_PROTOCOLS)}, unixsock-stream/PATH) "
+                f"for option {option}, not {endpoint!r}"
+            )
+        host, colon, port = address.rpartition(":")
+        bare = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+        if not colon or not (HOSTNAME.fullmatch(bare) or _ip(bare)):
+            return f"HOST:PORT after {proto}/ in option {option} ([v6]:PORT for IPv6), not {address!r}"
+        problem = port_problem(port, f"in option {option}")
+        if problem:
+            return f"{problem} (in {endpoint!r})"
+    return None
+
+
+def _ip(text: str) -> bool:
+    try:
+        ipaddress.ip_address(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _one_of(option: str, values: tuple[str, ...], what: str) -> OptionCheck:
+    return lambda v: None if v in values else f"{what} for option {option}, not {v!r}"
+
+
+def _path(what: str) -> OptionCheck:
+    return lambda v: None if v else what
+
+
+class Zenoh(Transport):
+    """antalate's own: one Zenoh key ``PREFIX/CHANNEL`` per channel, through routers (docs/wan.md)."""
+
+    scheme = "zenoh"
+    options: ClassVar[dict[str, OptionCheck]] = {
+        "connect": lambda v: zenoh_endpoints_problem("connect", v),
+        "listen": lambda v: zenoh_endpoints_problem("listen", v),
+        "mode": _one_of("mode", ("peer", "client"), "peer or client"),
+        "scout": _one_of("scout", ("0", "1"), "0 or 1 (multicast scouting)"),
+        "express": _one_of("express", ("0", "1"), "0 or 1 (no batching)"),
+        "lease": int_option("lease", 500, 3_600_000, "a link lease in milliseconds, 500 to 3600000"),
+        "config": _path("the path of a Zenoh JSON5 config file for option config"),
+        "ca": _path("the path of a PEM file (the CA of the router's certificate) for option ca"),
+        "cert": _path("the path of a PEM certificate for option cert"),
+        "cert_key": _path("the path of the PEM private key of cert for option cert_key"),
+        "auth": _path("the path of a file holding user:password for option auth"),
+        "plain": _one_of("plain", ("0", "1"), "0 or 1"),
+    }
+    not_lcm = ZENOH_NOT_LCM
+
+    @classmethod
+    def check(cls, u: LcmUrl) -> LcmUrl:
+        prefix = u.network or "antalate"
+        if not all(_ZENOH_CHUNK.fullmatch(chunk) for chunk in prefix.split("/")):
+            raise ValueError(
+                "a Zenoh key prefix after zenoh:// (chunks separated by /, none empty, no * $ ? # % or "
+                f"spaces), not {u.network!r}"
+            )
+        opts = u.options
+        if opts.get("mode") == "client" and "connect" not in opts:
+            raise ValueError(
+                "option connect with mode=client (the router to reach, e.g. connect=tcp/192.0.2.10:7447)"
+            )
+        if ("cert" in opts) != ("cert_key" in opts):
+            raise ValueError(
+                "options cert and cert_key together (this node's certificate and its private key)"
+            )
+        if ("ca" in opts or "cert" in opts) and opts.get("plain") != "1":
+            # TLS configured: a tcp/ endpoint would send the swarm's traffic in clear to whoever answers
+            plain = zenoh_plain_endpoints(
+                [e for o in ("connect", "listen") for e in opts.get(o, "").split(",") if e]
+            )
+            if plain:
+                raise ValueError(
+                    f"tls/ or quic/ endpoints with TLS configured (ca/cert), not {', '.join(plain)} "
+                    "(add plain=1 to allow an unencrypted endpoint)"
+                )
+        return LcmUrl(u.url, u.scheme, prefix, opts)
+
+    def open(self, *, max_message_size: int | None = None) -> Connection:
+        return ZenohLCM(self.url.url, max_message_size=max_message_size)
+
+
+class GroupProof(Protocol):
+    """Signs and checks election tokens (:class:`antalate_lcm.security.MemberProof`, with the swarm key);
+    a protocol here so the transport does not depend on the security module that asks it."""
+
+    @property
+    def refresh(self) -> float: ...
+
+    def token(self, group: str, member: str, now: float) -> str: ...
+
+    def check(self, group: str, name: str, now: float) -> tuple[str, float] | str: ...
+
+    def fresh(self, t: float, now: float) -> bool: ...
+
 
 _SPECIAL = ".^$*+?()[]{}|\\"
 _LITERAL = re.compile(r"(?:[^.^$*+?()\[\]{}|\\]|\\[.^$*+?()\[\]{}|\\])*")
@@ -223,11 +356,9 @@ class ZenohLCM:
 
     def __init__(self, url: str, *, max_message_size: int | None = None) -> None:
         try:
-            u = parse_lcm_url(url)
-        except ValueError as exc:  # a TLS or credentials file that is not there
-            raise BusUnavailable(url, str(exc)) from None
-        if u.provider != "zenoh":
-            raise BusUnavailable(url, "expected a zenoh:// URL")
+            u = Zenoh.parse(url)
+        except ValueError as exc:
+            raise BusUnavailable(url, f"expected {exc}") from None
         self.url = url
         self.prefix = u.network
         self._express = u.options.get("express", "0") == "1"
@@ -371,7 +502,7 @@ class ZenohLCM:
         group: str,
         member: str,
         on_change: Callable[[frozenset[str]], None],
-        proof: MemberProof | None = None,
+        proof: GroupProof | None = None,
     ) -> None:
         """Be ``member`` of ``group`` (a Zenoh liveliness token) and hear who else is, now and as it
         changes: ``on_change(members)``, this member always included. A member whose session dies
@@ -554,7 +685,7 @@ class _Group:
     group: str
     member: str
     on_change: Callable[[frozenset[str]], None]
-    proof: MemberProof | None = None
+    proof: GroupProof | None = None
     #: member -> {token name: the time it proves (0 without a proof)}
     tokens: dict[str, dict[str, float]] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)

@@ -41,6 +41,7 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
                 "validation",
                 "geo",
                 "transports",
+                "lcm_datagram",  # deprecated re-export of transports.datagram, one release
                 "strict",
                 "plugins",
                 "security",

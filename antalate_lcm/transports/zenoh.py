@@ -135,8 +135,8 @@ def _ip(text: str) -> bool:
     return True
 
 
-def _one_of(option: str, values: tuple[str, ...], what: str) -> OptionCheck:
-    return lambda v: None if v in values else f"{what} for option {option}, not {v!r}"
+def _one_of(values: tuple[str, ...], expected: str) -> OptionCheck:
+    return lambda v: None if v in values else f"{expected}, not {v!r}"
 
 
 def _path(what: str) -> OptionCheck:
@@ -150,16 +150,16 @@ class Zenoh(Transport):
     options: ClassVar[dict[str, OptionCheck]] = {
         "connect": lambda v: zenoh_endpoints_problem("connect", v),
         "listen": lambda v: zenoh_endpoints_problem("listen", v),
-        "mode": _one_of("mode", ("peer", "client"), "peer or client"),
-        "scout": _one_of("scout", ("0", "1"), "0 or 1 (multicast scouting)"),
-        "express": _one_of("express", ("0", "1"), "0 or 1 (no batching)"),
+        "mode": _one_of(("peer", "client"), "peer or client for option mode"),
+        "scout": _one_of(("0", "1"), "0 or 1 for option scout (multicast scouting)"),
+        "express": _one_of(("0", "1"), "0 or 1 for option express (no batching)"),
         "lease": int_option("lease", 500, 3_600_000, "a link lease in milliseconds, 500 to 3600000"),
         "config": _path("the path of a Zenoh JSON5 config file for option config"),
         "ca": _path("the path of a PEM file (the CA of the router's certificate) for option ca"),
         "cert": _path("the path of a PEM certificate for option cert"),
         "cert_key": _path("the path of the PEM private key of cert for option cert_key"),
         "auth": _path("the path of a file holding user:password for option auth"),
-        "plain": _one_of("plain", ("0", "1"), "0 or 1"),
+        "plain": _one_of(("0", "1"), "0 or 1 for option plain"),
     }
     not_lcm = ZENOH_NOT_LCM
 

@@ -40,7 +40,7 @@ import logging
 import os
 import re
 import tempfile
-from abc import ABC
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Protocol
@@ -194,9 +194,10 @@ class Transport(ABC):
         return cls.check(u)
 
     @classmethod
+    @abstractmethod
     def check(cls, u: LcmUrl) -> LcmUrl:
-        """``u`` with its network checked (and host and port filled in where there are some)."""
-        return u
+        """``u`` with its network part checked (and host and port filled in where there are some):
+        what that part means is each transport's own."""
 
     def open(self, *, max_message_size: int | None = None) -> Connection:
         """A connection to this URL: liblcm's provider, unless the transport is antalate's own.

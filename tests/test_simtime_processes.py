@@ -116,7 +116,8 @@ def test_only_the_buses_that_cross_processes_are_carried() -> None:
     }
     simulated, crossing = simulated_buses(buses)
     assert crossing == ["lan", "wan"]
-    assert simulated == {"lan": "memq://lan", "wan": "memq://wan", "mine": "memq://", "log": "file:///x"}
+    # A memq:// URL of its own each (the bus keeps one link per URL): never the in-process bus's.
+    assert simulated == {"lan": "memq://?", "wan": "memq://??", "mine": "memq://", "log": "file:///x"}
 
 
 # ----------------------------------------------------------------------------- real runs
@@ -320,7 +321,7 @@ def test_the_coordinator_hears_a_process_whose_subscriptions_take_several_reads(
     never heard the operator (what a 1,000-agent run over two processes did)."""
     clock = SimClock()
     executor = Executor(sim=clock)
-    bus = SimulatedBus({"lan": "memq://lan"}, ["lan"])
+    bus = SimulatedBus({"lan": "memq://?"}, ["lan"])
     bus.attach(executor)
     coordinator = TimeCoordinator(2)
     coordinator.serve(clock, bus, executor, ["lan"])

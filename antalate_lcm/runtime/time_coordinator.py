@@ -8,7 +8,7 @@ they follow is :mod:`antalate_lcm.runtime.time_grant` (why it keeps the lockstep
 deterministic is said there); here is only its I/O:
 
 - Every bus that crosses processes (UDP multicast, Zenoh) becomes, in each process, a private
-  ``memq://NAME`` bus: a datagram through the kernel would arrive at a real moment, not a
+  memq:// bus of its own: a datagram through the kernel would arrive at a real moment, not a
   simulated one, and in an order set by the scheduler. The link hears every message published
   on it (a pattern subscription) and carries it in its next report, with what the process's
   nodes subscribed to on it since (:class:`SimulatedBus`); the messages of the other processes
@@ -62,23 +62,25 @@ from antalate_lcm.runtime.time_grant import (
     woken,
 )
 from antalate_lcm.simclock import SIM_START, SimClock
+from antalate_lcm.transports import transport_for
 
 log = logging.getLogger("antalate.simclock")
 
 _FRAME = struct.Struct("<cQdI")
 _HELLO, _INTEREST, _REPORT, _DELIVER, _ADVANCE = b"H", b"I", b"R", b"D", b"A"
-#: Bus schemes that cross processes: on simulated time each becomes a memq:// bus of its own.
-_CROSSING = ("udpm://", "zenoh://")
 #: Longest real wait (s) of the coordinator between two looks at whether it is being closed.
 _PACE_STEP = 0.05
 
 
 def simulated_buses(buses: Mapping[str, str]) -> tuple[dict[str, str], list[str]]:
     """The buses of a process on the shared simulated clock, and those its link carries: each bus
-    that crosses processes becomes ``memq://NAME`` (one private bus per name, so the link never
-    hears the agents' internal topics on the in-process bus)."""
-    crossing = sorted(name for name, url in buses.items() if url.startswith(_CROSSING))
-    return {name: f"memq://{name}" if name in crossing else url for name, url in buses.items()}, crossing
+    that crosses processes (its transport reaches other hosts: udpm, zenoh, ...) becomes a memq://
+    bus of its own. Its own: ``memq://?``, ``memq://??`` ... (empty queries, which liblcm and the
+    transport read as none) are other URLs to the bus, which keeps one link per URL, so the link
+    never hears the agents' internal topics on the in-process ``memq://``."""
+    crossing = sorted(name for name, url in buses.items() if transport_for(url).network_reachable)
+    private = {name: "memq://" + "?" * (i + 1) for i, name in enumerate(crossing)}
+    return {name: private.get(name, url) for name, url in buses.items()}, crossing
 
 
 class SimulatedBus(Bus):

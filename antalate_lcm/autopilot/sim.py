@@ -25,7 +25,8 @@ Time
 ----
 The simulation advances lazily: whenever `state()` or a command is called, it integrates from the
 previous call to ``clock()`` (scaled by ``time_scale``) in steps of at most ``max_step`` seconds
-(in one go while idle on the ground). Nothing runs between calls, so hundreds of sims cost nothing
+(in one go while idle on the ground, and in GUIDED flight when no set-point expiry, empty battery or
+touchdown can fall inside the interval: the lag is exact for any step, see ``_one_step``). Nothing runs between calls, so hundreds of sims cost nothing
 while idle, and tests drive time with a fake clock. Autopilot timers (auto-disarm, velocity hold, ...)
 run on simulated time; `AutopilotState.link_age` is in real (clock) seconds, as the HLC perceives it.
 
@@ -248,6 +249,12 @@ class SimAutopilot(Autopilot):
         self._tau = float(p["tau"])
         self._time_scale = float(p["time_scale"])
         self._max_step = float(p["max_step"])
+        #: Read by every step of flight (the parameters never change after construction).
+        self._velocity_hold = float(p["velocity_hold"])
+        self._max_speed = float(p["max_speed"])
+        self._climb_rate = float(p["climb_rate"])
+        self._descent_rate = float(p["descent_rate"])
+        self._max_yaw_rate = float(p["max_yaw_rate"])
         # Vehicle state (local frame: metres north/east of home, altitude above home).
         self.north = 0.0
         self.east = 0.0
@@ -600,6 +607,14 @@ class SimAutopilot(Autopilot):
         now = self.clock()
         dt = max(0.0, now - self._t_last) * self._time_scale
         self._t_last = now
+        if dt <= 0.0:
+            return
+        phase = self._phase
+        if phase is _Motion.GROUND or (phase is _Motion.GUIDED and self._one_step(dt)):
+            # Nothing moves, or the set-point is followed exactly in one step (`_lag`): the HLC
+            # polls at 20 Hz, a period just over ``max_step``, which cut each poll in two steps.
+            self._step(dt)
+            return
         while dt > 0.0:
             if self._phase is _Motion.GROUND:
                 self._step(dt)  # nothing moves: one step, however long
@@ -607,6 +622,27 @@ class SimAutopilot(Autopilot):
             h = min(dt, self._max_step)
             self._step(h)
             dt -= h
+
+    def _one_step(self, dt: float) -> bool:
+        """Whether ``dt`` s of GUIDED flight integrate in one step to what steps of ``max_step`` give.
+
+        The lag is exact for a set-point held over the step (`_lag`), so steps differ only where a
+        discrete event falls inside ``dt``: the set-point expiring (``velocity_hold``, tested at each
+        step's end), the battery running out, or a touchdown (the altitude clamped at 0). When none
+        can, the steps' sum is the one step (to rounding). A body-frame set-point that yaws turns
+        its north/east target during the step: that one keeps the steps.
+        """
+        cmd = self._cmd
+        if cmd is not None and self._sim_time - self._cmd_time <= self._velocity_hold:
+            if self._sim_time + dt - self._cmd_time > self._velocity_hold:
+                return False
+            if cmd[4] is Frame.BODY and cmd[3]:
+                return False  # a body-frame set-point turning with the heading: not constant in NE
+
+        if self.battery - self._drain[self.in_air] * dt / 60.0 <= 0.0:
+            return False
+        # The lag never descends faster than the faster of the current and the largest target rate.
+        return self.alt > max(self.vd, self._descent_rate) * dt
 
     def _step(self, h: float) -> None:
         p = self._p
@@ -676,30 +712,35 @@ class SimAutopilot(Autopilot):
         self.vd = -math.copysign(rate, gap) if step < abs(gap) else 0.0
 
     def _follow_setpoint(self, h: float) -> None:
-        p = self._p
         tn = te = td = 0.0
         yaw_rate = 0.0
-        if self._cmd is not None and self._sim_time - self._cmd_time <= float(p["velocity_hold"]):
-            vx, vy, vz, yaw_rate, frame = self._cmd
+        cmd = self._cmd
+        if cmd is not None and self._sim_time - self._cmd_time <= self._velocity_hold:
+            vx, vy, vz, yaw_rate, frame = cmd
             if frame is Frame.BODY:
                 tn, te = body_to_ne(vx, vy, self.heading)
             else:
                 tn, te = vx, vy
             td = vz
-        speed = math.hypot(tn, te)
-        max_speed = float(p["max_speed"])
-        if speed > max_speed:
-            tn, te = tn * max_speed / speed, te * max_speed / speed
-        td = max(-float(p["climb_rate"]), min(float(p["descent_rate"]), td))
-        max_yaw = float(p["max_yaw_rate"])
-        yaw_rate = max(-max_yaw, min(max_yaw, yaw_rate))
-        self.vn, dn = self._lag(self.vn, tn, h)
-        self.ve, de = self._lag(self.ve, te, h)
-        self.vd, dd = self._lag(self.vd, td, h)
-        self.north += dn
-        self.east += de
-        self.alt = max(0.0, self.alt - dd)
-        self.heading = wrap_360(self.heading + yaw_rate * h)
+            speed = math.hypot(tn, te)
+            max_speed = self._max_speed
+            if speed > max_speed:
+                tn, te = tn * max_speed / speed, te * max_speed / speed
+            td = max(-self._climb_rate, min(self._descent_rate, td))
+            max_yaw = self._max_yaw_rate
+            yaw_rate = max(-max_yaw, min(max_yaw, yaw_rate))
+        # `_lag` inlined for the three axes (one exponential: the same time constant).
+        decay = math.exp(-h / self._tau)
+        keep = self._tau * (1.0 - decay)
+        vn, ve, vd = self.vn, self.ve, self.vd
+        self.vn = tn + (vn - tn) * decay
+        self.ve = te + (ve - te) * decay
+        self.vd = td + (vd - td) * decay
+        self.north += tn * h + (vn - tn) * keep
+        self.east += te * h + (ve - te) * keep
+        self.alt = max(0.0, self.alt - (td * h + (vd - td) * keep))
+        if yaw_rate:
+            self.heading = wrap_360(self.heading + yaw_rate * h)
 
     def _return_home(self, h: float) -> None:
         p = self._p

@@ -679,7 +679,8 @@ class HighLevelControl:
         passes the last good snapshot with its `link_age` grown); it goes into the LLC_DOWN reason.
         """
         self.autopilot = snapshot
-        return self._fire(self._autopilot_events(snapshot, fault), now)
+        events = self._autopilot_events(snapshot, fault)
+        return self._fire(events, now) if events else NOTHING  # 20 a second, nearly all with none
 
     def on_action_result(self, kind: ActionKind, ok: bool, now: float, detail: str = "") -> HlcOutcome:
         """The outcome of an `Action` the node performed (``arm()`` False or `AutopilotError` = not ok).

@@ -157,6 +157,7 @@ class HlcNode(Node):
         self._fence_mirrored = False  # the fence was written into the autopilot's own (once per start)
         self._clock: Callable[[], float] = context.executor.clock
         self._telemetry = telemetry_t()
+        self._state_out = hlc_state_t()
         self._state: Callable[[], AutopilotState] = self.autopilot.state
 
     @property
@@ -534,7 +535,8 @@ class HlcNode(Node):
         self.publish("HLC_ERROR", msg)
 
     def _state_msg(self) -> hlc_state_t:
-        msg = hlc_state_t()
+        # Refilled, as the telemetry is (see _publish_telemetry).
+        msg = self._state_out if self.interference is None else hlc_state_t()
         msg.state = int(self.machine.state)
         msg.autopilot = self.autopilot.name
         msg.reason = self.machine.reason

@@ -39,6 +39,7 @@ class McNode(Node):
         #: repeated at line rate must not drown the log.
         self._reject_log = RateLimitedLog(self.log, period=10.0)
         self._clock = context.executor.clock  # `now`, without the property (the 10 Hz tick reads it)
+        self._msg = mc_state_t()
 
     def on_start(self) -> None:
         self.subscribe("OPERATOR_CMD", self._on_command)
@@ -56,7 +57,9 @@ class McNode(Node):
         return self.machine.state
 
     def _state_msg(self) -> mc_state_t:
-        msg = mc_state_t()
+        # One message, refilled at every publish (publish stamps its header and encodes it at once:
+        # 5 a second and on every change); a fresh one where an experiment's interference may hold it.
+        msg = self._msg if self.interference is None else mc_state_t()
         msg.state = int(self.machine.state)
         msg.last_command_seq = self.machine.last_command_seq
         msg.takeoff_altitude = float(self.machine.takeoff_altitude)

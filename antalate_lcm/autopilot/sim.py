@@ -610,6 +610,18 @@ class SimAutopilot(Autopilot):
         if dt <= 0.0:
             return
         phase = self._phase
+        if (
+            phase is _Motion.GROUND
+            and self._armed_since is None
+            and self._disarm_at is None
+            and not self.in_air
+        ):
+            # Disarmed on the ground (20 polls a second, most of a swarm's life): `_step`'s work
+            # there is the battery's idle drain and nothing moving.
+            self._sim_time += dt
+            self.battery = max(0.0, self.battery - self._drain[False] * dt / 60.0)
+            self.vn = self.ve = self.vd = 0.0
+            return
         if phase is _Motion.GROUND or (phase is _Motion.GUIDED and self._one_step(dt)):
             # Nothing moves, or the set-point is followed exactly in one step (`_lag`): the HLC
             # polls at 20 Hz, a period just over ``max_step``, which cut each poll in two steps.

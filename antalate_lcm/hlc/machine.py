@@ -669,8 +669,10 @@ class HighLevelControl:
             events.append((HlcEvent.MC_RTL, "MC is in RTL"))
         elif state == McState.HOLD:
             events.append((HlcEvent.MC_HOLD, "MC is in HOLD"))
-        events.extend(self._init_events())
-        return self._fire(events, now)
+        if self.state is HlcState.INIT:
+            events.extend(self._init_events())
+        # 5 a second (the MC's republished state): nearly all with no event.
+        return self._fire(events, now) if events else NOTHING
 
     def on_autopilot(self, snapshot: AutopilotState, now: float, *, fault: str = "") -> HlcOutcome:
         """An autopilot snapshot (the node polls `Autopilot.state()`).

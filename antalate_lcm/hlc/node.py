@@ -321,7 +321,9 @@ class HlcNode(Node):
         alt = (
             msg.takeoff_altitude if math.isfinite(msg.takeoff_altitude) and msg.takeoff_altitude > 0 else 0.0
         )
-        self._handle(self.machine.on_mc_state(msg.state, self.now, takeoff_altitude=alt))
+        outcome = self.machine.on_mc_state(msg.state, self._clock(), takeoff_altitude=alt)
+        if outcome is not NOTHING:
+            self._handle(outcome)
 
     def _on_velocity(self, msg: velocity_cmd_t) -> None:
         if not self.started:

@@ -214,6 +214,13 @@ class _Motion(enum.Enum):
     HOLD = "hold"  # the autopilot brakes and holds position (failsafe BRAKE)
 
 
+# The members bound once: in CPython 3.11 reading ``_Motion.GROUND`` calls the enum's descriptor
+# (~125 ns, an attribute read ~10), and each poll of a thousand sims compares a few of them.
+_M_GROUND, _M_CLIMB, _M_GUIDED, _M_RETURN = _Motion.GROUND, _Motion.CLIMB, _Motion.GUIDED, _Motion.RETURN
+_M_DESCEND, _M_PILOT, _M_HOLD = _Motion.DESCEND, _Motion.PILOT, _Motion.HOLD
+_MANUAL, _BODY = FlightMode.MANUAL, Frame.BODY
+
+
 class SimAutopilot(Autopilot):
     """A kinematic quadcopter; see the module docstring for the model and the fault injection."""
 
@@ -319,7 +326,7 @@ class SimAutopilot(Autopilot):
         self.armed = False
         self.in_air = False
         self.mode = "GUIDED"
-        self._phase = _Motion.GROUND
+        self._phase = _M_GROUND
         self._takeoff_alt = 0.0
         self._cmd: tuple[float, float, float, float, Frame] | None = None  # vx, vy, vz, yaw_rate, frame
         self._cmd_time = 0.0
@@ -399,7 +406,7 @@ class SimAutopilot(Autopilot):
         self._takeoff_alt = alt
         self._armed_since = None
         self._airborne_since = self._sim_time
-        self._phase = _Motion.CLIMB
+        self._phase = _M_CLIMB
 
     def land(self) -> None:
         self._command("land")
@@ -407,7 +414,7 @@ class SimAutopilot(Autopilot):
         self._failsafe = ""
         self._cmd = None
         if self.in_air:
-            self._phase = _Motion.DESCEND
+            self._phase = _M_DESCEND
         elif self.armed:
             self._disarm()
 
@@ -417,14 +424,14 @@ class SimAutopilot(Autopilot):
         self._failsafe = ""
         self._cmd = None
         if self.in_air:
-            self._phase = _Motion.RETURN
+            self._phase = _M_RETURN
         elif self.armed:
             self._disarm()
 
     def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
         self._command("set_velocity")
         check_velocity(vx, vy, vz, yaw_rate)
-        if self.mode != "GUIDED" or self._phase is not _Motion.GUIDED:
+        if self.mode != "GUIDED" or self._phase is not _M_GUIDED:
             return  # like ArduCopter: velocity targets are ignored outside GUIDED flight
         self._cmd = (vx, vy, vz, yaw_rate, Frame(frame))
         self._cmd_time = self._sim_time
@@ -467,7 +474,7 @@ class SimAutopilot(Autopilot):
         self._failsafe = reason or mode
         self._cmd = None
         if self.in_air:
-            self._phase = {"rtl": _Motion.RETURN, "land": _Motion.DESCEND, "brake": _Motion.HOLD}[mode]
+            self._phase = {"rtl": _M_RETURN, "land": _M_DESCEND, "brake": _M_HOLD}[mode]
         elif self.armed:
             self._disarm()
 
@@ -497,7 +504,7 @@ class SimAutopilot(Autopilot):
         if auto_land is not None:
             self._pilot_autoland = auto_land
         if self.in_air:
-            self._phase = _Motion.PILOT
+            self._phase = _M_PILOT
             self._takeover_time = self._sim_time
 
     def _scheduled_faults(self) -> None:
@@ -620,7 +627,7 @@ class SimAutopilot(Autopilot):
             self._latlon = self.home.to_latlon(self.north, self.east)
         lat, lon = self._latlon
         mode = self.mode
-        flight_mode = _AUTONOMOUS_MODES.get(mode, FlightMode.MANUAL)
+        flight_mode = _AUTONOMOUS_MODES.get(mode, _MANUAL)
         cells, sag, warn_at = self._battery_params
         battery = self.battery
         voltage = math.nan
@@ -643,7 +650,7 @@ class SimAutopilot(Autopilot):
                 "battery": battery,
                 "armed": self.armed,
                 "in_air": self.in_air,
-                "autonomous": flight_mode is not FlightMode.MANUAL,
+                "autonomous": flight_mode is not _MANUAL,
                 "mode": mode,
                 "flight_mode": flight_mode,
                 "failsafe": self._failsafe,
@@ -662,25 +669,20 @@ class SimAutopilot(Autopilot):
         if dt <= 0.0:
             return
         phase = self._phase
-        if (
-            phase is _Motion.GROUND
-            and self._armed_since is None
-            and self._disarm_at is None
-            and not self.in_air
-        ):
+        if phase is _M_GROUND and self._armed_since is None and self._disarm_at is None and not self.in_air:
             # Disarmed on the ground (20 polls a second, most of a swarm's life): `_step`'s work
             # there is the battery's idle drain and nothing moving.
             self._sim_time += dt
             self.battery = max(0.0, self.battery - self._drain[False] * dt / 60.0)
             self.vn = self.ve = self.vd = 0.0
             return
-        if phase is _Motion.GROUND or (phase is _Motion.GUIDED and self._one_step(dt)):
+        if phase is _M_GROUND or (phase is _M_GUIDED and self._one_step(dt)):
             # Nothing moves, or the set-point is followed exactly in one step (`_lag`): the HLC
             # polls at 20 Hz, a period just over ``max_step``, which cut each poll in two steps.
             self._step(dt)
             return
         while dt > 0.0:
-            if self._phase is _Motion.GROUND:
+            if self._phase is _M_GROUND:
                 self._step(dt)  # nothing moves: one step, however long
                 return
             h = min(dt, self._max_step)
@@ -700,7 +702,7 @@ class SimAutopilot(Autopilot):
         if cmd is not None and self._sim_time - self._cmd_time <= self._velocity_hold:
             if self._sim_time + dt - self._cmd_time > self._velocity_hold:
                 return False
-            if cmd[4] is Frame.BODY and cmd[3]:
+            if cmd[4] is _BODY and cmd[3]:
                 return False  # a body-frame set-point turning with the heading: not constant in NE
 
         if self.battery - self._drain[self.in_air] * dt / 60.0 <= 0.0:
@@ -714,14 +716,14 @@ class SimAutopilot(Autopilot):
         t = self._sim_time
         drain = self._drain[self.in_air]
         self.battery = max(0.0, self.battery - drain * h / 60.0)
-        if self.in_air and self.battery <= 0.0 and self._phase is not _Motion.DESCEND:
+        if self.in_air and self.battery <= 0.0 and self._phase is not _M_DESCEND:
             self.mode = "LAND"  # the autopilot's own empty-battery failsafe
             self._failsafe = "battery empty"
             self._cmd = None
-            self._phase = _Motion.DESCEND
+            self._phase = _M_DESCEND
 
         phase = self._phase
-        if phase is _Motion.GROUND:
+        if phase is _M_GROUND:
             self.vn = self.ve = self.vd = 0.0
             if self._armed_since is not None or self._disarm_at is not None:
                 landed_long_enough = self._disarm_at is not None and t >= self._disarm_at
@@ -730,27 +732,27 @@ class SimAutopilot(Autopilot):
                 )
                 if landed_long_enough or idle_too_long:
                     self._disarm()
-        elif phase is _Motion.CLIMB:
+        elif phase is _M_CLIMB:
             self._brake(h)
             self._vertical_to(self._takeoff_alt, float(p["climb_rate"]), h)
             if self.alt >= self._takeoff_alt:
-                self._phase = _Motion.GUIDED
-        elif phase is _Motion.GUIDED:
+                self._phase = _M_GUIDED
+        elif phase is _M_GUIDED:
             self._follow_setpoint(h)
-        elif phase is _Motion.RETURN:
+        elif phase is _M_RETURN:
             self._return_home(h)
-        elif phase is _Motion.DESCEND:
+        elif phase is _M_DESCEND:
             self._brake(h)
             self._vertical_to(0.0, float(p["descent_rate"]), h)
-        elif phase is _Motion.HOLD:
+        elif phase is _M_HOLD:
             self._brake(h)
             self.vd = 0.0
-        elif phase is _Motion.PILOT:
+        elif phase is _M_PILOT:
             self._brake(h)
             self.vd = 0.0
             if self._pilot_autoland and t - self._takeover_time >= float(p["takeover_land_delay"]):
-                self._phase = _Motion.DESCEND
-        if self.in_air and self.alt <= 0.0 and self._phase is not _Motion.CLIMB:
+                self._phase = _M_DESCEND
+        if self.in_air and self.alt <= 0.0 and self._phase is not _M_CLIMB:
             self._touchdown()
 
     def _lag(self, v0: float, target: float, h: float) -> tuple[float, float]:
@@ -781,7 +783,7 @@ class SimAutopilot(Autopilot):
         cmd = self._cmd
         if cmd is not None and self._sim_time - self._cmd_time <= self._velocity_hold:
             vx, vy, vz, yaw_rate, frame = cmd
-            if frame is Frame.BODY:
+            if frame is _BODY:
                 tn, te = body_to_ne(vx, vy, self.heading)
             else:
                 tn, te = vx, vy
@@ -820,7 +822,7 @@ class SimAutopilot(Autopilot):
             # Arrive exactly (within one step's travel), stop, and descend.
             self.north = self.east = 0.0
             self.vn = self.ve = 0.0
-            self._phase = _Motion.DESCEND
+            self._phase = _M_DESCEND
             return
         self.vn, self.ve = -self.north / dist * speed, -self.east / dist * speed
         self.north += self.vn * h
@@ -831,7 +833,7 @@ class SimAutopilot(Autopilot):
         self.alt = 0.0
         self.vn = self.ve = self.vd = 0.0
         self.in_air = False
-        self._phase = _Motion.GROUND
+        self._phase = _M_GROUND
         self._failsafe = ""
         self._cmd = None
         if self.armed:

@@ -110,10 +110,10 @@ class Context:
     #: phases and the behaviors' random draws (``BehaviorContext.seed``) derive from it, so a run
     #: is a function of it. None: phases fixed by the agents' names, behaviors seed as they like.
     seed: int | None = None
-    #: One outgoing message of each type for every node of this context (`Node.outgoing`): a node
+    #: One outgoing message of each type for the nodes of this context that do not sign (`Node.outgoing`): a node
     #: refills it and publish encodes it at once, on the loop's one thread, so a thousand agents'
     #: 20 messages a second touch one object (hot in the cache), not a thousand of their own.
-    scratch: dict[tuple[type, bool], Any] = field(default_factory=dict, repr=False)
+    scratch: dict[type, Any] = field(default_factory=dict, repr=False)
     #: Buses -> their (name, send) pairs, shared by every publisher of the context on those buses.
     senders: dict[tuple[str, ...], list[tuple[str, Callable[[str, bytes], None]]]] = field(
         default_factory=dict, repr=False
@@ -406,17 +406,16 @@ class Node:
 
     def outgoing(self, msg_type: type[M]) -> M:
         """A message of ``msg_type`` to fill and hand to :meth:`publish` at once: the context's one
-        (see `Context.scratch`), or a fresh one where an experiment's interference may hold on to
+        (see `Context.scratch`), or a fresh one for a signing node (the MAC goes into its header;
+        an HMAC costs more than the message) and where an experiment's interference may hold on to
         what is sent. Its fields keep what the last user wrote: fill every one."""
-        if self.interference is not None:
-            return msg_type()
-        # Signing nodes apart: a signed message keeps its MAC in the header, an unsigned one none.
-        kind = (msg_type, bool(self.security.key))
-        scratch = self.context.scratch
-        msg = scratch.get(kind)
-        if msg is None:
-            msg = scratch[kind] = msg_type()
-        return msg
+        if self.interference is None and not self.security.key:
+            scratch = self.context.scratch
+            msg = scratch.get(msg_type)
+            if msg is None:
+                msg = scratch[msg_type] = msg_type()
+            return msg
+        return msg_type()
 
     def seal(self, msg: Message) -> bytes:
         """The bytes of a stamped message: signed with the swarm key if there is one."""

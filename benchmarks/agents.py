@@ -44,6 +44,11 @@ Measured 2026-11-26 on the 2-core machine, the commit before (3616f4f) and this 
 9.8-10.0 Hz, MC max 27-44 ms, RSS 68 MiB, 59-68 % of a core. At load 3-7 (six other jobs): 79-96 x
 ref here, 110-139 x before, and 1,000 agents got 36-42 % of a core and held 6.4-8.7 Hz. No kernel
 drops in any run. The tables: docs/simulator.md.
+
+Issue 32's second pass (sim flight step, slots, shared messages and parameters, enum members bound
+once), 5b13bf3 against 8b4ebf1 in one session at load 6.8-14.4, 3 runs each: 103 -> 71 x ref on the
+ground (681 -> 489 us per agent-second at 10 Hz), 108 -> 84 x ref hovering; with --busy 70 -> 63
+and 89 -> 72 (docs/simulator.md, "Issue 32, second pass").
 """
 
 from __future__ import annotations

@@ -92,10 +92,6 @@ class McEvent(enum.Enum):
     __hash__ = object.__hash__
 
     @classmethod
-    def of_hlc(cls, state: HlcState) -> McEvent:
-        return _OF_HLC[state]
-
-    @classmethod
     def of_command(cls, command: Command) -> McEvent:
         return cls[f"OP_{command.name}"]
 
@@ -375,7 +371,7 @@ class MissionControl:
         self.hlc_heard_at = now
         if self.state is _TAKEOFF and hlc is not _HLC_READY:
             self.hlc_left_ready = True
-        event = _OF_HLC[hlc]  # McEvent.of_hlc, without the classmethod call
+        event = _OF_HLC[hlc]
         row = self._table.match(self.state, event, self)
         if row is None:
             return _ACCEPTED

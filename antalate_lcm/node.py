@@ -23,7 +23,7 @@ import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 from antalate_lcm import validation
 from antalate_lcm._fastcodec import encode as fast_encode
@@ -57,6 +57,18 @@ INPROC_BUS = "_inproc"
 _PHASES = 1000
 #: s between the reminders an insecure node logs.
 INSECURE_REMINDER = 60.0
+M = TypeVar("M")
+
+
+#: Equal immutable values (a node's machine parameters) -> the one instance of them (`shared_value`).
+_SHARED: dict[Any, Any] = {}
+
+
+def shared_value(value: M) -> M:
+    """The process's one instance equal to ``value`` (hashable, immutable): a thousand agents with one
+    config read the same parameters object on every tick, one object in the cache instead of a
+    thousand copies."""
+    return _SHARED.setdefault(value, value)  # type: ignore[no-any-return]
 
 
 class Interference(Protocol):
@@ -98,6 +110,14 @@ class Context:
     #: phases and the behaviors' random draws (``BehaviorContext.seed``) derive from it, so a run
     #: is a function of it. None: phases fixed by the agents' names, behaviors seed as they like.
     seed: int | None = None
+    #: One outgoing message of each type for the nodes of this context that do not sign (`Node.outgoing`): a node
+    #: refills it and publish encodes it at once, on the loop's one thread, so a thousand agents'
+    #: 20 messages a second touch one object (hot in the cache), not a thousand of their own.
+    scratch: dict[type, Any] = field(default_factory=dict, repr=False)
+    #: Buses -> their (name, send) pairs, shared by every publisher of the context on those buses.
+    senders: dict[tuple[str, ...], list[tuple[str, Callable[[str, bytes], None]]]] = field(
+        default_factory=dict, repr=False
+    )
 
     def __post_init__(self) -> None:
         self.bus.attach(self.executor)  # the bus's descriptors are read on the nodes' loop
@@ -376,9 +396,26 @@ class Node:
     def _publisher(self, topic: str, fields: dict[str, str]) -> _Publisher:
         buses = self._publish_buses(topic)
         bus = self.context.bus
-        pub = _Publisher(buses, self.channel(topic, **fields), [(name, bus.sender(name)) for name in buses])
+        shared = self.context.senders
+        senders = shared.get(tuple(buses))
+        if senders is None:
+            senders = shared[tuple(buses)] = [(name, bus.sender(name)) for name in buses]
+        pub = _Publisher(buses, self.channel(topic, **fields), senders)
         self._publishers[(topic, tuple(sorted(fields.items()))) if fields else topic] = pub
         return pub
+
+    def outgoing(self, msg_type: type[M]) -> M:
+        """A message of ``msg_type`` to fill and hand to :meth:`publish` at once: the context's one
+        (see `Context.scratch`), or a fresh one for a signing node (the MAC goes into its header;
+        an HMAC costs more than the message) and where an experiment's interference may hold on to
+        what is sent. Its fields keep what the last user wrote: fill every one."""
+        if self.interference is None and not self.security.key:
+            scratch = self.context.scratch
+            msg = scratch.get(msg_type)
+            if msg is None:
+                msg = scratch[msg_type] = msg_type()
+            return msg
+        return msg_type()
 
     def seal(self, msg: Message) -> bytes:
         """The bytes of a stamped message: signed with the swarm key if there is one."""

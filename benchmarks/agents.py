@@ -44,6 +44,11 @@ Measured 2026-11-26 on the 2-core machine, the commit before (3616f4f) and this 
 9.8-10.0 Hz, MC max 27-44 ms, RSS 68 MiB, 59-68 % of a core. At load 3-7 (six other jobs): 79-96 x
 ref here, 110-139 x before, and 1,000 agents got 36-42 % of a core and held 6.4-8.7 Hz. No kernel
 drops in any run. The tables: docs/simulator.md.
+
+Issue 32's second pass (sim flight step, slots, shared messages and parameters, enum members bound
+once), 5b13bf3 against 8b4ebf1 in one session at load 6.8-14.4, 3 runs each: 103 -> 71 x ref on the
+ground (681 -> 489 us per agent-second at 10 Hz), 108 -> 84 x ref hovering; with --busy 70 -> 63
+and 89 -> 72 (docs/simulator.md, "Issue 32, second pass").
 """
 
 from __future__ import annotations
@@ -312,6 +317,7 @@ def run(
                 flown = [telem.get(a, 0) / window2 for a in mission]
             flight.update(
                 flight_hz_min=min(flown),
+                flight_hz_mean=statistics.fmean(flown),
                 flight_cpu_pct=100 * (cpu3 - cpu2) / window2,
                 flight_us_per_agent_s=(cpu3 - cpu2) / window2 / n * 1e6,
             )
@@ -337,13 +343,13 @@ def run(
         stop.set()
         th.join()
         receiver.close()
-        tree = _tree(proc.pid)
+        pids = _tree(proc.pid)
         proc.terminate()  # the launcher passes it on to its agent processes
         try:
             proc.wait(90)  # a thousand agents take a while to land their nodes on a loaded machine
         except subprocess.TimeoutExpired:
             proc.kill()
-        for pid in tree[1:]:  # nothing left behind to load the next size
+        for pid in pids[1:]:  # nothing left behind to load the next size
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
         log.close()
@@ -429,9 +435,12 @@ def _measure(n: int, tmp: Path, processes: int | None, safety: bool, tree: Path 
         flush=True,
     )
     if "flight_cpu_pct" in r:
+        # Scaled to the full rate as on the ground: a loaded process skips control and telemetry runs.
+        flown_full = r["flight_us_per_agent_s"] * 10.0 / max(r["flight_hz_mean"], 0.1)
         print(
             f"{'':>12} in flight (all {n} in MISSION, hovering): telemetry min {r['flight_hz_min']:.1f} Hz, "
-            f"CPU {r['flight_cpu_pct']:.0f} %, {r['flight_us_per_agent_s']:.0f} us/agent-s",
+            f"CPU {r['flight_cpu_pct']:.0f} %, {r['flight_us_per_agent_s']:.0f} us/agent-s, "
+            f"@10 Hz {flown_full:.0f}, x ref {flown_full / ref:.0f}",
             flush=True,
         )
     else:

@@ -25,7 +25,8 @@ Time
 ----
 The simulation advances lazily: whenever `state()` or a command is called, it integrates from the
 previous call to ``clock()`` (scaled by ``time_scale``) in steps of at most ``max_step`` seconds
-(in one go while idle on the ground). Nothing runs between calls, so hundreds of sims cost nothing
+(in one go while idle on the ground, and in GUIDED flight when no set-point expiry, empty battery or
+touchdown can fall inside the interval: the lag is exact for any step, see ``_one_step``). Nothing runs between calls, so hundreds of sims cost nothing
 while idle, and tests drive time with a fake clock. Autopilot timers (auto-disarm, velocity hold, ...)
 run on simulated time; `AutopilotState.link_age` is in real (clock) seconds, as the HLC perceives it.
 
@@ -213,12 +214,71 @@ class _Motion(enum.Enum):
     HOLD = "hold"  # the autopilot brakes and holds position (failsafe BRAKE)
 
 
+# The members bound once: in CPython 3.11 reading ``_Motion.GROUND`` calls the enum's descriptor
+# (~125 ns, an attribute read ~10), and each poll of a thousand sims compares a few of them.
+_M_GROUND, _M_CLIMB, _M_GUIDED, _M_RETURN = _Motion.GROUND, _Motion.CLIMB, _Motion.GUIDED, _Motion.RETURN
+_M_DESCEND, _M_PILOT, _M_HOLD = _Motion.DESCEND, _Motion.PILOT, _Motion.HOLD
+_MANUAL, _BODY = FlightMode.MANUAL, Frame.BODY
+
+
 class SimAutopilot(Autopilot):
     """A kinematic quadcopter; see the module docstring for the model and the fault injection."""
 
     name = "sim"
     blocking = False  # in-process: every command returns at once
     params_model = Params
+    # Slots: an instance with more than 30 attributes in its __dict__ loses CPython's shared-key
+    # dict (3.11: every attribute read a hash lookup in a 1.6 KB table of its own); a thousand
+    # sims are polled 20 times a second each. Subclasses and the base's attributes keep a __dict__.
+    __slots__ = (
+        "_p",
+        "home",
+        "_tau",
+        "_time_scale",
+        "_max_step",
+        "_velocity_hold",
+        "_max_speed",
+        "_climb_rate",
+        "_descent_rate",
+        "_max_yaw_rate",
+        "north",
+        "east",
+        "alt",
+        "vn",
+        "ve",
+        "vd",
+        "heading",
+        "battery",
+        "armed",
+        "in_air",
+        "mode",
+        "_phase",
+        "_takeoff_alt",
+        "_cmd",
+        "_cmd_time",
+        "_armed_since",
+        "_disarm_at",
+        "_takeover_time",
+        "_pilot_autoland",
+        "_sim_time",
+        "_t_last",
+        "_connected",
+        "_refuse_arm",
+        "_link_lost_at",
+        "_frozen",
+        "_airborne_since",
+        "_fired",
+        "_ends",
+        "_battery_params",
+        "_scheduled",
+        "_failsafe",
+        "_state_error",
+        "_state_file",
+        "_saved_at",
+        "_drain",
+        "_latlon_of",
+        "_latlon",
+    )
 
     def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
         super().__init__(params, clock=clock)
@@ -248,6 +308,12 @@ class SimAutopilot(Autopilot):
         self._tau = float(p["tau"])
         self._time_scale = float(p["time_scale"])
         self._max_step = float(p["max_step"])
+        #: Read by every step of flight (the parameters never change after construction).
+        self._velocity_hold = float(p["velocity_hold"])
+        self._max_speed = float(p["max_speed"])
+        self._climb_rate = float(p["climb_rate"])
+        self._descent_rate = float(p["descent_rate"])
+        self._max_yaw_rate = float(p["max_yaw_rate"])
         # Vehicle state (local frame: metres north/east of home, altitude above home).
         self.north = 0.0
         self.east = 0.0
@@ -260,7 +326,7 @@ class SimAutopilot(Autopilot):
         self.armed = False
         self.in_air = False
         self.mode = "GUIDED"
-        self._phase = _Motion.GROUND
+        self._phase = _M_GROUND
         self._takeoff_alt = 0.0
         self._cmd: tuple[float, float, float, float, Frame] | None = None  # vx, vy, vz, yaw_rate, frame
         self._cmd_time = 0.0
@@ -340,7 +406,7 @@ class SimAutopilot(Autopilot):
         self._takeoff_alt = alt
         self._armed_since = None
         self._airborne_since = self._sim_time
-        self._phase = _Motion.CLIMB
+        self._phase = _M_CLIMB
 
     def land(self) -> None:
         self._command("land")
@@ -348,7 +414,7 @@ class SimAutopilot(Autopilot):
         self._failsafe = ""
         self._cmd = None
         if self.in_air:
-            self._phase = _Motion.DESCEND
+            self._phase = _M_DESCEND
         elif self.armed:
             self._disarm()
 
@@ -358,14 +424,14 @@ class SimAutopilot(Autopilot):
         self._failsafe = ""
         self._cmd = None
         if self.in_air:
-            self._phase = _Motion.RETURN
+            self._phase = _M_RETURN
         elif self.armed:
             self._disarm()
 
     def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
         self._command("set_velocity")
         check_velocity(vx, vy, vz, yaw_rate)
-        if self.mode != "GUIDED" or self._phase is not _Motion.GUIDED:
+        if self.mode != "GUIDED" or self._phase is not _M_GUIDED:
             return  # like ArduCopter: velocity targets are ignored outside GUIDED flight
         self._cmd = (vx, vy, vz, yaw_rate, Frame(frame))
         self._cmd_time = self._sim_time
@@ -408,7 +474,7 @@ class SimAutopilot(Autopilot):
         self._failsafe = reason or mode
         self._cmd = None
         if self.in_air:
-            self._phase = {"rtl": _Motion.RETURN, "land": _Motion.DESCEND, "brake": _Motion.HOLD}[mode]
+            self._phase = {"rtl": _M_RETURN, "land": _M_DESCEND, "brake": _M_HOLD}[mode]
         elif self.armed:
             self._disarm()
 
@@ -438,7 +504,7 @@ class SimAutopilot(Autopilot):
         if auto_land is not None:
             self._pilot_autoland = auto_land
         if self.in_air:
-            self._phase = _Motion.PILOT
+            self._phase = _M_PILOT
             self._takeover_time = self._sim_time
 
     def _scheduled_faults(self) -> None:
@@ -561,7 +627,7 @@ class SimAutopilot(Autopilot):
             self._latlon = self.home.to_latlon(self.north, self.east)
         lat, lon = self._latlon
         mode = self.mode
-        flight_mode = _AUTONOMOUS_MODES.get(mode, FlightMode.MANUAL)
+        flight_mode = _AUTONOMOUS_MODES.get(mode, _MANUAL)
         cells, sag, warn_at = self._battery_params
         battery = self.battery
         voltage = math.nan
@@ -584,7 +650,7 @@ class SimAutopilot(Autopilot):
                 "battery": battery,
                 "armed": self.armed,
                 "in_air": self.in_air,
-                "autonomous": flight_mode is not FlightMode.MANUAL,
+                "autonomous": flight_mode is not _MANUAL,
                 "mode": mode,
                 "flight_mode": flight_mode,
                 "failsafe": self._failsafe,
@@ -600,13 +666,49 @@ class SimAutopilot(Autopilot):
         now = self.clock()
         dt = max(0.0, now - self._t_last) * self._time_scale
         self._t_last = now
+        if dt <= 0.0:
+            return
+        phase = self._phase
+        if phase is _M_GROUND and self._armed_since is None and self._disarm_at is None and not self.in_air:
+            # Disarmed on the ground (20 polls a second, most of a swarm's life): `_step`'s work
+            # there is the battery's idle drain and nothing moving.
+            self._sim_time += dt
+            self.battery = max(0.0, self.battery - self._drain[False] * dt / 60.0)
+            self.vn = self.ve = self.vd = 0.0
+            return
+        if phase is _M_GROUND or (phase is _M_GUIDED and self._one_step(dt)):
+            # Nothing moves, or the set-point is followed exactly in one step (`_lag`): the HLC
+            # polls at 20 Hz, a period just over ``max_step``, which cut each poll in two steps.
+            self._step(dt)
+            return
         while dt > 0.0:
-            if self._phase is _Motion.GROUND:
+            if self._phase is _M_GROUND:
                 self._step(dt)  # nothing moves: one step, however long
                 return
             h = min(dt, self._max_step)
             self._step(h)
             dt -= h
+
+    def _one_step(self, dt: float) -> bool:
+        """Whether ``dt`` s of GUIDED flight integrate in one step to what steps of ``max_step`` give.
+
+        The lag is exact for a set-point held over the step (`_lag`), so steps differ only where a
+        discrete event falls inside ``dt``: the set-point expiring (``velocity_hold``, tested at each
+        step's end), the battery running out, or a touchdown (the altitude clamped at 0). When none
+        can, the steps' sum is the one step (to rounding). A body-frame set-point that yaws turns
+        its north/east target during the step: that one keeps the steps.
+        """
+        cmd = self._cmd
+        if cmd is not None and self._sim_time - self._cmd_time <= self._velocity_hold:
+            if self._sim_time + dt - self._cmd_time > self._velocity_hold:
+                return False
+            if cmd[4] is _BODY and cmd[3]:
+                return False  # a body-frame set-point turning with the heading: not constant in NE
+
+        if self.battery - self._drain[self.in_air] * dt / 60.0 <= 0.0:
+            return False
+        # The lag never descends faster than the faster of the current and the largest target rate.
+        return self.alt > max(self.vd, self._descent_rate) * dt
 
     def _step(self, h: float) -> None:
         p = self._p
@@ -614,14 +716,14 @@ class SimAutopilot(Autopilot):
         t = self._sim_time
         drain = self._drain[self.in_air]
         self.battery = max(0.0, self.battery - drain * h / 60.0)
-        if self.in_air and self.battery <= 0.0 and self._phase is not _Motion.DESCEND:
+        if self.in_air and self.battery <= 0.0 and self._phase is not _M_DESCEND:
             self.mode = "LAND"  # the autopilot's own empty-battery failsafe
             self._failsafe = "battery empty"
             self._cmd = None
-            self._phase = _Motion.DESCEND
+            self._phase = _M_DESCEND
 
         phase = self._phase
-        if phase is _Motion.GROUND:
+        if phase is _M_GROUND:
             self.vn = self.ve = self.vd = 0.0
             if self._armed_since is not None or self._disarm_at is not None:
                 landed_long_enough = self._disarm_at is not None and t >= self._disarm_at
@@ -630,27 +732,27 @@ class SimAutopilot(Autopilot):
                 )
                 if landed_long_enough or idle_too_long:
                     self._disarm()
-        elif phase is _Motion.CLIMB:
+        elif phase is _M_CLIMB:
             self._brake(h)
             self._vertical_to(self._takeoff_alt, float(p["climb_rate"]), h)
             if self.alt >= self._takeoff_alt:
-                self._phase = _Motion.GUIDED
-        elif phase is _Motion.GUIDED:
+                self._phase = _M_GUIDED
+        elif phase is _M_GUIDED:
             self._follow_setpoint(h)
-        elif phase is _Motion.RETURN:
+        elif phase is _M_RETURN:
             self._return_home(h)
-        elif phase is _Motion.DESCEND:
+        elif phase is _M_DESCEND:
             self._brake(h)
             self._vertical_to(0.0, float(p["descent_rate"]), h)
-        elif phase is _Motion.HOLD:
+        elif phase is _M_HOLD:
             self._brake(h)
             self.vd = 0.0
-        elif phase is _Motion.PILOT:
+        elif phase is _M_PILOT:
             self._brake(h)
             self.vd = 0.0
             if self._pilot_autoland and t - self._takeover_time >= float(p["takeover_land_delay"]):
-                self._phase = _Motion.DESCEND
-        if self.in_air and self.alt <= 0.0 and self._phase is not _Motion.CLIMB:
+                self._phase = _M_DESCEND
+        if self.in_air and self.alt <= 0.0 and self._phase is not _M_CLIMB:
             self._touchdown()
 
     def _lag(self, v0: float, target: float, h: float) -> tuple[float, float]:
@@ -676,30 +778,35 @@ class SimAutopilot(Autopilot):
         self.vd = -math.copysign(rate, gap) if step < abs(gap) else 0.0
 
     def _follow_setpoint(self, h: float) -> None:
-        p = self._p
         tn = te = td = 0.0
         yaw_rate = 0.0
-        if self._cmd is not None and self._sim_time - self._cmd_time <= float(p["velocity_hold"]):
-            vx, vy, vz, yaw_rate, frame = self._cmd
-            if frame is Frame.BODY:
+        cmd = self._cmd
+        if cmd is not None and self._sim_time - self._cmd_time <= self._velocity_hold:
+            vx, vy, vz, yaw_rate, frame = cmd
+            if frame is _BODY:
                 tn, te = body_to_ne(vx, vy, self.heading)
             else:
                 tn, te = vx, vy
             td = vz
-        speed = math.hypot(tn, te)
-        max_speed = float(p["max_speed"])
-        if speed > max_speed:
-            tn, te = tn * max_speed / speed, te * max_speed / speed
-        td = max(-float(p["climb_rate"]), min(float(p["descent_rate"]), td))
-        max_yaw = float(p["max_yaw_rate"])
-        yaw_rate = max(-max_yaw, min(max_yaw, yaw_rate))
-        self.vn, dn = self._lag(self.vn, tn, h)
-        self.ve, de = self._lag(self.ve, te, h)
-        self.vd, dd = self._lag(self.vd, td, h)
-        self.north += dn
-        self.east += de
-        self.alt = max(0.0, self.alt - dd)
-        self.heading = wrap_360(self.heading + yaw_rate * h)
+            speed = math.hypot(tn, te)
+            max_speed = self._max_speed
+            if speed > max_speed:
+                tn, te = tn * max_speed / speed, te * max_speed / speed
+            td = max(-self._climb_rate, min(self._descent_rate, td))
+            max_yaw = self._max_yaw_rate
+            yaw_rate = max(-max_yaw, min(max_yaw, yaw_rate))
+        # `_lag` inlined for the three axes (one exponential: the same time constant).
+        decay = math.exp(-h / self._tau)
+        keep = self._tau * (1.0 - decay)
+        vn, ve, vd = self.vn, self.ve, self.vd
+        self.vn = tn + (vn - tn) * decay
+        self.ve = te + (ve - te) * decay
+        self.vd = td + (vd - td) * decay
+        self.north += tn * h + (vn - tn) * keep
+        self.east += te * h + (ve - te) * keep
+        self.alt = max(0.0, self.alt - (td * h + (vd - td) * keep))
+        if yaw_rate:
+            self.heading = wrap_360(self.heading + yaw_rate * h)
 
     def _return_home(self, h: float) -> None:
         p = self._p
@@ -715,7 +822,7 @@ class SimAutopilot(Autopilot):
             # Arrive exactly (within one step's travel), stop, and descend.
             self.north = self.east = 0.0
             self.vn = self.ve = 0.0
-            self._phase = _Motion.DESCEND
+            self._phase = _M_DESCEND
             return
         self.vn, self.ve = -self.north / dist * speed, -self.east / dist * speed
         self.north += self.vn * h
@@ -726,7 +833,7 @@ class SimAutopilot(Autopilot):
         self.alt = 0.0
         self.vn = self.ve = self.vd = 0.0
         self.in_air = False
-        self._phase = _Motion.GROUND
+        self._phase = _M_GROUND
         self._failsafe = ""
         self._cmd = None
         if self.armed:

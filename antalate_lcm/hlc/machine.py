@@ -287,6 +287,19 @@ class HlcOutcome:
 #: The outcome of an input that changed nothing (immutable, so one serves every tick).
 NOTHING = HlcOutcome()
 
+# Enum members read on every snapshot (20 a second per agent) and MC state (5), bound once: in
+# CPython 3.11 ``HlcEvent.LANDED`` calls the enum's descriptor (~125 ns; a global read is ~10).
+_E_LANDED, _E_PILOT_TAKEOVER, _E_AUTOPILOT_LAND = (
+    HlcEvent.LANDED,
+    HlcEvent.PILOT_TAKEOVER,
+    HlcEvent.AUTOPILOT_LAND,
+)
+_E_AUTOPILOT_RTL, _E_LOW_BATTERY = HlcEvent.AUTOPILOT_RTL, HlcEvent.LOW_BATTERY
+_E_ALTITUDE_REACHED = HlcEvent.ALTITUDE_REACHED
+_S_INIT, _S_LLC_DOWN, _S_GAINING_ALTITUDE = HlcState.INIT, HlcState.LLC_DOWN, HlcState.GAINING_ALTITUDE
+_F_LANDING, _F_RTL = FlightMode.LANDING, FlightMode.RTL
+_MC_TAKEOFF, _MC_LAND, _MC_RTL, _MC_HOLD = McState.TAKEOFF, McState.LAND, McState.RTL, McState.HOLD
+
 
 class HlcView(Protocol):
     """What the HLC table's guards and effects may read of the machine (read-only: see
@@ -659,18 +672,20 @@ class HighLevelControl:
         if self.mc_state != self.mc_state_at_entry:
             self.mc_moved = True
         events: list[tuple[HlcEvent, str]] = []
-        if state == McState.TAKEOFF:
+        if state == _MC_TAKEOFF:
             self._mc_takeoff_altitude = takeoff_altitude
-            if previous != McState.TAKEOFF:
+            if previous != _MC_TAKEOFF:
                 events.append((HlcEvent.MC_TAKEOFF, self._takeoff_detail()))
-        elif state == McState.LAND:
+        elif state == _MC_LAND:
             events.append((HlcEvent.MC_LAND, "MC is in LAND"))
-        elif state == McState.RTL:
+        elif state == _MC_RTL:
             events.append((HlcEvent.MC_RTL, "MC is in RTL"))
-        elif state == McState.HOLD:
+        elif state == _MC_HOLD:
             events.append((HlcEvent.MC_HOLD, "MC is in HOLD"))
-        events.extend(self._init_events())
-        return self._fire(events, now)
+        if self.state is _S_INIT:
+            events.extend(self._init_events())
+        # 5 a second (the MC's republished state): nearly all with no event.
+        return self._fire(events, now) if events else NOTHING
 
     def on_autopilot(self, snapshot: AutopilotState, now: float, *, fault: str = "") -> HlcOutcome:
         """An autopilot snapshot (the node polls `Autopilot.state()`).
@@ -679,7 +694,8 @@ class HighLevelControl:
         passes the last good snapshot with its `link_age` grown); it goes into the LLC_DOWN reason.
         """
         self.autopilot = snapshot
-        return self._fire(self._autopilot_events(snapshot, fault), now)
+        events = self._autopilot_events(snapshot, fault)
+        return self._fire(events, now) if events else NOTHING  # 20 a second, nearly all with none
 
     def on_action_result(self, kind: ActionKind, ok: bool, now: float, detail: str = "") -> HlcOutcome:
         """The outcome of an `Action` the node performed (``arm()`` False or `AutopilotError` = not ok).
@@ -702,7 +718,7 @@ class HighLevelControl:
         """Time passes: fires GAIN_ALTITUDE_TIMEOUT."""
         timeout = self.params.gain_altitude_timeout
         if (
-            self.state is HlcState.GAINING_ALTITUDE
+            self.state is _S_GAINING_ALTITUDE
             and self.entered_at is not None
             and now - self.entered_at >= timeout
         ):
@@ -769,19 +785,19 @@ class HighLevelControl:
                     f" (link_timeout {p.link_timeout:g} s){why}",
                 )
             ]
-        if self.state is HlcState.LLC_DOWN:
+        if self.state is _S_LLC_DOWN:
             return self._regained_events(ap) if self._link_fresh(ap) else []
         # Only events a row of this state takes are derived (`Table.events_taken`): the rest would be
         # passed over by `_fire` anyway, and their reasons cost more than the rest of the tick.
         takes = self._table.events_taken(self.state)
         events: list[tuple[HlcEvent, str]] = []
-        if HlcEvent.LANDED in takes and ap.landed:
+        if _E_LANDED in takes and ap.landed:
             events.append((HlcEvent.LANDED, f"on the ground and disarmed (mode {ap.mode or '?'})"))
-        if HlcEvent.PILOT_TAKEOVER in takes and ap.armed and pilot_in_control(ap):
+        if _E_PILOT_TAKEOVER in takes and ap.armed and pilot_in_control(ap):
             events.append(
                 (HlcEvent.PILOT_TAKEOVER, f"autopilot left autonomous control (mode {ap.mode or '?'})")
             )
-        if self.state is HlcState.INIT:
+        if self.state is _S_INIT:
             events.extend(self._init_events())
         if ap.failsafe and ap.flight_mode in _FAILSAFE_MODES:
             failsafe = {
@@ -795,15 +811,15 @@ class HighLevelControl:
                     f"{ap.failsafe}; autopilot switched to {ap.mode or ap.flight_mode.name}",
                 )
             )
-        if ap.flight_mode is FlightMode.LANDING and HlcEvent.AUTOPILOT_LAND in takes:
+        if ap.flight_mode is _F_LANDING and _E_AUTOPILOT_LAND in takes:
             events.append((HlcEvent.AUTOPILOT_LAND, f"autopilot switched to {ap.mode or 'LAND'}"))
-        if ap.flight_mode is FlightMode.RTL and HlcEvent.AUTOPILOT_RTL in takes:
+        if ap.flight_mode is _F_RTL and _E_AUTOPILOT_RTL in takes:
             events.append((HlcEvent.AUTOPILOT_RTL, f"autopilot switched to {ap.mode or 'RTL'}"))
-        if HlcEvent.LOW_BATTERY in takes:
+        if _E_LOW_BATTERY in takes:
             low = self.battery_low_reason()
             if low:
                 events.append((HlcEvent.LOW_BATTERY, low))
-        if HlcEvent.ALTITUDE_REACHED in takes and altitude_reached(
+        if _E_ALTITUDE_REACHED in takes and altitude_reached(
             ap.alt, self._target_altitude, p.airborne_fraction
         ):
             events.append(

@@ -99,7 +99,12 @@ class GuardDecision:
 
 def mission_flight(hlc_state: HlcState | int, mc_state: McState | int | None) -> bool:
     """The only situation in which behaviors may steer the vehicle."""
-    return hlc_state == HlcState.AIRBORNE and mc_state == McState.MISSION
+    return hlc_state == _AIRBORNE and mc_state == _MISSION
+
+
+# Bound once: in CPython 3.11 ``HlcState.AIRBORNE`` calls the enum's descriptor (~125 ns), and the
+# HLC asks `mission_flight` on every control tick (20 a second per agent).
+_AIRBORNE, _MISSION = HlcState.AIRBORNE, McState.MISSION
 
 
 def check_velocity(

@@ -92,10 +92,6 @@ class McEvent(enum.Enum):
     __hash__ = object.__hash__
 
     @classmethod
-    def of_hlc(cls, state: HlcState) -> McEvent:
-        return _OF_HLC[state]
-
-    @classmethod
     def of_command(cls, command: Command) -> McEvent:
         return cls[f"OP_{command.name}"]
 
@@ -104,6 +100,9 @@ class McEvent(enum.Enum):
 _OF_HLC = {state: McEvent[f"HLC_{state.name}"] for state in HlcState}
 #: The HLC's states by value: a lookup, not ``HlcState(value)`` (the enum's call), per hlc_state_t heard.
 _HLC_STATES: dict[int, HlcState] = {int(state): state for state in HlcState}
+#: Members read per hlc_state_t heard and per tick, bound once (in CPython 3.11 ``McState.TAKEOFF``
+#: calls the enum's descriptor, ~125 ns).
+_TAKEOFF, _HLC_READY = McState.TAKEOFF, HlcState.READY
 
 
 @dataclass(frozen=True)
@@ -370,9 +369,9 @@ class MissionControl:
         self.hlc_changed = hlc is not self.hlc_state
         self.hlc_state = hlc
         self.hlc_heard_at = now
-        if self.state is McState.TAKEOFF and hlc is not HlcState.READY:
+        if self.state is _TAKEOFF and hlc is not _HLC_READY:
             self.hlc_left_ready = True
-        event = McEvent.of_hlc(hlc)
+        event = _OF_HLC[hlc]
         row = self._table.match(self.state, event, self)
         if row is None:
             return _ACCEPTED
@@ -390,7 +389,7 @@ class MissionControl:
                 return McOutcome(True, transition, reason=transition.reason)
         timeout = self.params.takeoff_ack_timeout
         if (
-            self.state is McState.TAKEOFF
+            self.state is _TAKEOFF
             and not self.hlc_left_ready
             and self.entered_at is not None
             and now - self.entered_at >= timeout

@@ -14,7 +14,7 @@ from typing import Any
 from antalate_lcm.config import Config
 from antalate_lcm.mc.machine import McOutcome, McParams, MissionControl
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
-from antalate_lcm.node import Context, Node
+from antalate_lcm.node import Context, Node, shared_value
 from antalate_lcm.ratelimit import RateLimitedLog
 from antalate_lcm.vocabulary import Command, McState, name_of
 
@@ -28,10 +28,12 @@ class McNode(Node):
         super().__init__(config, context)
         m = config.mc
         self.machine = MissionControl(
-            McParams(
-                takeoff_ack_timeout=m.takeoff_ack_timeout,
-                hlc_timeout=m.hlc_timeout,
-                on_link_regained=m.on_link_regained,
+            shared_value(
+                McParams(
+                    takeoff_ack_timeout=m.takeoff_ack_timeout,
+                    hlc_timeout=m.hlc_timeout,
+                    on_link_regained=m.on_link_regained,
+                )
             )
         )
         self._publish_state: Callable[[], None] = lambda: None
@@ -56,7 +58,9 @@ class McNode(Node):
         return self.machine.state
 
     def _state_msg(self) -> mc_state_t:
-        msg = mc_state_t()
+        # The context's one mc_state_t, refilled (every field) at every publish: 5 a second and on
+        # every change; publish stamps its header and encodes it at once (Node.outgoing).
+        msg = self.outgoing(mc_state_t)
         msg.state = int(self.machine.state)
         msg.last_command_seq = self.machine.last_command_seq
         msg.takeoff_altitude = float(self.machine.takeoff_altitude)

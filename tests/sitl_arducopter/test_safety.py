@@ -78,7 +78,10 @@ def _one_sitl_swarm_at_a_time() -> Iterator[None]:
 
 
 @pytest.fixture(scope="module")
-def copters(sitl_netns: NetNamespace, sitl_dir: Path) -> Iterator[dict[str, Copter]]:
+def copters(sitl_netns: NetNamespace, sitl_dir: Path, sitl_probe: Probe) -> Iterator[dict[str, Copter]]:
+    """``sitl_probe`` listens before the agents start: each HLC says once, as it connects, that the
+    fence it wrote reads back (HLC_ERROR 14, info), and in one full run at load 8 that came before a
+    probe started after the vehicles heard it."""
     safety = {"enabled": True, "origin": [HOME[0], HOME[1]], "fence": FENCE}
     out: dict[str, Copter] = {}
     try:

@@ -1,7 +1,7 @@
 """The protocol emulators behave like the real vehicles, as seen through plain sockets and the real clients.
 
 Tello: plain UDP sockets on 127.0.0.1 (random ports), plus one run of the real djitellopy in a private
-network namespace pair (djitellopy binds 8889/8890 on all addresses, see tests/emulators/netns_pair.py).
+network namespace pair (djitellopy binds 8889/8890 on all addresses, see tests/harness/netns.py).
 MAVLink: the real pymavlink client over UDP (both directions of set-up) and TCP.
 """
 

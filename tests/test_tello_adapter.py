@@ -1,7 +1,7 @@
 """`TelloAutopilot` through the real djitellopy against the Tello SDK emulator (docs/design.md §7, §12).
 
 djitellopy binds UDP 8889/8890 on all addresses once per process, so the emulator cannot share a
-network namespace with it (see tests/emulators/netns_pair.py). The emulator runs in this process on a
+network namespace with it (see tests/harness/netns.py). The emulator runs in this process on a
 socket made in namespace ``a`` (192.168.10.1, the real Tello's address); the adapter runs in a
 driver process in namespace ``b`` that takes JSON requests on stdin ("make an adapter", "call
 takeoff(1.5)", "give me state()") and answers one JSON line each. The test compares what the

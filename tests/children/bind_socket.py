@@ -1,5 +1,5 @@
 """Bind a socket inside a network namespace and hand its descriptor back to the test process over the
-Unix socket it inherited (tests/emulators/netns_pair.py's ``udp_socket``/``tcp_listener``).
+Unix socket it inherited (tests/harness/netns.py's ``NetNamespace.socket``).
 
     python -m tests.children.bind_socket udp|tcp HOST PORT UNIX_FD
 """

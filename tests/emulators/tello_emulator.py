@@ -91,7 +91,7 @@ Faults and dynamics for tests (all settable while running):
   from the end of the command it was executing (15 s: SDK 3.0 user guide, "Safety Function").
 
 Running it next to djitellopy: djitellopy binds 8889/8890 on all addresses once per process, so the
-emulator cannot bind 8889 in the same network namespace. Use :class:`tests.emulators.netns_pair.NetnsPair`
+emulator cannot bind 8889 in the same network namespace. Use :class:`tests.harness.netns.NetnsPair`
 (two namespaces joined by a veth pair) and hand the emulator a socket made in the drone-side namespace
 (``TelloEmulator(sock=net.udp_socket("a", (net.addr_a, 8889)))``), or run this module's CLI there::
 

@@ -62,16 +62,13 @@ import os
 import re
 import secrets
 import shutil
-import signal
 import subprocess
 import sys
-import time
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import IO, Any, TypeVar
+from typing import Any, TypeVar
 
-from tests import REPO
-from tests.netns import child_env, stop_process
+from tests.harness.netns import NetNamespace, delete_named
 
 PREFIX = "antalate-lan"
 SUBNET = "10.77.0"
@@ -128,59 +125,46 @@ def _namespaces() -> list[str]:
     return [line.split()[0] for line in out.splitlines() if line.strip()]
 
 
-def _kill_namespace_processes(ns: str) -> None:
-    """SIGKILL whatever still runs in ``ns`` (only ever one of this harness's namespaces)."""
-    for _ in range(3):
-        pids = [int(p) for p in _run(["ip", "netns", "pids", ns], check=False).stdout.split() if p.isdigit()]
-        if not pids:
-            return
-        for pid in pids:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGKILL)
-        time.sleep(0.1)
-
-
-def delete_namespace(ns: str) -> None:
-    _kill_namespace_processes(ns)
-    _run(["ip", "netns", "delete", ns], check=False)
-
-
 def sweep_stale() -> list[str]:
     """Delete the namespaces left by runs of this harness whose process no longer exists."""
     removed = []
     for ns in _namespaces():
         m = _NAME.match(ns)
         if m and int(m.group(1)) != os.getpid() and not _pid_alive(int(m.group(1))):
-            delete_namespace(ns)
+            delete_named(ns)
             removed.append(ns)
     return removed
 
 
 class Host:
-    """One simulated machine: a network namespace with one interface (``lan0``) on a switch."""
+    """One simulated machine: a named network namespace (tests/harness/netns.py) with one interface
+    (``lan0``) on a switch. What runs in it is the namespace's; the cable and routes are the host's."""
 
     def __init__(
         self, name: str, ns: str, switch: str, port: str, address: str, gateway: str | None = None
     ) -> None:
         self.name = name
         self.ns = ns
+        self.netns = NetNamespace(name=ns)
         #: The switch's namespace, and the switch-side end of this host's cable in it.
         self.switch = switch
         self.port = port
         self.address = address
         #: The site's router (a WAN host); a LAN host has no route beyond its switch.
         self.gateway = gateway
-        self.procs: list[subprocess.Popen[str]] = []
-        self._files: list[IO[str]] = []
 
     def __repr__(self) -> str:
         return f"Host({self.name!r}, {self.ns}, {self.address})"
 
+    @property
+    def procs(self) -> list[subprocess.Popen[str]]:
+        """The processes started in this host and not stopped yet."""
+        return self.netns.procs
+
     # ------------------------------------------------------------------ set-up
     def build(self) -> None:
         ns, sw = self.ns, self.switch
-        _run(["ip", "netns", "add", ns])
-        _run(["ip", "-n", ns, "link", "set", "lo", "up"])
+        self.netns.start()
         _run(["ip", "-n", sw, "link", "add", self.port, "type", "veth", "peer", "name", "lan0", "netns", ns])
         _run(["ip", "-n", sw, "link", "set", self.port, "master", "br0"])
         _run(["ip", "-n", sw, "link", "set", self.port, "up"])
@@ -211,41 +195,29 @@ class Host:
 
     # ------------------------------------------------------------------ processes
     def wrap(self, argv: Sequence[str]) -> list[str]:
-        return ["ip", "netns", "exec", self.ns, *argv]
+        return self.netns.wrap(argv)
 
     def popen(self, argv: Sequence[str], *, log: Path | None = None, **kwargs: Any) -> subprocess.Popen[str]:
         """Start ``argv`` in this host (its own process group, so teardown can kill its children)."""
-        kwargs.setdefault("env", child_env())
-        kwargs.setdefault("text", True)
-        kwargs.setdefault("start_new_session", True)
-        kwargs.setdefault("cwd", str(REPO))
-        if log is not None:
-            out = open(log, "w")  # noqa: SIM115 - closed at teardown
-            self._files.append(out)
-            kwargs.setdefault("stdout", out)
-            kwargs.setdefault("stderr", subprocess.STDOUT)
-        proc: subprocess.Popen[str] = subprocess.Popen(self.wrap(argv), **kwargs)
-        self.procs.append(proc)
-        return proc
+        return self.netns.popen(argv, log=log, **kwargs)
 
     def antalate(self, *args: str, log: Path | None = None, **kwargs: Any) -> subprocess.Popen[str]:
-        return self.popen([sys.executable, "-m", "antalate_lcm.cli", *args], log=log, **kwargs)
+        return self.netns.antalate(*args, log=log, **kwargs)
 
     def run(
         self, argv: Sequence[str], timeout: float = 30, check: bool = False
     ) -> subprocess.CompletedProcess[str]:
-        return _run(self.wrap(argv), check=check, timeout=timeout)
+        done = self.netns.run(argv, timeout)
+        if check and done.returncode != 0:
+            raise LanError(
+                f"{' '.join(self.wrap(argv))} failed ({done.returncode}): "
+                f"{done.stderr.strip() or done.stdout.strip()}"
+            )
+        return done
 
     def stop(self, timeout: float = 5.0) -> dict[int, int | None]:
         """SIGTERM every process started here (then SIGKILL the stubborn), newest first."""
-        codes = {}
-        for proc in reversed(self.procs):
-            codes[proc.pid] = stop_process(proc, timeout)
-        self.procs.clear()
-        for f in self._files:
-            f.close()
-        self._files.clear()
-        return codes
+        return self.netns.stop(timeout)
 
 
 class _Topology:
@@ -282,9 +254,8 @@ class _Topology:
         self.close()
 
     def _namespace(self, ns: str) -> str:
-        _run(["ip", "netns", "add", ns])
         self._built.append(ns)
-        _run(["ip", "-n", ns, "link", "set", "lo", "up"])
+        NetNamespace(name=ns, multicast=False).start()
         return ns
 
     def _switch(self, ns: str) -> str:
@@ -348,7 +319,7 @@ class _Topology:
             with contextlib.suppress(Exception):  # teardown carries on whatever happens
                 host.stop()
         for ns in reversed(self._built):
-            delete_namespace(ns)
+            delete_named(ns)
         self._built.clear()
         atexit.unregister(self.close)
 

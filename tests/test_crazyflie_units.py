@@ -10,7 +10,6 @@ import pytest
 from antalate_lcm.autopilot.base import Frame
 from antalate_lcm.autopilot.crazyflie import CrazyflieAutopilot
 from antalate_lcm.autopilot.crazyflie.frames import LocalFrame
-from antalate_lcm.autopilot.crazyflie.params import parse_params
 from antalate_lcm.autopilot.crazyflie.setpoints import MIN_HEIGHT, build_setpoint, is_zero, next_height
 from antalate_lcm.autopilot.crazyflie.telemetry import (
     LOG_BLOCKS,
@@ -223,7 +222,7 @@ def test_defaults_validate_and_the_adapter_is_built_without_io() -> None:
 )
 def test_bad_parameters_name_the_key(params: dict[str, object], words: str) -> None:
     with pytest.raises(ValueError, match=words):
-        parse_params(params)
+        CrazyflieAutopilot(params)
 
 
 def test_params_documented_and_example_valid() -> None:

@@ -176,11 +176,6 @@ class DjitellopyLink:
                 self._owns_host = False
 
 
-def open_djitellopy(params: Params) -> TelloLink:
-    """The default `LinkOpener`: djitellopy to ``params.host``."""
-    return DjitellopyLink(params)
-
-
 class MemoryLink:
     """A link to a peer in this process: `handler` gets each command; answers come back as replies.
 

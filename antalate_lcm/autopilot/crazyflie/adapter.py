@@ -59,7 +59,6 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
 from pydantic import BaseModel
@@ -67,7 +66,6 @@ from pydantic import BaseModel
 from antalate_lcm.autopilot.base import (
     AutopilotError,
     AutopilotState,
-    Clock,
     FlightMode,
     Frame,
     check_takeoff_altitude,
@@ -162,22 +160,15 @@ class CrazyflieAutopilot(VehicleAdapter[Params, Any]):
     blocking = True  # arm and takeoff wait for the supervisor's confirmation over the radio
     params_model: ClassVar[type[BaseModel]] = Params
 
-    def __init__(
-        self,
-        params: Mapping[str, Any] | None = None,
-        *,
-        clock: Clock = time.monotonic,
-        link: Callable[[Params], Any] | None = None,
-    ) -> None:
+    def _setup(self) -> None:
         """`link` makes the cflib ``Crazyflie`` (default: cflib's own, its drivers installed)."""
-        super().__init__(params, clock=clock, link=link)
         p = self._p
         self.frame = LocalFrame(p.origin_lat, p.origin_lon, p.origin_heading)
         self.last_refusal = ""
         self._lock = threading.RLock()
         self._cf: Any = None
         self._reading = Reading()
-        self._heard = LinkAge(clock)  # any packet: log data, or the answers to cflib's latency pings
+        self._heard = LinkAge(self.clock)  # any packet: log data, or the answers to cflib's latency pings
         self._connected = False
         self._no_kalman = False
         self._link_error = ""

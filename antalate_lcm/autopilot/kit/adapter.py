@@ -87,7 +87,8 @@ class VehicleAdapter(Autopilot, Generic[P, L]):
 
     ``Cls(params, *, clock, link)``: `params` is parsed by `params_model` into ``self._p`` (a
     `ValueError` naming the key), `link` opens the link from those params (default: the adapter's
-    `_default_link`, its real transport). Nothing is opened before `connect`.
+    `_default_link`, its real transport); then `_setup` builds the adapter's own state. Nothing is
+    opened before `connect`.
     """
 
     def __init__(
@@ -104,6 +105,10 @@ class VehicleAdapter(Autopilot, Generic[P, L]):
         self._p: P = parse_params(model, self.params, self.name)
         self._opener: Callable[[P], L] = link or self._default_link
         self._workers = Workers()
+        self._setup()
+
+    def _setup(self) -> None:
+        """The adapter's own state, from ``self._p`` (no I/O): the one constructor calls it last."""
 
     def _default_link(self, params: P) -> L:
         """The real link for `params` (serial, UDP, radio...); an adapter without one needs ``link=``."""

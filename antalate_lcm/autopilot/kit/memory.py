@@ -61,8 +61,7 @@ class MemoryPipe(Generic[Out, In]):
         return items
 
     def open(self) -> None:
-        """Usable again; what the peer pushed before is forgotten (it was for a link now gone)."""
-        self.drain()
+        """Usable again (after `close`)."""
         self.closed = False
 
     def close(self) -> None:

@@ -75,8 +75,7 @@ import contextlib
 import logging
 import math
 import threading
-import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 from pydantic import BaseModel
@@ -85,7 +84,6 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from antalate_lcm.autopilot.base import (
     AutopilotError,
     AutopilotState,
-    Clock,
     Frame,
     check_takeoff_altitude,
     check_velocity,
@@ -141,14 +139,7 @@ class MavlinkAutopilot(VehicleAdapter[Params, MavLink]):
     blocking = True
     params_model: ClassVar[type[BaseModel]] = Params
 
-    def __init__(
-        self,
-        params: Mapping[str, Any] | None = None,
-        *,
-        clock: Clock = time.monotonic,
-        link: LinkOpener | None = None,
-    ) -> None:
-        super().__init__(params, clock=clock, link=link)
+    def _setup(self) -> None:
         p = self._p
         self.connection: str = p.connection
         self.source_system = p.source_system
@@ -175,7 +166,7 @@ class MavlinkAutopilot(VehicleAdapter[Params, MavLink]):
         self._connected = False
         self._closed = False
         self._warned_autopilot = False
-        self._rate_log = RateLimitedLog(log, period=10.0, clock=clock)
+        self._rate_log = RateLimitedLog(log, period=10.0, clock=self.clock)
         #: The last arming refusal's reason (STATUSTEXT, or the failed pre-flight check), for the HLC.
         self.last_refusal = ""
         #: What the last vehicle pre-flight check found (empty: the vehicle's failsafes protect it).
@@ -334,24 +325,33 @@ class MavlinkAutopilot(VehicleAdapter[Params, MavLink]):
             with self._cond:
                 mark, mode, armed = self._v.messages, self._v.mode, self._v.armed
             result = self._command(mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, float(alt))
-            if result != mav.MAV_RESULT_ACCEPTED:
-                state = f"mode {mode}, {'armed' if armed else 'disarmed'}"
-                raise AutopilotError(
-                    f"takeoff to {alt:g} m refused ({result_name(result)}; {state}){self._because(mark)}"
-                )
+            self._check_takeoff_accepted(result, alt, mode, armed, mark)
             log.info("taking off to %g m", alt)
 
+    def _check_takeoff_accepted(self, result: int, alt: float, mode: str, armed: bool, mark: int) -> None:
+        """`AutopilotError` saying why, unless MAV_CMD_NAV_TAKEOFF was accepted (`mode` and `armed` as sent)."""
+        if result != mav.MAV_RESULT_ACCEPTED:
+            state = f"mode {mode}, {'armed' if armed else 'disarmed'}"
+            raise AutopilotError(
+                f"takeoff to {alt:g} m refused ({result_name(result)}; {state}){self._because(mark)}"
+            )
+
+    #: The flight stack's modes for `land` and `rtl`.
+    _land_mode: ClassVar[str] = "LAND"
+    _rtl_mode: ClassVar[str] = "RTL"
+
     def land(self) -> None:
-        with self._cmd_lock:
-            self._require_link("land")
-            self._clear_setpoint()
-            self._set_mode("LAND")
+        self._mode_command("land", self._land_mode)
 
     def rtl(self) -> None:
+        self._mode_command("rtl", self._rtl_mode)
+
+    def _mode_command(self, what: str, mode: str) -> None:
+        """A command that is a mode change (the set-point stream stops)."""
         with self._cmd_lock:
-            self._require_link("rtl")
+            self._require_link(what)
             self._clear_setpoint()
-            self._set_mode("RTL")
+            self._set_mode(mode)
 
     def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
         """Send a velocity target now and keep resending it (never blocks: no ACK exists for it)."""

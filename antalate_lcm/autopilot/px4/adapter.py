@@ -28,16 +28,13 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
-from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import ClassVar
 
 from pydantic import BaseModel
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm.autopilot.base import AutopilotError, Clock, Frame, check_takeoff_altitude
-from antalate_lcm.autopilot.mavlink.adapter import LinkOpener, MavlinkAutopilot
-from antalate_lcm.autopilot.mavlink.dialect import result_name
+from antalate_lcm.autopilot.base import AutopilotError, Frame, check_takeoff_altitude
+from antalate_lcm.autopilot.mavlink.adapter import MavlinkAutopilot
 from antalate_lcm.autopilot.mavlink.vehicle_checks import Finding
 from antalate_lcm.autopilot.px4 import modes, vehicle_checks
 from antalate_lcm.autopilot.px4.offboard import OffboardRules
@@ -55,17 +52,13 @@ class Px4Autopilot(MavlinkAutopilot):
     name = "px4"
     params_model: ClassVar[type[BaseModel]] = Px4Params
     _arm_mode = modes.HOLD
+    _land_mode = "AUTO.LAND"
+    _rtl_mode = "AUTO.RTL"
     _vehicle_class = Px4Vehicle
     _autopilot_kind = (mav.MAV_AUTOPILOT_PX4, "PX4")
 
-    def __init__(
-        self,
-        params: Mapping[str, Any] | None = None,
-        *,
-        clock: Clock = time.monotonic,
-        link: LinkOpener | None = None,
-    ) -> None:
-        super().__init__(params, clock=clock, link=link)
+    def _setup(self) -> None:
+        super()._setup()
         p = self._p
         assert isinstance(p, Px4Params)
         self._px4 = p
@@ -107,31 +100,12 @@ class Px4Autopilot(MavlinkAutopilot):
                 )
             nan = float("nan")
             result = self._command(mav.MAV_CMD_NAV_TAKEOFF, -1, 0, 0, nan, nan, nan, home[2] + float(alt))
-            if result != mav.MAV_RESULT_ACCEPTED:
-                state = f"mode {mode}, {'armed' if armed else 'disarmed'}"
-                raise AutopilotError(
-                    f"takeoff to {alt:g} m refused ({result_name(result)}; {state}){self._because(mark)}"
-                )
+            self._check_takeoff_accepted(result, alt, mode, armed, mark)
             log.info("taking off to %g m (%.2f m AMSL)", alt, home[2] + alt)
-
-    def land(self) -> None:
-        with self._cmd_lock:
-            self._require_link("land")
-            self._clear_setpoint()
-            self._set_mode("AUTO.LAND")
-
-    def rtl(self) -> None:
-        with self._cmd_lock:
-            self._require_link("rtl")
-            self._clear_setpoint()
-            self._set_mode("AUTO.RTL")
 
     def hold(self) -> None:
         """Hold position in PX4's Hold (AUTO.LOITER); the set-point stream stops."""
-        with self._cmd_lock:
-            self._require_link("hold")
-            self._clear_setpoint()
-            self._set_mode(modes.HOLD)
+        self._mode_command("hold", modes.HOLD)
 
     def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
         """Stream the set-point (never blocks); from our Hold, switch to OFFBOARD once it has run ``offboard_lead``."""

@@ -71,7 +71,6 @@ from pydantic import BaseModel
 from antalate_lcm.autopilot.base import (
     AutopilotError,
     AutopilotState,
-    Clock,
     FlightMode,
     Frame,
     check_takeoff_altitude,
@@ -79,7 +78,7 @@ from antalate_lcm.autopilot.base import (
 )
 from antalate_lcm.autopilot.kit import LinkAge, VehicleAdapter
 from antalate_lcm.autopilot.tello import maths, telemetry
-from antalate_lcm.autopilot.tello.link import DjitellopyLink, LinkOpener, TelloLink
+from antalate_lcm.autopilot.tello.link import DjitellopyLink, TelloLink
 from antalate_lcm.autopilot.tello.params import Params
 from antalate_lcm.geo import FlatFrame, wrap_360
 from antalate_lcm.ratelimit import RateLimitedLog
@@ -124,15 +123,8 @@ class TelloAutopilot(VehicleAdapter[Params, TelloLink]):
     blocking = True  # takeoff/land/up wait for the Tello's answer, which comes when the move is done
     params_model: ClassVar[type[BaseModel]] = Params
 
-    def __init__(
-        self,
-        params: Mapping[str, Any] | None = None,
-        *,
-        clock: Clock = time.monotonic,
-        link: LinkOpener | None = None,
-    ) -> None:
+    def _setup(self) -> None:
         """`link` opens the adapter's link at `connect` (`link.MemoryLink` in tests); default djitellopy."""
-        super().__init__(params, clock=clock, link=link)
         p = self._p
         self.host: str = p.host
         self.home = FlatFrame(p.home_lat, p.home_lon)
@@ -142,10 +134,10 @@ class TelloAutopilot(VehicleAdapter[Params, TelloLink]):
         self._cmd_lock = threading.RLock()  # one answered command at a time (replies carry no id)
         self._lander: threading.Thread | None = None
         self._connected = False
-        self._ratelog = RateLimitedLog(log, period=10.0, clock=clock)
+        self._ratelog = RateLimitedLog(log, period=10.0, clock=self.clock)
         # Telemetry from the newest state packet.
         self._raw: Mapping[str, Any] | None = None  # the dict object of the last packet (identity = packet)
-        self._state_age = LinkAge(clock)  # heard_at: clock() when the newest packet was first seen
+        self._state_age = LinkAge(self.clock)  # heard_at: clock() when the newest packet was first seen
         self._reading = telemetry.StateReading()  # the newest packet in the adapter's units
         self._height_changed = -math.inf  # clock() of the last change of the height reading
         self._air = maths.Debounced(_GROUND_CONFIRM)  # the in-air flag, believed once it held

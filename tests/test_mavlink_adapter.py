@@ -17,7 +17,6 @@ from pymavlink.dialects.v20 import ardupilotmega as mav2
 
 from antalate_lcm.autopilot import AutopilotError, AutopilotState, FlightMode, Frame, load_autopilot
 from antalate_lcm.autopilot.mavlink import DEFAULTS, VELOCITY_TYPE_MASK, MavlinkAutopilot, Params
-from tests import REPO
 from tests.emulators.mavlink_vehicle import MavlinkVehicle, VehicleSnapshot
 from tests.polling import wait_for
 
@@ -450,18 +449,3 @@ def test_close_is_idempotent_and_final(vehicle: MavlinkVehicle) -> None:
         ap.set_velocity(0.0, 0.0, 0.0, 0.0, Frame.NED)
     with pytest.raises(AutopilotError, match="not connected"):
         ap.land()
-
-
-def test_params_documented_and_example_valid() -> None:
-    """Every parameter is in docs/ardupilot.md and examples/arducopter_sitl.toml, and the example loads."""
-    from antalate_lcm.config import load_config
-    from antalate_lcm.runtime.agent import validate
-
-    doc = (REPO / "docs" / "ardupilot.md").read_text()
-    config = load_config(REPO / "examples" / "arducopter_sitl.toml")
-    validate(config)
-    assert config.hlc.autopilot == "mavlink"
-    params = config.hlc.autopilot_params
-    MavlinkAutopilot(params)
-    missing = [k for k in DEFAULTS if f"`{k}`" not in doc or k not in params]
-    assert not missing, missing

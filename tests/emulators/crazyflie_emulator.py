@@ -101,7 +101,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from tests.emulators.lifecycle import Emulator
+from tests.emulators.lifecycle import Emulator, Motion
 
 if TYPE_CHECKING:  # cflib only when a memory link is asked for
     from antalate_lcm.autopilot.crazyflie.memory import MemoryLink
@@ -256,14 +256,7 @@ def _minimum_jerk(s: float) -> tuple[float, float]:
 
 
 @dataclass(frozen=True)
-class CrazyflieSnapshot:
-    x: float
-    y: float
-    z: float
-    yaw: float
-    vx: float
-    vy: float
-    vz: float
+class CrazyflieSnapshot(Motion):
     vbat: float
     armed: bool
     flying: bool

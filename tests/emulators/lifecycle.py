@@ -1,4 +1,5 @@
-"""What every protocol emulator shares: its threads, the context manager and waiting on its snapshot.
+"""What every protocol emulator shares: its threads, the context manager, waiting on its snapshot, and
+the motion a local-frame snapshot starts with.
 
 The threads are the vehicle kit's `antalate_lcm.autopilot.kit.Workers`, the same the adapters run on,
 so an emulator starts, stops and joins its loops exactly as the adapter it answers does.
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 from typing_extensions import Self
@@ -16,6 +18,20 @@ from antalate_lcm.autopilot.kit import Workers
 from tests.harness.polling import wait_for
 
 S = TypeVar("S")
+
+
+@dataclass(frozen=True)
+class Motion:
+    """Where an emulated body is and how it moves, in its emulator's local frame (m, deg, m/s; the
+    emulator's module docstring says which way the axes point): the first fields of its snapshot."""
+
+    x: float
+    y: float
+    z: float
+    yaw: float
+    vx: float
+    vy: float
+    vz: float
 
 
 class Emulator(ABC, Generic[S]):

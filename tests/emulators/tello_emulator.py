@@ -119,7 +119,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 from antalate_lcm.autopilot.tello.link import MemoryLink
-from tests.emulators.lifecycle import Emulator
+from tests.emulators.lifecycle import Emulator, Motion
 
 LOG = logging.getLogger("antalate.tests.tello_emulator")
 
@@ -157,16 +157,9 @@ class TelloCommand:
 
 
 @dataclass(frozen=True)
-class TelloSnapshot:
-    """A consistent copy of the emulated drone's state (frames: see the module docstring)."""
+class TelloSnapshot(Motion):
+    """A consistent copy of the emulated drone's state (frames: see the module docstring; vz up positive)."""
 
-    x: float
-    y: float
-    z: float
-    yaw: float
-    vx: float
-    vy: float
-    vz: float  # up positive, m/s
     flying: bool
     sdk_mode: bool
     stream_on: bool

@@ -327,6 +327,15 @@ def test_agent_process_flies_a_whole_mission_over_tcp(
     assert "connected to autopilot (1, 1)" in log and "mode GUIDED confirmed" in log
 
 
+def take_off(probe: Probe) -> None:
+    """The operator's TAKEOFF once the agent's MC is in STANDBY; the MC must reach MISSION."""
+    assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.STANDBY)
+    probe.publish(
+        "copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 1, "agent": "op"}, command=O.TAKEOFF
+    )
+    assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.MISSION)
+
+
 def fly_east(probe: Probe) -> None:
     """Velocity commands east at 3 m/s for a second, as the agent's BMA would send them (an internal topic:
     the sender must be the agent the channel names); the copter's telemetry must show it moving east."""
@@ -357,11 +366,7 @@ def test_hlc_restart_mid_flight_resyncs_without_arming_or_taking_off(
     agent.start("hlc")
     agent.start("mc")
     try:
-        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.STANDBY)
-        probe.publish(
-            "copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 1, "agent": "op"}, command=O.TAKEOFF
-        )
-        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.MISSION)
+        take_off(probe)
         assert "autopilot ARM" in agent.log("hlc")
         agent.kill("hlc")  # SIGKILL: the real vehicle flies on, hovering in GUIDED
         time.sleep(1.0)
@@ -415,11 +420,7 @@ def test_hlc_killed_the_vehicle_stops_and_comes_home_by_its_gcs_failsafe(
     agent.start("hlc")
     agent.start("mc")
     try:
-        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.STANDBY)
-        probe.publish(
-            "copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 1, "agent": "op"}, command=O.TAKEOFF
-        )
-        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.MISSION)
+        take_off(probe)
         assert "vehicle pre-flight check: failsafe parameters OK" in agent.log("hlc")
         fly_east(probe)
         agent.kill("hlc")  # SIGKILL while flying east: no LAND, no RTL, nothing more on the link

@@ -161,7 +161,8 @@ class CrazyflieAutopilot(VehicleAdapter[Params, Any]):
     params_model: ClassVar[type[BaseModel]] = Params
 
     def _setup(self) -> None:
-        """`link` makes the cflib ``Crazyflie`` (default: cflib's own, its drivers installed)."""
+        """The constructor's ``link=`` makes the cflib ``Crazyflie`` for each connection (default: cflib's
+        own, its drivers installed, `_default_link`)."""
         p = self._p
         self.frame = LocalFrame(p.origin_lat, p.origin_lon, p.origin_heading)
         self.last_refusal = ""

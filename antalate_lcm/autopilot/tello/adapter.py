@@ -124,7 +124,8 @@ class TelloAutopilot(VehicleAdapter[Params, TelloLink]):
     params_model: ClassVar[type[BaseModel]] = Params
 
     def _setup(self) -> None:
-        """`link` opens the adapter's link at `connect` (`link.MemoryLink` in tests); default djitellopy."""
+        """The constructor's ``link=`` opens the link at `connect` (`link.MemoryLink` in tests; default
+        djitellopy's sockets, `_default_link`)."""
         p = self._p
         self.host: str = p.host
         self.home = FlatFrame(p.home_lat, p.home_lon)

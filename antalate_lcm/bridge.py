@@ -12,7 +12,7 @@ message (the MAC covers every byte), so it remembers what it has carried:
   ``antalate-bridge:ID:ORIGIN``, ORIGIN a hash of ``[bridge] site`` and the bus the message came
   from), so a Zenoh
   subscriber receives one copy when two bridges forward the same message
-  (:mod:`antalate_lcm.zenoh_bus`), and a bridge never forwards to a bus a copy that came from that
+  (:mod:`antalate_lcm.transports.zenoh`), and a bridge never forwards to a bus a copy that came from that
   very bus through another bridge (two bridges on one LAN: whichever thread is first, no echo);
 - bridges of one site (same ``[bridge] site``) elect the one that forwards Zenoh to their LAN (Zenoh
   liveliness tokens, lowest id alive), so a redundant gateway does not double messages on the LAN.
@@ -27,7 +27,7 @@ Whoever reaches the router or the LAN must not be able to stop, stall or amplify
   dropped; nothing one message does ends a direction's thread;
 - sizes are limited per channel and direction (``max_size``, ``[[bridge.size]]``), checked on the
   first fragment that names the size (the LAN is read from antalate's own socket, reassembled by
-  :class:`~antalate_lcm.lcm_datagram.Reassembler`) and by Zenoh itself before it reassembles; a
+  :class:`~antalate_lcm.transports.datagram.Reassembler`) and by Zenoh itself before it reassembles; a
   message is delivered only when its fragments carried all its bytes, so bytes out <= bytes in;
 - what it remembers is bounded in time *and* count (seen messages, rate-cap slots, Zenoh publishers),
   and each direction has its own thread, queue and budget: sending never holds the lock the other
@@ -57,11 +57,12 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from antalate_lcm.errors import ConfigError
-from antalate_lcm.lcm_datagram import MAX_MESSAGE_SIZE, Reassembler, channel_problem
-from antalate_lcm.lcm_url import bus_url_problem
 from antalate_lcm.ratelimit import RateLimitedLog
 from antalate_lcm.security import MemberProof
-from antalate_lcm.zenoh_bus import BRIDGE_MARK
+from antalate_lcm.transports import Connection, bus_url_problem, transport_for
+from antalate_lcm.transports.datagram import MAX_MESSAGE_SIZE, Reassembler, channel_problem
+from antalate_lcm.transports.udpm import Udpm
+from antalate_lcm.transports.zenoh import BRIDGE_MARK, ZenohLCM
 
 log = logging.getLogger("antalate.bridge")
 
@@ -348,14 +349,11 @@ class _LanLink:
     """A ``udpm://`` LAN: read from antalate's own socket (sizes checked on the first fragment, before
     any buffer is allocated), sent by liblcm (whose receive thread never starts: nothing subscribes)."""
 
-    def __init__(self, url: str, size_limit: Callable[[str], int], largest: int) -> None:
-        from antalate_lcm.bus import open_lcm
-        from antalate_lcm.udpm_socket import UdpmReceiver
-
+    def __init__(self, transport: Udpm, size_limit: Callable[[str], int], largest: int) -> None:
         reassembler = Reassembler(max_message_size=largest, size_limit=size_limit)
-        self.receiver = UdpmReceiver(url, reassembler)
+        self.receiver = transport.receiver(reassembler)
         try:
-            self._lcm = open_lcm(url)
+            self._lcm = transport.open()
         except Exception:
             self.receiver.close()
             raise
@@ -385,16 +383,13 @@ class _LanLink:
         self.receiver.close()
 
 
-def _open(url: str, direction_in: Direction, largest: int) -> Any:
-    from antalate_lcm.bus import open_lcm
-    from antalate_lcm.zenoh_bus import ZenohLCM
-
-    if url.startswith("zenoh://"):
-        # Zenoh drops a larger message itself, before reassembling it (+ room for key and attachment).
-        return ZenohLCM(url, max_message_size=largest + 4096)
-    if url.startswith("udpm://"):
-        return _LanLink(url, direction_in.size_limit, largest)
-    return open_lcm(url)  # memq://, file://: nobody outside the process writes there
+def _open(url: str, direction_in: Direction, largest: int) -> _LanLink | Connection:
+    transport = transport_for(url)
+    if isinstance(transport, Udpm):
+        return _LanLink(transport, direction_in.size_limit, largest)
+    # Zenoh drops a larger message itself, before reassembling it (+ room for key and attachment);
+    # memq://, file://: nobody outside the process writes there.
+    return transport.open(max_message_size=largest + 4096)
 
 
 class Bridge:
@@ -433,8 +428,6 @@ class Bridge:
         )
 
     def start(self) -> None:
-        from antalate_lcm.zenoh_bus import ZenohLCM
-
         try:
             for name in self.names:
                 direction_in = self.directions[name]

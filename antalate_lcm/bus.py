@@ -1,5 +1,9 @@
 """The bus: named LCM instances with typed publish/subscribe, read by the process's event loop.
 
+A bus is routed by its name only: its URL goes to :func:`antalate_lcm.transports.transport_for`,
+which picks the transport by the URL's scheme and opens it; the bus asks that transport what it
+needs to know (whether antalate reads it from its own socket, whether it stays in the process).
+
 How it uses LCM, and why (measured with lcm 1.5.3, see ``benchmarks/bus.py``):
 
 - One LCM subscription per exact channel, plus one shared ``.*`` only while a regex subscription
@@ -16,8 +20,8 @@ How it uses LCM, and why (measured with lcm 1.5.3, see ``benchmarks/bus.py``):
   handler can crash lcm 1.5.x.
 - An instance's descriptor is watched from its first subscription, so a publish-only bus never
   reads its own traffic.
-- udpm:// is read on the loop's own thread from a socket of our own (:mod:`antalate_lcm.udpm_socket`,
-  liblcm's wire format in :mod:`antalate_lcm.lcm_datagram`): one thread wake-up per message instead
+- udpm:// is read on the loop's own thread from a socket of our own (:mod:`antalate_lcm.transports.udpm`,
+  liblcm's wire format in :mod:`antalate_lcm.transports.datagram`): one thread wake-up per message instead
   of liblcm's two (its receive thread, then its notify pipe), and a datagram nobody here wants (a
   process's own publications loop back) costs less dropped here than in liblcm's thread: 1,000
   agents in a process read 40,000 datagrams a second to keep a few, and liblcm's thread took a
@@ -32,26 +36,22 @@ How it uses LCM, and why (measured with lcm 1.5.3, see ``benchmarks/bus.py``):
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import os
 import re
-import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
 
-import lcm
-
 from antalate_lcm._fastcodec import decoder
 from antalate_lcm.executor import Executor
-from antalate_lcm.lcm_url import open_failure
 from antalate_lcm.ratelimit import RateLimitedLog
 from antalate_lcm.topics import Message
-from antalate_lcm.udpm_socket import UdpmReceiver, UdpmSender
+from antalate_lcm.transports import Transport, transport_for
+from antalate_lcm.transports.udpm import Udpm, UdpmReceiver, UdpmSender
 
 log = logging.getLogger("antalate.bus")
 
@@ -89,43 +89,6 @@ class Subscription:
             self.decode = decoder(self.msg_type)
 
 
-@contextlib.contextmanager
-def captured_stderr() -> Iterator[list[str]]:
-    """Swallow what liblcm prints on fd 2 (opening sockets, reading a damaged log): our errors say it better.
-
-    The yielded list holds the swallowed lines once the block ends (for a debug log).
-    """
-    lines: list[str] = []
-    with tempfile.TemporaryFile(mode="w+b") as tmp:
-        saved = os.dup(2)
-        try:
-            os.dup2(tmp.fileno(), 2)
-            yield lines
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-            tmp.seek(0)
-            lines.extend(tmp.read().decode(errors="replace").splitlines())
-
-
-def open_lcm(url: str) -> lcm.LCM:
-    """Create an LCM instance, turning 'Couldn't create LCM' into a message that says the fix."""
-    try:
-        with captured_stderr() as noise:
-            return lcm.LCM(url)
-    except (RuntimeError, OSError):
-        log.debug("liblcm said: %s", " | ".join(noise))
-        # "no multicast route" only when the routing table says so; else what was wrong.
-        raise open_failure(url, noise) from None
-
-
-def open_zenoh(url: str) -> Any:
-    """A ``zenoh://`` bus: the same LCM-encoded messages over Zenoh (docs/wan.md)."""
-    from antalate_lcm.zenoh_bus import ZenohLCM
-
-    return ZenohLCM(url)
-
-
 #: Characters with a meaning in LCM's channel regular expressions.
 _REGEX_SPECIAL = re.compile(r"([.^$*+?()\[\]{}|\\])")
 
@@ -158,9 +121,12 @@ class _Link:
         own_reader: bool = False,
     ) -> None:
         self.url = url
-        self._lcm: Any = open_zenoh(url) if url.startswith("zenoh://") else open_lcm(url)
-        #: Read udpm:// from our own socket on the loop thread (None until the first subscription).
-        self._own_reader = own_reader and type(self._lcm) is lcm.LCM and url.startswith("udpm://")
+        transport: Transport = transport_for(url)
+        self._lcm: Any = transport.open()
+        #: The udpm transport, when this link reads it from our own socket on the loop thread.
+        self._udpm = transport if own_reader and isinstance(transport, Udpm) else None
+        self._own_reader = self._udpm is not None
+        #: The receive socket (None until the first subscription).
         self._receiver: UdpmReceiver | None = None
         #: Sends the short messages when the link reads its own socket (None until the first publish).
         self._sender: UdpmSender | None = None
@@ -187,12 +153,11 @@ class _Link:
         self._lock = threading.Lock()
         self._executor = executor
         self._watched: tuple[Executor, int] | None = None
-        #: liblcm's udpm and memq providers keep their notify pipe readable exactly while a message
-        #: is queued, so a readable descriptor means handle() returns at once.
-        self._ready_means_message = type(self._lcm) is lcm.LCM and url.split(":", 1)[0] in ("udpm", "memq")
+        #: A readable descriptor means handle() returns at once (liblcm's udpm and memq pipes).
+        self._ready_means_message = transport.ready_means_message
         #: memq:// is private to this instance: a datagram nobody here subscribes to goes nowhere.
         #: (An agent's in-process bus carries TELEMETRY at 10 Hz that no node of the process reads.)
-        self._private = type(self._lcm) is lcm.LCM and url.startswith("memq://")
+        self._private = transport.in_process
         #: memq:// messages published on the loop thread, waiting for their one delivering handle.
         self._pending: list[tuple[_Route | None, str, bytes, bool]] = []
         self._decode_log = decode_log
@@ -278,10 +243,8 @@ class _Link:
         self._own_filter()
 
     def _open_receiver(self) -> UdpmReceiver:
-        try:
-            return UdpmReceiver(self.url)
-        except OSError as exc:
-            raise open_failure(self.url, [f"receive socket: {exc}"]) from None
+        assert self._udpm is not None
+        return self._udpm.receiver()
 
     def remove(self, sub: Subscription) -> None:
         sub.active = False
@@ -351,7 +314,8 @@ class _Link:
     def _open_sender(self) -> UdpmSender:
         with self._lock:
             if self._sender is None:
-                self._sender = UdpmSender(self.url)
+                assert self._udpm is not None
+                self._sender = self._udpm.sender()
                 self._own_filter()
             return self._sender
 

@@ -28,11 +28,11 @@ from pydantic import (
 
 from antalate_lcm.errors import ConfigError
 from antalate_lcm.geo import FlatFrame
-from antalate_lcm.lcm_url import EXAMPLES as LCM_URL_EXAMPLES
-from antalate_lcm.lcm_url import bus_url_problem
 from antalate_lcm.safety.geofence import Geofence
 from antalate_lcm.strict import describe, dotted, find_datetime
 from antalate_lcm.topics import MESSAGE_TYPES, TOPICS, TopicSpec
+from antalate_lcm.transports import EXAMPLES as LCM_URL_EXAMPLES
+from antalate_lcm.transports import bus_url_problem
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -30,7 +30,7 @@ class ConfigError(AntalateError):
 
 
 class BusUnavailable(AntalateError):
-    """liblcm could not create an instance for a bus URL; says why when that is known."""
+    """A bus URL could not be opened (by liblcm or antalate's own transport); says why when that is known."""
 
     def __init__(self, url: str, reason: str) -> None:
         self.url = url
@@ -38,10 +38,19 @@ class BusUnavailable(AntalateError):
         super().__init__(f"cannot open the LCM bus {url!r}: {reason}")
 
 
+class InvalidBusUrl(BusUnavailable, ValueError):
+    """A bus URL that breaks its transport's rules (`antalate_lcm.transports.transport_for`); the
+    reason says what was expected."""
+
+
+class UnknownTransport(InvalidBusUrl):
+    """A bus URL whose scheme no transport serves; the reason names the schemes that are known."""
+
+
 class MulticastUnavailable(BusUnavailable):
     """LCM could not open a UDP multicast socket because this host has no route to the group.
 
-    Raised only when the routing table says so (`antalate_lcm.lcm_url.open_failure`): its fix
+    Raised only when the routing table says so (`antalate_lcm.transports.udpm.Udpm.failure`): its fix
     would be the wrong advice for a bad URL or a busy socket.
     """
 

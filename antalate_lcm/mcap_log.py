@@ -151,7 +151,7 @@ def export(lcm_path: Path, out_path: Path, *, raw: bool = False) -> McapLogWrite
     as it ends :func:`antalate_lcm.analysis.read_log`."""
     import lcm
 
-    from antalate_lcm.bus import captured_stderr
+    from antalate_lcm.transports import captured_stderr
 
     try:
         log = lcm.EventLog(str(lcm_path), "r")

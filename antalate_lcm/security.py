@@ -30,6 +30,7 @@ from typing import Any
 
 from antalate_lcm._fastcodec import encode as fast_encode
 from antalate_lcm.topics import Message  # every antalate message starts with header_t (mac_len, mac)
+from antalate_lcm.transports import transport_for
 
 log = logging.getLogger("antalate.security")
 
@@ -372,9 +373,9 @@ class MemberProof:
 
 
 def network_reachable(url: str) -> bool:
-    """Whether a bus URL can carry datagrams from other hosts (anything but memq:// and file://)."""
-    scheme = url.split("://", 1)[0].lower()
-    return scheme not in ("memq", "file")
+    """Whether a bus URL can carry datagrams from other hosts (its transport says: all but memq://
+    and file://). A URL no transport serves is an error, never a guess either way."""
+    return transport_for(url).network_reachable
 
 
 def default_state_dir() -> Path:

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.tools import codegen
+from antalate_lcm.transports import transport_for
 
 JDK_HINT = "install a JDK (Debian/Ubuntu: sudo apt-get install default-jdk-headless)"
 
@@ -106,8 +107,7 @@ def cmd_spy(args: argparse.Namespace) -> int:
         raise AntalateError(
             f"no bus named {args.bus!r} in {config.source}; declared: {', '.join(config.buses)}"
         )
-    if url.startswith("zenoh://"):
-        from antalate_lcm.lcm_url import ZENOH_NOT_LCM
-
-        raise AntalateError(f"cannot spy on {url}: {ZENOH_NOT_LCM}")
+    transport = transport_for(url)
+    if transport.not_lcm:
+        raise AntalateError(f"cannot spy on {url}: {transport.not_lcm}")
     return run_spy(url)

@@ -113,7 +113,7 @@ def rcvbuf_errors() -> int:
     """Datagrams this network namespace's kernel dropped for a full receive buffer (``Udp:
     RcvbufErrors`` of /proc/net/snmp). A socket's own drop count (below) also counts what its filter
     dropped: an agent process's socket drops the process's own datagrams on purpose
-    (antalate_lcm/udpm_socket.py), so the agents' overflows are these less the listener's."""
+    (antalate_lcm/transports/udpm.py), so the agents' overflows are these less the listener's."""
     lines = [
         line.split() for line in Path("/proc/net/snmp").read_text().splitlines() if line.startswith("Udp:")
     ]
@@ -180,7 +180,7 @@ def run(
     import lcm
 
     from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
-    from antalate_lcm.udpm_socket import UdpmReceiver
+    from antalate_lcm.transports.udpm import UdpmReceiver
 
     cfg = tmp / "bench.toml"
     text = f'[agent]\nname = "b"\n[buses]\nlan = "{URL}"\n[hlc]\nautopilot = "sim"\n'
@@ -209,7 +209,7 @@ def run(
     started = time.perf_counter()
     proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=tree)
     lc = lcm.LCM(URL)  # to send the TAKEOFF
-    # Listening on antalate's own udpm reader (antalate_lcm/udpm_socket.py): no liblcm receive thread
+    # Listening on antalate's own udpm reader (antalate_lcm/transports/udpm.py): no liblcm receive thread
     # competing with the agents for the two cores; the kernel's drop count of this socket says
     # whether a rate below target was the agents' or this listener's.
     receiver = UdpmReceiver(URL)

@@ -17,7 +17,8 @@ from hypothesis import strategies as st
 from antalate_lcm.bridge import Bridge, BridgeConfig, Direction, Memory, Throttle, load_bridge_config
 from antalate_lcm.errors import ConfigError
 from antalate_lcm.security import MemberProof
-from antalate_lcm.zenoh_bus import BRIDGE_MARK, _Group
+from antalate_lcm.transports.zenoh import BRIDGE_MARK
+from antalate_lcm.transports.zenoh.groups import _Group
 from tests import REPO
 from tests.netns import NetNamespace
 

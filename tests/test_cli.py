@@ -282,9 +282,10 @@ def test_no_multicast_route_message_only_when_the_route_is_missing() -> None:
     got = json.loads(proc.stdout)
     assert got[urls[0]].startswith("MulticastUnavailable: ") and "no route for multicast" in got[urls[0]]
     assert got[urls[1]] == "opened"
-    assert got[urls[2]].startswith("BusUnavailable: ") and "a port 1-65535" in got[urls[2]]
-    assert got[urls[3]].startswith("BusUnavailable: ") and "multicast group" in got[urls[3]]
-    assert got[urls[4]].startswith("BusUnavailable: ") and "not 'http://'" in got[urls[4]]
+    # A malformed URL and an unknown scheme are refused by the registry (both a BusUnavailable).
+    assert got[urls[2]].startswith("InvalidBusUrl: ") and "a port 1-65535" in got[urls[2]]
+    assert got[urls[3]].startswith("InvalidBusUrl: ") and "multicast group" in got[urls[3]]
+    assert got[urls[4]].startswith("UnknownTransport: ") and "not 'http://'" in got[urls[4]]
     assert got[urls[5]].startswith("BusUnavailable: ") and "No such file or directory" in got[urls[5]]
     assert got["routed group, liblcm refused"] == "BusUnavailable"
 

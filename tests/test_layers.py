@@ -40,9 +40,8 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
                 "topics",
                 "validation",
                 "geo",
-                "lcm_url",
-                "lcm_datagram",
-                "udpm_socket",
+                "transports",
+                "lcm_datagram",  # deprecated re-export of transports.datagram, one release
                 "strict",
                 "plugins",
                 "security",
@@ -58,7 +57,6 @@ LAYERS: list[tuple[str, frozenset[str]]] = [
         "core",
         frozenset(
             {
-                "zenoh_bus",
                 "executor",
                 "simclock",
                 "bus",

@@ -1,4 +1,4 @@
-"""LCM's udpm wire format read without liblcm (antalate_lcm/lcm_datagram.py): every hostile datagram
+"""LCM's udpm wire format read without liblcm (antalate_lcm/transports/datagram.py): every hostile datagram
 is dropped and counted, never raised, and partial messages stay bounded."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import struct
 
 import pytest
 
-from antalate_lcm.lcm_datagram import (
+from antalate_lcm.transports.datagram import (
     MAGIC_LONG,
     MAX_MESSAGE_SIZE,
     Reassembler,

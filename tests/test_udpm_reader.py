@@ -37,7 +37,7 @@ import json, os, socket, struct, sys, time
 import lcm
 from pathlib import Path
 from antalate_lcm.bus import Bus
-from antalate_lcm.lcm_datagram import short_datagram
+from antalate_lcm.transports.datagram import short_datagram
 
 A = sys.argv[1]
 out = {}

@@ -18,7 +18,7 @@ from antalate_lcm.config import load_config  # noqa: E402
 from antalate_lcm.errors import ConfigError  # noqa: E402
 from antalate_lcm.msgs import mc_state_t, telemetry_t  # noqa: E402
 from antalate_lcm.runtime.router import router_config  # noqa: E402
-from antalate_lcm.zenoh_bus import ZenohLCM, channel_key, key_channel, literal_channel  # noqa: E402
+from antalate_lcm.transports.zenoh import ZenohLCM, channel_key, key_channel, literal_channel  # noqa: E402
 from tests import REPO  # noqa: E402
 from tests.polling import wait_for  # noqa: E402
 
@@ -329,9 +329,9 @@ def test_the_lcm_tools_refuse_a_zenoh_bus_with_the_way_out(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """lcm-logger and lcm-spy speak LCM only: `antalate log`/`spy` on a zenoh bus say to bridge it."""
-    from antalate_lcm.bus import open_lcm
     from antalate_lcm.cli import main
     from antalate_lcm.errors import BusUnavailable
+    from antalate_lcm.transports import open_lcm
 
     with pytest.raises(BusUnavailable, match="antalate bridge"):
         open_lcm("zenoh://?connect=tcp/127.0.0.1:7447")
@@ -385,7 +385,7 @@ def test_the_wan_example_configs_load(name: str) -> None:
 def test_a_message_two_bridges_forwarded_is_delivered_once_and_plain_repeats_are_not_touched(
     router: Router,
 ) -> None:
-    from antalate_lcm.zenoh_bus import BRIDGE_MARK
+    from antalate_lcm.transports.zenoh import BRIDGE_MARK
 
     pub, z = ZenohLCM(url(router)), ZenohLCM(url(router))
     try:

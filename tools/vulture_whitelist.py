@@ -85,8 +85,6 @@ _.HLC_TAKEOFF
 _.emergency  # Tello extra: docs/tello.md
 _.answering  # MemoryLink.answering: docs/ardupilot.md, users' tests without SITL
 _.push_state  # tello MemoryLink: the peer's state lines (docs/tello.md, the Tello emulator's memory mode)
-_.short_datagram  # lcm_datagram: forge LCM datagrams in users' tests of hostile input (docs/lan.md)
-_.fragments  # lcm_datagram: the same for fragmented messages (docs/lan.md)
 _.damaged_datagrams  # Bus: the own udpm reader's drop count beside decode_errors() (docs/lan.md)
 
 # --- cflib's CRTPDriver interface: cflib's link thread and scanner call these on our memory:// driver.

@@ -25,11 +25,11 @@ from antalate_lcm.analysis.model import (
     SwarmRecord,
     TelemetrySample,
 )
-from antalate_lcm.bus import captured_stderr
 from antalate_lcm.errors import AntalateError
 from antalate_lcm.mcap_log import McapEvents, is_mcap, read_events
 from antalate_lcm.msgs import direction_cmd_t, hlc_error_t, hlc_state_t, mc_state_t, payload_t, telemetry_t
 from antalate_lcm.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE, TOPICS, route
+from antalate_lcm.transports import captured_stderr
 from antalate_lcm.vocabulary import HlcState, McState, name_of
 
 #: Every LCM log event starts with this sync word (big-endian), so a file that does not is no log.

@@ -20,6 +20,7 @@ from antalate_lcm.errors import ConfigError, PluginNotFound
 from antalate_lcm.msgs import behavior_state_t, mc_state_t
 from antalate_lcm.plugins import BEHAVIORS, load_plugin
 from antalate_lcm.strict import StrictError, validate_strict
+from antalate_lcm.transports import transport_for
 from antalate_lcm.vocabulary import McState, names
 
 MC_STATES: tuple[str, ...] = names(McState)
@@ -74,7 +75,7 @@ def check_peer_buses(config: Config, *, whole_swarm: bool, plans: Sequence[BmaPl
     for topic in PEER_TOPICS:
         bus = config.topic_buses(topic)[0]
         url = config.buses[bus]
-        if url.split(":", 1)[0] == "memq" and not whole_swarm:
+        if transport_for(url).in_process and not whole_swarm:
             raise ConfigError(
                 config.source,
                 f"buses.{bus}",

@@ -168,7 +168,7 @@ def cmd_log(args: argparse.Namespace) -> int:
     """
     import time
 
-    from antalate_lcm.bus import open_lcm
+    from antalate_lcm.transports import open_lcm
 
     config = load_config(args.config)
     bus = args.bus or ("lan" if "lan" in config.buses else config.topics.default_bus)

@@ -2,7 +2,7 @@
 
 It is eclipse-zenoh's router mode, with what antalate's buses assume: no multicast scouting (a
 router at a site must not pull in whatever Zenoh nodes answer on its LAN) and the same short link
-lease as the buses (:data:`antalate_lcm.zenoh_bus.DEFAULT_LEASE_MS`), so a cut link is noticed
+lease as the buses (:data:`antalate_lcm.transports.zenoh.DEFAULT_LEASE_MS`), so a cut link is noticed
 and re-made quickly.
 
 Who may use it (issue 29: anyone who reached the router could listen to every position and command
@@ -33,8 +33,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from antalate_lcm.errors import AntalateError
-from antalate_lcm.lcm_url import zenoh_endpoints_problem, zenoh_plain_endpoints
 from antalate_lcm.runtime.launch import wait_for_stop
+from antalate_lcm.transports.zenoh import zenoh_endpoints_problem, zenoh_plain_endpoints
 
 if TYPE_CHECKING:  # the zenoh extra is optional: imported where used
     import zenoh
@@ -60,7 +60,7 @@ ACL_MESSAGES = (
 
 def access_control(prefixes: list[str]) -> dict[str, object]:
     """Zenoh's ``access_control``: deny by default, allow every message under each prefix and its
-    election groups (``PREFIX-groups``, :meth:`antalate_lcm.zenoh_bus.ZenohLCM.join_group`)."""
+    election groups (``PREFIX-groups``, :meth:`antalate_lcm.transports.zenoh.ZenohLCM.join_group`)."""
     keys = [k for p in prefixes for k in (f"{p}/**", f"{p}-groups/**")]
     return {
         "enabled": True,
@@ -91,7 +91,7 @@ def router_config(
 ) -> zenoh.Config:
     import zenoh
 
-    from antalate_lcm.zenoh_bus import tls_settings
+    from antalate_lcm.transports.zenoh import tls_settings
 
     config: zenoh.Config = zenoh.Config()  # zenoh's stub returns typing.Self, Any before 3.11
     config.insert_json5("mode", json.dumps("router"))
@@ -113,7 +113,7 @@ def router_config(
 
 def _users_file(path: str) -> str:
     """The users file made absolute, checked for ``user:password`` lines (Zenoh would only log)."""
-    from antalate_lcm.zenoh_bus import readable_file
+    from antalate_lcm.transports.zenoh import readable_file
 
     p = readable_file(path, "the users file")
     for n, line in enumerate(Path(p).read_text().splitlines(), 1):
@@ -183,7 +183,7 @@ def run_router(
 
 
 def cmd_router(args: argparse.Namespace) -> int:
-    from antalate_lcm.zenoh_bus import DEFAULT_LEASE_MS
+    from antalate_lcm.transports.zenoh import DEFAULT_LEASE_MS
 
     listen = args.listen or [DEFAULT_TLS_LISTEN if args.tls_cert else DEFAULT_LISTEN]
     return run_router(

@@ -9,9 +9,8 @@ from __future__ import annotations
 import json
 import sys
 
-from antalate_lcm.bus import open_lcm
 from antalate_lcm.errors import AntalateError
-from antalate_lcm.lcm_url import open_failure
+from antalate_lcm.transports import open_failure, open_lcm
 
 
 def main(urls: list[str]) -> dict[str, str]:

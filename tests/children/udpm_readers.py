@@ -20,8 +20,8 @@ from typing import Any
 import lcm
 
 from antalate_lcm.bus import Bus
-from antalate_lcm.lcm_datagram import fragments, short_datagram
 from antalate_lcm.msgs import telemetry_t
+from antalate_lcm.transports.datagram import fragments, short_datagram
 
 
 def until(cond: Callable[[], bool], timeout: float = 5.0) -> bool:

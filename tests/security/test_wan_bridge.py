@@ -26,8 +26,8 @@ import pytest
 import tomli_w
 
 from antalate_lcm.bridge import origin_tag
-from antalate_lcm.lcm_datagram import fragments, short_datagram
-from antalate_lcm.zenoh_bus import BRIDGE_MARK
+from antalate_lcm.transports.datagram import fragments, short_datagram
+from antalate_lcm.transports.zenoh import BRIDGE_MARK
 from tests import REPO
 from tests.conftest import _netns_reason
 from tests.jsonl import JsonLinesProcess

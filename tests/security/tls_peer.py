@@ -24,7 +24,7 @@ from typing import Any
 import zenoh
 
 from antalate_lcm.runtime.router import router_config
-from antalate_lcm.zenoh_bus import read_credentials, tls_settings
+from antalate_lcm.transports.zenoh import read_credentials, tls_settings
 
 
 class Peer:

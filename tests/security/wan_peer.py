@@ -29,8 +29,8 @@ from typing import Any
 
 import zenoh
 
-from antalate_lcm.lcm_datagram import Reassembler, short_datagram
-from antalate_lcm.udpm_socket import udpm_socket
+from antalate_lcm.transports.datagram import Reassembler, short_datagram
+from antalate_lcm.transports.udpm import udpm_socket
 
 LANS = {"a": ("239.255.76.67", 7667), "b": ("239.255.76.69", 7669), "c": ("239.255.76.71", 7671)}
 PROBE = "probe/WAN"

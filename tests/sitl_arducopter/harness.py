@@ -154,6 +154,7 @@ class SitlVehicle:
     agent: AgentProcesses
     nodes: tuple[str, ...]
     booted_at: float
+    workdir: Path
 
     def start(self, node: str) -> None:
         """Start ``node`` ("agent", or "hlc", "mc", "bma" each in its own process)."""
@@ -172,6 +173,23 @@ class SitlVehicle:
         self.agent.stop()
         stop_process(self.sitl)
         stop_process(self.gcs.proc)
+
+    def tails(self, lines: int = 25) -> str:
+        """The last `lines` of each of this vehicle's logs (the agent's nodes, the firmware's own)."""
+        out = []
+        for path in sorted(self.workdir.glob("*.log")):  # the agent's nodes write theirs here too
+            text = path.read_text(errors="replace").splitlines()
+            out.append(f"--- {self.name}: {path.name}, last {lines} lines ---\n" + "\n".join(text[-lines:]))
+        return "\n".join(out)
+
+    @contextlib.contextmanager
+    def explained(self) -> Iterator[None]:
+        """An assertion failing inside says what this vehicle's logs ended with: CI keeps no files, and
+        a failure without them cannot be told apart (refused arming, a failsafe, a starved simulator)."""
+        try:
+            yield
+        except AssertionError as e:
+            raise AssertionError(f"{e}\n{self.tails()}") from None
 
 
 class Copter(SitlVehicle):

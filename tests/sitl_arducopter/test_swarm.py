@@ -89,9 +89,10 @@ def test_three_sitl_copters_fly_dovrat_swarm_and_come_home(swarm: list[Copter], 
     sent = time.monotonic()
     for name in NAMES:
         command(probe, O.TAKEOFF, agent=name)
-    for name in NAMES:
-        wait_state(probe, "mc", agent=name, state=M.MISSION, timeout=180, since=start)
-        wait_state(probe, "hlc", agent=name, state=H.AIRBORNE, timeout=60, since=start)
+    for c in swarm:
+        with c.explained():
+            wait_state(probe, "mc", agent=c.name, state=M.MISSION, timeout=180, since=start)
+            wait_state(probe, "hlc", agent=c.name, state=H.AIRBORNE, timeout=60, since=start)
     print(f"\nswarm: all three AIRBORNE {time.monotonic() - sent:.1f} s after TAKEOFF")
     begin = [c.gcs.state() for c in swarm]
     time.sleep(8.0)  # dovrat_swarm flies them: forward along the heading, turning without a peer ahead
@@ -104,9 +105,10 @@ def test_three_sitl_copters_fly_dovrat_swarm_and_come_home(swarm: list[Copter], 
         command(probe, O.RTL, agent=name)
     for name in NAMES:
         wait_state(probe, "mc", agent=name, state=M.RTL, timeout=15, since=mark)
-    for name in NAMES:
-        wait_state(probe, "mc", agent=name, state=M.STANDBY, timeout=120, since=mark)
-        wait_state(probe, "hlc", agent=name, state=H.READY, timeout=15, since=mark)
+    for c in swarm:
+        with c.explained():
+            wait_state(probe, "mc", agent=c.name, state=M.STANDBY, timeout=120, since=mark)
+            wait_state(probe, "hlc", agent=c.name, state=H.READY, timeout=15, since=mark)
     for c in swarm:
         assert wait_for(partial(disarmed, c), timeout=20, interval=0.3), c.name
         down = c.gcs.state()

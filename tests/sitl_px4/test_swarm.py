@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from antalate_lcm import geo
 from antalate_lcm.msgs import hlc_state_t as H
@@ -45,6 +46,11 @@ def swarm_command(probe: Probe, cmd: int, seq: list[int] = [0]) -> None:  # noqa
 
 def in_mode(vehicle: Px4, mode: str) -> bool:
     return bool(vehicle.state()["mode"] == mode)
+
+
+def prearm_ok(vehicle: Px4) -> bool:
+    """PX4's HEARTBEAT says STANDBY: its pre-flight checks pass (UNINIT while they fail)."""
+    return bool(vehicle.state().get("system_status") == mav.MAV_STATE_STANDBY)
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -89,14 +95,23 @@ def test_three_px4s_fly_dovrat_swarm_and_come_home(swarm: list[Px4], sitl_probe:
     swarm channel brings each home, landed and disarmed, its MC in STANDBY."""
     probe = sitl_probe
     for v in swarm:
-        wait_state(probe, "mc", M.STANDBY, timeout=120, agent=v.name)
+        with v.explained():
+            wait_state(probe, "mc", M.STANDBY, timeout=120, agent=v.name)
     TIMINGS["boot_to_standby_last"] = time.monotonic() - swarm[-1].booted_at
+    # The swarm command once every PX4 passes its own pre-arm checks, as an operator would send it. An
+    # agent told to take off earlier waits up to 120 s for them (test_flight.py shows it); here three
+    # EKFs align on a loaded machine at their own pace, and that pace is not what this test measures.
+    for v in swarm:
+        with v.explained():
+            assert wait_for(partial(prearm_ok, v), timeout=240, interval=1.0), v.state()
+    TIMINGS["boot_to_prearm_ok_last"] = time.monotonic() - swarm[-1].booted_at
     mark = probe.mark()
     sent = time.monotonic()
     swarm_command(probe, O.TAKEOFF)
     for v in swarm:
-        wait_state(probe, "hlc", H.AIRBORNE, timeout=150, since=mark, agent=v.name)
-        wait_state(probe, "mc", M.MISSION, timeout=30, since=mark, agent=v.name)
+        with v.explained():
+            wait_state(probe, "hlc", H.AIRBORNE, timeout=150, since=mark, agent=v.name)
+            wait_state(probe, "mc", M.MISSION, timeout=30, since=mark, agent=v.name)
     TIMINGS["takeoff_to_all_airborne"] = time.monotonic() - sent
     for v in swarm:  # the behavior's first set-points, the stream's lead, the OFFBOARD switch
         assert wait_for(partial(in_mode, v, "OFFBOARD"), timeout=15, interval=0.2), v.state()
@@ -118,7 +133,8 @@ def test_three_px4s_fly_dovrat_swarm_and_come_home(swarm: list[Px4], sitl_probe:
     mark = probe.mark()
     swarm_command(probe, O.RTL)
     for v in swarm:
-        wait_state(probe, "mc", M.STANDBY, timeout=150, since=mark, agent=v.name)
+        with v.explained():
+            wait_state(probe, "mc", M.STANDBY, timeout=150, since=mark, agent=v.name)
 
         def disarmed(v: Px4 = v) -> dict[str, Any] | None:
             s = v.state()

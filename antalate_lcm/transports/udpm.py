@@ -1,4 +1,7 @@
-"""Receiving a ``udpm://`` bus on the event loop's own thread, without liblcm's receive thread.
+"""The ``udpm://`` transport (and liblcm's multi-port ``mpudpm://``): LCM over UDP multicast on a LAN.
+
+liblcm sends (and fragments) a udpm bus's messages; antalate receives them itself, on the event loop's
+own thread, without liblcm's receive thread.
 
 liblcm reads a udpm socket on a thread of its own, queues each datagram and wakes the reader through
 a pipe: two thread wake-ups per message, the second one in Python, and about 6 µs of that thread per
@@ -25,12 +28,102 @@ process's telemetry and state.
 from __future__ import annotations
 
 import ctypes
+import errno
+import ipaddress
 import socket
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import ClassVar
 
-from antalate_lcm.lcm_datagram import MAX_CHANNEL_LENGTH, SHORT_MAGIC_BYTES, Reassembler
-from antalate_lcm.lcm_url import parse_lcm_url
+from antalate_lcm.errors import AntalateError, MulticastUnavailable
+from antalate_lcm.transports.base import LcmUrl, OptionCheck, Transport, int_option, port_problem
+from antalate_lcm.transports.datagram import MAX_CHANNEL_LENGTH, SHORT_MAGIC_BYTES, Reassembler
+
+DEFAULT_UDPM = "239.255.76.67:7667"
+_MULTICAST = ipaddress.IPv4Network("224.0.0.0/4")
+_TTL = int_option("ttl", 0, 255, "an integer 0-255 (0 = this host only, 1 = the local network)")
+_RECV_BUF = int_option("recv_buf_size", 1, 2**31 - 1, "a size in bytes, 1 to 2147483647")
+
+
+class _Multicast(Transport):
+    """What udpm and mpudpm share: a multicast ``GROUP:PORT`` and the routing table's say on failure."""
+
+    @classmethod
+    def check(cls, u: LcmUrl) -> LcmUrl:
+        network = u.network or DEFAULT_UDPM
+        group, sep, port = network.partition(":")
+        try:
+            address = ipaddress.IPv4Address(group)
+        except ValueError:
+            raise ValueError(
+                f"a dotted IPv4 multicast group (224.0.0.0 to 239.255.255.255) before the port, not {group!r}"
+            ) from None
+        if address not in _MULTICAST:
+            raise ValueError(f"a multicast group (224.0.0.0/4); {group} is a unicast address")
+        if not sep:
+            raise ValueError(f"a port after the group ({group}:7667)")
+        problem = port_problem(port, "after the group")
+        if problem:
+            raise ValueError(problem)
+        return LcmUrl(u.url, u.scheme, u.network, u.options, str(address), int(port))
+
+    def failure(self, liblcm_said: Sequence[str] = ()) -> AntalateError:
+        """ "No multicast route" (with the fix) only when the routing table really has none: that fix
+        would be the wrong advice for a busy socket."""
+        if multicast_route_missing(self.url):
+            return MulticastUnavailable(self.url.url)
+        return super().failure(liblcm_said)
+
+
+class Udpm(_Multicast):
+    """UDP multicast on the LAN (liblcm's ``lcm_udpm.c``): read from a socket of antalate's own
+    (:class:`UdpmReceiver`), short messages sent from one (:class:`UdpmSender`), the rest by liblcm."""
+
+    scheme = "udpm"
+    options: ClassVar[dict[str, OptionCheck]] = {"ttl": _TTL, "recv_buf_size": _RECV_BUF}
+    ready_means_message = True
+
+    def receiver(self, reassembler: Reassembler | None = None) -> UdpmReceiver:
+        """A socket of antalate's own receiving this bus (the error says the fix when it cannot open)."""
+        try:
+            return UdpmReceiver(self.url.url, reassembler)
+        except OSError as exc:
+            raise self.failure([f"receive socket: {exc}"]) from None
+
+    def sender(self) -> UdpmSender:
+        return UdpmSender(self.url.url)
+
+
+class Mpudpm(_Multicast):
+    """liblcm's multi-port udpm (``lcm_mpudpm.c``): channels spread over ``nports`` ports; liblcm's own."""
+
+    scheme = "mpudpm"
+    options: ClassVar[dict[str, OptionCheck]] = {
+        "ttl": _TTL,
+        "recv_buf_size": _RECV_BUF,
+        "nports": int_option("nports", 1, 65535, "a number of ports >= 1"),
+    }
+
+    @classmethod
+    def check(cls, u: LcmUrl) -> LcmUrl:
+        u = super().check(u)
+        if u.port + int(u.options.get("nports", "1")) - 1 > 65535:
+            raise ValueError(f"ports up to 65535: {u.port} + nports={u.options['nports']} goes beyond")
+        return u
+
+
+def multicast_route_missing(u: LcmUrl) -> bool:
+    """Whether this host has no route to ``u``'s multicast group (what liblcm's test connect() hits).
+
+    A UDP connect() sends nothing: it only looks the destination up in the routing table.
+    """
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        try:
+            sock.connect((u.host, u.port))
+        except OSError as exc:
+            return exc.errno in (errno.ENETUNREACH, errno.EHOSTUNREACH, errno.ENODEV)
+    return False
+
 
 #: The largest UDP payload; liblcm reads into 65,535 bytes too.
 _DATAGRAM = 65_535
@@ -46,9 +139,7 @@ _SO_ATTACH_FILTER, _SO_DETACH_FILTER = 26, 27
 
 def udpm_socket(url: str) -> socket.socket:
     """A non-blocking socket receiving the group of a ``udpm://`` URL, as liblcm's receive socket."""
-    u = parse_lcm_url(url)
-    if u.provider != "udpm":
-        raise ValueError(f"not a udpm:// URL: {url!r}")
+    u = Udpm.parse(url)
     group, port = u.host, u.port
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
@@ -204,9 +295,7 @@ class UdpmSender:
     """
 
     def __init__(self, url: str) -> None:
-        u = parse_lcm_url(url)
-        if u.provider != "udpm":
-            raise ValueError(f"not a udpm:// URL: {url!r}")
+        u = Udpm.parse(url)
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             # As liblcm's send socket: the URL's TTL (0 = this host only) and loopback on, so other

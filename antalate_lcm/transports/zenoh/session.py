@@ -1,6 +1,6 @@
 """The ``zenoh://`` transport: antalate's LCM-encoded messages over Zenoh, past the first router.
 
-It offers the small part of ``lcm.LCM`` the bus uses -- ``publish``, ``subscribe`` (a channel regex
+:class:`Zenoh` checks its URLs (:mod:`.config`) and opens a :class:`ZenohLCM`. That offers the small part of ``lcm.LCM`` the bus uses -- ``publish``, ``subscribe`` (a channel regex
 matched whole, as liblcm does) with ``set_queue_capacity``, ``unsubscribe``, ``handle``,
 ``handle_timeout`` and ``fileno`` -- so :class:`antalate_lcm.bus.Bus` drives it exactly like an LCM
 instance, and so would an event loop waiting on ``fileno()``.
@@ -35,9 +35,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import hashlib
-import json
 import logging
-import os
 import re
 import select
 import socket
@@ -45,13 +43,13 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from antalate_lcm.errors import BusUnavailable
-from antalate_lcm.lcm_url import LcmUrl, parse_lcm_url
 from antalate_lcm.ratelimit import RateLimitedLog, TokenBucket
-from antalate_lcm.security import MemberProof
+from antalate_lcm.transports.base import Connection, LcmUrl, Transport
+from antalate_lcm.transports.zenoh.config import OPTIONS, ZENOH_NOT_LCM, check_url, zenoh_config
+from antalate_lcm.transports.zenoh.groups import GroupProof, _Group
 
 log = logging.getLogger("antalate.zenoh")
 
@@ -61,8 +59,6 @@ LcmHandler = Callable[..., None]
 BRIDGE_MARK = b"antalate-bridge:"
 #: How long identical forwarded bytes on one channel count as the same message (s).
 DEDUP_WINDOW = 2.0
-#: Default link lease (ms): how long a silent link is kept before reconnecting.
-DEFAULT_LEASE_MS = 3000
 #: LCM's default queue capacity per subscription (the bus raises it).
 DEFAULT_CAPACITY = 30
 #: Publications of a channel before it gets a declared publisher of its own.
@@ -76,6 +72,22 @@ DECLARE_BURST = 64.0
 MAX_COUNTED = 4096
 #: Forwarded messages each subscription remembers at most against duplicates (oldest forgotten first).
 MAX_SEEN = 65_536
+
+
+class Zenoh(Transport):
+    """antalate's own: one Zenoh key ``PREFIX/CHANNEL`` per channel, through routers (docs/wan.md)."""
+
+    scheme = "zenoh"
+    options = OPTIONS
+    not_lcm = ZENOH_NOT_LCM
+
+    @classmethod
+    def check(cls, u: LcmUrl) -> LcmUrl:
+        return check_url(u)
+
+    def open(self, *, max_message_size: int | None = None) -> Connection:
+        return ZenohLCM(self.url.url, max_message_size=max_message_size)
+
 
 _SPECIAL = ".^$*+?()[]{}|\\"
 _LITERAL = re.compile(r"(?:[^.^$*+?()\[\]{}|\\]|\\[.^$*+?()\[\]{}|\\])*")
@@ -113,89 +125,6 @@ def literal_channel(regex: str) -> str | None:
     return re.sub(r"\\(.)", r"\1", regex)
 
 
-def zenoh_config(u: LcmUrl, *, max_message_size: int | None = None) -> Any:
-    """A ``zenoh.Config`` for a parsed ``zenoh://`` URL. Multicast scouting is off unless ``scout=1``:
-    a bus reaches exactly the endpoints its config names, never whatever answers on the LAN."""
-    import zenoh
-
-    opts = u.options
-    config = zenoh.Config.from_file(opts["config"]) if "config" in opts else zenoh.Config()
-    if "mode" in opts:
-        config.insert_json5("mode", json.dumps(opts["mode"]))
-    elif "config" not in opts:
-        config.insert_json5(
-            "mode", json.dumps("client" if "connect" in opts and "listen" not in opts else "peer")
-        )
-    for option in ("connect", "listen"):
-        if option in opts:
-            config.insert_json5(f"{option}/endpoints", json.dumps(opts[option].split(",")))
-    if "scout" in opts or "config" not in opts:
-        enabled = json.dumps(opts.get("scout") == "1")
-        config.insert_json5("scouting/multicast/enabled", enabled)
-        config.insert_json5("scouting/gossip/enabled", "true")
-    if "config" not in opts:
-        # Field links come back: retry a lost router quickly and keep retrying forever.
-        retry = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}
-        config.insert_json5("connect/retry", json.dumps(retry))
-        config.insert_json5("connect/timeout_ms", json.dumps({"router": -1, "peer": -1, "client": 0}))
-        config.insert_json5(
-            "connect/exit_on_failure", json.dumps({"router": False, "peer": False, "client": False})
-        )
-        config.insert_json5("listen/exit_on_failure", "true")
-    if "lease" in opts or "config" not in opts:
-        # A cut link is noticed within the lease (Zenoh's default, 10 s, outlives a short outage's
-        # TCP backoff), then the client reconnects at most 1 s after the link is back.
-        config.insert_json5("transport/link/tx/lease", opts.get("lease", str(DEFAULT_LEASE_MS)))
-    if max_message_size is not None:
-        config.insert_json5("transport/link/rx/max_message_size", str(max_message_size))
-    tls = tls_settings(ca=opts.get("ca"), cert=opts.get("cert"), key=opts.get("cert_key"))
-    if tls:
-        config.insert_json5("transport/link/tls", json.dumps(tls))
-    if "auth" in opts:
-        user, password = read_credentials(opts["auth"])
-        config.insert_json5("transport/auth/usrpwd", json.dumps({"user": user, "password": password}))
-    return config
-
-
-def readable_file(path: str, what: str) -> str:
-    """``path`` made absolute, or ValueError naming ``what`` (Zenoh's own error is a Rust backtrace)."""
-    p = os.path.abspath(os.path.expanduser(path))
-    if not os.access(p, os.R_OK) or not os.path.isfile(p):
-        raise ValueError(f"{what} {path!r} is not a readable file")
-    return p
-
-
-def tls_settings(
-    *, ca: str | None = None, cert: str | None = None, key: str | None = None, listen: bool = False
-) -> dict[str, Any]:
-    """Zenoh's ``transport/link/tls`` for PEM files, all of them paths (never inline secrets).
-
-    ``ca``: the CA a peer's certificate must chain to (a client checks the router's; a router with
-    it asks every client for a certificate: mutual TLS). ``cert``/``key``: this node's own, shown to
-    the router (client) or to clients (``listen``)."""
-    tls: dict[str, Any] = {}
-    if ca:
-        tls["root_ca_certificate"] = readable_file(ca, "the CA certificate")
-    if cert and key:
-        side = "listen" if listen else "connect"
-        tls[f"{side}_certificate"] = readable_file(cert, "the certificate")
-        tls[f"{side}_private_key"] = readable_file(key, "the private key")
-        if not listen:
-            tls["enable_mtls"] = True  # without it Zenoh's client never shows its certificate
-    if listen and ca:
-        tls["enable_mtls"] = True
-    return tls
-
-
-def read_credentials(path: str) -> tuple[str, str]:
-    """``user:password`` from the first line of a file (the secret stays out of the config file)."""
-    line = Path(readable_file(path, "the credentials file")).read_text().splitlines()
-    user, sep, password = (line[0] if line else "").strip().partition(":")
-    if not sep or not user or not password:
-        raise ValueError(f"the credentials file {path!r} must hold one line user:password")
-    return user, password
-
-
 @dataclass(eq=False)
 class ZenohSubscription:
     """What :meth:`ZenohLCM.subscribe` returns (``set_queue_capacity`` as on an LCM subscription)."""
@@ -223,11 +152,9 @@ class ZenohLCM:
 
     def __init__(self, url: str, *, max_message_size: int | None = None) -> None:
         try:
-            u = parse_lcm_url(url)
-        except ValueError as exc:  # a TLS or credentials file that is not there
-            raise BusUnavailable(url, str(exc)) from None
-        if u.provider != "zenoh":
-            raise BusUnavailable(url, "expected a zenoh:// URL")
+            u = Zenoh.parse(url)
+        except ValueError as exc:
+            raise BusUnavailable(url, f"expected {exc}") from None
         self.url = url
         self.prefix = u.network
         self._express = u.options.get("express", "0") == "1"
@@ -371,7 +298,7 @@ class ZenohLCM:
         group: str,
         member: str,
         on_change: Callable[[frozenset[str]], None],
-        proof: MemberProof | None = None,
+        proof: GroupProof | None = None,
     ) -> None:
         """Be ``member`` of ``group`` (a Zenoh liveliness token) and hear who else is, now and as it
         changes: ``on_change(members)``, this member always included. A member whose session dies
@@ -546,66 +473,6 @@ class ZenohLCM:
             return item
 
 
-@dataclass(eq=False)
-class _Group:
-    """Who is in one group: the live token names of each member (pure; the clock is passed)."""
-
-    key: str
-    group: str
-    member: str
-    on_change: Callable[[frozenset[str]], None]
-    proof: MemberProof | None = None
-    #: member -> {token name: the time it proves (0 without a proof)}
-    tokens: dict[str, dict[str, float]] = field(default_factory=dict)
-    lock: threading.Lock = field(default_factory=threading.Lock)
-    report_lock: threading.Lock = field(default_factory=threading.Lock)
-    reported: frozenset[str] | None = None
-    token: Any = None
-    sub: Any = None
-
-    def seen(self, name: str, alive: bool, now: float) -> str | None:
-        """A token appeared or went away; why it does not count, or None."""
-        if self.proof is None:
-            who, t = name, 0.0
-        else:
-            checked = self.proof.check(self.group, name, now)
-            if isinstance(checked, str):
-                return None if not alive else checked  # a forged token going away changes nothing
-            who, t = checked
-        with self.lock:
-            if alive:
-                self.tokens.setdefault(who, {})[name] = t
-            else:
-                mine = self.tokens.get(who, {})
-                mine.pop(name, None)
-                if not mine:
-                    self.tokens.pop(who, None)
-        return None
-
-    def expire(self, now: float) -> None:
-        if self.proof is None:
-            return
-        with self.lock:
-            for who in list(self.tokens):
-                fresh = {n: t for n, t in self.tokens[who].items() if self.proof.fresh(t, now)}
-                if fresh:
-                    self.tokens[who] = fresh
-                else:
-                    del self.tokens[who]
-
-    def members(self) -> frozenset[str]:
-        with self.lock:
-            return frozenset(self.tokens) | {self.member}
-
-    def report(self) -> None:
-        """Tell ``on_change`` the members if they changed (in order: Zenoh's and the refresher's threads)."""
-        with self.report_lock:
-            members = self.members()
-            if members != self.reported:
-                self.reported = members
-                self.on_change(members)
-
-
 def _duplicate(sub: ZenohSubscription, channel: str, data: bytes) -> bool:
     """Whether this subscription already had these forwarded bytes on this channel lately."""
     now = time.monotonic()
@@ -631,7 +498,5 @@ __all__ = [
     "channel_key",
     "key_channel",
     "literal_channel",
-    "read_credentials",
-    "readable_file",
-    "tls_settings",
+    "Zenoh",
 ]

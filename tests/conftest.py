@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import pytest
 
+from antalate_lcm.autopilot import Autopilot
 from tests import scheduling
 from tests.harness.jsonl import JsonLinesProcess
 from tests.harness.netns import MCAST_URL as MCAST_URL
@@ -88,6 +89,17 @@ class Probe(JsonLinesProcess):
     def __init__(self, proc: subprocess.Popen[str]) -> None:
         super().__init__(proc, "the LCM probe")
 
+    @classmethod
+    def start(cls, ns: NetNamespace) -> Probe:
+        """tests/probe.py on the namespace's multicast group, ready for requests."""
+        proc = ns.popen(
+            [sys.executable, "-m", "tests.probe", MCAST_URL],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
+        return cls(proc)
+
     def publish(self, channel: str, type_name: str, **fields: Any) -> None:
         assert self.call(op="publish", channel=channel, type=type_name, fields=fields)["ok"]
 
@@ -113,14 +125,18 @@ class Probe(JsonLinesProcess):
 
 
 @pytest.fixture
+def made() -> Iterator[list[Any]]:
+    """Adapters and emulators a test made, closed (an `Autopilot`) or stopped (an emulator) at the end,
+    newest first, whatever happens."""
+    things: list[Any] = []
+    yield things
+    for thing in reversed(things):
+        thing.close() if isinstance(thing, Autopilot) else thing.stop()
+
+
+@pytest.fixture
 def probe(netns: NetNamespace) -> Iterator[Probe]:
-    proc = netns.popen(
-        [sys.executable, "-m", "tests.probe", MCAST_URL],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
-    yield Probe(proc)
+    yield Probe.start(netns)
 
 
 @pytest.fixture

@@ -18,8 +18,6 @@ from __future__ import annotations
 import json
 import math
 import subprocess
-import threading
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -27,6 +25,7 @@ from typing import Any
 import pytest
 
 from tests.conftest import MCAST_URL
+from tests.harness.timeline import EventTimeline
 from tests.netns import NetNamespace
 
 pytest.importorskip("cflib")
@@ -83,104 +82,13 @@ def agent_doc(
     }
 
 
-class Driver:
-    """The driver process and its timeline of events."""
-
-    def __init__(self, proc: subprocess.Popen[str], log_path: Path) -> None:
-        self.proc = proc
-        self.log_path = log_path
-        self.events: list[dict[str, Any]] = []
-        self._cursor = 0
-        self._cond = threading.Condition()
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            with self._cond:
-                self.events.append(json.loads(line))
-                self._cond.notify_all()
-        with self._cond:
-            self.events.append({"kind": "exit"})
-            self._cond.notify_all()
-
-    def wait(
-        self, kind: str, timeout: float, test: Callable[[dict[str, Any]], bool] | None = None, **where: Any
-    ) -> dict[str, Any]:
-        """The next event of `kind` matching `where` (and `test`) after the one the previous wait returned."""
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                for i in range(self._cursor, len(self.events)):
-                    e = self.events[i]
-                    if (
-                        e["kind"] == kind
-                        and all(e.get(k) == v for k, v in where.items())
-                        and (test is None or test(e))
-                    ):
-                        self._cursor = i + 1
-                        return e
-                left = deadline - time.monotonic()
-                if left <= 0 or self.events[-1:] == [{"kind": "exit"}]:
-                    raise AssertionError(
-                        f"no {kind} {where} within {timeout} s; timeline:\n{self.timeline()}"
-                        f"\nlog:\n{self.log_tail()}"
-                    )
-                self._cond.wait(min(left, 0.05))
-
-    def mark(self) -> int:
-        """Where the next wait starts looking, to come back to with rewind."""
-        with self._cond:
-            return self._cursor
-
-    def rewind(self, mark: int) -> None:
-        with self._cond:
-            self._cursor = mark
-
-    def last(self, kind: str, **where: Any) -> dict[str, Any]:
-        with self._cond:
-            return next(
-                e
-                for e in reversed(self.events)
-                if e["kind"] == kind and all(e.get(k) == v for k, v in where.items())
-            )
-
-    def all(self, kind: str) -> list[dict[str, Any]]:
-        with self._cond:
-            return [e for e in self.events if e["kind"] == kind]
-
-    def errors(self) -> list[dict[str, Any]]:
-        with self._cond:
-            return [e for e in self.events if e["kind"] == "error"]
-
-    def timeline(self) -> str:
-        with self._cond:
-            return "\n".join(json.dumps(e) for e in self.events if e["kind"] != "emu")
-
-    def log_tail(self, n: int = 40) -> str:
-        return "\n".join(self.log_path.read_text().splitlines()[-n:])
-
-    def send(self, line: str) -> None:
-        assert self.proc.stdin is not None
-        self.proc.stdin.write(line + "\n")
-        self.proc.stdin.flush()
-
-    def stop(self) -> None:
-        if self.proc.poll() is None and self.proc.stdin is not None:
-            try:
-                self.send("stop")
-                self.proc.wait(15)
-            except (BrokenPipeError, subprocess.TimeoutExpired):
-                self.proc.kill()
-
-
 @pytest.fixture
-def fly(netns: NetNamespace, tmp_path: Path) -> Iterator[Callable[..., Driver]]:
-    started: list[Driver] = []
+def fly(netns: NetNamespace, tmp_path: Path) -> Iterator[Callable[..., EventTimeline]]:
+    started: list[EventTimeline] = []
 
     def start(
         agents: list[tuple[dict[str, Any], dict[str, Any]]], operator: dict[str, Any] | None = None
-    ) -> Driver:
+    ) -> EventTimeline:
         spec = {"agents": [{"doc": doc, "emu": emu} for doc, emu in agents], "operator": operator}
         log_path = tmp_path / f"driver{len(started)}.log"
         with open(log_path, "w") as log:
@@ -192,7 +100,7 @@ def fly(netns: NetNamespace, tmp_path: Path) -> Iterator[Callable[..., Driver]]:
                 stdout=subprocess.PIPE,
                 stderr=log,
             )
-        driver = Driver(proc, log_path)
+        driver = EventTimeline(proc, log_path, noise="emu")
         started.append(driver)
         driver.wait("started", 20)
         return driver
@@ -203,7 +111,7 @@ def fly(netns: NetNamespace, tmp_path: Path) -> Iterator[Callable[..., Driver]]:
 
 
 def test_whole_mission_takes_off_flies_the_direction_and_returns_home(
-    fly: Callable[..., Driver], tmp_path: Path
+    fly: Callable[..., EventTimeline], tmp_path: Path
 ) -> None:
     d = fly([(agent_doc("cf1", tmp_path, operator={"rtl_after": 5.0}), {"x": 0.5, "y": -0.5})])
     d.wait("mc", 20, state="MISSION", agent="cf1")
@@ -226,7 +134,9 @@ def test_whole_mission_takes_off_flies_the_direction_and_returns_home(
     assert not [e for e in d.errors() if e["code"] not in ("LINK_REGAINED",)], d.timeline()
 
 
-def test_low_battery_per_cell_returns_home_and_lands(fly: Callable[..., Driver], tmp_path: Path) -> None:
+def test_low_battery_per_cell_returns_home_and_lands(
+    fly: Callable[..., EventTimeline], tmp_path: Path
+) -> None:
     # low_battery 5%: the firmware's 10% at 3.4 V is above it, so the voltage per cell is what fires
     d = fly([(agent_doc("cf1", tmp_path, operator={}, low_battery=5.0), {})])
     d.wait("mc", 20, state="MISSION", agent="cf1")
@@ -241,7 +151,7 @@ def test_low_battery_per_cell_returns_home_and_lands(fly: Callable[..., Driver],
 
 
 def test_link_loss_is_reported_within_link_timeout_and_recovered(
-    fly: Callable[..., Driver], tmp_path: Path
+    fly: Callable[..., EventTimeline], tmp_path: Path
 ) -> None:
     d = fly([(agent_doc("cf1", tmp_path, operator={}), {})])
     d.wait("mc", 20, state="MISSION", agent="cf1")
@@ -269,7 +179,7 @@ def test_link_loss_is_reported_within_link_timeout_and_recovered(
     ids=["locked-supervisor", "estimator-not-converged"],
 )
 def test_refused_arm_reaches_the_operator_with_its_reason(
-    fly: Callable[..., Driver], tmp_path: Path, emu: dict[str, Any], words: tuple[str, ...]
+    fly: Callable[..., EventTimeline], tmp_path: Path, emu: dict[str, Any], words: tuple[str, ...]
 ) -> None:
     d = fly([(agent_doc("cf1", tmp_path, operator={}), emu)])
     error = d.wait("error", 20, code="ARM_FAILED")
@@ -278,7 +188,9 @@ def test_refused_arm_reaches_the_operator_with_its_reason(
     assert not d.last("emu")["flying"]
 
 
-def test_three_crazyflies_in_one_process_fly_dovrat_swarm(fly: Callable[..., Driver], tmp_path: Path) -> None:
+def test_three_crazyflies_in_one_process_fly_dovrat_swarm(
+    fly: Callable[..., EventTimeline], tmp_path: Path
+) -> None:
     agents = [
         (
             agent_doc(

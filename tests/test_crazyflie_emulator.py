@@ -33,6 +33,14 @@ def emu() -> Iterator[CrazyflieEmulator]:
         yield e
 
 
+@pytest.fixture
+def scf(emu: CrazyflieEmulator) -> Iterator[SyncCrazyflie]:
+    """cflib's SyncCrazyflie on the emulator, every parameter read; closed after the test (`close`)."""
+    linked = connect(emu)
+    yield linked
+    close(linked)
+
+
 def connect(emu: CrazyflieEmulator, cache: Path | None = None) -> SyncCrazyflie:
     scf = SyncCrazyflie(emu.uri, cf=Crazyflie(rw_cache=str(cache) if cache else None))
     scf.open_link()
@@ -98,31 +106,21 @@ def test_the_crc_changes_with_the_toc(emu: CrazyflieEmulator) -> None:
     assert entries[0] == TocEntry(LOG_GROUP | LOG_START, "stateEstimate")
 
 
-def test_log_block_streams_values_at_its_period(emu: CrazyflieEmulator) -> None:
-    scf = connect(emu)
-    try:
-        got, _ = stream(
-            scf, ["stateEstimate.z", "pm.vbat", "pm.batteryLevel", "supervisor.info"], period_ms=100
-        )
-        assert wait_for(lambda: len(got) >= 12)
-        stamps = [ts for ts, _ in got[:12]]
-        gaps = sorted(b - a for a, b in zip(stamps, stamps[1:], strict=False))
-        # the firmware's ms timestamps, one period apart (the median: a loaded host may stall one send)
-        assert 90 <= gaps[len(gaps) // 2] <= 110, gaps
-        data = got[-1][1]
-        assert data["pm.vbat"] == pytest.approx(4.1, abs=1e-6) and data["pm.batteryLevel"] == 90
-    finally:
-        close(scf)
+def test_log_block_streams_values_at_its_period(emu: CrazyflieEmulator, scf: SyncCrazyflie) -> None:
+    got, _ = stream(scf, ["stateEstimate.z", "pm.vbat", "pm.batteryLevel", "supervisor.info"], period_ms=100)
+    assert wait_for(lambda: len(got) >= 12)
+    stamps = [ts for ts, _ in got[:12]]
+    gaps = sorted(b - a for a, b in zip(stamps, stamps[1:], strict=False))
+    # the firmware's ms timestamps, one period apart (the median: a loaded host may stall one send)
+    assert 90 <= gaps[len(gaps) // 2] <= 110, gaps
+    data = got[-1][1]
+    assert data["pm.vbat"] == pytest.approx(4.1, abs=1e-6) and data["pm.batteryLevel"] == 90
 
 
-def test_param_write_is_echoed_and_applied(emu: CrazyflieEmulator) -> None:
-    scf = connect(emu)
-    try:
-        scf.cf.param.set_value("kalman.resetEstimation", 1)
-        assert wait_for(lambda: emu.params["kalman.resetEstimation"] == 1)
-        assert wait_for(lambda: scf.cf.param.values["kalman"]["resetEstimation"] == "1")
-    finally:
-        close(scf)
+def test_param_write_is_echoed_and_applied(emu: CrazyflieEmulator, scf: SyncCrazyflie) -> None:
+    scf.cf.param.set_value("kalman.resetEstimation", 1)
+    assert wait_for(lambda: emu.params["kalman.resetEstimation"] == 1)
+    assert wait_for(lambda: scf.cf.param.values["kalman"]["resetEstimation"] == "1")
 
 
 def airborne(emu: CrazyflieEmulator, cf: Crazyflie, height: float = 1.0) -> None:
@@ -132,51 +130,45 @@ def airborne(emu: CrazyflieEmulator, cf: Crazyflie, height: float = 1.0) -> None
     assert wait_for(lambda: emu.snapshot().z > height - 0.05 and emu.snapshot().hl_kind == "hold")
 
 
-def test_a_streamed_setpoint_outranks_the_planner_until_notify_setpoint_stop(emu: CrazyflieEmulator) -> None:
+def test_a_streamed_setpoint_outranks_the_planner_until_notify_setpoint_stop(
+    emu: CrazyflieEmulator, scf: SyncCrazyflie
+) -> None:
     """commander.c: the stream has priority; a land sent meanwhile is planned but not flown until the
     notification relaxes the priority; a second land while landing is refused (planner.c)."""
-    scf = connect(emu)
     cf = scf.cf
-    try:
-        airborne(emu, cf)
-        for _ in range(10):
-            cf.commander.send_velocity_world_setpoint(0.5, 0.0, 0.0, 0.0)
-            time.sleep(0.05)
-        assert emu.snapshot().streaming and emu.snapshot().vx > 0.3
-        cf.high_level_commander.land(0.0, 1.0)  # planned, answered 0, but the stream still flies
-        assert wait_for(lambda: ("land", 0) in emu.hl_answers)
-        snap = emu.snapshot()
-        assert snap.streaming and snap.z > 0.95
-        cf.commander.send_notify_setpoint_stop()
-        cf.high_level_commander.land(0.0, 1.0)  # already landing: refused, and answered so
-        assert wait_for(lambda: emu.hl_answers[-1] == ("land", 1))
-        assert wait_for(lambda: not emu.snapshot().flying)
-        assert emu.notify_stops == 1 and emu.falls == 0
-    finally:
-        close(scf)
+    airborne(emu, cf)
+    for _ in range(10):
+        cf.commander.send_velocity_world_setpoint(0.5, 0.0, 0.0, 0.0)
+        time.sleep(0.05)
+    assert emu.snapshot().streaming and emu.snapshot().vx > 0.3
+    cf.high_level_commander.land(0.0, 1.0)  # planned, answered 0, but the stream still flies
+    assert wait_for(lambda: ("land", 0) in emu.hl_answers)
+    snap = emu.snapshot()
+    assert snap.streaming and snap.z > 0.95
+    cf.commander.send_notify_setpoint_stop()
+    cf.high_level_commander.land(0.0, 1.0)  # already landing: refused, and answered so
+    assert wait_for(lambda: emu.hl_answers[-1] == ("land", 1))
+    assert wait_for(lambda: not emu.snapshot().flying)
+    assert emu.notify_stops == 1 and emu.falls == 0
 
 
-def test_notify_setpoint_stop_alone_stops_the_motors(emu: CrazyflieEmulator) -> None:
+def test_notify_setpoint_stop_alone_stops_the_motors(emu: CrazyflieEmulator, scf: SyncCrazyflie) -> None:
     """PR #1298: the stream stopped the planner, so after the notification it sends the null set-point:
     a Crazyflie that gets no high-level command next falls; one that does, holds where it is."""
-    scf = connect(emu)
     cf = scf.cf
-    try:
-        airborne(emu, cf)
-        for _ in range(5):
-            cf.commander.send_hover_setpoint(0.0, 0.0, 0.0, 1.0)
-            time.sleep(0.05)
-        cf.commander.send_notify_setpoint_stop()
-        cf.high_level_commander.go_to(0.0, 0.0, 0.0, 0.0, 0.5, relative=True)
-        time.sleep(0.5)
-        assert emu.snapshot().flying and emu.snapshot().z > 0.9 and emu.falls == 0
+    airborne(emu, cf)
+    for _ in range(5):
         cf.commander.send_hover_setpoint(0.0, 0.0, 0.0, 1.0)
-        time.sleep(0.1)
-        cf.commander.send_notify_setpoint_stop()  # and no high-level command
-        assert wait_for(lambda: emu.snapshot().z == 0.0, timeout=3.0)
-        assert emu.falls == 1 and not emu.snapshot().flying and not emu.snapshot().locked
-    finally:
-        close(scf)
+        time.sleep(0.05)
+    cf.commander.send_notify_setpoint_stop()
+    cf.high_level_commander.go_to(0.0, 0.0, 0.0, 0.0, 0.5, relative=True)
+    time.sleep(0.5)
+    assert emu.snapshot().flying and emu.snapshot().z > 0.9 and emu.falls == 0
+    cf.commander.send_hover_setpoint(0.0, 0.0, 0.0, 1.0)
+    time.sleep(0.1)
+    cf.commander.send_notify_setpoint_stop()  # and no high-level command
+    assert wait_for(lambda: emu.snapshot().z == 0.0, timeout=3.0)
+    assert emu.falls == 1 and not emu.snapshot().flying and not emu.snapshot().locked
 
 
 def test_every_high_level_packet_is_answered_and_the_planner_refuses_a_second_takeoff(
@@ -201,33 +193,30 @@ def test_every_high_level_packet_is_answered_and_the_planner_refuses_a_second_ta
 
 def test_the_watchdog_levels_out_but_keeps_the_vertical_velocity_then_cuts_at_two_seconds(
     emu: CrazyflieEmulator,
+    scf: SyncCrazyflie,
 ) -> None:
     """supervisor.c: after 0.5 s WarningLevelOut (x/y level, z as set: the climb goes on), after 2 s the
     motors stop and the supervisor locks."""
-    scf = connect(emu)
     cf = scf.cf
-    try:
-        airborne(emu, cf)
-        for _ in range(10):
-            cf.commander.send_velocity_world_setpoint(0.4, 0.0, 0.3, 0.0)
-            time.sleep(0.05)
-        last = time.monotonic()
-        time.sleep(1.0)  # in WarningLevelOut
-        snap = emu.snapshot()
-        assert snap.flying and snap.vz == pytest.approx(0.3, abs=0.03)  # still climbing
-        assert snap.vx == pytest.approx(0.4, abs=0.05)  # level: coasting, not braked
-        z_at_1s = snap.z
-        time.sleep(max(0.0, last + 1.7 - time.monotonic()))
-        assert emu.snapshot().z > z_at_1s + 0.1
-        assert wait_for(lambda: not emu.snapshot().flying, timeout=2.0)
-        assert time.monotonic() - last >= 1.9  # `last` is 50 ms after the last set-point
-        assert emu.snapshot().locked
-        assert wait_for(lambda: emu.snapshot().z == 0.0, timeout=2.0) and emu.falls == 1
-        got, _ = stream(scf, ["supervisor.info"])
-        assert wait_for(lambda: bool(got))
-        assert got[-1][1]["supervisor.info"] >> 6 & 1  # locked bit
-    finally:
-        close(scf)
+    airborne(emu, cf)
+    for _ in range(10):
+        cf.commander.send_velocity_world_setpoint(0.4, 0.0, 0.3, 0.0)
+        time.sleep(0.05)
+    last = time.monotonic()
+    time.sleep(1.0)  # in WarningLevelOut
+    snap = emu.snapshot()
+    assert snap.flying and snap.vz == pytest.approx(0.3, abs=0.03)  # still climbing
+    assert snap.vx == pytest.approx(0.4, abs=0.05)  # level: coasting, not braked
+    z_at_1s = snap.z
+    time.sleep(max(0.0, last + 1.7 - time.monotonic()))
+    assert emu.snapshot().z > z_at_1s + 0.1
+    assert wait_for(lambda: not emu.snapshot().flying, timeout=2.0)
+    assert time.monotonic() - last >= 1.9  # `last` is 50 ms after the last set-point
+    assert emu.snapshot().locked
+    assert wait_for(lambda: emu.snapshot().z == 0.0, timeout=2.0) and emu.falls == 1
+    got, _ = stream(scf, ["supervisor.info"])
+    assert wait_for(lambda: bool(got))
+    assert got[-1][1]["supervisor.info"] >> 6 & 1  # locked bit
 
 
 def test_auto_arming_arms_at_power_on_and_after_every_disarm(emu: CrazyflieEmulator) -> None:
@@ -305,20 +294,16 @@ def test_low_power_comes_five_seconds_below_the_low_voltage_and_a_shutdown_five_
         assert not e.shut_down
 
 
-def test_silence_stops_every_packet_both_ways(emu: CrazyflieEmulator) -> None:
-    scf = connect(emu)
-    try:
-        got, _ = stream(scf, ["pm.vbat"])
-        assert wait_for(lambda: len(got) > 2)
-        emu.set_silent(True)
-        time.sleep(0.2)
-        n, received = len(got), len(emu.received)
-        time.sleep(0.5)
-        assert len(got) == n and len(emu.received) == received
-        emu.set_silent(False)
-        assert wait_for(lambda: len(got) > n)
-    finally:
-        close(scf)
+def test_silence_stops_every_packet_both_ways(emu: CrazyflieEmulator, scf: SyncCrazyflie) -> None:
+    got, _ = stream(scf, ["pm.vbat"])
+    assert wait_for(lambda: len(got) > 2)
+    emu.set_silent(True)
+    time.sleep(0.2)
+    n, received = len(got), len(emu.received)
+    time.sleep(0.5)
+    assert len(got) == n and len(emu.received) == received
+    emu.set_silent(False)
+    assert wait_for(lambda: len(got) > n)
 
 
 def test_cflib_closing_the_link_in_flight_stops_the_motors(emu: CrazyflieEmulator) -> None:

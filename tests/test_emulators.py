@@ -26,6 +26,7 @@ from tests import REPO
 from tests.emulators.mavlink_vehicle import COPTER_MODES, MavlinkVehicle
 from tests.emulators.netns_pair import NetnsPair, netns_pair_unavailable
 from tests.emulators.tello_emulator import TelloEmulator
+from tests.test_mavlink_adapter import FAST as ADAPTER_FAST
 
 # -- Tello helpers ----------------------------------------------------------------------------------
 
@@ -338,20 +339,11 @@ def connect_udp(vehicle: MavlinkVehicle) -> Any:
     return conn
 
 
-# Short delays and brisk kinematics so that every flight below takes a few seconds.
+# The adapter tests' brisk copter (every flight takes a few seconds), heartbeats at 4 Hz and the two
+# streams the tests below read at 5 Hz.
 FAST: dict[str, Any] = {
-    "boot_delay": 0.2,
-    "ekf_delay": 0.3,
-    "gps_delay": 0.3,
+    **ADAPTER_FAST,
     "heartbeat_rate": 4.0,
-    "climb_rate": 4.0,
-    "max_climb_rate": 4.0,
-    "land_speed": 2.0,
-    "land_speed_high": 3.0,
-    "max_descent_rate": 3.0,
-    "velocity_tau": 0.15,
-    "yaw_rate_max": 180.0,
-    "land_detect_time": 0.2,
     "stream_rates": {"EXTENDED_SYS_STATE": 5.0, "SYS_STATUS": 5.0},
 }
 

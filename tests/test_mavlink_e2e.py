@@ -327,6 +327,33 @@ def test_agent_process_flies_a_whole_mission_over_tcp(
     assert "connected to autopilot (1, 1)" in log and "mode GUIDED confirmed" in log
 
 
+def take_off(probe: Probe) -> None:
+    """The operator's TAKEOFF once the agent's MC is in STANDBY; the MC must reach MISSION."""
+    assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.STANDBY)
+    probe.publish(
+        "copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 1, "agent": "op"}, command=O.TAKEOFF
+    )
+    assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.MISSION)
+
+
+def fly_east(probe: Probe) -> None:
+    """Velocity commands east at 3 m/s for a second, as the agent's BMA would send them (an internal topic:
+    the sender must be the agent the channel names); the copter's telemetry must show it moving east."""
+    moving = probe.mark()
+    for i in range(10):
+        probe.publish(
+            "copter/VELOCITY_CMD",
+            "velocity_cmd_t",
+            header={"seq": i + 1, "agent": "copter"},
+            frame=1,
+            vx=0.0,
+            vy=3.0,
+        )
+        time.sleep(0.1)
+    east = [t["ve"] for t in probe.history("copter/TELEMETRY", "telemetry_t", since=moving)]
+    assert max(east) > 2.0, east
+
+
 @pytest.mark.netns
 def test_hlc_restart_mid_flight_resyncs_without_arming_or_taking_off(
     netns: NetNamespace, probe: Probe, emulator: EmulatorProcess, tmp_path: Path
@@ -339,11 +366,7 @@ def test_hlc_restart_mid_flight_resyncs_without_arming_or_taking_off(
     agent.start("hlc")
     agent.start("mc")
     try:
-        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.STANDBY)
-        probe.publish(
-            "copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 1, "agent": "op"}, command=O.TAKEOFF
-        )
-        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.MISSION)
+        take_off(probe)
         assert "autopilot ARM" in agent.log("hlc")
         agent.kill("hlc")  # SIGKILL: the real vehicle flies on, hovering in GUIDED
         time.sleep(1.0)
@@ -357,19 +380,7 @@ def test_hlc_restart_mid_flight_resyncs_without_arming_or_taking_off(
         airborne = probe.wait("copter/TELEMETRY", "telemetry_t", since=mark, timeout=5, in_air=True)
         assert airborne is not None and airborne["alt"] > 2.0 and airborne["mode"] == "GUIDED"
         # velocity commands reach the copter through the restarted HLC: east at 3 m/s for a second
-        moving = probe.mark()
-        for i in range(10):  # an internal topic: the sender must be the agent the channel names
-            probe.publish(
-                "copter/VELOCITY_CMD",
-                "velocity_cmd_t",
-                header={"seq": i + 1, "agent": "copter"},
-                frame=1,
-                vx=0.0,
-                vy=3.0,
-            )
-            time.sleep(0.1)
-        east = [t["ve"] for t in probe.history("copter/TELEMETRY", "telemetry_t", since=moving)]
-        assert max(east) > 2.0, east
+        fly_east(probe)
         # and it still obeys: RTL brings it home and down
         probe.publish(
             "copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 2, "agent": "op"}, command=O.RTL
@@ -409,25 +420,9 @@ def test_hlc_killed_the_vehicle_stops_and_comes_home_by_its_gcs_failsafe(
     agent.start("hlc")
     agent.start("mc")
     try:
-        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.STANDBY)
-        probe.publish(
-            "copter/OPERATOR_CMD", "operator_cmd_t", header={"seq": 1, "agent": "op"}, command=O.TAKEOFF
-        )
-        assert probe.wait("copter/MC_STATE", "mc_state_t", timeout=15, state=M.MISSION)
+        take_off(probe)
         assert "vehicle pre-flight check: failsafe parameters OK" in agent.log("hlc")
-        moving = probe.mark()
-        for i in range(10):
-            probe.publish(
-                "copter/VELOCITY_CMD",
-                "velocity_cmd_t",
-                header={"seq": i + 1, "agent": "copter"},
-                frame=1,
-                vx=0.0,
-                vy=3.0,
-            )
-            time.sleep(0.1)
-        east = [t["ve"] for t in probe.history("copter/TELEMETRY", "telemetry_t", since=moving)]
-        assert max(east) > 2.0, east
+        fly_east(probe)
         agent.kill("hlc")  # SIGKILL while flying east: no LAND, no RTL, nothing more on the link
         time.sleep(1.0 + 2.0 + 6.0)  # GUID_TIMEOUT, FS_GCS_TIMEOUT, then the RTL home and the landing
     finally:

@@ -8,7 +8,6 @@ ALT_HOLD, and a battery failsafe escalating from low to critical.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -19,14 +18,6 @@ from antalate_lcm.autopilot import FlightMode, Frame
 from antalate_lcm.autopilot.mavlink import MavlinkAutopilot
 from tests.emulators.mavlink_vehicle import PARAMS, MavlinkVehicle
 from tests.test_mavlink_adapter import FAST, fly, make_ap, state_until, vehicle_until
-
-
-@pytest.fixture
-def made() -> Iterator[list[Any]]:
-    things: list[Any] = []
-    yield things
-    for thing in reversed(things):
-        thing.close() if isinstance(thing, MavlinkAutopilot) else thing.stop()
 
 
 def pair(

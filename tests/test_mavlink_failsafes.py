@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -24,15 +23,6 @@ from tests.test_mavlink_adapter import FAST, fly, make_ap, state_until, vehicle_
 
 def started(params: dict[str, float] | None = None, **kw: Any) -> MavlinkVehicle:
     return MavlinkVehicle("127.0.0.1", 0, 0, **{**FAST, "params": params or {}, **kw}).start()
-
-
-@pytest.fixture
-def made() -> Iterator[list[Any]]:
-    """Vehicles and adapters a test made, stopped at the end whatever happens."""
-    things: list[Any] = []
-    yield things
-    for thing in reversed(things):
-        thing.close() if isinstance(thing, MavlinkAutopilot) else thing.stop()
 
 
 def pair(

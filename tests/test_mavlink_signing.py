@@ -10,14 +10,12 @@ from __future__ import annotations
 import hashlib
 import socket
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
 from antalate_lcm.autopilot import AutopilotError, Frame
-from antalate_lcm.autopilot.mavlink import MavlinkAutopilot
 from antalate_lcm.autopilot.mavlink.link import PymavlinkLink
 from antalate_lcm.autopilot.mavlink.signing import signing_key
 from tests.emulators.mavlink_vehicle import COPTER_MODES, MavlinkVehicle
@@ -26,14 +24,6 @@ from tests.test_mavlink_adapter import FAST, fly, make_ap, state_until, vehicle_
 
 PASSPHRASE = "correct horse battery staple"
 KEY = hashlib.sha256(PASSPHRASE.encode()).digest()  # MAVProxy's `signing setup PASSPHRASE`
-
-
-@pytest.fixture
-def made() -> Iterator[list[Any]]:
-    things: list[Any] = []
-    yield things
-    for thing in reversed(things):
-        thing.close() if isinstance(thing, MavlinkAutopilot) else thing.stop()
 
 
 def vehicle(made: list[Any], key: bytes | None) -> MavlinkVehicle:

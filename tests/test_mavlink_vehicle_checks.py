@@ -94,14 +94,6 @@ def adapter(vehicle: MavlinkVehicle, made: list[MavlinkAutopilot], **params: Any
     return ap
 
 
-@pytest.fixture
-def made() -> Iterator[list[MavlinkAutopilot]]:
-    aps: list[MavlinkAutopilot] = []
-    yield aps
-    for ap in aps:
-        ap.close()
-
-
 def test_defaults_are_reported_and_arming_still_allowed(
     vehicle: MavlinkVehicle, made: list[MavlinkAutopilot], caplog: pytest.LogCaptureFixture
 ) -> None:

@@ -25,9 +25,8 @@ from typing import Any
 import pytest
 
 from antalate_lcm.autopilot import load_autopilot
-from antalate_lcm.autopilot.tello import DEFAULTS, TelloAutopilot
+from antalate_lcm.autopilot.tello import TelloAutopilot
 from antalate_lcm.geo import FlatFrame
-from tests import REPO
 from tests.emulators.netns_pair import NetnsPair, netns_pair_unavailable
 from tests.emulators.tello_emulator import TelloEmulator
 
@@ -676,18 +675,3 @@ def test_six_second_link_loss_in_flight_recovers_without_a_restart(
     driver.call("takeoff", 0.8)
     driver.wait(lambda s: s["mode"] == "GUIDED", timeout=3)
     driver.call("land")
-
-
-def test_params_documented_and_example_valid() -> None:
-    """Every parameter is in docs/tello.md and examples/tello.toml, and the example loads."""
-    from antalate_lcm.config import load_config
-    from antalate_lcm.runtime.agent import validate
-
-    doc = (REPO / "docs" / "tello.md").read_text()
-    config = load_config(REPO / "examples" / "tello.toml")
-    validate(config)
-    assert config.hlc.autopilot == "tello"
-    params = config.hlc.autopilot_params
-    TelloAutopilot(params)
-    missing = [k for k in DEFAULTS if f"`{k}`" not in doc or k not in params]
-    assert not missing, missing

@@ -19,7 +19,6 @@ import json
 import math
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -30,6 +29,7 @@ import pytest
 from tests import REPO
 from tests.emulators.netns_pair import NetnsPair, netns_pair_unavailable
 from tests.emulators.tello_emulator import TelloEmulator
+from tests.harness.timeline import EventTimeline
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -99,84 +99,6 @@ def config(*, operator: dict[str, Any] | None = None, swarm: bool = False, **hlc
     }
 
 
-class Agent:
-    """The agent process in namespace b and its timeline of events."""
-
-    def __init__(self, proc: subprocess.Popen[str], log_path: Path) -> None:
-        self.proc = proc
-        self.log_path = log_path
-        self.events: list[dict[str, Any]] = []
-        self._cursor = 0
-        self._cond = threading.Condition()
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            with self._cond:
-                self.events.append(json.loads(line))
-                self._cond.notify_all()
-        with self._cond:
-            self.events.append({"kind": "exit"})
-            self._cond.notify_all()
-
-    def wait(
-        self, kind: str, timeout: float, *, poll: Callable[[], None] | None = None, **where: Any
-    ) -> dict[str, Any]:
-        """The next event of `kind` matching `where` after the one the previous `wait` returned.
-
-        Waits follow the timeline in order, so ``wait("hlc", state="READY")`` after a take-off finds
-        the READY of the landing, not the one at start-up.
-        """
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                for i in range(self._cursor, len(self.events)):
-                    event = self.events[i]
-                    if event["kind"] == kind and all(event.get(k) == v for k, v in where.items()):
-                        self._cursor = i + 1
-                        return event
-                left = deadline - time.monotonic()
-                if left <= 0 or self.events[-1:] == [{"kind": "exit"}]:
-                    raise AssertionError(
-                        f"no {kind} {where} within {timeout} s; timeline:\n{self.timeline()}"
-                        f"\nlog:\n{self.log_tail()}"
-                    )
-                self._cond.wait(min(left, 0.05))
-                if poll is not None:
-                    poll()
-
-    def states(self, kind: str) -> list[str]:
-        with self._cond:
-            return [e["state"] for e in self.events if e["kind"] == kind]
-
-    def errors(self) -> list[dict[str, Any]]:
-        with self._cond:
-            return [e for e in self.events if e["kind"] == "error"]
-
-    def timeline(self) -> str:
-        with self._cond:
-            return "\n".join(json.dumps(e) for e in self.events if e["kind"] != "telemetry")
-
-    def log_tail(self, n: int = 40) -> str:
-        return "\n".join(self.log_path.read_text().splitlines()[-n:])
-
-    def send(self, line: str) -> None:
-        assert self.proc.stdin is not None
-        self.proc.stdin.write(line + "\n")
-        self.proc.stdin.flush()
-
-    def stop(self) -> None:
-        if self.proc.poll() is None and self.proc.stdin is not None:
-            try:
-                self.proc.stdin.write("stop\n")
-                self.proc.stdin.flush()
-                self.proc.wait(10)
-            except (BrokenPipeError, subprocess.TimeoutExpired):
-                self.proc.kill()
-
-
 @pytest.fixture(scope="module")
 def net() -> Iterator[NetnsPair]:
     reason = netns_pair_unavailable()
@@ -187,13 +109,13 @@ def net() -> Iterator[NetnsPair]:
 
 
 @pytest.fixture
-def fly(net: NetnsPair, tmp_path: Path) -> Iterator[Callable[..., tuple[Agent, TelloEmulator]]]:
+def fly(net: NetnsPair, tmp_path: Path) -> Iterator[Callable[..., tuple[EventTimeline, TelloEmulator]]]:
     """Start an emulator (with `emu` settings) and then an agent process with `doc` as its config."""
-    started: list[tuple[Agent, TelloEmulator]] = []
+    started: list[tuple[EventTimeline, TelloEmulator]] = []
 
     def start(
         doc: dict[str, Any], setup: Callable[[TelloEmulator], None] | None = None, **emu_kw: Any
-    ) -> tuple[Agent, TelloEmulator]:
+    ) -> tuple[EventTimeline, TelloEmulator]:
         emu = TelloEmulator(sock=net.udp_socket("a", (net.addr_a, 8889)), **{**EMU, **emu_kw}).start()
         if setup is not None:
             setup(emu)
@@ -207,7 +129,7 @@ def fly(net: NetnsPair, tmp_path: Path) -> Iterator[Callable[..., tuple[Agent, T
             stderr=log,
         )
         log.close()
-        agent = Agent(proc, log_path)
+        agent = EventTimeline(proc, log_path, noise="telemetry")
         started.append((agent, emu))
         return agent, emu
 
@@ -221,7 +143,7 @@ def distance(snap: Any) -> float:
     return math.hypot(snap.x, snap.y)
 
 
-def test_whole_mission(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+def test_whole_mission(fly: Callable[..., tuple[EventTimeline, TelloEmulator]]) -> None:
     """auto_operator takes off, dovrat_swarm flies a curve, RTL brings the Tello back and lands it."""
     agent, emu = fly(config(operator={"rtl_after": 3.0}, swarm=True))
     farthest = [0.0]
@@ -256,7 +178,7 @@ def test_whole_mission(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
     assert agent.states("mc")[-1] == "STANDBY" and not emu.snapshot().flying
 
 
-def test_low_battery_returns_home(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+def test_low_battery_returns_home(fly: Callable[..., tuple[EventTimeline, TelloEmulator]]) -> None:
     agent, emu = fly(config(swarm=True))
     agent.wait("mc", 10, state="MISSION")
     time.sleep(1.0)  # fly away a little
@@ -271,7 +193,7 @@ def test_low_battery_returns_home(fly: Callable[..., tuple[Agent, TelloEmulator]
     assert agent.states("hlc")[-3:] == ["AIRBORNE", "LOW_BATTERY", "READY"]
 
 
-def test_link_loss_is_llc_down(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+def test_link_loss_is_llc_down(fly: Callable[..., tuple[EventTimeline, TelloEmulator]]) -> None:
     agent, emu = fly(config())
     agent.wait("mc", 10, state="MISSION")
     emu.stop_state()
@@ -282,7 +204,7 @@ def test_link_loss_is_llc_down(fly: Callable[..., tuple[Agent, TelloEmulator]]) 
     assert emu.wait_until(lambda s: not s.flying, timeout=6)
 
 
-def test_refused_takeoff(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+def test_refused_takeoff(fly: Callable[..., tuple[EventTimeline, TelloEmulator]]) -> None:
     """No arming on a Tello: the refusal is the TAKEOFF action failing.
 
     The HLC lands at once (TAKEOFF_REFUSED; the Tello is on the ground, so at once READY) rather than
@@ -301,7 +223,7 @@ def test_refused_takeoff(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> Non
     assert not emu.snapshot().flying
 
 
-def test_altitude_not_gained_lands(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+def test_altitude_not_gained_lands(fly: Callable[..., tuple[EventTimeline, TelloEmulator]]) -> None:
     """The Tello climbs far slower than its rc scale says: the HLC gives up and lands."""
     agent, emu = fly(config(gain_altitude_timeout=2.5), max_vertical_speed=0.05)
     agent.wait("hlc", 10, state="GAINING_ALTITUDE")
@@ -349,7 +271,7 @@ DYNAMICS: list[dict[str, Any]] = [
 
 
 def test_example_takes_off_20_of_20_across_vehicle_dynamics(
-    fly: Callable[..., tuple[Agent, TelloEmulator]],
+    fly: Callable[..., tuple[EventTimeline, TelloEmulator]],
 ) -> None:
     """examples/tello.toml unchanged (1.2 m, gain_altitude_timeout 10 s), 20 take-offs to MISSION.
 
@@ -388,7 +310,7 @@ def test_example_takes_off_20_of_20_across_vehicle_dynamics(
     )
 
 
-def test_example_steers_from_the_console(fly: Callable[..., tuple[Agent, TelloEmulator]]) -> None:
+def test_example_steers_from_the_console(fly: Callable[..., tuple[EventTimeline, TelloEmulator]]) -> None:
     """The console's direction keys move the Tello in MISSION (direction_follow in the example)."""
     agent, emu = fly(example_config(rtl_after=6.0, max_flights=1), takeoff_time=0.5, land_speed=3.0)
     agent.wait("mc", 15, state="MISSION")
@@ -407,7 +329,7 @@ def test_example_steers_from_the_console(fly: Callable[..., tuple[Agent, TelloEm
 
 
 def test_example_six_second_link_loss_in_flight_comes_home(
-    fly: Callable[..., tuple[Agent, TelloEmulator]],
+    fly: Callable[..., tuple[EventTimeline, TelloEmulator]],
 ) -> None:
     """Wi-Fi down both ways for 6 s in MISSION; the Tello (15 s auto-landing) is still up when it returns.
 
@@ -437,7 +359,7 @@ def test_example_six_second_link_loss_in_flight_comes_home(
 
 
 def test_example_link_loss_while_the_tello_lands_itself(
-    fly: Callable[..., tuple[Agent, TelloEmulator]],
+    fly: Callable[..., tuple[EventTimeline, TelloEmulator]],
 ) -> None:
     """As above, but the Tello lands itself during the loss and comes back out of SDK mode (a reboot).
 
@@ -461,7 +383,7 @@ def test_example_link_loss_while_the_tello_lands_itself(
 
 
 def test_rtl_getting_farther_is_reported_and_lands_where_it_is(
-    fly: Callable[..., tuple[Agent, TelloEmulator]],
+    fly: Callable[..., tuple[EventTimeline, TelloEmulator]],
 ) -> None:
     """Wrong vgx/vgy signs: the RTL leg grows. The operator gets an hlc_error_t saying so; it lands there."""
     agent, emu = fly(

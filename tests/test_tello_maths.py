@@ -9,7 +9,7 @@ import pytest
 
 from antalate_lcm.autopilot.base import altitude_reached
 from antalate_lcm.autopilot.tello import maths, telemetry
-from antalate_lcm.autopilot.tello.params import validated
+from antalate_lcm.autopilot.tello.params import Params
 
 
 def test_altitude_reached_is_the_hlc_rule_with_float_slack_only() -> None:
@@ -88,7 +88,7 @@ def test_rtl_leg_slows_down_near_home() -> None:
 
 def test_a_state_packet_read_in_the_adapters_units() -> None:
     """`telemetry.read`: dm/s into north/east/down m/s through home_heading, height from h or tof."""
-    p = validated({})
+    p = Params()
     east = telemetry.read(
         {"yaw": 30, "vgx": 10, "vgy": 0, "vgz": -5, "h": 120, "bat": 80}, p, 90.0, telemetry.StateReading()
     )
@@ -98,14 +98,14 @@ def test_a_state_packet_read_in_the_adapters_units() -> None:
     assert (east.yaw, east.h_cm, east.height, east.battery) == (30.0, 120, 1.2, 80.0)
     partial = telemetry.read({"vgx": 0}, p, 90.0, east)  # a field the packet lacks keeps its value
     assert (partial.yaw, partial.h_cm, partial.battery) == (30.0, 120, 80.0) and partial.ve == 0.0
-    tof = validated({"altitude_source": "tof"})
+    tof = Params(altitude_source="tof")
     assert telemetry.read({"h": 0, "tof": 95}, tof, 0.0, telemetry.StateReading()).height == pytest.approx(
         0.85
     )
     assert telemetry.read({"h": 30, "tof": 6553}, tof, 0.0, telemetry.StateReading()).height == pytest.approx(
         0.3
     )
-    body = validated({"velocity_frame": "body"})
+    body = Params(velocity_frame="body")
     turned = telemetry.read({"yaw": 90, "vgx": 10}, body, 0.0, telemetry.StateReading())
     assert (turned.vn, turned.ve) == pytest.approx((0.0, 1.0), abs=1e-9)  # forward, facing east
 

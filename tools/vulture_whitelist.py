@@ -39,7 +39,6 @@ _.allow_unsigned_callback  # pymavlink's signing state
 _.handle_eof  # pymavlink connection hooks
 _.handle_disconnect
 _.robust_parsing  # pymavlink's parser option
-_._peer  # pymavlink's UDP connection: the address it answers
 
 # --- pydantic fields read by key (model_dump / a mapping), not by attribute.
 _.tau  # SimParams: the sim reads its parameters as a dict (sim.py, p["..."])

@@ -101,6 +101,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from tests.emulators.lifecycle import Emulator, Motion
+
 if TYPE_CHECKING:  # cflib only when a memory link is asked for
     from antalate_lcm.autopilot.crazyflie.memory import MemoryLink
 
@@ -254,14 +256,7 @@ def _minimum_jerk(s: float) -> tuple[float, float]:
 
 
 @dataclass(frozen=True)
-class CrazyflieSnapshot:
-    x: float
-    y: float
-    z: float
-    yaw: float
-    vx: float
-    vy: float
-    vz: float
+class CrazyflieSnapshot(Motion):
     vbat: float
     armed: bool
     flying: bool
@@ -270,7 +265,7 @@ class CrazyflieSnapshot:
     hl_kind: str
 
 
-class CrazyflieEmulator:
+class CrazyflieEmulator(Emulator["CrazyflieSnapshot"]):
     """One emulated Crazyflie on a UDP port (``udp://127.0.0.1:PORT``). Use as a context manager."""
 
     def __init__(
@@ -296,6 +291,7 @@ class CrazyflieEmulator:
     ) -> None:
         """Bind ``host:port`` (``udp://``), or with `memory` register ``memory://MEMORY`` and bind nothing,
         or with `radio` bind nothing and answer `radio_exchange` (a `crazyradio.Crazyradio` calls it)."""
+        super().__init__()
         self.clock = clock
         self._lock = threading.RLock()
         self._sock: socket.socket | None = None
@@ -312,8 +308,6 @@ class CrazyflieEmulator:
             self._sock.bind((host, port))
             self._sock.settimeout(0.1)
         self._peer: Address | None = None
-        self._stop = threading.Event()
-        self._threads: list[threading.Thread] = []
         self._boot = clock()
         # vehicle
         self.x, self.y, self.z, self.yaw = x, y, 0.0, yaw
@@ -386,29 +380,19 @@ class CrazyflieEmulator:
         return f"udp://{host}:{port}"
 
     def start(self) -> CrazyflieEmulator:
+        if self._workers.running:
+            return self
         loops = [(self._sim_loop, "cf-emu-sim")]
         if self._sock is not None:
             loops.append((self._recv_loop, "cf-emu-rx"))
-        for target, name in loops:
-            t = threading.Thread(target=target, name=name, daemon=True)
-            t.start()
-            self._threads.append(t)
+        self._workers.start(*loops)
         return self
 
-    def stop(self) -> None:
-        self._stop.set()
-        for t in self._threads:
-            t.join(timeout=2)
+    def _close_transports(self) -> None:
         if self._sock is not None:
             self._sock.close()
         if self._memory is not None:
             self._memory.close()
-
-    def __enter__(self) -> CrazyflieEmulator:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     # ------------------------------------------------------------------ knobs and views
     def set_silent(self, silent: bool) -> None:
@@ -532,7 +516,7 @@ class CrazyflieEmulator:
 
     def _recv_loop(self) -> None:
         assert self._sock is not None
-        while not self._stop.is_set():
+        while not self._workers.stop.is_set():
             try:
                 data, sender = self._sock.recvfrom(64)
             except TimeoutError:
@@ -957,7 +941,7 @@ class CrazyflieEmulator:
 
     def _sim_loop(self) -> None:
         last = self.clock()
-        while not self._stop.wait(0.01):
+        while not self._workers.stop.wait(0.01):
             now = self.clock()
             with self._lock:
                 self._step(now - last, now)

@@ -120,7 +120,7 @@ from typing import Any
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
 from antalate_lcm.autopilot.mavlink.link import MemoryLink
-from tests.harness.polling import wait_for
+from tests.emulators.lifecycle import Emulator
 
 LOG = logging.getLogger("antalate.tests.mavlink_vehicle")
 
@@ -468,7 +468,7 @@ class _WireBuffer:
         return frames
 
 
-class MavlinkVehicle:
+class MavlinkVehicle(Emulator["VehicleSnapshot"]):
     """The emulated copter; ``start()``/``stop()`` or ``with``. Every public method is thread-safe."""
 
     def __init__(
@@ -561,9 +561,8 @@ class MavlinkVehicle:
         self.report_remaining = report_remaining
         self.signing_key = signing_key
 
+        super().__init__()
         self._lock = threading.RLock()
-        self._stop_evt = threading.Event()
-        self._thread: threading.Thread | None = None
         self._udp: socket.socket | None = None
         self._tcp: socket.socket | None = None
         self._udp_peers: dict[Address, _Peer] = {}
@@ -639,7 +638,7 @@ class MavlinkVehicle:
 
     def start(self) -> MavlinkVehicle:
         """Bind the transports and power on (the boot/EKF/GPS clocks start now)."""
-        if self._thread is not None:
+        if self._workers.running:
             return self
         try:
             if self.udp_port is not None:
@@ -653,32 +652,16 @@ class MavlinkVehicle:
                 self._tcp.listen(8)
                 self.tcp_port = self._tcp.getsockname()[1]
         except OSError:
-            self._close_sockets()
+            self._close_transports()
             raise
         if self.udp_target is not None:
             self._udp_peers[self.udp_target] = self._peer(addr=self.udp_target)
         with self._lock:
             self._t0 = time.monotonic()
             self._ground_since = self._t0
-        self._stop_evt.clear()
-        self._thread = threading.Thread(target=self._run, name="mavlink-vehicle", daemon=True)
-        self._thread.start()
+        self._workers.start((self._run, "mavlink-vehicle"))
         LOG.info("MAVLink vehicle udp=%s tcp=%s", self.udp_port, self.tcp_port)
         return self
-
-    def stop(self) -> None:
-        """Stop the thread and close every socket (idempotent)."""
-        self._stop_evt.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5)
-            self._thread = None
-        self._close_sockets()
-
-    def __enter__(self) -> MavlinkVehicle:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     def _peer(self, sock: socket.socket | None = None, addr: Address | None = None) -> _Peer:
         return _Peer(self.sysid, self.compid, sock=sock, addr=addr, key=self.signing_key)
@@ -750,11 +733,6 @@ class MavlinkVehicle:
                 rtl_phase=self._rtl_phase if self._mode == "RTL" else None,
                 rtl_alt=self._rtl_alt,
             )
-
-    def wait_until(self, predicate: Callable[[VehicleSnapshot], bool], timeout: float) -> bool:
-        """``predicate(snapshot())`` polled with tests/polling.py's ``wait_for``: True once it holds,
-        False if ``timeout`` s pass first."""
-        return wait_for(lambda: predicate(self.snapshot()), timeout)
 
     @property
     def received(self) -> list[Received]:
@@ -1817,7 +1795,7 @@ class MavlinkVehicle:
         tick = 1.0 / self.tick_rate
         last = time.monotonic()
         next_tick = last
-        while not self._stop_evt.is_set():
+        while not self._workers.stop.is_set():
             socks = [s for s in (self._udp, self._tcp) if s is not None]
             socks += [p.sock for p in self._tcp_peers if p.sock is not None]
             try:
@@ -1912,7 +1890,7 @@ class MavlinkVehicle:
                 self._memory_peers.remove(peer)
                 self._signing_rejected_gone += peer.rejected
 
-    def _close_sockets(self) -> None:
+    def _close_transports(self) -> None:
         for peer in list(self._tcp_peers):
             self._drop_tcp(peer)
         for sock in (self._udp, self._tcp):

@@ -119,7 +119,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 from antalate_lcm.autopilot.tello.link import MemoryLink
-from tests.harness.polling import wait_for
+from tests.emulators.lifecycle import Emulator, Motion
 
 LOG = logging.getLogger("antalate.tests.tello_emulator")
 
@@ -157,16 +157,9 @@ class TelloCommand:
 
 
 @dataclass(frozen=True)
-class TelloSnapshot:
-    """A consistent copy of the emulated drone's state (frames: see the module docstring)."""
+class TelloSnapshot(Motion):
+    """A consistent copy of the emulated drone's state (frames: see the module docstring; vz up positive)."""
 
-    x: float
-    y: float
-    z: float
-    yaw: float
-    vx: float
-    vy: float
-    vz: float  # up positive, m/s
     flying: bool
     sdk_mode: bool
     stream_on: bool
@@ -212,7 +205,7 @@ def _move_handler(name: str) -> Callable[[TelloEmulator, list[str], Address, flo
     return handle
 
 
-class TelloEmulator:
+class TelloEmulator(Emulator["TelloSnapshot"]):
     """An emulated Tello on one UDP socket; ``start()``/``stop()`` or ``with``. All methods are thread-safe."""
 
     MOTION_COMMANDS = ("up", "down", "left", "right", "forward", "back")
@@ -260,6 +253,7 @@ class TelloEmulator:
 
         Speeds are m/s and deg/s, times seconds, battery percent; ``battery_drain`` is %/s in flight.
         """
+        super().__init__()
         self._host, self._port = host, port
         self._sock = sock
         self.link: MemoryLink | None = None
@@ -306,8 +300,6 @@ class TelloEmulator:
         self._lost_replies: list[tuple[str, str]] = []
 
         self._lock = threading.RLock()
-        self._stop_evt = threading.Event()
-        self._thread: threading.Thread | None = None
         self._state_enabled = True
         self._x = self._y = self._z = 0.0
         self._vx = self._vy = self._vz = 0.0
@@ -331,7 +323,7 @@ class TelloEmulator:
     # -- lifecycle ---------------------------------------------------------------------------------
 
     def start(self) -> TelloEmulator:
-        if self._thread is not None:
+        if self._workers.running:
             return self
         if self._sock is None and self.link is None:
             sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -343,27 +335,14 @@ class TelloEmulator:
             self._sock = sock
         if self._sock is not None:
             self._host, self._port = self._sock.getsockname()[:2]
-        self._stop_evt.clear()
-        self._thread = threading.Thread(target=self._run, name=f"tello-emu-{self._port}", daemon=True)
-        self._thread.start()
+        self._workers.start((self._run, f"tello-emu-{self._port}"))
         LOG.info("Tello emulator on %s:%d", self._host, self._port)
         return self
 
-    def stop(self) -> None:
-        """Stop the thread and close the socket (idempotent)."""
-        self._stop_evt.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5)
-            self._thread = None
+    def _close_transports(self) -> None:
         if self._sock is not None:
             self._sock.close()
             self._sock = None
-
-    def __enter__(self) -> TelloEmulator:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     @property
     def address(self) -> Address:
@@ -414,11 +393,6 @@ class TelloEmulator:
 
     def command_texts(self) -> list[str]:
         return [c.text for c in self.commands]
-
-    def wait_until(self, predicate: Callable[[TelloSnapshot], bool], timeout: float) -> bool:
-        """``predicate(snapshot())`` polled with tests/polling.py's ``wait_for``: True once it holds,
-        False if ``timeout`` s pass first."""
-        return wait_for(lambda: predicate(self.snapshot()), timeout)
 
     # -- fault injection -------------------------------------------------------------------------
 
@@ -508,10 +482,10 @@ class TelloEmulator:
         last = time.monotonic()
         next_tick = last + tick
         next_state = last
-        while not self._stop_evt.is_set():
+        while not self._workers.stop.is_set():
             wait = max(0.0, min(next_tick - time.monotonic(), 0.05))
             if sock is None:  # a memory link delivers on the sender's thread (_from_link)
-                self._stop_evt.wait(wait)
+                self._workers.stop.wait(wait)
                 ready: list[socket.socket] = []
             else:
                 try:

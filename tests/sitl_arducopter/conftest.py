@@ -6,14 +6,12 @@ share it, each leaving it landed and disarmed in STANDBY (`landed`), in the orde
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from tests.conftest import MCAST_URL, Probe, _netns_reason
+from tests.conftest import Probe, _netns_reason
 from tests.netns import NetNamespace
 from tests.sitl_arducopter.harness import sitl_missing
 
@@ -29,13 +27,7 @@ def sitl_netns() -> Iterator[NetNamespace]:
 
 @pytest.fixture(scope="module")
 def sitl_probe(sitl_netns: NetNamespace) -> Iterator[Probe]:
-    proc = sitl_netns.popen(
-        [sys.executable, "-m", "tests.probe", MCAST_URL],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
-    yield Probe(proc)
+    yield Probe.start(sitl_netns)
 
 
 @pytest.fixture(scope="module")

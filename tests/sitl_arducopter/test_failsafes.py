@@ -31,7 +31,7 @@ from antalate_lcm.autopilot.mavlink import failsafe as fs
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
-from tests.conftest import MCAST_URL, Probe, _netns_reason
+from tests.conftest import Probe, _netns_reason
 from tests.netns import NetNamespace
 from tests.polling import wait_for
 from tests.sitl_arducopter.flight import AGENT, command, direction, wait_state
@@ -207,16 +207,7 @@ def fs_netns(backend: str) -> Iterator[NetNamespace]:
 
 @pytest.fixture(scope="module")
 def fs_probe(fs_netns: NetNamespace) -> Iterator[Probe]:
-    import subprocess
-    import sys
-
-    proc = fs_netns.popen(
-        [sys.executable, "-m", "tests.probe", MCAST_URL],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
-    yield Probe(proc)
+    yield Probe.start(fs_netns)
 
 
 @pytest.fixture(scope="module")

@@ -59,23 +59,20 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Mapping
 from typing import Any, ClassVar
 
 from pydantic import BaseModel
 
 from antalate_lcm.autopilot.base import (
-    Autopilot,
     AutopilotError,
     AutopilotState,
-    Clock,
     FlightMode,
     Frame,
     check_takeoff_altitude,
     check_velocity,
 )
 from antalate_lcm.autopilot.crazyflie.frames import LocalFrame
-from antalate_lcm.autopilot.crazyflie.params import Params, parse_params
+from antalate_lcm.autopilot.crazyflie.params import Params
 from antalate_lcm.autopilot.crazyflie.setpoints import (
     SetPoint,
     build_setpoint,
@@ -91,6 +88,7 @@ from antalate_lcm.autopilot.crazyflie.telemetry import (
     battery_warning,
     estimator_problem,
 )
+from antalate_lcm.autopilot.kit import LinkAge, VehicleAdapter
 
 log = logging.getLogger("antalate.autopilot.crazyflie")
 
@@ -155,28 +153,26 @@ def _init_drivers() -> None:
     memory.install()
 
 
-class CrazyflieAutopilot(Autopilot):
+class CrazyflieAutopilot(VehicleAdapter[Params, Any]):
     """A Crazyflie through cflib; see the module docstring for the rules on top of cflib."""
 
     name = "crazyflie"
     blocking = True  # arm and takeoff wait for the supervisor's confirmation over the radio
     params_model: ClassVar[type[BaseModel]] = Params
 
-    def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
-        super().__init__(params, clock=clock)
-        self._p = parse_params(self.params)
+    def _setup(self) -> None:
+        """The constructor's ``link=`` makes the cflib ``Crazyflie`` for each connection (default: cflib's
+        own, its drivers installed, `_default_link`)."""
         p = self._p
         self.frame = LocalFrame(p.origin_lat, p.origin_lon, p.origin_heading)
         self.last_refusal = ""
         self._lock = threading.RLock()
         self._cf: Any = None
         self._reading = Reading()
-        self._last_packet = -math.inf
+        self._heard = LinkAge(self.clock)  # any packet: log data, or the answers to cflib's latency pings
         self._connected = False
         self._no_kalman = False
         self._link_error = ""
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._mode = IDLE
         self._mode_at = -math.inf
         self._failsafe = ""
@@ -210,20 +206,21 @@ class CrazyflieAutopilot(Autopilot):
         except ImportError:
             raise AutopilotError(CFLIB_MISSING) from None
         self._open_link()
-        if self._thread is None:
-            self._stop.clear()
-            self._thread = threading.Thread(
-                target=self._control_loop, name=f"crazyflie-{self._p.uri}", daemon=True
-            )
-            self._thread.start()
+        if not self._workers.running:
+            self._workers.start((self._control_loop, f"crazyflie-{self._p.uri}"))
 
-    def _open_link(self) -> None:
+    def _default_link(self, params: Params) -> Any:
+        """cflib's ``Crazyflie`` (its drivers, ``memory://`` included, installed once per process)."""
         from cflib.crazyflie import Crazyflie
-        from cflib.crazyflie.log import LogConfig
 
         _init_drivers()
+        return Crazyflie(rw_cache=params.cache_dir or None)
+
+    def _open_link(self) -> None:
+        from cflib.crazyflie.log import LogConfig
+
         p = self._p
-        cf = Crazyflie(rw_cache=p.cache_dir or None)
+        cf = self._opener(p)
         ready = threading.Event()
         failure: list[str] = []
 
@@ -301,10 +298,7 @@ class CrazyflieAutopilot(Autopilot):
             log.debug("closing a cflib link raised", exc_info=True)
 
     def close(self) -> None:
-        self._stop.set()
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(timeout=2.0)
-        self._thread = None
+        self._workers.halt()
         with self._lock:
             cf, self._cf = self._cf, None
             flying = self._reading.flags.flying
@@ -320,7 +314,7 @@ class CrazyflieAutopilot(Autopilot):
         self._close_quietly(cf)
 
     def _on_packet(self, _pk: Any) -> None:
-        self._last_packet = self.clock()
+        self._heard.heard()
 
     def _on_hl_answer(self, pk: Any) -> None:
         """crtp_commander_high_level.c answers each command: byte 0 the command, byte 3 the result."""
@@ -394,7 +388,7 @@ class CrazyflieAutopilot(Autopilot):
         self.last_refusal = ""
         with self._lock:
             reading = self._reading
-            age = self.clock() - self._last_packet
+            age = self._heard()
             no_kalman = self._no_kalman
         if age > self._p.link_stale_after:
             return self._refuse(f"the link is {age:.1f} s old")
@@ -630,7 +624,7 @@ class CrazyflieAutopilot(Autopilot):
             if cf is None and not self._link_error:
                 return  # closing, or never opened
             dt, self._last_tick = now - self._last_tick, now
-            age = now - self._last_packet
+            age = self._heard()
             r = self._reading
             flying = r.flags.flying
             if self._mode == STREAM:
@@ -709,14 +703,14 @@ class CrazyflieAutopilot(Autopilot):
         with self._lock:
             r = self._reading
             connected = self._connected and self._cf is not None
-            age = self.clock() - self._last_packet
+            age = self._heard()
             mode = self._mode
             failsafe = self._failsafe
             ground_idle = self._ground_idle
         flags = r.flags
         common: dict[str, Any] = {
             "connected": connected,
-            "link_age": age if math.isfinite(self._last_packet) else math.inf,
+            "link_age": age,
             "battery": float(r.battery_level) if r.battery_level >= 0 else -1.0,
             "voltage": r.vbat,
             "cells": self._p.cells,

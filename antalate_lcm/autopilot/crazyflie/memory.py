@@ -15,7 +15,6 @@ This module imports cflib; only the adapter's ``connect`` and tests import it.
 
 from __future__ import annotations
 
-import queue
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -24,6 +23,8 @@ from cflib.crtp import CLASSES
 from cflib.crtp.crtpdriver import CRTPDriver
 from cflib.crtp.crtpstack import CRTPPacket
 from cflib.crtp.exceptions import WrongUriType
+
+from antalate_lcm.autopilot.kit.memory import MemoryPipe
 
 SCHEME = "memory://"
 
@@ -36,12 +37,14 @@ class MemoryLink:
 
     `handler` runs on cflib's sending thread and should return quickly (queue the packet if the
     peer needs time). Registering a name that is in use replaces nothing: it raises `ValueError`.
+    Each driver that opens the link gets its own `kit.MemoryPipe` to the peer: one a closed driver
+    left behind can neither send nor take the next driver's packets.
     """
 
     def __init__(self, name: str, handler: Callable[[bytes], None]) -> None:
         self.name = name
         self._handler = handler
-        self._inbox: queue.Queue[bytes] | None = None  # cflib's side, while a driver is connected
+        self._pipe: MemoryPipe[bytes, bytes] | None = None  # the open driver's, while one is connected
         with _links_lock:
             if name in _links:
                 raise ValueError(f"a memory link named {name!r} is already registered")
@@ -54,30 +57,30 @@ class MemoryLink:
     @property
     def connected(self) -> bool:
         """A cflib driver has this link open (packets pushed now reach it)."""
-        return self._inbox is not None
+        return self._pipe is not None
 
     def push(self, packet: bytes) -> None:
         """One packet to cflib (header byte + payload); dropped while no driver has the link open."""
-        inbox = self._inbox
-        if inbox is not None and packet:
-            inbox.put(bytes(packet))
+        pipe = self._pipe
+        if pipe is not None and packet:
+            pipe.push(bytes(packet))
 
     def close(self) -> None:
         """Unregister the name; a driver still open receives nothing more."""
         with _links_lock:
             if _links.get(self.name) is self:
                 del _links[self.name]
-        self._inbox = None
+        self._pipe = None
 
-    def _attach(self, inbox: queue.Queue[bytes]) -> None:
-        self._inbox = inbox
+    def _attach(self) -> MemoryPipe[bytes, bytes]:
+        pipe: MemoryPipe[bytes, bytes] = MemoryPipe(self._handler)
+        self._pipe = pipe
+        return pipe
 
-    def _detach(self, inbox: queue.Queue[bytes]) -> None:
-        if self._inbox is inbox:
-            self._inbox = None
-
-    def _deliver(self, packet: bytes) -> None:
-        self._handler(packet)
+    def _detach(self, pipe: MemoryPipe[bytes, bytes]) -> None:
+        pipe.close()
+        if self._pipe is pipe:
+            self._pipe = None
 
 
 class MemoryDriver(CRTPDriver):  # type: ignore[misc]  # cflib is untyped
@@ -87,7 +90,7 @@ class MemoryDriver(CRTPDriver):  # type: ignore[misc]  # cflib is untyped
         super().__init__()
         self.needs_resending = False  # an in-memory link loses nothing
         self._link: MemoryLink | None = None
-        self._inbox: queue.Queue[bytes] = queue.Queue()
+        self._pipe: MemoryPipe[bytes, bytes] = MemoryPipe(lambda _packet: None, closed=True)
 
     def connect(self, uri: str, _link_statistics: Any, _link_error: Any) -> None:
         # cflib passes its callbacks positionally; an in-memory link has no statistics and no radio errors.
@@ -98,23 +101,16 @@ class MemoryDriver(CRTPDriver):  # type: ignore[misc]  # cflib is untyped
             link = _links.get(name)
         if link is None:
             raise ConnectionError(f"no memory link named {name!r} is registered (MemoryLink({name!r}, ...))")
-        link._attach(self._inbox)
+        self._pipe = link._attach()
         self._link = link
 
     def send_packet(self, pk: Any) -> None:
-        link = self._link
-        if link is not None:
-            link._deliver(bytes([pk.header]) + bytes(pk.data))
+        if self._link is not None:
+            self._pipe.send(bytes([pk.header]) + bytes(pk.data))
 
     def receive_packet(self, wait: float = 0) -> CRTPPacket | None:
-        try:
-            if wait == 0:
-                raw = self._inbox.get(block=False)
-            else:
-                raw = self._inbox.get(timeout=None if wait < 0 else wait)
-        except queue.Empty:
-            return None
-        return CRTPPacket(raw[0], raw[1:])
+        raw = self._pipe.take(None if wait < 0 else wait)
+        return None if raw is None else CRTPPacket(raw[0], raw[1:])
 
     def get_status(self) -> str:
         return "in-process peer" if self._link is not None else "not connected"
@@ -135,7 +131,7 @@ class MemoryDriver(CRTPDriver):  # type: ignore[misc]  # cflib is untyped
     def close(self) -> None:
         link, self._link = self._link, None
         if link is not None:
-            link._detach(self._inbox)
+            link._detach(self._pipe)
 
 
 def install() -> None:

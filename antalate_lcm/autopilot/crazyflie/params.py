@@ -1,16 +1,17 @@
 """The ``[hlc.autopilot_params]`` of the ``crazyflie`` adapter, validated before any I/O.
 
-Strict (``"5"`` is not 5) and closed (a typo is an unknown key), so a field config fails at start-up
-naming the key instead of flying on a default. docs/crazyflie.md has the same table for people.
+Closed, strict and finite as every adapter's (`antalate_lcm.autopilot.kit.params`), so a field config
+fails at start-up naming the key instead of flying on a default. docs/crazyflie.md has the same table
+for people.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
-from antalate_lcm.strict import validate_strict
+from antalate_lcm.autopilot.kit.params import AdapterParams, defaults
 
 #: The Crazyflie firmware's commander watchdog (supervisor.c): no set-point for 0.5 s levels the
 #: vehicle, 2 s stops the motors. A streamed set-point must be renewed well inside the first.
@@ -19,11 +20,8 @@ WDT_STABILIZE_S = 0.5
 _URI_SCHEMES = ("radio://", "usb://", "udp://", "tcp://", "serial://", "memory://")
 
 
-class Params(BaseModel):
+class Params(AdapterParams):
     """Every adapter parameter with its default."""
-
-    # allow_inf_nan=False: no float field may be inf or nan (a timeout of inf never fires).
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True, allow_inf_nan=False)
 
     uri: str = Field(
         "radio://0/80/2M/E7E7E7E7E7",
@@ -112,9 +110,4 @@ class Params(BaseModel):
         return self
 
 
-def parse_params(raw: Any) -> Params:
-    """`Params` from the config table; `ValueError` naming the key."""
-    return validate_strict(Params, dict(raw or {}))
-
-
-DEFAULTS: dict[str, Any] = {name: f.default for name, f in Params.model_fields.items()}
+DEFAULTS: dict[str, Any] = defaults(Params)

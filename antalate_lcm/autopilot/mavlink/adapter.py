@@ -75,22 +75,20 @@ import contextlib
 import logging
 import math
 import threading
-import time
-from collections.abc import Callable, Mapping
-from typing import Any, ClassVar, cast
+from collections.abc import Callable
+from typing import Any, ClassVar
 
 from pydantic import BaseModel
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from antalate_lcm.autopilot.base import (
-    Autopilot,
     AutopilotError,
     AutopilotState,
-    Clock,
     Frame,
     check_takeoff_altitude,
     check_velocity,
 )
+from antalate_lcm.autopilot.kit import VehicleAdapter, Workers
 from antalate_lcm.autopilot.mavlink import dialect, vehicle_checks
 from antalate_lcm.autopilot.mavlink.dialect import (
     COPTER_MODES,
@@ -102,7 +100,7 @@ from antalate_lcm.autopilot.mavlink.dialect import (
 )
 from antalate_lcm.autopilot.mavlink.failsafe import FLIGHT_MODES
 from antalate_lcm.autopilot.mavlink.link import MavLink, PymavlinkLink
-from antalate_lcm.autopilot.mavlink.params import DEFAULTS, Params, parse_params
+from antalate_lcm.autopilot.mavlink.params import DEFAULTS, Params
 from antalate_lcm.autopilot.mavlink.setpoints import Setpoint, SetpointRules, Verdict
 from antalate_lcm.autopilot.mavlink.signing import signing_key
 from antalate_lcm.autopilot.mavlink.streams import StreamRequest
@@ -131,18 +129,7 @@ _RX_POLL = 0.1  # s the receive thread blocks at most, so close() is prompt
 _SETTLE = 3.0  # s connect() waits at most for the first position and landed-state reports
 
 
-def open_pymavlink(p: Params) -> MavLink:
-    """The real link: ``p.connection`` through pymavlink (serial, UDP, TCP), signed with ``p.signing_key``."""
-    return PymavlinkLink(
-        p.connection,
-        source_system=p.source_system,
-        source_component=p.source_component,
-        baud=p.baud,
-        signing_key=signing_key(p.signing_key) if p.signing_key.strip() else None,
-    )
-
-
-class MavlinkAutopilot(Autopilot):
+class MavlinkAutopilot(VehicleAdapter[Params, MavLink]):
     """ArduCopter through pymavlink; see the module docstring for what it waits for and why.
 
     ``link`` opens the link instead of pymavlink's connection (a `link.MemoryLink` in tests).
@@ -152,17 +139,8 @@ class MavlinkAutopilot(Autopilot):
     blocking = True
     params_model: ClassVar[type[BaseModel]] = Params
 
-    def __init__(
-        self,
-        params: Mapping[str, Any] | None = None,
-        *,
-        clock: Clock = time.monotonic,
-        link: LinkOpener | None = None,
-    ) -> None:
-        super().__init__(params, clock=clock)
-        p = parse_params(self.params, cast("type[Params]", self.params_model), self.name)
-        self._p = p
-        self._opener: LinkOpener = link or open_pymavlink
+    def _setup(self) -> None:
+        p = self._p
         self.connection: str = p.connection
         self.source_system = p.source_system
         self._ack_timeout = p.ack_timeout
@@ -185,12 +163,10 @@ class MavlinkAutopilot(Autopilot):
         self._setpoint: Setpoint | None = None
         self._streams: StreamRequest | None = None  # a telemetry re-request the transmit thread runs
         self._target: tuple[int, int] | None = None  # (system, component) of the autopilot
-        self._stop = threading.Event()
-        self._threads: list[threading.Thread] = []
         self._connected = False
         self._closed = False
         self._warned_autopilot = False
-        self._rate_log = RateLimitedLog(log, period=10.0, clock=clock)
+        self._rate_log = RateLimitedLog(log, period=10.0, clock=self.clock)
         #: The last arming refusal's reason (STATUSTEXT, or the failed pre-flight check), for the HLC.
         self.last_refusal = ""
         #: What the last vehicle pre-flight check found (empty: the vehicle's failsafes protect it).
@@ -201,10 +177,25 @@ class MavlinkAutopilot(Autopilot):
         self.setpoints_withheld = 0
         self._vehicle_ok = False  # the last pre-flight check found nothing
 
+    def _default_link(self, params: Params) -> MavLink:
+        """The real link: ``connection`` through pymavlink (serial, UDP, TCP), signed with ``signing_key``."""
+        return PymavlinkLink(
+            params.connection,
+            source_system=params.source_system,
+            source_component=params.source_component,
+            baud=params.baud,
+            signing_key=signing_key(params.signing_key) if params.signing_key.strip() else None,
+        )
+
+    #: The picture of the vehicle its telemetry is read into (a flight stack's own subclass).
+    _vehicle_class: ClassVar[type[Vehicle]] = Vehicle
+    #: The flight stack the adapter speaks: its MAV_AUTOPILOT, and its name for the warning.
+    _autopilot_kind: ClassVar[tuple[int, str]] = (mav.MAV_AUTOPILOT_ARDUPILOTMEGA, "ArduPilot")
+
     def _new_vehicle(self) -> Vehicle:
         # A HEARTBEAT showing the mode we commanded counts as ours for the longest a mode change can take.
         window = 2 * self._ack_timeout + self._mode_timeout + 1.0
-        return Vehicle(source_system=self.source_system, command_window=window)
+        return self._vehicle_class(source_system=self.source_system, command_window=window)
 
     # ----------------------------------------------------------------- Autopilot contract
 
@@ -217,7 +208,7 @@ class MavlinkAutopilot(Autopilot):
         if self._connected:
             return
         self._closed = False
-        self._stop = threading.Event()
+        self._workers = Workers()  # a fresh stop event: a thread of the last connection stays stopped
         timeout = self._p.connect_timeout
         deadline = self.clock() + timeout
         try:
@@ -264,12 +255,15 @@ class MavlinkAutopilot(Autopilot):
         self._connected = False
         self._shutdown()
 
+    #: The mode the adapter arms in (and flies its commands from).
+    _arm_mode: ClassVar[str] = "GUIDED"
+
     def arm(self) -> bool:
-        """Wait until the copter can fly GUIDED, switch to GUIDED, arm; False if the autopilot refused."""
+        """Wait until the vehicle can fly, switch to `_arm_mode`, arm; False if the autopilot refused."""
         with self._cmd_lock:
             self._require_link("arm")
             with self._cond:
-                ready = self._v.armed and self._v.mode == "GUIDED"
+                ready = self._v.armed and self._armed_ours()
             if ready:
                 return True
             if self._p.require_vehicle_failsafes:
@@ -279,7 +273,7 @@ class MavlinkAutopilot(Autopilot):
                     log.warning("arming refused: %s", self.last_refusal)
                     return False
             self._wait_ready()
-            self._set_mode("GUIDED")
+            self._enter_arm_mode()
             with self._cond:
                 mark = self._v.messages
             result = self._command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
@@ -296,10 +290,23 @@ class MavlinkAutopilot(Autopilot):
                 )
             with self._cond:
                 mode = self._v.mode
-            if mode != "GUIDED":
-                raise AutopilotError(f"armed, but the mode is {mode}, not GUIDED (changed behind our back)")
-            log.info("armed in GUIDED")
+                self._armed_in(mode)
+            if mode != self._arm_mode:
+                raise AutopilotError(
+                    f"armed, but the mode is {mode}, not {self._arm_mode} (changed behind our back)"
+                )
+            log.info("armed in %s", self._arm_mode)
             return True
+
+    def _armed_ours(self) -> bool:
+        """Whether an armed vehicle is already ours to command (lock held): arming again is then a no-op."""
+        return self._v.mode == self._arm_mode
+
+    def _enter_arm_mode(self) -> None:
+        self._set_mode(self._arm_mode)
+
+    def _armed_in(self, mode: str) -> None:
+        """The vehicle armed showing `mode` (lock held)."""
 
     def disarm(self) -> None:
         with self._cmd_lock:
@@ -318,24 +325,33 @@ class MavlinkAutopilot(Autopilot):
             with self._cond:
                 mark, mode, armed = self._v.messages, self._v.mode, self._v.armed
             result = self._command(mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, float(alt))
-            if result != mav.MAV_RESULT_ACCEPTED:
-                state = f"mode {mode}, {'armed' if armed else 'disarmed'}"
-                raise AutopilotError(
-                    f"takeoff to {alt:g} m refused ({result_name(result)}; {state}){self._because(mark)}"
-                )
+            self._check_takeoff_accepted(result, alt, mode, armed, mark)
             log.info("taking off to %g m", alt)
 
+    def _check_takeoff_accepted(self, result: int, alt: float, mode: str, armed: bool, mark: int) -> None:
+        """`AutopilotError` saying why, unless MAV_CMD_NAV_TAKEOFF was accepted (`mode` and `armed` as sent)."""
+        if result != mav.MAV_RESULT_ACCEPTED:
+            state = f"mode {mode}, {'armed' if armed else 'disarmed'}"
+            raise AutopilotError(
+                f"takeoff to {alt:g} m refused ({result_name(result)}; {state}){self._because(mark)}"
+            )
+
+    #: The flight stack's modes for `land` and `rtl`.
+    _land_mode: ClassVar[str] = "LAND"
+    _rtl_mode: ClassVar[str] = "RTL"
+
     def land(self) -> None:
-        with self._cmd_lock:
-            self._require_link("land")
-            self._clear_setpoint()
-            self._set_mode("LAND")
+        self._mode_command("land", self._land_mode)
 
     def rtl(self) -> None:
+        self._mode_command("rtl", self._rtl_mode)
+
+    def _mode_command(self, what: str, mode: str) -> None:
+        """A command that is a mode change (the set-point stream stops)."""
         with self._cmd_lock:
-            self._require_link("rtl")
+            self._require_link(what)
             self._clear_setpoint()
-            self._set_mode("RTL")
+            self._set_mode(mode)
 
     def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
         """Send a velocity target now and keep resending it (never blocks: no ACK exists for it)."""
@@ -410,12 +426,10 @@ class MavlinkAutopilot(Autopilot):
                     ) from exc.__cause__
 
     def _start_threads(self) -> None:
-        self._threads = [
-            threading.Thread(target=self._receive_loop, name=f"mavlink-rx {self.connection}", daemon=True),
-            threading.Thread(target=self._transmit_loop, name=f"mavlink-tx {self.connection}", daemon=True),
-        ]
-        for t in self._threads:
-            t.start()
+        self._workers.start(
+            (self._receive_loop, f"mavlink-rx {self.connection}"),
+            (self._transmit_loop, f"mavlink-tx {self.connection}"),
+        )
 
     def _shutdown(self) -> None:
         self._stop.set()
@@ -423,10 +437,7 @@ class MavlinkAutopilot(Autopilot):
             self._setpoint = None
             self._streams = None
             self._cond.notify_all()
-        for t in self._threads:
-            if t is not threading.current_thread():
-                t.join(timeout=2.0)
-        self._threads = []
+        self._workers.halt()
         with self._send_lock:
             link, self._link = self._link, None
         if link is not None:
@@ -553,11 +564,14 @@ class MavlinkAutopilot(Autopilot):
         if self._warned_autopilot:
             return
         self._warned_autopilot = True
-        if msg.autopilot != mav.MAV_AUTOPILOT_ARDUPILOTMEGA:
+        kind, stack = self._autopilot_kind
+        if msg.autopilot != kind:
             log.warning(
-                "autopilot %s is not ArduPilot (MAV_AUTOPILOT %d): this adapter speaks ArduCopter's modes",
+                "autopilot %s is not %s (MAV_AUTOPILOT %d): this adapter speaks %s's modes",
                 self._target,
+                stack,
                 msg.autopilot,
+                stack,
             )
 
     # ----------------------------------------------------------------- transmitting

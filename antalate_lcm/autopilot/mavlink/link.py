@@ -18,7 +18,6 @@ from __future__ import annotations
 import abc
 import logging
 import os
-import queue
 import sys
 import threading
 import time
@@ -28,6 +27,7 @@ from typing import Any
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from antalate_lcm.autopilot.kit.memory import MemoryPipe
 from antalate_lcm.autopilot.mavlink.signing import allow_unsigned, verify_signature_first
 from antalate_lcm.errors import LinkClosed as LinkClosed
 from antalate_lcm.errors import PeerClosed as PeerClosed
@@ -148,7 +148,7 @@ class _Writer:
 
 
 class MemoryLink(MavLink):
-    """A link through memory: our frames go to `peer` (bytes), the peer's frames come back by `feed`.
+    """A link through memory (`kit.MemoryPipe`): our frames go to `peer` (bytes), the peer's come back by `feed`.
 
     Both directions are real MAVLink 2 frames made and parsed by pymavlink (signed with `signing_key`),
     so the adapter runs exactly as over a socket, only without one. `feed` may be called from any thread.
@@ -162,12 +162,12 @@ class MemoryLink(MavLink):
         source_component: int = mav.MAV_COMP_ID_ONBOARD_COMPUTER,
         signing_key: bytes | None = None,
     ) -> None:
-        self._peer = peer
+        self._pipe: MemoryPipe[bytes, Any] = MemoryPipe(peer)
         self._send_lock = threading.Lock()
         self._parse_lock = threading.Lock()
-        self._inbox: queue.SimpleQueue[Any] = queue.SimpleQueue()
-        self._closed = False
-        self._encoder = mav.MAVLink(_Writer(peer), srcSystem=source_system, srcComponent=source_component)
+        self._encoder = mav.MAVLink(
+            _Writer(self._pipe.send), srcSystem=source_system, srcComponent=source_component
+        )
         self._decoder = mav.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
         self._decoder.robust_parsing = True
         if signing_key is not None:
@@ -226,31 +226,28 @@ class MemoryLink(MavLink):
         self._push(msg)
 
     def feed(self, data: bytes) -> None:
-        """Bytes from the peer: parsed now, received by `recv` in order."""
-        if self._closed:
+        """Bytes from the peer: parsed now, received by `recv` in order (dropped once closed)."""
+        if self._pipe.closed:
             return
         with self._parse_lock:
             received = self._decoder.parse_buffer(data) or []
         for msg in received:
-            self._inbox.put(msg)
+            self._pipe.push(msg)
 
     def send(self, msg: Any) -> None:
-        if self._closed:
+        if self._pipe.closed:
             raise LinkClosed("memory link closed")
         with self._send_lock:
             self._encoder.send(msg)
 
     def recv(self, timeout: float) -> Any | None:
-        if self._closed:
+        if self._pipe.closed:
             raise LinkClosed("memory link closed")
-        try:
-            return self._inbox.get(timeout=timeout)
-        except queue.Empty:
-            return None
+        return self._pipe.take(timeout)
 
     @property
     def closed(self) -> bool:
-        return self._closed
+        return self._pipe.closed
 
     def close(self) -> None:
-        self._closed = True
+        self._pipe.close()

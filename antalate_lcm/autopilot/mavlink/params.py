@@ -1,24 +1,20 @@
 """The ``[hlc.autopilot_params]`` of the ``mavlink`` adapter, validated before any I/O.
 
-A typo in a field config must fail at start-up naming the key, not fall back to a default in the air:
-unknown keys are refused (``extra="forbid"``) and types are strict (``"5"`` is not 5, ``true`` is not 1).
-TOML integers are accepted where a float is expected (``connect_timeout = 10``).
+Closed, strict and finite as every adapter's (`antalate_lcm.autopilot.kit.params`); TOML integers are
+accepted where a float is expected (``connect_timeout = 10``).
 """
 
 from __future__ import annotations
 
-from typing import Any, TypeVar
+from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
-from antalate_lcm.strict import StrictError, validate_strict
+from antalate_lcm.autopilot.kit.params import AdapterParams, defaults
 
 
-class Params(BaseModel):
+class Params(AdapterParams):
     """Every adapter parameter with its default; docs/ardupilot.md has the same table for people."""
-
-    # allow_inf_nan=False: no float field may be inf or nan (a timeout of inf never fires).
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True, allow_inf_nan=False)
 
     connection: str = Field(
         "tcp:127.0.0.1:5760",
@@ -99,21 +95,5 @@ class Params(BaseModel):
         return self
 
 
-P = TypeVar("P", bound=Params)
-
-
-def parse_params(raw: Any, model: type[P] = Params, adapter: str = "mavlink") -> P:  # type: ignore[assignment]
-    """`model` (`Params` or a flight stack's subclass) from the config table, validated as the config
-    loader does (`antalate_lcm.strict`).
-
-    Raises `ValueError` naming the key, so a typo in the field is a one-line fix.
-    """
-    try:
-        return validate_strict(model, dict(raw or {}))
-    except StrictError as exc:
-        where = f"parameter {exc.key!r}" if exc.key else "parameters"
-        raise ValueError(f"{adapter} autopilot {where}: {exc.message}") from None
-
-
 #: Defaults by name (tools and docs checks).
-DEFAULTS: dict[str, Any] = Params().model_dump()
+DEFAULTS: dict[str, Any] = defaults(Params)

@@ -234,8 +234,9 @@ class Vehicle:
         handler = _HANDLERS.get(msg.get_type())
         return _NOTHING if handler is None else handler(self, msg, now) or _NOTHING
 
-    def _on_heartbeat(self, msg: Any, now: float) -> Update:
-        previous = self.custom_mode
+    def _take_heartbeat(self, msg: Any, now: float) -> bool:
+        """Count the autopilot's HEARTBEAT and take its modes and status; True after a silence long
+        enough to be a reboot (its telemetry must be asked for again)."""
         silence = 0.0 if self.heartbeat_at is None else now - self.heartbeat_at
         request = silence > REBOOT_GAP
         if request:
@@ -243,10 +244,14 @@ class Vehicle:
         self.heartbeats += 1
         self.heartbeat_at = now
         self.heartbeat_msg = self.messages
-        was_armed = self.armed
         self.base_mode = msg.base_mode
         self.custom_mode = msg.custom_mode
         self.system_status = msg.system_status
+        return request
+
+    def _on_heartbeat(self, msg: Any, now: float) -> Update:
+        previous, was_armed = self.custom_mode, self.armed
+        request = self._take_heartbeat(msg, now)
         commanded = (
             self.commanded is not None
             and self.commanded[0] == self.mode

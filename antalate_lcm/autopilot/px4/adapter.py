@@ -28,17 +28,13 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
-from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import ClassVar
 
 from pydantic import BaseModel
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm.autopilot.base import AutopilotError, Clock, Frame, check_takeoff_altitude
-from antalate_lcm.autopilot.mavlink.adapter import LinkOpener, MavlinkAutopilot
-from antalate_lcm.autopilot.mavlink.dialect import result_name
-from antalate_lcm.autopilot.mavlink.vehicle import Vehicle
+from antalate_lcm.autopilot.base import AutopilotError, Frame, check_takeoff_altitude
+from antalate_lcm.autopilot.mavlink.adapter import MavlinkAutopilot
 from antalate_lcm.autopilot.mavlink.vehicle_checks import Finding
 from antalate_lcm.autopilot.px4 import modes, vehicle_checks
 from antalate_lcm.autopilot.px4.offboard import OffboardRules
@@ -55,15 +51,14 @@ class Px4Autopilot(MavlinkAutopilot):
 
     name = "px4"
     params_model: ClassVar[type[BaseModel]] = Px4Params
+    _arm_mode = modes.HOLD
+    _land_mode = "AUTO.LAND"
+    _rtl_mode = "AUTO.RTL"
+    _vehicle_class = Px4Vehicle
+    _autopilot_kind = (mav.MAV_AUTOPILOT_PX4, "PX4")
 
-    def __init__(
-        self,
-        params: Mapping[str, Any] | None = None,
-        *,
-        clock: Clock = time.monotonic,
-        link: LinkOpener | None = None,
-    ) -> None:
-        super().__init__(params, clock=clock, link=link)
+    def _setup(self) -> None:
+        super()._setup()
         p = self._p
         assert isinstance(p, Px4Params)
         self._px4 = p
@@ -77,63 +72,17 @@ class Px4Autopilot(MavlinkAutopilot):
         self._streaming_since: float | None = None  # when the stream towards an OFFBOARD switch began
         self._switching = False  # a switch thread is running
 
-    def _new_vehicle(self) -> Vehicle:
-        window = 2 * self._ack_timeout + self._mode_timeout + 1.0
-        return Px4Vehicle(source_system=self.source_system, command_window=window)
-
-    def _check_autopilot_kind(self, msg: Any) -> None:
-        if self._warned_autopilot:
-            return
-        self._warned_autopilot = True
-        if msg.autopilot != mav.MAV_AUTOPILOT_PX4:
-            log.warning(
-                "autopilot %s is not PX4 (MAV_AUTOPILOT %d): this adapter speaks PX4's modes",
-                self._target,
-                msg.autopilot,
-            )
-
     # ----------------------------------------------------------------- Autopilot contract
 
-    def arm(self) -> bool:
-        """Wait for PX4's pre-arm checks, hold (AUTO.LOITER), arm; False if PX4 refused."""
-        with self._cmd_lock:
-            self._require_link("arm")
-            with self._cond:
-                if self._v.armed and self._owned():
-                    return True
-            if self._p.require_vehicle_failsafes:
-                findings = [] if self._vehicle_ok else self._check_vehicle()
-                if findings:
-                    self.last_refusal = "vehicle pre-flight check: " + "; ".join(f.text() for f in findings)
-                    log.warning("arming refused: %s", self.last_refusal)
-                    return False
-            self._wait_ready()
-            with self._cond:
-                mode = self._v.mode
-            if mode != modes.HOLD:
-                self._set_mode(modes.HOLD)
-            with self._cond:
-                mark = self._v.messages
-            result = self._command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
-            if result != mav.MAV_RESULT_ACCEPTED:
-                with self._cond:
-                    reason = self._v.texts_since(mark) or self._v.latest_prearm()
-                self.last_refusal = reason
-                log.warning("arming refused (%s)%s", result_name(result), f": {reason}" if reason else "")
-                return False
-            if not self._wait(lambda v: v.armed, self._mode_timeout):
-                raise AutopilotError(
-                    f"arming acknowledged but no HEARTBEAT showed the motors armed within {self._mode_timeout:g} s"
-                )
-            with self._cond:
-                self._px4v.ours = self._v.mode == modes.HOLD
-                mode = self._v.mode
-            if mode != modes.HOLD:
-                raise AutopilotError(
-                    f"armed, but the mode is {mode}, not {modes.HOLD} (changed behind our back)"
-                )
-            log.info("armed in %s", modes.HOLD)
-            return True
+    def _enter_arm_mode(self) -> None:
+        """Arming happens in Hold, the mode PX4 boots in: switch only when it is elsewhere."""
+        with self._cond:
+            mode = self._v.mode
+        if mode != modes.HOLD:
+            self._set_mode(modes.HOLD)
+
+    def _armed_in(self, mode: str) -> None:
+        self._px4v.ours = mode == modes.HOLD
 
     def takeoff(self, alt: float) -> None:
         """NAV_TAKEOFF to home + `alt` (AMSL, as PX4 reads param7); PX4 holds there when it arrives."""
@@ -151,31 +100,12 @@ class Px4Autopilot(MavlinkAutopilot):
                 )
             nan = float("nan")
             result = self._command(mav.MAV_CMD_NAV_TAKEOFF, -1, 0, 0, nan, nan, nan, home[2] + float(alt))
-            if result != mav.MAV_RESULT_ACCEPTED:
-                state = f"mode {mode}, {'armed' if armed else 'disarmed'}"
-                raise AutopilotError(
-                    f"takeoff to {alt:g} m refused ({result_name(result)}; {state}){self._because(mark)}"
-                )
+            self._check_takeoff_accepted(result, alt, mode, armed, mark)
             log.info("taking off to %g m (%.2f m AMSL)", alt, home[2] + alt)
-
-    def land(self) -> None:
-        with self._cmd_lock:
-            self._require_link("land")
-            self._clear_setpoint()
-            self._set_mode("AUTO.LAND")
-
-    def rtl(self) -> None:
-        with self._cmd_lock:
-            self._require_link("rtl")
-            self._clear_setpoint()
-            self._set_mode("AUTO.RTL")
 
     def hold(self) -> None:
         """Hold position in PX4's Hold (AUTO.LOITER); the set-point stream stops."""
-        with self._cmd_lock:
-            self._require_link("hold")
-            self._clear_setpoint()
-            self._set_mode(modes.HOLD)
+        self._mode_command("hold", modes.HOLD)
 
     def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None:
         """Stream the set-point (never blocks); from our Hold, switch to OFFBOARD once it has run ``offboard_lead``."""
@@ -201,7 +131,7 @@ class Px4Autopilot(MavlinkAutopilot):
         assert isinstance(v, Px4Vehicle)
         return v
 
-    def _owned(self) -> bool:
+    def _armed_ours(self) -> bool:
         return self._px4v.ours
 
     def _switch_to_offboard(self) -> None:

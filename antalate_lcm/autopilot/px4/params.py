@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from pydantic import Field, model_validator
 
+from antalate_lcm.autopilot.kit.params import defaults
 from antalate_lcm.autopilot.mavlink.params import Params
 
 
@@ -49,4 +50,4 @@ class Px4Params(Params):
 
 
 #: Defaults by name (tools and docs checks).
-PX4_DEFAULTS = Px4Params().model_dump()
+PX4_DEFAULTS = defaults(Px4Params)

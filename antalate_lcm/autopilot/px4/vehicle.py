@@ -27,7 +27,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from antalate_lcm.autopilot.base import AutopilotState
 from antalate_lcm.autopilot.mavlink.dialect import status_name, text
 from antalate_lcm.autopilot.mavlink.failsafe import FENCE, GCS
-from antalate_lcm.autopilot.mavlink.vehicle import REBOOT_GAP, Update, Vehicle
+from antalate_lcm.autopilot.mavlink.vehicle import Update, Vehicle
 from antalate_lcm.autopilot.px4 import failsafe as fs
 from antalate_lcm.autopilot.px4 import modes
 
@@ -193,19 +193,8 @@ class Px4Vehicle(Vehicle):
         )
 
     def _on_px4_heartbeat(self, msg: Any, now: float) -> Update:
-        previous = self.custom_mode
-        previous_mode = self.mode
-        silence = 0.0 if self.heartbeat_at is None else now - self.heartbeat_at
-        request = silence > REBOOT_GAP
-        if request:
-            log.info("HEARTBEAT back after %.1f s: asking for telemetry again", silence)
-        self.heartbeats += 1
-        self.heartbeat_at = now
-        self.heartbeat_msg = self.messages
-        was_armed = self.armed
-        self.base_mode = msg.base_mode
-        self.custom_mode = msg.custom_mode
-        self.system_status = msg.system_status
+        previous, previous_mode, was_armed = self.custom_mode, self.mode, self.armed
+        request = self._take_heartbeat(msg, now)
         mode = self.mode
         changed = previous != msg.custom_mode
         carried = ""

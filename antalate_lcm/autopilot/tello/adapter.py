@@ -69,18 +69,17 @@ from typing import Any, ClassVar
 from pydantic import BaseModel
 
 from antalate_lcm.autopilot.base import (
-    Autopilot,
     AutopilotError,
     AutopilotState,
-    Clock,
     FlightMode,
     Frame,
     check_takeoff_altitude,
     check_velocity,
 )
+from antalate_lcm.autopilot.kit import LinkAge, VehicleAdapter
 from antalate_lcm.autopilot.tello import maths, telemetry
-from antalate_lcm.autopilot.tello.link import LinkOpener, TelloLink, open_djitellopy
-from antalate_lcm.autopilot.tello.params import Params, validated
+from antalate_lcm.autopilot.tello.link import DjitellopyLink, TelloLink
+from antalate_lcm.autopilot.tello.params import Params
 from antalate_lcm.geo import FlatFrame, wrap_360
 from antalate_lcm.ratelimit import RateLimitedLog
 
@@ -117,39 +116,29 @@ class _Preempted(AutopilotError):
     """A waiting command was overtaken by land, rtl or emergency."""
 
 
-class TelloAutopilot(Autopilot):
+class TelloAutopilot(VehicleAdapter[Params, TelloLink]):
     """A Tello through djitellopy; see the module docstring for what is emulated on top of the SDK."""
 
     name = "tello"
     blocking = True  # takeoff/land/up wait for the Tello's answer, which comes when the move is done
     params_model: ClassVar[type[BaseModel]] = Params
 
-    def __init__(
-        self,
-        params: Mapping[str, Any] | None = None,
-        *,
-        clock: Clock = time.monotonic,
-        link: LinkOpener | None = None,
-    ) -> None:
-        """`link` opens the adapter's link at `connect` (`link.MemoryLink` in tests); default djitellopy."""
-        super().__init__(params, clock=clock)
-        p = validated(self.params)
-        self._p = p
+    def _setup(self) -> None:
+        """The constructor's ``link=`` opens the link at `connect` (`link.MemoryLink` in tests; default
+        djitellopy's sockets, `_default_link`)."""
+        p = self._p
         self.host: str = p.host
         self.home = FlatFrame(p.home_lat, p.home_lon)
         self._home_heading = wrap_360(p.home_heading)
-        self._opener: LinkOpener = link or open_djitellopy
         self._link: TelloLink | None = None  # once connected
         self._lock = threading.RLock()  # adapter state, shared by the HLC, control and caller threads
         self._cmd_lock = threading.RLock()  # one answered command at a time (replies carry no id)
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._lander: threading.Thread | None = None
         self._connected = False
-        self._ratelog = RateLimitedLog(log, period=10.0, clock=clock)
+        self._ratelog = RateLimitedLog(log, period=10.0, clock=self.clock)
         # Telemetry from the newest state packet.
         self._raw: Mapping[str, Any] | None = None  # the dict object of the last packet (identity = packet)
-        self._state_time: float | None = None  # clock() when it was first seen
+        self._state_age = LinkAge(self.clock)  # heard_at: clock() when the newest packet was first seen
         self._reading = telemetry.StateReading()  # the newest packet in the adapter's units
         self._height_changed = -math.inf  # clock() of the last change of the height reading
         self._air = maths.Debounced(_GROUND_CONFIRM)  # the in-air flag, believed once it held
@@ -181,6 +170,10 @@ class TelloAutopilot(Autopilot):
         self._sent_at = -math.inf  # clock() when the waiting command went out
         self._units = maths.VelocityUnitCheck()
 
+    def _default_link(self, params: Params) -> TelloLink:
+        """djitellopy's sockets to ``host``."""
+        return DjitellopyLink(params)
+
     # ================================================================= the Autopilot contract
 
     def connect(self) -> None:
@@ -194,10 +187,8 @@ class TelloAutopilot(Autopilot):
         except BaseException:
             self._release()
             raise
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._control_loop, name=f"tello-{self.host}", daemon=True)
         self._connected = True
-        self._thread.start()
+        self._workers.start((self._control_loop, f"tello-{self.host}"))
         log.info(
             "Tello %s connected: battery %s%%, %s",
             self.host,
@@ -209,9 +200,7 @@ class TelloAutopilot(Autopilot):
         self._stop.set()
         with self._lock:
             self._preempt += 1
-        thread, self._thread = self._thread, None
-        if thread is not None and thread is not threading.current_thread():
-            thread.join(timeout=2.0)
+        self._workers.halt()
         if self._link is not None and self._connected:
             with self._lock:
                 flying = self._phase is not _Phase.GROUND
@@ -369,7 +358,7 @@ class TelloAutopilot(Autopilot):
             in_air = self._in_air() or self._phase is _Phase.LAND
             return AutopilotState(
                 connected=True,
-                link_age=self._link_age(),
+                link_age=self._state_age(),
                 lat=lat,
                 lon=lon,
                 alt=self._reading.height,
@@ -451,7 +440,7 @@ class TelloAutopilot(Autopilot):
         while True:
             with self._lock:
                 self._ingest()
-                if self._state_time is not None:
+                if self._state_age.heard_at is not None:
                     self._air.reset(self._in_air())
                     self._phase = _Phase.GUIDED if self._in_air() else _Phase.GROUND
                     self._takeoff_point = (self._north, self._east)
@@ -477,7 +466,7 @@ class TelloAutopilot(Autopilot):
         self._require_connected(what)
         with self._lock:
             self._ingest()
-            age = self._link_age()
+            age = self._state_age()
         if age > self._p.link_loss_timeout:
             raise AutopilotError(
                 f"{what}: no state from the Tello at {self.host} for {age:.1f} s (link lost)"
@@ -757,7 +746,8 @@ class TelloAutopilot(Autopilot):
         while self.clock() - start < timeout:
             with self._lock:
                 self._ingest()
-                if self._state_time is not None and self._state_time > start:
+                heard_at = self._state_age.heard_at
+                if heard_at is not None and heard_at > start:
                     return
             time.sleep(_POLL)
 
@@ -776,8 +766,8 @@ class TelloAutopilot(Autopilot):
             return
         now = self.clock()
         self._raw = raw
-        previous, before = self._state_time, self._reading
-        self._state_time = now
+        previous, before = self._state_age.heard_at, self._reading
+        self._state_age.heard(now)
         self._reading = telemetry.read(raw, self._p, self._home_heading, before)
         if self._reading.height != before.height:
             self._height_changed = now
@@ -833,9 +823,6 @@ class TelloAutopilot(Autopilot):
     def _in_air(self) -> bool:
         """What the newest packet says (height above zero); `state` adds the landing in progress."""
         return self._reading.h_cm > 0
-
-    def _link_age(self) -> float:
-        return math.inf if self._state_time is None else max(0.0, self.clock() - self._state_time)
 
     def _heading(self) -> float:
         return wrap_360(self._home_heading + self._reading.yaw)
@@ -934,7 +921,7 @@ class TelloAutopilot(Autopilot):
     def _tick_rc(self, now: float) -> tuple[int, int, int, int] | None:
         """What to send this tick (lock held): streaming rc, a stop, a keepalive, or nothing."""
         p = self._p
-        if self._link_age() > p.link_loss_timeout:
+        if self._state_age() > p.link_loss_timeout:
             if not self._silenced:
                 self._silenced = True
                 self._lost_in_air = self._in_air() or self._phase is not _Phase.GROUND
@@ -943,7 +930,7 @@ class TelloAutopilot(Autopilot):
                     "Tello %s: no state for %.1f s; stopped commanding it (it lands itself 15 s after "
                     "the last command)",
                     self.host,
-                    self._link_age(),
+                    self._state_age(),
                 )
                 return (0, 0, 0, 0) if self._lost_in_air else None
             return None

@@ -18,6 +18,7 @@ from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
 from antalate_lcm.autopilot.base import AutopilotError
+from antalate_lcm.autopilot.kit.memory import MemoryPipe
 from antalate_lcm.autopilot.tello.params import Params
 
 #: djitellopy (with av and numpy, 160 MB) is an extra, so a MAVLink or Crazyflie vehicle computer
@@ -176,13 +177,8 @@ class DjitellopyLink:
                 self._owns_host = False
 
 
-def open_djitellopy(params: Params) -> TelloLink:
-    """The default `LinkOpener`: djitellopy to ``params.host``."""
-    return DjitellopyLink(params)
-
-
 class MemoryLink:
-    """A link to a peer in this process: `handler` gets each command; answers come back as replies.
+    """A link to a peer in this process (`kit.MemoryPipe`): `handler` gets each command; answers come back as replies.
 
     `handler` returns the answer (``"ok"``, ``"85"``), or None for none now (``rc``; or a command the
     peer answers when it is done, with `reply`). State lines go in with `push_state`. All methods are
@@ -191,20 +187,27 @@ class MemoryLink:
 
     def __init__(self, handler: Callable[[str], str | None], *, name: str = "memory") -> None:
         self._handler = handler
+        # the peer's answers go straight into the live reply list, as djitellopy's receiver appends
+        # them: the adapter polls the list it got from `replies`, so the pipe carries only our side
+        self._pipe: MemoryPipe[str, None] = MemoryPipe(self._answer)
         self._lock = threading.Lock()
         self._replies: list[bytes] = []
         self._state: dict[str, int | float | str] | None = None
-        self.closed = False
         self.where = f"{name} (in memory)"
         self.state_where = f"{name}'s state (in memory)"
         self.sent: list[str] = []  # every command, for tests
 
+    @property
+    def closed(self) -> bool:
+        return self._pipe.closed
+
     def open(self) -> None:
-        self.closed = False
+        self._pipe.open()
 
     def send(self, text: str) -> None:
-        if self.closed:
-            raise OSError("the memory link is closed")
+        self._pipe.send(text)
+
+    def _answer(self, text: str) -> None:
         self.sent.append(text)
         answer = self._handler(text)
         if answer is not None:
@@ -220,7 +223,7 @@ class MemoryLink:
             return self._state
 
     def close(self) -> None:
-        self.closed = True
+        self._pipe.close()
 
     # -- the peer's side
 

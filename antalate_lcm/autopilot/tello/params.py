@@ -1,7 +1,8 @@
 """The Tello adapter's parameters (``[hlc.autopilot_params]`` with ``autopilot = "tello"``).
 
-One pydantic model, validated in the adapter's constructor: a typo or a wrong type fails there with
-a `ValueError` naming the key, instead of flying on a default. Every key is documented in
+One pydantic model, closed, strict and finite as every adapter's (`antalate_lcm.autopilot.kit.params`),
+validated in the adapter's constructor: a typo or a wrong type fails there with a `ValueError` naming
+the key, instead of flying on a default. Every key is documented in
 docs/tello.md and set in examples/tello.toml.
 """
 
@@ -11,63 +12,47 @@ import ipaddress
 import logging
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
+
+from antalate_lcm.autopilot.kit.params import AdapterParams, defaults
 
 #: The Tello lands itself this long after the last command it received (SDK 3.0 user guide, "Safety
 #: Function"): counted from the end of the last command it executed.
 TELLO_AUTOLAND_S = 15.0
 
-_Pos = Field(gt=0, allow_inf_nan=False)
 
-
-class Params(BaseModel):
+class Params(AdapterParams):
     """Every parameter with its default; ``strict``: ``"1.0"`` is not a number, ``true`` is not 1."""
 
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
-
     host: str = "192.168.10.1"  # the Tello's IP (192.168.10.1 in its own access-point mode)
-    home_lat: float = Field(default=32.7767, ge=-90.0, le=90.0, allow_inf_nan=False)  # deg: power-on point
-    home_lon: float = Field(default=35.0231, allow_inf_nan=False)  # deg
-    home_heading: float = Field(
-        default=0.0, allow_inf_nan=False
-    )  # deg from north the Tello faced at power-on
-    max_speed: float = Field(default=1.0, gt=0, allow_inf_nan=False)  # m/s horizontally at rc 100
-    max_vertical_speed: float = Field(default=1.0, gt=0, allow_inf_nan=False)  # m/s at rc 100
-    max_yaw_rate: float = Field(default=100.0, gt=0, allow_inf_nan=False)  # deg/s at rc 100
-    control_hz: float = Field(default=20.0, gt=0, le=50.0, allow_inf_nan=False)  # rc rate
-    keepalive_s: float = Field(default=5.0, gt=0, allow_inf_nan=False)  # s between keepalives in the air
-    velocity_hold: float = Field(
-        default=1.0, gt=0, allow_inf_nan=False
-    )  # s a set-point is streamed unrenewed
-    rtl_speed: float = Field(default=0.5, gt=0, allow_inf_nan=False)  # m/s back to the take-off point
-    rtl_tolerance: float = Field(default=0.3, gt=0, allow_inf_nan=False)  # m from it at which the RTL lands
+    home_lat: float = Field(default=32.7767, ge=-90.0, le=90.0)  # deg: power-on point
+    home_lon: float = Field(default=35.0231)  # deg
+    home_heading: float = Field(default=0.0)  # deg from north the Tello faced at power-on
+    max_speed: float = Field(default=1.0, gt=0)  # m/s horizontally at rc 100
+    max_vertical_speed: float = Field(default=1.0, gt=0)  # m/s at rc 100
+    max_yaw_rate: float = Field(default=100.0, gt=0)  # deg/s at rc 100
+    control_hz: float = Field(default=20.0, gt=0, le=50.0)  # rc rate
+    keepalive_s: float = Field(default=5.0, gt=0)  # s between keepalives in the air
+    velocity_hold: float = Field(default=1.0, gt=0)  # s a set-point is streamed unrenewed
+    rtl_speed: float = Field(default=0.5, gt=0)  # m/s back to the take-off point
+    rtl_tolerance: float = Field(default=0.3, gt=0)  # m from it at which the RTL lands
     vgx_sign: Literal[1, -1] = 1  # sign of the state's vgx (forward along yaw 0 is positive)
     vgy_sign: Literal[1, -1] = 1  # sign of the state's vgy (right of yaw 0 is positive)
     velocity_frame: Literal["ground", "body"] = "ground"  # frame of vgx/vgy
     altitude_source: Literal["h", "tof"] = "h"  # the state's height, or the downward range finder
     takeoff_altitude_mode: Literal["rc", "up"] = "rc"  # climb with rc after takeoff, or blocking up/down
-    min_battery: float = Field(
-        default=10.0, ge=0, le=100, allow_inf_nan=False
-    )  # percent: arm() refuses at/below
-    command_timeout: float = Field(
-        default=7.0, gt=0, allow_inf_nan=False
-    )  # s for an answer (command, battery?)
-    takeoff_timeout: float = Field(default=20.0, gt=0, allow_inf_nan=False)  # s for takeoff/land/up to finish
+    min_battery: float = Field(default=10.0, ge=0, le=100)  # percent: arm() refuses at/below
+    command_timeout: float = Field(default=7.0, gt=0)  # s for an answer (command, battery?)
+    takeoff_timeout: float = Field(default=20.0, gt=0)  # s for takeoff/land/up to finish
     velocity_unit_check: bool = True  # check vgx/vgy/vgz are dm/s against the height; RTL refused if not
     command_spacing: float = Field(
-        default=0.15, ge=0.1, le=1.0, allow_inf_nan=False
+        default=0.15, ge=0.1, le=1.0
     )  # s between commands (not rc) and after an answer: a Tello ignores closer ones
     retry_count: int = Field(default=3, ge=1)  # attempts of `command` at connect
-    state_timeout: float = Field(default=2.0, gt=0, allow_inf_nan=False)  # s connect() waits for state
-    link_loss_timeout: float = Field(
-        default=2.0, gt=0, allow_inf_nan=False
-    )  # s without state: stop commanding
-    autoland_s: float = Field(
-        default=TELLO_AUTOLAND_S, gt=0, allow_inf_nan=False
-    )  # the Tello's own auto-landing
-    link_back_hover: float = Field(
-        default=10.0, gt=0, allow_inf_nan=False
-    )  # s hovering uncommanded after a loss
+    state_timeout: float = Field(default=2.0, gt=0)  # s connect() waits for state
+    link_loss_timeout: float = Field(default=2.0, gt=0)  # s without state: stop commanding
+    autoland_s: float = Field(default=TELLO_AUTOLAND_S, gt=0)  # the Tello's own auto-landing
+    link_back_hover: float = Field(default=10.0, gt=0)  # s hovering uncommanded after a loss
     djitellopy_log_level: str = "WARNING"  # djitellopy logs every command (and rc) at INFO
 
     @field_validator("host")
@@ -110,23 +95,5 @@ class Params(BaseModel):
         return self
 
 
-def validated(params: dict[str, Any]) -> Params:
-    """`Params` from a config table; `ValueError` naming the key (first line) on anything wrong."""
-    try:
-        return Params.model_validate(params)
-    except ValidationError as exc:
-        problems = []
-        for err in exc.errors():
-            key = ".".join(str(part) for part in err["loc"]) or "(parameters)"
-            if not err["loc"] and str(err.get("msg", "")).startswith("Value error, "):
-                problems.append(str(err["msg"])[len("Value error, ") :])  # names its keys itself
-                continue
-            if err["type"] == "extra_forbidden":
-                problems.append(f"unknown key {key!r} (known: {sorted(Params.model_fields)})")
-            else:
-                problems.append(f"{key!r}: {err['msg']}, got {err.get('input')!r}")
-        raise ValueError("tello autopilot parameter " + "; ".join(problems)) from None
-
-
 #: Parameters and their defaults, for docs and tests.
-DEFAULTS: dict[str, Any] = {name: field.default for name, field in Params.model_fields.items()}
+DEFAULTS: dict[str, Any] = defaults(Params)

@@ -20,17 +20,17 @@ from typing import TYPE_CHECKING, Any
 __version__ = "0.1.0"
 
 _EXPORTS = {
-    "Bus": "antalate_lcm.bus",
-    "Context": "antalate_lcm.node",
-    "Node": "antalate_lcm.node",
-    "Config": "antalate_lcm.config",
-    "load_config": "antalate_lcm.config",
-    "Behavior": "antalate_lcm.behavior",
-    "BehaviorContext": "antalate_lcm.behavior",
+    "Bus": "antalate_lcm.core.bus",
+    "Context": "antalate_lcm.core.node",
+    "Node": "antalate_lcm.core.node",
+    "Config": "antalate_lcm.core.config",
+    "load_config": "antalate_lcm.core.config",
+    "Behavior": "antalate_lcm.core.behavior",
+    "BehaviorContext": "antalate_lcm.core.behavior",
     "Autopilot": "antalate_lcm.autopilot",
     "AutopilotState": "antalate_lcm.autopilot",
-    "AntalateError": "antalate_lcm.errors",
-    "ConfigError": "antalate_lcm.errors",
+    "AntalateError": "antalate_lcm.base.errors",
+    "ConfigError": "antalate_lcm.base.errors",
 }
 
 __all__ = [
@@ -50,11 +50,11 @@ __all__ = [
 
 if TYPE_CHECKING:
     from antalate_lcm.autopilot import Autopilot, AutopilotState
-    from antalate_lcm.behavior import Behavior, BehaviorContext
-    from antalate_lcm.bus import Bus
-    from antalate_lcm.config import Config, load_config
-    from antalate_lcm.errors import AntalateError, ConfigError
-    from antalate_lcm.node import Context, Node
+    from antalate_lcm.base.errors import AntalateError, ConfigError
+    from antalate_lcm.core.behavior import Behavior, BehaviorContext
+    from antalate_lcm.core.bus import Bus
+    from antalate_lcm.core.config import Config, load_config
+    from antalate_lcm.core.node import Context, Node
 
 
 def __getattr__(name: str) -> Any:

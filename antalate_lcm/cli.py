@@ -16,7 +16,7 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.base.errors import AntalateError
 
 Handler = Callable[[argparse.Namespace], int]
 
@@ -33,7 +33,7 @@ class Subcommand:
 
 def _cmd_keygen(args: argparse.Namespace) -> int:
     """Print a new random swarm key (docs/security.md: generating and rotating keys)."""
-    from antalate_lcm.security import generate_key
+    from antalate_lcm.wire.security import generate_key
 
     print(generate_key())
     return 0
@@ -42,7 +42,7 @@ def _cmd_keygen(args: argparse.Namespace) -> int:
 def commands() -> tuple[Subcommand, ...]:
     """The table. Its modules are imported here, not at the top, so ``import antalate_lcm.cli`` stays
     cheap for the tests and tools that only want :func:`main`."""
-    from antalate_lcm import foxglove_server, gcs, mcap_record, spy, types_cmd
+    from antalate_lcm.apps import foxglove_server, gcs, mcap_record, spy, types_cmd
     from antalate_lcm.runtime import commands as nodes
     from antalate_lcm.runtime import experiment, replay, router, scaffold, sweep
     from antalate_lcm.station import cli as station

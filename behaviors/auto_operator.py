@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from antalate_lcm.behavior import Behavior, BehaviorContext
+from antalate_lcm.core.behavior import Behavior, BehaviorContext
 from antalate_lcm.msgs import operator_cmd_t
 
 _COMMAND_NAMES = {operator_cmd_t.TAKEOFF: "TAKEOFF", operator_cmd_t.RTL: "RTL", operator_cmd_t.LAND: "LAND"}

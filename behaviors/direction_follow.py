@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from antalate_lcm.behavior import Behavior, BehaviorContext
+from antalate_lcm.core.behavior import Behavior, BehaviorContext
 from antalate_lcm.msgs import direction_cmd_t, velocity_cmd_t
 
 

@@ -27,7 +27,7 @@ from typing import IO
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from antalate_lcm.behavior import Behavior, BehaviorContext, BehaviorError
+from antalate_lcm.core.behavior import Behavior, BehaviorContext, BehaviorError
 
 
 class VideoCapture(Behavior):

@@ -29,7 +29,7 @@ The round trip is also measured for ``raw-thread``: raw lcm with a bare Bus's th
 side (another thread runs the handler while the sender waits), the floor for any design where the
 sender is not the thread that handles the answer.
 
-Node to node (``node``): a :class:`~antalate_lcm.node.Node` in each process, through the real
+Node to node (``node``): a :class:`~antalate_lcm.core.node.Node` in each process, through the real
 executor path: ``Node.publish`` of TELEMETRY (header stamped), ``Node.subscribe`` (decode, input
 validation, then the handler on the executor's loop thread). The pinger runs on its node's loop (a
 coroutine on ``Executor.loop`` publishes and awaits the pong), the echo is a node handler that
@@ -38,7 +38,7 @@ its handler; the streaming publisher calls ``Node.publish``.
 
 Signing (docs/security.md): ``bus-signed`` is the Bus with what a node does under a swarm key on
 every message, in the same run: the sender stamps ``header.utime`` and signs (HMAC-SHA256 into
-``header.mac``), the receiver runs the node's :class:`~antalate_lcm.security.Authenticator` (MAC,
+``header.mac``), the receiver runs the node's :class:`~antalate_lcm.wire.security.Authenticator` (MAC,
 window, replay guard) before counting or echoing; the echo re-stamps and re-signs its pong. So one
 round trip holds two signatures and two checks. The cost of one ``sign`` and one check is also timed
 alone, in this process. Takes about 140 s; never more than 190 s. Figures only: nothing here is a
@@ -79,12 +79,12 @@ import logging  # noqa: E402
 
 import lcm  # noqa: E402
 
-from antalate_lcm.bus import DEFAULT_QUEUE_CAPACITY  # noqa: E402
+from antalate_lcm.core.bus import DEFAULT_QUEUE_CAPACITY  # noqa: E402
 from antalate_lcm.msgs import header_t, telemetry_t  # noqa: E402
-from antalate_lcm.security import Authenticator, SecurityPolicy, signed_bytes  # noqa: E402
+from antalate_lcm.wire.security import Authenticator, SecurityPolicy, signed_bytes  # noqa: E402
 
 PORTS = {"raw": 7667, "bus": 7668, "raw-thread": 7670, "bus-signed": 7671, "node": 7672}
-BUS_MODULES = {"bus": "antalate_lcm.bus", "bus-signed": "antalate_lcm.bus"}
+BUS_MODULES = {"bus": "antalate_lcm.core.bus", "bus-signed": "antalate_lcm.core.bus"}
 SWARM_KEY = "benchmark-swarm-key-0123456789abcdef"
 TIME_LIMIT = 190.0  # seconds for the whole run, namespace included
 RATES = (10_000, 20_000, 30_000, 40_000, 50_000, 60_000, 80_000, 100_000, 120_000, 150_000)
@@ -97,10 +97,10 @@ NODE_TARGETS = {"p50 ratio": 1.05, "p99 bus us": 1000.0, "throughput ratio": 0.9
 
 # zenoh:// through a router on loopback (docs/wan.md): the Bus over Zenoh, next to udpm.
 PORTS["zenoh"] = 7673
-BUS_MODULES["zenoh"] = "antalate_lcm.bus"
+BUS_MODULES["zenoh"] = "antalate_lcm.core.bus"
 ZENOH_TARGETS = {"p50 ratio to bus": 2.0, "throughput": 50_000.0}
 PORTS["zenoh-tls"] = 7674
-BUS_MODULES["zenoh-tls"] = "antalate_lcm.bus"
+BUS_MODULES["zenoh-tls"] = "antalate_lcm.core.bus"
 #: Where the run's lab CA is (set by the inner process before the peers start; they inherit it).
 PKI_ENV = "ANTALATE_BENCH_PKI"
 
@@ -151,8 +151,8 @@ def checker() -> Authenticator:
 
 def make_node(agent: str, api: str = "node") -> Any:
     """A bare node (no key: unsigned like raw lcm) with its own context, its loop running."""
-    from antalate_lcm.config import parse_config
-    from antalate_lcm.node import Context, Node
+    from antalate_lcm.core.config import parse_config
+    from antalate_lcm.core.node import Context, Node
 
     # insecure: TELEMETRY is an agent-internal topic, and this compares transports, not keys
     config = parse_config(

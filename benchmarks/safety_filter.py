@@ -31,10 +31,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from antalate_lcm.agent.hlc.safety import SafetyLayer, new_picture  # noqa: E402
 from antalate_lcm.autopilot.base import AutopilotState, Frame  # noqa: E402
-from antalate_lcm.config import parse_config  # noqa: E402
-from antalate_lcm.geo import offset  # noqa: E402
-from antalate_lcm.hlc.safety import SafetyLayer, new_picture  # noqa: E402
+from antalate_lcm.base.geo import offset  # noqa: E402
+from antalate_lcm.core.config import parse_config  # noqa: E402
 from antalate_lcm.msgs import telemetry_t  # noqa: E402
 
 LAT0, LON0 = 32.7767, 35.0231

@@ -34,7 +34,7 @@ MAX_DRIFT_ERROR_DEG = 20.0
 
 def fly(agents: int, mission_time: float, azimuth: float, speed: float) -> tuple[bool, str]:
     """The demo's headless flight, with an operator timeout long enough for a long mission."""
-    from antalate_lcm.node import Node
+    from antalate_lcm.core.node import Node
     from antalate_lcm.runtime.agent import agent_nodes
     from antalate_lcm.runtime.demo import DEMO_URL, build_swarm, open_context, start_station
     from antalate_lcm.runtime.launch import run_until_signal
@@ -73,7 +73,7 @@ def main() -> int:
     args = parser.parse_args()
     ensure_private_netns()
 
-    from antalate_lcm.analysis import analyze_log, format_summary, plot_log
+    from antalate_lcm.apps.analysis import analyze_log, format_summary, plot_log
     from antalate_lcm.runtime.commands import native_lcm_tool
     from antalate_lcm.runtime.demo import DEMO_URL
 

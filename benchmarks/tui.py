@@ -51,8 +51,8 @@ URL = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608"
 # ---------------------------------------------------------------------- publisher (child process)
 def run_publisher(url: str, agents: int, hz: float, arbiter: bool) -> int:
     """Play ``agents`` vehicles until stdin closes; then print a JSON report on stdout."""
-    from antalate_lcm.bus import Bus
-    from antalate_lcm.geo import FlatFrame
+    from antalate_lcm.base.geo import FlatFrame
+    from antalate_lcm.core.bus import Bus
     from antalate_lcm.msgs import arbiter_status_t, hlc_state_t, mc_state_t, operator_cmd_t, telemetry_t
 
     bus = Bus({"lan": url})
@@ -190,7 +190,7 @@ class Terminal:
 
 def measure(args: argparse.Namespace, reader: str) -> int:
     """One console run with its udpm:// reader (``own`` or ``liblcm``), figures printed."""
-    from antalate_lcm.bus import UDPM_READER_ENV
+    from antalate_lcm.core.bus import UDPM_READER_ENV
     from tests.netns import NetNamespace, stop_process
 
     cols, rows = (int(x) for x in args.size.split("x"))

@@ -60,7 +60,7 @@ def node_args(cmdline: list[str]) -> list[str]:
 def plan(cmdline: list[str]) -> Check:
     """What to check for this command line (pure apart from reading the node's config file)."""
     from antalate_lcm.cli import build_parser
-    from antalate_lcm.config import load_config
+    from antalate_lcm.core.config import load_config
 
     rest = node_args(cmdline)
     args = build_parser().parse_args(rest)

@@ -1,7 +1,7 @@
 """The antalate operator console: a Textual app that is an LCM node on the LAN bus.
 
 ``antalate tui [CONFIG]`` calls :func:`run`. Tests and embedders build :class:`OperatorApp` with a
-shared :class:`~antalate_lcm.node.Context` instead (e.g. on a ``memq://`` bus).
+shared :class:`~antalate_lcm.core.node.Context` instead (e.g. on a ``memq://`` bus).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from antalate_lcm.config import Config
+    from antalate_lcm.core.config import Config
     from operator_tui.app import ConsoleSettings, OperatorApp
 
 __all__ = ["ConsoleSettings", "OperatorApp", "run"]
@@ -63,9 +63,9 @@ def run(
     duplicate detection on it, so two consoles on one swarm should use different names.
     ``headless_exit_after`` runs without a terminal for that many seconds (smoke tests, demos).
     Opens the buses before the UI starts, so a missing multicast route is reported as a plain
-    error (:class:`~antalate_lcm.errors.MulticastUnavailable`) rather than inside the UI.
+    error (:class:`~antalate_lcm.base.errors.MulticastUnavailable`) rather than inside the UI.
     """
-    from antalate_lcm.node import Context
+    from antalate_lcm.core.node import Context
     from operator_tui.app import OperatorApp
 
     context = Context.create(config)

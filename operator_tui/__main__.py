@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from antalate_lcm.config import load_config
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.base.errors import AntalateError
+from antalate_lcm.core.config import load_config
 from operator_tui import run
 
 

@@ -29,9 +29,9 @@ from textual.css.query import NoMatches
 from textual.screen import Screen
 from textual.widgets import Footer
 
-from antalate_lcm.config import Config
-from antalate_lcm.node import Context
-from antalate_lcm.vocabulary import Severity
+from antalate_lcm.core.config import Config
+from antalate_lcm.core.node import Context
+from antalate_lcm.wire.vocabulary import Severity
 from operator_tui.commands import CommandTracker, CommandUpdate, DirectionControl, Status, applies
 from operator_tui.link import OperatorNode
 from operator_tui.model import SwarmModel

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from antalate_lcm.config import load_config
+from antalate_lcm.core.config import load_config
 from operator_tui.web import DEFAULT_HOST, DEFAULT_PORT, serve
 
 

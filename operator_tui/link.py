@@ -1,4 +1,4 @@
-"""The console's LCM side: a :class:`~antalate_lcm.node.Node` that watches every agent.
+"""The console's LCM side: a :class:`~antalate_lcm.core.node.Node` that watches every agent.
 
 Receiving (measured with 1,000 agents × 3 topics × 5 Hz, benchmarks/tui.py): the console has no
 node logic to run on the executor, so it subscribes to raw datagrams, and the executor's loop only
@@ -27,13 +27,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from antalate_lcm.bus import Subscription
-from antalate_lcm.config import Config
+from antalate_lcm.base.ratelimit import RateLimitedLog
+from antalate_lcm.core.bus import Subscription
+from antalate_lcm.core.config import Config
+from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
-from antalate_lcm.node import Context, Node
-from antalate_lcm.ratelimit import RateLimitedLog
-from antalate_lcm.security import check_datagram
-from antalate_lcm.topics import Message, channel_regex
+from antalate_lcm.wire.security import check_datagram
+from antalate_lcm.wire.topics import Message, channel_regex
 from operator_tui.commands import COMMANDS
 from operator_tui.model import WATCHED_TOPICS
 

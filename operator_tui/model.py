@@ -23,9 +23,9 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-from antalate_lcm.geo import FlatFrame, wrap_360
-from antalate_lcm.hlc.machine import ErrorCode
-from antalate_lcm.vocabulary import HlcState, McState, Severity, name_of
+from antalate_lcm.agent.hlc.machine import ErrorCode
+from antalate_lcm.base.geo import FlatFrame, wrap_360
+from antalate_lcm.wire.vocabulary import HlcState, McState, Severity, name_of
 
 #: The topics the model understands (config topic names).
 WATCHED_TOPICS: tuple[str, ...] = ("MC_STATE", "HLC_STATE", "TELEMETRY", "HLC_ERROR", "ARBITER")

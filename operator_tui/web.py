@@ -44,8 +44,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from antalate_lcm.errors import AntalateError
-from antalate_lcm.ratelimit import RateLimitedLog, TokenBucket
+from antalate_lcm.base.errors import AntalateError
+from antalate_lcm.base.ratelimit import RateLimitedLog, TokenBucket
 
 if TYPE_CHECKING:
     from aiohttp import web
@@ -515,7 +515,7 @@ def serve(
     except ImportError:
         raise AntalateError("the web console needs textual-serve: pip install textual-serve") from None
     if config is not None:
-        from antalate_lcm.config import load_config
+        from antalate_lcm.core.config import load_config
 
         # a bad config is one clear line now, not a broken page later
         name = name or load_config(config).agent.name

@@ -10,8 +10,8 @@ import math
 
 from pydantic import BaseModel, ConfigDict
 
-from antalate_lcm.behavior import Behavior, BehaviorContext
-from antalate_lcm.geo import local_ne
+from antalate_lcm.base.geo import local_ne
+from antalate_lcm.core.behavior import Behavior, BehaviorContext
 from antalate_lcm.msgs import telemetry_t, velocity_cmd_t
 
 

@@ -13,13 +13,13 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from antalate_lcm.behavior import Behavior, BehaviorContext
-from antalate_lcm.bma import BmaNode
-from antalate_lcm.bus import Bus
-from antalate_lcm.config import Config, parse_config
-from antalate_lcm.executor import Executor
+from antalate_lcm.agent.bma import BmaNode
+from antalate_lcm.core.behavior import Behavior, BehaviorContext
+from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.config import Config, parse_config
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import behavior_state_t, mc_state_t
-from antalate_lcm.node import Context, Node
 
 AGENT = "a1"
 

@@ -139,7 +139,7 @@ def check_antalate(args: list[str], cwd: Path, *, parse_only: bool = False) -> N
         return
     config = getattr(ns, "config", None)
     if ns.command in _CONFIG_COMMANDS and isinstance(config, str) and config.endswith(".toml"):
-        from antalate_lcm.config import load_config
+        from antalate_lcm.core.config import load_config
         from antalate_lcm.runtime.agent import validate
 
         validate(load_config(str(cwd / config)))

@@ -12,13 +12,13 @@ import time
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
+from antalate_lcm.agent.hlc.node import HlcNode
 from antalate_lcm.autopilot.base import Autopilot
-from antalate_lcm.bus import Bus
-from antalate_lcm.config import parse_config
-from antalate_lcm.executor import Executor
-from antalate_lcm.hlc.node import HlcNode
+from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.config import parse_config
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
-from antalate_lcm.node import Context, Node
 from antalate_lcm.runtime.agent import agent_nodes
 from tests.polling import wait_for
 

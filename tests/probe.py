@@ -19,7 +19,7 @@ from typing import Any
 
 import lcm
 
-from antalate_lcm.topics import MESSAGE_TYPES
+from antalate_lcm.wire.topics import MESSAGE_TYPES
 
 
 def to_dict(msg: Any) -> Any:

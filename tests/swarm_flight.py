@@ -18,10 +18,10 @@ from typing import Any
 import lcm
 import tomli_w
 
-from antalate_lcm import geo
 from antalate_lcm.autopilot.sim import DEFAULTS as SIM_DEFAULTS
+from antalate_lcm.base import geo
 from antalate_lcm.msgs import mc_state_t, peer_scan_t, telemetry_t
-from antalate_lcm.vocabulary import McState
+from antalate_lcm.wire.vocabulary import McState
 from tests.agent_harness import FAST_SIM
 
 AGENTS = 8

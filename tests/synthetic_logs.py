@@ -7,7 +7,7 @@ from pathlib import Path
 
 import lcm
 
-from antalate_lcm.geo import offset
+from antalate_lcm.base.geo import offset
 from antalate_lcm.msgs import direction_cmd_t, hlc_error_t, hlc_state_t, mc_state_t, telemetry_t
 
 LAT0, LON0 = 32.7767, 35.0231

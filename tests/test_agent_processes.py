@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm.config import parse_config
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.base.errors import AntalateError
+from antalate_lcm.core.config import parse_config
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
 from antalate_lcm.runtime.agent import (

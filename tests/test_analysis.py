@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm.analysis import (
+from antalate_lcm.apps.analysis import (
     Track,
     analyze,
     analyze_log,
@@ -21,9 +21,9 @@ from antalate_lcm.analysis import (
     default_plot_path,
     read_log,
 )
+from antalate_lcm.base.errors import AntalateError
+from antalate_lcm.base.geo import offset
 from antalate_lcm.cli import main
-from antalate_lcm.errors import AntalateError
-from antalate_lcm.geo import offset
 from antalate_lcm.msgs import mc_state_t, velocity_cmd_t
 from tests.synthetic_logs import CORNERS, LAT0, LON0, LogWriter, square_swarm
 
@@ -313,7 +313,7 @@ def test_file_provider_replays_a_log_into_a_bus(tmp_path: Path) -> None:
     """LCM's ``file://`` provider as a bus URL: any antalate node (the console too) reads a log as if live."""
     import time
 
-    from antalate_lcm.bus import Bus
+    from antalate_lcm.core.bus import Bus
 
     path = square_swarm().write(tmp_path / "swarm.lcm")
     got: list[str] = []

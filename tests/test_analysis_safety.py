@@ -1,4 +1,4 @@
-"""``antalate analyze`` on a swarm's safety (antalate_lcm/analysis/safety.py, docs/safety.md): separation over
+"""``antalate analyze`` on a swarm's safety (antalate_lcm/apps/analysis/safety.py, docs/safety.md): separation over
 the whole log, near-misses, losses of separation, fence breaches, the HLCs' SAFETY reports and whether the
 mission flew, on small logs whose answers are worked out by hand."""
 
@@ -9,11 +9,11 @@ from pathlib import Path
 import pytest
 import tomli_w
 
-from antalate_lcm.analysis import SafetyLimits, analyze_log, read_log
-from antalate_lcm.analysis.safety import event_kind
+from antalate_lcm.apps.analysis import SafetyLimits, analyze_log, read_log
+from antalate_lcm.apps.analysis.safety import event_kind
+from antalate_lcm.base.safety.geofence import Geofence
 from antalate_lcm.cli import main
 from antalate_lcm.msgs import mc_state_t
-from antalate_lcm.safety.geofence import Geofence
 from tests.synthetic_logs import LAT0, LON0, LogWriter
 
 FENCE = Geofence(((-20.0, -20.0), (-20.0, 20.0), (20.0, 20.0), (20.0, -20.0)), 0.0, 30.0, 2.0)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from antalate_lcm import security
 from antalate_lcm.msgs import mc_state_t, operator_cmd_t
+from antalate_lcm.wire import security
 from tests.bma_support import AGENT, Harness, harness, make_config
 from tests.polling import wait_for
 

@@ -11,11 +11,11 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.bma import validate_bma_config
-from antalate_lcm.config import load_config
-from antalate_lcm.errors import ConfigError
+from antalate_lcm.agent.bma import validate_bma_config
+from antalate_lcm.base.errors import ConfigError
+from antalate_lcm.base.plugins import BEHAVIORS, available
+from antalate_lcm.core.config import load_config
 from antalate_lcm.msgs import velocity_cmd_t
-from antalate_lcm.plugins import BEHAVIORS, available
 from tests.bma_support import harness, make_config
 from tests.polling import wait_for
 

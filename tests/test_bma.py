@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.bma import ActivationRule, Arbiter
+from antalate_lcm.agent.bma import ActivationRule, Arbiter
 from antalate_lcm.msgs import arbiter_status_t, mc_state_t, telemetry_t
 from tests.bma_support import AGENT, Recorder, harness, make_config
 from tests.polling import wait_for

@@ -6,11 +6,11 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.bma import BmaNode, plan_bma, validate_bma_config
-from antalate_lcm.bus import Bus
-from antalate_lcm.errors import ConfigError
-from antalate_lcm.executor import Executor
-from antalate_lcm.node import Context
+from antalate_lcm.agent.bma import BmaNode, plan_bma, validate_bma_config
+from antalate_lcm.base.errors import ConfigError
+from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.node import Context
 from tests.bma_support import make_config
 
 REC = "tests.bma_support:Recorder"
@@ -74,9 +74,9 @@ def test_unimportable_module_class() -> None:
 
 def test_plugin_that_is_not_a_behavior() -> None:
     _fails(
-        [{"name": "m", "behaviors": [{"plugin": "antalate_lcm.config:Config"}]}],
+        [{"name": "m", "behaviors": [{"plugin": "antalate_lcm.core.config:Config"}]}],
         "bma[0].behaviors[0].plugin",
-        "not a subclass of antalate_lcm.behavior.Behavior",
+        "not a subclass of antalate_lcm.core.behavior.Behavior",
     )
 
 

@@ -12,16 +12,16 @@ from typing import Any
 import pytest
 import tomli_w
 
-from antalate_lcm import geo
-from antalate_lcm.behavior import Behavior
-from antalate_lcm.bma import BmaNode
-from antalate_lcm.bus import Bus
-from antalate_lcm.config import Config, parse_config
-from antalate_lcm.errors import ConfigError
-from antalate_lcm.executor import Executor
+from antalate_lcm.agent.bma import BmaNode
+from antalate_lcm.base import geo
+from antalate_lcm.base.errors import ConfigError
+from antalate_lcm.core.behavior import Behavior
+from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.config import Config, parse_config
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.node import Context, Node, TopicMatch
 from antalate_lcm.msgs import mc_state_t, telemetry_t
-from antalate_lcm.node import Context, Node, TopicMatch
-from antalate_lcm.peers import PeerTable
+from antalate_lcm.wire.peers import PeerTable
 from tests import REPO
 from tests.netns import child_env
 from tests.polling import wait_for

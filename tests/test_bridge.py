@@ -14,11 +14,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from antalate_lcm.bridge import Bridge, BridgeConfig, Direction, Memory, Throttle, load_bridge_config
-from antalate_lcm.errors import ConfigError
-from antalate_lcm.security import MemberProof
+from antalate_lcm.apps.bridge import Bridge, BridgeConfig, Direction, Memory, Throttle, load_bridge_config
+from antalate_lcm.base.errors import ConfigError
 from antalate_lcm.transports.zenoh import BRIDGE_MARK
 from antalate_lcm.transports.zenoh.groups import _Group
+from antalate_lcm.wire.security import MemberProof
 from tests import REPO
 from tests.netns import NetNamespace
 

@@ -12,8 +12,8 @@ from collections.abc import Iterator
 
 import pytest
 
-from antalate_lcm.bus import Bus
-from antalate_lcm.errors import MulticastUnavailable
+from antalate_lcm.base.errors import MulticastUnavailable
+from antalate_lcm.core.bus import Bus
 from antalate_lcm.msgs import mc_state_t, telemetry_t
 from tests import REPO
 from tests.conftest import MCAST_URL, Probe
@@ -246,7 +246,7 @@ def test_a_bad_datagram_is_one_decode_error_however_many_subscribers(bus: Bus) -
 
 def test_an_attached_bus_delivers_on_the_executors_thread_with_no_hop() -> None:
     """Context attaches its bus: handlers run on the nodes' loop thread, and no bus thread exists."""
-    from antalate_lcm.executor import Executor
+    from antalate_lcm.core.executor import Executor
 
     ex = Executor(name="the-one-loop")
     b = Bus({"test": "memq://"})
@@ -288,7 +288,7 @@ def test_memq_drops_what_nobody_in_the_process_subscribes_to_and_delivers_the_re
     the loop, in publish order, without liblcm's notify pipe (no system call per message)."""
     import select
 
-    from antalate_lcm.executor import Executor
+    from antalate_lcm.core.executor import Executor
 
     ex = Executor()  # not started yet: whatever is queued stays queued
     b = Bus({"test": "memq://"})

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from antalate_lcm.tools import codegen as _codegen
-from antalate_lcm.topics import MESSAGE_TYPES
+from antalate_lcm.wire.topics import MESSAGE_TYPES
 from tests.lcm_tables import dimensions, slots, typenames
 
 

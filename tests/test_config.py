@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm.config import Config, check_unique_agent_names, load_config, parse_config
-from antalate_lcm.errors import ConfigError
-from antalate_lcm.plan import load_plan
+from antalate_lcm.agent.plan import load_plan
+from antalate_lcm.base.errors import ConfigError
+from antalate_lcm.core.config import Config, check_unique_agent_names, load_config, parse_config
 from tests import REPO
 
 
@@ -106,7 +106,7 @@ def test_a_bad_adapter_name_beside_the_table_names_hlc_adapter(tmp_path: Path) -
 
 
 def test_a_config_loads_without_importing_its_plugins(tmp_path: Path) -> None:
-    """The config is data: plugins are resolved once, by the plan (`antalate_lcm.plan`)."""
+    """The config is data: plugins are resolved once, by the plan (`antalate_lcm.agent.plan`)."""
     path = write(tmp_path, '[hlc]\nautopilot = "nope"\n')
     assert load_config(path).hlc.autopilot == "nope"
     assert_config_error(path, "hlc.autopilot", "there is no adapter 'nope'")
@@ -469,7 +469,7 @@ def test_sim_params_model_covers_every_key_the_sim_accepts() -> None:
 
 def test_sim_rejects_the_same_params_when_constructed_directly() -> None:
     from antalate_lcm.autopilot.sim import SimAutopilot
-    from antalate_lcm.strict import StrictError
+    from antalate_lcm.base.strict import StrictError
 
     with pytest.raises(StrictError) as info:
         SimAutopilot({"land_disarm_delay": -1.0})
@@ -559,7 +559,7 @@ def test_behavior_params_are_strict(tmp_path: Path, params: str, key: str, expec
 
 def test_behavior_params_accept_what_toml_can_say(tmp_path: Path) -> None:
     """Strict JSON-like validation: an int fills a float, an array fills a list."""
-    from antalate_lcm.bma import plan_bma
+    from antalate_lcm.agent.bma import plan_bma
 
     config = load_config(write(tmp_path, BEHAVIOR + "params = { retry = 3, max_flights = 1 }\n"))
     params = plan_bma(config, config.bma[0]).behaviors[0].params
@@ -622,7 +622,7 @@ def test_strict_validation_takes_toml_values_as_written() -> None:
 
     from pydantic import BaseModel, ConfigDict
 
-    from antalate_lcm.strict import StrictError, validate_strict
+    from antalate_lcm.base.strict import StrictError, validate_strict
 
     class Mode(enum.Enum):
         FAST = "fast"

@@ -19,7 +19,7 @@ pytest.importorskip("cflib")
 
 from antalate_lcm.autopilot.base import AutopilotError, Frame  # noqa: E402
 from antalate_lcm.autopilot.crazyflie import CFLIB_MISSING, CrazyflieAutopilot  # noqa: E402
-from antalate_lcm.geo import distance  # noqa: E402
+from antalate_lcm.base.geo import distance  # noqa: E402
 from tests.emulators.crazyflie_emulator import CrazyflieEmulator  # noqa: E402
 from tests.emulators.crazyradio import Crazyradio, install  # noqa: E402
 from tests.polling import wait_for  # noqa: E402

@@ -21,7 +21,7 @@ from antalate_lcm.autopilot.crazyflie.telemetry import (
     block_size,
     estimator_problem,
 )
-from antalate_lcm.geo import distance_bearing
+from antalate_lcm.base.geo import distance_bearing
 
 LAT, LON = 32.7767, 35.0231
 
@@ -237,8 +237,8 @@ def test_config_loader_names_the_bad_autopilot_param(
     tmp_path: Any, table: str, key: str, phrase: str
 ) -> None:
     """The plan applies the adapter's params_model before anything starts (one line, the key)."""
-    from antalate_lcm.errors import ConfigError
-    from antalate_lcm.plan import load_plan
+    from antalate_lcm.agent.plan import load_plan
+    from antalate_lcm.base.errors import ConfigError
 
     path = tmp_path / "cf.toml"
     path.write_text(f'[hlc]\nautopilot = "crazyflie"\n[hlc.autopilot_params]\n{table}\n')

@@ -37,8 +37,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - the oldest supported Python
     import tomli as tomllib
 
-from antalate_lcm.behavior import Behavior
-from antalate_lcm.config import load_config
+from antalate_lcm.core.behavior import Behavior
+from antalate_lcm.core.config import load_config
 from antalate_lcm.runtime.agent import validate
 from antalate_lcm.runtime.script import load_script
 from tests.doc_snippets import Block, blocks, check_antalate, commands, is_antalate
@@ -194,7 +194,7 @@ def test_the_command_splitter() -> None:
 
 def test_a_broken_example_fails(tmp_path: Path) -> None:
     """The checks bite: a misspelt option, a misspelt param, a missing example, a broken snippet."""
-    from antalate_lcm.errors import ConfigError
+    from antalate_lcm.base.errors import ConfigError
 
     with pytest.raises(AssertionError, match="unrecognized arguments: --agnets"):
         check_antalate(["run", "examples/swarm_rules/gathering.toml", "--agnets", "8"], REPO)
@@ -242,7 +242,7 @@ def tutorial_script(python: str) -> str:
 @pytest.mark.netns
 @pytest.mark.timeout(240)
 def test_the_tutorial_runs_as_written(netns, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    from antalate_lcm.analysis import analyze_log
+    from antalate_lcm.apps.analysis import analyze_log
     from tests.netns import child_env
 
     site, work = tmp_path / "site", tmp_path / "work"

@@ -10,7 +10,7 @@ from collections.abc import Iterator
 import lcm
 import pytest
 
-from antalate_lcm.executor import Executor
+from antalate_lcm.core.executor import Executor
 from tests.polling import wait_for
 
 

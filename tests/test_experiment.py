@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm.analysis import analyze_log, read_log
+from antalate_lcm.apps.analysis import analyze_log, read_log
+from antalate_lcm.base.errors import AntalateError, ConfigError
 from antalate_lcm.cli import main
-from antalate_lcm.errors import AntalateError, ConfigError
 from antalate_lcm.runtime.experiment import Experiment, run
 from antalate_lcm.runtime.scaffold import files, write_behavior
 from antalate_lcm.runtime.script import load_script, parse_script
@@ -189,7 +189,7 @@ def test_new_behavior_refuses_bad_names_and_existing_folders(
         {"pyproject.toml", "README.md", "config.toml", "script.toml", "twice", "tests"}
     )
     # the generated config and script pass antalate's own validation, unchanged
-    from antalate_lcm.config import load_config
+    from antalate_lcm.core.config import load_config
 
     assert load_config(tmp_path / "twice" / "config.toml").bma[0].behaviors[0].plugin == "twice"
     assert load_script(tmp_path / "twice" / "script.toml").mission_time == 20.0

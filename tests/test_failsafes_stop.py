@@ -15,14 +15,14 @@ from collections.abc import Iterator
 
 import pytest
 
-from antalate_lcm.config import AgentConfig, Config, HlcConfig
-from antalate_lcm.hlc.node import HlcNode
-from antalate_lcm.mc.node import McNode
+from antalate_lcm.agent.hlc.node import HlcNode
+from antalate_lcm.agent.mc.node import McNode
+from antalate_lcm.core.config import AgentConfig, Config, HlcConfig
+from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import operator_cmd_t
-from antalate_lcm.node import Context, Node
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.runtime.launch import run_until_signal
-from antalate_lcm.vocabulary import HlcState, McState
+from antalate_lcm.wire.vocabulary import HlcState, McState
 from tests.polling import wait_for
 
 STOPS = 20

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from antalate_lcm.msgs import hlc_state_t, mc_state_t
-from antalate_lcm.vocabulary import Severity
+from antalate_lcm.wire.vocabulary import Severity
 from operator_tui.commands import applies
 from operator_tui.model import EventKind, SwarmModel
 from operator_tui.widgets.palette import HLC_STYLE, MC_STYLE, UNKNOWN_STYLE, hlc_style, mc_style

@@ -11,21 +11,21 @@ import threading
 import time
 from typing import Any
 
-from antalate_lcm.autopilot.base import Frame
-from antalate_lcm.autopilot.sim import SimAutopilot
-from antalate_lcm.config import AgentConfig, Config, HlcConfig, McConfig
-from antalate_lcm.hlc.node import HlcNode
-from antalate_lcm.hlc.velocity_guard import (
+from antalate_lcm.agent.hlc.node import HlcNode
+from antalate_lcm.agent.hlc.velocity_guard import (
     VelocityCommand,
     VelocityGuard,
     VelocityLimits,
     Verdict,
     check_velocity,
 )
-from antalate_lcm.mc.node import McNode
+from antalate_lcm.agent.mc.node import McNode
+from antalate_lcm.autopilot.base import Frame
+from antalate_lcm.autopilot.sim import SimAutopilot
+from antalate_lcm.core.config import AgentConfig, Config, HlcConfig, McConfig
+from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import operator_cmd_t, velocity_cmd_t
-from antalate_lcm.node import Context, Node
-from antalate_lcm.vocabulary import HlcState, McState
+from antalate_lcm.wire.vocabulary import HlcState, McState
 from tests.polling import wait_for
 
 LIMITS = VelocityLimits(velocity_timeout=0.5, max_link_age=1.5)  # the node passes its link_timeout

@@ -1,4 +1,4 @@
-"""antalate_lcm._fastcodec writes exactly what lcm-gen's encode writes, for every message type."""
+"""antalate_lcm.wire.fastcodec writes exactly what lcm-gen's encode writes, for every message type."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 import antalate_lcm.msgs as msgs
-from antalate_lcm._fastcodec import decoder, encode, encoder
+from antalate_lcm.wire.fastcodec import decoder, encode, encoder
 
 TYPES = [
     getattr(msgs, name)

@@ -22,15 +22,15 @@ from typing import Any
 import lcm
 import pytest
 
-from antalate_lcm.analysis import analyze_log, format_summary, read_log
-from antalate_lcm.analysis.model import FaultRecord, SwarmRecord
-from antalate_lcm.bus import Bus
-from antalate_lcm.config import load_config
-from antalate_lcm.errors import AntalateError, ConfigError
-from antalate_lcm.executor import Executor
-from antalate_lcm.geo import FlatFrame
+from antalate_lcm.apps.analysis import analyze_log, format_summary, read_log
+from antalate_lcm.apps.analysis.model import FaultRecord, SwarmRecord
+from antalate_lcm.base.errors import AntalateError, ConfigError
+from antalate_lcm.base.geo import FlatFrame
+from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.config import load_config
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import mc_state_t, operator_cmd_t, peer_scan_t, telemetry_t
-from antalate_lcm.node import Context, Node
 from antalate_lcm.runtime.experiment import Experiment, Outcome, run
 from antalate_lcm.runtime.faults import BroadcastReception, FaultGate, plan
 from antalate_lcm.runtime.script import Script, load_script, parse_script
@@ -554,7 +554,7 @@ def test_a_vehicle_failsafe_lands_the_agent(dead_and_frozen: tuple[Outcome, Swar
 
 
 def test_the_plot_marks_the_faults_on_their_agents(dead_and_frozen: tuple[Outcome, SwarmRecord]) -> None:
-    from antalate_lcm.analysis.plot import figure
+    from antalate_lcm.apps.analysis.plot import figure
 
     _, record = dead_and_frozen
     analysis = analyze_log(record.path)
@@ -795,8 +795,8 @@ def test_only_signed_fault_records_are_believed(tmp_path: Path) -> None:
     would start an agent process's faults early, or excuse an agent the operator should wait for."""
     from antalate_lcm.msgs import payload_t
     from antalate_lcm.runtime.fault_processes import read_record
-    from antalate_lcm.security import generate_key
-    from antalate_lcm.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE
+    from antalate_lcm.wire.security import generate_key
+    from antalate_lcm.wire.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE
 
     config = load_config(
         _write(tmp_path / "k.toml", CONFIG + f'[security]\nswarm_key = "{generate_key()}"\n')
@@ -829,7 +829,7 @@ def test_the_operators_process_acts_on_the_agent_processes_records(tmp_path: Pat
     names no fault of the script, or the wrong kind, changes nothing."""
     from antalate_lcm.msgs import payload_t
     from antalate_lcm.runtime.fault_processes import FaultRelay
-    from antalate_lcm.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE
+    from antalate_lcm.wire.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE
 
     config = load_config(_write(tmp_path / "swarm.toml", CONFIG))
     script = Script.model_validate(
@@ -887,7 +887,7 @@ def test_faults_across_processes(netns, tmp_path: Path) -> None:  # type: ignore
     agent (in the other process)."""
     import sys
 
-    from antalate_lcm.security import generate_key
+    from antalate_lcm.wire.security import generate_key
     from tests.netns import child_env
 
     udpm = CONFIG.replace('"memq://"', '"udpm://239.255.76.67:7667?ttl=0"')

@@ -9,7 +9,7 @@ import pytest
 
 from antalate_lcm.autopilot.mavlink import MavlinkAutopilot
 from antalate_lcm.autopilot.mavlink.fence_mirror import ORDER, fence_parameters, mirror, mismatches
-from antalate_lcm.safety.geofence import Geofence
+from antalate_lcm.base.safety.geofence import Geofence
 from tests.emulators.mavlink_vehicle import MavlinkVehicle
 from tests.test_mavlink_adapter import FAST, make_ap
 
@@ -57,7 +57,7 @@ def test_written_to_the_vehicle_and_read_back(vehicle: MavlinkVehicle) -> None:
 def test_the_hlc_mirrors_its_fence_before_flying_and_says_so() -> None:
     """MC + HLC(mavlink) + the auto-operator on memq://, [safety] with a fence: the HLC writes the fence
     on the ground, reads it back, reports it (SAFETY, INFO), and the sortie still flies and lands."""
-    from antalate_lcm.hlc.machine import ErrorCode
+    from antalate_lcm.agent.hlc.machine import ErrorCode
     from antalate_lcm.msgs import hlc_error_t
     from antalate_lcm.msgs import mc_state_t as M
     from tests.emulators.mavlink_vehicle import BRISK

@@ -12,8 +12,8 @@ import jsonschema
 import pytest
 import tomli_w
 
-from antalate_lcm import foxglove_msgs, lcm_json
 from antalate_lcm.cli import main
+from antalate_lcm.wire import foxglove_msgs, lcm_json
 from tests.agent_harness import agent_config
 from tests.conftest import MCAST_URL, Probe
 from tests.netns import NetNamespace, stop_process
@@ -82,7 +82,7 @@ def test_reference_client_receives_live_positions_with_the_advertised_schemas(
         assert fixes["sim-01"]["frame_id"] == "sim-01"
         assert abs(fixes["sim-01"]["latitude"] - telemetry["lat"]) < 1e-5
         assert abs(fixes["sim-01"]["longitude"] - telemetry["lon"]) < 1e-5
-        from antalate_lcm.geo import distance
+        from antalate_lcm.base.geo import distance
 
         gap = distance(
             fixes["sim-01"]["latitude"],
@@ -107,7 +107,7 @@ def test_beyond_loopback_needs_no_auth(capsys: pytest.CaptureFixture[str]) -> No
 
 
 def test_without_the_foxglove_extra_it_says_what_to_install() -> None:
-    from antalate_lcm.foxglove_server import FOXGLOVE_MISSING
+    from antalate_lcm.apps.foxglove_server import FOXGLOVE_MISSING
     from tests.test_optional_extras import antalate_without
 
     proc = antalate_without("foxglove", "foxglove", "--port", "0")

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from antalate_lcm import geo
+from antalate_lcm.base import geo
 
 POINTS = [
     (32.7767, 35.0231),  # Technion

@@ -9,9 +9,7 @@ from dataclasses import replace
 
 import pytest
 
-from antalate_lcm.autopilot.base import AutopilotState, FlightMode, Frame
-from antalate_lcm.autopilot.sim import SimAutopilot
-from antalate_lcm.hlc.machine import (
+from antalate_lcm.agent.hlc.machine import (
     HLC_TABLE,
     Action,
     ActionKind,
@@ -24,8 +22,10 @@ from antalate_lcm.hlc.machine import (
     classify,
     pilot_in_control,
 )
-from antalate_lcm.mc.machine import MissionControl
-from antalate_lcm.vocabulary import Command, HlcState, McState, Severity
+from antalate_lcm.agent.mc.machine import MissionControl
+from antalate_lcm.autopilot.base import AutopilotState, FlightMode, Frame
+from antalate_lcm.autopilot.sim import SimAutopilot
+from antalate_lcm.wire.vocabulary import Command, HlcState, McState, Severity
 
 H = HlcState
 M = McState

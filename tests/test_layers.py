@@ -18,75 +18,48 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.base.errors import AntalateError
 from tests import REPO
 
 PACKAGES = ("antalate_lcm", "operator_tui", "behaviors")
 
-#: Lowest first. A unit is a subpackage or a top-level module of antalate_lcm (by its name), or a
-#: whole top-level package. A unit may import units of its own layer or below, never above.
-LAYERS: list[tuple[str, frozenset[str]]] = [
-    ("contract", frozenset({"msgs"})),
-    (
-        "base",
-        frozenset(
-            {
-                "errors",
-                "ratelimit",
-                "_fastcodec",
-                "tools",
-                "state_machine",
-                "vocabulary",
-                "topics",
-                "validation",
-                "geo",
-                "transports",
-                "lcm_datagram",  # deprecated re-export of transports.datagram, one release
-                "strict",
-                "plugins",
-                "security",
-                "peers",
-                "safety",
-                "lcm_json",
-                "foxglove_msgs",
-                "json_view",
-            }
-        ),
-    ),
-    (
-        "core",
-        frozenset(
-            {
-                "executor",
-                "simclock",
-                "bus",
-                "config",
-                "node",
-                "behavior",
-                "mcap_log",
-            }
-        ),
-    ),
-    ("vehicles", frozenset({"autopilot"})),
-    ("domain", frozenset({"mc", "hlc", "bma", "osc", "station", "analysis", "plan", "antalate_lcm"})),
-    (
-        "applications",
-        frozenset(
-            {
-                "operator_tui",
-                "behaviors",
-                "bridge",
-                "spy",
-                "types_cmd",
-                "mcap_record",
-                "foxglove_server",
-                "gcs",
-            }
-        ),
-    ),
-    ("composition root", frozenset({"runtime", "cli"})),
+#: Lowest first: (layer, its folder). One folder is one layer: every module of antalate_lcm lives in the
+#: folder of its layer; operator_tui and behaviors are whole packages, each a layer. A layer may import
+#: its own folder and those below, never one above (docs/architecture.md, "Layers").
+LAYERS: list[tuple[str, str]] = [
+    ("contract", "msgs"),
+    ("base", "base"),
+    ("contract tooling", "tools"),
+    ("transports", "transports"),
+    ("wire", "wire"),
+    ("core", "core"),
+    ("vehicles", "autopilot"),
+    ("station", "station"),
+    ("agent", "agent"),
+    ("behaviors", "behaviors"),
+    ("console", "operator_tui"),
+    ("applications", "apps"),
+    ("composition root", "runtime"),
 ]
-LAYER_OF: dict[str, int] = {unit: i for i, (_, units) in enumerate(LAYERS) for unit in units}
+
+#: The top level of antalate_lcm is its public surface, not a layer: the package's names (its
+#: ``__init__``, which re-exports core and vehicle names; the runtime reads its ``__version__``), the CLI
+#: entry, and the old names of moved public modules, kept one release with a DeprecationWarning
+#: (DEPRECATED). Each sits with the layer it may import.
+DEPRECATED = frozenset(
+    {"lcm_datagram", "behavior", "geo", "peers", "ratelimit", "security", "validation", "analysis"}
+)
+SURFACE: dict[str, str] = {"antalate_lcm": "vehicles", "cli": "composition root"} | {
+    name: "composition root" for name in DEPRECATED
+}
+
+#: Folders that group units of their own (a module or a subpackage each, as they were at the top level
+#: before): the cycle rule is about those units (mc <-> hlc was one). Other folders are one unit.
+GROUPS = frozenset({"base", "wire", "core", "agent", "apps"})
+
+LAYER_OF: dict[str, int] = {folder: i for i, (_, folder) in enumerate(LAYERS)} | {
+    module: [name for name, _ in LAYERS].index(layer) for module, layer in SURFACE.items()
+}
 
 
 @dataclass(frozen=True)
@@ -138,10 +111,19 @@ def _imports(path: Path) -> Iterator[Import]:
 
 
 def _unit(module: str) -> str:
+    """The layer folder (or top-level module) a module belongs to."""
     parts = module.split(".")
     if parts[0] != "antalate_lcm":
         return parts[0]
     return parts[1] if len(parts) > 1 else "antalate_lcm"
+
+
+def _part(module: str) -> str:
+    """A unit inside a layer folder (``agent.mc``): what the cycle rule is about (mc <-> hlc was one)."""
+    parts = module.split(".")
+    if parts[0] != "antalate_lcm" or len(parts) < 3 or parts[1] not in GROUPS:
+        return _unit(module)
+    return ".".join(parts[1:3])
 
 
 def _ours(module: str) -> bool:
@@ -162,6 +144,26 @@ def test_every_unit_has_a_layer() -> None:
     assert units - set(LAYER_OF) == set()
 
 
+def test_the_top_level_is_the_public_surface() -> None:
+    """Every module lives in its layer's folder; the top level of antalate_lcm holds only the surface."""
+    top = REPO / "antalate_lcm"
+    modules = {path.stem for path in top.glob("*.py")}
+    folders = {path.name for path in top.iterdir() if (path / "__init__.py").exists()}
+    assert modules - {"__init__"} - set(SURFACE) == set()
+    assert folders - {folder for _, folder in LAYERS} == set()
+
+
+def test_one_folder_is_one_layer() -> None:
+    """Each layer is one folder, each folder one layer; a top-level module is never a layer."""
+    folders = [folder for _, folder in LAYERS]
+    assert len(folders) == len(set(folders)) == len({name for name, _ in LAYERS})
+    for folder in folders:
+        assert (REPO / "antalate_lcm" / folder / "__init__.py").exists() or (
+            REPO / folder / "__init__.py"
+        ).exists()
+    assert set(SURFACE.values()) <= {name for name, _ in LAYERS}
+
+
 def test_no_lower_layer_imports_a_higher_one() -> None:
     upward = [
         f"{_where(imp)} ({LAYERS[LAYER_OF[_unit(imp.module)]][0]} imports {LAYERS[LAYER_OF[_unit(imp.target)]][0]})"
@@ -175,7 +177,7 @@ def test_no_import_cycle_between_units() -> None:
     """Within a layer units may import each other, but not both ways round (mc ↔ hlc was one)."""
     edges: dict[str, set[str]] = {}
     for imp in ALL_IMPORTS:
-        a, b = _unit(imp.module), _unit(imp.target)
+        a, b = _part(imp.module), _part(imp.target)
         if a != b:
             edges.setdefault(a, set()).add(b)
 
@@ -239,13 +241,13 @@ def test_the_private_module_rule_rejects_what_it_is_about() -> None:
     and lets the owning package (its ``__init__`` and its modules) use its own private modules."""
     outside = [
         Import("operator_tui.web", 1, "antalate_lcm.station._auth", "sha256_hex"),
-        Import("antalate_lcm.runtime.commands", 2, "antalate_lcm._fastcodec", None),
+        Import("antalate_lcm.runtime.commands", 2, "antalate_lcm.station._db", None),
         Import("behaviors.x", 3, "antalate_lcm.station._file", None),
     ]
     inside = [
         Import("antalate_lcm.station", 4, "antalate_lcm.station._models", None),
         Import("antalate_lcm.station.cli", 5, "antalate_lcm.station._auth", "new_api_key"),
-        Import("antalate_lcm.node", 6, "antalate_lcm._fastcodec", "encode"),
+        Import("antalate_lcm.station._app", 6, "antalate_lcm.station._db", "Database"),
     ]
     assert len(_private_module_leaks(outside)) == 3
     assert _private_module_leaks(inside) == []
@@ -264,7 +266,7 @@ def test_the_checks_see_function_level_and_relative_imports() -> None:
 PRIVATE_EXCEPTIONS = {
     # pydantic turns a ValueError raised in a validator into its ValidationError, which load_config
     # reports as a ConfigError; it must stay a ValueError for pydantic to do that.
-    "antalate_lcm.config._KeyedError",
+    "antalate_lcm.core.config._KeyedError",
     # raised and caught inside the station's body-size middleware.
     "antalate_lcm.station._app._TooLarge",
 }
@@ -277,6 +279,8 @@ def _exception_classes() -> Iterator[type[BaseException]]:
         for name in names:
             if name.rpartition(".")[2] == "__main__":
                 continue  # running it is what importing it does
+            if name.count(".") == 1 and name.rpartition(".")[2] in DEPRECATED:
+                continue  # a deprecated name: the same classes as its new module, and a warning
             module = importlib.import_module(name)
             for value in vars(module).values():
                 if inspect.isclass(value) and issubclass(value, BaseException) and value.__module__ == name:
@@ -302,8 +306,8 @@ def test_every_exception_derives_from_antalate_error() -> None:
         ("antalate_lcm.autopilot.AutopilotError", RuntimeError),
         ("antalate_lcm.autopilot.UnknownAutopilotError", LookupError),
         ("antalate_lcm.autopilot.mavlink.link.LinkClosed", ConnectionError),
-        ("antalate_lcm.osc.wire.ReplyError", ValueError),
-        ("antalate_lcm.strict.StrictError", ValueError),
+        ("antalate_lcm.agent.osc.wire.ReplyError", ValueError),
+        ("antalate_lcm.base.strict.StrictError", ValueError),
         ("antalate_lcm.station._station.UnknownTarget", LookupError),
     ],
 )

@@ -28,8 +28,8 @@ from typing import Any
 
 import pytest
 
+from antalate_lcm.agent.hlc.machine import ErrorCode
 from antalate_lcm.autopilot.mavlink import LinkOpener, MavlinkAutopilot
-from antalate_lcm.hlc.machine import ErrorCode
 from antalate_lcm.msgs import hlc_error_t, operator_cmd_t
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M

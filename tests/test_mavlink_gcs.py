@@ -18,10 +18,10 @@ import tomli_w
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm.gcs.view import MC_MODES, GcsRefusal, GcsView, OperatorRequest
+from antalate_lcm.apps.gcs.view import MC_MODES, GcsRefusal, GcsView, OperatorRequest
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t
-from antalate_lcm.security import generate_key
-from antalate_lcm.vocabulary import Command, HlcState, McState
+from antalate_lcm.wire.security import generate_key
+from antalate_lcm.wire.vocabulary import Command, HlcState, McState
 from tests.agent_harness import agent_config
 from tests.conftest import MCAST_URL, Probe
 from tests.netns import NetNamespace, child_env, stop_process

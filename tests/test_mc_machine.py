@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.mc.machine import (
+from antalate_lcm.agent.mc.machine import (
     MC_TABLE,
     McEvent,
     McOutcome,
@@ -17,7 +17,7 @@ from antalate_lcm.mc.machine import (
     MissionControl,
 )
 from antalate_lcm.msgs import operator_cmd_t
-from antalate_lcm.vocabulary import Command, HlcState, McState
+from antalate_lcm.wire.vocabulary import Command, HlcState, McState
 
 M = McState
 H = HlcState
@@ -146,7 +146,7 @@ SEQUENCE_ROWS: list[tuple[McState, Input, McState]] = [
     *[(M.ERROR, hlc(h), target) for h in (H.HOLD, H.AIRBORNE) for target in (M.LAND, M.HOLD)],  # test_policy
 ]
 
-# The rows the implementation adds (documented in antalate_lcm/mc/machine.py).
+# The rows the implementation adds (documented in antalate_lcm/agent/mc/machine.py).
 EXTRA_ROWS: list[tuple[McState, Input, McState]] = [
     *[(s, hlc(H.LOW_BATTERY), M.RTL) for s in RESYNC],
     (M.TAKEOFF, hlc(H.RTL), M.RTL),

@@ -22,8 +22,7 @@ import lcm
 import pytest
 from mcap.reader import make_reader
 
-from antalate_lcm import lcm_json
-from antalate_lcm.analysis import analyze_log, read_log
+from antalate_lcm.apps.analysis import analyze_log, read_log
 from antalate_lcm.cli import main
 from antalate_lcm.msgs import (
     arbiter_status_t,
@@ -39,7 +38,8 @@ from antalate_lcm.msgs import (
     telemetry_t,
     velocity_cmd_t,
 )
-from antalate_lcm.topics import MESSAGE_TYPES
+from antalate_lcm.wire import lcm_json
+from antalate_lcm.wire.topics import MESSAGE_TYPES
 from tests.npm_tools import run_node
 from tests.synthetic_logs import LAT0, LON0, T0, LogWriter
 
@@ -379,7 +379,7 @@ def test_a_flight_recorded_live_and_exported(netns, tmp_path: Path) -> None:  # 
 
 
 def test_without_the_mcap_extra_the_commands_say_what_to_install(tmp_path: Path) -> None:
-    from antalate_lcm.mcap_log import MCAP_MISSING
+    from antalate_lcm.core.mcap_log import MCAP_MISSING
     from tests.test_optional_extras import antalate_without
 
     src = every_type_log(tmp_path / "all.lcm")

@@ -12,10 +12,10 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from antalate_lcm.config import AgentConfig, Config
-from antalate_lcm.hlc.node import HlcNode
-from antalate_lcm.mc.node import McNode
-from antalate_lcm.node import Context, Node
+from antalate_lcm.agent.hlc.node import HlcNode
+from antalate_lcm.agent.mc.node import McNode
+from antalate_lcm.core.config import AgentConfig, Config
+from antalate_lcm.core.node import Context, Node
 from antalate_lcm.runtime.agent import agent_nodes
 from tests.polling import wait_for
 

@@ -18,10 +18,10 @@ from typing import Any
 import pytest
 import tomli_w
 
-from antalate_lcm.analysis.plot import MATPLOTLIB_MISSING
+from antalate_lcm.apps.analysis.plot import MATPLOTLIB_MISSING
 from antalate_lcm.autopilot import AutopilotError
 from antalate_lcm.autopilot.tello import DJITELLOPY_MISSING, TelloAutopilot
-from antalate_lcm.config import load_config
+from antalate_lcm.core.config import load_config
 from tests import REPO
 
 

@@ -18,18 +18,18 @@ from typing import Any
 import httpx
 import pytest
 
-from antalate_lcm.bus import Bus
-from antalate_lcm.config import parse_config
-from antalate_lcm.errors import AntalateError, ConfigError
-from antalate_lcm.executor import Executor
+from antalate_lcm.agent.osc import OscNode, wire
+from antalate_lcm.agent.osc.node import tls_context
+from antalate_lcm.base.errors import AntalateError, ConfigError
+from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.config import parse_config
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.node import Context
 from antalate_lcm.msgs import direction_cmd_t, mc_state_t, operator_cmd_t, payload_t, telemetry_t
-from antalate_lcm.node import Context
-from antalate_lcm.osc import OscNode, wire
-from antalate_lcm.osc.node import tls_context
-from antalate_lcm.security import generate_key
 from antalate_lcm.station import StationServer, StationSettings
 from antalate_lcm.station._auth import registration_key, sha256_hex
 from antalate_lcm.station.client import StationClient, build_operator_cmd, operator_cmd_wire
+from antalate_lcm.wire.security import generate_key
 from tests.agent_harness import AgentProcesses, agent_config
 from tests.conftest import Probe
 from tests.netns import NetNamespace

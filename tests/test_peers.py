@@ -1,4 +1,4 @@
-"""The peer table (antalate_lcm.peers): frames, ages, staleness, centroid, and what it refuses."""
+"""The peer table (antalate_lcm.wire.peers): frames, ages, staleness, centroid, and what it refuses."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import math
 
 import pytest
 
-from antalate_lcm import geo
+from antalate_lcm.base import geo
 from antalate_lcm.msgs import mc_state_t, telemetry_t
-from antalate_lcm.peers import Peer, PeerTable
+from antalate_lcm.wire.peers import Peer, PeerTable
 
 ORIGIN = (32.7767, 35.0231)
 

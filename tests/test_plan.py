@@ -1,4 +1,4 @@
-"""One plugin-loading path (antalate_lcm/plan.py): the plan made once is what the nodes are built from."""
+"""One plugin-loading path (antalate_lcm/agent/plan.py): the plan made once is what the nodes are built from."""
 
 from __future__ import annotations
 
@@ -6,13 +6,13 @@ from collections.abc import Iterator
 
 import pytest
 
+from antalate_lcm.agent.bma.node import BmaNode
+from antalate_lcm.agent.hlc.node import HlcNode
+from antalate_lcm.agent.plan import plan_agent, plan_autopilot
 from antalate_lcm.autopilot.sim import SimAutopilot
-from antalate_lcm.bma.node import BmaNode
-from antalate_lcm.config import parse_config
-from antalate_lcm.errors import ConfigError
-from antalate_lcm.hlc.node import HlcNode
-from antalate_lcm.node import Context
-from antalate_lcm.plan import plan_agent, plan_autopilot
+from antalate_lcm.base.errors import ConfigError
+from antalate_lcm.core.config import parse_config
+from antalate_lcm.core.node import Context
 from antalate_lcm.runtime.agent import agent_nodes, validate
 
 DOC = {

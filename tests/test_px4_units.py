@@ -14,7 +14,7 @@ from antalate_lcm.autopilot.mavlink.setpoints import Verdict
 from antalate_lcm.autopilot.px4 import Px4Autopilot, Px4Params, failsafe, modes, vehicle_checks
 from antalate_lcm.autopilot.px4.offboard import OffboardRules
 from antalate_lcm.autopilot.px4.vehicle import Px4Vehicle, decode_param, encode_param
-from antalate_lcm.config import load_config
+from antalate_lcm.core.config import load_config
 from antalate_lcm.runtime.agent import validate
 from tests import REPO
 

@@ -6,10 +6,10 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.config import parse_config
-from antalate_lcm.errors import ConfigError
-from antalate_lcm.hlc.safety import SafetyLayer, filter_params
-from antalate_lcm.safety.filter import Policy
+from antalate_lcm.agent.hlc.safety import SafetyLayer, filter_params
+from antalate_lcm.base.errors import ConfigError
+from antalate_lcm.base.safety.filter import Policy
+from antalate_lcm.core.config import parse_config
 
 ORIGIN = [32.7767, 35.0231]
 SQUARE = [[0.0, 0.0], [0.0, 40.0], [40.0, 40.0], [40.0, 0.0]]

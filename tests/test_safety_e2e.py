@@ -24,25 +24,25 @@ from typing import Any
 
 import tomli_w
 
-from antalate_lcm.analysis import SafetyLimits, analyze_log
+from antalate_lcm.agent.hlc.node import HlcNode
+from antalate_lcm.apps.analysis import SafetyLimits, analyze_log
 from antalate_lcm.autopilot.sim import SimAutopilot
-from antalate_lcm.bus import Bus
-from antalate_lcm.config import Config, parse_config
-from antalate_lcm.executor import Executor
-from antalate_lcm.geo import FlatFrame, offset
-from antalate_lcm.hlc.node import HlcNode
+from antalate_lcm.base.geo import FlatFrame, offset
+from antalate_lcm.base.safety.geofence import Geofence
+from antalate_lcm.base.safety.separation import separation
+from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.config import Config, parse_config
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.node import Context, Node, TopicMatch
 from antalate_lcm.msgs import hlc_error_t, mc_state_t, operator_cmd_t
-from antalate_lcm.node import Context, Node, TopicMatch
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.runtime.recorder import LogRecorder
-from antalate_lcm.safety.geofence import Geofence
-from antalate_lcm.safety.separation import separation
-from antalate_lcm.vocabulary import McState
+from antalate_lcm.wire.vocabulary import McState
 from tests.polling import wait_for
 
 LAT0, LON0 = 32.7767, 35.0231
 RADIUS = 3.0
-#: The separation ellipsoid's half-height (the sim's default, antalate_lcm.hlc.safety.VEHICLE_DEFAULTS).
+#: The separation ellipsoid's half-height (the sim's default, antalate_lcm.agent.hlc.safety.VEHICLE_DEFAULTS).
 VERTICAL = 1.5
 #: docs/safety.md: the separation the tests demand (radius minus the measured margin of the
 #: sampled, lagging, 10 Hz-telemetry system).

@@ -14,10 +14,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from antalate_lcm.safety.barrier import Constraint, solve
-from antalate_lcm.safety.filter import FilterParams, Policy, SafetyFilter
-from antalate_lcm.safety.geofence import Geofence
-from antalate_lcm.safety.separation import PeerView, SeparationParams
+from antalate_lcm.base.safety.barrier import Constraint, solve
+from antalate_lcm.base.safety.filter import FilterParams, Policy, SafetyFilter
+from antalate_lcm.base.safety.geofence import Geofence
+from antalate_lcm.base.safety.separation import PeerView, SeparationParams
 
 R = 3.0
 VMAX = 5.0

@@ -6,9 +6,9 @@ import math
 
 import pytest
 
-from antalate_lcm.safety.filter import FilterParams, Policy, SafetyDecision, SafetyFilter
-from antalate_lcm.safety.geofence import Geofence
-from antalate_lcm.safety.separation import SeparationParams
+from antalate_lcm.base.safety.filter import FilterParams, Policy, SafetyDecision, SafetyFilter
+from antalate_lcm.base.safety.geofence import Geofence
+from antalate_lcm.base.safety.separation import SeparationParams
 
 VMAX, DT = 5.0, 0.05
 SQUARE = ((0.0, 0.0), (0.0, 40.0), (40.0, 40.0), (40.0, 0.0))

@@ -19,12 +19,13 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.bma import BmaNode
-from antalate_lcm.bus import Bus
-from antalate_lcm.config import Config, parse_config
-from antalate_lcm.executor import Executor
-from antalate_lcm.hlc.node import HlcNode
-from antalate_lcm.mc.node import McNode
+from antalate_lcm.agent.bma import BmaNode
+from antalate_lcm.agent.hlc.node import HlcNode
+from antalate_lcm.agent.mc.node import McNode
+from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.config import Config, parse_config
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.node import Context, InsecureBus, Node
 from antalate_lcm.msgs import (
     direction_cmd_t,
     hlc_state_t,
@@ -33,9 +34,8 @@ from antalate_lcm.msgs import (
     payload_t,
     velocity_cmd_t,
 )
-from antalate_lcm.node import Context, InsecureBus, Node
-from antalate_lcm.security import Reason, sign
-from antalate_lcm.vocabulary import HlcState, McState
+from antalate_lcm.wire.security import Reason, sign
+from antalate_lcm.wire.vocabulary import HlcState, McState
 from tests.agent_harness import FAST_SIM
 from tests.polling import wait_for
 

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm import validation
 from antalate_lcm.msgs import direction_cmd_t, mc_state_t, operator_cmd_t, payload_t, velocity_cmd_t
-from antalate_lcm.security import (
+from antalate_lcm.wire import validation
+from antalate_lcm.wire.security import (
     Authenticator,
     HighWaterStore,
     Reason,
@@ -247,7 +247,7 @@ def test_antalate_keygen_prints_a_fresh_key_each_time() -> None:
 def test_signed_bytes_equal_sign_then_encode(agent: str) -> None:
     """Node.publish splices the MAC into the unsigned encoding: it must be the very same bytes."""
     from antalate_lcm.msgs import telemetry_t
-    from antalate_lcm.security import signed_bytes
+    from antalate_lcm.wire.security import signed_bytes
 
     for msg in (_cmd(agent=agent, key=""), telemetry_t()):
         msg.header.agent, msg.header.utime, msg.header.seq = agent, int(T0 * 1e6), 9
@@ -261,7 +261,7 @@ def test_signed_bytes_equal_sign_then_encode(agent: str) -> None:
 def test_check_datagram_verifies_encoded_bytes_as_check_mac_does() -> None:
     """The console's path: the MAC checked on the datagram, without decoding it."""
     from antalate_lcm.msgs import mc_state_t
-    from antalate_lcm.security import Reason, check_datagram, signed_bytes
+    from antalate_lcm.wire.security import Reason, check_datagram, signed_bytes
 
     msg = mc_state_t()
     msg.header.agent, msg.header.utime, msg.header.seq = "alpha", 1_800_000_000_000_000, 7

@@ -10,7 +10,6 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm import geo
 from antalate_lcm.autopilot import (
     Autopilot,
     AutopilotError,
@@ -22,7 +21,8 @@ from antalate_lcm.autopilot import (
     load_autopilot,
 )
 from antalate_lcm.autopilot.sim import DEFAULTS, SimAutopilot
-from antalate_lcm.errors import PluginNotFound
+from antalate_lcm.base import geo
+from antalate_lcm.base.errors import PluginNotFound
 
 HOME = (32.7767, 35.0231)
 

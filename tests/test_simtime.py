@@ -21,12 +21,12 @@ import lcm
 import pytest
 
 from antalate_lcm.cli import main
-from antalate_lcm.executor import Executor
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.simclock import SIM_EPOCH, SIM_START, SimClock
 from antalate_lcm.msgs import telemetry_t
 from antalate_lcm.runtime.experiment import Experiment, run
 from antalate_lcm.runtime.replay import first_divergence, record_path
 from antalate_lcm.runtime.script import load_script
-from antalate_lcm.simclock import SIM_EPOCH, SIM_START, SimClock
 
 AGENTS = 20
 CONFIG = """

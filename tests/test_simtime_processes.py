@@ -21,7 +21,8 @@ from pathlib import Path
 import pytest
 
 from antalate_lcm.cli import main
-from antalate_lcm.executor import Executor
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.simclock import SIM_START, SimClock
 from antalate_lcm.runtime.experiment import Experiment, run
 from antalate_lcm.runtime.replay import read_record
 from antalate_lcm.runtime.script import load_script
@@ -47,7 +48,6 @@ from antalate_lcm.runtime.time_grant import (
     remaining,
     woken,
 )
-from antalate_lcm.simclock import SIM_START, SimClock
 from tests.harness.polling import wait_for
 from tests.test_simtime import CONFIG, SCRIPT, message_hashes
 

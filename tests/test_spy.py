@@ -26,10 +26,10 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm import spy
+from antalate_lcm.apps import spy
 from antalate_lcm.msgs import header_t, mc_state_t, telemetry_t
 from antalate_lcm.tools import codegen as _codegen
-from antalate_lcm.topics import Message
+from antalate_lcm.wire.topics import Message
 from tests import REPO
 from tests.lcm_tables import dimensions, fingerprint, slots, typenames
 from tests.netns import NetNamespace, group_members, netns_unavailable, stop_process

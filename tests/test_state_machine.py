@@ -1,4 +1,4 @@
-"""The state-machine engine (antalate_lcm/state_machine.py) the MC and HLC tables run on: rows read top to
+"""The state-machine engine (antalate_lcm/base/state_machine.py) the MC and HLC tables run on: rows read top to
 bottom, guards that fall through, and guards that cannot write to the machine they read."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
-from antalate_lcm.state_machine import Row, Table
+from antalate_lcm.base.state_machine import Row, Table
 from tests import REPO
 
 
@@ -71,8 +71,8 @@ def test_a_guard_cannot_write_to_the_machine_it_reads(tmp_path: Path) -> None:
     source.write_text(
         textwrap.dedent(
             """
-            from antalate_lcm.hlc.machine import HlcView
-            from antalate_lcm.mc.machine import McView
+            from antalate_lcm.agent.hlc.machine import HlcView
+            from antalate_lcm.agent.mc.machine import McView
 
             def mc_guard(m: McView) -> bool:
                 m.hlc_changed = True

@@ -18,7 +18,7 @@ from typing import Any
 import httpx
 import pytest
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.base.errors import AntalateError
 from antalate_lcm.station import StationServer, StationSettings, default_db_path, models, run_station
 from antalate_lcm.station._auth import sha256_hex
 from antalate_lcm.station._settings import ApiKey

@@ -18,14 +18,14 @@ from typing import Any
 import httpx
 import pytest
 
-from antalate_lcm.errors import ConfigError
-from antalate_lcm.osc import wire
-from antalate_lcm.security import generate_key, verify
+from antalate_lcm.agent.osc import wire
+from antalate_lcm.base.errors import ConfigError
 from antalate_lcm.station import StationServer, StationSettings
 from antalate_lcm.station._auth import registration_key, registration_mac, sha256_hex
 from antalate_lcm.station._file import load_station_file
 from antalate_lcm.station._settings import RateLimits
 from antalate_lcm.station.client import StationClient, StationClientError
+from antalate_lcm.wire.security import generate_key, verify
 from tests.test_station import API_KEYS, AUTH, OPERATOR_KEY, ORIGIN, READER_KEY, settings_for, tel
 
 SWARM_KEY = generate_key()

@@ -1,4 +1,4 @@
-"""Swarm metrics for any algorithm (antalate_lcm/analysis/swarm.py, geometry.py, phases.py) against
+"""Swarm metrics for any algorithm (antalate_lcm/apps/analysis/swarm.py, geometry.py, phases.py) against
 synthetic trajectories whose answers are worked out by hand in each test.
 
 The logs are written with ``lcm.EventLog`` as ``lcm-logger`` writes them (tests/synthetic_logs.py),
@@ -14,15 +14,15 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm.analysis import Analysis, analyze_log
-from antalate_lcm.analysis.geometry import (
+from antalate_lcm.apps.analysis import Analysis, analyze_log
+from antalate_lcm.apps.analysis.geometry import (
     closest_pair,
     components,
     nearest_neighbour_distances,
     polarisation,
     quantile,
 )
-from antalate_lcm.analysis.swarm import sample_times
+from antalate_lcm.apps.analysis.swarm import sample_times
 from antalate_lcm.cli import main
 from antalate_lcm.msgs import mc_state_t
 from tests import REPO
@@ -313,8 +313,8 @@ def test_cli_rejects_nonsense_thresholds(
 
 
 def test_plot_goal_lines_come_from_options_only(gathering: tuple[Path, Analysis], tmp_path: Path) -> None:
-    from antalate_lcm.analysis import read_log
-    from antalate_lcm.analysis.plot import figure
+    from antalate_lcm.apps.analysis import read_log
+    from antalate_lcm.apps.analysis.plot import figure
 
     path, result = gathering
     record = read_log(path)

@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from antalate_lcm.geo import offset
-from antalate_lcm.hlc.swarm_picture import SwarmPicture
+from antalate_lcm.agent.hlc.swarm_picture import SwarmPicture
+from antalate_lcm.base.geo import offset
 from antalate_lcm.msgs import telemetry_t
 
 LAT0, LON0 = 32.7767, 35.0231

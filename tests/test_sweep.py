@@ -16,8 +16,8 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.config import read_toml_file
-from antalate_lcm.errors import AntalateError, ConfigError
+from antalate_lcm.base.errors import AntalateError, ConfigError
+from antalate_lcm.core.config import read_toml_file
 from antalate_lcm.runtime.sweep import (
     METRICS,
     Progress,

@@ -26,7 +26,7 @@ import pytest
 
 from antalate_lcm.autopilot import load_autopilot
 from antalate_lcm.autopilot.tello import TelloAutopilot
-from antalate_lcm.geo import FlatFrame
+from antalate_lcm.base.geo import FlatFrame
 from tests.emulators.netns_pair import NetnsPair, netns_pair_unavailable
 from tests.emulators.tello_emulator import TelloEmulator
 

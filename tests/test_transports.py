@@ -10,9 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm import security
-from antalate_lcm.bus import Bus
-from antalate_lcm.errors import AntalateError, BusUnavailable, InvalidBusUrl, UnknownTransport
+from antalate_lcm.base.errors import AntalateError, BusUnavailable, InvalidBusUrl, UnknownTransport
+from antalate_lcm.core.bus import Bus
 from antalate_lcm.transports import TRANSPORTS, open_lcm, parse_lcm_url, transport_for
 from antalate_lcm.transports.base import Transport
 from antalate_lcm.transports.file import File
@@ -20,6 +19,7 @@ from antalate_lcm.transports.memq import Memq
 from antalate_lcm.transports.tcpq import Tcpq
 from antalate_lcm.transports.udpm import Mpudpm, Udpm
 from antalate_lcm.transports.zenoh import ZENOH_NOT_LCM, Zenoh
+from antalate_lcm.wire import security
 from tests import REPO
 
 #: One URL of each scheme, the transport it must get, and whether other hosts reach it.

@@ -19,9 +19,10 @@ from typing import Any, TypeVar
 
 import pytest
 
-from antalate_lcm.bus import Bus
-from antalate_lcm.config import Config, parse_config
-from antalate_lcm.executor import Executor
+from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.config import Config, parse_config
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.node import Context
 from antalate_lcm.msgs import (
     arbiter_status_t,
     direction_cmd_t,
@@ -31,9 +32,8 @@ from antalate_lcm.msgs import (
     operator_cmd_t,
     telemetry_t,
 )
-from antalate_lcm.node import Context
-from antalate_lcm.security import sign, verify
-from antalate_lcm.vocabulary import Command, name_of
+from antalate_lcm.wire.security import sign, verify
+from antalate_lcm.wire.vocabulary import Command, name_of
 from operator_tui.app import SLICE_ITEMS, ConsoleSettings, OperatorApp
 from operator_tui.commands import Status
 from operator_tui.model import EventKind, Telemetry

@@ -7,11 +7,11 @@ from collections.abc import Iterator
 
 import pytest
 
-from antalate_lcm.bus import Bus
-from antalate_lcm.config import parse_config
-from antalate_lcm.executor import Executor
+from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.config import parse_config
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.node import Context
 from antalate_lcm.msgs import hlc_error_t, mc_state_t, telemetry_t
-from antalate_lcm.node import Context
 from operator_tui.link import OperatorNode
 from tests.polling import wait_for
 

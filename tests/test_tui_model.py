@@ -7,7 +7,7 @@ import random
 import pytest
 
 from antalate_lcm.msgs import arbiter_status_t, hlc_error_t, hlc_state_t, mc_state_t, telemetry_t
-from antalate_lcm.vocabulary import Severity
+from antalate_lcm.wire.vocabulary import Severity
 from operator_tui.commands import CommandTracker, DirectionControl, Status, TrackedCommand, applies
 from operator_tui.model import EventKind, SwarmModel, heading_arrow, natural_key
 from operator_tui.widgets.agent_table import format_age, row_cells
@@ -121,7 +121,7 @@ def test_the_latest_safety_report_is_kept_apart_and_shown_in_the_detail() -> Non
 def test_the_status_bar_says_who_is_being_modified_and_the_closest_pair_in_the_air() -> None:
     """docs/safety.md: the swarm-wide line -- how many commands the filter is modifying (by whom) and
     the closest pair of agents in the air (3-D); nothing for a swarm that never sent a SAFETY report."""
-    from antalate_lcm.geo import offset
+    from antalate_lcm.base.geo import offset
     from operator_tui.commands import DirectionControl
     from operator_tui.widgets.panels import status_text
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from antalate_lcm.config import parse_config
+from antalate_lcm.core.config import parse_config
 from operator_tui.app import OperatorApp
 from tests.synthetic_logs import square_swarm
 

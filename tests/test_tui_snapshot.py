@@ -16,8 +16,8 @@ import os
 import re
 from pathlib import Path
 
+from antalate_lcm.core.node import Context
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
-from antalate_lcm.node import Context
 from operator_tui.app import OperatorApp
 from operator_tui.commands import Status
 from tests import test_tui

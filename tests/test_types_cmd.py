@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm import types_cmd
+from antalate_lcm.apps import types_cmd
 from antalate_lcm.tools import codegen as _codegen
 from tests import REPO
 

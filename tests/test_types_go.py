@@ -19,12 +19,13 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm import security, types_cmd
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.apps import types_cmd
+from antalate_lcm.base.errors import AntalateError
 from antalate_lcm.msgs import arbiter_status_t, header_t, operator_cmd_t, payload_t
 from antalate_lcm.tools import codegen as _codegen
 from antalate_lcm.tools import golang as _golang
 from antalate_lcm.tools.lcm_parse import fingerprint, parse_files
+from antalate_lcm.wire import security
 from tests import REPO
 
 ROUNDTRIP = REPO / "tests" / "go" / "roundtrip" / "main.go"

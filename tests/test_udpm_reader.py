@@ -36,7 +36,7 @@ _OWN_SCRIPT = r"""
 import json, os, socket, struct, sys, time
 import lcm
 from pathlib import Path
-from antalate_lcm.bus import Bus
+from antalate_lcm.core.bus import Bus
 from antalate_lcm.transports.datagram import short_datagram
 
 A = sys.argv[1]

@@ -12,7 +12,7 @@ import pytest
 from antalate_lcm.autopilot import load_autopilot
 from antalate_lcm.autopilot.kit import LinkAge, MemoryPipe, VehicleAdapter, Workers, defaults, parse_params
 from antalate_lcm.autopilot.mavlink import Params as MavlinkParams
-from antalate_lcm.errors import LinkClosed
+from antalate_lcm.base.errors import LinkClosed
 from tests import REPO
 from tests.harness.polling import wait_for
 
@@ -132,7 +132,7 @@ def test_workers_start_stop_and_a_loop_may_halt_its_own_workers() -> None:
 )
 def test_params_documented_and_example_valid(adapter: str, doc: str, example: str) -> None:
     """Every parameter is in the adapter's docs page and example config, and the example loads."""
-    from antalate_lcm.config import load_config
+    from antalate_lcm.core.config import load_config
     from antalate_lcm.runtime.agent import validate
 
     cls = load_autopilot(adapter)

@@ -7,8 +7,7 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.autopilot.base import Frame
-from antalate_lcm.hlc.velocity_guard import (
+from antalate_lcm.agent.hlc.velocity_guard import (
     GuardDecision,
     Velocity,
     VelocityCommand,
@@ -17,7 +16,8 @@ from antalate_lcm.hlc.velocity_guard import (
     Verdict,
     check_velocity,
 )
-from antalate_lcm.vocabulary import HlcState, McState
+from antalate_lcm.autopilot.base import Frame
+from antalate_lcm.wire.vocabulary import HlcState, McState
 
 LIMITS = VelocityLimits(max_horizontal=5.0, max_vertical=2.0, max_yaw_rate=90.0, velocity_timeout=0.5)
 OK = (HlcState.AIRBORNE, McState.MISSION)

@@ -8,7 +8,7 @@ from typing import Any, get_args
 import pytest
 
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, operator_cmd_t
-from antalate_lcm.vocabulary import (
+from antalate_lcm.wire.vocabulary import (
     Command,
     CommandName,
     HlcState,

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm import spy
+from antalate_lcm.apps import spy
 from antalate_lcm.tools import codegen as _codegen
 from tests.netns import NetNamespace, netns_unavailable, stop_process
 from tests.polling import wait_for

@@ -13,9 +13,9 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
 
-from antalate_lcm.bus import Bus  # noqa: E402
-from antalate_lcm.config import load_config  # noqa: E402
-from antalate_lcm.errors import ConfigError  # noqa: E402
+from antalate_lcm.base.errors import ConfigError  # noqa: E402
+from antalate_lcm.core.bus import Bus  # noqa: E402
+from antalate_lcm.core.config import load_config  # noqa: E402
 from antalate_lcm.msgs import mc_state_t, telemetry_t  # noqa: E402
 from antalate_lcm.runtime.router import router_config  # noqa: E402
 from antalate_lcm.transports.zenoh import ZenohLCM, channel_key, key_channel, literal_channel  # noqa: E402
@@ -329,8 +329,8 @@ def test_the_lcm_tools_refuse_a_zenoh_bus_with_the_way_out(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """lcm-logger and lcm-spy speak LCM only: `antalate log`/`spy` on a zenoh bus say to bridge it."""
+    from antalate_lcm.base.errors import BusUnavailable
     from antalate_lcm.cli import main
-    from antalate_lcm.errors import BusUnavailable
     from antalate_lcm.transports import open_lcm
 
     with pytest.raises(BusUnavailable, match="antalate bridge"):

@@ -3,7 +3,7 @@
 Adapters are found by name in the entry-point group ``antalate.autopilots`` (so third-party packages
 can add vehicles without touching this code) or given directly as ``"package.module:ClassName"``.
 Only the chosen adapter's module is imported: a missing optional library (djitellopy, pymavlink)
-only matters for the adapter that needs it. Lookup goes through `antalate_lcm.plugins`, the one
+only matters for the adapter that needs it. Lookup goes through `antalate_lcm.base.plugins`, the one
 loader shared with behaviors, so both kinds of plugin fail the same way.
 """
 
@@ -12,9 +12,9 @@ from __future__ import annotations
 import inspect
 
 from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, FlightMode, Frame
-from antalate_lcm.errors import PluginNotFound
-from antalate_lcm.errors import UnknownAutopilotError as UnknownAutopilotError
-from antalate_lcm.plugins import AUTOPILOTS, group_entry_points, load_plugin
+from antalate_lcm.base.errors import PluginNotFound
+from antalate_lcm.base.errors import UnknownAutopilotError as UnknownAutopilotError
+from antalate_lcm.base.plugins import AUTOPILOTS, group_entry_points, load_plugin
 
 ENTRY_POINT_GROUP = AUTOPILOTS
 

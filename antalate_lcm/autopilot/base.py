@@ -11,7 +11,7 @@ Every adapter is constructed as ``Cls(params, *, clock=time.monotonic)``:
 * ``params`` is the ``[hlc.autopilot_params]`` table of the config as a plain ``dict`` (unknown keys should
   raise `ValueError` naming the key, so a typo does not silently fall back to a default);
   an adapter declares them as a pydantic model in `Autopilot.params_model`
-  (``ConfigDict(extra="forbid", strict=True)``), which `antalate_lcm.plan` validates before anything
+  (``ConfigDict(extra="forbid", strict=True)``), which `antalate_lcm.agent.plan` validates before anything
   starts, so an error names ``hlc.autopilot_params.<field>``; `Autopilot.validate_params` applies the same
   rules in the constructor;
 * ``clock`` is a monotonic clock in seconds. Adapters must take every timestamp from it (link age,
@@ -41,9 +41,9 @@ from typing import Any, ClassVar
 
 from pydantic import BaseModel
 
-from antalate_lcm.errors import AutopilotError as AutopilotError
+from antalate_lcm.base.errors import AutopilotError as AutopilotError
+from antalate_lcm.base.strict import validate_strict
 from antalate_lcm.msgs import velocity_cmd_t
-from antalate_lcm.strict import validate_strict
 
 Clock = Callable[[], float]
 
@@ -186,8 +186,8 @@ class Autopilot(ABC):
     def validate_params(cls, params: Mapping[str, Any] | None) -> BaseModel | None:
         """``params`` validated by `params_model` exactly as the config loader does, or None without one.
 
-        Strict as TOML types values (`antalate_lcm.strict`): "5" is not a number, "yes" not a
-        boolean, an int fills a float. Raises `antalate_lcm.strict.StrictError` (a `ValueError`)
+        Strict as TOML types values (`antalate_lcm.base.strict`): "5" is not a number, "yes" not a
+        boolean, an int fills a float. Raises `antalate_lcm.base.strict.StrictError` (a `ValueError`)
         whose ``key`` is the field.
         """
         if cls.params_model is None:

@@ -6,7 +6,7 @@ testing the HLC against faults that are hard to provoke on real hardware.
 The model
 ---------
 * Position is kept in metres north/east of home and altitude above home; lat/lon are derived with
-  `antalate_lcm.geo.FlatFrame` (a tangent-plane approximation: centimetres off at 1 km, plenty
+  `antalate_lcm.base.geo.FlatFrame` (a tangent-plane approximation: centimetres off at 1 km, plenty
   for a flying field, and a few multiplications per call).
 * Velocity set-points (GUIDED, `set_velocity`) are followed with a first-order lag of time constant
   ``tau``; the horizontal set-point is limited to ``max_speed``, the vertical one to ``climb_rate`` up
@@ -78,7 +78,7 @@ from antalate_lcm.autopilot.base import (
     check_takeoff_altitude,
     check_velocity,
 )
-from antalate_lcm.geo import FlatFrame, body_to_ne, wrap_360
+from antalate_lcm.base.geo import FlatFrame, body_to_ne, wrap_360
 
 #: The scheduled faults' parameters (s of flight after takeoff, 0 = never).
 _SCHEDULED_FAULTS = ("takeover_after", "link_loss_after", "failsafe_after", "state_error_after")

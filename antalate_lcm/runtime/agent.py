@@ -17,20 +17,20 @@ from collections.abc import Callable, Sequence
 from types import FrameType
 from typing import IO
 
+from antalate_lcm.agent.hlc.node import HlcNode
+from antalate_lcm.agent.mc.node import McNode
+from antalate_lcm.agent.plan import AgentPlan, plan_agent, plan_autopilot
 from antalate_lcm.autopilot.sim import DEFAULTS as SIM_DEFAULTS
-from antalate_lcm.config import AgentConfig, Config
-from antalate_lcm.errors import AntalateError, ConfigError
-from antalate_lcm.geo import offset
-from antalate_lcm.hlc.node import HlcNode
-from antalate_lcm.mc.node import McNode
-from antalate_lcm.node import Context, Node
-from antalate_lcm.plan import AgentPlan, plan_agent, plan_autopilot
+from antalate_lcm.base.errors import AntalateError, ConfigError
+from antalate_lcm.base.geo import offset
+from antalate_lcm.core.config import AgentConfig, Config
+from antalate_lcm.core.node import Context, Node
 
 log = logging.getLogger("antalate.agent")
 
 
 def validate(config: Config) -> AgentPlan:
-    """Every plugin of the agent loaded and its params checked (`antalate_lcm.plan`), before any node
+    """Every plugin of the agent loaded and its params checked (`antalate_lcm.agent.plan`), before any node
     starts, so a typo never surfaces mid-flight."""
     return plan_agent(config)
 
@@ -40,14 +40,14 @@ def agent_nodes(config: Config, context: Context, plan: AgentPlan | None = None)
 
     Built from ``plan`` (made by `validate`; made here when not given), so what was checked runs.
     """
-    from antalate_lcm.bma.node import BmaNode
+    from antalate_lcm.agent.bma.node import BmaNode
 
     plan = plan if plan is not None else plan_agent(config)
     autopilot = plan.autopilot.build(context.executor.clock)
     nodes: list[Node] = [HlcNode(config, context, autopilot), McNode(config, context)]
     nodes.extend(BmaNode(config, context, bma.config, bma) for bma in plan.bmas)
     if config.osc.enabled:
-        from antalate_lcm.osc.node import OscNode
+        from antalate_lcm.agent.osc.node import OscNode
 
         nodes.append(OscNode(config, context))
     return nodes

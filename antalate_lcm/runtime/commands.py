@@ -12,12 +12,12 @@ import sys
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from antalate_lcm.config import Config, check_unique_agent_names, load_config
-from antalate_lcm.errors import AntalateError
-from antalate_lcm.node import Context, Node
+from antalate_lcm.base.errors import AntalateError
+from antalate_lcm.core.config import Config, check_unique_agent_names, load_config
+from antalate_lcm.core.node import Context, Node
 
 if TYPE_CHECKING:  # the plan imports every adapter's registry: only the commands that run nodes need it
-    from antalate_lcm.plan import AgentPlan
+    from antalate_lcm.agent.plan import AgentPlan
 
 
 def _run_single(args: argparse.Namespace, make: Callable[[AgentPlan, Context], list[Node]]) -> int:
@@ -31,13 +31,13 @@ def _run_single(args: argparse.Namespace, make: Callable[[AgentPlan, Context], l
 
 
 def cmd_mc(args: argparse.Namespace) -> int:
-    from antalate_lcm.mc.node import McNode
+    from antalate_lcm.agent.mc.node import McNode
 
     return _run_single(args, lambda plan, ctx: [McNode(plan.config, ctx)])
 
 
 def cmd_hlc(args: argparse.Namespace) -> int:
-    from antalate_lcm.hlc.node import HlcNode
+    from antalate_lcm.agent.hlc.node import HlcNode
 
     return _run_single(
         args, lambda plan, ctx: [HlcNode(plan.config, ctx, plan.autopilot.build(ctx.executor.clock))]
@@ -45,13 +45,13 @@ def cmd_hlc(args: argparse.Namespace) -> int:
 
 
 def cmd_osc(args: argparse.Namespace) -> int:
-    from antalate_lcm.osc import OscNode
+    from antalate_lcm.agent.osc import OscNode
 
     return _run_single(args, lambda plan, ctx: [OscNode(plan.config, ctx)])
 
 
 def cmd_bma(args: argparse.Namespace) -> int:
-    from antalate_lcm.bma.node import BmaNode
+    from antalate_lcm.agent.bma.node import BmaNode
 
     def make(plan: AgentPlan, ctx: Context) -> list[Node]:
         cfg = plan.config
@@ -86,7 +86,7 @@ def cmd_agent(args: argparse.Namespace) -> int:
     if args.shard:
         configs = shard(configs, *parse_shard(args.shard))
     elif processes > 1:  # same channels, agents spread over processes (one loop, one core each)
-        from antalate_lcm.bma.plan import check_peer_buses
+        from antalate_lcm.agent.bma.plan import check_peer_buses
 
         for cfg in configs:  # before any process starts: one line naming the key, not a split swarm
             check_peer_buses(cfg, whole_swarm=False, plans=plans[id(cfg)].bmas)
@@ -132,11 +132,11 @@ def _on_shared_clock(args: argparse.Namespace, buses: dict[str, str]) -> tuple[C
     """The context of an agent process of ``antalate run --speed --processes P``: its loop on
     simulated time, joined to the run's clock (runtime/time_coordinator.py), held until every node
     of the process has started; and what releases it then."""
-    from antalate_lcm.executor import Executor
-    from antalate_lcm.node import INPROC_BUS
+    from antalate_lcm.core.executor import Executor
+    from antalate_lcm.core.node import INPROC_BUS
+    from antalate_lcm.core.simclock import SimClock
     from antalate_lcm.runtime.agent import parse_shard
     from antalate_lcm.runtime.time_coordinator import SimulatedBus, join, simulated_buses
-    from antalate_lcm.simclock import SimClock
 
     if not args.shard:
         raise AntalateError("--sim-clock is for the agent processes of `antalate run` (with --shard)")
@@ -164,7 +164,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_analyze(args: argparse.Namespace) -> int:
     import json
 
-    from antalate_lcm.analysis import analyze_log, format_summary
+    from antalate_lcm.apps.analysis import analyze_log, format_summary
 
     result = analyze_log(args.log, **_analysis_options(args))
     if args.json:
@@ -175,7 +175,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from antalate_lcm.analysis import format_summary, plot_log
+    from antalate_lcm.apps.analysis import format_summary, plot_log
 
     path, result = plot_log(args.log, args.output, goals=args.goal or (), **_analysis_options(args))
     if not args.quiet:
@@ -203,7 +203,7 @@ def cmd_log(args: argparse.Namespace) -> int:
     open_lcm(url)  # a missing multicast route is reported with the fix, not as LCM's one-liner
     out = args.output or time.strftime("antalate-%Y%m%d-%H%M%S.lcm")
     if out.endswith(".mcap"):
-        from antalate_lcm.mcap_record import record
+        from antalate_lcm.apps.mcap_record import record
 
         return record(url, out, channel=args.channel, raw=args.raw, force=args.force)
     if args.raw:
@@ -262,8 +262,8 @@ def _analysis_options(args: argparse.Namespace) -> dict[str, Any]:
 def _safety_limits(args: argparse.Namespace) -> Any:
     """The `SafetyLimits` of ``--safety CONFIG`` and ``--radius``/``--vertical``/``--margin``/``--near-miss``
     (None when neither a config nor a radius is given: no safety section)."""
-    from antalate_lcm.analysis import SafetyLimits
-    from antalate_lcm.hlc.safety import MEASURED_MARGIN, filter_params
+    from antalate_lcm.agent.hlc.safety import MEASURED_MARGIN, filter_params
+    from antalate_lcm.apps.analysis import SafetyLimits
 
     radius, vertical, margin = args.radius, args.vertical, args.margin
     fence, origin = None, None

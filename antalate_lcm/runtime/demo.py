@@ -11,15 +11,15 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
-from antalate_lcm.bus import Bus
-from antalate_lcm.config import Config, parse_config
-from antalate_lcm.errors import MulticastUnavailable
-from antalate_lcm.node import Context, Node
+from antalate_lcm.base.errors import MulticastUnavailable
+from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.config import Config, parse_config
+from antalate_lcm.core.node import Context, Node
 from antalate_lcm.runtime.agent import agent_nodes, swarm_configs, validate
 from antalate_lcm.runtime.launch import run_until_signal
 from antalate_lcm.runtime.scripted_operator import Phase, ScriptedOperator
-from antalate_lcm.security import generate_key
 from antalate_lcm.station import StationServer, StationSettings
+from antalate_lcm.wire.security import generate_key
 
 log = logging.getLogger("antalate.demo")
 

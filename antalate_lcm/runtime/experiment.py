@@ -28,11 +28,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from antalate_lcm.bus import Bus
-from antalate_lcm.config import Config, check_unique_agent_names, load_config
-from antalate_lcm.errors import AntalateError, ConfigError
-from antalate_lcm.executor import Executor
-from antalate_lcm.node import Context, Node
+from antalate_lcm.base.errors import AntalateError, ConfigError
+from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.config import Config, check_unique_agent_names, load_config
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.simclock import SimClock
 from antalate_lcm.runtime.agent import (
     agent_nodes,
     run_processes,
@@ -45,10 +46,9 @@ from antalate_lcm.runtime.recorder import LogRecorder
 from antalate_lcm.runtime.script import Script, check_fault_agents, load_script
 from antalate_lcm.runtime.scripted_operator import DirectionAt, Phase, ScriptedOperator
 from antalate_lcm.runtime.time_coordinator import SimulatedBus, TimeCoordinator, simulated_buses
-from antalate_lcm.simclock import SimClock
 
 if TYPE_CHECKING:
-    from antalate_lcm.analysis import Analysis
+    from antalate_lcm.apps.analysis import Analysis
     from antalate_lcm.runtime.faults import FaultInjector
 
 #: Topics this process must hear or send when the agents are in other processes.
@@ -208,7 +208,7 @@ def _interfere(
 
         config = configs[0].with_agent_name("faults")
         return FaultRelay(config, context, script=script, gate=FaultGate(), bus=bus, excuse=lambda _a: None)
-    from antalate_lcm.hlc.node import HlcNode
+    from antalate_lcm.agent.hlc.node import HlcNode
     from antalate_lcm.runtime.faults import FaultGate, FaultInjector, lossy_broadcasts
 
     names = [c.agent.name for c in configs]
@@ -304,7 +304,7 @@ class Outcome:
                 f"({self.simulated_s / max(self.real_s, 1e-9):.1f}x real time{rounds})"
             )
         if self.analysis is not None:
-            from antalate_lcm.analysis import format_summary
+            from antalate_lcm.apps.analysis import format_summary
 
             lines.append(format_summary(self.analysis))
         else:
@@ -520,7 +520,7 @@ def _console(config: Config, context: Context, nodes: list[Node]) -> int:
 
 
 def _measure(outcome: Outcome, script: Script) -> None:
-    from antalate_lcm.analysis import analyze_log
+    from antalate_lcm.apps.analysis import analyze_log
 
     options = script.analyze
     try:

@@ -20,12 +20,12 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
-from antalate_lcm.config import Config
+from antalate_lcm.core.config import Config
+from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import payload_t
-from antalate_lcm.node import Context, Node
 from antalate_lcm.runtime.faults import FaultGate, FaultInjector, lossy_broadcasts
 from antalate_lcm.runtime.script import Script
-from antalate_lcm.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE
+from antalate_lcm.wire.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE
 
 log = logging.getLogger("antalate.faults")
 
@@ -78,7 +78,7 @@ def shard_faults(
     name: str,
 ) -> ShardFaults:
     """The fault injector of this process's agents, its gate set on their nodes (broadcast losses too)."""
-    from antalate_lcm.hlc.node import HlcNode
+    from antalate_lcm.agent.hlc.node import HlcNode
 
     if script.broadcast.reception < 1.0:
         gate = lossy_broadcasts(nodes, script.broadcast.reception, script.seed)

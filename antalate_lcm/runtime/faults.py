@@ -4,7 +4,7 @@ The paper's lab studies swarms under imperfect conditions: agents that die, free
 wrongly, and broadcast control signals "acquired by only a random set of the swarm's agents"
 (Segall & Bruckstein). ``antalate run`` models them where they happen on a real agent -- between
 the agent's software and the network -- through the one hook every node has
-(:class:`antalate_lcm.node.Interference`): what a node sends, what it consumes, and whether its
+(:class:`antalate_lcm.core.node.Interference`): what a node sends, what it consumes, and whether its
 timers run. The behaviors, MC, HLC and configs are the ones that fly; nothing is mocked.
 
 * crash: the agent's software is dead from ``at`` on: no timer runs, nothing is sent or consumed
@@ -43,14 +43,14 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from antalate_lcm.geo import offset as geo_offset
-from antalate_lcm.geo import wrap_180
+from antalate_lcm.base.geo import offset as geo_offset
+from antalate_lcm.base.geo import wrap_180
+from antalate_lcm.base.ratelimit import TokenBucket
+from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import mc_state_t, payload_t, peer_scan_t, telemetry_t
-from antalate_lcm.node import Context, Node
-from antalate_lcm.ratelimit import TokenBucket
 from antalate_lcm.runtime.script import VEHICLE_EVENTS, FaultStep, Script
-from antalate_lcm.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE, OPERATOR_INPUTS, Message
-from antalate_lcm.vocabulary import McState
+from antalate_lcm.wire.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE, OPERATOR_INPUTS, Message
+from antalate_lcm.wire.vocabulary import McState
 
 log = logging.getLogger("antalate.faults")
 
@@ -125,7 +125,7 @@ class _Planned:
 
 @dataclass
 class FaultGate:
-    """The :class:`~antalate_lcm.node.Interference` of every simulated agent of one experiment:
+    """The :class:`~antalate_lcm.core.node.Interference` of every simulated agent of one experiment:
     what is active now, per agent (set by the :class:`FaultInjector` on the executor thread)."""
 
     broadcast: dict[str, BroadcastReception] = field(default_factory=dict)

@@ -13,11 +13,11 @@ import os
 import tempfile
 from collections.abc import Iterator
 
-from antalate_lcm.node import Node
+from antalate_lcm.core.node import Node
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.runtime.demo import DEMO_URL, build_swarm, open_context, start_station
-from antalate_lcm.security import generate_key
 from antalate_lcm.station import new_api_key
+from antalate_lcm.wire.security import generate_key
 
 
 @contextlib.contextmanager

@@ -12,7 +12,7 @@ from concurrent import futures
 from functools import partial
 from types import FrameType
 
-from antalate_lcm.node import Context, Node
+from antalate_lcm.core.node import Context, Node
 
 log = logging.getLogger("antalate.launch")
 

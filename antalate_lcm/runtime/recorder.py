@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import lcm
 
-from antalate_lcm.bus import Subscription
-from antalate_lcm.config import Config
-from antalate_lcm.errors import AntalateError
-from antalate_lcm.node import Context, Node
+from antalate_lcm.base.errors import AntalateError
+from antalate_lcm.core.bus import Subscription
+from antalate_lcm.core.config import Config
+from antalate_lcm.core.node import Context, Node
 
 
 class LogRecorder(Node):

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import lcm
 
 from antalate_lcm import __version__
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.base.errors import AntalateError
 
 if TYPE_CHECKING:
     from antalate_lcm.runtime.experiment import Experiment
@@ -137,7 +137,7 @@ def describe(recorded: bytes, replayed: bytes) -> str:
     cls = _decoders().get(recorded[:8])
     if cls is None or replayed[:8] != recorded[:8]:
         return f"the bytes differ ({len(recorded)} recorded, {len(replayed)} replayed)"
-    from antalate_lcm.lcm_json import to_json
+    from antalate_lcm.wire.lcm_json import to_json
 
     try:
         a: dict[str, Any] = {}

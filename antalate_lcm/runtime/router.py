@@ -32,7 +32,7 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.base.errors import AntalateError
 from antalate_lcm.runtime.launch import wait_for_stop
 from antalate_lcm.transports.zenoh import zenoh_endpoints_problem, zenoh_plain_endpoints
 
@@ -200,7 +200,7 @@ def cmd_router(args: argparse.Namespace) -> int:
 
 def run_bridge(config_path: str, *, stop: threading.Event | None = None) -> int:
     """``antalate bridge CONFIG``: run until SIGINT/SIGTERM, then print what was forwarded."""
-    from antalate_lcm.bridge import Bridge, load_bridge_config
+    from antalate_lcm.apps.bridge import Bridge, load_bridge_config
 
     config = load_bridge_config(config_path)
     bridge = Bridge(config)

@@ -23,7 +23,7 @@ import keyword
 import re
 from pathlib import Path
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.base.errors import AntalateError
 
 _NAME = re.compile(r"[a-z][a-z0-9_]*")
 
@@ -132,7 +132,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from antalate_lcm.behavior import Behavior
+from antalate_lcm.core.behavior import Behavior
 from antalate_lcm.msgs import velocity_cmd_t
 
 from {name}.logic import circle_velocity

@@ -42,11 +42,11 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from antalate_lcm.config import read_toml_file
-from antalate_lcm.errors import ConfigError
-from antalate_lcm.strict import StrictError, validate_strict
-from antalate_lcm.topics import TOPICS
-from antalate_lcm.vocabulary import McState
+from antalate_lcm.base.errors import ConfigError
+from antalate_lcm.base.strict import StrictError, validate_strict
+from antalate_lcm.core.config import read_toml_file
+from antalate_lcm.wire.topics import TOPICS
+from antalate_lcm.wire.vocabulary import McState
 
 FaultKind = Literal[
     "crash", "freeze", "sensor", "byzantine", "battery", "link_loss", "packet_loss", "vehicle"
@@ -85,7 +85,7 @@ class FaultStep(BaseModel):
     offset: tuple[float, float] | None = None
     range_bias: float | None = Field(default=None, allow_inf_nan=False)
     bearing_bias: float | None = Field(default=None, ge=-360, le=360, allow_inf_nan=False)
-    #: The MC state a byzantine agent claims (a name of :class:`~antalate_lcm.vocabulary.McState`).
+    #: The MC state a byzantine agent claims (a name of :class:`~antalate_lcm.wire.vocabulary.McState`).
     state: str | None = None
     level: float | None = Field(default=None, ge=0, le=100, allow_inf_nan=False)
     drain: float | None = Field(default=None, ge=0, le=6000, allow_inf_nan=False)

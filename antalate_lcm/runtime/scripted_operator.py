@@ -13,10 +13,10 @@ import enum
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from antalate_lcm.config import Config
+from antalate_lcm.core.config import Config
+from antalate_lcm.core.node import Context, Node, TopicMatch
 from antalate_lcm.msgs import direction_cmd_t, mc_state_t, operator_cmd_t
-from antalate_lcm.node import Context, Node, TopicMatch
-from antalate_lcm.vocabulary import Command, McState
+from antalate_lcm.wire.vocabulary import Command, McState
 
 _RESEND = 1.0  # s between repeats of a broadcast command while some agent has not followed
 

@@ -31,8 +31,8 @@ from types import FrameType
 from typing import IO, Any
 from urllib.parse import urlsplit, urlunsplit
 
-from antalate_lcm.config import read_toml_file
-from antalate_lcm.errors import AntalateError, ConfigError
+from antalate_lcm.base.errors import AntalateError, ConfigError
+from antalate_lcm.core.config import read_toml_file
 from antalate_lcm.runtime.sweep_spec import Point, Sweep, build, dumps_toml, parse_spec
 
 #: Port offset between two parallel slots' udpm:// buses.

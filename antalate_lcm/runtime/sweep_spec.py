@@ -37,10 +37,10 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from antalate_lcm.config import Config, check_unique_agent_names, parse_config
-from antalate_lcm.errors import AntalateError, ConfigError
+from antalate_lcm.base.errors import AntalateError, ConfigError
+from antalate_lcm.base.strict import StrictError, validate_strict
+from antalate_lcm.core.config import Config, check_unique_agent_names, parse_config
 from antalate_lcm.runtime.script import DEFAULT_SCRIPT, Script, parse_script
-from antalate_lcm.strict import StrictError, validate_strict
 
 #: What a parameter's key starts with: where its value goes.
 PREFIXES = ("behavior", "config", "script")

@@ -2,7 +2,7 @@
 
 The operator's process (``antalate run``) serves a :class:`TimeCoordinator` on a Unix socket, on
 its own loop; it and each agent process (``antalate agent --shard i/P --sim-clock ADDRESS``) run
-their loop on a :class:`~antalate_lcm.simclock.SimClock` joined to it by a link
+their loop on a :class:`~antalate_lcm.core.simclock.SimClock` joined to it by a link
 (:class:`LocalLink` in the operator's process, :class:`SocketLink` in an agent process). The rule
 they follow is :mod:`antalate_lcm.runtime.time_grant` (why it keeps the lockstep and the run
 deterministic is said there); here is only its I/O:
@@ -44,9 +44,10 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from antalate_lcm.bus import Bus, Handler, Subscription
-from antalate_lcm.errors import AntalateError
-from antalate_lcm.executor import Executor
+from antalate_lcm.base.errors import AntalateError
+from antalate_lcm.core.bus import Bus, Handler, Subscription
+from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.simclock import SIM_START, SimClock
 from antalate_lcm.runtime.time_grant import (
     Deliver,
     Interest,
@@ -61,7 +62,6 @@ from antalate_lcm.runtime.time_grant import (
     remaining,
     woken,
 )
-from antalate_lcm.simclock import SIM_START, SimClock
 from antalate_lcm.transports import transport_for
 
 log = logging.getLogger("antalate.simclock")

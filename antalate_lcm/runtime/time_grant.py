@@ -2,7 +2,7 @@
 
 Pure logic, no I/O (the sockets are in :mod:`antalate_lcm.runtime.time_coordinator`), so it is
 tested on its own. Each process (the operator's, index 0, and each agent process) runs its loop on
-a :class:`~antalate_lcm.simclock.SimClock` at the same simulated time ``t``; when it has nothing
+a :class:`~antalate_lcm.core.simclock.SimClock` at the same simulated time ``t``; when it has nothing
 left to do at ``t`` it *reports*: the time of its next timer and every message it published since
 its last report on the buses that cross processes, in publish order. Once every process has
 reported (every one idle at ``t``, so none can still send at ``t``):

@@ -22,7 +22,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from pydantic import TypeAdapter, ValidationError
 from pydantic.json_schema import models_json_schema
 
-from antalate_lcm.errors import Refused, UnknownTarget
+from antalate_lcm.base.errors import Refused, UnknownTarget
 
 from ._auth import Operator, Role, retry_after_header, sha256_hex
 from ._db import StationDB

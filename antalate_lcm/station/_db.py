@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from antalate_lcm.errors import StationDBError
+from antalate_lcm.base.errors import StationDBError
 
 from ._models import Telemetry
 from ._settings import MEMORY

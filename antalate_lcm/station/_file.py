@@ -13,9 +13,9 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from antalate_lcm.config import read_toml_file
-from antalate_lcm.errors import ConfigError
-from antalate_lcm.strict import dotted
+from antalate_lcm.base.errors import ConfigError
+from antalate_lcm.base.strict import dotted
+from antalate_lcm.core.config import read_toml_file
 
 from ._settings import DEFAULT_HOST, DEFAULT_PORT, ApiKey, RateLimits, StationSettings
 

@@ -20,14 +20,16 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from antalate_lcm.vocabulary import CommandName, HlcStateName, McStateName
+from antalate_lcm.wire.vocabulary import CommandName, HlcStateName, McStateName
 
 #: An agent name as the config allows it (it is part of LCM channel names).
 AGENT_NAME = r"^[A-Za-z0-9_.-]{1,64}$"
 _HEX64 = r"^[0-9a-fA-F]{64}$"
 _INT32_MAX = 2**31 - 1
 _INT64_MAX = 2**63 - 1
-MAX_ALTITUDE = 1000.0  # m, as antalate_lcm.validation.MAX_TAKEOFF_ALTITUDE: above it is a typo or an attack
+MAX_ALTITUDE = (
+    1000.0  # m, as antalate_lcm.wire.validation.MAX_TAKEOFF_ALTITUDE: above it is a typo or an attack
+)
 MAX_SPEED = 100.0
 
 
@@ -256,7 +258,7 @@ class _SignedHeader(_Wire):
 
 
 class SignedOperatorCommand(_SignedHeader):
-    """An ``operator_cmd_t`` signed by the operator (``antalate_lcm.security.sign``), field by field."""
+    """An ``operator_cmd_t`` signed by the operator (``antalate_lcm.wire.security.sign``), field by field."""
 
     command: CommandName
     altitude: float = Field(0.0, ge=0.0, le=MAX_ALTITUDE, description="m; 0 = the agent's default")

@@ -11,7 +11,7 @@ from types import TracebackType
 import uvicorn
 from pydantic import ValidationError
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.base.errors import AntalateError
 
 from ._app import create_app
 from ._db import StationDB

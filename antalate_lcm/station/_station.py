@@ -15,8 +15,8 @@ import secrets
 from collections import deque
 from dataclasses import dataclass, field
 
-from antalate_lcm.errors import Refused, UnknownTarget
-from antalate_lcm.ratelimit import TokenBucket
+from antalate_lcm.base.errors import Refused, UnknownTarget
+from antalate_lcm.base.ratelimit import TokenBucket
 
 from . import sector
 from ._auth import check_registration, new_token, sha256_hex

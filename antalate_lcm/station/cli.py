@@ -9,7 +9,7 @@ import os
 import sys
 from pathlib import Path
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.base.errors import AntalateError
 
 from ._settings import DEFAULT_HOST, DEFAULT_PORT
 
@@ -65,7 +65,7 @@ def _swarm_key(args: argparse.Namespace) -> str | None:
     if getattr(args, "swarm_key_file", None):
         return _read_secret(args.swarm_key_file, "swarm key")
     if getattr(args, "agent_config", None):
-        from antalate_lcm.config import load_config
+        from antalate_lcm.core.config import load_config
 
         key = load_config(args.agent_config).security.swarm_key
         if not key:

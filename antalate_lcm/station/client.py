@@ -22,10 +22,10 @@ from typing import Any, get_args
 
 import httpx
 
-from antalate_lcm.errors import StationClientError as StationClientError
+from antalate_lcm.base.errors import StationClientError as StationClientError
 from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
-from antalate_lcm.security import sign
-from antalate_lcm.vocabulary import Command, CommandName
+from antalate_lcm.wire.security import sign
+from antalate_lcm.wire.vocabulary import Command, CommandName
 
 COMMANDS: tuple[CommandName, ...] = get_args(CommandName)
 

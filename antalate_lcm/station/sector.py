@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 from geographiclib.geodesic import Geodesic
 
-from antalate_lcm.geo import WGS84_A, metres_per_radian
+from antalate_lcm.base.geo import WGS84_A, metres_per_radian
 
 _WGS84 = Geodesic.WGS84
 _MASK = Geodesic.DISTANCE | Geodesic.AZIMUTH

@@ -3,7 +3,7 @@
 * `codegen` -- runs ``lcm-gen`` (Python, Java), writes each generated module's typed stub, and the
   staleness checks the tests use (``make gen`` is ``python -m antalate_lcm.tools.codegen``);
 * `lcm_parse` -- reads ``.lcm`` files the way lcm-gen does (structs, constants, comments, fingerprints),
-  for the Go emitter and for `antalate_lcm.lcm_json`;
+  for the Go emitter and for `antalate_lcm.wire.lcm_json`;
 * `golang` -- lcm-gen 1.5.3's Go emitter ported to Python, its decoder bounds-checked
   (``antalate types --lang go``, docs/other-languages.md).
 

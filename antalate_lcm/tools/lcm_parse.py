@@ -14,7 +14,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.base.errors import AntalateError
 
 PRIMITIVES = ("int8_t", "int16_t", "int32_t", "int64_t", "byte", "float", "double", "string", "boolean")
 _DIMENSION_TYPES = ("int8_t", "int16_t", "int32_t", "int64_t")

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-from antalate_lcm.errors import AntalateError, InvalidBusUrl, UnknownTransport
+from antalate_lcm.base.errors import AntalateError, InvalidBusUrl, UnknownTransport
 from antalate_lcm.transports.base import EXAMPLES, Connection, LcmUrl, Transport, captured_stderr
 from antalate_lcm.transports.file import File
 from antalate_lcm.transports.memq import Memq

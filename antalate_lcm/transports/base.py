@@ -47,7 +47,7 @@ from typing import Any, ClassVar, Protocol
 
 import lcm
 
-from antalate_lcm.errors import AntalateError, BusUnavailable
+from antalate_lcm.base.errors import AntalateError, BusUnavailable
 
 log = logging.getLogger("antalate.bus")
 

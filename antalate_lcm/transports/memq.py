@@ -1,7 +1,7 @@
 """The ``memq://`` transport: liblcm's in-process queue, an agent's private bus.
 
 Nothing outside the process can write to it, so the exposure policy lets an unsigned node consume
-from it; the bus delivers its messages on its own loop (:mod:`antalate_lcm.bus`), never through
+from it; the bus delivers its messages on its own loop (:mod:`antalate_lcm.core.bus`), never through
 liblcm's queue.
 """
 

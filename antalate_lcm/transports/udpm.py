@@ -35,7 +35,7 @@ import struct
 from collections.abc import Callable, Sequence
 from typing import ClassVar
 
-from antalate_lcm.errors import AntalateError, MulticastUnavailable
+from antalate_lcm.base.errors import AntalateError, MulticastUnavailable
 from antalate_lcm.transports.base import LcmUrl, OptionCheck, Transport, int_option, port_problem
 from antalate_lcm.transports.datagram import MAX_CHANNEL_LENGTH, SHORT_MAGIC_BYTES, Reassembler
 

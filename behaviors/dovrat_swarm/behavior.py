@@ -18,7 +18,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from antalate_lcm.behavior import Behavior, BehaviorContext
+from antalate_lcm.base.ratelimit import RateLimitedLog
+from antalate_lcm.core.behavior import Behavior, BehaviorContext
 from antalate_lcm.msgs import (
     direction_cmd_t,
     payload_t,
@@ -26,7 +27,6 @@ from antalate_lcm.msgs import (
     telemetry_t,
     velocity_cmd_t,
 )
-from antalate_lcm.ratelimit import RateLimitedLog
 from behaviors.dovrat_swarm.logic import (
     Detection,
     DetectionTracker,

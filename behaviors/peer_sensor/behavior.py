@@ -12,9 +12,9 @@ import random
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from antalate_lcm.behavior import Behavior, BehaviorContext
+from antalate_lcm.core.behavior import Behavior, BehaviorContext
 from antalate_lcm.msgs import peer_scan_t
-from antalate_lcm.peers import Peer
+from antalate_lcm.wire.peers import Peer
 from behaviors.peer_sensor.logic import Body, SensorParams, scan
 
 

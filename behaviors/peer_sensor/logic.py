@@ -15,7 +15,7 @@ import random
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from antalate_lcm.geo import body_to_ne, wrap_180
+from antalate_lcm.base.geo import body_to_ne, wrap_180
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,7 @@ def scan(me: Body, others: Iterable[Body], p: SensorParams, rng: random.Random) 
         if p.dropout > 0 and rng.random() < p.dropout:
             continue
         if p.velocity:
-            # NED -> body is the body-to-NED rotation by -heading (antalate_lcm.geo.body_to_ne)
+            # NED -> body is the body-to-NED rotation by -heading (antalate_lcm.base.geo.body_to_ne)
             forward, right = body_to_ne(other.vn - me.vn, other.ve - me.ve, -me.heading)
         else:
             forward = right = 0.0

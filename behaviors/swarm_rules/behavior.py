@@ -16,7 +16,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from antalate_lcm.behavior import Behavior, BehaviorContext
+from antalate_lcm.core.behavior import Behavior, BehaviorContext
 from antalate_lcm.msgs import velocity_cmd_t
 from behaviors.swarm_rules.logic import (
     DispersionParams,

@@ -6,7 +6,7 @@ home, orange = a pilot has the vehicle, red = needs attention. Stale agents are 
 
 from __future__ import annotations
 
-from antalate_lcm.vocabulary import Severity
+from antalate_lcm.wire.vocabulary import Severity
 
 MC_STYLE: dict[str, str] = {
     "INIT": "grey62",

@@ -14,7 +14,7 @@ from rich.text import Text
 from textual.geometry import Region
 from textual.widgets import RichLog, Static
 
-from antalate_lcm.vocabulary import Severity
+from antalate_lcm.wire.vocabulary import Severity
 from operator_tui.commands import DirectionControl, Status, TrackedCommand, applies
 from operator_tui.model import AgentView, Event, SafetySummary, heading_arrow
 from operator_tui.widgets.palette import SEVERITY_STYLE, battery_style, hlc_style, mc_style

@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 import time
 
-from antalate_lcm.bus import Bus
+from antalate_lcm.core.bus import Bus
 from antalate_lcm.msgs import telemetry_t
 
 

@@ -18,13 +18,13 @@ import threading
 import time
 from typing import Any
 
-from antalate_lcm.config import Config, parse_config
-from antalate_lcm.hlc.machine import ErrorCode
+from antalate_lcm.agent.hlc.machine import ErrorCode
+from antalate_lcm.core.config import Config, parse_config
+from antalate_lcm.core.node import Context, Node, TopicMatch
 from antalate_lcm.msgs import direction_cmd_t
-from antalate_lcm.node import Context, Node, TopicMatch
 from antalate_lcm.runtime.agent import agent_nodes, shared_buses, validate
 from antalate_lcm.runtime.scripted_operator import ScriptedOperator
-from antalate_lcm.vocabulary import HlcState, McState
+from antalate_lcm.wire.vocabulary import HlcState, McState
 from tests.children.events import emit
 from tests.emulators.crazyflie_emulator import CrazyflieEmulator
 

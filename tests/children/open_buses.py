@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import sys
 
-from antalate_lcm.errors import AntalateError
+from antalate_lcm.base.errors import AntalateError
 from antalate_lcm.transports import open_failure, open_lcm
 
 

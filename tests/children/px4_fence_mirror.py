@@ -13,7 +13,7 @@ from typing import Any
 
 from antalate_lcm.autopilot.px4 import Px4Autopilot
 from antalate_lcm.autopilot.px4.fence_mirror import ORDER, fence_parameters, mirror
-from antalate_lcm.safety.geofence import Geofence
+from antalate_lcm.base.safety.geofence import Geofence
 
 
 def main(port: int) -> dict[str, Any]:

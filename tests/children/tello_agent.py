@@ -15,12 +15,12 @@ import logging
 import sys
 from typing import Any
 
-from antalate_lcm.config import Config, parse_config
-from antalate_lcm.hlc.machine import ErrorCode
+from antalate_lcm.agent.hlc.machine import ErrorCode
+from antalate_lcm.core.config import Config, parse_config
+from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import direction_cmd_t
-from antalate_lcm.node import Context, Node
 from antalate_lcm.runtime.agent import agent_nodes, validate
-from antalate_lcm.vocabulary import HlcState, McState
+from antalate_lcm.wire.vocabulary import HlcState, McState
 from tests.children.events import emit
 
 

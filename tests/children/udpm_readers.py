@@ -19,7 +19,7 @@ from typing import Any
 
 import lcm
 
-from antalate_lcm.bus import Bus
+from antalate_lcm.core.bus import Bus
 from antalate_lcm.msgs import telemetry_t
 from antalate_lcm.transports.datagram import fragments, short_datagram
 

@@ -37,8 +37,8 @@ KEY = "container-test-swarm-key"
 HEALTHCHECK = ["/opt/antalate/bin/python", "/usr/local/lib/antalate-healthcheck.py"]
 # the module every node kind runs, the LCM binding and the MAVLink adapter (the default image's vehicle)
 NODE_IMPORTS = (
-    "import lcm, antalate_lcm.cli, antalate_lcm.mc, antalate_lcm.hlc.node, antalate_lcm.bma, "
-    "antalate_lcm.osc, antalate_lcm.station, antalate_lcm.autopilot.mavlink, "
+    "import lcm, antalate_lcm.cli, antalate_lcm.agent.mc, antalate_lcm.agent.hlc.node, antalate_lcm.agent.bma, "
+    "antalate_lcm.agent.osc, antalate_lcm.station, antalate_lcm.autopilot.mavlink, "
     "antalate_lcm.autopilot.tello, operator_tui.web; from pymavlink import mavutil"
 )
 # what the default image leaves out: opencv (never imported), the tello and plot extras

@@ -25,8 +25,8 @@ import json
 import sys
 from typing import Any
 
-from antalate_lcm.config import Config, load_config
-from antalate_lcm.node import Context
+from antalate_lcm.core.config import Config, load_config
+from antalate_lcm.core.node import Context
 from operator_tui.commands import CommandTracker, DirectionControl, Status
 from operator_tui.link import OperatorNode
 from operator_tui.model import SwarmModel

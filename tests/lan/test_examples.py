@@ -6,7 +6,7 @@ from urllib.parse import urlparse
 
 import pytest
 
-from antalate_lcm.config import load_config
+from antalate_lcm.core.config import load_config
 from antalate_lcm.runtime.agent import validate
 from tests.lan.swarm import EXAMPLES, OPERATOR, VEHICLES
 from tests.lan.topology import LOCAL_GROUP, SUBNET

@@ -18,7 +18,7 @@ from typing import Any
 import lcm
 import pytest
 
-from antalate_lcm.analysis import analyze, read_log
+from antalate_lcm.apps.analysis import analyze, read_log
 from tests.lan.swarm import VEHICLES, LanSwarm
 
 pytestmark = [pytest.mark.lan, pytest.mark.timeout(150), pytest.mark.usefixtures("need_lan")]

@@ -13,7 +13,7 @@ from typing import Any
 import pluggy
 import pytest
 
-from antalate_lcm.geo import offset
+from antalate_lcm.base.geo import offset
 from tests.conftest import ATTACK_PROPERTY, _netns_reason
 from tests.netns import NetNamespace
 from tests.polling import wait_for

@@ -38,8 +38,8 @@ from typing import Any
 import httpx
 import lcm
 
-from antalate_lcm.security import sign, verify
-from antalate_lcm.topics import MESSAGE_TYPES
+from antalate_lcm.wire.security import sign, verify
+from antalate_lcm.wire.topics import MESSAGE_TYPES
 from tests.probe import matches, to_dict
 
 

@@ -213,7 +213,7 @@ def test_access_control_keeps_a_client_under_the_swarm_prefix(lab: Lab) -> None:
 
 def test_tls_configured_refuses_a_plain_tcp_endpoint(lab: Lab, tmp_path: Path) -> None:
     """An agent, a bridge or the router with TLS configured never falls back to tcp/ silently."""
-    from antalate_lcm.errors import BusUnavailable
+    from antalate_lcm.base.errors import BusUnavailable
     from antalate_lcm.transports import parse_lcm_url
     from antalate_lcm.transports.zenoh import ZenohLCM
 

@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.geo import offset
+from antalate_lcm.base.geo import offset
 from antalate_lcm.msgs import operator_cmd_t
 from antalate_lcm.station._auth import registration_key, registration_mac
 from tests.polling import wait_for

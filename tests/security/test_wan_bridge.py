@@ -25,7 +25,7 @@ from typing import Any
 import pytest
 import tomli_w
 
-from antalate_lcm.bridge import origin_tag
+from antalate_lcm.apps.bridge import origin_tag
 from antalate_lcm.transports.datagram import fragments, short_datagram
 from antalate_lcm.transports.zenoh import BRIDGE_MARK
 from tests import REPO

@@ -25,11 +25,11 @@ from typing import Any
 import pytest
 
 from antalate_lcm.autopilot.mavlink.fence_mirror import fence_parameters
-from antalate_lcm.geo import FlatFrame, offset
+from antalate_lcm.base.geo import FlatFrame, offset
+from antalate_lcm.base.safety.geofence import Geofence
+from antalate_lcm.base.safety.separation import separation
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
-from antalate_lcm.safety.geofence import Geofence
-from antalate_lcm.safety.separation import separation
 from tests.conftest import Probe
 from tests.netns import NetNamespace, stop_process
 from tests.polling import wait_for
@@ -37,7 +37,7 @@ from tests.sitl_arducopter.harness import HOME, Copter, one_sitl_swarm_at_a_time
 
 pytestmark = [pytest.mark.netns, pytest.mark.timeout(420)]
 
-#: The mavlink vehicles' separation (antalate_lcm.hlc.safety.VEHICLE_DEFAULTS): 4 m, half-height 2 m.
+#: The mavlink vehicles' separation (antalate_lcm.agent.hlc.safety.VEHICLE_DEFAULTS): 4 m, half-height 2 m.
 RADIUS, VERTICAL = 4.0, 2.0
 #: docs/safety.md: the margin measured on ArduCopter SITL (velocity loop lag, 10 Hz telemetry).
 MARGIN = 1.25  # docs/safety.md: 2.96 m seen twice in the full suite (radius 4 m)

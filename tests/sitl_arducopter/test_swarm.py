@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm import geo
+from antalate_lcm.base import geo
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O

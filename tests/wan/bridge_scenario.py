@@ -20,8 +20,8 @@ from typing import Any
 
 import zenoh
 
-from antalate_lcm.bridge import Bridge, BridgeConfig
-from antalate_lcm.bus import Bus
+from antalate_lcm.apps.bridge import Bridge, BridgeConfig
+from antalate_lcm.core.bus import Bus
 from antalate_lcm.msgs import mc_state_t, telemetry_t
 from antalate_lcm.runtime.router import router_config
 

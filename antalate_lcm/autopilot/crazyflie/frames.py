@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from antalate_lcm.geo import local_ne, offset, wrap_360
+from antalate_lcm.base.geo import local_ne, offset, wrap_360
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ import queue
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
-from antalate_lcm.errors import LinkClosed
+from antalate_lcm.base.errors import LinkClosed
 
 __all__ = ["MemoryPipe"]
 

@@ -2,7 +2,7 @@
 
 A typo in a field config must fail at start-up naming the key, not fall back to a default in the air:
 unknown keys are refused (``extra="forbid"``), types are strict (``"5"`` is not 5, ``true`` is not 1,
-as `antalate_lcm.strict` reads a TOML table) and no float may be inf or nan (a timeout of inf never
+as `antalate_lcm.base.strict` reads a TOML table) and no float may be inf or nan (a timeout of inf never
 fires). The constructor parses exactly as the config loader validates (`Autopilot.validate_params`), so
 a table that loads also constructs, and the error names the key the same way in both places.
 """
@@ -13,7 +13,7 @@ from typing import Any, TypeVar
 
 from pydantic import BaseModel, ConfigDict
 
-from antalate_lcm.strict import StrictError, validate_strict
+from antalate_lcm.base.strict import StrictError, validate_strict
 
 __all__ = ["AdapterParams", "defaults", "parse_params"]
 

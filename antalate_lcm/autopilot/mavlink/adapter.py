@@ -106,7 +106,7 @@ from antalate_lcm.autopilot.mavlink.signing import signing_key
 from antalate_lcm.autopilot.mavlink.streams import StreamRequest
 from antalate_lcm.autopilot.mavlink.vehicle import Vehicle
 from antalate_lcm.autopilot.mavlink.vehicle_checks import Finding
-from antalate_lcm.ratelimit import RateLimitedLog
+from antalate_lcm.base.ratelimit import RateLimitedLog
 
 log = logging.getLogger("antalate.autopilot.mavlink")
 

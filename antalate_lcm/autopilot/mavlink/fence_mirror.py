@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from typing import Protocol
 
-from antalate_lcm.safety.geofence import Geofence
+from antalate_lcm.base.safety.geofence import Geofence
 
 #: FENCE_TYPE bits (AC_Fence.h); POLYGON (4) needs the fence mission protocol, not mirrored here.
 ALT_MAX, CIRCLE, ALT_MIN = 1, 2, 8

@@ -29,8 +29,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from antalate_lcm.autopilot.kit.memory import MemoryPipe
 from antalate_lcm.autopilot.mavlink.signing import allow_unsigned, verify_signature_first
-from antalate_lcm.errors import LinkClosed as LinkClosed
-from antalate_lcm.errors import PeerClosed as PeerClosed
+from antalate_lcm.base.errors import LinkClosed as LinkClosed
+from antalate_lcm.base.errors import PeerClosed as PeerClosed
 
 log = logging.getLogger("antalate.autopilot.mavlink")
 

@@ -28,7 +28,7 @@ from antalate_lcm.autopilot.mavlink.dialect import (
     text,
 )
 from antalate_lcm.autopilot.mavlink.failsafe import FailsafeTracker
-from antalate_lcm.geo import wrap_360
+from antalate_lcm.base.geo import wrap_360
 
 log = logging.getLogger("antalate.autopilot.mavlink")
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 
 from antalate_lcm.autopilot.mavlink import fence_mirror as ardupilot
-from antalate_lcm.safety.geofence import Geofence
+from antalate_lcm.base.safety.geofence import Geofence
 
 #: GF_ACTION per [safety.fence] outside policy (geofence_params.c).
 ACTIONS = {"return": 3, "land": 5, "hover": 2}

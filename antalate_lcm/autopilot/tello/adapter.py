@@ -80,8 +80,8 @@ from antalate_lcm.autopilot.kit import LinkAge, VehicleAdapter
 from antalate_lcm.autopilot.tello import maths, telemetry
 from antalate_lcm.autopilot.tello.link import DjitellopyLink, TelloLink
 from antalate_lcm.autopilot.tello.params import Params
-from antalate_lcm.geo import FlatFrame, wrap_360
-from antalate_lcm.ratelimit import RateLimitedLog
+from antalate_lcm.base.geo import FlatFrame, wrap_360
+from antalate_lcm.base.ratelimit import RateLimitedLog
 
 log = logging.getLogger("antalate.autopilot.tello")
 

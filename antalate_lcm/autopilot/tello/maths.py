@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 
 from antalate_lcm.autopilot.base import altitude_reached
-from antalate_lcm.geo import body_to_ne
+from antalate_lcm.base.geo import body_to_ne
 
 RC = tuple[int, int, int, int]
 

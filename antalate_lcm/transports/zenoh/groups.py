@@ -11,7 +11,7 @@ from typing import Any, Protocol
 
 
 class GroupProof(Protocol):
-    """Signs and checks election tokens (:class:`antalate_lcm.security.MemberProof`, with the swarm key);
+    """Signs and checks election tokens (:class:`antalate_lcm.wire.security.MemberProof`, with the swarm key);
     a protocol here so the transport does not depend on the security module that asks it."""
 
     @property

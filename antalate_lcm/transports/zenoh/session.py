@@ -2,7 +2,7 @@
 
 :class:`Zenoh` checks its URLs (:mod:`.config`) and opens a :class:`ZenohLCM`. That offers the small part of ``lcm.LCM`` the bus uses -- ``publish``, ``subscribe`` (a channel regex
 matched whole, as liblcm does) with ``set_queue_capacity``, ``unsubscribe``, ``handle``,
-``handle_timeout`` and ``fileno`` -- so :class:`antalate_lcm.bus.Bus` drives it exactly like an LCM
+``handle_timeout`` and ``fileno`` -- so :class:`antalate_lcm.core.bus.Bus` drives it exactly like an LCM
 instance, and so would an event loop waiting on ``fileno()``.
 
 Why it is built this way:
@@ -45,8 +45,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from antalate_lcm.errors import BusUnavailable
-from antalate_lcm.ratelimit import RateLimitedLog, TokenBucket
+from antalate_lcm.base.errors import BusUnavailable
+from antalate_lcm.base.ratelimit import RateLimitedLog, TokenBucket
 from antalate_lcm.transports.base import Connection, LcmUrl, Transport
 from antalate_lcm.transports.zenoh.config import OPTIONS, ZENOH_NOT_LCM, check_url, zenoh_config
 from antalate_lcm.transports.zenoh.groups import GroupProof, _Group

@@ -10,7 +10,7 @@ import math
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from antalate_lcm.behavior import Behavior
+from antalate_lcm.core.behavior import Behavior
 from antalate_lcm.msgs import telemetry_t, velocity_cmd_t
 
 

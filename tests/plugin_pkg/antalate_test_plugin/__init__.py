@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict
 
-from antalate_lcm.behavior import Behavior
+from antalate_lcm.core.behavior import Behavior
 from antalate_lcm.msgs import behavior_state_t
 
 

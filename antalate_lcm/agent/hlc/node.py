@@ -1,0 +1,588 @@
+"""The High-Level Control node: wires `HighLevelControl` and `VelocityGuard` to the bus and an autopilot.
+
+A control loop polls the autopilot at ``control_hz`` and feeds the machine; the actions it returns are
+performed in order, on a worker thread when the adapter's commands may block (see
+`Autopilot.blocking`), and their results fed back. Telemetry goes out at ``telemetry_hz``.
+
+An adapter whose ``state()`` raises is a stale link, not a crash: the machine gets the last good
+snapshot with its ``link_age`` grown by the time since (so LLC_DOWN follows after ``link_timeout``,
+with the exception as the reason, and the recoverable LLC_DOWN row applies once ``state()`` works
+again), and the log gets one rate-limited line, not a traceback per tick.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
+from typing import Any, cast
+
+from antalate_lcm.agent.hlc.machine import (
+    NOTHING,
+    Action,
+    ActionKind,
+    ErrorCode,
+    HighLevelControl,
+    HlcError,
+    HlcOutcome,
+    HlcParams,
+)
+from antalate_lcm.agent.hlc.safety import Filtered, SafetyLayer, describe, new_picture
+from antalate_lcm.agent.hlc.velocity_guard import (
+    GuardDecision,
+    Velocity,
+    VelocityCommand,
+    VelocityGuard,
+    VelocityLimits,
+    Verdict,
+    mission_flight,
+)
+from antalate_lcm.agent.plan import plan_autopilot
+from antalate_lcm.autopilot import Autopilot, AutopilotError, AutopilotState, Frame
+from antalate_lcm.base.ratelimit import RateLimitedLog
+from antalate_lcm.core.config import Config
+from antalate_lcm.core.node import Context, Node, TopicMatch, shared_value
+from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t, velocity_cmd_t
+from antalate_lcm.wire.vocabulary import HlcState, Severity
+
+_CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
+#: s between two SAFETY hlc_error_t of the same kind (separation, fence, conflict): the console and
+#: the log see every episode without a message per set-point.
+_SAFETY_REPORT_PERIOD = 1.0
+#: s between sweeps of the swarm picture (stale agents out of the grid, silent ones forgotten).
+_SWEEP_PERIOD = 0.25
+#: HLC states in which the filtered return leg flies (the machine's RTL action started it).
+_RETURNING = (HlcState.RTL, HlcState.LOW_BATTERY)
+
+
+class _SharedPicture:
+    """The `SwarmPicture` of one process (one `Context`), fed by one hidden node for all its HLCs."""
+
+    def __init__(self, config: Config, context: Context) -> None:
+        self.picture = new_picture(config)
+        self.feeder = Node(config, context, name="safety-picture")
+        self.users = 0
+
+    def join(self) -> None:
+        self.users += 1
+        if self.users > 1:
+            return
+        feeder, picture = self.feeder, self.picture
+        feeder.start()
+
+        def on_telemetry(msg: telemetry_t, m: TopicMatch) -> None:
+            picture.feed(m.fields.get("agent", ""), msg, feeder.now)
+
+        feeder.subscribe_all("TELEMETRY", on_telemetry)
+        feeder.subscribe_all(
+            "MC_STATE", lambda msg, m: picture.state(m.fields.get("agent", ""), msg.state, feeder.now)
+        )
+        feeder.create_timer(_SWEEP_PERIOD, lambda: picture.sweep(feeder.now))
+
+    def leave(self) -> bool:
+        """False once the last HLC left (the feeder is stopped)."""
+        self.users -= 1
+        if self.users > 0:
+            return True
+        self.feeder.stop()
+        return False
+
+
+#: id(Context) -> its shared picture. A context lives as long as its process's nodes.
+_PICTURES: dict[int, _SharedPicture] = {}
+
+
+def _picture(config: Config, context: Context) -> _SharedPicture:
+    shared = _PICTURES.get(id(context))
+    if shared is None:
+        shared = _PICTURES[id(context)] = _SharedPicture(config, context)
+    return shared
+
+
+def make_autopilot(config: Config, context: Context) -> Autopilot:
+    return plan_autopilot(config).build(context.executor.clock)
+
+
+class HlcNode(Node):
+    kind = "hlc"
+    # Slots for the HLC's own attributes: with the node's they were over 30, past which CPython
+    # (3.11) gives an instance a dict of its own and every attribute read a hash lookup; the 20 Hz
+    # control tick of a thousand agents reads dozens. The base's attributes keep a __dict__.
+    __slots__ = (
+        "autopilot",
+        "machine",
+        "velocity_guard",
+        "mc_state",
+        "snapshot",
+        "_good",
+        "_good_at",
+        "_polled_at",
+        "_state_fault",
+        "_fault_log",
+        "connected",
+        "_io",
+        "_reject_log",
+        "_publish_state",
+        "_shared",
+        "safety",
+        "_wish",
+        "_modified",
+        "_filtered_at",
+        "_returning",
+        "_safety_landing",
+        "_reported",
+        "_fence_mirrored",
+        "_clock",
+        "_state",
+    )
+
+    def __init__(self, config: Config, context: Context, autopilot: Autopilot | None = None) -> None:
+        super().__init__(config, context)
+        h = config.hlc
+        self.autopilot = autopilot or make_autopilot(config, context)
+        self.machine = HighLevelControl(
+            shared_value(
+                HlcParams(
+                    default_takeoff_altitude=h.default_takeoff_altitude,
+                    airborne_fraction=h.airborne_fraction,
+                    gain_altitude_timeout=h.gain_altitude_timeout,
+                    low_battery=h.low_battery,
+                    link_timeout=h.link_timeout,
+                    low_cell_voltage=h.low_cell_voltage,
+                )
+            )
+        )
+        self.velocity_guard = VelocityGuard(
+            shared_value(
+                VelocityLimits(
+                    max_horizontal=h.max_horizontal_speed,
+                    max_vertical=h.max_vertical_speed,
+                    max_yaw_rate=h.max_yaw_rate,
+                    velocity_timeout=h.velocity_timeout,
+                    max_link_age=h.link_timeout,
+                )
+            )
+        )
+        self.mc_state: int | None = None
+        self.snapshot = AutopilotState()
+        self._good = AutopilotState()  # the last snapshot state() returned
+        self._good_at: float | None = None  # `now` when it did
+        self._polled_at: float | None = None  # `now` of `snapshot`
+        self._state_fault = ""  # why state() failed on the last tick, "" when it worked
+        self._fault_log = RateLimitedLog(self.log, period=30.0)
+        self.connected = False
+        self._io: ThreadPoolExecutor | None = None
+        self._reject_log = RateLimitedLog(self.log, period=5.0)
+        self._publish_state: Callable[[], None] = lambda: None
+        #: The separation and fence filter (docs/safety.md), None when [safety] is not enabled.
+        self._shared: _SharedPicture | None = None
+        self.safety: SafetyLayer | None = None
+        if config.safety.enabled:
+            self._shared = _picture(config, context)
+            self.safety = SafetyLayer(self.agent, config, self._shared.picture)
+        self._wish: tuple[Velocity, float] | None = None  # the last velocity a behavior asked for, when
+        self._modified = False  # the filter changed the last set-point it saw
+        self._filtered_at = -math.inf  # `now` of the last set-point filtered
+        self._returning = False  # flying the filtered return leg (RTL with [safety] rtl = "filtered")
+        self._safety_landing = False  # the filter's policy asked the vehicle to land
+        self._reported: dict[str, float] = {}  # SAFETY report kind -> `now` of the last one
+        self._fence_mirrored = False  # the fence was written into the autopilot's own (once per start)
+        self._clock: Callable[[], float] = context.executor.clock
+        self._state: Callable[[], AutopilotState] = self.autopilot.state
+
+    @property
+    def state(self) -> HlcState:
+        return self.machine.state
+
+    # ------------------------------------------------------------------ lifecycle
+    def on_start(self) -> None:
+        #: The executor's clock and the adapter's ``state``, bound once for the 20 Hz control tick.
+        self._clock = self.context.executor.clock
+        self._state = self.autopilot.state
+        if self.autopilot.blocking:
+            self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"hlc-io-{self.agent}")
+        self.subscribe("MC_STATE", self._on_mc_state)
+        self.subscribe("VELOCITY_CMD", self._on_velocity)
+        if self._shared is not None:
+            self._shared.join()
+        h = self.config.hlc
+        self._publish_state = self.state_publisher(
+            "HLC_STATE", self._state_msg, h.republish_hz, periodic=False
+        )
+        # One timer when the rates allow (20, 10 and 5 Hz by default): telemetry and the state go
+        # out right after the control tick whose snapshot they report.
+        self.ticker(
+            h.control_hz,
+            [
+                (h.control_hz, self._control),
+                (h.telemetry_hz, self._publish_telemetry),
+                (h.republish_hz, self._publish_state),
+            ],
+        )
+        self._publish_state()
+        self._connect()
+
+    def on_stop(self) -> None:
+        shared, self._shared = self._shared, None
+        if shared is not None and not shared.leave():
+            _PICTURES.pop(id(self.context), None)
+        io, self._io = self._io, None
+        if io is not None:
+            io.shutdown(wait=False, cancel_futures=True)
+        try:
+            self.autopilot.close()
+        except Exception:
+            self.log.exception("closing the %s autopilot failed", self.autopilot.name)
+
+    def _connect(self) -> None:
+        def done(ok: bool, detail: str) -> None:
+            if not self.started:
+                return
+            if ok:
+                self.connected = True
+                self.log.info("autopilot %s connected", self.autopilot.name)
+                return
+            self._error(
+                HlcError(
+                    ErrorCode.LINK_LOST,
+                    Severity.ERROR,
+                    f"cannot connect the {self.autopilot.name} "
+                    f"autopilot: {detail}; retrying in {_CONNECT_RETRY:g} s",
+                )
+            )
+            self.call_later(_CONNECT_RETRY, self._connect)
+
+        self._run(self.autopilot.connect, done)
+
+    # ------------------------------------------------------------------ running autopilot calls
+    def _run(self, call: Any, done: Any) -> None:
+        """Run ``call()``; then ``done(ok, detail)`` on the executor thread (inline for non-blocking adapters)."""
+
+        def attempt() -> tuple[bool, str]:
+            try:
+                result = call()
+            except AutopilotError as exc:
+                return False, str(exc)
+            except Exception as exc:  # noqa: BLE001 - an adapter bug must not kill the HLC
+                self.log.exception("autopilot %s raised", self.autopilot.name)
+                return False, f"{type(exc).__name__}: {exc}"
+            if result is False:
+                # An adapter may say why (ArduCopter's PreArm text): it goes into the hlc_error_t.
+                return False, self.autopilot.last_refusal or "refused"
+            return True, ""
+
+        if self._io is None:
+            done(*attempt())
+        else:
+            post = self.context.executor.call_soon
+            self._io.submit(lambda: post(done, *attempt()))
+
+    def _perform(self, action: Action) -> None:
+        ap = self.autopilot
+        calls = {
+            ActionKind.ARM: ap.arm,
+            ActionKind.DISARM: ap.disarm,
+            ActionKind.TAKEOFF: lambda: ap.takeoff(action.altitude),
+            ActionKind.LAND: ap.land,
+            ActionKind.RTL: ap.rtl,
+        }
+        self.log.info(
+            "autopilot %s%s",
+            action.kind.name,
+            f" to {action.altitude:g} m" if action.kind is ActionKind.TAKEOFF else "",
+        )
+
+        def done(ok: bool, detail: str) -> None:
+            if not self.started:
+                return
+            if not ok:
+                self.log.warning("autopilot %s failed: %s", action.kind.name, detail or "refused")
+            self._handle(self.machine.on_action_result(action.kind, ok, self.now, detail))
+
+        if action.kind is ActionKind.RTL and self.safety is not None and self.config.safety.rtl == "filtered":
+            # The HLC flies home itself, through the filter, and lands there (`_return_leg`).
+            self._returning = True
+            self.log.info("RTL: flying home through the safety filter (safety.rtl = filtered)")
+            return
+        if action.kind is ActionKind.HOVER:
+            # Like every velocity set-point, inline: queued behind a slow command on the worker it
+            # could arrive after, and override, a newer velocity command.
+            self._apply(GuardDecision(Verdict.HOVER, Velocity.hover(), "HLC action"), "HLC")
+            return
+        self._run(calls[action.kind], done)
+
+    # ------------------------------------------------------------------ inputs
+    def _on_mc_state(self, msg: mc_state_t) -> None:
+        if not self.started:
+            return  # delivered after stop(): the autopilot is closed
+        self.mc_state = msg.state
+        alt = (
+            msg.takeoff_altitude if math.isfinite(msg.takeoff_altitude) and msg.takeoff_altitude > 0 else 0.0
+        )
+        outcome = self.machine.on_mc_state(msg.state, self._clock(), takeoff_altitude=alt)
+        if outcome is not NOTHING:
+            self._handle(outcome)
+
+    def _on_velocity(self, msg: velocity_cmd_t) -> None:
+        if not self.started:
+            return
+        cmd = VelocityCommand(msg.vx, msg.vy, msg.vz, msg.yaw_rate, msg.frame, self.now)
+        decision = self.velocity_guard.on_command(
+            cmd, self.now, self.machine.state, self.mc_state, self._link_age()
+        )
+        self._apply(decision, msg.header.agent)
+
+    def _link_age(self) -> float:
+        """The link's age now: the last snapshot's, plus the time since it was taken (20 Hz is coarse)."""
+        if self._polled_at is None:
+            return math.inf
+        return self.snapshot.link_age + max(0.0, self.now - self._polled_at)
+
+    def _stale(self, now: float, exc: Exception) -> AutopilotState:
+        """``state()`` raised ``exc``: the last good snapshot, its link aged by the time since."""
+        fault = f"autopilot {self.autopilot.name} state() raised {type(exc).__name__}: {exc}"
+        if fault != self._state_fault:
+            self.log.debug("%s", fault, exc_info=True)
+        self._state_fault = fault
+        self._fault_log.log(("state",), logging.WARNING, "%s", fault)
+        if self._good_at is None:
+            return replace(self._good, link_age=math.inf)
+        return replace(self._good, link_age=self._good.link_age + max(0.0, now - self._good_at))
+
+    def _control(self) -> None:
+        if not self.started:
+            return
+        now = self._clock()
+        # The adapter's snapshot, or the last good one aged by the time since when state() raises.
+        try:
+            snapshot = self._state()
+        except Exception as exc:  # noqa: BLE001 - an adapter bug is a stale link, not a dead HLC
+            snapshot = self._stale(now, exc)
+        else:
+            if self._state_fault:
+                self.log.warning("autopilot %s state() works again", self.autopilot.name)
+                self._state_fault = ""
+            self._good, self._good_at = snapshot, now
+        self.snapshot = snapshot
+        self._polled_at = now
+        machine = self.machine
+        # 20 times a second per agent: most outcomes are NOTHING, checked here rather than in a call.
+        outcome = machine.on_autopilot(snapshot, now, fault=self._state_fault)
+        if outcome is not NOTHING:
+            self._handle(outcome)
+        outcome = machine.tick(now)
+        if outcome is not NOTHING:
+            self._handle(outcome)
+        # The link's age now is the snapshot's: it was polled at `now` (see _link_age).
+        stale = self.velocity_guard.tick(now, machine.state, self.mc_state, self.snapshot.link_age)
+        if stale is not None:
+            self._apply(stale, "velocity timeout")
+        if self.safety is not None:
+            self._safety_tick(now)
+
+    # ------------------------------------------------------------------ outputs
+    def _apply(self, decision: GuardDecision, source: str) -> None:
+        if decision.verdict is Verdict.REJECT:
+            # Outside mission flight a velocity command is expected (a behavior's last "stop"),
+            # so it is noted; a malformed one in flight is a warning.
+            in_mission = mission_flight(self.machine.state, self.mc_state)
+            self._reject_log.log(
+                ("reject", decision.reason.split(":")[0]),  # per kind: a stale link's age changes every time
+                logging.WARNING if in_mission else logging.INFO,
+                "rejected velocity command from %s: %s",
+                source,
+                decision.reason,
+            )
+            return
+        v = decision.send or Velocity.hover()
+        if decision.verdict is Verdict.HOVER:
+            self.log.info("hover: %s", decision.reason)
+        elif decision.clamped:
+            self._reject_log.log(("clamp",), logging.INFO, "velocity command clamped: %s", decision.reason)
+        if self.safety is not None:
+            self._wish = (v, self.now)
+            v = self._filtered(v)
+        self._send(v)
+
+    def _send(self, v: Velocity) -> None:
+        try:
+            self.autopilot.set_velocity(v.vx, v.vy, v.vz, v.yaw_rate, Frame(v.frame))
+        except Exception as exc:
+            self._reject_log.log(("set_velocity",), logging.WARNING, "set_velocity failed: %s", exc)
+
+    # ------------------------------------------------------------------ the safety filter
+    def _filtered(self, v: Velocity) -> Velocity:
+        """`v` through the separation and fence filter (unchanged when it is safe or no fix is known)."""
+        assert self.safety is not None
+        out = self.safety.filter_velocity(self.snapshot, v.vx, v.vy, v.vz, Frame(v.frame), self.now)
+        if out is None:
+            return v
+        self._act_on(out)
+        self._modified = out.decision.modified
+        self._filtered_at = self.now
+        if not out.decision.modified:
+            return v
+        return Velocity(out.vn, out.ve, out.vd, v.yaw_rate, Frame.NED)
+
+    def _safety_tick(self, now: float) -> None:
+        """Every control tick: the filtered return leg, or the last wish re-filtered as peers move
+        (a behavior may command at 1 Hz; the filter must not wait for it)."""
+        assert self.safety is not None
+        if not self._fence_mirrored:
+            self._mirror_fence()
+        state = self.machine.state
+        if self._returning and state not in _RETURNING:
+            self._returning = False  # the MC landed it, a pilot took it, ...
+        if self._link_age() >= self.config.hlc.link_timeout:
+            return
+        if self._returning:
+            leg = self.safety.return_leg(self.snapshot, now)
+            if leg is None:
+                if self.safety.home is None or not math.isfinite(self.snapshot.lat):
+                    self.log.warning("filtered RTL: no home or position known: the autopilot's own RTL")
+                    self._returning = False
+                    self._run(self.autopilot.rtl, self._after_safety_action)
+                    return
+                self._returning = False
+                self.log.info("filtered RTL: home reached, landing")
+                self._run(self.autopilot.land, self._after_safety_action)
+                return
+            self._act_on(leg)
+            self._send(Velocity(leg.vn, leg.ve, leg.vd, 0.0, Frame.NED))
+            return
+        if not mission_flight(state, self.mc_state):
+            self._wish = None
+            return
+        if not self._modified and now - self._filtered_at < 2.0 / self.config.hlc.control_hz:
+            return  # a behavior commanding at 10 Hz or more is filtered on every command already
+        wish = self._wish
+        fresh = wish is not None and now - wish[1] <= self.config.hlc.velocity_timeout
+        v = wish[0] if wish is not None and fresh else Velocity.hover()
+        was = self._modified
+        out = self._filtered(v)
+        if self._modified or was:
+            self._send(out)
+
+    def _act_on(self, f: Filtered) -> None:
+        """Report a modified set-point, and follow the filter's policy (land) once."""
+        d = f.decision
+        if d.action == "land" and not self._safety_landing:
+            self._safety_landing = True
+            self.log.warning("%s: landing", describe(d))
+            self._run(self.autopilot.land, self._after_safety_action)
+        if not (d.modified or d.reason):
+            return
+        conflict = bool(d.reason) and not d.reason.startswith("no peer")
+        kind = "conflict" if conflict else d.by or "peers"
+        now = self.now
+        if now - self._reported.get(kind, -math.inf) < _SAFETY_REPORT_PERIOD:
+            return
+        self._reported[kind] = now
+        severity = Severity.ERROR if conflict else Severity.WARNING
+        self._error(HlcError(ErrorCode.SAFETY, severity, describe(d)))
+
+    def _mirror_fence(self) -> None:
+        """Write the swarm fence into the autopilot's own fence parameters and read them back, once, on
+        the ground with a position fix: ArduPilot's FENCE_* (antalate_lcm.autopilot.mavlink.fence_mirror),
+        PX4's GF_* (antalate_lcm.autopilot.px4.fence_mirror). It holds if we die."""
+        safety, fence_config = self.safety, self.config.safety.fence
+        kind = self.autopilot.name
+        if safety is None or fence_config is None or kind not in ("mavlink", "px4") or not self.connected:
+            return
+        s = self.snapshot
+        here = safety.position(s)
+        fence = safety.params.fence
+        if here is None or fence is None or s.in_air or s.armed:
+            return
+        self._fence_mirrored = True
+        from antalate_lcm.autopilot.mavlink import fence_mirror as ardupilot
+        from antalate_lcm.autopilot.px4 import fence_mirror as px4
+
+        module = px4 if kind == "px4" else ardupilot
+        wanted = module.fence_parameters(fence, (here[0], here[1]), fence_config.outside)
+        link = cast(ardupilot.ParamLink, self.autopilot)
+
+        def call() -> None:
+            problems = module.mirror(link, wanted)
+            if problems:
+                raise AutopilotError("; ".join(problems))
+
+        def done(ok: bool, detail: str) -> None:
+            if not self.started:
+                return
+            shown = ", ".join(f"{k} {v:g}" for k, v in wanted.items())
+            if ok:
+                text = f"safety: fence mirrored into the autopilot and read back: {shown}"
+                self._error(HlcError(ErrorCode.SAFETY, Severity.INFO, text))
+            else:
+                text = f"safety: the autopilot does not hold the fence ({detail}); wanted {shown}"
+                self._error(HlcError(ErrorCode.SAFETY, Severity.WARNING, text))
+
+        self._run(call, done)
+
+    def _after_safety_action(self, ok: bool, detail: str) -> None:
+        if not ok:
+            self.log.warning("safety: autopilot command failed: %s", detail or "refused")
+
+    def _handle(self, outcome: HlcOutcome) -> None:
+        if outcome is NOTHING:  # most inputs (a snapshot 20 times a second) change nothing
+            return
+        t = outcome.transition
+        if t is not None:
+            if t.to_state is HlcState.TAKEOFF and self.safety is not None:
+                self.safety.mark_home(self.snapshot)
+                self._safety_landing = False
+                crowd = self.safety.crowded(self.snapshot, self.now)
+                if crowd:
+                    radius = self.safety.params.separation.radius
+                    near = ", ".join(f"{a} at {d:.1f} m" for a, d in crowd)
+                    text = (
+                        f"safety: taking off closer than the {radius:g} m radius to {near}: the climb keeps"
+                        " that distance; the filter separates them only in MISSION"
+                    )
+                    self._error(HlcError(ErrorCode.SAFETY, Severity.WARNING, text))
+            level = logging.INFO
+            if t.to_state is HlcState.LLC_DOWN:
+                level = logging.ERROR
+            elif t.from_state is HlcState.LLC_DOWN or t.to_state is HlcState.HOLD:
+                level = logging.WARNING
+            self.log.log(
+                level, "%s -> %s on %s: %s", t.from_state.name, t.to_state.name, t.event.name, t.reason
+            )
+            self._publish_state()
+        for err in outcome.errors:
+            self._error(err)
+        for action in outcome.actions:
+            self._perform(action)
+
+    def _error(self, err: HlcError) -> None:
+        level = {Severity.INFO: logging.INFO, Severity.WARNING: logging.WARNING}.get(
+            err.severity, logging.ERROR
+        )
+        self.log.log(level, "error %d (%s): %s", int(err.code), err.code.name, err.text)
+        msg = hlc_error_t()
+        msg.code = int(err.code)
+        msg.severity = int(err.severity)
+        msg.text = err.text
+        self.publish("HLC_ERROR", msg)
+
+    def _state_msg(self) -> hlc_state_t:
+        msg = self.outgoing(hlc_state_t)  # refilled, every field, as the telemetry is
+        msg.state = int(self.machine.state)
+        msg.autopilot = self.autopilot.name
+        msg.reason = self.machine.reason
+        return msg
+
+    def _publish_telemetry(self) -> None:
+        s = self.snapshot
+        if not s.connected:
+            return
+        # The context's one telemetry message, refilled (publish stamps its header and encodes it
+        # at once): every field of it is written here.
+        msg = self.outgoing(telemetry_t)
+        msg.lat, msg.lon, msg.alt = s.lat, s.lon, s.alt
+        msg.heading, msg.vn, msg.ve, msg.vd = s.heading, s.vn, s.ve, s.vd
+        msg.battery, msg.armed, msg.in_air, msg.mode = s.battery, s.armed, s.in_air, s.mode
+        self.publish("TELEMETRY", msg)

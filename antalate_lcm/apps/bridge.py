@@ -1,0 +1,634 @@
+"""``antalate bridge``: forward chosen channels between two buses, e.g. a site's LAN and a Zenoh bus.
+
+A bridge forwards the bytes as they are -- it never decodes, re-encodes or re-signs -- so the MAC
+and the replay guard hold end to end. It must never loop and never duplicate, and it cannot mark a
+message (the MAC covers every byte), so it remembers what it has carried:
+
+- every message it receives on either side is remembered for :attr:`BridgeConfig.memory` seconds
+  by (channel, hash of the bytes); a message it already remembers is not forwarded. That stops the
+  copy it published itself coming back (multicast loops back to its own socket) and the copy a second
+  bridge already carried;
+- on Zenoh it also subscribes to remote samples only and marks what it puts (attachment
+  ``antalate-bridge:ID:ORIGIN``, ORIGIN a hash of ``[bridge] site`` and the bus the message came
+  from), so a Zenoh
+  subscriber receives one copy when two bridges forward the same message
+  (:mod:`antalate_lcm.transports.zenoh`), and a bridge never forwards to a bus a copy that came from that
+  very bus through another bridge (two bridges on one LAN: whichever thread is first, no echo);
+- bridges of one site (same ``[bridge] site``) elect the one that forwards Zenoh to their LAN (Zenoh
+  liveliness tokens, lowest id alive), so a redundant gateway does not double messages on the LAN.
+
+A rate cap per channel and direction (a thin uplink) keeps the newest message and sends it at the
+next slot: a state topic always ends on its latest value, never on a dropped one.
+
+Whoever reaches the router or the LAN must not be able to stop, stall or amplify it (issue 29):
+
+- every message that cannot be forwarded (a channel LCM cannot carry, over its size limit, an error
+  of the destination) is counted by reason, logged once per reason and direction per 10 s, and
+  dropped; nothing one message does ends a direction's thread;
+- sizes are limited per channel and direction (``max_size``, ``[[bridge.size]]``), checked on the
+  first fragment that names the size (the LAN is read from antalate's own socket, reassembled by
+  :class:`~antalate_lcm.transports.datagram.Reassembler`) and by Zenoh itself before it reassembles; a
+  message is delivered only when its fragments carried all its bytes, so bytes out <= bytes in;
+- what it remembers is bounded in time *and* count (seen messages, rate-cap slots, Zenoh publishers),
+  and each direction has its own thread, queue and budget: sending never holds the lock the other
+  direction needs;
+- with ``[security] swarm_key``, the election counts only liveliness tokens signed with it.
+
+The config is its own TOML file: ``[buses]`` as in an agent config, and ``[bridge]`` (docs/wan.md).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import re
+import select
+import sys
+import threading
+import time
+import uuid
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from antalate_lcm.base.errors import ConfigError
+from antalate_lcm.base.ratelimit import RateLimitedLog
+from antalate_lcm.transports import Connection, bus_url_problem, transport_for
+from antalate_lcm.transports.datagram import MAX_MESSAGE_SIZE, Reassembler, channel_problem
+from antalate_lcm.transports.udpm import Udpm
+from antalate_lcm.transports.zenoh import BRIDGE_MARK, ZenohLCM
+from antalate_lcm.wire.security import MemberProof
+
+log = logging.getLogger("antalate.bridge")
+
+#: Default largest message forwarded (bytes): 1,000 times the largest antalate message in practice.
+DEFAULT_MAX_SIZE = 256 * 1024
+#: Seen messages remembered at most (each ~100 bytes), whatever arrives within ``memory`` seconds.
+MAX_REMEMBERED = 100_000
+
+
+# ---------------------------------------------------------------------------------------- config
+class RateLimit(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    #: Channel regex (whole name), e.g. ``.*/TELEMETRY``.
+    channel: str
+    #: The bus the capped messages go to (the other direction is not capped).
+    to: str
+    #: Messages per second per channel at most; the newest waiting one is sent at each slot.
+    rate: float = Field(gt=0)
+
+    @field_validator("channel")
+    @classmethod
+    def _regex(cls, v: str) -> str:
+        re.compile(v)
+        return v
+
+
+class SizeLimit(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    #: Channel regex (whole name).
+    channel: str
+    #: The bus the limited messages go to.
+    to: str
+    #: Largest message (bytes of LCM payload) forwarded on those channels towards ``to``.
+    max: int = Field(gt=0, le=MAX_MESSAGE_SIZE)
+
+    @field_validator("channel")
+    @classmethod
+    def _regex(cls, v: str) -> str:
+        re.compile(v)
+        return v
+
+
+class BridgeSecurity(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    #: The swarm key (as in the agents' [security]): signs this bridge's liveliness token; without
+    #: it, any Zenoh client can take the site's election over (docs/wan.md).
+    swarm_key: str = ""
+    #: Former keys, accepted for checking the other bridges' tokens during a rotation.
+    previous_keys: list[str] = Field(default_factory=list)
+    #: s: how far a token's time may be from this host's clock (the hosts need NTP).
+    window: float = Field(default=5.0, gt=0, le=300)
+
+
+class BridgeSection(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    #: The two bus names (from [buses]) to join.
+    between: list[str] = Field(min_length=2, max_length=2)
+    #: Channel regexes (whole name) to forward; default every channel.
+    channels: list[str] = Field(default_factory=lambda: [".*"])
+    #: Channel regexes never forwarded (checked after ``channels``).
+    exclude: list[str] = Field(default_factory=list)
+    #: Seconds a forwarded message is remembered against echoes and duplicates.
+    memory: float = Field(default=2.0, gt=0, le=60)
+    #: Name of the network this bridge serves: bridges that join the *same* LAN to Zenoh (a
+    #: redundant gateway) must share it, bridges of different sites must not. Empty: this bridge's
+    #: own random id (safe: never mistakes another site's messages for its own).
+    site: str = ""
+    limit: list[RateLimit] = Field(default_factory=list)
+    #: Largest message (bytes) forwarded either way unless a [[bridge.size]] says otherwise; far
+    #: below liblcm's 256 MiB: the largest antalate message is a few hundred bytes.
+    max_size: int = Field(default=DEFAULT_MAX_SIZE, gt=0, le=MAX_MESSAGE_SIZE)
+    size: list[SizeLimit] = Field(default_factory=list)
+
+    @field_validator("channels", "exclude")
+    @classmethod
+    def _regexes(cls, v: list[str]) -> list[str]:
+        for pattern in v:
+            re.compile(pattern)
+        return v
+
+
+class BridgeConfig(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    buses: dict[str, str]
+    bridge: BridgeSection
+    security: BridgeSecurity = Field(default_factory=BridgeSecurity)
+
+    @field_validator("buses")
+    @classmethod
+    def _urls(cls, v: dict[str, str]) -> dict[str, str]:
+        problem = bus_url_problem(v)
+        if problem is not None:
+            raise ValueError(f"{problem[0]}: expected {problem[1]}")
+        return v
+
+    @model_validator(mode="after")
+    def _known(self) -> BridgeConfig:
+        a, b = self.bridge.between
+        if a == b:
+            raise ValueError(f"bridge.between: two different buses, not {a!r} twice")
+        for name in (a, b):
+            if name not in self.buses:
+                raise ValueError(f"bridge.between: a bus declared in [buses], not {name!r}")
+        if self.buses[a] == self.buses[b]:
+            raise ValueError(f"bridge.between: {a} and {b} are the same bus ({self.buses[a]})")
+        for i, lim in enumerate(self.bridge.limit):
+            if lim.to not in (a, b):
+                raise ValueError(f"bridge.limit[{i}].to: one of {a}, {b}, not {lim.to!r}")
+        for i, size in enumerate(self.bridge.size):
+            if size.to not in (a, b):
+                raise ValueError(f"bridge.size[{i}].to: one of {a}, {b}, not {size.to!r}")
+        return self
+
+
+def load_bridge_config(path: str | Path) -> BridgeConfig:
+    """Read and check a bridge config; every mistake is a ConfigError naming the file and key."""
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover - exercised only on 3.10
+        import tomli as tomllib
+
+    source = str(path)
+    try:
+        data = tomllib.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise ConfigError(source, "", "no such file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(source, "", f"not valid TOML ({exc})") from None
+    try:
+        return BridgeConfig.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        key = ".".join(str(p) for p in err["loc"])
+        msg = str(err["msg"]).removeprefix("Value error, ")
+        named = re.match(r"([a-z_]+(?:\.[a-z_]+|\[\d+\]\.[a-z_]+)*): (.*)", msg, re.S)
+        if named:  # our own checks name their key first
+            key, msg = named.group(1), named.group(2)
+        raise ConfigError(source, key, msg) from None
+    except re.error as exc:
+        raise ConfigError(source, "bridge", f"valid regular expressions ({exc})") from None
+
+
+# ----------------------------------------------------------------------------------- pure logic
+class Memory:
+    """(channel, digest) pairs seen in the last ``window`` seconds, ``limit`` at most. Not thread-safe."""
+
+    def __init__(self, window: float, limit: int = MAX_REMEMBERED) -> None:
+        self.window = window
+        self.limit = limit
+        self._seen: OrderedDict[bytes, float] = OrderedDict()
+
+    @staticmethod
+    def digest(channel: str, data: bytes) -> bytes:
+        h = hashlib.blake2b(data, digest_size=16, person=b"antalate-bridge")
+        h.update(channel.encode())
+        return h.digest()
+
+    def prune(self, now: float) -> None:
+        """Forget what left the window (oldest first, O(1) per entry); also when nothing arrives."""
+        seen = self._seen
+        while seen:
+            oldest, t = next(iter(seen.items()))
+            if now - t <= self.window:
+                break
+            del seen[oldest]
+
+    def check_and_add(self, key: bytes, now: float) -> bool:
+        """True (and remembered afresh) if ``key`` was seen within the window, else remember it."""
+        self.prune(now)
+        seen = key in self._seen
+        self._seen[key] = now
+        self._seen.move_to_end(key)
+        if len(self._seen) > self.limit:  # a flood within one window: the oldest goes first
+            self._seen.popitem(last=False)
+        return seen
+
+    def __len__(self) -> int:
+        return len(self._seen)
+
+
+class Throttle:
+    """Newest-wins rate cap per channel: at most one message per ``1/rate`` s, the latest one."""
+
+    def __init__(self, rate: float) -> None:
+        self.interval = 1.0 / rate
+        self._last: dict[str, float] = {}
+        self._pending: dict[str, bytes] = {}
+        #: Messages replaced by a newer one before their slot.
+        self.superseded = 0
+
+    def offer(self, channel: str, data: bytes, now: float) -> bool:
+        """True: send now. False: kept as the channel's newest, sent by :meth:`due`."""
+        last = self._last.get(channel)
+        if last is None or now - last >= self.interval:
+            self._last[channel] = now
+            self._pending.pop(channel, None)
+            return True
+        if channel in self._pending:
+            self.superseded += 1
+        self._pending[channel] = data
+        return False
+
+    def due(self, now: float) -> list[tuple[str, bytes]]:
+        out = []
+        for channel in list(self._pending):
+            if now - self._last[channel] >= self.interval:
+                out.append((channel, self._pending.pop(channel)))
+                self._last[channel] = now
+        return out
+
+    def prune(self, now: float) -> None:
+        """Forget the slots of channels that have nothing waiting and whose slot has passed."""
+        stale = [c for c, t in self._last.items() if now - t >= self.interval and c not in self._pending]
+        for channel in stale:
+            del self._last[channel]
+
+    def __len__(self) -> int:
+        return len(self._last)
+
+
+@dataclass
+class Direction:
+    """What goes from one side to the other: the caps, the size limits and the counters."""
+
+    source: str
+    dest: str
+    limits: list[tuple[re.Pattern[str], Throttle]]
+    sizes: list[tuple[re.Pattern[str], int]] = field(default_factory=list)
+    max_size: int = DEFAULT_MAX_SIZE
+    forwarded: int = 0
+    #: Messages on channels ``[bridge] channels``/``exclude`` leave out.
+    not_selected: int = 0
+    #: Not forwarded, and rightly: already carried (an echo, a second bridge's copy), brought from
+    #: the destination by another bridge, or another bridge of the site forwards this way.
+    seen: int = 0
+    same_origin: int = 0
+    standby: int = 0
+    #: LCM payload bytes received from ``source`` and sent to ``dest``.
+    bytes_in: int = 0
+    bytes_out: int = 0
+    #: Messages not forwarded, by reason (see :data:`DROP_REASONS`).
+    dropped: dict[str, int] = field(default_factory=dict)
+
+    def throttle_for(self, channel: str) -> Throttle | None:
+        for pattern, throttle in self.limits:
+            if pattern.fullmatch(channel):
+                return throttle
+        return None
+
+    def size_limit(self, channel: str) -> int:
+        for pattern, limit in self.sizes:
+            if pattern.fullmatch(channel):
+                return limit
+        return self.max_size
+
+    @property
+    def largest(self) -> int:
+        """The largest message any channel may carry this way (what reassembly may ever hold)."""
+        return max([self.max_size, *(limit for _, limit in self.sizes)])
+
+
+#: Why a message was not forwarded (stats keys ``dropped_<reason>``).
+DROP_REASONS = {
+    "bad_channel": "its channel cannot be carried by LCM (empty, a NUL byte, over 63 bytes)",
+    "oversize": "it is over the size limit of its channel",
+    "damaged": "it is not LCM or is damaged (LAN datagrams, or fragments that never all came)",
+    "send_error": "the destination refused it",
+    "error": "an unforeseen error while forwarding it",
+}
+
+
+def origin_tag(name: str) -> bytes:
+    """A short tag naming a bus of a site (the same on every bridge that joins that bus)."""
+    return hashlib.blake2b(name.encode(), digest_size=6).hexdigest().encode()
+
+
+# ------------------------------------------------------------------------------------------ I/O
+class _LanLink:
+    """A ``udpm://`` LAN: read from antalate's own socket (sizes checked on the first fragment, before
+    any buffer is allocated), sent by liblcm (whose receive thread never starts: nothing subscribes)."""
+
+    def __init__(self, transport: Udpm, size_limit: Callable[[str], int], largest: int) -> None:
+        reassembler = Reassembler(max_message_size=largest, size_limit=size_limit)
+        self.receiver = transport.receiver(reassembler)
+        try:
+            self._lcm = transport.open()
+        except Exception:
+            self.receiver.close()
+            raise
+        self._handler: Callable[[str, bytes], None] = lambda channel, data: None
+        self.closed = False
+        self._counted = (0, 0)
+
+    def take_drops(self) -> tuple[int, int]:
+        """(oversize, damaged) datagrams the reassembler dropped since the last call."""
+        r = self.receiver.reassembler
+        now = (r.oversize, r.dropped + r.evicted)
+        before, self._counted = self._counted, now
+        return now[0] - before[0], now[1] - before[1]
+
+    def subscribe(self, handler: Callable[[str, bytes], None]) -> None:
+        self._handler = handler
+
+    def publish(self, channel: str, data: bytes) -> None:
+        self._lcm.publish(channel, data)
+
+    def handle_timeout(self, timeout_ms: int) -> int:
+        readable, _, _ = select.select([self.receiver.fileno()], [], [], timeout_ms / 1000)
+        return self.receiver.drain(self._handler, 256) if readable else 0
+
+    def close(self) -> None:
+        self.closed = True
+        self.receiver.close()
+
+
+def _open(url: str, direction_in: Direction, largest: int) -> _LanLink | Connection:
+    transport = transport_for(url)
+    if isinstance(transport, Udpm):
+        return _LanLink(transport, direction_in.size_limit, largest)
+    # Zenoh drops a larger message itself, before reassembling it (+ room for key and attachment);
+    # memq://, file://: nobody outside the process writes there.
+    return transport.open(max_message_size=largest + 4096)
+
+
+class Bridge:
+    """Two transports, one receive thread each; a short lock orders what both directions remember."""
+
+    def __init__(self, config: BridgeConfig, *, bridge_id: str | None = None) -> None:
+        self.config = config
+        self.id = bridge_id or uuid.uuid4().hex[:12]
+        self.mark = BRIDGE_MARK + self.id.encode()
+        sec = config.bridge
+        self._select = [re.compile(p) for p in sec.channels]
+        self._exclude = [re.compile(p) for p in sec.exclude]
+        self.memory = Memory(sec.memory)
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self.names: tuple[str, str] = (sec.between[0], sec.between[1])
+        self._links: dict[str, Any] = {}
+        self.directions: dict[str, Direction] = {}
+        for src, dst in (self.names, self.names[::-1]):
+            limits = [(re.compile(lim.channel), Throttle(lim.rate)) for lim in sec.limit if lim.to == dst]
+            sizes = [(re.compile(s.channel), s.max) for s in sec.size if s.to == dst]
+            self.directions[src] = Direction(src, dst, limits, sizes, sec.max_size)
+        #: Origin tag of each side: a hash of the site and its URL (two bridges on one LAN share it).
+        site = sec.site or self.id
+        self.origin = {name: origin_tag(f"{site} {config.buses[name]}") for name in self.names}
+        #: Per LAN side: whether this bridge is the one (of those serving that LAN) that forwards to it.
+        self.leader = dict.fromkeys(self.names, True)
+        self.send_errors = 0
+        self._threads: list[threading.Thread] = []
+        #: Per side: whether it is a Zenoh bus (what it takes: attachments, any channel name).
+        self._zenoh: dict[str, bool] = {}
+        self._log = RateLimitedLog(log, period=10.0)
+        keys = config.security
+        self._proof = (
+            MemberProof((keys.swarm_key, *keys.previous_keys), keys.window) if keys.swarm_key else None
+        )
+
+    def start(self) -> None:
+        try:
+            for name in self.names:
+                direction_in = self.directions[name]
+                largest = max(direction_in.largest, self.directions[direction_in.dest].largest)
+                self._links[name] = _open(self.config.buses[name], direction_in, largest)
+        except Exception:
+            self.close()
+            raise
+        self._zenoh = {name: isinstance(link, ZenohLCM) for name, link in self._links.items()}
+        for name in self.names:
+            link = self._links[name]
+            handler: Callable[..., None] = partial(self._on_message, name)
+            if isinstance(link, ZenohLCM):
+                link.subscribe(".*", handler, remote_only=True, attachments=True).set_queue_capacity(10_000)
+            elif isinstance(link, _LanLink):
+                link.subscribe(handler)  # the kernel's socket buffer is its queue
+            else:
+                link.subscribe(".*", handler).set_queue_capacity(10_000)
+        for zside, lside in (self.names, self.names[::-1]):
+            zlink, llink = self._links[zside], self._links[lside]
+            if isinstance(zlink, ZenohLCM) and not isinstance(llink, ZenohLCM):
+                if self._proof is None:
+                    log.warning(
+                        "bridge %s: no [security] swarm_key: any client of the Zenoh router can take "
+                        "over the election of the bridges of this site (docs/wan.md)",
+                        self.id,
+                    )
+                # Bridges serving one LAN (same site) elect the one that forwards to it: the lowest id alive.
+                zlink.join_group(
+                    self.origin[lside].decode(), self.id, partial(self._on_members, lside), self._proof
+                )
+        for name in self.names:
+            t = threading.Thread(target=self._run, args=(name,), name=f"bridge {name}", daemon=True)
+            t.start()
+            self._threads.append(t)
+        log.info(
+            "bridge %s: %s (%s) <-> %s (%s)",
+            self.id,
+            self.names[0],
+            self.config.buses[self.names[0]],
+            self.names[1],
+            self.config.buses[self.names[1]],
+        )
+
+    def _on_members(self, side: str, members: frozenset[str]) -> None:
+        leader = min(members) == self.id
+        if leader != self.leader[side]:
+            log.info(
+                "bridge %s: %s forwarding to %s (bridges of this site alive: %s)",
+                self.id,
+                "now" if leader else "no longer",
+                side,
+                ", ".join(sorted(members)),
+            )
+        self.leader[side] = leader
+
+    def _selected(self, channel: str) -> bool:
+        return any(p.fullmatch(channel) for p in self._select) and not any(
+            p.fullmatch(channel) for p in self._exclude
+        )
+
+    def _on_message(self, source: str, channel: str, data: bytes, attachment: bytes | None = None) -> None:
+        """Whatever one message holds, it is forwarded or counted and dropped: never an exception."""
+        direction = self.directions[source]
+        try:
+            self._forward(direction, channel, data, attachment)
+        except Exception as exc:  # noqa: BLE001 - one message must never end a direction
+            self._drop(direction, "error", channel, f"{type(exc).__name__}: {exc}")
+
+    def _drop(self, direction: Direction, reason: str, channel: str, detail: str, count: int = 1) -> None:
+        n = direction.dropped.get(reason, 0) + count
+        direction.dropped[reason] = n
+        self._log.log(
+            (direction.source, reason),
+            logging.WARNING,
+            "bridge %s: dropped a message from %s to %s because %s (%s; channel %r): %d so far",
+            self.id,
+            direction.source,
+            direction.dest,
+            DROP_REASONS[reason],
+            detail,
+            channel[:80],
+            n,
+        )
+
+    def _forward(self, direction: Direction, channel: str, data: bytes, attachment: bytes | None) -> None:
+        direction.bytes_in += len(data)
+        if not self._selected(channel):
+            direction.not_selected += 1
+            return
+        if not self._zenoh[direction.dest]:
+            problem = channel_problem(channel)
+            if problem is not None:
+                self._drop(direction, "bad_channel", channel, problem)
+                return
+        limit = direction.size_limit(channel)
+        if len(data) > limit:
+            self._drop(direction, "oversize", channel, f"{len(data)} bytes, limit {limit}")
+            return
+        forwarded = attachment is not None and attachment.startswith(BRIDGE_MARK)
+        if forwarded and attachment.rpartition(b":")[2] == self.origin[direction.dest]:  # type: ignore[union-attr]
+            direction.same_origin += 1  # another bridge brought it from there: it is there already
+            return
+        now = time.monotonic()
+        with self._lock:
+            if self.memory.check_and_add(Memory.digest(channel, data), now):
+                direction.seen += 1
+                return
+            if not self.leader[direction.dest]:
+                # Another bridge of this site forwards it; remembered above, so its copy on the LAN
+                # is not sent back to Zenoh from here.
+                direction.standby += 1
+                return
+            throttle = direction.throttle_for(channel)
+            if throttle is not None and not throttle.offer(channel, data, now):
+                return
+        # Remembered above before it goes out (the looped-back copy finds it); sent without the lock,
+        # so a slow destination never holds up the other direction.
+        self._send(direction, channel, data)
+
+    def _send(self, direction: Direction, channel: str, data: bytes) -> None:
+        link = self._links[direction.dest]
+        try:
+            if self._zenoh[direction.dest]:
+                link.publish(channel, data, attachment=self.mark + b":" + self.origin[direction.source])
+            else:
+                link.publish(channel, data)
+        except Exception as exc:  # noqa: BLE001 - a dead link or a refused message: counted, never fatal
+            self.send_errors += 1
+            self._drop(direction, "send_error", channel, f"{type(exc).__name__}: {exc}")
+            return
+        direction.forwarded += 1
+        direction.bytes_out += len(data)
+
+    def _run(self, name: str) -> None:
+        link = self._links[name]
+        direction = self.directions[name]  # what this side sends out; its caps are flushed here
+        pruned = time.monotonic()
+        while not self._stop.is_set():
+            try:
+                link.handle_timeout(20)
+            except Exception as exc:  # noqa: BLE001 - the loop survives; only a closed link ends it
+                if self._stop.is_set() or getattr(link, "closed", False):
+                    return
+                self._log.log(
+                    (name, "receive"),
+                    logging.ERROR,
+                    "bridge %s: receiving from %s failed: %s: %s",
+                    self.id,
+                    name,
+                    type(exc).__name__,
+                    exc,
+                )
+                self._stop.wait(0.1)
+            if isinstance(link, _LanLink):
+                oversize, damaged = link.take_drops()
+                for reason, n in (("oversize", oversize), ("damaged", damaged)):
+                    if n:
+                        self._drop(direction, reason, "", f"{n} datagrams, found when reassembling", n)
+            now = time.monotonic()
+            due: list[tuple[str, bytes]] = []
+            with self._lock:
+                for _pattern, throttle in direction.limits:
+                    due.extend(throttle.due(now))
+                if now - pruned >= 0.5:  # what was remembered goes when it is old, also when all is quiet
+                    pruned = now
+                    self.memory.prune(now)
+                    for _pattern, throttle in direction.limits:
+                        throttle.prune(now)
+            for channel, data in due:
+                self._send(direction, channel, data)
+
+    def stats(self) -> dict[str, int]:
+        a, b = self.names
+        out = {
+            f"{a}->{b}": self.directions[a].forwarded,
+            f"{b}->{a}": self.directions[b].forwarded,
+            "not_forwarded_seen": sum(d.seen for d in self.directions.values()),
+            "not_forwarded_same_origin": sum(d.same_origin for d in self.directions.values()),
+            "not_forwarded_standby": sum(d.standby for d in self.directions.values()),
+            "send_errors": self.send_errors,
+        }
+        out["election_tokens_ignored"] = sum(
+            link.ignored_tokens for name, link in self._links.items() if self._zenoh.get(name)
+        )
+        for d in self.directions.values():
+            out[f"not_selected {d.source}->{d.dest}"] = d.not_selected
+            for reason, n in sorted(d.dropped.items()):
+                out[f"dropped_{reason} {d.source}->{d.dest}"] = n
+            out[f"bytes {d.source}->{d.dest} in"] = d.bytes_in
+            out[f"bytes {d.source}->{d.dest} out"] = d.bytes_out
+        return out
+
+    def close(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(timeout=2)
+        for link in self._links.values():
+            if hasattr(link, "close"):
+                link.close()
+        self._links.clear()
+
+
+__all__: Sequence[str] = ["Bridge", "BridgeConfig", "Memory", "Throttle", "load_bridge_config"]

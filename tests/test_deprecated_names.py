@@ -1,0 +1,78 @@
+"""The old names of the public modules moved into layer folders (issue #26) keep working for one
+release, with a DeprecationWarning, and give the same objects as the new names (docs/architecture.md,
+"Deprecated names")."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+SHIMS = [
+    ("antalate_lcm.behavior", "antalate_lcm.core.behavior"),
+    ("antalate_lcm.geo", "antalate_lcm.base.geo"),
+    ("antalate_lcm.peers", "antalate_lcm.wire.peers"),
+    ("antalate_lcm.ratelimit", "antalate_lcm.base.ratelimit"),
+    ("antalate_lcm.security", "antalate_lcm.wire.security"),
+    ("antalate_lcm.validation", "antalate_lcm.wire.validation"),
+    ("antalate_lcm.analysis", "antalate_lcm.apps.analysis"),
+]
+#: Deprecated names with a test of their own (they re-export only what users imported).
+OTHERS = [
+    "antalate_lcm.lcm_datagram",
+]
+
+
+@pytest.mark.parametrize(("old", "new"), SHIMS)
+def test_the_old_name_warns_and_gives_the_same_objects(old: str, new: str) -> None:
+    """A fresh interpreter, so the warning is the first import's (a module warns once, when imported)."""
+    program = (
+        "import importlib, warnings\n"
+        "with warnings.catch_warnings(record=True) as caught:\n"
+        "    warnings.simplefilter('always')\n"
+        f"    old = importlib.import_module({old!r})\n"
+        f"new = importlib.import_module({new!r})\n"
+        "public = [n for n in vars(new) if not n.startswith('_')]\n"
+        "assert public and all(getattr(old, n) is getattr(new, n) for n in public), 'not the same objects'\n"
+        "assert [w for w in caught if w.category is DeprecationWarning and "
+        f"{new!r} in str(w.message)], [str(w.message) for w in caught]\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+
+
+#: Imports every module of the three packages but the old names, recording the warnings of each (a
+#: library may change the warning filters while it is imported, so none is relied upon).
+WALK = """
+import importlib, pkgutil, sys, warnings
+old = set(sys.argv[1:])
+count, used = 0, []
+for package in ("antalate_lcm", "operator_tui", "behaviors"):
+    for info in pkgutil.walk_packages(importlib.import_module(package).__path__, package + "."):
+        if info.name in old or info.name.endswith(".__main__"):
+            continue
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                importlib.import_module(info.name)
+            except ModuleNotFoundError as exc:  # an extra that is not installed, never one of ours
+                if (exc.name or "").split(".")[0] in ("antalate_lcm", "operator_tui", "behaviors"):
+                    raise
+        used += [f"{info.name}: {w.message}" for w in caught if str(w.message).split(" is deprecated")[0] in old]
+        count += 1
+print(count)
+sys.exit("\\n".join(used) or None)
+"""
+
+
+def test_nothing_in_the_project_imports_an_old_name() -> None:
+    """The shims are for users: every module of the packages imports the new names (an old one would warn)."""
+    proc = subprocess.run(
+        [sys.executable, "-c", WALK, *(old for old, _ in SHIMS), *OTHERS],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert int(proc.stdout) > 100  # the walk saw the packages

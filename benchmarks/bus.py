@@ -841,7 +841,8 @@ def main() -> int:
     if args.inside:
         return inside(args)
 
-    from tests.netns import NetNamespace, netns_unavailable, stop_process
+    from tests.harness.netns import NetNamespace, netns_unavailable
+    from tests.harness.process import stop_process
 
     reason = netns_unavailable()
     if reason:

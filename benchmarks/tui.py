@@ -191,7 +191,8 @@ class Terminal:
 def measure(args: argparse.Namespace, reader: str) -> int:
     """One console run with its udpm:// reader (``own`` or ``liblcm``), figures printed."""
     from antalate_lcm.core.bus import UDPM_READER_ENV
-    from tests.netns import NetNamespace, stop_process
+    from tests.harness.netns import NetNamespace
+    from tests.harness.process import stop_process
 
     cols, rows = (int(x) for x in args.size.split("x"))
     with tempfile.TemporaryDirectory() as tmp, NetNamespace() as ns:
@@ -323,7 +324,7 @@ def main() -> int:
     if args.role == "publisher":
         return run_publisher(args.url, args.agents, args.hz, args.arbiter)
 
-    from tests.netns import netns_unavailable
+    from tests.harness.netns import netns_unavailable
 
     reason = netns_unavailable()
     if reason:

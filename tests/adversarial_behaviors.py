@@ -1,4 +1,4 @@
-"""Behaviors that try to crash the swarm, for the safety filter's end-to-end tests (tests/test_safety_e2e.py).
+"""Behaviors that try to crash the swarm, for the safety filter's end-to-end tests (tests/safety/test_safety_e2e.py).
 
 `FlyAt` commands its agent straight at a fixed point (the swarm's centroid, a partner's start for a
 head-on pair, a point outside the fence) at full speed, whatever is in the way, until deactivated.

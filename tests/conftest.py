@@ -144,9 +144,9 @@ def launch(netns: NetNamespace, tmp_path: Path) -> Iterator[Callable[..., AgentP
     """Start agents as separate node processes in ``netns``; each must exit cleanly at the end.
 
     On multicast with no key: the probe plays an unsigned operator and behavior, so an agent runs
-    insecure unless the test says otherwise (tests/test_security_*.py fly the signed path).
+    insecure unless the test says otherwise (tests/core/test_security_*.py fly the signed path).
     """
-    from tests.agent_harness import AgentProcesses, agent_config  # it imports this module
+    from tests.harness.agents import AgentProcesses, agent_config  # it imports this module
 
     started: list[AgentProcesses] = []
 

@@ -1,4 +1,4 @@
-"""The fenced code blocks of the docs, and the checks that keep them true (tests/test_doc_snippets.py).
+"""The fenced code blocks of the docs, and the checks that keep them true (tests/architecture/test_doc_snippets.py).
 
 A block is the text between two fences, with its language and the HTML comment (if any) on the
 line just above its opening fence: ``<!-- file: PATH -->`` says "this block is the file PATH",

@@ -20,7 +20,7 @@ from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
 from antalate_lcm.runtime.agent import agent_nodes
-from tests.polling import wait_for
+from tests.harness.polling import wait_for
 
 
 @dataclass

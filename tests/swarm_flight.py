@@ -1,5 +1,5 @@
 """Fly the shipped peer behaviors (gathering, flocking) with 8 simulated agents and judge the flight
-from its LCM log: the same configs and the same verdict in every launch mode (tests/test_peer_flights.py).
+from its LCM log: the same configs and the same verdict in every launch mode (tests/agent/test_peer_flights.py).
 
 Each agent's config holds the whole experiment: ``auto_operator`` takes off once and orders RTL after
 ``mission`` seconds, the swarm rule flies the mission, and ``peer_sensor`` (identities on, unlimited
@@ -22,7 +22,7 @@ from antalate_lcm.autopilot.sim import DEFAULTS as SIM_DEFAULTS
 from antalate_lcm.base import geo
 from antalate_lcm.msgs import mc_state_t, peer_scan_t, telemetry_t
 from antalate_lcm.wire.vocabulary import McState
-from tests.agent_harness import FAST_SIM
+from tests.harness.agents import FAST_SIM
 
 AGENTS = 8
 BASE = "sw"

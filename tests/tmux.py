@@ -57,7 +57,7 @@ def fly_one_sortie(term: Tmux, agent_prefix: str, agents: int) -> None:
     RTL all after 2 s, wait for STANDBY again (the rows whose name starts with ``agent_prefix``)."""
     import time
 
-    from tests.polling import wait_for
+    from tests.harness.polling import wait_for
 
     def count(word: str) -> int:
         return sum(

@@ -5,7 +5,7 @@ here counts as used. Every entry says who uses it, because vulture cannot see th
 by name, entry points, pydantic fields read by key, foreign objects we set attributes on, and the tests,
 tools and documentation that use a public name. Framework hooks matched by pattern (Textual ``on_*`` /
 ``action_*``, pydantic validators, FastAPI routes) are in [tool.vulture] instead. Something that is
-really unused is removed, not listed here (tests/test_dead_code.py keeps the list honest).
+really unused is removed, not listed here (tests/architecture/test_dead_code.py keeps the list honest).
 """
 
 # ruff: noqa: B018 - a bare name or attribute is how a vulture whitelist marks it used
@@ -97,27 +97,27 @@ _.get_help
 _.publish_errors  # Bus: docs/wan.md
 _.setpoints_withheld  # MavlinkAutopilot: docs/ardupilot.md
 _.vehicle_findings  # MavlinkAutopilot: what the vehicle checks found (docs/ardupilot.md)
-_.resending  # MavlinkAutopilot: a command is being resent (tests/test_mavlink_adapter.py)
-_.ready_reasons  # MavlinkAutopilot: why arming would be refused (tests/test_mavlink_adapter.py)
-_.reconnects  # CrazyflieAutopilot: link recoveries (tests/test_crazyflie_adapter.py)
-_.reports_ok  # OscNode: reports the station accepted (tests/test_osc.py)
-_.reporting  # OscNode: whether the exchange with the station runs (tests/test_osc.py)
+_.resending  # MavlinkAutopilot: a command is being resent (tests/vehicles/test_mavlink_adapter.py)
+_.ready_reasons  # MavlinkAutopilot: why arming would be refused (tests/vehicles/test_mavlink_adapter.py)
+_.reconnects  # CrazyflieAutopilot: link recoveries (tests/vehicles/test_crazyflie_adapter.py)
+_.reports_ok  # OscNode: reports the station accepted (tests/agent/test_osc.py)
+_.reporting  # OscNode: whether the exchange with the station runs (tests/agent/test_osc.py)
 _.set_refuse_arm  # SimAutopilot fault knobs for tests and the demo
 _.set_time_scale
 _.sim_time
-_.position_ne  # TelloAutopilot dead reckoning (tests/test_tello_adapter.py)
+_.position_ne  # TelloAutopilot dead reckoning (tests/vehicles/test_tello_adapter.py)
 _.takeoff_point
-_.dead_reckoning_problem  # TelloAutopilot: the velocity unit check for tools (tests/test_tello_adapter.py)
-_.from_wgs84  # crazyflie frames: the inverse, checked round trip (tests/test_crazyflie_units.py)
-_.block_size  # crazyflie log blocks fit one packet (tests/test_crazyflie_units.py)
+_.dead_reckoning_problem  # TelloAutopilot: the velocity unit check for tools (tests/vehicles/test_tello_adapter.py)
+_.from_wgs84  # crazyflie frames: the inverse, checked round trip (tests/vehicles/test_crazyflie_units.py)
+_.block_size  # crazyflie log blocks fit one packet (tests/vehicles/test_crazyflie_units.py)
 _.LOG_MAX_BYTES
-_.stale_packaged_types  # tools/codegen.py: the bindings-are-current checks (tests/test_types_cmd.py)
-_.stale_files  # tests/test_codegen.py
-_.wait_stopped  # VideoCapture: tests/test_video_capture.py
-_.row_count  # AgentTable: tests/test_tui.py
-_.render_map  # swarm_map's pure renderer: tests/test_tui_model.py
-_.repaints  # SwarmMap: repaints only on a changed picture (tests/test_tui.py)
-_.layouts_skipped  # the event log's skipped layouts (tests/test_tui.py)
+_.stale_packaged_types  # tools/codegen.py: the bindings-are-current checks (tests/tools/test_types_cmd.py)
+_.stale_files  # tests/wire/test_codegen.py
+_.wait_stopped  # VideoCapture: tests/vehicles/test_video_capture.py
+_.row_count  # AgentTable: tests/console/test_tui.py
+_.render_map  # swarm_map's pure renderer: tests/console/test_tui_model.py
+_.repaints  # SwarmMap: repaints only on a changed picture (tests/console/test_tui.py)
+_.layouts_skipped  # the event log's skipped layouts (tests/console/test_tui.py)
 _.Gathering  # entry points (pyproject): the canonical swarm rules and the simulated peer sensor
 _.Flocking
 _.Dispersion

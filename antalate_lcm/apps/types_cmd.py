@@ -7,7 +7,7 @@ the definitions themselves, for a build that runs its own ``lcm-gen``.
 
 Go is the exception: lcm-gen 1.5.3's Go emitter crashes on ``header_t.mac`` (a variable-length
 array, in every message), so ``tools.golang`` writes the Go lcm-gen would have written (same API, wire
-format and fingerprints; ``tests/test_types_go.py`` compares the two).
+format and fingerprints; ``tests/tools/test_types_go.py`` compares the two).
 """
 
 from __future__ import annotations

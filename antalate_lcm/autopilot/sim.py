@@ -193,7 +193,7 @@ def _state_of(values: dict[str, Any]) -> AutopilotState:
     """An `AutopilotState` holding ``values`` (every field, ``flight_mode`` given), built without the
     frozen dataclass's ``__init__``: its per-field ``object.__setattr__`` took two thirds of a
     snapshot, and the sim makes 20 a second per agent. Equal to ``AutopilotState(**values)``
-    (tests/test_sim_autopilot.py checks it)."""
+    (tests/vehicles/test_sim_autopilot.py checks it)."""
     state = _new(AutopilotState)
     state.__dict__.update(values)
     return state

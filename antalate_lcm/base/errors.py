@@ -1,6 +1,6 @@
 """Exceptions a user can meet, each carrying enough to say what to do next.
 
-`AntalateError` is the root of every exception the package defines (``tests/test_layers.py`` checks
+`AntalateError` is the root of every exception the package defines (``tests/architecture/test_layers.py`` checks
 it), so ``except AntalateError`` (the CLI, the console) catches whatever antalate raises on purpose.
 They are all defined here, as httpx keeps its exceptions in one module, so the whole hierarchy reads in
 one place; the module that raises one re-exports it under its old name (``antalate_lcm.autopilot.

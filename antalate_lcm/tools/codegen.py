@@ -1,7 +1,7 @@
 """Generate the Python message modules from ``lcmtypes/`` with the ``lcm-gen`` that ships in the lcm wheel.
 
 The generated modules are committed (so a plain ``pip install`` needs no code generator) and
-``tests/test_codegen.py`` fails when they are stale against ``lcmtypes/`` or were edited by hand.
+``tests/wire/test_codegen.py`` fails when they are stale against ``lcmtypes/`` or were edited by hand.
 
 lcm-gen's Python has no annotations, so beside every ``<type>.py`` this also writes ``<type>.pyi``:
 the same surface (fields, constants, ``encode``/``decode``, fingerprints) with Python types, so a

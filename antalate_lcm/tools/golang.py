@@ -5,7 +5,7 @@ of a primitive (``header_t.mac``, so every message): since upstream commit 6e5da
 release from 1.5.0) it looks up the *element* type as a struct to fingerprint it, and ``byte`` is
 not one. This module is a line-for-line port of that emitter for what ``.lcm`` files can say, with
 that one lookup fixed (the element's own Go type, as the struct definition already uses), so a Go
-node gets the API, wire format and fingerprints lcm-gen's would have: ``tests/test_types_go.py``
+node gets the API, wire format and fingerprints lcm-gen's would have: ``tests/tools/test_types_go.py``
 checks the output equals lcm-gen's (but for the decoder's bounds checks) for every type lcm-gen
 does not crash on, and that Go and the Python classes exchange bytes both ways. The generated code imports the standard library only.
 

@@ -6,7 +6,7 @@ in a process of a thousand simulated agents, which publish 20 a second each (tel
 MC and HLC states). For a type made of the ``header_t`` followed by primitives and strings (no
 arrays, no other nested type) the encoder here packs each run of primitives with one precompiled
 ``struct`` and joins the parts once. Any other type keeps lcm-gen's ``encode``
-(tests/test_fastcodec.py checks both against lcm-gen for every message type).
+(tests/wire/test_fastcodec.py checks both against lcm-gen for every message type).
 
 The decoder is the mirror image, for the messages a process delivers to its own nodes (an agent's
 MC and HLC states, 10 a second per agent, in memory): one ``unpack_from`` per run of primitives at

@@ -2,7 +2,7 @@
 
 Every value here is one of the generated types' constants (``mc_state_t``, ``hlc_state_t``,
 ``operator_cmd_t``, ``hlc_error_t``), so the ``.lcm`` files stay the only source of the numbers;
-``tests/test_vocabulary.py`` fails when a constant is added there and not here (or the reverse),
+``tests/wire/test_vocabulary.py`` fails when a constant is added there and not here (or the reverse),
 and when the name literals below (the station's JSON) disagree with the enums.
 
 It lives below every machine and node (docs/architecture.md, "Layers"): the MC machine, the HLC

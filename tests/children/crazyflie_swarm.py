@@ -1,5 +1,5 @@
 """Crazyflie agents against their emulators in one process, reporting what happens as JSON lines
-(tests/test_crazyflie_e2e.py's ``Driver`` is the other end).
+(tests/vehicles/test_crazyflie_e2e.py's ``Driver`` is the other end).
 
 The spec (argv[1], JSON) lists the agents (``doc``: the agent's config, ``emu``: the emulator's
 settings) and optionally a scripted ``operator``. Events on stdout: ``started``, ``mc``/``hlc`` state

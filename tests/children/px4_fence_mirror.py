@@ -1,6 +1,6 @@
 """Connect to a PX4 on PORT, mirror a geofence into its GF_* parameters and print, as one JSON line,
 the parameters before, the ones wanted, the problems the mirror reported and the parameters after
-(tests/test_fence_mirror_px4.py).
+(tests/safety/test_fence_mirror_px4.py).
 
     python -m tests.children.px4_fence_mirror PORT
 """

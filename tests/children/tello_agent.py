@@ -1,5 +1,5 @@
 """One Tello agent in a process of its own, reporting what happens as JSON lines
-(tests/test_tello_e2e.py's ``Agent`` is the other end).
+(tests/vehicles/test_tello_e2e.py's ``Agent`` is the other end).
 
 The agent's config is argv[1] (JSON). Events on stdout: ``started``, ``mc``/``hlc`` state changes,
 ``error``, ``telemetry`` (at most once a second) and ``stopped``. Commands on stdin:

@@ -1,5 +1,5 @@
 """The Tello adapter in a process of its own, driven over JSON lines on stdin/stdout
-(tests/test_tello_adapter.py's ``Driver`` is the other end).
+(tests/vehicles/test_tello_adapter.py's ``Driver`` is the other end).
 
 Each request names an adapter (``name``, default "main") and an ``op``: ``new`` (params), ``call``
 (method, args), ``start``/``result`` (a call on a thread of its own, for another caller while one

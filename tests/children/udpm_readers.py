@@ -1,7 +1,7 @@
 """Two of antalate's own udpm readers, liblcm's receive thread and a reader of another group, all on one
 port: liblcm's datagrams (small and fragmented) reach them intact, the Bus's reach a plain liblcm
 subscriber, hostile datagrams from a plain socket kill nobody, and closing the buses closes their sockets.
-Prints one JSON object of findings (tests/test_udpm_reader.py judges them).
+Prints one JSON object of findings (tests/transport/test_udpm_reader.py judges them).
 
     python -m tests.children.udpm_readers GROUP_A_URL GROUP_B_URL
 """

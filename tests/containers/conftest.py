@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from tests.containers.support import Podman, load_build_module, podman_unavailable
-from tests.netns import NetNamespace
+from tests.harness.netns import NetNamespace
 from tests.wheel_support import build_wheel
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 from types import ModuleType
 
 from tests import REPO
-from tests.netns import NetNamespace
+from tests.harness.netns import NetNamespace
 
 
 def load_build_module() -> ModuleType:

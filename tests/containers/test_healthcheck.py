@@ -11,10 +11,11 @@ from types import ModuleType
 import pytest
 
 from tests import REPO
-from tests.agent_harness import AgentProcesses, agent_config
 from tests.conftest import Probe
-from tests.netns import NetNamespace, stop_process
-from tests.polling import wait_for
+from tests.harness.agents import AgentProcesses, agent_config
+from tests.harness.netns import NetNamespace
+from tests.harness.polling import wait_for
+from tests.harness.process import stop_process
 
 pytestmark = pytest.mark.netns
 

@@ -24,11 +24,11 @@ import pytest
 import tomli_w
 
 from tests import REPO
-from tests.agent_harness import agent_config
 from tests.containers.conftest import Image
 from tests.containers.support import Podman, load_build_module
+from tests.harness.agents import agent_config
+from tests.harness.netns import NetNamespace
 from tests.lan.swarm import OperatorClient
-from tests.netns import NetNamespace
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 
@@ -251,7 +251,7 @@ def logs(pod: Podman, name: str) -> str:
 
 
 def wait_logged(pod: Podman, name: str, text: str, timeout: float = 20) -> bool:
-    from tests.polling import wait_for
+    from tests.harness.polling import wait_for
 
     return bool(wait_for(lambda: text in logs(pod, name), timeout, interval=0.5))
 

@@ -11,7 +11,7 @@ import java.nio.file.Paths;
 import lcm.lcm.LCMEncodable;
 
 /**
- * The Java side of tests/test_spy.py: decodes what Python encoded with the lcm-gen Java classes.
+ * The Java side of tests/tools/test_spy.py: decodes what Python encoded with the lcm-gen Java classes.
  *
  * <pre>
  *   java DecodeCheck decode DIR TYPE...   for each TYPE reads DIR/TYPE.bin, decodes it with

@@ -26,10 +26,10 @@ import tomli_w
 
 from antalate_lcm.runtime.commands import native_lcm_tool
 from tests import REPO
-from tests.agent_harness import FAST_SIM
-from tests.jsonl import JsonLinesProcess
+from tests.harness.agents import FAST_SIM
+from tests.harness.jsonl import JsonLinesProcess
+from tests.harness.process import stop_process
 from tests.lan.topology import Lan
-from tests.netns import stop_process
 
 if sys.version_info >= (3, 11):
     import tomllib

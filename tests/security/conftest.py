@@ -15,8 +15,8 @@ import pytest
 
 from antalate_lcm.base.geo import offset
 from tests.conftest import ATTACK_PROPERTY, _netns_reason
-from tests.netns import NetNamespace
-from tests.polling import wait_for
+from tests.harness.netns import NetNamespace
+from tests.harness.polling import wait_for
 from tests.security.harness import HOME, SWARM_KEY, PeerClient, Swarm, agent_doc
 
 

@@ -29,10 +29,11 @@ from typing import Any
 import tomli_w
 
 from antalate_lcm.station._auth import new_api_key, registration_key, sha256_hex
-from tests.agent_harness import FAST_SIM
-from tests.jsonl import JsonLinesProcess
-from tests.netns import NetNamespace, stop_process
-from tests.polling import wait_for
+from tests.harness.agents import FAST_SIM
+from tests.harness.jsonl import JsonLinesProcess
+from tests.harness.netns import NetNamespace
+from tests.harness.polling import wait_for
+from tests.harness.process import stop_process
 from tests.tls import make_tls
 
 LAN = "udpm://239.255.76.67:7667?ttl=0"

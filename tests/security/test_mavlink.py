@@ -22,9 +22,9 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
 from tests.emulators.mavlink_vehicle import COPTER_MODES
-from tests.jsonl import JsonLinesProcess
-from tests.netns import stop_process
-from tests.polling import wait_for
+from tests.harness.jsonl import JsonLinesProcess
+from tests.harness.polling import wait_for
+from tests.harness.process import stop_process
 from tests.security.harness import (
     DISARMED,
     HOME,

@@ -15,7 +15,7 @@ import time
 import pytest
 
 from antalate_lcm.base.geo import offset
-from tests.polling import wait_for
+from tests.harness.polling import wait_for
 from tests.security.harness import HOME, PeerClient, Swarm, assert_unmoved, baseline
 from tests.security.test_nonsense import PAYLOADS, still_swarming, swarming
 

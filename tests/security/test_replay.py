@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from tests.polling import wait_for
+from tests.harness.polling import wait_for
 from tests.security.harness import (
     PeerClient,
     Swarm,

@@ -23,9 +23,9 @@ import pytest
 
 from tests import REPO
 from tests.conftest import _netns_reason
-from tests.jsonl import JsonLinesProcess
-from tests.netns import NetNamespace
-from tests.polling import wait_for
+from tests.harness.jsonl import JsonLinesProcess
+from tests.harness.netns import NetNamespace
+from tests.harness.polling import wait_for
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
 

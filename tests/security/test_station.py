@@ -22,7 +22,7 @@ import pytest
 from antalate_lcm.base.geo import offset
 from antalate_lcm.msgs import operator_cmd_t
 from antalate_lcm.station._auth import registration_key, registration_mac
-from tests.polling import wait_for
+from tests.harness.polling import wait_for
 from tests.security.harness import (
     HOME,
     OPERATOR,

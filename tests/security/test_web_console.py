@@ -29,8 +29,8 @@ from antalate_lcm.station._auth import new_api_key, sha256_hex
 from antalate_lcm.station._settings import ApiKey
 from operator_tui import web
 from tests import REPO
-from tests.netns import stop_process
-from tests.polling import wait_for
+from tests.harness.polling import wait_for
+from tests.harness.process import stop_process
 
 ALICE, CAROL, READER = new_api_key(), new_api_key(), new_api_key()
 EVIL = "rebind.evil.example"

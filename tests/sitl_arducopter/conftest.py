@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import Probe, _netns_reason
-from tests.netns import NetNamespace
+from tests.harness.netns import NetNamespace
 from tests.sitl_arducopter.harness import sitl_missing
 
 

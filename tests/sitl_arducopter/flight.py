@@ -15,7 +15,7 @@ from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
 from tests.conftest import Probe
-from tests.polling import wait_for
+from tests.harness.polling import wait_for
 from tests.sitl_arducopter.harness import SitlVehicle
 
 AGENT = "copter"

@@ -25,10 +25,12 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from tests.agent_harness import AgentProcesses
+from tests import REPO
 from tests.conftest import MCAST_URL
-from tests.jsonl import JsonLinesProcess
-from tests.netns import REPO, NetNamespace, stop_process
+from tests.harness.agents import AgentProcesses
+from tests.harness.jsonl import JsonLinesProcess
+from tests.harness.netns import NetNamespace
+from tests.harness.process import stop_process
 
 DEFAULT_SITL = REPO / ".." / "shared" / "sitl" / "arducopter" / "arducopter"
 HOME = (-35.363261, 149.165230, 584.0, 353.0)

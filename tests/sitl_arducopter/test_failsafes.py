@@ -32,8 +32,8 @@ from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
 from tests.conftest import Probe, _netns_reason
-from tests.netns import NetNamespace
-from tests.polling import wait_for
+from tests.harness.netns import NetNamespace
+from tests.harness.polling import wait_for
 from tests.sitl_arducopter.flight import AGENT, command, direction, wait_state
 from tests.sitl_arducopter.harness import Copter, sitl_missing
 

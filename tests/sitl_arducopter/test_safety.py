@@ -31,8 +31,9 @@ from antalate_lcm.base.safety.separation import separation
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
 from tests.conftest import Probe
-from tests.netns import NetNamespace, stop_process
-from tests.polling import wait_for
+from tests.harness.netns import NetNamespace
+from tests.harness.polling import wait_for
+from tests.harness.process import stop_process
 from tests.sitl_arducopter.harness import HOME, Copter, one_sitl_swarm_at_a_time
 
 pytestmark = [pytest.mark.netns, pytest.mark.timeout(420)]

@@ -22,8 +22,8 @@ from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
 from tests.conftest import Probe
-from tests.netns import NetNamespace
-from tests.polling import wait_for
+from tests.harness.netns import NetNamespace
+from tests.harness.polling import wait_for
 from tests.sitl_arducopter.flight import command, wait_state
 from tests.sitl_arducopter.harness import HOME, Copter, one_sitl_swarm_at_a_time
 

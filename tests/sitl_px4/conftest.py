@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from tests.conftest import _netns_reason
-from tests.netns import NetNamespace
+from tests.harness.netns import NetNamespace
 from tests.sitl_arducopter.conftest import sitl_dir, sitl_probe
 from tests.sitl_px4.harness import sitl_missing
 

@@ -17,7 +17,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from tests.netns import REPO, NetNamespace, child_env, stop_process
+from tests import REPO
+from tests.harness.netns import NetNamespace
+from tests.harness.process import child_env, stop_process
 from tests.sitl_arducopter.harness import Gcs, SitlVehicle, agent_doc
 
 DEFAULT_SITL = REPO / ".." / "shared" / "sitl" / "px4"

@@ -26,8 +26,8 @@ from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
 from tests.conftest import Probe
-from tests.netns import NetNamespace
-from tests.polling import wait_for
+from tests.harness.netns import NetNamespace
+from tests.harness.polling import wait_for
 from tests.sitl_arducopter import flight
 from tests.sitl_arducopter.flight import (
     AGENT,
@@ -172,7 +172,7 @@ def test_hlc_killed_in_offboard_and_restarted_resyncs_to_px4s_hold(px4: Px4, sit
     offboard-loss failsafe after COM_OF_LOSS_T (COM_OBL_RC_ACT = Hold); the HLC started again finds
     PX4 holding on a failsafe and resyncs to HOLD -- no arming, no take-off -- and the MC holds too,
     waiting for the operator. (A restarted HLC that finds PX4 in its own Hold resyncs to AIRBORNE:
-    tests/test_px4_units.py.)"""
+    tests/vehicles/test_px4_units.py.)"""
     probe = sitl_probe
     airborne(px4, probe)
     fly_east(px4, probe, 3.0, speed=1.0)

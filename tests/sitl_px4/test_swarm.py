@@ -24,8 +24,9 @@ from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
 from tests.conftest import Probe
-from tests.netns import NetNamespace, stop_process
-from tests.polling import wait_for
+from tests.harness.netns import NetNamespace
+from tests.harness.polling import wait_for
+from tests.harness.process import stop_process
 from tests.sitl_arducopter.flight import wait_state
 from tests.sitl_arducopter.harness import one_sitl_swarm_at_a_time
 from tests.sitl_px4.harness import SIH_HOME, Px4, px4_gcs

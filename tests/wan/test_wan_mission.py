@@ -82,7 +82,7 @@ def events(path: Path, channel_suffix: str) -> list[tuple[float, str]]:
 
 
 def stop_loggers(wan: Wan) -> None:
-    from tests.netns import stop_process
+    from tests.harness.process import stop_process
 
     for host in wan.hosts.values():
         for proc in list(host.procs):
@@ -194,7 +194,7 @@ def test_operator_at_site_a_flies_the_agents_of_site_b_through_the_router(tmp_pa
         # Site A recorded every agent's telemetry and whole mission, through both bridges.
         # How many samples cross depends on how long TCP stalls under 20 % loss (18-34 seen), so what is
         # checked is that each phase of the flight reached A: on the ground, in the air before the cut
-        # and after it. (The cap itself is tested in tests/test_bridge.py: stalled TCP delivers bursts.)
+        # and after it. (The cap itself is tested in tests/transport/test_bridge.py: stalled TCP delivers bursts.)
         record_a = read_log(log_a)
         t0 = record_a.start_utime / 1e6
         cut_a, back_a = t_cut - t0, t_back - t0

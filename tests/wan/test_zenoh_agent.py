@@ -18,9 +18,9 @@ import pytest
 import tomli_w
 
 from tests import REPO
-from tests.agent_harness import FAST_SIM
+from tests.harness.agents import FAST_SIM
+from tests.harness.netns import NetNamespace
 from tests.lan.swarm import OperatorClient, _merge
-from tests.netns import NetNamespace
 
 if sys.version_info >= (3, 11):
     import tomllib

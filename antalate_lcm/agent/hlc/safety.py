@@ -32,7 +32,7 @@ VEHICLE_DEFAULTS: dict[str, tuple[float, float, float]] = {
 }
 _UNKNOWN_VEHICLE = (4.0, 2.0, 0.5)
 #: m: how far below the radius the closest approach came in the measured worst cases of docs/safety.md
-#: (sim: tests/test_safety_e2e.py; mavlink: three ArduCopter SITL, tests/sitl_arducopter/test_safety.py).
+#: (sim: tests/safety/test_safety_e2e.py; mavlink: three ArduCopter SITL, tests/sitl_arducopter/test_safety.py).
 #: `antalate analyze --safety` compares the log's minimum separation with radius minus this.
 MEASURED_MARGIN: dict[str, float] = {"sim": 0.5, "mavlink": 1.25}
 #: m (horizontal) from home at which the filtered return leg ends and the vehicle lands.

@@ -1,4 +1,4 @@
-// Command hostile is the Go side of tests/test_types_go.py's hostile-datagram test: what a Go node
+// Command hostile is the Go side of tests/tools/test_types_go.py's hostile-datagram test: what a Go node
 // on a shared network can be sent, fed to the Decode of every type of `antalate types --lang go`
 // (and of demo/maps, a multi-dimensional type the test generates beside them). Decode must return
 // an error, never panic, and never allocate what a forged length claims.

@@ -1,4 +1,4 @@
-// Command roundtrip is the Go side of tests/test_types_go.py: the Go types of
+// Command roundtrip is the Go side of tests/tools/test_types_go.py: the Go types of
 // `antalate types --lang go` against the Python classes, both ways.
 //
 // Each line of standard input is "TYPE HEX", a message the Python classes encoded. The command

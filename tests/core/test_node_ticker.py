@@ -1,0 +1,127 @@
+"""Node.ticker: jobs whose rates divide the fastest share its timer, at their own rates; others get their own.
+
+The HLC runs control, telemetry and its state on one ticker (20, 10 and 5 Hz by default) and the MC
+its tick and its state (10 and 5 Hz): 30 timer runs a second per agent instead of 50. The rates are
+checked as ratios of runs of one timer (exact whatever the machine's load), never against a clock.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterator
+
+import pytest
+
+from antalate_lcm.agent.hlc.node import HlcNode
+from antalate_lcm.agent.mc.node import McNode
+from antalate_lcm.core.config import AgentConfig, Config
+from antalate_lcm.core.node import Context, Node
+from antalate_lcm.runtime.agent import agent_nodes
+from tests.harness.polling import wait_for
+
+
+@pytest.fixture
+def context() -> Iterator[Context]:
+    ctx = Context.in_process({"lan": "memq://"})
+    ctx.executor.start()
+    try:
+        yield ctx
+    finally:
+        ctx.close()
+
+
+def _node(context: Context, name: str = "ticker") -> Node:
+    return Node(Config(agent=AgentConfig(name=name), buses={"lan": "memq://"}), context)
+
+
+def test_divisor_rates_share_one_timer_and_run_at_their_rates(context: Context) -> None:
+    node = _node(context)
+    now = [0.0]
+    runs: dict[str, list[float]] = {"fast": [], "half": [], "quarter": []}
+
+    def job(name: str) -> Callable[[], None]:
+        return lambda: runs[name].append(now[0])
+
+    context.executor.run_sync(
+        lambda: node.ticker(
+            20.0, [(20.0, job("fast")), (10.0, job("half")), (5.0, job("quarter"))], clock=lambda: now[0]
+        )
+    )
+    assert len(node._timers) == 1
+    node._timers[0].cancel()  # driven by hand below, on a clock of the test's own
+    tick = node._timers[0].fn
+    for k in range(20):  # 1 s on time, the timer's millisecond slots a little late or early
+        now[0] = 0.05 * k + (0.001 if k % 3 else -0.0005)
+        tick()
+    assert len(runs["fast"]) == 20 and len(runs["half"]) == 10 and len(runs["quarter"]) == 5
+    assert runs["half"] == [t for i, t in enumerate(runs["fast"]) if i % 2 == 0]
+    # A loaded executor skips runs of the timer (1.05, 1.10, 1.25, 1.30 never come): each job
+    # still runs on the runs that remain when its period came round, late rather than lost, and
+    # keeps its schedule as a timer of its own would (Executor: due + period unless a period behind).
+    for t in (1.0, 1.15, 1.2, 1.35, 1.4, 1.45, 1.5):
+        now[0] = t
+        tick()
+    assert runs["half"][10:] == [1.0, 1.15, 1.2, 1.35, 1.4, 1.5]
+    assert runs["quarter"][5:] == [1.0, 1.2, 1.4]
+    # A whole period behind: one run, not a burst, and the schedule restarts from there.
+    now[0] = 2.0
+    tick()
+    now[0] = 2.05
+    tick()
+    assert runs["half"][-1] == 2.0 and runs["quarter"][-1] == 2.0
+
+
+def test_a_rate_that_does_not_divide_gets_a_timer_of_its_own(context: Context) -> None:
+    node = _node(context)
+    runs = {"fast": 0, "odd": 0, "faster": 0}
+    context.executor.run_sync(
+        lambda: node.ticker(
+            100.0,
+            [
+                (100.0, lambda: runs.__setitem__("fast", runs["fast"] + 1)),
+                (30.0, lambda: runs.__setitem__("odd", runs["odd"] + 1)),
+                (300.0, lambda: runs.__setitem__("faster", runs["faster"] + 1)),
+            ],
+        )
+    )
+    assert len(node._timers) == 3
+    assert wait_for(lambda: min(runs.values()) >= 3, 20)
+    for timer in node._timers:
+        timer.cancel()
+
+
+def test_a_raising_job_is_logged_and_the_others_still_run(
+    context: Context, caplog: pytest.LogCaptureFixture
+) -> None:
+    node = _node(context)
+    runs = {"after": 0}
+
+    def broken() -> None:
+        raise RuntimeError("job bug")
+
+    with caplog.at_level(logging.ERROR):
+        context.executor.run_sync(
+            lambda: node.ticker(
+                200.0, [(200.0, broken), (100.0, lambda: runs.__setitem__("after", runs["after"] + 1))]
+            )
+        )
+        assert wait_for(lambda: runs["after"] >= 3, 20)
+    for timer in node._timers:
+        timer.cancel()
+    assert any("job bug" in (r.exc_text or "") or "broken" in r.getMessage() for r in caplog.records)
+
+
+def test_an_agent_at_the_default_rates_runs_two_timers(context: Context) -> None:
+    """HLC: control + telemetry + state on one; MC: tick + state on one."""
+    config = Config(agent=AgentConfig(name="t1"), buses={"lan": "memq://"})
+    nodes = agent_nodes(config, context)
+    hlc = next(n for n in nodes if isinstance(n, HlcNode))
+    mc = next(n for n in nodes if isinstance(n, McNode))
+    for n in nodes:
+        n.start()
+    try:
+        assert len(hlc._timers) == 1 and len(mc._timers) == 1
+        assert wait_for(lambda: hlc.connected and mc.state.name == "STANDBY", 20)
+    finally:
+        for n in reversed(nodes):
+            n.stop()

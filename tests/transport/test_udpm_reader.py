@@ -1,0 +1,116 @@
+"""antalate's own udpm reader against liblcm on real multicast, in a private network namespace:
+what either sends the other receives (fragmented messages included), hostile datagrams are dropped
+and counted, the socket shares the port and is released on close, and another group is not heard."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+from tests.harness.netns import NetNamespace
+
+GROUP_A = "udpm://239.255.76.67:7667?ttl=0"
+GROUP_B = "udpm://239.255.76.99:7667?ttl=0"
+
+
+def test_own_reader_and_liblcm_on_one_group(netns: NetNamespace) -> None:
+    proc = netns.python(
+        "-m", "tests.children.udpm_readers", GROUP_A, GROUP_B, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    r = json.loads(out.strip().splitlines()[-1])
+    assert r["liblcm_to_own"] and r["exact_intact"], r  # small and liblcm-fragmented, to both readers
+    assert r["old_small"], r
+    assert r["regex_intact"], r
+    assert r["own_to_liblcm"] == list(range(1, 51)) and r["own_hears_itself"], r
+    assert r["alive_after_hostile"], (r, err)
+    assert r["forged_fragments_reassembled_by_both"], r  # our fragment layout is liblcm's
+    assert r["damaged"] == 9, r  # every hostile datagram counted, once
+    assert "not LCM or are damaged" in err  # and said, at a limited rate
+    assert r["elsewhere"] == 0, r  # bound to its group, as liblcm binds
+    assert r["open_before_close"] == 3 and r["open_after_close"] == 0, r  # Bus.close() closes its socket
+
+
+_OWN_SCRIPT = r"""
+import json, os, socket, struct, sys, time
+import lcm
+from pathlib import Path
+from antalate_lcm.core.bus import Bus
+from antalate_lcm.transports.datagram import short_datagram
+
+A = sys.argv[1]
+out = {}
+
+def until(cond, timeout=5.0):
+    end = time.time() + timeout
+    while not cond() and time.time() < end:
+        time.sleep(0.01)
+    return cond()
+
+def drops(bus):
+    ino = os.fstat(next(iter(bus._links.values()))._receiver.fileno()).st_ino
+    for line in Path("/proc/net/udp").read_text().splitlines()[1:]:
+        f = line.split()
+        if int(f[9]) == ino:
+            return int(f[12])
+    return -1
+
+own, peer = Bus({"a": A}), Bus({"a": A})
+got = {"in": [], "out": [], "peer": []}
+own.subscribe("a", "IN", None, lambda ch, d: got["in"].append(d))
+peer.subscribe("a", "OUT", None, lambda ch, d: got["peer"].append(d))
+heard = []
+lc = lcm.LCM(A)
+lc.subscribe("OUT", lambda ch, d: heard.append(d)).set_queue_capacity(1000)
+time.sleep(0.2)
+before = drops(own)
+for i in range(20):
+    own.publish("a", "OUT", b"o%d" % i)
+end = time.time() + 5
+while len(heard) < 20 and time.time() < end:
+    lc.handle_timeout(50)
+out["liblcm_hears_all"] = heard == [b"o%d" % i for i in range(20)]
+out["another_bus_of_the_process_hears_all"] = until(lambda: len(got["peer"]) == 20)
+# the own socket's copies went no further than its filter (the kernel counts them as dropped)
+out["own_copies_dropped_in_the_kernel"] = until(lambda: drops(own) - before == 20)
+peer.publish("a", "IN", b"from peer")
+lc.publish("IN", b"from liblcm")
+out["others_heard"] = until(lambda: got["in"] == [b"from peer", b"from liblcm"])
+# another process's channels whose last part nobody here subscribes to: dropped in the kernel too
+before = drops(own)
+for i in range(10):
+    peer.publish("a", "b-9/TELEMETRY", b"t%d" % i)
+out["other_topics_dropped_in_the_kernel"] = until(lambda: drops(own) - before == 10)
+# a channel with a subscribed last part passes the filter and is dropped by channel; a datagram
+# the filter cannot read (an LC02 header and nothing more) goes; reception carries on after both
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+s.sendto(short_datagram("x/IN", b"not mine"), ("239.255.76.67", 7667))
+s.sendto(struct.pack(">II", 0x4C433032, 9), ("239.255.76.67", 7667))
+s.sendto(short_datagram("IN", b"after"), ("239.255.76.67", 7667))
+out["hears_after_hostile"] = until(lambda: got["in"][2:] == [b"after"])
+s.close()
+# a subscriber of a channel the process publishes: its own messages are heard again
+own.subscribe("a", "OUT", None, lambda ch, d: got["out"].append(d))
+own.publish("a", "OUT", b"mine")
+out["own_heard_once_subscribed"] = until(lambda: got["out"] == [b"mine"])
+big = bytes(70_000)  # too large for one datagram: liblcm's fragmenting publish, heard as before
+own.publish("a", "OUT", big)
+out["fragmented_heard"] = until(lambda: got["out"][-1:] == [big])
+for b in (own, peer):
+    b.close()
+print(json.dumps(out), flush=True)
+"""
+
+
+def test_a_process_drops_its_own_datagrams_until_it_subscribes_to_them(netns: NetNamespace) -> None:
+    """The own sender's datagrams loop back to the own socket: dropped in the kernel while no
+    subscription of the bus wants them, heard by everyone else, and heard again (for good) once the
+    process subscribes to a channel it publishes on. Other processes' channels whose last part no
+    subscription has are dropped in the kernel as well; a damaged datagram does not stop reception."""
+    proc = netns.python("-c", _OWN_SCRIPT, GROUP_A, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    r = json.loads(out.strip().splitlines()[-1])
+    assert all(r.values()), r

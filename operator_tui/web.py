@@ -250,6 +250,30 @@ def console_command(config: str | None, name: str) -> str:
 
 
 # ------------------------------------------------------------------------------------------ server
+@dataclass(eq=False)
+class ConsoleLink:
+    """One browser tab's console, which only its own WebSocket handler closes; others ask it to.
+
+    aiohttp's ``close()`` called from another task while the handler waits in ``receive()`` drops the
+    TCP connection right after its Close frame, without waiting for the browser's Close in reply; a
+    browser that sees the connection end before it has answered (its reader behind the console's
+    output, on a loaded machine) reports 1006 instead of the code sent (a removed key's 4401). Closed
+    by the handler, which is not reading then, the closing handshake completes before the connection
+    ends."""
+
+    #: the task relaying the browser's messages to the console, cancelled to wake the handler
+    relay: asyncio.Task[None] | None = None
+    #: why the console must end (WebSocket close code, message), once asked
+    ending: tuple[int, bytes] | None = None
+
+    def end(self, code: int, message: bytes) -> None:
+        """Ask the handler to close the WebSocket with ``code`` (the first reason asked wins)."""
+        if self.ending is None:
+            self.ending = (code, message)
+        if self.relay is not None:
+            self.relay.cancel()
+
+
 def make_server(
     config: str | None,
     *,
@@ -266,7 +290,7 @@ def make_server(
     import aiohttp_jinja2
     import jinja2
     import textual_serve
-    from aiohttp import WSMsgType, web
+    from aiohttp import WSCloseCode, WSMsgType, web
     from textual_serve.app_service import AppService
     from textual_serve.server import Server, to_int
 
@@ -277,8 +301,28 @@ def make_server(
     attempts = TokenBucket(1.0 / SIGN_IN_EVERY_S, SIGN_IN_BURST)
     sign_ins = RateLimitedLog(log, period=LOG_PERIOD_S, clock=clock)
     refusals = RateLimitedLog(log, period=LOG_PERIOD_S, clock=clock)
-    #: session token -> the consoles (WebSockets) it opened, closed when its key is removed
-    consoles: dict[str, set[web.WebSocketResponse]] = {}
+    #: session token -> the consoles it opened, ended when its key is removed
+    consoles: dict[str, set[ConsoleLink]] = {}
+
+    async def relay(websocket: web.WebSocketResponse, app_service: AppService) -> None:
+        """The browser's keystrokes, resizes and focus changes to its console, until the browser leaves."""
+        async for message in websocket:
+            if message.type != WSMsgType.TEXT:
+                continue
+            envelope = message.json()
+            if not isinstance(envelope, list) or not envelope:
+                continue
+            kind = envelope[0]
+            if kind == "stdin":
+                await app_service.send_bytes(str(envelope[1]).encode("utf-8"))
+            elif kind == "resize":
+                await app_service.set_terminal_size(envelope[1]["width"], envelope[1]["height"])
+            elif kind == "ping":
+                await websocket.send_json(["pong", envelope[1]])
+            elif kind == "blur":
+                await app_service.blur()
+            elif kind == "focus":
+                await app_service.focus()
 
     class ConsoleServer(Server):
         async def _make_app(self) -> web.Application:
@@ -402,15 +446,16 @@ def make_server(
             height = to_int(request.query.get("height", "24"), 24)
             tab_name = f"{name}-web{next(tabs)}"
             app_service: AppService | None = None
+            link = ConsoleLink()
 
-            async def close_websocket() -> None:  # AppService awaits it and wants no result
-                await websocket.close()
+            async def close_websocket() -> None:  # the console exited; AppService wants no result
+                link.end(WSCloseCode.OK, b"")
 
             token = request.cookies.get(SESSION_COOKIE, "")
             try:
                 await websocket.prepare(request)
                 if access is not None:
-                    consoles.setdefault(token, set()).add(websocket)
+                    consoles.setdefault(token, set()).add(link)
                 app_service = AppService(
                     console_command(config, tab_name),
                     write_bytes=websocket.send_bytes,
@@ -421,23 +466,18 @@ def make_server(
                 )
                 log.info("console %s opened from %s", tab_name, request.remote)
                 await app_service.start(width, height)
-                async for message in websocket:
-                    if message.type != WSMsgType.TEXT:
-                        continue
-                    envelope = message.json()
-                    if not isinstance(envelope, list) or not envelope:
-                        continue
-                    kind = envelope[0]
-                    if kind == "stdin":
-                        await app_service.send_bytes(str(envelope[1]).encode("utf-8"))
-                    elif kind == "resize":
-                        await app_service.set_terminal_size(envelope[1]["width"], envelope[1]["height"])
-                    elif kind == "ping":
-                        await websocket.send_json(["pong", envelope[1]])
-                    elif kind == "blur":
-                        await app_service.blur()
-                    elif kind == "focus":
-                        await app_service.focus()
+                if link.ending is None:
+                    link.relay = asyncio.create_task(relay(websocket, app_service))
+                    try:
+                        await asyncio.wait([link.relay])  # ends when the browser leaves or link.end()
+                    finally:
+                        link.relay.cancel()
+                        await asyncio.wait([link.relay])
+                    if not link.relay.cancelled():
+                        link.relay.result()  # a browser's garbage: logged below
+                if link.ending is not None:
+                    code, reason = link.ending
+                    await websocket.close(code=code, message=reason)
             except asyncio.CancelledError:
                 await websocket.close()
             except Exception:  # a browser's garbage must not take the server down
@@ -445,7 +485,7 @@ def make_server(
             finally:
                 mine = consoles.get(token)
                 if mine is not None:
-                    mine.discard(websocket)
+                    mine.discard(link)
                     if not mine:
                         del consoles[token]
                 if app_service is not None:
@@ -470,8 +510,8 @@ def make_server(
                     len(ended),
                 )
                 for token in ended:
-                    for websocket in list(consoles.pop(token, ())):
-                        await websocket.close(code=4401, message=b"your key was removed")
+                    for link in consoles.pop(token, ()):
+                        link.end(4401, b"your key was removed")
 
         async def on_startup(self, app: web.Application) -> None:
             if access is not None and keys_file is not None:

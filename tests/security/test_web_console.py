@@ -261,6 +261,40 @@ async def test_a_removed_key_ends_its_sessions_and_consoles_within_seconds(tmp_p
         await c.server.close()
 
 
+@pytest.mark.attack("a removed operator key's console told it was removed, browser not reading (issue 29.6)")
+async def test_a_browser_behind_on_reading_still_gets_the_removed_key_close_code(tmp_path: Path) -> None:
+    """The browser reads the server's Close only after the server has ended the console (a loaded
+    machine, a reader behind the console's output): it must still see 4401, which it can only if
+    the server waits for its Close in reply before ending the connection. Ending it at once made
+    the browser's reply fail, and it reported 1006."""
+    keys = tmp_path / "keys.toml"
+    keys.write_text(keys_toml(("alice", "operator", ALICE), ("carol", "operator", CAROL)))
+    keys_file = web.KeysFile(str(keys))
+    access = web.ConsoleAccess(keys_file.load())
+    c = await serve(access, config=operator_config(tmp_path), keys_file=keys_file)
+    try:
+        r = await c.request("POST", "/login", data={"key": CAROL})
+        cookie = r.cookies[web.SESSION_COOKIE].value
+        async with aiohttp.ClientSession(cookies={web.SESSION_COOKIE: cookie}) as session:
+            ws = await session.ws_connect(f"ws://127.0.0.1:{c.port}/ws?width=80&height=24")
+            first = await asyncio.wait_for(ws.receive(), 30)
+            assert first.type in (aiohttp.WSMsgType.BINARY, aiohttp.WSMsgType.TEXT), first
+            time.sleep(0.01)  # let the file's mtime move on coarse clocks
+            keys.write_text(keys_toml(("alice", "operator", ALICE)))
+            deadline = time.monotonic() + 10
+            while access.sessions and time.monotonic() < deadline:
+                await asyncio.sleep(0.05)
+            assert not access.sessions, "carol's session outlived her key"
+            await asyncio.sleep(1.0)  # the server closes meanwhile; this browser reads nothing yet
+            while True:
+                msg = await asyncio.wait_for(ws.receive(), 10)
+                if msg.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.CLOSING):
+                    break
+            assert ws.close_code == 4401, msg
+    finally:
+        await c.server.close()
+
+
 async def _eventually(call: object, status: int, timeout: float = 10.0) -> bool:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:

@@ -24,7 +24,8 @@ velocity set-points in flight; benchmarks/safety_filter.py runs 1,000 agents bot
 Figures only (docs/design.md §12): the machine is shared, so the load average is printed beside them.
 
 A reference workload is measured in the same run, just before each size starts, so figures from
-two machines (or two moments of one) can be compared. ``ref`` is the CPU time one raw-lcm message
+two machines (or two moments of one) can be compared. ``ref`` (benchmarks/_reference.py, shared with
+benchmarks/tui.py) is the CPU time one raw-lcm message
 costs this machine now: one of a thousand senders' ``telemetry_t`` encoded by lcm-gen,
 ``lcm.publish``ed on the same udpm URL and decoded (µs, the mean of 20,000). ``@10 Hz`` is the µs
 per agent-second scaled to the full telemetry rate (x 10 / the mean rate received): a process short
@@ -69,6 +70,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks._netns import ensure_private_netns  # noqa: E402
+from benchmarks._reference import reference  # noqa: E402
 
 URL = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608"
 
@@ -134,41 +136,6 @@ def udp_drops(port: int) -> dict[int, int]:
         if int(f[1].split(":")[1], 16) == port:
             out[int(f[9])] = int(f[12])
     return out
-
-
-#: Messages the reference workload sends (about 0.1 s of CPU on the 2-core machine class).
-REFERENCE_MESSAGES = 20_000
-
-
-def reference(url: str = URL) -> float:
-    """CPU µs this thread spends per raw-lcm message: build, encode, publish (udpm), decode.
-
-    The same message mix an agent sends, through liblcm rather than antalate: the yardstick the
-    agents' µs per agent-second is divided by. Thread CPU time, so a busy machine slows it the way
-    it slows the agents (caches, frequency) but preemption does not count.
-    """
-    import lcm
-
-    from antalate_lcm.msgs import telemetry_t
-
-    lc = lcm.LCM(url)
-    # A thousand senders' messages in turn, as a thousand agents' are: a working set the size of
-    # a swarm's, not one message hot in the cache.
-    msgs = []
-    for k in range(1000):
-        msg = telemetry_t()
-        msg.header.agent = f"ref-{k:03d}"
-        msg.mode = "GUIDED"
-        msgs.append((f"ref-{k:03d}/TELEMETRY", msg))
-    t0 = time.thread_time()
-    for i in range(REFERENCE_MESSAGES):
-        channel, msg = msgs[i % 1000]
-        msg.header.seq = i
-        msg.lat = 32.0 + i * 1e-7
-        data = msg.encode()
-        lc.publish(channel, data)
-        telemetry_t.decode(data)
-    return (time.thread_time() - t0) / REFERENCE_MESSAGES * 1e6
 
 
 def busy_loop(stop_at: float) -> None:
@@ -406,7 +373,7 @@ def main() -> None:
 
 def _measure(n: int, tmp: Path, processes: int | None, safety: bool, tree: Path | None) -> None:
     procs = processes if processes is not None else math.ceil(n / 1000)
-    ref = reference()
+    ref = reference(URL)
     r = run(n, tmp, processes, safety, tree)
     if "error" in r:
         print(f"{n:>6} {procs:>5}  only {int(r['error'])} agents reached STANDBY within 60 s", flush=True)

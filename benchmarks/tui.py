@@ -18,6 +18,12 @@ What runs, and why this way:
 The console's CPU is read from /proc/<pid>/stat over the measurement window (after it shows all
 agents), so the publisher's and this script's costs are not counted. Key-to-wire latency (a key
 written to the terminal until the command arrives at the publisher) shows the UI stayed responsive.
+
+A reference workload (benchmarks/_reference.py, the one benchmarks/agents.py divides by) is measured
+in the same run, in the namespace just before the console starts: ``ref`` is the CPU µs one raw-lcm
+``telemetry_t`` costs this machine now (encode, publish, decode). The console's CPU per message
+received (its CPU share / the publisher's rate) divided by ``ref`` is ``x ref``: what one message
+costs the console in raw-lcm messages, a figure that moves much less with the machine than the %.
 """
 
 from __future__ import annotations
@@ -198,6 +204,10 @@ def measure(args: argparse.Namespace, reader: str) -> int:
     with tempfile.TemporaryDirectory() as tmp, NetNamespace() as ns:
         config = Path(tmp) / "tui.toml"
         config.write_text(f'[buses]\nlan = "{URL}"\n')
+        # The yardstick, in this namespace before anything else runs in it (benchmarks/_reference.py).
+        ref_proc = ns.python(__file__, "--role", "reference", stdout=subprocess.PIPE)
+        ref_out, _ = ref_proc.communicate(timeout=60)
+        ref = float(ref_out.strip())
         pub = ns.python(
             __file__,
             "--role",
@@ -279,6 +289,11 @@ def measure(args: argparse.Namespace, reader: str) -> int:
     print(
         f"console CPU: {share * 100:.1f} % of one core (target < {target} %; load average {os.getloadavg()[0]:.2f})"
     )
+    us_per_msg = share * 1e6 / max(rate, 1e-9)
+    print(
+        f"  per message received: {us_per_msg:.1f} us of console CPU; reference {ref:.2f} us "
+        f"(raw lcm, same run): {us_per_msg / ref:.2f} x ref"
+    )
     per_thread = {tid: (cpu - threads0.get(tid, 0.0)) / (t1 - t0) for tid, cpu in threads1.items()}
     others = sorted((share for tid, share in per_thread.items() if tid != tui.pid), reverse=True)
     print(
@@ -318,11 +333,18 @@ def main() -> int:
     parser.add_argument(
         "--baseline", action="store_true", help="run twice in this run: own reader, then liblcm's"
     )
-    parser.add_argument("--role", choices=["main", "publisher"], default="main", help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--role", choices=["main", "publisher", "reference"], default="main", help=argparse.SUPPRESS
+    )
     parser.add_argument("--url", default=URL, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.role == "publisher":
         return run_publisher(args.url, args.agents, args.hz, args.arbiter)
+    if args.role == "reference":
+        from benchmarks._reference import reference
+
+        print(f"{reference(args.url):.4f}", flush=True)
+        return 0
 
     from tests.harness.netns import netns_unavailable
 

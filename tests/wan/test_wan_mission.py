@@ -137,6 +137,13 @@ def test_operator_at_site_a_flies_the_agents_of_site_b_through_the_router(tmp_pa
         )
         try:
             op.wait_all(VEHICLES, "STANDBY", timeout=40)
+            # the ground phase reaches A before the take-off, as the record at A is checked for it (an
+            # MC state can cross before the first telemetry: a full run once had none on the ground)
+            op.wait(
+                lambda s: all(s["agents"][v]["tel_age"] is not None for v in VEHICLES),
+                timeout=20,
+                what="every agent's telemetry at A, on the ground",
+            )
 
             # -- 20 % loss on site B's uplink: take off and steer, every command acknowledged
             wan.set_loss("b", 20)

@@ -25,6 +25,7 @@ from antalate_lcm.base.errors import AntalateError, ConfigError
 from antalate_lcm.base.geo import offset
 from antalate_lcm.core.config import AgentConfig, Config
 from antalate_lcm.core.node import Context, Node
+from antalate_lcm.transports import spawn_lock
 
 log = logging.getLogger("antalate.agent")
 
@@ -176,11 +177,14 @@ def run_processes(
     procs: list[subprocess.Popen[bytes]] = []
     try:
         for i in range(count):
-            procs.append(
-                subprocess.Popen(
-                    child_argv(i, count), preexec_fn=_die_with_parent, stdout=output, stderr=output
+            with (
+                spawn_lock()
+            ):  # not while another thread has fd 2 swapped out: the child's lines would go there
+                procs.append(
+                    subprocess.Popen(
+                        child_argv(i, count), preexec_fn=_die_with_parent, stdout=output, stderr=output
+                    )
                 )
-            )
         log.info("%d agent processes: %s", count, ", ".join(str(p.pid) for p in procs))
         failed: subprocess.Popen[bytes] | None = None
         while not stop.is_set():  # never stop.wait(): see launch.run_until_signal

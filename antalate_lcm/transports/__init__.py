@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 from antalate_lcm.base.errors import AntalateError, InvalidBusUrl, UnknownTransport
-from antalate_lcm.transports.base import EXAMPLES, Connection, LcmUrl, Transport, captured_stderr
+from antalate_lcm.transports.base import EXAMPLES, Connection, LcmUrl, Transport, captured_stderr, spawn_lock
 from antalate_lcm.transports.file import File
 from antalate_lcm.transports.memq import Memq
 from antalate_lcm.transports.tcpq import Tcpq
@@ -107,6 +107,7 @@ __all__ = [
     "Transport",
     "bus_url_problem",
     "captured_stderr",
+    "spawn_lock",
     "open_failure",
     "open_lcm",
     "parse_lcm_url",

@@ -39,7 +39,9 @@ import contextlib
 import logging
 import os
 import re
+import sys
 import tempfile
+import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -111,14 +113,27 @@ def port_problem(port: str, where: str) -> str | None:
     return f"a port 1-65535 {where}, not {port!r}"
 
 
+#: Held while fd 2 is swapped for a file (`captured_stderr`). fd 2 belongs to the whole process: a
+#: child started by another thread meanwhile inherits the file as its stderr and every line it
+#: writes is lost (an agent process of ``antalate run --processes`` once lost all of its own), so
+#: whatever starts a child that writes to this process's stderr takes it first (`spawn_lock`).
+_FD2 = threading.RLock()
+
+
+def spawn_lock() -> threading.RLock:
+    """The lock to hold while starting a child that inherits this process's stderr."""
+    return _FD2
+
+
 @contextlib.contextmanager
 def captured_stderr() -> Iterator[list[str]]:
     """Swallow what liblcm prints on fd 2 (opening sockets, reading a damaged log): our errors say it better.
 
-    The yielded list holds the swallowed lines once the block ends (for a debug log).
+    The yielded list holds the swallowed lines once the block ends (for a debug log). Another
+    thread's log lines written meanwhile land there too: `Transport.open_lcm` writes them back.
     """
     lines: list[str] = []
-    with tempfile.TemporaryFile(mode="w+b") as tmp:
+    with _FD2, tempfile.TemporaryFile(mode="w+b") as tmp:
         saved = os.dup(2)
         try:
             os.dup2(tmp.fileno(), 2)
@@ -215,10 +230,13 @@ class Transport(ABC):
         try:
             with captured_stderr() as noise:
                 instance: Connection = lcm.LCM(self.url.url)
-                return instance
         except (RuntimeError, OSError):
             log.debug("liblcm said: %s", " | ".join(noise))
             raise self.failure(noise) from None
+        if noise:  # liblcm is silent when it succeeds: these are other threads' lines, not lost
+            sys.stderr.write("".join(line + "\n" for line in noise))
+            sys.stderr.flush()
+        return instance
 
     def failure(self, liblcm_said: Sequence[str] = ()) -> AntalateError:
         """The error to raise when this URL could not be opened; repeats liblcm's own words."""
@@ -226,4 +244,4 @@ class Transport(ABC):
         return BusUnavailable(self.url.url, f"liblcm refused it ({said})" if said else "liblcm refused it")
 
 
-__all__ = ["Connection", "LcmUrl", "Transport", "captured_stderr"]
+__all__ = ["Connection", "LcmUrl", "Transport", "captured_stderr", "spawn_lock"]

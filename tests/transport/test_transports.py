@@ -234,3 +234,58 @@ def test_the_old_datagram_module_still_works_with_a_warning() -> None:
         old = importlib.import_module("antalate_lcm.lcm_datagram")
     assert old.short_datagram is datagram.short_datagram and old.fragments is datagram.fragments
     assert old.Reassembler is datagram.Reassembler
+
+
+def test_a_child_started_while_a_bus_opens_keeps_its_stderr(capfd: pytest.CaptureFixture[str]) -> None:
+    """While liblcm's chatter is captured, fd 2 is a file: an agent process started by another thread
+    then lost every line it wrote (a CI run's ``antalate run --processes 2`` printed none of its first
+    process's lines). The spawn waits for the capture to end instead."""
+    import sys
+    import threading
+
+    from antalate_lcm.runtime.agent import run_processes
+    from antalate_lcm.transports import captured_stderr
+
+    capturing, spawned = threading.Event(), threading.Event()
+
+    def open_slowly() -> None:
+        with captured_stderr():
+            capturing.set()
+            spawned.wait(1.0)  # the spawn below must not happen in here: it times out instead
+
+    opener = threading.Thread(target=open_slowly)
+    opener.start()
+    assert capturing.wait(10)
+    child = [sys.executable, "-c", "import sys; print('the child speaks', file=sys.stderr)"]
+
+    def spawn() -> None:
+        run_processes(lambda i, n: child, 1, grace=10)
+        spawned.set()
+
+    spawner = threading.Thread(target=spawn)
+    spawner.start()
+    spawner.join(30)
+    opener.join(30)
+    assert "the child speaks" in capfd.readouterr().err
+
+
+def test_another_threads_lines_written_while_a_bus_opens_are_not_lost(
+    monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """liblcm says nothing when it opens a bus; what fd 2 got meanwhile is another thread's, put back."""
+    import os
+    import threading
+
+    import lcm
+
+    real = lcm.LCM
+
+    def opened_while_another_thread_logs(url: str) -> object:
+        other = threading.Thread(target=os.write, args=(2, b"a warning of another thread\n"))
+        other.start()
+        other.join()
+        return real(url)
+
+    monkeypatch.setattr(lcm, "LCM", opened_while_another_thread_logs)
+    open_lcm("memq://")
+    assert "a warning of another thread" in capfd.readouterr().err

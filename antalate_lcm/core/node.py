@@ -34,6 +34,7 @@ from antalate_lcm.core.context import Context as Context
 from antalate_lcm.core.context import shared_params as shared_params
 from antalate_lcm.core.context import shared_value as shared_value
 from antalate_lcm.core.executor import Timer
+from antalate_lcm.core.routes import Routes
 from antalate_lcm.core.timers import phase_delay, run_due, split_jobs
 from antalate_lcm.wire.security import Authenticator, SecurityPolicy
 from antalate_lcm.wire.topics import Message, TopicSpec, channel_regex, is_internal
@@ -56,15 +57,6 @@ class Interference(Protocol):
     def silenced(self, agent: str) -> bool:
         """Whether ``agent``'s software is dead or frozen now (its timers do not run)."""
         ...
-
-
-@dataclass
-class _Publisher:
-    buses: list[str]
-    channel: str
-    #: Each bus's send function (`Bus.sender`), resolved once: 20 publishes a second per agent.
-    senders: list[tuple[str, Callable[[str, bytes], None]]]
-    seq: int = 0
 
 
 @dataclass
@@ -103,8 +95,9 @@ class Node:
         self.log = logging.getLogger(f"antalate.{self.kind}.{self.agent}")
         if context.executor.sim is not None:  # simulated time: headers and the replay window on it
             self.wallclock = context.executor.wallclock
-        self._specs = config.topic_specs()
-        self._publishers: dict[Any, _Publisher] = {}
+        #: The topics' channels and buses (`Routes`); its publishers, read on every publish.
+        self.routes = Routes(config, context, self.agent)
+        self._publishers = self.routes.publishers
         self._subs: list[Subscription] = []
         #: subscribe_all's pattern subscription -> its own-channel subscription (unsubscribed together).
         self._companions: dict[Subscription, Subscription] = {}
@@ -179,15 +172,18 @@ class Node:
     def on_stop(self) -> None:
         """Release what ``on_start`` acquired beyond subscriptions and timers."""
 
-    # ------------------------------------------------------------------ topics
+    # ------------------------------------------------------------------ topics (core/routes.py)
     def topic_spec(self, topic: str) -> TopicSpec:
-        try:
-            return self._specs[topic]
-        except KeyError:
-            raise KeyError(f"unknown topic {topic!r}; known: {', '.join(self._specs)}") from None
+        return self.routes.spec(topic)
 
     def channel(self, topic: str, **fields: str) -> str:
-        return self.topic_spec(topic).channel.format(**{"agent": self.agent, **fields})
+        return self.routes.channel(topic, **fields)
+
+    def _publish_buses(self, topic: str) -> list[str]:
+        return self.routes.publish_buses(topic)
+
+    def _subscribe_bus(self, topic: str) -> str:
+        return self.routes.subscribe_bus(topic)
 
     def publish(
         self,
@@ -206,7 +202,7 @@ class Node:
         """
         pub = self._publishers.get((topic, tuple(sorted(fields.items()))) if fields else topic)
         if pub is None:
-            pub = self._publisher(topic, fields)
+            pub = self.routes.publisher(topic, fields)
         if seq is None:
             pub.seq += 1
             seq = pub.seq
@@ -230,17 +226,6 @@ class Node:
             except OSError as exc:
                 ok = self.context.bus.publish_failed(bus, channel, exc) and ok
         return ok
-
-    def _publisher(self, topic: str, fields: dict[str, str]) -> _Publisher:
-        buses = self._publish_buses(topic)
-        bus = self.context.bus
-        shared = self.context.senders
-        senders = shared.get(tuple(buses))
-        if senders is None:
-            senders = shared[tuple(buses)] = [(name, bus.sender(name)) for name in buses]
-        pub = _Publisher(buses, self.channel(topic, **fields), senders)
-        self._publishers[(topic, tuple(sorted(fields.items()))) if fields else topic] = pub
-        return pub
 
     def outgoing(self, msg_type: type[M]) -> M:
         """A message of ``msg_type`` to fill and hand to :meth:`publish` at once: the context's one
@@ -277,27 +262,6 @@ class Node:
         for bus in self._publish_buses(topic):
             self.context.bus.publish(bus, channel, data)
         return None
-
-    def _publish_buses(self, topic: str) -> list[str]:
-        """The topic's buses (plus the in-process bus for an internal topic), one per distinct URL."""
-        names = self.config.topic_buses(topic)
-        inproc = self.context.inproc_bus
-        if inproc is not None and is_internal(topic):
-            names = [inproc, *names]
-        out: list[str] = []
-        seen: set[str] = set()
-        for name in names:
-            url = self.context.bus.urls.get(name, name)
-            if url not in seen:  # two names for one URL are one LCM instance: send once
-                seen.add(url)
-                out.append(name)
-        return out
-
-    def _subscribe_bus(self, topic: str) -> str:
-        inproc = self.context.inproc_bus
-        if inproc is not None and is_internal(topic):
-            return inproc
-        return self.config.topic_buses(topic)[0]
 
     def subscribe(self, topic: str, handler: Callable[[Any], None], **fields: str) -> Subscription:
         """Deliver this agent's ``topic`` (decoded, authenticated, validated) to ``handler`` on the

@@ -21,11 +21,11 @@ import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from antalate_lcm.base.errors import InsecureBus
 from antalate_lcm.base.ratelimit import RateLimitedLog
-from antalate_lcm.core.config import SecurityConfig
+from antalate_lcm.core.config import Config, SecurityConfig
 from antalate_lcm.wire import validation
 from antalate_lcm.wire.fastcodec import encode as fast_encode
 from antalate_lcm.wire.security import (
@@ -56,6 +56,18 @@ class RelayRefusal:
     logged: bool = False
 
 
+class Owner(Protocol):
+    """What a node's admission reads of the node (:class:`~antalate_lcm.core.node.Node`)."""
+
+    agent: str
+    name: str
+    kind: str
+    config: Config
+    log: logging.Logger
+    #: Read when the authenticator is first needed: a node may set its own after it was built.
+    wallclock: Callable[[], float]
+
+
 class Admission:
     """What the nodes of one context share of the pipeline (the context owns one).
 
@@ -71,24 +83,11 @@ class Admission:
         #: bury every other line of the start.
         self.open_warned: set[str] = set()
 
-    def for_node(
-        self,
-        *,
-        agent: str,
-        name: str,
-        kind: str,
-        security: SecurityConfig,
-        buses: Mapping[str, str],
-        log: logging.Logger,
-        wallclock: Callable[[], Callable[[], float]],
-        watcher: bool = False,
-    ) -> NodeAdmission:
-        """The pipeline of one node: ``agent``'s node ``name`` (``kind`` in what it says), with the
-        ``[security]`` settings and configured ``buses`` of its config. ``wallclock`` gives the
-        node's clock when the authenticator is first needed (a node may set its own after it was
-        built). ``watcher``: the node watches agents rather than flying one (the operator console, the
+    def for_node(self, node: Owner, *, watcher: bool = False) -> NodeAdmission:
+        """The pipeline of one node, with the ``[security]`` settings and buses of its config.
+        ``watcher``: the node watches agents rather than flying one (the operator console, the
         scripted operator), so it may read agents' state from a network bus without a swarm key."""
-        return NodeAdmission(self, agent, name, kind, security, buses, log, wallclock, watcher)
+        return NodeAdmission(self, node, watcher)
 
     def state_dir(self, security: SecurityConfig, buses: Mapping[str, str]) -> Path | None:
         """Where a node keeps its replay memory: ``[security] state_dir``, else the user's state
@@ -108,27 +107,14 @@ class NodeAdmission:
     """One node's admission: signs what it publishes, admits what it consumes, applies the exposure
     policy to every input it subscribes to, vets what it relays for an operator."""
 
-    def __init__(
-        self,
-        admission: Admission,
-        agent: str,
-        name: str,
-        kind: str,
-        security: SecurityConfig,
-        buses: Mapping[str, str],
-        log: logging.Logger,
-        wallclock: Callable[[], Callable[[], float]],
-        watcher: bool,
-    ) -> None:
+    def __init__(self, admission: Admission, node: Owner, watcher: bool) -> None:
         self.admission = admission
-        self.agent = agent
-        self.name = name
-        self.kind = kind
-        self.settings = security
-        self.buses = buses
-        self.log = log
+        self.node = node
+        self.agent = node.agent
+        self.kind = node.kind
+        security = self.settings = node.config.security
+        self.log = log = node.log
         self.watcher = watcher
-        self._wallclock = wallclock
         self.policy = SecurityPolicy(security.swarm_key, tuple(security.previous_keys), security.window)
         #: Whether what this node publishes is signed (it has a swarm key).
         self.signs = bool(self.policy.key)
@@ -152,14 +138,15 @@ class NodeAdmission:
         """The checks every consumed message passes with a swarm key (None without one)."""
         if self._auth is None and self.policy.enabled:
             store = None
-            state_dir = self.admission.state_dir(self.settings, self.buses)
+            node = self.node  # its name and clock as they are now (a node may set its own clock)
+            state_dir = self.admission.state_dir(self.settings, node.config.buses)
             if state_dir is not None:
-                store = HighWaterStore(state_dir / f"{self.agent}.{self.name}.replay.json")
+                store = HighWaterStore(state_dir / f"{self.agent}.{node.name}.replay.json")
             self._auth = Authenticator(
                 self.policy,
                 self.log,
                 replay_guard=ReplayGuard(store, PERSISTED_TYPES),
-                wallclock=self._wallclock(),
+                wallclock=node.wallclock,
             )
         return self._auth
 

@@ -104,16 +104,7 @@ class Node:
         self._timers: list[Timer] = []
         self.started = False
         self._last_utime = 0
-        self.admission = context.admission.for_node(
-            agent=self.agent,
-            name=self.name,
-            kind=self.kind,
-            security=config.security,
-            buses=config.buses,
-            log=self.log,
-            wallclock=lambda: self.wallclock,
-            watcher=watcher,
-        )
+        self.admission = context.admission.for_node(self, watcher=watcher)
         #: The admission's encoder (signing with a key), read on every publish.
         self._seal = self.admission.seal
 

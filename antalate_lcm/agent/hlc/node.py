@@ -8,6 +8,10 @@ An adapter whose ``state()`` raises is a stale link, not a crash: the machine ge
 snapshot with its ``link_age`` grown by the time since (so LLC_DOWN follows after ``link_timeout``,
 with the exception as the reason, and the recoverable LLC_DOWN row applies once ``state()`` works
 again), and the log gets one rate-limited line, not a traceback per tick.
+
+With ``[safety] enabled`` the separation and fence filter is driven by a
+:class:`~antalate_lcm.agent.hlc.filtering.SafetyDriver` this node holds: every velocity set-point
+passes it, and it runs on each control tick.
 """
 
 from __future__ import annotations

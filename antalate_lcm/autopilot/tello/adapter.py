@@ -53,6 +53,7 @@ from antalate_lcm.autopilot.tello.flight import FLIGHT_MODES, Flight, TelloPhase
 from antalate_lcm.autopilot.tello.landing import Lander
 from antalate_lcm.autopilot.tello.link import DjitellopyLink, TelloLink
 from antalate_lcm.autopilot.tello.params import Params
+from antalate_lcm.autopilot.tello.parts import Shared
 from antalate_lcm.autopilot.tello.rtl import ReturnHome
 from antalate_lcm.autopilot.tello.takeoff import Takeoff
 from antalate_lcm.autopilot.tello.tracking import PacketTracker
@@ -78,73 +79,28 @@ class TelloAutopilot(VehicleAdapter[Params, TelloLink]):
         self._link: TelloLink | None = None  # once connected
         self._lock = threading.RLock()  # adapter state, shared by the HLC, control and caller threads
         self._connected = False
-        self._ratelog = RateLimitedLog(log, period=10.0, clock=self.clock)
         self._track = PacketTracker(p, self.clock, self.host)
         self._flight = Flight()
-        self._cmd = CommandChannel(
-            p,
+        shared = Shared(
+            p=p,
             clock=self.clock,
             host=self.host,
             lock=self._lock,
-            link=lambda: self._link,
-            ingest=self._ingest,
-            track=self._track,
             stop=self._stop,
-            ratelog=self._ratelog,
-        )
-        self._failsafes = Failsafes(
-            p,
-            host=self.host,
+            ratelog=RateLimitedLog(log, period=10.0, clock=self.clock),
             link=lambda: self._link,
-            track=self._track,
-            flight=self._flight,
-            commands=self._cmd,
-        )
-        self._rtl = ReturnHome(
-            p,
-            clock=self.clock,
-            host=self.host,
-            lock=self._lock,
             ingest=self._ingest,
             track=self._track,
             flight=self._flight,
         )
-        self._lander = Lander(
-            p,
-            clock=self.clock,
-            host=self.host,
-            lock=self._lock,
-            ingest=self._ingest,
-            track=self._track,
-            flight=self._flight,
-            commands=self._cmd,
-            ratelog=self._ratelog,
-        )
-        self._takeoff = Takeoff(
-            p,
-            clock=self.clock,
-            host=self.host,
-            lock=self._lock,
-            ingest=self._ingest,
-            track=self._track,
-            flight=self._flight,
-            commands=self._cmd,
-        )
+        self._cmd = CommandChannel(shared)
+        self._failsafes = Failsafes(shared, self._cmd)
+        self._rtl = ReturnHome(shared)
+        self._lander = Lander(shared, self._cmd)
+        self._takeoff = Takeoff(shared, self._cmd)
         self._rc = Sticks(p, self._track)
         self._control = ControlLoop(
-            p,
-            clock=self.clock,
-            host=self.host,
-            lock=self._lock,
-            stop=self._stop,
-            track=self._track,
-            flight=self._flight,
-            commands=self._cmd,
-            failsafes=self._failsafes,
-            rtl=self._rtl,
-            lander=self._lander,
-            sticks=self._rc,
-            ratelog=self._ratelog,
+            shared, self._cmd, failsafes=self._failsafes, rtl=self._rtl, lander=self._lander, sticks=self._rc
         )
 
     def _default_link(self, params: Params) -> TelloLink:

@@ -19,12 +19,10 @@ import threading
 import time
 from collections.abc import Callable
 
-from antalate_lcm.autopilot.base import AutopilotError, Clock
+from antalate_lcm.autopilot.base import AutopilotError
 from antalate_lcm.autopilot.tello.link import TelloLink
 from antalate_lcm.autopilot.tello.maths import RC
-from antalate_lcm.autopilot.tello.params import Params
-from antalate_lcm.autopilot.tello.tracking import PacketTracker
-from antalate_lcm.base.ratelimit import RateLimitedLog
+from antalate_lcm.autopilot.tello.parts import Part, Shared
 
 log = logging.getLogger("antalate.autopilot.tello")
 
@@ -35,35 +33,15 @@ class Preempted(AutopilotError):
     """A waiting command was overtaken by land, rtl or emergency."""
 
 
-class CommandChannel:
-    """Commands to one Tello and their answers; shares the adapter's state lock (`lock`).
+class CommandChannel(Part):
+    """Commands to one Tello and their answers.
 
-    `ingest` takes in the newest state packet (called with `lock` held) so that a wait keeps the
-    adapter's picture of the Tello current; `track` is that picture.
+    A wait takes in the state packets as they come (`Shared.ingest`, under the adapter's lock), so the
+    adapter's picture of the Tello stays current while a command is out.
     """
 
-    def __init__(
-        self,
-        p: Params,
-        *,
-        clock: Clock,
-        host: str,
-        lock: threading.RLock,
-        link: Callable[[], TelloLink | None],
-        ingest: Callable[[], None],
-        track: PacketTracker,
-        stop: threading.Event,
-        ratelog: RateLimitedLog,
-    ) -> None:
-        self._p = p
-        self._clock = clock
-        self._host = host
-        self._lock = lock
-        self._link = link
-        self._ingest = ingest
-        self._track = track
-        self._stop = stop
-        self._ratelog = ratelog
+    def __init__(self, shared: Shared) -> None:
+        super().__init__(shared)
         self.cmd_lock = threading.RLock()  # one answered command at a time (replies carry no id)
         self._space_lock = threading.Lock()  # one non-rc datagram at a time, spaced (`_await_spacing`)
         self._quiet_since = -math.inf  # clock() of the last non-rc datagram sent or answer received

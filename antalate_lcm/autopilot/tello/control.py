@@ -11,19 +11,18 @@ Function"). While the link is lost it sends what `failsafe.Failsafes` allows: on
 from __future__ import annotations
 
 import logging
-import threading
 
-from antalate_lcm.autopilot.base import AutopilotError, Clock, Frame
+from antalate_lcm.autopilot.base import AutopilotError, Frame
 from antalate_lcm.autopilot.tello import maths
 from antalate_lcm.autopilot.tello.commands import CommandChannel
 from antalate_lcm.autopilot.tello.failsafe import Failsafes
-from antalate_lcm.autopilot.tello.flight import Flight, TelloPhase
+from antalate_lcm.autopilot.tello.flight import TelloPhase
 from antalate_lcm.autopilot.tello.landing import Lander
 from antalate_lcm.autopilot.tello.maths import RC
 from antalate_lcm.autopilot.tello.params import Params
+from antalate_lcm.autopilot.tello.parts import Part, Shared
 from antalate_lcm.autopilot.tello.rtl import ReturnHome
 from antalate_lcm.autopilot.tello.tracking import PacketTracker
-from antalate_lcm.base.ratelimit import RateLimitedLog
 
 log = logging.getLogger("antalate.autopilot.tello")
 
@@ -56,39 +55,25 @@ class Sticks:
         return self(fwd, right, up, yaw_rate)
 
 
-class ControlLoop:
+class ControlLoop(Part):
     """The thread's loop (`run`) and what each tick sends (`lock` held while deciding, not sending)."""
 
     def __init__(
         self,
-        p: Params,
-        *,
-        clock: Clock,
-        host: str,
-        lock: threading.RLock,
-        stop: threading.Event,
-        track: PacketTracker,
-        flight: Flight,
+        shared: Shared,
         commands: CommandChannel,
+        *,
         failsafes: Failsafes,
         rtl: ReturnHome,
         lander: Lander,
         sticks: Sticks,
-        ratelog: RateLimitedLog,
     ) -> None:
-        self._p = p
-        self._clock = clock
-        self._host = host
-        self._lock = lock
-        self._stop = stop
-        self._track = track
-        self._flight = flight
+        super().__init__(shared)
         self._commands = commands
         self._failsafes = failsafes
         self._rtl = rtl
         self._lander = lander
         self._sticks = sticks
-        self._ratelog = ratelog
         self._stop_ticks = 0  # zero rc still to send after motion stopped
 
     def run(self) -> None:

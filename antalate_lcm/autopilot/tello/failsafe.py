@@ -18,38 +18,22 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
 
 from antalate_lcm.autopilot.tello.commands import CommandChannel
-from antalate_lcm.autopilot.tello.flight import Flight, TelloPhase
-from antalate_lcm.autopilot.tello.link import TelloLink
+from antalate_lcm.autopilot.tello.flight import TelloPhase
 from antalate_lcm.autopilot.tello.maths import RC
-from antalate_lcm.autopilot.tello.params import Params
-from antalate_lcm.autopilot.tello.tracking import PacketTracker
+from antalate_lcm.autopilot.tello.parts import Part, Shared
 
 log = logging.getLogger("antalate.autopilot.tello")
 
 PROBE_PERIOD = 1.0  # s between "command" probes while the link is lost
 
 
-class Failsafes:
+class Failsafes(Part):
     """The link-loss state (`silenced`) and the reactions to what the state packets show."""
 
-    def __init__(
-        self,
-        p: Params,
-        *,
-        host: str,
-        link: Callable[[], TelloLink | None],
-        track: PacketTracker,
-        flight: Flight,
-        commands: CommandChannel,
-    ) -> None:
-        self._p = p
-        self._host = host
-        self._link = link
-        self._track = track
-        self._flight = flight
+    def __init__(self, shared: Shared, commands: CommandChannel) -> None:
+        super().__init__(shared)
         self._commands = commands
         self.silenced = False  # link lost: no more commands until state comes back
         self._lost_in_air = False  # the Tello was flying when the link was lost

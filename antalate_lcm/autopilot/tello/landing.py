@@ -9,43 +9,21 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable
 
-from antalate_lcm.autopilot.base import AutopilotError, Clock
+from antalate_lcm.autopilot.base import AutopilotError
 from antalate_lcm.autopilot.tello.commands import CommandChannel
-from antalate_lcm.autopilot.tello.flight import Flight, TelloPhase
-from antalate_lcm.autopilot.tello.params import Params
-from antalate_lcm.autopilot.tello.tracking import PacketTracker
-from antalate_lcm.base.ratelimit import RateLimitedLog
+from antalate_lcm.autopilot.tello.flight import TelloPhase
+from antalate_lcm.autopilot.tello.parts import Part, Shared
 
 _LAND_RETRY = 2.0  # s between attempts when a land command failed in the air
 
 
-class Lander:
+class Lander(Part):
     """``land`` from the HLC's thread (`land_now`) or a thread of its own (`in_background`)."""
 
-    def __init__(
-        self,
-        p: Params,
-        *,
-        clock: Clock,
-        host: str,
-        lock: threading.RLock,
-        ingest: Callable[[], None],
-        track: PacketTracker,
-        flight: Flight,
-        commands: CommandChannel,
-        ratelog: RateLimitedLog,
-    ) -> None:
-        self._p = p
-        self._clock = clock
-        self._host = host
-        self._lock = lock
-        self._ingest = ingest
-        self._track = track
-        self._flight = flight
+    def __init__(self, shared: Shared, commands: CommandChannel) -> None:
+        super().__init__(shared)
         self._commands = commands
-        self._ratelog = ratelog
         self._thread: threading.Thread | None = None
 
     def landed(self) -> bool:

@@ -11,15 +11,12 @@ the reason in ``AutopilotState.failsafe``.
 from __future__ import annotations
 
 import logging
-import threading
 import time
-from collections.abc import Callable
 
-from antalate_lcm.autopilot.base import AutopilotError, Clock
+from antalate_lcm.autopilot.base import AutopilotError
 from antalate_lcm.autopilot.tello import maths
-from antalate_lcm.autopilot.tello.flight import Flight, TelloPhase
-from antalate_lcm.autopilot.tello.params import Params
-from antalate_lcm.autopilot.tello.tracking import PacketTracker
+from antalate_lcm.autopilot.tello.flight import TelloPhase
+from antalate_lcm.autopilot.tello.parts import Part
 
 log = logging.getLogger("antalate.autopilot.tello")
 
@@ -30,31 +27,11 @@ _RTL_PROGRESS = 0.5  # m: rtl() returns once the distance shrank by this (or by 
 _RTL_EARLY_DIVERGENCE = 0.5  # m: rtl() fails when the distance grew by this before shrinking
 
 
-class ReturnHome:
+class ReturnHome(Part):
     """The RTL leg: its start, its velocity each control tick, its check and its abort.
 
-    `start`, `leg` and `abort` run with the adapter's lock (`lock`) held, `verify` takes it itself;
-    `ingest` takes in the newest state packet (lock held).
+    `start`, `leg` and `abort` run with the adapter's lock held, `verify` takes it itself.
     """
-
-    def __init__(
-        self,
-        p: Params,
-        *,
-        clock: Clock,
-        host: str,
-        lock: threading.RLock,
-        ingest: Callable[[], None],
-        track: PacketTracker,
-        flight: Flight,
-    ) -> None:
-        self._p = p
-        self._clock = clock
-        self._host = host
-        self._lock = lock
-        self._ingest = ingest
-        self._track = track
-        self._flight = flight
 
     def start(self) -> float:
         """Begin the leg from here (the HLC's `rtl`): the distance to go; raises when it cannot be trusted."""

@@ -11,16 +11,13 @@ packets: the Tello in the air and holding its height.
 from __future__ import annotations
 
 import logging
-import threading
 import time
-from collections.abc import Callable
 
-from antalate_lcm.autopilot.base import AutopilotError, Clock
+from antalate_lcm.autopilot.base import AutopilotError
 from antalate_lcm.autopilot.tello import maths
 from antalate_lcm.autopilot.tello.commands import POLL, CommandChannel, Preempted
-from antalate_lcm.autopilot.tello.flight import Flight, TelloPhase
-from antalate_lcm.autopilot.tello.params import Params
-from antalate_lcm.autopilot.tello.tracking import PacketTracker
+from antalate_lcm.autopilot.tello.flight import TelloPhase
+from antalate_lcm.autopilot.tello.parts import Part, Shared
 
 log = logging.getLogger("antalate.autopilot.tello")
 
@@ -28,28 +25,11 @@ _SETTLED = 1.0  # s of unchanged height (and zero vertical speed) that end a tak
 _UP_MIN_CM, _UP_MAX_CM = 20, 500  # the SDK's range for up/down
 
 
-class Takeoff:
-    """`fly` is the HLC's `takeoff` after the link check; it takes the adapter's lock (`lock`) itself."""
+class Takeoff(Part):
+    """`fly` is the HLC's `takeoff` after the link check; it takes the adapter's lock itself."""
 
-    def __init__(
-        self,
-        p: Params,
-        *,
-        clock: Clock,
-        host: str,
-        lock: threading.RLock,
-        ingest: Callable[[], None],
-        track: PacketTracker,
-        flight: Flight,
-        commands: CommandChannel,
-    ) -> None:
-        self._p = p
-        self._clock = clock
-        self._host = host
-        self._lock = lock
-        self._ingest = ingest
-        self._track = track
-        self._flight = flight
+    def __init__(self, shared: Shared, commands: CommandChannel) -> None:
+        super().__init__(shared)
         self._commands = commands
 
     def fly(self, alt: float) -> None:

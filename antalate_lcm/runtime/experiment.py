@@ -45,7 +45,12 @@ from antalate_lcm.runtime.launch import run_until_signal
 from antalate_lcm.runtime.recorder import LogRecorder
 from antalate_lcm.runtime.script import Script, check_fault_agents, load_script
 from antalate_lcm.runtime.scripted_operator import DirectionAt, Phase, ScriptedOperator
-from antalate_lcm.runtime.time_coordinator import SimulatedBus, TimeCoordinator, simulated_buses
+from antalate_lcm.runtime.time_coordinator import (
+    DEFAULT_STALL,
+    SimulatedBus,
+    TimeCoordinator,
+    simulated_buses,
+)
 
 if TYPE_CHECKING:
     from antalate_lcm.apps.analysis import Analysis
@@ -78,6 +83,9 @@ class Experiment:
     seed: int | None = None
     #: False: no metrics at the end (benchmarks/simtime.py times the flight, not the analysis).
     measure: bool = True
+    #: ``--stall-timeout``: real seconds an agent process on the shared clock may go silent
+    #: before it is taken as hung (``--speed`` with ``--processes``).
+    stall_timeout: float = DEFAULT_STALL
 
 
 def default_log_path() -> str:
@@ -340,7 +348,9 @@ def run(exp: Experiment) -> Outcome:
     buses = shared_buses(configs)
     # Several processes on simulated time: one clock for all, served from here (time_coordinator).
     coordinator = (
-        TimeCoordinator(processes + 1, exp.speed) if exp.speed is not None and processes > 1 else None
+        TimeCoordinator(processes + 1, exp.speed, exp.stall_timeout)
+        if exp.speed is not None and processes > 1
+        else None
     )
     clock = None if exp.speed is None else SimClock(math.inf if coordinator else exp.speed, held=True)
     crossing: list[str] = []
@@ -552,6 +562,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             log_level=args.log_level,
             speed=args.speed,
             seed=args.seed,
+            stall_timeout=args.stall_timeout,
         )
     )
     print(json.dumps(outcome.to_json(), indent=1) if args.json else outcome.text(), flush=True)
@@ -594,6 +605,25 @@ def run_arguments(p: argparse.ArgumentParser) -> None:
         help="the script's seed; with --speed the run (its log, byte for byte) is a function of "
         "config, script and S, and `antalate replay LOG` checks it",
     )
+    p.add_argument(
+        "--stall-timeout",
+        type=parse_stall,
+        default=DEFAULT_STALL,
+        metavar="S",
+        help="with --speed and --processes: an agent process silent for S real seconds is taken as "
+        f"hung; the run stops with its name and it is killed (default {DEFAULT_STALL:g})",
+    )
+
+
+def parse_stall(text: str) -> float:
+    """``--stall-timeout``: a number of seconds > 0 (not NaN, not infinite: a hang must end)."""
+    try:
+        seconds = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a number of seconds > 0, got {text!r}") from None
+    if not 0 < seconds < math.inf:
+        raise argparse.ArgumentTypeError(f"a number of seconds > 0, got {text!r}")
+    return seconds
 
 
 def parse_speed(text: str) -> float:

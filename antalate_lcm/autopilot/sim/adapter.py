@@ -34,7 +34,7 @@ __all__ = ["SimAutopilot"]
 
 
 class SimAutopilot(FaultInjection, Autopilot):
-    """A kinematic quadcopter; see the package docstring for the model and the fault injection."""
+    """A kinematic quadcopter: its model in `physics`, its fault injection in `faults`."""
 
     name = "sim"
     blocking = False  # in-process: every command returns at once

@@ -53,7 +53,7 @@ class FaultInjection(Quadcopter):
     def _init_state(self, p: Params, now: float) -> None:
         super()._init_state(p, now)
         self._connected = False
-        self._refuse_arm = bool(p.refuse_arm)
+        self._refuse_arm = p.refuse_arm
         self._link_lost_at: float | None = None  # clock time the link was lost
         self._frozen: AutopilotState | None = None  # what state() repeats while it is
         self._state_error: str | None = None

@@ -123,16 +123,16 @@ class Quadcopter:
     def _init_state(self, p: Params, now: float) -> None:
         """On the ground at home, disarmed, at ``now`` of the clock."""
         self._p = p
-        self.home = FlatFrame(float(p.home_lat), float(p.home_lon))
-        self._tau = float(p.tau)
-        self._time_scale = float(p.time_scale)
-        self._max_step = float(p.max_step)
+        self.home = FlatFrame(p.home_lat, p.home_lon)
+        self._tau = p.tau
+        self._time_scale = p.time_scale
+        self._max_step = p.max_step
         #: Read by every step of flight (the parameters never change after construction).
-        self._velocity_hold = float(p.velocity_hold)
-        self._max_speed = float(p.max_speed)
-        self._climb_rate = float(p.climb_rate)
-        self._descent_rate = float(p.descent_rate)
-        self._max_yaw_rate = float(p.max_yaw_rate)
+        self._velocity_hold = p.velocity_hold
+        self._max_speed = p.max_speed
+        self._climb_rate = p.climb_rate
+        self._descent_rate = p.descent_rate
+        self._max_yaw_rate = p.max_yaw_rate
         # Vehicle state (local frame: metres north/east of home, altitude above home).
         self.north = 0.0
         self.east = 0.0
@@ -140,8 +140,8 @@ class Quadcopter:
         self.vn = 0.0
         self.ve = 0.0
         self.vd = 0.0
-        self.heading = wrap_360(float(p.heading))
-        self.battery = self._check_battery(float(p.battery))
+        self.heading = wrap_360(p.heading)
+        self.battery = self._check_battery(p.battery)
         self.armed = False
         self.in_air = False
         self.mode = "GUIDED"
@@ -153,14 +153,14 @@ class Quadcopter:
         self._armed_since: float | None = None  # sim time the vehicle was armed on the ground
         self._disarm_at: float | None = None  # sim time of a pending post-landing disarm
         self._takeover_time = 0.0
-        self._pilot_autoland = bool(p.takeover_autoland)
+        self._pilot_autoland = p.takeover_autoland
         self._sim_time = 0.0
         self._t_last = now
         self._airborne_since: float | None = None  # sim time of the last takeoff
         #: cells, voltage sag per cell in the air, warning level (%): read by every `telemetry.snapshot`.
-        self._battery_params = (int(p.cells), float(p.voltage_sag), float(p.battery_warning_at))
+        self._battery_params = (p.cells, p.voltage_sag, p.battery_warning_at)
         #: %/min drained on the ground and in the air (indexed by `in_air`: read every step).
-        self._drain = (float(p.drain_idle), float(p.drain_flying))
+        self._drain = (p.drain_idle, p.drain_flying)
         self._latlon_of: tuple[float, float] | None = None  # (north, east) of `_latlon`
         self._latlon = (0.0, 0.0)
 

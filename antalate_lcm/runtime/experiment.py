@@ -46,6 +46,7 @@ from antalate_lcm.runtime.recorder import LogRecorder
 from antalate_lcm.runtime.script import Script, check_fault_agents, load_script
 from antalate_lcm.runtime.scripted_operator import DirectionAt, Phase, ScriptedOperator
 from antalate_lcm.runtime.time_coordinator import SimulatedBus, TimeCoordinator, simulated_buses
+from antalate_lcm.transports import transport_for
 
 if TYPE_CHECKING:
     from antalate_lcm.apps.analysis import Analysis
@@ -53,8 +54,6 @@ if TYPE_CHECKING:
 
 #: Topics this process must hear or send when the agents are in other processes.
 _OPERATOR_TOPICS = ("MC_STATE", "TELEMETRY", "SWARM_OPERATOR_CMD", "SWARM_DIRECTION_CMD")
-#: Bus schemes that never leave a process.
-_IN_PROCESS = ("memq://", "file://")
 
 
 @dataclass(frozen=True)
@@ -108,16 +107,15 @@ def check_reach(config: Config, processes: int, recorded: str) -> None:
         return
     for topic in _OPERATOR_TOPICS:
         for name in config.topic_buses(topic):
-            url = config.buses.get(name, "")
-            if url.startswith(_IN_PROCESS):
+            url = config.buses.get(name)
+            if url is not None and not transport_for(url).crosses_processes:
                 raise ConfigError(
                     config.source,
                     f"buses.{name}",
                     f"a bus other processes reach (udpm:// or zenoh://) with --processes {processes}: "
                     f"{topic} travels on it and {url!r} stays inside one process",
                 )
-    url = config.buses[recorded]
-    if url.startswith(_IN_PROCESS):
+    if not transport_for(config.buses[recorded]).crosses_processes:
         raise ConfigError(
             config.source,
             f"buses.{recorded}",
@@ -349,7 +347,9 @@ def run(exp: Experiment) -> Outcome:
     elif clock is not None:
         # Simulated agents in one process on simulated time: a datagram through the kernel would
         # come back at a real moment, not a simulated one, so every bus stays in the process.
-        buses = {name: url if url.startswith(_IN_PROCESS) else "memq://" for name, url in buses.items()}
+        buses = {
+            name: "memq://" if transport_for(url).crosses_processes else url for name, url in buses.items()
+        }
     # One process: every agent's internal topics in memory, as `antalate agent` runs them, and the
     # whole swarm here (a peer behavior may hear its peers on memq://). Several: this process only
     # commands and records, on the configured buses.

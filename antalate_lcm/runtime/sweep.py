@@ -29,11 +29,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
 from typing import IO, Any
-from urllib.parse import urlsplit, urlunsplit
 
-from antalate_lcm.base.errors import AntalateError, ConfigError
+from antalate_lcm.base.errors import AntalateError, BusUnavailable, ConfigError
 from antalate_lcm.core.config import read_toml_file
 from antalate_lcm.runtime.sweep_spec import Point, Sweep, build, dumps_toml, parse_spec
+from antalate_lcm.transports import Transport, transport_for
 
 #: Port offset between two parallel slots' udpm:// buses.
 SLOT_PORT_STEP = 100
@@ -195,27 +195,29 @@ class _Run:
 
 
 def slot_buses(config: dict[str, Any], slot: int, jobs: int) -> None:
-    """Keep parallel runs apart: the ``udpm://`` buses of slot k on port + 100 k (none with one job)."""
+    """Keep parallel runs apart: each bus as its transport moves it for slot k (udpm: port + 100 k;
+    none with one job); a transport that cannot keep runs apart (zenoh) is refused."""
     buses = config.get("buses")
     if jobs <= 1 or not isinstance(buses, dict):
         return
     for name, url in buses.items():
-        if not isinstance(url, str):
+        transport = _transport(url)
+        if transport is None:
             continue
-        if url.startswith("zenoh://"):
-            raise AntalateError(
-                f"buses.{name} = {url!r}: parallel runs on one zenoh network would hear each other; "
-                "use --jobs 1, or memq:// / udpm:// buses"
-            )
-        if url.startswith("udpm://") and slot:
-            parts = urlsplit(url)
-            port = (parts.port or 7667) + SLOT_PORT_STEP * slot
-            if port > 65535:
-                raise AntalateError(
-                    f"buses.{name}: no port for parallel slot {slot} ({port} > 65535): use fewer --jobs"
-                )
-            netloc = f"{parts.hostname}:{port}"
-            buses[name] = urlunsplit(parts._replace(netloc=netloc))
+        try:
+            buses[name] = transport.for_slot(slot, SLOT_PORT_STEP)
+        except ValueError as exc:
+            raise AntalateError(f"buses.{name} = {url!r}: {exc}") from None
+
+
+def _transport(url: object) -> Transport | None:
+    """``url``'s transport; None for what is not a valid bus URL (the config's own check says why)."""
+    if not isinstance(url, str):
+        return None
+    try:
+        return transport_for(url)
+    except BusUnavailable:
+        return None
 
 
 def check_slots(sweep: Sweep, jobs: int) -> None:
@@ -225,8 +227,9 @@ def check_slots(sweep: Sweep, jobs: int) -> None:
         config, _ = sweep.documents(sweep.points[0])
         slot_buses(config, slot, jobs)
         for name, url in config.get("buses", {}).items():
-            if isinstance(url, str) and url.startswith("udpm://"):
-                port = urlsplit(url).port or 7667
+            transport = _transport(url)
+            if transport is not None and transport.apart_by_port:
+                port = transport.url.port
                 other = used.setdefault(port, (slot, name))
                 if other[0] != slot:
                     raise AntalateError(

@@ -88,6 +88,12 @@ class Zenoh(Transport):
     def open(self, *, max_message_size: int | None = None) -> Connection:
         return ZenohLCM(self.url.url, max_message_size=max_message_size)
 
+    def for_slot(self, slot: int, step: int) -> str:
+        """Runs on one Zenoh network hear each other whatever their ports: never apart."""
+        raise ValueError(
+            "parallel runs on one zenoh network would hear each other; use --jobs 1, or memq:// / udpm:// buses"
+        )
+
 
 _SPECIAL = ".^$*+?()[]{}|\\"
 _LITERAL = re.compile(r"(?:[^.^$*+?()\[\]{}|\\]|\\[.^$*+?()\[\]{}|\\])*")

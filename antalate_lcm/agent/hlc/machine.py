@@ -335,20 +335,24 @@ class HighLevelControl:
 
 
 __all__ = [
-    "HLC_TABLE",
-    "NOTHING",
-    "Action",
-    "ActionKind",
-    "Control",
-    "ErrorCode",
+    # defined here
     "HighLevelControl",
-    "HlcError",
-    "HlcEvent",
-    "HlcOutcome",
     "HlcParams",
+    # importable from here as before the split: the table (table.py)
+    "HLC_TABLE",
     "HlcRow",
-    "HlcTransition",
     "HlcView",
+    # its events (events.py)
+    "HlcEvent",
+    "Control",
     "classify",
     "pilot_in_control",
+    # what its rows ask of the node (effects.py)
+    "Action",
+    "ActionKind",
+    "ErrorCode",
+    "HlcError",
+    "HlcOutcome",
+    "HlcTransition",
+    "NOTHING",
 ]

@@ -106,7 +106,6 @@ _.set_refuse_arm  # SimAutopilot fault knobs for tests and the demo
 _.set_time_scale
 _.sim_time
 _.position_ne  # TelloAutopilot dead reckoning (tests/vehicles/test_tello_adapter.py)
-_.takeoff_point
 _.dead_reckoning_problem  # TelloAutopilot: the velocity unit check for tools (tests/vehicles/test_tello_adapter.py)
 _.from_wgs84  # crazyflie frames: the inverse, checked round trip (tests/vehicles/test_crazyflie_units.py)
 _.block_size  # crazyflie log blocks fit one packet (tests/vehicles/test_crazyflie_units.py)

@@ -34,17 +34,15 @@ from antalate_lcm.core.config import Config, load_config
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context, Node
 from antalate_lcm.core.simclock import SimClock
-from antalate_lcm.runtime.agent import (
-    agent_nodes,
-    run_processes,
-    shared_buses,
-)
+from antalate_lcm.runtime.agent import agent_nodes, run_processes, shared_buses
 from antalate_lcm.runtime.experiment_spec import (
     Experiment,
     check_interference,
     check_reach,
     check_simulated,
     default_log_path,
+    parse_speed,
+    parse_stall,
     prepare,
     record_bus,
 )
@@ -52,7 +50,12 @@ from antalate_lcm.runtime.launch import run_until_signal
 from antalate_lcm.runtime.recorder import LogRecorder
 from antalate_lcm.runtime.script import Script, load_script
 from antalate_lcm.runtime.scripted_operator import DirectionAt, Phase, ScriptedOperator
-from antalate_lcm.runtime.time_coordinator import SimulatedBus, TimeCoordinator, simulated_buses
+from antalate_lcm.runtime.time_coordinator import (
+    DEFAULT_STALL,
+    SimulatedBus,
+    TimeCoordinator,
+    simulated_buses,
+)
 from antalate_lcm.transports import transport_for
 
 if TYPE_CHECKING:
@@ -196,7 +199,9 @@ def run(exp: Experiment) -> Outcome:
     buses = shared_buses(configs)
     # Several processes on simulated time: one clock for all, served from here (time_coordinator).
     coordinator = (
-        TimeCoordinator(processes + 1, exp.speed) if exp.speed is not None and processes > 1 else None
+        TimeCoordinator(processes + 1, exp.speed, exp.stall_timeout)
+        if exp.speed is not None and processes > 1
+        else None
     )
     clock = None if exp.speed is None else SimClock(math.inf if coordinator else exp.speed, held=True)
     crossing: list[str] = []
@@ -410,6 +415,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             log_level=args.log_level,
             speed=args.speed,
             seed=args.seed,
+            stall_timeout=args.stall_timeout,
         )
     )
     print(json.dumps(outcome.to_json(), indent=1) if args.json else outcome.text(), flush=True)
@@ -452,19 +458,14 @@ def run_arguments(p: argparse.ArgumentParser) -> None:
         help="the script's seed; with --speed the run (its log, byte for byte) is a function of "
         "config, script and S, and `antalate replay LOG` checks it",
     )
-
-
-def parse_speed(text: str) -> float:
-    """``--speed``: ``max`` (math.inf) or a number > 0."""
-    if text == "max":
-        return math.inf
-    try:
-        speed = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'max' or a number > 0, got {text!r}") from None
-    if not speed > 0 or math.isinf(speed):
-        raise argparse.ArgumentTypeError(f"'max' or a number > 0, got {text!r}")
-    return speed
+    p.add_argument(
+        "--stall-timeout",
+        type=parse_stall,
+        default=DEFAULT_STALL,
+        metavar="S",
+        help="with --speed and --processes: an agent process silent for S real seconds is taken as "
+        f"hung; the run stops with its name and it is killed (default {DEFAULT_STALL:g})",
+    )
 
 
 __all__ = [
@@ -476,6 +477,7 @@ __all__ = [
     "cmd_run",
     "default_log_path",
     "parse_speed",
+    "parse_stall",
     "prepare",
     "record_bus",
     "run",

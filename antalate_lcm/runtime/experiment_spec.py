@@ -2,11 +2,13 @@
 flies (:func:`prepare`): the config and its plugins (as ``antalate agent``), the script (one line
 naming the key), the recorded bus, and that this process can hear and command agents that run in
 other processes (buses their transport carries across processes). ``antalate sweep`` runs the same
-checks on every point of a sweep before its first run.
+checks on every point of a sweep before its first run. The argument types of ``--speed`` and
+``--stall-timeout`` are here too: they are values of an :class:`Experiment`.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import time
@@ -17,6 +19,7 @@ from antalate_lcm.base.errors import AntalateError, ConfigError
 from antalate_lcm.core.config import Config, check_unique_agent_names, load_config
 from antalate_lcm.runtime.agent import swarm_configs, validate
 from antalate_lcm.runtime.script import Script, check_fault_agents
+from antalate_lcm.runtime.time_coordinator import DEFAULT_STALL
 from antalate_lcm.transports import transport_for
 
 #: Topics this process must hear or send when the agents are in other processes.
@@ -44,6 +47,9 @@ class Experiment:
     seed: int | None = None
     #: False: no metrics at the end (benchmarks/simtime.py times the flight, not the analysis).
     measure: bool = True
+    #: ``--stall-timeout``: real seconds an agent process on the shared clock may go silent
+    #: before it is taken as hung (``--speed`` with ``--processes``).
+    stall_timeout: float = DEFAULT_STALL
 
 
 def default_log_path() -> str:
@@ -161,12 +167,38 @@ def check_interference(exp: Experiment, script: Script, configs: list[Config]) -
         )
 
 
+def parse_speed(text: str) -> float:
+    """``--speed``: ``max`` (math.inf) or a number > 0."""
+    if text == "max":
+        return math.inf
+    try:
+        speed = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'max' or a number > 0, got {text!r}") from None
+    if not speed > 0 or math.isinf(speed):
+        raise argparse.ArgumentTypeError(f"'max' or a number > 0, got {text!r}")
+    return speed
+
+
+def parse_stall(text: str) -> float:
+    """``--stall-timeout``: a number of seconds > 0 (not NaN, not infinite: a hang must end)."""
+    try:
+        seconds = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a number of seconds > 0, got {text!r}") from None
+    if not 0 < seconds < math.inf:
+        raise argparse.ArgumentTypeError(f"a number of seconds > 0, got {text!r}")
+    return seconds
+
+
 __all__ = [
     "Experiment",
     "check_interference",
     "check_reach",
     "check_simulated",
     "default_log_path",
+    "parse_speed",
+    "parse_stall",
     "prepare",
     "record_bus",
 ]

@@ -21,6 +21,11 @@ deterministic is said there); here is only its I/O:
 - A process whose socket closes before the run ends (it died, it was killed) stops the run: the
   coordinator says which one and at what simulated time (:attr:`TimeCoordinator.failure`), and
   sets :attr:`TimeCoordinator.lost` for ``antalate run`` to stop the others.
+- A process that hangs (a behavior in an endless loop, a process stopped by SIGSTOP or a
+  debugger) holds every other one, since time moves only once all have reported. A watchdog
+  thread takes a process that owes a report for ``stall`` real seconds (``antalate run
+  --stall-timeout``) as hung: it says which, stops the run the same way and kills that process
+  (its pid came with its hello), which could not stop in order anyway.
 
 The frames, both ways: kind (1 byte), round (u64), a float (a report's next timer, an answer's
 time, a hello's process index), the payload's length (u32), the payload (messages; the
@@ -70,6 +75,10 @@ _FRAME = struct.Struct("<cQdI")
 _HELLO, _INTEREST, _REPORT, _DELIVER, _ADVANCE = b"H", b"I", b"R", b"D", b"A"
 #: Longest real wait (s) of the coordinator between two looks at whether it is being closed.
 _PACE_STEP = 0.05
+#: Real seconds an agent process may owe its report before the watchdog takes it as hung
+#: (``antalate run --stall-timeout``): far above a round's cost (milliseconds at 1,000 agents,
+#: seconds for a process swapped out on a loaded machine), far below a user giving up.
+DEFAULT_STALL = 60.0
 
 
 def simulated_buses(buses: Mapping[str, str]) -> tuple[dict[str, str], list[str]]:
@@ -214,7 +223,7 @@ class SocketLink(ClockLink):
         sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
             sock.connect(self._address)
-            sock.sendall(_frame(_HELLO, 0, float(self.index)))
+            sock.sendall(_frame(_HELLO, 0, float(self.index), str(os.getpid()).encode()))
         except OSError as exc:
             sock.close()
             raise AntalateError(f"cannot join the simulated clock at {self._address}: {exc}") from None
@@ -301,9 +310,14 @@ class TimeCoordinator:
     round that concerns only this process (the recorder given the agents' messages) costs no
     system call."""
 
-    def __init__(self, count: int, speed: float = math.inf) -> None:
+    def __init__(self, count: int, speed: float = math.inf, stall: float = DEFAULT_STALL) -> None:
         self.count = count
         self.speed = speed
+        self.stall = stall
+        #: Each agent process's pid, from its hello: the watchdog kills a hung one.
+        self._pids: list[int | None] = [None] * count
+        #: When the last round was decided (real, monotonic); None until the first one.
+        self._progress: float | None = None
         self._dir = tempfile.mkdtemp(prefix="antalate-clock-")
         self.address = os.path.join(self._dir, "clock")
         self._server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -337,6 +351,7 @@ class TimeCoordinator:
         self._local, self._executor = link, executor
         clock.link = link
         executor.add_reader(self._server.fileno(), self._accept)
+        threading.Thread(target=self._watch, name="clock-watchdog", daemon=True).start()
 
     def finish(self) -> None:
         """The run has ended: processes leaving now are stopping, not failing."""
@@ -406,6 +421,7 @@ class TimeCoordinator:
                     return False
                 peer.index = index
                 self._peers[index] = peer
+                self._pids[index] = int(payload) if payload.isdigit() else None
             elif kind == _INTEREST and peer.index is not None:
                 # At once: its report may come in a later read (a thousand agents' subscriptions
                 # are more than one read), and it must be known before that report is.
@@ -418,7 +434,7 @@ class TimeCoordinator:
         peer.sock.close()
         if peer.index is not None:
             self._peers[peer.index] = None
-        if self._finished:
+        if self._finished or self.lost.is_set():  # already stopping (the watchdog killed it): said
             return
         who = f"agent process {peer.index} of {self.count - 1}"
         if peer.index is None:
@@ -439,6 +455,7 @@ class TimeCoordinator:
             return
         self._round += 1
         self.rounds += 1
+        self._progress = time.monotonic()
         wake = woken(decision)
         self._reports = remaining(self._reports, decision)
         for i in wake:
@@ -462,6 +479,41 @@ class TimeCoordinator:
         real0, sim0 = self._paced
         while not self._finished and (wait := pace(self.speed, real0, sim0, t, time.monotonic())) > 0:
             time.sleep(min(wait, _PACE_STEP))
+            self._progress = time.monotonic()  # waiting on purpose, not on a process
+
+    def _watch(self) -> None:
+        """The watchdog (its own thread): a round not decided for ``stall`` s names the processes
+        that owe their report, stops the run and kills them. It counts from the first round on,
+        so a slow start (a thousand agents' nodes, time held) is not taken for a hang."""
+        step = min(1.0, self.stall / 4)
+        while not (self._finished or self.lost.is_set()):
+            time.sleep(step)
+            since = self._progress
+            if since is None or time.monotonic() - since < self.stall or self._finished:
+                continue
+            owing = [
+                i for i, r in enumerate(self._reports) if r is None and i > 0 and self._peers[i] is not None
+            ]
+            if not owing:  # this process itself is busy (it cannot be waiting on itself): not a hang
+                continue
+            names = ", ".join(self._named(i) for i in owing)
+            self.failure = (
+                f"{names} sent nothing for {self.stall:g} s of real time at {self.t - SIM_START:.3f} s "
+                "of simulated time (it hangs or was stopped, and every other process waits for it; "
+                "--stall-timeout sets how long); the run stops and it is killed"
+            )
+            log.error("%s", self.failure)
+            self.lost.set()
+            for i in owing:
+                pid = self._pids[i]
+                if pid is not None:
+                    with contextlib.suppress(OSError):
+                        os.kill(pid, signal.SIGKILL)
+            return
+
+    def _named(self, index: int) -> str:
+        pid = self._pids[index]
+        return f"agent process {index} of {self.count - 1}" + (f" (pid {pid})" if pid is not None else "")
 
     def _answer(self, index: int, kind: bytes, value: float, payload: bytes) -> None:
         if index == 0:

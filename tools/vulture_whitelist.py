@@ -14,9 +14,6 @@ from vulture.whitelist_utils import Whitelist
 
 _ = Whitelist()
 
-# --- Python's module protocol: lazy exports (PEP 562), called by the import system.
-_.__getattr__
-
 # --- Entry points (pyproject [project.entry-points]): loaded by name through importlib.metadata.
 _.SimAutopilot
 _.AutoOperator

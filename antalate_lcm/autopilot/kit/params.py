@@ -15,7 +15,7 @@ from pydantic import BaseModel, ConfigDict
 
 from antalate_lcm.base.strict import StrictError, validate_strict
 
-__all__ = ["AdapterParams", "defaults", "parse_params"]
+__all__ = ["AdapterParams", "defaults", "parse_params", "require_duration"]
 
 
 class AdapterParams(BaseModel):
@@ -43,3 +43,13 @@ def parse_params(model: type[P], raw: Any, adapter: str) -> P:
 def defaults(model: type[BaseModel]) -> dict[str, Any]:
     """Every parameter of `model` with its default, by name (for docs and their checks)."""
     return {name: field.default for name, field in model.model_fields.items()}
+
+
+def require_duration(key: str, value: float, minimum: float, shorter_than: str) -> None:
+    """`ValueError` if the duration `key` (`value` s) is under `minimum` s, saying it is `shorter_than` what.
+
+    For a model validator: a timer that watches a periodic stream (a link's staleness, a set-point's
+    renewal) must span a few of its periods, or it fires on a healthy link.
+    """
+    if value < minimum:
+        raise ValueError(f"{key} {value:g} s is shorter than {shorter_than}")

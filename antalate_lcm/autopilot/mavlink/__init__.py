@@ -1,6 +1,8 @@
 """The ``mavlink`` autopilot adapter (ArduCopter through pymavlink), split by job:
 
-* `adapter` -- `MavlinkAutopilot`: the threads, the commands and their waits;
+* `adapter` -- `MavlinkAutopilot`: the HLC's verbs (arm, take-off, modes, velocities, the state);
+* `commands` -- COMMAND_LONG and its ACK, confirmed mode changes, parameters, the pre-flight check;
+* `connection` -- the link, the receive and transmit threads, the vehicle's picture, the velocity resend;
 * `link` -- the I/O: `MavLink`, pymavlink's connection (`PymavlinkLink`) and `MemoryLink` for tests;
 * `dialect` -- ArduCopter's mode numbers, names and the messages sent (pure);
 * `vehicle` -- the vehicle's picture from its telemetry, COMMAND_ACK matching (pure);

@@ -10,70 +10,44 @@ from typing import Any
 
 from pydantic import Field, field_validator, model_validator
 
-from antalate_lcm.autopilot.kit.params import AdapterParams, defaults
+from antalate_lcm.autopilot.kit.params import AdapterParams, defaults, require_duration
 
 
 class Params(AdapterParams):
     """Every adapter parameter with its default; docs/ardupilot.md has the same table for people."""
 
-    connection: str = Field(
-        "tcp:127.0.0.1:5760",
-        description='pymavlink connection string: "tcp:HOST:PORT", "udpin:HOST:PORT", "udpout:HOST:PORT", '
-        'or a serial device such as "/dev/ttyACM0" (with `baud`)',
-    )
-    baud: int = Field(115200, ge=1, le=10_000_000, description="serial baud rate (serial links only)")
-    source_system: int = Field(245, ge=1, le=255, description="our MAVLink system id (see SYSID_MYGCS)")
-    source_component: int = Field(
-        191, ge=0, le=255, description="our component id (MAV_COMP_ID_ONBOARD_COMPUTER)"
-    )
-    target_system: int = Field(0, ge=0, le=255, description="the autopilot's system id; 0 = the first heard")
-    target_component: int = Field(0, ge=0, le=255, description="the autopilot's component id; 0 = AUTOPILOT1")
-    connect_timeout: float = Field(10.0, gt=0, description="s to open the link and hear the first HEARTBEAT")
-    ready_timeout: float = Field(30.0, gt=0, description="s arm() waits for STANDBY, EKF position and 3D fix")
-    ack_timeout: float = Field(
-        1.5, gt=0, description="s per COMMAND_ACK / PARAM_VALUE attempt (two attempts)"
-    )
-    mode_timeout: float = Field(3.0, gt=0, description="s for a HEARTBEAT to confirm a mode change or arming")
-    stream_rate_hz: float = Field(5.0, gt=0, description="telemetry rate asked of the autopilot")
-    velocity_resend_hz: float = Field(
-        4.0,
-        ge=0,
-        description="resend rate of the current velocity set-point in GUIDED flight; 0 = never resend",
-    )
-    setpoint_timeout: float = Field(
-        1.0,
-        gt=0,
-        le=10.0,
-        description="s after the HLC's set_velocity() call beyond which that set-point is never sent again",
-    )
-    link_stale_after: float = Field(
-        1.0,
-        gt=0,
-        description="s without any message from the vehicle after which no set-point is sent (none is "
-        "queued in a socket buffer during a cut); when the link returns a stop is sent at once",
-    )
-    heartbeat_hz: float = Field(1.0, gt=0, description="our GCS HEARTBEAT rate")
-    cells: int = Field(
-        0,
-        ge=0,
-        le=24,
-        description="battery cells in series; 0 = learn from BATTERY_STATUS per-cell voltages, else unknown",
-    )
-    check_vehicle: bool = Field(True, description="read the vehicle's failsafe parameters on connect")
-    configure_vehicle: bool = Field(
-        False, description="write the failsafe parameters the pre-flight check finds wrong (PARAM_SET)"
-    )
-    require_vehicle_failsafes: bool = Field(
-        False, description="refuse to arm while a failsafe parameter is wrong or unread"
-    )
-    max_guid_timeout: float = Field(
-        3.0, gt=0, le=5.0, description="largest GUID_TIMEOUT (s) the pre-flight check accepts"
-    )
-    signing_key: str = Field(
-        "",
-        description="MAVLink 2 signing: 64 hex digits (the key) or a passphrase (key = SHA-256 of it, "
-        "as MAVProxy's `signing setup`); empty = no signing",
-    )
+    # pymavlink connection string: "tcp:HOST:PORT", "udpin:HOST:PORT", "udpout:HOST:PORT", or a serial
+    # device such as "/dev/ttyACM0" (with `baud`)
+    connection: str = "tcp:127.0.0.1:5760"
+    baud: int = Field(115200, ge=1, le=10_000_000)  # serial baud rate (serial links only)
+    source_system: int = Field(245, ge=1, le=255)  # our MAVLink system id (see SYSID_MYGCS)
+    source_component: int = Field(191, ge=0, le=255)  # our component id (MAV_COMP_ID_ONBOARD_COMPUTER)
+    target_system: int = Field(0, ge=0, le=255)  # the autopilot's system id; 0 = the first heard
+    target_component: int = Field(0, ge=0, le=255)  # the autopilot's component id; 0 = AUTOPILOT1
+    connect_timeout: float = Field(10.0, gt=0)  # s to open the link and hear the first HEARTBEAT
+    ready_timeout: float = Field(30.0, gt=0)  # s arm() waits for STANDBY, EKF position and 3D fix
+    ack_timeout: float = Field(1.5, gt=0)  # s per COMMAND_ACK / PARAM_VALUE attempt (two attempts)
+    mode_timeout: float = Field(3.0, gt=0)  # s for a HEARTBEAT to confirm a mode change or arming
+    stream_rate_hz: float = Field(5.0, gt=0)  # telemetry rate asked of the autopilot
+    # resend rate of the current velocity set-point in GUIDED flight; 0 = never resend
+    velocity_resend_hz: float = Field(4.0, ge=0)
+    # s after the HLC's set_velocity() call beyond which that set-point is never sent again
+    setpoint_timeout: float = Field(1.0, gt=0, le=10.0)
+    # s without any message from the vehicle after which no set-point is sent (none is queued in a
+    # socket buffer during a cut); when the link returns a stop is sent at once
+    link_stale_after: float = Field(1.0, gt=0)
+    heartbeat_hz: float = Field(1.0, gt=0)  # our GCS HEARTBEAT rate
+    # battery cells in series; 0 = learn from BATTERY_STATUS per-cell voltages, else unknown
+    cells: int = Field(0, ge=0, le=24)
+    check_vehicle: bool = True  # read the vehicle's failsafe parameters on connect
+    # write the failsafe parameters the pre-flight check finds wrong (PARAM_SET)
+    configure_vehicle: bool = False
+    require_vehicle_failsafes: bool = False  # refuse to arm while a failsafe parameter is wrong or unread
+    # largest GUID_TIMEOUT (s) the pre-flight check accepts
+    max_guid_timeout: float = Field(3.0, gt=0, le=5.0)
+    # MAVLink 2 signing: 64 hex digits (the key) or a passphrase (key = SHA-256 of it, as MAVProxy's
+    # `signing setup`); empty = no signing
+    signing_key: str = ""
 
     @field_validator("connection")
     @classmethod
@@ -86,12 +60,14 @@ class Params(AdapterParams):
     @model_validator(mode="after")
     def _stale_after_streams(self) -> Params:
         # A healthy link must never look stale: at least two telemetry periods of silence.
-        if self.link_stale_after < 2.0 / self.stream_rate_hz:
-            raise ValueError(
-                f"link_stale_after {self.link_stale_after:g} s is shorter than two telemetry periods "
-                f"at stream_rate_hz {self.stream_rate_hz:g}: a healthy link would look stale "
-                f"(use >= {2.0 / self.stream_rate_hz:g} s)"
-            )
+        rate = self.stream_rate_hz
+        require_duration(
+            "link_stale_after",
+            self.link_stale_after,
+            2.0 / rate,
+            f"two telemetry periods at stream_rate_hz {rate:g}: a healthy link would look stale "
+            f"(use >= {2.0 / rate:g} s)",
+        )
         return self
 
 

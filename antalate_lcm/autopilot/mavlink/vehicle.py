@@ -12,7 +12,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
@@ -133,10 +133,13 @@ class Vehicle:
         # No EXTENDED_SYS_STATE: ArduCopter is ACTIVE while armed, so an armed vehicle counts as flying.
         return self.armed and self.system_status in FLYING_STATUS
 
+    #: The mode in which velocity targets fly the vehicle (ArduCopter's GUIDED; PX4's OFFBOARD).
+    velocity_mode: ClassVar[str] = "GUIDED"
+
     @property
     def flying_guided(self) -> bool:
-        """Armed, in GUIDED and in the air: the only time a velocity target moves the copter."""
-        return self.armed and self.mode == "GUIDED" and self.in_air
+        """Armed, in `velocity_mode` and in the air: the only time a velocity target moves the vehicle."""
+        return self.armed and self.mode == self.velocity_mode and self.in_air
 
     @property
     def ekf_ok(self) -> bool:

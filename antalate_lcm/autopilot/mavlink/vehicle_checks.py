@@ -11,7 +11,7 @@ libraries/AC_Fence, libraries/AP_BattMonitor); see docs/ardupilot.md.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
 #: Copter 4.7 renamed SYSID_MYGCS to MAV_GCS_SYSID; whichever the vehicle has is checked.
@@ -66,6 +66,50 @@ class Finding:
         return f"{self.param} {shown} ({self.why}): {fix}"
 
 
+NOT_READ = "not read from the vehicle"
+
+
+@dataclass(frozen=True)
+class Rule:
+    """A parameter whose value can leave the vehicle unprotected (ArduCopter's here, PX4's in `px4`).
+
+    `bad` says which values do, `want` is the value to set instead (None: only a person can choose),
+    `why` the reason shown (given the value when it names it). A `required` parameter the vehicle did
+    not report is a finding too; any other is left alone (an older firmware may lack it).
+    """
+
+    param: str
+    bad: Callable[[float], bool]
+    want: float | None
+    why: str | Callable[[float], str]
+    required: bool = False
+
+    def finding(self, values: Mapping[str, float]) -> Finding | None:
+        value = values.get(self.param)
+        if value is None or not math.isfinite(value):
+            return Finding(self.param, None, None, NOT_READ) if self.required else None
+        if not self.bad(float(value)):
+            return None
+        why = self.why if isinstance(self.why, str) else self.why(float(value))
+        return Finding(self.param, float(value), self.want, why)
+
+
+def one_of(*codes: int) -> Callable[[float], bool]:
+    """`Rule.bad` for an enumerated parameter: its value rounds to one of `codes`."""
+    return lambda value: round(value) in codes
+
+
+def above(limit: float) -> Callable[[float], bool]:
+    """`Rule.bad` for a timeout: longer than `limit` (by more than a float's rounding)."""
+    return lambda value: value > limit + 1e-6
+
+
+def findings(rules: Iterable[Rule], values: Mapping[str, float], unread: Iterable[str] = ()) -> list[Finding]:
+    """`unread` parameters missing from `values` first, then what each of `rules` finds, in order."""
+    found = [Finding(n, None, None, NOT_READ) for n in unread if n not in values]
+    return found + [f for rule in rules if (f := rule.finding(values)) is not None]
+
+
 def gcs_sysid_name(values: Mapping[str, float]) -> str:
     """The name this firmware uses for the GCS system id (SYSID_MYGCS unless only MAV_GCS_SYSID was read)."""
     return next((n for n in GCS_SYSID_NAMES if n in values), GCS_SYSID_NAMES[0])
@@ -75,66 +119,32 @@ def check(
     values: Mapping[str, float], *, source_system: int, max_guid_timeout: float, cells: int
 ) -> list[Finding]:
     """Every finding for the parameter `values` read from the vehicle (empty: its failsafes protect it)."""
-    findings: list[Finding] = []
-    missing = [n for n in READ if n not in values and n not in _OPTIONAL]
-    findings += [Finding(n, None, None, "not read from the vehicle") for n in missing]
-
-    def get(name: str) -> float | None:
-        value = values.get(name)
-        return None if value is None or not math.isfinite(value) else float(value)
-
-    fs_gcs = get("FS_GCS_ENABLE")
-    if fs_gcs is not None and round(fs_gcs) == 0:
-        findings.append(
-            Finding(
-                "FS_GCS_ENABLE",
-                fs_gcs,
-                FS_GCS_RTL,
-                "GCS failsafe off: if antalate dies in flight the copter hovers until its battery fails",
-            )
-        )
-    sysid_name = gcs_sysid_name(values)
-    sysid = get(sysid_name)
-    if sysid is None:
-        findings.append(Finding(sysid_name, None, None, "not read from the vehicle"))
-    elif round(sysid) != source_system:
-        findings.append(
-            Finding(
-                sysid_name,
-                sysid,
-                source_system,
-                f"the GCS failsafe watches system {sysid:g}, antalate sends as {source_system}",
-            )
-        )
-    guid = get("GUID_TIMEOUT")
-    if guid is not None and guid > max_guid_timeout + 1e-6:
-        findings.append(
-            Finding(
-                "GUID_TIMEOUT", guid, max_guid_timeout, f"a dead HLC's last velocity is flown for {guid:g} s"
-            )
-        )
-    fence = get("FENCE_ENABLE")
-    if fence is not None and round(fence) == 0:
-        findings.append(Finding("FENCE_ENABLE", fence, 1, "no geofence"))
-    action = get("FENCE_ACTION")
-    if action is not None and round(action) == 0:
-        findings.append(Finding("FENCE_ACTION", action, FENCE_RTL_OR_LAND, "a fence breach is only reported"))
-    monitor = get("BATT_MONITOR")
-    if monitor is not None and round(monitor) == 0:
-        findings.append(Finding("BATT_MONITOR", monitor, None, "no battery monitor: no battery failsafe"))
-    low_act = get("BATT_FS_LOW_ACT")
-    if low_act is not None and round(low_act) == 0:
-        findings.append(Finding("BATT_FS_LOW_ACT", low_act, BATT_FS_RTL, "a low battery does nothing"))
-    low_volt = get("BATT_LOW_VOLT")
-    if low_volt is not None and low_volt <= 0.0:
-        want = round(LOW_VOLT_PER_CELL * cells, 2) if cells > 0 else None
-        findings.append(
-            Finding(
-                "BATT_LOW_VOLT",
-                low_volt,
-                want,
-                "no low-voltage failsafe"
-                + ("" if cells > 0 else " (set the adapter's `cells` to let it choose)"),
-            )
-        )
-    return findings
+    low_volt = round(LOW_VOLT_PER_CELL * cells, 2) if cells > 0 else None
+    cells_hint = "" if cells > 0 else " (set the adapter's `cells` to let it choose)"
+    rules = (
+        Rule(
+            "FS_GCS_ENABLE",
+            one_of(0),
+            FS_GCS_RTL,
+            "GCS failsafe off: if antalate dies in flight the copter hovers until its battery fails",
+        ),
+        Rule(
+            gcs_sysid_name(values),
+            lambda sysid: round(sysid) != source_system,
+            source_system,
+            lambda sysid: f"the GCS failsafe watches system {sysid:g}, antalate sends as {source_system}",
+            required=True,
+        ),
+        Rule(
+            "GUID_TIMEOUT",
+            above(max_guid_timeout),
+            max_guid_timeout,
+            lambda guid: f"a dead HLC's last velocity is flown for {guid:g} s",
+        ),
+        Rule("FENCE_ENABLE", one_of(0), 1, "no geofence"),
+        Rule("FENCE_ACTION", one_of(0), FENCE_RTL_OR_LAND, "a fence breach is only reported"),
+        Rule("BATT_MONITOR", one_of(0), None, "no battery monitor: no battery failsafe"),
+        Rule("BATT_FS_LOW_ACT", one_of(0), BATT_FS_RTL, "a low battery does nothing"),
+        Rule("BATT_LOW_VOLT", lambda volts: volts <= 0.0, low_volt, "no low-voltage failsafe" + cells_hint),
+    )
+    return findings(rules, values, unread=[n for n in READ if n not in _OPTIONAL])

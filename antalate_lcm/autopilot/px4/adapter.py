@@ -33,7 +33,7 @@ from typing import ClassVar
 from pydantic import BaseModel
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm.autopilot.base import AutopilotError, Frame, check_takeoff_altitude
+from antalate_lcm.autopilot.base import AutopilotError, Frame
 from antalate_lcm.autopilot.mavlink.adapter import MavlinkAutopilot
 from antalate_lcm.autopilot.mavlink.vehicle_checks import Finding
 from antalate_lcm.autopilot.px4 import modes, vehicle_checks
@@ -84,24 +84,17 @@ class Px4Autopilot(MavlinkAutopilot):
     def _armed_in(self, mode: str) -> None:
         self._px4v.ours = mode == modes.HOLD
 
-    def takeoff(self, alt: float) -> None:
-        """NAV_TAKEOFF to home + `alt` (AMSL, as PX4 reads param7); PX4 holds there when it arrives."""
-        check_takeoff_altitude(alt)
-        with self._cmd_lock:
-            self._require_link("takeoff")
-            self._clear_setpoint()
-            with self._cond:
-                home = self._v.home
-                mark, mode, armed = self._v.messages, self._v.mode, self._v.armed
-                self._v.commanded = ("AUTO.TAKEOFF", self.clock())
-            if home is None:
-                raise AutopilotError(
-                    "takeoff refused: PX4 has sent no HOME_POSITION (needed for an AMSL altitude)"
-                )
-            nan = float("nan")
-            result = self._command(mav.MAV_CMD_NAV_TAKEOFF, -1, 0, 0, nan, nan, nan, home[2] + float(alt))
-            self._check_takeoff_accepted(result, alt, mode, armed, mark)
-            log.info("taking off to %g m (%.2f m AMSL)", alt, home[2] + alt)
+    def _takeoff_target(self, alt: float) -> tuple[tuple[float, ...], str]:
+        """Home + `alt`, AMSL as PX4's navigator reads param7; PX4 holds there when it arrives (lock held)."""
+        home = self._v.home
+        self._v.commanded = ("AUTO.TAKEOFF", self.clock())
+        if home is None:
+            raise AutopilotError(
+                "takeoff refused: PX4 has sent no HOME_POSITION (needed for an AMSL altitude)"
+            )
+        amsl = home[2] + float(alt)
+        nan = float("nan")
+        return (-1, 0, 0, nan, nan, nan, amsl), f"{alt:g} m ({amsl:.2f} m AMSL)"
 
     def hold(self) -> None:
         """Hold position in PX4's Hold (AUTO.LOITER); the set-point stream stops."""

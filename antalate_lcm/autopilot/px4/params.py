@@ -16,29 +16,14 @@ from antalate_lcm.autopilot.mavlink.params import Params
 class Px4Params(Params):
     """`Params` with PX4's defaults: the offboard link of SITL instance 0, set-points streamed at 10 Hz."""
 
-    connection: str = Field(
-        "udpin:127.0.0.1:14540",
-        description="pymavlink connection string; PX4 SITL instance N sends its offboard link to "
-        "udpin:127.0.0.1:(14540+N)",
-    )
-    velocity_resend_hz: float = Field(
-        10.0,
-        ge=2.0,
-        le=50.0,
-        description="rate of the OFFBOARD set-point stream (PX4 needs >= 2 Hz, COM_OF_LOSS_T)",
-    )
-    offboard_lead: float = Field(
-        1.0,
-        ge=0.2,
-        le=5.0,
-        description="s the set-point stream runs before the adapter asks PX4 for OFFBOARD",
-    )
-    max_offboard_loss_timeout: float = Field(
-        1.0,
-        gt=0,
-        le=5.0,
-        description="largest COM_OF_LOSS_T (s) the pre-flight check accepts",
-    )
+    # PX4 SITL instance N sends its offboard link to udpin:127.0.0.1:(14540+N)
+    connection: str = "udpin:127.0.0.1:14540"
+    # rate of the OFFBOARD set-point stream (PX4 needs >= 2 Hz, COM_OF_LOSS_T)
+    velocity_resend_hz: float = Field(10.0, ge=2.0, le=50.0)
+    # s the set-point stream runs before the adapter asks PX4 for OFFBOARD
+    offboard_lead: float = Field(1.0, ge=0.2, le=5.0)
+    # largest COM_OF_LOSS_T (s) the pre-flight check accepts
+    max_offboard_loss_timeout: float = Field(1.0, gt=0, le=5.0)
 
     @model_validator(mode="after")
     def _no_arducopter_keys(self) -> Px4Params:

@@ -88,10 +88,7 @@ class Px4Vehicle(Vehicle):
     def mode(self) -> str:
         return "" if self.custom_mode is None else modes.mode_name(self.custom_mode)
 
-    @property
-    def flying_guided(self) -> bool:
-        """Armed, in OFFBOARD and in the air: the only time a velocity set-point moves the vehicle."""
-        return self.armed and self.mode == "OFFBOARD" and self.in_air
+    velocity_mode = "OFFBOARD"  # the only mode in which a velocity set-point moves the vehicle
 
     @property
     def ekf_ok(self) -> bool:

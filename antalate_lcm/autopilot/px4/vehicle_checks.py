@@ -20,10 +20,9 @@ after GUID_TIMEOUT), and antalate gone for COM_DL_LOSS_T brings it **home** (as 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 
-from antalate_lcm.autopilot.mavlink.vehicle_checks import Finding
+from antalate_lcm.autopilot.mavlink.vehicle_checks import Finding, Rule, above, findings, one_of
 
 READ = (
     "COM_OF_LOSS_T",
@@ -45,46 +44,26 @@ GF_RETURN = 3  # GF_ACTION: Return
 
 def check(values: Mapping[str, float], *, max_offboard_loss_timeout: float) -> list[Finding]:
     """Every finding for the PX4 parameter `values` (empty: PX4's failsafes protect the vehicle)."""
-    findings = [Finding(n, None, None, "not read from the vehicle") for n in READ if n not in values]
-
-    def get(name: str) -> float | None:
-        value = values.get(name)
-        return None if value is None or not math.isfinite(value) else float(value)
-
-    loss_t = get("COM_OF_LOSS_T")
-    if loss_t is not None and loss_t > max_offboard_loss_timeout + 1e-6:
-        findings.append(
-            Finding(
-                "COM_OF_LOSS_T",
-                loss_t,
-                max_offboard_loss_timeout,
-                f"a silent antalate's last set-point is flown for {loss_t:g} s",
-            )
-        )
-    obl = get("COM_OBL_RC_ACT")
-    if obl is not None and round(obl) in OBL_NEEDS_PILOT:
-        findings.append(
-            Finding(
-                "COM_OBL_RC_ACT",
-                obl,
-                OBL_HOLD,
-                "offboard loss hands over to a pilot's sticks (Position/Altitude/Stabilized)",
-            )
-        )
-    dll = get("NAV_DLL_ACT")
-    if dll is not None and round(dll) == 0:
-        findings.append(
-            Finding(
-                "NAV_DLL_ACT",
-                dll,
-                DLL_RETURN,
-                "data link loss off: if antalate dies in flight PX4 holds until its battery fails",
-            )
-        )
-    low = get("COM_LOW_BAT_ACT")
-    if low is not None and round(low) == 0:
-        findings.append(Finding("COM_LOW_BAT_ACT", low, LOW_BAT_RETURN, "a low battery is only a warning"))
-    gf = get("GF_ACTION")
-    if gf is not None and round(gf) in (0, 1):
-        findings.append(Finding("GF_ACTION", gf, GF_RETURN, "a geofence breach is only reported"))
-    return findings
+    rules = (
+        Rule(
+            "COM_OF_LOSS_T",
+            above(max_offboard_loss_timeout),
+            max_offboard_loss_timeout,
+            lambda loss_t: f"a silent antalate's last set-point is flown for {loss_t:g} s",
+        ),
+        Rule(
+            "COM_OBL_RC_ACT",
+            one_of(*OBL_NEEDS_PILOT),
+            OBL_HOLD,
+            "offboard loss hands over to a pilot's sticks (Position/Altitude/Stabilized)",
+        ),
+        Rule(
+            "NAV_DLL_ACT",
+            one_of(0),
+            DLL_RETURN,
+            "data link loss off: if antalate dies in flight PX4 holds until its battery fails",
+        ),
+        Rule("COM_LOW_BAT_ACT", one_of(0), LOW_BAT_RETURN, "a low battery is only a warning"),
+        Rule("GF_ACTION", one_of(0, 1), GF_RETURN, "a geofence breach is only reported"),
+    )
+    return findings(rules, values, unread=READ)

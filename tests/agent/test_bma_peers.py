@@ -3,8 +3,6 @@ agent's own messages heard once, and a config that would split the swarm refused
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -24,7 +22,7 @@ from antalate_lcm.msgs import mc_state_t, telemetry_t
 from antalate_lcm.wire.peers import PeerTable
 from tests import REPO
 from tests.harness.polling import wait_for
-from tests.harness.process import child_env
+from tests.harness.process import run_antalate
 
 KEY = "peer-test-key"
 HOME = (32.7767, 35.0231)
@@ -191,17 +189,6 @@ def test_a_peer_bus_inside_one_process_is_refused_when_the_agents_are_not(contex
     BmaNode(cfg, context, cfg.bma[0])  # the whole swarm in this process: memq:// reaches everyone
 
 
-def _antalate(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "antalate_lcm.cli", *args],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env=child_env(),
-        cwd=cwd,
-    )
-
-
 @pytest.mark.parametrize(
     "how",
     [["agent", "--agents", "4", "--processes", "2"], ["bma", "--name", "swarm"]],
@@ -217,7 +204,7 @@ def test_a_behavior_that_cannot_hear_its_peers_stops_the_start_with_one_line(
     }
     cfg = tmp_path / "swarm.toml"
     cfg.write_text(tomli_w.dumps(doc))
-    proc = _antalate(how[0], str(cfg), *how[1:], cwd=REPO)
+    proc = run_antalate(how[0], str(cfg), *how[1:], cwd=REPO)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-import subprocess
 import sys
 import threading
 import time
@@ -41,7 +40,7 @@ from operator_tui.screens import ConfirmScreen, HelpScreen
 from operator_tui.widgets.agent_table import COLUMNS, AgentTable
 from operator_tui.widgets.panels import EventLog
 from operator_tui.widgets.swarm_map import SwarmMap, points_from
-from tests.harness.netns import NetNamespace, netns_unavailable
+from tests.harness.netns import NetNamespace, run_unrouted
 
 T = TypeVar("T")
 
@@ -678,15 +677,7 @@ async def test_garbage_on_a_watched_channel_is_reported_not_fatal(
 
 def test_run_reports_a_missing_multicast_route() -> None:
     """`antalate tui` on a host without a multicast route: one clear error, exit status 2, no UI."""
-    reason = netns_unavailable()
-    if reason:
-        pytest.skip(reason)
-    proc = subprocess.run(
-        ["unshare", "-rn", sys.executable, "-m", "operator_tui", "--headless", "1"],
-        capture_output=True,
-        text=True,
-        timeout=30,
-    )
+    proc = run_unrouted([sys.executable, "-m", "operator_tui", "--headless", "1"], timeout=30)
     assert proc.returncode == 2
     assert "no route for multicast" in proc.stderr and "Traceback" not in proc.stderr
 

@@ -10,6 +10,7 @@ from antalate_lcm.agent.plan import load_plan
 from antalate_lcm.base.errors import ConfigError
 from antalate_lcm.core.config import Config, check_unique_agent_names, load_config, parse_config
 from tests import REPO
+from tests.harness.cases import cases
 
 
 def write(tmp_path: Path, text: str) -> Path:
@@ -112,31 +113,7 @@ def test_a_config_loads_without_importing_its_plugins(tmp_path: Path) -> None:
     assert_config_error(path, "hlc.autopilot", "there is no adapter 'nope'")
 
 
-@pytest.mark.parametrize(
-    ("text", "key", "expected"),
-    [
-        ("[hlc]\ntelemetry_hz = 'fast'\n", "hlc.telemetry_hz", "valid number"),
-        ("[hlc]\ntelemetry_hz = -1\n", "hlc.telemetry_hz", "greater than 0"),
-        ("[hlc]\nlow_battery = 150\n", "hlc.low_battery", "less than or equal to 100"),
-        ("[hlc]\nairborne_fraction = nan\n", "hlc.airborne_fraction", ""),
-        ("[mc]\ntakeof_ack_timeout = 3\n", "mc.takeof_ack_timeout", "Extra inputs"),
-        ("[agent]\nname = 'a b'\n", "agent.name", "white space"),
-        ("[agent]\nname = 'drône'\n", "agent.name", "ASCII"),
-        ("[buses]\nlan = 'localhost:7667'\n", "buses.lan", "LCM URL"),
-        ("[topics]\nMC_STATE = 'wan'\n", "topics.MC_STATE.bus", "declared in [buses]"),
-        ("[topics]\ndefault_bus = 'wan'\n", "topics.default_bus", "declared in [buses]"),
-        ("[topics]\nFOO = 'lan'\n", "topics.FOO", "known topic"),
-        ("[topics]\nFOO = { type = 'nope_t', channel = 'x' }\n", "topics.FOO.type", "one of"),
-        ("[[bma]]\nname = 'a'\nstate_topic = 'NOPE'\n", "bma[0].state_topic", "topic name"),
-        ("[[bma]]\nname = 'a'\n[[bma]]\nname = 'a'\n", "bma.name", "unique"),
-        (
-            "[[bma]]\nname = 'a'\n[[bma.behaviors]]\nactivate_on = ['MISSION']\n",
-            "bma[0].behaviors[0].plugin",
-            "required",
-        ),
-        ("[osc]\nrate = 0\n", "osc.rate", "greater than 0"),
-    ],
-)
+@pytest.mark.parametrize(("text", "key", "expected"), cases("core/bad_configs.toml"))
 def test_invalid_files_name_file_key_and_expectation(
     tmp_path: Path, text: str, key: str, expected: str
 ) -> None:

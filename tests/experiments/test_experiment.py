@@ -21,45 +21,14 @@ from antalate_lcm.runtime.experiment import Experiment, run
 from antalate_lcm.runtime.scaffold import files, write_behavior
 from antalate_lcm.runtime.script import load_script, parse_script
 from tests import REPO
+from tests.harness.agents import swarm_config
+from tests.harness.cases import cases
 
-MEMQ_CONFIG = """
-[agent]
-name = "e"
-[buses]
-lan = "memq://"
-[topics]
-default_bus = "lan"
-[hlc]
-autopilot = "sim"
-default_takeoff_altitude = 5.0
-[[bma]]
-name = "m"
-[[bma.behaviors]]
-plugin = "direction_follow"
-"""
+MEMQ_CONFIG = swarm_config("e", {"plugin": "direction_follow"})
 
 
 # ----------------------------------------------------------------------------- the script
-@pytest.mark.parametrize(
-    ("text", "key", "what"),
-    [
-        ('mission_time = "6"', "mission_time", "valid number"),
-        ("mission_time = 6\nmisson = 3", "misson", "Extra inputs"),
-        ("altitude = 5", "mission_time", "Field required"),
-        ("mission_time = nan", "mission_time", "finite"),
-        ("mission_time = -1", "mission_time", "greater than 0"),
-        ("mission_time = 6\n[[direction]]\nat = 7\nazimuth = 3", "direction[0].at", "below mission_time"),
-        (
-            "mission_time = 9\n[[direction]]\nat = 5\nazimuth = 3\n[[direction]]\nat = 2\nazimuth = 4",
-            "direction[1].at",
-            "in order",
-        ),
-        ("mission_time = 6\n[[direction]]\nat = 1\nazimuth = 3\nspeed = inf", "direction[0].speed", "finite"),
-        ("mission_time = 6\n[analyze]\nrange = -1", "analyze.range", "greater than 0"),
-        ("mission_time = 6\n[analyze]\nradius_below = true", "analyze.radius_below", "valid number"),
-        ("mission_time = 6\ntimeout = 1979-05-27", "timeout", "date/time"),
-    ],
-)
+@pytest.mark.parametrize(("text", "key", "what"), cases("experiments/bad_scripts.toml"))
 def test_a_bad_script_is_one_line_naming_the_key(tmp_path: Path, text: str, key: str, what: str) -> None:
     path = tmp_path / "script.toml"
     path.write_text(text + "\n")
@@ -99,7 +68,7 @@ def test_bad_configs_and_options_fail_before_anything_flies(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "buses.lan" in err and "--processes 2" in err
     bad_plugin = tmp_path / "bad.toml"
-    bad_plugin.write_text(MEMQ_CONFIG.replace('"direction_follow"', '"no_such_behavior"'))
+    bad_plugin.write_text(swarm_config("e", {"plugin": "no_such_behavior"}))
     assert main(["run", str(bad_plugin), "--headless", "-o", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "bma[0].behaviors[0].plugin" in err

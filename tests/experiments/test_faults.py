@@ -34,25 +34,16 @@ from antalate_lcm.msgs import mc_state_t, operator_cmd_t, peer_scan_t, telemetry
 from antalate_lcm.runtime.experiment import Experiment, Outcome, run
 from antalate_lcm.runtime.faults import BroadcastReception, FaultGate, plan
 from antalate_lcm.runtime.script import Script, load_script, parse_script
+from tests.harness.agents import swarm_config
+from tests.harness.cases import cases
 
-CONFIG = """
-[agent]
-name = "e"
-[buses]
-lan = "memq://"
-[topics]
-default_bus = "lan"
-[hlc]
-autopilot = "sim"
-default_takeoff_altitude = 5.0
-[[bma]]
-name = "m"
-[[bma.behaviors]]
-plugin = "direction_follow"
-[[bma.behaviors]]
-plugin = "peer_sensor"
-params = { max_range = 1000.0, identities = true }
-"""
+BEHAVIORS = (
+    {"plugin": "direction_follow"},
+    {"plugin": "peer_sensor", "params": {"max_range": 1000.0, "identities": True}},
+)
+CONFIG = swarm_config("e", *BEHAVIORS)
+#: The same swarm on the namespace's multicast group, for runs over several processes.
+UDPM_CONFIG = swarm_config("e", *BEHAVIORS, bus="udpm://239.255.76.67:7667?ttl=0")
 
 #: Every swarm flies east at 2 m/s from the start of its mission (the agents keep their grid).
 EAST = "[[direction]]\nat = 0.0\nazimuth = 90.0\nspeed = 2.0\n"
@@ -112,88 +103,7 @@ def _raw(path: Path, channel: str) -> list[tuple[float, Any]]:
 
 
 # ----------------------------------------------------------------------------- the script
-@pytest.mark.parametrize(
-    ("fault", "key", "what"),
-    [
-        ('kind = "melt"\nagent = "e-01"\nat = 1', "fault[0].kind", "Input should be"),
-        ('kind = "crash"\nat = 1', "fault[0].agent", "Field required"),
-        ('kind = "crash"\nagent = "e-01"\nat = -1', "fault[0].at", "greater than or equal to 0"),
-        ('kind = "crash"\nagent = "e-01"\nat = 9', "fault[0].at", "below mission_time"),
-        ('kind = "crash"\nagent = "e-01"\nat = 1\nduration = 2', "fault[0].duration", "not a key of a crash"),
-        (
-            'kind = "freeze"\nagent = "e-01"\nat = 1\nprobability = 1.5',
-            "fault[0].probability",
-            "less than or",
-        ),
-        ('kind = "sensor"\nagent = "e-01"\nat = 1\nmode = "bias"', "fault[0].sensor", "position or peers"),
-        ('kind = "sensor"\nagent = "e-01"\nat = 1\nsensor = "position"', "fault[0].mode", "stuck or bias"),
-        (
-            'kind = "sensor"\nagent = "e-01"\nat = 1\nsensor = "position"\nmode = "bias"',
-            "fault[0].mode",
-            "needs offset",
-        ),
-        (
-            'kind = "sensor"\nagent = "e-01"\nat = 1\nsensor = "position"\nmode = "bias"\nrange_bias = 2',
-            "fault[0].range_bias",
-            "not a key of a position sensor",
-        ),
-        ('kind = "byzantine"\nagent = "e-01"\nat = 1', "fault[0].kind", "offset"),
-        ('kind = "byzantine"\nagent = "e-01"\nat = 1\nstate = "FLYING"', "fault[0].state", "one of INIT"),
-        ('kind = "battery"\nagent = "e-01"\nat = 1\nlevel = 120', "fault[0].level", "less than or equal"),
-        ('kind = "battery"\nagent = "e-01"\nat = 1', "fault[0].kind", "level"),
-        ('kind = "packet_loss"\nagent = "e-01"\nat = 1\nloss = 0.5', "fault[0].topics", "the topics"),
-        (
-            'kind = "packet_loss"\nagent = "e-01"\nat = 1\nloss = 0.5\ntopics = ["TELEMTRY"]',
-            "fault[0].topics",
-            "'TELEMTRY'",
-        ),
-        (
-            'kind = "packet_loss"\nagent = "e-01"\nat = 1\ntopics = ["TELEMETRY"]',
-            "fault[0].loss",
-            "a delay > 0 or a bandwidth",
-        ),
-        (
-            'kind = "packet_loss"\nagent = "e-01"\nat = 1\ntopics = ["TELEMETRY"]\nloss = 0.1\nburst = 100',
-            "fault[0].burst",
-            "a burst with a bandwidth",
-        ),
-        (
-            'kind = "packet_loss"\nagent = "e-01"\nat = 1\ntopics = ["TELEMETRY"]\nbandwidth = 0',
-            "fault[0].bandwidth",
-            "greater than 0",
-        ),
-        (
-            'kind = "freeze"\nagent = "e-01"\nat = 1\nbandwidth = 100',
-            "fault[0].bandwidth",
-            "not a key of a freeze",
-        ),
-        ('kind = "link_loss"\nagent = []\nat = 1', "fault[0].agent", "at least one agent"),
-        ('kind = "vehicle"\nagent = "e-01"\nat = 1', "fault[0].vehicle", "failsafe, pilot_takeover"),
-        ('kind = "vehicle"\nagent = "e-01"\nat = 1\nvehicle = "fire"', "fault[0].vehicle", "Input should be"),
-        (
-            'kind = "vehicle"\nagent = "e-01"\nat = 1\nvehicle = "link_loss"\nfailsafe = "land"',
-            "fault[0].failsafe",
-            "only with vehicle = 'failsafe'",
-        ),
-        (
-            'kind = "vehicle"\nagent = "e-01"\nat = 1\nvehicle = "pilot_takeover"\nduration = 3',
-            "fault[0].duration",
-            "happens once",
-        ),
-        ('kind = "crash"\nagent = "e-01"\nat = 3\nat_latest = 2', "fault[0].at_latest", "from at = 3 on"),
-        ('kind = "crash"\nagent = "e-01"\nat = 3\nat_latest = 6', "fault[0].at_latest", "below mission_time"),
-        (
-            'kind = "crash"\nagent = "e-01"\nat = 1\nsince = "takeoff"',
-            "fault[0].since",
-            "'mission' or 'start'",
-        ),
-        (
-            'kind = "link_loss"\nagent = "e-01"\nat = 1\nlevel = 3',
-            "fault[0].level",
-            "not a key of a link_loss",
-        ),
-    ],
-)
+@pytest.mark.parametrize(("fault", "key", "what"), cases("experiments/bad_faults.toml"))
 def test_a_bad_fault_is_one_line_naming_the_key(tmp_path: Path, fault: str, key: str, what: str) -> None:
     with pytest.raises(ConfigError) as info:
         _script(tmp_path / "s.toml", f"mission_time = 6\n[[fault]]\n{fault}\n")
@@ -220,7 +130,7 @@ def test_faults_on_unknown_agents_or_elsewhere_fail_before_anything_flies(tmp_pa
     script = parse_script({"mission_time": 6, "fault": [{**crash, "agent": "e-01"}]}, "s.toml")
     with pytest.raises(AntalateError, match=r"needs --headless"):
         run(Experiment(str(config), agents=3, script=script, output=str(out), headless=False))
-    mavlink = _write(tmp_path / "mavlink.toml", CONFIG.replace('autopilot = "sim"', 'autopilot = "mavlink"'))
+    mavlink = _write(tmp_path / "mavlink.toml", swarm_config("e", *BEHAVIORS, autopilot="mavlink"))
     for kind, keys in (("battery", {"level": 10.0}), ("vehicle", {"vehicle": "failsafe"})):
         fault = {"kind": kind, "agent": "e", "at": 1.0, **keys}
         script = parse_script({"mission_time": 6, "fault": [fault]}, "s.toml")
@@ -885,13 +795,11 @@ def test_faults_across_processes(netns, tmp_path: Path) -> None:  # type: ignore
     agent process injects the faults of its own agents, timed from the operator's record of the
     mission's start, and their records reach the log; the operator waits no more for the crashed
     agent (in the other process)."""
-    import sys
 
     from antalate_lcm.wire.security import generate_key
-    from tests.harness.process import child_env
+    from tests.harness.process import antalate_argv, child_env
 
-    udpm = CONFIG.replace('"memq://"', '"udpm://239.255.76.67:7667?ttl=0"')
-    config = _write(tmp_path / "swarm.toml", udpm + f'[security]\nswarm_key = "{generate_key()}"\n')
+    config = _write(tmp_path / "swarm.toml", UDPM_CONFIG + f'[security]\nswarm_key = "{generate_key()}"\n')
     script = _write(
         tmp_path / "s.toml",
         "mission_time = 5.0\nseed = 3\n"
@@ -903,8 +811,8 @@ def test_faults_across_processes(netns, tmp_path: Path) -> None:  # type: ignore
         + '[[fault]]\nkind = "freeze"\nagent = "e-02"\nat = 1.0\nprobability = 0.0\n',
     )
     log = tmp_path / "f.lcm"
-    argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", "WARNING", "run", str(config)]
-    argv += ["--agents", "4", "--processes", "2", "--headless", "--script", str(script), "-o", str(log)]
+    argv = antalate_argv("--log-level", "WARNING", "run", str(config), "--agents", "4", "--processes", "2")
+    argv += ["--headless", "--script", str(script), "-o", str(log)]
     env = child_env()
     env["XDG_STATE_HOME"] = str(tmp_path / "state")  # the swarm key's replay memory
     flight = netns.run(argv, timeout=180, cwd=tmp_path, env=env)
@@ -945,18 +853,16 @@ def test_faults_across_processes(netns, tmp_path: Path) -> None:  # type: ignore
 def test_lossy_broadcasts_across_processes(netns, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """With the agents over 2 processes (udpm multicast in a namespace) each process loses the
     broadcasts at its own agents, from the same per-agent streams, and reports what each heard."""
-    import sys
 
-    from tests.harness.process import child_env
+    from tests.harness.process import antalate_argv, child_env
 
     # the peer sensor hears the other process's agents on the LAN: no swarm key in a test namespace
-    udpm = CONFIG.replace('"memq://"', '"udpm://239.255.76.67:7667?ttl=0"') + "[security]\ninsecure = true\n"
-    config = _write(tmp_path / "swarm.toml", udpm)
+    config = _write(tmp_path / "swarm.toml", UDPM_CONFIG + "[security]\ninsecure = true\n")
     script = _write(
         tmp_path / "s.toml", "mission_time = 5.0\nseed = 2\n" + EAST + "[broadcast]\nreception = 0.5\n"
     )
-    argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", "WARNING", "run", str(config)]
-    argv += ["--agents", "4", "--processes", "2", "--headless", "--script", str(script)]
+    argv = antalate_argv("--log-level", "WARNING", "run", str(config), "--agents", "4", "--processes", "2")
+    argv += ["--headless", "--script", str(script)]
     argv += ["-o", str(tmp_path / "c.lcm")]
     flight = netns.run(argv, timeout=180, cwd=tmp_path, env=child_env())
     assert flight.returncode == 0, flight.stdout + flight.stderr

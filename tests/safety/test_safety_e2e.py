@@ -13,8 +13,6 @@ no fence breach, every agent in MISSION and back on the ground.
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -39,6 +37,7 @@ from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.runtime.recorder import LogRecorder
 from antalate_lcm.wire.vocabulary import McState
 from tests.harness.polling import wait_for
+from tests.harness.process import run_antalate
 
 LAT0, LON0 = 32.7767, 35.0231
 RADIUS = 3.0
@@ -189,13 +188,7 @@ def analyze(log: Path, safety: dict[str, Any], tmp_path: Path, names: list[str])
     in-process, checked: separation, breaches, the mission flown."""
     cfg = tmp_path / "safety.toml"
     cfg.write_text(tomli_w.dumps({"agent": {"name": "x"}, "hlc": {"autopilot": "sim"}, "safety": safety}))
-    out = subprocess.run(
-        [sys.executable, "-m", "antalate_lcm.cli", "analyze", str(log), "--safety", str(cfg)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=True,
-    ).stdout
+    out = run_antalate("analyze", str(log), "--safety", str(cfg), timeout=120, check=True).stdout
     section = out[out.index("safety (radius") :]
     print(f"\nantalate analyze {log.name} --safety {cfg.name}:\n{section}")
     fence_doc = safety.get("fence")

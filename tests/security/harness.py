@@ -391,15 +391,14 @@ class Swarm:
     ) -> PeerClient:
         """A peer process; ``ca``: verify the station's certificate with it (else: no verification,
         as an attacker does not care whom it talks to)."""
-        args = ["-m", "tests.security.peer", LAN, LOCAL, "--window", str(WINDOW)]
+        args = ["tests.security.peer", LAN, LOCAL, "--window", str(WINDOW)]
         if key is not None:
             args += ["--key", key]
         if source is not None:
             args += ["--source", source]
         if ca is not None:
             args += ["--ca", str(ca)]
-        proc = self.netns.python(*args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        client = PeerClient(proc, what, self.station_url)
+        client = PeerClient(self.netns.peer(*args), what, self.station_url)
         self.peers.append(client)
         return client
 

@@ -205,25 +205,10 @@ def test_garbage_datagrams_over_multicast_do_not_kill_a_subscriber(netns: NetNam
 
 def test_no_multicast_route_gives_the_fix() -> None:
     """In a namespace without the route, the CLI prints one clear message with the exact command."""
-    from tests.harness.netns import netns_unavailable
+    from tests.harness.netns import run_unrouted
 
-    reason = netns_unavailable()
-    if reason:
-        pytest.skip(f"no private network namespace: {reason}")
-    proc = subprocess.run(
-        [
-            "unshare",
-            "-rn",
-            sys.executable,
-            "-m",
-            "tests.children.open_bus",
-            "udpm://239.255.76.67:7667?ttl=1",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=30,
-        cwd=REPO,
-    )
+    argv = [sys.executable, "-m", "tests.children.open_bus", "udpm://239.255.76.67:7667?ttl=1"]
+    proc = run_unrouted(argv, timeout=30, cwd=REPO)
     assert proc.returncode != 0
     assert "MulticastUnavailable" in proc.stderr
     assert "ip route add 224.0.0.0/4 dev lo" in proc.stderr

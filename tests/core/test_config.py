@@ -178,39 +178,7 @@ def assert_config_error(path: Path, key: str, *expected: str) -> ConfigError:
     return err
 
 
-@pytest.mark.parametrize(
-    ("text", "key", "expected"),
-    [
-        # a string is not a number, a boolean is not a number, a number is not a boolean or a string
-        ("[hlc]\ntelemetry_hz = '5'\n", "hlc.telemetry_hz", "valid number, got '5'"),
-        ("[hlc]\nlow_battery = true\n", "hlc.low_battery", "valid number, got True"),
-        ("[mc]\nhlc_timeout = '2.0'\n", "mc.hlc_timeout", "valid number"),
-        ("[mc]\non_link_regained = 1\n", "mc.on_link_regained", "'rtl', 'land' or 'hold'"),
-        ("[osc]\nenabled = 'yes'\n", "osc.enabled", "valid boolean, got 'yes'"),
-        ("[osc]\nenabled = 1\n", "osc.enabled", "valid boolean, got 1"),
-        ("[osc]\nmax_reply_bytes = '65536'\n", "osc.max_reply_bytes", "valid integer"),
-        ("[osc]\nmax_reply_bytes = 65536.0\n", "osc.max_reply_bytes", "valid integer"),
-        ("[osc]\nserver = 8080\n", "osc.server", "valid string"),
-        ("[security]\ninsecure = 'false'\n", "security.insecure", "valid boolean, got 'false'"),
-        ("[security]\nwindow = '5'\n", "security.window", "valid number"),
-        ("[security]\nswarm_key = 1234\n", "security.swarm_key", "valid string"),
-        ("[agent]\nname = 7\n", "agent.name", "valid string, got 7"),
-        ("[buses]\nlan = 7667\n", "buses.lan", "valid string"),
-        ("[topics]\ndefault_bus = 1\n", "topics.default_bus", "valid string"),
-        ("[topics]\nMC_STATE = 5\n", "topics.MC_STATE", "a bus name"),
-        ("[topics]\nMC_STATE = ['lan', 5]\n", "topics.MC_STATE[1]", "valid string"),
-        ("[topics]\nMC_STATE = { bus = 'lan', chanel = 'x' }\n", "topics.MC_STATE.chanel", "Extra inputs"),
-        ("[[bma]]\nname = 5\n", "bma[0].name", "valid string"),
-        ("[[bma]]\nname = 'a'\nrepublish_hz = '5'\n", "bma[0].republish_hz", "valid number"),
-        (BEHAVIOR + "tick_hz = '5'\n", "bma[0].behaviors[0].tick_hz", "valid number"),
-        (BEHAVIOR + "activate_on = 'MISSION'\n", "bma[0].behaviors[0].activate_on", "valid array"),
-        ("[hlc]\nautopilot = 5\n", "hlc.autopilot", "valid string"),
-        # TOML dates and times fit no setting; as strings they would slip into a text field
-        ("[agent]\nname = 1979-05-27\n", "agent.name", "date/time"),
-        ("[hlc.autopilot_params]\nstate_file = 07:32:00\n", "hlc.autopilot_params.state_file", "date/time"),
-        ('source = "elsewhere.toml"\n', "source", "not a config key"),
-    ],
-)
+@pytest.mark.parametrize(("text", "key", "expected"), cases("core/no_coercion.toml"))
 def test_no_silent_coercion_in_any_section(tmp_path: Path, text: str, key: str, expected: str) -> None:
     assert_config_error(write(tmp_path, text), key, expected)
 
@@ -405,26 +373,7 @@ def test_design_style_table_names_its_name_key(tmp_path: Path) -> None:
 # ------------------------------------------------------------------ adapter params, by the adapter's own model
 
 
-@pytest.mark.parametrize(
-    ("params", "field", "expected"),
-    [
-        ("land_disarm_delay = -1", "land_disarm_delay", "greater than or equal to 0, got -1"),
-        ("auto_disarm_delay = 0", "auto_disarm_delay", "greater than 0"),
-        ("takeover_land_delay = -0.5", "takeover_land_delay", "greater than or equal to 0"),
-        ("link_loss_after = -3", "link_loss_after", "greater than or equal to 0"),
-        ("climb_rate = -1.0", "climb_rate", "greater than 0"),
-        ("drain_flying = -4", "drain_flying", "greater than or equal to 0"),
-        ("tau = 0", "tau", "greater than 0"),
-        ("time_scale = inf", "time_scale", "finite number"),
-        ("battery = 120", "battery", "less than or equal to 100"),
-        ("home_lat = 95.0", "home_lat", "less than or equal to 90"),
-        ("home_lat = '32.7'", "home_lat", "valid number, got '32.7'"),
-        ("link_loss = 'yes'", "link_loss", "valid boolean, got 'yes'"),
-        ("refuse_arm = 1", "refuse_arm", "valid boolean, got 1"),
-        ("state_file = 5", "state_file", "valid string"),
-        ("hom_lat = 32.1", "hom_lat", "Extra inputs are not permitted"),
-    ],
-)
+@pytest.mark.parametrize(("params", "field", "expected"), cases("core/sim_params.toml"))
 @pytest.mark.parametrize("table", ["autopilot", "autopilot_params"])
 def test_sim_params_are_validated_at_load(
     tmp_path: Path, table: str, params: str, field: str, expected: str

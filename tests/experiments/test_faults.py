@@ -67,6 +67,12 @@ def _faults(record: SwarmRecord, agent: str, kind: str) -> dict[str, FaultRecord
     return {f.event: f for f in record.faults if f.agent == agent and f.kind == kind}
 
 
+def _span(record: SwarmRecord, agent: str, kind: str) -> tuple[float, float]:
+    """When the agent's fault of ``kind`` started and ended (s into the log)."""
+    fault = _faults(record, agent, kind)
+    return fault["start"].t, fault["end"].t
+
+
 def _ne(record: SwarmRecord, agent: str) -> list[tuple[float, float, float]]:
     """(t, north, east) of the agent's telemetry, in one frame for every agent."""
     frame = FlatFrame(32.7767, 35.0231)
@@ -406,8 +412,7 @@ def test_a_frozen_agent_is_silent_for_the_duration_then_carries_on(
     dead_and_frozen: tuple[Outcome, SwarmRecord],
 ) -> None:
     _, record = dead_and_frozen
-    freeze = _faults(record, "e-02", "freeze")
-    start, end = freeze["start"].t, freeze["end"].t
+    start, end = _span(record, "e-02", "freeze")
     times = [s.t for s in record.agents["e-02"].telemetry]
     assert not [t for t in times if start + 0.1 < t < end - 0.1]
     assert [t for t in times if t > end + 0.3]
@@ -418,8 +423,7 @@ def test_a_biased_position_sensor_moves_the_agent_in_its_telemetry(
     dead_and_frozen: tuple[Outcome, SwarmRecord],
 ) -> None:
     _, record = dead_and_frozen
-    bias = _faults(record, "e-03", "sensor")
-    start, end = bias["start"].t, bias["end"].t
+    start, end = _span(record, "e-03", "sensor")
     # e-03 and e-04 fly east side by side: what changes between them is e-03's reading
     e3, e4 = _ne(record, "e-03"), _ne(record, "e-04")
 
@@ -439,8 +443,7 @@ def test_a_biased_position_sensor_moves_the_agent_in_its_telemetry(
 
 def test_a_byzantine_agent_claims_a_state_it_is_not_in(dead_and_frozen: tuple[Outcome, SwarmRecord]) -> None:
     outcome, record = dead_and_frozen
-    lie = _faults(record, "e-04", "byzantine")
-    start, end = lie["start"].t, lie["end"].t
+    start, end = _span(record, "e-04", "byzantine")
     states = [(c.t, c.state) for c in record.agents["e-04"].mc_states]
     (hold,) = [(t, s) for t, s in states if s == "HOLD"]
     assert start - 0.1 <= hold[0] <= start + 1.0
@@ -559,8 +562,7 @@ def test_the_lossy_flight_comes_back_with_every_fault_recorded(lossy: tuple[Outc
 
 def test_a_byzantine_position_fools_the_others_not_itself(lossy: tuple[Outcome, SwarmRecord]) -> None:
     _, record = lossy
-    lie = _faults(record, "e-01", "byzantine")
-    start, end = lie["start"].t, lie["end"].t
+    start, end = _span(record, "e-01", "byzantine")
     e1, e4 = _ne(record, "e-01"), _ne(record, "e-04")
     assert _gap(e1, e4, 2, start + 0.3, end - 0.3) - _gap(
         e1, e4, 2, start - 1.0, start - 0.1
@@ -602,8 +604,7 @@ def test_link_loss_keeps_the_operators_rtl_from_the_agent(lossy: tuple[Outcome, 
 
 def test_packet_loss_and_delay_on_the_chosen_topic(lossy: tuple[Outcome, SwarmRecord]) -> None:
     _, record = lossy
-    loss = _faults(record, "e-02", "packet_loss")
-    start, end = loss["start"].t, loss["end"].t
+    start, end = _span(record, "e-02", "packet_loss")
     path = Path(record.path)
 
     def window(agent: str, t0: float, t1: float) -> list[tuple[float, Any]]:
@@ -662,8 +663,7 @@ def test_a_battery_fault_drops_and_drains_the_sim_battery(lossy: tuple[Outcome, 
 def test_a_faulty_peer_sensor_and_a_stuck_position(lossy: tuple[Outcome, SwarmRecord]) -> None:
     _, record = lossy
     path = Path(record.path)
-    bias = _faults(record, "e-04", "sensor")
-    start, end = bias["start"].t, bias["end"].t
+    start, end = _span(record, "e-04", "sensor")
     scans = _raw(path, "e-04/PEER_SCAN")
 
     def range_to(peer: str, t0: float, t1: float) -> float:
@@ -674,8 +674,7 @@ def test_a_faulty_peer_sensor_and_a_stuck_position(lossy: tuple[Outcome, SwarmRe
     assert range_to("e-03", start + 0.3, end) - range_to("e-03", start - 1.0, start) == pytest.approx(
         5.0, abs=0.5
     )
-    stuck = _faults(record, "e-05", "sensor")
-    start, end = stuck["start"].t, stuck["end"].t
+    start, end = _span(record, "e-05", "sensor")
     during = {(round(n, 3), round(e, 3)) for t, n, e in _ne(record, "e-05") if start + 0.1 < t < end - 0.1}
     assert len(during) == 1  # flying east at 2 m/s, reading one place
     moved = [e for t, _, e in _ne(record, "e-05") if end + 0.2 < t < end + 1.0]

@@ -75,33 +75,39 @@ class AgentProcesses:
 
     def __init__(self, netns: NetNamespace, tmp_path: Path, doc: dict[str, Any]) -> None:
         self.netns = netns
-        self.name = doc["agent"]["name"]
+        self.name: str = doc["agent"]["name"]
+        self.doc = doc
         self.path = tmp_path / f"{self.name}.toml"
         self.path.write_text(tomli_w.dumps(doc))
         self.procs: dict[str, subprocess.Popen[str]] = {}
+        #: The log of each node's latest run; ``runs``: every run's, in the order started.
         self.logs: dict[str, Path] = {}
+        self.runs: list[Path] = []
         self._tmp = tmp_path
-        self._runs = 0
 
     def start(self, node: str, *extra: str) -> subprocess.Popen[str]:
-        self._runs += 1
-        log = self._tmp / f"{self.name}-{node}-{self._runs}.log"
+        log = self._tmp / f"{self.name}-{node}-{len(self.runs) + 1}.log"
         self.logs[node] = log
+        self.runs.append(log)
         out = open(log, "w")  # noqa: SIM115 - closed with the process
         proc = self.netns.antalate(node, str(self.path), *extra, stdout=out, stderr=subprocess.STDOUT)
         self.procs[node] = proc
         return proc
 
     def kill(self, node: str) -> None:
+        """SIGKILL: the node gets no chance to say goodbye (a crash, as a test means it)."""
         proc = self.procs.pop(node)
         proc.kill()
-        proc.wait(5)
+        proc.wait(10)
 
     def alive(self, node: str) -> bool:
         return self.procs[node].poll() is None
 
-    def log(self, node: str) -> str:
-        return self.logs[node].read_text()
+    def log(self, node: str | None = None) -> str:
+        """``node``'s latest log, or every log of this agent in the order the nodes started."""
+        if node is not None:
+            return self.logs[node].read_text(errors="replace")
+        return "".join(p.read_text(errors="replace") for p in self.runs)
 
     def stop(self) -> dict[str, int | None]:
         return {node: stop_process(proc) for node, proc in self.procs.items()}

@@ -210,6 +210,16 @@ def analyze(log: Path, safety: dict[str, Any], tmp_path: Path, names: list[str])
     return section
 
 
+def kept_apart(flight: Flight, names: list[str], what: str, breaches: str = "") -> None:
+    """Every agent flew its mission and no two came closer than the filter allows (printed)."""
+    print(
+        f"\n{what}: min separation {flight.min_sep:.2f} m ({flight.min_pair}), 3-D {flight.min_3d:.2f} m,"
+        f" {breaches}{len(flight.safety_reports)} SAFETY reports"
+    )
+    assert flight.missions == set(names)
+    assert flight.min_sep >= RADIUS - MARGIN, (flight.min_pair, flight.when)
+
+
 def test_twenty_agents_commanded_at_the_centroid_keep_apart_then_come_home_from_the_cluster(
     tmp_path: Path,
 ) -> None:
@@ -222,12 +232,7 @@ def test_twenty_agents_commanded_at_the_centroid_keep_apart_then_come_home_from_
     log = tmp_path / "centroid.lcm"
     with swarm(configs, None, log) as (flight, probe, hlcs):
         fly_mission(flight, probe, names, mission=8.0)
-    print(
-        f"\n20 at the centroid: min separation {flight.min_sep:.2f} m ({flight.min_pair}), 3-D {flight.min_3d:.2f} m,"
-        f" {len(flight.safety_reports)} SAFETY reports"
-    )
-    assert flight.missions == set(names)
-    assert flight.min_sep >= RADIUS - MARGIN, flight.when
+    kept_apart(flight, names, "20 at the centroid")
     assert any("separation" in r.text for r in flight.safety_reports)
     # every one is home: within a metre of where it took off
     for h in hlcs:
@@ -259,12 +264,7 @@ def test_head_on_pairs_and_agents_sent_out_of_the_fence(tmp_path: Path) -> None:
     log = tmp_path / "head-on-fence.lcm"
     with swarm(configs, fence, log) as (flight, probe, _):
         fly_mission(flight, probe, names, mission=9.0)
-    print(
-        f"\nhead-on pairs and fence: min separation {flight.min_sep:.2f} m ({flight.min_pair}), 3-D {flight.min_3d:.2f} m,"
-        f" {len(flight.breaches)} fence breaches, {len(flight.safety_reports)} SAFETY reports"
-    )
-    assert flight.missions == set(names)
-    assert flight.min_sep >= RADIUS - MARGIN, flight.min_pair
+    kept_apart(flight, names, "head-on pairs and fence", f"{len(flight.breaches)} fence breaches, ")
     assert flight.breaches == []
     assert any("fence" in r.text for r in flight.safety_reports)
     section = analyze(log, safety, tmp_path, names)

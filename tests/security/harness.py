@@ -29,7 +29,7 @@ from typing import Any
 import tomli_w
 
 from antalate_lcm.station._auth import new_api_key, registration_key, sha256_hex
-from tests.harness.agents import FAST_SIM
+from tests.harness.agents import FAST_SIM, AgentProcesses
 from tests.harness.jsonl import JsonLinesProcess
 from tests.harness.netns import NetNamespace
 from tests.harness.polling import wait_for
@@ -214,43 +214,23 @@ class Vehicle:
         )
 
 
-class AgentRun:
-    """One agent: its config file, its node processes (or a share of an ``antalate agent`` process)."""
+class AgentRun(AgentProcesses):
+    """One agent: its config file, its node processes (or a share of an ``antalate agent`` process),
+    its simulated vehicle's state file."""
 
     def __init__(self, swarm: Swarm, name: str, doc: dict[str, Any]) -> None:
         self.swarm = swarm
-        self.name = name
         self.state_file = swarm.tmp / f"{name}-vehicle.json"
         hlc = doc.setdefault("hlc", {})
         if hlc.get("autopilot", "sim") == "sim":
             hlc.setdefault("autopilot_params", {})["state_file"] = str(self.state_file)
-        self.doc = doc
-        self.path = swarm.tmp / f"{name}.toml"
-        self.path.write_text(tomli_w.dumps(doc))
-        self.procs: dict[str, subprocess.Popen[str]] = {}
+        super().__init__(swarm.netns, swarm.tmp, doc)
         #: The ``antalate agent`` process this agent shares with others, if it runs in one.
         self.shared: subprocess.Popen[str] | None = None
-        self.logs: list[Path] = []
 
-    def start(self, node: str) -> None:
-        log = self.swarm.tmp / f"{self.name}-{node}-{len(self.logs)}.log"
-        self.logs.append(log)
-        out = open(log, "w")  # noqa: SIM115 - the process owns it
-        self.procs[node] = self.swarm.netns.antalate(
-            node, str(self.path), stdout=out, stderr=subprocess.STDOUT
-        )
-
-    def kill(self, node: str) -> None:
-        proc = self.procs.pop(node)
-        proc.kill()
-        proc.wait(10)
-
-    def alive(self, node: str) -> bool:
-        return self.procs[node].poll() is None
-
-    def log(self) -> str:
-        own = "".join(p.read_text(errors="replace") for p in self.logs)
-        return own + self.swarm.shared_log(self.name)
+    def log(self, node: str | None = None) -> str:
+        """As `AgentProcesses.log`; every log also holds this agent's lines of a shared process."""
+        return super().log(node) + ("" if node else self.swarm.shared_log(self.name))
 
     def lines(self) -> list[str]:
         """This agent's log lines (a shared ``antalate agent`` log holds several agents)."""

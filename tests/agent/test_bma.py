@@ -330,20 +330,24 @@ def test_a_behavior_that_fails_once_runs_again_in_the_same_state() -> None:
 
 
 # ---------------------------------------------------------------------- cascading
+#: The topic a switcher's behavior state goes out on, for a cascaded BMA to follow.
+SWARM_MODE = {"SWARM_MODE": {"type": "behavior_state_t", "channel": "{agent}/SWARM_MODE"}}
+
+
+def _switcher(**params: Any) -> dict[str, Any]:
+    """The ModeSwitcher behavior (tests.bma_support), active in MISSION, publishing on SWARM_MODE."""
+    entry = {
+        "plugin": "tests.bma_support:ModeSwitcher",
+        "activate_on": ["MISSION"],
+        "topics": {"MODE": "SWARM_MODE"},
+    }
+    return {**entry, "params": params} if params else entry
+
+
 def test_a_behavior_state_drives_a_cascaded_bma() -> None:
     config = make_config(
         [
-            _bma(
-                [
-                    {
-                        "plugin": "tests.bma_support:ModeSwitcher",
-                        "activate_on": ["MISSION"],
-                        "topics": {"MODE": "SWARM_MODE"},
-                        "params": {"after": 0.2},
-                    }
-                ],
-                name="root",
-            ),
+            _bma([_switcher(after=0.2)], name="root"),
             _bma(
                 [
                     {"plugin": REC, "name": "searcher", "activate_on": ["SEARCH"]},
@@ -354,7 +358,7 @@ def test_a_behavior_state_drives_a_cascaded_bma() -> None:
                 states=["SEARCH", "FOLLOW", "IDLE"],
             ),
         ],
-        topics={"SWARM_MODE": {"type": "behavior_state_t", "channel": "{agent}/SWARM_MODE"}},
+        topics=SWARM_MODE,
     )
     with harness(config) as h:
         modes = h.record("SWARM_MODE")
@@ -374,20 +378,7 @@ def test_a_behavior_state_drives_a_cascaded_bma() -> None:
 
 
 def test_published_message_type_is_checked() -> None:
-    config = make_config(
-        [
-            _bma(
-                [
-                    {
-                        "plugin": "tests.bma_support:ModeSwitcher",
-                        "activate_on": ["MISSION"],
-                        "topics": {"MODE": "SWARM_MODE"},
-                    }
-                ]
-            )
-        ],
-        topics={"SWARM_MODE": {"type": "behavior_state_t", "channel": "{agent}/SWARM_MODE"}},
-    )
+    config = make_config([_bma([_switcher()])], topics=SWARM_MODE)
     with harness(config) as h:
         node = h.bma("main")
         beh = h.sync(lambda: node.behavior("ModeSwitcher"))

@@ -3,6 +3,7 @@ agent's own messages heard once, and a config that would split the swarm refused
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -180,12 +181,11 @@ def test_unsubscribing_subscribe_all_drops_its_own_channel_half(context: Context
 def test_a_peer_bus_inside_one_process_is_refused_when_the_agents_are_not(context: Context) -> None:
     """A BMA in a process of its own (``antalate bma``), or one shard of ``--processes N``."""
     cfg = _config("a1")
-    alone = Context(Bus(cfg.buses), Executor())
-    try:
-        with pytest.raises(ConfigError, match=r"buses\.lan: a bus other processes reach .* TELEMETRY"):
-            BmaNode(cfg, alone, cfg.bma[0])
-    finally:
-        alone.close()
+    with (
+        contextlib.closing(Context(Bus(cfg.buses), Executor())) as alone,
+        pytest.raises(ConfigError, match=r"buses\.lan: a bus other processes reach .* TELEMETRY"),
+    ):
+        BmaNode(cfg, alone, cfg.bma[0])
     BmaNode(cfg, context, cfg.bma[0])  # the whole swarm in this process: memq:// reaches everyone
 
 

@@ -188,16 +188,23 @@ def test_pilot_takeover_then_landing(launch: Callable[..., AgentProcesses], prob
     fails_safe_then_lands(probe, H.MANUAL, M.MANUAL, timeout=15)
 
 
+def restarted_in_flight(agent: AgentProcesses, probe: Probe, node: str) -> int:
+    """The agent flies its mission, ``node`` is killed (no goodbye) and started again: the probe's
+    mark just before the restart."""
+    mc(probe, M.STANDBY)
+    command(probe, O.TAKEOFF, seq=1)
+    mc(probe, M.MISSION)
+    agent.kill(node)
+    mark = probe.mark()
+    agent.start(node)
+    return mark
+
+
 def test_mc_restart_mid_flight_resyncs_without_commands(
     launch: Callable[..., AgentProcesses], probe: Probe
 ) -> None:
     agent = launch()
-    mc(probe, M.STANDBY)
-    command(probe, O.TAKEOFF, seq=1)
-    mc(probe, M.MISSION)
-    agent.kill("mc")
-    mark = probe.mark()
-    agent.start("mc")
+    mark = restarted_in_flight(agent, probe, "mc")
     mc(probe, M.MISSION, since=mark)
     # the HLC never left AIRBORNE: the restart sent nothing
     states = {m["state"] for m in probe.history("alpha/HLC_STATE", "hlc_state_t", since=mark)}
@@ -211,12 +218,7 @@ def test_hlc_restart_mid_flight_resyncs_without_commands(
     launch: Callable[..., AgentProcesses], probe: Probe, tmp_path: Path
 ) -> None:
     agent = launch(sim={"state_file": str(tmp_path / "vehicle.json")})
-    mc(probe, M.STANDBY)
-    command(probe, O.TAKEOFF, seq=1)
-    mc(probe, M.MISSION)
-    agent.kill("hlc")
-    mark = probe.mark()
-    agent.start("hlc")
+    mark = restarted_in_flight(agent, probe, "hlc")
     hlc(probe, H.AIRBORNE, since=mark)
     log = agent.log("hlc")
     assert "INIT -> AIRBORNE" in log

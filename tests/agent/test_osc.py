@@ -13,7 +13,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import httpx
 import pytest
@@ -137,6 +137,9 @@ def test_token_is_kept_across_reports(station: StationServer) -> None:
 # ----------------------------------------------------------------------------- misbehaving servers
 
 
+S = TypeVar("S", bound=http.server.ThreadingHTTPServer)
+
+
 class _FakeStation(http.server.BaseHTTPRequestHandler):
     """A station of the test's making: every POST is answered with what ``reply`` says."""
 
@@ -184,14 +187,17 @@ class GarbageServer(http.server.ThreadingHTTPServer):
         self.mode = ""
 
 
-@pytest.fixture
-def garbage_server() -> Iterator[GarbageServer]:
-    srv = GarbageServer()
-    th = threading.Thread(target=srv.serve_forever, daemon=True)
-    th.start()
+def _serving(srv: S) -> Iterator[S]:
+    """``srv`` serving on a thread for a fixture's lifetime."""
+    threading.Thread(target=srv.serve_forever, daemon=True).start()
     yield srv
     srv.shutdown()
     srv.server_close()
+
+
+@pytest.fixture
+def garbage_server() -> Iterator[GarbageServer]:
+    yield from _serving(GarbageServer())
 
 
 @pytest.mark.parametrize("mode", ["bad_json", "wrong_fields", "nan", "huge", "status", "html", "partial_cmd"])
@@ -343,12 +349,7 @@ class LiarServer(http.server.ThreadingHTTPServer):
 
 @pytest.fixture
 def liar() -> Iterator[LiarServer]:
-    srv = LiarServer()
-    th = threading.Thread(target=srv.serve_forever, daemon=True)
-    th.start()
-    yield srv
-    srv.shutdown()
-    srv.server_close()
+    yield from _serving(LiarServer())
 
 
 KEY = generate_key()

@@ -138,6 +138,10 @@ class FakeSwarm:
         self.hlc(name, hlc)
         self.tel(name, **tel)
 
+    def flying(self, name: str, **tel: Any) -> None:
+        """An agent in its mission, airborne, with this telemetry."""
+        self.agent(name, mc_state_t.MISSION, hlc_state_t.AIRBORNE, in_air=True, **tel)
+
     def sent(self) -> list[tuple[str, operator_cmd_t]]:
         with self._lock:
             return list(self.commands)
@@ -245,18 +249,7 @@ async def two_agents(
     app = make_app(context, clock)
     async with app.run_test(size=(160, 44)) as pilot:
         swarm.agent("alpha", lat=47.3977, lon=8.5456)
-        swarm.agent(
-            "bravo",
-            mc=mc_state_t.MISSION,
-            hlc=hlc_state_t.AIRBORNE,
-            lat=47.3980,
-            lon=8.5460,
-            alt=12.5,
-            heading=90.0,
-            ve=2.0,
-            battery=35.0,
-            in_air=True,
-        )
+        swarm.flying("bravo", lat=47.3980, lon=8.5460, alt=12.5, heading=90.0, ve=2.0, battery=35.0)
         await until(pilot, app, lambda: len(app.model.agents) == 2 and app.selected == "alpha")
         yield app, pilot
 
@@ -272,17 +265,7 @@ async def test_agent_messages_appear_as_rows(context: Context, swarm: FakeSwarm,
     async with app.run_test(size=(160, 44)) as pilot:
         table = app.screen.query_one(AgentTable)
         assert table.row_count == 0
-        swarm.agent(
-            "uav10",
-            mc=mc_state_t.MISSION,
-            hlc=hlc_state_t.AIRBORNE,
-            alt=12.34,
-            heading=271.0,
-            vn=3.0,
-            ve=4.0,
-            battery=55.0,
-            in_air=True,
-        )
+        swarm.flying("uav10", alt=12.34, heading=271.0, vn=3.0, ve=4.0, battery=55.0)
         swarm.agent("uav2")
         swarm.arbiter("uav10", "main", "MISSION", ["dovrat_swarm", "video_capture"])
         swarm.error("uav10", "arming refused: battery low", code=12)

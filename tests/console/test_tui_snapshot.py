@@ -57,19 +57,7 @@ async def test_main_screen_snapshot(context: Context, swarm: FakeSwarm, clock: F
     app = make_app(context, clock)
     async with app.run_test(size=SIZE) as pilot:
         swarm.agent("alpha", lat=47.39770, lon=8.54560)
-        swarm.agent(
-            "bravo",
-            mc=mc_state_t.MISSION,
-            hlc=hlc_state_t.AIRBORNE,
-            lat=47.39810,
-            lon=8.54640,
-            alt=15.2,
-            heading=45.0,
-            vn=1.4,
-            ve=1.4,
-            battery=76.0,
-            in_air=True,
-        )
+        swarm.flying("bravo", lat=47.39810, lon=8.54640, alt=15.2, heading=45.0, vn=1.4, ve=1.4, battery=76.0)
         swarm.arbiter("bravo", "main", "MISSION", ["dovrat_swarm", "video_capture"])
         swarm.agent(
             "charlie",

@@ -458,21 +458,7 @@ def test_any_adapter_declares_its_params_model(tmp_path: Path, plugin_dir: Path)
 # ------------------------------------------------------------------ behaviors' params are strict too
 
 
-@pytest.mark.parametrize(
-    ("params", "key", "expected"),
-    [
-        ("{ retry = '2' }", "retry", "valid number, got '2'"),
-        ("{ max_flights = 1.0 }", "max_flights", "valid integer"),
-        ("{ max_flights = '1' }", "max_flights", "valid integer"),
-        ("{ altitude = true }", "altitude", "valid number"),
-        ("{ turn_direction = true }", "turn_direction", "Input should be 1 or -1, got True"),
-        (
-            "{ detection_source = 1 }",
-            "detection_source",
-            "Input should be 'any', 'peer_detection' or 'payload'",
-        ),
-    ],
-)
+@pytest.mark.parametrize(("params", "key", "expected"), cases("core/behavior_params.toml"))
 def test_behavior_params_are_strict(tmp_path: Path, params: str, key: str, expected: str) -> None:
     from antalate_lcm.runtime.agent import validate
 

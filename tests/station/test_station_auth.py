@@ -231,6 +231,10 @@ def test_a_signed_command_for_an_unknown_agent_is_404(keyed_station: StationServ
     assert err.value.status == 404
 
 
+#: What an operator signs besides the command itself (the MAC is well-formed, not checked here).
+SIGNED: dict[str, Any] = {"target": "", "utime": 1, "sender": "op", "seq": 1, "mac": "ab" * 32}
+
+
 @pytest.mark.parametrize(
     ("field", "value", "words"),
     [
@@ -242,30 +246,13 @@ def test_a_signed_command_for_an_unknown_agent_is_404(keyed_station: StationServ
     ],
 )
 def test_bad_signed_commands_get_422(open_station: StationServer, field: str, value: Any, words: str) -> None:
-    body = {
-        "target": "",
-        "utime": 1,
-        "sender": "op",
-        "seq": 1,
-        "mac": "ab" * 32,
-        "command": "TAKEOFF",
-        "altitude": 0.0,
-        field: value,
-    }
+    body = {**SIGNED, "command": "TAKEOFF", "altitude": 0.0, field: value}
     r = httpx.post(f"{open_station.url}/api/commands", json={"operator_cmd": body}, headers=AUTH)
     assert r.status_code == 422 and words in r.json()["detail"], r.text
 
 
 def test_signed_direction_must_not_need_wrapping(open_station: StationServer) -> None:
-    body = {
-        "target": "",
-        "utime": 1,
-        "sender": "op",
-        "seq": 1,
-        "mac": "ab" * 32,
-        "azimuth": 360.0,
-        "speed": 1.0,
-    }
+    body = {**SIGNED, "azimuth": 360.0, "speed": 1.0}
     r = httpx.post(f"{open_station.url}/api/commands", json={"direction_cmd": body}, headers=AUTH)
     assert r.status_code == 422 and "azimuth" in r.json()["detail"]
 

@@ -9,6 +9,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
+from typing import IO
 
 import pytest
 
@@ -160,40 +161,32 @@ def test_unknown_bus_is_a_clear_error(bus: Bus) -> None:
 # --------------------------------------------------------------------------- real multicast
 
 
-def test_two_processes_over_multicast(netns: NetNamespace, probe: Probe) -> None:
+def _subscriber(netns: NetNamespace, mode: str) -> tuple[subprocess.Popen[str], IO[str]]:
+    """tests/children/bus_subscriber.py in ``mode``, ready (subscribed): the process and its stdout."""
     sub = netns.python(
-        "-m",
-        "tests.children.bus_subscriber",
-        MCAST_URL,
-        "order",
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
+        "-m", "tests.children.bus_subscriber", MCAST_URL, mode, stdout=subprocess.PIPE, stderr=subprocess.PIPE
     )
-    assert sub.stdout is not None
-    assert sub.stdout.readline().strip() == "ready"
+    assert sub.stdout is not None and sub.stdout.readline().strip() == "ready"
+    return sub, sub.stdout
+
+
+def test_two_processes_over_multicast(netns: NetNamespace, probe: Probe) -> None:
+    _, out = _subscriber(netns, "order")
     pub = netns.python("-m", "tests.children.bus_publisher", MCAST_URL, stderr=subprocess.PIPE)
     assert pub.wait(20) == 0
-    assert sub.stdout.readline().split() == ["200", "True"]
+    assert out.readline().split() == ["200", "True"]
     # the probe (a third process, raw lcm) saw the same stream
     seen = probe.history("alpha/TELEMETRY", "telemetry_t")
     assert len(seen) == 200 and seen[-1]["mode"] == "SIM"
 
 
 def test_garbage_datagrams_over_multicast_do_not_kill_a_subscriber(netns: NetNamespace, probe: Probe) -> None:
-    sub = netns.python(
-        "-m",
-        "tests.children.bus_subscriber",
-        MCAST_URL,
-        "decode-errors",
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
-    assert sub.stdout is not None and sub.stdout.readline().strip() == "ready"
+    sub, out = _subscriber(netns, "decode-errors")
     for data in (b"\xff" * 40, telemetry_t().encode()[:10], b"x"):
         probe.raw("alpha/TELEMETRY", data)
     pub = netns.python("-m", "tests.children.bus_publisher", MCAST_URL, stderr=subprocess.PIPE)
     assert pub.wait(20) == 0
-    assert sub.stdout.readline().split() == ["200", "3"]
+    assert out.readline().split() == ["200", "3"]
     assert sub.wait(5) == 0
 
 

@@ -40,25 +40,13 @@ from operator_tui.screens import ConfirmScreen, HelpScreen
 from operator_tui.widgets.agent_table import COLUMNS, AgentTable
 from operator_tui.widgets.panels import EventLog
 from operator_tui.widgets.swarm_map import SwarmMap, points_from
+from tests.harness.clock import FakeClock
 from tests.harness.netns import NetNamespace, run_unrouted
 
 T = TypeVar("T")
 
 FIRST_SEQ = 1000
 WALL0 = 1_800_000_000.0
-
-
-class FakeClock:
-    """A monotonic clock that moves only when told to (shared by the app and the node)."""
-
-    def __init__(self, start: float = 100.0) -> None:
-        self.t = start
-
-    def __call__(self) -> float:
-        return self.t
-
-    def advance(self, dt: float) -> None:
-        self.t += dt
 
 
 class FakeSwarm:
@@ -170,7 +158,7 @@ def swarm(context: Context) -> FakeSwarm:
 
 @pytest.fixture
 def clock() -> FakeClock:
-    return FakeClock()
+    return FakeClock(100.0)  # shared by the app and the node
 
 
 def utc_hms(wall: float) -> str:
@@ -473,13 +461,18 @@ async def test_direction_keys(
     assert not isinstance(app.screen, ConfirmScreen) and not app.direction_all
 
 
+def keyed_app(context: Context, clock: FakeClock, swarm: FakeSwarm) -> tuple[OperatorApp, str]:
+    """A console with a swarm key, and the fake swarm signing with the same key on its clock."""
+    key = "correct horse battery staple"
+    swarm.key, swarm.clock = key, clock
+    return make_app(context, clock, memq_config(security={"swarm_key": key})), key
+
+
 # ---------------------------------------------------------------------- security, help
 async def test_commands_are_signed_when_a_swarm_key_is_configured(
     context: Context, swarm: FakeSwarm, clock: FakeClock
 ) -> None:
-    key = "correct horse battery staple"
-    app = make_app(context, clock, memq_config(security={"swarm_key": key}))
-    swarm.key, swarm.clock = key, clock
+    app, key = keyed_app(context, clock, swarm)
     async with app.run_test(size=(160, 44)) as pilot:
         swarm.agent("alpha")
         await until(pilot, app, lambda: app.selected == "alpha")
@@ -501,9 +494,7 @@ async def test_a_keyed_console_takes_no_forged_acknowledgement_or_state(
 ) -> None:
     """An attacker's unsigned or wrongly signed mc_state_t must not acknowledge a command the MC never
     accepted (the console would stop resending it) nor change what the operator sees."""
-    key = "correct horse battery staple"
-    app = make_app(context, clock, memq_config(security={"swarm_key": key}))
-    swarm.key, swarm.clock = key, clock
+    app, key = keyed_app(context, clock, swarm)
     async with app.run_test(size=(160, 44)) as pilot:
         swarm.agent("alpha")
         await until(pilot, app, lambda: app.selected == "alpha")

@@ -21,7 +21,8 @@ from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
 from operator_tui.app import OperatorApp
 from operator_tui.commands import Status
 from tests.console import test_tui
-from tests.console.test_tui import FakeClock, FakeSwarm, make_app, until, wait_dirs, wait_sent
+from tests.console.test_tui import FakeSwarm, make_app, until, wait_dirs, wait_sent
+from tests.harness.clock import FakeClock
 
 # The pilot tests' fixtures (a memq bus shared with fake agents, a fake clock), reused as they are.
 context = test_tui.context

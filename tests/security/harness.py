@@ -549,13 +549,14 @@ def _watchdog(t: tuple[str, str, str]) -> bool:
     )
 
 
-def fly(swarm: Swarm, operator: PeerClient, name: str) -> None:
-    """Take ``name`` to MISSION with a genuine signed TAKEOFF (no-op when it already is)."""
+def fly(swarm: Swarm, operator: PeerClient, name: str) -> AgentRun:
+    """Take ``name`` to MISSION with a genuine signed TAKEOFF (no-op when it already is): its run."""
     run = swarm.agents[name]
     if run.mc_state() == "MISSION":
-        return
+        return run
     n = len(run.transitions("mc"))
     command(operator, swarm, name, "TAKEOFF")
     run.wait_mc("MISSION", timeout=30, after=n)
     if not wait_for(lambda: run.vehicle().in_air, 15.0, 0.1):
         raise NotJudged(f"{name}: in MISSION but not in the air")
+    return run

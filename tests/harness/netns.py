@@ -81,9 +81,11 @@ def require_netns() -> None:
 
 
 @contextlib.contextmanager
-def private_netns(**kwargs: Any) -> Iterator[NetNamespace]:
+def private_netns(*, missing: str | None = None, **kwargs: Any) -> Iterator[NetNamespace]:
     """A `NetNamespace` (``kwargs`` are its own) for a fixture's lifetime; the test skips where none can
-    be made."""
+    be made, or first with ``missing``, the reason something else it needs is not here (the firmware)."""
+    if missing:
+        pytest.skip(missing)
     require_netns()
     with NetNamespace(**kwargs) as ns:
         yield ns

@@ -26,6 +26,11 @@ from tests.harness.process import stop_process
 from tests.tools.test_spy import _marked_processes, require_spy_window, spy_window
 from tests.wheel_support import build_wheel
 
+#: The set-up builds the wheel and pip-installs it with its dependencies into a fresh venv (the pip
+#: step alone may take its own 600 s): the suite's 120 s default cut it off at load 11, when eight
+#: other venvs were being installed on the same two cores.
+pytestmark = pytest.mark.timeout(900)
+
 TYPE_NAMES = sorted(p.stem for p in _codegen.SOURCE_LCMTYPES_DIR.glob("*.lcm"))
 
 

@@ -205,8 +205,12 @@ def _children(pid: int) -> list[int]:
     return out
 
 
-def test_a_process_killed_mid_run_stops_the_run_with_one_clear_message(files: Path) -> None:
-    out = files / "killed.lcm"
+def _fly_then(
+    files: Path, name: str, hurt: int, *extra: str
+) -> tuple[subprocess.CompletedProcess[str], int, int]:
+    """An endless 4-agent run over 2 processes at ``--speed max``; once it flies, signal ``hurt``
+    to its second agent process. The run's outcome, that process (pid) and its index (1 or 2)."""
+    out = files / f"{name}.lcm"
     argv = antalate_argv("--log-level", "WARNING", "run", str(files / "swarm.toml"))
     argv += [
         "--agents",
@@ -217,7 +221,7 @@ def test_a_process_killed_mid_run_stops_the_run_with_one_clear_message(files: Pa
         "--script",
         str(files / "endless.toml"),
     ]
-    argv += ["-o", str(out), "--speed", "max", "--seed", "1"]
+    argv += ["-o", str(out), "--speed", "max", "--seed", "1", *extra]
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         # Flying: both agent processes up, and the log growing (every process has joined the clock).
@@ -227,17 +231,47 @@ def test_a_process_killed_mid_run_stops_the_run_with_one_clear_message(files: Pa
             "the run never flew"
         )
         victim = max(children)  # the second agent process
-        os.kill(victim, signal.SIGKILL)
+        os.kill(victim, hurt)
         text, _ = proc.communicate(timeout=120)  # a hang fails here
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert proc.returncode == 1, text
+    done = subprocess.CompletedProcess(argv, proc.returncode, text)
+    return done, victim, 1 + sorted(children).index(victim)
+
+
+def test_a_process_killed_mid_run_stops_the_run_with_one_clear_message(files: Path) -> None:
+    done, _victim, index = _fly_then(files, "killed", signal.SIGKILL)
+    text = done.stdout
+    assert done.returncode == 1, text
     assert "FAILED" in text and "(it died, or was killed)" in text, text
-    assert f"agent process {1 + sorted(children).index(victim)} of 2 left the simulated clock at" in text, (
-        text
-    )
+    assert f"agent process {index} of 2 left the simulated clock at" in text, text
+
+
+def test_a_hung_process_is_named_and_killed_and_the_others_stop(files: Path) -> None:
+    """A process that stops answering (SIGSTOP: as a behavior stuck in an endless loop) held every
+    other process for ever; after --stall-timeout the run says which one, stops, and kills it."""
+    began = time.monotonic()
+    done, victim, index = _fly_then(files, "hung", signal.SIGSTOP, "--stall-timeout", "3")
+    text = done.stdout
+    assert done.returncode == 1, text
+    assert "FAILED" in text, text
+    assert f"agent process {index} of 2 (pid {victim}) sent nothing for 3 s of real time at" in text, text
+    assert "it hangs or was stopped" in text, text
+    assert not Path(f"/proc/{victim}").exists(), "the hung process was left behind"
+    # Stopped by the watchdog, not by the 60 s grace for a process that ignores SIGINT.
+    assert time.monotonic() - began < 100, text
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "inf", "soon"])
+def test_a_stall_timeout_that_cannot_end_a_hang_is_refused(
+    value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        main(["run", "swarm.toml", "--stall-timeout", value])
+    assert exit_.value.code == 2
+    assert f"--stall-timeout: a number of seconds > 0, got {value!r}" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(

@@ -7,19 +7,16 @@ exercises that way of naming a plugin.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from antalate_lcm.agent.bma import BmaNode
 from antalate_lcm.core.behavior import Behavior, BehaviorContext
-from antalate_lcm.core.bus import Bus
 from antalate_lcm.core.config import Config, parse_config
-from antalate_lcm.core.executor import Executor
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Node
 from antalate_lcm.msgs import behavior_state_t, mc_state_t
+from tests.harness.inprocess import InProcess
 
 AGENT = "a1"
 
@@ -30,23 +27,16 @@ def make_config(bma: list[dict[str, Any]], **extra: Any) -> Config:
     return parse_config(data, "test.toml")
 
 
-class Harness:
+class Harness(InProcess):
     """A started executor and bus, a probe node for the test's own traffic, and BMAs to run."""
 
     def __init__(self, config: Config) -> None:
-        self.config = config
-        self.context = Context(Bus(config.buses), Executor())
-        self.context.executor.start()
-        self.probe = Node(config, self.context, name="probe")
-        self.probe.start()
-        self.nodes: list[Node] = [self.probe]
+        super().__init__(config)
+        self.probe = self.add(Node(config, self.context, name="probe"))
 
     def bma(self, name: str) -> BmaNode:
         spec = next(b for b in self.config.bma if b.name == name)
-        node = BmaNode(self.config, self.context, spec)
-        node.start()
-        self.nodes.append(node)
-        return node
+        return self.add(BmaNode(self.config, self.context, spec))
 
     def mc_state(self, state: str) -> None:
         msg = mc_state_t()
@@ -64,27 +54,15 @@ class Harness:
         self.probe.subscribe(topic, got.append, **fields)
         return got
 
-    def sync(self, fn: Callable[[], Any]) -> Any:
-        return self.context.executor.run_sync(fn)
-
     def settle(self) -> None:
         """Let queued deliveries run: memq delivers on the dispatcher thread, then the executor."""
         time.sleep(0.05)
         self.sync(lambda: None)
 
-    def close(self) -> None:
-        for node in reversed(self.nodes):
-            node.stop()
-        self.context.close()
 
-
-@contextmanager
-def harness(config: Config) -> Iterator[Harness]:
-    h = Harness(config)
-    try:
-        yield h
-    finally:
-        h.close()
+def harness(config: Config) -> Harness:
+    """``with harness(config) as h``: closed at the end of the block."""
+    return Harness(config)
 
 
 # ---------------------------------------------------------------------- test behaviors

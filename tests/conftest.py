@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import subprocess
-import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
@@ -14,12 +13,11 @@ from antalate_lcm.autopilot import Autopilot
 from tests import scheduling
 from tests.harness.jsonl import JsonLinesProcess
 from tests.harness.netns import MCAST_URL as MCAST_URL
-from tests.harness.netns import NetNamespace, netns_unavailable
+from tests.harness.netns import NetNamespace, netns_reason, private_netns
 
 if TYPE_CHECKING:
     from tests.harness.agents import AgentProcesses
 
-_NETNS_REASON: list[str | None] = []
 #: The ``user_properties`` key of an attack's verdict (tests/security/conftest.py judges each attack).
 ATTACK_PROPERTY = "antalate-attack"
 _ATTACKS: dict[str, str] = {}
@@ -68,18 +66,14 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
 
 
 def _netns_reason() -> str | None:
-    if not _NETNS_REASON:
-        _NETNS_REASON.append(netns_unavailable())
-    return _NETNS_REASON[0]
+    """`netns_reason`, by the name the SITL fixtures import it under."""
+    return netns_reason()
 
 
 @pytest.fixture
 def netns() -> Iterator[NetNamespace]:
     """A private network namespace with multicast on lo; skips with the reason where none can be made."""
-    reason = _netns_reason()
-    if reason:
-        pytest.skip(f"no private network namespace: {reason}")
-    with NetNamespace() as ns:
+    with private_netns() as ns:
         yield ns
 
 
@@ -92,13 +86,7 @@ class Probe(JsonLinesProcess):
     @classmethod
     def start(cls, ns: NetNamespace) -> Probe:
         """tests/probe.py on the namespace's multicast group, ready for requests."""
-        proc = ns.popen(
-            [sys.executable, "-m", "tests.probe", MCAST_URL],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-        )
-        return cls(proc)
+        return cls(ns.peer("tests.probe", MCAST_URL))
 
     def publish(self, channel: str, type_name: str, **fields: Any) -> None:
         assert self.call(op="publish", channel=channel, type=type_name, fields=fields)["ok"]

@@ -8,6 +8,7 @@ from typing import Any
 import pytest
 
 from antalate_lcm.agent.bma import ActivationRule, Arbiter
+from antalate_lcm.core.config import Config
 from antalate_lcm.msgs import arbiter_status_t, mc_state_t, telemetry_t
 from tests.bma_support import AGENT, Recorder, harness, make_config
 from tests.harness.polling import wait_for
@@ -70,6 +71,13 @@ def test_permanent_failure_is_never_retried() -> None:
 # ---------------------------------------------------------------------- the node
 def _bma(behaviors: list[dict[str, Any]], **kw: Any) -> dict[str, Any]:
     return {"name": kw.pop("name", "main"), "behaviors": behaviors, **kw}
+
+
+def _raiser(where: str, **bma: Any) -> Config:
+    """One BMA whose Raiser behavior, active in MISSION, raises in ``where`` (``bma``: the BMA's keys)."""
+    return make_config(
+        [_bma([{"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": where}}], **bma)]
+    )
 
 
 @pytest.fixture(autouse=True)
@@ -179,9 +187,7 @@ def test_undefined_mc_state_value_is_ignored() -> None:
 
 
 def test_handlers_of_a_past_activation_are_dropped() -> None:
-    config = make_config(
-        [_bma([{"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "handler"}}])]
-    )
+    config = _raiser("handler")
     with harness(config) as h:
         node = h.bma("main")
         h.mc_state("MISSION")
@@ -277,17 +283,7 @@ def test_failing_constructor_and_on_deactivate_are_reported() -> None:
 
 
 def test_failed_behavior_is_retried_only_after_the_state_leaves() -> None:
-    config = make_config(
-        [
-            _bma(
-                [
-                    {"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "on_activate"}},
-                ],
-                republish_hz=50.0,
-                restart_backoff=0,
-            )
-        ]
-    )
+    config = _raiser("on_activate", republish_hz=50.0, restart_backoff=0)
     with harness(config) as h:
         node = h.bma("main")
         raiser = h.sync(lambda: node.behavior("Raiser"))
@@ -303,16 +299,7 @@ def test_failed_behavior_is_retried_only_after_the_state_leaves() -> None:
 def test_failed_behavior_is_restarted_after_a_back_off_that_doubles() -> None:
     """A behavior that met one bad input flies again in the same mission; a broken one is not
     restarted in a tight loop: 0.2 s, then 0.4 s, then 0.8 s (the default is 2 s)."""
-    config = make_config(
-        [
-            _bma(
-                [
-                    {"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "on_activate"}},
-                ],
-                restart_backoff=0.2,
-            )
-        ]
-    )
+    config = _raiser("on_activate", restart_backoff=0.2)
     with harness(config) as h:
         node = h.bma("main")
         raiser = h.sync(lambda: node.behavior("Raiser"))
@@ -331,16 +318,7 @@ def test_failed_behavior_is_restarted_after_a_back_off_that_doubles() -> None:
 
 
 def test_a_behavior_that_fails_once_runs_again_in_the_same_state() -> None:
-    config = make_config(
-        [
-            _bma(
-                [
-                    {"plugin": RAISER, "activate_on": ["MISSION"], "params": {"where": "handler"}},
-                ],
-                restart_backoff=0.1,
-            )
-        ]
-    )
+    config = _raiser("handler", restart_backoff=0.1)
     with harness(config) as h:
         node = h.bma("main")
         h.mc_state("MISSION")
@@ -352,20 +330,24 @@ def test_a_behavior_that_fails_once_runs_again_in_the_same_state() -> None:
 
 
 # ---------------------------------------------------------------------- cascading
+#: The topic a switcher's behavior state goes out on, for a cascaded BMA to follow.
+SWARM_MODE = {"SWARM_MODE": {"type": "behavior_state_t", "channel": "{agent}/SWARM_MODE"}}
+
+
+def _switcher(**params: Any) -> dict[str, Any]:
+    """The ModeSwitcher behavior (tests.bma_support), active in MISSION, publishing on SWARM_MODE."""
+    entry = {
+        "plugin": "tests.bma_support:ModeSwitcher",
+        "activate_on": ["MISSION"],
+        "topics": {"MODE": "SWARM_MODE"},
+    }
+    return {**entry, "params": params} if params else entry
+
+
 def test_a_behavior_state_drives_a_cascaded_bma() -> None:
     config = make_config(
         [
-            _bma(
-                [
-                    {
-                        "plugin": "tests.bma_support:ModeSwitcher",
-                        "activate_on": ["MISSION"],
-                        "topics": {"MODE": "SWARM_MODE"},
-                        "params": {"after": 0.2},
-                    }
-                ],
-                name="root",
-            ),
+            _bma([_switcher(after=0.2)], name="root"),
             _bma(
                 [
                     {"plugin": REC, "name": "searcher", "activate_on": ["SEARCH"]},
@@ -376,7 +358,7 @@ def test_a_behavior_state_drives_a_cascaded_bma() -> None:
                 states=["SEARCH", "FOLLOW", "IDLE"],
             ),
         ],
-        topics={"SWARM_MODE": {"type": "behavior_state_t", "channel": "{agent}/SWARM_MODE"}},
+        topics=SWARM_MODE,
     )
     with harness(config) as h:
         modes = h.record("SWARM_MODE")
@@ -396,20 +378,7 @@ def test_a_behavior_state_drives_a_cascaded_bma() -> None:
 
 
 def test_published_message_type_is_checked() -> None:
-    config = make_config(
-        [
-            _bma(
-                [
-                    {
-                        "plugin": "tests.bma_support:ModeSwitcher",
-                        "activate_on": ["MISSION"],
-                        "topics": {"MODE": "SWARM_MODE"},
-                    }
-                ]
-            )
-        ],
-        topics={"SWARM_MODE": {"type": "behavior_state_t", "channel": "{agent}/SWARM_MODE"}},
-    )
+    config = make_config([_bma([_switcher()])], topics=SWARM_MODE)
     with harness(config) as h:
         node = h.bma("main")
         beh = h.sync(lambda: node.behavior("ModeSwitcher"))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from typing import Any
 
 import pytest
@@ -272,9 +273,8 @@ def test_a_remap_to_a_new_topic_of_the_same_type_is_fine() -> None:
 
 def test_bma_node_refuses_a_bad_config_at_construction() -> None:
     config = make_config([{"name": "m", "behaviors": [{"plugin": "nope"}]}])
-    context = Context(Bus(config.buses), Executor())
-    try:
-        with pytest.raises(ConfigError, match=r"bma\[0\].behaviors\[0\].plugin"):
-            BmaNode(config, context, config.bma[0])
-    finally:
-        context.close()
+    with (
+        contextlib.closing(Context(Bus(config.buses), Executor())) as context,
+        pytest.raises(ConfigError, match=r"bma\[0\].behaviors\[0\].plugin"),
+    ):
+        BmaNode(config, context, config.bma[0])

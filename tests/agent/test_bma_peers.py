@@ -3,8 +3,7 @@ agent's own messages heard once, and a config that would split the swarm refused
 
 from __future__ import annotations
 
-import subprocess
-import sys
+import contextlib
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -24,7 +23,7 @@ from antalate_lcm.msgs import mc_state_t, telemetry_t
 from antalate_lcm.wire.peers import PeerTable
 from tests import REPO
 from tests.harness.polling import wait_for
-from tests.harness.process import child_env
+from tests.harness.process import run_antalate
 
 KEY = "peer-test-key"
 HOME = (32.7767, 35.0231)
@@ -182,24 +181,12 @@ def test_unsubscribing_subscribe_all_drops_its_own_channel_half(context: Context
 def test_a_peer_bus_inside_one_process_is_refused_when_the_agents_are_not(context: Context) -> None:
     """A BMA in a process of its own (``antalate bma``), or one shard of ``--processes N``."""
     cfg = _config("a1")
-    alone = Context(Bus(cfg.buses), Executor())
-    try:
-        with pytest.raises(ConfigError, match=r"buses\.lan: a bus other processes reach .* TELEMETRY"):
-            BmaNode(cfg, alone, cfg.bma[0])
-    finally:
-        alone.close()
+    with (
+        contextlib.closing(Context(Bus(cfg.buses), Executor())) as alone,
+        pytest.raises(ConfigError, match=r"buses\.lan: a bus other processes reach .* TELEMETRY"),
+    ):
+        BmaNode(cfg, alone, cfg.bma[0])
     BmaNode(cfg, context, cfg.bma[0])  # the whole swarm in this process: memq:// reaches everyone
-
-
-def _antalate(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "antalate_lcm.cli", *args],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env=child_env(),
-        cwd=cwd,
-    )
 
 
 @pytest.mark.parametrize(
@@ -217,7 +204,7 @@ def test_a_behavior_that_cannot_hear_its_peers_stops_the_start_with_one_line(
     }
     cfg = tmp_path / "swarm.toml"
     cfg.write_text(tomli_w.dumps(doc))
-    proc = _antalate(how[0], str(cfg), *how[1:], cwd=REPO)
+    proc = run_antalate(how[0], str(cfg), *how[1:], cwd=REPO)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr

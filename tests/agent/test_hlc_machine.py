@@ -26,6 +26,7 @@ from antalate_lcm.agent.mc.machine import MissionControl
 from antalate_lcm.autopilot.base import AutopilotState, FlightMode, Frame
 from antalate_lcm.autopilot.sim import SimAutopilot
 from antalate_lcm.wire.vocabulary import Command, HlcState, McState, Severity
+from tests.harness.clock import FakeClock
 
 H = HlcState
 M = McState
@@ -658,14 +659,6 @@ def test_params_validated(changes: dict[str, float]) -> None:
 
 
 # -------------------------------------------------------------------------------- closed loop
-
-
-class FakeClock:
-    def __init__(self, t: float = 0.0) -> None:
-        self.t = t
-
-    def __call__(self) -> float:
-        return self.t
 
 
 class Loop:

@@ -137,13 +137,19 @@ def test_arming_refused_returns_to_standby_with_an_error(
     mc(probe, M.STANDBY, since=probe.mark())
 
 
-def test_low_battery_returns_home(launch: Callable[..., AgentProcesses], probe: Probe) -> None:
-    launch(sim={"battery": 23.0, "drain_flying": 90.0}, hlc={"low_battery": 20.0})
+def fails_safe_then_lands(probe: Probe, hlc_state: int, mc_state: int, timeout: float) -> None:
+    """After the operator's TAKEOFF the HLC reports ``hlc_state`` (a failsafe) within ``timeout`` s, the
+    MC follows to ``mc_state``, and the agent lands back in STANDBY."""
     mc(probe, M.STANDBY)
     command(probe, O.TAKEOFF, seq=1)
-    hlc(probe, H.LOW_BATTERY, timeout=20)
-    mc(probe, M.RTL)
+    hlc(probe, hlc_state, timeout=timeout)
+    mc(probe, mc_state)
     mc(probe, M.STANDBY, since=probe.mark(), timeout=20)
+
+
+def test_low_battery_returns_home(launch: Callable[..., AgentProcesses], probe: Probe) -> None:
+    launch(sim={"battery": 23.0, "drain_flying": 90.0}, hlc={"low_battery": 20.0})
+    fails_safe_then_lands(probe, H.LOW_BATTERY, M.RTL, timeout=20)
 
 
 def test_takeoff_refused_at_low_battery(launch: Callable[..., AgentProcesses], probe: Probe) -> None:
@@ -157,11 +163,7 @@ def test_takeoff_refused_at_low_battery(launch: Callable[..., AgentProcesses], p
 
 def test_altitude_not_gained_lands(launch: Callable[..., AgentProcesses], probe: Probe) -> None:
     launch(sim={"climb_rate": 0.3}, hlc={"gain_altitude_timeout": 1.5})
-    mc(probe, M.STANDBY)
-    command(probe, O.TAKEOFF, seq=1)
-    hlc(probe, H.LANDING, timeout=10)
-    mc(probe, M.LAND)
-    mc(probe, M.STANDBY, since=probe.mark(), timeout=20)
+    fails_safe_then_lands(probe, H.LANDING, M.LAND, timeout=10)
 
 
 def test_link_lost_for_good_rejects_commands_nobody_can_execute(
@@ -183,23 +185,26 @@ def test_link_lost_for_good_rejects_commands_nobody_can_execute(
 
 def test_pilot_takeover_then_landing(launch: Callable[..., AgentProcesses], probe: Probe) -> None:
     launch(sim={"takeover_after": 1.5, "takeover_land_delay": 1.0})
+    fails_safe_then_lands(probe, H.MANUAL, M.MANUAL, timeout=15)
+
+
+def restarted_in_flight(agent: AgentProcesses, probe: Probe, node: str) -> int:
+    """The agent flies its mission, ``node`` is killed (no goodbye) and started again: the probe's
+    mark just before the restart."""
     mc(probe, M.STANDBY)
     command(probe, O.TAKEOFF, seq=1)
-    hlc(probe, H.MANUAL, timeout=15)
-    mc(probe, M.MANUAL)
-    mc(probe, M.STANDBY, since=probe.mark(), timeout=20)
+    mc(probe, M.MISSION)
+    agent.kill(node)
+    mark = probe.mark()
+    agent.start(node)
+    return mark
 
 
 def test_mc_restart_mid_flight_resyncs_without_commands(
     launch: Callable[..., AgentProcesses], probe: Probe
 ) -> None:
     agent = launch()
-    mc(probe, M.STANDBY)
-    command(probe, O.TAKEOFF, seq=1)
-    mc(probe, M.MISSION)
-    agent.kill("mc")
-    mark = probe.mark()
-    agent.start("mc")
+    mark = restarted_in_flight(agent, probe, "mc")
     mc(probe, M.MISSION, since=mark)
     # the HLC never left AIRBORNE: the restart sent nothing
     states = {m["state"] for m in probe.history("alpha/HLC_STATE", "hlc_state_t", since=mark)}
@@ -213,12 +218,7 @@ def test_hlc_restart_mid_flight_resyncs_without_commands(
     launch: Callable[..., AgentProcesses], probe: Probe, tmp_path: Path
 ) -> None:
     agent = launch(sim={"state_file": str(tmp_path / "vehicle.json")})
-    mc(probe, M.STANDBY)
-    command(probe, O.TAKEOFF, seq=1)
-    mc(probe, M.MISSION)
-    agent.kill("hlc")
-    mark = probe.mark()
-    agent.start("hlc")
+    mark = restarted_in_flight(agent, probe, "hlc")
     hlc(probe, H.AIRBORNE, since=mark)
     log = agent.log("hlc")
     assert "INIT -> AIRBORNE" in log

@@ -13,7 +13,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import httpx
 import pytest
@@ -137,16 +137,32 @@ def test_token_is_kept_across_reports(station: StationServer) -> None:
 # ----------------------------------------------------------------------------- misbehaving servers
 
 
-class _Garbage(http.server.BaseHTTPRequestHandler):
-    mode = "json"
+S = TypeVar("S", bound=http.server.ThreadingHTTPServer)
+
+
+class _FakeStation(http.server.BaseHTTPRequestHandler):
+    """A station of the test's making: every POST is answered with what ``reply`` says."""
 
     def log_message(self, *args: Any) -> None:
         pass
 
+    def reply(self) -> tuple[bytes, int]:
+        raise NotImplementedError
+
     def do_POST(self) -> None:  # noqa: N802 - http.server's API
         self.rfile.read(int(self.headers.get("Content-Length", 0)))
+        body, status = self.reply()
+        self.send_response(status)
+        self.send_header("Content-Type", "application/json")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+
+class _Garbage(_FakeStation):
+    def reply(self) -> tuple[bytes, int]:
         assert isinstance(self.server, GarbageServer)
-        body, status = {
+        return {
             "bad_json": (b"{not json", 200),
             "wrong_fields": (
                 json.dumps({"token": 5, "operator_cmd": {"command": "FLIP", "seq": 1}}).encode(),
@@ -161,11 +177,6 @@ class _Garbage(http.server.BaseHTTPRequestHandler):
             "html": (b"<html>proxy error</html>", 502),
             "partial_cmd": (json.dumps({"token": "t", "operator_cmd": {"command": "LAND"}}).encode(), 200),
         }[self.server.mode]
-        self.send_response(status)
-        self.send_header("Content-Type", "application/json")
-        self.send_header("Content-Length", str(len(body)))
-        self.end_headers()
-        self.wfile.write(body)
 
 
 class GarbageServer(http.server.ThreadingHTTPServer):
@@ -176,14 +187,17 @@ class GarbageServer(http.server.ThreadingHTTPServer):
         self.mode = ""
 
 
-@pytest.fixture
-def garbage_server() -> Iterator[GarbageServer]:
-    srv = GarbageServer()
-    th = threading.Thread(target=srv.serve_forever, daemon=True)
-    th.start()
+def _serving(srv: S) -> Iterator[S]:
+    """``srv`` serving on a thread for a fixture's lifetime."""
+    threading.Thread(target=srv.serve_forever, daemon=True).start()
     yield srv
     srv.shutdown()
     srv.server_close()
+
+
+@pytest.fixture
+def garbage_server() -> Iterator[GarbageServer]:
+    yield from _serving(GarbageServer())
 
 
 @pytest.mark.parametrize("mode", ["bad_json", "wrong_fields", "nan", "huge", "status", "html", "partial_cmd"])
@@ -316,22 +330,13 @@ def test_server_that_hangs_times_out() -> None:
 # ----------------------------------------------------------------------------- a station that lies
 
 
-class _Liar(http.server.BaseHTTPRequestHandler):
+class _Liar(_FakeStation):
     """A compromised station: its replies come from ``server.replies`` in turn, then empty ones."""
 
-    def log_message(self, *args: Any) -> None:
-        pass
-
-    def do_POST(self) -> None:  # noqa: N802 - http.server's API
-        self.rfile.read(int(self.headers.get("Content-Length", 0)))
+    def reply(self) -> tuple[bytes, int]:
         assert isinstance(self.server, LiarServer)
         replies = self.server.replies
-        body = json.dumps(replies.pop(0) if replies else {"token": "t"}).encode()
-        self.send_response(200)
-        self.send_header("Content-Type", "application/json")
-        self.send_header("Content-Length", str(len(body)))
-        self.end_headers()
-        self.wfile.write(body)
+        return json.dumps(replies.pop(0) if replies else {"token": "t"}).encode(), 200
 
 
 class LiarServer(http.server.ThreadingHTTPServer):
@@ -344,12 +349,7 @@ class LiarServer(http.server.ThreadingHTTPServer):
 
 @pytest.fixture
 def liar() -> Iterator[LiarServer]:
-    srv = LiarServer()
-    th = threading.Thread(target=srv.serve_forever, daemon=True)
-    th.start()
-    yield srv
-    srv.shutdown()
-    srv.server_close()
+    yield from _serving(LiarServer())
 
 
 KEY = generate_key()

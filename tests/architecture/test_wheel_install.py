@@ -8,11 +8,9 @@ tests share it.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import re
 import shutil
-import signal
 import subprocess
 import sys
 import uuid
@@ -22,10 +20,10 @@ import pytest
 
 from antalate_lcm.apps import spy
 from antalate_lcm.tools import codegen as _codegen
-from tests.harness.netns import NetNamespace, netns_unavailable
+from tests.harness.netns import private_netns
 from tests.harness.polling import wait_for
 from tests.harness.process import stop_process
-from tests.tools.test_spy import _jdk_is_headless, _marked_processes, _read_until
+from tests.tools.test_spy import _marked_processes, require_spy_window, spy_window
 from tests.wheel_support import build_wheel
 
 #: The set-up builds the wheel and pip-installs it with its dependencies into a fresh venv (the pip
@@ -142,34 +140,11 @@ def test_spy_from_the_wheel_finds_every_type(wheel_venv: WheelVenv, tmp_path: Pa
     ):
         if shutil.which(tool) is None:
             pytest.skip(f"{tool} not found ({hint})")
-    if _jdk_is_headless():
-        pytest.skip(
-            "this Java has no AWT for X11 (libawt_xawt.so), which lcm-spy's window needs (Debian: default-jre)"
-        )
-    reason = netns_unavailable()
-    if reason:
-        pytest.skip(f"no private network namespace: {reason}")
-
+    require_spy_window()
     marker = f"-Dantalate.test={uuid.uuid4().hex}"
     env = wheel_venv.env(LCM_JVM_OPT=f"-Xmx128m -Xms64m {marker}", TMPDIR=str(tmp_path))
     env.pop("DISPLAY", None)
-    out: list[str] = []
-    with NetNamespace() as ns:
-        proc = ns.popen(
-            ["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", str(wheel_venv.bin / "antalate"), "spy"],
-            env=env,
-            cwd=wheel_venv.home,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-        )
-        try:
-            _read_until(proc, out, lambda line: line.startswith("Found ") and line.endswith(" plugins"), 90)
-        finally:
-            for pid in _marked_processes(marker):
-                os.kill(pid, signal.SIGTERM)
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                proc.wait(10)
-            stop_process(proc)
+    out, _ = spy_window([str(wheel_venv.bin / "antalate"), "spy"], marker, 90, env=env, cwd=wheel_venv.home)
     text = "\n".join(out)
     assert "javac failed" not in text and "Traceback" not in text, text
     counts = [
@@ -183,10 +158,7 @@ def test_spy_from_the_wheel_finds_every_type(wheel_venv: WheelVenv, tmp_path: Pa
 
 @pytest.mark.netns
 def test_demo_headless_flies_from_the_wheel(wheel_venv: WheelVenv) -> None:
-    reason = netns_unavailable()
-    if reason:
-        pytest.skip(f"no private network namespace: {reason}")
-    with NetNamespace() as ns:
+    with private_netns() as ns:
         proc = ns.popen(
             [str(wheel_venv.bin / "antalate"), "demo", "--headless", "--agents", "2", "--mission-time", "2"],
             env=wheel_venv.env(),

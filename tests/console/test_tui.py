@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-import subprocess
 import sys
 import threading
 import time
@@ -41,25 +40,13 @@ from operator_tui.screens import ConfirmScreen, HelpScreen
 from operator_tui.widgets.agent_table import COLUMNS, AgentTable
 from operator_tui.widgets.panels import EventLog
 from operator_tui.widgets.swarm_map import SwarmMap, points_from
-from tests.harness.netns import NetNamespace, netns_unavailable
+from tests.harness.clock import FakeClock
+from tests.harness.netns import NetNamespace, run_unrouted
 
 T = TypeVar("T")
 
 FIRST_SEQ = 1000
 WALL0 = 1_800_000_000.0
-
-
-class FakeClock:
-    """A monotonic clock that moves only when told to (shared by the app and the node)."""
-
-    def __init__(self, start: float = 100.0) -> None:
-        self.t = start
-
-    def __call__(self) -> float:
-        return self.t
-
-    def advance(self, dt: float) -> None:
-        self.t += dt
 
 
 class FakeSwarm:
@@ -139,6 +126,10 @@ class FakeSwarm:
         self.hlc(name, hlc)
         self.tel(name, **tel)
 
+    def flying(self, name: str, **tel: Any) -> None:
+        """An agent in its mission, airborne, with this telemetry."""
+        self.agent(name, mc_state_t.MISSION, hlc_state_t.AIRBORNE, in_air=True, **tel)
+
     def sent(self) -> list[tuple[str, operator_cmd_t]]:
         with self._lock:
             return list(self.commands)
@@ -167,7 +158,7 @@ def swarm(context: Context) -> FakeSwarm:
 
 @pytest.fixture
 def clock() -> FakeClock:
-    return FakeClock()
+    return FakeClock(100.0)  # shared by the app and the node
 
 
 def utc_hms(wall: float) -> str:
@@ -246,18 +237,7 @@ async def two_agents(
     app = make_app(context, clock)
     async with app.run_test(size=(160, 44)) as pilot:
         swarm.agent("alpha", lat=47.3977, lon=8.5456)
-        swarm.agent(
-            "bravo",
-            mc=mc_state_t.MISSION,
-            hlc=hlc_state_t.AIRBORNE,
-            lat=47.3980,
-            lon=8.5460,
-            alt=12.5,
-            heading=90.0,
-            ve=2.0,
-            battery=35.0,
-            in_air=True,
-        )
+        swarm.flying("bravo", lat=47.3980, lon=8.5460, alt=12.5, heading=90.0, ve=2.0, battery=35.0)
         await until(pilot, app, lambda: len(app.model.agents) == 2 and app.selected == "alpha")
         yield app, pilot
 
@@ -273,17 +253,7 @@ async def test_agent_messages_appear_as_rows(context: Context, swarm: FakeSwarm,
     async with app.run_test(size=(160, 44)) as pilot:
         table = app.screen.query_one(AgentTable)
         assert table.row_count == 0
-        swarm.agent(
-            "uav10",
-            mc=mc_state_t.MISSION,
-            hlc=hlc_state_t.AIRBORNE,
-            alt=12.34,
-            heading=271.0,
-            vn=3.0,
-            ve=4.0,
-            battery=55.0,
-            in_air=True,
-        )
+        swarm.flying("uav10", alt=12.34, heading=271.0, vn=3.0, ve=4.0, battery=55.0)
         swarm.agent("uav2")
         swarm.arbiter("uav10", "main", "MISSION", ["dovrat_swarm", "video_capture"])
         swarm.error("uav10", "arming refused: battery low", code=12)
@@ -491,13 +461,18 @@ async def test_direction_keys(
     assert not isinstance(app.screen, ConfirmScreen) and not app.direction_all
 
 
+def keyed_app(context: Context, clock: FakeClock, swarm: FakeSwarm) -> tuple[OperatorApp, str]:
+    """A console with a swarm key, and the fake swarm signing with the same key on its clock."""
+    key = "correct horse battery staple"
+    swarm.key, swarm.clock = key, clock
+    return make_app(context, clock, memq_config(security={"swarm_key": key})), key
+
+
 # ---------------------------------------------------------------------- security, help
 async def test_commands_are_signed_when_a_swarm_key_is_configured(
     context: Context, swarm: FakeSwarm, clock: FakeClock
 ) -> None:
-    key = "correct horse battery staple"
-    app = make_app(context, clock, memq_config(security={"swarm_key": key}))
-    swarm.key, swarm.clock = key, clock
+    app, key = keyed_app(context, clock, swarm)
     async with app.run_test(size=(160, 44)) as pilot:
         swarm.agent("alpha")
         await until(pilot, app, lambda: app.selected == "alpha")
@@ -519,9 +494,7 @@ async def test_a_keyed_console_takes_no_forged_acknowledgement_or_state(
 ) -> None:
     """An attacker's unsigned or wrongly signed mc_state_t must not acknowledge a command the MC never
     accepted (the console would stop resending it) nor change what the operator sees."""
-    key = "correct horse battery staple"
-    app = make_app(context, clock, memq_config(security={"swarm_key": key}))
-    swarm.key, swarm.clock = key, clock
+    app, key = keyed_app(context, clock, swarm)
     async with app.run_test(size=(160, 44)) as pilot:
         swarm.agent("alpha")
         await until(pilot, app, lambda: app.selected == "alpha")
@@ -678,15 +651,7 @@ async def test_garbage_on_a_watched_channel_is_reported_not_fatal(
 
 def test_run_reports_a_missing_multicast_route() -> None:
     """`antalate tui` on a host without a multicast route: one clear error, exit status 2, no UI."""
-    reason = netns_unavailable()
-    if reason:
-        pytest.skip(reason)
-    proc = subprocess.run(
-        ["unshare", "-rn", sys.executable, "-m", "operator_tui", "--headless", "1"],
-        capture_output=True,
-        text=True,
-        timeout=30,
-    )
+    proc = run_unrouted([sys.executable, "-m", "operator_tui", "--headless", "1"], timeout=30)
     assert proc.returncode == 2
     assert "no route for multicast" in proc.stderr and "Traceback" not in proc.stderr
 

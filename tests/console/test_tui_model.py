@@ -9,7 +9,7 @@ import pytest
 from antalate_lcm.msgs import arbiter_status_t, hlc_error_t, hlc_state_t, mc_state_t, telemetry_t
 from antalate_lcm.wire.vocabulary import Severity
 from operator_tui.commands import CommandTracker, DirectionControl, Status, TrackedCommand, applies
-from operator_tui.model import EventKind, SwarmModel, heading_arrow, natural_key
+from operator_tui.model import EventKind, SafetySummary, SwarmModel, heading_arrow, natural_key
 from operator_tui.widgets.agent_table import format_age, row_cells
 from operator_tui.widgets.swarm_map import MapPoint, render_map
 
@@ -146,23 +146,10 @@ def test_the_status_bar_says_who_is_being_modified_and_the_closest_pair_in_the_a
     assert summary.modified == {"separation": 2}
     assert summary.closest is not None and summary.closest[1:] == ("a", "b")
     assert summary.closest[0] == pytest.approx(5.0, abs=0.01)
-    line = status_text(
-        bus="memq://",
-        agents=4,
-        stale=0,
-        pending=0,
-        failed=0,
-        direction=DirectionControl(),
-        scope_all=True,
-        selected=None,
-        safety=summary,
-    ).plain
-    assert line.endswith("safety modifying 2 by separation  closest a-b 5.0 m")
-    later = model.safety_summary(10.0)
-    assert later is not None and later.modified == {}
-    assert (
-        "safety idle"
-        in status_text(
+
+    def status(safety: SafetySummary) -> str:
+        """The status line of a calm swarm of four, but for ``safety``."""
+        return status_text(
             bus="memq://",
             agents=4,
             stale=0,
@@ -171,9 +158,13 @@ def test_the_status_bar_says_who_is_being_modified_and_the_closest_pair_in_the_a
             direction=DirectionControl(),
             scope_all=True,
             selected=None,
-            safety=later,
+            safety=safety,
         ).plain
-    )
+
+    assert status(summary).endswith("safety modifying 2 by separation  closest a-b 5.0 m")
+    later = model.safety_summary(10.0)
+    assert later is not None and later.modified == {}
+    assert "safety idle" in status(later)
 
 
 def test_stale_agents_are_marked_once_and_kept() -> None:

@@ -21,7 +21,8 @@ from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
 from operator_tui.app import OperatorApp
 from operator_tui.commands import Status
 from tests.console import test_tui
-from tests.console.test_tui import FakeClock, FakeSwarm, make_app, until, wait_dirs, wait_sent
+from tests.console.test_tui import FakeSwarm, make_app, until, wait_dirs, wait_sent
+from tests.harness.clock import FakeClock
 
 # The pilot tests' fixtures (a memq bus shared with fake agents, a fake clock), reused as they are.
 context = test_tui.context
@@ -57,19 +58,7 @@ async def test_main_screen_snapshot(context: Context, swarm: FakeSwarm, clock: F
     app = make_app(context, clock)
     async with app.run_test(size=SIZE) as pilot:
         swarm.agent("alpha", lat=47.39770, lon=8.54560)
-        swarm.agent(
-            "bravo",
-            mc=mc_state_t.MISSION,
-            hlc=hlc_state_t.AIRBORNE,
-            lat=47.39810,
-            lon=8.54640,
-            alt=15.2,
-            heading=45.0,
-            vn=1.4,
-            ve=1.4,
-            battery=76.0,
-            in_air=True,
-        )
+        swarm.flying("bravo", lat=47.39810, lon=8.54640, alt=15.2, heading=45.0, vn=1.4, ve=1.4, battery=76.0)
         swarm.arbiter("bravo", "main", "MISSION", ["dovrat_swarm", "video_capture"])
         swarm.agent(
             "charlie",

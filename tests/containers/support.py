@@ -3,7 +3,7 @@
 Everything podman keeps for these tests lives under one folder (``--root``, ``--runroot``,
 ``--tmpdir``), so the host's images and containers are never touched and the folder goes with the
 test. ``--network host`` puts a container in the network namespace of the podman that started it:
-started through tests.netns.NetNamespace in its root mode (``unshare -n``), that is a private namespace with only
+started through tests.harness.netns.NetNamespace in its root mode (``unshare -n``), that is a private namespace with only
 ``lo`` and the multicast route, never the host's network.
 """
 

@@ -10,6 +10,7 @@ from antalate_lcm.agent.plan import load_plan
 from antalate_lcm.base.errors import ConfigError
 from antalate_lcm.core.config import Config, check_unique_agent_names, load_config, parse_config
 from tests import REPO
+from tests.harness.cases import cases
 
 
 def write(tmp_path: Path, text: str) -> Path:
@@ -112,31 +113,7 @@ def test_a_config_loads_without_importing_its_plugins(tmp_path: Path) -> None:
     assert_config_error(path, "hlc.autopilot", "there is no adapter 'nope'")
 
 
-@pytest.mark.parametrize(
-    ("text", "key", "expected"),
-    [
-        ("[hlc]\ntelemetry_hz = 'fast'\n", "hlc.telemetry_hz", "valid number"),
-        ("[hlc]\ntelemetry_hz = -1\n", "hlc.telemetry_hz", "greater than 0"),
-        ("[hlc]\nlow_battery = 150\n", "hlc.low_battery", "less than or equal to 100"),
-        ("[hlc]\nairborne_fraction = nan\n", "hlc.airborne_fraction", ""),
-        ("[mc]\ntakeof_ack_timeout = 3\n", "mc.takeof_ack_timeout", "Extra inputs"),
-        ("[agent]\nname = 'a b'\n", "agent.name", "white space"),
-        ("[agent]\nname = 'drône'\n", "agent.name", "ASCII"),
-        ("[buses]\nlan = 'localhost:7667'\n", "buses.lan", "LCM URL"),
-        ("[topics]\nMC_STATE = 'wan'\n", "topics.MC_STATE.bus", "declared in [buses]"),
-        ("[topics]\ndefault_bus = 'wan'\n", "topics.default_bus", "declared in [buses]"),
-        ("[topics]\nFOO = 'lan'\n", "topics.FOO", "known topic"),
-        ("[topics]\nFOO = { type = 'nope_t', channel = 'x' }\n", "topics.FOO.type", "one of"),
-        ("[[bma]]\nname = 'a'\nstate_topic = 'NOPE'\n", "bma[0].state_topic", "topic name"),
-        ("[[bma]]\nname = 'a'\n[[bma]]\nname = 'a'\n", "bma.name", "unique"),
-        (
-            "[[bma]]\nname = 'a'\n[[bma.behaviors]]\nactivate_on = ['MISSION']\n",
-            "bma[0].behaviors[0].plugin",
-            "required",
-        ),
-        ("[osc]\nrate = 0\n", "osc.rate", "greater than 0"),
-    ],
-)
+@pytest.mark.parametrize(("text", "key", "expected"), cases("core/bad_configs.toml"))
 def test_invalid_files_name_file_key_and_expectation(
     tmp_path: Path, text: str, key: str, expected: str
 ) -> None:
@@ -201,39 +178,7 @@ def assert_config_error(path: Path, key: str, *expected: str) -> ConfigError:
     return err
 
 
-@pytest.mark.parametrize(
-    ("text", "key", "expected"),
-    [
-        # a string is not a number, a boolean is not a number, a number is not a boolean or a string
-        ("[hlc]\ntelemetry_hz = '5'\n", "hlc.telemetry_hz", "valid number, got '5'"),
-        ("[hlc]\nlow_battery = true\n", "hlc.low_battery", "valid number, got True"),
-        ("[mc]\nhlc_timeout = '2.0'\n", "mc.hlc_timeout", "valid number"),
-        ("[mc]\non_link_regained = 1\n", "mc.on_link_regained", "'rtl', 'land' or 'hold'"),
-        ("[osc]\nenabled = 'yes'\n", "osc.enabled", "valid boolean, got 'yes'"),
-        ("[osc]\nenabled = 1\n", "osc.enabled", "valid boolean, got 1"),
-        ("[osc]\nmax_reply_bytes = '65536'\n", "osc.max_reply_bytes", "valid integer"),
-        ("[osc]\nmax_reply_bytes = 65536.0\n", "osc.max_reply_bytes", "valid integer"),
-        ("[osc]\nserver = 8080\n", "osc.server", "valid string"),
-        ("[security]\ninsecure = 'false'\n", "security.insecure", "valid boolean, got 'false'"),
-        ("[security]\nwindow = '5'\n", "security.window", "valid number"),
-        ("[security]\nswarm_key = 1234\n", "security.swarm_key", "valid string"),
-        ("[agent]\nname = 7\n", "agent.name", "valid string, got 7"),
-        ("[buses]\nlan = 7667\n", "buses.lan", "valid string"),
-        ("[topics]\ndefault_bus = 1\n", "topics.default_bus", "valid string"),
-        ("[topics]\nMC_STATE = 5\n", "topics.MC_STATE", "a bus name"),
-        ("[topics]\nMC_STATE = ['lan', 5]\n", "topics.MC_STATE[1]", "valid string"),
-        ("[topics]\nMC_STATE = { bus = 'lan', chanel = 'x' }\n", "topics.MC_STATE.chanel", "Extra inputs"),
-        ("[[bma]]\nname = 5\n", "bma[0].name", "valid string"),
-        ("[[bma]]\nname = 'a'\nrepublish_hz = '5'\n", "bma[0].republish_hz", "valid number"),
-        (BEHAVIOR + "tick_hz = '5'\n", "bma[0].behaviors[0].tick_hz", "valid number"),
-        (BEHAVIOR + "activate_on = 'MISSION'\n", "bma[0].behaviors[0].activate_on", "valid array"),
-        ("[hlc]\nautopilot = 5\n", "hlc.autopilot", "valid string"),
-        # TOML dates and times fit no setting; as strings they would slip into a text field
-        ("[agent]\nname = 1979-05-27\n", "agent.name", "date/time"),
-        ("[hlc.autopilot_params]\nstate_file = 07:32:00\n", "hlc.autopilot_params.state_file", "date/time"),
-        ('source = "elsewhere.toml"\n', "source", "not a config key"),
-    ],
-)
+@pytest.mark.parametrize(("text", "key", "expected"), cases("core/no_coercion.toml"))
 def test_no_silent_coercion_in_any_section(tmp_path: Path, text: str, key: str, expected: str) -> None:
     assert_config_error(write(tmp_path, text), key, expected)
 
@@ -428,26 +373,7 @@ def test_design_style_table_names_its_name_key(tmp_path: Path) -> None:
 # ------------------------------------------------------------------ adapter params, by the adapter's own model
 
 
-@pytest.mark.parametrize(
-    ("params", "field", "expected"),
-    [
-        ("land_disarm_delay = -1", "land_disarm_delay", "greater than or equal to 0, got -1"),
-        ("auto_disarm_delay = 0", "auto_disarm_delay", "greater than 0"),
-        ("takeover_land_delay = -0.5", "takeover_land_delay", "greater than or equal to 0"),
-        ("link_loss_after = -3", "link_loss_after", "greater than or equal to 0"),
-        ("climb_rate = -1.0", "climb_rate", "greater than 0"),
-        ("drain_flying = -4", "drain_flying", "greater than or equal to 0"),
-        ("tau = 0", "tau", "greater than 0"),
-        ("time_scale = inf", "time_scale", "finite number"),
-        ("battery = 120", "battery", "less than or equal to 100"),
-        ("home_lat = 95.0", "home_lat", "less than or equal to 90"),
-        ("home_lat = '32.7'", "home_lat", "valid number, got '32.7'"),
-        ("link_loss = 'yes'", "link_loss", "valid boolean, got 'yes'"),
-        ("refuse_arm = 1", "refuse_arm", "valid boolean, got 1"),
-        ("state_file = 5", "state_file", "valid string"),
-        ("hom_lat = 32.1", "hom_lat", "Extra inputs are not permitted"),
-    ],
-)
+@pytest.mark.parametrize(("params", "field", "expected"), cases("core/sim_params.toml"))
 @pytest.mark.parametrize("table", ["autopilot", "autopilot_params"])
 def test_sim_params_are_validated_at_load(
     tmp_path: Path, table: str, params: str, field: str, expected: str
@@ -532,21 +458,7 @@ def test_any_adapter_declares_its_params_model(tmp_path: Path, plugin_dir: Path)
 # ------------------------------------------------------------------ behaviors' params are strict too
 
 
-@pytest.mark.parametrize(
-    ("params", "key", "expected"),
-    [
-        ("{ retry = '2' }", "retry", "valid number, got '2'"),
-        ("{ max_flights = 1.0 }", "max_flights", "valid integer"),
-        ("{ max_flights = '1' }", "max_flights", "valid integer"),
-        ("{ altitude = true }", "altitude", "valid number"),
-        ("{ turn_direction = true }", "turn_direction", "Input should be 1 or -1, got True"),
-        (
-            "{ detection_source = 1 }",
-            "detection_source",
-            "Input should be 'any', 'peer_detection' or 'payload'",
-        ),
-    ],
-)
+@pytest.mark.parametrize(("params", "key", "expected"), cases("core/behavior_params.toml"))
 def test_behavior_params_are_strict(tmp_path: Path, params: str, key: str, expected: str) -> None:
     from antalate_lcm.runtime.agent import validate
 

@@ -12,8 +12,7 @@ import json
 import logging
 import math
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +36,7 @@ from antalate_lcm.msgs import (
 from antalate_lcm.wire.security import Reason, sign
 from antalate_lcm.wire.vocabulary import HlcState, McState
 from tests.harness.agents import FAST_SIM
+from tests.harness.inprocess import InProcess
 from tests.harness.polling import wait_for
 
 KEY = "node-test-swarm-key"
@@ -65,20 +65,13 @@ def config(key: str = KEY, **extra: Any) -> Config:
     return parse_config(doc, "test.toml")
 
 
-class Swarm:
+class Swarm(InProcess):
     """A started context; nodes added by the test; an operator console node and an attacker."""
 
     def __init__(self, cfg: Config) -> None:
+        super().__init__(cfg)
         self.cfg = cfg
-        self.context = Context(Bus(cfg.buses), Executor())
-        self.context.executor.start()
-        self.nodes: list[Node] = []
         self.operator = self.add(Node(cfg.with_agent_name("console"), self.context, name="console"))
-
-    def add(self, node: Any) -> Any:
-        node.start()
-        self.nodes.append(node)
-        return node
 
     def stop(self, node: Node) -> None:
         node.stop()
@@ -109,19 +102,10 @@ class Swarm:
         msg.command, msg.target = getattr(operator_cmd_t, name), target
         self.operator.publish("OPERATOR_CMD", msg, seq=seq, agent=target)
 
-    def close(self) -> None:
-        for node in reversed(self.nodes):
-            node.stop()
-        self.context.close()
 
-
-@contextmanager
-def swarm(cfg: Config) -> Iterator[Swarm]:
-    s = Swarm(cfg)
-    try:
-        yield s
-    finally:
-        s.close()
+def swarm(cfg: Config) -> Swarm:
+    """``with swarm(cfg) as s``: closed at the end of the block."""
+    return Swarm(cfg)
 
 
 def rejected(node: Node, reason: Reason) -> Callable[[], int]:
@@ -251,7 +235,7 @@ def _direction(azimuth: float, speed: float) -> direction_cmd_t:
 def test_an_older_direction_replayed_within_the_window_is_rejected() -> None:
     with swarm(config(bma=[SWARM_BMA])) as s:
         bma = s.add(BmaNode(s.cfg, s.context, s.cfg.bma[0]))
-        behavior = bma.behavior("dovrat_swarm")
+        behavior: Any = bma.behavior("dovrat_swarm")  # the plugin class, with its own attributes
         wire = s.capture("SWARM/DIRECTION_CMD")
         s.operator.publish("SWARM_DIRECTION_CMD", _direction(90.0, 1.0))
         s.operator.publish("SWARM_DIRECTION_CMD", _direction(270.0, 1.0))
@@ -269,7 +253,7 @@ def test_infinite_and_nan_inputs_are_rejected_and_the_behavior_lives_on(
 ) -> None:
     with swarm(config(bma=[SWARM_BMA])) as s:
         bma = s.add(BmaNode(s.cfg, s.context, s.cfg.bma[0]))
-        behavior = bma.behavior("dovrat_swarm")
+        behavior: Any = bma.behavior("dovrat_swarm")  # the plugin class, with its own attributes
         got: list[velocity_cmd_t] = []
         s.operator.subscribe("VELOCITY_CMD", got.append, agent=AGENT)
         mc_stand_in = s.add(Node(s.cfg, s.context, name="mc"))  # the agent's MC says MISSION
@@ -406,7 +390,7 @@ def test_in_process_context_keeps_internal_topics_off_the_network_bus() -> None:
 def test_payload_json_reaches_the_behavior_when_it_is_right() -> None:
     with swarm(config(bma=[SWARM_BMA])) as s:
         bma = s.add(BmaNode(s.cfg, s.context, s.cfg.bma[0]))
-        behavior = bma.behavior("dovrat_swarm")
+        behavior: Any = bma.behavior("dovrat_swarm")  # the plugin class, with its own attributes
         payload = payload_t()
         payload.content_type = "application/json"
         payload.data = json.dumps({"detected": True, "count": 2}).encode()

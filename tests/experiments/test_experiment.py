@@ -21,45 +21,22 @@ from antalate_lcm.runtime.experiment import Experiment, run
 from antalate_lcm.runtime.scaffold import files, write_behavior
 from antalate_lcm.runtime.script import load_script, parse_script
 from tests import REPO
+from tests.harness.agents import swarm_config
+from tests.harness.cases import cases
 
-MEMQ_CONFIG = """
-[agent]
-name = "e"
-[buses]
-lan = "memq://"
-[topics]
-default_bus = "lan"
-[hlc]
-autopilot = "sim"
-default_takeoff_altitude = 5.0
-[[bma]]
-name = "m"
-[[bma.behaviors]]
-plugin = "direction_follow"
-"""
+MEMQ_CONFIG = swarm_config("e", {"plugin": "direction_follow"})
+
+
+@pytest.fixture
+def config(tmp_path: Path) -> Path:
+    """The swarm of the flights in one process: ``direction_follow`` on ``memq://``."""
+    path = tmp_path / "swarm.toml"
+    path.write_text(MEMQ_CONFIG)
+    return path
 
 
 # ----------------------------------------------------------------------------- the script
-@pytest.mark.parametrize(
-    ("text", "key", "what"),
-    [
-        ('mission_time = "6"', "mission_time", "valid number"),
-        ("mission_time = 6\nmisson = 3", "misson", "Extra inputs"),
-        ("altitude = 5", "mission_time", "Field required"),
-        ("mission_time = nan", "mission_time", "finite"),
-        ("mission_time = -1", "mission_time", "greater than 0"),
-        ("mission_time = 6\n[[direction]]\nat = 7\nazimuth = 3", "direction[0].at", "below mission_time"),
-        (
-            "mission_time = 9\n[[direction]]\nat = 5\nazimuth = 3\n[[direction]]\nat = 2\nazimuth = 4",
-            "direction[1].at",
-            "in order",
-        ),
-        ("mission_time = 6\n[[direction]]\nat = 1\nazimuth = 3\nspeed = inf", "direction[0].speed", "finite"),
-        ("mission_time = 6\n[analyze]\nrange = -1", "analyze.range", "greater than 0"),
-        ("mission_time = 6\n[analyze]\nradius_below = true", "analyze.radius_below", "valid number"),
-        ("mission_time = 6\ntimeout = 1979-05-27", "timeout", "date/time"),
-    ],
-)
+@pytest.mark.parametrize(("text", "key", "what"), cases("experiments/bad_scripts.toml"))
 def test_a_bad_script_is_one_line_naming_the_key(tmp_path: Path, text: str, key: str, what: str) -> None:
     path = tmp_path / "script.toml"
     path.write_text(text + "\n")
@@ -89,17 +66,15 @@ def test_script_defaults_and_a_full_script() -> None:
 
 # ----------------------------------------------------------------------------- refusals before flight
 def test_bad_configs_and_options_fail_before_anything_flies(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, config: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    config = tmp_path / "swarm.toml"
-    config.write_text(MEMQ_CONFIG)
     out = tmp_path / "x.lcm"
     # agents in other processes cannot hear an operator on memq://: the key, not a silent no-show
     assert main(["run", str(config), "--agents", "2", "--processes", "2", "--headless", "-o", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "buses.lan" in err and "--processes 2" in err
     bad_plugin = tmp_path / "bad.toml"
-    bad_plugin.write_text(MEMQ_CONFIG.replace('"direction_follow"', '"no_such_behavior"'))
+    bad_plugin.write_text(swarm_config("e", {"plugin": "no_such_behavior"}))
     assert main(["run", str(bad_plugin), "--headless", "-o", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "bma[0].behaviors[0].plugin" in err
@@ -115,10 +90,8 @@ def test_bad_configs_and_options_fail_before_anything_flies(
 
 # ----------------------------------------------------------------------------- a flight in one process
 def test_run_flies_the_script_records_and_prints_the_metrics(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, config: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    config = tmp_path / "swarm.toml"
-    config.write_text(MEMQ_CONFIG)
     script = tmp_path / "script.toml"
     script.write_text(
         "mission_time = 8.0\n"
@@ -254,7 +227,7 @@ def _env() -> dict[str, str]:
 
 
 # ----------------------------------------------------------------------------- with the console
-def test_run_with_the_console_in_a_real_terminal(tmp_path: Path) -> None:
+def test_run_with_the_console_in_a_real_terminal(tmp_path: Path, config: Path) -> None:
     """Without --headless the operator console flies (tmux: take off all, RTL all, quit); the log
     and the metrics follow when it quits."""
     import shlex
@@ -265,8 +238,6 @@ def test_run_with_the_console_in_a_real_terminal(tmp_path: Path) -> None:
 
     if shutil.which("tmux") is None:
         pytest.skip("tmux is not installed (Debian/Ubuntu: apt-get install tmux)")
-    config = tmp_path / "swarm.toml"
-    config.write_text(MEMQ_CONFIG)
     log = tmp_path / "console.lcm"
     argv = [sys.executable, "-m", "antalate_lcm.cli", "run", str(config), "--agents", "2", "-o", str(log)]
     env = _env()
@@ -286,7 +257,7 @@ def test_run_with_the_console_in_a_real_terminal(tmp_path: Path) -> None:
     assert all("MISSION" in [c.state for c in a.mc_states] for a in record.agents.values())
 
 
-def test_ctrl_c_mid_mission_stops_cleanly_and_still_measures(tmp_path: Path) -> None:
+def test_ctrl_c_mid_mission_stops_cleanly_and_still_measures(tmp_path: Path, config: Path) -> None:
     """SIGINT while the swarm is in MISSION: the nodes stop in order, the log is complete up to
     there, the metrics are printed (here as --json), exit status 130."""
     import signal
@@ -294,8 +265,6 @@ def test_ctrl_c_mid_mission_stops_cleanly_and_still_measures(tmp_path: Path) -> 
     from tests.harness.polling import wait_for
     from tests.harness.process import stop_process
 
-    config = tmp_path / "swarm.toml"
-    config.write_text(MEMQ_CONFIG)
     script = tmp_path / "long.toml"
     script.write_text("mission_time = 600.0\n")
     log = tmp_path / "cut.lcm"

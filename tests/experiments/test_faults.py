@@ -34,25 +34,16 @@ from antalate_lcm.msgs import mc_state_t, operator_cmd_t, peer_scan_t, telemetry
 from antalate_lcm.runtime.experiment import Experiment, Outcome, run
 from antalate_lcm.runtime.faults import BroadcastReception, FaultGate, plan
 from antalate_lcm.runtime.script import Script, load_script, parse_script
+from tests.harness.agents import swarm_config
+from tests.harness.cases import cases
 
-CONFIG = """
-[agent]
-name = "e"
-[buses]
-lan = "memq://"
-[topics]
-default_bus = "lan"
-[hlc]
-autopilot = "sim"
-default_takeoff_altitude = 5.0
-[[bma]]
-name = "m"
-[[bma.behaviors]]
-plugin = "direction_follow"
-[[bma.behaviors]]
-plugin = "peer_sensor"
-params = { max_range = 1000.0, identities = true }
-"""
+BEHAVIORS = (
+    {"plugin": "direction_follow"},
+    {"plugin": "peer_sensor", "params": {"max_range": 1000.0, "identities": True}},
+)
+CONFIG = swarm_config("e", *BEHAVIORS)
+#: The same swarm on the namespace's multicast group, for runs over several processes.
+UDPM_CONFIG = swarm_config("e", *BEHAVIORS, bus="udpm://239.255.76.67:7667?ttl=0")
 
 #: Every swarm flies east at 2 m/s from the start of its mission (the agents keep their grid).
 EAST = "[[direction]]\nat = 0.0\nazimuth = 90.0\nspeed = 2.0\n"
@@ -74,6 +65,12 @@ def _script(path: Path, text: str) -> Script:
 
 def _faults(record: SwarmRecord, agent: str, kind: str) -> dict[str, FaultRecord]:
     return {f.event: f for f in record.faults if f.agent == agent and f.kind == kind}
+
+
+def _span(record: SwarmRecord, agent: str, kind: str) -> tuple[float, float]:
+    """When the agent's fault of ``kind`` started and ended (s into the log)."""
+    fault = _faults(record, agent, kind)
+    return fault["start"].t, fault["end"].t
 
 
 def _ne(record: SwarmRecord, agent: str) -> list[tuple[float, float, float]]:
@@ -112,88 +109,7 @@ def _raw(path: Path, channel: str) -> list[tuple[float, Any]]:
 
 
 # ----------------------------------------------------------------------------- the script
-@pytest.mark.parametrize(
-    ("fault", "key", "what"),
-    [
-        ('kind = "melt"\nagent = "e-01"\nat = 1', "fault[0].kind", "Input should be"),
-        ('kind = "crash"\nat = 1', "fault[0].agent", "Field required"),
-        ('kind = "crash"\nagent = "e-01"\nat = -1', "fault[0].at", "greater than or equal to 0"),
-        ('kind = "crash"\nagent = "e-01"\nat = 9', "fault[0].at", "below mission_time"),
-        ('kind = "crash"\nagent = "e-01"\nat = 1\nduration = 2', "fault[0].duration", "not a key of a crash"),
-        (
-            'kind = "freeze"\nagent = "e-01"\nat = 1\nprobability = 1.5',
-            "fault[0].probability",
-            "less than or",
-        ),
-        ('kind = "sensor"\nagent = "e-01"\nat = 1\nmode = "bias"', "fault[0].sensor", "position or peers"),
-        ('kind = "sensor"\nagent = "e-01"\nat = 1\nsensor = "position"', "fault[0].mode", "stuck or bias"),
-        (
-            'kind = "sensor"\nagent = "e-01"\nat = 1\nsensor = "position"\nmode = "bias"',
-            "fault[0].mode",
-            "needs offset",
-        ),
-        (
-            'kind = "sensor"\nagent = "e-01"\nat = 1\nsensor = "position"\nmode = "bias"\nrange_bias = 2',
-            "fault[0].range_bias",
-            "not a key of a position sensor",
-        ),
-        ('kind = "byzantine"\nagent = "e-01"\nat = 1', "fault[0].kind", "offset"),
-        ('kind = "byzantine"\nagent = "e-01"\nat = 1\nstate = "FLYING"', "fault[0].state", "one of INIT"),
-        ('kind = "battery"\nagent = "e-01"\nat = 1\nlevel = 120', "fault[0].level", "less than or equal"),
-        ('kind = "battery"\nagent = "e-01"\nat = 1', "fault[0].kind", "level"),
-        ('kind = "packet_loss"\nagent = "e-01"\nat = 1\nloss = 0.5', "fault[0].topics", "the topics"),
-        (
-            'kind = "packet_loss"\nagent = "e-01"\nat = 1\nloss = 0.5\ntopics = ["TELEMTRY"]',
-            "fault[0].topics",
-            "'TELEMTRY'",
-        ),
-        (
-            'kind = "packet_loss"\nagent = "e-01"\nat = 1\ntopics = ["TELEMETRY"]',
-            "fault[0].loss",
-            "a delay > 0 or a bandwidth",
-        ),
-        (
-            'kind = "packet_loss"\nagent = "e-01"\nat = 1\ntopics = ["TELEMETRY"]\nloss = 0.1\nburst = 100',
-            "fault[0].burst",
-            "a burst with a bandwidth",
-        ),
-        (
-            'kind = "packet_loss"\nagent = "e-01"\nat = 1\ntopics = ["TELEMETRY"]\nbandwidth = 0',
-            "fault[0].bandwidth",
-            "greater than 0",
-        ),
-        (
-            'kind = "freeze"\nagent = "e-01"\nat = 1\nbandwidth = 100',
-            "fault[0].bandwidth",
-            "not a key of a freeze",
-        ),
-        ('kind = "link_loss"\nagent = []\nat = 1', "fault[0].agent", "at least one agent"),
-        ('kind = "vehicle"\nagent = "e-01"\nat = 1', "fault[0].vehicle", "failsafe, pilot_takeover"),
-        ('kind = "vehicle"\nagent = "e-01"\nat = 1\nvehicle = "fire"', "fault[0].vehicle", "Input should be"),
-        (
-            'kind = "vehicle"\nagent = "e-01"\nat = 1\nvehicle = "link_loss"\nfailsafe = "land"',
-            "fault[0].failsafe",
-            "only with vehicle = 'failsafe'",
-        ),
-        (
-            'kind = "vehicle"\nagent = "e-01"\nat = 1\nvehicle = "pilot_takeover"\nduration = 3',
-            "fault[0].duration",
-            "happens once",
-        ),
-        ('kind = "crash"\nagent = "e-01"\nat = 3\nat_latest = 2', "fault[0].at_latest", "from at = 3 on"),
-        ('kind = "crash"\nagent = "e-01"\nat = 3\nat_latest = 6', "fault[0].at_latest", "below mission_time"),
-        (
-            'kind = "crash"\nagent = "e-01"\nat = 1\nsince = "takeoff"',
-            "fault[0].since",
-            "'mission' or 'start'",
-        ),
-        (
-            'kind = "link_loss"\nagent = "e-01"\nat = 1\nlevel = 3',
-            "fault[0].level",
-            "not a key of a link_loss",
-        ),
-    ],
-)
+@pytest.mark.parametrize(("fault", "key", "what"), cases("experiments/bad_faults.toml"))
 def test_a_bad_fault_is_one_line_naming_the_key(tmp_path: Path, fault: str, key: str, what: str) -> None:
     with pytest.raises(ConfigError) as info:
         _script(tmp_path / "s.toml", f"mission_time = 6\n[[fault]]\n{fault}\n")
@@ -220,7 +136,7 @@ def test_faults_on_unknown_agents_or_elsewhere_fail_before_anything_flies(tmp_pa
     script = parse_script({"mission_time": 6, "fault": [{**crash, "agent": "e-01"}]}, "s.toml")
     with pytest.raises(AntalateError, match=r"needs --headless"):
         run(Experiment(str(config), agents=3, script=script, output=str(out), headless=False))
-    mavlink = _write(tmp_path / "mavlink.toml", CONFIG.replace('autopilot = "sim"', 'autopilot = "mavlink"'))
+    mavlink = _write(tmp_path / "mavlink.toml", swarm_config("e", *BEHAVIORS, autopilot="mavlink"))
     for kind, keys in (("battery", {"level": 10.0}), ("vehicle", {"vehicle": "failsafe"})):
         fault = {"kind": kind, "agent": "e", "at": 1.0, **keys}
         script = parse_script({"mission_time": 6, "fault": [fault]}, "s.toml")
@@ -496,8 +412,7 @@ def test_a_frozen_agent_is_silent_for_the_duration_then_carries_on(
     dead_and_frozen: tuple[Outcome, SwarmRecord],
 ) -> None:
     _, record = dead_and_frozen
-    freeze = _faults(record, "e-02", "freeze")
-    start, end = freeze["start"].t, freeze["end"].t
+    start, end = _span(record, "e-02", "freeze")
     times = [s.t for s in record.agents["e-02"].telemetry]
     assert not [t for t in times if start + 0.1 < t < end - 0.1]
     assert [t for t in times if t > end + 0.3]
@@ -508,8 +423,7 @@ def test_a_biased_position_sensor_moves_the_agent_in_its_telemetry(
     dead_and_frozen: tuple[Outcome, SwarmRecord],
 ) -> None:
     _, record = dead_and_frozen
-    bias = _faults(record, "e-03", "sensor")
-    start, end = bias["start"].t, bias["end"].t
+    start, end = _span(record, "e-03", "sensor")
     # e-03 and e-04 fly east side by side: what changes between them is e-03's reading
     e3, e4 = _ne(record, "e-03"), _ne(record, "e-04")
 
@@ -529,8 +443,7 @@ def test_a_biased_position_sensor_moves_the_agent_in_its_telemetry(
 
 def test_a_byzantine_agent_claims_a_state_it_is_not_in(dead_and_frozen: tuple[Outcome, SwarmRecord]) -> None:
     outcome, record = dead_and_frozen
-    lie = _faults(record, "e-04", "byzantine")
-    start, end = lie["start"].t, lie["end"].t
+    start, end = _span(record, "e-04", "byzantine")
     states = [(c.t, c.state) for c in record.agents["e-04"].mc_states]
     (hold,) = [(t, s) for t, s in states if s == "HOLD"]
     assert start - 0.1 <= hold[0] <= start + 1.0
@@ -649,8 +562,7 @@ def test_the_lossy_flight_comes_back_with_every_fault_recorded(lossy: tuple[Outc
 
 def test_a_byzantine_position_fools_the_others_not_itself(lossy: tuple[Outcome, SwarmRecord]) -> None:
     _, record = lossy
-    lie = _faults(record, "e-01", "byzantine")
-    start, end = lie["start"].t, lie["end"].t
+    start, end = _span(record, "e-01", "byzantine")
     e1, e4 = _ne(record, "e-01"), _ne(record, "e-04")
     assert _gap(e1, e4, 2, start + 0.3, end - 0.3) - _gap(
         e1, e4, 2, start - 1.0, start - 0.1
@@ -692,8 +604,7 @@ def test_link_loss_keeps_the_operators_rtl_from_the_agent(lossy: tuple[Outcome, 
 
 def test_packet_loss_and_delay_on_the_chosen_topic(lossy: tuple[Outcome, SwarmRecord]) -> None:
     _, record = lossy
-    loss = _faults(record, "e-02", "packet_loss")
-    start, end = loss["start"].t, loss["end"].t
+    start, end = _span(record, "e-02", "packet_loss")
     path = Path(record.path)
 
     def window(agent: str, t0: float, t1: float) -> list[tuple[float, Any]]:
@@ -752,8 +663,7 @@ def test_a_battery_fault_drops_and_drains_the_sim_battery(lossy: tuple[Outcome, 
 def test_a_faulty_peer_sensor_and_a_stuck_position(lossy: tuple[Outcome, SwarmRecord]) -> None:
     _, record = lossy
     path = Path(record.path)
-    bias = _faults(record, "e-04", "sensor")
-    start, end = bias["start"].t, bias["end"].t
+    start, end = _span(record, "e-04", "sensor")
     scans = _raw(path, "e-04/PEER_SCAN")
 
     def range_to(peer: str, t0: float, t1: float) -> float:
@@ -764,8 +674,7 @@ def test_a_faulty_peer_sensor_and_a_stuck_position(lossy: tuple[Outcome, SwarmRe
     assert range_to("e-03", start + 0.3, end) - range_to("e-03", start - 1.0, start) == pytest.approx(
         5.0, abs=0.5
     )
-    stuck = _faults(record, "e-05", "sensor")
-    start, end = stuck["start"].t, stuck["end"].t
+    start, end = _span(record, "e-05", "sensor")
     during = {(round(n, 3), round(e, 3)) for t, n, e in _ne(record, "e-05") if start + 0.1 < t < end - 0.1}
     assert len(during) == 1  # flying east at 2 m/s, reading one place
     moved = [e for t, _, e in _ne(record, "e-05") if end + 0.2 < t < end + 1.0]
@@ -885,13 +794,11 @@ def test_faults_across_processes(netns, tmp_path: Path) -> None:  # type: ignore
     agent process injects the faults of its own agents, timed from the operator's record of the
     mission's start, and their records reach the log; the operator waits no more for the crashed
     agent (in the other process)."""
-    import sys
 
     from antalate_lcm.wire.security import generate_key
-    from tests.harness.process import child_env
+    from tests.harness.process import antalate_argv, child_env
 
-    udpm = CONFIG.replace('"memq://"', '"udpm://239.255.76.67:7667?ttl=0"')
-    config = _write(tmp_path / "swarm.toml", udpm + f'[security]\nswarm_key = "{generate_key()}"\n')
+    config = _write(tmp_path / "swarm.toml", UDPM_CONFIG + f'[security]\nswarm_key = "{generate_key()}"\n')
     script = _write(
         tmp_path / "s.toml",
         "mission_time = 5.0\nseed = 3\n"
@@ -903,8 +810,8 @@ def test_faults_across_processes(netns, tmp_path: Path) -> None:  # type: ignore
         + '[[fault]]\nkind = "freeze"\nagent = "e-02"\nat = 1.0\nprobability = 0.0\n',
     )
     log = tmp_path / "f.lcm"
-    argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", "WARNING", "run", str(config)]
-    argv += ["--agents", "4", "--processes", "2", "--headless", "--script", str(script), "-o", str(log)]
+    argv = antalate_argv("--log-level", "WARNING", "run", str(config), "--agents", "4", "--processes", "2")
+    argv += ["--headless", "--script", str(script), "-o", str(log)]
     env = child_env()
     env["XDG_STATE_HOME"] = str(tmp_path / "state")  # the swarm key's replay memory
     flight = netns.run(argv, timeout=180, cwd=tmp_path, env=env)
@@ -945,18 +852,16 @@ def test_faults_across_processes(netns, tmp_path: Path) -> None:  # type: ignore
 def test_lossy_broadcasts_across_processes(netns, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """With the agents over 2 processes (udpm multicast in a namespace) each process loses the
     broadcasts at its own agents, from the same per-agent streams, and reports what each heard."""
-    import sys
 
-    from tests.harness.process import child_env
+    from tests.harness.process import antalate_argv, child_env
 
     # the peer sensor hears the other process's agents on the LAN: no swarm key in a test namespace
-    udpm = CONFIG.replace('"memq://"', '"udpm://239.255.76.67:7667?ttl=0"') + "[security]\ninsecure = true\n"
-    config = _write(tmp_path / "swarm.toml", udpm)
+    config = _write(tmp_path / "swarm.toml", UDPM_CONFIG + "[security]\ninsecure = true\n")
     script = _write(
         tmp_path / "s.toml", "mission_time = 5.0\nseed = 2\n" + EAST + "[broadcast]\nreception = 0.5\n"
     )
-    argv = [sys.executable, "-m", "antalate_lcm.cli", "--log-level", "WARNING", "run", str(config)]
-    argv += ["--agents", "4", "--processes", "2", "--headless", "--script", str(script)]
+    argv = antalate_argv("--log-level", "WARNING", "run", str(config), "--agents", "4", "--processes", "2")
+    argv += ["--headless", "--script", str(script)]
     argv += ["-o", str(tmp_path / "c.lcm")]
     flight = netns.run(argv, timeout=180, cwd=tmp_path, env=child_env())
     assert flight.returncode == 0, flight.stdout + flight.stderr

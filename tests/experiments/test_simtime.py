@@ -12,8 +12,6 @@ import json
 import math
 import os
 import shutil
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -27,26 +25,18 @@ from antalate_lcm.msgs import telemetry_t
 from antalate_lcm.runtime.experiment import Experiment, run
 from antalate_lcm.runtime.replay import first_divergence, record_path
 from antalate_lcm.runtime.script import load_script
+from tests.harness.agents import swarm_config
+from tests.harness.process import run_antalate
 
 AGENTS = 20
-CONFIG = """
-[agent]
-name = "d"
-[buses]
-lan = "udpm://239.255.76.99:7699?ttl=0"
-[topics]
-default_bus = "lan"
-[hlc]
-autopilot = "sim"
-default_takeoff_altitude = 5.0
-[[bma]]
-name = "swarm"
-[[bma.behaviors]]
-plugin = "dovrat_swarm"
-activate_on = ["MISSION"]
-[bma.behaviors.params]
-forward_speed = {speed}
-"""
+
+
+def config(speed: float, autopilot: str = "sim") -> str:
+    """The swarm of these runs: ``dovrat_swarm`` at ``speed`` m/s in its mission."""
+    swarm = {"plugin": "dovrat_swarm", "activate_on": ["MISSION"], "params": {"forward_speed": speed}}
+    return swarm_config("d", swarm, bus="udpm://239.255.76.99:7699?ttl=0", bma="swarm", autopilot=autopilot)
+
+
 # The script's draws matter too: lossy broadcasts, a freeze and seeded packet losses.
 SCRIPT = """
 mission_time = 6.0
@@ -86,12 +76,10 @@ def message_hashes(log: Path) -> list[str]:
 @pytest.fixture(scope="module")
 def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     d = tmp_path_factory.mktemp("simtime")
-    (d / "swarm.toml").write_text(CONFIG.format(speed=2.0))
-    (d / "changed.toml").write_text(CONFIG.format(speed=2.5))
-    (d / "mavlink.toml").write_text(CONFIG.format(speed=2.0).replace('"sim"', '"mavlink"'))
-    (d / "osc.toml").write_text(
-        CONFIG.format(speed=2.0) + '[osc]\nenabled = true\nserver = "http://127.0.0.1:9"\n'
-    )
+    (d / "swarm.toml").write_text(config(2.0))
+    (d / "changed.toml").write_text(config(2.5))
+    (d / "mavlink.toml").write_text(config(2.0, "mavlink"))
+    (d / "osc.toml").write_text(config(2.0) + '[osc]\nenabled = true\nserver = "http://127.0.0.1:9"\n')
     (d / "script.toml").write_text(SCRIPT)
     return d
 
@@ -122,19 +110,9 @@ def recorded(files: Path) -> Path:
 def test_one_seed_gives_the_same_messages_and_another_seed_others(files: Path, recorded: Path) -> None:
     again = files / "seed1-again.lcm"
     env = {**os.environ, "PYTHONHASHSEED": "12345"}
-    argv = [
-        sys.executable,
-        "-m",
-        "antalate_lcm.cli",
-        "--log-level",
-        "WARNING",
-        "run",
-        str(files / "swarm.toml"),
-    ]
-    argv += ["--agents", str(AGENTS), "--headless", "--script", str(files / "script.toml")]
-    proc = subprocess.run(
-        [*argv, "-o", str(again), "--speed", "max", "--seed", "1"], env=env, capture_output=True, text=True
-    )
+    argv = ["--log-level", "WARNING", "run", str(files / "swarm.toml"), "--agents", str(AGENTS), "--headless"]
+    argv += ["--script", str(files / "script.toml"), "-o", str(again), "--speed", "max", "--seed", "1"]
+    proc = run_antalate(*argv, env=env, timeout=None)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     first = message_hashes(recorded)
     assert len(first) > 5000  # 20 agents' states, telemetry, commands and the faults' records

@@ -14,7 +14,6 @@ import os
 import signal
 import socket
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -48,8 +47,9 @@ from antalate_lcm.runtime.time_grant import (
     remaining,
     woken,
 )
-from tests.experiments.test_simtime import CONFIG, SCRIPT, message_hashes
+from tests.experiments.test_simtime import SCRIPT, config, message_hashes
 from tests.harness.polling import wait_for
+from tests.harness.process import antalate_argv
 
 AGENTS = 10
 PROCESSES = 2
@@ -124,7 +124,7 @@ def test_only_the_buses_that_cross_processes_are_carried() -> None:
 @pytest.fixture(scope="module")
 def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     d = tmp_path_factory.mktemp("simtime-processes")
-    (d / "swarm.toml").write_text(CONFIG.format(speed=2.0))
+    (d / "swarm.toml").write_text(config(2.0))
     (d / "script.toml").write_text(SCRIPT)
     (d / "long.toml").write_text("mission_time = 60.0\n")
     (d / "endless.toml").write_text("mission_time = 3600.0\n")
@@ -211,15 +211,7 @@ def _fly_then(
     """An endless 4-agent run over 2 processes at ``--speed max``; once it flies, signal ``hurt``
     to its second agent process. The run's outcome, that process (pid) and its index (1 or 2)."""
     out = files / f"{name}.lcm"
-    argv = [
-        sys.executable,
-        "-m",
-        "antalate_lcm.cli",
-        "--log-level",
-        "WARNING",
-        "run",
-        str(files / "swarm.toml"),
-    ]
+    argv = antalate_argv("--log-level", "WARNING", "run", str(files / "swarm.toml"))
     argv += [
         "--agents",
         "4",

@@ -30,27 +30,16 @@ from antalate_lcm.runtime.sweep import (
 )
 from antalate_lcm.runtime.sweep_spec import dumps_toml, expand, parse_spec
 from tests import REPO
+from tests.harness.agents import swarm_config
+from tests.harness.cases import cases
+from tests.harness.process import antalate_argv
 
-CONFIG = """
-[agent]
-name = "d"
-[buses]
-lan = "memq://"
-[topics]
-default_bus = "lan"
-[hlc]
-autopilot = "sim"
-default_takeoff_altitude = 2.0
-[hlc.autopilot_params]
-climb_rate = 5.0
-descent_rate = 4.0
-rtl_speed = 10.0
-[[bma]]
-name = "swarm"
-[[bma.behaviors]]
-plugin = "dovrat_swarm"
-params = { forward_speed = 2.0, sharp_turn_rate = 40.0 }
-"""
+SWARM = {"plugin": "dovrat_swarm", "params": {"forward_speed": 2.0, "sharp_turn_rate": 40.0}}
+SIM = {"climb_rate": 5.0, "descent_rate": 4.0, "rtl_speed": 10.0}
+CONFIG = swarm_config("d", SWARM, bma="swarm", takeoff=2.0, sim=SIM)
+UDPM_CONFIG = swarm_config(
+    "d", SWARM, bus="udpm://239.255.76.67:7667?ttl=0", bma="swarm", takeoff=2.0, sim=SIM
+)
 
 #: Each agent's position reads 3 m north with probability 1/2, drawn from the seed: the seeds
 #: give different runs.
@@ -214,14 +203,13 @@ def test_ctrl_c_stops_the_sweep_with_its_rows_written(tmp_path: Path) -> None:
     are rows, the exit status is 130."""
     import signal
     import subprocess
-    import sys
 
     spec = _files(
         tmp_path,
         'config = "swarm.toml"\nagents = 2\nseeds = [1, 2, 3]\n[parameters]\n"script.mission_time" = [30.0]\n',
     )
     out = tmp_path / "r"
-    argv = [sys.executable, "-m", "antalate_lcm.cli", "sweep", str(spec), "-o", str(out), "-j", "1"]
+    argv = antalate_argv("sweep", str(spec), "-o", str(out), "-j", "1")
     sweep = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 60
@@ -239,84 +227,7 @@ def test_ctrl_c_stops_the_sweep_with_its_rows_written(tmp_path: Path) -> None:
     assert [(r["run"], r["status"]) for r in rows] == [(0, "interrupted")]
 
 
-@pytest.mark.parametrize(
-    ("spec", "key", "what"),
-    [
-        ('config = "swarm.toml"\nseed = 3\n', "seed", "Extra inputs are not permitted"),
-        ("seeds = 3\n", "config", "Field required"),
-        ('config = "nope.toml"\n', "config", "nope.toml is not one"),
-        ('config = "swarm.toml"\nscript = "nope.toml"\n', "script", "an experiment script file"),
-        ('config = "swarm.toml"\nseeds = 0\n', "seeds", "a count from 1"),
-        ('config = "swarm.toml"\nseeds = [1, -2]\n', "seeds", "seeds >= 0 (got -2)"),
-        ('config = "swarm.toml"\nseeds = [1, 1]\n', "seeds", "each seed once"),
-        ('config = "swarm.toml"\nseeds = "5"\n', "seeds", "a count, or a list of integer seeds (got '5')"),
-        ('config = "swarm.toml"\nseeds = [1, 2.5]\n', "seeds", "(got [1, 2.5])"),
-        ('config = "swarm.toml"\nagents = 0\n', "agents", "greater than or equal to 1"),
-        ('config = "swarm.toml"\nspeed = 0.0\n', "speed", '"max" or a number > 0 (got 0.0)'),
-        ('config = "swarm.toml"\nspeed = "fast"\n', "speed", "max"),
-        ('config = "swarm.toml"\nspeed = "max"\nprocesses = 2\n', "speed", "simulated time runs in one"),
-        (
-            'config = "swarm.toml"\n[parameters]\n"speed" = [1.0]\n',
-            'parameters."speed"',
-            "behavior.PLUGIN.PARAM",
-        ),
-        (
-            'config = "swarm.toml"\n[parameters]\n"behavior.dovrat_swarm" = [1.0]\n',
-            'parameters."behavior.dovrat_swarm"',
-            "a plugin name, then one of its params",
-        ),
-        (
-            'config = "swarm.toml"\n[parameters]\n"behavior.dovrat_swarm.forward_speed" = []\n',
-            'parameters."behavior.dovrat_swarm.forward_speed"',
-            "at least one value",
-        ),
-        (
-            'config = "swarm.toml"\n[parameters]\n"behavior.dovrat_swarm.forward_speed" = [1.0, -1.0]\n',
-            'parameters."behavior.dovrat_swarm.forward_speed"[1]',
-            "-1.0 is refused: invalid config <run>: bma[0].behaviors[0].params.forward_speed",
-        ),
-        (
-            'config = "swarm.toml"\n[parameters]\n"behavior.dovrat_swarm.forward_sped" = [1.0]\n',
-            'parameters."behavior.dovrat_swarm.forward_sped"[0]',
-            "forward_sped",
-        ),
-        (
-            'config = "swarm.toml"\n[parameters]\n"behavior.direction_follow.timeout" = [1.0]\n',
-            'parameters."behavior.direction_follow.timeout"[0]',
-            "no [[bma.behaviors]] of the config has plugin 'direction_follow' (it has: dovrat_swarm)",
-        ),
-        (
-            'config = "swarm.toml"\n[parameters]\n"config.bma.3.name" = ["x"]\n',
-            'parameters."config.bma.3.name"[0]',
-            "bma is an array of 1: index it 0..0 (got '3')",
-        ),
-        (
-            'config = "swarm.toml"\n[parameters]\n"config.hlc.autopilot.x" = [1]\n',
-            'parameters."config.hlc.autopilot.x"[0]',
-            "hlc.autopilot is a value, not a table",
-        ),
-        (
-            'config = "swarm.toml"\n[parameters]\n"script.mission_time" = ["60"]\n',
-            'parameters."script.mission_time"[0]',
-            "'60' is refused: invalid config <run>: mission_time: Input should be a valid number",
-        ),
-        (
-            'config = "swarm.toml"\n[parameters]\n"script.seed" = [1]\n',
-            'parameters."script.seed"',
-            "the seeds are the sweep's own key",
-        ),
-        (
-            'config = "swarm.toml"\nagents = 3\n[parameters]\n"config.hlc.autopilot" = ["mavlink"]\n',
-            'parameters."config.hlc.autopilot"[0]',
-            "'mavlink' is refused: invalid config <run>: hlc.autopilot_params.climb_rate: Extra inputs",
-        ),
-        (
-            'config = "swarm.toml"\nprocesses = 2\nagents = 2\n',
-            "config",
-            "the base run is refused: invalid config <run>: buses.lan: a bus other processes reach",
-        ),
-    ],
-)
+@pytest.mark.parametrize(("spec", "key", "what"), cases("experiments/bad_specs.toml"))
 def test_a_bad_spec_is_one_line_naming_the_key(tmp_path: Path, spec: str, key: str, what: str) -> None:
     path = _files(tmp_path, spec)
     with pytest.raises(ConfigError) as info:
@@ -411,19 +322,17 @@ def test_parallel_slots_get_their_own_udpm_ports(tmp_path: Path) -> None:
 def test_parallel_runs_on_udpm_never_hear_each_other(netns, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """Two runs at once on one multicast group (a namespace): each slot on its own port, each log
     holds its own run's agents and faults only."""
-    import sys
 
     from tests.harness.process import child_env
 
-    udpm = CONFIG.replace('lan = "memq://"', 'lan = "udpm://239.255.76.67:7667?ttl=0"')
     spec = _files(
         tmp_path,
         'config = "swarm.toml"\nscript = "script.toml"\nagents = 2\nseeds = [1, 2]\n',
-        config=udpm + "[security]\ninsecure = true\n",
+        config=UDPM_CONFIG + "[security]\ninsecure = true\n",
         script='mission_time = 2.0\n[[fault]]\nkind = "freeze"\nagent = "d-02"\nat = 0.5\nduration = 1.0\n',
     )
     out = tmp_path / "r"
-    argv = [sys.executable, "-m", "antalate_lcm.cli", "sweep", str(spec), "-o", str(out), "-j", "2"]
+    argv = antalate_argv("sweep", str(spec), "-o", str(out), "-j", "2")
     done = netns.run(argv, timeout=180, cwd=tmp_path, env=child_env())
     assert done.returncode == 0, done.stdout + done.stderr
     ports = []

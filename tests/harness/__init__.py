@@ -1,9 +1,15 @@
-"""The helpers every test leans on, in one place: private network namespaces (``netns``), child
-processes (``process``), polling with a deadline (``polling``), JSON-lines peers (``jsonl``), the event
-timeline of a child that reports JSON lines (``timeline``) and an agent's config and processes
-(``agents``).
+"""The helpers every test leans on, in one place (tests/README.md, "The harness").
+
+``netns``: private network namespaces (`NetNamespace`, its modes, `require_netns`, `private_netns`,
+`run_unrouted`, JSON-lines peers inside with `NetNamespace.peer`); ``process``: the ``antalate``
+command (`run_antalate`, `antalate_argv`), a child's environment, reading its output lines as they come
+(`OutputLines`) and stopping its whole process group; ``polling``: the one `wait_for`; ``jsonl``: both
+sides of a JSON-lines child; ``agents``: the one config builder (`agent_config`, `swarm_config`) and the
+agent runner across processes (`AgentProcesses`); ``inprocess``: the runner of nodes in the test's own
+process (`InProcess`); ``timeline``: the event timeline of a child that reports JSON lines;
+``cases``: refusal tables kept as TOML; ``clock``: `FakeClock`; ``lifecycle``: `Started`, a set-up
+that closes what it started when its start fails; ``messages``: messages put on a bus by hand.
 
 The modules they came from (``tests.netns``, ``tests.polling``, ``tests.jsonl``,
-``tests.agent_harness``) still import the same names, so tests written against them keep working; new
-tests import from here.
+``tests.agent_harness``) still import the same names for one release, with a DeprecationWarning.
 """

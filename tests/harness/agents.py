@@ -1,5 +1,11 @@
-"""An agent's config for a test (``agent_config``: the simulator, brisk, on the namespace's multicast
-bus) and its MC and HLC started as separate processes in a namespace (``AgentProcesses``)."""
+"""The one config builder of the tests and the agent runner across processes.
+
+``agent_config``: an agent's config as a dict (the simulator, brisk, on the namespace's multicast bus);
+``swarm_config``: the TOML text of an experiment's agent (``antalate run`` copies it into a swarm: the
+simulator at its own speeds, every topic on the one bus, one BMA); ``AgentProcesses``: an agent's
+nodes, each its own ``antalate`` process in a namespace. The agents of one process are
+``tests.memory_agent``'s; whole swarms across hosts are ``tests.lan.swarm``'s.
+"""
 
 from __future__ import annotations
 
@@ -21,13 +27,47 @@ FAST_SIM = {
 
 
 def agent_config(
-    name: str = "alpha", *, sim: dict[str, Any] | None = None, **sections: Any
+    name: str = "alpha",
+    *,
+    sim: dict[str, Any] | None = None,
+    bus: str = MCAST_URL,
+    fast: bool = True,
+    autopilot: str = "sim",
+    takeoff: float = 3.0,
+    **sections: Any,
 ) -> dict[str, Any]:
-    hlc = {"autopilot": "sim", "default_takeoff_altitude": 3.0, **sections.pop("hlc", {})}
-    hlc["autopilot_params"] = {**FAST_SIM, **(sim or {})}
-    doc: dict[str, Any] = {"agent": {"name": name}, "buses": {"lan": MCAST_URL}, "hlc": hlc}
+    """``sim`` adds to (``fast``) or replaces the simulator's speed-ups; ``sections`` are the config's
+    other tables (``hlc`` merged into the one built here)."""
+    hlc = {"autopilot": autopilot, "default_takeoff_altitude": takeoff, **sections.pop("hlc", {})}
+    params = {**(FAST_SIM if fast else {}), **(sim or {})}
+    if params:
+        hlc["autopilot_params"] = params
+    doc: dict[str, Any] = {"agent": {"name": name}, "buses": {"lan": bus}, "hlc": hlc}
     doc.update(sections)
     return doc
+
+
+def swarm_config(
+    name: str,
+    *behaviors: dict[str, Any],
+    bus: str = "memq://",
+    bma: str = "m",
+    takeoff: float = 5.0,
+    sim: dict[str, Any] | None = None,
+    autopilot: str = "sim",
+) -> str:
+    """The TOML of an experiment's agent: ``behaviors`` (``{"plugin": ..., ...}`` each) in one BMA."""
+    doc = agent_config(
+        name,
+        sim=sim,
+        bus=bus,
+        fast=False,
+        autopilot=autopilot,
+        takeoff=takeoff,
+        topics={"default_bus": "lan"},
+        bma=[{"name": bma, "behaviors": list(behaviors)}],
+    )
+    return tomli_w.dumps(doc)
 
 
 class AgentProcesses:
@@ -35,33 +75,39 @@ class AgentProcesses:
 
     def __init__(self, netns: NetNamespace, tmp_path: Path, doc: dict[str, Any]) -> None:
         self.netns = netns
-        self.name = doc["agent"]["name"]
+        self.name: str = doc["agent"]["name"]
+        self.doc = doc
         self.path = tmp_path / f"{self.name}.toml"
         self.path.write_text(tomli_w.dumps(doc))
         self.procs: dict[str, subprocess.Popen[str]] = {}
+        #: The log of each node's latest run; ``runs``: every run's, in the order started.
         self.logs: dict[str, Path] = {}
+        self.runs: list[Path] = []
         self._tmp = tmp_path
-        self._runs = 0
 
     def start(self, node: str, *extra: str) -> subprocess.Popen[str]:
-        self._runs += 1
-        log = self._tmp / f"{self.name}-{node}-{self._runs}.log"
+        log = self._tmp / f"{self.name}-{node}-{len(self.runs) + 1}.log"
         self.logs[node] = log
+        self.runs.append(log)
         out = open(log, "w")  # noqa: SIM115 - closed with the process
         proc = self.netns.antalate(node, str(self.path), *extra, stdout=out, stderr=subprocess.STDOUT)
         self.procs[node] = proc
         return proc
 
     def kill(self, node: str) -> None:
+        """SIGKILL: the node gets no chance to say goodbye (a crash, as a test means it)."""
         proc = self.procs.pop(node)
         proc.kill()
-        proc.wait(5)
+        proc.wait(10)
 
     def alive(self, node: str) -> bool:
         return self.procs[node].poll() is None
 
-    def log(self, node: str) -> str:
-        return self.logs[node].read_text()
+    def log(self, node: str | None = None) -> str:
+        """``node``'s latest log, or every log of this agent in the order the nodes started."""
+        if node is not None:
+            return self.logs[node].read_text(errors="replace")
+        return "".join(p.read_text(errors="replace") for p in self.runs)
 
     def stop(self) -> dict[str, int | None]:
         return {node: stop_process(proc) for node, proc in self.procs.items()}

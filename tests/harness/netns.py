@@ -28,9 +28,11 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any, Literal
+
+import pytest
 
 from tests import REPO
 from tests.harness.process import child_env, stop_process
@@ -59,6 +61,44 @@ def unavailable_because(script: str, failure: str) -> str | None:
 def netns_unavailable() -> str | None:
     """The reason private namespaces cannot be made here, or None when they can."""
     return unavailable_because("ip link set lo up", "cannot create a network namespace (unshare -rn)")
+
+
+_REASON: list[str | None] = []
+
+
+def netns_reason() -> str | None:
+    """``netns_unavailable()``, asked once a process (each answer costs an ``unshare``)."""
+    if not _REASON:
+        _REASON.append(netns_unavailable())
+    return _REASON[0]
+
+
+def require_netns() -> None:
+    """Skip the calling test, saying why, where no private network namespace can be made."""
+    reason = netns_reason()
+    if reason:
+        pytest.skip(f"no private network namespace: {reason}")
+
+
+@contextlib.contextmanager
+def private_netns(*, missing: str | None = None, **kwargs: Any) -> Iterator[NetNamespace]:
+    """A `NetNamespace` (``kwargs`` are its own) for a fixture's lifetime; the test skips where none can
+    be made, or first with ``missing``, the reason something else it needs is not here (the firmware)."""
+    if missing:
+        pytest.skip(missing)
+    require_netns()
+    with NetNamespace(**kwargs) as ns:
+        yield ns
+
+
+def run_unrouted(argv: Sequence[str], timeout: float = 60, **kw: Any) -> subprocess.CompletedProcess[str]:
+    """``argv`` to its end in a bare namespace (``unshare -rn``: ``lo`` down, no multicast route), a
+    host as a user may have it; its output captured as text (``kw`` are subprocess.run's)."""
+    require_netns()
+    done: subprocess.CompletedProcess[str] = subprocess.run(
+        ["unshare", "-rn", *argv], capture_output=True, text=True, timeout=timeout, **kw
+    )
+    return done
 
 
 def netns_pair_unavailable() -> str | None:
@@ -229,6 +269,12 @@ class NetNamespace:
 
     def antalate(self, *args: str, **kwargs: Any) -> subprocess.Popen[str]:
         return self.python("-m", "antalate_lcm.cli", *args, **kwargs)
+
+    def peer(self, module: str, *args: str, **kwargs: Any) -> subprocess.Popen[str]:
+        """``python -m module ARGS`` inside, stdin, stdout and stderr piped: a JSON-lines peer of the
+        test (tests.harness.jsonl), such as the LCM probe or an attacker."""
+        pipes = {"stdin": subprocess.PIPE, "stdout": subprocess.PIPE, "stderr": subprocess.PIPE}
+        return self.python("-m", module, *args, **pipes, **kwargs)
 
     def socket(self, kind: Literal["udp", "tcp"], bind: tuple[str, int]) -> socket.socket:
         """A UDP socket bound to ``bind`` (or a listening TCP one) made inside, usable from this

@@ -28,6 +28,7 @@ from antalate_lcm.runtime.commands import native_lcm_tool
 from tests import REPO
 from tests.harness.agents import FAST_SIM
 from tests.harness.jsonl import JsonLinesProcess
+from tests.harness.lifecycle import Started
 from tests.harness.process import stop_process
 from tests.lan.topology import Lan
 
@@ -124,7 +125,7 @@ class OperatorClient(JsonLinesProcess):
         stop_process(self.proc)
 
 
-class LanSwarm:
+class LanSwarm(Started):
     """The whole set-up for one test; a context manager that tears everything down."""
 
     def __init__(
@@ -151,15 +152,7 @@ class LanSwarm:
 
     def __enter__(self) -> LanSwarm:
         self.lan.__enter__()
-        try:
-            self._start()
-        except BaseException:
-            self.close()
-            raise
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+        return super().__enter__()
 
     def close(self) -> None:
         if self.op is not None:

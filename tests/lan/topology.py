@@ -68,6 +68,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
+from tests.harness.lifecycle import Started
 from tests.harness.netns import NetNamespace, delete_named
 
 PREFIX = "antalate-lan"
@@ -220,7 +221,7 @@ class Host:
         return self.netns.stop(timeout)
 
 
-class _Topology:
+class _Topology(Started):
     """What a LAN and a WAN share: build inside ``with``, a loss table, and a teardown that leaves
     nothing (hosts' processes, then the namespaces in reverse order of creation)."""
 
@@ -240,18 +241,13 @@ class _Topology:
     def _build(self) -> None:
         raise NotImplementedError
 
+    def _start(self) -> None:
+        self._build()
+
     def __enter__(self: _T) -> _T:
         sweep_stale()
         atexit.register(self.close)
-        try:
-            self._build()
-        except BaseException:
-            self.close()
-            raise
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+        return super().__enter__()
 
     def _namespace(self, ns: str) -> str:
         self._built.append(ns)

@@ -29,10 +29,12 @@ LINK_REGAINED = 13  # ErrorCode.LINK_REGAINED
 AUTOPILOT_FAILSAFE = 12  # ErrorCode.AUTOPILOT_FAILSAFE
 
 
-def take_off(probe: Probe, seq: int = 1) -> None:
+def take_off(probe: Probe, seq: int = 1) -> int:
+    """The operator's TAKEOFF, once the MC is in STANDBY, until the mission: the probe's mark then."""
     mc(probe, M.STANDBY)
     command(probe, O.TAKEOFF, seq=seq)
     mc(probe, M.MISSION)
+    return probe.mark()
 
 
 def states(probe: Probe, topic: str, since: int = 0) -> list[int]:
@@ -51,8 +53,7 @@ def test_link_cut_for_5s_in_flight_comes_home_with_no_operator_action(
     launch: Callable[..., AgentProcesses], probe: Probe
 ) -> None:
     agent = launch(sim={"link_loss_after": 1.0, "link_loss_for": 5.0}, hlc={"link_timeout": 1.0})
-    take_off(probe)
-    mark = probe.mark()
+    mark = take_off(probe)
     hlc(probe, H.LLC_DOWN, since=mark)
     assert "autopilot link" in mc(probe, M.ERROR, since=mark)["reason"]
     regained = mc(probe, M.RTL, since=mark, timeout=20)
@@ -77,8 +78,7 @@ def test_link_regained_with_policy_hold_waits_for_the_operators_land(
         hlc={"link_timeout": 1.0},
         mc={"on_link_regained": "hold"},
     )
-    take_off(probe)
-    mark = probe.mark()
+    mark = take_off(probe)
     mc(probe, M.ERROR, since=mark)
     held = mc(probe, M.HOLD, since=mark, timeout=20)
     assert "on_link_regained = hold" in held["reason"]
@@ -105,8 +105,7 @@ def test_autopilot_failsafe_is_followed_not_taken_for_a_pilot(
             "rtl_altitude": 20.0,
         }
     )
-    take_off(probe)
-    mark = probe.mark()
+    mark = take_off(probe)
     returning = mc(probe, M.RTL, since=mark)
     assert "on its own" in returning["reason"]
     hlc_rtl = hlc(probe, H.RTL, since=mark)
@@ -148,8 +147,7 @@ def test_state_raising_goes_llc_down_then_recovers(
     launch: Callable[..., AgentProcesses], probe: Probe
 ) -> None:
     agent = launch(sim={"state_error_after": 1.0, "state_error_for": 3.0}, hlc={"link_timeout": 1.0})
-    take_off(probe)
-    mark = probe.mark()
+    mark = take_off(probe)
     down = hlc(probe, H.LLC_DOWN, since=mark)
     assert "simulated adapter fault" in down["reason"]
     mc(probe, M.ERROR, since=mark)

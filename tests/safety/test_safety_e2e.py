@@ -13,8 +13,6 @@ no fence breach, every agent in MISSION and back on the ground.
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -39,6 +37,7 @@ from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.runtime.recorder import LogRecorder
 from antalate_lcm.wire.vocabulary import McState
 from tests.harness.polling import wait_for
+from tests.harness.process import run_antalate
 
 LAT0, LON0 = 32.7767, 35.0231
 RADIUS = 3.0
@@ -189,13 +188,7 @@ def analyze(log: Path, safety: dict[str, Any], tmp_path: Path, names: list[str])
     in-process, checked: separation, breaches, the mission flown."""
     cfg = tmp_path / "safety.toml"
     cfg.write_text(tomli_w.dumps({"agent": {"name": "x"}, "hlc": {"autopilot": "sim"}, "safety": safety}))
-    out = subprocess.run(
-        [sys.executable, "-m", "antalate_lcm.cli", "analyze", str(log), "--safety", str(cfg)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=True,
-    ).stdout
+    out = run_antalate("analyze", str(log), "--safety", str(cfg), timeout=120, check=True).stdout
     section = out[out.index("safety (radius") :]
     print(f"\nantalate analyze {log.name} --safety {cfg.name}:\n{section}")
     fence_doc = safety.get("fence")
@@ -217,6 +210,16 @@ def analyze(log: Path, safety: dict[str, Any], tmp_path: Path, names: list[str])
     return section
 
 
+def kept_apart(flight: Flight, names: list[str], what: str, breaches: str = "") -> None:
+    """Every agent flew its mission and no two came closer than the filter allows (printed)."""
+    print(
+        f"\n{what}: min separation {flight.min_sep:.2f} m ({flight.min_pair}), 3-D {flight.min_3d:.2f} m,"
+        f" {breaches}{len(flight.safety_reports)} SAFETY reports"
+    )
+    assert flight.missions == set(names)
+    assert flight.min_sep >= RADIUS - MARGIN, (flight.min_pair, flight.when)
+
+
 def test_twenty_agents_commanded_at_the_centroid_keep_apart_then_come_home_from_the_cluster(
     tmp_path: Path,
 ) -> None:
@@ -229,12 +232,7 @@ def test_twenty_agents_commanded_at_the_centroid_keep_apart_then_come_home_from_
     log = tmp_path / "centroid.lcm"
     with swarm(configs, None, log) as (flight, probe, hlcs):
         fly_mission(flight, probe, names, mission=8.0)
-    print(
-        f"\n20 at the centroid: min separation {flight.min_sep:.2f} m ({flight.min_pair}), 3-D {flight.min_3d:.2f} m,"
-        f" {len(flight.safety_reports)} SAFETY reports"
-    )
-    assert flight.missions == set(names)
-    assert flight.min_sep >= RADIUS - MARGIN, flight.when
+    kept_apart(flight, names, "20 at the centroid")
     assert any("separation" in r.text for r in flight.safety_reports)
     # every one is home: within a metre of where it took off
     for h in hlcs:
@@ -266,12 +264,7 @@ def test_head_on_pairs_and_agents_sent_out_of_the_fence(tmp_path: Path) -> None:
     log = tmp_path / "head-on-fence.lcm"
     with swarm(configs, fence, log) as (flight, probe, _):
         fly_mission(flight, probe, names, mission=9.0)
-    print(
-        f"\nhead-on pairs and fence: min separation {flight.min_sep:.2f} m ({flight.min_pair}), 3-D {flight.min_3d:.2f} m,"
-        f" {len(flight.breaches)} fence breaches, {len(flight.safety_reports)} SAFETY reports"
-    )
-    assert flight.missions == set(names)
-    assert flight.min_sep >= RADIUS - MARGIN, flight.min_pair
+    kept_apart(flight, names, "head-on pairs and fence", f"{len(flight.breaches)} fence breaches, ")
     assert flight.breaches == []
     assert any("fence" in r.text for r in flight.safety_reports)
     section = analyze(log, safety, tmp_path, names)

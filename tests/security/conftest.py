@@ -14,8 +14,8 @@ import pluggy
 import pytest
 
 from antalate_lcm.base.geo import offset
-from tests.conftest import ATTACK_PROPERTY, _netns_reason
-from tests.harness.netns import NetNamespace
+from tests.conftest import ATTACK_PROPERTY
+from tests.harness.netns import NetNamespace, require_netns
 from tests.harness.polling import wait_for
 from tests.security.harness import HOME, SWARM_KEY, PeerClient, Swarm, agent_doc
 
@@ -69,9 +69,7 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
       processes on the (host-only, ttl=0) ``local`` bus, signed. bravo stays on the ground, charlie
       is flown; charlie's OSC is a third process of its own.
     """
-    reason = _netns_reason()
-    if reason:
-        pytest.skip(f"no private network namespace: {reason}")
+    require_netns()
     tmp = tmp_path_factory.mktemp("security")
     ns = NetNamespace().__enter__()
     s = Swarm(ns, tmp)

@@ -29,7 +29,7 @@ from typing import Any
 import tomli_w
 
 from antalate_lcm.station._auth import new_api_key, registration_key, sha256_hex
-from tests.harness.agents import FAST_SIM
+from tests.harness.agents import FAST_SIM, AgentProcesses
 from tests.harness.jsonl import JsonLinesProcess
 from tests.harness.netns import NetNamespace
 from tests.harness.polling import wait_for
@@ -214,43 +214,23 @@ class Vehicle:
         )
 
 
-class AgentRun:
-    """One agent: its config file, its node processes (or a share of an ``antalate agent`` process)."""
+class AgentRun(AgentProcesses):
+    """One agent: its config file, its node processes (or a share of an ``antalate agent`` process),
+    its simulated vehicle's state file."""
 
     def __init__(self, swarm: Swarm, name: str, doc: dict[str, Any]) -> None:
         self.swarm = swarm
-        self.name = name
         self.state_file = swarm.tmp / f"{name}-vehicle.json"
         hlc = doc.setdefault("hlc", {})
         if hlc.get("autopilot", "sim") == "sim":
             hlc.setdefault("autopilot_params", {})["state_file"] = str(self.state_file)
-        self.doc = doc
-        self.path = swarm.tmp / f"{name}.toml"
-        self.path.write_text(tomli_w.dumps(doc))
-        self.procs: dict[str, subprocess.Popen[str]] = {}
+        super().__init__(swarm.netns, swarm.tmp, doc)
         #: The ``antalate agent`` process this agent shares with others, if it runs in one.
         self.shared: subprocess.Popen[str] | None = None
-        self.logs: list[Path] = []
 
-    def start(self, node: str) -> None:
-        log = self.swarm.tmp / f"{self.name}-{node}-{len(self.logs)}.log"
-        self.logs.append(log)
-        out = open(log, "w")  # noqa: SIM115 - the process owns it
-        self.procs[node] = self.swarm.netns.antalate(
-            node, str(self.path), stdout=out, stderr=subprocess.STDOUT
-        )
-
-    def kill(self, node: str) -> None:
-        proc = self.procs.pop(node)
-        proc.kill()
-        proc.wait(10)
-
-    def alive(self, node: str) -> bool:
-        return self.procs[node].poll() is None
-
-    def log(self) -> str:
-        own = "".join(p.read_text(errors="replace") for p in self.logs)
-        return own + self.swarm.shared_log(self.name)
+    def log(self, node: str | None = None) -> str:
+        """As `AgentProcesses.log`; every log also holds this agent's lines of a shared process."""
+        return super().log(node) + ("" if node else self.swarm.shared_log(self.name))
 
     def lines(self) -> list[str]:
         """This agent's log lines (a shared ``antalate agent`` log holds several agents)."""
@@ -391,15 +371,14 @@ class Swarm:
     ) -> PeerClient:
         """A peer process; ``ca``: verify the station's certificate with it (else: no verification,
         as an attacker does not care whom it talks to)."""
-        args = ["-m", "tests.security.peer", LAN, LOCAL, "--window", str(WINDOW)]
+        args = ["tests.security.peer", LAN, LOCAL, "--window", str(WINDOW)]
         if key is not None:
             args += ["--key", key]
         if source is not None:
             args += ["--source", source]
         if ca is not None:
             args += ["--ca", str(ca)]
-        proc = self.netns.python(*args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        client = PeerClient(proc, what, self.station_url)
+        client = PeerClient(self.netns.peer(*args), what, self.station_url)
         self.peers.append(client)
         return client
 
@@ -570,13 +549,14 @@ def _watchdog(t: tuple[str, str, str]) -> bool:
     )
 
 
-def fly(swarm: Swarm, operator: PeerClient, name: str) -> None:
-    """Take ``name`` to MISSION with a genuine signed TAKEOFF (no-op when it already is)."""
+def fly(swarm: Swarm, operator: PeerClient, name: str) -> AgentRun:
+    """Take ``name`` to MISSION with a genuine signed TAKEOFF (no-op when it already is): its run."""
     run = swarm.agents[name]
     if run.mc_state() == "MISSION":
-        return
+        return run
     n = len(run.transitions("mc"))
     command(operator, swarm, name, "TAKEOFF")
     run.wait_mc("MISSION", timeout=30, after=n)
     if not wait_for(lambda: run.vehicle().in_air, 15.0, 0.1):
         raise NotJudged(f"{name}: in MISSION but not in the air")
+    return run

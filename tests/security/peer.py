@@ -26,11 +26,9 @@ Requests, one JSON object a line, one JSON reply line each (``{"ok": bool, ...}`
 
 from __future__ import annotations
 
-import json
 import re
 import socket
 import ssl
-import sys
 import threading
 import time
 from typing import Any
@@ -40,6 +38,7 @@ import lcm
 
 from antalate_lcm.wire.security import sign, verify
 from antalate_lcm.wire.topics import MESSAGE_TYPES
+from tests.harness.jsonl import serve
 from tests.probe import matches, to_dict
 
 
@@ -278,14 +277,7 @@ def main() -> None:
     parser.add_argument("--source", default=None, help="local address of HTTP requests")
     parser.add_argument("--ca", default=None, help="CA file that verifies the station (else no verification)")
     args = parser.parse_args()
-    peer = Peer(args.url, args.key, args.window, args.source, args.ca)
-    print(json.dumps({"ok": True, "ready": True}), flush=True)
-    for line in sys.stdin:
-        try:
-            reply = peer.handle(json.loads(line))
-        except Exception as exc:  # noqa: BLE001 - report to the test, keep serving
-            reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
-        print(json.dumps(reply), flush=True)
+    serve(Peer(args.url, args.key, args.window, args.source, args.ca).handle)
 
 
 if __name__ == "__main__":

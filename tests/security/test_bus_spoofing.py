@@ -75,8 +75,7 @@ def test_spoofed_mc_takeoff_does_not_launch_an_in_process_agent(
 def test_injected_velocity_does_not_move_a_flying_vehicle(
     swarm: Swarm, operator: PeerClient, attacker: PeerClient
 ) -> None:
-    fly(swarm, operator, "charlie")
-    charlie = swarm.agents["charlie"]
+    charlie = fly(swarm, operator, "charlie")
     before = baseline(charlie)
     stream(attacker, "charlie/VELOCITY_CMD", "velocity_cmd_t", frame=velocity_cmd_t.NED, vx=3.2)
     after = assert_unmoved(charlie, before, tolerance=0.5)
@@ -89,8 +88,7 @@ def test_injected_velocity_does_not_steer_a_swarming_agent(
     swarm: Swarm, operator: PeerClient, attacker: PeerClient
 ) -> None:
     """delta flies dovrat_swarm at 1 m/s: the attacker's 3.2 m/s must never show in its speed."""
-    fly(swarm, operator, "delta")
-    delta = swarm.agents["delta"]
+    delta = fly(swarm, operator, "delta")
     before = baseline(delta)
     speeds: list[float] = []
     end = time.monotonic() + SPOOF_SECONDS + 1.0
@@ -117,8 +115,7 @@ def test_injected_velocity_does_not_steer_a_swarming_agent(
 def test_spoofed_llc_down_does_not_put_the_mc_in_error(
     swarm: Swarm, operator: PeerClient, attacker: PeerClient, name: str
 ) -> None:
-    fly(swarm, operator, name)
-    run = swarm.agents[name]
+    run = fly(swarm, operator, name)
     before = baseline(run)
     stream(attacker, f"{name}/HLC_STATE", "hlc_state_t", state=hlc_state_t.LLC_DOWN, autopilot="sim")
     after = assert_unmoved(run, before, tolerance=0.5, still=name == "charlie")

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import subprocess
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -54,7 +53,6 @@ class Copter(JsonLinesProcess):
 @pytest.fixture(scope="module")
 def copter(swarm: Swarm) -> Iterator[tuple[Copter, AgentRun]]:
     args = [
-        "-m",
         "tests.security.mav_vehicle",
         "--udp-port",
         str(VEHICLE_PORT),
@@ -65,7 +63,7 @@ def copter(swarm: Swarm) -> Iterator[tuple[Copter, AgentRun]]:
     ]
     if not DISARMED:
         args += ["--signing-key", MAV_KEY.hex()]
-    proc = swarm.netns.python(*args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = swarm.netns.peer(*args)
     vehicle = Copter(proc, "the MAVLink vehicle")
     doc = agent_doc(
         "foxtrot",

@@ -22,9 +22,8 @@ from typing import Any
 import pytest
 
 from tests import REPO
-from tests.conftest import _netns_reason
 from tests.harness.jsonl import JsonLinesProcess
-from tests.harness.netns import NetNamespace
+from tests.harness.netns import NetNamespace, private_netns
 from tests.harness.polling import wait_for
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
@@ -84,17 +83,7 @@ class Lab:
                 stderr=subprocess.STDOUT,
                 cwd=str(REPO),
             )
-        self.peer = Peer(
-            ns.python(
-                "-m",
-                "tests.security.tls_peer",
-                stdin=subprocess.PIPE,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                cwd=str(REPO),
-            ),
-            "tls_peer",
-        )
+        self.peer = Peer(ns.peer("tests.security.tls_peer"), "tls_peer")
         for log in self.logs.values():
 
             def listening(log: Path = log) -> bool:
@@ -115,10 +104,7 @@ class Lab:
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Lab]:
-    reason = _netns_reason()
-    if reason:
-        pytest.skip(f"no private network namespace: {reason}")
-    with NetNamespace() as ns:
+    with private_netns() as ns:
         yield Lab(ns, tmp_path_factory.mktemp("router-tls"))
 
 

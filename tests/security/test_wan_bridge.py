@@ -29,9 +29,8 @@ from antalate_lcm.apps.bridge import origin_tag
 from antalate_lcm.transports.datagram import fragments, short_datagram
 from antalate_lcm.transports.zenoh import BRIDGE_MARK
 from tests import REPO
-from tests.conftest import _netns_reason
 from tests.harness.jsonl import JsonLinesProcess
-from tests.harness.netns import NetNamespace
+from tests.harness.netns import NetNamespace, private_netns
 from tests.harness.polling import wait_for
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
@@ -67,18 +66,7 @@ class Wan:
             "c1": self.bridge("c", LAN_C, "c1"),
             "c2": self.bridge("c", LAN_C, "c2"),
         }
-        self.peer = Peer(
-            ns.python(
-                "-m",
-                "tests.security.wan_peer",
-                self.router,
-                stdin=subprocess.PIPE,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                cwd=str(REPO),
-            ),
-            "wan_peer",
-        )
+        self.peer = Peer(ns.peer("tests.security.wan_peer", self.router), "wan_peer")
 
     def bridge(self, site: str, lan: str, name: str = "") -> subprocess.Popen[str]:
         doc: dict[str, Any] = {
@@ -114,10 +102,7 @@ class Wan:
 
 @pytest.fixture(scope="module")
 def wan(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Wan]:
-    reason = _netns_reason()
-    if reason:
-        pytest.skip(f"no private network namespace: {reason}")
-    with NetNamespace() as ns:
+    with private_netns() as ns:
         w = Wan(ns, tmp_path_factory.mktemp("wan"))
         assert wait_for(lambda: w.peer.latency("a", "b", 1.0) is not None, 30.0, 0.1), w.log("a") + w.log("b")
         assert wait_for(lambda: w.peer.latency("zenoh", "a", 1.0) is not None, 30.0, 0.1), w.log("a")

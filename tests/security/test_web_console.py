@@ -215,13 +215,18 @@ async def test_sign_in_is_throttled_per_address_with_retry_after(
         await c.server.close()
 
 
-@pytest.mark.attack("a removed operator key keeps its session and open console (issue 29.6)")
-async def test_a_removed_key_ends_its_sessions_and_consoles_within_seconds(tmp_path: Path) -> None:
+async def _alice_and_carol(tmp_path: Path) -> tuple[Path, web.ConsoleAccess, Console]:
+    """A console whose keys file (returned, for the test to edit) holds two operators, alice and carol."""
     keys = tmp_path / "keys.toml"
     keys.write_text(keys_toml(("alice", "operator", ALICE), ("carol", "operator", CAROL)))
     keys_file = web.KeysFile(str(keys))
     access = web.ConsoleAccess(keys_file.load())
-    c = await serve(access, config=operator_config(tmp_path), keys_file=keys_file)
+    return keys, access, await serve(access, config=operator_config(tmp_path), keys_file=keys_file)
+
+
+@pytest.mark.attack("a removed operator key keeps its session and open console (issue 29.6)")
+async def test_a_removed_key_ends_its_sessions_and_consoles_within_seconds(tmp_path: Path) -> None:
+    keys, access, c = await _alice_and_carol(tmp_path)
     try:
         cookies = {}
         for name, key in (("alice", ALICE), ("carol", CAROL)):
@@ -267,11 +272,7 @@ async def test_a_browser_behind_on_reading_still_gets_the_removed_key_close_code
     machine, a reader behind the console's output): it must still see 4401, which it can only if
     the server waits for its Close in reply before ending the connection. Ending it at once made
     the browser's reply fail, and it reported 1006."""
-    keys = tmp_path / "keys.toml"
-    keys.write_text(keys_toml(("alice", "operator", ALICE), ("carol", "operator", CAROL)))
-    keys_file = web.KeysFile(str(keys))
-    access = web.ConsoleAccess(keys_file.load())
-    c = await serve(access, config=operator_config(tmp_path), keys_file=keys_file)
+    keys, access, c = await _alice_and_carol(tmp_path)
     try:
         r = await c.request("POST", "/login", data={"key": CAROL})
         cookie = r.cookies[web.SESSION_COOKIE].value

@@ -16,7 +16,6 @@ Requests, one JSON object a line, one JSON reply line each (``{"ok": bool, ...}`
 from __future__ import annotations
 
 import json
-import sys
 import threading
 import time
 from typing import Any
@@ -25,6 +24,7 @@ import zenoh
 
 from antalate_lcm.runtime.router import router_config
 from antalate_lcm.transports.zenoh import read_credentials, tls_settings
+from tests.harness.jsonl import serve
 
 
 class Peer:
@@ -96,14 +96,7 @@ class Peer:
 
 
 def main() -> None:
-    peer = Peer()
-    print(json.dumps({"ready": True}), flush=True)
-    for line in sys.stdin:
-        try:
-            reply = peer.handle(json.loads(line))
-        except Exception as exc:  # noqa: BLE001 - the test reads the error
-            reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
-        print(json.dumps(reply), flush=True)
+    serve(Peer().handle)
 
 
 if __name__ == "__main__":

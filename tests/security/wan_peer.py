@@ -31,6 +31,7 @@ import zenoh
 
 from antalate_lcm.transports.datagram import Reassembler, short_datagram
 from antalate_lcm.transports.udpm import udpm_socket
+from tests.harness.jsonl import serve
 
 LANS = {"a": ("239.255.76.67", 7667), "b": ("239.255.76.69", 7669), "c": ("239.255.76.71", 7671)}
 PROBE = "probe/WAN"
@@ -160,14 +161,7 @@ class Witness:
 
 
 def main() -> None:
-    witness = Witness(sys.argv[1])
-    print(json.dumps({"ready": True}), flush=True)
-    for line in sys.stdin:
-        try:
-            reply = witness.handle(json.loads(line))
-        except Exception as exc:  # noqa: BLE001 - the test reads the error
-            reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
-        print(json.dumps(reply), flush=True)
+    serve(Witness(sys.argv[1]).handle)
 
 
 if __name__ == "__main__":

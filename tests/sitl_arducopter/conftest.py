@@ -11,17 +11,14 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import Probe, _netns_reason
-from tests.harness.netns import NetNamespace
+from tests.conftest import Probe
+from tests.harness.netns import NetNamespace, private_netns
 from tests.sitl_arducopter.harness import sitl_missing
 
 
 @pytest.fixture(scope="module")
 def sitl_netns() -> Iterator[NetNamespace]:
-    reason = sitl_missing() or _netns_reason()
-    if reason:
-        pytest.skip(reason)
-    with NetNamespace() as ns:
+    with private_netns(missing=sitl_missing()) as ns:
         yield ns
 
 

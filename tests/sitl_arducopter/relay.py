@@ -13,20 +13,28 @@ import contextlib
 import socket
 import threading
 import time
+from typing import Generic, TypeVar
 
 MODES = ("pass", "cut", "stall")
 
+#: What a relay holds while stalled, and hands back to be sent when it passes again.
+Held = TypeVar("Held")
 
-class Relay:
-    def __init__(self, listen_port: int, upstream_port: int, host: str = "127.0.0.1") -> None:
-        self.upstream = (host, upstream_port)
+
+class _Modes(Generic[Held]):
+    """The modes both relays share: ``set_mode`` checks the mode and, back to ``pass``, sends what the
+    stall held, in order (outside the lock: a send may block)."""
+
+    def __init__(self) -> None:
         self.mode = "pass"
         self._lock = threading.Lock()
-        self._held: dict[str, bytearray] = {"up": bytearray(), "down": bytearray()}
-        self._socks: dict[str, socket.socket] = {}  # "up": to SITL, "down": to the adapter
-        self._server = socket.create_server((host, listen_port))
-        self.port = self._server.getsockname()[1]
-        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _take_held(self) -> Held:
+        """What is held, emptied (called with the lock held)."""
+        raise NotImplementedError
+
+    def _release(self, held: Held) -> None:
+        raise NotImplementedError
 
     def set_mode(self, mode: str) -> None:
         if mode not in MODES:
@@ -35,10 +43,28 @@ class Relay:
             self.mode = mode
             if mode != "pass":
                 return
-            flush = [(self._socks.get(k), bytes(b)) for k, b in self._held.items()]
-            for b in self._held.values():
-                b.clear()
-        for sock, data in flush:
+            held = self._take_held()
+        self._release(held)
+
+
+class Relay(_Modes[list[tuple[socket.socket | None, bytes]]]):
+    def __init__(self, listen_port: int, upstream_port: int, host: str = "127.0.0.1") -> None:
+        super().__init__()
+        self.upstream = (host, upstream_port)
+        self._held: dict[str, bytearray] = {"up": bytearray(), "down": bytearray()}
+        self._socks: dict[str, socket.socket] = {}  # "up": to SITL, "down": to the adapter
+        self._server = socket.create_server((host, listen_port))
+        self.port = self._server.getsockname()[1]
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _take_held(self) -> list[tuple[socket.socket | None, bytes]]:
+        flush = [(self._socks.get(k), bytes(b)) for k, b in self._held.items()]
+        for b in self._held.values():
+            b.clear()
+        return flush
+
+    def _release(self, held: list[tuple[socket.socket | None, bytes]]) -> None:
+        for sock, data in held:
             if sock is not None and data:
                 with contextlib.suppress(OSError):
                     sock.sendall(data)
@@ -81,7 +107,7 @@ class Relay:
                 dst.sendall(data)
 
 
-class UdpRelay:
+class UdpRelay(_Modes[dict[str, list[bytes]]]):
     """`Relay`'s modes for a UDP link (PX4's offboard link): between a vehicle that sends to
     ``listen_port`` and an adapter listening (``udpin``) on ``adapter_port``.
 
@@ -92,8 +118,7 @@ class UdpRelay:
     """
 
     def __init__(self, listen_port: int, adapter_port: int, host: str = "127.0.0.1") -> None:
-        self.mode = "pass"
-        self._lock = threading.Lock()
+        super().__init__()
         self._held: dict[str, list[bytes]] = {"up": [], "down": []}
         self._vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._vehicle.bind((host, listen_port))
@@ -104,16 +129,13 @@ class UdpRelay:
         threading.Thread(target=self._pump, args=("down",), daemon=True).start()
         threading.Thread(target=self._pump, args=("up",), daemon=True).start()
 
-    def set_mode(self, mode: str) -> None:
-        if mode not in MODES:
-            raise ValueError(f"relay mode {mode!r}: one of {MODES}")
-        with self._lock:
-            self.mode = mode
-            if mode != "pass":
-                return
-            held = {k: list(v) for k, v in self._held.items()}
-            for v in self._held.values():
-                v.clear()
+    def _take_held(self) -> dict[str, list[bytes]]:
+        held = {k: list(v) for k, v in self._held.items()}
+        for v in self._held.values():
+            v.clear()
+        return held
+
+    def _release(self, held: dict[str, list[bytes]]) -> None:
         for key, datagrams in held.items():
             for data in datagrams:
                 self._send(key, data)

@@ -12,8 +12,7 @@ from typing import Any
 
 import pytest
 
-from tests.conftest import _netns_reason
-from tests.harness.netns import NetNamespace
+from tests.harness.netns import NetNamespace, private_netns
 from tests.sitl_arducopter.conftest import sitl_dir, sitl_probe
 from tests.sitl_px4.harness import sitl_missing
 
@@ -22,10 +21,7 @@ __all__ = ["sitl_dir", "sitl_netns", "sitl_probe"]
 
 @pytest.fixture(scope="module")
 def sitl_netns() -> Iterator[NetNamespace]:
-    reason = sitl_missing() or _netns_reason()
-    if reason:
-        pytest.skip(reason)
-    with NetNamespace() as ns:
+    with private_netns(missing=sitl_missing()) as ns:
         yield ns
 
 

@@ -8,8 +8,6 @@ key, names cannot be taken over, requests are rate-limited, and signed commands 
 from __future__ import annotations
 
 import sqlite3
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -26,6 +24,7 @@ from antalate_lcm.station._file import load_station_file
 from antalate_lcm.station._settings import RateLimits
 from antalate_lcm.station.client import StationClient, StationClientError
 from antalate_lcm.wire.security import generate_key, verify
+from tests.harness.process import run_antalate
 from tests.station.test_station import API_KEYS, AUTH, OPERATOR_KEY, ORIGIN, READER_KEY, settings_for, tel
 
 SWARM_KEY = generate_key()
@@ -232,6 +231,10 @@ def test_a_signed_command_for_an_unknown_agent_is_404(keyed_station: StationServ
     assert err.value.status == 404
 
 
+#: What an operator signs besides the command itself (the MAC is well-formed, not checked here).
+SIGNED: dict[str, Any] = {"target": "", "utime": 1, "sender": "op", "seq": 1, "mac": "ab" * 32}
+
+
 @pytest.mark.parametrize(
     ("field", "value", "words"),
     [
@@ -243,30 +246,13 @@ def test_a_signed_command_for_an_unknown_agent_is_404(keyed_station: StationServ
     ],
 )
 def test_bad_signed_commands_get_422(open_station: StationServer, field: str, value: Any, words: str) -> None:
-    body = {
-        "target": "",
-        "utime": 1,
-        "sender": "op",
-        "seq": 1,
-        "mac": "ab" * 32,
-        "command": "TAKEOFF",
-        "altitude": 0.0,
-        field: value,
-    }
+    body = {**SIGNED, "command": "TAKEOFF", "altitude": 0.0, field: value}
     r = httpx.post(f"{open_station.url}/api/commands", json={"operator_cmd": body}, headers=AUTH)
     assert r.status_code == 422 and words in r.json()["detail"], r.text
 
 
 def test_signed_direction_must_not_need_wrapping(open_station: StationServer) -> None:
-    body = {
-        "target": "",
-        "utime": 1,
-        "sender": "op",
-        "seq": 1,
-        "mac": "ab" * 32,
-        "azimuth": 360.0,
-        "speed": 1.0,
-    }
+    body = {**SIGNED, "azimuth": 360.0, "speed": 1.0}
     r = httpx.post(f"{open_station.url}/api/commands", json={"direction_cmd": body}, headers=AUTH)
     assert r.status_code == 422 and "azimuth" in r.json()["detail"]
 
@@ -295,14 +281,9 @@ def test_station_file_round_trip(tmp_path: Path) -> None:
 def test_station_key_cli(tmp_path: Path) -> None:
     keyfile = tmp_path / "swarm.key"
     keyfile.write_text(SWARM_KEY + "\n")
-    run = [sys.executable, "-m", "antalate_lcm.cli", "station-key"]
-    out = subprocess.run(
-        [*run, "registration", "--swarm-key-file", str(keyfile)], capture_output=True, text=True, check=True
-    ).stdout
+    out = run_antalate("station-key", "registration", "--swarm-key-file", str(keyfile), check=True).stdout
     assert f'registration_key = "{REG_KEY}"' in out and SWARM_KEY not in out
-    out = subprocess.run(
-        [*run, "api", "--name", "ci", "--role", "read-only"], capture_output=True, text=True, check=True
-    ).stdout
+    out = run_antalate("station-key", "api", "--name", "ci", "--role", "read-only", check=True).stdout
     key = next(w for w in out.split() if w.startswith("antk_"))
     assert f'sha256 = "{sha256_hex(key)}"' in out and 'role = "read-only"' in out
     cfg = tmp_path / "station.toml"
@@ -339,14 +320,12 @@ def test_openapi_declares_the_bearer_scheme(open_station: StationServer) -> None
 
 
 def test_station_cli_refuses_a_bad_config_or_tls_pair_before_listening(tmp_path: Path) -> None:
-    run = [sys.executable, "-m", "antalate_lcm.cli", "station", "--port", "0", "--db", ":memory:"]
+    station = ("station", "--port", "0", "--db", ":memory:")
     cfg = tmp_path / "station.toml"
     cfg.write_text('[station]\nregistration_key = "not hex"\n')
-    r = subprocess.run([*run, "--config", str(cfg)], capture_output=True, text=True, timeout=60)
+    r = run_antalate(*station, "--config", str(cfg))
     assert r.returncode == 2 and "station.registration_key" in r.stderr and "Traceback" not in r.stderr
-    r = subprocess.run([*run, "--tls-cert", str(cfg)], capture_output=True, text=True, timeout=60)
+    r = run_antalate(*station, "--tls-cert", str(cfg))
     assert r.returncode == 2 and "--tls-key" in r.stderr
-    r = subprocess.run(
-        [*run, "--tls-cert", str(cfg), "--tls-key", str(cfg)], capture_output=True, text=True, timeout=60
-    )
+    r = run_antalate(*station, "--tls-cert", str(cfg), "--tls-key", str(cfg))
     assert r.returncode == 2 and "cannot use TLS certificate" in r.stderr and "Traceback" not in r.stderr

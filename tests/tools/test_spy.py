@@ -17,7 +17,6 @@ import signal
 import struct
 import subprocess
 import sys
-import threading
 import time
 import uuid
 import zipfile
@@ -31,9 +30,9 @@ from antalate_lcm.msgs import header_t, mc_state_t, telemetry_t
 from antalate_lcm.tools import codegen as _codegen
 from antalate_lcm.wire.topics import Message
 from tests import REPO
-from tests.harness.netns import NetNamespace, netns_unavailable
+from tests.harness.netns import private_netns, require_netns
 from tests.harness.polling import wait_for
-from tests.harness.process import group_members, stop_process
+from tests.harness.process import OutputLines, group_members, stop_process
 from tests.lcm_tables import dimensions, fingerprint, slots, typenames
 
 JAVA_SRC = Path(__file__).resolve().parent.parent / "java" / "DecodeCheck.java"
@@ -261,41 +260,13 @@ def test_lcm_spy_headless_finds_every_antalate_type(types_jar: Path, tmp_path: P
         pytest.skip("xvfb-run not found (Debian/Ubuntu: apt-get install xvfb xauth)")
     if shutil.which("xauth") is None:
         pytest.skip("xauth not found, which xvfb-run needs (Debian/Ubuntu: apt-get install xauth)")
-    if _jdk_is_headless():
-        pytest.skip(
-            "this Java has no AWT for X11 (libawt_xawt.so), which lcm-spy's window needs (Debian: default-jre)"
-        )
-    reason = netns_unavailable()
-    if reason:
-        pytest.skip(f"no private network namespace: {reason}")
-
+    require_spy_window()
     cmd, env = spy.spy_command(MCAST_URL, types_jar)
     marker = f"-Dantalate.test={uuid.uuid4().hex}"  # finds our JVM in /proc if it outlives the test
     env["LCM_JVM_OPT"] = f"-Xmx128m -Xms64m {marker}"
     env.pop("DISPLAY", None)
     env["TMPDIR"] = str(tmp_path)  # xvfb-run's Xauthority folder: checked below that it is cleaned up
-    out: list[str] = []
-    with NetNamespace() as ns:
-        proc = ns.popen(
-            ["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", *cmd],
-            env=env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-        )
-        try:
-            # "Found N plugins" is printed after the window is shown and LCM has joined the group.
-            _read_until(proc, out, lambda line: line.startswith("Found ") and line.endswith(" plugins"), 45)
-            time.sleep(0.5)
-            assert proc.poll() is None, "lcm-spy exited:\n" + "\n".join(out)
-        finally:
-            pgid = proc.pid
-            # Clean stop: end the JVM, so xvfb-run stops Xvfb and removes its files itself; then
-            # stop_process ends whatever is left of the process group.
-            for pid in _marked_processes(marker):
-                os.kill(pid, signal.SIGTERM)
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                proc.wait(10)
-            stop_process(proc)
+    out, pgid = spy_window(cmd, marker, 45, env=env)
     text = "\n".join(out)
     counts = [
         int(line.split()[1]) for line in out if line.startswith("Found ") and line.endswith(" LCM types")
@@ -319,25 +290,47 @@ def _jdk_is_headless() -> bool:
     return sys.platform.startswith("linux") and not libs
 
 
-def _read_until(proc: subprocess.Popen[str], out: list[str], done: Any, timeout: float) -> None:
-    """Collect output lines (on a thread, so a silent process cannot block us) until ``done(line)``."""
-    assert proc.stdout is not None
-    stream = proc.stdout
-    seen = threading.Event()
+def require_spy_window() -> None:
+    """Skip, saying why, where lcm-spy's window cannot open in a private namespace."""
+    if _jdk_is_headless():
+        pytest.skip(
+            "this Java has no AWT for X11 (libawt_xawt.so), which lcm-spy's window needs (Debian: default-jre)"
+        )
+    require_netns()
 
-    def reader() -> None:
+
+def spy_window(cmd: list[str], marker: str, timeout: float, **kw: Any) -> tuple[list[str], int]:
+    """lcm-spy (``cmd``, its JVM marked with ``marker``) under xvfb-run in a private namespace, until it
+    reports its plugins, then stopped: its output lines and its process group.
+
+    "Found N plugins" is printed after the window is shown and LCM has joined the group. The stop is
+    clean: the JVM ends, so xvfb-run stops Xvfb and removes its files itself; stop_process then ends
+    whatever is left of the process group."""
+    with private_netns() as ns:
+        proc = ns.popen(
+            ["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", *cmd],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            **kw,
+        )
+        assert proc.stdout is not None
+        out = OutputLines(proc.stdout)
         try:
-            for line in stream:
-                out.append(line.rstrip())
-                if done(out[-1]):
-                    seen.set()
-        except (ValueError, OSError):  # stop_process closed the pipe under us
-            pass
-        seen.set()  # end of output: the process is gone
-
-    threading.Thread(target=reader, daemon=True).start()
-    if not seen.wait(timeout) or not any(done(line) for line in out):
-        pytest.fail(f"lcm-spy did not start (exit code {proc.poll()}):\n" + "\n".join(out))
+            if (
+                out.wait(lambda line: line.startswith("Found ") and line.endswith(" plugins"), timeout)
+                is None
+            ):
+                pytest.fail(f"lcm-spy did not start (exit code {proc.poll()}):\n{out.text()}")
+            time.sleep(0.5)
+            assert proc.poll() is None, "lcm-spy exited:\n" + out.text()
+        finally:
+            for pid in _marked_processes(marker):
+                os.kill(pid, signal.SIGTERM)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(10)
+            stop_process(proc)
+    out.join()
+    return out.lines, proc.pid
 
 
 def _marked_processes(marker: str) -> list[int]:

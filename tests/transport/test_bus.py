@@ -9,14 +9,16 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
+from typing import IO
 
 import pytest
 
 from antalate_lcm.base.errors import MulticastUnavailable
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Bus, Subscription
 from antalate_lcm.msgs import mc_state_t, telemetry_t
 from tests import REPO
 from tests.conftest import MCAST_URL, Probe
+from tests.harness.messages import mc_state
 from tests.harness.netns import NetNamespace
 from tests.harness.polling import wait_for
 
@@ -28,18 +30,11 @@ def bus() -> Iterator[Bus]:
     b.close()
 
 
-def _mc(state: int, seq: int = 0) -> mc_state_t:
-    m = mc_state_t()
-    m.state = state
-    m.header.seq = seq
-    return m
-
-
 def test_typed_publish_subscribe(bus: Bus) -> None:
     got: list[tuple[str, int]] = []
     bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: got.append((ch, m.state)))
     bus.subscribe("test", "b/MC_STATE", mc_state_t, lambda ch, m: got.append((ch, -1)))
-    bus.publish("test", "a/MC_STATE", _mc(mc_state_t.MISSION))
+    bus.publish("test", "a/MC_STATE", mc_state(mc_state_t.MISSION))
     assert wait_for(lambda: got, 2) == [("a/MC_STATE", mc_state_t.MISSION)]
 
 
@@ -47,7 +42,7 @@ def test_regex_subscription_sees_every_agent(bus: Bus) -> None:
     got: list[str] = []
     bus.subscribe("test", r"[^/]+/MC_STATE", mc_state_t, lambda ch, m: got.append(ch), regex=True)
     for agent in ("a", "b", "c"):
-        bus.publish("test", f"{agent}/MC_STATE", _mc(1))
+        bus.publish("test", f"{agent}/MC_STATE", mc_state(1))
     bus.publish("test", "a/HLC_STATE", b"not for us")
     assert wait_for(lambda: len(got) == 3, 2)
     assert sorted(got) == ["a/MC_STATE", "b/MC_STATE", "c/MC_STATE"]
@@ -58,11 +53,11 @@ def test_garbage_is_counted_and_logged_at_a_limited_rate(bus: Bus, caplog: pytes
     bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: good.append(m.state))
     caplog.set_level(logging.WARNING, logger="antalate.bus")
     wrong_type = telemetry_t().encode()
-    truncated = _mc(3).encode()[:-3]
+    truncated = mc_state(3).encode()[:-3]
     for _ in range(50):
         for data in (b"\x00\x01garbage", wrong_type, truncated, b""):
             bus.publish("test", "a/MC_STATE", data)
-    bus.publish("test", "a/MC_STATE", _mc(3))
+    bus.publish("test", "a/MC_STATE", mc_state(3))
     assert wait_for(lambda: good, 2) == [3]
     assert bus.decode_errors() == {"a/MC_STATE": 200}
     logged = [r for r in caplog.records if "not a valid mc_state_t" in r.getMessage()]
@@ -82,24 +77,30 @@ def test_a_burst_is_not_dropped(bus: Bus) -> None:
 
     bus.subscribe("test", "a/MC_STATE", mc_state_t, slow_handler)
     for i in range(5000):
-        bus.publish("test", "a/MC_STATE", _mc(1, i))
+        bus.publish("test", "a/MC_STATE", mc_state(1, i))
     assert done.wait(10), f"received {len(got)} of 5000"
     assert got == list(range(5000))
 
 
-def test_unsubscribe_inside_a_handler(bus: Bus) -> None:
-    got: list[int] = []
-    holder: dict[str, object] = {}
+def _subscribe_once(bus: Bus, got: list[int]) -> None:
+    """A subscriber to a/MC_STATE that records the first message's seq and unsubscribes itself from
+    inside its handler."""
+    holder: dict[str, Subscription] = {}
 
     def once(ch: str, m: mc_state_t) -> None:
         got.append(m.header.seq)
-        bus.unsubscribe(holder["sub"])  # type: ignore[arg-type]
+        bus.unsubscribe(holder["sub"])
 
     holder["sub"] = bus.subscribe("test", "a/MC_STATE", mc_state_t, once)
+
+
+def test_unsubscribe_inside_a_handler(bus: Bus) -> None:
+    got: list[int] = []
+    _subscribe_once(bus, got)
     other: list[int] = []
     bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: other.append(m.header.seq))
     for i in range(20):
-        bus.publish("test", "a/MC_STATE", _mc(1, i))
+        bus.publish("test", "a/MC_STATE", mc_state(1, i))
     assert wait_for(lambda: len(other) == 20, 2)
     assert got == [0]
 
@@ -108,19 +109,13 @@ def test_the_last_subscriber_leaving_from_its_handler_releases_the_channel(bus: 
     """The LCM subscription itself goes (on the dispatcher thread, after the handler); a new
     subscriber on the same channel then gets each message exactly once."""
     first: list[int] = []
-    holder: dict[str, object] = {}
-
-    def once(ch: str, m: mc_state_t) -> None:
-        first.append(m.header.seq)
-        bus.unsubscribe(holder["sub"])  # type: ignore[arg-type]
-
-    holder["sub"] = bus.subscribe("test", "a/MC_STATE", mc_state_t, once)
-    bus.publish("test", "a/MC_STATE", _mc(1, 0))
+    _subscribe_once(bus, first)
+    bus.publish("test", "a/MC_STATE", mc_state(1, 0))
     assert wait_for(lambda: first == [0], 2)
     again: list[int] = []
     bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: again.append(m.header.seq))
     for i in range(1, 11):
-        bus.publish("test", "a/MC_STATE", _mc(1, i))
+        bus.publish("test", "a/MC_STATE", mc_state(1, i))
     assert wait_for(lambda: len(again) >= 10, 2)
     time.sleep(0.2)
     assert again == list(range(1, 11)) and first == [0]
@@ -134,8 +129,8 @@ def test_a_raising_handler_does_not_stop_the_bus(bus: Bus) -> None:
 
     bus.subscribe("test", "a/MC_STATE", mc_state_t, bad)
     bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: got.append(m.state))
-    bus.publish("test", "a/MC_STATE", _mc(1))
-    bus.publish("test", "a/MC_STATE", _mc(2))
+    bus.publish("test", "a/MC_STATE", mc_state(1))
+    bus.publish("test", "a/MC_STATE", mc_state(2))
     assert wait_for(lambda: got == [1, 2], 2)
 
 
@@ -166,64 +161,41 @@ def test_unknown_bus_is_a_clear_error(bus: Bus) -> None:
 # --------------------------------------------------------------------------- real multicast
 
 
-def test_two_processes_over_multicast(netns: NetNamespace, probe: Probe) -> None:
+def _subscriber(netns: NetNamespace, mode: str) -> tuple[subprocess.Popen[str], IO[str]]:
+    """tests/children/bus_subscriber.py in ``mode``, ready (subscribed): the process and its stdout."""
     sub = netns.python(
-        "-m",
-        "tests.children.bus_subscriber",
-        MCAST_URL,
-        "order",
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
+        "-m", "tests.children.bus_subscriber", MCAST_URL, mode, stdout=subprocess.PIPE, stderr=subprocess.PIPE
     )
-    assert sub.stdout is not None
-    assert sub.stdout.readline().strip() == "ready"
+    assert sub.stdout is not None and sub.stdout.readline().strip() == "ready"
+    return sub, sub.stdout
+
+
+def test_two_processes_over_multicast(netns: NetNamespace, probe: Probe) -> None:
+    _, out = _subscriber(netns, "order")
     pub = netns.python("-m", "tests.children.bus_publisher", MCAST_URL, stderr=subprocess.PIPE)
     assert pub.wait(20) == 0
-    assert sub.stdout.readline().split() == ["200", "True"]
+    assert out.readline().split() == ["200", "True"]
     # the probe (a third process, raw lcm) saw the same stream
     seen = probe.history("alpha/TELEMETRY", "telemetry_t")
     assert len(seen) == 200 and seen[-1]["mode"] == "SIM"
 
 
 def test_garbage_datagrams_over_multicast_do_not_kill_a_subscriber(netns: NetNamespace, probe: Probe) -> None:
-    sub = netns.python(
-        "-m",
-        "tests.children.bus_subscriber",
-        MCAST_URL,
-        "decode-errors",
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
-    assert sub.stdout is not None and sub.stdout.readline().strip() == "ready"
+    sub, out = _subscriber(netns, "decode-errors")
     for data in (b"\xff" * 40, telemetry_t().encode()[:10], b"x"):
         probe.raw("alpha/TELEMETRY", data)
     pub = netns.python("-m", "tests.children.bus_publisher", MCAST_URL, stderr=subprocess.PIPE)
     assert pub.wait(20) == 0
-    assert sub.stdout.readline().split() == ["200", "3"]
+    assert out.readline().split() == ["200", "3"]
     assert sub.wait(5) == 0
 
 
 def test_no_multicast_route_gives_the_fix() -> None:
     """In a namespace without the route, the CLI prints one clear message with the exact command."""
-    from tests.harness.netns import netns_unavailable
+    from tests.harness.netns import run_unrouted
 
-    reason = netns_unavailable()
-    if reason:
-        pytest.skip(f"no private network namespace: {reason}")
-    proc = subprocess.run(
-        [
-            "unshare",
-            "-rn",
-            sys.executable,
-            "-m",
-            "tests.children.open_bus",
-            "udpm://239.255.76.67:7667?ttl=1",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=30,
-        cwd=REPO,
-    )
+    argv = [sys.executable, "-m", "tests.children.open_bus", "udpm://239.255.76.67:7667?ttl=1"]
+    proc = run_unrouted(argv, timeout=30, cwd=REPO)
     assert proc.returncode != 0
     assert "MulticastUnavailable" in proc.stderr
     assert "ip route add 224.0.0.0/4 dev lo" in proc.stderr
@@ -239,7 +211,7 @@ def test_a_bad_datagram_is_one_decode_error_however_many_subscribers(bus: Bus) -
         bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: good.append(m.state))
     bus.subscribe("test", r"a/.*", mc_state_t, lambda ch, m: good.append(m.state), regex=True)
     bus.publish("test", "a/MC_STATE", b"\x00garbage\x01")
-    bus.publish("test", "a/MC_STATE", _mc(3))
+    bus.publish("test", "a/MC_STATE", mc_state(3))
     assert wait_for(lambda: len(good) == 4, 2)
     assert bus.decode_errors() == {"a/MC_STATE": 1}
 
@@ -257,7 +229,7 @@ def test_an_attached_bus_delivers_on_the_executors_thread_with_no_hop() -> None:
         b.subscribe(
             "test", "a/MC_STATE", mc_state_t, lambda ch, m: threads.append(threading.current_thread().name)
         )
-        b.publish("test", "a/MC_STATE", _mc(1))
+        b.publish("test", "a/MC_STATE", mc_state(1))
         assert wait_for(lambda: threads, 2) == ["the-one-loop"]
         assert "lcm-dispatch" not in {t.name for t in threading.enumerate()}
         with pytest.raises(RuntimeError, match="another executor"):
@@ -270,14 +242,14 @@ def test_an_attached_bus_delivers_on_the_executors_thread_with_no_hop() -> None:
 def test_unsubscribe_from_another_thread_releases_the_channel(bus: Bus) -> None:
     got: list[int] = []
     sub = bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: got.append(m.header.seq))
-    bus.publish("test", "a/MC_STATE", _mc(1, 1))
+    bus.publish("test", "a/MC_STATE", mc_state(1, 1))
     assert wait_for(lambda: got == [1], 2)
     bus.unsubscribe(sub)
     link = bus._by_name["test"]
     assert wait_for(lambda: not link._retire, 2), (
         "the LCM subscription is dropped on the loop without a datagram"
     )
-    bus.publish("test", "a/MC_STATE", _mc(1, 2))
+    bus.publish("test", "a/MC_STATE", mc_state(1, 2))
     time.sleep(0.1)
     assert got == [1]
 
@@ -299,8 +271,8 @@ def test_memq_drops_what_nobody_in_the_process_subscribes_to_and_delivers_the_re
         fd = b._link("test")._lcm.fileno()
         for _ in range(100):
             b.publish("test", "a/TELEMETRY", b"nobody listens")
-        b.publish("test", "a/MC_STATE", _mc(1, 7))
-        b.publish("test", "a/MC_STATE", _mc(1, 8))
+        b.publish("test", "a/MC_STATE", mc_state(1, 7))
+        b.publish("test", "a/MC_STATE", mc_state(1, 8))
         assert exact == [], "never delivered inside the publisher's call"
         assert select.select([fd], [], [], 0)[0] == [], "liblcm's memq queue is not used"
         ex.start()

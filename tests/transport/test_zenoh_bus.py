@@ -20,6 +20,7 @@ from antalate_lcm.msgs import mc_state_t, telemetry_t  # noqa: E402
 from antalate_lcm.runtime.router import router_config  # noqa: E402
 from antalate_lcm.transports.zenoh import ZenohLCM, channel_key, key_channel, literal_channel  # noqa: E402
 from tests import REPO  # noqa: E402
+from tests.harness.messages import mc_state  # noqa: E402
 from tests.harness.polling import wait_for  # noqa: E402
 
 
@@ -64,15 +65,8 @@ def buses(router: Router) -> Iterator[tuple[Bus, Bus]]:
     b.close()
 
 
-def _mc(state: int, seq: int = 0) -> mc_state_t:
-    m = mc_state_t()
-    m.state = state
-    m.header.seq = seq
-    return m
-
-
 PROBE_SEQ = 999_999
-PROBE = _mc(0, seq=PROBE_SEQ)
+PROBE = mc_state(0, seq=PROBE_SEQ)
 
 
 def _settle(pub: Bus, sub_bus: Bus, channel: str, got: list[Any]) -> None:
@@ -186,7 +180,7 @@ def test_typed_messages_cross_the_router_as_the_exact_lcm_bytes(buses: tuple[Bus
     b.subscribe("wan", "alpha/MC_STATE", mc_state_t, past_probe(lambda ch, m: typed.append(m)))
     b.subscribe("wan", "alpha/MC_STATE", None, past_probe(lambda ch, d: raw.append(d)))
     _settle(a, b, "alpha/MC_STATE", typed)
-    msg = _mc(mc_state_t.MISSION, seq=7)
+    msg = mc_state(mc_state_t.MISSION, seq=7)
     assert a.publish("wan", "alpha/MC_STATE", msg)
     assert wait_for(lambda: typed and raw, 10)
     assert typed[0].state == mc_state_t.MISSION and typed[0].header.seq == 7
@@ -199,7 +193,7 @@ def test_regex_subscription_sees_every_agent_and_nothing_else(buses: tuple[Bus, 
     b.subscribe("wan", ".*/MC_STATE", mc_state_t, past_probe(lambda ch, m: got.append(ch)), regex=True)
     _settle(a, b, "zz/MC_STATE", got)
     for name in ("alpha", "beta", "gamma"):
-        a.publish("wan", f"{name}/MC_STATE", _mc(1))
+        a.publish("wan", f"{name}/MC_STATE", mc_state(1))
     a.publish("wan", "alpha/TELEMETRY", telemetry_t())
     assert wait_for(lambda: len(got) >= 3, 10)
     assert sorted(got) == ["alpha/MC_STATE", "beta/MC_STATE", "gamma/MC_STATE"]
@@ -213,7 +207,7 @@ def test_garbage_is_counted_as_on_udpm(buses: tuple[Bus, Bus], caplog: pytest.Lo
     with caplog.at_level(logging.WARNING, logger="antalate.bus"):
         for _ in range(5):
             a.publish("wan", "alpha/MC_STATE", b"\x00garbage")
-        a.publish("wan", "alpha/MC_STATE", _mc(2))
+        a.publish("wan", "alpha/MC_STATE", mc_state(2))
         assert wait_for(lambda: got, 10)
     assert b.decode_errors() == {"alpha/MC_STATE": 5}
     assert got[0].state == 2  # the bus carried on
@@ -226,7 +220,7 @@ def test_a_burst_is_not_dropped(buses: tuple[Bus, Bus]) -> None:
     b.subscribe("wan", "alpha/MC_STATE", mc_state_t, past_probe(lambda ch, m: got.append(m.header.seq)))
     _settle(a, b, "alpha/MC_STATE", got)
     for i in range(3000):
-        a.publish("wan", "alpha/MC_STATE", _mc(1, seq=i))
+        a.publish("wan", "alpha/MC_STATE", mc_state(1, seq=i))
     assert wait_for(lambda: len(got) >= 3000, 20)
     assert got == list(range(3000))  # in order, none lost, none twice
 
@@ -236,7 +230,7 @@ def test_own_publications_reach_own_subscribers_as_on_multicast(router: Router) 
     with Bus({"wan": url(router)}) as bus:
         got: list[mc_state_t] = []
         bus.subscribe("wan", "alpha/MC_STATE", mc_state_t, lambda ch, m: got.append(m))
-        bus.publish("wan", "alpha/MC_STATE", _mc(3))
+        bus.publish("wan", "alpha/MC_STATE", mc_state(3))
         assert wait_for(lambda: got, 10)
 
 
@@ -256,7 +250,7 @@ def test_unsubscribe_inside_a_handler(buses: tuple[Bus, Bus]) -> None:
     _settle(a, b, "alpha/MC_STATE", keep)
     sub.append(b.subscribe("wan", "alpha/MC_STATE", mc_state_t, once))
     for i in range(1, 6):
-        a.publish("wan", "alpha/MC_STATE", _mc(1, seq=i))
+        a.publish("wan", "alpha/MC_STATE", mc_state(1, seq=i))
     assert wait_for(lambda: len(keep) >= 5, 10)
     assert len(got) == 1
 
@@ -286,13 +280,13 @@ def test_an_agent_starts_before_its_router_and_is_heard_once_it_answers() -> Non
     bus = Bus({"wan": url(r)})
     try:
         bus.open()  # does not raise: the router is not there yet
-        assert not bus.publish("wan", "alpha/MC_STATE", _mc(1))
+        assert not bus.publish("wan", "alpha/MC_STATE", mc_state(1))
         assert bus.publish_errors == 1
         r.start()
         with Bus({"wan": url(r)}) as listener:
             got: list[mc_state_t] = []
             listener.subscribe("wan", "alpha/MC_STATE", mc_state_t, lambda ch, m: got.append(m))
-            assert wait_for(lambda: bus.publish("wan", "alpha/MC_STATE", _mc(1)) and got, 15, 0.2)
+            assert wait_for(lambda: bus.publish("wan", "alpha/MC_STATE", mc_state(1)) and got, 15, 0.2)
     finally:
         bus.close()
         r.stop()
@@ -307,7 +301,7 @@ def test_the_router_restarting_is_survived(router: Router) -> None:
         router.stop()
         router.start()
         # Seen again once both clients have reconnected (retry period <= 1 s).
-        assert wait_for(lambda: a.publish("wan", "alpha/MC_STATE", _mc(5)) and got, 15, 0.1)
+        assert wait_for(lambda: a.publish("wan", "alpha/MC_STATE", mc_state(5)) and got, 15, 0.1)
     finally:
         a.close()
         b.close()

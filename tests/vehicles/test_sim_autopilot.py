@@ -23,23 +23,17 @@ from antalate_lcm.autopilot import (
 from antalate_lcm.autopilot.sim import DEFAULTS, SimAutopilot
 from antalate_lcm.base import geo
 from antalate_lcm.base.errors import PluginNotFound
+from tests.harness.clock import FakeClock
 
 HOME = (32.7767, 35.0231)
 
 
-class FakeClock:
-    def __init__(self, t: float = 1000.0) -> None:
-        self.t = t
-
-    def __call__(self) -> float:
-        return self.t
-
-    def advance(self, seconds: float) -> None:
-        self.t += seconds
+#: Where the simulator's fake clock starts (s).
+T0 = 1000.0
 
 
 def make(**params: Any) -> tuple[SimAutopilot, FakeClock]:
-    clock = FakeClock()
+    clock = FakeClock(T0)
     sim = SimAutopilot(params, clock=clock)
     sim.connect()
     return sim, clock
@@ -75,7 +69,7 @@ def test_contract_basics() -> None:
 
 
 def test_state_before_connect_and_after_close() -> None:
-    clock = FakeClock()
+    clock = FakeClock(T0)
     sim = SimAutopilot({}, clock=clock)
     s = sim.state()
     assert not s.connected and s.link_age == math.inf
@@ -148,7 +142,7 @@ def test_autopilot_state_defaults_and_derivations() -> None:
 )
 def test_bad_params_raise(params: dict[str, Any], match: str) -> None:
     with pytest.raises(ValueError, match=match):
-        SimAutopilot(params, clock=FakeClock())
+        SimAutopilot(params, clock=FakeClock(T0))
 
 
 # -------------------------------------------------------------------------------- kinematics
@@ -519,7 +513,7 @@ def test_battery_warning_at() -> None:
 )
 def test_bad_fault_params_raise(params: dict[str, Any], match: str) -> None:
     with pytest.raises(ValueError, match=match):
-        SimAutopilot(params, clock=FakeClock())
+        SimAutopilot(params, clock=FakeClock(T0))
 
 
 def test_refuse_arm_from_params_and_api() -> None:
@@ -590,7 +584,7 @@ def test_time_does_not_advance_between_calls_and_never_runs_backwards() -> None:
 
 
 def test_many_idle_sims_are_cheap() -> None:
-    clock = FakeClock()
+    clock = FakeClock(T0)
     sims = [SimAutopilot({"home_lat": 32.0 + i * 1e-4}, clock=clock) for i in range(200)]
     for sim in sims:
         sim.connect()
@@ -602,7 +596,7 @@ def test_many_idle_sims_are_cheap() -> None:
 
 
 def test_every_documented_param_is_accepted() -> None:
-    SimAutopilot(dict(DEFAULTS), clock=FakeClock())
+    SimAutopilot(dict(DEFAULTS), clock=FakeClock(T0))
 
 
 # -------------------------------------------------------------------------------- registry

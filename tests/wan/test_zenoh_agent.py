@@ -20,6 +20,7 @@ import tomli_w
 from tests import REPO
 from tests.harness.agents import FAST_SIM
 from tests.harness.netns import NetNamespace
+from tests.harness.process import run_antalate
 from tests.lan.swarm import OperatorClient, _merge
 
 if sys.version_info >= (3, 11):
@@ -38,13 +39,7 @@ URL = f"zenoh://?connect=tcp/127.0.0.1:{PORT}&mode=client"
 def lab_ca(out: Path, *clients: str, host: str = "127.0.0.1") -> Path:
     """``antalate lab-ca``: a CA, the router's certificate for ``host`` and one per client."""
     args = [a for c in clients for a in ("--client", c)]
-    made = subprocess.run(
-        [sys.executable, "-m", "antalate_lcm.cli", "lab-ca", str(out), "--host", host, *args],
-        capture_output=True,
-        text=True,
-        cwd=str(REPO),
-        timeout=60,
-    )
+    made = run_antalate("lab-ca", str(out), "--host", host, *args, cwd=str(REPO))
     assert made.returncode == 0, made.stderr
     return out
 
@@ -115,19 +110,7 @@ def test_an_agent_on_zenoh_is_flown_by_an_operator_on_zenoh(
         operator = _config(
             "operator_remote.toml", tmp_path, {"security": {"swarm_key": KEY}}, urls["operator"]
         )
-        op = OperatorClient(
-            netns.python(
-                "-m",
-                "tests.lan.lan_operator",
-                str(operator),
-                "--stale-after",
-                "2",
-                stdin=subprocess.PIPE,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                cwd=str(REPO),
-            )
-        )
+        op = OperatorClient(netns.peer("tests.lan.lan_operator", str(operator), "--stale-after", "2"))
         try:
             name = tomllib.loads(agent.read_text())["agent"]["name"]
             op.wait_all([name], "STANDBY", timeout=30)

@@ -39,17 +39,17 @@ _SLOTS_PER_S = 1000
 #: timer runs at most a tenth of its period (5 ms at most) after its time; short timers keep 1 ms.
 _QUANTUM_PER_PERIOD = 10
 _MAX_QUANTUM_MS = 5
-#: On simulated time timers run on a grid of 50 ms (or the largest divisor of 50 ms that divides a
-#: timer's period or a one-shot's delay, in whole ms; 1 ms if it is no whole number of ms): every default period (HLC control 20 Hz,
-#: telemetry 10 Hz, the nodes' 5 Hz republish, behaviors' 10 Hz and 5 Hz ticks, the HLC's 0.25 s
-#: and the BMA's 5 s sweeps, the operator's and the faults' 0.1 s and 0.05 s steps) is a multiple of
-#: it and stays exact, and only an agent's phase (``Node.first_delay``) is rounded up, by less than
-#: one step. The agents' phases spread a thousand agents' runs over every millisecond, which on the
-#: wall clock keeps their datagrams from arriving in one burst but on simulated time only makes
-#: distinct instants, each an iteration of the loop and, over ``--processes P``, at least one round
-#: between the processes (100 agents: about 1,800 rounds per simulated second in 1 ms slots, about
-#: 60 on the grid; docs/experiments.md). Timers of one instant run in the order of their exact due
-#: times, so the phases (and the seed that draws them) still order the agents.
+#: On simulated time timers run on a grid of 50 ms (for a period, or a one-shot's delay, that 50 ms
+#: does not divide: the largest divisor of 50 ms that divides it in whole ms; else 1 ms). Every
+#: default period is a multiple of 50 ms (HLC control 20 Hz, telemetry 10 Hz, the nodes' 5 Hz
+#: republish, the behaviors' 10 Hz and 5 Hz ticks, the HLC's 0.25 s and the BMA's 5 s sweeps, the
+#: operator's 0.1 s and the faults' 0.05 s steps) and stays exact: only an agent's phase
+#: (``Node.first_delay``) is rounded up, by less than one step. On the wall clock the phases spread
+#: a thousand agents' datagrams over every millisecond; on simulated time they only made distinct
+#: instants, each an iteration of the loop and, over ``--processes P``, a round or two between the
+#: processes: 1,800 rounds per simulated second for 100 agents, 2,000 for 1,000, against 40 on the
+#: grid (docs/experiments.md). Timers of one instant run in the order of their exact due times, so
+#: the phases (and the seed that draws them) still order the agents.
 _SIM_GRID_MS = 50
 #: ms of float error (a due time summed from simulated seconds) not taken for a later slot.
 _SIM_SLACK_MS = 1e-3

@@ -1,16 +1,8 @@
-"""Deprecated: moved to :mod:`antalate_lcm.transports.datagram` (issue 26); this name stays for one
-release because docs/lan.md told users to forge test datagrams with it."""
+"""Deprecated name of :mod:`antalate_lcm.transports.datagram` (moved there by issue #26): docs/lan.md told
+users to forge test datagrams with it, so it keeps working, with a warning, for one release."""
 
-from __future__ import annotations
-
-import warnings
-
+from antalate_lcm.base.deprecation import moved_module
 from antalate_lcm.transports.datagram import Reassembler, channel_problem, fragments, short_datagram
 
-warnings.warn(
-    "antalate_lcm.lcm_datagram is deprecated: import antalate_lcm.transports.datagram",
-    DeprecationWarning,
-    stacklevel=2,
-)
-
+__getattr__ = moved_module(__name__, "antalate_lcm.transports.datagram")
 __all__ = ["Reassembler", "channel_problem", "fragments", "short_datagram"]

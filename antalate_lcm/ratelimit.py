@@ -1,21 +1,8 @@
-"""Deprecated name of :mod:`antalate_lcm.base.ratelimit`, where issue #26 moved it (its layer folder):
-import that. Behavior authors and the docs imported this name, so it keeps working, with a warning, until
-the next release removes it."""
+"""Deprecated name of :mod:`antalate_lcm.base.ratelimit`, where issue #26 moved it: behavior authors and the
+docs imported it, so it keeps working, with a warning, for one release (:mod:`antalate_lcm.base.deprecation`).
+"""
 
-from __future__ import annotations
-
-import warnings
-from typing import Any
-
-from antalate_lcm.base import ratelimit as _moved
+from antalate_lcm.base.deprecation import moved_module
 from antalate_lcm.base.ratelimit import *  # noqa: F403 - the old name offers what the new one does
 
-warnings.warn(
-    "antalate_lcm.ratelimit is deprecated: import antalate_lcm.base.ratelimit (the old name goes in the next release)",
-    DeprecationWarning,
-    stacklevel=2,
-)
-
-
-def __getattr__(name: str) -> Any:
-    return getattr(_moved, name)
+__getattr__ = moved_module(__name__, "antalate_lcm.base.ratelimit")

@@ -21,6 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from antalate_lcm.core.behavior import Behavior, BehaviorContext
 from antalate_lcm.msgs import direction_cmd_t, velocity_cmd_t
+from behaviors.velocity import velocity_cmd
 
 
 @dataclass(frozen=True)
@@ -94,7 +95,4 @@ class DirectionFollow(Behavior):
         self._publish(0.0, 0.0)
 
     def _publish(self, vn: float, ve: float) -> None:
-        msg = velocity_cmd_t()
-        msg.frame = velocity_cmd_t.NED
-        msg.vx, msg.vy, msg.vz, msg.yaw_rate = vn, ve, 0.0, 0.0
-        self.ctx.publish("VELOCITY_CMD", msg)
+        self.ctx.publish("VELOCITY_CMD", velocity_cmd(vn, ve))

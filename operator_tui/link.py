@@ -10,7 +10,7 @@ topic per tick whatever the rates, and nothing that a newer message superseded. 
 states loses no acknowledgement; a state held for less than one tick is not shown.
 
 Sending happens on the caller's (UI) thread, and only there, through :meth:`Node.publish` (which
-stamps the header, signs with the swarm key and hands the datagram to the thread-safe bus), so a
+stamps the header, has the node's admission sign it with the swarm key and hands the datagram to the thread-safe bus), so a
 key press reaches the wire without waiting for either thread. The console owns the ``header.seq``
 of operator commands (a resend must repeat it, see :mod:`operator_tui.commands`) and passes it to
 ``publish``; ``utime`` is fresh on every send, so a resend passes the agents' replay guard.
@@ -32,7 +32,6 @@ from antalate_lcm.core.bus import Subscription
 from antalate_lcm.core.config import Config
 from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
-from antalate_lcm.wire.security import check_datagram
 from antalate_lcm.wire.topics import Message, channel_regex
 from operator_tui.commands import COMMANDS
 from operator_tui.model import WATCHED_TOPICS
@@ -91,7 +90,7 @@ class OperatorNode(Node):
         clock: Callable[[], float] = time.monotonic,
         wallclock: Callable[[], float] = time.time,
     ) -> None:
-        super().__init__(config, context)
+        super().__init__(config, context, watcher=True)  # it watches agents, flies none
         self.clock = clock
         self.wallclock = wallclock
         #: Events in arrival order, and the newest sample per channel (written on the loop thread).
@@ -100,9 +99,8 @@ class OperatorNode(Node):
         self.swarm_key = config.security.swarm_key
         #: With a swarm key, what the console shows and counts as an acknowledgement must be signed
         #: by a swarm member: a forged mc_state_t would otherwise stop the resends of a command the
-        #: MC never accepted. Checked only on what is decoded (a state republished unchanged is not).
-        self._keys = tuple(k for k in (config.security.swarm_key, *config.security.previous_keys) if k)
-        self._window = config.security.window
+        #: MC never accepted. Checked (`NodeAdmission.check_datagram`) only on what is decoded (a state
+        #: republished unchanged is not).
         self.rejected = 0
         self._direction_seq = 0
         self._raw_subs: list[Subscription] = []
@@ -191,7 +189,7 @@ class OperatorNode(Node):
         """The agent of a TELEMETRY channel whose decoding may wait until it is shown, or None.
 
         Never with a swarm key: what the console shows must then be checked first."""
-        if self._keys:
+        if self.admission.checks_datagrams:
             return None
         kind = self._classify(channel)
         if kind is None or kind[0] != "TELEMETRY":
@@ -212,8 +210,8 @@ class OperatorNode(Node):
                 self.unchanged += 1  # the same state again: the decoded one stands
                 agent = fields.get("agent") or last[1].header.agent
                 return Incoming(topic, agent, last[1], received, fields, unchanged=True)
-        if self._keys:
-            problem = check_datagram(data, self._keys, self._window, self.wallclock())
+        if self.admission.checks_datagrams:
+            problem = self.admission.check_datagram(data, self.wallclock())
             if problem is not None:
                 self.rejected += 1
                 self._decode_log.log(

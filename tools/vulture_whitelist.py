@@ -14,11 +14,7 @@ from vulture.whitelist_utils import Whitelist
 
 _ = Whitelist()
 
-# --- Python's module protocol: lazy exports (PEP 562), called by the import system.
-_.__getattr__
-
 # --- Entry points (pyproject [project.entry-points]): loaded by name through importlib.metadata.
-_.SimAutopilot
 _.AutoOperator
 _.DirectionFollow
 _.DovratSwarm
@@ -41,31 +37,6 @@ _.handle_disconnect
 _.robust_parsing  # pymavlink's parser option
 
 # --- pydantic fields read by key (model_dump / a mapping), not by attribute.
-_.tau  # SimParams: the sim reads its parameters as a dict (sim.py, p["..."])
-_.climb_rate
-_.descent_rate
-_.rtl_altitude
-_.drain_flying
-_.drain_idle
-_.auto_disarm_delay
-_.land_disarm_delay
-_.takeover_autoland
-_.takeover_land_delay
-_.link_loss
-_.refuse_arm
-_.time_scale
-_.max_step
-_.link_loss_after
-_.link_loss_for
-_.takeover_after
-_.failsafe_after
-_.failsafe_mode
-_.failsafe_reason
-_.state_error_after
-_.state_error_for
-_.voltage_sag
-_.battery_warning_at
-_.state_file
 _.command_ttl
 _.pending_commands  # station/_models.py: a field of the JSON the API returns (docs/station-protocol.md)
 

@@ -39,312 +39,28 @@ The config is its own TOML file: ``[buses]`` as in an agent config, and ``[bridg
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import re
 import select
-import sys
 import threading
 import time
 import uuid
-from collections import OrderedDict
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from functools import partial
-from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
-
-from antalate_lcm.base.errors import ConfigError
+from antalate_lcm.apps.bridge_config import BridgeConfig, load_bridge_config
+from antalate_lcm.apps.bridge_policy import DROP_REASONS, Direction, Memory, Throttle, origin_tag
 from antalate_lcm.base.ratelimit import RateLimitedLog
-from antalate_lcm.transports import Connection, bus_url_problem, transport_for
-from antalate_lcm.transports.datagram import MAX_MESSAGE_SIZE, Reassembler, channel_problem
+from antalate_lcm.transports import Connection, transport_for
+from antalate_lcm.transports.datagram import Reassembler, channel_problem
 from antalate_lcm.transports.udpm import Udpm
 from antalate_lcm.transports.zenoh import BRIDGE_MARK, ZenohLCM
 from antalate_lcm.wire.security import MemberProof
 
 log = logging.getLogger("antalate.bridge")
 
-#: Default largest message forwarded (bytes): 1,000 times the largest antalate message in practice.
-DEFAULT_MAX_SIZE = 256 * 1024
-#: Seen messages remembered at most (each ~100 bytes), whatever arrives within ``memory`` seconds.
-MAX_REMEMBERED = 100_000
 
-
-# ---------------------------------------------------------------------------------------- config
-class RateLimit(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True)
-
-    #: Channel regex (whole name), e.g. ``.*/TELEMETRY``.
-    channel: str
-    #: The bus the capped messages go to (the other direction is not capped).
-    to: str
-    #: Messages per second per channel at most; the newest waiting one is sent at each slot.
-    rate: float = Field(gt=0)
-
-    @field_validator("channel")
-    @classmethod
-    def _regex(cls, v: str) -> str:
-        re.compile(v)
-        return v
-
-
-class SizeLimit(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True)
-
-    #: Channel regex (whole name).
-    channel: str
-    #: The bus the limited messages go to.
-    to: str
-    #: Largest message (bytes of LCM payload) forwarded on those channels towards ``to``.
-    max: int = Field(gt=0, le=MAX_MESSAGE_SIZE)
-
-    @field_validator("channel")
-    @classmethod
-    def _regex(cls, v: str) -> str:
-        re.compile(v)
-        return v
-
-
-class BridgeSecurity(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True)
-
-    #: The swarm key (as in the agents' [security]): signs this bridge's liveliness token; without
-    #: it, any Zenoh client can take the site's election over (docs/wan.md).
-    swarm_key: str = ""
-    #: Former keys, accepted for checking the other bridges' tokens during a rotation.
-    previous_keys: list[str] = Field(default_factory=list)
-    #: s: how far a token's time may be from this host's clock (the hosts need NTP).
-    window: float = Field(default=5.0, gt=0, le=300)
-
-
-class BridgeSection(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True)
-
-    #: The two bus names (from [buses]) to join.
-    between: list[str] = Field(min_length=2, max_length=2)
-    #: Channel regexes (whole name) to forward; default every channel.
-    channels: list[str] = Field(default_factory=lambda: [".*"])
-    #: Channel regexes never forwarded (checked after ``channels``).
-    exclude: list[str] = Field(default_factory=list)
-    #: Seconds a forwarded message is remembered against echoes and duplicates.
-    memory: float = Field(default=2.0, gt=0, le=60)
-    #: Name of the network this bridge serves: bridges that join the *same* LAN to Zenoh (a
-    #: redundant gateway) must share it, bridges of different sites must not. Empty: this bridge's
-    #: own random id (safe: never mistakes another site's messages for its own).
-    site: str = ""
-    limit: list[RateLimit] = Field(default_factory=list)
-    #: Largest message (bytes) forwarded either way unless a [[bridge.size]] says otherwise; far
-    #: below liblcm's 256 MiB: the largest antalate message is a few hundred bytes.
-    max_size: int = Field(default=DEFAULT_MAX_SIZE, gt=0, le=MAX_MESSAGE_SIZE)
-    size: list[SizeLimit] = Field(default_factory=list)
-
-    @field_validator("channels", "exclude")
-    @classmethod
-    def _regexes(cls, v: list[str]) -> list[str]:
-        for pattern in v:
-            re.compile(pattern)
-        return v
-
-
-class BridgeConfig(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True)
-
-    buses: dict[str, str]
-    bridge: BridgeSection
-    security: BridgeSecurity = Field(default_factory=BridgeSecurity)
-
-    @field_validator("buses")
-    @classmethod
-    def _urls(cls, v: dict[str, str]) -> dict[str, str]:
-        problem = bus_url_problem(v)
-        if problem is not None:
-            raise ValueError(f"{problem[0]}: expected {problem[1]}")
-        return v
-
-    @model_validator(mode="after")
-    def _known(self) -> BridgeConfig:
-        a, b = self.bridge.between
-        if a == b:
-            raise ValueError(f"bridge.between: two different buses, not {a!r} twice")
-        for name in (a, b):
-            if name not in self.buses:
-                raise ValueError(f"bridge.between: a bus declared in [buses], not {name!r}")
-        if self.buses[a] == self.buses[b]:
-            raise ValueError(f"bridge.between: {a} and {b} are the same bus ({self.buses[a]})")
-        for i, lim in enumerate(self.bridge.limit):
-            if lim.to not in (a, b):
-                raise ValueError(f"bridge.limit[{i}].to: one of {a}, {b}, not {lim.to!r}")
-        for i, size in enumerate(self.bridge.size):
-            if size.to not in (a, b):
-                raise ValueError(f"bridge.size[{i}].to: one of {a}, {b}, not {size.to!r}")
-        return self
-
-
-def load_bridge_config(path: str | Path) -> BridgeConfig:
-    """Read and check a bridge config; every mistake is a ConfigError naming the file and key."""
-    if sys.version_info >= (3, 11):
-        import tomllib
-    else:  # pragma: no cover - exercised only on 3.10
-        import tomli as tomllib
-
-    source = str(path)
-    try:
-        data = tomllib.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise ConfigError(source, "", "no such file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(source, "", f"not valid TOML ({exc})") from None
-    try:
-        return BridgeConfig.model_validate(data)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        key = ".".join(str(p) for p in err["loc"])
-        msg = str(err["msg"]).removeprefix("Value error, ")
-        named = re.match(r"([a-z_]+(?:\.[a-z_]+|\[\d+\]\.[a-z_]+)*): (.*)", msg, re.S)
-        if named:  # our own checks name their key first
-            key, msg = named.group(1), named.group(2)
-        raise ConfigError(source, key, msg) from None
-    except re.error as exc:
-        raise ConfigError(source, "bridge", f"valid regular expressions ({exc})") from None
-
-
-# ----------------------------------------------------------------------------------- pure logic
-class Memory:
-    """(channel, digest) pairs seen in the last ``window`` seconds, ``limit`` at most. Not thread-safe."""
-
-    def __init__(self, window: float, limit: int = MAX_REMEMBERED) -> None:
-        self.window = window
-        self.limit = limit
-        self._seen: OrderedDict[bytes, float] = OrderedDict()
-
-    @staticmethod
-    def digest(channel: str, data: bytes) -> bytes:
-        h = hashlib.blake2b(data, digest_size=16, person=b"antalate-bridge")
-        h.update(channel.encode())
-        return h.digest()
-
-    def prune(self, now: float) -> None:
-        """Forget what left the window (oldest first, O(1) per entry); also when nothing arrives."""
-        seen = self._seen
-        while seen:
-            oldest, t = next(iter(seen.items()))
-            if now - t <= self.window:
-                break
-            del seen[oldest]
-
-    def check_and_add(self, key: bytes, now: float) -> bool:
-        """True (and remembered afresh) if ``key`` was seen within the window, else remember it."""
-        self.prune(now)
-        seen = key in self._seen
-        self._seen[key] = now
-        self._seen.move_to_end(key)
-        if len(self._seen) > self.limit:  # a flood within one window: the oldest goes first
-            self._seen.popitem(last=False)
-        return seen
-
-    def __len__(self) -> int:
-        return len(self._seen)
-
-
-class Throttle:
-    """Newest-wins rate cap per channel: at most one message per ``1/rate`` s, the latest one."""
-
-    def __init__(self, rate: float) -> None:
-        self.interval = 1.0 / rate
-        self._last: dict[str, float] = {}
-        self._pending: dict[str, bytes] = {}
-        #: Messages replaced by a newer one before their slot.
-        self.superseded = 0
-
-    def offer(self, channel: str, data: bytes, now: float) -> bool:
-        """True: send now. False: kept as the channel's newest, sent by :meth:`due`."""
-        last = self._last.get(channel)
-        if last is None or now - last >= self.interval:
-            self._last[channel] = now
-            self._pending.pop(channel, None)
-            return True
-        if channel in self._pending:
-            self.superseded += 1
-        self._pending[channel] = data
-        return False
-
-    def due(self, now: float) -> list[tuple[str, bytes]]:
-        out = []
-        for channel in list(self._pending):
-            if now - self._last[channel] >= self.interval:
-                out.append((channel, self._pending.pop(channel)))
-                self._last[channel] = now
-        return out
-
-    def prune(self, now: float) -> None:
-        """Forget the slots of channels that have nothing waiting and whose slot has passed."""
-        stale = [c for c, t in self._last.items() if now - t >= self.interval and c not in self._pending]
-        for channel in stale:
-            del self._last[channel]
-
-    def __len__(self) -> int:
-        return len(self._last)
-
-
-@dataclass
-class Direction:
-    """What goes from one side to the other: the caps, the size limits and the counters."""
-
-    source: str
-    dest: str
-    limits: list[tuple[re.Pattern[str], Throttle]]
-    sizes: list[tuple[re.Pattern[str], int]] = field(default_factory=list)
-    max_size: int = DEFAULT_MAX_SIZE
-    forwarded: int = 0
-    #: Messages on channels ``[bridge] channels``/``exclude`` leave out.
-    not_selected: int = 0
-    #: Not forwarded, and rightly: already carried (an echo, a second bridge's copy), brought from
-    #: the destination by another bridge, or another bridge of the site forwards this way.
-    seen: int = 0
-    same_origin: int = 0
-    standby: int = 0
-    #: LCM payload bytes received from ``source`` and sent to ``dest``.
-    bytes_in: int = 0
-    bytes_out: int = 0
-    #: Messages not forwarded, by reason (see :data:`DROP_REASONS`).
-    dropped: dict[str, int] = field(default_factory=dict)
-
-    def throttle_for(self, channel: str) -> Throttle | None:
-        for pattern, throttle in self.limits:
-            if pattern.fullmatch(channel):
-                return throttle
-        return None
-
-    def size_limit(self, channel: str) -> int:
-        for pattern, limit in self.sizes:
-            if pattern.fullmatch(channel):
-                return limit
-        return self.max_size
-
-    @property
-    def largest(self) -> int:
-        """The largest message any channel may carry this way (what reassembly may ever hold)."""
-        return max([self.max_size, *(limit for _, limit in self.sizes)])
-
-
-#: Why a message was not forwarded (stats keys ``dropped_<reason>``).
-DROP_REASONS = {
-    "bad_channel": "its channel cannot be carried by LCM (empty, a NUL byte, over 63 bytes)",
-    "oversize": "it is over the size limit of its channel",
-    "damaged": "it is not LCM or is damaged (LAN datagrams, or fragments that never all came)",
-    "send_error": "the destination refused it",
-    "error": "an unforeseen error while forwarding it",
-}
-
-
-def origin_tag(name: str) -> bytes:
-    """A short tag naming a bus of a site (the same on every bridge that joins that bus)."""
-    return hashlib.blake2b(name.encode(), digest_size=6).hexdigest().encode()
-
-
-# ------------------------------------------------------------------------------------------ I/O
 class _LanLink:
     """A ``udpm://`` LAN: read from antalate's own socket (sizes checked on the first fragment, before
     any buffer is allocated), sent by liblcm (whose receive thread never starts: nothing subscribes)."""
@@ -631,4 +347,12 @@ class Bridge:
         self._links.clear()
 
 
-__all__: Sequence[str] = ["Bridge", "BridgeConfig", "Memory", "Throttle", "load_bridge_config"]
+__all__: Sequence[str] = [
+    "Bridge",
+    "BridgeConfig",
+    "Direction",
+    "Memory",
+    "Throttle",
+    "load_bridge_config",
+    "origin_tag",
+]

@@ -149,14 +149,10 @@ def _json_to_lcm(type_name: str, data: bytes) -> bytes | None:
 def export(lcm_path: Path, out_path: Path, *, raw: bool = False) -> McapLogWriter:
     """Convert an LCM log (``lcm-logger``, ``antalate log``) to MCAP; a damaged tail ends it early,
     as it ends :func:`antalate_lcm.apps.analysis.read_log`."""
-    import lcm
-
+    from antalate_lcm.core.lcm_log import log_events, open_log
     from antalate_lcm.transports import captured_stderr
 
-    try:
-        log = lcm.EventLog(str(lcm_path), "r")
-    except (OSError, RuntimeError, ValueError) as exc:
-        raise AntalateError(f"{lcm_path}: cannot be opened as an LCM log: {exc}") from None
+    log = open_log(lcm_path)
     try:
         out = out_path.open("wb")
     except OSError as exc:
@@ -165,14 +161,8 @@ def export(lcm_path: Path, out_path: Path, *, raw: bool = False) -> McapLogWrite
     with out, captured_stderr():
         writer = McapLogWriter(out, raw=raw)
         try:
-            while True:
-                event = log.read_next_event()
-                if event is None:
-                    break
-                channel = event.channel
-                if isinstance(channel, bytes):
-                    channel = channel.decode("utf-8", "replace")
-                writer.write_event(channel, int(event.timestamp) * 1000, event.data)
+            for t, channel, data in log_events(log):
+                writer.write_event(channel, t * 1000, data)
         finally:
             log.close()
             writer.finish()

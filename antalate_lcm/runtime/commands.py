@@ -18,6 +18,7 @@ from antalate_lcm.core.node import Context, Node
 
 if TYPE_CHECKING:  # the plan imports every adapter's registry: only the commands that run nodes need it
     from antalate_lcm.agent.plan import AgentPlan
+    from antalate_lcm.apps.analysis import AnalysisOptions
 
 
 def _run_single(args: argparse.Namespace, make: Callable[[AgentPlan, Context], list[Node]]) -> int:
@@ -244,7 +245,7 @@ def _positive(text: str) -> float:
     return value
 
 
-def _analysis_options(args: argparse.Namespace) -> dict[str, Any]:
+def _analysis_options(args: argparse.Namespace) -> AnalysisOptions:
     """The keywords of ``analyze_log`` from the options of :func:`_add_analysis_options`."""
     return {
         "azimuth": args.azimuth,

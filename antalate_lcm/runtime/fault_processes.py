@@ -23,7 +23,7 @@ from typing import Any
 from antalate_lcm.core.config import Config
 from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import payload_t
-from antalate_lcm.runtime.faults import FaultGate, FaultInjector, lossy_broadcasts
+from antalate_lcm.runtime.faults import FaultGate, FaultInjector, agents_gate
 from antalate_lcm.runtime.script import Script
 from antalate_lcm.wire.topics import FAULT_CHANNEL, FAULT_CONTENT_TYPE
 
@@ -80,18 +80,12 @@ def shard_faults(
     """The fault injector of this process's agents, its gate set on their nodes (broadcast losses too)."""
     from antalate_lcm.agent.hlc.node import HlcNode
 
-    if script.broadcast.reception < 1.0:
-        gate = lossy_broadcasts(nodes, script.broadcast.reception, script.seed)
-    else:
-        gate = FaultGate()
-        for node in nodes:
-            node.interference = gate
     return ShardFaults(
         configs[0].with_agent_name(name),
         context,
         script=script,
         agents=[c.agent.name for c in configs],
-        gate=gate,
+        gate=agents_gate(nodes, script),
         bus=bus,
         excuse=lambda _agent: None,
         vehicles={n.agent: n.autopilot for n in nodes if isinstance(n, HlcNode)},

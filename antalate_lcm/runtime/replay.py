@@ -22,10 +22,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import lcm
-
 from antalate_lcm import __version__
 from antalate_lcm.base.errors import AntalateError
+from antalate_lcm.core.lcm_log import log_events, open_log
 
 if TYPE_CHECKING:
     from antalate_lcm.runtime.experiment import Experiment
@@ -95,16 +94,9 @@ class Divergence:
 
 
 def _events(path: str | Path) -> Iterator[tuple[int, str, bytes]]:
-    log = lcm.EventLog(str(path), "r")
+    log = open_log(path)
     try:
-        while True:
-            event = log.read_next_event()
-            if event is None:
-                return
-            channel = event.channel
-            if isinstance(channel, bytes):
-                channel = channel.decode("utf-8", "replace")
-            yield int(event.timestamp), channel, bytes(event.data)
+        yield from log_events(log)
     finally:
         log.close()
 

@@ -73,7 +73,7 @@ class ScriptedOperator(Node):
         timeout: float = 180.0,
         directions: Sequence[DirectionAt] = (),
     ) -> None:
-        super().__init__(config, context)
+        super().__init__(config, context, watcher=True)  # it watches agents, flies none
         self.expected_agents = expected_agents
         self.mission_time = mission_time
         self.altitude = altitude

@@ -9,15 +9,16 @@ status, and the swarm metrics of ``antalate analyze``), so an interrupted sweep 
 finished. A run that fails (a flight that does not come back, a process that dies, a time-out) is
 a row with ``status = failed`` and its ``reason``, and the sweep carries on.
 
-Parallel runs must not hear each other: ``memq://`` buses stay inside their run's process; with
-``--jobs`` above 1 the ``udpm://`` buses of the k-th parallel slot get the port + 100 k (the same
-group), and ``zenoh://`` buses are refused.
+Parallel runs must not hear each other: each bus's transport says how to keep them apart
+(:meth:`~antalate_lcm.transports.base.Transport.for_slot`): ``memq://`` buses stay inside their run's
+process; with ``--jobs`` above 1 the ``udpm://`` buses of the k-th parallel slot get the port + 100 k
+(the same group), and ``zenoh://`` buses are refused. The table and the progress line are
+:mod:`.sweep_results`.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import os
 import signal
@@ -29,42 +30,26 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
 from typing import IO, Any
-from urllib.parse import urlsplit, urlunsplit
 
-from antalate_lcm.base.errors import AntalateError, ConfigError
+from antalate_lcm.base.errors import AntalateError, BusUnavailable, ConfigError
 from antalate_lcm.core.config import read_toml_file
+from antalate_lcm.runtime.sweep_results import (
+    HEAD,
+    METRICS,
+    TAIL,
+    Progress,
+    ResultsTable,
+    columns,
+    count,
+    metrics_row,
+)
 from antalate_lcm.runtime.sweep_spec import Point, Sweep, build, dumps_toml, parse_spec
+from antalate_lcm.transports import Transport, transport_for
 
 #: Port offset between two parallel slots' udpm:// buses.
 SLOT_PORT_STEP = 100
 #: s a run has to stop after SIGINT (its nodes stop in order) before it is killed.
 STOP_GRACE = 30.0
-#: The table's columns before the parameters and after them (the metrics: :func:`metrics_row`).
-HEAD = ("run",)
-TAIL = ("seed", "status", "reason", "wall_s", "messages")
-METRICS = (
-    "agents",
-    "mission_s",
-    "radius_start",
-    "radius_end",
-    "radius_max",
-    "radius_mean",
-    "mean_distance_mean",
-    "min_separation",
-    "nn_median",
-    "polarisation_mean",
-    "polarisation_end",
-    "connected_fraction",
-    "cohesion_ratio",
-    "radius_below_after",
-    "radius_above_after",
-    "drift_error_deg",
-    "drift_speed",
-    "faults",
-    "broadcast_offered",
-    "broadcast_heard",
-    "log",
-)
 
 
 def load_sweep(path: str | Path) -> Sweep:
@@ -86,98 +71,6 @@ def load_sweep(path: str | Path) -> Sweep:
     return build(spec, read_toml_file(config_path), script_doc, str(p))
 
 
-# ----------------------------------------------------------------------------- the table
-def columns(sweep: Sweep) -> list[str]:
-    return [*HEAD, *sweep.parameters, *TAIL, *METRICS]
-
-
-def _phase(analysis: dict[str, Any], name: str) -> dict[str, Any]:
-    return next((p for p in analysis.get("phases", []) if p["phase"]["name"] == name), {})
-
-
-def metrics_row(analysis: dict[str, Any] | None) -> dict[str, Any]:
-    """The table's metrics from ``antalate run --json``'s ``analysis`` (None: every metric empty).
-
-    Over the mission phase (the whole swarm in MISSION; docs/logging.md, "Analyse"): the radius at
-    its start and end, its largest and mean value; the mean distance to the centroid (mean); the
-    minimum separation; the median nearest-neighbour distance; the polarisation (mean, end); the
-    fraction of samples with the proximity graph connected; the cohesion ratio; the seconds from
-    the mission's start to the script's radius_below / radius_above crossings; the mean absolute
-    drift error against the commanded directions and the centroid's mean speed; the faults started,
-    and the broadcasts offered to and heard by the agents.
-    """
-    row: dict[str, Any] = dict.fromkeys(METRICS)
-    if analysis is None:
-        return row
-    mission = _phase(analysis, "mission")
-
-    def extent(key: str, what: str) -> Any:
-        value = mission.get(key)
-        return value.get(what) if isinstance(value, dict) else None
-
-    window = analysis.get("window")
-    drifts = [d for d in analysis.get("drift", []) if d.get("error") is not None]
-    faults = analysis.get("faults", [])
-    summaries = [f["detail"] for f in faults if f["kind"] == "broadcast" and f["event"] == "summary"]
-    row.update(
-        agents=len(analysis.get("agents", [])),
-        mission_s=(window["end"] - window["start"]) if window else None,
-        radius_start=extent("radius", "start"),
-        radius_end=extent("radius", "end"),
-        radius_max=extent("radius", "max"),
-        radius_mean=extent("radius", "mean"),
-        mean_distance_mean=extent("mean_distance", "mean"),
-        min_separation=extent("min_separation", "distance"),
-        nn_median=extent("nearest_neighbour", "median"),
-        polarisation_mean=extent("polarisation", "mean"),
-        polarisation_end=extent("polarisation", "end"),
-        connected_fraction=extent("connectivity", "connected_fraction"),
-        cohesion_ratio=analysis.get("cohesion_ratio"),
-        radius_below_after=extent("radius_below", "after"),
-        radius_above_after=extent("radius_above", "after"),
-        drift_error_deg=sum(abs(d["error"]) for d in drifts) / len(drifts) if drifts else None,
-        drift_speed=sum(d["speed"] for d in drifts) / len(drifts) if drifts else None,
-        faults=sum(1 for f in faults if f["event"] == "start" and f["kind"] != "mission"),
-        broadcast_offered=sum(int(s["offered"]) for s in summaries) if summaries else None,
-        broadcast_heard=sum(int(s["heard"]) for s in summaries) if summaries else None,
-    )
-    return row
-
-
-class ResultsTable:
-    """``results.csv`` and ``results.json``, rewritten whole after each row (a temporary file renamed
-    over the old one): a reader, or an interrupted sweep, always finds a complete table."""
-
-    def __init__(self, folder: Path, cols: list[str]) -> None:
-        self.csv = folder / "results.csv"
-        self.json = folder / "results.json"
-        self.columns = cols
-        self.rows: list[dict[str, Any]] = []
-
-    def add(self, row: dict[str, Any]) -> None:
-        self.rows.append({c: row.get(c) for c in self.columns})
-        self.rows.sort(key=lambda r: int(r["run"]))
-        self.write()
-
-    def write(self) -> None:
-        tmp = self.csv.with_suffix(".csv.tmp")
-        with tmp.open("w", newline="", encoding="utf-8") as f:
-            writer = csv.DictWriter(f, fieldnames=self.columns)
-            writer.writeheader()
-            for row in self.rows:
-                writer.writerow({k: _cell(v) for k, v in row.items()})
-        tmp.replace(self.csv)
-        tmp = self.json.with_suffix(".json.tmp")
-        tmp.write_text(json.dumps(self.rows, indent=1) + "\n", encoding="utf-8")
-        tmp.replace(self.json)
-
-
-def _cell(value: Any) -> Any:
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    return "" if value is None else value
-
-
 # ----------------------------------------------------------------------------- one run
 @dataclass
 class _Run:
@@ -195,27 +88,29 @@ class _Run:
 
 
 def slot_buses(config: dict[str, Any], slot: int, jobs: int) -> None:
-    """Keep parallel runs apart: the ``udpm://`` buses of slot k on port + 100 k (none with one job)."""
+    """Keep parallel runs apart: each bus as its transport moves it for slot k (udpm: port + 100 k;
+    none with one job); a transport that cannot keep runs apart (zenoh) is refused."""
     buses = config.get("buses")
     if jobs <= 1 or not isinstance(buses, dict):
         return
     for name, url in buses.items():
-        if not isinstance(url, str):
+        transport = _transport(url)
+        if transport is None:
             continue
-        if url.startswith("zenoh://"):
-            raise AntalateError(
-                f"buses.{name} = {url!r}: parallel runs on one zenoh network would hear each other; "
-                "use --jobs 1, or memq:// / udpm:// buses"
-            )
-        if url.startswith("udpm://") and slot:
-            parts = urlsplit(url)
-            port = (parts.port or 7667) + SLOT_PORT_STEP * slot
-            if port > 65535:
-                raise AntalateError(
-                    f"buses.{name}: no port for parallel slot {slot} ({port} > 65535): use fewer --jobs"
-                )
-            netloc = f"{parts.hostname}:{port}"
-            buses[name] = urlunsplit(parts._replace(netloc=netloc))
+        try:
+            buses[name] = transport.for_slot(slot, SLOT_PORT_STEP)
+        except ValueError as exc:
+            raise AntalateError(f"buses.{name} = {url!r}: {exc}") from None
+
+
+def _transport(url: object) -> Transport | None:
+    """``url``'s transport; None for what is not a valid bus URL (the config's own check says why)."""
+    if not isinstance(url, str):
+        return None
+    try:
+        return transport_for(url)
+    except BusUnavailable:
+        return None
 
 
 def check_slots(sweep: Sweep, jobs: int) -> None:
@@ -225,8 +120,9 @@ def check_slots(sweep: Sweep, jobs: int) -> None:
         config, _ = sweep.documents(sweep.points[0])
         slot_buses(config, slot, jobs)
         for name, url in config.get("buses", {}).items():
-            if isinstance(url, str) and url.startswith("udpm://"):
-                port = urlsplit(url).port or 7667
+            transport = _transport(url)
+            if transport is not None and transport.apart_by_port:
+                port = transport.url.port
                 other = used.setdefault(port, (slot, name))
                 if other[0] != slot:
                     raise AntalateError(
@@ -335,57 +231,6 @@ def _reason(code: int, outcome: dict[str, Any] | None, stderr: Path) -> str:
     return f"exit status {code}" + (f": {last}" if last else "")
 
 
-# ----------------------------------------------------------------------------- progress
-class Progress:
-    """A bar redrawn in place on a terminal; one plain line per finished run otherwise (CI logs)."""
-
-    def __init__(self, total: int, stream: IO[str], tty: bool | None = None) -> None:
-        self.total = total
-        self.stream = stream
-        self.tty = stream.isatty() if tty is None else tty
-        self.done = 0
-        self.failed = 0
-        self.start = time.monotonic()
-
-    def ended(self, row: dict[str, Any], label: str) -> None:
-        self.done += 1
-        self.failed += row["status"] != "ok"
-        what = "ok" if row["status"] == "ok" else f"{row['status']}: {row['reason']}"
-        line = f"sweep: {self.done}/{self.total} run {row['run']} ({label}) {what} in {row['wall_s']:.1f} s"
-        if not self.tty:
-            print(line, file=self.stream, flush=True)
-        elif row["status"] != "ok":  # above the bar, which the next draw puts back
-            self.stream.write("\r" + line + "\x1b[K\n")
-            self.stream.flush()
-
-    def draw(self, running: int = 0) -> None:
-        if not self.tty:
-            return
-        width = 30
-        filled = int(width * self.done / self.total) if self.total else width
-        elapsed = time.monotonic() - self.start
-        eta = elapsed / self.done * (self.total - self.done) if self.done else None
-        bar = "#" * filled + "." * (width - filled)
-        text = f"\r[{bar}] {self.done}/{self.total} runs, {running} running, {self.failed} failed, {_mmss(elapsed)}"
-        text += f" (about {_mmss(eta)} to go)" if eta is not None else ""
-        self.stream.write(text + "\x1b[K")
-        self.stream.flush()
-
-    def close(self) -> None:
-        if self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
-
-
-def _count(n: int, what: str) -> str:
-    return f"{n} {what}" + ("" if n == 1 else "s")
-
-
-def _mmss(seconds: float) -> str:
-    s = int(seconds)
-    return f"{s // 60}:{s % 60:02d}"
-
-
 # ----------------------------------------------------------------------------- the sweep
 @dataclass
 class SweepResult:
@@ -481,8 +326,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     try:
         progress = Progress(len(sweep.points), sys.stderr)
         print(
-            f"sweep: {len(sweep.points)} runs ({_count(len(sweep.points) // len(sweep.seeds), 'point')} x "
-            f"{_count(len(sweep.seeds), 'seed')}), {jobs} at a time, into {out_dir}",
+            f"sweep: {len(sweep.points)} runs ({count(len(sweep.points) // len(sweep.seeds), 'point')} x "
+            f"{count(len(sweep.seeds), 'seed')}), {jobs} at a time, into {out_dir}",
             file=sys.stderr,
             flush=True,
         )
@@ -511,3 +356,24 @@ def sweep_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "-f", "--force", action="store_true", help="overwrite the results of an earlier sweep in DIR"
     )
+
+
+__all__ = [
+    "HEAD",
+    "METRICS",
+    "SLOT_PORT_STEP",
+    "TAIL",
+    "Progress",
+    "ResultsTable",
+    "SweepResult",
+    "check_slots",
+    "cmd_sweep",
+    "columns",
+    "load_sweep",
+    "metrics_row",
+    "prepare_output",
+    "run_argv",
+    "run_sweep",
+    "slot_buses",
+    "sweep_arguments",
+]

@@ -240,7 +240,7 @@ def check_documents(
 ) -> tuple[Config, Script]:
     """Every check ``antalate run`` makes before anything flies, on one run's documents."""
     from antalate_lcm.runtime.agent import swarm_configs, validate
-    from antalate_lcm.runtime.experiment import Experiment, check_interference, check_reach, record_bus
+    from antalate_lcm.runtime.experiment_spec import Experiment, check_interference, check_reach, record_bus
 
     base = parse_config(config, source)
     parsed = parse_script(script, source)

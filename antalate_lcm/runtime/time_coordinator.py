@@ -3,7 +3,8 @@
 The operator's process (``antalate run``) serves a :class:`TimeCoordinator` on a Unix socket, on
 its own loop; it and each agent process (``antalate agent --shard i/P --sim-clock ADDRESS``) run
 their loop on a :class:`~antalate_lcm.core.simclock.SimClock` joined to it by a link
-(:class:`LocalLink` in the operator's process, :class:`SocketLink` in an agent process). The rule
+(:class:`LocalLink` in the operator's process, :class:`SocketLink` in an agent process, with the
+rest of a process's side in :mod:`antalate_lcm.runtime.clock_link`). The rule
 they follow is :mod:`antalate_lcm.runtime.time_grant` (why it keeps the lockstep and the run
 deterministic is said there); here is only its I/O:
 
@@ -34,7 +35,6 @@ subscriptions of an interest frame, which precedes its report).
 
 from __future__ import annotations
 
-import collections
 import contextlib
 import logging
 import math
@@ -42,237 +42,49 @@ import os
 import shutil
 import signal
 import socket
-import struct
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from collections.abc import Sequence
 
-from antalate_lcm.base.errors import AntalateError
-from antalate_lcm.core.bus import Bus, Handler, Subscription
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.simclock import SIM_START, SimClock
+from antalate_lcm.runtime.clock_link import (
+    _ADVANCE,
+    _DELIVER,
+    _HELLO,
+    _INTEREST,
+    _REPORT,
+    ClockLink,
+    SimulatedBus,
+    SocketLink,
+    join,
+    simulated_buses,
+)
+
+# The frame format, for the tests that forge frames (its home is clock_link).
+from antalate_lcm.runtime.clock_link import _FRAME as _FRAME
+from antalate_lcm.runtime.clock_link import _frame as _frame
 from antalate_lcm.runtime.time_grant import (
     Deliver,
     Interest,
     Report,
     add_interest,
     decide,
-    decode_messages,
-    encode_interest,
-    encode_message,
     merge,
     pace,
     remaining,
     woken,
 )
-from antalate_lcm.transports import transport_for
 
 log = logging.getLogger("antalate.simclock")
 
-_FRAME = struct.Struct("<cQdI")
-_HELLO, _INTEREST, _REPORT, _DELIVER, _ADVANCE = b"H", b"I", b"R", b"D", b"A"
 #: Longest real wait (s) of the coordinator between two looks at whether it is being closed.
 _PACE_STEP = 0.05
 #: Real seconds an agent process may owe its report before the watchdog takes it as hung
 #: (``antalate run --stall-timeout``): far above a round's cost (milliseconds at 1,000 agents,
 #: seconds for a process swapped out on a loaded machine), far below a user giving up.
 DEFAULT_STALL = 60.0
-
-
-def simulated_buses(buses: Mapping[str, str]) -> tuple[dict[str, str], list[str]]:
-    """The buses of a process on the shared simulated clock, and those its link carries: each bus
-    that crosses processes (its transport reaches other hosts: udpm, zenoh, ...) becomes a memq://
-    bus of its own. Its own: ``memq://?``, ``memq://??`` ... (empty queries, which liblcm and the
-    transport read as none) are other URLs to the bus, which keeps one link per URL, so the link
-    never hears the agents' internal topics on the in-process ``memq://``."""
-    crossing = sorted(name for name, url in buses.items() if transport_for(url).network_reachable)
-    private = {name: "memq://" + "?" * (i + 1) for i, name in enumerate(crossing)}
-    return {name: private.get(name, url) for name, url in buses.items()}, crossing
-
-
-class SimulatedBus(Bus):
-    """The bus of a process on the shared clock: notes what its nodes subscribe to on the buses
-    that cross processes, so that the coordinator hands it only those messages."""
-
-    def __init__(self, urls: Mapping[str, str], crossing: Sequence[str]) -> None:
-        super().__init__(urls)
-        self._crossing = frozenset(crossing)
-        #: (bus, channel, regex) subscribed since the link last said so.
-        self.new_interest: list[tuple[str, str, bool]] = []
-
-    def subscribe(
-        self, bus: str, channel: str, msg_type: Any, handler: Handler, *, regex: bool = False
-    ) -> Subscription:
-        sub = super().subscribe(bus, channel, msg_type, handler, regex=regex)
-        if bus in self._crossing:
-            self.new_interest.append((bus, channel, regex))
-        return sub
-
-
-def _frame(kind: bytes, round_: int, value: float, payload: bytes = b"") -> bytes:
-    return _FRAME.pack(kind, round_, value, len(payload)) + payload
-
-
-def _frames(sock: socket.socket, buf: bytearray) -> list[tuple[bytes, int, float, bytes]]:
-    """The frames readable now on ``sock`` (one ``recv`` for a whole frame, the usual case), after
-    those begun in ``buf``; a frame begun is read to its end (its sender writes it whole)."""
-    chunk = sock.recv(1 << 20)
-    if not chunk:
-        raise ConnectionError("the simulated clock's coordinator closed the connection")
-    buf += chunk
-    out = []
-    while len(buf) >= _FRAME.size:
-        kind, round_, value, size = _FRAME.unpack_from(buf)
-        end = _FRAME.size + size
-        while len(buf) < end:
-            more = sock.recv(end - len(buf))
-            if not more:
-                raise ConnectionError("the simulated clock's coordinator closed the connection")
-            buf += more
-        out.append((kind, round_, value, bytes(buf[_FRAME.size : end])))
-        del buf[:end]
-    return out
-
-
-class ClockLink:
-    """A process's side: reports when its loop is idle, applies the coordinator's answers. This
-    one reports over the coordinator's socket (an agent process); :class:`LocalLink` in the
-    coordinator's own process."""
-
-    def __init__(self, index: int, clock: SimClock) -> None:
-        self.index = index
-        self._clock = clock
-        self._bus: SimulatedBus | None = None
-        #: Messages published here since the last report, encoded.
-        self._outbox: list[bytes] = []
-        #: Per bus: the others' messages published here by the link, not yet heard back.
-        self._echo: dict[str, collections.deque[bytes]] = {}
-        self._round = 0
-        #: The next timer of the report awaiting its answer (None: no report waits).
-        self._reported: float | None = None
-
-    def bridge(self, bus: SimulatedBus, names: Sequence[str]) -> None:
-        """Carry every message published on ``names`` of ``bus`` (memq:// buses) to the others."""
-        self._bus = bus
-        for name in names:
-            self._echo[name] = collections.deque()
-            Bus.subscribe(bus, name, ".*", None, self._hearer(name), regex=True)  # not an interest
-
-    def _hearer(self, name: str) -> Callable[[str, bytes], None]:
-        echo = self._echo[name]
-        outbox = self._outbox
-
-        def heard(channel: str, data: bytes) -> None:
-            # The others' messages come back here in the order the link published them, after
-            # any message published here before them: the head is the next one to drop.
-            if echo and echo[0] == data:
-                echo.popleft()
-                return
-            outbox.append(encode_message(name, channel, data))
-
-        return heard
-
-    def idle(self, next_due: float) -> bool:
-        """The loop has nothing left to do now; its next timer is at ``next_due``. A report waits
-        for its answer unless this process has had work since (another thread's call): then the
-        new report adds to it. True when the answer came at once (the loop looks again)."""
-        if self._reported is not None and not self._outbox and next_due >= self._reported:
-            return False
-        payload = b"".join(self._outbox)
-        self._outbox.clear()
-        self._reported = next_due
-        bus = self._bus
-        interest = b""
-        if bus is not None and bus.new_interest:  # what it now subscribes to, before what it sent
-            interest = encode_interest(bus.new_interest)
-            bus.new_interest.clear()
-        return self._report(next_due, interest, payload)
-
-    def _report(self, next_due: float, interest: bytes, payload: bytes) -> bool:
-        raise NotImplementedError
-
-    def apply(self, kind: bytes, round_: int, value: float, payload: bytes) -> None:
-        """The coordinator's answer: move to ``value`` (an advance's time, or a delivery's: this
-        process may have slept through advances), and deliver a delivery's messages."""
-        self._round, self._reported = round_, None
-        if value > self._clock.t:
-            self._clock.t = value
-        if kind == _DELIVER:
-            bus = self._bus
-            assert bus is not None
-            for name, channel, data in decode_messages(payload):
-                self._echo[name].append(data)
-                bus.publish(name, channel, data)
-
-
-class SocketLink(ClockLink):
-    """An agent process's link: the coordinator is in the operator's process, over its socket."""
-
-    def __init__(self, address: str, index: int, clock: SimClock) -> None:
-        super().__init__(index, clock)
-        self._address = address
-        self._sock: socket.socket | None = None
-        self._executor: Executor | None = None
-        #: A frame from the coordinator begun, not yet whole.
-        self._inbuf = bytearray()
-
-    def start(self, executor: Executor) -> None:
-        """Join the coordinator (before the loop runs); from now on the clock moves only by it."""
-        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        try:
-            sock.connect(self._address)
-            sock.sendall(_frame(_HELLO, 0, float(self.index), str(os.getpid()).encode()))
-        except OSError as exc:
-            sock.close()
-            raise AntalateError(f"cannot join the simulated clock at {self._address}: {exc}") from None
-        self._sock, self._executor = sock, executor
-        self._clock.link = self
-        executor.add_reader(sock.fileno(), self._readable)
-
-    def _report(self, next_due: float, interest: bytes, payload: bytes) -> bool:
-        sock = self._sock
-        if sock is None:
-            return False
-        frame = _frame(_REPORT, self._round, next_due, payload)
-        if interest:
-            frame = _frame(_INTEREST, self._round, 0.0, interest) + frame
-        try:
-            sock.sendall(frame)
-        except OSError:
-            self._lost()
-        return False
-
-    def _readable(self) -> None:
-        sock = self._sock
-        if sock is None:
-            return
-        try:
-            frames = _frames(sock, self._inbuf)
-        except OSError:  # ConnectionError included: the coordinator is gone
-            self._lost()
-            return
-        for frame in frames:
-            self.apply(*frame)
-
-    def _lost(self) -> None:
-        """The coordinator is gone (the operator's process died): stop this process, as Ctrl-C."""
-        if self._sock is None:
-            return
-        log.error("lost the simulated clock's coordinator; stopping this process")
-        self.close()
-        os.kill(os.getpid(), signal.SIGTERM)
-
-    def close(self) -> None:
-        sock, self._sock = self._sock, None
-        self._clock.link = None
-        if sock is None:
-            return
-        if self._executor is not None:
-            with contextlib.suppress(RuntimeError, ValueError):
-                self._executor.remove_reader(sock.fileno())
-        sock.close()
 
 
 class LocalLink(ClockLink):
@@ -529,11 +341,13 @@ class TimeCoordinator:
             log.debug("cannot send to process %s", index)
 
 
-def join(
-    address: str, index: int, clock: SimClock, bus: SimulatedBus, executor: Executor, buses: Sequence[str]
-) -> SocketLink:
-    """An agent process on the shared clock: its crossing ``buses`` carried, its loop joined."""
-    link = SocketLink(address, index, clock)
-    link.bridge(bus, buses)
-    link.start(executor)
-    return link
+__all__ = [
+    "DEFAULT_STALL",
+    "ClockLink",
+    "LocalLink",
+    "SimulatedBus",
+    "SocketLink",
+    "TimeCoordinator",
+    "join",
+    "simulated_buses",
+]

@@ -17,7 +17,7 @@ from antalate_lcm.base.errors import ConfigError
 from antalate_lcm.base.strict import dotted
 from antalate_lcm.core.config import read_toml_file
 
-from ._settings import DEFAULT_HOST, DEFAULT_PORT, ApiKey, RateLimits, StationSettings
+from ._settings import DEFAULT_HOST, DEFAULT_PORT, ApiKey, RateLimits, StationSettings, given_settings
 
 
 class _StationTable(BaseModel):
@@ -73,16 +73,16 @@ def parse_station_file(data: dict[str, Any], source: str, base: Path | None = No
     st = doc.station
     here = base if base is not None else Path(".")
     fields: dict[str, Any] = {"api_keys": tuple(doc.api_keys), "rate_limits": doc.rate_limits}
-    for key, name in (
-        ("range", "range_m"),
-        ("fov", "fov_deg"),
-        ("stale_after", "stale_after_s"),
-        ("command_ttl", "command_ttl_s"),
-        ("registration_key", "registration_key"),
-    ):
-        value = getattr(st, key)
-        if value is not None:
-            fields[name] = value
+    fields |= given_settings(
+        st,
+        (
+            ("range", "range_m"),
+            ("fov", "fov_deg"),
+            ("stale_after", "stale_after_s"),
+            ("command_ttl", "command_ttl_s"),
+            ("registration_key", "registration_key"),
+        ),
+    )
     if st.db is not None:
         fields["db_path"] = _relative(here, st.db)
     try:

@@ -16,11 +16,14 @@ import base64
 import binascii
 import math
 import re
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from antalate_lcm.wire.vocabulary import CommandName, HlcStateName, McStateName
+
+if TYPE_CHECKING:
+    from typing_extensions import Self  # typing.Self is 3.11+
 
 #: An agent name as the config allows it (it is part of LCM channel names).
 AGENT_NAME = r"^[A-Za-z0-9_.-]{1,64}$"
@@ -75,20 +78,31 @@ class Telemetry(_Wire):
         return _wrap_360(value)
 
 
-def _check_encoded(data: str, encoding: str) -> None:
-    """Feedback's and Payload's ``data`` must decode as its ``encoding`` says (base64, RFC 4648)."""
-    if encoding == "base64":
-        try:
-            base64.b64decode(data, validate=True)
-        except (binascii.Error, ValueError) as exc:
-            raise ValueError(f"data is not valid base64: {exc}") from None
+class _EncodedData(_Wire):
+    """What Feedback and Payload share: ``data`` is text as ``encoding`` says, checked to decode (base64,
+    RFC 4648) so a client bug shows at its source, and handed on as the bytes LCM carries. The fields are
+    each model's own (for their order and descriptions in the OpenAPI document); this names them for
+    the type checker only."""
+
+    if TYPE_CHECKING:
+        data: str
+        encoding: Literal["utf-8", "base64"]
+
+    @model_validator(mode="after")
+    def _base64_decodes(self) -> Self:
+        if self.encoding == "base64":
+            try:
+                base64.b64decode(self.data, validate=True)
+            except (binascii.Error, ValueError) as exc:
+                raise ValueError(f"data is not valid base64: {exc}") from None
+        return self
+
+    def content(self) -> bytes:
+        """The payload bytes, whatever the encoding: what an LCM ``payload_t.data`` holds."""
+        return base64.b64decode(self.data) if self.encoding == "base64" else self.data.encode("utf-8")
 
 
-def _decoded(data: str, encoding: str) -> bytes:
-    return base64.b64decode(data) if encoding == "base64" else data.encode("utf-8")
-
-
-class Feedback(_Wire):
+class Feedback(_EncodedData):
     """Agent → station payload (``payload_t`` on ``{agent}/OPERATOR_FEEDBACK``), stored with the report.
 
     ``data`` is text. Binary content travels base64-encoded with ``encoding: "base64"``; the station
@@ -102,17 +116,8 @@ class Feedback(_Wire):
         description='"utf-8": data is the content itself; "base64": data is base64 (RFC 4648) of the bytes',
     )
 
-    @model_validator(mode="after")
-    def _base64_decodes(self) -> Feedback:
-        _check_encoded(self.data, self.encoding)
-        return self
 
-    def content(self) -> bytes:
-        """The payload bytes, whatever the encoding: what an LCM ``payload_t.data`` holds."""
-        return _decoded(self.data, self.encoding)
-
-
-class Payload(_Wire):
+class Payload(_EncodedData):
     """Station → agent payload (``payload_t`` on ``{agent}/OPERATOR_PAYLOAD``); same shape as feedback."""
 
     content_type: str = Field(
@@ -120,15 +125,6 @@ class Payload(_Wire):
     )
     data: str
     encoding: Literal["utf-8", "base64"] = "utf-8"
-
-    @model_validator(mode="after")
-    def _base64_decodes(self) -> Payload:
-        _check_encoded(self.data, self.encoding)
-        return self
-
-    def content(self) -> bytes:
-        """The payload bytes, whatever the encoding: what an LCM ``payload_t.data`` holds."""
-        return _decoded(self.data, self.encoding)
 
 
 class PeerDetection(_Wire):

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
@@ -13,6 +15,14 @@ from ._auth import Role
 MEMORY = ":memory:"
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
+
+
+def given_settings(source: object, names: Iterable[tuple[str, str]]) -> dict[str, Any]:
+    """``{setting: value}`` for each ``(attribute, setting)`` of ``names`` that ``source`` sets (not None):
+    what the station file and then the command line each lay over the defaults."""
+    return {
+        setting: value for attribute, setting in names if (value := getattr(source, attribute)) is not None
+    }
 
 
 def default_db_path() -> Path:

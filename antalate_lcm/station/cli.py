@@ -17,23 +17,16 @@ from ._settings import DEFAULT_HOST, DEFAULT_PORT
 def cmd_station(args: argparse.Namespace) -> int:
     from ._file import load_station_file
     from ._server import run_station
-    from ._settings import StationSettings
+    from ._settings import StationSettings, given_settings
 
     if args.config:
         f = load_station_file(args.config)
         settings, host, port, cert, key = f.settings, f.host, f.port, f.tls_cert, f.tls_key
     else:
         settings, host, port, cert, key = StationSettings(), DEFAULT_HOST, DEFAULT_PORT, None, None
-    overrides: dict[str, object] = {}
-    for flag, name in (
-        ("db", "db_path"),
-        ("range", "range_m"),
-        ("fov", "fov_deg"),
-        ("stale_after", "stale_after_s"),
-    ):
-        value = getattr(args, flag)
-        if value is not None:
-            overrides[name] = value
+    overrides = given_settings(
+        args, (("db", "db_path"), ("range", "range_m"), ("fov", "fov_deg"), ("stale_after", "stale_after_s"))
+    )
     if overrides:
         from pydantic import ValidationError
 

@@ -175,15 +175,14 @@ def detect(
     `in_sector` on every peer (ties for the nearest aside); the reported range and bearing always
     come from the geodesic solution.
     """
-    if not _Flat.usable(lat, range_m):
-        return _detect_exact(lat, lon, heading, peers, range_m, fov_deg)
-    flat = _Flat(lat, lon, heading, range_m, fov_deg)
+    # Long ranges and polar regions, where the planar bounds do not hold: every peer is solved.
+    flat = _Flat(lat, lon, heading, range_m, fov_deg) if _Flat.usable(lat, range_m) else None
     count = 0
     best_d = math.inf
     best_rel = 0.0
     sure: list[tuple[float, float, float]] = []  # planar distance, lat, lon of certainly-inside peers
     for peer_lat, peer_lon in peers:
-        cls = flat.classify(peer_lat, peer_lon)
+        cls = flat.classify(peer_lat, peer_lon) if flat is not None else -2.0
         if cls == -1.0:
             continue
         if cls >= 0.0:
@@ -203,29 +202,6 @@ def detect(
                 _, dist, rel = in_sector(lat, lon, heading, peer_lat, peer_lon, range_m, fov_deg)
                 if dist < best_d:
                     best_d, best_rel = dist, rel
-    if count == 0:
-        return NO_DETECTION
-    return Detection(True, count, best_d, best_rel)
-
-
-def _detect_exact(
-    lat: float,
-    lon: float,
-    heading: float,
-    peers: Iterable[tuple[float, float]],
-    range_m: float,
-    fov_deg: float,
-) -> Detection:
-    """`detect` without shortcuts: long ranges and polar regions, where the planar bounds do not hold."""
-    count = 0
-    best_d = math.inf
-    best_rel = 0.0
-    for peer_lat, peer_lon in peers:
-        inside, dist, rel = in_sector(lat, lon, heading, peer_lat, peer_lon, range_m, fov_deg)
-        if inside:
-            count += 1
-            if dist < best_d:
-                best_d, best_rel = dist, rel
     if count == 0:
         return NO_DETECTION
     return Detection(True, count, best_d, best_rel)

@@ -187,6 +187,12 @@ class Transport(ABC):
     ready_means_message: ClassVar[bool] = False
     #: Its messages reach only this instance's subscribers (memq): the bus queues them on its loop.
     in_process: ClassVar[bool] = False
+    #: Other processes can hear it (False: memq, and file://'s log, which no running process shares):
+    #: ``antalate run --processes`` needs it for the buses it commands and records on.
+    crosses_processes: ClassVar[bool] = True
+    #: Runs side by side that must not hear each other (``antalate sweep --jobs``) each take a port
+    #: of their own on it (:meth:`for_slot`).
+    apart_by_port: ClassVar[bool] = False
 
     def __init__(self, url: LcmUrl) -> None:
         self.url = url
@@ -213,6 +219,20 @@ class Transport(ABC):
     def check(cls, u: LcmUrl) -> LcmUrl:
         """``u`` with its network part checked (and host and port filled in where there are some):
         what that part means is each transport's own."""
+
+    def for_slot(self, slot: int, step: int) -> str:
+        """This bus's URL for the ``slot``-th (from 0) of runs side by side that must not hear each
+        other: ``step * slot`` ports further where the transport is kept apart by port (udpm),
+        else the URL as it is (memq and file stay in their process; a tcpq server and mpudpm's port
+        range are the user's). ValueError says why runs cannot be kept apart on it (zenoh)."""
+        u = self.url
+        if not self.apart_by_port or not slot:
+            return u.url
+        port = u.port + step * slot
+        if port > 65535:
+            raise ValueError(f"no port for parallel slot {slot} ({port} > 65535): use fewer --jobs")
+        _, sep, query = u.url.partition("?")
+        return f"{u.scheme}://{u.host}:{port}{sep}{query}"
 
     def open(self, *, max_message_size: int | None = None) -> Connection:
         """A connection to this URL: liblcm's provider, unless the transport is antalate's own.

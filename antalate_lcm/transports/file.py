@@ -39,6 +39,7 @@ class File(Transport):
         "start_timestamp": int_option("start_timestamp", 0, 2**63 - 1, "microseconds since 1970, >= 0"),
     }
     network_reachable = False
+    crosses_processes = False
 
     @classmethod
     def check(cls, u: LcmUrl) -> LcmUrl:

@@ -17,6 +17,7 @@ class Memq(Transport):
     network_reachable = False
     ready_means_message = True
     in_process = True
+    crosses_processes = False
 
     @classmethod
     def check(cls, u: LcmUrl) -> LcmUrl:

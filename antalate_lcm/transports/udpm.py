@@ -82,6 +82,7 @@ class Udpm(_Multicast):
     scheme = "udpm"
     options: ClassVar[dict[str, OptionCheck]] = {"ttl": _TTL, "recv_buf_size": _RECV_BUF}
     ready_means_message = True
+    apart_by_port = True
 
     def receiver(self, reassembler: Reassembler | None = None) -> UdpmReceiver:
         """A socket of antalate's own receiving this bus (the error says the fix when it cannot open)."""

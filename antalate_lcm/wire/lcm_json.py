@@ -16,6 +16,7 @@ from __future__ import annotations
 import base64
 import functools
 import math
+from collections.abc import Callable
 from typing import Any
 
 from antalate_lcm.base.errors import AntalateError
@@ -122,18 +123,24 @@ def schema_name(type_name: str) -> str:
     return f"{s.name.package}.{s.name.short}"
 
 
+#: The primitives JSON holds as they are (but for a float's non-finite values), each by the Python type
+#: that both ways of the conversion coerce to.
+_SAME_IN_JSON: dict[str, Callable[[Any], Any]] = {
+    "boolean": bool,
+    "string": str,
+    "byte": int,
+    **dict.fromkeys(_INT_BITS, int),
+}
+
+
 def _value_to_json(kind: str, value: Any) -> Any:
     if kind in ("float", "double"):
         f = float(value)
         if math.isfinite(f):
             return f
         return "NaN" if math.isnan(f) else ("Infinity" if f > 0 else "-Infinity")
-    if kind in _INT_BITS or kind == "byte":
-        return int(value)
-    if kind == "boolean":
-        return bool(value)
-    if kind == "string":
-        return str(value)
+    if kind in _SAME_IN_JSON:
+        return _SAME_IN_JSON[kind](value)
     return to_json(value)
 
 
@@ -154,12 +161,8 @@ def to_json(msg: Any) -> dict[str, Any]:
 def _value_from_json(kind: str, value: Any) -> Any:
     if kind in ("float", "double"):
         return float("nan") if value == "NaN" else float(value)  # "Infinity"/"-Infinity" parse as such
-    if kind in _INT_BITS or kind == "byte":
-        return int(value)
-    if kind == "boolean":
-        return bool(value)
-    if kind == "string":
-        return str(value)
+    if kind in _SAME_IN_JSON:
+        return _SAME_IN_JSON[kind](value)
     return from_json(kind, value)
 
 

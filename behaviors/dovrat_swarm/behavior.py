@@ -37,6 +37,7 @@ from behaviors.dovrat_swarm.logic import (
     parse_detection_payload,
     swarm_command,
 )
+from behaviors.velocity import velocity_cmd
 
 
 class DovratSwarm(Behavior):
@@ -173,10 +174,7 @@ class DovratSwarm(Behavior):
         self._publish(0.0, 0.0, 0.0)
 
     def _publish(self, vx: float, vy: float, yaw_rate: float) -> None:
-        msg = velocity_cmd_t()
-        msg.frame = velocity_cmd_t.BODY
-        msg.vx, msg.vy, msg.vz, msg.yaw_rate = vx, vy, 0.0, yaw_rate
-        self.ctx.publish("VELOCITY_CMD", msg)
+        self.ctx.publish("VELOCITY_CMD", velocity_cmd(vx, vy, frame=velocity_cmd_t.BODY, yaw_rate=yaw_rate))
 
     def status(self) -> dict[str, Any]:
         """A snapshot for tests and debugging."""

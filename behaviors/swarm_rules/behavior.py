@@ -28,11 +28,19 @@ from behaviors.swarm_rules.logic import (
     flocking,
     gathering,
 )
+from behaviors.velocity import velocity_cmd
 
-_SPEED = Field(default=1.5, gt=0, allow_inf_nan=False)
-_SEPARATION = Field(default=3.0, ge=0, allow_inf_nan=False)
-#: 1/s; 0.25 per agent keeps a closing pair critically damped under the simulator's 0.5 s lag (logic.separate).
-_GAIN = Field(default=0.25, gt=0, allow_inf_nan=False)
+
+class _RuleParams(BaseModel):
+    """What every rule takes: the speed it asks for at most and the separation it keeps from every peer
+    (``logic.separate``); a rule redeclares a field whose default differs."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    speed: float = Field(default=1.5, gt=0, allow_inf_nan=False)
+    separation: float = Field(default=3.0, ge=0, allow_inf_nan=False)
+    margin: float = Field(default=0.3, ge=0, allow_inf_nan=False)
+    #: 1/s; 0.25 per agent keeps a closing pair critically damped under the simulator's 0.5 s lag (logic.separate).
+    separation_gain: float = Field(default=0.25, gt=0, allow_inf_nan=False)
 
 
 class _PeerRule(Behavior):
@@ -75,10 +83,7 @@ class _PeerRule(Behavior):
         self._publish(0.0, 0.0)
 
     def _publish(self, vn: float, ve: float) -> None:
-        msg = velocity_cmd_t()
-        msg.frame = velocity_cmd_t.NED
-        msg.vx, msg.vy, msg.vz, msg.yaw_rate = vn, ve, 0.0, 0.0
-        self.ctx.publish("VELOCITY_CMD", msg)
+        self.ctx.publish("VELOCITY_CMD", velocity_cmd(vn, ve))
 
     def status(self) -> dict[str, Any]:
         """A snapshot for tests and debugging."""
@@ -88,12 +93,8 @@ class _PeerRule(Behavior):
 class Gathering(_PeerRule):
     """Aggregation: towards the centroid of the peers, never nearer than ``separation`` to any."""
 
-    class Params(BaseModel):
-        model_config = ConfigDict(extra="forbid", frozen=True)
-        speed: float = _SPEED
+    class Params(_RuleParams):
         gain: float = Field(default=0.4, gt=0, allow_inf_nan=False)
-        separation: float = _SEPARATION
-        margin: float = Field(default=0.3, ge=0, allow_inf_nan=False)
         separation_gain: float = Field(default=0.5, gt=0, allow_inf_nan=False)
         stop_radius: float = Field(default=4.5, ge=0, allow_inf_nan=False)
         jitter: float = Field(default=0.5, ge=0, allow_inf_nan=False)
@@ -116,15 +117,11 @@ class Gathering(_PeerRule):
 class Flocking(_PeerRule):
     """Reynolds/Vicsek flocking: separation, alignment, cohesion at a cruise speed."""
 
-    class Params(BaseModel):
-        model_config = ConfigDict(extra="forbid", frozen=True)
-        speed: float = _SPEED
+    class Params(_RuleParams):
         neighbourhood: float = Field(default=0.0, ge=0, allow_inf_nan=False)
         alignment: float = Field(default=3.0, ge=0, allow_inf_nan=False)
         cohesion: float = Field(default=0.05, ge=0, allow_inf_nan=False)
-        separation: float = _SEPARATION
         margin: float = Field(default=0.5, ge=0, allow_inf_nan=False)
-        separation_gain: float = _GAIN
         #: deg: the heading an agent sets off on while nobody moves; omitted = one fixed by its name
         #: (so the flock starts in disorder and alignment has to agree on one).
         heading: float | None = Field(default=None, allow_inf_nan=False)
@@ -145,14 +142,9 @@ class Flocking(_PeerRule):
 class Dispersion(_PeerRule):
     """Area coverage: spread to ``spacing`` from every peer, within ``area_radius`` of the takeoff point."""
 
-    class Params(BaseModel):
-        model_config = ConfigDict(extra="forbid", frozen=True)
-        speed: float = _SPEED
+    class Params(_RuleParams):
         spacing: float = Field(default=10.0, gt=0, allow_inf_nan=False)
         area_radius: float = Field(default=30.0, ge=0, allow_inf_nan=False)
-        separation: float = _SEPARATION
-        margin: float = Field(default=0.3, ge=0, allow_inf_nan=False)
-        separation_gain: float = _GAIN
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)

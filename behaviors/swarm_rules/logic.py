@@ -84,16 +84,24 @@ def radius(points: Sequence[Vec]) -> float:
     return max(math.hypot(p[0] - cn, p[1] - ce) for p in points)
 
 
-# ---------------------------------------------------------------------------------------------- gathering
 @dataclass(frozen=True)
-class GatheringParams:
-    #: m/s, the fastest the rule asks for.
+class RuleParams:
+    """What every rule takes: its speed and the separation it keeps (:func:`separate`). A rule
+    redeclares a field whose default differs."""
+
+    #: m/s, the fastest the rule asks for (flocking: the speed it cruises at).
     speed: float = 1.5
-    #: 1/s: velocity per metre to the centroid (slows down on arrival).
-    gain: float = 0.4
     #: m kept from every peer, the margin aimed for beyond it, and the closing speed per metre of gap (1/s).
     separation: float = 3.0
     margin: float = 0.3
+    separation_gain: float = 0.25
+
+
+# ---------------------------------------------------------------------------------------------- gathering
+@dataclass(frozen=True)
+class GatheringParams(RuleParams):
+    #: 1/s: velocity per metre to the centroid (slows down on arrival).
+    gain: float = 0.4
     #: (faster than critically damped: 8 agents gathered from a 6 m grid kept 3.29 m, docs/behaviors.md)
     separation_gain: float = 0.5
     #: Stop closing in once the swarm (this agent and its peers) is within this radius, m; 0 = never.
@@ -138,18 +146,13 @@ def gathering(neighbours: Sequence[Neighbour], p: GatheringParams, jitter: Vec =
 
 # ---------------------------------------------------------------------------------------------- flocking
 @dataclass(frozen=True)
-class FlockingParams:
-    #: m/s the flock cruises at (every agent's own preferred speed).
-    speed: float = 1.5
+class FlockingParams(RuleParams):
     #: m: peers within this distance are neighbours (Reynolds' perception radius); 0 = every peer.
     neighbourhood: float = 0.0
     #: Weights of alignment (match the neighbours' mean velocity) and cohesion (towards their centroid).
     alignment: float = 3.0
     cohesion: float = 0.05
-    #: m kept from every peer, the margin aimed for beyond it, and the closing speed per metre of gap (1/s).
-    separation: float = 3.0
     margin: float = 0.5
-    separation_gain: float = 0.25
     #: Initial heading of the cruise (deg from north) when no neighbour moves yet.
     heading: float = 0.0
 
@@ -180,17 +183,11 @@ def flocking(velocity: Vec, neighbours: Sequence[Neighbour], p: FlockingParams) 
 
 # ---------------------------------------------------------------------------------------------- dispersion
 @dataclass(frozen=True)
-class DispersionParams:
-    #: m/s, the fastest the rule asks for.
-    speed: float = 1.5
+class DispersionParams(RuleParams):
     #: m: the spacing the swarm spreads to (each agent moves away from peers nearer than this).
     spacing: float = 10.0
     #: m: never farther than this from the home the agent took off from (the area to cover); 0 = no bound.
     area_radius: float = 30.0
-    #: m kept from every peer, the margin aimed for beyond it, and the closing speed per metre of gap (1/s).
-    separation: float = 3.0
-    margin: float = 0.3
-    separation_gain: float = 0.25
 
 
 def dispersion(home: Vec, neighbours: Sequence[Neighbour], p: DispersionParams) -> Vec:

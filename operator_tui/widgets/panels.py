@@ -79,11 +79,18 @@ def status_text(
     return t
 
 
-class StatusBar(Static):
+class _TextPanel(Static):
+    """A fixed-size panel showing one `Text`, redrawn only when the text changes and never re-laying
+    out the screen (the console refreshes its panels several times a second)."""
+
     def show(self, text: Text) -> None:
         if text != getattr(self, "_last", None):
             self._last = text
-            self.update(text, layout=False)  # fixed-size panels: no re-layout of the screen
+            self.update(text, layout=False)
+
+
+class StatusBar(_TextPanel):
+    """The line across the top: bus, agents, commands, the direction control, the safety filter."""
 
 
 # ---------------------------------------------------------------------- detail
@@ -153,11 +160,8 @@ def detail_text(view: AgentView | None, now: float, time_format: TimeFormat = cl
     return t
 
 
-class AgentDetail(Static):
-    def show(self, text: Text) -> None:
-        if text != getattr(self, "_last", None):
-            self._last = text
-            self.update(text, layout=False)  # fixed-size panels: no re-layout of the screen
+class AgentDetail(_TextPanel):
+    """The selected agent's states, telemetry, behaviors and last error."""
 
 
 # ---------------------------------------------------------------------- commands

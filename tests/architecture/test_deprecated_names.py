@@ -42,6 +42,21 @@ def test_the_old_name_warns_and_gives_the_same_objects(old: str, new: str) -> No
     assert proc.returncode == 0, proc.stderr
 
 
+def test_the_warning_points_at_the_users_import() -> None:
+    """``base.deprecation.moved_module`` warns from inside the shim: the warning must name the line that
+    imported the old name (what a user fixes), not the shim or the helper."""
+    program = (
+        "import warnings\n"
+        "with warnings.catch_warnings(record=True) as caught:\n"
+        "    warnings.simplefilter('always')\n"
+        "    import antalate_lcm.geo\n"
+        "print([(w.filename, w.lineno) for w in caught if w.category is DeprecationWarning])\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[('<string>', 4)]"
+
+
 #: Imports every module of the three packages but the old names, recording the warnings of each (a
 #: library may change the warning filters while it is imported, so none is relied upon).
 WALK = """

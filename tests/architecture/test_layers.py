@@ -331,7 +331,7 @@ KNOWN_DOUBLES = {
     "MemoryLink",  # autopilot/mavlink/link.py, autopilot/crazyflie/memory.py
     "Telemetry",  # station/_models.py (JSON), operator_tui/model.py
     "Verdict",  # hlc/velocity_guard.py, autopilot/mavlink/setpoints.py
-    "_Writer",  # tools/golang.py, autopilot/mavlink/link.py
+    "_Writer",  # tools/golang_layout.py, autopilot/mavlink/link.py
 }
 
 

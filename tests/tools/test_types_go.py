@@ -31,7 +31,7 @@ from tests import REPO
 ROUNDTRIP = REPO / "tests" / "go" / "roundtrip" / "main.go"
 HOSTILE = REPO / "tests" / "go" / "hostile" / "main.go"
 KEY = "go-node-test-swarm-key"
-# The decoder's added checks (``_golang._StructEmitter.need``/``array_checks``): one line each.
+# The decoder's added checks (``tools.golang_decode.GoDecoder.need``/``array_checks``): one line each.
 BOUNDS_CHECK = re.compile(r"^\t+if .+ \{ return fmt\.Errorf\(.+\) \}$")
 PY_TYPES: dict[str, Any] = {
     "header_t": header_t,

@@ -50,6 +50,23 @@ def test_the_scheme_picks_the_transport(url: str, cls: type[Transport], reachabl
     # Only antalate's own transport is closed to the LCM tools; only memq stays in the process.
     assert transport.not_lcm == (ZENOH_NOT_LCM if cls is Zenoh else "")
     assert transport.in_process is (cls is Memq)
+    # Only memq and a log file stay with their process (antalate run --processes refuses them).
+    assert transport.crosses_processes is (cls not in (Memq, File))
+
+
+def test_the_transport_keeps_parallel_runs_apart() -> None:
+    """``antalate sweep --jobs``: udpm moves a slot's port (query kept), zenoh cannot keep runs apart,
+    the others keep their URL."""
+    udpm = transport_for("udpm://239.255.76.67:7667?ttl=0")
+    assert udpm.for_slot(0, 100) == "udpm://239.255.76.67:7667?ttl=0"
+    assert udpm.for_slot(2, 100) == "udpm://239.255.76.67:7867?ttl=0"
+    assert transport_for("udpm://").for_slot(1, 100) == "udpm://239.255.76.67:7767"
+    with pytest.raises(ValueError, match="no port for parallel slot 3"):
+        transport_for("udpm://239.255.76.67:65500").for_slot(3, 100)
+    with pytest.raises(ValueError, match="use --jobs 1"):
+        transport_for("zenoh://swarm").for_slot(0, 100)
+    for url in ("memq://", "tcpq://127.0.0.1:7700", "mpudpm://239.255.76.67:7667?nports=4"):
+        assert transport_for(url).for_slot(1, 100) == url
 
 
 def test_the_transport_fills_in_what_its_url_leaves_out() -> None:
@@ -131,10 +148,7 @@ def test_the_bus_and_the_lcm_tools_ask_the_registry() -> None:
 
 #: Modules that still read a scheme from a URL's text, left to their owners (issue 26); remove a line
 #: when it asks the transport instead, never add one.
-KNOWN_READERS = {
-    "antalate_lcm/runtime/sweep.py",  # moves udpm ports apart per parallel slot
-    "antalate_lcm/runtime/experiment.py",  # swaps network buses for memq://
-}
+KNOWN_READERS: set[str] = set()
 
 
 def _scheme_readings(source: str) -> list[int]:

@@ -219,7 +219,9 @@ class BmaNode(Node):
 
         ctx.create_timer(1.0 / hz, tick, where="tick")
 
-    def _deactivate(self, name: str, *, why: str) -> None:
+    def _wind_down(self, name: str) -> Exception | None:
+        """Deactivate ``name`` in the arbiter's eyes, end its activation and run its
+        ``on_deactivate``: what that raised, for the caller to report (the BMA carries on)."""
         slot = self._slots[name]
         self._arbiter.deactivated(name)
         if slot.ctx is not None:
@@ -227,11 +229,17 @@ class BmaNode(Node):
         if slot.behavior is not None:
             try:
                 slot.behavior.on_deactivate()
-            except Exception as exc:  # noqa: BLE001 - reported, the BMA carries on
-                reason = f"{failure_reason(exc)} (in on_deactivate)"
-                self.log.error("behavior %s raised while deactivating: %s", name, reason, exc_info=True)
-                self._arbiter.failed(name, reason)
-                return
+            except Exception as exc:  # noqa: BLE001 - reported by the caller, the BMA carries on
+                return exc
+        return None
+
+    def _deactivate(self, name: str, *, why: str) -> None:
+        exc = self._wind_down(name)
+        if exc is not None:
+            reason = f"{failure_reason(exc)} (in on_deactivate)"
+            self.log.error("behavior %s raised while deactivating: %s", name, reason, exc_info=exc)
+            self._arbiter.failed(name, reason)
+            return
         self.log.info("deactivated %s (%s)", name, why)
 
     def _fail(self, name: str, where: str, exc: BaseException) -> None:
@@ -250,14 +258,9 @@ class BmaNode(Node):
             exc_info=exc,
         )
         if self._arbiter.is_active(name):
-            self._arbiter.deactivated(name)
-            if slot.ctx is not None:
-                slot.ctx.end_activation()
-            if slot.behavior is not None:
-                try:
-                    slot.behavior.on_deactivate()
-                except Exception:  # noqa: BLE001 - already failing; the first reason is the one reported
-                    self.log.warning("%s: on_deactivate after the failure raised too", name, exc_info=True)
+            also = self._wind_down(name)
+            if also is not None:  # already failing: the first reason is the one reported
+                self.log.warning("%s: on_deactivate after the failure raised too", name, exc_info=also)
         self._arbiter.failed(name, reason)
         self._publish_status()
         backoff = self.bma.restart_backoff

@@ -8,6 +8,10 @@ An adapter whose ``state()`` raises is a stale link, not a crash: the machine ge
 snapshot with its ``link_age`` grown by the time since (so LLC_DOWN follows after ``link_timeout``,
 with the exception as the reason, and the recoverable LLC_DOWN row applies once ``state()`` works
 again), and the log gets one rate-limited line, not a traceback per tick.
+
+With ``[safety] enabled`` the separation and fence filter is driven by a
+:class:`~antalate_lcm.agent.hlc.filtering.SafetyDriver` this node holds: every velocity set-point
+passes it, and it runs on each control tick.
 """
 
 from __future__ import annotations
@@ -17,8 +21,9 @@ import math
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
-from typing import Any, cast
+from typing import Any
 
+from antalate_lcm.agent.hlc.filtering import SafetyDriver, SharedPicture, shared_picture
 from antalate_lcm.agent.hlc.machine import (
     NOTHING,
     Action,
@@ -29,7 +34,7 @@ from antalate_lcm.agent.hlc.machine import (
     HlcOutcome,
     HlcParams,
 )
-from antalate_lcm.agent.hlc.safety import Filtered, SafetyLayer, describe, new_picture
+from antalate_lcm.agent.hlc.safety import SafetyLayer
 from antalate_lcm.agent.hlc.velocity_guard import (
     GuardDecision,
     Velocity,
@@ -43,62 +48,11 @@ from antalate_lcm.agent.plan import plan_autopilot
 from antalate_lcm.autopilot import Autopilot, AutopilotError, AutopilotState, Frame
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.config import Config
-from antalate_lcm.core.node import Context, Node, TopicMatch, shared_value
+from antalate_lcm.core.node import Context, Node, shared_params
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t, velocity_cmd_t
 from antalate_lcm.wire.vocabulary import HlcState, Severity
 
 _CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
-#: s between two SAFETY hlc_error_t of the same kind (separation, fence, conflict): the console and
-#: the log see every episode without a message per set-point.
-_SAFETY_REPORT_PERIOD = 1.0
-#: s between sweeps of the swarm picture (stale agents out of the grid, silent ones forgotten).
-_SWEEP_PERIOD = 0.25
-#: HLC states in which the filtered return leg flies (the machine's RTL action started it).
-_RETURNING = (HlcState.RTL, HlcState.LOW_BATTERY)
-
-
-class _SharedPicture:
-    """The `SwarmPicture` of one process (one `Context`), fed by one hidden node for all its HLCs."""
-
-    def __init__(self, config: Config, context: Context) -> None:
-        self.picture = new_picture(config)
-        self.feeder = Node(config, context, name="safety-picture")
-        self.users = 0
-
-    def join(self) -> None:
-        self.users += 1
-        if self.users > 1:
-            return
-        feeder, picture = self.feeder, self.picture
-        feeder.start()
-
-        def on_telemetry(msg: telemetry_t, m: TopicMatch) -> None:
-            picture.feed(m.fields.get("agent", ""), msg, feeder.now)
-
-        feeder.subscribe_all("TELEMETRY", on_telemetry)
-        feeder.subscribe_all(
-            "MC_STATE", lambda msg, m: picture.state(m.fields.get("agent", ""), msg.state, feeder.now)
-        )
-        feeder.create_timer(_SWEEP_PERIOD, lambda: picture.sweep(feeder.now))
-
-    def leave(self) -> bool:
-        """False once the last HLC left (the feeder is stopped)."""
-        self.users -= 1
-        if self.users > 0:
-            return True
-        self.feeder.stop()
-        return False
-
-
-#: id(Context) -> its shared picture. A context lives as long as its process's nodes.
-_PICTURES: dict[int, _SharedPicture] = {}
-
-
-def _picture(config: Config, context: Context) -> _SharedPicture:
-    shared = _PICTURES.get(id(context))
-    if shared is None:
-        shared = _PICTURES[id(context)] = _SharedPicture(config, context)
-    return shared
 
 
 def make_autopilot(config: Config, context: Context) -> Autopilot:
@@ -127,13 +81,7 @@ class HlcNode(Node):
         "_publish_state",
         "_shared",
         "safety",
-        "_wish",
-        "_modified",
-        "_filtered_at",
-        "_returning",
-        "_safety_landing",
-        "_reported",
-        "_fence_mirrored",
+        "_filter",
         "_clock",
         "_state",
     )
@@ -143,26 +91,26 @@ class HlcNode(Node):
         h = config.hlc
         self.autopilot = autopilot or make_autopilot(config, context)
         self.machine = HighLevelControl(
-            shared_value(
-                HlcParams(
-                    default_takeoff_altitude=h.default_takeoff_altitude,
-                    airborne_fraction=h.airborne_fraction,
-                    gain_altitude_timeout=h.gain_altitude_timeout,
-                    low_battery=h.low_battery,
-                    link_timeout=h.link_timeout,
-                    low_cell_voltage=h.low_cell_voltage,
-                )
+            shared_params(
+                HlcParams,
+                h,
+                "default_takeoff_altitude",
+                "airborne_fraction",
+                "gain_altitude_timeout",
+                "low_battery",
+                "link_timeout",
+                "low_cell_voltage",
             )
         )
         self.velocity_guard = VelocityGuard(
-            shared_value(
-                VelocityLimits(
-                    max_horizontal=h.max_horizontal_speed,
-                    max_vertical=h.max_vertical_speed,
-                    max_yaw_rate=h.max_yaw_rate,
-                    velocity_timeout=h.velocity_timeout,
-                    max_link_age=h.link_timeout,
-                )
+            shared_params(
+                VelocityLimits,
+                h,
+                "max_yaw_rate",
+                "velocity_timeout",
+                max_horizontal="max_horizontal_speed",
+                max_vertical="max_vertical_speed",
+                max_link_age="link_timeout",
             )
         )
         self.mc_state: int | None = None
@@ -177,18 +125,13 @@ class HlcNode(Node):
         self._reject_log = RateLimitedLog(self.log, period=5.0)
         self._publish_state: Callable[[], None] = lambda: None
         #: The separation and fence filter (docs/safety.md), None when [safety] is not enabled.
-        self._shared: _SharedPicture | None = None
+        self._shared: SharedPicture | None = None
         self.safety: SafetyLayer | None = None
+        self._filter: SafetyDriver | None = None
         if config.safety.enabled:
-            self._shared = _picture(config, context)
+            self._shared = shared_picture(config, context)
             self.safety = SafetyLayer(self.agent, config, self._shared.picture)
-        self._wish: tuple[Velocity, float] | None = None  # the last velocity a behavior asked for, when
-        self._modified = False  # the filter changed the last set-point it saw
-        self._filtered_at = -math.inf  # `now` of the last set-point filtered
-        self._returning = False  # flying the filtered return leg (RTL with [safety] rtl = "filtered")
-        self._safety_landing = False  # the filter's policy asked the vehicle to land
-        self._reported: dict[str, float] = {}  # SAFETY report kind -> `now` of the last one
-        self._fence_mirrored = False  # the fence was written into the autopilot's own (once per start)
+            self._filter = SafetyDriver(self, self.safety)
         self._clock: Callable[[], float] = context.executor.clock
         self._state: Callable[[], AutopilotState] = self.autopilot.state
 
@@ -226,8 +169,8 @@ class HlcNode(Node):
 
     def on_stop(self) -> None:
         shared, self._shared = self._shared, None
-        if shared is not None and not shared.leave():
-            _PICTURES.pop(id(self.context), None)
+        if shared is not None:
+            shared.leave(self.context)
         io, self._io = self._io, None
         if io is not None:
             io.shutdown(wait=False, cancel_futures=True)
@@ -244,7 +187,7 @@ class HlcNode(Node):
                 self.connected = True
                 self.log.info("autopilot %s connected", self.autopilot.name)
                 return
-            self._error(
+            self.report(
                 HlcError(
                     ErrorCode.LINK_LOST,
                     Severity.ERROR,
@@ -254,10 +197,10 @@ class HlcNode(Node):
             )
             self.call_later(_CONNECT_RETRY, self._connect)
 
-        self._run(self.autopilot.connect, done)
+        self.run_call(self.autopilot.connect, done)
 
     # ------------------------------------------------------------------ running autopilot calls
-    def _run(self, call: Any, done: Any) -> None:
+    def run_call(self, call: Any, done: Any) -> None:
         """Run ``call()``; then ``done(ok, detail)`` on the executor thread (inline for non-blocking adapters)."""
 
         def attempt() -> tuple[bool, str]:
@@ -301,9 +244,13 @@ class HlcNode(Node):
                 self.log.warning("autopilot %s failed: %s", action.kind.name, detail or "refused")
             self._handle(self.machine.on_action_result(action.kind, ok, self.now, detail))
 
-        if action.kind is ActionKind.RTL and self.safety is not None and self.config.safety.rtl == "filtered":
-            # The HLC flies home itself, through the filter, and lands there (`_return_leg`).
-            self._returning = True
+        if (
+            action.kind is ActionKind.RTL
+            and self._filter is not None
+            and self.config.safety.rtl == "filtered"
+        ):
+            # The HLC flies home itself, through the filter, and lands there (`SafetyDriver.tick`).
+            self._filter.returning = True
             self.log.info("RTL: flying home through the safety filter (safety.rtl = filtered)")
             return
         if action.kind is ActionKind.HOVER:
@@ -311,7 +258,7 @@ class HlcNode(Node):
             # could arrive after, and override, a newer velocity command.
             self._apply(GuardDecision(Verdict.HOVER, Velocity.hover(), "HLC action"), "HLC")
             return
-        self._run(calls[action.kind], done)
+        self.run_call(calls[action.kind], done)
 
     # ------------------------------------------------------------------ inputs
     def _on_mc_state(self, msg: mc_state_t) -> None:
@@ -330,11 +277,11 @@ class HlcNode(Node):
             return
         cmd = VelocityCommand(msg.vx, msg.vy, msg.vz, msg.yaw_rate, msg.frame, self.now)
         decision = self.velocity_guard.on_command(
-            cmd, self.now, self.machine.state, self.mc_state, self._link_age()
+            cmd, self.now, self.machine.state, self.mc_state, self.link_age()
         )
         self._apply(decision, msg.header.agent)
 
-    def _link_age(self) -> float:
+    def link_age(self) -> float:
         """The link's age now: the last snapshot's, plus the time since it was taken (20 Hz is coarse)."""
         if self._polled_at is None:
             return math.inf
@@ -379,8 +326,8 @@ class HlcNode(Node):
         stale = self.velocity_guard.tick(now, machine.state, self.mc_state, self.snapshot.link_age)
         if stale is not None:
             self._apply(stale, "velocity timeout")
-        if self.safety is not None:
-            self._safety_tick(now)
+        if self._filter is not None:
+            self._filter.tick(now)
 
     # ------------------------------------------------------------------ outputs
     def _apply(self, decision: GuardDecision, source: str) -> None:
@@ -401,148 +348,23 @@ class HlcNode(Node):
             self.log.info("hover: %s", decision.reason)
         elif decision.clamped:
             self._reject_log.log(("clamp",), logging.INFO, "velocity command clamped: %s", decision.reason)
-        if self.safety is not None:
-            self._wish = (v, self.now)
-            v = self._filtered(v)
-        self._send(v)
+        if self._filter is not None:
+            v = self._filter.wished(v)
+        self.send_velocity(v)
 
-    def _send(self, v: Velocity) -> None:
+    def send_velocity(self, v: Velocity) -> None:
         try:
             self.autopilot.set_velocity(v.vx, v.vy, v.vz, v.yaw_rate, Frame(v.frame))
         except Exception as exc:
             self._reject_log.log(("set_velocity",), logging.WARNING, "set_velocity failed: %s", exc)
-
-    # ------------------------------------------------------------------ the safety filter
-    def _filtered(self, v: Velocity) -> Velocity:
-        """`v` through the separation and fence filter (unchanged when it is safe or no fix is known)."""
-        assert self.safety is not None
-        out = self.safety.filter_velocity(self.snapshot, v.vx, v.vy, v.vz, Frame(v.frame), self.now)
-        if out is None:
-            return v
-        self._act_on(out)
-        self._modified = out.decision.modified
-        self._filtered_at = self.now
-        if not out.decision.modified:
-            return v
-        return Velocity(out.vn, out.ve, out.vd, v.yaw_rate, Frame.NED)
-
-    def _safety_tick(self, now: float) -> None:
-        """Every control tick: the filtered return leg, or the last wish re-filtered as peers move
-        (a behavior may command at 1 Hz; the filter must not wait for it)."""
-        assert self.safety is not None
-        if not self._fence_mirrored:
-            self._mirror_fence()
-        state = self.machine.state
-        if self._returning and state not in _RETURNING:
-            self._returning = False  # the MC landed it, a pilot took it, ...
-        if self._link_age() >= self.config.hlc.link_timeout:
-            return
-        if self._returning:
-            leg = self.safety.return_leg(self.snapshot, now)
-            if leg is None:
-                if self.safety.home is None or not math.isfinite(self.snapshot.lat):
-                    self.log.warning("filtered RTL: no home or position known: the autopilot's own RTL")
-                    self._returning = False
-                    self._run(self.autopilot.rtl, self._after_safety_action)
-                    return
-                self._returning = False
-                self.log.info("filtered RTL: home reached, landing")
-                self._run(self.autopilot.land, self._after_safety_action)
-                return
-            self._act_on(leg)
-            self._send(Velocity(leg.vn, leg.ve, leg.vd, 0.0, Frame.NED))
-            return
-        if not mission_flight(state, self.mc_state):
-            self._wish = None
-            return
-        if not self._modified and now - self._filtered_at < 2.0 / self.config.hlc.control_hz:
-            return  # a behavior commanding at 10 Hz or more is filtered on every command already
-        wish = self._wish
-        fresh = wish is not None and now - wish[1] <= self.config.hlc.velocity_timeout
-        v = wish[0] if wish is not None and fresh else Velocity.hover()
-        was = self._modified
-        out = self._filtered(v)
-        if self._modified or was:
-            self._send(out)
-
-    def _act_on(self, f: Filtered) -> None:
-        """Report a modified set-point, and follow the filter's policy (land) once."""
-        d = f.decision
-        if d.action == "land" and not self._safety_landing:
-            self._safety_landing = True
-            self.log.warning("%s: landing", describe(d))
-            self._run(self.autopilot.land, self._after_safety_action)
-        if not (d.modified or d.reason):
-            return
-        conflict = bool(d.reason) and not d.reason.startswith("no peer")
-        kind = "conflict" if conflict else d.by or "peers"
-        now = self.now
-        if now - self._reported.get(kind, -math.inf) < _SAFETY_REPORT_PERIOD:
-            return
-        self._reported[kind] = now
-        severity = Severity.ERROR if conflict else Severity.WARNING
-        self._error(HlcError(ErrorCode.SAFETY, severity, describe(d)))
-
-    def _mirror_fence(self) -> None:
-        """Write the swarm fence into the autopilot's own fence parameters and read them back, once, on
-        the ground with a position fix: ArduPilot's FENCE_* (antalate_lcm.autopilot.mavlink.fence_mirror),
-        PX4's GF_* (antalate_lcm.autopilot.px4.fence_mirror). It holds if we die."""
-        safety, fence_config = self.safety, self.config.safety.fence
-        kind = self.autopilot.name
-        if safety is None or fence_config is None or kind not in ("mavlink", "px4") or not self.connected:
-            return
-        s = self.snapshot
-        here = safety.position(s)
-        fence = safety.params.fence
-        if here is None or fence is None or s.in_air or s.armed:
-            return
-        self._fence_mirrored = True
-        from antalate_lcm.autopilot.mavlink import fence_mirror as ardupilot
-        from antalate_lcm.autopilot.px4 import fence_mirror as px4
-
-        module = px4 if kind == "px4" else ardupilot
-        wanted = module.fence_parameters(fence, (here[0], here[1]), fence_config.outside)
-        link = cast(ardupilot.ParamLink, self.autopilot)
-
-        def call() -> None:
-            problems = module.mirror(link, wanted)
-            if problems:
-                raise AutopilotError("; ".join(problems))
-
-        def done(ok: bool, detail: str) -> None:
-            if not self.started:
-                return
-            shown = ", ".join(f"{k} {v:g}" for k, v in wanted.items())
-            if ok:
-                text = f"safety: fence mirrored into the autopilot and read back: {shown}"
-                self._error(HlcError(ErrorCode.SAFETY, Severity.INFO, text))
-            else:
-                text = f"safety: the autopilot does not hold the fence ({detail}); wanted {shown}"
-                self._error(HlcError(ErrorCode.SAFETY, Severity.WARNING, text))
-
-        self._run(call, done)
-
-    def _after_safety_action(self, ok: bool, detail: str) -> None:
-        if not ok:
-            self.log.warning("safety: autopilot command failed: %s", detail or "refused")
 
     def _handle(self, outcome: HlcOutcome) -> None:
         if outcome is NOTHING:  # most inputs (a snapshot 20 times a second) change nothing
             return
         t = outcome.transition
         if t is not None:
-            if t.to_state is HlcState.TAKEOFF and self.safety is not None:
-                self.safety.mark_home(self.snapshot)
-                self._safety_landing = False
-                crowd = self.safety.crowded(self.snapshot, self.now)
-                if crowd:
-                    radius = self.safety.params.separation.radius
-                    near = ", ".join(f"{a} at {d:.1f} m" for a, d in crowd)
-                    text = (
-                        f"safety: taking off closer than the {radius:g} m radius to {near}: the climb keeps"
-                        " that distance; the filter separates them only in MISSION"
-                    )
-                    self._error(HlcError(ErrorCode.SAFETY, Severity.WARNING, text))
+            if t.to_state is HlcState.TAKEOFF and self._filter is not None:
+                self._filter.taking_off(self.snapshot, self.now)
             level = logging.INFO
             if t.to_state is HlcState.LLC_DOWN:
                 level = logging.ERROR
@@ -553,11 +375,11 @@ class HlcNode(Node):
             )
             self._publish_state()
         for err in outcome.errors:
-            self._error(err)
+            self.report(err)
         for action in outcome.actions:
             self._perform(action)
 
-    def _error(self, err: HlcError) -> None:
+    def report(self, err: HlcError) -> None:
         level = {Severity.INFO: logging.INFO, Severity.WARNING: logging.WARNING}.get(
             err.severity, logging.ERROR
         )

@@ -14,7 +14,7 @@ from typing import Any
 from antalate_lcm.agent.mc.machine import McOutcome, McParams, MissionControl
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.config import Config
-from antalate_lcm.core.node import Context, Node, shared_value
+from antalate_lcm.core.node import Context, Node, shared_params
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
 from antalate_lcm.wire.vocabulary import Command, McState, name_of
 
@@ -28,13 +28,7 @@ class McNode(Node):
         super().__init__(config, context)
         m = config.mc
         self.machine = MissionControl(
-            shared_value(
-                McParams(
-                    takeoff_ack_timeout=m.takeoff_ack_timeout,
-                    hlc_timeout=m.hlc_timeout,
-                    on_link_regained=m.on_link_regained,
-                )
-            )
+            shared_params(McParams, m, "takeoff_ack_timeout", "hlc_timeout", "on_link_regained")
         )
         self._publish_state: Callable[[], None] = lambda: None
         #: Rejected commands are logged once per (command, state) per period: well-formed junk

@@ -7,8 +7,8 @@ logged (at a limited rate) and retried with exponential backoff; nothing is publ
 that did not validate completely.
 
 The OSC never signs for the station. An operator command arrives as the operator signed it and is
-published exactly so (header and MAC untouched); with a swarm key the OSC verifies it first (MAC,
-window, replay, target) and drops what fails, so a station that is compromised can delay or drop
+published exactly so (header and MAC untouched); with a swarm key the agent's admission pipeline
+verifies it first (target, MAC, window, replay: `Node.relay`, `NodeAdmission.vet_relay`) and the OSC drops what fails, so a station that is compromised can delay or drop
 commands but not make one up. The station's own payload (peer detection) is published as this
 node's message, like anything else the agent says.
 """
@@ -35,7 +35,6 @@ from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.config import Config
 from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, payload_t, telemetry_t
-from antalate_lcm.wire import validation
 
 # httpx logs every request at INFO: one line per report per agent would drown an agent's log.
 logging.getLogger("httpx").setLevel(logging.WARNING)
@@ -297,35 +296,16 @@ class OscNode(Node):
             self.publish(topic, msg)  # the station's own payload: this node's message
             self.log.debug("from the station: %s", topic)
             return
+        # The admission vets it (`Node.relay`, `NodeAdmission.vet_relay`): signed, it goes out as the operator
+        # signed it (no new header, no signature of ours); unsigned, only from a keyless agent.
+        refusal = self.relay(topic, msg, signed=signed, seq=seq)
+        if refusal is not None:
+            if refusal.logged:  # counted and logged (rate-limited) by the authenticator
+                self.dropped[refusal.reason] = self.dropped.get(refusal.reason, 0) + 1
+            else:
+                self._drop(refusal.reason, topic, msg, refusal.text)
+            return
         if not signed:
-            if self.security.enabled:
-                self._drop(
-                    "unsigned", topic, msg, "the station sent it unsigned and this agent has a swarm key"
-                )
-                return
-            problem = validation.problem(msg)
-            if problem is not None:
-                self._drop("invalid", topic, msg, problem)
-                return
-            self.publish(topic, msg, seq=seq)
             self.log.info("from the station: %s (seq %s, unsigned)", topic, seq)
             return
-        if msg.target and msg.target != self.agent:
-            self._drop("retargeted", topic, msg, f"signed for {msg.target!r}, not for {self.agent!r}")
-            return
-        auth = self.authenticator
-        if auth is not None:
-            rejection = auth.check(msg, self.channel(topic))
-            if rejection is not None:
-                self.dropped[rejection.reason.value] = self.dropped.get(rejection.reason.value, 0) + 1
-                return  # counted and logged (rate-limited) by the authenticator
-        problem = validation.problem(msg)
-        if problem is not None:
-            self._drop("invalid", topic, msg, problem)
-            return
-        # As the operator signed it: no new header, no signature of ours.
-        data = msg.encode()
-        channel = self.channel(topic)
-        for bus in self._publish_buses(topic):
-            self.context.bus.publish(bus, channel, data)
         self.log.info("from the station: %s signed by %r (seq %d)", topic, msg.header.agent, msg.header.seq)

@@ -19,13 +19,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from antalate_lcm.apps.analysis.logfile import check_log_file, read_log
 from antalate_lcm.apps.analysis.metrics import (
     DEFAULT_BIN_S,
     DEFAULT_MAX_AGE,
     Analysis,
+    AnalysisOptions,
     CohesionSample,
     Drift,
     analyze,
@@ -63,6 +64,9 @@ from antalate_lcm.apps.analysis.swarm import (
 )
 from antalate_lcm.apps.analysis.track import Track
 
+if TYPE_CHECKING:
+    from typing_extensions import Unpack  # typing.Unpack is 3.11+
+
 
 def default_plot_path(log: str | Path) -> Path:
     """``swarm.lcm`` -> ``swarm.png``; any other name gets ``.png`` appended, so lcm-logger's numbered
@@ -71,36 +75,13 @@ def default_plot_path(log: str | Path) -> Path:
     return p.with_suffix(".png") if p.suffix in (".lcm", ".mcap") else p.with_name(p.name + ".png")
 
 
-def analyze_log(
-    path: str | Path,
-    *,
-    azimuth: float | None = None,
-    bin_s: float = DEFAULT_BIN_S,
-    max_age: float = DEFAULT_MAX_AGE,
-    step: float = DEFAULT_STEP_S,
-    range_m: float = DEFAULT_RANGE_M,
-    min_speed: float = DEFAULT_MIN_SPEED,
-    radius_below: float | None = None,
-    radius_above: float | None = None,
-    safety: SafetyLimits | None = None,
-) -> Analysis:
+def analyze_log(path: str | Path, **options: Unpack[AnalysisOptions]) -> Analysis:
     """Read ``path`` and analyse it (raises ``AntalateError`` for a file that is not a usable log).
 
     The options are :func:`analyze`'s. The result holds every agent's trajectory (``result.tracks``,
     metres north/east of ``result.origin``) beside the metrics.
     """
-    return analyze(
-        read_log(path),
-        azimuth=azimuth,
-        bin_s=bin_s,
-        max_age=max_age,
-        step=step,
-        range_m=range_m,
-        min_speed=min_speed,
-        radius_below=radius_below,
-        radius_above=radius_above,
-        safety=safety,
-    )
+    return analyze(read_log(path), **options)
 
 
 def plot_log(
@@ -108,7 +89,7 @@ def plot_log(
     out: str | Path | None = None,
     *,
     goals: Sequence[float] = (),
-    **options: Any,
+    **options: Unpack[AnalysisOptions],
 ) -> tuple[Path, Analysis]:
     """Read, analyse and plot ``path``; the PNG goes to ``out`` (default: :func:`default_plot_path`).
 
@@ -118,7 +99,7 @@ def plot_log(
     from antalate_lcm.apps.analysis.plot import plot
 
     record = read_log(path)
-    result = analyze(record, **options)  # the same keywords as analyze_log's
+    result = analyze(record, **options)
     target = Path(out) if out is not None else default_plot_path(path)
     return plot(record, result, result.tracks, target, goals=goals), result
 
@@ -132,6 +113,7 @@ __all__ = [
     "PHASES",
     "AgentRecord",
     "Analysis",
+    "AnalysisOptions",
     "CohesionSample",
     "Connectivity",
     "Crossing",

@@ -16,8 +16,6 @@ import struct
 from pathlib import Path
 from typing import Any
 
-import lcm
-
 from antalate_lcm.apps.analysis.model import (
     DirectionCommand,
     FaultRecord,
@@ -26,6 +24,7 @@ from antalate_lcm.apps.analysis.model import (
     TelemetrySample,
 )
 from antalate_lcm.base.errors import AntalateError
+from antalate_lcm.core.lcm_log import log_events, open_log
 from antalate_lcm.core.mcap_log import McapEvents, is_mcap, read_events
 from antalate_lcm.msgs import direction_cmd_t, hlc_error_t, hlc_state_t, mc_state_t, payload_t, telemetry_t
 from antalate_lcm.transports import captured_stderr
@@ -76,22 +75,13 @@ def read_log(path: str | Path) -> SwarmRecord:
     p = check_log_file(path)
     record = SwarmRecord(path=str(p))
     reader = _Reader(record)
-    try:
-        log = lcm.EventLog(str(p), "r")
-    except (OSError, RuntimeError, ValueError) as exc:
-        raise AntalateError(f"{p}: cannot be opened as an LCM log: {exc}") from None
+    log = open_log(p)
     # liblcm prints "Invalid header after log data" on fd 2 when it meets damage; we report it ourselves.
     with captured_stderr():
         try:
             size = log.size()
-            while True:
-                event = log.read_next_event()
-                if event is None:
-                    break
-                channel = event.channel
-                if isinstance(channel, bytes):
-                    channel = channel.decode("utf-8", "replace")
-                reader.add(int(event.timestamp), channel, event.data)
+            for t, channel, data in log_events(log):
+                reader.add(t, channel, data)
             position = log.tell()
         finally:
             log.close()

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, TypedDict
 
 from antalate_lcm.apps.analysis.model import DirectionCommand, FaultRecord, SwarmRecord
 from antalate_lcm.apps.analysis.phases import Window, flight_phases, mission_window
@@ -256,6 +256,21 @@ def drift(
 
 
 # ----------------------------------------------------------------------------- the whole analysis
+class AnalysisOptions(TypedDict, total=False):
+    """The keywords of :func:`analyze`, typed once for what passes them on (``analyze_log``,
+    ``plot_log``, the CLI's options): a caller of those gets the same checking as one of ``analyze``."""
+
+    azimuth: float | None
+    bin_s: float
+    max_age: float
+    step: float
+    range_m: float
+    min_speed: float
+    radius_below: float | None
+    radius_above: float | None
+    safety: SafetyLimits | None
+
+
 def analyze(
     record: SwarmRecord,
     *,

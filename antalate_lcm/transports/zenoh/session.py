@@ -50,6 +50,7 @@ from antalate_lcm.base.ratelimit import RateLimitedLog, TokenBucket
 from antalate_lcm.transports.base import Connection, LcmUrl, Transport
 from antalate_lcm.transports.zenoh.config import OPTIONS, ZENOH_NOT_LCM, check_url, zenoh_config
 from antalate_lcm.transports.zenoh.groups import GroupProof, _Group
+from antalate_lcm.transports.zenoh.keys import channel_key, key_channel, literal_channel
 
 log = logging.getLogger("antalate.zenoh")
 
@@ -88,41 +89,11 @@ class Zenoh(Transport):
     def open(self, *, max_message_size: int | None = None) -> Connection:
         return ZenohLCM(self.url.url, max_message_size=max_message_size)
 
-
-_SPECIAL = ".^$*+?()[]{}|\\"
-_LITERAL = re.compile(r"(?:[^.^$*+?()\[\]{}|\\]|\\[.^$*+?()\[\]{}|\\])*")
-#: Characters a Zenoh key cannot hold (wildcards, verbatim-chunk ``@``), escaped as %XX in a channel.
-_KEY_UNSAFE = re.compile(r"[%*$?#@\s]")
-_EMPTY_CHUNK = "%-"
-
-
-def channel_key(prefix: str, channel: str) -> str:
-    """The Zenoh key of ``channel``: ``prefix/channel``, reserved characters and empty chunks escaped."""
-    chunks = [
-        _KEY_UNSAFE.sub(lambda m: f"%{ord(m.group()):02X}", c) if c else _EMPTY_CHUNK
-        for c in channel.split("/")
-    ]
-    return f"{prefix}/{'/'.join(chunks)}"
-
-
-def key_channel(prefix: str, key: str) -> str | None:
-    """The channel a key under ``prefix`` carries (inverse of :func:`channel_key`); None if not ours."""
-    if not key.startswith(prefix + "/"):
-        return None
-    out = []
-    for chunk in key[len(prefix) + 1 :].split("/"):
-        if chunk == _EMPTY_CHUNK:
-            out.append("")
-        else:
-            out.append(re.sub(r"%([0-9A-F]{2})", lambda m: chr(int(m.group(1), 16)), chunk))
-    return "/".join(out)
-
-
-def literal_channel(regex: str) -> str | None:
-    """The one channel an LCM channel regex matches when it is a literal (``alpha/MC_STATE``), else None."""
-    if not _LITERAL.fullmatch(regex):
-        return None
-    return re.sub(r"\\(.)", r"\1", regex)
+    def for_slot(self, slot: int, step: int) -> str:
+        """Runs on one Zenoh network hear each other whatever their ports: never apart."""
+        raise ValueError(
+            "parallel runs on one zenoh network would hear each other; use --jobs 1, or memq:// / udpm:// buses"
+        )
 
 
 @dataclass(eq=False)

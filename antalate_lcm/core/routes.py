@@ -1,0 +1,88 @@
+"""Where a node's topics travel: each topic's channel, bus(es) and publisher, from its config and context.
+
+The config names each topic's buses and channel template, so moving a node to another machine is a
+config change; an agent's internal topics also travel on the context's in-process bus
+(:meth:`~antalate_lcm.core.context.Context.in_process`), so its own nodes never take them from the
+network. :class:`~antalate_lcm.core.node.Node` holds one :class:`Routes`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from antalate_lcm.core.config import Config
+from antalate_lcm.core.context import Context
+from antalate_lcm.wire.topics import TopicSpec, is_internal
+
+
+@dataclass
+class Publisher:
+    buses: list[str]
+    channel: str
+    #: Each bus's send function (`Bus.sender`), resolved once: 20 publishes a second per agent.
+    senders: list[tuple[str, Callable[[str, bytes], None]]]
+    seq: int = 0
+
+
+def publisher_key(topic: str, fields: dict[str, str]) -> Any:
+    """The key of a topic's publisher in :attr:`Routes.publishers` (the topic alone without fields)."""
+    return (topic, tuple(sorted(fields.items()))) if fields else topic
+
+
+class Routes:
+    """The topics of ``agent``'s node: their channels, the buses each is published to and taken from."""
+
+    def __init__(self, config: Config, context: Context, agent: str) -> None:
+        self.config = config
+        self.context = context
+        self.agent = agent
+        self.specs = config.topic_specs()
+        #: `publisher_key` -> the topic's publisher, made by the first publish.
+        self.publishers: dict[Any, Publisher] = {}
+
+    def spec(self, topic: str) -> TopicSpec:
+        try:
+            return self.specs[topic]
+        except KeyError:
+            raise KeyError(f"unknown topic {topic!r}; known: {', '.join(self.specs)}") from None
+
+    def channel(self, topic: str, **fields: str) -> str:
+        return self.spec(topic).channel.format(**{"agent": self.agent, **fields})
+
+    def publisher(self, topic: str, fields: dict[str, str]) -> Publisher:
+        """The topic's publisher (its channel with ``fields``), made and kept on first use; the
+        context's publishers on the same buses share their send functions."""
+        buses = self.publish_buses(topic)
+        bus = self.context.bus
+        shared = self.context.senders
+        senders = shared.get(tuple(buses))
+        if senders is None:
+            senders = shared[tuple(buses)] = [(name, bus.sender(name)) for name in buses]
+        pub = Publisher(buses, self.channel(topic, **fields), senders)
+        self.publishers[publisher_key(topic, fields)] = pub
+        return pub
+
+    def publish_buses(self, topic: str) -> list[str]:
+        """The topic's buses (plus the in-process bus for an internal topic), one per distinct URL."""
+        names = self.config.topic_buses(topic)
+        inproc = self.context.inproc_bus
+        if inproc is not None and is_internal(topic):
+            names = [inproc, *names]
+        out: list[str] = []
+        seen: set[str] = set()
+        for name in names:
+            url = self.context.bus.urls.get(name, name)
+            if url not in seen:  # two names for one URL are one LCM instance: send once
+                seen.add(url)
+                out.append(name)
+        return out
+
+    def subscribe_bus(self, topic: str) -> str:
+        """The bus a topic is taken from: the in-process one for an internal topic when there is
+        one, else the topic's first configured bus."""
+        inproc = self.context.inproc_bus
+        if inproc is not None and is_internal(topic):
+            return inproc
+        return self.config.topic_buses(topic)[0]

@@ -22,13 +22,19 @@ shared, so its load average is printed beside the figures (docs/design.md §12).
     python benchmarks/simtime.py [N ...] [--mission S] [--no-wall] [--processes P]   (sizes: 100 1000)
 
 Measured 2026-11-26 on the 2-core machine shared with other jobs (docs/experiments.md, "Simulated
-time, seeds and replay"): 100 agents 11.3x real time at load 1.7-2.6 (11.8x per CPU second), 5.5x at
-load 8; 1,000 agents 0.7x at load 1.7-5.4 (1.0x per CPU second), 0.3x at load 8. The goals (20x,
-2x) are not met: an agent's nodes compute about 1 ms of CPU per simulated second. Over two agent
-processes on one simulated clock (docs/experiments.md, "Simulated time over several processes"):
-100 agents 2.5x at load 3.5 (one process 11.8x in the same run: 1,800 rounds of the shared clock
-per simulated second cost more than the agents compute), 1,000 agents 0.3x at load 8.7 against
-0.2x in one process.
+time, seeds and replay"), timers in 1 ms slots: 100 agents 11.3x real time at load 1.7-2.6 (11.8x
+per CPU second), 5.5x at load 8; 1,000 agents 0.7x at load 1.7-5.4 (1.0x per CPU second). Over two
+agent processes 1,800 rounds of the shared clock per simulated second (2,000 for 1,000 agents)
+cost more than the agents compute: 100 agents 2.5x at load 3.5 against 11.8x in one process.
+
+Measured 2026-11-27, same machine, the simulated clock's 50 ms timer grid (antalate_lcm/core/
+executor.py, ``_SIM_GRID_MS``) alternated with the 1 ms slots before it, two runs each
+(docs/experiments.md, "Simulated time over several processes"): 100 agents in one process 21.6x and
+22.2x real time at load 2.5-3.0 (22-23x per CPU second; 13.5x and 14.4x before), 9.8x at load 8;
+over two processes 17.6x and 14.1x (3.2x and 3.5x before) with 40 rounds per simulated second
+instead of 1,802. 1,000 agents: one process 1.0x and 1.5x at load 1.8-2.7 (1.3x and 1.1x before:
+the agents' own work dominates), two processes 1.1x and 1.4x (1.0x and 0.7x before) with 40 rounds
+instead of 2,000 and a third less CPU. Goal met for 100 agents at low load; not for 1,000 (2x).
 """
 
 from __future__ import annotations

@@ -8,6 +8,16 @@ descriptor is readable, the clock jumps to the next timer's due time (lockstep: 
 at ``t``, and every message it sends, is handled before time moves past ``t``). A 10-minute
 experiment takes as long as the process needs to compute it.
 
+On this clock the executor runs timers on a grid of 50 ms (``_SIM_GRID_MS`` in
+:mod:`antalate_lcm.core.executor`; for a period, or a one-shot's delay, that 50 ms does not divide,
+the largest divisor of 50 ms that divides it, down to 1 ms). Every default period is a multiple of
+50 ms and stays exact; an agent's phase within a period (``Node.first_delay``) is rounded up to the
+grid, so the agents' timers fall on a few instants of each period instead of on every millisecond:
+each distinct instant costs a loop iteration and, over several processes, a round between them.
+Timers of one instant run in the order of their exact due times, so the seed's phases still order
+the agents. The wall clock keeps its 1 ms slots and its spread phases (a thousand agents'
+datagrams must not arrive at once).
+
 Every node reads this one clock: ``Node.now`` and the behaviors' ``ctx.now`` (the executor's
 ``clock``), the sim autopilot (constructed with that clock), message headers and the replay
 window (the executor's ``wallclock``: a fixed epoch plus simulated time, so a run's bytes do not

@@ -5,12 +5,13 @@ from __future__ import annotations
 import asyncio
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import lcm
 import pytest
 
 from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.simclock import SimClock
 from tests.harness.polling import wait_for
 
 
@@ -205,3 +206,31 @@ def test_coroutines_left_at_stop_are_cancelled_and_unwind(ran: bool) -> None:
     # a coroutine that never ran took nothing to release: cancelled before its first line
     assert unwound == (["started", "antalate-executor"] if ran else [])
     assert task.cancelled()
+
+
+def test_on_simulated_time_timers_share_a_50_ms_grid_and_keep_their_periods() -> None:
+    """Ten agents' 10 Hz timers at ten phases run at two instants of each period, in the order of
+    their phases; a 30 ms period and a 23 ms one-shot, which 50 ms does not divide, keep their times."""
+    clock = SimClock()
+    ex = Executor(sim=clock)
+    runs: list[tuple[str, float]] = []
+
+    def at(name: str) -> Callable[[], None]:
+        return lambda: runs.append((name, round(clock.elapsed, 6)))
+
+    for i in range(10):  # first due 100 ms (a0) down to 14.5 ms (a9)
+        ex.create_timer(0.1, at(f"a{i}"), first_delay=0.1 - 0.0095 * i)
+    ex.create_timer(0.03, at("odd"))
+    ex.call_later(0.023, at("once"))
+    ex.call_later(1.01, ex.stop)
+    ex.start()
+    assert wait_for(lambda: not ex.loop.is_running() and clock.elapsed > 1.0, 30)
+    agents = [(name, t) for name, t in runs if name.startswith("a")]
+    assert sorted({t for _, t in agents}) == [round(0.05 * k, 6) for k in range(1, 21)]
+    assert [name for name, t in agents if t == 0.05] == ["a9", "a8", "a7", "a6"]
+    assert [name for name, t in agents if t == 0.1] == ["a5", "a4", "a3", "a2", "a1", "a0"]
+    for i in range(10):
+        times = [t for name, t in agents if name == f"a{i}"]
+        assert times == [round(times[0] + 0.1 * k, 6) for k in range(10)]
+    assert [t for name, t in runs if name == "odd"] == [round(0.03 * k, 6) for k in range(1, 34)]
+    assert [t for name, t in runs if name == "once"] == [0.023]

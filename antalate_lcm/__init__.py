@@ -2,10 +2,10 @@
 
 The public API is small; everything else lives in modules named for their job (docs/architecture.md):
 
-- :class:`Bus`, :class:`Context`, :class:`Node` — typed messaging and the node lifecycle;
+- :class:`Buses`, :class:`Context`, :class:`Node` — typed messaging and the node lifecycle;
 - :func:`load_config`, :class:`Config` — the validated TOML config;
 - :class:`Behavior`, :class:`BehaviorContext` — what a behavior plugin implements and gets;
-- :class:`Autopilot`, :class:`AutopilotState` — what a vehicle adapter implements;
+- :class:`VehicleAdapter`, :class:`VehicleState` — what a vehicle adapter implements;
 - :mod:`antalate_lcm.msgs` — the generated LCM message types;
 - :class:`AntalateError`, :class:`ConfigError` — errors a user can meet.
 
@@ -20,26 +20,26 @@ from typing import TYPE_CHECKING, Any
 __version__ = "0.1.0"
 
 _EXPORTS = {
-    "Bus": "antalate_lcm.core.bus",
+    "Buses": "antalate_lcm.core.bus",
     "Context": "antalate_lcm.core.node",
     "Node": "antalate_lcm.core.node",
     "Config": "antalate_lcm.core.config",
     "load_config": "antalate_lcm.core.config",
     "Behavior": "antalate_lcm.core.behavior",
     "BehaviorContext": "antalate_lcm.core.behavior",
-    "Autopilot": "antalate_lcm.autopilot",
-    "AutopilotState": "antalate_lcm.autopilot",
+    "VehicleAdapter": "antalate_lcm.vehicles",
+    "VehicleState": "antalate_lcm.vehicles",
     "AntalateError": "antalate_lcm.base.errors",
     "ConfigError": "antalate_lcm.base.errors",
 }
 
 __all__ = [
     "AntalateError",
-    "Autopilot",
-    "AutopilotState",
+    "VehicleAdapter",
+    "VehicleState",
     "Behavior",
     "BehaviorContext",
-    "Bus",
+    "Buses",
     "Config",
     "ConfigError",
     "Context",
@@ -49,15 +49,29 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
-    from antalate_lcm.autopilot import Autopilot, AutopilotState
     from antalate_lcm.base.errors import AntalateError, ConfigError
     from antalate_lcm.core.behavior import Behavior, BehaviorContext
-    from antalate_lcm.core.bus import Bus
+    from antalate_lcm.core.bus import Buses
     from antalate_lcm.core.config import Config, load_config
     from antalate_lcm.core.node import Context, Node
+    from antalate_lcm.vehicles import VehicleAdapter, VehicleState
+
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {"Autopilot": "VehicleAdapter", "AutopilotState": "VehicleState", "Bus": "Buses"}
 
 
 def __getattr__(name: str) -> Any:
+    if name in _DEPRECATED_NAMES:  # an old name (docs/architecture.md, Vocabulary)
+        import warnings
+
+        new = _DEPRECATED_NAMES[name]
+        warnings.warn(
+            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return globals()[new] if new in globals() else __getattr__(new)
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'antalate_lcm' has no attribute {name!r}")

@@ -1,6 +1,6 @@
 """The ``antalate`` command: every subcommand, in the order ``antalate --help`` lists them.
 
-:func:`commands` is the one table of the command line. Each row names a subcommand, its one-line help,
+:func:`subcommands` is the one table of the command line. Each row names a subcommand, its one-line help,
 the function that declares its arguments and the handler that runs it; both functions live next to each
 other in the module that owns the job (``runtime/experiment.py`` for ``run``, ``operator_tui/cli.py``
 for ``tui``...). A command is added by adding a row here and nowhere else: no module registers itself,
@@ -15,6 +15,7 @@ import logging
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from antalate_lcm.base.errors import AntalateError
 
@@ -39,11 +40,11 @@ def _cmd_keygen(args: argparse.Namespace) -> int:
     return 0
 
 
-def commands() -> tuple[Subcommand, ...]:
+def subcommands() -> tuple[Subcommand, ...]:
     """The table. Its modules are imported here, not at the top, so ``import antalate_lcm.cli`` stays
     cheap for the tests and tools that only want :func:`main`."""
     from antalate_lcm.apps import foxglove_server, gcs, mcap_record, spy, types_cmd
-    from antalate_lcm.runtime import commands as nodes
+    from antalate_lcm.runtime import cli as nodes
     from antalate_lcm.runtime import experiment, replay, router, scaffold, sweep
     from antalate_lcm.station import cli as station
     from operator_tui import cli as console
@@ -68,7 +69,7 @@ def commands() -> tuple[Subcommand, ...]:
             None,
             _cmd_keygen,
         ),
-        # running nodes and agents (runtime/commands.py)
+        # running nodes and agents (runtime/cli.py)
         Subcommand("mc", "run the Mission Control node of an agent", nodes.node_arguments, nodes.cmd_mc),
         Subcommand(
             "hlc",
@@ -210,7 +211,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="antalate", description="Multi-agent UAV autonomy over LCM.")
     parser.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING, ERROR (default INFO)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for command in commands():
+    for command in subcommands():
         p = sub.add_parser(command.name, help=command.help)
         if command.arguments is not None:
             command.arguments(p)
@@ -242,3 +243,22 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {"commands": "subcommands"}
+
+if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
+
+    def __getattr__(name: str) -> object:
+        new = _DEPRECATED_NAMES.get(name)
+        if new is None:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        import warnings
+
+        warnings.warn(
+            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return globals()[new]

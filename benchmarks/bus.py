@@ -9,7 +9,7 @@ Round trip: this process publishes a ~100-byte ``telemetry_t`` on PING every mil
 process decodes it and publishes it back on PONG; the time runs from just before the ping is encoded
 to the moment the pong handler holds the decoded message. Raw lcm: one ``lcm.LCM`` per process,
 subscribed to the one channel, its handler calls ``telemetry_t.decode``, the main thread runs
-``handle_timeout``. Bus: ``Bus.publish`` / ``Bus.subscribe(..., telemetry_t, ...)``, handlers on the
+``handle_timeout``. Bus: ``Buses.publish`` / ``Buses.subscribe(..., telemetry_t, ...)``, handlers on the
 loop thread of the Bus's private executor (no Context: the sender is the main thread, which waits on
 an Event, so the ping side has one thread hop that ``node`` below does not). The Bus (and so every
 node) reads udpm:// from a socket of its own on the loop thread (docs/lan.md, "Who reads a udpm
@@ -118,7 +118,7 @@ def url(api: str) -> str:
 
 
 def bus_class(api: str) -> Any:
-    return importlib.import_module(BUS_MODULES[api]).Bus
+    return importlib.import_module(BUS_MODULES[api]).Buses
 
 
 def make_msg() -> telemetry_t:

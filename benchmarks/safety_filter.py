@@ -32,10 +32,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from antalate_lcm.agent.hlc.safety import SafetyLayer, new_picture  # noqa: E402
-from antalate_lcm.autopilot.base import AutopilotState, Frame  # noqa: E402
 from antalate_lcm.base.geo import offset  # noqa: E402
 from antalate_lcm.core.config import parse_config  # noqa: E402
 from antalate_lcm.msgs import telemetry_t  # noqa: E402
+from antalate_lcm.vehicles.base import Frame, VehicleState  # noqa: E402
 
 LAT0, LON0 = 32.7767, 35.0231
 CONTROL_HZ, TELEMETRY_HZ = 20.0, 10.0
@@ -69,9 +69,7 @@ def measure(n: int, spacing: float, ticks: int) -> dict[str, float]:
     layers, states, wishes = [], [], []
     for i, name in enumerate(names):
         layers.append(SafetyLayer(name, config.with_agent_name(name), picture))
-        states.append(
-            AutopilotState(connected=True, link_age=0.0, lat=msgs[i].lat, lon=msgs[i].lon, alt=10.0)
-        )
+        states.append(VehicleState(connected=True, link_age=0.0, lat=msgs[i].lat, lon=msgs[i].lon, alt=10.0))
         dn, de = centre[0] - where[i][0], centre[1] - where[i][1]
         d = math.hypot(dn, de) or 1.0
         wishes.append((dn / d * 5.0, de / d * 5.0))

@@ -74,7 +74,7 @@ def main() -> int:
     ensure_private_netns()
 
     from antalate_lcm.apps.analysis import analyze_log, format_summary, plot_log
-    from antalate_lcm.runtime.commands import native_lcm_tool
+    from antalate_lcm.runtime.cli import native_lcm_tool
     from antalate_lcm.runtime.demo import DEMO_URL
 
     tmp = tempfile.TemporaryDirectory()

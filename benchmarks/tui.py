@@ -58,10 +58,10 @@ URL = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=8388608"
 def run_publisher(url: str, agents: int, hz: float, arbiter: bool) -> int:
     """Play ``agents`` vehicles until stdin closes; then print a JSON report on stdout."""
     from antalate_lcm.base.geo import FlatFrame
-    from antalate_lcm.core.bus import Bus
+    from antalate_lcm.core.bus import Buses
     from antalate_lcm.msgs import arbiter_status_t, hlc_state_t, mc_state_t, operator_cmd_t, telemetry_t
 
-    bus = Bus({"lan": url})
+    bus = Buses({"lan": url})
     frame = FlatFrame(47.3977, 8.5456)
     names = [f"uav{i:03d}" for i in range(agents)]
     last_seq = dict.fromkeys(names, 0)

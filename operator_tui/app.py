@@ -1,7 +1,7 @@
-"""The operator console app: wires the pure model and command tracker to the LCM node and the widgets.
+"""The operator console app: wires the pure board and command tracker to the LCM node and the widgets.
 
 One refresh timer (``settings.refresh_interval``, 4 Hz by default) drains everything the node
-received, folds it into the model and the command tracker, resends what is due, and pushes the
+received, folds it into the board and the command tracker, resends what is due, and pushes the
 result to the widgets. Key presses act at once (a command is on the wire before the key's handler
 returns); nothing in the UI ever waits on the network. Everything mutable here is touched only
 on the UI thread, so nothing needs a lock.
@@ -32,9 +32,9 @@ from textual.widgets import Footer
 from antalate_lcm.core.config import Config
 from antalate_lcm.core.node import Context
 from antalate_lcm.wire.vocabulary import Severity
+from operator_tui.board import SwarmBoard
 from operator_tui.commands import CommandTracker, CommandUpdate, DirectionControl, Status, applies
-from operator_tui.link import OperatorNode
-from operator_tui.model import SwarmModel
+from operator_tui.node import OperatorNode
 from operator_tui.screens import ConfirmScreen, HelpScreen
 from operator_tui.widgets.agent_table import AgentTable
 from operator_tui.widgets.panels import (
@@ -195,7 +195,7 @@ class OperatorApp(App[None]):
         self.exit_after = exit_after
         s = self.settings
         self.node = OperatorNode(self.config, self.context, clock=clock, wallclock=wallclock)
-        self.model = SwarmModel(stale_after=s.stale_after)
+        self.board = SwarmBoard(stale_after=s.stale_after)
         self.tracker = CommandTracker(
             resend_interval=s.resend_interval, timeout=s.command_timeout, first_seq=s.first_seq
         )
@@ -259,7 +259,7 @@ class OperatorApp(App[None]):
         (its table row, the detail, the map when due); until then only its arrival is noted (the
         agent is alive) and the newest datagram is kept in :attr:`_deferred`."""
         started = time.perf_counter()
-        model, tracker, node = self.model, self.tracker, self.node
+        board, tracker, node = self.board, self.tracker, self.node
         backlog, deferred = self._backlog, self._deferred
         backlog.extend(node.take())
         while backlog:
@@ -268,9 +268,9 @@ class OperatorApp(App[None]):
                 raw = backlog.popleft()
                 agent = node.deferrable(raw[0])
                 if agent is not None:
-                    view = model.agents.get(agent)
+                    view = board.agents.get(agent)
                     if lazy and view is not None and view.telemetry is not None:
-                        model.heard("TELEMETRY", agent, raw[2], wall)
+                        board.heard("TELEMETRY", agent, raw[2], wall)
                         deferred[agent] = raw
                         continue
                     deferred.pop(agent, None)  # older than this one
@@ -279,9 +279,9 @@ class OperatorApp(App[None]):
                     continue
                 try:
                     if item.unchanged:  # nothing new but that the agent is alive
-                        model.heard(item.topic, item.agent, item.received, wall)
+                        board.heard(item.topic, item.agent, item.received, wall)
                         continue
-                    model.apply(item.topic, item.agent, item.msg, item.received, wall, item.fields)
+                    board.apply(item.topic, item.agent, item.msg, item.received, wall, item.fields)
                     if item.topic == "MC_STATE":
                         for update in tracker.observe(item.agent, item.msg.last_command_seq, self.clock()):
                             self._log_update(update, wall)
@@ -300,7 +300,7 @@ class OperatorApp(App[None]):
                 raw = deferred.pop(agent)
                 item = node.decode(raw)
                 if item is not None:
-                    model.fold(item.topic, item.agent, item.msg, item.received, wall, item.fields)
+                    board.fold(item.topic, item.agent, item.msg, item.received, wall, item.fields)
                 if i % SLICE_ITEMS == 0:
                     self.max_refresh = max(self.max_refresh, time.perf_counter() - started)
                     yield
@@ -309,9 +309,9 @@ class OperatorApp(App[None]):
         while self._log_bridge.records:
             record = self._log_bridge.records.popleft()
             sev = Severity.ERROR if record.levelno >= logging.ERROR else Severity.WARNING
-            model.log(wall, _log_source(record.name), record.getMessage(), sev)
-        model.tick(now, wall)
-        resend, updates = tracker.tick(now, model.mc_state_of, model.is_stale)
+            board.log(wall, _log_source(record.name), record.getMessage(), sev)
+        board.tick(now, wall)
+        resend, updates = tracker.tick(now, board.mc_state_of, board.is_stale)
         for cmd in resend:
             self.node.send_operator_cmd(cmd.command, cmd.target, cmd.seq, altitude=cmd.altitude)
         for update in updates:
@@ -327,7 +327,7 @@ class OperatorApp(App[None]):
         self.max_refresh = max(self.max_refresh, time.perf_counter() - started)
 
     def _map_is_due(self, now: float) -> bool:
-        return now >= self._map_due or (self.selected, len(self.model.agents)) != self._map_key
+        return now >= self._map_due or (self.selected, len(self.board.agents)) != self._map_key
 
     def _shown_agents(self) -> list[str]:
         """Agents whose telemetry is on screen: the table's visible rows and the selected agent."""
@@ -348,32 +348,32 @@ class OperatorApp(App[None]):
             return
 
     def _render_on(self, screen: MainScreen, now: float) -> None:
-        model = self.model
-        screen.query_one(AgentTable).sync(model, now)
+        board = self.board
+        screen.query_one(AgentTable).sync(board, now)
         if self._map_is_due(now):
             # Fixed-rate: every agent's position is aggregated into the picture once a map_interval.
             self._map_due = now + self.settings.map_interval
-            self._map_key = (self.selected, len(model.agents))
-            screen.query_one(SwarmMap).update_points(points_from(model.positions()), self.selected)
+            self._map_key = (self.selected, len(board.agents))
+            screen.query_one(SwarmMap).update_points(points_from(board.positions()), self.selected)
         screen.query_one(AgentDetail).show(
-            detail_text(model.agents.get(self.selected or ""), now, self.time_format)
+            detail_text(board.agents.get(self.selected or ""), now, self.time_format)
         )
         screen.query_one(CommandPanel).show(
-            commands_text(self.tracker.recent(self.settings.command_rows), now, self.model.mc_state_of)
+            commands_text(self.tracker.recent(self.settings.command_rows), now, self.board.mc_state_of)
         )
-        screen.query_one(EventLog).add(model.take_events())
+        screen.query_one(EventLog).add(board.take_events())
         counts = self.tracker.counts()
         screen.query_one(StatusBar).show(
             status_text(
                 bus=self.node.bus_summary(),
-                agents=len(model.agents),
-                stale=model.stale_count,
+                agents=len(board.agents),
+                stale=board.stale_count,
                 pending=counts[Status.PENDING],
                 failed=counts[Status.FAILED],
                 direction=self.direction,
                 scope_all=self.direction_all,
                 selected=self.selected,
-                safety=model.safety_summary(now),
+                safety=board.safety_summary(now),
             )
         )
 
@@ -384,7 +384,7 @@ class OperatorApp(App[None]):
         return None
 
     def _log_update(self, update: CommandUpdate, wall: float) -> None:
-        self.model.log(
+        self.board.log(
             wall,
             update.command.target or "ALL",
             update.text,
@@ -399,7 +399,7 @@ class OperatorApp(App[None]):
     # ------------------------------------------------------------------ actions (keys)
     def action_command(self, command: str, to_all: bool) -> None:
         if to_all:
-            live = self.model.live_names()
+            live = self.board.live_names()
             detail = (
                 f"Broadcast on SWARM/OPERATOR_CMD; waiting for {len(live)} live agent(s) to acknowledge."
                 if live
@@ -420,17 +420,17 @@ class OperatorApp(App[None]):
     def send_command(self, command: str, target: str) -> None:
         """Send a new operator command now ("" = all agents) and track it until acknowledged."""
         now, wall = self.clock(), self.wallclock()
-        expected = self.model.live_names() if not target else [target]
+        expected = self.board.live_names() if not target else [target]
         altitude = self.settings.takeoff_altitude if command == "TAKEOFF" else 0.0
         cmd = self.tracker.new(command, target, now, expected=expected, altitude=altitude)
         channel = self.node.send_operator_cmd(command, target, cmd.seq, altitude=altitude)
         text = f"sent {cmd.label} #{cmd.seq} on {channel}"
         severity = Severity.INFO
-        state = self.model.mc_state_of(target) if target else None
+        state = self.board.mc_state_of(target) if target else None
         if applies(command, state) is False:
             text += f" — MC is {state}: it will likely be rejected"
             severity = Severity.WARNING
-        self.model.log(wall, target or "ALL", text, severity)
+        self.board.log(wall, target or "ALL", text, severity)
         self._render(now)
 
     def action_rotate(self, steps: int) -> None:
@@ -454,7 +454,7 @@ class OperatorApp(App[None]):
         self._publish_direction(target, now)
         d = self.direction
         state = f"{d.azimuth:03.0f}° {d.speed:.1f} m/s" if d.active else "stop"
-        self.model.log(self.wallclock(), target or "ALL", f"direction {state}")
+        self.board.log(self.wallclock(), target or "ALL", f"direction {state}")
         self._render(now)
 
     def _publish_direction(self, target: str, now: float) -> None:

@@ -89,7 +89,7 @@ def console_command(config: str | None, name: str) -> str:
 
 # ------------------------------------------------------------------------------------------ server
 @dataclass(eq=False)
-class ConsoleLink:
+class BrowserTab:
     """One browser tab's console, which only its own WebSocket handler closes; others ask it to.
 
     aiohttp's ``close()`` called from another task while the handler waits in ``receive()`` drops the
@@ -140,7 +140,7 @@ def make_server(
     sign_ins = RateLimitedLog(log, period=LOG_PERIOD_S, clock=clock)
     refusals = RateLimitedLog(log, period=LOG_PERIOD_S, clock=clock)
     #: session token -> the consoles it opened, ended when its key is removed
-    consoles: dict[str, set[ConsoleLink]] = {}
+    consoles: dict[str, set[BrowserTab]] = {}
 
     async def relay(websocket: web.WebSocketResponse, app_service: AppService) -> None:
         """The browser's keystrokes, resizes and focus changes to its console, until the browser leaves."""
@@ -284,16 +284,16 @@ def make_server(
             height = to_int(request.query.get("height", "24"), 24)
             tab_name = f"{name}-web{next(tabs)}"
             app_service: AppService | None = None
-            link = ConsoleLink()
+            tab = BrowserTab()
 
             async def close_websocket() -> None:  # the console exited; AppService wants no result
-                link.end(WSCloseCode.OK, b"")
+                tab.end(WSCloseCode.OK, b"")
 
             token = request.cookies.get(SESSION_COOKIE, "")
             try:
                 await websocket.prepare(request)
                 if access is not None:
-                    consoles.setdefault(token, set()).add(link)
+                    consoles.setdefault(token, set()).add(tab)
                 app_service = AppService(
                     console_command(config, tab_name),
                     write_bytes=websocket.send_bytes,
@@ -304,17 +304,17 @@ def make_server(
                 )
                 log.info("console %s opened from %s", tab_name, request.remote)
                 await app_service.start(width, height)
-                if link.ending is None:
-                    link.relay = asyncio.create_task(relay(websocket, app_service))
+                if tab.ending is None:
+                    tab.relay = asyncio.create_task(relay(websocket, app_service))
                     try:
-                        await asyncio.wait([link.relay])  # ends when the browser leaves or link.end()
+                        await asyncio.wait([tab.relay])  # ends when the browser leaves or tab.end()
                     finally:
-                        link.relay.cancel()
-                        await asyncio.wait([link.relay])
-                    if not link.relay.cancelled():
-                        link.relay.result()  # a browser's garbage: logged below
-                if link.ending is not None:
-                    code, reason = link.ending
+                        tab.relay.cancel()
+                        await asyncio.wait([tab.relay])
+                    if not tab.relay.cancelled():
+                        tab.relay.result()  # a browser's garbage: logged below
+                if tab.ending is not None:
+                    code, reason = tab.ending
                     await websocket.close(code=code, message=reason)
             except asyncio.CancelledError:
                 await websocket.close()
@@ -323,7 +323,7 @@ def make_server(
             finally:
                 mine = consoles.get(token)
                 if mine is not None:
-                    mine.discard(link)
+                    mine.discard(tab)
                     if not mine:
                         del consoles[token]
                 if app_service is not None:
@@ -348,8 +348,8 @@ def make_server(
                     len(ended),
                 )
                 for token in ended:
-                    for link in consoles.pop(token, ()):
-                        link.end(4401, b"your key was removed")
+                    for tab in consoles.pop(token, ()):
+                        tab.end(4401, b"your key was removed")
 
         async def on_startup(self, app: web.Application) -> None:
             if access is not None and keys_file is not None:
@@ -440,7 +440,7 @@ __all__ = [
     "SIGN_IN_BURST",
     "SIGN_IN_EVERY_S",
     "ConsoleAccess",
-    "ConsoleLink",
+    "BrowserTab",
     "KeysFile",
     "Refusal",
     "allowed_hosts",
@@ -452,3 +452,22 @@ __all__ = [
     "same_origin",
     "serve",
 ]
+
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {"ConsoleLink": "BrowserTab"}
+
+if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
+
+    def __getattr__(name: str) -> object:
+        new = _DEPRECATED_NAMES.get(name)
+        if new is None:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        import warnings
+
+        warnings.warn(
+            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return globals()[new]

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import pytest
 
-from antalate_lcm.autopilot import Autopilot
+from antalate_lcm.vehicles import VehicleAdapter
 from tests import scheduling
 from tests.harness.jsonl import JsonLinesProcess
 from tests.harness.netns import MCAST_URL as MCAST_URL
@@ -114,12 +114,12 @@ class Probe(JsonLinesProcess):
 
 @pytest.fixture
 def made() -> Iterator[list[Any]]:
-    """Adapters and emulators a test made, closed (an `Autopilot`) or stopped (an emulator) at the end,
+    """Adapters and emulators a test made, closed (an `VehicleAdapter`) or stopped (an emulator) at the end,
     newest first, whatever happens."""
     things: list[Any] = []
     yield things
     for thing in reversed(things):
-        thing.close() if isinstance(thing, Autopilot) else thing.stop()
+        thing.close() if isinstance(thing, VehicleAdapter) else thing.stop()
 
 
 @pytest.fixture

@@ -13,13 +13,13 @@ from dataclasses import dataclass
 from typing import Any, TypeVar
 
 from antalate_lcm.agent.hlc.node import HlcNode
-from antalate_lcm.autopilot.base import Autopilot
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import parse_config
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
 from antalate_lcm.runtime.agent import agent_nodes
+from antalate_lcm.vehicles.base import VehicleAdapter
 from tests.harness.polling import wait_for
 
 
@@ -43,7 +43,7 @@ class MemoryAgent:
         *,
         hlc: dict[str, Any] | None = None,
         operator: dict[str, Any] | None = None,
-        adapter: Autopilot | None = None,
+        adapter: VehicleAdapter | None = None,
         name: str = "memory",
         safety: dict[str, Any] | None = None,
     ) -> None:
@@ -66,7 +66,7 @@ class MemoryAgent:
             ],
         }
         self.config = parse_config(doc, f"{name}.toml")
-        self.context = Context(Bus(self.config.buses), Executor())
+        self.context = Context(Buses(self.config.buses), Executor())
         self.mc: list[Seen] = []
         self.hlc: list[Seen] = []
         self.errors: list[hlc_error_t] = []

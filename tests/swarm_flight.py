@@ -18,9 +18,9 @@ from typing import Any
 import lcm
 import tomli_w
 
-from antalate_lcm.autopilot.sim import DEFAULTS as SIM_DEFAULTS
 from antalate_lcm.base import geo
 from antalate_lcm.msgs import mc_state_t, peer_scan_t, telemetry_t
+from antalate_lcm.vehicles.sim import DEFAULTS as SIM_DEFAULTS
 from antalate_lcm.wire.vocabulary import McState
 from tests.harness.agents import FAST_SIM
 

@@ -66,18 +66,18 @@ _.get_status
 _.scan_interface
 _.get_help
 _.publish_errors  # Bus: docs/wan.md
-_.setpoints_withheld  # MavlinkAutopilot: docs/ardupilot.md
-_.vehicle_findings  # MavlinkAutopilot: what the vehicle checks found (docs/ardupilot.md)
-_.resending  # MavlinkAutopilot: a command is being resent (tests/vehicles/test_mavlink_adapter.py)
-_.ready_reasons  # MavlinkAutopilot: why arming would be refused (tests/vehicles/test_mavlink_adapter.py)
-_.reconnects  # CrazyflieAutopilot: link recoveries (tests/vehicles/test_crazyflie_adapter.py)
+_.setpoints_withheld  # MavlinkAdapter: docs/ardupilot.md
+_.vehicle_findings  # MavlinkAdapter: what the vehicle checks found (docs/ardupilot.md)
+_.resending  # MavlinkAdapter: a command is being resent (tests/vehicles/test_mavlink_adapter.py)
+_.ready_reasons  # MavlinkAdapter: why arming would be refused (tests/vehicles/test_mavlink_adapter.py)
+_.reconnects  # CrazyflieAdapter: link recoveries (tests/vehicles/test_crazyflie_adapter.py)
 _.reports_ok  # OscNode: reports the station accepted (tests/agent/test_osc.py)
 _.reporting  # OscNode: whether the exchange with the station runs (tests/agent/test_osc.py)
-_.set_refuse_arm  # SimAutopilot fault knobs for tests and the demo
+_.set_refuse_arm  # SimAdapter fault knobs for tests and the demo
 _.set_time_scale
 _.sim_time
-_.position_ne  # TelloAutopilot dead reckoning (tests/vehicles/test_tello_adapter.py)
-_.dead_reckoning_problem  # TelloAutopilot: the velocity unit check for tools (tests/vehicles/test_tello_adapter.py)
+_.position_ne  # TelloAdapter dead reckoning (tests/vehicles/test_tello_adapter.py)
+_.dead_reckoning_problem  # TelloAdapter: the velocity unit check for tools (tests/vehicles/test_tello_adapter.py)
 _.from_wgs84  # crazyflie frames: the inverse, checked round trip (tests/vehicles/test_crazyflie_units.py)
 _.block_size  # crazyflie log blocks fit one packet (tests/vehicles/test_crazyflie_units.py)
 _.LOG_MAX_BYTES
@@ -94,3 +94,8 @@ _.Dispersion
 _.PeerSensor
 _.has_velocity  # peer_scan_t field, written by the peer sensor, read by its consumers
 _.CONTINUE  # safety.filter.Policy: chosen by value from [safety] no_peers (Policy("continue"))
+# --- The import protocol: the deprecated package shim antalate_lcm/autopilot/ (issue #26), its
+# finder and loader, called by the import system.
+_.find_spec
+_.create_module
+_.exec_module

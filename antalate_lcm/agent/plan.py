@@ -18,10 +18,10 @@ from typing import Any
 from pydantic import BaseModel
 
 from antalate_lcm.agent.bma.plan import BmaPlan, plan_bma
-from antalate_lcm.autopilot import Autopilot, UnknownAutopilotError, load_autopilot
-from antalate_lcm.autopilot.base import Clock
 from antalate_lcm.base.errors import ConfigError, StrictError
 from antalate_lcm.core.config import Config, load_config
+from antalate_lcm.vehicles import UnknownAutopilotError, VehicleAdapter, load_autopilot
+from antalate_lcm.vehicles.base import Clock
 
 #: Shown once per config file that still writes the adapter as a ``[hlc.autopilot]`` table.
 DEPRECATED_TABLE = (
@@ -35,13 +35,13 @@ class AutopilotPlan:
     """The adapter class and its params, validated by the adapter's own model."""
 
     name: str
-    cls: type[Autopilot]
+    cls: type[VehicleAdapter]
     #: As written (adapters take a plain mapping: docs/design.md §7, constructor contract).
     params: Mapping[str, Any]
-    #: ``params`` through `Autopilot.params_model`; None for an adapter without one.
+    #: ``params`` through `VehicleAdapter.params_model`; None for an adapter without one.
     model: BaseModel | None
 
-    def build(self, clock: Clock) -> Autopilot:
+    def build(self, clock: Clock) -> VehicleAdapter:
         """A new adapter (no I/O until ``connect()``)."""
         return self.cls(dict(self.params), clock=clock)
 

@@ -82,7 +82,7 @@ def serve(url: str, *, host: str, port: int, no_auth: bool, stop: threading.Even
         import foxglove
     except ImportError:
         raise AntalateError(FOXGLOVE_MISSING) from None
-    from antalate_lcm.core.bus import Bus
+    from antalate_lcm.core.bus import Buses
 
     stop = stop or threading.Event()
 
@@ -99,7 +99,7 @@ def serve(url: str, *, host: str, port: int, no_auth: bool, stop: threading.Even
         else None
     )
     context = foxglove.Context()
-    bus = Bus({"view": url})
+    bus = Buses({"view": url})
     server = None
     try:
         bus.open()

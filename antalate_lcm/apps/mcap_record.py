@@ -41,7 +41,7 @@ def _open_output(path: str, force: bool) -> Path:
 
 def record(url: str, out_path: str, *, channel: str = ".*", raw: bool = False, force: bool = False) -> int:
     """Record every ``channel`` message of the bus at ``url`` into an MCAP file until Ctrl-C/SIGTERM."""
-    from antalate_lcm.core.bus import Bus
+    from antalate_lcm.core.bus import Buses
 
     out = _open_output(out_path, force)
 
@@ -53,7 +53,7 @@ def record(url: str, out_path: str, *, channel: str = ".*", raw: bool = False, f
         signalled.append(signum)
 
     previous = signal.signal(signal.SIGTERM, on_signal)
-    bus = Bus({"log": url})
+    bus = Buses({"log": url})
     try:
         bus.open()
         try:

@@ -1,63 +1,67 @@
-"""Autopilot contract and adapter registry.
-
-Adapters are found by name in the entry-point group ``antalate.autopilots`` (so third-party packages
-can add vehicles without touching this code) or given directly as ``"package.module:ClassName"``.
-Only the chosen adapter's module is imported: a missing optional library (djitellopy, pymavlink)
-only matters for the adapter that needs it. Lookup goes through `antalate_lcm.base.plugins`, the one
-loader shared with behaviors, so both kinds of plugin fail the same way.
-"""
+"""Deprecated name of :mod:`antalate_lcm.vehicles`, where issue #26's vocabulary renamed it (docs/architecture.md,
+"Vocabulary"): import that. It keeps working, with a warning, until the next release removes it,
+submodules included: ``antalate_lcm.autopilot.X`` is the very module ``antalate_lcm.vehicles.X`` (so a config's
+``"antalate_lcm.autopilot.sim:SimAutopilot"`` still loads the same class)."""
 
 from __future__ import annotations
 
-import inspect
+import importlib
+import importlib.abc
+import importlib.machinery
+import sys
+import warnings
+from collections.abc import Sequence
+from types import ModuleType
+from typing import Any
 
-from antalate_lcm.autopilot.base import Autopilot, AutopilotError, AutopilotState, FlightMode, Frame
-from antalate_lcm.base.errors import PluginNotFound
-from antalate_lcm.base.errors import UnknownAutopilotError as UnknownAutopilotError
-from antalate_lcm.base.plugins import AUTOPILOTS, group_entry_points, load_plugin
+from antalate_lcm import vehicles as _moved
+from antalate_lcm.vehicles import *  # noqa: F403 - the old name offers what the new one does
 
-ENTRY_POINT_GROUP = AUTOPILOTS
+_OLD, _NEW = "antalate_lcm.autopilot", "antalate_lcm.vehicles"
 
-__all__ = [
-    "ENTRY_POINT_GROUP",
-    "Autopilot",
-    "AutopilotError",
-    "AutopilotState",
-    "FlightMode",
-    "Frame",
-    "UnknownAutopilotError",
-    "available_autopilots",
-    "load_autopilot",
-]
-
-
-def available_autopilots() -> dict[str, str]:
-    """Registered adapter names mapped to their ``module:Class`` targets, sorted by name."""
-    return dict(sorted((ep.name, ep.value) for ep in group_entry_points(ENTRY_POINT_GROUP)))
+warnings.warn(
+    f"{_OLD} is deprecated: import {_NEW} (the old name goes in the next release)",
+    DeprecationWarning,
+    stacklevel=2,
+)
 
 
-def load_autopilot(name: str) -> type[Autopilot]:
-    """The adapter class for `name` (a registered name or ``module:Class``).
+class _MovedModule(importlib.abc.Loader):
+    """Loads an old submodule name as the module already imported under its new name."""
 
-    Raises `UnknownAutopilotError` -- whatever went wrong: an unknown or malformed name, a module
-    that does not import, a class that is not an `Autopilot` -- with one line that lists the
-    installed adapters, so a config typo is a one-line fix and never a traceback.
-    """
-    installed = available_autopilots()
-    expected = (
-        f"expected an installed adapter ({', '.join(installed) or 'none'}) or 'package.module:Class' "
-        "naming an Autopilot subclass"
-    )
-    if ":" not in name and name not in installed:
-        raise UnknownAutopilotError(f"{expected}; there is no adapter {name!r}")
-    try:
-        cls = load_plugin(ENTRY_POINT_GROUP, name, Autopilot)
-    except PluginNotFound as exc:
-        raise UnknownAutopilotError(f"{expected}; {exc}") from None
-    except Exception as exc:  # noqa: BLE001 - an entry point's module may fail in any way
-        raise UnknownAutopilotError(f"{expected}; {name!r} failed to load: {exc!r}") from None
-    assert issubclass(cls, Autopilot)  # checked by load_plugin; narrows the type
-    if inspect.isabstract(cls):
-        missing = ", ".join(sorted(getattr(cls, "__abstractmethods__", ())))
-        raise UnknownAutopilotError(f"{expected}; {name!r} is abstract (it lacks {missing})")
-    return cls
+    def __init__(self, new: str) -> None:
+        self._new = new
+        self._spec: importlib.machinery.ModuleSpec | None = None
+
+    def create_module(self, spec: importlib.machinery.ModuleSpec) -> ModuleType:
+        module = importlib.import_module(self._new)
+        self._spec = module.__spec__
+        return module
+
+    def exec_module(self, module: ModuleType) -> None:
+        module.__spec__ = self._spec  # the import system set the old name's; the module keeps its own
+
+
+class _OldSubmodules(importlib.abc.MetaPathFinder):
+    def find_spec(
+        self, fullname: str, path: Sequence[str] | None, target: ModuleType | None = None
+    ) -> importlib.machinery.ModuleSpec | None:
+        if not fullname.startswith(_OLD + "."):
+            return None
+        new = _NEW + fullname[len(_OLD) :]
+        warnings.warn(
+            f"{fullname} is deprecated: import {new} (the old name goes in the next release)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return importlib.machinery.ModuleSpec(fullname, _MovedModule(new))
+
+
+if not any(type(f).__name__ == "_OldSubmodules" and getattr(f, "old", None) == _OLD for f in sys.meta_path):
+    _finder = _OldSubmodules()
+    _finder.old = _OLD  # type: ignore[attr-defined]
+    sys.meta_path.insert(0, _finder)
+
+
+def __getattr__(name: str) -> Any:
+    return getattr(_moved, name)

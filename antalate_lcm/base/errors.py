@@ -3,7 +3,7 @@
 `AntalateError` is the root of every exception the package defines (``tests/architecture/test_layers.py`` checks
 it), so ``except AntalateError`` (the CLI, the console) catches whatever antalate raises on purpose.
 They are all defined here, as httpx keeps its exceptions in one module, so the whole hierarchy reads in
-one place; the module that raises one re-exports it under its old name (``antalate_lcm.autopilot.
+one place; the module that raises one re-exports it under its old name (``antalate_lcm.vehicles.
 AutopilotError``, ``antalate_lcm.base.strict.StrictError``, …), which is where docs and behaviors import it
 from. An exception a caller used to catch by a standard base keeps that base as a second one
 (``AutopilotError(AntalateError, RuntimeError)``, ``ReplyError(AntalateError, ValueError)``). Private
@@ -70,7 +70,7 @@ class PluginNotFound(AntalateError):
     """A behavior or autopilot name that no entry point and no ``module:Class`` provides."""
 
 
-# Vehicles (antalate_lcm.autopilot)
+# Vehicles (antalate_lcm.vehicles)
 
 
 class AutopilotError(AntalateError, RuntimeError):

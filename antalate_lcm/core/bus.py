@@ -14,7 +14,7 @@ How it uses LCM, and why (measured with lcm 1.5.3, see ``benchmarks/bus.py``):
 - No thread of its own: the :class:`~antalate_lcm.core.executor.Executor` (the process's one event loop)
   waits on every instance's ``fileno()`` and calls ``handle`` when it is readable, so handlers run
   on the loop thread, where the nodes live, with no queue between (rclpy's wait set). A bus given
-  no executor (:meth:`Bus.attach`) starts a private one on its first subscription.
+  no executor (:meth:`Buses.attach`) starts a private one on its first subscription.
 - LCM subscriptions are added from the subscribing thread (liblcm guards its handler table) but
   removed only on the loop thread between two ``handle`` calls: unsubscribing from inside a
   handler can crash lcm 1.5.x.
@@ -41,7 +41,7 @@ import os
 import re
 import threading
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.bus_connection import BusConnection, Handler, Subscription
@@ -57,7 +57,7 @@ UDPM_READER_ENV = "ANTALATE_UDPM_READER"
 DEFAULT_QUEUE_CAPACITY = 10_000
 
 
-class Bus:
+class Buses:
     """Named LCM buses of a process (the paper's proxies). Thread-safe; share one per process.
 
     Handlers run on the thread of the executor the bus is attached to (:meth:`attach`; a
@@ -80,7 +80,7 @@ class Bus:
             own_udpm_reader = os.environ.get(UDPM_READER_ENV, "own") != "liblcm"
         self.own_udpm_reader = own_udpm_reader
         self._queue_capacity = queue_capacity
-        self._links: dict[str, BusConnection] = {}
+        self._connections: dict[str, BusConnection] = {}
         self._by_name: dict[str, BusConnection] = {}
         self._lock = threading.Lock()
         self._decode_log = RateLimitedLog(log)
@@ -109,10 +109,10 @@ class Bus:
                 self._executor.start()
             return self._executor
 
-    def _link(self, bus: str) -> BusConnection:
-        link = self._by_name.get(bus)
-        if link is not None:
-            return link
+    def _connection(self, bus: str) -> BusConnection:
+        conn = self._by_name.get(bus)
+        if conn is not None:
+            return conn
         try:
             url = self.urls[bus]
         except KeyError:
@@ -120,25 +120,25 @@ class Bus:
         with self._lock:
             if self._closed:
                 raise RuntimeError("bus is closed")
-            link = self._links.get(url)
-            if link is None:
-                link = self._links[url] = BusConnection(
+            conn = self._connections.get(url)
+            if conn is None:
+                conn = self._connections[url] = BusConnection(
                     url, self._queue_capacity, self._decode_log, lambda: self.executor, self.own_udpm_reader
                 )
-            self._by_name[bus] = link
-            return link
+            self._by_name[bus] = conn
+            return conn
 
     def open(self) -> None:
         """Open every declared bus now, so a missing multicast route is reported before nodes start."""
         for name in self.urls:
-            self._link(name)
+            self._connection(name)
 
     def publish(self, bus: str, channel: str, msg: Any) -> bool:
         """Encode and send; a send error (link down) is logged at a limited rate and returns False."""
         # A node sends bytes, already encoded (and signed): no isinstance on its path.
         data = msg if type(msg) is bytes else bytes(msg) if isinstance(msg, bytearray) else msg.encode()
         try:
-            self._link(bus).publish(channel, data)
+            self._connection(bus).publish(channel, data)
         except OSError as exc:
             return self.publish_failed(bus, channel, exc)
         return True
@@ -147,7 +147,7 @@ class Bus:
         """The send function of ``bus`` for encoded bytes, looked up once (a node's publisher keeps
         it: 20 messages a second per simulated agent, a lookup and two calls less each). It raises
         what ``publish`` would log: the caller reports an OSError through :meth:`publish_failed`."""
-        return self._link(bus).publish
+        return self._connection(bus).publish
 
     def publish_failed(self, bus: str, channel: str, exc: OSError) -> bool:
         """Count and log (rate-limited) a send that failed with ``exc``; False, what publish returns."""
@@ -163,42 +163,61 @@ class Bus:
         With ``regex=True`` the channel is a regular expression that must match the whole name.
         """
         sub = Subscription(bus, channel, msg_type, handler, re.compile(channel) if regex else None)
-        self._link(bus).add(sub)
+        self._connection(bus).add(sub)
         return sub
 
     def unsubscribe(self, sub: Subscription) -> None:
         """Stop delivery; safe from inside a handler (the current delivery completes, no further one)."""
         sub.active = False
-        link = self._by_name.get(sub.bus)
-        if link is not None:
-            link.remove(sub)
+        conn = self._by_name.get(sub.bus)
+        if conn is not None:
+            conn.remove(sub)
 
     def decode_errors(self) -> dict[str, int]:
         out: dict[str, int] = {}
-        for link in list(self._links.values()):
-            for channel, n in link.decode_errors.items():
+        for conn in list(self._connections.values()):
+            for channel, n in conn.decode_errors.items():
                 out[channel] = out.get(channel, 0) + n
         return out
 
     def damaged_datagrams(self) -> int:
         """Datagrams this process's own udpm sockets dropped as not LCM or damaged."""
-        return sum(link.damaged for link in list(self._links.values()))
+        return sum(conn.damaged for conn in list(self._connections.values()))
 
     def close(self) -> None:
         """Stop reading, release the sockets (and stop a private executor). Idempotent."""
         with self._lock:
             self._closed = True
-            links, self._links, self._by_name = list(self._links.values()), {}, {}
-        for link in links:
-            link.close()
+            conns, self._connections, self._by_name = list(self._connections.values()), {}, {}
+        for conn in conns:
+            conn.close()
         if self._own_executor and self._executor is not None:
             self._executor.stop()
 
-    def __enter__(self) -> Bus:
+    def __enter__(self) -> Buses:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
 
 
-__all__ = ["DEFAULT_QUEUE_CAPACITY", "UDPM_READER_ENV", "Bus", "Handler", "Subscription"]
+__all__ = ["DEFAULT_QUEUE_CAPACITY", "UDPM_READER_ENV", "Buses", "Handler", "Subscription"]
+
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {"Bus": "Buses"}
+
+if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
+
+    def __getattr__(name: str) -> object:
+        new = _DEPRECATED_NAMES.get(name)
+        if new is None:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        import warnings
+
+        warnings.warn(
+            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return globals()[new]

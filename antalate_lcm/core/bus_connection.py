@@ -1,8 +1,8 @@
-"""One bus URL of a :class:`~antalate_lcm.core.bus.Bus`: its transport's connection, the subscribers of
+"""One bus URL of a :class:`~antalate_lcm.core.bus.Buses`: its transport's connection, the subscribers of
 each channel, and how the process's event loop reads it (the why of every choice is in
 :mod:`antalate_lcm.core.bus`'s docstring).
 
-Kept apart from the ``Bus`` (the names, the executor, the public calls) because this is the hot path:
+Kept apart from the ``Buses`` (the names, the executor, the public calls) because this is the hot path:
 what runs per datagram (``_on_exact``, ``_on_pattern``, ``_deliver``), per publish, and the own udpm
 socket's kernel filter.
 """
@@ -40,7 +40,7 @@ _DRAIN_BUDGET = 0.02
 
 @dataclass(eq=False)
 class Subscription:
-    """A handle returned by :meth:`Bus.subscribe`; pass it to :meth:`Bus.unsubscribe`."""
+    """A handle returned by :meth:`Buses.subscribe`; pass it to :meth:`Buses.unsubscribe`."""
 
     bus: str
     channel: str
@@ -78,7 +78,7 @@ class _Route:
 
 class BusConnection:
     """One bus URL opened (its transport's connection), its channels' subscribers, read by the event
-    loop while it has subscriptions; a :class:`~antalate_lcm.core.bus.Bus` keeps one per URL."""
+    loop while it has subscriptions; a :class:`~antalate_lcm.core.bus.Buses` keeps one per URL."""
 
     def __init__(
         self,
@@ -91,16 +91,16 @@ class BusConnection:
         self.url = url
         transport: Transport = transport_for(url)
         self._lcm: Any = transport.open()
-        #: The udpm transport, when this link reads it from our own socket on the loop thread.
+        #: The udpm transport, when this connection reads it from our own socket on the loop thread.
         self._udpm = transport if own_reader and isinstance(transport, Udpm) else None
         self._own_reader = self._udpm is not None
         #: The receive socket (None until the first subscription).
         self._receiver: UdpmReceiver | None = None
-        #: Sends the short messages when the link reads its own socket (None until the first publish).
+        #: Sends the short messages when the connection reads its own socket (None until the first publish).
         self._sender: UdpmSender | None = None
         #: The receiver drops the sender's own datagrams in the kernel (see _own_filter).
         self._ignoring = False
-        #: Once a subscription of this link could want the process's own messages (a pattern, or a
+        #: Once a subscription of this connection could want the process's own messages (a pattern, or a
         #: channel it publishes), they are heard again, for good.
         self._hear_own = False
         #: (own address, topics) the receive socket's filter drops by (see _own_filter).
@@ -177,7 +177,7 @@ class BusConnection:
 
     def _own_filter(self) -> None:
         """Under the lock: have the kernel drop, on the receive socket, what no subscription of the
-        link can want: the process's own datagrams (while no pattern, and no channel it both
+        connection can want: the process's own datagrams (while no pattern, and no channel it both
         publishes and subscribes: then :meth:`publish` turns that off) and the short messages of
         channels whose last ``/``-part no exact subscription has (while no pattern). A thousand
         simulated agents read their own 20,000 datagrams a second and every other agent process's

@@ -11,7 +11,7 @@ from typing import Any, TypeVar
 
 from antalate_lcm.base.errors import AntalateError
 from antalate_lcm.core.admission import Admission
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config
 from antalate_lcm.core.executor import Executor
 
@@ -51,7 +51,7 @@ class Context:
     of this process (see :meth:`in_process`); None when each node runs in its own process.
     """
 
-    bus: Bus
+    bus: Buses
     executor: Executor
     inproc_bus: str | None = None
     #: Every agent of the swarm runs in this process (``antalate agent`` without ``--processes``,
@@ -78,7 +78,7 @@ class Context:
 
     @classmethod
     def create(cls, config: Config) -> Context:
-        return cls(Bus(config.buses), Executor())
+        return cls(Buses(config.buses), Executor())
 
     @classmethod
     def in_process(
@@ -94,7 +94,7 @@ class Context:
         if INPROC_BUS in buses:
             raise AntalateError(f"bus name {INPROC_BUS!r} is reserved for the in-process bus")
         return cls(
-            Bus({**buses, INPROC_BUS: "memq://"}),
+            Buses({**buses, INPROC_BUS: "memq://"}),
             executor or Executor(),
             inproc_bus=INPROC_BUS,
             whole_swarm=whole_swarm,

@@ -21,7 +21,7 @@ from antalate_lcm.wire.topics import TopicSpec, is_internal
 class Publisher:
     buses: list[str]
     channel: str
-    #: Each bus's send function (`Bus.sender`), resolved once: 20 publishes a second per agent.
+    #: Each bus's send function (`Buses.sender`), resolved once: 20 publishes a second per agent.
     senders: list[tuple[str, Callable[[str, bytes], None]]]
     seq: int = 0
 

@@ -29,8 +29,8 @@ run falls behind); a run on a held clock (:meth:`SimClock.hold`) waits, in real 
 from other threads and does not advance (the experiment holds it while its nodes start and after
 the operator has finished, so what is recorded does not depend on how fast another thread is).
 
-Over several processes (``antalate run --speed --processes P``) each one's clock has a ``link``
-(:class:`antalate_lcm.runtime.time_coordinator.ClockLink`): where a lone loop would move its clock,
+Over several processes (``antalate run --speed --processes P``) each one's clock has a ``coordinator``
+(:class:`antalate_lcm.runtime.time_coordinator.ClockClient`): where a lone loop would move its clock,
 it reports to the processes' coordinator and waits, and the coordinator moves it (and paces it).
 """
 
@@ -55,7 +55,7 @@ _HELD_WAIT = 0.05
 
 class Coordinated(Protocol):
     """The clock of one of several processes on one simulated time
-    (:class:`antalate_lcm.runtime.time_coordinator.ClockLink`): it moves only when told to."""
+    (:class:`antalate_lcm.runtime.time_coordinator.ClockClient`): it moves only when told to."""
 
     def idle(self, next_due: float) -> bool:
         """The loop has nothing left to do now; its next timer is due at ``next_due``. True: the
@@ -65,7 +65,7 @@ class Coordinated(Protocol):
 
 class SimClock:
     """Simulated seconds, advanced by a :class:`SimEventLoop` (and only by it), or, with a
-    :attr:`link`, by the processes' coordinator."""
+    :attr:`coordinator`, by the processes' coordinator."""
 
     def __init__(self, speed: float = math.inf, *, held: bool = False) -> None:
         if not speed > 0:
@@ -78,7 +78,7 @@ class SimClock:
         self._sim0 = SIM_START
         #: Several processes on this time (``--processes P``): the loop reports to it when idle and
         #: waits for its answer instead of moving time itself.
-        self.link: Coordinated | None = None
+        self.coordinator: Coordinated | None = None
 
     def monotonic(self) -> float:
         """The executor's ``clock``: simulated seconds."""
@@ -130,11 +130,11 @@ class _SimSelector(selectors.BaseSelector):
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
         clock = self._clock
         if timeout is None:  # nothing scheduled: only another thread can give the loop work
-            if clock.link is not None and not clock.held:  # ... or another process's message
+            if clock.coordinator is not None and not clock.held:  # ... or another process's message
                 ready = self._inner.select(0)
                 if ready:
                     return ready
-                if clock.link.idle(math.inf):
+                if clock.coordinator.idle(math.inf):
                     return []
             return self._inner.select(None)
         if clock.held:
@@ -142,9 +142,9 @@ class _SimSelector(selectors.BaseSelector):
         ready = self._inner.select(0)
         if ready or timeout <= 0:
             return ready
-        link = clock.link
-        if link is not None:  # another process may yet send something for now: ask, then wait
-            if link.idle(clock.t + timeout):
+        client = clock.coordinator
+        if client is not None:  # another process may yet send something for now: ask, then wait
+            if client.idle(clock.t + timeout):
                 return []
             return self._inner.select(None)
         wait = clock.real_wait(timeout)

@@ -20,12 +20,12 @@ from typing import IO
 from antalate_lcm.agent.hlc.node import HlcNode
 from antalate_lcm.agent.mc.node import McNode
 from antalate_lcm.agent.plan import AgentPlan, plan_agent, plan_autopilot
-from antalate_lcm.autopilot.sim import DEFAULTS as SIM_DEFAULTS
 from antalate_lcm.base.errors import AntalateError, ConfigError
 from antalate_lcm.base.geo import offset
 from antalate_lcm.core.config import AgentConfig, Config
 from antalate_lcm.core.node import Context, Node
 from antalate_lcm.transports import spawn_lock
+from antalate_lcm.vehicles.sim import DEFAULTS as SIM_DEFAULTS
 
 log = logging.getLogger("antalate.agent")
 

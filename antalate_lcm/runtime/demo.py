@@ -12,7 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 from antalate_lcm.base.errors import MulticastUnavailable
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config, parse_config
 from antalate_lcm.core.node import Context, Node
 from antalate_lcm.runtime.agent import agent_nodes, swarm_configs, validate
@@ -60,7 +60,7 @@ def demo_document(url: str, *, station: str | None = None, swarm_key: str = "") 
 
 def open_context(url: str) -> tuple[Context, str]:
     """A context on ``url``, or on ``memq://`` when this host has no multicast route (said once)."""
-    probe = Bus({"lan": url})
+    probe = Buses({"lan": url})
     try:
         probe.open()
     except MulticastUnavailable as exc:

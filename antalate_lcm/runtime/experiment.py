@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from antalate_lcm.base.errors import AntalateError
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config, load_config
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context, Node
@@ -52,7 +52,7 @@ from antalate_lcm.runtime.script import Script, load_script
 from antalate_lcm.runtime.scripted_operator import DirectionAt, Phase, ScriptedOperator
 from antalate_lcm.runtime.time_coordinator import (
     DEFAULT_STALL,
-    SimulatedBus,
+    SimulatedBuses,
     TimeCoordinator,
     simulated_buses,
 )
@@ -219,11 +219,11 @@ def run(exp: Experiment) -> Outcome:
     context = (
         Context.in_process(buses, whole_swarm=True, executor=Executor(sim=clock))
         if processes == 1
-        else Context(SimulatedBus(buses, crossing) if coordinator else Bus(buses), Executor(sim=clock))
+        else Context(SimulatedBuses(buses, crossing) if coordinator else Buses(buses), Executor(sim=clock))
     )
     if clock is not None or exp.seed is not None:
         context.seed = script.seed
-    if coordinator is not None and clock is not None and isinstance(context.bus, SimulatedBus):
+    if coordinator is not None and clock is not None and isinstance(context.bus, SimulatedBuses):
         coordinator.serve(clock, context.bus, context.executor, crossing)
     recorder = LogRecorder(configs[0].with_agent_name("recorder"), context, bus=bus, path=out)
     nodes: list[Node] = [recorder]

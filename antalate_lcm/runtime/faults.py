@@ -19,7 +19,7 @@ timers run. The behaviors, MC, HLC and configs are the ones that fly; nothing is
 * battery: the sim vehicle's battery drops to ``level`` percent, and/or drains ``drain`` %/min
   more (the sim's own failsafes then act: a battery warning, LAND when empty).
 * link_loss: the operator hears nothing from the agent and the agent nothing from the operator.
-* vehicle: the sim vehicle's own faults (antalate_lcm/autopilot/sim/faults.py): its failsafe (``rtl``,
+* vehicle: the sim vehicle's own faults (antalate_lcm/vehicles/sim/faults.py): its failsafe (``rtl``,
   ``land`` or ``brake``), a pilot takeover, a lost link between the HLC and the vehicle, or an
   adapter whose ``state()`` raises, for ``duration`` s (the last two).
 * packet_loss: the agent's messages on ``topics`` are lost with probability ``loss`` and/or

@@ -97,7 +97,7 @@ class FaultStep(BaseModel):
     #: message is lost), and the bytes it lets through at once (default: one second's worth).
     bandwidth: float | None = Field(default=None, gt=0, le=1e9, allow_inf_nan=False)
     burst: float | None = Field(default=None, gt=0, le=1e9, allow_inf_nan=False)
-    #: A fault of the sim vehicle itself (antalate_lcm/autopilot/sim/faults.py).
+    #: A fault of the sim vehicle itself (antalate_lcm/vehicles/sim/faults.py).
     vehicle: Literal["failsafe", "pilot_takeover", "link_loss", "state_error"] | None = None
     failsafe: Literal["rtl", "land", "brake"] = "rtl"
 

@@ -2,20 +2,20 @@
 
 The operator's process (``antalate run``) serves a :class:`TimeCoordinator` on a Unix socket, on
 its own loop; it and each agent process (``antalate agent --shard i/P --sim-clock ADDRESS``) run
-their loop on a :class:`~antalate_lcm.core.simclock.SimClock` joined to it by a link
-(:class:`LocalLink` in the operator's process, :class:`SocketLink` in an agent process, with the
-rest of a process's side in :mod:`antalate_lcm.runtime.clock_link`). The rule
+their loop on a :class:`~antalate_lcm.core.simclock.SimClock` joined to it by a client
+(:class:`LocalClockClient` in the operator's process, :class:`SocketClockClient` in an agent process, with the
+rest of a process's side in :mod:`antalate_lcm.runtime.clock_client`). The rule
 they follow is :mod:`antalate_lcm.runtime.time_grant` (why it keeps the lockstep and the run
 deterministic is said there); here is only its I/O:
 
 - Every bus that crosses processes (UDP multicast, Zenoh) becomes, in each process, a private
   memq:// bus of its own: a datagram through the kernel would arrive at a real moment, not a
-  simulated one, and in an order set by the scheduler. The link hears every message published
+  simulated one, and in an order set by the scheduler. The client hears every message published
   on it (a pattern subscription) and carries it in its next report, with what the process's
-  nodes subscribed to on it since (:class:`SimulatedBus`); the messages of the other processes
+  nodes subscribed to on it since (:class:`SimulatedBuses`); the messages of the other processes
   it is handed come back on that bus, still at the time they were sent.
 - A process reports when its loop has nothing left to do now (the simulated clock's selector
-  calls :meth:`ClockLink.idle` where a lone process would move its clock), then waits on the
+  calls :meth:`ClockClient.idle` where a lone process would move its clock), then waits on the
   coordinator's socket; its answer (deliver these, or move to ``t``) is read on the loop thread.
   The operator's process reports and is answered by calls, on its own loop: a round that only
   hands the recorder the agents' messages costs it no system call and no thread switch.
@@ -46,25 +46,26 @@ import tempfile
 import threading
 import time
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.simclock import SIM_START, SimClock
-from antalate_lcm.runtime.clock_link import (
+from antalate_lcm.runtime.clock_client import (
     _ADVANCE,
     _DELIVER,
     _HELLO,
     _INTEREST,
     _REPORT,
-    ClockLink,
-    SimulatedBus,
-    SocketLink,
+    ClockClient,
+    SimulatedBuses,
+    SocketClockClient,
     join,
     simulated_buses,
 )
 
 # The frame format, for the tests that forge frames (its home is clock_link).
-from antalate_lcm.runtime.clock_link import _FRAME as _FRAME
-from antalate_lcm.runtime.clock_link import _frame as _frame
+from antalate_lcm.runtime.clock_client import _FRAME as _FRAME
+from antalate_lcm.runtime.clock_client import _frame as _frame
 from antalate_lcm.runtime.time_grant import (
     Deliver,
     Interest,
@@ -87,8 +88,8 @@ _PACE_STEP = 0.05
 DEFAULT_STALL = 60.0
 
 
-class LocalLink(ClockLink):
-    """The link of the coordinator's own process (index 0): its reports and answers are calls."""
+class LocalClockClient(ClockClient):
+    """The client of the coordinator's own process (index 0): its reports and answers are calls."""
 
     def __init__(self, coordinator: TimeCoordinator, clock: SimClock) -> None:
         super().__init__(0, clock)
@@ -136,7 +137,7 @@ class TimeCoordinator:
         self._server.bind(self.address)
         self._server.listen(count)
         self._executor: Executor | None = None
-        self._local: LocalLink | None = None
+        self._local: LocalClockClient | None = None
         self._peers: list[_Peer | None] = [None] * count
         self._pending: list[_Peer] = []  # connected, not yet said which process they are
         self._reports: list[Report | None] = [None] * count
@@ -156,12 +157,12 @@ class TimeCoordinator:
         #: Rounds decided (deliveries and advances): what the shared clock costs (benchmarks/simtime.py).
         self.rounds = 0
 
-    def serve(self, clock: SimClock, bus: SimulatedBus, executor: Executor, buses: Sequence[str]) -> None:
+    def serve(self, clock: SimClock, bus: SimulatedBuses, executor: Executor, buses: Sequence[str]) -> None:
         """Serve on ``executor``'s loop (before it runs), this process joined as index 0."""
-        link = LocalLink(self, clock)
-        link.bridge(bus, buses)
-        self._local, self._executor = link, executor
-        clock.link = link
+        client = LocalClockClient(self, clock)
+        client.bridge(bus, buses)
+        self._local, self._executor = client, executor
+        clock.coordinator = client
         executor.add_reader(self._server.fileno(), self._accept)
         threading.Thread(target=self._watch, name="clock-watchdog", daemon=True).start()
 
@@ -343,11 +344,35 @@ class TimeCoordinator:
 
 __all__ = [
     "DEFAULT_STALL",
-    "ClockLink",
-    "LocalLink",
-    "SimulatedBus",
-    "SocketLink",
+    "ClockClient",
+    "LocalClockClient",
+    "SimulatedBuses",
+    "SocketClockClient",
     "TimeCoordinator",
     "join",
     "simulated_buses",
 ]
+
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {
+    "ClockLink": "ClockClient",
+    "LocalLink": "LocalClockClient",
+    "SimulatedBus": "SimulatedBuses",
+    "SocketLink": "SocketClockClient",
+}
+
+if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
+
+    def __getattr__(name: str) -> object:
+        new = _DEPRECATED_NAMES.get(name)
+        if new is None:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        import warnings
+
+        warnings.warn(
+            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return globals()[new]

@@ -25,7 +25,7 @@ from textual.message import Message
 from textual.scroll_view import ScrollView
 from textual.strip import Strip
 
-from operator_tui.model import AgentView, SwarmModel, heading_arrow, join_limited, natural_key
+from operator_tui.board import AgentView, SwarmBoard, heading_arrow, join_limited, natural_key
 from operator_tui.widgets.palette import (
     SEVERITY_STYLE,
     STALE_STYLE,
@@ -179,7 +179,7 @@ class AgentTable(ScrollView, can_focus=True):
         self.selected: str | None = None
         self._frame_styles: tuple[Style, Style, Style] | None = None
         # What the last sync saw, so a row scrolled into view is brought up to date when drawn.
-        self._model: SwarmModel | None = None
+        self._board: SwarmBoard | None = None
         self._now = 0.0
         self._tick = 0
         self._fresh: dict[str, int] = {}
@@ -189,13 +189,13 @@ class AgentTable(ScrollView, can_focus=True):
         return len(self.order)
 
     # ------------------------------------------------------------------ data
-    def sync(self, model: SwarmModel, now: float) -> None:
-        """Bring the visible rows up to date with the model (new agents are inserted in name order).
+    def sync(self, board: SwarmBoard, now: float) -> None:
+        """Bring the visible rows up to date with the board (new agents are inserted in name order).
 
         A virtual table: with 1,000 agents only the rows on screen are formatted each tick; a row
         scrolled into view is formatted when it is drawn (:meth:`_cells_of`)."""
         cells_of = self.cells
-        new = [name for name in model.agents if name not in cells_of]
+        new = [name for name in board.agents if name not in cells_of]
         for name in new:
             key = natural_key(name)
             i = bisect_left(self._keys, key)
@@ -203,13 +203,13 @@ class AgentTable(ScrollView, can_focus=True):
             self.order.insert(i, name)
             cells_of[name] = ()
         changed = bool(new)
-        self._model, self._now = model, now
+        self._board, self._now = board, now
         self._tick += 1
         fresh, tick = self._fresh, self._tick
         first = self.scroll_offset.y
         order = self.order
         for name in order[first : first + max(1, self.size.height)]:
-            cells = row_cells(model.agents[name], now, model.stale_after)
+            cells = row_cells(board.agents[name], now, board.stale_after)
             fresh[name] = tick
             if cells != cells_of[name]:
                 cells_of[name] = cells
@@ -299,9 +299,9 @@ class AgentTable(ScrollView, can_focus=True):
 
     def _cells_of(self, name: str) -> tuple[Cell, ...]:
         """A row's cells as of the last sync (formatted now if the row was off screen then)."""
-        model = self._model
-        if model is not None and self._fresh.get(name) != self._tick and name in model.agents:
-            self.cells[name] = row_cells(model.agents[name], self._now, model.stale_after)
+        board = self._board
+        if board is not None and self._fresh.get(name) != self._tick and name in board.agents:
+            self.cells[name] = row_cells(board.agents[name], self._now, board.stale_after)
             self._fresh[name] = self._tick
         return self.cells[name]
 

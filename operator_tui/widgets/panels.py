@@ -15,8 +15,8 @@ from textual.geometry import Region
 from textual.widgets import RichLog, Static
 
 from antalate_lcm.wire.vocabulary import Severity
+from operator_tui.board import AgentView, Event, SafetySummary, heading_arrow
 from operator_tui.commands import DirectionControl, Status, TrackedCommand, applies
-from operator_tui.model import AgentView, Event, SafetySummary, heading_arrow
 from operator_tui.widgets.palette import SEVERITY_STYLE, battery_style, hlc_style, mc_style
 
 if TYPE_CHECKING:

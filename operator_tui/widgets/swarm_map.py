@@ -19,7 +19,7 @@ from rich.text import Text
 from textual.strip import Strip
 from textual.widget import Widget
 
-from operator_tui.model import AgentView, heading_arrow
+from operator_tui.board import AgentView, heading_arrow
 from operator_tui.widgets.palette import STALE_STYLE, mc_style
 
 #: Candidate scale-bar lengths (m): the map picks the longest that fits a quarter of its width.
@@ -188,7 +188,7 @@ class SwarmMap(Widget):
 
 
 def points_from(positions: Iterable[tuple[AgentView, float, float]]) -> list[MapPoint]:
-    """MapPoints from :meth:`SwarmModel.positions` (kept here so the model stays UI-free)."""
+    """MapPoints from :meth:`SwarmBoard.positions` (kept here so the board stays UI-free)."""
     out: list[MapPoint] = []
     for view, north, east in positions:
         tel = view.telemetry

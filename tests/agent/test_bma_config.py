@@ -9,7 +9,7 @@ import pytest
 
 from antalate_lcm.agent.bma import BmaNode, plan_bma, validate_bma_config
 from antalate_lcm.base.errors import ConfigError
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context
 from tests.bma_support import make_config
@@ -274,7 +274,7 @@ def test_a_remap_to_a_new_topic_of_the_same_type_is_fine() -> None:
 def test_bma_node_refuses_a_bad_config_at_construction() -> None:
     config = make_config([{"name": "m", "behaviors": [{"plugin": "nope"}]}])
     with (
-        contextlib.closing(Context(Bus(config.buses), Executor())) as context,
+        contextlib.closing(Context(Buses(config.buses), Executor())) as context,
         pytest.raises(ConfigError, match=r"bma\[0\].behaviors\[0\].plugin"),
     ):
         BmaNode(config, context, config.bma[0])

@@ -15,7 +15,7 @@ from antalate_lcm.agent.bma import BmaNode
 from antalate_lcm.base import geo
 from antalate_lcm.base.errors import ConfigError
 from antalate_lcm.core.behavior import Behavior
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config, parse_config
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context, Node, TopicMatch
@@ -182,7 +182,7 @@ def test_a_peer_bus_inside_one_process_is_refused_when_the_agents_are_not(contex
     """A BMA in a process of its own (``antalate bma``), or one shard of ``--processes N``."""
     cfg = _config("a1")
     with (
-        contextlib.closing(Context(Bus(cfg.buses), Executor())) as alone,
+        contextlib.closing(Context(Buses(cfg.buses), Executor())) as alone,
         pytest.raises(ConfigError, match=r"buses\.lan: a bus other processes reach .* TELEMETRY"),
     ):
         BmaNode(cfg, alone, cfg.bma[0])

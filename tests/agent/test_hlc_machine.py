@@ -23,8 +23,8 @@ from antalate_lcm.agent.hlc.machine import (
     pilot_in_control,
 )
 from antalate_lcm.agent.mc.machine import MissionControl
-from antalate_lcm.autopilot.base import AutopilotState, FlightMode, Frame
-from antalate_lcm.autopilot.sim import SimAutopilot
+from antalate_lcm.vehicles.base import FlightMode, Frame, VehicleState
+from antalate_lcm.vehicles.sim import SimAdapter
 from antalate_lcm.wire.vocabulary import Command, HlcState, McState, Severity
 from tests.harness.clock import FakeClock
 
@@ -32,11 +32,11 @@ H = HlcState
 M = McState
 T0 = 500.0
 
-GROUND = AutopilotState(connected=True, link_age=0.1, lat=32.7, lon=35.0, battery=80.0, mode="GUIDED")
+GROUND = VehicleState(connected=True, link_age=0.1, lat=32.7, lon=35.0, battery=80.0, mode="GUIDED")
 FLYING = replace(GROUND, armed=True, in_air=True, alt=10.0)
 
 
-def flying(**changes: object) -> AutopilotState:
+def flying(**changes: object) -> VehicleState:
     return replace(FLYING, **changes)  # type: ignore[arg-type]
 
 
@@ -73,7 +73,7 @@ def hlc_in(state: HlcState, params: HlcParams | None = None) -> HighLevelControl
     return h
 
 
-# An input is one of: ("mc", McState), ("ap", AutopilotState), ("arm", bool), ("tick", seconds later).
+# An input is one of: ("mc", McState), ("ap", VehicleState), ("arm", bool), ("tick", seconds later).
 Input = tuple[str, object]
 
 
@@ -89,7 +89,7 @@ def feed(h: HighLevelControl, what: Input, now: float = T0 + 10) -> HlcOutcome:
         assert isinstance(value, McState)
         return h.on_mc_state(value, now)
     if kind == "ap":
-        assert isinstance(value, AutopilotState)
+        assert isinstance(value, VehicleState)
         return h.on_autopilot(value, now)
     if kind == "arm":
         assert isinstance(value, bool)
@@ -221,8 +221,8 @@ EXTRA_ROWS: list[tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[Erro
 
 def _row_id(row: tuple[HlcState, Input, HlcState, tuple[Action, ...], tuple[ErrorCode, ...]]) -> str:
     frm, (kind, value), to, _, _ = row
-    detail = getattr(value, "name", None) or (value.mode if isinstance(value, AutopilotState) else value)
-    if isinstance(value, AutopilotState) and value.failsafe:
+    detail = getattr(value, "name", None) or (value.mode if isinstance(value, VehicleState) else value)
+    if isinstance(value, VehicleState) and value.failsafe:
         detail = f"{detail}-failsafe"
     return f"{frm.name}-{kind}_{detail}-{to.name}"
 
@@ -317,10 +317,10 @@ def test_init_to_ready_needs_both_autopilot_and_mc() -> None:
 
 @pytest.mark.parametrize(
     "snapshot",
-    [replace(GROUND, connected=False), replace(GROUND, link_age=3.0), AutopilotState()],
+    [replace(GROUND, connected=False), replace(GROUND, link_age=3.0), VehicleState()],
     ids=["not-connected", "stale", "nothing-known"],
 )
-def test_init_waits_for_a_fresh_link_and_never_declares_llc_down(snapshot: AutopilotState) -> None:
+def test_init_waits_for_a_fresh_link_and_never_declares_llc_down(snapshot: VehicleState) -> None:
     h = HighLevelControl()
     h.on_mc_state(M.STANDBY, T0)
     for i in range(5):
@@ -339,7 +339,7 @@ def test_init_waits_for_a_fresh_link_and_never_declares_llc_down(snapshot: Autop
     ],
     ids=lambda v: getattr(v, "mode", None) or v.name,
 )
-def test_init_resync_from_a_flying_vehicle(snapshot: AutopilotState, expected: HlcState) -> None:
+def test_init_resync_from_a_flying_vehicle(snapshot: VehicleState, expected: HlcState) -> None:
     h = HighLevelControl()
     h.on_mc_state(M.MISSION, T0)
     outcome = h.on_autopilot(snapshot, T0)
@@ -666,7 +666,7 @@ class Loop:
 
     def __init__(self, sim_params: dict[str, object] | None = None) -> None:
         self.clock = FakeClock(10.0)
-        self.sim = SimAutopilot(sim_params or {}, clock=self.clock)
+        self.sim = SimAdapter(sim_params or {}, clock=self.clock)
         self.sim.connect()
         self.mc = MissionControl()
         self.hlc = HighLevelControl()
@@ -829,7 +829,7 @@ def test_closed_loop_restarts_resync_without_commands() -> None:
     ],
     ids=lambda v: v if isinstance(v, bool) else f"{v.mode}-{v.flight_mode.name}-{v.failsafe or 'nofs'}",
 )
-def test_pilot_is_only_a_real_pilot(snapshot: AutopilotState, pilot: bool) -> None:
+def test_pilot_is_only_a_real_pilot(snapshot: VehicleState, pilot: bool) -> None:
     assert pilot_in_control(snapshot) is pilot
 
 
@@ -852,7 +852,7 @@ def test_classify() -> None:
     ],
     ids=["percent", "volts", "warning"],
 )
-def test_low_battery_reason_says_which(snapshot: AutopilotState, words: str) -> None:
+def test_low_battery_reason_says_which(snapshot: VehicleState, words: str) -> None:
     h = hlc_in(H.AIRBORNE)
     outcome = h.on_autopilot(snapshot, T0 + 20)
     assert h.state is H.LOW_BATTERY
@@ -864,7 +864,7 @@ def test_low_battery_reason_says_which(snapshot: AutopilotState, words: str) -> 
     [flying(voltage=float("nan"), cells=4), flying(voltage=13.6, cells=0), flying(voltage=14.4, cells=4)],
     ids=["nan-volts", "no-cells", "3.6V"],
 )
-def test_unknown_or_healthy_voltage_is_not_low(snapshot: AutopilotState) -> None:
+def test_unknown_or_healthy_voltage_is_not_low(snapshot: VehicleState) -> None:
     h = hlc_in(H.AIRBORNE)
     assert h.on_autopilot(snapshot, T0 + 20).transition is None
 

@@ -21,7 +21,7 @@ import pytest
 from antalate_lcm.agent.osc import OscNode, wire
 from antalate_lcm.agent.osc.node import tls_context
 from antalate_lcm.base.errors import AntalateError, ConfigError
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import parse_config
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context
@@ -56,7 +56,7 @@ def make_osc(
             "security": security or {},
         }
     )
-    ctx = Context(Bus(cfg.buses), Executor())
+    ctx = Context(Buses(cfg.buses), Executor())
     ctx.executor.start()
     got: dict[str, list[Any]] = {"cmd": [], "dir": [], "payload": []}
     ctx.bus.subscribe("lan", "alpha/OPERATOR_CMD", operator_cmd_t, lambda c, m: got["cmd"].append(m))
@@ -230,7 +230,7 @@ def test_many_oscs_share_the_loop_and_send_nothing_once_stopped(station: Station
         )
         for i in range(40)
     ]
-    ctx = Context(Bus(cfgs[0].buses), Executor())
+    ctx = Context(Buses(cfgs[0].buses), Executor())
     ctx.executor.start()
     threads = threading.active_count()
     nodes = [OscNode(cfg, ctx) for cfg in cfgs]
@@ -274,7 +274,7 @@ def test_an_unexpected_error_in_the_exchange_is_logged_and_retried(caplog: pytes
             "osc": {"enabled": True, "server": "http://127.0.0.1:9", "rate": 20.0, "max_backoff": 0.2},
         }
     )
-    ctx = Context(Bus(cfg.buses), Executor())
+    ctx = Context(Buses(cfg.buses), Executor())
     ctx.executor.start()
     node = OscNode(cfg, ctx, transport=httpx.MockTransport(broken))
     try:
@@ -551,7 +551,7 @@ def test_a_missing_ca_file_is_a_config_error(tmp_path: Path) -> None:
             "osc": {"enabled": True, "server": "https://127.0.0.1:1", "ca_file": str(tmp_path / "no.pem")},
         }
     )
-    ctx = Context(Bus(cfg.buses), Executor())
+    ctx = Context(Buses(cfg.buses), Executor())
     with pytest.raises(ConfigError, match="osc.ca_file"):
         OscNode(cfg, ctx)
     ctx.close()

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from antalate_lcm.runtime.commands import native_lcm_tool
+from antalate_lcm.runtime.cli import native_lcm_tool
 from tests import swarm_flight as sf
 from tests.conftest import MCAST_URL
 from tests.harness.netns import NetNamespace, netns_unavailable

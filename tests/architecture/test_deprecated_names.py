@@ -17,6 +17,12 @@ SHIMS = [
     ("antalate_lcm.security", "antalate_lcm.wire.security"),
     ("antalate_lcm.validation", "antalate_lcm.wire.validation"),
     ("antalate_lcm.analysis", "antalate_lcm.apps.analysis"),
+    ("antalate_lcm.autopilot", "antalate_lcm.vehicles"),
+    ("operator_tui.link", "operator_tui.node"),
+    ("operator_tui.model", "operator_tui.board"),
+    ("antalate_lcm.apps.analysis.model", "antalate_lcm.apps.analysis.records"),
+    ("antalate_lcm.runtime.commands", "antalate_lcm.runtime.cli"),
+    ("antalate_lcm.runtime.clock_link", "antalate_lcm.runtime.clock_client"),
 ]
 #: Deprecated names with a test of their own (they re-export only what users imported).
 OTHERS = [
@@ -84,10 +90,80 @@ sys.exit("\\n".join(used) or None)
 def test_nothing_in_the_project_imports_an_old_name() -> None:
     """The shims are for users: every module of the packages imports the new names (an old one would warn)."""
     proc = subprocess.run(
-        [sys.executable, "-c", WALK, *(old for old, _ in SHIMS), *OTHERS],
+        [
+            sys.executable,
+            "-c",
+            WALK,
+            *(old for old, _ in SHIMS),
+            *OTHERS,
+            *(f"{m}.{o}" for m, o, _ in RENAMED),
+        ],
         capture_output=True,
         text=True,
         timeout=120,
     )
     assert proc.returncode == 0, proc.stderr
     assert int(proc.stdout) > 100  # the walk saw the packages
+
+
+#: Names renamed to the vocabulary (docs/architecture.md, "Vocabulary"): (module, old, new).
+RENAMED = [
+    ("antalate_lcm", "Autopilot", "VehicleAdapter"),
+    ("antalate_lcm", "AutopilotState", "VehicleState"),
+    ("antalate_lcm", "Bus", "Buses"),
+    ("antalate_lcm.vehicles", "Autopilot", "VehicleAdapter"),
+    ("antalate_lcm.vehicles", "AutopilotState", "VehicleState"),
+    ("antalate_lcm.vehicles.base", "Autopilot", "VehicleAdapter"),
+    ("antalate_lcm.vehicles.base", "AutopilotState", "VehicleState"),
+    ("antalate_lcm.vehicles.crazyflie", "CrazyflieAutopilot", "CrazyflieAdapter"),
+    ("antalate_lcm.vehicles.crazyflie.adapter", "CrazyflieAutopilot", "CrazyflieAdapter"),
+    ("antalate_lcm.vehicles.mavlink", "MavlinkAutopilot", "MavlinkAdapter"),
+    ("antalate_lcm.vehicles.mavlink.adapter", "MavlinkAutopilot", "MavlinkAdapter"),
+    ("antalate_lcm.vehicles.px4", "Px4Autopilot", "Px4Adapter"),
+    ("antalate_lcm.vehicles.px4.adapter", "Px4Autopilot", "Px4Adapter"),
+    ("antalate_lcm.vehicles.sim", "SimAutopilot", "SimAdapter"),
+    ("antalate_lcm.vehicles.sim.adapter", "SimAutopilot", "SimAdapter"),
+    ("antalate_lcm.vehicles.tello", "TelloAutopilot", "TelloAdapter"),
+    ("antalate_lcm.vehicles.tello.adapter", "TelloAutopilot", "TelloAdapter"),
+    ("antalate_lcm.cli", "commands", "subcommands"),
+    ("antalate_lcm.core.bus", "Bus", "Buses"),
+    ("antalate_lcm.runtime.clock_client", "ClockLink", "ClockClient"),
+    ("antalate_lcm.runtime.clock_client", "SimulatedBus", "SimulatedBuses"),
+    ("antalate_lcm.runtime.clock_client", "SocketLink", "SocketClockClient"),
+    ("antalate_lcm.runtime.time_coordinator", "ClockLink", "ClockClient"),
+    ("antalate_lcm.runtime.time_coordinator", "LocalLink", "LocalClockClient"),
+    ("antalate_lcm.runtime.time_coordinator", "SimulatedBus", "SimulatedBuses"),
+    ("antalate_lcm.runtime.time_coordinator", "SocketLink", "SocketClockClient"),
+    ("operator_tui.board", "SwarmModel", "SwarmBoard"),
+    ("operator_tui.web", "ConsoleLink", "BrowserTab"),
+]
+
+
+@pytest.mark.parametrize(("module", "old", "new"), RENAMED)
+def test_an_old_name_warns_and_is_the_new_one(module: str, old: str, new: str) -> None:
+    import importlib
+
+    try:
+        mod = importlib.import_module(module)
+    except ModuleNotFoundError as exc:  # an optional extra (djitellopy, cflib) that is not installed
+        pytest.skip(str(exc))
+    with pytest.warns(DeprecationWarning, match=f"{old} is deprecated: use .*{new}"):
+        value = getattr(mod, old)
+    assert value is getattr(mod, new)
+
+
+def test_an_old_submodule_is_the_new_module() -> None:
+    """A config naming ``antalate_lcm.autopilot.sim:SimAutopilot`` loads the very class it did."""
+    program = (
+        "import importlib, warnings\n"
+        "warnings.simplefilter('ignore')\n"
+        "from antalate_lcm.base.plugins import load_plugin\n"
+        "from antalate_lcm.vehicles import VehicleAdapter\n"
+        "from antalate_lcm.vehicles.sim import SimAdapter\n"
+        "old = importlib.import_module('antalate_lcm.autopilot.sim')\n"
+        "assert old is importlib.import_module('antalate_lcm.vehicles.sim')\n"
+        "assert old.__spec__.name == 'antalate_lcm.vehicles.sim'\n"
+        "assert load_plugin('antalate.autopilots', 'antalate_lcm.autopilot.sim:SimAutopilot', VehicleAdapter) is SimAdapter\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr

@@ -19,9 +19,9 @@ import pytest
 import tomli_w
 
 from antalate_lcm.apps.analysis.plot import MATPLOTLIB_MISSING
-from antalate_lcm.autopilot import AutopilotError
-from antalate_lcm.autopilot.tello import DJITELLOPY_MISSING, TelloAutopilot
 from antalate_lcm.core.config import load_config
+from antalate_lcm.vehicles import AutopilotError
+from antalate_lcm.vehicles.tello import DJITELLOPY_MISSING, TelloAdapter
 from tests import REPO
 
 
@@ -69,7 +69,7 @@ def test_tello_connect_without_djitellopy_says_which_extra_to_install(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     monkeypatch.setitem(sys.modules, "djitellopy", None)
-    ap = TelloAutopilot({"host": "127.0.0.1"})
+    ap = TelloAdapter({"host": "127.0.0.1"})
     with pytest.raises(AutopilotError) as err:
         ap.connect()
     assert str(err.value) == DJITELLOPY_MISSING and "pip install 'antalate[tello]'" in str(err.value)

@@ -8,12 +8,12 @@ from __future__ import annotations
 import sys
 import time
 
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.msgs import telemetry_t
 
 
 def main(url: str) -> None:
-    b = Bus({"lan": url})
+    b = Buses({"lan": url})
     for i in range(200):
         m = telemetry_t()
         m.header.seq = i

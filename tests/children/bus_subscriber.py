@@ -10,12 +10,12 @@ from __future__ import annotations
 import sys
 import time
 
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.msgs import telemetry_t
 
 
 def main(url: str, report: str) -> None:
-    b = Bus({"lan": url})
+    b = Buses({"lan": url})
     got: list[int] = []
 
     def on_telemetry(_channel: str, m: telemetry_t) -> None:

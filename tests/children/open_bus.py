@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import sys
 
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 
 if __name__ == "__main__":
-    Bus({"lan": sys.argv[1]}).open()
+    Buses({"lan": sys.argv[1]}).open()

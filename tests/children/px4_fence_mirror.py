@@ -11,14 +11,14 @@ import json
 import sys
 from typing import Any
 
-from antalate_lcm.autopilot.px4 import Px4Autopilot
-from antalate_lcm.autopilot.px4.fence_mirror import ORDER, fence_parameters, mirror
 from antalate_lcm.base.safety.geofence import Geofence
+from antalate_lcm.vehicles.px4 import Px4Adapter
+from antalate_lcm.vehicles.px4.fence_mirror import ORDER, fence_parameters, mirror
 
 
 def main(port: int) -> dict[str, Any]:
     fence = Geofence(((-30.0, -40.0), (-30.0, 40.0), (50.0, 40.0), (50.0, -40.0)), 0.0, 60.0, 2.0)
-    ap = Px4Autopilot({"connection": f"udpin:127.0.0.1:{port}", "connect_timeout": 90.0})
+    ap = Px4Adapter({"connection": f"udpin:127.0.0.1:{port}", "connect_timeout": 90.0})
     ap.connect()
     try:
         before = ap.read_params(list(ORDER))

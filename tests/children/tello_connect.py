@@ -6,12 +6,12 @@
 
 from __future__ import annotations
 
-from antalate_lcm.autopilot.tello import TelloAutopilot
+from antalate_lcm.vehicles.tello import TelloAdapter
 
 
 def main() -> None:
     try:
-        TelloAutopilot({}).connect()
+        TelloAdapter({}).connect()
     except Exception as exc:
         print(type(exc).__name__, exc)
 

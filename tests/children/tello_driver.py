@@ -18,10 +18,10 @@ import time
 from dataclasses import asdict
 from typing import Any
 
-from antalate_lcm.autopilot.base import Frame
-from antalate_lcm.autopilot.tello import TelloAutopilot
+from antalate_lcm.vehicles.base import Frame
+from antalate_lcm.vehicles.tello import TelloAdapter
 
-adapters: dict[str, TelloAutopilot] = {}
+adapters: dict[str, TelloAdapter] = {}
 background: dict[str, dict[str, Any]] = {}
 
 
@@ -52,7 +52,7 @@ def handle(req: dict[str, Any]) -> Any:
         old = adapters.pop(name, None)
         if old is not None:
             old.close()
-        adapters[name] = TelloAutopilot(req["params"])
+        adapters[name] = TelloAdapter(req["params"])
         return None
     if op == "call":
         args = list(req.get("args", []))

@@ -19,7 +19,7 @@ from typing import Any
 
 import lcm
 
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.msgs import telemetry_t
 from antalate_lcm.transports.datagram import fragments, short_datagram
 
@@ -42,9 +42,9 @@ def sockets() -> set[str]:
 
 def main(A: str, B: str) -> dict[str, Any]:
     out: dict[str, Any] = {}
-    own, other = Bus({"a": A}), Bus({"a": A})  # two own readers on one port (SO_REUSEADDR)
-    old = Bus({"a": A}, own_udpm_reader=False)  # liblcm's receive thread, beside them
-    elsewhere = Bus({"b": B})  # the same port, another group
+    own, other = Buses({"a": A}), Buses({"a": A})  # two own readers on one port (SO_REUSEADDR)
+    old = Buses({"a": A}, own_udpm_reader=False)  # liblcm's receive thread, beside them
+    elsewhere = Buses({"b": B})  # the same port, another group
     got: dict[str, list[Any]] = {k: [] for k in ("exact", "regex", "other", "old", "elsewhere", "typed")}
     own.subscribe("a", "BIG", None, lambda ch, d: got["exact"].append(d))
     own.subscribe("a", "B.*", None, lambda ch, d: got["regex"].append((ch, d)), regex=True)
@@ -113,7 +113,7 @@ def main(A: str, B: str) -> dict[str, Any]:
 
     mine = set()
     for b in (own, other, elsewhere):
-        for link in b._links.values():
+        for link in b._connections.values():
             assert link._receiver is not None, "a bus with the own reader has its receiver"
             mine.add(f"socket:[{os.fstat(link._receiver.fileno()).st_ino}]")
     out["open_before_close"] = len(mine & sockets())

@@ -1,5 +1,5 @@
 """The command line is one table (docs/architecture.md, "The command line"): every subcommand is a row of
-``antalate_lcm.cli.commands()``, its arguments declared beside its handler, and no module hooks a
+``antalate_lcm.cli.subcommands()``, its arguments declared beside its handler, and no module hooks a
 subcommand or edits a parser another built (as the web console once did to ``tui``)."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import argparse
 import ast
 from pathlib import Path
 
-from antalate_lcm.cli import build_parser, commands
+from antalate_lcm.cli import build_parser, subcommands
 
 REPO = Path(__file__).resolve().parent.parent.parent
 PACKAGES = ("antalate_lcm", "operator_tui", "behaviors")
@@ -21,7 +21,7 @@ def _subparsers(parser: argparse.ArgumentParser) -> argparse._SubParsersAction[a
 
 
 def test_the_parser_is_the_table_in_its_order() -> None:
-    rows = commands()
+    rows = subcommands()
     names = [row.name for row in rows]
     assert len(set(names)) == len(names)
     sub = _subparsers(build_parser())
@@ -34,7 +34,7 @@ def test_the_parser_is_the_table_in_its_order() -> None:
 def test_each_command_declares_its_arguments_beside_its_handler() -> None:
     misplaced = {
         row.name: (row.arguments.__module__, row.run.__module__)
-        for row in commands()
+        for row in subcommands()
         if row.arguments is not None and row.arguments.__module__ != row.run.__module__
     }
     assert misplaced == {}

@@ -18,7 +18,7 @@ from typing import Any, TypeVar
 
 import pytest
 
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config, parse_config
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context
@@ -34,8 +34,8 @@ from antalate_lcm.msgs import (
 from antalate_lcm.wire.security import sign, verify
 from antalate_lcm.wire.vocabulary import Command, name_of
 from operator_tui.app import SLICE_ITEMS, ConsoleSettings, OperatorApp
+from operator_tui.board import EventKind, Telemetry
 from operator_tui.commands import Status
-from operator_tui.model import EventKind, Telemetry
 from operator_tui.screens import ConfirmScreen, HelpScreen
 from operator_tui.widgets.agent_table import COLUMNS, AgentTable
 from operator_tui.widgets.panels import EventLog
@@ -52,7 +52,7 @@ WALL0 = 1_800_000_000.0
 class FakeSwarm:
     """Publishes what agents publish and records what the console sends, on the shared bus."""
 
-    def __init__(self, bus: Bus, bus_name: str = "lan") -> None:
+    def __init__(self, bus: Buses, bus_name: str = "lan") -> None:
         self.bus = bus
         self.bus_name = bus_name
         self.commands: list[tuple[str, operator_cmd_t]] = []
@@ -145,7 +145,7 @@ def memq_config(**extra: Any) -> Config:
 
 @pytest.fixture
 def context() -> Iterator[Context]:
-    ctx = Context(Bus({"lan": "memq://"}), Executor())
+    ctx = Context(Buses({"lan": "memq://"}), Executor())
     ctx.executor.start()
     yield ctx
     ctx.close()
@@ -195,7 +195,7 @@ async def until(pilot: Any, app: OperatorApp, cond: Callable[[], T], timeout: fl
 
 def telemetry(app: OperatorApp, name: str) -> Telemetry:
     """The agent's last decoded telemetry (it must have one by then)."""
-    tel = app.model.agents[name].telemetry
+    tel = app.board.agents[name].telemetry
     assert tel is not None, f"{name} has no telemetry yet"
     return tel
 
@@ -238,7 +238,7 @@ async def two_agents(
     async with app.run_test(size=(160, 44)) as pilot:
         swarm.agent("alpha", lat=47.3977, lon=8.5456)
         swarm.flying("bravo", lat=47.3980, lon=8.5460, alt=12.5, heading=90.0, ve=2.0, battery=35.0)
-        await until(pilot, app, lambda: len(app.model.agents) == 2 and app.selected == "alpha")
+        await until(pilot, app, lambda: len(app.board.agents) == 2 and app.selected == "alpha")
         yield app, pilot
 
 
@@ -258,7 +258,7 @@ async def test_agent_messages_appear_as_rows(context: Context, swarm: FakeSwarm,
         swarm.arbiter("uav10", "main", "MISSION", ["dovrat_swarm", "video_capture"])
         swarm.error("uav10", "arming refused: battery low", code=12)
         await until(
-            pilot, app, lambda: table.row_count == 2 and app.model.agents["uav10"].last_error is not None
+            pilot, app, lambda: table.row_count == 2 and app.board.agents["uav10"].last_error is not None
         )
         await pilot.pause()
         assert table.order == ["uav2", "uav10"]
@@ -298,19 +298,19 @@ async def test_silent_agents_are_marked_stale_not_removed(
     app, pilot = two_agents
     clock.advance(2.0)
     swarm.mc("bravo", mc_state_t.MISSION)
-    await until(pilot, app, lambda: app.model.agents["bravo"].link_age(clock()) == 0.0)
+    await until(pilot, app, lambda: app.board.agents["bravo"].link_age(clock()) == 0.0)
     clock.advance(1.5)  # alpha silent 3.5 s > 3 s; bravo 1.5 s
     app.refresh_now()
-    assert app.model.agents["alpha"].stale and not app.model.agents["bravo"].stale
+    assert app.board.agents["alpha"].stale and not app.board.agents["bravo"].stale
     table = app.screen.query_one(AgentTable)
     assert table.row_count == 2
     row = table.cells["alpha"]
     assert row[7] == ("4s", "bold red")
     assert "dim" in row[1][1]
     assert table_row(app, "bravo")["link"] == "2s"
-    assert any(e.kind.value == "stale" and e.agent == "alpha" for e in app.model.events)
+    assert any(e.kind.value == "stale" and e.agent == "alpha" for e in app.board.events)
     swarm.mc("alpha")
-    await until(pilot, app, lambda: not app.model.agents["alpha"].stale)
+    await until(pilot, app, lambda: not app.board.agents["alpha"].stale)
     assert table_row(app, "alpha")["link"] == "ok"
 
 
@@ -372,7 +372,7 @@ async def test_ack_through_last_command_seq_clears_pending(
     await until(pilot, app, lambda: cmd.status is Status.ACKED)
     assert not app.tracker.pending
     assert "acked 0.3s" in str(app.screen.query_one("#commands").render())
-    assert any("acknowledged" in e.text for e in app.model.events)
+    assert any("acknowledged" in e.text for e in app.board.events)
 
 
 async def test_unacknowledged_command_is_resent_with_the_same_seq_then_fails(
@@ -389,7 +389,7 @@ async def test_unacknowledged_command_is_resent_with_the_same_seq_then_fails(
     for _ in range(4):
         clock.advance(1.0)
         swarm.mc("bravo", mc_state_t.MISSION)  # alive, but not accepting it
-        await until(pilot, app, lambda: app.model.agents["bravo"].last_heard == clock())
+        await until(pilot, app, lambda: app.board.agents["bravo"].last_heard == clock())
     cmd = next(c for c in app.tracker.done if c.seq == first.header.seq)
     assert cmd.status is Status.FAILED and cmd.sends == 5
     assert "likely rejected it (MC MISSION; TAKEOFF applies in STANDBY)" in cmd.reason
@@ -507,12 +507,12 @@ async def test_a_keyed_console_takes_no_forged_acknowledgement_or_state(
             await settle(pilot)
             app.refresh_now()
             assert cmd.status is Status.PENDING
-            assert app.model.agents["alpha"].mc_state == "STANDBY"
+            assert app.board.agents["alpha"].mc_state == "STANDBY"
         assert app.node.rejected == 2
         swarm.key = key  # the real MC's acknowledgement
         swarm.mc("alpha", mc_state_t.TAKEOFF, last=msg.header.seq)
         await until(pilot, app, lambda: cmd.status is Status.ACKED)
-        assert app.model.agents["alpha"].mc_state == "TAKEOFF"
+        assert app.board.agents["alpha"].mc_state == "TAKEOFF"
 
 
 async def test_help_screen_and_footer(two_agents: tuple[OperatorApp, Any], swarm: FakeSwarm) -> None:
@@ -538,7 +538,7 @@ async def test_a_key_goes_before_a_pending_bulk_update(
     async with app.run_test(size=(160, 44)) as pilot:
         swarm.agent("alpha")
         await until(pilot, app, lambda: app.selected == "alpha")
-        n = 16 * SLICE_ITEMS  # each is logged as discovered: fewer than the 2,000 events the model keeps
+        n = 16 * SLICE_ITEMS  # each is logged as discovered: fewer than the 2,000 events the board keeps
         for i in range(n):
             swarm.mc(f"bulk{i:04d}")
         deadline = time.monotonic() + 10.0
@@ -548,8 +548,8 @@ async def test_a_key_goes_before_a_pending_bulk_update(
         tick = asyncio.ensure_future(app.refresh_sliced())
         await pilot.press("t")
         await tick
-        assert len(app.model.agents) == n + 1
-        events = list(app.model.events)
+        assert len(app.board.agents) == n + 1
+        events = list(app.board.events)
         (sent,) = [i for i, ev in enumerate(events) if ev.text.startswith("sent TAKEOFF → alpha")]
         discovered = [i for i, ev in enumerate(events) if ev.kind is EventKind.DISCOVERED]
         assert discovered[0] < sent < discovered[-1], "the key waited for the whole bulk update"
@@ -560,7 +560,7 @@ async def test_the_map_is_fixed_rate_and_repaints_only_when_its_picture_changes(
 ) -> None:
     app, pilot = two_agents
     swarm_map = app.screen.query_one(SwarmMap)
-    points = points_from(app.model.positions())
+    points = points_from(app.board.positions())
     swarm_map.update_points(points, app.selected)
     repaints = swarm_map.repaints
     # Agents moving inside their cells: the aggregated picture is the same, nothing is repainted.
@@ -603,12 +603,12 @@ async def test_off_screen_telemetry_is_decoded_when_shown(
         await until(
             pilot,
             app,
-            lambda: len(app.model.agents) == 60 and all(v.telemetry for v in app.model.agents.values()),
+            lambda: len(app.board.agents) == 60 and all(v.telemetry for v in app.board.agents.values()),
         )
         await pilot.pause()
         shown, hidden = names[0], names[-1]
         assert hidden not in app.screen.query_one(AgentTable).visible_names()
-        heard = app.model.agents[hidden].messages
+        heard = app.board.agents[hidden].messages
         for name in (shown, hidden):
             swarm.tel(name, battery=50.0)
         deadline = time.monotonic() + 5.0
@@ -618,7 +618,7 @@ async def test_off_screen_telemetry_is_decoded_when_shown(
         await app.refresh_sliced()
         assert telemetry(app, shown).battery == 50.0
         assert telemetry(app, hidden).battery == 90.0, "off screen: not decoded yet"
-        assert app.model.agents[hidden].messages == heard + 1, "but heard"
+        assert app.board.agents[hidden].messages == heard + 1, "but heard"
         clock.advance(ConsoleSettings().map_interval)
         await app.refresh_sliced()
         assert telemetry(app, hidden).battery == 50.0, "the map's turn: every position"
@@ -628,11 +628,11 @@ async def test_appending_events_does_not_lay_out_the_screen(two_agents: tuple[Op
     app, pilot = two_agents
     log_widget = app.screen.query_one(EventLog)
     for i in range(40):  # more lines than the log shows: its scrollbar is up
-        app.model.log(WALL0, "alpha", f"line {i}")
+        app.board.log(WALL0, "alpha", f"line {i}")
     app.refresh_now()
     await pilot.pause()
     skipped = log_widget.layouts_skipped
-    app.model.log(WALL0, "alpha", "one more line")
+    app.board.log(WALL0, "alpha", "one more line")
     app.refresh_now()
     await pilot.pause()
     assert log_widget.layouts_skipped == skipped + 1
@@ -645,7 +645,7 @@ async def test_garbage_on_a_watched_channel_is_reported_not_fatal(
 ) -> None:
     app, pilot = two_agents
     context.bus.publish("lan", "alpha/MC_STATE", b"\x00garbage")
-    await until(pilot, app, lambda: any("not a valid mc_state_t" in e.text for e in app.model.events))
+    await until(pilot, app, lambda: any("not a valid mc_state_t" in e.text for e in app.board.events))
     assert app.node.decode_errors == 1 and app.is_running
 
 

@@ -16,8 +16,8 @@ async def test_console_reads_a_log_as_if_live(tmp_path: Path) -> None:
     async with app.run_test() as pilot:
         for _ in range(100):
             await pilot.pause(0.1)
-            if len(app.model.agents) == 4 and app.model.agents["a-1"].mc_state == "RTL":
+            if len(app.board.agents) == 4 and app.board.agents["a-1"].mc_state == "RTL":
                 break
-        assert sorted(app.model.agents) == ["a-1", "a-2", "a-3", "a-4"]
-        assert app.model.agents["a-1"].mc_state == "RTL"
-        assert {app.model.agents[a].mc_state for a in ("a-2", "a-3", "a-4")} == {"MISSION"}
+        assert sorted(app.board.agents) == ["a-1", "a-2", "a-3", "a-4"]
+        assert app.board.agents["a-1"].mc_state == "RTL"
+        assert {app.board.agents[a].mc_state for a in ("a-2", "a-3", "a-4")} == {"MISSION"}

@@ -79,7 +79,7 @@ async def test_main_screen_snapshot(context: Context, swarm: FakeSwarm, clock: F
         )
         swarm.error("delta", "no autopilot heartbeat for 3.0 s", code=2, severity=hlc_error_t.CRITICAL)
         swarm.agent("echo", lat=47.39790, lon=8.54480, heading=300.0)
-        await until(pilot, app, lambda: len(app.model.agents) == 5 and app.model.agents["delta"].last_error)
+        await until(pilot, app, lambda: len(app.board.agents) == 5 and app.board.agents["delta"].last_error)
 
         # TAKEOFF alpha, acknowledged 0.4 s later.
         await pilot.press("home", "t")
@@ -95,18 +95,18 @@ async def test_main_screen_snapshot(context: Context, swarm: FakeSwarm, clock: F
         # Four seconds on: everybody but echo keeps publishing, so echo goes stale.
         clock.advance(0.5)
         for name in ("alpha", "bravo", "charlie", "delta"):
-            state = app.model.agents[name].mc_state
+            state = app.board.agents[name].mc_state
             assert state, f"{name} has no MC state yet"
             swarm.mc(name, mc_state_t.__dict__[state], last=takeoff.header.seq if name == "alpha" else 0)
         await until(
-            pilot, app, lambda: all(app.model.agents[n].last_heard == clock() for n in ("alpha", "delta"))
+            pilot, app, lambda: all(app.board.agents[n].last_heard == clock() for n in ("alpha", "delta"))
         )
         clock.advance(3.0)
         swarm.mc("bravo", mc_state_t.MISSION)
         await until(
             pilot,
             app,
-            lambda: app.model.agents["echo"].stale and app.model.agents["bravo"].last_heard == clock(),
+            lambda: app.board.agents["echo"].stale and app.board.agents["bravo"].last_heard == clock(),
         )
         app.refresh_now()
         await pilot.pause()

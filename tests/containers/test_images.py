@@ -38,8 +38,8 @@ HEALTHCHECK = ["/opt/antalate/bin/python", "/usr/local/lib/antalate-healthcheck.
 # the module every node kind runs, the LCM binding and the MAVLink adapter (the default image's vehicle)
 NODE_IMPORTS = (
     "import lcm, antalate_lcm.cli, antalate_lcm.agent.mc, antalate_lcm.agent.hlc.node, antalate_lcm.agent.bma, "
-    "antalate_lcm.agent.osc, antalate_lcm.station, antalate_lcm.autopilot.mavlink, "
-    "antalate_lcm.autopilot.tello, operator_tui.web; from pymavlink import mavutil"
+    "antalate_lcm.agent.osc, antalate_lcm.station, antalate_lcm.vehicles.mavlink, "
+    "antalate_lcm.vehicles.tello, operator_tui.web; from pymavlink import mavutil"
 )
 # what the default image leaves out: opencv (never imported), the tello and plot extras
 LEFT_OUT_CHECK = (
@@ -131,8 +131,8 @@ def test_every_node_kind_imports_in_the_image_as_its_user(built_image: Image, im
     tello = run(
         "/opt/antalate/bin/python",
         "-c",
-        "from antalate_lcm.autopilot.tello import TelloAutopilot\n"
-        "try:\n    TelloAutopilot({'host': '127.0.0.1'}).connect()\n"
+        "from antalate_lcm.vehicles.tello import TelloAdapter\n"
+        "try:\n    TelloAdapter({'host': '127.0.0.1'}).connect()\n"
         "except Exception as exc:\n    print(exc)",
     )
     assert "pip install 'antalate[tello]'" in tello.stdout, tello.stdout + tello.stderr

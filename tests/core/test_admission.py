@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config, parse_config
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context, InsecureBus, Node
@@ -42,7 +42,7 @@ def _command(
 
 @pytest.fixture
 def context() -> Any:
-    ctx = Context(Bus({"lan": UDPM}), Executor())  # never opened: nothing here sends
+    ctx = Context(Buses({"lan": UDPM}), Executor())  # never opened: nothing here sends
     yield ctx
     ctx.close()
 

@@ -307,7 +307,7 @@ def test_bad_station_urls(tmp_path: Path, server: str, expected: str) -> None:
 
 
 def _installed_listed(message: str) -> None:
-    from antalate_lcm.autopilot import available_autopilots
+    from antalate_lcm.vehicles import available_autopilots
 
     installed = available_autopilots()
     assert {"sim", "tello", "mavlink"} <= set(installed)
@@ -329,17 +329,17 @@ def plugin_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
         (":Foo", "'package.module:ClassName'"),
         (".sim:X", "an absolute module path"),
         ("sim:", "'package.module:ClassName'"),
-        ("antalate_lcm.autopilot.sim:Sim Autopilot", "'package.module:ClassName'"),
+        ("antalate_lcm.vehicles.sim:Sim Autopilot", "'package.module:ClassName'"),
         ("nope", "there is no adapter 'nope'"),
         ("Sim", "there is no adapter 'Sim'"),
         ("", "there is no adapter ''"),
         ("antalate_lcm.no_such_module:Foo", "No module named 'antalate_lcm.no_such_module'"),
-        ("antalate_lcm.autopilot.sim:Nope", "has no attribute 'Nope'"),
+        ("antalate_lcm.vehicles.sim:Nope", "has no attribute 'Nope'"),
         (
-            "antalate_lcm.autopilot.base:AutopilotState",
-            "not a subclass of antalate_lcm.autopilot.base.Autopilot",
+            "antalate_lcm.vehicles.base:VehicleState",
+            "not a subclass of antalate_lcm.vehicles.base.VehicleAdapter",
         ),
-        ("antalate_lcm.autopilot.base:Autopilot", "abstract"),
+        ("antalate_lcm.vehicles.base:VehicleAdapter", "abstract"),
     ],
 )
 def test_bad_autopilot_names_list_the_installed_adapters(tmp_path: Path, name: str, detail: str) -> None:
@@ -385,20 +385,20 @@ def test_sim_params_are_validated_at_load(
 
 def test_sim_params_model_covers_every_key_the_sim_accepts() -> None:
     """One truth: a knob added to the sim's DEFAULTS without its Params field fails here."""
-    from antalate_lcm.autopilot.sim import DEFAULTS, Params, SimAutopilot
+    from antalate_lcm.vehicles.sim import DEFAULTS, Params, SimAdapter
 
-    assert SimAutopilot.params_model is Params
+    assert SimAdapter.params_model is Params
     assert Params().model_dump() == DEFAULTS
     assert Params.model_config.get("extra") == "forbid" and Params.model_config.get("strict") is True
-    SimAutopilot(dict(DEFAULTS))  # the documented defaults pass the adapter's own check
+    SimAdapter(dict(DEFAULTS))  # the documented defaults pass the adapter's own check
 
 
 def test_sim_rejects_the_same_params_when_constructed_directly() -> None:
-    from antalate_lcm.autopilot.sim import SimAutopilot
     from antalate_lcm.base.strict import StrictError
+    from antalate_lcm.vehicles.sim import SimAdapter
 
     with pytest.raises(StrictError) as info:
-        SimAutopilot({"land_disarm_delay": -1.0})
+        SimAdapter({"land_disarm_delay": -1.0})
     assert isinstance(info.value, ValueError) and info.value.key == "land_disarm_delay"
 
 
@@ -407,17 +407,17 @@ def test_any_adapter_declares_its_params_model(tmp_path: Path, plugin_dir: Path)
     (plugin_dir / "h4_custom_adapter.py").write_text(
         "from typing import Literal\n"
         "from pydantic import BaseModel, ConfigDict, Field\n"
-        "from antalate_lcm.autopilot.sim import SimAutopilot\n"
+        "from antalate_lcm.vehicles.sim import SimAdapter\n"
         "class Params(BaseModel):\n"
         "    model_config = ConfigDict(extra='forbid', strict=True)\n"
         "    port: int = Field(default=14550, ge=1, le=65535)\n"
         "    mode: str = 'GUIDED'\n"
         "    sign: Literal[1, -1] | None = None\n"
-        "class Custom(SimAutopilot):\n"
+        "class Custom(SimAdapter):\n"
         "    params_model = Params\n"
         "    def __init__(self, params=None, **kw):\n"
-        "        super(SimAutopilot, self).__init__(params, **kw)\n"
-        "class Unchecked(SimAutopilot):\n"
+        "        super(SimAdapter, self).__init__(params, **kw)\n"
+        "class Unchecked(SimAdapter):\n"
         "    params_model = None\n"
         "    def __init__(self, params=None, **kw):\n"
         "        if set(params or {}) - {'home_lat'}:\n"
@@ -569,7 +569,7 @@ def test_strict_validation_takes_toml_values_as_written() -> None:
 
 @pytest.mark.parametrize("adapter", ["sim", "tello", "mavlink"])
 def test_every_shipped_adapter_declares_a_strict_params_model(tmp_path: Path, adapter: str) -> None:
-    from antalate_lcm.autopilot import load_autopilot
+    from antalate_lcm.vehicles import load_autopilot
 
     model = load_autopilot(adapter).params_model
     assert model is not None, f"{adapter}: no params_model"

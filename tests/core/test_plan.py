@@ -9,11 +9,11 @@ import pytest
 from antalate_lcm.agent.bma.node import BmaNode
 from antalate_lcm.agent.hlc.node import HlcNode
 from antalate_lcm.agent.plan import plan_agent, plan_autopilot
-from antalate_lcm.autopilot.sim import SimAutopilot
 from antalate_lcm.base.errors import ConfigError
 from antalate_lcm.core.config import parse_config
 from antalate_lcm.core.node import Context
 from antalate_lcm.runtime.agent import agent_nodes, validate
+from antalate_lcm.vehicles.sim import SimAdapter
 
 DOC = {
     "agent": {"name": "p1"},
@@ -38,14 +38,14 @@ def test_the_nodes_are_built_from_the_plan_validate_made(context: Context) -> No
     config = parse_config(DOC, "<plan>")
     plan = validate(config)
     assert plan.config is config
-    assert plan.autopilot.cls is SimAutopilot and dict(plan.autopilot.params) == {"tau": 0.4}
+    assert plan.autopilot.cls is SimAdapter and dict(plan.autopilot.params) == {"tau": 0.4}
     assert [b.name for b in plan.bmas[0].behaviors] == ["auto_operator"]
     assert plan.bmas[0].behaviors[0].params.model_dump()["retry"] == 3.0
     nodes = agent_nodes(config, context, plan)
     (bma,) = (n for n in nodes if isinstance(n, BmaNode))
     assert bma.plan is plan.bmas[0]  # not resolved a second time
     (hlc,) = (n for n in nodes if isinstance(n, HlcNode))
-    assert isinstance(hlc.autopilot, SimAutopilot) and hlc.autopilot.params == {"tau": 0.4}
+    assert isinstance(hlc.autopilot, SimAdapter) and hlc.autopilot.params == {"tau": 0.4}
     assert hlc.autopilot.clock is context.executor.clock
 
 

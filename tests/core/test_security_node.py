@@ -21,7 +21,7 @@ import pytest
 from antalate_lcm.agent.bma import BmaNode
 from antalate_lcm.agent.hlc.node import HlcNode
 from antalate_lcm.agent.mc.node import McNode
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config, parse_config
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context, InsecureBus, Node
@@ -309,7 +309,7 @@ def _udpm_config(**security: Any) -> Config:
 
 def test_a_node_refuses_internal_topics_on_a_network_bus_without_a_key() -> None:
     cfg = _udpm_config()
-    context = Context(Bus(cfg.buses), Executor())  # never opened: the refusal comes before any socket
+    context = Context(Buses(cfg.buses), Executor())  # never opened: the refusal comes before any socket
     try:
         with pytest.raises(InsecureBus) as info:
             McNode(cfg, context).start()
@@ -322,7 +322,7 @@ def test_a_node_refuses_internal_topics_on_a_network_bus_without_a_key() -> None
 
 def test_insecure_true_starts_and_says_so(caplog: pytest.LogCaptureFixture) -> None:
     cfg = _udpm_config(insecure=True)
-    context = Context(Bus(cfg.buses), Executor())  # never opened: no socket outside a namespace
+    context = Context(Buses(cfg.buses), Executor())  # never opened: no socket outside a namespace
     try:
         node = McNode(cfg, context)
         with caplog.at_level(logging.WARNING):

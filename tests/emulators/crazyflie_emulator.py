@@ -10,7 +10,7 @@ tests drive the real cflib. The behaviours below were checked against the firmwa
 * **Framing** (cflib/crtp/udpdriver.py): one CRTP packet per datagram, byte 0 the header
   ``port << 4 | 0x0C | channel``, then up to 30 bytes of payload; no checksum. Replies go to the
   address of the last datagram received. With ``memory=NAME`` the same bytes go over a
-  ``memory://NAME`` link instead (`antalate_lcm.autopilot.crazyflie.memory`): no socket at all.
+  ``memory://NAME`` link instead (`antalate_lcm.vehicles.crazyflie.memory`): no socket at all.
 * **Link** (port 15): channel 0 echoes (cflib's latency pings), channel 1 ("source") answers the
   30-byte "Bitcraze Crazyflie" string, which tells cflib the firmware has protocol versioning;
   the null packet ``0xFF`` (cflib's UDP scan) gets an empty ``0xFF`` back.
@@ -104,7 +104,7 @@ from typing import TYPE_CHECKING
 from tests.emulators.lifecycle import Emulator, Motion
 
 if TYPE_CHECKING:  # cflib only when a memory link is asked for
-    from antalate_lcm.autopilot.crazyflie.memory import MemoryLink
+    from antalate_lcm.vehicles.crazyflie.memory import MemoryLink
 
 Address = tuple[str, int]
 _MEMORY_PEER: Address = ("memory", 0)  # the sender of packets off a memory link
@@ -300,7 +300,7 @@ class CrazyflieEmulator(Emulator["CrazyflieSnapshot"]):
         self._radio_out: deque[bytes] | None = deque() if radio else None
         self.radio_uri = ""  # set by the dongle the emulator is added to
         if memory is not None:
-            from antalate_lcm.autopilot.crazyflie.memory import MemoryLink
+            from antalate_lcm.vehicles.crazyflie.memory import MemoryLink
 
             self._memory = MemoryLink(memory, lambda packet: self._on_datagram(packet, _MEMORY_PEER))
         elif not radio:

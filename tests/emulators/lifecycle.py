@@ -1,7 +1,7 @@
 """What every protocol emulator shares: its threads, the context manager, waiting on its snapshot, and
 the motion a local-frame snapshot starts with.
 
-The threads are the vehicle kit's `antalate_lcm.autopilot.kit.Workers`, the same the adapters run on,
+The threads are the vehicle kit's `antalate_lcm.vehicles.kit.Workers`, the same the adapters run on,
 so an emulator starts, stops and joins its loops exactly as the adapter it answers does.
 """
 
@@ -14,7 +14,7 @@ from typing import Generic, TypeVar
 
 from typing_extensions import Self
 
-from antalate_lcm.autopilot.kit import Workers
+from antalate_lcm.vehicles.kit import Workers
 from tests.harness.polling import wait_for
 
 S = TypeVar("S")

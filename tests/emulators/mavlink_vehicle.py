@@ -53,7 +53,7 @@ Transports: ``udp_port`` (0 = a free port) answers every peer that sends it some
 pushes to a fixed address like SITL's ``udpclient`` (pymavlink ``udpin:HOST:PORT``); ``tcp_port``
 accepts any number of TCP clients (pymavlink ``tcp:HOST:PORT``). Ports are read back from
 ``udp_port``/``tcp_port`` after ``start()``. ``memory_link()`` adds a client without a socket: an
-``antalate_lcm.autopilot.mavlink.link.MemoryLink`` whose frames reach the vehicle as bytes, like a TCP
+``antalate_lcm.vehicles.mavlink.link.MemoryLink`` whose frames reach the vehicle as bytes, like a TCP
 client's (``udp_port=None`` for a vehicle with no socket at all).
 
 Parameters (:data:`PARAMS`, ArduCopter 4.x names, defaults and types; ``params={...}`` overrides)
@@ -119,7 +119,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
-from antalate_lcm.autopilot.mavlink.link import MemoryLink
+from antalate_lcm.vehicles.mavlink.link import MemoryLink
 from tests.emulators.lifecycle import Emulator
 
 LOG = logging.getLogger("antalate.tests.mavlink_vehicle")

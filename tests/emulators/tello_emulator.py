@@ -118,7 +118,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
-from antalate_lcm.autopilot.tello.link import MemoryLink
+from antalate_lcm.vehicles.tello.link import MemoryLink
 from tests.emulators.lifecycle import Emulator, Motion
 
 LOG = logging.getLogger("antalate.tests.tello_emulator")
@@ -249,7 +249,7 @@ class TelloEmulator(Emulator["TelloSnapshot"]):
         """Bind ``host:port`` (``port=0``: a free port) or adopt ``sock`` (already bound, e.g. in a netns).
 
         With `memory` the emulator binds nothing: its datagrams go over `link`, a `MemoryLink` for
-        ``TelloAutopilot(params, link=lambda _p: emu.link)`` (commands in; replies and state lines out).
+        ``TelloAdapter(params, link=lambda _p: emu.link)`` (commands in; replies and state lines out).
 
         Speeds are m/s and deg/s, times seconds, battery percent; ``battery_drain`` is %/s in flight.
         """

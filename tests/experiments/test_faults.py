@@ -23,10 +23,10 @@ import lcm
 import pytest
 
 from antalate_lcm.apps.analysis import analyze_log, format_summary, read_log
-from antalate_lcm.apps.analysis.model import FaultRecord, SwarmRecord
+from antalate_lcm.apps.analysis.records import FaultRecord, SwarmRecord
 from antalate_lcm.base.errors import AntalateError, ConfigError
 from antalate_lcm.base.geo import FlatFrame
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import load_config
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context, Node
@@ -258,7 +258,7 @@ def test_fault_probability_hits_agents_reproducibly() -> None:
 def _gate_with(tmp_path: Path, fault: dict[str, Any]) -> tuple[FaultGate, Node, Node]:
     """A gate with ``fault`` active on agent e-01, and e-01's node and the operator's (never started)."""
     config = load_config(_write(tmp_path / "swarm.toml", CONFIG))
-    context = Context(Bus({"lan": "memq://"}), Executor())
+    context = Context(Buses({"lan": "memq://"}), Executor())
     script = Script.model_validate({"mission_time": 9.0, "fault": [{"agent": "e-01", "at": 0.0, **fault}]})
     gate = FaultGate()
     (planned,) = plan(script, ["e-01", "e-02"])
@@ -710,7 +710,7 @@ def test_only_signed_fault_records_are_believed(tmp_path: Path) -> None:
     config = load_config(
         _write(tmp_path / "k.toml", CONFIG + f'[security]\nswarm_key = "{generate_key()}"\n')
     )
-    node = Node(config.with_agent_name("faults-0of2"), Context(Bus({"lan": "memq://"}), Executor()))
+    node = Node(config.with_agent_name("faults-0of2"), Context(Buses({"lan": "memq://"}), Executor()))
     record = {"agent": "operator", "kind": "mission", "event": "start", "at": 0.0}
 
     def message(seq: int, content_type: str = FAULT_CONTENT_TYPE, data: bytes | None = None) -> payload_t:
@@ -754,7 +754,7 @@ def test_the_operators_process_acts_on_the_agent_processes_records(tmp_path: Pat
     excused: list[str] = []
     relay = FaultRelay(
         config.with_agent_name("faults"),
-        Context(Bus({"lan": "memq://"}), Executor()),
+        Context(Buses({"lan": "memq://"}), Executor()),
         script=script,
         gate=FaultGate(),
         bus="lan",

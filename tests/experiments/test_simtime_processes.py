@@ -27,7 +27,7 @@ from antalate_lcm.runtime.replay import read_record
 from antalate_lcm.runtime.script import load_script
 from antalate_lcm.runtime.time_coordinator import (
     _FRAME,
-    SimulatedBus,
+    SimulatedBuses,
     TimeCoordinator,
     _frame,
     simulated_buses,
@@ -347,7 +347,7 @@ def test_the_coordinator_hears_a_process_whose_subscriptions_take_several_reads(
     never heard the operator (what a 1,000-agent run over two processes did)."""
     clock = SimClock()
     executor = Executor(sim=clock)
-    bus = SimulatedBus({"lan": "memq://?"}, ["lan"])
+    bus = SimulatedBuses({"lan": "memq://?"}, ["lan"])
     bus.attach(executor)
     coordinator = TimeCoordinator(2)
     coordinator.serve(clock, bus, executor, ["lan"])

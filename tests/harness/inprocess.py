@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context, Node
@@ -23,7 +23,7 @@ Self = TypeVar("Self", bound="InProcess")
 class InProcess:
     def __init__(self, config: Config) -> None:
         self.config = config
-        self.context = Context(Bus(config.buses), Executor())
+        self.context = Context(Buses(config.buses), Executor())
         self.context.executor.start()
         self.nodes: list[Node] = []
 

@@ -3,8 +3,8 @@
     python -m tests.lan.lan_operator CONFIG [--stale-after 2]
 
 It is the operator console without its terminal: the console's own node
-(:class:`operator_tui.link.OperatorNode`: receiving, signed sending), model
-(:class:`operator_tui.model.SwarmModel`: who is live or stale), command tracker
+(:class:`operator_tui.node.OperatorNode`: receiving, signed sending), board
+(:class:`operator_tui.board.SwarmBoard`: who is live or stale), command tracker
 (:class:`operator_tui.commands.CommandTracker`: seq per command, ack = ``mc_state_t.last_command_seq``,
 resend with the same seq until every expected agent acknowledged) and direction control (the direction
 is a state, repeated every second), so what the tests prove is what the console does.
@@ -27,19 +27,19 @@ from typing import Any
 
 from antalate_lcm.core.config import Config, load_config
 from antalate_lcm.core.node import Context
+from operator_tui.board import SwarmBoard
 from operator_tui.commands import CommandTracker, DirectionControl, Status
-from operator_tui.link import OperatorNode
-from operator_tui.model import SwarmModel
+from operator_tui.node import OperatorNode
 
 
 class LanOperator(OperatorNode):
-    """The console's own parts without its terminal: :class:`~operator_tui.link.OperatorNode` receives
-    and sends (signed), :class:`~operator_tui.model.SwarmModel` says who is stale, the tracker and
+    """The console's own parts without its terminal: :class:`~operator_tui.node.OperatorNode` receives
+    and sends (signed), :class:`~operator_tui.board.SwarmBoard` says who is stale, the tracker and
     the direction control resend. Its refresh runs on the executor's timer instead of the UI's."""
 
     def __init__(self, config: Config, context: Context, *, stale_after: float = 2.0) -> None:
         super().__init__(config, context)
-        self.model = SwarmModel(stale_after=stale_after)
+        self.board = SwarmBoard(stale_after=stale_after)
         self.tracker = CommandTracker(resend_interval=1.0, timeout=30.0)
         self.direction = DirectionControl(repeat_interval=1.0)
         self.updates: list[str] = []
@@ -54,14 +54,14 @@ class LanOperator(OperatorNode):
         now, wall = self.clock(), self.wallclock()
         for item in self.drain():
             if item.unchanged:
-                self.model.heard(item.topic, item.agent, item.received, wall)
+                self.board.heard(item.topic, item.agent, item.received, wall)
                 continue
-            self.model.apply(item.topic, item.agent, item.msg, item.received, wall, item.fields)
+            self.board.apply(item.topic, item.agent, item.msg, item.received, wall, item.fields)
             if item.topic == "MC_STATE":
                 observed = self.tracker.observe(item.agent, item.msg.last_command_seq, now)
                 self.updates.extend(u.text for u in observed)
-        self.model.tick(now, wall)
-        resend, updates = self.tracker.tick(now, self.model.mc_state_of, self.model.is_stale)
+        self.board.tick(now, wall)
+        resend, updates = self.tracker.tick(now, self.board.mc_state_of, self.board.is_stale)
         for cmd in resend:
             self.send_operator_cmd(cmd.command, cmd.target, cmd.seq, altitude=cmd.altitude)
         self.updates.extend(u.text for u in updates)
@@ -75,7 +75,7 @@ class LanOperator(OperatorNode):
 
     def command(self, command: str, target: str = "", altitude: float = 0.0) -> int:
         """A new command, as the console sends it: a broadcast expects every live agent's ack."""
-        expected = self.model.live_names() if not target else [target]
+        expected = self.board.live_names() if not target else [target]
         cmd = self.tracker.new(command, target, self.clock(), expected=expected, altitude=altitude)
         self.send_operator_cmd(command, target, cmd.seq, altitude=altitude)
         return cmd.seq
@@ -87,8 +87,8 @@ class LanOperator(OperatorNode):
     def status(self) -> dict[str, Any]:
         now = self.clock()
         agents: dict[str, Any] = {}
-        for name in self.model.names():
-            v = self.model.agents[name]
+        for name in self.board.names():
+            v = self.board.agents[name]
             mc_heard, tel_heard = v.heard.get("MC_STATE"), v.heard.get("TELEMETRY")
             tel = v.telemetry
             agents[name] = {
@@ -118,7 +118,7 @@ class LanOperator(OperatorNode):
         ]
         return {
             "agents": agents,
-            "stale": sorted(n for n, v in self.model.agents.items() if v.stale),
+            "stale": sorted(n for n, v in self.board.agents.items() if v.stale),
             "commands": sorted(commands, key=lambda c: c["seq"]),
             "pending": sum(1 for c in commands if c["status"] == Status.PENDING.value),
             "direction_sends": self.direction.sends,

@@ -24,7 +24,7 @@ from typing import Any
 
 import tomli_w
 
-from antalate_lcm.runtime.commands import native_lcm_tool
+from antalate_lcm.runtime.cli import native_lcm_tool
 from tests import REPO
 from tests.harness.agents import FAST_SIM
 from tests.harness.jsonl import JsonLinesProcess

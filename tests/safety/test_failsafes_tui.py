@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from antalate_lcm.msgs import hlc_state_t, mc_state_t
 from antalate_lcm.wire.vocabulary import Severity
+from operator_tui.board import EventKind, SwarmBoard
 from operator_tui.commands import applies
-from operator_tui.model import EventKind, SwarmModel
 from operator_tui.widgets.palette import HLC_STYLE, MC_STYLE, UNKNOWN_STYLE, hlc_style, mc_style
 from operator_tui.widgets.panels import detail_text
 
@@ -33,22 +33,22 @@ def test_every_state_has_a_colour() -> None:
 
 
 def test_failsafe_states_are_events_with_their_reason() -> None:
-    model = SwarmModel()
-    model.apply("MC_STATE", "a", mc(mc_state_t.MISSION), 0.0, 1000.0)
-    model.apply("HLC_STATE", "a", hlc(hlc_state_t.AIRBORNE), 0.0, 1000.0)
-    model.take_events()
+    board = SwarmBoard()
+    board.apply("MC_STATE", "a", mc(mc_state_t.MISSION), 0.0, 1000.0)
+    board.apply("HLC_STATE", "a", hlc(hlc_state_t.AIRBORNE), 0.0, 1000.0)
+    board.take_events()
     fence = "autopilot failsafe: holding position (fence breach; autopilot switched to BRAKE)"
-    model.apply("HLC_STATE", "a", hlc(hlc_state_t.HOLD, fence), 1.0, 1001.0)
-    model.apply("MC_STATE", "a", mc(mc_state_t.HOLD, "vehicle holding on its own (HLC HOLD)"), 1.1, 1001.1)
+    board.apply("HLC_STATE", "a", hlc(hlc_state_t.HOLD, fence), 1.0, 1001.0)
+    board.apply("MC_STATE", "a", mc(mc_state_t.HOLD, "vehicle holding on its own (HLC HOLD)"), 1.1, 1001.1)
     lost = "HLC lost (HLC silent for 2.1 s; the vehicle is on its own GCS failsafe)"
-    model.apply("MC_STATE", "a", mc(mc_state_t.HLC_LOST, lost), 4.0, 1004.0)
-    events = [(e.kind, e.text, e.severity) for e in model.take_events()]
+    board.apply("MC_STATE", "a", mc(mc_state_t.HLC_LOST, lost), 4.0, 1004.0)
+    events = [(e.kind, e.text, e.severity) for e in board.take_events()]
     assert events == [
         (EventKind.HLC, f"HLC AIRBORNE → HOLD: {fence}", Severity.WARNING),
         (EventKind.MC, "MC MISSION → HOLD: vehicle holding on its own (HLC HOLD)", Severity.WARNING),
         (EventKind.MC, f"MC HOLD → HLC_LOST: {lost}", Severity.ERROR),
     ]
-    view = model.agents["a"]
+    view = board.agents["a"]
     assert (view.mc_state, view.mc_reason, view.hlc_reason) == ("HLC_LOST", lost, fence)
     shown = detail_text(view, 4.0).plain
     assert "HLC_LOST" in shown and "GCS failsafe" in shown and "fence breach" in shown

@@ -20,11 +20,11 @@ from antalate_lcm.agent.hlc.velocity_guard import (
     check_velocity,
 )
 from antalate_lcm.agent.mc.node import McNode
-from antalate_lcm.autopilot.base import Frame
-from antalate_lcm.autopilot.sim import SimAutopilot
 from antalate_lcm.core.config import AgentConfig, Config, HlcConfig, McConfig
 from antalate_lcm.core.node import Context, Node
 from antalate_lcm.msgs import operator_cmd_t, velocity_cmd_t
+from antalate_lcm.vehicles.base import Frame
+from antalate_lcm.vehicles.sim import SimAdapter
 from antalate_lcm.wire.vocabulary import HlcState, McState
 from tests.harness.polling import wait_for
 
@@ -59,7 +59,7 @@ def test_nothing_passes_in_llc_down_or_hold() -> None:
             assert check_velocity(cmd(10.0), 10.0, state, mc, LIMITS).verdict is Verdict.REJECT
 
 
-class RecordingSim(SimAutopilot):
+class RecordingSim(SimAdapter):
     """The real sim, remembering every set-point it was handed and in what circumstances."""
 
     def __init__(self, params: dict[str, Any], clock: Any) -> None:

@@ -7,9 +7,9 @@ from collections.abc import Iterator
 
 import pytest
 
-from antalate_lcm.autopilot.mavlink import MavlinkAutopilot
-from antalate_lcm.autopilot.mavlink.fence_mirror import ORDER, fence_parameters, mirror, mismatches
 from antalate_lcm.base.safety.geofence import Geofence
+from antalate_lcm.vehicles.mavlink import MavlinkAdapter
+from antalate_lcm.vehicles.mavlink.fence_mirror import ORDER, fence_parameters, mirror, mismatches
 from tests.emulators.mavlink_vehicle import MavlinkVehicle
 from tests.vehicles.test_mavlink_adapter import FAST, make_ap
 
@@ -42,7 +42,7 @@ def vehicle() -> Iterator[MavlinkVehicle]:
 
 
 def test_written_to_the_vehicle_and_read_back(vehicle: MavlinkVehicle) -> None:
-    ap: MavlinkAutopilot = make_ap(vehicle.udp_url)
+    ap: MavlinkAdapter = make_ap(vehicle.udp_url)
     try:
         ap.connect()
         wanted = fence_parameters(FENCE, (0.0, 0.0))
@@ -99,8 +99,8 @@ def test_the_hlc_mirrors_its_fence_before_flying_and_says_so() -> None:
 def test_px4_gets_the_same_cylinder_in_its_gf_parameters_without_a_floor() -> None:
     """PX4 v1.15.4 (geofence_params.c): GF_MAX_HOR_DIST around home, GF_MAX_VER_DIST above it, GF_ACTION
     (2 Hold, 3 Return, 5 Land); no floor parameter, the action written last."""
-    from antalate_lcm.autopilot.px4.fence_mirror import ORDER as PX4_ORDER
-    from antalate_lcm.autopilot.px4.fence_mirror import fence_parameters as px4_parameters
+    from antalate_lcm.vehicles.px4.fence_mirror import ORDER as PX4_ORDER
+    from antalate_lcm.vehicles.px4.fence_mirror import fence_parameters as px4_parameters
 
     p = px4_parameters(FENCE, (0.0, 0.0))
     assert p == {"GF_MAX_HOR_DIST": pytest.approx(66.0, abs=0.05), "GF_MAX_VER_DIST": 60.0, "GF_ACTION": 3.0}

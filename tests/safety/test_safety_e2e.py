@@ -24,17 +24,17 @@ import tomli_w
 
 from antalate_lcm.agent.hlc.node import HlcNode
 from antalate_lcm.apps.analysis import SafetyLimits, analyze_log
-from antalate_lcm.autopilot.sim import SimAutopilot
 from antalate_lcm.base.geo import FlatFrame, offset
 from antalate_lcm.base.safety.geofence import Geofence
 from antalate_lcm.base.safety.separation import separation
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config, parse_config
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context, Node, TopicMatch
 from antalate_lcm.msgs import hlc_error_t, mc_state_t, operator_cmd_t
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.runtime.recorder import LogRecorder
+from antalate_lcm.vehicles.sim import SimAdapter
 from antalate_lcm.wire.vocabulary import McState
 from tests.harness.polling import wait_for
 from tests.harness.process import run_antalate
@@ -98,7 +98,7 @@ def config(
 def swarm(
     configs: list[Config], fence: Geofence | None, log: Path | None = None
 ) -> Iterator[tuple[Flight, Node, list[HlcNode]]]:
-    context = Context(Bus({"lan": "memq://"}), Executor())
+    context = Context(Buses({"lan": "memq://"}), Executor())
     probe = Node(configs[0].with_agent_name("probe"), context, name="probe")
     recorder = LogRecorder(configs[0], context, bus="lan", path=str(log)) if log is not None else None
     nodes = [node for cfg in configs for node in agent_nodes(cfg, context)]
@@ -109,7 +109,7 @@ def swarm(
         where = []
         for h in hlcs:
             ap = h.autopilot
-            assert isinstance(ap, SimAutopilot)
+            assert isinstance(ap, SimAdapter)
             if not ap.in_air:
                 continue
             north, east = flight.frame.to_ne(*ap.home.to_latlon(ap.north, ap.east))
@@ -237,7 +237,7 @@ def test_twenty_agents_commanded_at_the_centroid_keep_apart_then_come_home_from_
     # every one is home: within a metre of where it took off
     for h in hlcs:
         ap = h.autopilot
-        assert isinstance(ap, SimAutopilot)
+        assert isinstance(ap, SimAdapter)
         assert not ap.in_air and math.hypot(ap.north, ap.east) < 1.0, (h.agent, ap.north, ap.east)
     analyze(log, SAFETY, tmp_path, names)
 
@@ -298,7 +298,7 @@ def test_no_peer_information_lands_per_the_policy() -> None:
         assert wait_for(lambda: "lone" in flight.missions, 20), flight.mc
         assert all_in(flight, ["lone"], McState.STANDBY, 30)  # landed on its own: MISSION -> LAND -> STANDBY
         ap = hlcs[0].autopilot
-        assert isinstance(ap, SimAutopilot) and not ap.in_air
+        assert isinstance(ap, SimAdapter) and not ap.in_air
         assert math.hypot(ap.north, ap.east) < 2.0  # it did not fly off at the behavior's command
     texts = [r.text for r in flight.safety_reports]
     assert any("no peer information: 0 fresh peer(s) of min_peers 1" in t for t in texts), texts
@@ -322,7 +322,7 @@ def test_operator_land_from_the_tight_cluster(tmp_path: Path) -> None:
         time.sleep(8.0)
         command(probe, operator_cmd_t.LAND, 2)
         assert all_in(flight, names, McState.STANDBY, 60), flight.mc
-        sims = [h.autopilot for h in hlcs if isinstance(h.autopilot, SimAutopilot)]
+        sims = [h.autopilot for h in hlcs if isinstance(h.autopilot, SimAdapter)]
         assert len(sims) == n and not any(ap.in_air for ap in sims)
         spread = [math.hypot(ap.north, ap.east) for ap in sims]
     print(
@@ -349,7 +349,7 @@ def test_taking_off_closer_than_the_radius_is_reported_then_separated_in_mission
 
         def apart() -> float:
             a, b = (h.autopilot for h in hlcs)
-            assert isinstance(a, SimAutopilot) and isinstance(b, SimAutopilot)
+            assert isinstance(a, SimAdapter) and isinstance(b, SimAdapter)
             pa = flight.frame.to_ne(*a.home.to_latlon(a.north, a.east))
             pb = flight.frame.to_ne(*b.home.to_latlon(b.north, b.east))
             return separation(pa[0] - pb[0], pa[1] - pb[1], a.alt - b.alt, RADIUS / VERTICAL)

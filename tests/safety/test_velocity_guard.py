@@ -16,7 +16,7 @@ from antalate_lcm.agent.hlc.velocity_guard import (
     Verdict,
     check_velocity,
 )
-from antalate_lcm.autopilot.base import Frame
+from antalate_lcm.vehicles.base import Frame
 from antalate_lcm.wire.vocabulary import HlcState, McState
 
 LIMITS = VelocityLimits(max_horizontal=5.0, max_vertical=2.0, max_yaw_rate=90.0, velocity_timeout=0.5)

@@ -45,10 +45,10 @@ from typing import Any
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm.autopilot.mavlink.dialect import COPTER_MODES, mode_name
-from antalate_lcm.autopilot.px4 import modes as px4_modes
-from antalate_lcm.autopilot.px4.vehicle import decode_param, encode_param
 from antalate_lcm.base.geo import local_ne
+from antalate_lcm.vehicles.mavlink.dialect import COPTER_MODES, mode_name
+from antalate_lcm.vehicles.px4 import modes as px4_modes
+from antalate_lcm.vehicles.px4.vehicle import decode_param, encode_param
 from tests.sitl_arducopter.relay import Relay, UdpRelay
 
 SYSTEM = 250  # neither SYSID_MYGCS (245 in these tests) nor the adapter

@@ -27,10 +27,10 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm.autopilot.mavlink import failsafe as fs
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
+from antalate_lcm.vehicles.mavlink import failsafe as fs
 from tests.conftest import Probe, _netns_reason
 from tests.harness.netns import NetNamespace
 from tests.harness.polling import wait_for

@@ -24,12 +24,12 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.autopilot.mavlink.fence_mirror import fence_parameters
 from antalate_lcm.base.geo import FlatFrame, offset
 from antalate_lcm.base.safety.geofence import Geofence
 from antalate_lcm.base.safety.separation import separation
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
+from antalate_lcm.vehicles.mavlink.fence_mirror import fence_parameters
 from tests.conftest import Probe
 from tests.harness.netns import NetNamespace
 from tests.harness.polling import wait_for

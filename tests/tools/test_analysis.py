@@ -243,7 +243,7 @@ def test_antalate_log_records_and_lcm_logplayer_replays(netns, probe, tmp_path: 
     """The stock-tools recipe of docs/logging.md, end to end on real multicast in a namespace."""
     import subprocess
 
-    from antalate_lcm.runtime.commands import native_lcm_tool
+    from antalate_lcm.runtime.cli import native_lcm_tool
     from tests.conftest import MCAST_URL
     from tests.harness.polling import wait_for
     from tests.harness.process import stop_process
@@ -313,11 +313,11 @@ def test_file_provider_replays_a_log_into_a_bus(tmp_path: Path) -> None:
     """LCM's ``file://`` provider as a bus URL: any antalate node (the console too) reads a log as if live."""
     import time
 
-    from antalate_lcm.core.bus import Bus
+    from antalate_lcm.core.bus import Buses
 
     path = square_swarm().write(tmp_path / "swarm.lcm")
     got: list[str] = []
-    bus = Bus({"lan": f"file://{path}?speed=0"})
+    bus = Buses({"lan": f"file://{path}?speed=0"})
     try:
         bus.subscribe("lan", "a-.*/MC_STATE", mc_state_t, lambda ch, _m: got.append(ch), regex=True)
         bus.open()

@@ -327,7 +327,7 @@ def test_a_flight_recorded_live_and_exported(netns, tmp_path: Path) -> None:  # 
     and by ``antalate log -o flight.mcap`` at once; the export of the LCM log matches it field by
     field, every message of both files validates against its schema, analyze reads both alike, and
     @mcap/core reads both."""
-    from antalate_lcm.runtime.commands import native_lcm_tool
+    from antalate_lcm.runtime.cli import native_lcm_tool
     from tests.conftest import MCAST_URL
     from tests.harness.process import stop_process
 

@@ -14,7 +14,7 @@ from typing import IO
 import pytest
 
 from antalate_lcm.base.errors import MulticastUnavailable
-from antalate_lcm.core.bus import Bus, Subscription
+from antalate_lcm.core.bus import Buses, Subscription
 from antalate_lcm.msgs import mc_state_t, telemetry_t
 from tests import REPO
 from tests.conftest import MCAST_URL, Probe
@@ -24,13 +24,13 @@ from tests.harness.polling import wait_for
 
 
 @pytest.fixture
-def bus() -> Iterator[Bus]:
-    b = Bus({"test": "memq://"})
+def bus() -> Iterator[Buses]:
+    b = Buses({"test": "memq://"})
     yield b
     b.close()
 
 
-def test_typed_publish_subscribe(bus: Bus) -> None:
+def test_typed_publish_subscribe(bus: Buses) -> None:
     got: list[tuple[str, int]] = []
     bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: got.append((ch, m.state)))
     bus.subscribe("test", "b/MC_STATE", mc_state_t, lambda ch, m: got.append((ch, -1)))
@@ -38,7 +38,7 @@ def test_typed_publish_subscribe(bus: Bus) -> None:
     assert wait_for(lambda: got, 2) == [("a/MC_STATE", mc_state_t.MISSION)]
 
 
-def test_regex_subscription_sees_every_agent(bus: Bus) -> None:
+def test_regex_subscription_sees_every_agent(bus: Buses) -> None:
     got: list[str] = []
     bus.subscribe("test", r"[^/]+/MC_STATE", mc_state_t, lambda ch, m: got.append(ch), regex=True)
     for agent in ("a", "b", "c"):
@@ -48,7 +48,9 @@ def test_regex_subscription_sees_every_agent(bus: Bus) -> None:
     assert sorted(got) == ["a/MC_STATE", "b/MC_STATE", "c/MC_STATE"]
 
 
-def test_garbage_is_counted_and_logged_at_a_limited_rate(bus: Bus, caplog: pytest.LogCaptureFixture) -> None:
+def test_garbage_is_counted_and_logged_at_a_limited_rate(
+    bus: Buses, caplog: pytest.LogCaptureFixture
+) -> None:
     good: list[int] = []
     bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: good.append(m.state))
     caplog.set_level(logging.WARNING, logger="antalate.bus")
@@ -64,7 +66,7 @@ def test_garbage_is_counted_and_logged_at_a_limited_rate(bus: Bus, caplog: pytes
     assert len(logged) == 1, "one line per channel per minute"
 
 
-def test_a_burst_is_not_dropped(bus: Bus) -> None:
+def test_a_burst_is_not_dropped(bus: Buses) -> None:
     got: list[int] = []
     done = threading.Event()
 
@@ -82,7 +84,7 @@ def test_a_burst_is_not_dropped(bus: Bus) -> None:
     assert got == list(range(5000))
 
 
-def _subscribe_once(bus: Bus, got: list[int]) -> None:
+def _subscribe_once(bus: Buses, got: list[int]) -> None:
     """A subscriber to a/MC_STATE that records the first message's seq and unsubscribes itself from
     inside its handler."""
     holder: dict[str, Subscription] = {}
@@ -94,7 +96,7 @@ def _subscribe_once(bus: Bus, got: list[int]) -> None:
     holder["sub"] = bus.subscribe("test", "a/MC_STATE", mc_state_t, once)
 
 
-def test_unsubscribe_inside_a_handler(bus: Bus) -> None:
+def test_unsubscribe_inside_a_handler(bus: Buses) -> None:
     got: list[int] = []
     _subscribe_once(bus, got)
     other: list[int] = []
@@ -105,7 +107,7 @@ def test_unsubscribe_inside_a_handler(bus: Bus) -> None:
     assert got == [0]
 
 
-def test_the_last_subscriber_leaving_from_its_handler_releases_the_channel(bus: Bus) -> None:
+def test_the_last_subscriber_leaving_from_its_handler_releases_the_channel(bus: Buses) -> None:
     """The LCM subscription itself goes (on the dispatcher thread, after the handler); a new
     subscriber on the same channel then gets each message exactly once."""
     first: list[int] = []
@@ -121,7 +123,7 @@ def test_the_last_subscriber_leaving_from_its_handler_releases_the_channel(bus: 
     assert again == list(range(1, 11)) and first == [0]
 
 
-def test_a_raising_handler_does_not_stop_the_bus(bus: Bus) -> None:
+def test_a_raising_handler_does_not_stop_the_bus(bus: Buses) -> None:
     got: list[int] = []
 
     def bad(ch: str, m: mc_state_t) -> None:
@@ -140,7 +142,7 @@ def test_close_leaves_no_thread_and_no_socket() -> None:
 
     before_threads, before_fds = threading.active_count(), fds()
     for _ in range(5):
-        b = Bus({"x": "memq://", "y": "memq://?"})
+        b = Buses({"x": "memq://", "y": "memq://?"})
         b.open()
         b.subscribe("x", "c", None, lambda ch, d: None)
         b.close()
@@ -153,7 +155,7 @@ def test_close_leaves_no_thread_and_no_socket() -> None:
     assert fds() <= before_fds
 
 
-def test_unknown_bus_is_a_clear_error(bus: Bus) -> None:
+def test_unknown_bus_is_a_clear_error(bus: Buses) -> None:
     with pytest.raises(KeyError, match="unknown bus 'lan'; declared: test"):
         bus.publish("lan", "x", b"")
 
@@ -204,7 +206,7 @@ def test_no_multicast_route_gives_the_fix() -> None:
     assert issubclass(MulticastUnavailable, Exception)
 
 
-def test_a_bad_datagram_is_one_decode_error_however_many_subscribers(bus: Bus) -> None:
+def test_a_bad_datagram_is_one_decode_error_however_many_subscribers(bus: Buses) -> None:
     """Counted per datagram, not per subscriber: three subscribers of a channel, one garbage datagram."""
     good: list[int] = []
     for _ in range(3):
@@ -221,7 +223,7 @@ def test_an_attached_bus_delivers_on_the_executors_thread_with_no_hop() -> None:
     from antalate_lcm.core.executor import Executor
 
     ex = Executor(name="the-one-loop")
-    b = Bus({"test": "memq://"})
+    b = Buses({"test": "memq://"})
     b.attach(ex)
     ex.start()
     try:
@@ -239,7 +241,7 @@ def test_an_attached_bus_delivers_on_the_executors_thread_with_no_hop() -> None:
         b.close()
 
 
-def test_unsubscribe_from_another_thread_releases_the_channel(bus: Bus) -> None:
+def test_unsubscribe_from_another_thread_releases_the_channel(bus: Buses) -> None:
     got: list[int] = []
     sub = bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: got.append(m.header.seq))
     bus.publish("test", "a/MC_STATE", mc_state(1, 1))
@@ -263,12 +265,12 @@ def test_memq_drops_what_nobody_in_the_process_subscribes_to_and_delivers_the_re
     from antalate_lcm.core.executor import Executor
 
     ex = Executor()  # not started yet: whatever is queued stays queued
-    b = Bus({"test": "memq://"})
+    b = Buses({"test": "memq://"})
     b.attach(ex)
     try:
         exact: list[int] = []
         b.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: exact.append(m.header.seq))
-        fd = b._link("test")._lcm.fileno()
+        fd = b._connection("test")._lcm.fileno()
         for _ in range(100):
             b.publish("test", "a/TELEMETRY", b"nobody listens")
         b.publish("test", "a/MC_STATE", mc_state(1, 7))

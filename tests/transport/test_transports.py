@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from antalate_lcm.base.errors import AntalateError, BusUnavailable, InvalidBusUrl, UnknownTransport
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.transports import TRANSPORTS, open_lcm, parse_lcm_url, transport_for
 from antalate_lcm.transports.base import Transport
 from antalate_lcm.transports.file import File
@@ -132,7 +132,7 @@ def test_a_transport_refuses_another_schemes_url() -> None:
 def test_the_bus_and_the_lcm_tools_ask_the_registry() -> None:
     """The bus opens a declared URL through its transport: an unknown scheme is the registry's error
     at open, before any node starts; the LCM tools' opener refuses antalate's own transport."""
-    bus = Bus({"lan": "http://239.255.76.67:7667"})
+    bus = Buses({"lan": "http://239.255.76.67:7667"})
     try:
         with pytest.raises(UnknownTransport, match="memq://"):
             bus.open()

@@ -14,7 +14,7 @@ import pytest
 zenoh = pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (pip install -e '.[dev]')")
 
 from antalate_lcm.base.errors import ConfigError  # noqa: E402
-from antalate_lcm.core.bus import Bus  # noqa: E402
+from antalate_lcm.core.bus import Buses  # noqa: E402
 from antalate_lcm.core.config import load_config  # noqa: E402
 from antalate_lcm.msgs import mc_state_t, telemetry_t  # noqa: E402
 from antalate_lcm.runtime.router import router_config  # noqa: E402
@@ -58,8 +58,8 @@ def url(r: Router, extra: str = "") -> str:
 
 
 @pytest.fixture
-def buses(router: Router) -> Iterator[tuple[Bus, Bus]]:
-    a, b = Bus({"wan": url(router)}), Bus({"wan": url(router)})
+def buses(router: Router) -> Iterator[tuple[Buses, Buses]]:
+    a, b = Buses({"wan": url(router)}), Buses({"wan": url(router)})
     yield a, b
     a.close()
     b.close()
@@ -69,7 +69,7 @@ PROBE_SEQ = 999_999
 PROBE = mc_state(0, seq=PROBE_SEQ)
 
 
-def _settle(pub: Bus, sub_bus: Bus, channel: str, got: list[Any]) -> None:
+def _settle(pub: Buses, sub_bus: Buses, channel: str, got: list[Any]) -> None:
     """Publish probes until the subscription has reached the router (Zenoh declares asynchronously).
 
     Probes still in flight may arrive later: the handlers of these tests ignore them (``probe``)."""
@@ -173,7 +173,7 @@ def test_bad_zenoh_urls_say_what_was_expected(tmp_path: Path, bad: str, expected
 
 
 # --------------------------------------------------------------------------- through a router
-def test_typed_messages_cross_the_router_as_the_exact_lcm_bytes(buses: tuple[Bus, Bus]) -> None:
+def test_typed_messages_cross_the_router_as_the_exact_lcm_bytes(buses: tuple[Buses, Buses]) -> None:
     a, b = buses
     typed: list[mc_state_t] = []
     raw: list[bytes] = []
@@ -187,7 +187,7 @@ def test_typed_messages_cross_the_router_as_the_exact_lcm_bytes(buses: tuple[Bus
     assert raw == [msg.encode()]  # fingerprint and header.mac included: signing works unchanged
 
 
-def test_regex_subscription_sees_every_agent_and_nothing_else(buses: tuple[Bus, Bus]) -> None:
+def test_regex_subscription_sees_every_agent_and_nothing_else(buses: tuple[Buses, Buses]) -> None:
     a, b = buses
     got: list[str] = []
     b.subscribe("wan", ".*/MC_STATE", mc_state_t, past_probe(lambda ch, m: got.append(ch)), regex=True)
@@ -199,7 +199,7 @@ def test_regex_subscription_sees_every_agent_and_nothing_else(buses: tuple[Bus, 
     assert sorted(got) == ["alpha/MC_STATE", "beta/MC_STATE", "gamma/MC_STATE"]
 
 
-def test_garbage_is_counted_as_on_udpm(buses: tuple[Bus, Bus], caplog: pytest.LogCaptureFixture) -> None:
+def test_garbage_is_counted_as_on_udpm(buses: tuple[Buses, Buses], caplog: pytest.LogCaptureFixture) -> None:
     a, b = buses
     got: list[mc_state_t] = []
     b.subscribe("wan", "alpha/MC_STATE", mc_state_t, past_probe(lambda ch, m: got.append(m)))
@@ -214,7 +214,7 @@ def test_garbage_is_counted_as_on_udpm(buses: tuple[Bus, Bus], caplog: pytest.Lo
     assert any("not a valid mc_state_t" in r.getMessage() for r in caplog.records)
 
 
-def test_a_burst_is_not_dropped(buses: tuple[Bus, Bus]) -> None:
+def test_a_burst_is_not_dropped(buses: tuple[Buses, Buses]) -> None:
     a, b = buses
     got: list[int] = []
     b.subscribe("wan", "alpha/MC_STATE", mc_state_t, past_probe(lambda ch, m: got.append(m.header.seq)))
@@ -227,14 +227,14 @@ def test_a_burst_is_not_dropped(buses: tuple[Bus, Bus]) -> None:
 
 def test_own_publications_reach_own_subscribers_as_on_multicast(router: Router) -> None:
     """Two nodes of one process share the bus: one's publication must reach the other."""
-    with Bus({"wan": url(router)}) as bus:
+    with Buses({"wan": url(router)}) as bus:
         got: list[mc_state_t] = []
         bus.subscribe("wan", "alpha/MC_STATE", mc_state_t, lambda ch, m: got.append(m))
         bus.publish("wan", "alpha/MC_STATE", mc_state(3))
         assert wait_for(lambda: got, 10)
 
 
-def test_unsubscribe_inside_a_handler(buses: tuple[Bus, Bus]) -> None:
+def test_unsubscribe_inside_a_handler(buses: tuple[Buses, Buses]) -> None:
     a, b = buses
     got: list[int] = []
     sub: list[Any] = []
@@ -277,13 +277,13 @@ def test_fileno_is_readable_exactly_while_a_message_waits(router: Router) -> Non
 def test_an_agent_starts_before_its_router_and_is_heard_once_it_answers() -> None:
     """A vehicle may boot before its LTE link: the bus opens, sends fail (counted), then work."""
     r = Router(free_port())
-    bus = Bus({"wan": url(r)})
+    bus = Buses({"wan": url(r)})
     try:
         bus.open()  # does not raise: the router is not there yet
         assert not bus.publish("wan", "alpha/MC_STATE", mc_state(1))
         assert bus.publish_errors == 1
         r.start()
-        with Bus({"wan": url(r)}) as listener:
+        with Buses({"wan": url(r)}) as listener:
             got: list[mc_state_t] = []
             listener.subscribe("wan", "alpha/MC_STATE", mc_state_t, lambda ch, m: got.append(m))
             assert wait_for(lambda: bus.publish("wan", "alpha/MC_STATE", mc_state(1)) and got, 15, 0.2)
@@ -293,7 +293,7 @@ def test_an_agent_starts_before_its_router_and_is_heard_once_it_answers() -> Non
 
 
 def test_the_router_restarting_is_survived(router: Router) -> None:
-    a, b = Bus({"wan": url(router)}), Bus({"wan": url(router)})
+    a, b = Buses({"wan": url(router)}), Buses({"wan": url(router)})
     try:
         got: list[mc_state_t] = []
         b.subscribe("wan", "alpha/MC_STATE", mc_state_t, lambda ch, m: got.append(m))

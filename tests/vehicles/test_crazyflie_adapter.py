@@ -1,4 +1,4 @@
-"""`CrazyflieAutopilot` through the real cflib against the Crazyflie emulator, without the HLC.
+"""`CrazyflieAdapter` through the real cflib against the Crazyflie emulator, without the HLC.
 
 Each test reads the emulated vehicle (its true state) and the adapter's `state()`: arming refusals
 with their reasons, velocities the right way and speed in both frames, the hand-back to the
@@ -17,9 +17,9 @@ import pytest
 
 pytest.importorskip("cflib")
 
-from antalate_lcm.autopilot.base import AutopilotError, Frame  # noqa: E402
-from antalate_lcm.autopilot.crazyflie import CFLIB_MISSING, CrazyflieAutopilot  # noqa: E402
 from antalate_lcm.base.geo import distance  # noqa: E402
+from antalate_lcm.vehicles.base import AutopilotError, Frame  # noqa: E402
+from antalate_lcm.vehicles.crazyflie import CFLIB_MISSING, CrazyflieAdapter  # noqa: E402
 from tests.emulators.crazyflie_emulator import CrazyflieEmulator  # noqa: E402
 from tests.emulators.crazyradio import Crazyradio, install  # noqa: E402
 from tests.harness.polling import wait_for  # noqa: E402
@@ -28,14 +28,12 @@ FAST = {"climb_speed": 2.0, "land_speed": 1.0, "rtl_speed": 2.0, "connect_timeou
 
 
 @pytest.fixture
-def rig() -> Iterator[Callable[..., tuple[CrazyflieEmulator, CrazyflieAutopilot]]]:
-    made: list[tuple[CrazyflieEmulator, CrazyflieAutopilot]] = []
+def rig() -> Iterator[Callable[..., tuple[CrazyflieEmulator, CrazyflieAdapter]]]:
+    made: list[tuple[CrazyflieEmulator, CrazyflieAdapter]] = []
 
-    def make(
-        emu: dict[str, Any] | None = None, **params: Any
-    ) -> tuple[CrazyflieEmulator, CrazyflieAutopilot]:
+    def make(emu: dict[str, Any] | None = None, **params: Any) -> tuple[CrazyflieEmulator, CrazyflieAdapter]:
         e = CrazyflieEmulator(**(emu or {})).start()
-        ap = CrazyflieAutopilot({"uri": e.uri, **FAST, **params})
+        ap = CrazyflieAdapter({"uri": e.uri, **FAST, **params})
         made.append((e, ap))
         ap.connect()
         return e, ap
@@ -47,15 +45,15 @@ def rig() -> Iterator[Callable[..., tuple[CrazyflieEmulator, CrazyflieAutopilot]
 
 
 @pytest.fixture
-def radio_rig() -> Iterator[Callable[..., tuple[CrazyflieEmulator, CrazyflieAutopilot, Crazyradio]]]:
+def radio_rig() -> Iterator[Callable[..., tuple[CrazyflieEmulator, CrazyflieAdapter, Crazyradio]]]:
     """The emulator behind an emulated Crazyradio dongle: cflib's own radio:// driver, acks and all."""
     dongle = Crazyradio()
     uninstall = install(dongle)
-    made: list[tuple[CrazyflieEmulator, CrazyflieAutopilot]] = []
+    made: list[tuple[CrazyflieEmulator, CrazyflieAdapter]] = []
 
-    def make(**params: Any) -> tuple[CrazyflieEmulator, CrazyflieAutopilot, Crazyradio]:
+    def make(**params: Any) -> tuple[CrazyflieEmulator, CrazyflieAdapter, Crazyradio]:
         e = CrazyflieEmulator(radio=True).start()
-        ap = CrazyflieAutopilot({"uri": dongle.add(e), **FAST, **params})
+        ap = CrazyflieAdapter({"uri": dongle.add(e), **FAST, **params})
         made.append((e, ap))
         ap.connect()
         return e, ap, dongle
@@ -67,7 +65,7 @@ def radio_rig() -> Iterator[Callable[..., tuple[CrazyflieEmulator, CrazyflieAuto
     uninstall()
 
 
-def airborne(emu: CrazyflieEmulator, ap: CrazyflieAutopilot, alt: float = 1.0) -> None:
+def airborne(emu: CrazyflieEmulator, ap: CrazyflieAdapter, alt: float = 1.0) -> None:
     # arm() refuses until the estimator's variances have come in their log block (its first period)
     assert wait_for(ap.arm, timeout=2.0, interval=0.05), ap.last_refusal
     ap.takeoff(alt)
@@ -209,7 +207,7 @@ def test_velocity_on_the_ground_is_refused(rig: Callable[..., Any]) -> None:
 
 def test_without_cflib_connect_says_how_to_install_it(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "cflib", None)
-    ap = CrazyflieAutopilot({"uri": "udp://127.0.0.1:9"})
+    ap = CrazyflieAdapter({"uri": "udp://127.0.0.1:9"})
     with pytest.raises(AutopilotError) as err:
         ap.connect()
     assert str(err.value) == CFLIB_MISSING and "antalate[crazyflie]" in str(err.value)
@@ -220,7 +218,7 @@ def test_nobody_answering_fails_connect_within_its_timeout() -> None:
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))  # a port that swallows everything
-        ap = CrazyflieAutopilot({"uri": f"udp://127.0.0.1:{s.getsockname()[1]}", "connect_timeout": 1.0})
+        ap = CrazyflieAdapter({"uri": f"udp://127.0.0.1:{s.getsockname()[1]}", "connect_timeout": 1.0})
         with pytest.raises(AutopilotError, match="cannot connect"):
             ap.connect()
         ap.close()

@@ -1,4 +1,4 @@
-"""A whole mission through `CrazyflieAutopilot` over ``memory://``: the real cflib stack, no radio, no socket.
+"""A whole mission through `CrazyflieAdapter` over ``memory://``: the real cflib stack, no radio, no socket.
 
 The adapter is configured exactly as for a Crazyflie (``uri`` in ``[hlc.autopilot_params]``); cflib
 picks the in-memory driver by the URI's scheme (`crazyflie.memory.install` put it in cflib's driver
@@ -20,7 +20,7 @@ from tests.memory_agent import MemoryAgent
 
 pytest.importorskip("cflib")
 
-from antalate_lcm.autopilot.crazyflie.memory import MemoryDriver, MemoryLink  # noqa: E402
+from antalate_lcm.vehicles.crazyflie.memory import MemoryDriver, MemoryLink  # noqa: E402
 from tests.emulators.crazyflie_emulator import CrazyflieEmulator  # noqa: E402
 
 FAST_AP = {"climb_speed": 2.0, "land_speed": 1.0, "rtl_speed": 2.0, "connect_timeout": 8.0}

@@ -7,11 +7,12 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.autopilot.base import Frame
-from antalate_lcm.autopilot.crazyflie import CrazyflieAutopilot
-from antalate_lcm.autopilot.crazyflie.frames import LocalFrame
-from antalate_lcm.autopilot.crazyflie.setpoints import MIN_HEIGHT, build_setpoint, is_zero, next_height
-from antalate_lcm.autopilot.crazyflie.telemetry import (
+from antalate_lcm.base.geo import distance_bearing
+from antalate_lcm.vehicles.base import Frame
+from antalate_lcm.vehicles.crazyflie import CrazyflieAdapter
+from antalate_lcm.vehicles.crazyflie.frames import LocalFrame
+from antalate_lcm.vehicles.crazyflie.setpoints import MIN_HEIGHT, build_setpoint, is_zero, next_height
+from antalate_lcm.vehicles.crazyflie.telemetry import (
     LOG_BLOCKS,
     LOG_MAX_BYTES,
     Reading,
@@ -21,7 +22,6 @@ from antalate_lcm.autopilot.crazyflie.telemetry import (
     block_size,
     estimator_problem,
 )
-from antalate_lcm.base.geo import distance_bearing
 
 LAT, LON = 32.7767, 35.0231
 
@@ -202,7 +202,7 @@ def test_pm_state_low_power_is_the_vehicle_battery_warning() -> None:
 
 # ---------------------------------------------------------------- parameters
 def test_defaults_validate_and_the_adapter_is_built_without_io() -> None:
-    ap = CrazyflieAutopilot({"uri": "udp://127.0.0.1:19850"})
+    ap = CrazyflieAdapter({"uri": "udp://127.0.0.1:19850"})
     state = ap.state()
     assert not state.connected and state.link_age == math.inf
 
@@ -221,7 +221,7 @@ def test_defaults_validate_and_the_adapter_is_built_without_io() -> None:
 )
 def test_bad_parameters_name_the_key(params: dict[str, object], words: str) -> None:
     with pytest.raises(ValueError, match=words):
-        CrazyflieAutopilot(params)
+        CrazyflieAdapter(params)
 
 
 @pytest.mark.parametrize(

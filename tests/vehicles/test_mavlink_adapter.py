@@ -1,4 +1,4 @@
-"""`MavlinkAutopilot` against the ArduCopter-like emulator, through the real pymavlink, on 127.0.0.1.
+"""`MavlinkAdapter` against the ArduCopter-like emulator, through the real pymavlink, on 127.0.0.1.
 
 Each test starts its own emulated copter with short boot/EKF/GPS delays and brisk kinematics so a
 whole flight takes a few seconds; the adapter sees it exactly as it would see SITL (UDP both ways, TCP).
@@ -15,8 +15,8 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
-from antalate_lcm.autopilot import AutopilotError, AutopilotState, FlightMode, Frame, load_autopilot
-from antalate_lcm.autopilot.mavlink import DEFAULTS, VELOCITY_TYPE_MASK, MavlinkAutopilot, Params
+from antalate_lcm.vehicles import AutopilotError, FlightMode, Frame, VehicleState, load_autopilot
+from antalate_lcm.vehicles.mavlink import DEFAULTS, VELOCITY_TYPE_MASK, MavlinkAdapter, Params
 from tests.emulators.mavlink_vehicle import BRISK, MavlinkVehicle, VehicleSnapshot
 from tests.harness.polling import wait_for
 
@@ -38,8 +38,8 @@ def free_udp_port() -> int:
         return int(s.getsockname()[1])
 
 
-def make_ap(connection: str, **params: Any) -> MavlinkAutopilot:
-    return MavlinkAutopilot({"connection": connection, **AP, **params})
+def make_ap(connection: str, **params: Any) -> MavlinkAdapter:
+    return MavlinkAdapter({"connection": connection, **AP, **params})
 
 
 @pytest.fixture
@@ -49,7 +49,7 @@ def vehicle(request: pytest.FixtureRequest) -> Iterator[MavlinkVehicle]:
 
 
 @pytest.fixture
-def ap(vehicle: MavlinkVehicle, request: pytest.FixtureRequest) -> Iterator[MavlinkAutopilot]:
+def ap(vehicle: MavlinkVehicle, request: pytest.FixtureRequest) -> Iterator[MavlinkAdapter]:
     """An adapter connected to `vehicle` over UDP (``udpout``: the adapter's HEARTBEAT goes first)."""
     adapter = make_ap(vehicle.udp_url, **getattr(request, "param", {}))
     adapter.connect()
@@ -60,8 +60,8 @@ def ap(vehicle: MavlinkVehicle, request: pytest.FixtureRequest) -> Iterator[Mavl
 
 
 def state_until(
-    ap: MavlinkAutopilot, predicate: Callable[[AutopilotState], bool], timeout: float
-) -> AutopilotState:
+    ap: MavlinkAdapter, predicate: Callable[[VehicleState], bool], timeout: float
+) -> VehicleState:
     s = wait_for(lambda: (lambda st: st if predicate(st) else None)(ap.state()), timeout)
     assert s is not None, f"state never matched; last {ap.state()}"
     return s
@@ -73,7 +73,7 @@ def vehicle_until(
     assert vehicle.wait_until(predicate, timeout), f"vehicle never matched; last {vehicle.snapshot()}"
 
 
-def fly(ap: MavlinkAutopilot, vehicle: MavlinkVehicle, alt: float = 2.0) -> None:
+def fly(ap: MavlinkAdapter, vehicle: MavlinkVehicle, alt: float = 2.0) -> None:
     assert ap.arm() is True
     ap.takeoff(alt)
     state_until(ap, lambda s: s.alt >= alt - 0.15 and s.in_air, timeout=alt / 2 + 3)
@@ -84,14 +84,14 @@ def fly(ap: MavlinkAutopilot, vehicle: MavlinkVehicle, alt: float = 2.0) -> None
 
 
 def test_registered_and_parameters_are_validated() -> None:
-    assert load_autopilot("mavlink") is MavlinkAutopilot
-    assert MavlinkAutopilot.name == "mavlink" and MavlinkAutopilot.blocking
-    assert MavlinkAutopilot.params_model is Params
-    assert isinstance(MavlinkAutopilot.validate_params({"cells": 4}), Params)  # what the config loader calls
+    assert load_autopilot("mavlink") is MavlinkAdapter
+    assert MavlinkAdapter.name == "mavlink" and MavlinkAdapter.blocking
+    assert MavlinkAdapter.params_model is Params
+    assert isinstance(MavlinkAdapter.validate_params({"cells": 4}), Params)  # what the config loader calls
     with pytest.raises(ValueError, match="parameter 'conection': Extra inputs are not permitted"):
-        MavlinkAutopilot({"conection": "tcp:127.0.0.1:5760"})
+        MavlinkAdapter({"conection": "tcp:127.0.0.1:5760"})
     with pytest.raises(ValueError, match="parameter 'velocity_hold': Extra"):  # renamed: setpoint_timeout
-        MavlinkAutopilot({"velocity_hold": 3.0})
+        MavlinkAdapter({"velocity_hold": 3.0})
     for bad in (
         {"source_system": 0},
         {"source_system": 256},
@@ -110,17 +110,17 @@ def test_registered_and_parameters_are_validated() -> None:
         {"signing_key": 7},
     ):
         with pytest.raises(ValueError, match=rf"parameter '{next(iter(bad))}': "):
-            MavlinkAutopilot(bad)
+            MavlinkAdapter(bad)
     with pytest.raises(
         ValueError, match=r"parameters: .*link_stale_after 1 s is shorter than two telemetry periods"
     ):
-        MavlinkAutopilot({"stream_rate_hz": 1})  # a healthy link would look stale between two messages
-    ap = MavlinkAutopilot(
+        MavlinkAdapter({"stream_rate_hz": 1})  # a healthy link would look stale between two messages
+    ap = MavlinkAdapter(
         {"velocity_resend_hz": 0, "connect_timeout": 10}
     )  # 0 = never resend; an int is a float
     assert ap.source_system == DEFAULTS["source_system"] == 245
     # the constructor does no I/O; before connect() nothing is known
-    assert ap.state() == AutopilotState(connected=False, link_age=math.inf)
+    assert ap.state() == VehicleState(connected=False, link_age=math.inf)
     with pytest.raises(AutopilotError, match="not connected"):
         ap.arm()
     ap.close()  # idempotent, even unconnected
@@ -131,7 +131,7 @@ def test_registered_and_parameters_are_validated() -> None:
 # -- connecting --------------------------------------------------------------------------------------
 
 
-def test_connect_over_udp_reads_telemetry(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+def test_connect_over_udp_reads_telemetry(vehicle: MavlinkVehicle, ap: MavlinkAdapter) -> None:
     assert ap.target == (1, 1)
     s = state_until(ap, lambda s: not math.isnan(s.lat), timeout=3)
     assert s.connected and s.link_age < 1.0
@@ -243,13 +243,13 @@ def test_arm_waits_for_boot_ekf_and_gps(vehicle: MavlinkVehicle) -> None:
 
 @pytest.mark.parametrize("vehicle", [{"gps_delay": 60.0}], indirect=True)
 @pytest.mark.parametrize("ap", [{"ready_timeout": 0.8}], indirect=True)
-def test_arm_gives_up_when_never_ready(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+def test_arm_gives_up_when_never_ready(vehicle: MavlinkVehicle, ap: MavlinkAdapter) -> None:
     with pytest.raises(AutopilotError, match="not ready to arm after 0.8 s.*GPS fix_type 0"):
         ap.arm()
     assert not vehicle.snapshot().armed and vehicle.snapshot().mode == "STABILIZE"
 
 
-def test_arm_refused_returns_false_with_the_reason(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+def test_arm_refused_returns_false_with_the_reason(vehicle: MavlinkVehicle, ap: MavlinkAdapter) -> None:
     vehicle.refuse_arm = True
     assert ap.arm() is False
     assert "refuse_arm" in ap.last_refusal
@@ -262,7 +262,7 @@ def test_arm_refused_returns_false_with_the_reason(vehicle: MavlinkVehicle, ap: 
 
 
 def test_takeoff_climbs_in_guided_and_is_refused_otherwise(
-    vehicle: MavlinkVehicle, ap: MavlinkAutopilot
+    vehicle: MavlinkVehicle, ap: MavlinkAdapter
 ) -> None:
     with pytest.raises(AutopilotError, match=r"takeoff to 2 m refused \(FAILED; mode STABILIZE, disarmed\)"):
         ap.takeoff(2.0)
@@ -281,7 +281,7 @@ def test_takeoff_climbs_in_guided_and_is_refused_otherwise(
     )
 
 
-def test_velocity_in_ned_and_body_frames(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+def test_velocity_in_ned_and_body_frames(vehicle: MavlinkVehicle, ap: MavlinkAdapter) -> None:
     fly(ap, vehicle)
     ap.set_velocity(0.0, 3.0, 0.0, 0.0, Frame.NED)  # east
     vehicle_until(vehicle, lambda s: s.east > 1.0, 2)
@@ -314,7 +314,7 @@ def test_velocity_in_ned_and_body_frames(vehicle: MavlinkVehicle, ap: MavlinkAut
 @pytest.mark.parametrize("vehicle", [{"guided_timeout": 0.4}], indirect=True)
 @pytest.mark.parametrize("ap", [{"setpoint_timeout": 0.8}], indirect=True)
 def test_no_setpoint_older_than_the_setpoint_timeout_is_sent(
-    vehicle: MavlinkVehicle, ap: MavlinkAutopilot
+    vehicle: MavlinkVehicle, ap: MavlinkAdapter
 ) -> None:
     fly(ap, vehicle, alt=1.5)
     ap.set_velocity(1.0, 0.0, 0.0, 0.0, Frame.NED)  # once
@@ -331,7 +331,7 @@ def test_no_setpoint_older_than_the_setpoint_timeout_is_sent(
 
 
 @pytest.mark.parametrize("ap", [{"setpoint_timeout": 5.0}], indirect=True)
-def test_hover_is_resent_for_a_second_then_let_go(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+def test_hover_is_resent_for_a_second_then_let_go(vehicle: MavlinkVehicle, ap: MavlinkAdapter) -> None:
     fly(ap, vehicle, alt=1.5)
     ap.set_velocity(1.0, 0.0, 0.0, 0.0, Frame.NED)
     time.sleep(1.2)
@@ -344,7 +344,7 @@ def test_hover_is_resent_for_a_second_then_let_go(vehicle: MavlinkVehicle, ap: M
     assert len(vehicle.received_of("SET_POSITION_TARGET_LOCAL_NED")) == count
 
 
-def test_land_lands_and_disarms(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+def test_land_lands_and_disarms(vehicle: MavlinkVehicle, ap: MavlinkAdapter) -> None:
     fly(ap, vehicle)
     ap.set_velocity(1.0, 0.0, 0.0, 0.0, Frame.NED)
     ap.land()
@@ -358,7 +358,7 @@ def test_land_lands_and_disarms(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -
     assert not snap.armed and snap.alt == 0.0
 
 
-def test_rtl_returns_home_and_lands(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+def test_rtl_returns_home_and_lands(vehicle: MavlinkVehicle, ap: MavlinkAdapter) -> None:
     fly(ap, vehicle)
     home = ap.state()
     ap.set_velocity(4.0, 4.0, 0.0, 0.0, Frame.NED)
@@ -372,7 +372,7 @@ def test_rtl_returns_home_and_lands(vehicle: MavlinkVehicle, ap: MavlinkAutopilo
     assert math.hypot(snap.north, snap.east) < 0.5 and not snap.armed
 
 
-def test_disarm(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+def test_disarm(vehicle: MavlinkVehicle, ap: MavlinkAdapter) -> None:
     assert ap.arm() is True
     ap.disarm()
     assert state_until(ap, lambda s: not s.armed, 1).landed
@@ -384,9 +384,7 @@ def test_disarm(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
 # -- overrides and faults ----------------------------------------------------------------------------
 
 
-def test_pilot_switching_to_loiter_is_a_manual_override(
-    vehicle: MavlinkVehicle, ap: MavlinkAutopilot
-) -> None:
+def test_pilot_switching_to_loiter_is_a_manual_override(vehicle: MavlinkVehicle, ap: MavlinkAdapter) -> None:
     fly(ap, vehicle, alt=1.5)
     ap.set_velocity(1.0, 0.0, 0.0, 0.0, Frame.NED)
     assert vehicle.pilot_switch_mode("LOITER")
@@ -401,7 +399,7 @@ def test_pilot_switching_to_loiter_is_a_manual_override(
     assert state_until(ap, lambda s: s.landed, 5).flight_mode is FlightMode.LANDING
 
 
-def test_heartbeat_silence_is_link_loss(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+def test_heartbeat_silence_is_link_loss(vehicle: MavlinkVehicle, ap: MavlinkAdapter) -> None:
     state_until(ap, lambda s: s.link_age < 0.3, 1)
     vehicle.stop_heartbeats()
     s = state_until(ap, lambda s: s.link_age > 1.0, 2)
@@ -421,7 +419,7 @@ def test_heartbeat_silence_is_link_loss(vehicle: MavlinkVehicle, ap: MavlinkAuto
     assert wait_for(lambda: len(vehicle.received_of("COMMAND_LONG")) > requests, 2)
 
 
-def test_battery(vehicle: MavlinkVehicle, ap: MavlinkAutopilot) -> None:
+def test_battery(vehicle: MavlinkVehicle, ap: MavlinkAdapter) -> None:
     assert state_until(ap, lambda s: s.battery_known, 2).battery == 100.0
     vehicle.set_battery(17)
     assert state_until(ap, lambda s: s.battery == 17.0, 2).battery_known
@@ -432,7 +430,7 @@ def test_close_is_idempotent_and_final(vehicle: MavlinkVehicle) -> None:
     ap.connect()
     ap.close()
     ap.close()
-    assert ap.state() == AutopilotState(connected=False, link_age=math.inf)
+    assert ap.state() == VehicleState(connected=False, link_age=math.inf)
     with pytest.raises(AutopilotError, match="not connected"):
         ap.set_velocity(0.0, 0.0, 0.0, 0.0, Frame.NED)
     with pytest.raises(AutopilotError, match="not connected"):

@@ -1,4 +1,4 @@
-"""Whole agents flying the ArduCopter-like emulator through `MavlinkAutopilot` (docs/design.md §5, §6, §7).
+"""Whole agents flying the ArduCopter-like emulator through `MavlinkAdapter` (docs/design.md §5, §6, §7).
 
 Two set-ups:
 
@@ -29,11 +29,11 @@ from typing import Any
 import pytest
 
 from antalate_lcm.agent.hlc.machine import ErrorCode
-from antalate_lcm.autopilot.mavlink import LinkOpener, MavlinkAutopilot
 from antalate_lcm.msgs import hlc_error_t, operator_cmd_t
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
 from antalate_lcm.msgs import operator_cmd_t as O
+from antalate_lcm.vehicles.mavlink import LinkOpener, MavlinkAdapter
 from tests.conftest import MCAST_URL, Probe
 from tests.emulators.mavlink_vehicle import BRISK, MavlinkVehicle
 from tests.harness.agents import AgentProcesses
@@ -84,7 +84,7 @@ class InProcessAgent(MemoryAgent):
             name="copter",
             hlc={"default_takeoff_altitude": 3.0, "link_timeout": 1.5, **(hlc or {})},
             operator={**AUTO_OPERATOR, **(operator or {})},
-            adapter=None if link is None else MavlinkAutopilot(params, link=link),
+            adapter=None if link is None else MavlinkAdapter(params, link=link),
         )
         self.vehicle = vehicle
 

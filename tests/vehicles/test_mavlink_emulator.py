@@ -14,15 +14,13 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
-from antalate_lcm.autopilot import FlightMode, Frame
-from antalate_lcm.autopilot.mavlink import MavlinkAutopilot
+from antalate_lcm.vehicles import FlightMode, Frame
+from antalate_lcm.vehicles.mavlink import MavlinkAdapter
 from tests.emulators.mavlink_vehicle import PARAMS, MavlinkVehicle
 from tests.vehicles.test_mavlink_adapter import FAST, fly, make_ap, state_until, vehicle_until
 
 
-def pair(
-    made: list[Any], params: dict[str, float], **vehicle: Any
-) -> tuple[MavlinkVehicle, MavlinkAutopilot]:
+def pair(made: list[Any], params: dict[str, float], **vehicle: Any) -> tuple[MavlinkVehicle, MavlinkAdapter]:
     v = MavlinkVehicle("127.0.0.1", 0, **{**FAST, "params": params, **vehicle}).start()
     made.append(v)
     # FS_GCS_TIMEOUT is 1 s here (the firmware's least is 2 s; shorter tests): at the adapter's default
@@ -152,7 +150,7 @@ def test_signature_checked_before_the_timestamp_as_ardupilot_does() -> None:
 GCS_FS = {"FS_GCS_ENABLE": 1, "SYSID_MYGCS": 245, "FS_GCS_TIMEOUT": 1.0}
 
 
-def landing_from(ap: MavlinkAutopilot, v: MavlinkVehicle, alt: float) -> None:
+def landing_from(ap: MavlinkAdapter, v: MavlinkVehicle, alt: float) -> None:
     """Take off to `alt` and start the operator's LAND (LAND_SPEED 0.3 m/s: it is still landing later)."""
     fly(ap, v, alt=alt)
     ap.land()

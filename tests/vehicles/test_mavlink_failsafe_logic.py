@@ -1,12 +1,12 @@
-"""`antalate_lcm.autopilot.mavlink.failsafe`: a pilot's mode change or an ArduCopter failsafe (pure, no I/O)."""
+"""`antalate_lcm.vehicles.mavlink.failsafe`: a pilot's mode change or an ArduCopter failsafe (pure, no I/O)."""
 
 from __future__ import annotations
 
 import pytest
 
-from antalate_lcm.autopilot import FlightMode
-from antalate_lcm.autopilot.mavlink import failsafe as fs
-from antalate_lcm.autopilot.mavlink.failsafe import (
+from antalate_lcm.vehicles import FlightMode
+from antalate_lcm.vehicles.mavlink import failsafe as fs
+from antalate_lcm.vehicles.mavlink.failsafe import (
     FailsafeTracker,
     classify,
     text_battery_level,

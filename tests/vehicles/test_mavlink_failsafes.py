@@ -1,4 +1,4 @@
-"""ArduCopter's own failsafes and a cut link, seen through `MavlinkAutopilot` (the real pymavlink, 127.0.0.1).
+"""ArduCopter's own failsafes and a cut link, seen through `MavlinkAdapter` (the real pymavlink, 127.0.0.1).
 
 Each test gives the emulated copter the parameters a real one would have (FENCE_*, BATT_*, FS_GCS_*,
 GUID_TIMEOUT) and checks what the adapter tells the HLC: a failsafe named and still computer control,
@@ -14,8 +14,8 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.autopilot import FlightMode, Frame
-from antalate_lcm.autopilot.mavlink import MavlinkAutopilot
+from antalate_lcm.vehicles import FlightMode, Frame
+from antalate_lcm.vehicles.mavlink import MavlinkAdapter
 from tests.emulators.mavlink_vehicle import MavlinkVehicle
 from tests.harness.polling import wait_for
 from tests.vehicles.test_mavlink_adapter import FAST, fly, make_ap, state_until, vehicle_until
@@ -31,7 +31,7 @@ def pair(
     vehicle: dict[str, Any] | None = None,
     tcp: bool = False,
     **ap_params: Any,
-) -> tuple[MavlinkVehicle, MavlinkAutopilot]:
+) -> tuple[MavlinkVehicle, MavlinkAdapter]:
     v = started(params, **(vehicle or {}))
     made.append(v)
     # FS_GCS_TIMEOUT is 1 s in some of these (the firmware's least is 2 s; shorter tests): at the
@@ -45,7 +45,7 @@ def pair(
 class Commander:
     """An HLC that keeps sending one velocity at 10 Hz (from its own thread) until stopped."""
 
-    def __init__(self, ap: MavlinkAutopilot, vx: float, vy: float) -> None:
+    def __init__(self, ap: MavlinkAdapter, vx: float, vy: float) -> None:
         self.ap, self.v = ap, (vx, vy)
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)

@@ -9,8 +9,8 @@ import pytest
 from pymavlink.dialects.v10 import ardupilotmega as mav1
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm.autopilot.mavlink import dialect
-from antalate_lcm.autopilot.mavlink.link import LinkClosed, MemoryLink, _convert
+from antalate_lcm.vehicles.mavlink import dialect
+from antalate_lcm.vehicles.mavlink.link import LinkClosed, MemoryLink, _convert
 
 KEY = bytes(range(32))
 

@@ -1,4 +1,4 @@
-"""A whole mission through `MavlinkAutopilot` over a `MemoryLink`: no socket anywhere (issue #14).
+"""A whole mission through `MavlinkAdapter` over a `MemoryLink`: no socket anywhere (issue #14).
 
 MC + HLC(``mavlink``) + a BMA running ``auto_operator`` (the operator: TAKEOFF, then RTL after a
 second of MISSION) on one ``memq://`` bus in this process, assembled as in test_mavlink_e2e.py; the
@@ -19,9 +19,9 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm.autopilot.mavlink import MavlinkAutopilot, MemoryLink, Params
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
+from antalate_lcm.vehicles.mavlink import MavlinkAdapter, MemoryLink, Params
 from tests.emulators.mavlink_vehicle import BRISK, MavlinkVehicle
 from tests.vehicles.test_mavlink_e2e import InProcessAgent
 
@@ -97,7 +97,7 @@ def test_answering_link_connects_the_adapter_to_a_scripted_vehicle() -> None:
     """What a user's own test does without SITL: the adapter connects, reads the picture, sets a mode."""
     heard: list[str] = []
     link = MemoryLink.answering(_scripted_copter(heard))
-    ap = MavlinkAutopilot(
+    ap = MavlinkAdapter(
         {"heartbeat_hz": 20.0, "connect_timeout": 5.0, "ack_timeout": 0.5, "check_vehicle": False},
         link=lambda _params: link,
     )

@@ -7,10 +7,10 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm.autopilot.base import Frame
-from antalate_lcm.autopilot.mavlink.dialect import COPTER_MODES
-from antalate_lcm.autopilot.mavlink.setpoints import ZERO_RESEND, SetpointRules, Verdict
-from antalate_lcm.autopilot.mavlink.vehicle import Vehicle
+from antalate_lcm.vehicles.base import Frame
+from antalate_lcm.vehicles.mavlink.dialect import COPTER_MODES
+from antalate_lcm.vehicles.mavlink.setpoints import ZERO_RESEND, SetpointRules, Verdict
+from antalate_lcm.vehicles.mavlink.vehicle import Vehicle
 
 RULES = SetpointRules(resend_period=0.1, timeout=1.0, stale_after=1.0)
 

@@ -1,4 +1,4 @@
-"""MAVLink 2 signing between `MavlinkAutopilot` and the emulated ArduCopter (pymavlink's signing, 127.0.0.1).
+"""MAVLink 2 signing between `MavlinkAdapter` and the emulated ArduCopter (pymavlink's signing, 127.0.0.1).
 
 A signed link flies; a wrong key or an unsigned peer is refused with a clear message, and every
 message dropped for its signature is counted on both sides; a forged unsigned message injected into a
@@ -15,9 +15,9 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
-from antalate_lcm.autopilot import AutopilotError, Frame
-from antalate_lcm.autopilot.mavlink.link import PymavlinkLink
-from antalate_lcm.autopilot.mavlink.signing import signing_key
+from antalate_lcm.vehicles import AutopilotError, Frame
+from antalate_lcm.vehicles.mavlink.link import PymavlinkLink
+from antalate_lcm.vehicles.mavlink.signing import signing_key
 from tests.emulators.mavlink_vehicle import COPTER_MODES, MavlinkVehicle
 from tests.harness.polling import wait_for
 from tests.vehicles.test_mavlink_adapter import FAST, fly, make_ap, state_until, vehicle_until

@@ -6,9 +6,9 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm.autopilot.mavlink.dialect import DATA_STREAMS, STREAMS
-from antalate_lcm.autopilot.mavlink.streams import StreamRequest
-from antalate_lcm.autopilot.mavlink.vehicle import Vehicle
+from antalate_lcm.vehicles.mavlink.dialect import DATA_STREAMS, STREAMS
+from antalate_lcm.vehicles.mavlink.streams import StreamRequest
+from antalate_lcm.vehicles.mavlink.vehicle import Vehicle
 
 TARGET = (1, 1)
 

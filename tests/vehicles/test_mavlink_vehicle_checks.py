@@ -11,8 +11,8 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.autopilot.mavlink import MavlinkAutopilot
-from antalate_lcm.autopilot.mavlink.vehicle_checks import READ, Finding, check
+from antalate_lcm.vehicles.mavlink import MavlinkAdapter
+from antalate_lcm.vehicles.mavlink.vehicle_checks import READ, Finding, check
 from tests.emulators.mavlink_vehicle import MavlinkVehicle
 from tests.vehicles.test_mavlink_adapter import FAST, make_ap
 
@@ -87,7 +87,7 @@ def vehicle(request: pytest.FixtureRequest) -> Iterator[MavlinkVehicle]:
         yield v
 
 
-def adapter(vehicle: MavlinkVehicle, made: list[MavlinkAutopilot], **params: Any) -> MavlinkAutopilot:
+def adapter(vehicle: MavlinkVehicle, made: list[MavlinkAdapter], **params: Any) -> MavlinkAdapter:
     ap = make_ap(vehicle.udp_url, **params)
     made.append(ap)
     ap.connect()
@@ -95,7 +95,7 @@ def adapter(vehicle: MavlinkVehicle, made: list[MavlinkAutopilot], **params: Any
 
 
 def test_defaults_are_reported_and_arming_still_allowed(
-    vehicle: MavlinkVehicle, made: list[MavlinkAutopilot], caplog: pytest.LogCaptureFixture
+    vehicle: MavlinkVehicle, made: list[MavlinkAdapter], caplog: pytest.LogCaptureFixture
 ) -> None:
     ap = adapter(
         vehicle, made
@@ -115,7 +115,7 @@ def test_defaults_are_reported_and_arming_still_allowed(
 
 
 def test_required_failsafes_refuse_arming_naming_the_parameter(
-    vehicle: MavlinkVehicle, made: list[MavlinkAutopilot]
+    vehicle: MavlinkVehicle, made: list[MavlinkAdapter]
 ) -> None:
     ap = adapter(vehicle, made, require_vehicle_failsafes=True)
     assert ap.arm() is False
@@ -138,9 +138,7 @@ def test_required_failsafes_refuse_arming_naming_the_parameter(
     [{"gcs_sysid_param": "MAV_GCS_SYSID", "params": {"GUID_TIMEOUT": 5.0, "BATT_LOW_VOLT": 0.0}}],
     indirect=True,
 )
-def test_configure_vehicle_writes_what_is_wrong(
-    vehicle: MavlinkVehicle, made: list[MavlinkAutopilot]
-) -> None:
+def test_configure_vehicle_writes_what_is_wrong(vehicle: MavlinkVehicle, made: list[MavlinkAdapter]) -> None:
     ap = adapter(vehicle, made, configure_vehicle=True, require_vehicle_failsafes=True, cells=4)
     assert ap.vehicle_findings == []
     assert vehicle.param("FS_GCS_ENABLE") == 1 and vehicle.param("MAV_GCS_SYSID") == 245  # Copter 4.7's name
@@ -160,7 +158,7 @@ def test_configure_vehicle_writes_what_is_wrong(
 
 @pytest.mark.parametrize("vehicle", [{"params": {"BATT_MONITOR": 0}}], indirect=True)
 def test_what_the_adapter_cannot_set_still_refuses(
-    vehicle: MavlinkVehicle, made: list[MavlinkAutopilot]
+    vehicle: MavlinkVehicle, made: list[MavlinkAdapter]
 ) -> None:
     ap = adapter(vehicle, made, configure_vehicle=True, require_vehicle_failsafes=True)
     assert [f.param for f in ap.vehicle_findings] == ["BATT_MONITOR"]
@@ -169,7 +167,7 @@ def test_what_the_adapter_cannot_set_still_refuses(
 
 
 def test_without_the_connect_check_arming_still_checks_when_required(
-    vehicle: MavlinkVehicle, made: list[MavlinkAutopilot]
+    vehicle: MavlinkVehicle, made: list[MavlinkAdapter]
 ) -> None:
     ap = adapter(vehicle, made, check_vehicle=False, require_vehicle_failsafes=True)
     assert ap.vehicle_findings == [] and not vehicle.received_of("PARAM_REQUEST_READ")

@@ -8,9 +8,9 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm.autopilot.base import FlightMode
-from antalate_lcm.autopilot.mavlink import dialect
-from antalate_lcm.autopilot.mavlink.vehicle import REBOOT_GAP, Vehicle
+from antalate_lcm.vehicles.base import FlightMode
+from antalate_lcm.vehicles.mavlink import dialect
+from antalate_lcm.vehicles.mavlink.vehicle import REBOOT_GAP, Vehicle
 
 GUIDED, LOITER, RTL = (dialect.COPTER_MODES[m] for m in ("GUIDED", "LOITER", "RTL"))
 ARMED = mav.MAV_MODE_FLAG_SAFETY_ARMED | mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED

@@ -9,13 +9,13 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm.autopilot.base import FlightMode, Frame
-from antalate_lcm.autopilot.mavlink.setpoints import Verdict
-from antalate_lcm.autopilot.px4 import Px4Autopilot, Px4Params, failsafe, modes, vehicle_checks
-from antalate_lcm.autopilot.px4.offboard import OffboardRules
-from antalate_lcm.autopilot.px4.vehicle import Px4Vehicle, decode_param, encode_param
 from antalate_lcm.core.config import load_config
 from antalate_lcm.runtime.agent import validate
+from antalate_lcm.vehicles.base import FlightMode, Frame
+from antalate_lcm.vehicles.mavlink.setpoints import Verdict
+from antalate_lcm.vehicles.px4 import Px4Adapter, Px4Params, failsafe, modes, vehicle_checks
+from antalate_lcm.vehicles.px4.offboard import OffboardRules
+from antalate_lcm.vehicles.px4.vehicle import Px4Vehicle, decode_param, encode_param
 from tests import REPO
 
 HOLD = modes.pack(modes.AUTO, modes.AUTO_LOITER)
@@ -266,11 +266,11 @@ def test_params_have_px4_defaults_and_refuse_arducopters_guid_timeout() -> None:
     p = Px4Params()
     assert p.connection == "udpin:127.0.0.1:14540" and p.velocity_resend_hz == 10.0
     with pytest.raises(ValueError, match="max_guid_timeout is ArduCopter"):
-        Px4Autopilot({"max_guid_timeout": 2.0})
+        Px4Adapter({"max_guid_timeout": 2.0})
     with pytest.raises(ValueError, match="px4 autopilot parameter 'velocity_resend_hz'"):
-        Px4Autopilot({"velocity_resend_hz": 1.0})  # PX4 needs >= 2 Hz
+        Px4Adapter({"velocity_resend_hz": 1.0})  # PX4 needs >= 2 Hz
     with pytest.raises(ValueError, match="offboard_lead"):
-        Px4Autopilot({"offboard_lead": "1"})
+        Px4Adapter({"offboard_lead": "1"})
 
 
 @pytest.mark.parametrize(

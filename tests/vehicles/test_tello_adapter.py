@@ -1,4 +1,4 @@
-"""`TelloAutopilot` through the real djitellopy against the Tello SDK emulator (docs/design.md §7, §12).
+"""`TelloAdapter` through the real djitellopy against the Tello SDK emulator (docs/design.md §7, §12).
 
 djitellopy binds UDP 8889/8890 on all addresses once per process, so the emulator cannot share a
 network namespace with it (see tests/harness/netns.py). The emulator runs in this process on a
@@ -24,9 +24,9 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.autopilot import load_autopilot
-from antalate_lcm.autopilot.tello import TelloAutopilot
 from antalate_lcm.base.geo import FlatFrame
+from antalate_lcm.vehicles import load_autopilot
+from antalate_lcm.vehicles.tello import TelloAdapter
 from tests.emulators.tello_emulator import TelloEmulator
 from tests.harness.netns import NetnsPair, netns_pair_unavailable
 
@@ -126,8 +126,8 @@ def angle_diff(a: float, b: float) -> float:
 
 
 def test_registered_and_constructed_without_io() -> None:
-    assert load_autopilot("tello") is TelloAutopilot
-    ap = TelloAutopilot({"host": "10.0.0.5"})
+    assert load_autopilot("tello") is TelloAdapter
+    ap = TelloAdapter({"host": "10.0.0.5"})
     s = ap.state()
     assert not s.connected and math.isinf(s.link_age)
     ap.close()  # idempotent, nothing opened
@@ -154,18 +154,18 @@ def test_registered_and_constructed_without_io() -> None:
 )
 def test_params_are_validated(params: dict[str, Any], needle: str) -> None:
     with pytest.raises(ValueError, match=needle):
-        TelloAutopilot(params)
+        TelloAdapter(params)
 
 
 def test_rc_scale() -> None:
     """rc 100 = max_speed; horizontal clamped together (direction kept), the rest per channel."""
-    ap = TelloAutopilot({"max_speed": 2.0, "max_vertical_speed": 0.5, "max_yaw_rate": 90.0})
+    ap = TelloAdapter({"max_speed": 2.0, "max_vertical_speed": 0.5, "max_yaw_rate": 90.0})
     assert ap._rc(1.0, -0.5, 0.25, 45.0) == (-25, 50, 50, 50)
     assert ap._rc(8.0, 4.0, -3.0, -500.0) == (50, 100, -100, -100)  # 4:2 keeps its 2:1 direction
 
 
 def test_commands_need_a_connection() -> None:
-    ap = TelloAutopilot({})
+    ap = TelloAdapter({})
     for call in (ap.arm, ap.land, ap.rtl, lambda: ap.takeoff(1.0)):
         with pytest.raises(Exception, match="not connected"):
             call()

@@ -1,4 +1,4 @@
-"""The Tello adapter's arithmetic (`antalate_lcm.autopilot.tello.maths`) and the shared altitude rule."""
+"""The Tello adapter's arithmetic (`antalate_lcm.vehicles.tello.maths`) and the shared altitude rule."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import re
 
 import pytest
 
-from antalate_lcm.autopilot.base import altitude_reached
-from antalate_lcm.autopilot.tello import maths, telemetry
-from antalate_lcm.autopilot.tello.params import Params
+from antalate_lcm.vehicles.base import altitude_reached
+from antalate_lcm.vehicles.tello import maths, telemetry
+from antalate_lcm.vehicles.tello.params import Params
 
 
 def test_altitude_reached_is_the_hlc_rule_with_float_slack_only() -> None:

@@ -1,4 +1,4 @@
-"""A whole mission through `TelloAutopilot` over a `MemoryLink`: no socket, no network namespace (issue #14).
+"""A whole mission through `TelloAdapter` over a `MemoryLink`: no socket, no network namespace (issue #14).
 
 The adapter's link is the Tello emulator's `MemoryLink` (``TelloEmulator(memory=True)``): SDK commands
 go to the emulator's model as the datagrams they would be, its answers come back when its manoeuvres
@@ -15,11 +15,11 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.autopilot.base import AutopilotError
-from antalate_lcm.autopilot.tello import MemoryLink, Params, TelloAutopilot
-from antalate_lcm.autopilot.tello.link import parse_state
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
+from antalate_lcm.vehicles.base import AutopilotError
+from antalate_lcm.vehicles.tello import MemoryLink, Params, TelloAdapter
+from antalate_lcm.vehicles.tello.link import parse_state
 from tests.emulators.tello_emulator import TelloEmulator
 from tests.memory_agent import MemoryAgent
 from tests.vehicles.test_tello_e2e import config
@@ -50,7 +50,7 @@ def test_mission_over_a_memory_link(emulator: TelloEmulator) -> None:
         AP,
         hlc={"default_takeoff_altitude": 1.2, "gain_altitude_timeout": 6.0, "link_timeout": 1.5},
         operator={"altitude": 1.2, "rtl_after": 1.0},
-        adapter=TelloAutopilot(AP, link=open_link),
+        adapter=TelloAdapter(AP, link=open_link),
     ).start()
     try:
         agent.wait("mc", M.STANDBY)
@@ -80,7 +80,7 @@ def test_scripted_tello_answers_and_state_lines() -> None:
         return None if command.startswith("rc ") else "87" if command == "battery?" else "ok"
 
     link = MemoryLink(tello)
-    ap = TelloAutopilot({**AP, "min_battery": 20.0}, link=lambda _params: link)
+    ap = TelloAdapter({**AP, "min_battery": 20.0}, link=lambda _params: link)
     ap.connect()
     try:
         assert ap.arm()  # battery? -> 87 > min_battery

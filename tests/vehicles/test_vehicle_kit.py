@@ -1,4 +1,4 @@
-"""The vehicle kit (antalate_lcm/autopilot/kit): the params parser, the in-memory pipe, link age and
+"""The vehicle kit (antalate_lcm/vehicles/kit): the params parser, the in-memory pipe, link age and
 the worker threads every adapter and emulator is built on; and, for each adapter, that its params are
 documented and its example config loads."""
 
@@ -9,10 +9,10 @@ from typing import Any
 
 import pytest
 
-from antalate_lcm.autopilot import load_autopilot
-from antalate_lcm.autopilot.kit import LinkAge, MemoryPipe, VehicleAdapter, Workers, defaults, parse_params
-from antalate_lcm.autopilot.mavlink import Params as MavlinkParams
 from antalate_lcm.base.errors import LinkClosed
+from antalate_lcm.vehicles import load_autopilot
+from antalate_lcm.vehicles.kit import LinkAge, LinkedAdapter, MemoryPipe, Workers, defaults, parse_params
+from antalate_lcm.vehicles.mavlink import Params as MavlinkParams
 from tests import REPO
 from tests.harness.polling import wait_for
 
@@ -39,7 +39,7 @@ def test_parse_params_takes_none_as_an_empty_table_and_defaults_are_the_fields()
 
 
 def test_an_adapter_without_params_model_or_link_says_so() -> None:
-    class Bare(VehicleAdapter[Any, Any]):
+    class Bare(LinkedAdapter[Any, Any]):
         name = "bare"
 
         def connect(self) -> None: ...

@@ -21,7 +21,7 @@ from typing import Any
 import zenoh
 
 from antalate_lcm.apps.bridge import Bridge, BridgeConfig
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.msgs import mc_state_t, telemetry_t
 from antalate_lcm.runtime.router import router_config
 
@@ -43,7 +43,7 @@ def msg(origin: int, seq: int) -> bytes:
 class Observer:
     """Every datagram of a bus, raw, counted by (channel, bytes)."""
 
-    def __init__(self, bus: Bus, name: str) -> None:
+    def __init__(self, bus: Buses, name: str) -> None:
         self.copies: Counter[tuple[str, bytes]] = Counter()
         self.order: list[tuple[str, bytes]] = []
         self.lock = threading.Lock()
@@ -89,7 +89,7 @@ def bridge(lan: str, wan: str, site: str, limits: list[dict[str, Any]] | None = 
     return b
 
 
-def settle(bus: Bus, bus_name: str, observers: list[Observer]) -> None:
+def settle(bus: Buses, bus_name: str, observers: list[Observer]) -> None:
     """Probe until every observer hears the publisher (subscriptions reach the router asynchronously)."""
     i = 0
 
@@ -109,7 +109,7 @@ def two_sites(port: int) -> dict[str, Any]:
     limit = [{"channel": ".*/TELEMETRY", "to": "wan", "rate": RATE}]
     # Both sites' LANs use the same URL form in the field; here two groups stand for two LANs.
     bridges = [bridge(LAN_A, wan, "site-a"), bridge(LAN_B, wan, "site-b", limit)]
-    bus = Bus({"a": LAN_A, "b": LAN_B, "w": wan})
+    bus = Buses({"a": LAN_A, "b": LAN_B, "w": wan})
     obs = {"a": Observer(bus, "a"), "b": Observer(bus, "b"), "w": Observer(bus, "w")}
     for name in ("a", "b", "w"):
         settle(bus, name, [o for k, o in obs.items() if k != name])
@@ -162,7 +162,7 @@ def two_sites(port: int) -> dict[str, Any]:
 def one_lan(port: int) -> dict[str, Any]:
     wan = f"zenoh://?connect=tcp/127.0.0.1:{port}"
     bridges = [bridge(LAN_A, wan, "site-a"), bridge(LAN_A, wan, "site-a")]
-    bus = Bus({"a": LAN_A, "w": wan})
+    bus = Buses({"a": LAN_A, "w": wan})
     obs = {"a": Observer(bus, "a"), "w": Observer(bus, "w")}
     settle(bus, "a", [obs["w"]])
     settle(bus, "w", [obs["a"]])

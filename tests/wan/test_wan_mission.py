@@ -27,7 +27,7 @@ import pytest
 import tomli_w
 
 from antalate_lcm.apps.analysis import read_log
-from antalate_lcm.runtime.commands import native_lcm_tool
+from antalate_lcm.runtime.cli import native_lcm_tool
 from tests.lan.swarm import EXAMPLES, SWARM_KEY, VEHICLES, OperatorClient, _merge, vehicle_config
 from tests.lan.topology import Wan
 from tests.wan.test_zenoh_agent import lab_ca, mtls_url

@@ -45,7 +45,7 @@ class HlcError:
 
 
 class ActionKind(enum.Enum):
-    """Autopilot calls the node performs for the machine (`Autopilot` method of the same name)."""
+    """Autopilot calls the node performs for the machine (`VehicleAdapter` method of the same name)."""
 
     ARM = "ARM"
     DISARM = "DISARM"

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import enum
 
-from antalate_lcm.autopilot.base import AutopilotState, FlightMode
+from antalate_lcm.vehicles.base import FlightMode, VehicleState
 
 
 class HlcEvent(enum.Enum):
@@ -37,9 +37,9 @@ class HlcEvent(enum.Enum):
     AUTOPILOT_RTL = "AUTOPILOT_RTL"  # the autopilot reports it is returning on its own
     RESYNC_HOLD = "RESYNC_HOLD"  # INIT: armed and in air, autopilot holding on a failsafe
     MC_HOLD = "MC_HOLD"  # MC is in HOLD (level)
-    FAILSAFE_RTL = "FAILSAFE_RTL"  # AutopilotState.failsafe set, flight_mode RTL
-    FAILSAFE_LAND = "FAILSAFE_LAND"  # AutopilotState.failsafe set, flight_mode LANDING
-    FAILSAFE_HOLD = "FAILSAFE_HOLD"  # AutopilotState.failsafe set, flight_mode HOLD
+    FAILSAFE_RTL = "FAILSAFE_RTL"  # VehicleState.failsafe set, flight_mode RTL
+    FAILSAFE_LAND = "FAILSAFE_LAND"  # VehicleState.failsafe set, flight_mode LANDING
+    FAILSAFE_HOLD = "FAILSAFE_HOLD"  # VehicleState.failsafe set, flight_mode HOLD
     LINK_REGAINED_GROUND = "LINK_REGAINED_GROUND"  # LLC_DOWN: fresh again, vehicle on the ground
     LINK_REGAINED_GUIDED = "LINK_REGAINED_GUIDED"  # LLC_DOWN: fresh again, flying in GUIDED
     LINK_REGAINED_RTL = "LINK_REGAINED_RTL"  # LLC_DOWN: fresh again, autopilot returning
@@ -63,10 +63,10 @@ class Control(enum.Enum):
 FAILSAFE_MODES = (FlightMode.RTL, FlightMode.LANDING, FlightMode.HOLD)
 
 
-def pilot_in_control(ap: AutopilotState) -> bool:
+def pilot_in_control(ap: VehicleState) -> bool:
     """A human pilot has the vehicle: not autonomous, or a pilot's mode, unless a failsafe explains it.
 
-    An autopilot failsafe (`AutopilotState.failsafe` with RTL, LANDING or HOLD) is the autopilot's
+    An autopilot failsafe (`VehicleState.failsafe` with RTL, LANDING or HOLD) is the autopilot's
     own decision, never a pilot's, even when the adapter says the vehicle left our control. HOLD
     without a failsafe is a pilot's BRAKE.
     """
@@ -75,7 +75,7 @@ def pilot_in_control(ap: AutopilotState) -> bool:
     return not ap.autonomous or ap.flight_mode in (FlightMode.MANUAL, FlightMode.HOLD)
 
 
-def classify(ap: AutopilotState) -> Control:
+def classify(ap: VehicleState) -> Control:
     """What the vehicle is doing, for the resync rows (INIT, and LLC_DOWN when the link is back)."""
     if not (ap.armed and ap.in_air):
         return Control.GROUND

@@ -15,10 +15,10 @@ from typing import TYPE_CHECKING, cast
 from antalate_lcm.agent.hlc.machine import ErrorCode, HlcError
 from antalate_lcm.agent.hlc.safety import Filtered, SafetyLayer, describe, new_picture
 from antalate_lcm.agent.hlc.velocity_guard import Velocity, mission_flight
-from antalate_lcm.autopilot import AutopilotError, AutopilotState, Frame
 from antalate_lcm.core.config import Config
 from antalate_lcm.core.node import Context, Node, TopicMatch
 from antalate_lcm.msgs import telemetry_t
+from antalate_lcm.vehicles import AutopilotError, Frame, VehicleState
 from antalate_lcm.wire.vocabulary import HlcState, Severity
 
 if TYPE_CHECKING:
@@ -121,7 +121,7 @@ class SafetyDriver:
             return v
         return Velocity(out.vn, out.ve, out.vd, v.yaw_rate, Frame.NED)
 
-    def taking_off(self, snapshot: AutopilotState, now: float) -> None:
+    def taking_off(self, snapshot: VehicleState, now: float) -> None:
         """The HLC enters TAKEOFF: home is here; a crowd around it is reported (the climb keeps it)."""
         layer = self.layer
         layer.mark_home(snapshot)
@@ -200,8 +200,8 @@ class SafetyDriver:
 
     def _mirror_fence(self) -> None:
         """Write the swarm fence into the autopilot's own fence parameters and read them back, once, on
-        the ground with a position fix: ArduPilot's FENCE_* (antalate_lcm.autopilot.mavlink.fence_mirror),
-        PX4's GF_* (antalate_lcm.autopilot.px4.fence_mirror). It holds if we die."""
+        the ground with a position fix: ArduPilot's FENCE_* (antalate_lcm.vehicles.mavlink.fence_mirror),
+        PX4's GF_* (antalate_lcm.vehicles.px4.fence_mirror). It holds if we die."""
         node = self.node
         safety, fence_config = self.layer, node.config.safety.fence
         kind = node.autopilot.name
@@ -213,8 +213,8 @@ class SafetyDriver:
         if here is None or fence is None or s.in_air or s.armed:
             return
         self._fence_mirrored = True
-        from antalate_lcm.autopilot.mavlink import fence_mirror as ardupilot
-        from antalate_lcm.autopilot.px4 import fence_mirror as px4
+        from antalate_lcm.vehicles.mavlink import fence_mirror as ardupilot
+        from antalate_lcm.vehicles.px4 import fence_mirror as px4
 
         module = px4 if kind == "px4" else ardupilot
         wanted = module.fence_parameters(fence, (here[0], here[1]), fence_config.outside)

@@ -3,7 +3,7 @@
 Pure logic: no I/O, no clock. The HLC node feeds it three kinds of input and performs what comes out:
 
 * `HighLevelControl.on_mc_state(state, now, takeoff_altitude=...)` -- every ``mc_state_t`` heard;
-* `HighLevelControl.on_autopilot(snapshot, now)` -- every `AutopilotState` polled (10 Hz or more);
+* `HighLevelControl.on_autopilot(snapshot, now)` -- every `VehicleState` polled (10 Hz or more);
 * `HighLevelControl.on_action_result(kind, ok, now)` -- the result of an `Action` the node performed;
 * `HighLevelControl.tick(now)` -- periodically, for timeouts.
 
@@ -45,8 +45,8 @@ from antalate_lcm.agent.hlc.effects import (
 )
 from antalate_lcm.agent.hlc.events import FAILSAFE_MODES, Control, HlcEvent, classify, pilot_in_control
 from antalate_lcm.agent.hlc.table import HLC_TABLE, HlcRow, HlcView
-from antalate_lcm.autopilot.base import AutopilotState, FlightMode, altitude_reached
 from antalate_lcm.base.state_machine import Table
+from antalate_lcm.vehicles.base import FlightMode, VehicleState, altitude_reached
 from antalate_lcm.wire.vocabulary import HlcState, McState, Severity
 
 
@@ -100,7 +100,7 @@ class HighLevelControl:
         self.state: HlcState = HlcState.INIT
         self.entered_at: float | None = None  # `now` of the last transition
         self.mc_state: int | None = None  # last MC state heard (an McState value), None = never
-        self.autopilot: AutopilotState | None = None  # last snapshot
+        self.autopilot: VehicleState | None = None  # last snapshot
         self.mc_state_at_entry: int | None = None  # the MC's state when `state` began
         self.low_battery_handled = False  # LOW_BATTERY was entered since the last READY
         self.mc_moved = False  # the MC has been in another state than `mc_state_at_entry` since
@@ -166,8 +166,8 @@ class HighLevelControl:
         # 5 a second (the MC's republished state): nearly all with no event.
         return self._fire(events, now) if events else NOTHING
 
-    def on_autopilot(self, snapshot: AutopilotState, now: float, *, fault: str = "") -> HlcOutcome:
-        """An autopilot snapshot (the node polls `Autopilot.state()`).
+    def on_autopilot(self, snapshot: VehicleState, now: float, *, fault: str = "") -> HlcOutcome:
+        """An autopilot snapshot (the node polls `VehicleAdapter.state()`).
 
         `fault` says why the snapshot is not fresh when the node knows (``state()`` raised: the node
         passes the last good snapshot with its `link_age` grown); it goes into the LLC_DOWN reason.
@@ -215,7 +215,7 @@ class HighLevelControl:
             low or f"battery {battery} (low_battery {self.params.low_battery:g}%)"
         )
 
-    def _link_fresh(self, ap: AutopilotState) -> bool:
+    def _link_fresh(self, ap: VehicleState) -> bool:
         return ap.connected and ap.link_age < self.params.link_timeout
 
     def _init_events(self) -> list[tuple[HlcEvent, str]]:
@@ -234,7 +234,7 @@ class HighLevelControl:
         }
         return [(resync[control], self._vehicle_detail(ap))]
 
-    def _regained_events(self, ap: AutopilotState) -> list[tuple[HlcEvent, str]]:
+    def _regained_events(self, ap: VehicleState) -> list[tuple[HlcEvent, str]]:
         regained = {
             Control.GROUND: HlcEvent.LINK_REGAINED_GROUND,
             Control.GUIDED: HlcEvent.LINK_REGAINED_GUIDED,
@@ -248,11 +248,11 @@ class HighLevelControl:
         return [(regained[control], f"link {ap.link_age:.2f} s old after LLC_DOWN, {where}")]
 
     @staticmethod
-    def _vehicle_detail(ap: AutopilotState) -> str:
+    def _vehicle_detail(ap: VehicleState) -> str:
         failsafe = f", failsafe: {ap.failsafe}" if ap.failsafe else ""
         return f"vehicle armed and in air, mode {ap.mode or '?'} at {ap.alt:.1f} m{failsafe}"
 
-    def _autopilot_events(self, ap: AutopilotState, fault: str = "") -> list[tuple[HlcEvent, str]]:
+    def _autopilot_events(self, ap: VehicleState, fault: str = "") -> list[tuple[HlcEvent, str]]:
         p = self.params
         if ap.link_age >= p.link_timeout:
             # Nothing else the snapshot says can be trusted.

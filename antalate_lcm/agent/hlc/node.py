@@ -2,7 +2,7 @@
 
 A control loop polls the autopilot at ``control_hz`` and feeds the machine; the actions it returns are
 performed in order, on a worker thread when the adapter's commands may block (see
-`Autopilot.blocking`), and their results fed back. Telemetry goes out at ``telemetry_hz``.
+`VehicleAdapter.blocking`), and their results fed back. Telemetry goes out at ``telemetry_hz``.
 
 An adapter whose ``state()`` raises is a stale link, not a crash: the machine gets the last good
 snapshot with its ``link_age`` grown by the time since (so LLC_DOWN follows after ``link_timeout``,
@@ -45,17 +45,17 @@ from antalate_lcm.agent.hlc.velocity_guard import (
     mission_flight,
 )
 from antalate_lcm.agent.plan import plan_autopilot
-from antalate_lcm.autopilot import Autopilot, AutopilotError, AutopilotState, Frame
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.config import Config
 from antalate_lcm.core.node import Context, Node, shared_params
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t, velocity_cmd_t
+from antalate_lcm.vehicles import AutopilotError, Frame, VehicleAdapter, VehicleState
 from antalate_lcm.wire.vocabulary import HlcState, Severity
 
 _CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
 
 
-def make_autopilot(config: Config, context: Context) -> Autopilot:
+def make_autopilot(config: Config, context: Context) -> VehicleAdapter:
     return plan_autopilot(config).build(context.executor.clock)
 
 
@@ -86,7 +86,7 @@ class HlcNode(Node):
         "_state",
     )
 
-    def __init__(self, config: Config, context: Context, autopilot: Autopilot | None = None) -> None:
+    def __init__(self, config: Config, context: Context, autopilot: VehicleAdapter | None = None) -> None:
         super().__init__(config, context)
         h = config.hlc
         self.autopilot = autopilot or make_autopilot(config, context)
@@ -114,8 +114,8 @@ class HlcNode(Node):
             )
         )
         self.mc_state: int | None = None
-        self.snapshot = AutopilotState()
-        self._good = AutopilotState()  # the last snapshot state() returned
+        self.snapshot = VehicleState()
+        self._good = VehicleState()  # the last snapshot state() returned
         self._good_at: float | None = None  # `now` when it did
         self._polled_at: float | None = None  # `now` of `snapshot`
         self._state_fault = ""  # why state() failed on the last tick, "" when it worked
@@ -133,7 +133,7 @@ class HlcNode(Node):
             self.safety = SafetyLayer(self.agent, config, self._shared.picture)
             self._filter = SafetyDriver(self, self.safety)
         self._clock: Callable[[], float] = context.executor.clock
-        self._state: Callable[[], AutopilotState] = self.autopilot.state
+        self._state: Callable[[], VehicleState] = self.autopilot.state
 
     @property
     def state(self) -> HlcState:
@@ -287,7 +287,7 @@ class HlcNode(Node):
             return math.inf
         return self.snapshot.link_age + max(0.0, self.now - self._polled_at)
 
-    def _stale(self, now: float, exc: Exception) -> AutopilotState:
+    def _stale(self, now: float, exc: Exception) -> VehicleState:
         """``state()`` raised ``exc``: the last good snapshot, its link aged by the time since."""
         fault = f"autopilot {self.autopilot.name} state() raised {type(exc).__name__}: {exc}"
         if fault != self._state_fault:

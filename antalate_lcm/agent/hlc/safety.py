@@ -13,12 +13,12 @@ import math
 from dataclasses import dataclass, replace
 
 from antalate_lcm.agent.hlc.swarm_picture import SwarmPicture
-from antalate_lcm.autopilot.base import AutopilotState, Frame
 from antalate_lcm.base.geo import FlatFrame, body_to_ne
 from antalate_lcm.base.safety.barrier import Vec
 from antalate_lcm.base.safety.filter import FilterParams, Policy, SafetyDecision, SafetyFilter
 from antalate_lcm.base.safety.separation import PeerView, SeparationParams
 from antalate_lcm.core.config import Config, SafetyConfig
+from antalate_lcm.vehicles.base import Frame, VehicleState
 
 #: Per vehicle (the ``[hlc] autopilot`` name): separation radius (m, horizontal), half-height (m), and
 #: velocity response time constant (s). Sim: its own ``tau``. ArduCopter: WPNAV/PSC velocity loop,
@@ -106,7 +106,7 @@ class SafetyLayer:
         self._filter = SafetyFilter(self.params)
 
     # ------------------------------------------------------------------ inputs
-    def position(self, s: AutopilotState) -> Vec | None:
+    def position(self, s: VehicleState) -> Vec | None:
         """(north, east, up) of a snapshot in the local frame, None without a valid fix."""
         if not (math.isfinite(s.lat) and math.isfinite(s.lon) and -90.0 <= s.lat <= 90.0):
             return None
@@ -116,13 +116,13 @@ class SafetyLayer:
         north, east = frame.to_ne(s.lat, s.lon)
         return north, east, s.alt
 
-    def mark_home(self, s: AutopilotState) -> None:
+    def mark_home(self, s: VehicleState) -> None:
         """Remember where the vehicle takes off (the filtered return leg flies back there)."""
         here = self.position(s)
         if here is not None:
             self.home = (here[0], here[1])
 
-    def crowded(self, s: AutopilotState, now: float) -> list[tuple[str, float]]:
+    def crowded(self, s: VehicleState, now: float) -> list[tuple[str, float]]:
         """The fresh peers standing or flying closer than the radius horizontally, nearest first: a
         vertical take-off from here keeps that distance (docs/safety.md, take-off)."""
         here = self.position(s)
@@ -164,7 +164,7 @@ class SafetyLayer:
         return out
 
     def filter_velocity(
-        self, s: AutopilotState, vx: float, vy: float, vz: float, frame: Frame, now: float
+        self, s: VehicleState, vx: float, vy: float, vz: float, frame: Frame, now: float
     ) -> Filtered | None:
         """The velocity to send for a command (as the guard passed it); None without a position fix."""
         here = self.position(s)
@@ -185,7 +185,7 @@ class SafetyLayer:
         u = decision.velocity
         return Filtered(u[0], u[1], -u[2], decision)
 
-    def return_leg(self, s: AutopilotState, now: float) -> Filtered | None:
+    def return_leg(self, s: VehicleState, now: float) -> Filtered | None:
         """The filtered RTL: towards home at ``rtl_speed`` and the current height; None once home
         (the node then lands) or without a position fix or a home."""
         here = self.position(s)

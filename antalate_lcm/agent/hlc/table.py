@@ -10,7 +10,7 @@ Failsafe rows (docs/design.md §6 and docs/failsafes.md), and the choices behind
   autopilot's RTL/LAND/failsafe-HOLD or a pilot -> RTL/LANDING/HOLD/MANUAL; still in GUIDED -> HOLD
   with a HOVER action: the vehicle stops until the MC decides (its ``on_link_regained`` policy).
   Every such row publishes a LINK_REGAINED ``hlc_error_t`` saying what the vehicle does.
-* **Autopilot failsafes are not pilots.** `AutopilotState.failsafe` with flight_mode RTL, LANDING or
+* **Autopilot failsafes are not pilots.** `VehicleState.failsafe` with flight_mode RTL, LANDING or
   HOLD is the autopilot's decision (fence, battery, EKF, GCS failsafe): the HLC follows the vehicle
   from any flying state (FAILSAFE_RTL/LAND/HOLD rows, a WARNING AUTOPILOT_FAILSAFE error carrying
   the reason), never MANUAL. Only a real pilot (`pilot_in_control`) makes MANUAL; HOLD without a
@@ -25,7 +25,7 @@ Failsafe rows (docs/design.md §6 and docs/failsafes.md), and the choices behind
   failsafe holds COM_FAIL_ACT_T before its action) stays HOLD, where LOW_BATTERY and FAILSAFE_HOLD
   would otherwise alternate at the poll rate, an RTL command each time (seen with PX4 1.15.4 SITL).
 * **Low battery** is the first of: percentage <= ``low_battery``, volts per cell <= ``low_cell_voltage``,
-  or the vehicle's own `AutopilotState.battery_warning`; the reason says which.
+  or the vehicle's own `VehicleState.battery_warning`; the reason says which.
 
 Rows beyond docs/design.md §6, and why
 ------------------------------

@@ -2,7 +2,7 @@
 
 Behaviors are plugins: the HLC cannot trust them to be in the right state, to produce finite
 numbers, to respect the vehicle's limits, or to keep talking. This module decides, for each command
-and on each tick, what (if anything) goes to `Autopilot.set_velocity` and why:
+and on each tick, what (if anything) goes to `VehicleAdapter.set_velocity` and why:
 
 * a command is only passed on while the HLC is AIRBORNE **and** the MC is in MISSION (otherwise the
   autopilot is taking off, landing or returning, or a pilot flies, and must not be disturbed);
@@ -29,7 +29,7 @@ import enum
 import math
 from dataclasses import dataclass
 
-from antalate_lcm.autopilot.base import Frame
+from antalate_lcm.vehicles.base import Frame
 from antalate_lcm.wire.vocabulary import HlcState, McState, name_of
 
 
@@ -52,7 +52,7 @@ class VelocityLimits:
 
 @dataclass(frozen=True)
 class Velocity:
-    """A set-point to pass to `Autopilot.set_velocity` (m/s, z down; deg/s clockwise)."""
+    """A set-point to pass to `VehicleAdapter.set_velocity` (m/s, z down; deg/s clockwise)."""
 
     vx: float
     vy: float
@@ -117,7 +117,7 @@ def check_velocity(
 ) -> GuardDecision:
     """Stateless verdict on one command (see the module docstring for the rules).
 
-    `link_age` is the age of the autopilot's last snapshot (`AutopilotState.link_age`).
+    `link_age` is the age of the autopilot's last snapshot (`VehicleState.link_age`).
     """
     if not mission_flight(hlc_state, mc_state):
         return GuardDecision(

@@ -38,7 +38,8 @@ from antalate_lcm.apps.analysis.metrics import (
     frame_origin,
     local_tracks,
 )
-from antalate_lcm.apps.analysis.model import (
+from antalate_lcm.apps.analysis.phases import PHASES, FlightPhase, Window, flight_phases, mission_window
+from antalate_lcm.apps.analysis.records import (
     AgentRecord,
     DirectionCommand,
     SafetyEvent,
@@ -46,7 +47,6 @@ from antalate_lcm.apps.analysis.model import (
     SwarmRecord,
     TelemetrySample,
 )
-from antalate_lcm.apps.analysis.phases import PHASES, FlightPhase, Window, flight_phases, mission_window
 from antalate_lcm.apps.analysis.safety import Encounter, SafetyAnalysis, SafetyLimits, analyze_safety
 from antalate_lcm.apps.analysis.swarm import (
     DEFAULT_MIN_SPEED,

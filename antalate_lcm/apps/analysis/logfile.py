@@ -16,7 +16,7 @@ import struct
 from pathlib import Path
 from typing import Any
 
-from antalate_lcm.apps.analysis.model import (
+from antalate_lcm.apps.analysis.records import (
     DirectionCommand,
     FaultRecord,
     SafetyEvent,

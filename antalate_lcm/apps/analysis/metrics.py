@@ -27,8 +27,8 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any, TypedDict
 
-from antalate_lcm.apps.analysis.model import DirectionCommand, FaultRecord, SwarmRecord
 from antalate_lcm.apps.analysis.phases import Window, flight_phases, mission_window
+from antalate_lcm.apps.analysis.records import DirectionCommand, FaultRecord, SwarmRecord
 from antalate_lcm.apps.analysis.safety import SafetyAnalysis, SafetyLimits, analyze_safety, format_safety
 from antalate_lcm.apps.analysis.swarm import (
     DEFAULT_MIN_SPEED,

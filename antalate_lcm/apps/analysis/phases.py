@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from antalate_lcm.apps.analysis.model import SwarmRecord
+from antalate_lcm.apps.analysis.records import SwarmRecord
 
 #: The phases, in flight order.
 PHASES = ("takeoff", "mission", "return")

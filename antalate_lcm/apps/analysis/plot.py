@@ -11,7 +11,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from antalate_lcm.apps.analysis.metrics import Analysis
-from antalate_lcm.apps.analysis.model import SwarmRecord
+from antalate_lcm.apps.analysis.records import SwarmRecord
 from antalate_lcm.apps.analysis.swarm import SwarmSample
 from antalate_lcm.apps.analysis.track import Track
 from antalate_lcm.base.errors import AntalateError

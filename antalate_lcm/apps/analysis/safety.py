@@ -27,7 +27,7 @@ import bisect
 import math
 from dataclasses import dataclass, field
 
-from antalate_lcm.apps.analysis.model import SafetyEvent, SwarmRecord
+from antalate_lcm.apps.analysis.records import SafetyEvent, SwarmRecord
 from antalate_lcm.apps.analysis.swarm import sample_times
 from antalate_lcm.base.geo import FlatFrame
 from antalate_lcm.base.safety.geofence import Geofence

@@ -8,7 +8,7 @@ station name its mode; the mode is the ArduCopter mode nearest to the MC state (
 docs/tools.md), and the exact MC and HLC states go out as STATUSTEXT when they change.
 
 Message fields follow the MAVLink common set (pymavlink's ``ardupilotmega`` dialect, the one the
-MAVLink adapter speaks: ``autopilot/mavlink/dialect.py``); units as there: GLOBAL_POSITION_INT lat/lon
+MAVLink adapter speaks: ``vehicles/mavlink/dialect.py``); units as there: GLOBAL_POSITION_INT lat/lon
 in 1e-7 degrees, altitudes in mm, velocities in cm/s, heading in centidegrees.
 """
 
@@ -20,8 +20,8 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from antalate_lcm.autopilot.mavlink.dialect import COPTER_MODES
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t
+from antalate_lcm.vehicles.mavlink.dialect import COPTER_MODES
 from antalate_lcm.wire.vocabulary import Command, HlcState, McState, name_of
 
 #: MC state -> the ArduCopter mode a ground station shows (HEARTBEAT custom_mode).

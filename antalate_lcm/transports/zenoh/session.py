@@ -2,7 +2,7 @@
 
 :class:`Zenoh` checks its URLs (:mod:`.config`) and opens a :class:`ZenohLCM`. That offers the small part of ``lcm.LCM`` the bus uses -- ``publish``, ``subscribe`` (a channel regex
 matched whole, as liblcm does) with ``set_queue_capacity``, ``unsubscribe``, ``handle``,
-``handle_timeout`` and ``fileno`` -- so :class:`antalate_lcm.core.bus.Bus` drives it exactly like an LCM
+``handle_timeout`` and ``fileno`` -- so :class:`antalate_lcm.core.bus.Buses` drives it exactly like an LCM
 instance, and so would an event loop waiting on ``fileno()``.
 
 Why it is built this way:

@@ -1,0 +1,83 @@
+"""Vehicle adapter contract and adapter registry.
+
+Adapters are found by name in the entry-point group ``antalate.autopilots`` (so third-party packages
+can add vehicles without touching this code) or given directly as ``"package.module:ClassName"``.
+Only the chosen adapter's module is imported: a missing optional library (djitellopy, pymavlink)
+only matters for the adapter that needs it. Lookup goes through `antalate_lcm.base.plugins`, the one
+loader shared with behaviors, so both kinds of plugin fail the same way.
+"""
+
+from __future__ import annotations
+
+import inspect
+from typing import TYPE_CHECKING
+
+from antalate_lcm.base.errors import PluginNotFound
+from antalate_lcm.base.errors import UnknownAutopilotError as UnknownAutopilotError
+from antalate_lcm.base.plugins import AUTOPILOTS, group_entry_points, load_plugin
+from antalate_lcm.vehicles.base import AutopilotError, FlightMode, Frame, VehicleAdapter, VehicleState
+
+ENTRY_POINT_GROUP = AUTOPILOTS
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "VehicleAdapter",
+    "AutopilotError",
+    "VehicleState",
+    "FlightMode",
+    "Frame",
+    "UnknownAutopilotError",
+    "available_autopilots",
+    "load_autopilot",
+]
+
+
+def available_autopilots() -> dict[str, str]:
+    """Registered adapter names mapped to their ``module:Class`` targets, sorted by name."""
+    return dict(sorted((ep.name, ep.value) for ep in group_entry_points(ENTRY_POINT_GROUP)))
+
+
+def load_autopilot(name: str) -> type[VehicleAdapter]:
+    """The adapter class for `name` (a registered name or ``module:Class``).
+
+    Raises `UnknownAutopilotError` -- whatever went wrong: an unknown or malformed name, a module
+    that does not import, a class that is not an `VehicleAdapter` -- with one line that lists the
+    installed adapters, so a config typo is a one-line fix and never a traceback.
+    """
+    installed = available_autopilots()
+    expected = (
+        f"expected an installed adapter ({', '.join(installed) or 'none'}) or 'package.module:Class' "
+        "naming an VehicleAdapter subclass"
+    )
+    if ":" not in name and name not in installed:
+        raise UnknownAutopilotError(f"{expected}; there is no adapter {name!r}")
+    try:
+        cls = load_plugin(ENTRY_POINT_GROUP, name, VehicleAdapter)
+    except PluginNotFound as exc:
+        raise UnknownAutopilotError(f"{expected}; {exc}") from None
+    except Exception as exc:  # noqa: BLE001 - an entry point's module may fail in any way
+        raise UnknownAutopilotError(f"{expected}; {name!r} failed to load: {exc!r}") from None
+    assert issubclass(cls, VehicleAdapter)  # checked by load_plugin; narrows the type
+    if inspect.isabstract(cls):
+        missing = ", ".join(sorted(getattr(cls, "__abstractmethods__", ())))
+        raise UnknownAutopilotError(f"{expected}; {name!r} is abstract (it lacks {missing})")
+    return cls
+
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {"Autopilot": "VehicleAdapter", "AutopilotState": "VehicleState"}
+
+if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
+
+    def __getattr__(name: str) -> object:
+        new = _DEPRECATED_NAMES.get(name)
+        if new is None:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        import warnings
+
+        warnings.warn(
+            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return globals()[new]

@@ -1,0 +1,37 @@
+"""The Crazyflie adapter (``autopilot = "crazyflie"``): `CrazyflieAdapter` and its parameters.
+
+``adapter`` holds the HLC's verbs, ``control`` the control thread (the velocity stream, the
+high-level commander's switch, link-loss and battery landings), ``connection`` Bitcraze's cflib link
+(an optional extra: ``pip install 'antalate[crazyflie]'``), its log blocks and its reopening;
+``modes`` names what the adapter is doing, ``frames`` maps the local positioning frame to WGS84,
+``telemetry`` decodes the log blocks and the supervisor's bits, ``setpoints`` builds velocity
+set-points, ``memory`` is cflib's ``memory://`` driver, and ``params`` validates
+``[hlc.autopilot_params]``. Only ``connect`` imports cflib, so a config naming this adapter validates
+without it.
+"""
+
+from typing import TYPE_CHECKING
+
+from antalate_lcm.vehicles.crazyflie.adapter import CFLIB_MISSING, CrazyflieAdapter
+from antalate_lcm.vehicles.crazyflie.params import DEFAULTS, Params
+
+__all__ = ["CFLIB_MISSING", "DEFAULTS", "CrazyflieAdapter", "Params"]
+
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {"CrazyflieAutopilot": "CrazyflieAdapter"}
+
+if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
+
+    def __getattr__(name: str) -> object:
+        new = _DEPRECATED_NAMES.get(name)
+        if new is None:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        import warnings
+
+        warnings.warn(
+            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return globals()[new]

@@ -1,0 +1,38 @@
+"""The ``px4`` autopilot adapter: PX4 through the MAVLink adapter's link, threads and rules, split by job:
+
+* `adapter` -- `Px4Adapter`: PX4's commands, the OFFBOARD hand-over, the vehicle checks;
+* `modes` -- PX4's (main, sub) modes, their names and what they mean to the HLC (pure);
+* `vehicle` -- `Px4Vehicle`: PX4's readiness, mode ownership and failsafe flag (pure);
+* `offboard` -- when a set-point is streamed and when OFFBOARD is asked for (pure);
+* `failsafe` -- which PX4 failsafe switched the mode (pure);
+* `vehicle_checks` -- PX4's failsafe parameters, checked before flight (pure);
+* `params` -- the validated ``[hlc.autopilot_params]``.
+
+Shared MAVLink code (link, signing, streams, acknowledgements) stays in `antalate_lcm.vehicles.mavlink`.
+"""
+
+from typing import TYPE_CHECKING
+
+from antalate_lcm.vehicles.px4.adapter import Px4Adapter
+from antalate_lcm.vehicles.px4.params import PX4_DEFAULTS, Px4Params
+
+__all__ = ["PX4_DEFAULTS", "Px4Adapter", "Px4Params"]
+
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {"Px4Autopilot": "Px4Adapter"}
+
+if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
+
+    def __getattr__(name: str) -> object:
+        new = _DEPRECATED_NAMES.get(name)
+        if new is None:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        import warnings
+
+        warnings.warn(
+            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return globals()[new]

@@ -1,0 +1,42 @@
+"""The ``sim`` vehicle: an in-process kinematic quadcopter, the default (docs/design.md §7).
+
+It is meant for running the whole framework (and swarms of 200 agents) on one laptop, and for
+testing the HLC against faults that are hard to provoke on real hardware. One vehicle, in layers,
+each a module:
+
+* `params` -- ``[hlc.autopilot_params]`` (`Params`, `DEFAULTS`);
+* `physics` -- `Quadcopter`: the kinematic model and its lazy integration over simulated time
+  (docs/simulator.md spells out the dynamics);
+* `telemetry` -- `snapshot`: the `VehicleState` it reports, battery voltage and warning included;
+* `faults` -- `FaultInjection`: link loss, autopilot failsafes, a pilot taking over, a raising
+  ``state()``, at once by method or scheduled by params;
+* `persistence` -- `StateFile`: the vehicle outlives a restart of the process that flies it;
+* `adapter` -- `SimAdapter`, the `VehicleAdapter` contract over them (``autopilot = "sim"``).
+"""
+
+from typing import TYPE_CHECKING
+
+from antalate_lcm.vehicles.sim.adapter import SimAdapter
+from antalate_lcm.vehicles.sim.faults import FAILSAFE_MODES
+from antalate_lcm.vehicles.sim.params import DEFAULTS, Params
+
+__all__ = ["DEFAULTS", "FAILSAFE_MODES", "Params", "SimAdapter"]
+
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {"SimAutopilot": "SimAdapter"}
+
+if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
+
+    def __getattr__(name: str) -> object:
+        new = _DEPRECATED_NAMES.get(name)
+        if new is None:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        import warnings
+
+        warnings.warn(
+            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return globals()[new]

@@ -1,0 +1,53 @@
+"""The Tello adapter (``autopilot = "tello"``): `TelloAdapter` and its parameters.
+
+``adapter`` flies it through a ``link`` (`DjitellopyLink`: djitellopy, an optional extra:
+``pip install 'antalate[tello]'``; `MemoryLink`: a peer in this process), built from: ``commands``
+(the SDK command path and its waits), ``control`` (the control thread), ``failsafe`` (link loss and
+what the vehicle does uncommanded), ``takeoff``, ``rtl`` and ``landing`` (the moves), ``tracking``
+(state packets into position and link age) and ``flight`` (the phase), sharing what ``parts``
+names. ``telemetry`` reads a state packet into the adapter's units, ``maths`` the frames, dead
+reckoning, rc scaling, climb and landing rules, ``params`` the validated ``[hlc.autopilot_params]``.
+"""
+
+from typing import TYPE_CHECKING
+
+from antalate_lcm.vehicles.tello.adapter import TelloAdapter
+from antalate_lcm.vehicles.tello.link import (
+    DJITELLOPY_MISSING,
+    DjitellopyLink,
+    LinkOpener,
+    MemoryLink,
+    TelloLink,
+)
+from antalate_lcm.vehicles.tello.params import DEFAULTS, TELLO_AUTOLAND_S, Params
+
+__all__ = [
+    "DEFAULTS",
+    "DJITELLOPY_MISSING",
+    "TELLO_AUTOLAND_S",
+    "DjitellopyLink",
+    "LinkOpener",
+    "MemoryLink",
+    "Params",
+    "TelloAdapter",
+    "TelloLink",
+]
+
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {"TelloAutopilot": "TelloAdapter"}
+
+if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
+
+    def __getattr__(name: str) -> object:
+        new = _DEPRECATED_NAMES.get(name)
+        if new is None:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        import warnings
+
+        warnings.warn(
+            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return globals()[new]

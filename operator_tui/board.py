@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from antalate_lcm.agent.hlc.machine import ErrorCode
+from antalate_lcm.base.deprecation import renamed_names
 from antalate_lcm.base.geo import FlatFrame, wrap_360
 from antalate_lcm.wire.vocabulary import HlcState, McState, Severity, name_of
 
@@ -425,16 +426,4 @@ def join_limited(items: Iterable[str], width: int) -> str:
 _DEPRECATED_NAMES = {"SwarmModel": "SwarmBoard"}
 
 if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-
-    def __getattr__(name: str) -> object:
-        new = _DEPRECATED_NAMES.get(name)
-        if new is None:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        import warnings
-
-        warnings.warn(
-            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return globals()[new]
+    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

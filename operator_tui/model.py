@@ -1,20 +1,7 @@
 """Deprecated name of :mod:`operator_tui.board`, where issue #26's vocabulary renamed it (docs/architecture.md,
 "Vocabulary"): import that. It keeps working, with a warning, until the next release removes it."""
 
-from __future__ import annotations
-
-import warnings
-from typing import Any
-
-from operator_tui import board as _moved
+from antalate_lcm.base.deprecation import moved_module
 from operator_tui.board import *  # noqa: F403 - the old name offers what the new one does
 
-warnings.warn(
-    "operator_tui.model is deprecated: import operator_tui.board (the old name goes in the next release)",
-    DeprecationWarning,
-    stacklevel=2,
-)
-
-
-def __getattr__(name: str) -> Any:
-    return getattr(_moved, name)
+__getattr__ = moved_module(__name__, "operator_tui.board")

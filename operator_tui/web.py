@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from antalate_lcm.base.deprecation import renamed_names
 from antalate_lcm.base.errors import AntalateError
 from antalate_lcm.base.ratelimit import RateLimitedLog, TokenBucket
 from operator_tui.web_access import (
@@ -458,16 +459,4 @@ __all__ = [
 _DEPRECATED_NAMES = {"ConsoleLink": "BrowserTab"}
 
 if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-
-    def __getattr__(name: str) -> object:
-        new = _DEPRECATED_NAMES.get(name)
-        if new is None:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        import warnings
-
-        warnings.warn(
-            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return globals()[new]
+    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

@@ -5,8 +5,9 @@ removing them next release is deleting files, and no shim can drift from the oth
 from __future__ import annotations
 
 import importlib
+import sys
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 
@@ -24,5 +25,25 @@ def moved_module(old: str, new: str) -> Callable[[str], Any]:
 
     def __getattr__(name: str) -> Any:
         return getattr(target, name)
+
+    return __getattr__
+
+
+def renamed_names(module: str, renamed: Mapping[str, str]) -> Callable[[str], Any]:
+    """The module ``__getattr__`` that keeps ``module``'s renamed names (old -> new, issue #26's
+    vocabulary) working one release: each use warns, naming the new name, and gets the very object
+    the new name is bound to. Set only where mypy does not look (``if not TYPE_CHECKING``), so
+    nothing in the project itself can use an old name."""
+
+    def __getattr__(name: str) -> Any:
+        new = renamed.get(name)
+        if new is None:
+            raise AttributeError(f"module {module!r} has no attribute {name!r}")
+        warnings.warn(
+            f"{module}.{name} is deprecated: use {module}.{new} (the old name goes in the next release)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return getattr(sys.modules[module], new)
 
     return __getattr__

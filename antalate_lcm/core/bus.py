@@ -43,6 +43,7 @@ import threading
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
+from antalate_lcm.base.deprecation import renamed_names
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.bus_connection import BusConnection, Handler, Subscription
 from antalate_lcm.core.executor import Executor
@@ -208,16 +209,4 @@ __all__ = ["DEFAULT_QUEUE_CAPACITY", "UDPM_READER_ENV", "Buses", "Handler", "Sub
 _DEPRECATED_NAMES = {"Bus": "Buses"}
 
 if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-
-    def __getattr__(name: str) -> object:
-        new = _DEPRECATED_NAMES.get(name)
-        if new is None:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        import warnings
-
-        warnings.warn(
-            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return globals()[new]
+    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

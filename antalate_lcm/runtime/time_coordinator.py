@@ -48,6 +48,7 @@ import time
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
+from antalate_lcm.base.deprecation import renamed_names
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.simclock import SIM_START, SimClock
 from antalate_lcm.runtime.clock_client import (
@@ -363,16 +364,4 @@ _DEPRECATED_NAMES = {
 }
 
 if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-
-    def __getattr__(name: str) -> object:
-        new = _DEPRECATED_NAMES.get(name)
-        if new is None:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        import warnings
-
-        warnings.warn(
-            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return globals()[new]
+    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import inspect
 from typing import TYPE_CHECKING
 
+from antalate_lcm.base.deprecation import renamed_names
 from antalate_lcm.base.errors import PluginNotFound
 from antalate_lcm.base.errors import UnknownAutopilotError as UnknownAutopilotError
 from antalate_lcm.base.plugins import AUTOPILOTS, group_entry_points, load_plugin
@@ -68,16 +69,4 @@ def load_autopilot(name: str) -> type[VehicleAdapter]:
 _DEPRECATED_NAMES = {"Autopilot": "VehicleAdapter", "AutopilotState": "VehicleState"}
 
 if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-
-    def __getattr__(name: str) -> object:
-        new = _DEPRECATED_NAMES.get(name)
-        if new is None:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        import warnings
-
-        warnings.warn(
-            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return globals()[new]
+    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

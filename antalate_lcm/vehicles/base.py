@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from pydantic import BaseModel
 
+from antalate_lcm.base.deprecation import renamed_names
 from antalate_lcm.base.errors import AutopilotError as AutopilotError
 from antalate_lcm.base.strict import validate_strict
 from antalate_lcm.msgs import velocity_cmd_t
@@ -239,16 +240,4 @@ class VehicleAdapter(ABC):
 _DEPRECATED_NAMES = {"Autopilot": "VehicleAdapter", "AutopilotState": "VehicleState"}
 
 if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-
-    def __getattr__(name: str) -> object:
-        new = _DEPRECATED_NAMES.get(name)
-        if new is None:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        import warnings
-
-        warnings.warn(
-            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return globals()[new]
+    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

@@ -1,20 +1,7 @@
 """Deprecated name of :mod:`antalate_lcm.apps.analysis.records`, where issue #26's vocabulary renamed it (docs/architecture.md,
 "Vocabulary"): import that. It keeps working, with a warning, until the next release removes it."""
 
-from __future__ import annotations
-
-import warnings
-from typing import Any
-
-from antalate_lcm.apps.analysis import records as _moved
 from antalate_lcm.apps.analysis.records import *  # noqa: F403 - the old name offers what the new one does
+from antalate_lcm.base.deprecation import moved_module
 
-warnings.warn(
-    "antalate_lcm.apps.analysis.model is deprecated: import antalate_lcm.apps.analysis.records (the old name goes in the next release)",
-    DeprecationWarning,
-    stacklevel=2,
-)
-
-
-def __getattr__(name: str) -> Any:
-    return getattr(_moved, name)
+__getattr__ = moved_module(__name__, "antalate_lcm.apps.analysis.records")

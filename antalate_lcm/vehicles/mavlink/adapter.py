@@ -44,6 +44,7 @@ from typing import TYPE_CHECKING, ClassVar
 from pydantic import BaseModel
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from antalate_lcm.base.deprecation import renamed_names
 from antalate_lcm.vehicles.base import (
     AutopilotError,
     Frame,
@@ -310,16 +311,4 @@ class MavlinkAdapter(MavlinkCommands):
 _DEPRECATED_NAMES = {"MavlinkAutopilot": "MavlinkAdapter"}
 
 if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-
-    def __getattr__(name: str) -> object:
-        new = _DEPRECATED_NAMES.get(name)
-        if new is None:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        import warnings
-
-        warnings.warn(
-            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return globals()[new]
+    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

@@ -13,6 +13,7 @@ Shared MAVLink code (link, signing, streams, acknowledgements) stays in `antalat
 
 from typing import TYPE_CHECKING
 
+from antalate_lcm.base.deprecation import renamed_names
 from antalate_lcm.vehicles.px4.adapter import Px4Adapter
 from antalate_lcm.vehicles.px4.params import PX4_DEFAULTS, Px4Params
 
@@ -23,16 +24,4 @@ __all__ = ["PX4_DEFAULTS", "Px4Adapter", "Px4Params"]
 _DEPRECATED_NAMES = {"Px4Autopilot": "Px4Adapter"}
 
 if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-
-    def __getattr__(name: str) -> object:
-        new = _DEPRECATED_NAMES.get(name)
-        if new is None:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        import warnings
-
-        warnings.warn(
-            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return globals()[new]
+    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

@@ -16,6 +16,7 @@ each a module:
 
 from typing import TYPE_CHECKING
 
+from antalate_lcm.base.deprecation import renamed_names
 from antalate_lcm.vehicles.sim.adapter import SimAdapter
 from antalate_lcm.vehicles.sim.faults import FAILSAFE_MODES
 from antalate_lcm.vehicles.sim.params import DEFAULTS, Params
@@ -27,16 +28,4 @@ __all__ = ["DEFAULTS", "FAILSAFE_MODES", "Params", "SimAdapter"]
 _DEPRECATED_NAMES = {"SimAutopilot": "SimAdapter"}
 
 if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-
-    def __getattr__(name: str) -> object:
-        new = _DEPRECATED_NAMES.get(name)
-        if new is None:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        import warnings
-
-        warnings.warn(
-            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return globals()[new]
+    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

@@ -29,14 +29,14 @@ def test_own_reader_and_liblcm_on_one_group(netns: NetNamespace) -> None:
     assert r["damaged"] == 9, r  # every hostile datagram counted, once
     assert "not LCM or are damaged" in err  # and said, at a limited rate
     assert r["elsewhere"] == 0, r  # bound to its group, as liblcm binds
-    assert r["open_before_close"] == 3 and r["open_after_close"] == 0, r  # Bus.close() closes its socket
+    assert r["open_before_close"] == 3 and r["open_after_close"] == 0, r  # Buses.close() closes its socket
 
 
 _OWN_SCRIPT = r"""
 import json, os, socket, struct, sys, time
 import lcm
 from pathlib import Path
-from antalate_lcm.core.bus import Bus
+from antalate_lcm.core.bus import Buses
 from antalate_lcm.transports.datagram import short_datagram
 
 A = sys.argv[1]
@@ -49,14 +49,14 @@ def until(cond, timeout=5.0):
     return cond()
 
 def drops(bus):
-    ino = os.fstat(next(iter(bus._links.values()))._receiver.fileno()).st_ino
+    ino = os.fstat(next(iter(bus._connections.values()))._receiver.fileno()).st_ino
     for line in Path("/proc/net/udp").read_text().splitlines()[1:]:
         f = line.split()
         if int(f[9]) == ino:
             return int(f[12])
     return -1
 
-own, peer = Bus({"a": A}), Bus({"a": A})
+own, peer = Buses({"a": A}), Buses({"a": A})
 got = {"in": [], "out": [], "peer": []}
 own.subscribe("a", "IN", None, lambda ch, d: got["in"].append(d))
 peer.subscribe("a", "OUT", None, lambda ch, d: got["peer"].append(d))

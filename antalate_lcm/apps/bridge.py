@@ -122,7 +122,7 @@ class Bridge:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self.names: tuple[str, str] = (sec.between[0], sec.between[1])
-        self._links: dict[str, Any] = {}
+        self._connections: dict[str, Any] = {}
         self.directions: dict[str, Direction] = {}
         for src, dst in (self.names, self.names[::-1]):
             limits = [(re.compile(lim.channel), Throttle(lim.rate)) for lim in sec.limit if lim.to == dst]
@@ -148,23 +148,23 @@ class Bridge:
             for name in self.names:
                 direction_in = self.directions[name]
                 largest = max(direction_in.largest, self.directions[direction_in.dest].largest)
-                self._links[name] = _open(self.config.buses[name], direction_in, largest)
+                self._connections[name] = _open(self.config.buses[name], direction_in, largest)
         except Exception:
             self.close()
             raise
-        self._zenoh = {name: isinstance(link, ZenohLCM) for name, link in self._links.items()}
+        self._zenoh = {name: isinstance(conn, ZenohLCM) for name, conn in self._connections.items()}
         for name in self.names:
-            link = self._links[name]
+            conn = self._connections[name]
             handler: Callable[..., None] = partial(self._on_message, name)
-            if isinstance(link, ZenohLCM):
-                link.subscribe(".*", handler, remote_only=True, attachments=True).set_queue_capacity(10_000)
-            elif isinstance(link, _LanLink):
-                link.subscribe(handler)  # the kernel's socket buffer is its queue
+            if isinstance(conn, ZenohLCM):
+                conn.subscribe(".*", handler, remote_only=True, attachments=True).set_queue_capacity(10_000)
+            elif isinstance(conn, _LanLink):
+                conn.subscribe(handler)  # the kernel's socket buffer is its queue
             else:
-                link.subscribe(".*", handler).set_queue_capacity(10_000)
+                conn.subscribe(".*", handler).set_queue_capacity(10_000)
         for zside, lside in (self.names, self.names[::-1]):
-            zlink, llink = self._links[zside], self._links[lside]
-            if isinstance(zlink, ZenohLCM) and not isinstance(llink, ZenohLCM):
+            zconn, lconn = self._connections[zside], self._connections[lside]
+            if isinstance(zconn, ZenohLCM) and not isinstance(lconn, ZenohLCM):
                 if self._proof is None:
                     log.warning(
                         "bridge %s: no [security] swarm_key: any client of the Zenoh router can take "
@@ -172,7 +172,7 @@ class Bridge:
                         self.id,
                     )
                 # Bridges serving one LAN (same site) elect the one that forwards to it: the lowest id alive.
-                zlink.join_group(
+                zconn.join_group(
                     self.origin[lside].decode(), self.id, partial(self._on_members, lside), self._proof
                 )
         for name in self.names:
@@ -265,13 +265,13 @@ class Bridge:
         self._send(direction, channel, data)
 
     def _send(self, direction: Direction, channel: str, data: bytes) -> None:
-        link = self._links[direction.dest]
+        conn = self._connections[direction.dest]
         try:
             if self._zenoh[direction.dest]:
-                link.publish(channel, data, attachment=self.mark + b":" + self.origin[direction.source])
+                conn.publish(channel, data, attachment=self.mark + b":" + self.origin[direction.source])
             else:
-                link.publish(channel, data)
-        except Exception as exc:  # noqa: BLE001 - a dead link or a refused message: counted, never fatal
+                conn.publish(channel, data)
+        except Exception as exc:  # noqa: BLE001 - a dead connection or a refused message: counted, never fatal
             self.send_errors += 1
             self._drop(direction, "send_error", channel, f"{type(exc).__name__}: {exc}")
             return
@@ -279,14 +279,14 @@ class Bridge:
         direction.bytes_out += len(data)
 
     def _run(self, name: str) -> None:
-        link = self._links[name]
+        conn = self._connections[name]
         direction = self.directions[name]  # what this side sends out; its caps are flushed here
         pruned = time.monotonic()
         while not self._stop.is_set():
             try:
-                link.handle_timeout(20)
-            except Exception as exc:  # noqa: BLE001 - the loop survives; only a closed link ends it
-                if self._stop.is_set() or getattr(link, "closed", False):
+                conn.handle_timeout(20)
+            except Exception as exc:  # noqa: BLE001 - the loop survives; only a closed connection ends it
+                if self._stop.is_set() or getattr(conn, "closed", False):
                     return
                 self._log.log(
                     (name, "receive"),
@@ -298,8 +298,8 @@ class Bridge:
                     exc,
                 )
                 self._stop.wait(0.1)
-            if isinstance(link, _LanLink):
-                oversize, damaged = link.take_drops()
+            if isinstance(conn, _LanLink):
+                oversize, damaged = conn.take_drops()
                 for reason, n in (("oversize", oversize), ("damaged", damaged)):
                     if n:
                         self._drop(direction, reason, "", f"{n} datagrams, found when reassembling", n)
@@ -327,7 +327,7 @@ class Bridge:
             "send_errors": self.send_errors,
         }
         out["election_tokens_ignored"] = sum(
-            link.ignored_tokens for name, link in self._links.items() if self._zenoh.get(name)
+            conn.ignored_tokens for name, conn in self._connections.items() if self._zenoh.get(name)
         )
         for d in self.directions.values():
             out[f"not_selected {d.source}->{d.dest}"] = d.not_selected
@@ -341,10 +341,10 @@ class Bridge:
         self._stop.set()
         for t in self._threads:
             t.join(timeout=2)
-        for link in self._links.values():
-            if hasattr(link, "close"):
-                link.close()
-        self._links.clear()
+        for conn in self._connections.values():
+            if hasattr(conn, "close"):
+                conn.close()
+        self._connections.clear()
 
 
 __all__: Sequence[str] = [

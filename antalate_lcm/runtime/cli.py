@@ -7,6 +7,7 @@ Every command loads and validates its whole config (plugins included) before any
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from collections.abc import Callable
@@ -235,14 +236,23 @@ def native_lcm_tool(name: str) -> str:
         raise AntalateError(str(exc)) from None
 
 
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
-    return value
+def positive_number(not_a_number: str, not_positive: str) -> Callable[[str], float]:
+    """An argparse ``type``: a finite number > 0 (NaN and infinity are refused: a period, a radius or
+    a timeout must be one), each refusal in the words given, followed by ``, got 'TEXT'``."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{not_a_number}, got {text!r}") from None
+        if not 0 < value < math.inf:
+            raise argparse.ArgumentTypeError(f"{not_positive}, got {text!r}")
+        return value
+
+    return parse
+
+
+_positive = positive_number("expected a number", "expected a positive finite number")
 
 
 def _analysis_options(args: argparse.Namespace) -> AnalysisOptions:

@@ -8,7 +8,6 @@ checks on every point of a sweep before its first run. The argument types of ``-
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import time
@@ -18,6 +17,7 @@ from pathlib import Path
 from antalate_lcm.base.errors import AntalateError, ConfigError
 from antalate_lcm.core.config import Config, check_unique_agent_names, load_config
 from antalate_lcm.runtime.agent import swarm_configs, validate
+from antalate_lcm.runtime.cli import positive_number
 from antalate_lcm.runtime.script import Script, check_fault_agents
 from antalate_lcm.runtime.time_coordinator import DEFAULT_STALL
 from antalate_lcm.transports import transport_for
@@ -167,28 +167,16 @@ def check_interference(exp: Experiment, script: Script, configs: list[Config]) -
         )
 
 
+_SPEED_NUMBER = positive_number("'max' or a number > 0", "'max' or a number > 0")
+
+
 def parse_speed(text: str) -> float:
     """``--speed``: ``max`` (math.inf) or a number > 0."""
-    if text == "max":
-        return math.inf
-    try:
-        speed = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'max' or a number > 0, got {text!r}") from None
-    if not speed > 0 or math.isinf(speed):
-        raise argparse.ArgumentTypeError(f"'max' or a number > 0, got {text!r}")
-    return speed
+    return math.inf if text == "max" else _SPEED_NUMBER(text)
 
 
-def parse_stall(text: str) -> float:
-    """``--stall-timeout``: a number of seconds > 0 (not NaN, not infinite: a hang must end)."""
-    try:
-        seconds = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"a number of seconds > 0, got {text!r}") from None
-    if not 0 < seconds < math.inf:
-        raise argparse.ArgumentTypeError(f"a number of seconds > 0, got {text!r}")
-    return seconds
+#: ``--stall-timeout``: a number of seconds > 0 (not NaN, not infinite: a hang must end).
+parse_stall = positive_number("a number of seconds > 0", "a number of seconds > 0")
 
 
 __all__ = [

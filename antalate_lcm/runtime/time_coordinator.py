@@ -109,11 +109,13 @@ class LocalClockClient(ClockClient):
 
 
 class _Peer:
-    __slots__ = ("sock", "index", "buf")
+    __slots__ = ("sock", "index", "pid", "buf")
 
     def __init__(self, sock: socket.socket) -> None:
         self.sock = sock
         self.index: int | None = None
+        #: From its hello: the watchdog kills a hung process.
+        self.pid: int | None = None
         self.buf = bytearray()
 
 
@@ -128,8 +130,6 @@ class TimeCoordinator:
         self.count = count
         self.speed = speed
         self.stall = stall
-        #: Each agent process's pid, from its hello: the watchdog kills a hung one.
-        self._pids: list[int | None] = [None] * count
         #: When the last round was decided (real, monotonic); None until the first one.
         self._progress: float | None = None
         self._dir = tempfile.mkdtemp(prefix="antalate-clock-")
@@ -235,7 +235,7 @@ class TimeCoordinator:
                     return False
                 peer.index = index
                 self._peers[index] = peer
-                self._pids[index] = int(payload) if payload.isdigit() else None
+                peer.pid = int(payload) if payload.isdigit() else None
             elif kind == _INTEREST and peer.index is not None:
                 # At once: its report may come in a later read (a thousand agents' subscriptions
                 # are more than one read), and it must be known before that report is.
@@ -305,12 +305,15 @@ class TimeCoordinator:
             since = self._progress
             if since is None or time.monotonic() - since < self.stall or self._finished:
                 continue
+            reports, peers = self._reports, self._peers
             owing = [
-                i for i, r in enumerate(self._reports) if r is None and i > 0 and self._peers[i] is not None
+                peer
+                for report, peer in zip(reports[1:], peers[1:], strict=True)
+                if report is None and peer is not None
             ]
             if not owing:  # this process itself is busy (it cannot be waiting on itself): not a hang
                 continue
-            names = ", ".join(self._named(i) for i in owing)
+            names = ", ".join(self._named(peer) for peer in owing)
             self.failure = (
                 f"{names} sent nothing for {self.stall:g} s of real time at {self.t - SIM_START:.3f} s "
                 "of simulated time (it hangs or was stopped, and every other process waits for it; "
@@ -318,16 +321,15 @@ class TimeCoordinator:
             )
             log.error("%s", self.failure)
             self.lost.set()
-            for i in owing:
-                pid = self._pids[i]
-                if pid is not None:
+            for peer in owing:
+                if peer.pid is not None:
                     with contextlib.suppress(OSError):
-                        os.kill(pid, signal.SIGKILL)
+                        os.kill(peer.pid, signal.SIGKILL)
             return
 
-    def _named(self, index: int) -> str:
-        pid = self._pids[index]
-        return f"agent process {index} of {self.count - 1}" + (f" (pid {pid})" if pid is not None else "")
+    def _named(self, peer: _Peer) -> str:
+        pid = f" (pid {peer.pid})" if peer.pid is not None else ""
+        return f"agent process {peer.index} of {self.count - 1}{pid}"
 
     def _answer(self, index: int, kind: bytes, value: float, payload: bytes) -> None:
         if index == 0:

@@ -112,9 +112,13 @@ def test_signed_separate_processes_fly_and_ignore_unsigned_spoofs(
         assert wait_for(
             lambda: "unsigned message" in agent.log("mc") and "unsigned message" in agent.log("hlc"), 10
         )
+        # a genuine state of each since (the spoofs say TAKEOFF and LLC_DOWN): at load the probe's own
+        # spoofs, looped back late, once were all it had heard of HLC_STATE here, and the set below was empty
         later = probe.mark()
-        assert probe.wait("alpha/MC_STATE", "mc_state_t", timeout=5, since=later)
-        assert probe.wait("alpha/HLC_STATE", "hlc_state_t", timeout=5, since=later), agent.log("hlc")
+        assert probe.wait("alpha/MC_STATE", "mc_state_t", timeout=5, since=later, state=M.STANDBY)
+        assert probe.wait("alpha/HLC_STATE", "hlc_state_t", timeout=5, since=later, state=H.READY), agent.log(
+            "hlc"
+        )
         # the genuine messages are the signed ones (the spoofs carry no MAC; a genuine seq may be 1 too)
         states = {
             m["state"]

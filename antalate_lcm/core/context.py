@@ -14,6 +14,7 @@ from antalate_lcm.core.admission import Admission
 from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config
 from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.timers import Ticker
 
 #: The bus name of :meth:`Context.in_process` (memq://, one per process).
 INPROC_BUS = "_inproc"
@@ -69,6 +70,8 @@ class Context:
     senders: dict[tuple[str, ...], list[tuple[str, Callable[[str, bytes], None]]]] = field(
         default_factory=dict, repr=False
     )
+    #: Agent name -> the timer its nodes' periodic jobs share (`Node.ticker`): the HLC's and the MC's.
+    tickers: dict[str, Ticker] = field(default_factory=dict, repr=False)
     #: The one place this process signs and admits messages (every node's `NodeAdmission` comes from it).
     admission: Admission = field(init=False, repr=False)
 

@@ -35,7 +35,7 @@ from antalate_lcm.core.context import shared_params as shared_params
 from antalate_lcm.core.context import shared_value as shared_value
 from antalate_lcm.core.executor import Timer
 from antalate_lcm.core.routes import Routes
-from antalate_lcm.core.timers import phase_delay, run_due, split_jobs
+from antalate_lcm.core.timers import Ticker, phase_delay
 from antalate_lcm.wire.security import Authenticator, SecurityPolicy
 from antalate_lcm.wire.topics import Message, TopicSpec, channel_regex, is_internal
 
@@ -102,6 +102,8 @@ class Node:
         #: subscribe_all's pattern subscription -> its own-channel subscription (unsubscribed together).
         self._companions: dict[Subscription, Subscription] = {}
         self._timers: list[Timer] = []
+        #: The agent's shared timers this node has jobs on (`ticker`).
+        self._tickers: list[Ticker] = []
         self.started = False
         self._last_utime = 0
         self.admission = context.admission.for_node(self, watcher=watcher)
@@ -124,8 +126,17 @@ class Node:
         def shutdown() -> None:
             # Timers and subscriptions go first, on the executor thread (so none is mid-run): a
             # timer that ran after on_stop would meet a closed adapter (a false LINK_LOST).
+            for ticker in self._tickers:
+                # The agent's other nodes keep their jobs on it (an MC watching for its HLC).
+                if ticker.remove(self):
+                    ticker.timer.cancel()
+                    if self.context.tickers.get(self.agent) is ticker:
+                        del self.context.tickers[self.agent]
+            shared = [ticker.timer for ticker in self._tickers]
+            self._tickers.clear()
             for timer in self._timers:
-                timer.cancel()
+                if not any(timer is t for t in shared):
+                    timer.cancel()
             for sub in self._subs:
                 self.context.bus.unsubscribe(sub)
             self._timers.clear()
@@ -394,8 +405,15 @@ class Node:
         returned function every ``1/hz`` s itself, from a timer it already has (see `ticker`).
         """
 
-        def publish_now() -> None:
-            self.publish(topic, build(), seq=None, **fields)
+        if fields:
+
+            def publish_now() -> None:
+                self.publish(topic, build(), seq=None, **fields)
+
+        else:  # the agents' MC and HLC states, 10 a second per agent: no keyword dict to build
+
+            def publish_now() -> None:
+                self.publish(topic, build())
 
         if periodic:
             self.create_timer(1.0 / hz, publish_now, first_delay=self.first_delay(1.0 / hz))
@@ -410,34 +428,54 @@ class Node:
     ) -> None:
         """Run each ``(rate, fn)`` of ``jobs`` at its rate, on as few timers as the rates allow.
 
-        A job whose rate divides ``hz`` (the first job's, the fastest) runs on the first job's
-        timer, right after it, on the runs where its own period has come round; any other job
-        gets a timer of its own. A thousand simulated agents in one process ran 50 timers a second
-        each (HLC control, telemetry and state, MC tick and state) where 30 do, and a telemetry
-        message built a tick after the snapshot it reports found it out of the cache.
+        A job whose rate divides ``hz`` (the first job's, the fastest) runs on one timer (a
+        `Ticker`), right after the jobs before it, on the runs where its own period has come round;
+        any other job gets a timer of its own. The agent's nodes share that timer when their rates
+        divide its rate: the MC's 10 and 5 Hz jobs run on the HLC's 20 Hz timer. A thousand
+        simulated agents in one process ran 50 timers a second each (HLC control, telemetry and
+        state, MC tick and state), then 30 (one per node), now 20, and a telemetry message built a
+        tick after the snapshot it reports found it out of the cache.
 
         A shared job keeps its own due time, not a count of runs: when a loaded executor skips
         runs of the timer (it never bursts to catch up), the job still runs at its rate on the
         runs that remain, as its own timer would. Each job's exception is logged on its own.
-        ``clock``: the time of each run (the run's due time unless a test gives its own).
+        ``clock``: the time of each run (the run's due time unless a test gives its own); a
+        ticker with a clock of its own is this node's alone.
         """
+        tickers = self.context.tickers
+        host = tickers.get(self.agent) if clock is None else None
+        if host is not None and host.takes(jobs):
+            host.add(self, [(rate, self._interfered(fn)) for rate, fn in jobs], self.log)
+            self._tickers.append(host)
+            return
         period = 1.0 / hz
-        shared, own = split_jobs(hz, jobs)
-        for rate, fn in own:
-            self.create_timer(1.0 / rate, fn, first_delay=self.first_delay(1.0 / rate))
+        ticker = Ticker(hz)
+        shared: list[tuple[float, Callable[[], Any]]] = []
+        for rate, fn in jobs:
+            if ticker.takes([(rate, fn)]):
+                shared.append((rate, self._interfered(fn)))
+            else:
+                self.create_timer(1.0 / rate, fn, first_delay=self.first_delay(1.0 / rate))
         if not shared:
             return
-        slack = period / 2  # a run a little early (the timer's millisecond slots) is on time
-        log = self.log
-        timer: Timer | None = None
+        ticker.add(self, shared, self.log)
+        run = ticker.run
 
         def tick() -> None:
             # The time this run of the timer was due: exact, where the loop's clock is the one
             # read when its iteration began (every slot of a backlog run in one iteration reads
             # the same, and jobs then looked early and were skipped).
-            run_due(shared, timer.due if clock is None else clock(), slack, log)  # type: ignore[union-attr]
+            run(timer.due if clock is None else clock())
 
-        timer = self.create_timer(period, tick, first_delay=self.first_delay(period))
+        # Straight on the executor: its jobs are wrapped one by one (`_interfered`), as they may
+        # be other nodes' too.
+        timer = self.context.executor.create_timer(period, tick, first_delay=self.first_delay(period))
+        ticker.timer = timer
+        self._timers.append(timer)
+        if clock is None:
+            self._tickers.append(ticker)
+            if host is None:
+                tickers[self.agent] = ticker
 
     def first_delay(self, period: float) -> float:
         """When a periodic timer of this agent first runs (`phase_delay`: within one ``period``, at

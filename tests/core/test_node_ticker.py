@@ -1,8 +1,9 @@
 """Node.ticker: jobs whose rates divide the fastest share its timer, at their own rates; others get their own.
 
 The HLC runs control, telemetry and its state on one ticker (20, 10 and 5 Hz by default) and the MC
-its tick and its state (10 and 5 Hz): 30 timer runs a second per agent instead of 50. The rates are
-checked as ratios of runs of one timer (exact whatever the machine's load), never against a clock.
+its tick and its state (10 and 5 Hz) on the same one: 20 timer runs a second per agent instead of 50.
+The rates are checked as ratios of runs of one timer (exact whatever the machine's load), never
+against a clock.
 """
 
 from __future__ import annotations
@@ -111,8 +112,8 @@ def test_a_raising_job_is_logged_and_the_others_still_run(
     assert any("job bug" in (r.exc_text or "") or "broken" in r.getMessage() for r in caplog.records)
 
 
-def test_an_agent_at_the_default_rates_runs_two_timers(context: Context) -> None:
-    """HLC: control + telemetry + state on one; MC: tick + state on one."""
+def test_an_agent_at_the_default_rates_runs_one_timer(context: Context) -> None:
+    """HLC: control, telemetry and state; MC: tick and state; all on the HLC's 20 Hz timer."""
     config = Config(agent=AgentConfig(name="t1"), buses={"lan": "memq://"})
     nodes = agent_nodes(config, context)
     hlc = next(n for n in nodes if isinstance(n, HlcNode))
@@ -120,8 +121,34 @@ def test_an_agent_at_the_default_rates_runs_two_timers(context: Context) -> None
     for n in nodes:
         n.start()
     try:
-        assert len(hlc._timers) == 1 and len(mc._timers) == 1
+        assert len(hlc._timers) == 1 and not mc._timers
+        assert context.tickers["t1"].timer is hlc._timers[0]
+        # The MC's tick and state run on it: it hears the HLC and the HLC hears it.
         assert wait_for(lambda: hlc.connected and mc.state.name == "STANDBY", 20)
     finally:
         for n in reversed(nodes):
             n.stop()
+    assert not context.tickers and not hlc._timers
+
+
+def test_the_mc_keeps_its_jobs_when_its_hlc_stops_and_the_hlc_joins_again(context: Context) -> None:
+    config = Config(agent=AgentConfig(name="t2"), buses={"lan": "memq://"})
+    nodes = agent_nodes(config, context)
+    hlc = next(n for n in nodes if isinstance(n, HlcNode))
+    mc = next(n for n in nodes if isinstance(n, McNode))
+    for n in nodes:
+        n.start()
+    try:
+        assert wait_for(lambda: mc.state.name == "STANDBY", 20)
+        ticker = context.tickers["t2"]
+        hlc.stop()
+        # The MC's 10 Hz tick still runs on the stopped HLC's timer: it notices the silence.
+        assert wait_for(lambda: mc.state.name == "HLC_LOST", 30)
+        assert not ticker.timer.cancelled and not hlc._timers
+        hlc.start()
+        assert wait_for(lambda: mc.state.name == "STANDBY", 30)
+        assert context.tickers == {"t2": ticker} and hlc._tickers == [ticker] and ticker.base is not None
+    finally:
+        for n in reversed(nodes):
+            n.stop()
+    assert not context.tickers and ticker.timer.cancelled

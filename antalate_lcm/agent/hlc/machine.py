@@ -195,12 +195,10 @@ class HighLevelControl:
 
     def tick(self, now: float) -> HlcOutcome:
         """Time passes: fires GAIN_ALTITUDE_TIMEOUT."""
+        if self.state is not _S_GAINING_ALTITUDE:
+            return NOTHING  # 20 a second per agent, nearly always in another state
         timeout = self.params.gain_altitude_timeout
-        if (
-            self.state is _S_GAINING_ALTITUDE
-            and self.entered_at is not None
-            and now - self.entered_at >= timeout
-        ):
+        if self.entered_at is not None and now - self.entered_at >= timeout:
             detail = f"still below {self.params.airborne_fraction:g} x {self._target_altitude:g} m after {timeout:g} s"
             return self._fire([(HlcEvent.GAIN_ALTITUDE_TIMEOUT, detail)], now)
         return NOTHING

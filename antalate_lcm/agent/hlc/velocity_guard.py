@@ -200,6 +200,8 @@ class VelocityGuard:
         self, now: float, hlc_state: HlcState | int, mc_state: McState | int | None, link_age: float = 0.0
     ) -> GuardDecision | None:
         """Call periodically: returns a HOVER decision once after the last command went stale."""
+        if self._last_received is None:
+            return None  # no command passed on since the last flight (or ever): nothing to go stale
         if not mission_flight(hlc_state, mc_state):
             self._last_received = None
             return None

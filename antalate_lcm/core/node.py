@@ -35,7 +35,7 @@ from antalate_lcm.core.context import shared_params as shared_params
 from antalate_lcm.core.context import shared_value as shared_value
 from antalate_lcm.core.executor import Timer
 from antalate_lcm.core.routes import Routes
-from antalate_lcm.core.timers import Ticker, phase_delay
+from antalate_lcm.core.timers import Ticker, divides, phase_delay
 from antalate_lcm.wire.security import Authenticator, SecurityPolicy
 from antalate_lcm.wire.topics import Message, TopicSpec, channel_regex, is_internal
 
@@ -452,7 +452,7 @@ class Node:
         ticker = Ticker(hz)
         shared: list[tuple[float, Callable[[], Any]]] = []
         for rate, fn in jobs:
-            if ticker.takes([(rate, fn)]):
+            if divides(hz, rate):
                 shared.append((rate, self._interfered(fn)))
             else:
                 self.create_timer(1.0 / rate, fn, first_delay=self.first_delay(1.0 / rate))

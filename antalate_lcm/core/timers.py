@@ -1,8 +1,7 @@
 """Timer phasing and shared tickers: how a node's periodic work is spread over time and timers.
 
 Pure (no I/O): :class:`~antalate_lcm.core.node.Node` asks :func:`phase_delay` where its periodic timers
-start and hands :meth:`~antalate_lcm.core.node.Node.ticker`'s jobs to :func:`split_jobs` and
-:func:`run_due`.
+start and puts :meth:`~antalate_lcm.core.node.Node.ticker`'s jobs on a :class:`Ticker` (one per agent).
 """
 
 from __future__ import annotations
@@ -28,51 +27,31 @@ def phase_delay(period: float, agent: str, seed: int | None) -> float:
     return period * (1.0 - (zlib.crc32(name.encode()) % PHASES) / PHASES)
 
 
-def split_jobs(
-    hz: float, jobs: list[tuple[float, Callable[[], Any]]], log: logging.Logger
-) -> tuple[list[list[Any]], list[tuple[float, Callable[[], Any]]]]:
-    """``jobs`` (rate, fn) as the ones that share a ``hz`` timer (their rate divides it), each as
-    ``[period, due, fn, log, owner]`` for :func:`run_due` (``log`` says what a raising ``fn`` did;
-    ``owner`` is `Ticker.add`'s), and the ones that need a timer of their own."""
-    shared: list[list[Any]] = []
-    own: list[tuple[float, Callable[[], Any]]] = []
-    for rate, fn in jobs:
-        every = round(hz / rate)
-        if every >= 1 and abs(hz / every - rate) <= 1e-9 * rate:
-            shared.append([1.0 / rate, -math.inf, fn, log, None])
-        else:
-            own.append((rate, fn))
-    return shared, own
+def divides(hz: float, rate: float) -> bool:
+    """Whether a job at ``rate`` can run on a ``hz`` timer: every whole number of its runs."""
+    every = round(hz / rate)
+    return every >= 1 and abs(hz / every - rate) <= 1e-9 * rate
 
 
-def run_due(shared: list[list[Any]], now: float, slack: float) -> None:
-    """Run the ``shared`` jobs whose period has come round at ``now`` (``slack`` early is on time);
-    each job's exception is logged on its own, by its own log."""
-    for job in shared:
-        job_period, due, fn, log, _owner = job
-        if now < due - slack:
-            continue
-        # As the executor re-arms a timer: the next period, or a period from now if behind.
-        job[1] = due + job_period if now < due + job_period else now + job_period
-        try:
-            fn()
-        except Exception:
-            log.exception("%s raised; the node carries on", getattr(fn, "__qualname__", fn))
+def _log_raise(fn: Callable[[], Any], log: logging.Logger) -> None:
+    log.exception("%s raised; the node carries on", getattr(fn, "__qualname__", fn))
 
 
 class Ticker:
     """The periodic jobs of one agent's nodes on one timer (`Node.ticker`): the HLC's control,
     telemetry and state (20, 10 and 5 Hz by default) and the MC's tick and state (10 and 5 Hz) are
-    20 timer runs a second per agent, not 30 (one timer each) nor 50 (one per job).
+    20 timer runs a second per agent, not 30 (one timer a node) nor 50 (one a job).
 
     The job at the timer's own rate (``base``, the first that came) runs on every run: the executor
-    never runs a timer twice within its period, so it needs no due time. Each other job keeps its
-    own (`run_due`): when a loaded executor skips runs, a job still runs at its rate on the runs
-    that remain, as a timer of its own would. Nodes come and go (`add`, `remove`): an MC whose HLC
-    stopped keeps its jobs and its watchdog of that HLC on the same timer.
+    never runs a timer twice within its period, so it needs no due time. The other jobs are grouped
+    by period, each group with its due time (a job joining a group runs on the group's runs): when
+    a loaded executor skips runs, a group still runs at its rate on the runs that remain, as a
+    timer of its own would, and a run before the next due time looks at no group. Each job's
+    exception is logged on its own, by its node's log. Nodes come and go (`add`, `remove`): an MC
+    whose HLC stopped keeps its jobs, and its watchdog of that HLC, on the same timer.
     """
 
-    __slots__ = ("hz", "slack", "base", "base_owner", "base_log", "jobs", "timer")
+    __slots__ = ("hz", "slack", "base", "base_owner", "base_log", "groups", "next_due", "timer")
 
     def __init__(self, hz: float) -> None:
         self.hz = hz
@@ -80,31 +59,40 @@ class Ticker:
         self.base: Callable[[], Any] | None = None
         self.base_owner: object = None
         self.base_log: logging.Logger | None = None
-        #: ``[period, due, fn, log, owner]`` of every other job (`split_jobs`), in the order they came.
-        self.jobs: list[list[Any]] = []
+        #: ``[period, due, [(fn, log, owner), ...]]`` per period of the other jobs, in the order they came.
+        self.groups: list[list[Any]] = []
+        #: The earliest due time of a group, less the slack: runs before it look at none.
+        self.next_due = -math.inf
         #: The executor's timer running `run` (set by whoever armed it).
         self.timer: Any = None
 
     def takes(self, jobs: list[tuple[float, Callable[[], Any]]]) -> bool:
         """Whether every one of ``jobs`` can run at its rate on this timer."""
-        return not split_jobs(self.hz, jobs, _LOG)[1]
+        return all(divides(self.hz, rate) for rate, _ in jobs)
 
     def add(self, owner: object, jobs: list[tuple[float, Callable[[], Any]]], log: logging.Logger) -> None:
         """``owner``'s ``jobs`` (each rate dividing ``hz``: `takes`) from the next run on."""
-        shared, _ = split_jobs(self.hz, jobs, log)
-        for job in shared:
-            if self.base is None and abs(job[0] * self.hz - 1.0) <= 1e-9:
-                self.base, self.base_owner, self.base_log = job[2], owner, log
-            else:
-                job[4] = owner
-                self.jobs.append(job)
+        for rate, fn in jobs:
+            period = 1.0 / rate
+            if self.base is None and abs(rate - self.hz) <= 1e-9 * rate:
+                self.base, self.base_owner, self.base_log = fn, owner, log
+                continue
+            group = next((g for g in self.groups if abs(g[0] - period) <= 1e-9 * period), None)
+            if group is None:
+                group = [period, -math.inf, []]
+                self.groups.append(group)
+                self.next_due = -math.inf
+            group[2].append((fn, log, owner))
 
     def remove(self, owner: object) -> bool:
         """Drop ``owner``'s jobs; True when none is left (the timer can go)."""
         if self.base_owner is owner:
             self.base = self.base_owner = self.base_log = None
-        self.jobs = [job for job in self.jobs if job[4] is not owner]
-        return self.base is None and not self.jobs
+        for group in self.groups:
+            group[2] = [job for job in group[2] if job[2] is not owner]
+        self.groups = [group for group in self.groups if group[2]]
+        self.next_due = -math.inf
+        return self.base is None and not self.groups
 
     def run(self, now: float) -> None:
         """One run of the timer, ``now`` the time it was due."""
@@ -113,10 +101,21 @@ class Ticker:
             try:
                 base()
             except Exception:
-                assert self.base_log is not None
-                self.base_log.exception("%s raised; the node carries on", getattr(base, "__qualname__", base))
-        if self.jobs:
-            run_due(self.jobs, now, self.slack)
-
-
-_LOG = logging.getLogger("antalate.timers")
+                _log_raise(base, self.base_log)  # type: ignore[arg-type]
+        if now < self.next_due:
+            return
+        slack = self.slack
+        earliest = math.inf
+        for group in self.groups:
+            period, due, jobs = group
+            if now >= due - slack:
+                # As the executor re-arms a timer: the next period, or a period from now if behind.
+                due = group[1] = due + period if now < due + period else now + period
+                for fn, log, _owner in jobs:
+                    try:
+                        fn()
+                    except Exception:
+                        _log_raise(fn, log)
+            if due < earliest:
+                earliest = due
+        self.next_due = earliest - slack

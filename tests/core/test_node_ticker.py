@@ -17,6 +17,7 @@ from antalate_lcm.agent.hlc.node import HlcNode
 from antalate_lcm.agent.mc.node import McNode
 from antalate_lcm.core.config import AgentConfig, Config
 from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.timers import Ticker
 from antalate_lcm.runtime.agent import agent_nodes
 from tests.harness.polling import wait_for
 
@@ -110,6 +111,33 @@ def test_a_raising_job_is_logged_and_the_others_still_run(
     for timer in node._timers:
         timer.cancel()
     assert any("job bug" in (r.exc_text or "") or "broken" in r.getMessage() for r in caplog.records)
+
+
+def test_jobs_of_two_nodes_share_the_runs_of_their_period_and_leave_with_their_node() -> None:
+    ticker = Ticker(20.0)
+    log = logging.getLogger("test.ticker")
+    runs: list[str] = []
+    hlc, mc = object(), object()
+    ticker.add(hlc, [(20.0, lambda: runs.append("control")), (10.0, lambda: runs.append("telemetry"))], log)
+    ticker.run(0.0)
+    ticker.run(0.05)
+    # The MC joins on an odd run: its 10 Hz job runs with the telemetry, not on the runs between.
+    ticker.add(mc, [(10.0, lambda: runs.append("mc tick")), (5.0, lambda: runs.append("mc state"))], log)
+    runs.clear()
+    for k in range(2, 6):
+        ticker.run(0.05 * k)
+    assert runs == [
+        "control", "telemetry", "mc tick", "mc state",
+        "control",
+        "control", "telemetry", "mc tick",
+        "control",
+    ]  # fmt: skip
+    assert not ticker.remove(hlc)  # the MC's jobs stay
+    runs.clear()
+    for k in range(6, 10):
+        ticker.run(0.05 * k)
+    assert runs == ["mc tick", "mc state", "mc tick"]
+    assert ticker.remove(mc)
 
 
 def test_an_agent_at_the_default_rates_runs_one_timer(context: Context) -> None:

@@ -460,13 +460,7 @@ class Node:
             return
         ticker.add(self, shared, self.log)
         run = ticker.run
-
-        def tick() -> None:
-            # The time this run of the timer was due: exact, where the loop's clock is the one
-            # read when its iteration began (every slot of a backlog run in one iteration reads
-            # the same, and jobs then looked early and were skipped).
-            run(timer.due if clock is None else clock())
-
+        tick = run if clock is None else lambda: run(clock())
         # Straight on the executor: its jobs are wrapped one by one (`_interfered`), as they may
         # be other nodes' too.
         timer = self.context.executor.create_timer(period, tick, first_delay=self.first_delay(period))

@@ -94,8 +94,13 @@ class Ticker:
         self.next_due = -math.inf
         return self.base is None and not self.groups
 
-    def run(self, now: float) -> None:
-        """One run of the timer, ``now`` the time it was due."""
+    def run(self, now: float | None = None) -> None:
+        """One run of the timer, ``now`` the time it was due (None: the timer's due time, exact where
+        the loop's clock is the one read when its iteration began: every slot of a backlog run in
+        one iteration reads the same, and jobs then looked early and were skipped). The executor
+        calls it as the timer's function, with no closure between."""
+        if now is None:
+            now = self.timer.due
         base = self.base
         if base is not None:
             try:

@@ -917,3 +917,36 @@ def test_closed_loop_fence_brake_holds_until_the_operator_lands() -> None:
     assert (loop.mc.state, loop.hlc.state) == (M.STANDBY, H.READY)
     assert loop.errors == [ErrorCode.AUTOPILOT_FAILSAFE]
     assert M.MANUAL not in {to for _, to in loop.mc_log}
+
+
+def test_a_fresh_snapshot_in_a_state_with_no_row_for_it_is_not_derived_and_loses_nothing() -> None:
+    """READY and TAKEOFF take no event a fresh snapshot makes: on_autopilot returns at once there (a
+    swarm on the ground polls 20 times a second per agent), and deriving the events in full comes to
+    the same NOTHING for any vehicle; a stale link still makes LINK_LOST."""
+    from antalate_lcm.agent.hlc.machine import NOTHING, _deaf_states
+
+    deaf = _deaf_states(HLC_TABLE)
+    assert deaf == {HlcState.READY, HlcState.TAKEOFF}
+    fresh = VehicleState(connected=True, link_age=0.1, battery=80.0, mode="GUIDED")
+    snapshots = [
+        fresh,
+        replace(fresh, armed=True, in_air=True, alt=50.0),
+        replace(
+            fresh, armed=True, in_air=True, autonomous=False, mode="LOITER", flight_mode=FlightMode.MANUAL
+        ),
+        replace(
+            fresh, armed=True, in_air=True, mode="RTL", flight_mode=FlightMode.RTL, failsafe="fence breach"
+        ),
+        replace(fresh, mode="LAND", flight_mode=FlightMode.LANDING),
+        replace(fresh, battery=1.0, voltage=13.0, cells=4, battery_warning="critical"),
+    ]
+    for state in deaf:
+        for snap in snapshots:
+            m = HighLevelControl()
+            m.state, m.mc_state, m.mc_state_at_entry = state, int(McState.TAKEOFF), int(McState.TAKEOFF)
+            assert m.on_autopilot(snap, 1.0) is NOTHING and m.autopilot is snap
+            assert m._fire(m._autopilot_events(snap), 1.0) is NOTHING
+        m = HighLevelControl()
+        m.state = state
+        lost = m.on_autopilot(replace(fresh, link_age=5.0), 1.0)
+        assert lost.transition is not None and lost.transition.to_state is HlcState.LLC_DOWN

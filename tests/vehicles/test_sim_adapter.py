@@ -94,7 +94,7 @@ def test_initial_state_at_home() -> None:
 
 
 def test_snapshot_is_a_whole_autopilot_state() -> None:
-    """The sim builds its 20-a-second snapshots without the dataclass's __init__ (sim.telemetry._state_of): each
+    """The sim builds its 20-a-second snapshots without the dataclass's __init__ (sim.telemetry.snapshot): each
     holds every field, the same state the constructor makes, and stays frozen and hashable."""
     sim, clock = make(cells=4, battery_warning_at=99.99)
     assert sim.arm()

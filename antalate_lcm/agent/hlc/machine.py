@@ -86,6 +86,40 @@ _F_LANDING, _F_RTL = FlightMode.LANDING, FlightMode.RTL
 _MC_TAKEOFF, _MC_LAND, _MC_RTL, _MC_HOLD = McState.TAKEOFF, McState.LAND, McState.RTL, McState.HOLD
 
 
+#: The events `HighLevelControl._autopilot_events` derives from a snapshot whose link is fresh.
+_FROM_SNAPSHOT = frozenset(
+    {
+        HlcEvent.LANDED,
+        HlcEvent.PILOT_TAKEOVER,
+        HlcEvent.FAILSAFE_RTL,
+        HlcEvent.FAILSAFE_LAND,
+        HlcEvent.FAILSAFE_HOLD,
+        HlcEvent.AUTOPILOT_LAND,
+        HlcEvent.AUTOPILOT_RTL,
+        HlcEvent.LOW_BATTERY,
+        HlcEvent.ALTITUDE_REACHED,
+    }
+)
+#: id(table) -> (the table, kept so that its id is never another's; its deaf states).
+_DEAF: dict[int, tuple[object, frozenset[HlcState]]] = {}
+
+
+def _deaf_states(table: Table[HlcState, HlcEvent, HlcView, HlcRow]) -> frozenset[HlcState]:
+    """The states of ``table`` in which a snapshot with a fresh link makes no event a row takes: not
+    INIT and LLC_DOWN (they read the vehicle to leave), nor any state taking one of `_FROM_SNAPSHOT`.
+    Worked out once per table (the machines of a process share it)."""
+    known = _DEAF.get(id(table))
+    if known is not None and known[0] is table:
+        return known[1]
+    deaf = frozenset(
+        state
+        for state in HlcState
+        if state not in (HlcState.INIT, HlcState.LLC_DOWN) and not table.events_taken(state) & _FROM_SNAPSHOT
+    )
+    _DEAF[id(table)] = (table, deaf)
+    return deaf
+
+
 class HighLevelControl:
     """The HLC machine. Read `state`; feed observations; perform the returned actions."""
 
@@ -107,6 +141,8 @@ class HighLevelControl:
         self.reason = "waiting for the autopilot and the MC"  # why the HLC is in `state` (hlc_state_t.reason)
         self._mc_takeoff_altitude = 0.0
         self._target_altitude = 0.0
+        #: The states in which no row takes an event a fresh snapshot can make (`_deaf_states`).
+        self._deaf = _deaf_states(table)
 
     # ----------------------------------------------------------------- queries
 
@@ -173,6 +209,10 @@ class HighLevelControl:
         passes the last good snapshot with its `link_age` grown); it goes into the LLC_DOWN reason.
         """
         self.autopilot = snapshot
+        if self.state in self._deaf and snapshot.link_age < self.params.link_timeout:
+            # A fresh snapshot in a state with no row for anything a snapshot says (READY, the
+            # MC's STANDBY: most of a swarm's life, 20 times a second per agent): nothing to derive.
+            return NOTHING
         events = self._autopilot_events(snapshot, fault)
         return self._fire(events, now) if events else NOTHING  # 20 a second, nearly all with none
 

@@ -53,6 +53,7 @@ from antalate_lcm.vehicles import AutopilotError, Frame, VehicleAdapter, Vehicle
 from antalate_lcm.wire.vocabulary import HlcState, Severity
 
 _CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
+_GAINING_ALTITUDE = HlcState.GAINING_ALTITUDE  # bound once: read on every control tick
 
 
 def make_autopilot(config: Config, context: Context) -> VehicleAdapter:
@@ -319,13 +320,16 @@ class HlcNode(Node):
         outcome = machine.on_autopilot(snapshot, now, fault=self._state_fault)
         if outcome is not NOTHING:
             self._handle(outcome)
-        outcome = machine.tick(now)
-        if outcome is not NOTHING:
-            self._handle(outcome)
-        # The link's age now is the snapshot's: it was polled at `now` (see _link_age).
-        stale = self.velocity_guard.tick(now, machine.state, self.mc_state, self.snapshot.link_age)
-        if stale is not None:
-            self._apply(stale, "velocity timeout")
+        if machine.state is _GAINING_ALTITUDE:  # the one state with a timeout (`HighLevelControl.tick`)
+            outcome = machine.tick(now)
+            if outcome is not NOTHING:
+                self._handle(outcome)
+        guard = self.velocity_guard
+        if guard.last_received is not None:  # else nothing can go stale (`VelocityGuard.tick`)
+            # The link's age now is the snapshot's: it was polled at `now` (see _link_age).
+            stale = guard.tick(now, machine.state, self.mc_state, self.snapshot.link_age)
+            if stale is not None:
+                self._apply(stale, "velocity timeout")
         if self._filter is not None:
             self._filter.tick(now)
 

@@ -175,7 +175,9 @@ class VelocityGuard:
 
     def __init__(self, limits: VelocityLimits | None = None) -> None:
         self.limits = limits or VelocityLimits()
-        self._last_received: float | None = None  # receipt time of the last command passed on
+        #: Receipt time of the last command passed on, None when none can go stale (read by the HLC's
+        #: control tick before it calls `tick`).
+        self.last_received: float | None = None
         self._hovering = False
 
     def on_command(
@@ -188,26 +190,26 @@ class VelocityGuard:
     ) -> GuardDecision:
         decision = check_velocity(cmd, now, hlc_state, mc_state, self.limits, link_age)
         if decision.verdict is Verdict.SEND:
-            self._last_received = cmd.received_at
+            self.last_received = cmd.received_at
             self._hovering = False
         elif decision.verdict is Verdict.HOVER:
             self._hovering = True
         elif not mission_flight(hlc_state, mc_state):
-            self._last_received = None  # nothing of ours is flying any more
+            self.last_received = None  # nothing of ours is flying any more
         return decision
 
     def tick(
         self, now: float, hlc_state: HlcState | int, mc_state: McState | int | None, link_age: float = 0.0
     ) -> GuardDecision | None:
         """Call periodically: returns a HOVER decision once after the last command went stale."""
-        if self._last_received is None:
+        if self.last_received is None:
             return None  # no command passed on since the last flight (or ever): nothing to go stale
         if not mission_flight(hlc_state, mc_state):
-            self._last_received = None
+            self.last_received = None
             return None
-        if self._last_received is None or self._hovering or not link_age < self.limits.max_link_age:
+        if self.last_received is None or self._hovering or not link_age < self.limits.max_link_age:
             return None
-        age = now - self._last_received
+        age = now - self.last_received
         if age <= self.limits.velocity_timeout:
             return None
         self._hovering = True

@@ -12,7 +12,6 @@ BATT_LOW_VOLT/BATT_LOW_MAH).
 from __future__ import annotations
 
 import math
-from typing import Any
 
 from antalate_lcm.vehicles.base import FlightMode, VehicleState
 from antalate_lcm.vehicles.sim.physics import Quadcopter
@@ -29,24 +28,17 @@ _MANUAL = FlightMode.MANUAL
 _CELL_FULL, _CELL_EMPTY = 4.2, 3.4  # V per cell at 100% and 0%
 
 
-def _state_of(values: dict[str, Any]) -> VehicleState:
-    """An `VehicleState` holding ``values`` (every field, ``flight_mode`` given), built without the
-    frozen dataclass's ``__init__``: its per-field ``object.__setattr__`` took two thirds of a
-    snapshot, and the sim makes 20 a second per agent. ``values`` becomes the instance's dict (a
-    fresh one the caller gives away): copying it in took half the rest. Equal to
-    ``VehicleState(**values)`` (tests/vehicles/test_sim_adapter.py checks it)."""
-    state = _new(VehicleState)
-    _set(state, "__dict__", values)
-    return state
-
-
 _new = object.__new__
 _set = object.__setattr__
 
 
 def snapshot(v: Quadcopter) -> VehicleState:
     """What `v`'s autopilot reports now (connected, the link fresh: `faults` ages a lost one)."""
-    # lat/lon are recomputed only when the vehicle moved, and the state is built by `_state_of`.
+    # lat/lon are recomputed only when the vehicle moved. The state is built without the frozen
+    # dataclass's ``__init__``: its per-field ``object.__setattr__`` took two thirds of a snapshot,
+    # and the sim makes 20 a second per agent; the fresh dict below becomes the instance's own
+    # (copying it in took half the rest). Equal to ``VehicleState(**values)``
+    # (tests/vehicles/test_sim_adapter.py checks it).
     ne = (v.north, v.east)
     if ne != v._latlon_of:
         v._latlon_of = ne
@@ -62,7 +54,10 @@ def snapshot(v: Quadcopter) -> VehicleState:
             sag = 0.0
         voltage = cells * (_CELL_EMPTY + (_CELL_FULL - _CELL_EMPTY) * battery / 100.0 - sag)
     warning = f"battery low ({battery:.0f}% <= {warn_at:g}%)" if warn_at and battery <= warn_at else ""
-    return _state_of(
+    state = _new(VehicleState)
+    _set(
+        state,
+        "__dict__",
         {
             "connected": True,
             "link_age": 0.0,
@@ -83,5 +78,6 @@ def snapshot(v: Quadcopter) -> VehicleState:
             "voltage": voltage,
             "cells": cells,
             "battery_warning": warning,
-        }
+        },
     )
+    return state

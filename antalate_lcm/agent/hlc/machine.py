@@ -123,6 +123,24 @@ def _deaf_states(table: Table[HlcState, HlcEvent, HlcView, HlcRow]) -> frozenset
 class HighLevelControl:
     """The HLC machine. Read `state`; feed observations; perform the returned actions."""
 
+    # Slots: a thousand machines in a process are read on every control tick, each out of the
+    # cache by then; a slot is read at its offset, where a dict of its own is a hash lookup.
+    __slots__ = (
+        "params",
+        "_table",
+        "state",
+        "entered_at",
+        "mc_state",
+        "autopilot",
+        "mc_state_at_entry",
+        "low_battery_handled",
+        "mc_moved",
+        "reason",
+        "_mc_takeoff_altitude",
+        "_target_altitude",
+        "_deaf",
+    )
+
     def __init__(
         self,
         params: HlcParams | None = None,

@@ -173,6 +173,8 @@ def _clamp(value: float, limit: float) -> float:
 class VelocityGuard:
     """`check_velocity` plus the memory needed to hover once when commands stop arriving."""
 
+    __slots__ = ("limits", "last_received", "_hovering")
+
     def __init__(self, limits: VelocityLimits | None = None) -> None:
         self.limits = limits or VelocityLimits()
         #: Receipt time of the last command passed on, None when none can go stale (read by the HLC's

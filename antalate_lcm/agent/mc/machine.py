@@ -297,6 +297,22 @@ _ACCEPTED_IN: dict[McEvent, tuple[McState, ...]] = {
 class MissionControl:
     """The MC machine. Read `state`, `last_command_seq`, `takeoff_altitude`; feed it inputs."""
 
+    # Slots, as the HLC's machine: read 10 times a second per agent, out of the cache each time.
+    __slots__ = (
+        "params",
+        "_table",
+        "state",
+        "entered_at",
+        "last_command_seq",
+        "takeoff_altitude",
+        "hlc_state",
+        "hlc_heard_at",
+        "hlc_changed",
+        "hlc_left_ready",
+        "reason",
+        "_accepted",
+    )
+
     def __init__(
         self, params: McParams | None = None, *, table: Table[McState, McEvent, McView, McRow] = MC_TABLE
     ) -> None:

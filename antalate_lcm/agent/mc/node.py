@@ -23,6 +23,8 @@ _TICK_PERIOD = 0.1  # s: resolution of the takeoff-acknowledgement timeout and t
 
 class McNode(Node):
     kind = "mc"
+    # Its own attributes in slots, as the HLC node's: read on every tick (the base keeps a __dict__).
+    __slots__ = ("machine", "_publish_state", "_reject_log", "_clock")
 
     def __init__(self, config: Config, context: Context) -> None:
         super().__init__(config, context)

@@ -20,7 +20,7 @@ from pydantic import BaseModel
 from antalate_lcm.agent.bma.plan import BmaPlan, plan_bma
 from antalate_lcm.base.errors import ConfigError, StrictError
 from antalate_lcm.core.config import Config, load_config
-from antalate_lcm.vehicles import UnknownAutopilotError, VehicleAdapter, load_autopilot
+from antalate_lcm.vehicles import UnknownAdapterError, VehicleAdapter, load_adapter
 from antalate_lcm.vehicles.base import Clock
 
 #: Shown once per config file that still writes the adapter as a ``[hlc.autopilot]`` table.
@@ -58,8 +58,8 @@ def plan_autopilot(config: Config) -> AutopilotPlan:
     """Load ``[hlc] autopilot`` and validate its params; raises `ConfigError` naming the key written."""
     hlc = config.hlc
     try:
-        cls = load_autopilot(hlc.autopilot)
-    except UnknownAutopilotError as exc:
+        cls = load_adapter(hlc.autopilot)
+    except UnknownAdapterError as exc:
         raise ConfigError(config.source, hlc.autopilot_name_key, str(exc)) from None
     params = hlc.autopilot_params
     model: BaseModel | None = None

@@ -78,7 +78,7 @@ def _interfere(
     from antalate_lcm.agent.hlc.node import HlcNode
     from antalate_lcm.runtime.faults import FaultInjector, agents_gate
 
-    vehicles = {n.agent: n.autopilot for n in nodes if isinstance(n, HlcNode)}
+    vehicles = {n.agent: n.adapter for n in nodes if isinstance(n, HlcNode)}
     return FaultInjector(
         configs[0].with_agent_name("faults"),
         context,

@@ -307,9 +307,9 @@ def test_bad_station_urls(tmp_path: Path, server: str, expected: str) -> None:
 
 
 def _installed_listed(message: str) -> None:
-    from antalate_lcm.vehicles import available_autopilots
+    from antalate_lcm.vehicles import available_adapters
 
-    installed = available_autopilots()
+    installed = available_adapters()
     assert {"sim", "tello", "mavlink"} <= set(installed)
     assert f"an installed adapter ({', '.join(installed)})" in message, message
 
@@ -569,9 +569,9 @@ def test_strict_validation_takes_toml_values_as_written() -> None:
 
 @pytest.mark.parametrize("adapter", ["sim", "tello", "mavlink"])
 def test_every_shipped_adapter_declares_a_strict_params_model(tmp_path: Path, adapter: str) -> None:
-    from antalate_lcm.vehicles import load_autopilot
+    from antalate_lcm.vehicles import load_adapter
 
-    model = load_autopilot(adapter).params_model
+    model = load_adapter(adapter).params_model
     assert model is not None, f"{adapter}: no params_model"
     assert model.model_config.get("extra") == "forbid" and model.model_config.get("strict") is True
     number = next(n for n, f in model.model_fields.items() if f.annotation in (int, float))

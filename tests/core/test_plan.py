@@ -45,8 +45,8 @@ def test_the_nodes_are_built_from_the_plan_validate_made(context: Context) -> No
     (bma,) = (n for n in nodes if isinstance(n, BmaNode))
     assert bma.plan is plan.bmas[0]  # not resolved a second time
     (hlc,) = (n for n in nodes if isinstance(n, HlcNode))
-    assert isinstance(hlc.autopilot, SimAdapter) and hlc.autopilot.params == {"tau": 0.4}
-    assert hlc.autopilot.clock is context.executor.clock
+    assert isinstance(hlc.adapter, SimAdapter) and hlc.adapter.params == {"tau": 0.4}
+    assert hlc.adapter.clock is context.executor.clock
 
 
 def test_behaviors_are_checked_before_the_adapter_and_both_name_their_key() -> None:

@@ -84,7 +84,7 @@ def _interfere(
         context,
         script=script,
         agents=[c.agent.name for c in configs],
-        gate=agents_gate([n for n in nodes if n.kind != "recorder"], script),
+        gate=agents_gate([n for n in nodes if not isinstance(n, LogRecorder)], script),
         bus=bus,
         mission_start=lambda: None,
         excuse=lambda _agent: None,

@@ -117,6 +117,9 @@ RENAMED = [
     ("antalate_lcm.vehicles", "available_autopilots", "available_adapters"),
     ("antalate_lcm.vehicles", "load_autopilot", "load_adapter"),
     ("antalate_lcm.base.errors", "UnknownAutopilotError", "UnknownAdapterError"),
+    ("antalate_lcm.agent.plan", "AutopilotPlan", "AdapterPlan"),
+    ("antalate_lcm.agent.plan", "plan_autopilot", "plan_adapter"),
+    ("antalate_lcm.agent.hlc.node", "make_autopilot", "make_adapter"),
     ("antalate_lcm.vehicles.base", "Autopilot", "VehicleAdapter"),
     ("antalate_lcm.vehicles.base", "AutopilotState", "VehicleState"),
     ("antalate_lcm.vehicles.crazyflie", "CrazyflieAutopilot", "CrazyflieAdapter"),
@@ -174,8 +177,9 @@ def test_an_old_submodule_is_the_new_module() -> None:
 
 
 def test_an_old_attribute_warns_and_is_the_new_one() -> None:
-    """``HlcNode.autopilot`` (issue #26: it holds the vehicle adapter) reads and writes ``adapter``, warning
-    each time; built by the real agent path on the in-memory transport."""
+    """``HlcNode.autopilot`` and ``AgentPlan.autopilot`` (issue #26: they hold the vehicle adapter and
+    its plan) read ``adapter``, warning each time, and the node's writes it; built by the real agent
+    path on the in-memory transport."""
     from antalate_lcm.agent.hlc.node import HlcNode
     from antalate_lcm.core.config import parse_config
     from antalate_lcm.core.node import Context
@@ -186,7 +190,12 @@ def test_an_old_attribute_warns_and_is_the_new_one() -> None:
     context = Context.in_process({"lan": "memq://"})
     try:
         config = parse_config(doc, "<deprecated>")
-        (hlc,) = (n for n in agent_nodes(config, context, validate(config)) if isinstance(n, HlcNode))
+        plan = validate(config)
+        with pytest.warns(
+            DeprecationWarning, match=r"plan\.AgentPlan\.autopilot is deprecated: use .*AgentPlan\.adapter"
+        ):
+            assert plan.autopilot is plan.adapter  # type: ignore[attr-defined]
+        (hlc,) = (n for n in agent_nodes(config, context, plan) if isinstance(n, HlcNode))
         warned = r"antalate_lcm\.agent\.hlc\.node\.HlcNode\.autopilot is deprecated: use .*HlcNode\.adapter"
         with pytest.warns(DeprecationWarning, match=warned):
             assert hlc.autopilot is hlc.adapter  # type: ignore[attr-defined]

@@ -81,12 +81,12 @@ def test_deprecated_autopilot_spellings_load_the_same_plan_with_a_warning(tmp_pa
     ) as seen:
         plan = load_plan(path)
     assert str(path) in str(seen[0].message)
-    assert (plan.autopilot.name, plan.autopilot.cls, dict(plan.autopilot.params)) == (
+    assert (plan.adapter.name, plan.adapter.cls, dict(plan.adapter.params)) == (
         "sim",
-        canonical.autopilot.cls,
+        canonical.adapter.cls,
         {"tau": 0.4},
     )
-    assert plan.autopilot.model == canonical.autopilot.model
+    assert plan.adapter.model == canonical.adapter.model
 
 
 def test_the_canonical_autopilot_spelling_warns_nothing(tmp_path: Path) -> None:
@@ -96,7 +96,7 @@ def test_the_canonical_autopilot_spelling_warns_nothing(tmp_path: Path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         plan = load_plan(path)
-    assert plan.autopilot.build(lambda: 0.0).params == {"tau": 0.4}
+    assert plan.adapter.build(lambda: 0.0).params == {"tau": 0.4}
 
 
 def test_a_bad_adapter_name_beside_the_table_names_hlc_adapter(tmp_path: Path) -> None:

@@ -44,8 +44,8 @@ from antalate_lcm.agent.hlc.velocity_guard import (
     Verdict,
     mission_flight,
 )
-from antalate_lcm.agent.plan import plan_autopilot
-from antalate_lcm.base.deprecation import renamed_attribute
+from antalate_lcm.agent.plan import plan_adapter
+from antalate_lcm.base.deprecation import renamed_attribute, renamed_names
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.config import Config
 from antalate_lcm.core.node import Context, Node, shared_params
@@ -56,8 +56,9 @@ from antalate_lcm.wire.vocabulary import HlcState, Severity
 _CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
 
 
-def make_autopilot(config: Config, context: Context) -> VehicleAdapter:
-    return plan_autopilot(config).build(context.executor.clock)
+def make_adapter(config: Config, context: Context) -> VehicleAdapter:
+    """The vehicle adapter ``[hlc] autopilot`` names, on the context's clock (no I/O yet)."""
+    return plan_adapter(config).build(context.executor.clock)
 
 
 class HlcNode(Node):
@@ -94,7 +95,7 @@ class HlcNode(Node):
         super().__init__(config, context)
         h = config.hlc
         #: The vehicle adapter the config's ``[hlc] autopilot`` names (or the one given).
-        self.adapter = adapter or make_autopilot(config, context)
+        self.adapter = adapter or make_adapter(config, context)
         self.machine = HighLevelControl(
             shared_params(
                 HlcParams,
@@ -413,3 +414,10 @@ class HlcNode(Node):
         msg.heading, msg.vn, msg.ve, msg.vd = s.heading, s.vn, s.ve, s.vd
         msg.battery, msg.armed, msg.in_air, msg.mode = s.battery, s.armed, s.in_air, s.mode
         self.publish("TELEMETRY", msg)
+
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {"make_autopilot": "make_adapter"}
+
+if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
+    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

@@ -5,6 +5,7 @@ the simulator."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import pytest
@@ -950,3 +951,20 @@ def test_a_fresh_snapshot_in_a_state_with_no_row_for_it_is_not_derived_and_loses
         m.state = state
         lost = m.on_autopilot(replace(fresh, link_age=5.0), 1.0)
         assert lost.transition is not None and lost.transition.to_state is HlcState.LLC_DOWN
+
+
+@pytest.mark.parametrize("cells", [0, 4])
+def test_the_flight_tick_asks_for_the_battery_reason_whenever_it_can_be_low(cells: int) -> None:
+    """The tick skips `battery_low_reason` only well above every threshold: for every battery,
+    voltage and warning (unknown, NaN, infinite, zero, on and around each threshold) an AIRBORNE
+    machine goes to LOW_BATTERY exactly when the reason says the battery is low."""
+    flying = VehicleState(connected=True, link_age=0.1, armed=True, in_air=True, alt=10.0, mode="GUIDED")
+    for battery in (-1.0, math.nan, 5.0, 20.0, 20.01, 80.0):
+        for voltage in (math.nan, -1.0, 0.0, 13.9, 14.0, 14.1, 16.0, math.inf):
+            for warning in ("", "battery failsafe"):
+                m = HighLevelControl()
+                m.state, m.mc_state = HlcState.AIRBORNE, int(McState.MISSION)
+                snap = replace(flying, battery=battery, voltage=voltage, cells=cells, battery_warning=warning)
+                outcome = m.on_autopilot(snap, 1.0)
+                low = outcome.transition is not None and outcome.transition.event is HlcEvent.LOW_BATTERY
+                assert low == bool(m.battery_low_reason()), (battery, voltage, cells, warning)

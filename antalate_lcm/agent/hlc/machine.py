@@ -82,7 +82,7 @@ _E_LANDED, _E_PILOT_TAKEOVER, _E_AUTOPILOT_LAND = (
 _E_AUTOPILOT_RTL, _E_LOW_BATTERY = HlcEvent.AUTOPILOT_RTL, HlcEvent.LOW_BATTERY
 _E_ALTITUDE_REACHED = HlcEvent.ALTITUDE_REACHED
 _S_INIT, _S_LLC_DOWN, _S_GAINING_ALTITUDE = HlcState.INIT, HlcState.LLC_DOWN, HlcState.GAINING_ALTITUDE
-_F_LANDING, _F_RTL = FlightMode.LANDING, FlightMode.RTL
+_F_LANDING, _F_RTL, _F_GUIDED = FlightMode.LANDING, FlightMode.RTL, FlightMode.GUIDED
 _MC_TAKEOFF, _MC_LAND, _MC_RTL, _MC_HOLD = McState.TAKEOFF, McState.LAND, McState.RTL, McState.HOLD
 
 
@@ -326,9 +326,14 @@ class HighLevelControl:
         # passed over by `_fire` anyway, and their reasons cost more than the rest of the tick.
         takes = self._table.events_taken(self.state)
         events: list[tuple[HlcEvent, str]] = []
-        if _E_LANDED in takes and ap.landed:
+        if _E_LANDED in takes and not ap.in_air and not ap.armed:  # `VehicleState.landed`, inline
             events.append((HlcEvent.LANDED, f"on the ground and disarmed (mode {ap.mode or '?'})"))
-        if _E_PILOT_TAKEOVER in takes and ap.armed and pilot_in_control(ap):
+        if (
+            _E_PILOT_TAKEOVER in takes
+            and ap.armed
+            and not (ap.autonomous and ap.flight_mode is _F_GUIDED)  # ours: no pilot, no call
+            and pilot_in_control(ap)
+        ):
             events.append(
                 (HlcEvent.PILOT_TAKEOVER, f"autopilot left autonomous control (mode {ap.mode or '?'})")
             )
@@ -350,7 +355,13 @@ class HighLevelControl:
             events.append((HlcEvent.AUTOPILOT_LAND, f"autopilot switched to {ap.mode or 'LAND'}"))
         if ap.flight_mode is _F_RTL and _E_AUTOPILOT_RTL in takes:
             events.append((HlcEvent.AUTOPILOT_RTL, f"autopilot switched to {ap.mode or 'RTL'}"))
-        if _E_LOW_BATTERY in takes:
+        # Well above every threshold (the flight's every tick), `battery_low_reason` is not asked:
+        # a NaN or unknown value, or a voltage at or below the cells' threshold, asks it.
+        if _E_LOW_BATTERY in takes and not (
+            ap.battery > p.low_battery
+            and not ap.battery_warning
+            and not ap.cells * p.low_cell_voltage >= ap.voltage
+        ):
             low = self.battery_low_reason()
             if low:
                 events.append((HlcEvent.LOW_BATTERY, low))

@@ -70,8 +70,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-REPO = Path(__file__).resolve().parent.parent
-for _p in (str(REPO), str(Path(__file__).resolve().parent)):
+#: The checkout whose antalate runs here and in the peers (``--tree``: a baseline in the same session).
+TREE_ENV = "ANTALATE_BENCH_TREE"
+REPO = Path(os.environ.get(TREE_ENV) or Path(__file__).resolve().parent.parent).resolve()
+for _p in (str(Path(__file__).resolve().parent), str(REPO)):
     if _p not in sys.path:
         sys.path.insert(0, _p)
 
@@ -115,6 +117,14 @@ def url(api: str) -> str:
             f"&cert={pki / 'bench.pem'}&cert_key={pki / 'bench.key'}"
         )
     return f"udpm://239.255.76.67:{PORTS[api]}?ttl=0&recv_buf_size=4194304"
+
+
+def busy_loop(stop_at: float) -> None:
+    """The --busy process: pure Python arithmetic until ``stop_at`` (monotonic), on the other core."""
+    x = 0
+    while time.monotonic() < stop_at:
+        for i in range(10_000):
+            x = (x * 31 + i) % 1_000_003
 
 
 def bus_class(api: str) -> Any:
@@ -703,15 +713,23 @@ def inside(args: argparse.Namespace) -> int:
     apis = ["raw", "bus", "bus-signed", "node"]
     latency_apis = ["raw", "bus", "bus-signed", "raw-thread", "node"]
     size = len(make_msg().encode())
-    router = zenoh_router()
-    tls_router = zenoh_router("zenoh-tls") if router is not None else None
+    router = tls_router = None
+    if args.apis:  # a subset: raw lcm always, as the yardstick
+        latency_apis = ["raw", *(a for a in latency_apis if a in args.apis and a != "raw")]
+        apis = [a for a in apis if a in latency_apis]
+    else:
+        router = zenoh_router()
+        tls_router = zenoh_router("zenoh-tls") if router is not None else None
     if router is not None and tls_router is not None:
         apis += ["zenoh", "zenoh-tls"]
         latency_apis += ["zenoh", "zenoh-tls"]
     print(
         f"message: telemetry_t, {size} bytes; URL {url('raw')} (one port per API); queue capacity {DEFAULT_QUEUE_CAPACITY}"
     )
-    print(f"CPUs: {os.cpu_count()}; load average {os.getloadavg()[0]:.2f} at start")
+    print(
+        f"CPUs: {os.cpu_count()}; load average {os.getloadavg()[0]:.2f} at start; antalate from {REPO}"
+        f"{'; a second process busy' if args.busy else ''}"
+    )
     rt: dict[str, dict[str, Any]] = {}
     if args.only in (None, "latency"):
         print(
@@ -762,12 +780,12 @@ def inside(args: argparse.Namespace) -> int:
         f"signing, alone: sign {cost['sign_us']:.1f} us, check (MAC + window + replay guard) "
         f"{cost['check_us']:.1f} us per message"
     )
-    if rt:
+    if "bus-signed" in rt and "bus" in rt:
         print(
             f"  round trip p50 signed {rt['bus-signed']['p50']:.1f} us vs unsigned {rt['bus']['p50']:.1f} us "
             f"({rt['bus-signed']['p50'] - rt['bus']['p50']:+.1f} us for two signatures and two checks)"
         )
-    if tp and tp["bus"]["lossless"]:
+    if "bus-signed" in tp and "bus" in tp and tp["bus"]["lossless"]:
         print(
             f"  lossless throughput signed {tp['bus-signed']['lossless'] / 1000:.0f}k vs unsigned "
             f"{tp['bus']['lossless'] / 1000:.0f}k msg/s ({tp['bus-signed']['lossless'] / tp['bus']['lossless']:.2f}x)"
@@ -801,6 +819,8 @@ def inside(args: argparse.Namespace) -> int:
         )
     print("against the targets:")
     for api, targets in (("bus", TARGETS), ("node", NODE_TARGETS)):
+        if api not in latency_apis:
+            continue
         p50_ratio = rt[api]["p50"] / rt["raw"]["p50"] if rt else nan
         p99 = rt[api]["p99"] if rt else nan
         tp_ratio = tp[api]["lossless"] / tp["raw"]["lossless"] if tp and tp["raw"]["lossless"] else nan
@@ -832,6 +852,14 @@ def main() -> int:
     parser.add_argument("--burst", type=int, default=10_000, help="messages in the back-to-back burst")
     parser.add_argument("--only", choices=("latency", "throughput"), help="run one half only")
     parser.add_argument("--json", action="store_true", help="also print every figure as one JSON line")
+    parser.add_argument(
+        "--apis",
+        nargs="+",
+        choices=("bus", "bus-signed", "raw-thread", "node"),
+        help="only these (and raw lcm); no zenoh columns",
+    )
+    parser.add_argument("--busy", action="store_true", help="a second process spins for the whole run")
+    parser.add_argument("--tree", type=Path, help="run antalate from this checkout (a baseline)")
     parser.add_argument("--inside", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--peer", nargs=2, metavar=("API", "ROLE"), help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -860,14 +888,27 @@ def main() -> int:
     ]
     argv += ["--only", args.only] if args.only else []
     argv += ["--json"] if args.json else []
-    with NetNamespace() as ns:
-        proc = ns.python(*argv)
-        try:
-            return proc.wait(TIME_LIMIT)
-        except subprocess.TimeoutExpired:
-            print(f"benchmark stopped after {TIME_LIMIT:.0f} s", file=sys.stderr)
-            stop_process(proc)
-            return 1
+    argv += ["--apis", *args.apis] if args.apis else []
+    argv += ["--busy"] if args.busy else []
+    env = {TREE_ENV: str(args.tree.resolve())} if args.tree else None
+    busy = None
+    if args.busy:
+        import multiprocessing
+
+        busy = multiprocessing.Process(target=busy_loop, args=(time.monotonic() + TIME_LIMIT,), daemon=True)
+        busy.start()
+    try:
+        with NetNamespace() as ns:
+            proc = ns.python(*argv, extra_env=env)
+            try:
+                return proc.wait(TIME_LIMIT)
+            except subprocess.TimeoutExpired:
+                print(f"benchmark stopped after {TIME_LIMIT:.0f} s", file=sys.stderr)
+                stop_process(proc)
+                return 1
+    finally:
+        if busy is not None:
+            busy.terminate()
 
 
 if __name__ == "__main__":

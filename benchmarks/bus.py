@@ -36,6 +36,14 @@ coroutine on ``Executor.loop`` publishes and awaits the pong), the echo is a nod
 publishes back; the time runs from the publish to the pong handler. The sink is a node counting in
 its handler; the streaming publisher calls ``Node.publish``.
 
+``--stages`` times where a raw and a node round trip go (the echo reports its own stamps; one
+host, so the processes share CLOCK_MONOTONIC): the ping's send call, from its return to the echo's
+handler, the echo's send, and from that to the pong handler. A send call returns only after the
+kernel has queued the datagram and woken the reader (which often runs first, on the sender's core:
+a synchronous wake-up), so the second stage can be negative. ``--busy`` spins a second process on
+the other core for the whole run; ``--tree DIR`` runs antalate (this process and the peers) from
+another checkout, a baseline in the same session; ``--apis`` measures only some APIs beside raw lcm.
+
 Signing (docs/security.md): ``bus-signed`` is the Bus with what a node does under a swarm key on
 every message, in the same run: the sender stamps ``header.utime`` and signs (HMAC-SHA256 into
 ``header.mac``), the receiver runs the node's :class:`~antalate_lcm.wire.security.Authenticator` (MAC,
@@ -105,6 +113,8 @@ PORTS["zenoh-tls"] = 7674
 BUS_MODULES["zenoh-tls"] = "antalate_lcm.core.bus"
 #: Where the run's lab CA is (set by the inner process before the peers start; they inherit it).
 PKI_ENV = "ANTALATE_BENCH_PKI"
+#: Set (by ``--stages``) for the echo peers: they time each echo (handler entered, send returned).
+STAGES_ENV = "ANTALATE_BENCH_STAGES"
 
 
 def url(api: str) -> str:
@@ -187,6 +197,8 @@ class Peer:
         self.last = 0.0
         self.api = api
         self.stop = threading.Event()
+        #: seq -> (handler entered, send returned), ns (--stages: raw and node echoes only).
+        self.stamps: dict[int, tuple[int, int]] | None = {} if os.environ.get(STAGES_ENV) else None
         if api == "node":
             self.node = make_node("echo" if role == "echo" else "sink")
             if role == "echo":
@@ -219,7 +231,12 @@ class Peer:
             self.bus.open()
 
     def _echo_node(self, msg: telemetry_t) -> None:
+        if self.stamps is None:
+            self.node.publish("TELEMETRY", msg, seq=msg.header.seq)
+            return
+        t = time.perf_counter_ns()
         self.node.publish("TELEMETRY", msg, seq=msg.header.seq)
+        self.stamps[msg.header.seq] = (t, time.perf_counter_ns())
 
     def _count_node(self, _msg: telemetry_t) -> None:
         self.count += 1
@@ -235,7 +252,13 @@ class Peer:
             self.last = time.perf_counter()
 
     def _echo_raw(self, _channel: str, data: bytes) -> None:
-        self.lc.publish("PONG", telemetry_t.decode(data).encode())
+        if self.stamps is None:
+            self.lc.publish("PONG", telemetry_t.decode(data).encode())
+            return
+        t = time.perf_counter_ns()
+        msg = telemetry_t.decode(data)
+        self.lc.publish("PONG", msg.encode())
+        self.stamps[msg.header.seq] = (t, time.perf_counter_ns())
 
     def _count_raw(self, _channel: str, data: bytes) -> None:
         telemetry_t.decode(data)
@@ -269,6 +292,8 @@ class Peer:
                 self.quiet_count()
                 self.count = 0
                 print(json.dumps("ok"), flush=True)
+            elif cmd == "stamps":
+                print(json.dumps(self.stamps), flush=True)
         self.stop.set()
         if self.api == "node":
             self.node.stop()
@@ -322,6 +347,8 @@ class RawPinger:
     def __init__(self, api: str) -> None:
         self.lc = lcm.LCM(url(api))
         self.got: tuple[int, int] = (-1, 0)
+        #: seq -> (ping encoded from, its send returned, pong handler entered), ns (--stages).
+        self.stages: dict[int, tuple[int, int, int]] | None = {} if os.environ.get(STAGES_ENV) else None
         self.lc.subscribe("PONG", self._on_pong).set_queue_capacity(DEFAULT_QUEUE_CAPACITY)
 
     def _on_pong(self, _channel: str, data: bytes) -> None:
@@ -332,12 +359,15 @@ class RawPinger:
         seq = msg.header.seq
         t0 = time.perf_counter_ns()
         self.lc.publish("PING", msg.encode())
+        sent = time.perf_counter_ns()
         deadline = time.monotonic() + timeout
         while self.got[0] != seq:
             left = deadline - time.monotonic()
             if left <= 0:
                 return None
             self.lc.handle_timeout(max(1, int(left * 1000)))
+        if self.stages is not None:
+            self.stages[seq] = (t0, sent, self.got[1])
         return self.got[1] - t0
 
     def close(self) -> None:
@@ -445,13 +475,15 @@ class NodePinger:
         self.node = make_node("pinger")
         self.ex = self.node.context.executor
         self.got: tuple[int, int] = (-1, 0)
-        self.t0 = 0
+        self.t0 = self.sent = 0
+        self.stages: dict[int, tuple[int, int, int]] | None = {} if os.environ.get(STAGES_ENV) else None
         self.event = threading.Event()
         self.ex.run_sync(lambda: self.node.subscribe("TELEMETRY", self._on_pong, agent="echo"))
 
     def _send(self, msg: telemetry_t) -> None:
         self.t0 = time.perf_counter_ns()
         self.node.publish("TELEMETRY", msg, seq=msg.header.seq)
+        self.sent = time.perf_counter_ns()
 
     def _on_pong(self, msg: telemetry_t) -> None:
         self.got = (msg.header.seq, time.perf_counter_ns())
@@ -467,6 +499,8 @@ class NodePinger:
             if left <= 0 or not self.event.wait(left):
                 return None
             self.event.clear()
+        if self.stages is not None:
+            self.stages[seq] = (self.t0, self.sent, self.got[1])
         return self.got[1] - self.t0
 
     def close(self) -> None:
@@ -507,9 +541,11 @@ def round_trip(apis: list[str], n: int, period: float = 0.001, warmup: int = 20)
     pingers = {api: kinds.get(api, BusPinger)(api) for api in apis}
     rtts: dict[str, list[int]] = {api: [] for api in apis}
     lost = dict.fromkeys(apis, 0)
+    measured: set[int] = set()
+    stages: dict[str, dict[str, list[float]]] = {}
     seq = 0
     try:
-        with peers(apis, "echo"):
+        with peers(apis, "echo") as echoes:
             for api, pinger in pingers.items():  # group membership takes a moment: ping until answered
                 deadline = time.monotonic() + 5
                 while True:
@@ -533,15 +569,21 @@ def round_trip(apis: list[str], n: int, period: float = 0.001, warmup: int = 20)
                                 lost[api] += 1
                             else:
                                 rtts[api].append(rtt)
+                                measured.add(seq)
                         pause = next_t - time.perf_counter()
                         if pause > 0:
                             time.sleep(pause)
                         else:
                             next_t = time.perf_counter()  # fell behind: no catch-up burst
+            for api, pinger in pingers.items():
+                mine = getattr(pinger, "stages", None)
+                if mine is not None:
+                    theirs = {int(k): v for k, v in ask(echoes[api], "stamps").items()}
+                    stages[api] = stage_times(mine, theirs, measured)
     finally:
         for pinger in pingers.values():
             pinger.close()
-    out = {}
+    out: dict[str, dict[str, Any]] = {}
     for api in apis:
         us = sorted(t / 1000 for t in rtts[api])
         out[api] = {
@@ -553,7 +595,38 @@ def round_trip(apis: list[str], n: int, period: float = 0.001, warmup: int = 20)
             "max": us[-1] if us else float("nan"),
             "mean": statistics.fmean(us) if us else float("nan"),
         }
+        if api in stages:
+            out[api]["stages"] = {
+                name: {"p50": pct(v, 50), "p90": pct(v, 90), "p99": pct(v, 99)}
+                for name, v in stages[api].items()
+            }
     return out
+
+
+#: The stages of a round trip (``--stages``), from the pinger's and the echo's clocks (one host:
+#: CLOCK_MONOTONIC is shared by the processes).
+STAGES = (
+    "ping send",  # encode (node: stamp, encode) and the send call, until it returned
+    "to echo handler",  # the echo wakes, reads, (node: decodes and checks) and enters its handler
+    "echo send",  # the echo's publish until it returned (raw: with its decode)
+    "to pong handler",  # the pinger wakes, reads and decodes: its handler holds the pong
+)
+
+
+def stage_times(
+    pinger: dict[int, tuple[int, int, int]], echo: dict[int, tuple[int, int]], measured: set[int]
+) -> dict[str, list[float]]:
+    """Each stage's sorted durations (us) over the measured pings both sides timed. A send call
+    returns after the kernel has queued the datagram and woken the reader, which may already run
+    on the other core: "to echo handler" can be negative."""
+    out: dict[str, list[float]] = {name: [] for name in STAGES}
+    for seq, (t0, sent, pong) in pinger.items():
+        e = echo.get(seq)
+        if seq not in measured or e is None:
+            continue
+        for name, (a, b) in zip(STAGES, ((t0, sent), (sent, e[0]), e, (e[1], pong)), strict=True):
+            out[name].append((b - a) / 1000)
+    return {name: sorted(v) for name, v in out.items()}
 
 
 def pct(sorted_values: list[float], p: float) -> float:
@@ -741,6 +814,10 @@ def inside(args: argparse.Namespace) -> int:
                 f"  {api:10s}  p50 {r['p50']:6.1f} us  p90 {r['p90']:6.1f} us  p99 {r['p99']:7.1f} us  "
                 f"max {r['max']:7.1f} us  mean {r['mean']:6.1f} us  lost {r['lost']}"
             )
+            for name, st in r.get("stages", {}).items():
+                print(
+                    f"      {name:16s} p50 {st['p50']:6.1f} us  p90 {st['p90']:6.1f} us  p99 {st['p99']:7.1f} us"
+                )
         if "raw-thread" in rt:
             print(
                 "  (raw-thread: raw lcm with the Bus's threading on the ping side -- a dispatcher thread runs the "
@@ -860,6 +937,9 @@ def main() -> int:
     )
     parser.add_argument("--busy", action="store_true", help="a second process spins for the whole run")
     parser.add_argument("--tree", type=Path, help="run antalate from this checkout (a baseline)")
+    parser.add_argument(
+        "--stages", action="store_true", help="time the round trip's stages too (raw lcm and node)"
+    )
     parser.add_argument("--inside", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--peer", nargs=2, metavar=("API", "ROLE"), help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -890,7 +970,9 @@ def main() -> int:
     argv += ["--json"] if args.json else []
     argv += ["--apis", *args.apis] if args.apis else []
     argv += ["--busy"] if args.busy else []
-    env = {TREE_ENV: str(args.tree.resolve())} if args.tree else None
+    env = {TREE_ENV: str(args.tree.resolve())} if args.tree else {}
+    if args.stages:
+        env[STAGES_ENV] = "1"
     busy = None
     if args.busy:
         import multiprocessing

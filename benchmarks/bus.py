@@ -44,6 +44,20 @@ a synchronous wake-up), so the second stage can be negative. ``--busy`` spins a 
 the other core for the whole run; ``--tree DIR`` runs antalate (this process and the peers) from
 another checkout, a baseline in the same session; ``--apis`` measures only some APIs beside raw lcm.
 
+Issue 32 (2026-11-27, 2 cores, load 4-7 from other work, >= 3 runs each): node/raw p50 0.63-0.92
+quiet and 0.76-1.03 with ``--busy``, this tree and the one before alike; p99 165 us to 5.8 ms for raw
+and node alike, the tail all in the reader waiting for a core ("to echo handler" p99 up to 3.7 ms
+while the handler's own work stays under 100 us). ``--stages``: a send call is 30-58 us of wall time
+for both (the kernel delivers the looped-back copy and wakes the reader inside it; about 4 us of it
+is the sender's CPU); a node spends less in its sends (echo send 12-27 us against raw's 30-43: no
+lcm-gen encode, no liblcm publish) and more on receiving (to pong handler 13-20 us: wake, read,
+parse, decode, deliver in Python, against raw's 3-12 us, where liblcm's thread has often run inside
+the echo's send call). The 1.15-1.18x of the issue (2026-11-25): that tree (3616f4f) published
+through lcm-gen and liblcm, its sends 4-8 us longer, and measured 1.01x quiet and 0.91x busy beside
+this tree's 0.80x and 0.90x in the same session; and the ratio moves by +-0.15 between runs at one
+load, as the scheduler places the readers. No GIL contention shows: the node's receive stays
+13-20 us at p50 with a second process busy.
+
 Signing (docs/security.md): ``bus-signed`` is the Bus with what a node does under a swarm key on
 every message, in the same run: the sender stamps ``header.utime`` and signs (HMAC-SHA256 into
 ``header.mac``), the receiver runs the node's :class:`~antalate_lcm.wire.security.Authenticator` (MAC,

@@ -205,3 +205,27 @@ def test_an_old_attribute_warns_and_is_the_new_one() -> None:
         assert hlc.adapter is other
     finally:
         context.close()
+
+
+def test_the_gcs_nodes_old_link_is_its_ground_station_connection() -> None:
+    """``GcsNode.link`` held the pymavlink connection to the ground station, which is not a link in the
+    vocabulary (an adapter's I/O with its vehicle): it is ``ground`` now, and the old name reads it."""
+    from pymavlink import mavutil
+
+    from antalate_lcm.apps.gcs.server import GcsNode
+    from antalate_lcm.apps.gcs.view import GcsView
+    from antalate_lcm.core.config import parse_config
+    from antalate_lcm.core.node import Context
+
+    config = parse_config({"agent": {"name": "gcs"}, "buses": {"lan": "memq://"}}, "<deprecated>")
+    context = Context.in_process({"lan": "memq://"})
+    ground = mavutil.mavlink_connection("udpout:127.0.0.1:14550", source_system=255)
+    try:
+        node = GcsNode(config, context, GcsView(), ground, commands=False)
+        with pytest.warns(
+            DeprecationWarning, match=r"server\.GcsNode\.link is deprecated: use .*GcsNode\.ground"
+        ):
+            assert node.link is ground is node.ground  # type: ignore[attr-defined]
+    finally:
+        ground.close()
+        context.close()

@@ -229,3 +229,23 @@ def test_the_gcs_nodes_old_link_is_its_ground_station_connection() -> None:
     finally:
         ground.close()
         context.close()
+
+
+def test_the_hlc_machines_old_names_are_its_vehicle_snapshot_and_input() -> None:
+    """``HighLevelControl.autopilot`` held the last `VehicleState` and ``on_autopilot`` took it: both are
+    the vehicle's (the vocabulary's "vehicle"), so they are ``vehicle`` and ``on_vehicle``; the old names
+    warn and reach the new ones."""
+    from antalate_lcm.agent.hlc.machine import HighLevelControl
+    from antalate_lcm.vehicles import VehicleState
+
+    hlc = HighLevelControl()
+    snapshot = VehicleState(link_age=0.1)
+    with pytest.warns(
+        DeprecationWarning, match=r"HighLevelControl\.on_autopilot is deprecated: use .*\.on_vehicle"
+    ):
+        hlc.on_autopilot(snapshot, 1.0)  # type: ignore[attr-defined]
+    assert hlc.vehicle is snapshot
+    with pytest.warns(
+        DeprecationWarning, match=r"HighLevelControl\.autopilot is deprecated: use .*\.vehicle"
+    ):
+        assert hlc.autopilot is snapshot  # type: ignore[attr-defined]

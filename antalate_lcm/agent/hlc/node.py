@@ -322,7 +322,7 @@ class HlcNode(Node):
         self._polled_at = now
         machine = self.machine
         # 20 times a second per agent: most outcomes are NOTHING, checked here rather than in a call.
-        outcome = machine.on_autopilot(snapshot, now, fault=self._state_fault)
+        outcome = machine.on_vehicle(snapshot, now, fault=self._state_fault)
         if outcome is not NOTHING:
             self._handle(outcome)
         outcome = machine.tick(now)

@@ -249,3 +249,17 @@ def test_the_hlc_machines_old_names_are_its_vehicle_snapshot_and_input() -> None
         DeprecationWarning, match=r"HighLevelControl\.autopilot is deprecated: use .*\.vehicle"
     ):
         assert hlc.autopilot is snapshot  # type: ignore[attr-defined]
+
+
+def test_the_mavlink_vehicles_old_autopilot_state_is_its_vehicle_state() -> None:
+    """``Vehicle.autopilot_state()`` (what a MAVLink autopilot last said, as a `VehicleState`, the
+    vocabulary's "vehicle") is ``vehicle_state()``; the old name warns and is the very method."""
+    from antalate_lcm.vehicles.mavlink.vehicle import Vehicle
+    from antalate_lcm.vehicles.px4.vehicle import Px4Vehicle
+
+    for vehicle in (Vehicle(), Px4Vehicle()):
+        with pytest.warns(
+            DeprecationWarning, match=r"Vehicle\.autopilot_state is deprecated: use .*\.vehicle_state"
+        ):
+            old = vehicle.autopilot_state  # type: ignore[attr-defined]
+        assert old == vehicle.vehicle_state and old(1.0) == vehicle.vehicle_state(1.0)

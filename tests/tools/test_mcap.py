@@ -40,8 +40,8 @@ from antalate_lcm.msgs import (
 )
 from antalate_lcm.wire import lcm_json
 from antalate_lcm.wire.topics import MESSAGE_TYPES
-from tests.npm_tools import run_node
 from tests.synthetic_logs import LAT0, LON0, T0, LogWriter
+from tests.tools.npm_tools import run_node
 
 MCAP_CHECK = Path(__file__).parent.parent / "node" / "mcap_check.mjs"
 

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any, cast
 import pytest
 
 from antalate_lcm.vehicles import VehicleAdapter
-from tests import scheduling
+from tests.harness import scheduling
 from tests.harness.jsonl import JsonLinesProcess
 from tests.harness.netns import MCAST_URL as MCAST_URL
 from tests.harness.netns import NetNamespace, netns_reason, private_netns
@@ -38,7 +38,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
-    """`make test`'s ``--dist loadfile``, longest modules first (tests/scheduling.py)."""
+    """`make test`'s ``--dist loadfile``, longest modules first (tests/harness/scheduling.py)."""
     if config.getoption("dist", None) != "loadfile":
         return None
     return scheduling.make_scheduler(config, log)

@@ -78,15 +78,15 @@ def netns() -> Iterator[NetNamespace]:
 
 
 class Probe(JsonLinesProcess):
-    """Client side of tests/probe.py: publish, wait for and list messages inside a namespace."""
+    """Client side of tests/children/probe.py: publish, wait for and list messages inside a namespace."""
 
     def __init__(self, proc: subprocess.Popen[str]) -> None:
         super().__init__(proc, "the LCM probe")
 
     @classmethod
     def start(cls, ns: NetNamespace) -> Probe:
-        """tests/probe.py on the namespace's multicast group, ready for requests."""
-        return cls(ns.peer("tests.probe", MCAST_URL))
+        """tests/children/probe.py on the namespace's multicast group, ready for requests."""
+        return cls(ns.peer("tests.children.probe", MCAST_URL))
 
     def publish(self, channel: str, type_name: str, **fields: Any) -> None:
         assert self.call(op="publish", channel=channel, type=type_name, fields=fields)["ok"]

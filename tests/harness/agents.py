@@ -4,7 +4,7 @@
 ``swarm_config``: the TOML text of an experiment's agent (``antalate run`` copies it into a swarm: the
 simulator at its own speeds, every topic on the one bus, one BMA); ``AgentProcesses``: an agent's
 nodes, each its own ``antalate`` process in a namespace. The agents of one process are
-``tests.memory_agent``'s; whole swarms across hosts are ``tests.lan.swarm``'s.
+``tests.harness.memory_agent``'s; whole swarms across hosts are ``tests.lan.swarm``'s.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@ nodes a test adds to it, stopped newest first, then the context, whatever happen
 
 The agent runner in one process: the BMA tests' `Harness` (tests/bma_support.py) and the signing
 tests' `Swarm` (tests/core/test_security_node.py) are this with their own probes and attackers; a whole
-agent assembled as ``antalate agent`` does is `tests.memory_agent.MemoryAgent`.
+agent assembled as ``antalate agent`` does is `tests.harness.memory_agent.MemoryAgent`, an `InProcess` too.
 """
 
 from __future__ import annotations

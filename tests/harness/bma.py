@@ -1,21 +1,25 @@
-"""Helpers for the BMA and behavior tests: an in-memory harness and small test behaviors.
+"""Helpers for the BMA and behavior tests: an in-memory harness and the behaviors tests load by name.
 
-The behaviors here are loaded by ``module:Class`` (``tests.bma_support:Recorder``), which also
-exercises that way of naming a plugin.
+The behaviors here are loaded by ``module:Class`` (``tests.harness.bma:Recorder``), which also
+exercises that way of naming a plugin; `FlyAt` is the adversary of the safety filter's end-to-end
+tests (tests/safety/test_safety_e2e.py, tests/sitl_arducopter/test_safety.py), loaded by the agent
+processes they start.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from antalate_lcm.agent.bma import BmaNode
+from antalate_lcm.base.geo import local_ne
 from antalate_lcm.core.behavior import Behavior, BehaviorContext
 from antalate_lcm.core.config import Config, parse_config
 from antalate_lcm.core.node import Node
-from antalate_lcm.msgs import behavior_state_t, mc_state_t
+from antalate_lcm.msgs import behavior_state_t, mc_state_t, telemetry_t, velocity_cmd_t
 from tests.harness.inprocess import InProcess
 
 AGENT = "a1"
@@ -180,3 +184,45 @@ class Delayed(Behavior):
 
     def _fire(self) -> None:
         self.fired += 1
+
+
+# ------------------------------------------------- behaviors that try to crash the swarm
+class FlyAt(Behavior):
+    """Full speed at (lat, lon) whatever is in the way (the swarm's centroid, a partner's start for a
+    head-on pair, a point outside the fence) until deactivated; it never slows down, it passes the point
+    and comes back."""
+
+    class Params(BaseModel):
+        model_config = ConfigDict(extra="forbid", frozen=True)
+
+        lat: float
+        lon: float
+        speed: float = 5.0
+
+    params: Params
+    topics = {"TELEMETRY": telemetry_t, "VELOCITY_CMD": velocity_cmd_t}
+    activate_on = ("MISSION",)
+    tick_hz = 10.0
+
+    def __init__(self, ctx: BehaviorContext) -> None:
+        super().__init__(ctx)
+        self.here: tuple[float, float] | None = None
+        ctx.subscribe("TELEMETRY", self._on_telemetry)
+
+    def _on_telemetry(self, msg: telemetry_t) -> None:
+        if math.isfinite(msg.lat) and math.isfinite(msg.lon):
+            self.here = (msg.lat, msg.lon)
+
+    def on_activate(self) -> None:
+        self.tick(0.0)
+
+    def tick(self, dt: float) -> None:
+        if self.here is None:
+            return
+        north, east = local_ne(self.here[0], self.here[1], self.params.lat, self.params.lon)
+        d = math.hypot(north, east)
+        msg = velocity_cmd_t()
+        msg.frame = velocity_cmd_t.NED
+        s = self.params.speed / d if d > 0.05 else 0.0
+        msg.vx, msg.vy, msg.vz, msg.yaw_rate = north * s, east * s, 0.0, 0.0
+        self.ctx.publish("VELOCITY_CMD", msg)

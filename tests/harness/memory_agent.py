@@ -19,6 +19,7 @@ from antalate_lcm.core.node import Node
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.vehicles.base import VehicleAdapter
+from tests.harness.agents import agent_config
 from tests.harness.inprocess import InProcess
 from tests.harness.polling import wait_for
 
@@ -47,24 +48,22 @@ class MemoryAgent(InProcess):
         name: str = "memory",
         safety: dict[str, Any] | None = None,
     ) -> None:
-        doc = {
-            "agent": {"name": name},
-            "buses": {"lan": "memq://"},
-            "hlc": {"autopilot": autopilot, **(hlc or {}), "autopilot_params": params},
-            "safety": safety or {},
-            "bma": [
-                {
-                    "name": "operator",
-                    "behaviors": [
-                        {
-                            "plugin": "auto_operator",
-                            "activate_on": ["STANDBY", "MISSION"],
-                            "params": {"max_flights": 1, "retry": 0.5, **(operator or {})},
-                        }
-                    ],
-                }
-            ],
+        auto_operator = {
+            "plugin": "auto_operator",
+            "activate_on": ["STANDBY", "MISSION"],
+            "params": {"max_flights": 1, "retry": 0.5, **(operator or {})},
         }
+        doc = agent_config(
+            name,
+            bus="memq://",
+            autopilot=autopilot,
+            sim=params,
+            fast=False,
+            takeoff=None,
+            hlc=hlc or {},
+            safety=safety or {},
+            bma=[{"name": "operator", "behaviors": [auto_operator]}],
+        )
         super().__init__(parse_config(doc, f"{name}.toml"))
         try:
             self.mc: list[Seen] = []

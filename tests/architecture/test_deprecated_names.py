@@ -9,6 +9,8 @@ import sys
 
 import pytest
 
+from tests import REPO
+
 SHIMS = [
     ("antalate_lcm.behavior", "antalate_lcm.core.behavior"),
     ("antalate_lcm.geo", "antalate_lcm.base.geo"),
@@ -263,3 +265,51 @@ def test_the_mavlink_vehicles_old_autopilot_state_is_its_vehicle_state() -> None
         ):
             old = vehicle.autopilot_state  # type: ignore[attr-defined]
         assert old == vehicle.vehicle_state and old(1.0) == vehicle.vehicle_state(1.0)
+
+
+#: The test helpers docs/behaviors.md once showed by their old paths (a behavior package's tests may
+#: import them): (old module, new module, the names the old one keeps).
+TEST_HELPERS = [
+    ("tests.polling", "tests.harness.polling", ["wait_for"]),
+    (
+        "tests.bma_support",
+        "tests.harness.bma",
+        ["AGENT", "Delayed", "Harness", "ModeSwitcher", "Raiser", "Recorder", "harness", "make_config"],
+    ),
+]
+
+
+@pytest.mark.parametrize(("old", "new", "names"), TEST_HELPERS)
+def test_an_old_test_helper_warns_and_gives_the_same_objects(old: str, new: str, names: list[str]) -> None:
+    """A fresh interpreter in the checkout, as a behavior package's tests would import it."""
+    program = (
+        "import importlib, warnings\n"
+        "with warnings.catch_warnings(record=True) as caught:\n"
+        "    warnings.simplefilter('always')\n"
+        f"    old = importlib.import_module({old!r})\n"
+        f"new = importlib.import_module({new!r})\n"
+        f"assert all(getattr(old, n) is getattr(new, n) for n in {names!r}), 'not the same objects'\n"
+        "assert [w for w in caught if w.category is DeprecationWarning and "
+        f"{new!r} in str(w.message)], [str(w.message) for w in caught]\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", program], capture_output=True, text=True, timeout=60, cwd=REPO
+    )
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_a_behavior_named_by_its_old_test_path_loads() -> None:
+    """docs/behaviors.md's cascaded arbiter named ``tests.bma_support:ModeSwitcher``: a config that copied
+    it loads the very class."""
+    program = (
+        "import warnings\n"
+        "warnings.simplefilter('ignore')\n"
+        "from antalate_lcm.base.plugins import load_plugin\n"
+        "from antalate_lcm.core.behavior import Behavior\n"
+        "from tests.harness.bma import ModeSwitcher\n"
+        "assert load_plugin('antalate.behaviors', 'tests.bma_support:ModeSwitcher', Behavior) is ModeSwitcher\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", program], capture_output=True, text=True, timeout=60, cwd=REPO
+    )
+    assert proc.returncode == 0, proc.stderr

@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bus.py [--n 5000] [--seconds 1.0] [--json]
 
-Everything runs inside a private network namespace (tests/netns.py), never on the host's network:
+Everything runs inside a private network namespace (tests/harness/netns.py), never on the host's network:
 the outer process only makes the namespace and waits for the inner one, which prints the figures.
 
 Round trip: this process publishes a ~100-byte ``telemetry_t`` on PING every millisecond; an echo

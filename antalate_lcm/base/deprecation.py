@@ -33,8 +33,11 @@ MOVED_MODULES: Mapping[str, str] = {
     "antalate_lcm.runtime.clock_link": "antalate_lcm.runtime.clock_client",
 }
 
+#: The vehicle adapter packages (``antalate_lcm.vehicles.<package>``); ``<Package>Adapter`` is each one's class.
+_ADAPTER_PACKAGES = ("crazyflie", "mavlink", "px4", "sim", "tello")
+
 #: Every renamed module-level name (issue #26's vocabulary, docs/architecture.md): module -> {old: new}.
-#: A module listed here ends with ``if not TYPE_CHECKING: __getattr__ = renamed_names(__name__)``.
+#: A module listed here binds ``__getattr__ = renamed_names(__name__)`` under ``if not TYPE_CHECKING``.
 RENAMED_NAMES: Mapping[str, Mapping[str, str]] = {
     "antalate_lcm": {"Autopilot": "VehicleAdapter", "AutopilotState": "VehicleState", "Bus": "Buses"},
     "antalate_lcm.vehicles": {
@@ -48,16 +51,13 @@ RENAMED_NAMES: Mapping[str, Mapping[str, str]] = {
     "antalate_lcm.agent.plan": {"AutopilotPlan": "AdapterPlan", "plan_autopilot": "plan_adapter"},
     "antalate_lcm.agent.hlc.node": {"make_autopilot": "make_adapter"},
     "antalate_lcm.vehicles.base": {"Autopilot": "VehicleAdapter", "AutopilotState": "VehicleState"},
-    "antalate_lcm.vehicles.crazyflie": {"CrazyflieAutopilot": "CrazyflieAdapter"},
-    "antalate_lcm.vehicles.crazyflie.adapter": {"CrazyflieAutopilot": "CrazyflieAdapter"},
-    "antalate_lcm.vehicles.mavlink": {"MavlinkAutopilot": "MavlinkAdapter"},
-    "antalate_lcm.vehicles.mavlink.adapter": {"MavlinkAutopilot": "MavlinkAdapter"},
-    "antalate_lcm.vehicles.px4": {"Px4Autopilot": "Px4Adapter"},
-    "antalate_lcm.vehicles.px4.adapter": {"Px4Autopilot": "Px4Adapter"},
-    "antalate_lcm.vehicles.sim": {"SimAutopilot": "SimAdapter"},
-    "antalate_lcm.vehicles.sim.adapter": {"SimAutopilot": "SimAdapter"},
-    "antalate_lcm.vehicles.tello": {"TelloAutopilot": "TelloAdapter"},
-    "antalate_lcm.vehicles.tello.adapter": {"TelloAutopilot": "TelloAdapter"},
+    **{  # each adapter package, and its ``adapter`` module, had its class as ``<Package>Autopilot``
+        f"antalate_lcm.vehicles.{package}{module}": {
+            f"{package.capitalize()}Autopilot": f"{package.capitalize()}Adapter"
+        }
+        for package in _ADAPTER_PACKAGES
+        for module in ("", ".adapter")
+    },
     "antalate_lcm.cli": {"commands": "subcommands"},
     "antalate_lcm.core.bus": {"Bus": "Buses"},
     "antalate_lcm.runtime.clock_client": {

@@ -345,6 +345,10 @@ class TimeCoordinator:
             log.debug("cannot send to process %s", index)
 
 
+if not TYPE_CHECKING:  # the old names (base.deprecation.RENAMED_NAMES), unseen by mypy
+    __getattr__ = renamed_names(__name__)
+
+
 __all__ = [
     "DEFAULT_STALL",
     "ClockClient",
@@ -355,7 +359,3 @@ __all__ = [
     "join",
     "simulated_buses",
 ]
-
-
-if not TYPE_CHECKING:  # the old names (base.deprecation.RENAMED_NAMES), unseen by mypy
-    __getattr__ = renamed_names(__name__)

@@ -4,6 +4,8 @@ release, with a DeprecationWarning, and give the same objects as the new names (
 
 from __future__ import annotations
 
+import ast
+import re
 import subprocess
 import sys
 
@@ -11,7 +13,7 @@ import pytest
 
 from antalate_lcm.base.deprecation import MOVED_MODULES, RENAMED_NAMES
 from tests import REPO
-from tests.architecture.doc_tables import section_table
+from tests.architecture.doc_tables import section_rows, section_table
 
 #: The moved modules (old, new), from the one table (base.deprecation.MOVED_MODULES).
 SHIMS = list(MOVED_MODULES.items())
@@ -102,7 +104,7 @@ DOC = REPO / "docs" / "architecture.md"
 def test_the_docs_table_lists_exactly_the_deprecated_modules_and_names() -> None:
     """docs/architecture.md's "Deprecated names" tells users what to import instead: each of its module and
     name rows is a moved module or a renamed name of base.deprecation, and each of those is a row (the
-    attribute rows, which name a class, are `renamed_attribute`'s and have tests of their own below)."""
+    attribute rows, which name a class, are `renamed_attribute`'s: the next test)."""
     doc = {
         old: new.strip("`")
         for old, new in section_table(DOC.read_text("utf-8"), "### Deprecated names").items()
@@ -111,6 +113,47 @@ def test_the_docs_table_lists_exactly_the_deprecated_modules_and_names() -> None
     assert {old: new for old, new in doc.items() if old not in code} == {}, "in the doc, not in the code"
     assert {old: new for old, new in code.items() if old not in doc} == {}, "in the code, not in the doc"
     assert doc == code
+
+
+def renamed_attributes() -> set[str]:
+    """``Class.old`` for every `renamed_attribute` in the packages' class bodies, read from the source."""
+    found = set()
+    for package in ("antalate_lcm", "operator_tui", "behaviors"):
+        for path in sorted((REPO / package).rglob("*.py")):
+            for cls in ast.walk(ast.parse(path.read_text("utf-8"), str(path))):
+                if not isinstance(cls, ast.ClassDef):
+                    continue
+                body = [n for top in cls.body for n in (top.body if isinstance(top, ast.If) else [top])]
+                found |= {
+                    f"{cls.name}.{target.id}"
+                    for node in body
+                    if isinstance(node, ast.Assign)
+                    and isinstance(node.value, ast.Call)
+                    and isinstance(node.value.func, ast.Name)
+                    and node.value.func.id == "renamed_attribute"
+                    for target in node.targets
+                    if isinstance(target, ast.Name)
+                }
+    return found
+
+
+def test_the_docs_table_lists_exactly_the_renamed_attributes() -> None:
+    """The table's attribute rows name ``Class.old`` (and ``.old`` for a second one of the same class):
+    they are exactly the `renamed_attribute` class attributes of the source."""
+    in_doc = set()
+    for first, *_ in section_rows(DOC.read_text("utf-8"), "### Deprecated names"):
+        owner = ""
+        for span in re.findall(r"`([^`]+)`", first):
+            name = span.removesuffix("()")
+            if name[:1].isupper() and "." in name:
+                owner = name.split(".")[0]
+                in_doc.add(name)
+            elif name.startswith(".") and owner:
+                in_doc.add(owner + name)
+    in_code = renamed_attributes()
+    assert in_doc - in_code == set(), "in the doc, not in the code"
+    assert in_code - in_doc == set(), "in the code, not in the doc"
+    assert len(in_code) >= 6  # the reader sees them (HlcNode.autopilot, AgentPlan.autopilot, ...)
 
 
 @pytest.mark.parametrize(("module", "old", "new"), RENAMED)

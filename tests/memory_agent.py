@@ -16,7 +16,7 @@ from antalate_lcm.agent.hlc.node import HlcNode
 from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import parse_config
 from antalate_lcm.core.executor import Executor
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Context, Node, NodeSettings
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.vehicles.base import VehicleAdapter
@@ -70,7 +70,7 @@ class MemoryAgent:
         self.mc: list[Seen] = []
         self.hlc: list[Seen] = []
         self.errors: list[hlc_error_t] = []
-        self.probe = Node(self.config, self.context, name="probe")
+        self.probe = Node(NodeSettings.from_config(self.config), self.context, name="probe")
         self.nodes = agent_nodes(self.config, self.context)
         if adapter is not None:  # the HLC comes first in agent_nodes
             assert isinstance(self.nodes[0], HlcNode)

@@ -28,7 +28,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from antalate_lcm.apps.gcs.view import GcsRefusal, GcsView, OperatorRequest
 from antalate_lcm.base.errors import AntalateError
 from antalate_lcm.core.config import Config
-from antalate_lcm.core.node import Context, Node, TopicMatch
+from antalate_lcm.core.node import Context, Node, NodeSettings, TopicMatch
 from antalate_lcm.msgs import mc_state_t, operator_cmd_t
 
 log = logging.getLogger("antalate.gcs")
@@ -63,7 +63,7 @@ class GcsNode(Node):
 
     def __init__(
         self,
-        config: Config,
+        settings: NodeSettings,
         context: Context,
         view: GcsView,
         link: Any,
@@ -71,7 +71,7 @@ class GcsNode(Node):
         commands: bool,
         clock: Any = time.monotonic,
     ) -> None:
-        super().__init__(config, context)
+        super().__init__(settings, context)
         self.view = view
         self.link = link
         self.commands = commands
@@ -232,7 +232,7 @@ def serve(
 
     previous = signal.signal(signal.SIGTERM, on_signal)
     context = Context.create(config)
-    node = GcsNode(config, context, view, link, commands=commands)
+    node = GcsNode(NodeSettings.from_config(config), context, view, link, commands=commands)
     stop = threading.Event()
     reader = threading.Thread(target=_reader, args=(link, node, stop), name="gcs-reader", daemon=True)
     try:

@@ -42,7 +42,7 @@ def cmd_hlc(args: argparse.Namespace) -> int:
     from antalate_lcm.agent.hlc.node import HlcNode
 
     return _run_single(
-        args, lambda plan, ctx: [HlcNode(plan.config, ctx, plan.autopilot.build(ctx.executor.clock))]
+        args, lambda plan, ctx: [HlcNode(plan.config, ctx, plan.adapter.build(ctx.executor.clock))]
     )
 
 

@@ -81,12 +81,12 @@ def test_deprecated_autopilot_spellings_load_the_same_plan_with_a_warning(tmp_pa
     ) as seen:
         plan = load_plan(path)
     assert str(path) in str(seen[0].message)
-    assert (plan.autopilot.name, plan.autopilot.cls, dict(plan.autopilot.params)) == (
+    assert (plan.adapter.name, plan.adapter.cls, dict(plan.adapter.params)) == (
         "sim",
-        canonical.autopilot.cls,
+        canonical.adapter.cls,
         {"tau": 0.4},
     )
-    assert plan.autopilot.model == canonical.autopilot.model
+    assert plan.adapter.model == canonical.adapter.model
 
 
 def test_the_canonical_autopilot_spelling_warns_nothing(tmp_path: Path) -> None:
@@ -96,7 +96,7 @@ def test_the_canonical_autopilot_spelling_warns_nothing(tmp_path: Path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         plan = load_plan(path)
-    assert plan.autopilot.build(lambda: 0.0).params == {"tau": 0.4}
+    assert plan.adapter.build(lambda: 0.0).params == {"tau": 0.4}
 
 
 def test_a_bad_adapter_name_beside_the_table_names_hlc_adapter(tmp_path: Path) -> None:
@@ -307,9 +307,9 @@ def test_bad_station_urls(tmp_path: Path, server: str, expected: str) -> None:
 
 
 def _installed_listed(message: str) -> None:
-    from antalate_lcm.vehicles import available_autopilots
+    from antalate_lcm.vehicles import available_adapters
 
-    installed = available_autopilots()
+    installed = available_adapters()
     assert {"sim", "tello", "mavlink"} <= set(installed)
     assert f"an installed adapter ({', '.join(installed)})" in message, message
 
@@ -569,9 +569,9 @@ def test_strict_validation_takes_toml_values_as_written() -> None:
 
 @pytest.mark.parametrize("adapter", ["sim", "tello", "mavlink"])
 def test_every_shipped_adapter_declares_a_strict_params_model(tmp_path: Path, adapter: str) -> None:
-    from antalate_lcm.vehicles import load_autopilot
+    from antalate_lcm.vehicles import load_adapter
 
-    model = load_autopilot(adapter).params_model
+    model = load_adapter(adapter).params_model
     assert model is not None, f"{adapter}: no params_model"
     assert model.model_config.get("extra") == "forbid" and model.model_config.get("strict") is True
     number = next(n for n, f in model.model_fields.items() if f.annotation in (int, float))

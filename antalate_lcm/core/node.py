@@ -74,7 +74,7 @@ class Publisher:
     message then costs no lookup of its topic. Its ``seq`` is the topic's counter (`Node.publish`
     counts on the same one)."""
 
-    __slots__ = ("topic", "channel", "buses", "seq", "_node", "_senders")
+    __slots__ = ("topic", "channel", "buses", "seq", "_node", "_senders", "_seal")
 
     def __init__(self, node: Node, topic: str, destination: Destination) -> None:
         self.topic = topic
@@ -84,6 +84,8 @@ class Publisher:
         self.seq = 0
         self._node = node
         self._senders = destination.senders
+        #: The node's admission's encoder (`NodeAdmission.seal`: signing with a key).
+        self._seal = node.admission.seal
 
     def publish(self, msg: Message, *, seq: int | None = None) -> bool:
         """Stamp ``msg.header`` (time, agent, the next seq), have the node's admission sign it, send
@@ -109,7 +111,7 @@ class Publisher:
         header.seq = seq
         if node.interference is not None:
             return node.interference.send(node, self.topic, msg, self.buses, self.channel)
-        data = node._seal(msg)
+        data = self._seal(msg)
         channel = self.channel
         ok = True
         for bus, send in self._senders:
@@ -162,8 +164,6 @@ class Node:
         self.started = False
         self._last_utime = 0
         self.admission = context.admission.for_node(self, watcher=watcher)
-        #: The admission's encoder (signing with a key), read on every publish.
-        self._seal = self.admission.seal
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:

@@ -74,7 +74,7 @@ def subcommands() -> tuple[Subcommand, ...]:
         Subcommand("mc", "run the Mission Control node of an agent", nodes.node_arguments, nodes.cmd_mc),
         Subcommand(
             "hlc",
-            "run the High-Level Control node (and its autopilot) of an agent",
+            "run the High-Level Control node (and its vehicle adapter) of an agent",
             nodes.node_arguments,
             nodes.cmd_hlc,
         ),

@@ -99,10 +99,10 @@ def serve(url: str, *, host: str, port: int, no_auth: bool, stop: threading.Even
         else None
     )
     context = foxglove.Context()
-    bus = Buses({"view": url})
+    buses = Buses({"view": url})
     server = None
     try:
-        bus.open()
+        buses.open()
         try:
             # No capability: no client publishing, services or parameters (read-only by construction).
             server = foxglove.start_server(
@@ -111,7 +111,7 @@ def serve(url: str, *, host: str, port: int, no_auth: bool, stop: threading.Even
         except Exception as exc:  # noqa: BLE001 - the SDK raises its own error type for a bind failure
             raise AntalateError(f"cannot serve Foxglove on {host}:{port}: {exc}") from None
         view = FoxgloveView(foxglove, context)
-        bus.subscribe("view", ".*", None, view.on_message, regex=True)
+        buses.subscribe("view", ".*", None, view.on_message, regex=True)
         if not is_loopback(host):
             log.warning(
                 "the Foxglove view on %s:%d has NO sign-in: anyone who reaches it sees the swarm",
@@ -125,7 +125,7 @@ def serve(url: str, *, host: str, port: int, no_auth: bool, stop: threading.Even
         except KeyboardInterrupt:
             pass
     finally:
-        bus.close()
+        buses.close()
         if server is not None:
             server.stop()
         if previous is not None:
@@ -137,10 +137,7 @@ def cmd_foxglove(args: argparse.Namespace) -> int:
     from antalate_lcm.core.config import load_config
 
     config = load_config(args.config)
-    name = args.bus or ("lan" if "lan" in config.buses else config.topics.default_bus)
-    url = config.buses.get(name)
-    if url is None:
-        raise AntalateError(f"no bus named {name!r} in {config.source}; declared: {', '.join(config.buses)}")
+    url = config.bus_url(config.watched_bus(args.bus))
     return serve(url, host=args.host, port=args.port, no_auth=args.no_auth)
 
 

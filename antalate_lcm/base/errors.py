@@ -71,7 +71,7 @@ class MulticastUnavailable(BusUnavailable):
 
 
 class PluginNotFound(AntalateError):
-    """A behavior or autopilot name that no entry point and no ``module:Class`` provides."""
+    """A behavior or vehicle adapter name that no entry point and no ``module:Class`` provides."""
 
 
 # Vehicles (antalate_lcm.vehicles)

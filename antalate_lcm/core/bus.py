@@ -51,7 +51,7 @@ from antalate_lcm.wire.topics import Message
 
 log = logging.getLogger("antalate.bus")
 
-#: ``liblcm`` here makes every Bus leave udpm:// to liblcm's receive thread.
+#: ``liblcm`` here makes every `Buses` leave udpm:// to liblcm's receive thread.
 UDPM_READER_ENV = "ANTALATE_UDPM_READER"
 
 #: Messages LCM may queue for us before dropping (the library default of 30 drops bursts).

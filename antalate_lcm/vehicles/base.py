@@ -1,4 +1,4 @@
-"""The autopilot contract (docs/design.md §7): what the HLC needs from any vehicle, and nothing more.
+"""The vehicle adapter contract (docs/design.md §7): what the HLC needs from any vehicle, and nothing more.
 
 The HLC is written against `VehicleAdapter` only, so a simulator, a Tello and an ArduCopter are
 interchangeable by config. An adapter is a class registered under the entry-point group

@@ -9,6 +9,8 @@ import sys
 
 import pytest
 
+from tests import REPO
+
 SHIMS = [
     ("antalate_lcm.behavior", "antalate_lcm.core.behavior"),
     ("antalate_lcm.geo", "antalate_lcm.base.geo"),
@@ -205,3 +207,109 @@ def test_an_old_attribute_warns_and_is_the_new_one() -> None:
         assert hlc.adapter is other
     finally:
         context.close()
+
+
+def test_the_gcs_nodes_old_link_is_its_ground_station_connection() -> None:
+    """``GcsNode.link`` held the pymavlink connection to the ground station, which is not a link in the
+    vocabulary (an adapter's I/O with its vehicle): it is ``ground`` now, and the old name reads it."""
+    from pymavlink import mavutil
+
+    from antalate_lcm.apps.gcs.server import GcsNode
+    from antalate_lcm.apps.gcs.view import GcsView
+    from antalate_lcm.core.config import parse_config
+    from antalate_lcm.core.node import Context, NodeSettings
+
+    config = parse_config({"agent": {"name": "gcs"}, "buses": {"lan": "memq://"}}, "<deprecated>")
+    context = Context.in_process({"lan": "memq://"})
+    ground = mavutil.mavlink_connection("udpout:127.0.0.1:14550", source_system=255)
+    try:
+        node = GcsNode(NodeSettings.from_config(config), context, GcsView(), ground, commands=False)
+        with pytest.warns(
+            DeprecationWarning, match=r"server\.GcsNode\.link is deprecated: use .*GcsNode\.ground"
+        ):
+            assert node.link is ground is node.ground  # type: ignore[attr-defined]
+    finally:
+        ground.close()
+        context.close()
+
+
+def test_the_hlc_machines_old_names_are_its_vehicle_snapshot_and_input() -> None:
+    """``HighLevelControl.autopilot`` held the last `VehicleState` and ``on_autopilot`` took it: both are
+    the vehicle's (the vocabulary's "vehicle"), so they are ``vehicle`` and ``on_vehicle``; the old names
+    warn and reach the new ones."""
+    from antalate_lcm.agent.hlc.machine import HighLevelControl
+    from antalate_lcm.vehicles import VehicleState
+
+    hlc = HighLevelControl()
+    snapshot = VehicleState(link_age=0.1)
+    with pytest.warns(
+        DeprecationWarning, match=r"HighLevelControl\.on_autopilot is deprecated: use .*\.on_vehicle"
+    ):
+        hlc.on_autopilot(snapshot, 1.0)  # type: ignore[attr-defined]
+    assert hlc.vehicle is snapshot
+    with pytest.warns(
+        DeprecationWarning, match=r"HighLevelControl\.autopilot is deprecated: use .*\.vehicle"
+    ):
+        assert hlc.autopilot is snapshot  # type: ignore[attr-defined]
+
+
+def test_the_mavlink_vehicles_old_autopilot_state_is_its_vehicle_state() -> None:
+    """``Vehicle.autopilot_state()`` (what a MAVLink autopilot last said, as a `VehicleState`, the
+    vocabulary's "vehicle") is ``vehicle_state()``; the old name warns and is the very method."""
+    from antalate_lcm.vehicles.mavlink.vehicle import Vehicle
+    from antalate_lcm.vehicles.px4.vehicle import Px4Vehicle
+
+    for vehicle in (Vehicle(), Px4Vehicle()):
+        with pytest.warns(
+            DeprecationWarning, match=r"Vehicle\.autopilot_state is deprecated: use .*\.vehicle_state"
+        ):
+            old = vehicle.autopilot_state  # type: ignore[attr-defined]
+        assert old == vehicle.vehicle_state and old(1.0) == vehicle.vehicle_state(1.0)
+
+
+#: The test helpers docs/behaviors.md once showed by their old paths (a behavior package's tests may
+#: import them): (old module, new module, the names the old one keeps).
+TEST_HELPERS = [
+    ("tests.polling", "tests.harness.polling", ["wait_for"]),
+    (
+        "tests.bma_support",
+        "tests.harness.bma",
+        ["AGENT", "Delayed", "Harness", "ModeSwitcher", "Raiser", "Recorder", "harness", "make_config"],
+    ),
+]
+
+
+@pytest.mark.parametrize(("old", "new", "names"), TEST_HELPERS)
+def test_an_old_test_helper_warns_and_gives_the_same_objects(old: str, new: str, names: list[str]) -> None:
+    """A fresh interpreter in the checkout, as a behavior package's tests would import it."""
+    program = (
+        "import importlib, warnings\n"
+        "with warnings.catch_warnings(record=True) as caught:\n"
+        "    warnings.simplefilter('always')\n"
+        f"    old = importlib.import_module({old!r})\n"
+        f"new = importlib.import_module({new!r})\n"
+        f"assert all(getattr(old, n) is getattr(new, n) for n in {names!r}), 'not the same objects'\n"
+        "assert [w for w in caught if w.category is DeprecationWarning and "
+        f"{new!r} in str(w.message)], [str(w.message) for w in caught]\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", program], capture_output=True, text=True, timeout=60, cwd=REPO
+    )
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_a_behavior_named_by_its_old_test_path_loads() -> None:
+    """docs/behaviors.md's cascaded arbiter named ``tests.bma_support:ModeSwitcher``: a config that copied
+    it loads the very class."""
+    program = (
+        "import warnings\n"
+        "warnings.simplefilter('ignore')\n"
+        "from antalate_lcm.base.plugins import load_plugin\n"
+        "from antalate_lcm.core.behavior import Behavior\n"
+        "from tests.harness.bma import ModeSwitcher\n"
+        "assert load_plugin('antalate.behaviors', 'tests.bma_support:ModeSwitcher', Behavior) is ModeSwitcher\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", program], capture_output=True, text=True, timeout=60, cwd=REPO
+    )
+    assert proc.returncode == 0, proc.stderr

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from antalate_lcm.agent.plan import load_plan
-from antalate_lcm.base.errors import ConfigError
-from antalate_lcm.core.config import Config, check_unique_agent_names, load_config, parse_config
+from antalate_lcm.base.errors import AntalateError, ConfigError
+from antalate_lcm.core.config import Config, TopicsConfig, check_unique_agent_names, load_config, parse_config
 from tests import REPO
 from tests.harness.cases import cases
 
@@ -56,6 +56,18 @@ home_lat = 32.1
     assert specs["VELOCITY_CMD"].channel == "{agent}/VEL"
     assert specs["SWARM_MODE"].msg_type.__name__ == "behavior_state_t"
     assert cfg.hlc.autopilot_params == {"home_lat": 32.1}
+
+
+def test_the_bus_a_tool_watches_and_an_undeclared_one_refused() -> None:
+    """``antalate log``, ``run``'s recording and the Foxglove bridge open ``--bus``, else ``lan``, else
+    the default bus; a name the file does not declare is refused naming the declared ones."""
+    two = Config(buses={"lan": "memq://", "local": "memq://"}, topics=TopicsConfig(default_bus="local"))
+    assert (two.watched_bus(None), two.watched_bus("local")) == ("lan", "local")
+    no_lan = Config(buses={"local": "memq://"}, topics=TopicsConfig(default_bus="local"))
+    assert no_lan.watched_bus(None) == "local"
+    assert two.bus_url("local") == "memq://"
+    with pytest.raises(AntalateError, match=r"^no bus named 'wan' in <defaults>; declared: lan, local$"):
+        two.bus_url("wan")
 
 
 def test_design_style_autopilot_table(tmp_path: Path) -> None:

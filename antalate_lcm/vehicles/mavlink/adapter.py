@@ -279,7 +279,7 @@ class MavlinkAdapter(MavlinkCommands):
         with self._cond:
             if not self._connected:
                 return VehicleState(connected=False, link_age=math.inf)
-            return self._v.autopilot_state(self.clock(), self._p.cells)
+            return self._v.vehicle_state(self.clock(), self._p.cells)
 
     # ----------------------------------------------------------------- extras (tools, tests)
 

@@ -1,4 +1,4 @@
-"""The ``px4`` autopilot adapter: PX4 through the MAVLink adapter's link, threads and rules, split by job:
+"""The ``px4`` vehicle adapter: PX4 through the MAVLink adapter's link, threads and rules, split by job:
 
 * `adapter` -- `Px4Adapter`: PX4's commands, the OFFBOARD hand-over, the vehicle checks;
 * `modes` -- PX4's (main, sub) modes, their names and what they mean to the HLC (pure);

@@ -87,7 +87,7 @@ class Publisher:
         #: The node's admission's encoder (`NodeAdmission.seal`: signing with a key).
         self._seal = node.admission.seal
 
-    def publish(self, msg: Message, *, seq: int | None = None) -> bool:
+    def publish(self, msg: Message, seq: int | None = None) -> bool:
         """Stamp ``msg.header`` (time, agent, the next seq), have the node's admission sign it, send
         it on every bus of the topic; False when a bus refused it (logged by the bus).
 
@@ -233,7 +233,7 @@ class Node:
         pub = self._publishers.get((topic, tuple(sorted(fields.items()))) if fields else topic)
         if pub is None:
             pub = self.publisher(topic, **fields)
-        return pub.publish(msg, seq=seq)
+        return pub.publish(msg, seq)
 
     def outgoing(self, msg_type: type[M]) -> M:
         """A message of ``msg_type`` to fill and hand to :meth:`publish` at once: the context's one

@@ -21,6 +21,7 @@ import pytest
 from antalate_lcm.agent.bma import BmaNode
 from antalate_lcm.agent.hlc.node import HlcNode
 from antalate_lcm.agent.mc.node import McNode
+from antalate_lcm.core.admission import INSECURE_REMINDER
 from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config, parse_config
 from antalate_lcm.core.executor import Executor
@@ -336,8 +337,13 @@ def test_insecure_true_starts_and_says_so(caplog: pytest.LogCaptureFixture) -> N
         node = McNode(cfg, context)
         with caplog.at_level(logging.WARNING):
             node.admission.check_exposure("HLC_STATE", "lan")  # what subscribe() runs first
+            node.admission.check_exposure("VELOCITY_CMD", "lan")
         assert "INSECURE" in caplog.text and "HLC_STATE on 'lan'" in caplog.text
         assert "launch it" in caplog.text
+        # Said once at once, then reminded on the node's timers: one reminder for all its inputs.
+        assert caplog.text.count("INSECURE") == 1
+        reminders = [t for t in node._timers if t.fn == node.admission.warn_insecure]
+        assert [t.period for t in reminders] == [INSECURE_REMINDER]
         with pytest.raises(InsecureBus):
             McNode(_udpm_config(), context).admission.check_exposure("HLC_STATE", "lan")
     finally:

@@ -225,13 +225,13 @@ def test_the_gcs_nodes_old_link_is_its_ground_station_connection() -> None:
     from antalate_lcm.apps.gcs.server import GcsNode
     from antalate_lcm.apps.gcs.view import GcsView
     from antalate_lcm.core.config import parse_config
-    from antalate_lcm.core.node import Context
+    from antalate_lcm.core.node import Context, NodeSettings
 
     config = parse_config({"agent": {"name": "gcs"}, "buses": {"lan": "memq://"}}, "<deprecated>")
     context = Context.in_process({"lan": "memq://"})
     ground = mavutil.mavlink_connection("udpout:127.0.0.1:14550", source_system=255)
     try:
-        node = GcsNode(config, context, GcsView(), ground, commands=False)
+        node = GcsNode(NodeSettings.from_config(config), context, GcsView(), ground, commands=False)
         with pytest.warns(
             DeprecationWarning, match=r"server\.GcsNode\.link is deprecated: use .*GcsNode\.ground"
         ):

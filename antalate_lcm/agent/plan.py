@@ -1,4 +1,4 @@
-"""A config resolved into what runs: the autopilot adapter class and each arbiter's behavior classes,
+"""A config resolved into what runs: the vehicle adapter class and each arbiter's behavior classes,
 every one with its params validated -- the one place antalate loads plugins.
 
 `plan_agent` is called once per agent before any node starts (``antalate agent|mc|hlc|bma|osc``,
@@ -13,14 +13,15 @@ import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel
 
 from antalate_lcm.agent.bma.plan import BmaPlan, plan_bma
+from antalate_lcm.base.deprecation import renamed_attribute, renamed_names
 from antalate_lcm.base.errors import ConfigError, StrictError
 from antalate_lcm.core.config import Config, load_config
-from antalate_lcm.vehicles import UnknownAutopilotError, VehicleAdapter, load_autopilot
+from antalate_lcm.vehicles import UnknownAdapterError, VehicleAdapter, load_adapter
 from antalate_lcm.vehicles.base import Clock
 
 #: Shown once per config file that still writes the adapter as a ``[hlc.autopilot]`` table.
@@ -31,7 +32,7 @@ DEPRECATED_TABLE = (
 
 
 @dataclass(frozen=True)
-class AutopilotPlan:
+class AdapterPlan:
     """The adapter class and its params, validated by the adapter's own model."""
 
     name: str
@@ -49,17 +50,21 @@ class AutopilotPlan:
 @dataclass(frozen=True)
 class AgentPlan:
     config: Config
-    autopilot: AutopilotPlan
+    #: The vehicle adapter the ``[hlc] autopilot`` key names.
+    adapter: AdapterPlan
     #: One per ``[[bma]]``, in config order.
     bmas: tuple[BmaPlan, ...]
 
+    if not TYPE_CHECKING:  # the old name, one release (issue #26's vocabulary); mypy sees only `adapter`
+        autopilot = renamed_attribute("adapter")
 
-def plan_autopilot(config: Config) -> AutopilotPlan:
+
+def plan_adapter(config: Config) -> AdapterPlan:
     """Load ``[hlc] autopilot`` and validate its params; raises `ConfigError` naming the key written."""
     hlc = config.hlc
     try:
-        cls = load_autopilot(hlc.autopilot)
-    except UnknownAutopilotError as exc:
+        cls = load_adapter(hlc.autopilot)
+    except UnknownAdapterError as exc:
         raise ConfigError(config.source, hlc.autopilot_name_key, str(exc)) from None
     params = hlc.autopilot_params
     model: BaseModel | None = None
@@ -86,13 +91,13 @@ def plan_autopilot(config: Config) -> AutopilotPlan:
             FutureWarning,
             stacklevel=2,
         )
-    return AutopilotPlan(hlc.autopilot, cls, dict(params), model)
+    return AdapterPlan(hlc.autopilot, cls, dict(params), model)
 
 
 def plan_agent(config: Config) -> AgentPlan:
     """Every plugin of one agent, loaded and checked (behaviors first, in config order, then the adapter)."""
     bmas = tuple(plan_bma(config, bma) for bma in config.bma)
-    return AgentPlan(config, plan_autopilot(config), bmas)
+    return AgentPlan(config, plan_adapter(config), bmas)
 
 
 def load_plan(path: str | Path | None) -> AgentPlan:
@@ -100,4 +105,10 @@ def load_plan(path: str | Path | None) -> AgentPlan:
     return plan_agent(load_config(path))
 
 
-__all__ = ["DEPRECATED_TABLE", "AgentPlan", "AutopilotPlan", "load_plan", "plan_agent", "plan_autopilot"]
+__all__ = ["DEPRECATED_TABLE", "AgentPlan", "AdapterPlan", "load_plan", "plan_agent", "plan_adapter"]
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {"AutopilotPlan": "AdapterPlan", "plan_autopilot": "plan_adapter"}
+
+if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
+    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

@@ -137,10 +137,7 @@ def cmd_foxglove(args: argparse.Namespace) -> int:
     from antalate_lcm.core.config import load_config
 
     config = load_config(args.config)
-    name = args.bus or ("lan" if "lan" in config.buses else config.topics.default_bus)
-    url = config.buses.get(name)
-    if url is None:
-        raise AntalateError(f"no bus named {name!r} in {config.source}; declared: {', '.join(config.buses)}")
+    url = config.bus_url(config.watched_bus(args.bus))
     return serve(url, host=args.host, port=args.port, no_auth=args.no_auth)
 
 

@@ -102,11 +102,7 @@ def cmd_spy(args: argparse.Namespace) -> int:
     from antalate_lcm.core.config import load_config
 
     config = load_config(args.config)
-    url = config.buses.get(args.bus) if args.bus else config.buses.get(config.topics.default_bus)
-    if url is None:
-        raise AntalateError(
-            f"no bus named {args.bus!r} in {config.source}; declared: {', '.join(config.buses)}"
-        )
+    url = config.bus_url(args.bus or config.topics.default_bus)
     transport = transport_for(url)
     if transport.not_lcm:
         raise AntalateError(f"cannot spy on {url}: {transport.not_lcm}")

@@ -1,6 +1,7 @@
-"""The one mechanism behind the old names of moved modules (issue #26, docs/architecture.md, "Deprecated
-names"): every shim warns the same way and resolves what its star import left out the same way, so
-removing them next release is deleting files, and no shim can drift from the others."""
+"""The one mechanism behind the old names of moved modules, renamed names and renamed attributes (issue
+#26, docs/architecture.md, "Deprecated names"): every shim warns the same way and resolves what its star
+import left out the same way, so removing them next release is deleting files and lines, and no shim can
+drift from the others."""
 
 from __future__ import annotations
 
@@ -47,3 +48,38 @@ def renamed_names(module: str, renamed: Mapping[str, str]) -> Callable[[str], An
         return getattr(sys.modules[module], new)
 
     return __getattr__
+
+
+class renamed_attribute:
+    """The class attribute that keeps an instance attribute's old name working one release
+    (``autopilot = renamed_attribute("adapter")`` in the class body): reading or setting it warns,
+    naming the new attribute, and goes to the new one, so both names are always the same object.
+    Set only where mypy does not look (``if not TYPE_CHECKING``), like `renamed_names`' old names.
+    A descriptor, not a ``property`` per name, so the warning's words are the same as the modules'.
+    It works beside ``__slots__``: it is a class attribute, the value lives in the new name's slot."""
+
+    def __init__(self, new: str) -> None:
+        self._new = new
+        self._old = new  # replaced by __set_name__ with the name the class binds it to
+        self._owner = ""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self._old, self._owner = name, f"{owner.__module__}.{owner.__qualname__}"
+
+    def _warn(self) -> None:
+        warnings.warn(
+            f"{self._owner}.{self._old} is deprecated: use {self._owner}.{self._new} "
+            "(the old name goes in the next release)",
+            DeprecationWarning,
+            stacklevel=3,
+        )
+
+    def __get__(self, instance: object | None, owner: type | None = None) -> Any:
+        if instance is None:
+            return self
+        self._warn()
+        return getattr(instance, self._new)
+
+    def __set__(self, instance: object, value: Any) -> None:
+        self._warn()
+        setattr(instance, self._new, value)

@@ -13,6 +13,10 @@ stays beside the code that raises and catches it.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+from antalate_lcm.base.deprecation import renamed_names
+
 
 class AntalateError(Exception):
     """Base of every error antalate raises on purpose (the CLI prints these without a traceback)."""
@@ -77,8 +81,8 @@ class AutopilotError(AntalateError, RuntimeError):
     """A command the vehicle refused, did not acknowledge, or cannot perform in its current state."""
 
 
-class UnknownAutopilotError(PluginNotFound, LookupError):
-    """The configured autopilot matches no registered adapter, or cannot be loaded.
+class UnknownAdapterError(PluginNotFound, LookupError):
+    """The configured ``[hlc] autopilot`` matches no registered vehicle adapter, or cannot be loaded.
 
     A `PluginNotFound` (the CLI prints it without a traceback) and a `LookupError`.
     """
@@ -159,3 +163,10 @@ class StationClientError(AntalateError):
         super().__init__(f"station answered {status}: {detail}")
         self.status = status
         self.detail = detail
+
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {"UnknownAutopilotError": "UnknownAdapterError"}
+
+if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
+    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

@@ -275,23 +275,22 @@ class BehaviorContext:
         """The BMA deactivates the behavior: drop what the activation acquired; safe to call twice."""
         self._generation += 1
         self._active = False
-        for timer in self._scoped_timers:
-            timer.cancel()
-        for sub in self._scoped_subs:
-            self._node.unsubscribe(sub)
-        self._scoped_timers.clear()
-        self._scoped_subs.clear()
+        self._release(self._scoped_timers, self._scoped_subs)
 
     def close(self) -> None:
         """The BMA drops the behavior for good (stop, or a failed construction): release everything."""
         self.end_activation()
         self._closed = True
-        for timer in self._persistent_timers:
+        self._release(self._persistent_timers, self._persistent_subs)
+
+    def _release(self, timers: list[Timer], subs: list[Subscription]) -> None:
+        """Cancel and drop what one scope (an activation, or the behavior's whole life) acquired."""
+        for timer in timers:
             timer.cancel()
-        for sub in self._persistent_subs:
+        for sub in subs:
             self._node.unsubscribe(sub)
-        self._persistent_timers.clear()
-        self._persistent_subs.clear()
+        timers.clear()
+        subs.clear()
 
 
 def _name(fn: Callable[..., Any]) -> str:

@@ -26,7 +26,7 @@ from pydantic import (
     model_validator,
 )
 
-from antalate_lcm.base.errors import ConfigError
+from antalate_lcm.base.errors import AntalateError, ConfigError
 from antalate_lcm.base.geo import FlatFrame
 from antalate_lcm.base.safety.geofence import Geofence
 from antalate_lcm.base.strict import describe, dotted, find_datetime
@@ -433,6 +433,20 @@ class Config(BaseModel):
         if binding is not None and binding.bus:
             return list(binding.bus)
         return [self.topics.default_bus]
+
+    def watched_bus(self, name: str | None) -> str:
+        """The bus a tool that watches the swarm opens (``antalate log``, the recording of ``antalate
+        run``, the Foxglove bridge): ``name`` (its ``--bus``), else ``lan`` if declared, else the
+        default bus."""
+        return name or ("lan" if "lan" in self.buses else self.topics.default_bus)
+
+    def bus_url(self, name: str) -> str:
+        """The URL of the bus a tool was told to open; an undeclared name is refused, naming those
+        declared (the name comes from a command line, not from this file)."""
+        url = self.buses.get(name)
+        if url is None:
+            raise AntalateError(f"no bus named {name!r} in {self.source}; declared: {', '.join(self.buses)}")
+        return url
 
     def with_agent_name(self, name: str) -> Config:
         return self.model_copy(update={"agent": AgentConfig(name=name)})

@@ -19,7 +19,7 @@ from typing import IO
 
 from antalate_lcm.agent.hlc.node import HlcNode
 from antalate_lcm.agent.mc.node import McNode
-from antalate_lcm.agent.plan import AgentPlan, plan_agent, plan_autopilot
+from antalate_lcm.agent.plan import AgentPlan, plan_adapter, plan_agent
 from antalate_lcm.base.errors import AntalateError, ConfigError
 from antalate_lcm.base.geo import offset
 from antalate_lcm.core.config import AgentConfig, Config
@@ -44,8 +44,8 @@ def agent_nodes(config: Config, context: Context, plan: AgentPlan | None = None)
     from antalate_lcm.agent.bma.node import BmaNode
 
     plan = plan if plan is not None else plan_agent(config)
-    autopilot = plan.autopilot.build(context.executor.clock)
-    nodes: list[Node] = [HlcNode(config, context, autopilot), McNode(config, context)]
+    adapter = plan.adapter.build(context.executor.clock)
+    nodes: list[Node] = [HlcNode(config, context, adapter), McNode(config, context)]
     nodes.extend(BmaNode(config, context, bma.config, bma) for bma in plan.bmas)
     if config.osc.enabled:
         from antalate_lcm.agent.osc.node import OscNode
@@ -66,7 +66,7 @@ def swarm_configs(
     if n == 1:
         return [config]
     if config.hlc.autopilot != "sim":
-        plan_autopilot(config)  # the adapter's own mistakes first: they are what to fix in the file
+        plan_adapter(config)  # the adapter's own mistakes first: they are what to fix in the file
         raise ConfigError(
             config.source,
             "hlc.autopilot",

@@ -42,7 +42,7 @@ def cmd_hlc(args: argparse.Namespace) -> int:
     from antalate_lcm.agent.hlc.node import HlcNode
 
     return _run_single(
-        args, lambda plan, ctx: [HlcNode(plan.config, ctx, plan.autopilot.build(ctx.executor.clock))]
+        args, lambda plan, ctx: [HlcNode(plan.config, ctx, plan.adapter.build(ctx.executor.clock))]
     )
 
 
@@ -198,10 +198,8 @@ def cmd_log(args: argparse.Namespace) -> int:
     from antalate_lcm.transports import open_lcm
 
     config = load_config(args.config)
-    bus = args.bus or ("lan" if "lan" in config.buses else config.topics.default_bus)
-    url = config.buses.get(bus)
-    if url is None:
-        raise AntalateError(f"no bus named {bus!r} in {config.source}; declared: {', '.join(config.buses)}")
+    bus = config.watched_bus(args.bus)
+    url = config.bus_url(bus)
     open_lcm(url)  # a missing multicast route is reported with the fix, not as LCM's one-liner
     out = args.output or time.strftime("antalate-%Y%m%d-%H%M%S.lcm")
     if out.endswith(".mcap"):

@@ -78,13 +78,13 @@ def _interfere(
     from antalate_lcm.agent.hlc.node import HlcNode
     from antalate_lcm.runtime.faults import FaultInjector, agents_gate
 
-    vehicles = {n.agent: n.autopilot for n in nodes if isinstance(n, HlcNode)}
+    vehicles = {n.agent: n.adapter for n in nodes if isinstance(n, HlcNode)}
     return FaultInjector(
         configs[0].with_agent_name("faults"),
         context,
         script=script,
         agents=[c.agent.name for c in configs],
-        gate=agents_gate([n for n in nodes if n.kind != "recorder"], script),
+        gate=agents_gate([n for n in nodes if not isinstance(n, LogRecorder)], script),
         bus=bus,
         mission_start=lambda: None,
         excuse=lambda _agent: None,

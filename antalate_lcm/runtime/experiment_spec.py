@@ -57,11 +57,10 @@ def default_log_path() -> str:
 
 
 def record_bus(config: Config, bus: str | None) -> str:
-    """The bus to record: ``bus``, else ``lan`` if declared, else the default bus (as ``antalate log``);
-    it must carry the telemetry and the MC states, or the log would hold nothing to analyse."""
-    name = bus or ("lan" if "lan" in config.buses else config.topics.default_bus)
-    if name not in config.buses:
-        raise AntalateError(f"no bus named {name!r} in {config.source}; declared: {', '.join(config.buses)}")
+    """The bus to record (`Config.watched_bus`, as ``antalate log``); it must carry the telemetry and
+    the MC states, or the log would hold nothing to analyse."""
+    name = config.watched_bus(bus)
+    config.bus_url(name)  # refuses an undeclared name
     for topic in ("TELEMETRY", "MC_STATE"):
         if name not in config.topic_buses(topic):
             raise ConfigError(

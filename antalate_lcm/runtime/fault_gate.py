@@ -119,7 +119,7 @@ class FaultGate:
     def send(self, node: Node, topic: str, msg: Message, buses: list[str], channel: str) -> bool:
         agent = node.agent
         bus = node.context.bus
-        if node.kind == "operator" or not self.active.get(agent):
+        if _watches(node) or not self.active.get(agent):
             data = node.seal(msg)
             return all([bus.publish(b, channel, data) for b in buses])
         if self.silenced(agent):
@@ -174,7 +174,7 @@ class FaultGate:
     # --------------------------------------------------------------------- receiving
     def receiving(self, node: Node, topic: str, handler: Callable[..., None]) -> Callable[..., None]:
         agent = node.agent
-        if node.kind == "operator":
+        if _watches(node):
 
             def operator_receives(msg: Any, *rest: Any) -> None:
                 if not self.link_lost(str(msg.header.agent)):
@@ -294,6 +294,13 @@ def _lie(step: FaultStep, topic: str, msg: Message) -> Message:
         out.state = int(McState[step.state])
         return out
     return msg
+
+
+def _watches(node: Node) -> bool:
+    """Whether ``node`` watches the agents rather than flying one (the scripted operator, the console:
+    built with ``watcher=True``): no agent's fault is its own, only an agent's link loss cuts what it
+    hears of that agent. Its role as the node declared it (kept by its admission), never its kind's text."""
+    return node.admission.watcher
 
 
 def agents_gate(nodes: list[Node], script: Script) -> FaultGate:

@@ -88,7 +88,7 @@ def shard_faults(
         gate=agents_gate(nodes, script),
         bus=bus,
         excuse=lambda _agent: None,
-        vehicles={n.agent: n.autopilot for n in nodes if isinstance(n, HlcNode)},
+        vehicles={n.agent: n.adapter for n in nodes if isinstance(n, HlcNode)},
     )
 
 

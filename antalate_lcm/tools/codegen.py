@@ -97,14 +97,17 @@ def copy_packaged_types() -> None:
         shutil.copy2(src, PACKAGED_LCMTYPES_DIR / src.name)
 
 
+def _lcm_gen(*options: str) -> None:
+    """Run lcm-gen with ``options`` over every ``.lcm`` file; its output is kept for the
+    `subprocess.CalledProcessError` it raises on failure."""
+    subprocess.run(
+        [lcm_tool("lcm-gen"), *options, *map(str, lcm_files())], check=True, capture_output=True, text=True
+    )
+
+
 def generate_python(out_dir: Path) -> Path:
     """Run lcm-gen for Python into ``out_dir``, add the stubs, return the generated ``msgs`` folder."""
-    subprocess.run(
-        [lcm_tool("lcm-gen"), "--python", "--ppath", str(out_dir), *map(str, lcm_files())],
-        check=True,
-        capture_output=True,
-        text=True,
-    )
+    _lcm_gen("--python", "--ppath", str(out_dir))
     msgs_dir = out_dir / _MSGS_SUBPATH
     write_stubs(msgs_dir)
     return msgs_dir
@@ -211,12 +214,7 @@ def write_stubs(msgs_dir: Path) -> None:
 
 def generate_java(out_dir: Path) -> Path:
     """Run lcm-gen for Java into ``out_dir`` (used by ``antalate spy`` and the cross-language test)."""
-    subprocess.run(
-        [lcm_tool("lcm-gen"), "--java", "--jpath", str(out_dir), *map(str, lcm_files())],
-        check=True,
-        capture_output=True,
-        text=True,
-    )
+    _lcm_gen("--java", "--jpath", str(out_dir))
     return out_dir
 
 

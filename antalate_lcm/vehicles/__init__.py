@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 from antalate_lcm.base.deprecation import renamed_names
 from antalate_lcm.base.errors import PluginNotFound
-from antalate_lcm.base.errors import UnknownAutopilotError as UnknownAutopilotError
+from antalate_lcm.base.errors import UnknownAdapterError as UnknownAdapterError
 from antalate_lcm.base.plugins import AUTOPILOTS, group_entry_points, load_plugin
 from antalate_lcm.vehicles.base import AutopilotError, FlightMode, Frame, VehicleAdapter, VehicleState
 
@@ -27,46 +27,52 @@ __all__ = [
     "VehicleState",
     "FlightMode",
     "Frame",
-    "UnknownAutopilotError",
-    "available_autopilots",
-    "load_autopilot",
+    "UnknownAdapterError",
+    "available_adapters",
+    "load_adapter",
 ]
 
 
-def available_autopilots() -> dict[str, str]:
+def available_adapters() -> dict[str, str]:
     """Registered adapter names mapped to their ``module:Class`` targets, sorted by name."""
     return dict(sorted((ep.name, ep.value) for ep in group_entry_points(ENTRY_POINT_GROUP)))
 
 
-def load_autopilot(name: str) -> type[VehicleAdapter]:
+def load_adapter(name: str) -> type[VehicleAdapter]:
     """The adapter class for `name` (a registered name or ``module:Class``).
 
-    Raises `UnknownAutopilotError` -- whatever went wrong: an unknown or malformed name, a module
+    Raises `UnknownAdapterError` -- whatever went wrong: an unknown or malformed name, a module
     that does not import, a class that is not an `VehicleAdapter` -- with one line that lists the
     installed adapters, so a config typo is a one-line fix and never a traceback.
     """
-    installed = available_autopilots()
+    installed = available_adapters()
     expected = (
         f"expected an installed adapter ({', '.join(installed) or 'none'}) or 'package.module:Class' "
         "naming an VehicleAdapter subclass"
     )
     if ":" not in name and name not in installed:
-        raise UnknownAutopilotError(f"{expected}; there is no adapter {name!r}")
+        raise UnknownAdapterError(f"{expected}; there is no adapter {name!r}")
     try:
         cls = load_plugin(ENTRY_POINT_GROUP, name, VehicleAdapter)
     except PluginNotFound as exc:
-        raise UnknownAutopilotError(f"{expected}; {exc}") from None
+        raise UnknownAdapterError(f"{expected}; {exc}") from None
     except Exception as exc:  # noqa: BLE001 - an entry point's module may fail in any way
-        raise UnknownAutopilotError(f"{expected}; {name!r} failed to load: {exc!r}") from None
+        raise UnknownAdapterError(f"{expected}; {name!r} failed to load: {exc!r}") from None
     assert issubclass(cls, VehicleAdapter)  # checked by load_plugin; narrows the type
     if inspect.isabstract(cls):
         missing = ", ".join(sorted(getattr(cls, "__abstractmethods__", ())))
-        raise UnknownAutopilotError(f"{expected}; {name!r} is abstract (it lacks {missing})")
+        raise UnknownAdapterError(f"{expected}; {name!r} is abstract (it lacks {missing})")
     return cls
 
 
 #: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
-_DEPRECATED_NAMES = {"Autopilot": "VehicleAdapter", "AutopilotState": "VehicleState"}
+_DEPRECATED_NAMES = {
+    "Autopilot": "VehicleAdapter",
+    "AutopilotState": "VehicleState",
+    "UnknownAutopilotError": "UnknownAdapterError",
+    "available_autopilots": "available_adapters",
+    "load_autopilot": "load_adapter",
+}
 
 if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
     __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

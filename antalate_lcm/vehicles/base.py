@@ -2,7 +2,7 @@
 
 The HLC is written against `VehicleAdapter` only, so a simulator, a Tello and an ArduCopter are
 interchangeable by config. An adapter is a class registered under the entry-point group
-``antalate.autopilots`` (see `antalate_lcm.vehicles.load_autopilot`).
+``antalate.autopilots`` (see `antalate_lcm.vehicles.load_adapter`).
 
 Constructor contract
 --------------------

@@ -17,8 +17,9 @@ same ``ValueError`` for another type's fingerprint and ``struct.error`` for a tr
 
 from __future__ import annotations
 
+import itertools
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 #: LCM primitive -> struct format character (lcm-gen's own choices: a boolean is packed as "b").
@@ -38,8 +39,11 @@ Encoder = Callable[[Any], bytes]
 _ENCODERS: dict[type, Encoder] = {}
 Decoder = Callable[[bytes], Any]
 _DECODERS: dict[type, Decoder] = {}
-#: struct sizes of the LCM primitives.
-_SIZE = {"b": 1, "h": 2, "i": 4, "q": 8, "f": 4, "d": 8, "B": 1}
+#: ``header_t`` on the wire: utime and the agent name's length (with its NUL), then seq and mac_len;
+#: and the length that precedes every string.
+_HEADER_HEAD = struct.Struct(">qI")
+_HEADER_SEQ = struct.Struct(">ih")
+_STRING_LEN = struct.Struct(">I")
 
 
 def encoder(cls: type) -> Encoder:
@@ -57,19 +61,14 @@ def encode(msg: Any) -> bytes:
 
 
 def _compile(cls: type) -> Encoder | None:
-    names: list[str] = list(getattr(cls, "__slots__", ()))
-    types: list[str] = list(getattr(cls, "__typenames__", ()))
-    dims: list[Any] = list(getattr(cls, "__dimensions__", ()))
-    fingerprint = getattr(cls, "_get_packed_fingerprint", None)
-    if not names or len(names) != len(types) or len(dims) != len(types) or fingerprint is None:
-        return None
-    if names[0] != "header" or types[0] != _HEADER or any(d is not None for d in dims[1:]):
+    fields = _flat_fields(cls)
+    if fields is None:
         return None
     env: dict[str, Any] = {
-        "_fp": fingerprint(),
-        "_head": struct.Struct(">qI").pack,
-        "_seq": struct.Struct(">ih").pack,
-        "_len": struct.Struct(">I").pack,
+        "_fp": cls._get_packed_fingerprint(),  # type: ignore[attr-defined]
+        "_head": _HEADER_HEAD.pack,
+        "_seq": _HEADER_SEQ.pack,
+        "_len": _STRING_LEN.pack,
     }
     lines = [
         "def encode(msg):",
@@ -85,25 +84,14 @@ def _compile(cls: type) -> Encoder | None:
         "_seq(h.seq, m)",
         "(bytes(h.mac[:m]) if m else b'')",
     ]
-    run: list[tuple[str, str]] = []
-
-    def close_run() -> None:
-        if run:
-            name = f"_p{len(env)}"
-            env[name] = struct.Struct(">" + "".join(_FORMAT[t] for _, t in run)).pack
-            parts.append(f"{name}({', '.join(f'msg.{n}' for n, _ in run)})")
-            run.clear()
-
-    for i, (name, typename) in enumerate(zip(names[1:], types[1:], strict=True)):
-        if typename in _FORMAT:
-            run.append((name, typename))
-        elif typename == "string":
-            close_run()
-            lines.append(f"    s{i} = msg.{name}.encode('utf-8')")
+    for i, (packer, run) in enumerate(_runs(fields)):
+        if packer is None:  # a string
+            lines.append(f"    s{i} = msg.{run[0]}.encode('utf-8')")
             parts.extend((f"_len(len(s{i}) + 1)", f"s{i}", "b'\\0'"))
         else:
-            return None
-    close_run()
+            name = f"_p{len(env)}"
+            env[name] = packer.pack
+            parts.append(f"{name}({', '.join(f'msg.{n}' for n in run)})")
     lines.append(f"    return b''.join(({', '.join(parts)}))")
     exec("\n".join(lines), env)  # noqa: S102 - source built above from the type's own field table
     fn: Encoder = env["encode"]
@@ -136,6 +124,18 @@ def _flat_fields(cls: type) -> list[tuple[str, str]] | None:
     return fields
 
 
+def _runs(fields: list[tuple[str, str]]) -> Iterator[tuple[struct.Struct | None, list[str]]]:
+    """A flat type's fields in wire order as both compilers walk them: each run of primitives with
+    the one ``struct`` that packs it, and each string alone (``None``: a length, then its bytes)."""
+    for is_string, group in itertools.groupby(fields, key=lambda field: field[1] == "string"):
+        run = list(group)
+        if is_string:
+            for name, _ in run:
+                yield None, [name]
+        else:
+            yield struct.Struct(">" + "".join(_FORMAT[t] for _, t in run)), [name for name, _ in run]
+
+
 def _compile_decoder(cls: type) -> Decoder | None:
     fields = _flat_fields(cls)
     if fields is None:
@@ -147,9 +147,9 @@ def _compile_decoder(cls: type) -> Decoder | None:
         "_new": object.__new__,
         "_C": cls,
         "_H": header_t,
-        "_head": struct.Struct(">qI").unpack_from,
-        "_seq": struct.Struct(">ih").unpack_from,
-        "_len": struct.Struct(">I").unpack_from,
+        "_head": _HEADER_HEAD.unpack_from,
+        "_seq": _HEADER_SEQ.unpack_from,
+        "_len": _STRING_LEN.unpack_from,
     }
     # As lcm-gen's header_t._decode_one; a negative mac_len reads the rest (BytesIO.read(-n)).
     lines = [
@@ -172,31 +172,21 @@ def _compile_decoder(cls: type) -> Decoder | None:
         "    msg = _new(_C)",
         "    msg.header = h",
     ]
-    run: list[tuple[str, str]] = []
-
-    def close_run() -> None:
-        if not run:
-            return
-        fmt = "".join(_FORMAT[t] for _, t in run)
-        name = f"_p{len(env)}"
-        env[name] = struct.Struct(">" + fmt).unpack_from
-        lines.append(f"    v = {name}(data, o)")
-        for k, (field, typename) in enumerate(run):
-            value = f"bool(v[{k}])" if typename == "boolean" else f"v[{k}]"
-            lines.append(f"    msg.{field} = {value}")
-        lines.append(f"    o += {sum(_SIZE[c] for c in fmt)}")
-        run.clear()
-
-    for field, typename in fields:
-        if typename == "string":
-            close_run()
+    booleans = {name for name, typename in fields if typename == "boolean"}
+    for packer, run in _runs(fields):
+        if packer is None:  # a string
             lines.append("    n = _len(data, o)[0]")
             lines.append("    o += 4")
-            lines.append(f"    msg.{field} = data[o:o + n][:-1].decode('utf-8', 'replace')")
+            lines.append(f"    msg.{run[0]} = data[o:o + n][:-1].decode('utf-8', 'replace')")
             lines.append("    o += n")
-        else:
-            run.append((field, typename))
-    close_run()
+            continue
+        name = f"_p{len(env)}"
+        env[name] = packer.unpack_from
+        lines.append(f"    v = {name}(data, o)")
+        for k, field in enumerate(run):
+            value = f"bool(v[{k}])" if field in booleans else f"v[{k}]"
+            lines.append(f"    msg.{field} = {value}")
+        lines.append(f"    o += {packer.size}")
     lines.append("    return msg")
     exec("\n".join(lines), env)  # noqa: S102 - source built above from the type's own field table
     fn: Decoder = env["decode"]

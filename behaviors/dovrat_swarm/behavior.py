@@ -16,7 +16,7 @@ import logging
 import math
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.behavior import Behavior, BehaviorContext
@@ -43,21 +43,7 @@ from behaviors.velocity import velocity_cmd
 class DovratSwarm(Behavior):
     """Fly forward, turn gently while a peer is ahead and sharply while none is, drift with the operator."""
 
-    class Params(BaseModel):
-        model_config = ConfigDict(extra="forbid", frozen=True)
-
-        #: m/s along the heading.
-        forward_speed: float = Field(default=2.0, ge=0, allow_inf_nan=False)
-        #: deg/s while a peer is detected in the front sector.
-        gentle_turn_rate: float = Field(default=10.0, ge=0, allow_inf_nan=False)
-        #: deg/s while no peer is detected.
-        sharp_turn_rate: float = Field(default=40.0, ge=0, allow_inf_nan=False)
-        #: 1 = turn clockwise, -1 = counter-clockwise (both rates turn the same way).
-        turn_direction: Literal[1, -1] = 1
-        #: Scale of the operator's direction drift; 0 ignores direction commands.
-        direction_weight: float = Field(default=1.0, ge=0, allow_inf_nan=False)
-        #: Cap on the blended horizontal speed (m/s); 0 = none (the HLC clamps anyway).
-        max_speed: float = Field(default=0.0, ge=0, allow_inf_nan=False)
+    class Params(SwarmParams):
         #: A detection older than this (s) counts as "no peer".
         detection_timeout: float = Field(default=2.0, gt=0, allow_inf_nan=False)
         #: Heading older than this (s) is unknown: the operator's drift is left out meanwhile.
@@ -80,14 +66,6 @@ class DovratSwarm(Behavior):
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
         p = self.params
-        self.rule = SwarmParams(
-            forward_speed=p.forward_speed,
-            gentle_turn_rate=p.gentle_turn_rate,
-            sharp_turn_rate=p.sharp_turn_rate,
-            turn_direction=p.turn_direction,
-            direction_weight=p.direction_weight,
-            max_speed=p.max_speed,
-        )
         self.detections = DetectionTracker(p.detection_timeout)
         self.direction: OperatorDirection | None = None
         self._heading: float | None = None
@@ -159,13 +137,13 @@ class DovratSwarm(Behavior):
     def on_activate(self) -> None:
         self.log.info(
             "swarming: %g m/s, turning %s",
-            self.rule.forward_speed,
-            "clockwise" if self.rule.turn_direction > 0 else "counter-clockwise",
+            self.params.forward_speed,
+            "clockwise" if self.params.turn_direction > 0 else "counter-clockwise",
         )
 
     def tick(self, dt: float) -> None:
         now = self.ctx.now
-        command = swarm_command(self.heading(), self.detections.detected(now), self.direction, self.rule)
+        command = swarm_command(self.heading(), self.detections.detected(now), self.direction, self.params)
         self.last_command = command
         self._publish(command.vx, command.vy, command.yaw_rate)
 

@@ -29,22 +29,28 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
 
 
-@dataclass(frozen=True)
-class SwarmParams:
-    forward_speed: float = 1.0
-    #: deg/s while a peer is detected.
-    gentle_turn_rate: float = 10.0
-    #: deg/s while none is.
-    sharp_turn_rate: float = 45.0
-    #: +1 = turn clockwise (right), -1 = counter-clockwise.
-    turn_direction: int = 1
-    #: Scale of the operator's direction drift (0 = ignore the operator's direction).
-    direction_weight: float = 1.0
-    #: Cap on the horizontal speed of the blended command; 0 = no cap (the HLC still clamps).
-    max_speed: float = 0.0
+class SwarmParams(BaseModel):
+    """The rule's parameters, validated, since the plugin's ``Params`` are these (one list of names,
+    defaults and bounds for the rule and its config)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    #: m/s along the heading.
+    forward_speed: float = Field(default=2.0, ge=0, allow_inf_nan=False)
+    #: deg/s while a peer is detected in the front sector.
+    gentle_turn_rate: float = Field(default=10.0, ge=0, allow_inf_nan=False)
+    #: deg/s while no peer is detected.
+    sharp_turn_rate: float = Field(default=40.0, ge=0, allow_inf_nan=False)
+    #: 1 = turn clockwise (right), -1 = counter-clockwise (both rates turn the same way).
+    turn_direction: Literal[1, -1] = 1
+    #: Scale of the operator's direction drift; 0 ignores direction commands.
+    direction_weight: float = Field(default=1.0, ge=0, allow_inf_nan=False)
+    #: Cap on the horizontal speed of the blended command (m/s); 0 = none (the HLC clamps anyway).
+    max_speed: float = Field(default=0.0, ge=0, allow_inf_nan=False)
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import random
 
-from pydantic import BaseModel, ConfigDict, Field
-
 from antalate_lcm.core.behavior import Behavior, BehaviorContext
 from antalate_lcm.msgs import peer_scan_t
 from antalate_lcm.wire.peers import Peer
@@ -25,18 +23,11 @@ def _body(peer: Peer) -> Body:
 class PeerSensor(Behavior):
     """The simulated range-and-bearing sensor of peers (``logic.scan``)."""
 
-    class Params(BaseModel):
-        model_config = ConfigDict(extra="forbid", frozen=True)
-        max_range: float = Field(default=20.0, gt=0, le=1e6, allow_inf_nan=False)
-        fov: float = Field(default=360.0, gt=0, le=360, allow_inf_nan=False)
-        range_noise: float = Field(default=0.0, ge=0, allow_inf_nan=False)
-        bearing_noise: float = Field(default=0.0, ge=0, allow_inf_nan=False)
-        dropout: float = Field(default=0.0, ge=0, le=1, allow_inf_nan=False)
-        velocity: bool = False
-        identities: bool = False
+    class Params(SensorParams):
         #: Seed of the noise and dropout; 0 = the run's (`antalate run --seed`), else a different one every run.
         seed: int = 0
 
+    params: Params
     topics = {"PEER_SCAN": peer_scan_t}
     activate_on = ("TAKEOFF", "MISSION", "RTL", "LAND", "HOLD")
     tick_hz = 10.0
@@ -44,16 +35,12 @@ class PeerSensor(Behavior):
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
-        p = self.params
-        self.sensor = SensorParams(
-            p.max_range, p.fov, p.range_noise, p.bearing_noise, p.dropout, p.velocity, p.identities
-        )
         # The param's seed, else the run's (antalate run --seed), else a fresh one each run.
-        self.rng = random.Random(p.seed or ctx.seed)
+        self.rng = random.Random(self.params.seed or ctx.seed)
 
     def on_activate(self) -> None:
         self.log.info(
-            "sensing peers within %g m, %g deg field of view", self.sensor.max_range, self.sensor.fov
+            "sensing peers within %g m, %g deg field of view", self.params.max_range, self.params.fov
         )
 
     def tick(self, dt: float) -> None:
@@ -61,12 +48,12 @@ class PeerSensor(Behavior):
         me = table.me
         if me is None:  # this agent's own position is not known yet: nothing to measure from
             return
-        sightings = scan(_body(me), (_body(p) for p in table.peers(self.ctx.now)), self.sensor, self.rng)
+        sightings = scan(_body(me), (_body(p) for p in table.peers(self.ctx.now)), self.params, self.rng)
         msg = peer_scan_t()
         msg.max_range, msg.fov, msg.has_velocity = (
-            self.sensor.max_range,
-            self.sensor.fov,
-            self.sensor.velocity,
+            self.params.max_range,
+            self.params.fov,
+            self.params.velocity,
         )
         msg.n = len(sightings)
         msg.range = [s.range for s in sightings]

@@ -15,20 +15,25 @@ import random
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from pydantic import BaseModel, ConfigDict, Field
+
 from antalate_lcm.base.geo import body_to_ne, wrap_180
 
 
-@dataclass(frozen=True)
-class SensorParams:
+class SensorParams(BaseModel):
+    """Validated, since the plugin's ``Params`` are these (one list of names, defaults and bounds for
+    the sensor and its config)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
     #: m; peers farther away are not seen.
-    max_range: float = 20.0
+    max_range: float = Field(default=20.0, gt=0, le=1e6, allow_inf_nan=False)
     #: Degrees, the full field of view centred on the heading (360 = all around).
-    fov: float = 360.0
+    fov: float = Field(default=360.0, gt=0, le=360, allow_inf_nan=False)
     #: Standard deviations of the noise added to range (m) and bearing (deg); 0 = exact.
-    range_noise: float = 0.0
-    bearing_noise: float = 0.0
+    range_noise: float = Field(default=0.0, ge=0, allow_inf_nan=False)
+    bearing_noise: float = Field(default=0.0, ge=0, allow_inf_nan=False)
     #: Probability that a peer within range and view is missed in one scan.
-    dropout: float = 0.0
+    dropout: float = Field(default=0.0, ge=0, le=1, allow_inf_nan=False)
     #: Report each peer's relative velocity (forward, right), else zeros.
     velocity: bool = False
     #: Report each peer's agent name, else "" (anonymous).

@@ -14,8 +14,6 @@ import random
 import zlib
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field
-
 from antalate_lcm.core.behavior import Behavior, BehaviorContext
 from antalate_lcm.msgs import velocity_cmd_t
 from behaviors.swarm_rules.logic import (
@@ -29,18 +27,6 @@ from behaviors.swarm_rules.logic import (
     gathering,
 )
 from behaviors.velocity import velocity_cmd
-
-
-class _RuleParams(BaseModel):
-    """What every rule takes: the speed it asks for at most and the separation it keeps from every peer
-    (``logic.separate``); a rule redeclares a field whose default differs."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    speed: float = Field(default=1.5, gt=0, allow_inf_nan=False)
-    separation: float = Field(default=3.0, ge=0, allow_inf_nan=False)
-    margin: float = Field(default=0.3, ge=0, allow_inf_nan=False)
-    #: 1/s; 0.25 per agent keeps a closing pair critically damped under the simulator's 0.5 s lag (logic.separate).
-    separation_gain: float = Field(default=0.25, gt=0, allow_inf_nan=False)
 
 
 class _PeerRule(Behavior):
@@ -93,45 +79,38 @@ class _PeerRule(Behavior):
 class Gathering(_PeerRule):
     """Aggregation: towards the centroid of the peers, never nearer than ``separation`` to any."""
 
-    class Params(_RuleParams):
-        gain: float = Field(default=0.4, gt=0, allow_inf_nan=False)
-        separation_gain: float = Field(default=0.5, gt=0, allow_inf_nan=False)
-        stop_radius: float = Field(default=4.5, ge=0, allow_inf_nan=False)
-        jitter: float = Field(default=0.5, ge=0, allow_inf_nan=False)
-        cushion: float = Field(default=1.0, ge=0, allow_inf_nan=False)
+    class Params(GatheringParams):
         #: Seed of the jitter; 0 = one fixed by the agent's name (repeatable per agent, different between agents).
         seed: int = 0
 
+    params: Params
+
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
-        p = self.params.model_dump()
         # The param's seed, else the run's (antalate run --seed), else one fixed by the agent's name.
-        self.rng = random.Random(p.pop("seed") or ctx.seed or zlib.crc32(ctx.agent.encode()))
-        self.rule_params = GatheringParams(**p)
+        self.rng = random.Random(self.params.seed or ctx.seed or zlib.crc32(ctx.agent.encode()))
 
     def rule(self, neighbours: list[Neighbour]) -> Vec:
         angle = self.rng.uniform(0.0, 2.0 * math.pi)
-        return gathering(neighbours, self.rule_params, (math.cos(angle), math.sin(angle)))
+        return gathering(neighbours, self.params, (math.cos(angle), math.sin(angle)))
 
 
 class Flocking(_PeerRule):
     """Reynolds/Vicsek flocking: separation, alignment, cohesion at a cruise speed."""
 
-    class Params(_RuleParams):
-        neighbourhood: float = Field(default=0.0, ge=0, allow_inf_nan=False)
-        alignment: float = Field(default=3.0, ge=0, allow_inf_nan=False)
-        cohesion: float = Field(default=0.05, ge=0, allow_inf_nan=False)
-        margin: float = Field(default=0.5, ge=0, allow_inf_nan=False)
-        #: deg: the heading an agent sets off on while nobody moves; omitted = one fixed by its name
-        #: (so the flock starts in disorder and alignment has to agree on one).
-        heading: float | None = Field(default=None, allow_inf_nan=False)
+    class Params(FlockingParams):
+        """``heading`` omitted: one fixed by the agent's name, so the flock starts in disorder and
+        alignment has to agree on one."""
+
+    params: Params
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
-        p = self.params.model_dump()
-        if p["heading"] is None:
-            p["heading"] = float(zlib.crc32(ctx.agent.encode()) % 360)
-        self.rule_params = FlockingParams(**p)
+        self.rule_params = self.params
+        if "heading" not in self.params.model_fields_set:
+            self.rule_params = self.params.model_copy(
+                update={"heading": float(zlib.crc32(ctx.agent.encode()) % 360)}
+            )
 
     def rule(self, neighbours: list[Neighbour]) -> Vec:
         me = self.ctx.peers.me
@@ -142,13 +121,11 @@ class Flocking(_PeerRule):
 class Dispersion(_PeerRule):
     """Area coverage: spread to ``spacing`` from every peer, within ``area_radius`` of the takeoff point."""
 
-    class Params(_RuleParams):
-        spacing: float = Field(default=10.0, gt=0, allow_inf_nan=False)
-        area_radius: float = Field(default=30.0, ge=0, allow_inf_nan=False)
+    Params = DispersionParams
+    params: DispersionParams
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
-        self.rule_params = DispersionParams(**self.params.model_dump())
         #: (north, east) of the first position this behavior saw, in the table's frame.
         self.home: tuple[float, float] | None = None
 
@@ -158,4 +135,4 @@ class Dispersion(_PeerRule):
             return 0.0, 0.0
         if self.home is None:
             self.home = (me.north, me.east)
-        return dispersion((self.home[0] - me.north, self.home[1] - me.east), neighbours, self.rule_params)
+        return dispersion((self.home[0] - me.north, self.home[1] - me.east), neighbours, self.params)

@@ -16,6 +16,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from pydantic import BaseModel, ConfigDict, Field
+
 Vec = tuple[float, float]
 #: Passes of separate() over the neighbours.
 _PASSES = 10
@@ -84,36 +86,37 @@ def radius(points: Sequence[Vec]) -> float:
     return max(math.hypot(p[0] - cn, p[1] - ce) for p in points)
 
 
-@dataclass(frozen=True)
-class RuleParams:
+class RuleParams(BaseModel):
     """What every rule takes: its speed and the separation it keeps (:func:`separate`). A rule
-    redeclares a field whose default differs."""
+    redeclares a field whose default differs. Validated, since the plugins' ``Params`` are these (one
+    list of names, defaults and bounds for the rule and its config)."""
 
+    model_config = ConfigDict(extra="forbid", frozen=True)
     #: m/s, the fastest the rule asks for (flocking: the speed it cruises at).
-    speed: float = 1.5
-    #: m kept from every peer, the margin aimed for beyond it, and the closing speed per metre of gap (1/s).
-    separation: float = 3.0
-    margin: float = 0.3
-    separation_gain: float = 0.25
+    speed: float = Field(default=1.5, gt=0, allow_inf_nan=False)
+    #: m kept from every peer, the margin aimed for beyond it, and the closing speed per metre of gap (1/s):
+    #: 0.25 per agent keeps a closing pair critically damped under the simulator's 0.5 s lag.
+    separation: float = Field(default=3.0, ge=0, allow_inf_nan=False)
+    margin: float = Field(default=0.3, ge=0, allow_inf_nan=False)
+    separation_gain: float = Field(default=0.25, gt=0, allow_inf_nan=False)
 
 
 # ---------------------------------------------------------------------------------------------- gathering
-@dataclass(frozen=True)
 class GatheringParams(RuleParams):
     #: 1/s: velocity per metre to the centroid (slows down on arrival).
-    gain: float = 0.4
+    gain: float = Field(default=0.4, gt=0, allow_inf_nan=False)
     #: (faster than critically damped: 8 agents gathered from a 6 m grid kept 3.29 m, docs/behaviors.md)
-    separation_gain: float = 0.5
+    separation_gain: float = Field(default=0.5, gt=0, allow_inf_nan=False)
     #: Stop closing in once the swarm (this agent and its peers) is within this radius, m; 0 = never.
-    stop_radius: float = 4.5
+    stop_radius: float = Field(default=4.5, ge=0, allow_inf_nan=False)
     #: m/s of random motion added to the approach (the caller draws it, ``jitter`` argument): agents
     #: that close in on a square grid otherwise jam in that shape, every one blocked by two neighbours
     #: (8 agents from an 8 m grid stopped at a radius of 5.3 m with 3.3 m spacing); a little noise
     #: lets them slide into the gaps, as in stochastic aggregation models.
-    jitter: float = 0.5
+    jitter: float = Field(default=0.5, ge=0, allow_inf_nan=False)
     #: m beyond ``separation + margin`` where a soft push away from a neighbour starts: a pushed
     #: neighbour moves aside, so the swarm settles into a round cluster rather than jamming.
-    cushion: float = 1.0
+    cushion: float = Field(default=1.0, ge=0, allow_inf_nan=False)
 
 
 def gathering(neighbours: Sequence[Neighbour], p: GatheringParams, jitter: Vec = (0.0, 0.0)) -> Vec:
@@ -145,16 +148,15 @@ def gathering(neighbours: Sequence[Neighbour], p: GatheringParams, jitter: Vec =
 
 
 # ---------------------------------------------------------------------------------------------- flocking
-@dataclass(frozen=True)
 class FlockingParams(RuleParams):
     #: m: peers within this distance are neighbours (Reynolds' perception radius); 0 = every peer.
-    neighbourhood: float = 0.0
+    neighbourhood: float = Field(default=0.0, ge=0, allow_inf_nan=False)
     #: Weights of alignment (match the neighbours' mean velocity) and cohesion (towards their centroid).
-    alignment: float = 3.0
-    cohesion: float = 0.05
-    margin: float = 0.5
+    alignment: float = Field(default=3.0, ge=0, allow_inf_nan=False)
+    cohesion: float = Field(default=0.05, ge=0, allow_inf_nan=False)
+    margin: float = Field(default=0.5, ge=0, allow_inf_nan=False)
     #: Initial heading of the cruise (deg from north) when no neighbour moves yet.
-    heading: float = 0.0
+    heading: float = Field(default=0.0, allow_inf_nan=False)
 
 
 def flocking(velocity: Vec, neighbours: Sequence[Neighbour], p: FlockingParams) -> Vec:
@@ -182,12 +184,11 @@ def flocking(velocity: Vec, neighbours: Sequence[Neighbour], p: FlockingParams) 
 
 
 # ---------------------------------------------------------------------------------------------- dispersion
-@dataclass(frozen=True)
 class DispersionParams(RuleParams):
     #: m: the spacing the swarm spreads to (each agent moves away from peers nearer than this).
-    spacing: float = 10.0
+    spacing: float = Field(default=10.0, gt=0, allow_inf_nan=False)
     #: m: never farther than this from the home the agent took off from (the area to cover); 0 = no bound.
-    area_radius: float = 30.0
+    area_radius: float = Field(default=30.0, ge=0, allow_inf_nan=False)
 
 
 def dispersion(home: Vec, neighbours: Sequence[Neighbour], p: DispersionParams) -> Vec:

@@ -4,6 +4,7 @@ agent's own messages heard once, and a config that would split the swarm refused
 from __future__ import annotations
 
 import contextlib
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context, Node, TopicMatch
 from antalate_lcm.msgs import mc_state_t, telemetry_t
 from antalate_lcm.wire.peers import PeerTable
+from behaviors.swarm_rules.behavior import Flocking
 from tests import REPO
 from tests.harness.polling import wait_for
 from tests.harness.process import run_antalate
@@ -210,3 +212,27 @@ def test_a_behavior_that_cannot_hear_its_peers_stops_the_start_with_one_line(
     assert len(lines) == 1, proc.stderr
     assert lines[0].startswith(f"antalate: invalid config {cfg}: buses.lan: a bus other processes reach")
     assert "bma[0].behaviors[0]" in lines[0] and "'memq://'" in lines[0]
+
+
+def test_flocking_sets_off_along_its_heading_or_one_fixed_by_the_agents_name(context: Context) -> None:
+    """``heading`` given (0 included) is the rule's; omitted, each agent takes one from its name, so the
+    flock starts in disorder (docs/behaviors.md, flocking)."""
+
+    def heading(agent: str, params: dict[str, Any]) -> float:
+        behaviors = [{"plugin": "flocking", "params": params}]
+        doc = {
+            "agent": {"name": agent},
+            "buses": {"lan": "memq://"},
+            "bma": [{"name": "swarm", "behaviors": behaviors}],
+        }
+        cfg = parse_config(doc, f"{agent}.toml")
+        bma = BmaNode(cfg, context, cfg.bma[0])
+        context.executor.run_sync(bma.start)
+        flocking = bma.behavior("flocking")
+        assert isinstance(flocking, Flocking)
+        return flocking.rule_params.heading
+
+    assert heading("f1", {"heading": 90.0}) == 90.0
+    assert heading("f1", {"heading": 0.0}) == 0.0
+    assert heading("f1", {}) == zlib.crc32(b"f1") % 360
+    assert heading("f2", {}) == zlib.crc32(b"f2") % 360 != zlib.crc32(b"f1") % 360

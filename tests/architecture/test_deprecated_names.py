@@ -113,6 +113,13 @@ RENAMED = [
     ("antalate_lcm", "Bus", "Buses"),
     ("antalate_lcm.vehicles", "Autopilot", "VehicleAdapter"),
     ("antalate_lcm.vehicles", "AutopilotState", "VehicleState"),
+    ("antalate_lcm.vehicles", "UnknownAutopilotError", "UnknownAdapterError"),
+    ("antalate_lcm.vehicles", "available_autopilots", "available_adapters"),
+    ("antalate_lcm.vehicles", "load_autopilot", "load_adapter"),
+    ("antalate_lcm.base.errors", "UnknownAutopilotError", "UnknownAdapterError"),
+    ("antalate_lcm.agent.plan", "AutopilotPlan", "AdapterPlan"),
+    ("antalate_lcm.agent.plan", "plan_autopilot", "plan_adapter"),
+    ("antalate_lcm.agent.hlc.node", "make_autopilot", "make_adapter"),
     ("antalate_lcm.vehicles.base", "Autopilot", "VehicleAdapter"),
     ("antalate_lcm.vehicles.base", "AutopilotState", "VehicleState"),
     ("antalate_lcm.vehicles.crazyflie", "CrazyflieAutopilot", "CrazyflieAdapter"),
@@ -167,3 +174,34 @@ def test_an_old_submodule_is_the_new_module() -> None:
     )
     proc = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
+
+
+def test_an_old_attribute_warns_and_is_the_new_one() -> None:
+    """``HlcNode.autopilot`` and ``AgentPlan.autopilot`` (issue #26: they hold the vehicle adapter and
+    its plan) read ``adapter``, warning each time, and the node's writes it; built by the real agent
+    path on the in-memory transport."""
+    from antalate_lcm.agent.hlc.node import HlcNode
+    from antalate_lcm.core.config import parse_config
+    from antalate_lcm.core.node import Context
+    from antalate_lcm.runtime.agent import agent_nodes, validate
+    from antalate_lcm.vehicles.sim import SimAdapter
+
+    doc = {"agent": {"name": "d1"}, "buses": {"lan": "memq://"}, "hlc": {"autopilot": "sim"}}
+    context = Context.in_process({"lan": "memq://"})
+    try:
+        config = parse_config(doc, "<deprecated>")
+        plan = validate(config)
+        with pytest.warns(
+            DeprecationWarning, match=r"plan\.AgentPlan\.autopilot is deprecated: use .*AgentPlan\.adapter"
+        ):
+            assert plan.autopilot is plan.adapter  # type: ignore[attr-defined]
+        (hlc,) = (n for n in agent_nodes(config, context, plan) if isinstance(n, HlcNode))
+        warned = r"antalate_lcm\.agent\.hlc\.node\.HlcNode\.autopilot is deprecated: use .*HlcNode\.adapter"
+        with pytest.warns(DeprecationWarning, match=warned):
+            assert hlc.autopilot is hlc.adapter  # type: ignore[attr-defined]
+        other = SimAdapter({}, clock=context.executor.clock)
+        with pytest.warns(DeprecationWarning, match=warned):
+            hlc.autopilot = other  # type: ignore[attr-defined]
+        assert hlc.adapter is other
+    finally:
+        context.close()

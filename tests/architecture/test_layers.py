@@ -314,7 +314,7 @@ def test_every_exception_derives_from_antalate_error() -> None:
     ("qualified", "stdlib"),
     [
         ("antalate_lcm.vehicles.AutopilotError", RuntimeError),
-        ("antalate_lcm.vehicles.UnknownAutopilotError", LookupError),
+        ("antalate_lcm.vehicles.UnknownAdapterError", LookupError),
         ("antalate_lcm.vehicles.mavlink.link.LinkClosed", ConnectionError),
         ("antalate_lcm.agent.osc.wire.ReplyError", ValueError),
         ("antalate_lcm.base.strict.StrictError", ValueError),

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from antalate_lcm.agent.plan import load_plan
-from antalate_lcm.base.errors import ConfigError
-from antalate_lcm.core.config import Config, check_unique_agent_names, load_config, parse_config
+from antalate_lcm.base.errors import AntalateError, ConfigError
+from antalate_lcm.core.config import Config, TopicsConfig, check_unique_agent_names, load_config, parse_config
 from tests import REPO
 from tests.harness.cases import cases
 
@@ -58,6 +58,18 @@ home_lat = 32.1
     assert cfg.hlc.autopilot_params == {"home_lat": 32.1}
 
 
+def test_the_bus_a_tool_watches_and_an_undeclared_one_refused() -> None:
+    """``antalate log``, ``run``'s recording and the Foxglove bridge open ``--bus``, else ``lan``, else
+    the default bus; a name the file does not declare is refused naming the declared ones."""
+    two = Config(buses={"lan": "memq://", "local": "memq://"}, topics=TopicsConfig(default_bus="local"))
+    assert (two.watched_bus(None), two.watched_bus("local")) == ("lan", "local")
+    no_lan = Config(buses={"local": "memq://"}, topics=TopicsConfig(default_bus="local"))
+    assert no_lan.watched_bus(None) == "local"
+    assert two.bus_url("local") == "memq://"
+    with pytest.raises(AntalateError, match=r"^no bus named 'wan' in <defaults>; declared: lan, local$"):
+        two.bus_url("wan")
+
+
 def test_design_style_autopilot_table(tmp_path: Path) -> None:
     cfg = load_config(write(tmp_path, '[hlc.autopilot]\nname = "tello"\nhost = "192.168.10.1"\n'))
     assert cfg.hlc.autopilot == "tello"
@@ -81,12 +93,12 @@ def test_deprecated_autopilot_spellings_load_the_same_plan_with_a_warning(tmp_pa
     ) as seen:
         plan = load_plan(path)
     assert str(path) in str(seen[0].message)
-    assert (plan.autopilot.name, plan.autopilot.cls, dict(plan.autopilot.params)) == (
+    assert (plan.adapter.name, plan.adapter.cls, dict(plan.adapter.params)) == (
         "sim",
-        canonical.autopilot.cls,
+        canonical.adapter.cls,
         {"tau": 0.4},
     )
-    assert plan.autopilot.model == canonical.autopilot.model
+    assert plan.adapter.model == canonical.adapter.model
 
 
 def test_the_canonical_autopilot_spelling_warns_nothing(tmp_path: Path) -> None:
@@ -96,7 +108,7 @@ def test_the_canonical_autopilot_spelling_warns_nothing(tmp_path: Path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         plan = load_plan(path)
-    assert plan.autopilot.build(lambda: 0.0).params == {"tau": 0.4}
+    assert plan.adapter.build(lambda: 0.0).params == {"tau": 0.4}
 
 
 def test_a_bad_adapter_name_beside_the_table_names_hlc_adapter(tmp_path: Path) -> None:
@@ -307,9 +319,9 @@ def test_bad_station_urls(tmp_path: Path, server: str, expected: str) -> None:
 
 
 def _installed_listed(message: str) -> None:
-    from antalate_lcm.vehicles import available_autopilots
+    from antalate_lcm.vehicles import available_adapters
 
-    installed = available_autopilots()
+    installed = available_adapters()
     assert {"sim", "tello", "mavlink"} <= set(installed)
     assert f"an installed adapter ({', '.join(installed)})" in message, message
 
@@ -569,9 +581,9 @@ def test_strict_validation_takes_toml_values_as_written() -> None:
 
 @pytest.mark.parametrize("adapter", ["sim", "tello", "mavlink"])
 def test_every_shipped_adapter_declares_a_strict_params_model(tmp_path: Path, adapter: str) -> None:
-    from antalate_lcm.vehicles import load_autopilot
+    from antalate_lcm.vehicles import load_adapter
 
-    model = load_autopilot(adapter).params_model
+    model = load_adapter(adapter).params_model
     assert model is not None, f"{adapter}: no params_model"
     assert model.model_config.get("extra") == "forbid" and model.model_config.get("strict") is True
     number = next(n for n, f in model.model_fields.items() if f.annotation in (int, float))

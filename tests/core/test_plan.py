@@ -8,7 +8,7 @@ import pytest
 
 from antalate_lcm.agent.bma.node import BmaNode
 from antalate_lcm.agent.hlc.node import HlcNode
-from antalate_lcm.agent.plan import plan_agent, plan_autopilot
+from antalate_lcm.agent.plan import plan_adapter, plan_agent
 from antalate_lcm.base.errors import ConfigError
 from antalate_lcm.core.config import parse_config
 from antalate_lcm.core.node import Context
@@ -38,15 +38,15 @@ def test_the_nodes_are_built_from_the_plan_validate_made(context: Context) -> No
     config = parse_config(DOC, "<plan>")
     plan = validate(config)
     assert plan.config is config
-    assert plan.autopilot.cls is SimAdapter and dict(plan.autopilot.params) == {"tau": 0.4}
+    assert plan.adapter.cls is SimAdapter and dict(plan.adapter.params) == {"tau": 0.4}
     assert [b.name for b in plan.bmas[0].behaviors] == ["auto_operator"]
     assert plan.bmas[0].behaviors[0].params.model_dump()["retry"] == 3.0
     nodes = agent_nodes(config, context, plan)
     (bma,) = (n for n in nodes if isinstance(n, BmaNode))
     assert bma.plan is plan.bmas[0]  # not resolved a second time
     (hlc,) = (n for n in nodes if isinstance(n, HlcNode))
-    assert isinstance(hlc.autopilot, SimAdapter) and hlc.autopilot.params == {"tau": 0.4}
-    assert hlc.autopilot.clock is context.executor.clock
+    assert isinstance(hlc.adapter, SimAdapter) and hlc.adapter.params == {"tau": 0.4}
+    assert hlc.adapter.clock is context.executor.clock
 
 
 def test_behaviors_are_checked_before_the_adapter_and_both_name_their_key() -> None:
@@ -59,5 +59,5 @@ def test_behaviors_are_checked_before_the_adapter_and_both_name_their_key() -> N
         plan_agent(parse_config(bad_both, "<plan>"))
     assert info.value.key == "bma[0].behaviors[0].params.retry"
     with pytest.raises(ConfigError) as info:
-        plan_autopilot(parse_config(bad_both, "<plan>"))
+        plan_adapter(parse_config(bad_both, "<plan>"))
     assert info.value.key == "hlc.autopilot" and "there is no adapter 'nope'" in info.value.expected

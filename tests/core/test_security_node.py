@@ -139,7 +139,7 @@ def test_spoofed_mc_state_takeoff_launches_nothing() -> None:
         s.send(f"{AGENT}/MC_STATE", _mc_state(mc_state_t.TAKEOFF))  # unsigned
         s.send(f"{AGENT}/MC_STATE", _mc_state(mc_state_t.TAKEOFF), key="guessed-key")  # forged
         assert wait_for(lambda: rejected(hlc, Reason.UNSIGNED)() and rejected(hlc, Reason.FORGED)(), 5)
-        sim = hlc.autopilot.state()
+        sim = hlc.adapter.state()
         assert hlc.state is HlcState.READY and not sim.armed and sim.alt == 0.0
         # the same message, genuinely signed by the MC's agent, is obeyed: the path is live
         s.send(f"{AGENT}/MC_STATE", _mc_state(mc_state_t.TAKEOFF), key=KEY)
@@ -189,12 +189,12 @@ def test_injected_and_replayed_velocity_commands_fly_nowhere() -> None:
             ),
             5,
         )
-        assert abs(hlc.autopilot.state().vn) < 0.5
+        assert abs(hlc.adapter.state().vn) < 0.5
         # the agent's own signed command is flown: the check above could have failed
         north_ok = velocity_cmd_t()
         north_ok.frame, north_ok.vx = velocity_cmd_t.NED, 1.0
         assert wait_for(
-            lambda: behavior.publish("VELOCITY_CMD", north_ok) and hlc.autopilot.state().vn > 0.5, 5
+            lambda: behavior.publish("VELOCITY_CMD", north_ok) and hlc.adapter.state().vn > 0.5, 5
         )
 
 

@@ -256,7 +256,9 @@ def test_fault_probability_hits_agents_reproducibly() -> None:
 
 # ----------------------------------------------------------------------------- the gate, message by message
 def _gate_with(tmp_path: Path, fault: dict[str, Any]) -> tuple[FaultGate, Node, Node]:
-    """A gate with ``fault`` active on agent e-01, and e-01's node and the operator's (never started)."""
+    """A gate with ``fault`` active on agent e-01, and e-01's node and the operator's (never started; a
+    plain `Node` declared a watcher, as the scripted operator and the console are: the gate reads the
+    role the node declared, not its kind)."""
     config = load_config(_write(tmp_path / "swarm.toml", CONFIG))
     context = Context(Buses({"lan": "memq://"}), Executor())
     script = Script.model_validate({"mission_time": 9.0, "fault": [{"agent": "e-01", "at": 0.0, **fault}]})
@@ -266,7 +268,7 @@ def _gate_with(tmp_path: Path, fault: dict[str, Any]) -> tuple[FaultGate, Node, 
     return (
         gate,
         Node(config.with_agent_name("e-01"), context),
-        Node(config.with_agent_name("operator"), context),
+        Node(config.with_agent_name("operator"), context, watcher=True),
     )
 
 
@@ -327,7 +329,6 @@ def test_a_bandwidth_cap_on_what_an_agent_hears_passes_its_bucket_only(tmp_path:
 
 def test_link_loss_cuts_both_sides_and_nothing_else(tmp_path: Path) -> None:
     gate, node, operator = _gate_with(tmp_path, {"kind": "link_loss"})
-    operator.kind = "operator"
     reception = gate.broadcast["e-01"] = BroadcastReception(1.0, 1, "e-01")
     heard: list[Any] = []
     for topic in ("SWARM_OPERATOR_CMD", "OPERATOR_CMD", "SWARM_DIRECTION_CMD"):

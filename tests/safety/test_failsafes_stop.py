@@ -76,7 +76,7 @@ def _fly_and_stop(i: int) -> None:
         assert wait_for(lambda: hlc.state is HlcState.AIRBORNE and mc.state is McState.MISSION, 10), (
             f"run {i}: HLC {hlc.state.name}, MC {mc.state.name}"
         )
-        assert hlc.autopilot.state().in_air
+        assert hlc.adapter.state().in_air
     finally:
         stop.set()  # what SIGINT does
         runner.join(15)

@@ -84,7 +84,7 @@ def test_an_agent_sends_no_setpoint_over_a_stale_link_in_llc_down_or_in_hold() -
     )
     context = Context.in_process(config.buses)
     sim = RecordingSim({"climb_rate": 5.0}, clock=context.executor.clock)
-    hlc = HlcNode(config, context, autopilot=sim)
+    hlc = HlcNode(config, context, adapter=sim)
     sim.node = hlc
     mc = McNode(config, context)
     behavior = Node(config, context, name="behavior")

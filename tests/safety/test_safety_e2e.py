@@ -108,7 +108,7 @@ def swarm(
     def sample() -> None:
         where = []
         for h in hlcs:
-            ap = h.autopilot
+            ap = h.adapter
             assert isinstance(ap, SimAdapter)
             if not ap.in_air:
                 continue
@@ -236,7 +236,7 @@ def test_twenty_agents_commanded_at_the_centroid_keep_apart_then_come_home_from_
     assert any("separation" in r.text for r in flight.safety_reports)
     # every one is home: within a metre of where it took off
     for h in hlcs:
-        ap = h.autopilot
+        ap = h.adapter
         assert isinstance(ap, SimAdapter)
         assert not ap.in_air and math.hypot(ap.north, ap.east) < 1.0, (h.agent, ap.north, ap.east)
     analyze(log, SAFETY, tmp_path, names)
@@ -297,7 +297,7 @@ def test_no_peer_information_lands_per_the_policy() -> None:
         # not by polling the current one (at load a poll fell on either side of it, and failed)
         assert wait_for(lambda: "lone" in flight.missions, 20), flight.mc
         assert all_in(flight, ["lone"], McState.STANDBY, 30)  # landed on its own: MISSION -> LAND -> STANDBY
-        ap = hlcs[0].autopilot
+        ap = hlcs[0].adapter
         assert isinstance(ap, SimAdapter) and not ap.in_air
         assert math.hypot(ap.north, ap.east) < 2.0  # it did not fly off at the behavior's command
     texts = [r.text for r in flight.safety_reports]
@@ -322,7 +322,7 @@ def test_operator_land_from_the_tight_cluster(tmp_path: Path) -> None:
         time.sleep(8.0)
         command(probe, operator_cmd_t.LAND, 2)
         assert all_in(flight, names, McState.STANDBY, 60), flight.mc
-        sims = [h.autopilot for h in hlcs if isinstance(h.autopilot, SimAdapter)]
+        sims = [h.adapter for h in hlcs if isinstance(h.adapter, SimAdapter)]
         assert len(sims) == n and not any(ap.in_air for ap in sims)
         spread = [math.hypot(ap.north, ap.east) for ap in sims]
     print(
@@ -348,7 +348,7 @@ def test_taking_off_closer_than_the_radius_is_reported_then_separated_in_mission
         assert all_in(flight, names, McState.MISSION, 20), flight.mc
 
         def apart() -> float:
-            a, b = (h.autopilot for h in hlcs)
+            a, b = (h.adapter for h in hlcs)
             assert isinstance(a, SimAdapter) and isinstance(b, SimAdapter)
             pa = flight.frame.to_ne(*a.home.to_latlon(a.north, a.east))
             pb = flight.frame.to_ne(*b.home.to_latlon(b.north, b.east))

@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav2
 
-from antalate_lcm.vehicles import AutopilotError, FlightMode, Frame, VehicleState, load_autopilot
+from antalate_lcm.vehicles import AutopilotError, FlightMode, Frame, VehicleState, load_adapter
 from antalate_lcm.vehicles.mavlink import DEFAULTS, VELOCITY_TYPE_MASK, MavlinkAdapter, Params
 from tests.emulators.mavlink_vehicle import BRISK, MavlinkVehicle, VehicleSnapshot
 from tests.harness.polling import wait_for
@@ -84,7 +84,7 @@ def fly(ap: MavlinkAdapter, vehicle: MavlinkVehicle, alt: float = 2.0) -> None:
 
 
 def test_registered_and_parameters_are_validated() -> None:
-    assert load_autopilot("mavlink") is MavlinkAdapter
+    assert load_adapter("mavlink") is MavlinkAdapter
     assert MavlinkAdapter.name == "mavlink" and MavlinkAdapter.blocking
     assert MavlinkAdapter.params_model is Params
     assert isinstance(MavlinkAdapter.validate_params({"cells": 4}), Params)  # what the config loader calls

@@ -16,11 +16,11 @@ from antalate_lcm.vehicles import (
     AutopilotError,
     FlightMode,
     Frame,
-    UnknownAutopilotError,
+    UnknownAdapterError,
     VehicleAdapter,
     VehicleState,
-    available_autopilots,
-    load_autopilot,
+    available_adapters,
+    load_adapter,
 )
 from antalate_lcm.vehicles.sim import DEFAULTS, SimAdapter
 from tests.harness.clock import FakeClock
@@ -603,19 +603,19 @@ def test_every_documented_param_is_accepted() -> None:
 
 
 def test_registry_lists_the_shipped_adapters() -> None:
-    names = available_autopilots()
+    names = available_adapters()
     assert {"sim", "tello", "mavlink"} <= set(names)
     assert names["sim"] == "antalate_lcm.vehicles.sim:SimAdapter"
 
 
 def test_load_by_name_and_by_module_path() -> None:
-    assert load_autopilot("sim") is SimAdapter
-    assert load_autopilot("antalate_lcm.vehicles.sim:SimAdapter") is SimAdapter
+    assert load_adapter("sim") is SimAdapter
+    assert load_adapter("antalate_lcm.vehicles.sim:SimAdapter") is SimAdapter
 
 
 def test_unknown_name_lists_the_available_ones() -> None:
-    with pytest.raises(UnknownAutopilotError) as info:
-        load_autopilot("simm")
+    with pytest.raises(UnknownAdapterError) as info:
+        load_adapter("simm")
     message = str(info.value)
     assert "simm" in message and "sim" in message and "mavlink" in message and "tello" in message
     assert isinstance(info.value, PluginNotFound) and isinstance(info.value, LookupError)
@@ -630,5 +630,5 @@ def test_unknown_name_lists_the_available_ones() -> None:
     ],
 )
 def test_bad_module_paths(target: str, match: str) -> None:
-    with pytest.raises(UnknownAutopilotError, match=match):
-        load_autopilot(target)
+    with pytest.raises(UnknownAdapterError, match=match):
+        load_adapter(target)

@@ -25,7 +25,7 @@ from typing import Any
 import pytest
 
 from antalate_lcm.base.geo import FlatFrame
-from antalate_lcm.vehicles import load_autopilot
+from antalate_lcm.vehicles import load_adapter
 from antalate_lcm.vehicles.tello import TelloAdapter
 from tests.emulators.tello_emulator import TelloEmulator
 from tests.harness.netns import NetnsPair, netns_pair_unavailable
@@ -126,7 +126,7 @@ def angle_diff(a: float, b: float) -> float:
 
 
 def test_registered_and_constructed_without_io() -> None:
-    assert load_autopilot("tello") is TelloAdapter
+    assert load_adapter("tello") is TelloAdapter
     ap = TelloAdapter({"host": "10.0.0.5"})
     s = ap.state()
     assert not s.connected and math.isinf(s.link_age)

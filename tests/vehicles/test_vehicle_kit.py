@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 
 from antalate_lcm.base.errors import LinkClosed
-from antalate_lcm.vehicles import load_autopilot
+from antalate_lcm.vehicles import load_adapter
 from antalate_lcm.vehicles.kit import LinkAge, LinkedAdapter, MemoryPipe, Workers, defaults, parse_params
 from antalate_lcm.vehicles.mavlink import Params as MavlinkParams
 from tests import REPO
@@ -135,7 +135,7 @@ def test_params_documented_and_example_valid(adapter: str, doc: str, example: st
     from antalate_lcm.core.config import load_config
     from antalate_lcm.runtime.agent import validate
 
-    cls = load_autopilot(adapter)
+    cls = load_adapter(adapter)
     text = (REPO / "docs" / doc).read_text()
     config = load_config(REPO / "examples" / example)
     validate(config)

@@ -171,10 +171,10 @@ class SafetyDriver:
             self.returning = False
             if self.layer.home is None or not math.isfinite(node.snapshot.lat):
                 node.log.warning("filtered RTL: no home or position known: the autopilot's own RTL")
-                node.run_call(node.autopilot.rtl, self._after_action)
+                node.run_call(node.adapter.rtl, self._after_action)
                 return
             node.log.info("filtered RTL: home reached, landing")
-            node.run_call(node.autopilot.land, self._after_action)
+            node.run_call(node.adapter.land, self._after_action)
             return
         self._act_on(leg)
         node.send_velocity(Velocity(leg.vn, leg.ve, leg.vd, 0.0, Frame.NED))
@@ -186,7 +186,7 @@ class SafetyDriver:
         if d.action == "land" and not self._landing:
             self._landing = True
             node.log.warning("%s: landing", describe(d))
-            node.run_call(node.autopilot.land, self._after_action)
+            node.run_call(node.adapter.land, self._after_action)
         if not (d.modified or d.reason):
             return
         conflict = bool(d.reason) and not d.reason.startswith("no peer")
@@ -204,7 +204,7 @@ class SafetyDriver:
         PX4's GF_* (antalate_lcm.vehicles.px4.fence_mirror). It holds if we die."""
         node = self.node
         safety, fence_config = self.layer, node.config.safety.fence
-        kind = node.autopilot.name
+        kind = node.adapter.name
         if fence_config is None or kind not in ("mavlink", "px4") or not node.connected:
             return
         s = node.snapshot
@@ -218,7 +218,7 @@ class SafetyDriver:
 
         module = px4 if kind == "px4" else ardupilot
         wanted = module.fence_parameters(fence, (here[0], here[1]), fence_config.outside)
-        link = cast(ardupilot.ParamLink, node.autopilot)
+        link = cast(ardupilot.ParamLink, node.adapter)
 
         def call() -> None:
             problems = module.mirror(link, wanted)

@@ -21,7 +21,7 @@ import math
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from antalate_lcm.agent.hlc.filtering import SafetyDriver, SharedPicture, shared_picture
 from antalate_lcm.agent.hlc.machine import (
@@ -44,7 +44,8 @@ from antalate_lcm.agent.hlc.velocity_guard import (
     Verdict,
     mission_flight,
 )
-from antalate_lcm.agent.plan import plan_autopilot
+from antalate_lcm.agent.plan import plan_adapter
+from antalate_lcm.base.deprecation import renamed_attribute, renamed_names
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.config import Config
 from antalate_lcm.core.node import Context, Node, shared_params
@@ -55,8 +56,9 @@ from antalate_lcm.wire.vocabulary import HlcState, Severity
 _CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
 
 
-def make_autopilot(config: Config, context: Context) -> VehicleAdapter:
-    return plan_autopilot(config).build(context.executor.clock)
+def make_adapter(config: Config, context: Context) -> VehicleAdapter:
+    """The vehicle adapter ``[hlc] autopilot`` names, on the context's clock (no I/O yet)."""
+    return plan_adapter(config).build(context.executor.clock)
 
 
 class HlcNode(Node):
@@ -65,7 +67,7 @@ class HlcNode(Node):
     # (3.11) gives an instance a dict of its own and every attribute read a hash lookup; the 20 Hz
     # control tick of a thousand agents reads dozens. The base's attributes keep a __dict__.
     __slots__ = (
-        "autopilot",
+        "adapter",
         "machine",
         "velocity_guard",
         "mc_state",
@@ -86,10 +88,14 @@ class HlcNode(Node):
         "_state",
     )
 
-    def __init__(self, config: Config, context: Context, autopilot: VehicleAdapter | None = None) -> None:
+    if not TYPE_CHECKING:  # the old name, one release (issue #26's vocabulary); mypy sees only `adapter`
+        autopilot = renamed_attribute("adapter")
+
+    def __init__(self, config: Config, context: Context, adapter: VehicleAdapter | None = None) -> None:
         super().__init__(config, context)
         h = config.hlc
-        self.autopilot = autopilot or make_autopilot(config, context)
+        #: The vehicle adapter the config's ``[hlc] autopilot`` names (or the one given).
+        self.adapter = adapter or make_adapter(config, context)
         self.machine = HighLevelControl(
             shared_params(
                 HlcParams,
@@ -133,7 +139,7 @@ class HlcNode(Node):
             self.safety = SafetyLayer(self.agent, config, self._shared.picture)
             self._filter = SafetyDriver(self, self.safety)
         self._clock: Callable[[], float] = context.executor.clock
-        self._state: Callable[[], VehicleState] = self.autopilot.state
+        self._state: Callable[[], VehicleState] = self.adapter.state
 
     @property
     def state(self) -> HlcState:
@@ -143,8 +149,8 @@ class HlcNode(Node):
     def on_start(self) -> None:
         #: The executor's clock and the adapter's ``state``, bound once for the 20 Hz control tick.
         self._clock = self.context.executor.clock
-        self._state = self.autopilot.state
-        if self.autopilot.blocking:
+        self._state = self.adapter.state
+        if self.adapter.blocking:
             self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"hlc-io-{self.agent}")
         self.subscribe("MC_STATE", self._on_mc_state)
         self.subscribe("VELOCITY_CMD", self._on_velocity)
@@ -175,9 +181,9 @@ class HlcNode(Node):
         if io is not None:
             io.shutdown(wait=False, cancel_futures=True)
         try:
-            self.autopilot.close()
+            self.adapter.close()
         except Exception:
-            self.log.exception("closing the %s autopilot failed", self.autopilot.name)
+            self.log.exception("closing the %s autopilot failed", self.adapter.name)
 
     def _connect(self) -> None:
         def done(ok: bool, detail: str) -> None:
@@ -185,19 +191,19 @@ class HlcNode(Node):
                 return
             if ok:
                 self.connected = True
-                self.log.info("autopilot %s connected", self.autopilot.name)
+                self.log.info("autopilot %s connected", self.adapter.name)
                 return
             self.report(
                 HlcError(
                     ErrorCode.LINK_LOST,
                     Severity.ERROR,
-                    f"cannot connect the {self.autopilot.name} "
+                    f"cannot connect the {self.adapter.name} "
                     f"autopilot: {detail}; retrying in {_CONNECT_RETRY:g} s",
                 )
             )
             self.call_later(_CONNECT_RETRY, self._connect)
 
-        self.run_call(self.autopilot.connect, done)
+        self.run_call(self.adapter.connect, done)
 
     # ------------------------------------------------------------------ running autopilot calls
     def run_call(self, call: Any, done: Any) -> None:
@@ -209,11 +215,11 @@ class HlcNode(Node):
             except AutopilotError as exc:
                 return False, str(exc)
             except Exception as exc:  # noqa: BLE001 - an adapter bug must not kill the HLC
-                self.log.exception("autopilot %s raised", self.autopilot.name)
+                self.log.exception("autopilot %s raised", self.adapter.name)
                 return False, f"{type(exc).__name__}: {exc}"
             if result is False:
                 # An adapter may say why (ArduCopter's PreArm text): it goes into the hlc_error_t.
-                return False, self.autopilot.last_refusal or "refused"
+                return False, self.adapter.last_refusal or "refused"
             return True, ""
 
         if self._io is None:
@@ -223,7 +229,7 @@ class HlcNode(Node):
             self._io.submit(lambda: post(done, *attempt()))
 
     def _perform(self, action: Action) -> None:
-        ap = self.autopilot
+        ap = self.adapter
         calls = {
             ActionKind.ARM: ap.arm,
             ActionKind.DISARM: ap.disarm,
@@ -289,7 +295,7 @@ class HlcNode(Node):
 
     def _stale(self, now: float, exc: Exception) -> VehicleState:
         """``state()`` raised ``exc``: the last good snapshot, its link aged by the time since."""
-        fault = f"autopilot {self.autopilot.name} state() raised {type(exc).__name__}: {exc}"
+        fault = f"autopilot {self.adapter.name} state() raised {type(exc).__name__}: {exc}"
         if fault != self._state_fault:
             self.log.debug("%s", fault, exc_info=True)
         self._state_fault = fault
@@ -309,7 +315,7 @@ class HlcNode(Node):
             snapshot = self._stale(now, exc)
         else:
             if self._state_fault:
-                self.log.warning("autopilot %s state() works again", self.autopilot.name)
+                self.log.warning("autopilot %s state() works again", self.adapter.name)
                 self._state_fault = ""
             self._good, self._good_at = snapshot, now
         self.snapshot = snapshot
@@ -354,7 +360,7 @@ class HlcNode(Node):
 
     def send_velocity(self, v: Velocity) -> None:
         try:
-            self.autopilot.set_velocity(v.vx, v.vy, v.vz, v.yaw_rate, Frame(v.frame))
+            self.adapter.set_velocity(v.vx, v.vy, v.vz, v.yaw_rate, Frame(v.frame))
         except Exception as exc:
             self._reject_log.log(("set_velocity",), logging.WARNING, "set_velocity failed: %s", exc)
 
@@ -393,7 +399,7 @@ class HlcNode(Node):
     def _state_msg(self) -> hlc_state_t:
         msg = self.outgoing(hlc_state_t)  # refilled, every field, as the telemetry is
         msg.state = int(self.machine.state)
-        msg.autopilot = self.autopilot.name
+        msg.autopilot = self.adapter.name
         msg.reason = self.machine.reason
         return msg
 
@@ -408,3 +414,10 @@ class HlcNode(Node):
         msg.heading, msg.vn, msg.ve, msg.vd = s.heading, s.vn, s.ve, s.vd
         msg.battery, msg.armed, msg.in_air, msg.mode = s.battery, s.armed, s.in_air, s.mode
         self.publish("TELEMETRY", msg)
+
+
+#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
+_DEPRECATED_NAMES = {"make_autopilot": "make_adapter"}
+
+if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
+    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

@@ -40,6 +40,11 @@ over two processes 17.6x and 14.1x (3.2x and 3.5x before) with 40 rounds per sim
 instead of 1,802. 1,000 agents: one process 1.0x and 1.5x at load 1.8-2.7 (1.3x and 1.1x before:
 the agents' own work dominates), two processes 1.1x and 1.4x (1.0x and 0.7x before) with 40 rounds
 instead of 2,000 and a third less CPU. Goal met for 100 agents at low load; not for 1,000 (2x).
+
+Measured 2026-11-27 later, load 2-6, main alternated with the run's stop in C (docs/experiments.md,
+"Where a simulated second of 1,000 agents goes"): 100 agents 16.4-18.6x (main 8.4-13.7x), simulated
+time 508-644 us of CPU per agent-second against the wall clock's 1,112-1,456; 1,000 agents 0.6-0.8x
+(main 0.4-0.6x), 863-954 us per agent-second: 2x on one core needs 500, the agents' own work.
 """
 
 from __future__ import annotations

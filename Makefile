@@ -29,7 +29,7 @@ demo-headless: setup
 # out; load stayed under 3 with four), so more workers than cores shorten it. A module's tests stay on
 # one worker, in order (--dist loadfile): its module-scoped fixtures (a built wheel, a booted SITL
 # vehicle) are made once, and tests that build on the one before keep their order. The modules go out
-# longest first from tests/module_times.json (tests/scheduling.py), the SITL swarms as one unit.
+# longest first from tests/harness/module_times.json (tests/harness/scheduling.py), the SITL swarms as one unit.
 TEST_WORKERS ?= 4
 
 test: setup sysdeps

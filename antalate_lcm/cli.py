@@ -74,7 +74,7 @@ def subcommands() -> tuple[Subcommand, ...]:
         Subcommand("mc", "run the Mission Control node of an agent", nodes.node_arguments, nodes.cmd_mc),
         Subcommand(
             "hlc",
-            "run the High-Level Control node (and its autopilot) of an agent",
+            "run the High-Level Control node (and its vehicle adapter) of an agent",
             nodes.node_arguments,
             nodes.cmd_hlc,
         ),
@@ -246,8 +246,5 @@ if __name__ == "__main__":
     sys.exit(main())
 
 
-#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
-_DEPRECATED_NAMES = {"commands": "subcommands"}
-
-if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)
+if not TYPE_CHECKING:  # the old names (base.deprecation.RENAMED_NAMES), unseen by mypy
+    __getattr__ = renamed_names(__name__)

@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bus.py [--n 5000] [--seconds 1.0] [--json]
 
-Everything runs inside a private network namespace (tests/netns.py), never on the host's network:
+Everything runs inside a private network namespace (tests/harness/netns.py), never on the host's network:
 the outer process only makes the namespace and waits for the inner one, which prints the figures.
 
 Round trip: this process publishes a ~100-byte ``telemetry_t`` on PING every millisecond; an echo
@@ -35,6 +35,28 @@ validation, then the handler on the executor's loop thread). The pinger runs on 
 coroutine on ``Executor.loop`` publishes and awaits the pong), the echo is a node handler that
 publishes back; the time runs from the publish to the pong handler. The sink is a node counting in
 its handler; the streaming publisher calls ``Node.publish``.
+
+``--stages`` times where a raw and a node round trip go (the echo reports its own stamps; one
+host, so the processes share CLOCK_MONOTONIC): the ping's send call, from its return to the echo's
+handler, the echo's send, and from that to the pong handler. A send call returns only after the
+kernel has queued the datagram and woken the reader (which often runs first, on the sender's core:
+a synchronous wake-up), so the second stage can be negative. ``--busy`` spins a second process on
+the other core for the whole run; ``--tree DIR`` runs antalate (this process and the peers) from
+another checkout, a baseline in the same session; ``--apis`` measures only some APIs beside raw lcm.
+
+Issue 32 (2026-11-27, 2 cores, load 4-7 from other work, >= 3 runs each): node/raw p50 0.63-0.92
+quiet and 0.76-1.03 with ``--busy``, this tree and the one before alike; p99 165 us to 5.8 ms for raw
+and node alike, the tail all in the reader waiting for a core ("to echo handler" p99 up to 3.7 ms
+while the handler's own work stays under 100 us). ``--stages``: a send call is 30-58 us of wall time
+for both (the kernel delivers the looped-back copy and wakes the reader inside it; about 4 us of it
+is the sender's CPU); a node spends less in its sends (echo send 12-27 us against raw's 30-43: no
+lcm-gen encode, no liblcm publish) and more on receiving (to pong handler 13-20 us: wake, read,
+parse, decode, deliver in Python, against raw's 3-12 us, where liblcm's thread has often run inside
+the echo's send call). The 1.15-1.18x of the issue (2026-11-25): that tree (3616f4f) published
+through lcm-gen and liblcm, its sends 4-8 us longer, and measured 1.01x quiet and 0.91x busy beside
+this tree's 0.80x and 0.90x in the same session; and the ratio moves by +-0.15 between runs at one
+load, as the scheduler places the readers. No GIL contention shows: the node's receive stays
+13-20 us at p50 with a second process busy.
 
 Signing (docs/security.md): ``bus-signed`` is the Bus with what a node does under a swarm key on
 every message, in the same run: the sender stamps ``header.utime`` and signs (HMAC-SHA256 into
@@ -70,8 +92,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-REPO = Path(__file__).resolve().parent.parent
-for _p in (str(REPO), str(Path(__file__).resolve().parent)):
+#: The checkout whose antalate runs here and in the peers (``--tree``: a baseline in the same session).
+TREE_ENV = "ANTALATE_BENCH_TREE"
+REPO = Path(os.environ.get(TREE_ENV) or Path(__file__).resolve().parent.parent).resolve()
+for _p in (str(Path(__file__).resolve().parent), str(REPO)):
     if _p not in sys.path:
         sys.path.insert(0, _p)
 
@@ -103,6 +127,8 @@ PORTS["zenoh-tls"] = 7674
 BUS_MODULES["zenoh-tls"] = "antalate_lcm.core.bus"
 #: Where the run's lab CA is (set by the inner process before the peers start; they inherit it).
 PKI_ENV = "ANTALATE_BENCH_PKI"
+#: Set (by ``--stages``) for the echo peers: they time each echo (handler entered, send returned).
+STAGES_ENV = "ANTALATE_BENCH_STAGES"
 
 
 def url(api: str) -> str:
@@ -115,6 +141,14 @@ def url(api: str) -> str:
             f"&cert={pki / 'bench.pem'}&cert_key={pki / 'bench.key'}"
         )
     return f"udpm://239.255.76.67:{PORTS[api]}?ttl=0&recv_buf_size=4194304"
+
+
+def busy_loop(stop_at: float) -> None:
+    """The --busy process: pure Python arithmetic until ``stop_at`` (monotonic), on the other core."""
+    x = 0
+    while time.monotonic() < stop_at:
+        for i in range(10_000):
+            x = (x * 31 + i) % 1_000_003
 
 
 def bus_class(api: str) -> Any:
@@ -177,6 +211,8 @@ class Peer:
         self.last = 0.0
         self.api = api
         self.stop = threading.Event()
+        #: seq -> (handler entered, send returned), ns (--stages: raw and node echoes only).
+        self.stamps: dict[int, tuple[int, int]] | None = {} if os.environ.get(STAGES_ENV) else None
         if api == "node":
             self.node = make_node("echo" if role == "echo" else "sink")
             if role == "echo":
@@ -209,7 +245,12 @@ class Peer:
             self.bus.open()
 
     def _echo_node(self, msg: telemetry_t) -> None:
+        if self.stamps is None:
+            self.node.publish("TELEMETRY", msg, seq=msg.header.seq)
+            return
+        t = time.perf_counter_ns()
         self.node.publish("TELEMETRY", msg, seq=msg.header.seq)
+        self.stamps[msg.header.seq] = (t, time.perf_counter_ns())
 
     def _count_node(self, _msg: telemetry_t) -> None:
         self.count += 1
@@ -225,7 +266,13 @@ class Peer:
             self.last = time.perf_counter()
 
     def _echo_raw(self, _channel: str, data: bytes) -> None:
-        self.lc.publish("PONG", telemetry_t.decode(data).encode())
+        if self.stamps is None:
+            self.lc.publish("PONG", telemetry_t.decode(data).encode())
+            return
+        t = time.perf_counter_ns()
+        msg = telemetry_t.decode(data)
+        self.lc.publish("PONG", msg.encode())
+        self.stamps[msg.header.seq] = (t, time.perf_counter_ns())
 
     def _count_raw(self, _channel: str, data: bytes) -> None:
         telemetry_t.decode(data)
@@ -259,6 +306,8 @@ class Peer:
                 self.quiet_count()
                 self.count = 0
                 print(json.dumps("ok"), flush=True)
+            elif cmd == "stamps":
+                print(json.dumps(self.stamps), flush=True)
         self.stop.set()
         if self.api == "node":
             self.node.stop()
@@ -312,6 +361,8 @@ class RawPinger:
     def __init__(self, api: str) -> None:
         self.lc = lcm.LCM(url(api))
         self.got: tuple[int, int] = (-1, 0)
+        #: seq -> (ping encoded from, its send returned, pong handler entered), ns (--stages).
+        self.stages: dict[int, tuple[int, int, int]] | None = {} if os.environ.get(STAGES_ENV) else None
         self.lc.subscribe("PONG", self._on_pong).set_queue_capacity(DEFAULT_QUEUE_CAPACITY)
 
     def _on_pong(self, _channel: str, data: bytes) -> None:
@@ -322,12 +373,15 @@ class RawPinger:
         seq = msg.header.seq
         t0 = time.perf_counter_ns()
         self.lc.publish("PING", msg.encode())
+        sent = time.perf_counter_ns()
         deadline = time.monotonic() + timeout
         while self.got[0] != seq:
             left = deadline - time.monotonic()
             if left <= 0:
                 return None
             self.lc.handle_timeout(max(1, int(left * 1000)))
+        if self.stages is not None:
+            self.stages[seq] = (t0, sent, self.got[1])
         return self.got[1] - t0
 
     def close(self) -> None:
@@ -435,13 +489,15 @@ class NodePinger:
         self.node = make_node("pinger")
         self.ex = self.node.context.executor
         self.got: tuple[int, int] = (-1, 0)
-        self.t0 = 0
+        self.t0 = self.sent = 0
+        self.stages: dict[int, tuple[int, int, int]] | None = {} if os.environ.get(STAGES_ENV) else None
         self.event = threading.Event()
         self.ex.run_sync(lambda: self.node.subscribe("TELEMETRY", self._on_pong, agent="echo"))
 
     def _send(self, msg: telemetry_t) -> None:
         self.t0 = time.perf_counter_ns()
         self.node.publish("TELEMETRY", msg, seq=msg.header.seq)
+        self.sent = time.perf_counter_ns()
 
     def _on_pong(self, msg: telemetry_t) -> None:
         self.got = (msg.header.seq, time.perf_counter_ns())
@@ -457,6 +513,8 @@ class NodePinger:
             if left <= 0 or not self.event.wait(left):
                 return None
             self.event.clear()
+        if self.stages is not None:
+            self.stages[seq] = (self.t0, self.sent, self.got[1])
         return self.got[1] - self.t0
 
     def close(self) -> None:
@@ -497,9 +555,11 @@ def round_trip(apis: list[str], n: int, period: float = 0.001, warmup: int = 20)
     pingers = {api: kinds.get(api, BusPinger)(api) for api in apis}
     rtts: dict[str, list[int]] = {api: [] for api in apis}
     lost = dict.fromkeys(apis, 0)
+    measured: set[int] = set()
+    stages: dict[str, dict[str, list[float]]] = {}
     seq = 0
     try:
-        with peers(apis, "echo"):
+        with peers(apis, "echo") as echoes:
             for api, pinger in pingers.items():  # group membership takes a moment: ping until answered
                 deadline = time.monotonic() + 5
                 while True:
@@ -523,15 +583,21 @@ def round_trip(apis: list[str], n: int, period: float = 0.001, warmup: int = 20)
                                 lost[api] += 1
                             else:
                                 rtts[api].append(rtt)
+                                measured.add(seq)
                         pause = next_t - time.perf_counter()
                         if pause > 0:
                             time.sleep(pause)
                         else:
                             next_t = time.perf_counter()  # fell behind: no catch-up burst
+            for api, pinger in pingers.items():
+                mine = getattr(pinger, "stages", None)
+                if mine is not None:
+                    theirs = {int(k): v for k, v in ask(echoes[api], "stamps").items()}
+                    stages[api] = stage_times(mine, theirs, measured)
     finally:
         for pinger in pingers.values():
             pinger.close()
-    out = {}
+    out: dict[str, dict[str, Any]] = {}
     for api in apis:
         us = sorted(t / 1000 for t in rtts[api])
         out[api] = {
@@ -543,7 +609,38 @@ def round_trip(apis: list[str], n: int, period: float = 0.001, warmup: int = 20)
             "max": us[-1] if us else float("nan"),
             "mean": statistics.fmean(us) if us else float("nan"),
         }
+        if api in stages:
+            out[api]["stages"] = {
+                name: {"p50": pct(v, 50), "p90": pct(v, 90), "p99": pct(v, 99)}
+                for name, v in stages[api].items()
+            }
     return out
+
+
+#: The stages of a round trip (``--stages``), from the pinger's and the echo's clocks (one host:
+#: CLOCK_MONOTONIC is shared by the processes).
+STAGES = (
+    "ping send",  # encode (node: stamp, encode) and the send call, until it returned
+    "to echo handler",  # the echo wakes, reads, (node: decodes and checks) and enters its handler
+    "echo send",  # the echo's publish until it returned (raw: with its decode)
+    "to pong handler",  # the pinger wakes, reads and decodes: its handler holds the pong
+)
+
+
+def stage_times(
+    pinger: dict[int, tuple[int, int, int]], echo: dict[int, tuple[int, int]], measured: set[int]
+) -> dict[str, list[float]]:
+    """Each stage's sorted durations (us) over the measured pings both sides timed. A send call
+    returns after the kernel has queued the datagram and woken the reader, which may already run
+    on the other core: "to echo handler" can be negative."""
+    out: dict[str, list[float]] = {name: [] for name in STAGES}
+    for seq, (t0, sent, pong) in pinger.items():
+        e = echo.get(seq)
+        if seq not in measured or e is None:
+            continue
+        for name, (a, b) in zip(STAGES, ((t0, sent), (sent, e[0]), e, (e[1], pong)), strict=True):
+            out[name].append((b - a) / 1000)
+    return {name: sorted(v) for name, v in out.items()}
 
 
 def pct(sorted_values: list[float], p: float) -> float:
@@ -703,15 +800,23 @@ def inside(args: argparse.Namespace) -> int:
     apis = ["raw", "bus", "bus-signed", "node"]
     latency_apis = ["raw", "bus", "bus-signed", "raw-thread", "node"]
     size = len(make_msg().encode())
-    router = zenoh_router()
-    tls_router = zenoh_router("zenoh-tls") if router is not None else None
+    router = tls_router = None
+    if args.apis:  # a subset: raw lcm always, as the yardstick
+        latency_apis = ["raw", *(a for a in latency_apis if a in args.apis and a != "raw")]
+        apis = [a for a in apis if a in latency_apis]
+    else:
+        router = zenoh_router()
+        tls_router = zenoh_router("zenoh-tls") if router is not None else None
     if router is not None and tls_router is not None:
         apis += ["zenoh", "zenoh-tls"]
         latency_apis += ["zenoh", "zenoh-tls"]
     print(
         f"message: telemetry_t, {size} bytes; URL {url('raw')} (one port per API); queue capacity {DEFAULT_QUEUE_CAPACITY}"
     )
-    print(f"CPUs: {os.cpu_count()}; load average {os.getloadavg()[0]:.2f} at start")
+    print(
+        f"CPUs: {os.cpu_count()}; load average {os.getloadavg()[0]:.2f} at start; antalate from {REPO}"
+        f"{'; a second process busy' if args.busy else ''}"
+    )
     rt: dict[str, dict[str, Any]] = {}
     if args.only in (None, "latency"):
         print(
@@ -723,6 +828,10 @@ def inside(args: argparse.Namespace) -> int:
                 f"  {api:10s}  p50 {r['p50']:6.1f} us  p90 {r['p90']:6.1f} us  p99 {r['p99']:7.1f} us  "
                 f"max {r['max']:7.1f} us  mean {r['mean']:6.1f} us  lost {r['lost']}"
             )
+            for name, st in r.get("stages", {}).items():
+                print(
+                    f"      {name:16s} p50 {st['p50']:6.1f} us  p90 {st['p90']:6.1f} us  p99 {st['p99']:7.1f} us"
+                )
         if "raw-thread" in rt:
             print(
                 "  (raw-thread: raw lcm with the Bus's threading on the ping side -- a dispatcher thread runs the "
@@ -762,12 +871,12 @@ def inside(args: argparse.Namespace) -> int:
         f"signing, alone: sign {cost['sign_us']:.1f} us, check (MAC + window + replay guard) "
         f"{cost['check_us']:.1f} us per message"
     )
-    if rt:
+    if "bus-signed" in rt and "bus" in rt:
         print(
             f"  round trip p50 signed {rt['bus-signed']['p50']:.1f} us vs unsigned {rt['bus']['p50']:.1f} us "
             f"({rt['bus-signed']['p50'] - rt['bus']['p50']:+.1f} us for two signatures and two checks)"
         )
-    if tp and tp["bus"]["lossless"]:
+    if "bus-signed" in tp and "bus" in tp and tp["bus"]["lossless"]:
         print(
             f"  lossless throughput signed {tp['bus-signed']['lossless'] / 1000:.0f}k vs unsigned "
             f"{tp['bus']['lossless'] / 1000:.0f}k msg/s ({tp['bus-signed']['lossless'] / tp['bus']['lossless']:.2f}x)"
@@ -801,6 +910,8 @@ def inside(args: argparse.Namespace) -> int:
         )
     print("against the targets:")
     for api, targets in (("bus", TARGETS), ("node", NODE_TARGETS)):
+        if api not in latency_apis:
+            continue
         p50_ratio = rt[api]["p50"] / rt["raw"]["p50"] if rt else nan
         p99 = rt[api]["p99"] if rt else nan
         tp_ratio = tp[api]["lossless"] / tp["raw"]["lossless"] if tp and tp["raw"]["lossless"] else nan
@@ -832,6 +943,17 @@ def main() -> int:
     parser.add_argument("--burst", type=int, default=10_000, help="messages in the back-to-back burst")
     parser.add_argument("--only", choices=("latency", "throughput"), help="run one half only")
     parser.add_argument("--json", action="store_true", help="also print every figure as one JSON line")
+    parser.add_argument(
+        "--apis",
+        nargs="+",
+        choices=("bus", "bus-signed", "raw-thread", "node"),
+        help="only these (and raw lcm); no zenoh columns",
+    )
+    parser.add_argument("--busy", action="store_true", help="a second process spins for the whole run")
+    parser.add_argument("--tree", type=Path, help="run antalate from this checkout (a baseline)")
+    parser.add_argument(
+        "--stages", action="store_true", help="time the round trip's stages too (raw lcm and node)"
+    )
     parser.add_argument("--inside", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--peer", nargs=2, metavar=("API", "ROLE"), help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -860,14 +982,29 @@ def main() -> int:
     ]
     argv += ["--only", args.only] if args.only else []
     argv += ["--json"] if args.json else []
-    with NetNamespace() as ns:
-        proc = ns.python(*argv)
-        try:
-            return proc.wait(TIME_LIMIT)
-        except subprocess.TimeoutExpired:
-            print(f"benchmark stopped after {TIME_LIMIT:.0f} s", file=sys.stderr)
-            stop_process(proc)
-            return 1
+    argv += ["--apis", *args.apis] if args.apis else []
+    argv += ["--busy"] if args.busy else []
+    env = {TREE_ENV: str(args.tree.resolve())} if args.tree else {}
+    if args.stages:
+        env[STAGES_ENV] = "1"
+    busy = None
+    if args.busy:
+        import multiprocessing
+
+        busy = multiprocessing.Process(target=busy_loop, args=(time.monotonic() + TIME_LIMIT,), daemon=True)
+        busy.start()
+    try:
+        with NetNamespace() as ns:
+            proc = ns.python(*argv, extra_env=env)
+            try:
+                return proc.wait(TIME_LIMIT)
+            except subprocess.TimeoutExpired:
+                print(f"benchmark stopped after {TIME_LIMIT:.0f} s", file=sys.stderr)
+                stop_process(proc)
+                return 1
+    finally:
+        if busy is not None:
+            busy.terminate()
 
 
 if __name__ == "__main__":

@@ -12,7 +12,7 @@ What runs, and why this way:
 * the **console** is the real ``python -m operator_tui CONFIG`` on a pseudo-terminal of
   ``--size`` (a headless Textual app skips writing the screen, which would flatter the figure);
   this script drains the terminal output and presses keys into it;
-* both run inside a private network namespace on real UDP multicast (tests/netns.py), so the
+* both run inside a private network namespace on real UDP multicast (tests/harness/netns.py), so the
   figure includes LCM receive and decode and nothing touches the host network.
 
 The console's CPU is read from /proc/<pid>/stat over the measurement window (after it shows all

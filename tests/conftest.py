@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any, cast
 import pytest
 
 from antalate_lcm.vehicles import VehicleAdapter
-from tests import scheduling
+from tests.harness import scheduling
 from tests.harness.jsonl import JsonLinesProcess
 from tests.harness.netns import MCAST_URL as MCAST_URL
 from tests.harness.netns import NetNamespace, netns_reason, private_netns
@@ -38,7 +38,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
-    """`make test`'s ``--dist loadfile``, longest modules first (tests/scheduling.py)."""
+    """`make test`'s ``--dist loadfile``, longest modules first (tests/harness/scheduling.py)."""
     if config.getoption("dist", None) != "loadfile":
         return None
     return scheduling.make_scheduler(config, log)
@@ -78,15 +78,15 @@ def netns() -> Iterator[NetNamespace]:
 
 
 class Probe(JsonLinesProcess):
-    """Client side of tests/probe.py: publish, wait for and list messages inside a namespace."""
+    """Client side of tests/children/probe.py: publish, wait for and list messages inside a namespace."""
 
     def __init__(self, proc: subprocess.Popen[str]) -> None:
         super().__init__(proc, "the LCM probe")
 
     @classmethod
     def start(cls, ns: NetNamespace) -> Probe:
-        """tests/probe.py on the namespace's multicast group, ready for requests."""
-        return cls(ns.peer("tests.probe", MCAST_URL))
+        """tests/children/probe.py on the namespace's multicast group, ready for requests."""
+        return cls(ns.peer("tests.children.probe", MCAST_URL))
 
     def publish(self, channel: str, type_name: str, **fields: Any) -> None:
         assert self.call(op="publish", channel=channel, type=type_name, fields=fields)["ok"]

@@ -1,6 +1,6 @@
-"""Deprecated: import from ``tests.harness.polling``. Where tests imported these names from before
-tests/harness/ gathered the helpers; they still work for one release (a behavior package's tests may
-have copied the old path from docs/behaviors.md), with a DeprecationWarning that names the new place."""
+"""Deprecated: import from ``tests.harness.polling``. docs/behaviors.md showed this path (``from
+tests.polling import wait_for``), so a behavior package's tests may have copied it; the name keeps working
+for one release, with a DeprecationWarning that names the new place."""
 
 import warnings
 

@@ -13,7 +13,7 @@
 #   podman, mmdebstrap  the container image (Debian base made from the mirror, no registry)
 #   qemu-user-static    arm64 images, only where binfmt_misc can be used
 #   nodejs, npm         reference clients under node: @mcap/core reads antalate's MCAP files,
-#                       @foxglove/ws-protocol connects to `antalate foxglove` (tests/npm_tools.py)
+#                       @foxglove/ws-protocol connects to `antalate foxglove` (tests/tools/npm_tools.py)
 # Without root (and without passwordless sudo) it says what to install and carries on: the tests
 # that need a missing tool skip with the reason.
 set -u

@@ -99,3 +99,5 @@ _.CONTINUE  # safety.filter.Policy: chosen by value from [safety] no_peers (Poli
 _.find_spec
 _.create_module
 _.exec_module
+# --- Old names kept one release by base.deprecation.renamed_attribute (issue #26): read by users' code.
+_.autopilot_state

@@ -61,7 +61,7 @@ from antalate_lcm.wire.security import MemberProof
 log = logging.getLogger("antalate.bridge")
 
 
-class _LanLink:
+class _LanConnection:
     """A ``udpm://`` LAN: read from antalate's own socket (sizes checked on the first fragment, before
     any buffer is allocated), sent by liblcm (whose receive thread never starts: nothing subscribes)."""
 
@@ -99,10 +99,10 @@ class _LanLink:
         self.receiver.close()
 
 
-def _open(url: str, direction_in: Direction, largest: int) -> _LanLink | Connection:
+def _open(url: str, direction_in: Direction, largest: int) -> _LanConnection | Connection:
     transport = transport_for(url)
     if isinstance(transport, Udpm):
-        return _LanLink(transport, direction_in.size_limit, largest)
+        return _LanConnection(transport, direction_in.size_limit, largest)
     # Zenoh drops a larger message itself, before reassembling it (+ room for key and attachment);
     # memq://, file://: nobody outside the process writes there.
     return transport.open(max_message_size=largest + 4096)
@@ -158,7 +158,7 @@ class Bridge:
             handler: Callable[..., None] = partial(self._on_message, name)
             if isinstance(conn, ZenohLCM):
                 conn.subscribe(".*", handler, remote_only=True, attachments=True).set_queue_capacity(10_000)
-            elif isinstance(conn, _LanLink):
+            elif isinstance(conn, _LanConnection):
                 conn.subscribe(handler)  # the kernel's socket buffer is its queue
             else:
                 conn.subscribe(".*", handler).set_queue_capacity(10_000)
@@ -298,7 +298,7 @@ class Bridge:
                     exc,
                 )
                 self._stop.wait(0.1)
-            if isinstance(conn, _LanLink):
+            if isinstance(conn, _LanConnection):
                 oversize, damaged = conn.take_drops()
                 for reason, n in (("oversize", oversize), ("damaged", damaged)):
                     if n:

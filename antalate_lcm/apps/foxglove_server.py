@@ -99,10 +99,10 @@ def serve(url: str, *, host: str, port: int, no_auth: bool, stop: threading.Even
         else None
     )
     context = foxglove.Context()
-    bus = Buses({"view": url})
+    buses = Buses({"view": url})
     server = None
     try:
-        bus.open()
+        buses.open()
         try:
             # No capability: no client publishing, services or parameters (read-only by construction).
             server = foxglove.start_server(
@@ -111,7 +111,7 @@ def serve(url: str, *, host: str, port: int, no_auth: bool, stop: threading.Even
         except Exception as exc:  # noqa: BLE001 - the SDK raises its own error type for a bind failure
             raise AntalateError(f"cannot serve Foxglove on {host}:{port}: {exc}") from None
         view = FoxgloveView(foxglove, context)
-        bus.subscribe("view", ".*", None, view.on_message, regex=True)
+        buses.subscribe("view", ".*", None, view.on_message, regex=True)
         if not is_loopback(host):
             log.warning(
                 "the Foxglove view on %s:%d has NO sign-in: anyone who reaches it sees the swarm",
@@ -125,7 +125,7 @@ def serve(url: str, *, host: str, port: int, no_auth: bool, stop: threading.Even
         except KeyboardInterrupt:
             pass
     finally:
-        bus.close()
+        buses.close()
         if server is not None:
             server.stop()
         if previous is not None:

@@ -53,9 +53,9 @@ def record(url: str, out_path: str, *, channel: str = ".*", raw: bool = False, f
         signalled.append(signum)
 
     previous = signal.signal(signal.SIGTERM, on_signal)
-    bus = Buses({"log": url})
+    buses = Buses({"log": url})
     try:
-        bus.open()
+        buses.open()
         try:
             f = out.open("wb")
         except OSError as exc:
@@ -66,17 +66,17 @@ def record(url: str, out_path: str, *, channel: str = ".*", raw: bool = False, f
             def on_message(name: str, data: bytes) -> None:
                 writer.write_event(name, time.time_ns(), data)
 
-            bus.subscribe("log", channel, None, on_message, regex=True)
+            buses.subscribe("log", channel, None, on_message, regex=True)
             print(f"logging {url} to {out} (MCAP); Ctrl-C stops", flush=True)
             try:
                 while not signalled:
                     time.sleep(0.2)
             except KeyboardInterrupt:
                 pass
-            bus.close()  # no handler runs after this: the writer is ours alone
+            buses.close()  # no handler runs after this: the writer is ours alone
             writer.finish()
     finally:
-        bus.close()
+        buses.close()
         signal.signal(signal.SIGTERM, previous)
     print(f"wrote {out}: {_summary(writer)}", flush=True)
     return 0

@@ -1,6 +1,6 @@
 """Load plugins by entry-point name or ``module:Class`` — the one way antalate finds extensions.
 
-Used for behaviors (group ``antalate.behaviors``) and autopilot adapters (``antalate.autopilots``).
+Used for behaviors (group ``antalate.behaviors``) and vehicle adapters (``antalate.autopilots``).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ _CLASS = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
 #: (group, sys.path) -> its entry points: scanning every installed distribution's metadata takes
-#: ~6 ms, and ``antalate agent --agents 1000`` looked its autopilot up 2,000 times (12 s before the
+#: ~6 ms, and ``antalate agent --agents 1000`` looked its adapter up 2,000 times (12 s before the
 #: first agent started). A changed sys.path (a plugin installed into it) is a new key.
 _ENTRY_POINTS: dict[tuple[str, tuple[str, ...]], tuple[EntryPoint, ...]] = {}
 

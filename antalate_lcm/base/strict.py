@@ -2,7 +2,7 @@
 
 A field trial showed ``'5'`` becoming 5 and ``'yes'`` becoming True: pydantic's default (lax) mode
 guesses, and a guess in a flight config is a vehicle doing something nobody wrote. Every table of the
-config -- antalate's own sections, an autopilot adapter's params, a behavior's params -- goes
+config -- antalate's own sections, a vehicle adapter's params, a behavior's params -- goes
 through :func:`validate_strict`, which validates in pydantic's *strict JSON* mode:
 
 - a string is never a number or a boolean, a number never a boolean or a string;

@@ -183,11 +183,11 @@ class BusConnection:
         simulated agents read their own 20,000 datagrams a second and every other agent process's
         only to drop them by channel."""
         receiver = self._receiver
-        if receiver is None:
+        if receiver is None or self._unfiltered:
             return
         own: tuple[str, int] | None = None
         topics: frozenset[str] | None = None
-        if not self._patterns and not self._unfiltered:
+        if not self._patterns:
             if self._sender is not None and not self._hear_own:
                 own = self._sender.address
             if self._topics:
@@ -198,8 +198,10 @@ class BusConnection:
             if not receiver.filter(own, topics):  # too many topics for one filter: own ones only
                 topics = None
                 receiver.filter(own, None)
-        except OSError as exc:  # a kernel without socket filters: read and drop, as before
-            log.debug("cannot filter datagrams on %s: %s", self.url, exc)
+        except OSError as exc:
+            # A kernel without socket filters, or a filter locked (SO_LOCK_FILTER): every datagram
+            # is read and dropped by channel here, as liblcm's thread would. Said once, not raised.
+            log.info("cannot filter datagrams on %s in the kernel (%s): reading all of them", self.url, exc)
             self._unfiltered = True
             return
         self._filter = (own, topics)

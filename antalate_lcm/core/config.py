@@ -479,7 +479,7 @@ def parse_config(data: dict[str, Any], source: str = "<config>") -> Config:
     """Validate an already-parsed TOML document; see :func:`load_config`.
 
     Strict throughout: values are taken as TOML typed them (see `antalate_lcm.base.strict`). Plugins
-    (the autopilot adapter, behaviors) are not imported here: `antalate_lcm.agent.plan.plan_agent` resolves
+    (the vehicle adapter, behaviors) are not imported here: `antalate_lcm.agent.plan.plan_agent` resolves
     them and validates their params, the one place that does, so a config is data and nothing else.
     """
     where = find_datetime(data)

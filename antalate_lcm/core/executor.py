@@ -3,8 +3,8 @@
 Like rclpy's wait set, the loop waits on every LCM instance's file descriptor (``lcm.fileno()``),
 its timers and a wake-up for other threads, and calls ``handle()`` when a descriptor is readable:
 a message reaches its node's handler on the loop thread with no hop through a queue, and node code
-(state machines, behaviors) runs on a single thread and needs no locks. Blocking work (autopilot
-I/O) runs on worker threads that post their results back with :meth:`Executor.call_soon`.
+(state machines, behaviors) runs on a single thread and needs no locks. Blocking work (a vehicle
+adapter's I/O) runs on worker threads that post their results back with :meth:`Executor.call_soon`.
 
 It is an asyncio loop (uvloop when installed: measured in ``benchmarks/bus.py``, it dispatches a
 datagram faster than a selector loop written in Python), so asyncio code can share it through

@@ -19,7 +19,7 @@ the agents. The wall clock keeps its 1 ms slots and its spread phases (a thousan
 datagrams must not arrive at once).
 
 Every node reads this one clock: ``Node.now`` and the behaviors' ``ctx.now`` (the executor's
-``clock``), the sim autopilot (constructed with that clock), message headers and the replay
+``clock``), the sim adapter (constructed with that clock), message headers and the replay
 window (the executor's ``wallclock``: a fixed epoch plus simulated time, so a run's bytes do not
 depend on the day it ran).
 

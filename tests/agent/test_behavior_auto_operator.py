@@ -7,7 +7,7 @@ from typing import Any
 
 from antalate_lcm.msgs import mc_state_t, operator_cmd_t
 from antalate_lcm.wire import security
-from tests.bma_support import AGENT, Harness, harness, make_config
+from tests.harness.bma import AGENT, Harness, harness, make_config
 from tests.harness.polling import wait_for
 
 

@@ -10,7 +10,7 @@ from antalate_lcm.base.plugins import BEHAVIORS, load_plugin
 from antalate_lcm.core.config import Config
 from antalate_lcm.msgs import direction_cmd_t, velocity_cmd_t
 from behaviors.direction_follow import Direction, DirectionFollow, follow_velocity
-from tests.bma_support import AGENT, Harness, harness, make_config
+from tests.harness.bma import AGENT, Harness, harness, make_config
 from tests.harness.polling import wait_for
 
 

@@ -16,7 +16,7 @@ from antalate_lcm.base.errors import ConfigError
 from antalate_lcm.base.plugins import BEHAVIORS, available
 from antalate_lcm.core.config import load_config
 from antalate_lcm.msgs import velocity_cmd_t
-from tests.bma_support import harness, make_config
+from tests.harness.bma import harness, make_config
 from tests.harness.polling import wait_for
 
 if sys.version_info >= (3, 11):

@@ -10,11 +10,11 @@ import pytest
 from antalate_lcm.agent.bma import ActivationRule, Arbiter
 from antalate_lcm.core.config import Config
 from antalate_lcm.msgs import arbiter_status_t, mc_state_t, telemetry_t
-from tests.bma_support import AGENT, Recorder, harness, make_config
+from tests.harness.bma import AGENT, Recorder, harness, make_config
 from tests.harness.polling import wait_for
 
-REC = "tests.bma_support:Recorder"
-RAISER = "tests.bma_support:Raiser"
+REC = "tests.harness.bma:Recorder"
+RAISER = "tests.harness.bma:Raiser"
 
 
 # ---------------------------------------------------------------------- pure rules
@@ -335,9 +335,9 @@ SWARM_MODE = {"SWARM_MODE": {"type": "behavior_state_t", "channel": "{agent}/SWA
 
 
 def _switcher(**params: Any) -> dict[str, Any]:
-    """The ModeSwitcher behavior (tests.bma_support), active in MISSION, publishing on SWARM_MODE."""
+    """The ModeSwitcher behavior (tests.harness.bma), active in MISSION, publishing on SWARM_MODE."""
     entry = {
-        "plugin": "tests.bma_support:ModeSwitcher",
+        "plugin": "tests.harness.bma:ModeSwitcher",
         "activate_on": ["MISSION"],
         "topics": {"MODE": "SWARM_MODE"},
     }
@@ -392,7 +392,7 @@ def test_timers_of_an_activation_are_cancelled_with_it_and_one_shots_are_forgott
             _bma(
                 [
                     {
-                        "plugin": "tests.bma_support:Delayed",
+                        "plugin": "tests.harness.bma:Delayed",
                         "activate_on": ["MISSION"],
                         "params": {"delay": 0.2},
                     }

@@ -12,10 +12,10 @@ from antalate_lcm.base.errors import ConfigError
 from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context
-from tests.bma_support import make_config
+from tests.harness.bma import make_config
 
-REC = "tests.bma_support:Recorder"
-SWITCHER = "tests.bma_support:ModeSwitcher"
+REC = "tests.harness.bma:Recorder"
+SWITCHER = "tests.harness.bma:ModeSwitcher"
 SWARM_MODE = {"SWARM_MODE": {"type": "behavior_state_t", "channel": "{agent}/SWARM_MODE"}}
 
 

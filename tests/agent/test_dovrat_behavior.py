@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from antalate_lcm.msgs import direction_cmd_t, payload_t, peer_detection_t, telemetry_t, velocity_cmd_t
-from tests.bma_support import AGENT, Harness, harness, make_config
+from tests.harness.bma import AGENT, Harness, harness, make_config
 from tests.harness.polling import wait_for
 
 PARAMS = {"forward_speed": 2.0, "gentle_turn_rate": 10.0, "sharp_turn_rate": 45.0, "detection_timeout": 0.4}

@@ -47,26 +47,26 @@ def hlc_in(state: HlcState, params: HlcParams | None = None) -> HighLevelControl
         h.on_mc_state(M.STANDBY, T0)  # the MC is heard; the autopilot not yet
         return h
     h.on_mc_state(M.STANDBY, T0)
-    h.on_autopilot(GROUND, T0)
+    h.on_vehicle(GROUND, T0)
     assert h.state is H.READY
     if state is H.LLC_DOWN:
-        h.on_autopilot(replace(GROUND, link_age=60.0), T0 + 1)
+        h.on_vehicle(replace(GROUND, link_age=60.0), T0 + 1)
     elif state is not H.READY:
         h.on_mc_state(M.TAKEOFF, T0 + 1)
         if state is not H.TAKEOFF:
             h.on_action_result(ActionKind.ARM, True, T0 + 1)
-            h.on_autopilot(flying(alt=1.0), T0 + 2)
+            h.on_vehicle(flying(alt=1.0), T0 + 2)
             if state is not H.GAINING_ALTITUDE:
-                h.on_autopilot(FLYING, T0 + 5)
+                h.on_vehicle(FLYING, T0 + 5)
                 h.on_mc_state(M.MISSION, T0 + 5)
                 if state is H.RTL:
                     h.on_mc_state(M.RTL, T0 + 6)
                 elif state is H.LANDING:
                     h.on_mc_state(M.LAND, T0 + 6)
                 elif state is H.LOW_BATTERY:
-                    h.on_autopilot(flying(battery=15.0), T0 + 6)
+                    h.on_vehicle(flying(battery=15.0), T0 + 6)
                 elif state is H.MANUAL:
-                    h.on_autopilot(flying(autonomous=False, mode="LOITER"), T0 + 6)
+                    h.on_vehicle(flying(autonomous=False, mode="LOITER"), T0 + 6)
                 elif state is H.HOLD:
                     h.on_mc_state(M.HOLD, T0 + 6)
     assert h.state is state
@@ -90,7 +90,7 @@ def feed(h: HighLevelControl, what: Input, now: float = T0 + 10) -> HlcOutcome:
         return h.on_mc_state(value, now)
     if kind == "ap":
         assert isinstance(value, VehicleState)
-        return h.on_autopilot(value, now)
+        return h.on_vehicle(value, now)
     if kind == "arm":
         assert isinstance(value, bool)
         return h.on_action_result(ActionKind.ARM, value, now)
@@ -287,7 +287,7 @@ def test_a_refused_takeoff_lands_at_once() -> None:
     """A vehicle with no arming step (a Tello) refuses at takeoff: land now, not after the timeout."""
     h = HighLevelControl()
     h.on_mc_state(M.STANDBY, T0)
-    h.on_autopilot(GROUND, T0)
+    h.on_vehicle(GROUND, T0)
     h.on_mc_state(M.TAKEOFF, T0 + 1)
     h.on_action_result(ActionKind.ARM, True, T0 + 1.1)
     assert h.state is H.GAINING_ALTITUDE
@@ -295,7 +295,7 @@ def test_a_refused_takeoff_lands_at_once() -> None:
     assert state_of(h) is H.LANDING
     assert Action.LAND in outcome.actions
     assert [e.code for e in outcome.errors] == [ErrorCode.TAKEOFF_REFUSED]
-    assert h.on_autopilot(GROUND, T0 + 1.3).transition is not None
+    assert h.on_vehicle(GROUND, T0 + 1.3).transition is not None
     assert state_of(h) is H.READY
 
 
@@ -304,14 +304,14 @@ def test_a_refused_takeoff_lands_at_once() -> None:
 
 def test_init_to_ready_needs_both_autopilot_and_mc() -> None:
     h = HighLevelControl()
-    assert h.on_autopilot(GROUND, T0).transition is None  # no MC yet
+    assert h.on_vehicle(GROUND, T0).transition is None  # no MC yet
     assert h.state is H.INIT
     outcome = h.on_mc_state(M.STANDBY, T0 + 1)  # the MC arrives second
     assert state_of(h) is H.READY and outcome.actions == ()
 
     h = HighLevelControl()
     assert h.on_mc_state(M.INIT, T0).transition is None  # no autopilot yet
-    assert h.on_autopilot(GROUND, T0 + 1).transition is not None
+    assert h.on_vehicle(GROUND, T0 + 1).transition is not None
     assert h.state is H.READY
 
 
@@ -324,7 +324,7 @@ def test_init_waits_for_a_fresh_link_and_never_declares_llc_down(snapshot: Vehic
     h = HighLevelControl()
     h.on_mc_state(M.STANDBY, T0)
     for i in range(5):
-        assert h.on_autopilot(replace(snapshot, link_age=snapshot.link_age + i), T0 + i).transition is None
+        assert h.on_vehicle(replace(snapshot, link_age=snapshot.link_age + i), T0 + i).transition is None
     assert h.state is H.INIT
 
 
@@ -342,7 +342,7 @@ def test_init_waits_for_a_fresh_link_and_never_declares_llc_down(snapshot: Vehic
 def test_init_resync_from_a_flying_vehicle(snapshot: VehicleState, expected: HlcState) -> None:
     h = HighLevelControl()
     h.on_mc_state(M.MISSION, T0)
-    outcome = h.on_autopilot(snapshot, T0)
+    outcome = h.on_vehicle(snapshot, T0)
     assert h.state is expected
     assert outcome.actions == ()  # a resync commands nothing
     assert outcome.transition is not None and "resync" in outcome.reason
@@ -351,7 +351,7 @@ def test_init_resync_from_a_flying_vehicle(snapshot: VehicleState, expected: Hlc
 def test_init_armed_on_the_ground_is_ready() -> None:
     h = HighLevelControl()
     h.on_mc_state(M.STANDBY, T0)
-    h.on_autopilot(replace(GROUND, armed=True), T0)
+    h.on_vehicle(replace(GROUND, armed=True), T0)
     assert h.state is H.READY
 
 
@@ -360,7 +360,7 @@ def test_init_armed_on_the_ground_is_ready() -> None:
 
 def test_takeoff_refused_on_low_battery_stays_ready_with_error() -> None:
     h = hlc_in(H.READY)
-    h.on_autopilot(replace(GROUND, battery=20.0), T0 + 1)
+    h.on_vehicle(replace(GROUND, battery=20.0), T0 + 1)
     outcome = h.on_mc_state(M.TAKEOFF, T0 + 2)
     assert h.state is H.READY
     assert outcome.transition is None and outcome.actions == ()
@@ -374,10 +374,10 @@ def test_takeoff_refused_on_low_battery_stays_ready_with_error() -> None:
 
 def test_unknown_battery_is_never_low() -> None:
     h = hlc_in(H.READY)
-    h.on_autopilot(replace(GROUND, battery=-1.0), T0 + 1)
+    h.on_vehicle(replace(GROUND, battery=-1.0), T0 + 1)
     assert h.on_mc_state(M.TAKEOFF, T0 + 2).actions == (Action.ARM,)
     h = hlc_in(H.AIRBORNE)
-    assert h.on_autopilot(flying(battery=-1.0), T0 + 20).transition is None
+    assert h.on_vehicle(flying(battery=-1.0), T0 + 20).transition is None
 
 
 def test_requested_takeoff_altitude_is_used_and_latched() -> None:
@@ -387,8 +387,8 @@ def test_requested_takeoff_altitude_is_used_and_latched() -> None:
     assert outcome.actions == (Action.takeoff(25.0),)
     assert h.target_altitude == 25.0
     h.on_mc_state(M.TAKEOFF, T0 + 2.2, takeoff_altitude=50.0)  # a later request does not move the goal
-    assert h.on_autopilot(flying(alt=23.0), T0 + 9).transition is None
-    assert h.on_autopilot(flying(alt=23.75), T0 + 10).transition is not None  # 0.95 x 25
+    assert h.on_vehicle(flying(alt=23.0), T0 + 9).transition is None
+    assert h.on_vehicle(flying(alt=23.75), T0 + 10).transition is not None  # 0.95 x 25
     assert h.state is H.AIRBORNE
 
 
@@ -400,8 +400,8 @@ def test_zero_altitude_means_the_default() -> None:
 
 def test_altitude_threshold_is_the_airborne_fraction() -> None:
     h = hlc_in(H.GAINING_ALTITUDE)
-    assert h.on_autopilot(flying(alt=9.49), T0 + 3).transition is None
-    assert h.on_autopilot(flying(alt=9.5), T0 + 4).transition is not None
+    assert h.on_vehicle(flying(alt=9.49), T0 + 3).transition is None
+    assert h.on_vehicle(flying(alt=9.5), T0 + 4).transition is not None
 
 
 def test_failed_arm_does_not_rearm_on_mc_republish_but_on_the_next_command() -> None:
@@ -424,7 +424,7 @@ def test_arm_failure_detail_reaches_the_error_text() -> None:
 
 def test_hlc_started_while_mc_already_in_takeoff_does_not_take_off() -> None:
     h = HighLevelControl()
-    h.on_autopilot(GROUND, T0)
+    h.on_vehicle(GROUND, T0)
     h.on_mc_state(M.TAKEOFF, T0)
     assert h.state is H.READY
     assert h.on_mc_state(M.TAKEOFF, T0 + 0.2) == HlcOutcome()
@@ -460,10 +460,10 @@ def test_tick_does_nothing_in_other_states() -> None:
 
 def test_low_battery_fires_once() -> None:
     h = hlc_in(H.AIRBORNE)
-    first = h.on_autopilot(flying(battery=19.0), T0 + 20)
+    first = h.on_vehicle(flying(battery=19.0), T0 + 20)
     assert first.actions == (Action.RTL,)
     for i in range(10):
-        again = h.on_autopilot(flying(battery=18.0 - i), T0 + 21 + i)
+        again = h.on_vehicle(flying(battery=18.0 - i), T0 + 21 + i)
         assert again == HlcOutcome()
     assert h.state is H.LOW_BATTERY
 
@@ -473,36 +473,36 @@ def test_a_battery_failsafe_hold_after_low_battery_stays_hold_instead_of_alterna
     (5 s) before its action; HOLD's low-battery row fired again, FAILSAFE_HOLD again, ... dozens of
     transitions and RTL commands a second. Now: LOW_BATTERY once, then HOLD until PX4 acts."""
     h = hlc_in(H.AIRBORNE)
-    assert h.on_autopilot(flying(battery=19.0), T0 + 20).actions == (Action.RTL,)
+    assert h.on_vehicle(flying(battery=19.0), T0 + 20).actions == (Action.RTL,)
     held = flying(battery=15.0, flight_mode=FlightMode.HOLD, mode="AUTO.LOITER", failsafe="battery failsafe")
-    assert h.on_autopilot(held, T0 + 21).transition is not None
+    assert h.on_vehicle(held, T0 + 21).transition is not None
     assert h.state is H.HOLD
     for i in range(10):
-        assert h.on_autopilot(held, T0 + 21.05 + 0.05 * i).transition is None
+        assert h.on_vehicle(held, T0 + 21.05 + 0.05 * i).transition is None
     assert h.state is H.HOLD
     landing = replace(held, flight_mode=FlightMode.LANDING, mode="AUTO.LAND")
-    assert h.on_autopilot(landing, T0 + 27).transition is not None
+    assert h.on_vehicle(landing, T0 + 27).transition is not None
     assert state_of(h) is H.LANDING
 
 
 def test_a_fence_hold_with_a_low_battery_still_returns_once() -> None:
     h = hlc_in(H.AIRBORNE)
     held = flying(flight_mode=FlightMode.HOLD, mode="BRAKE", failsafe="fence breach")
-    h.on_autopilot(held, T0 + 20)
+    h.on_vehicle(held, T0 + 20)
     assert h.state is H.HOLD
-    assert h.on_autopilot(replace(held, battery=19.0), T0 + 21).actions == (Action.RTL,)
+    assert h.on_vehicle(replace(held, battery=19.0), T0 + 21).actions == (Action.RTL,)
     assert state_of(h) is H.LOW_BATTERY
 
 
 @pytest.mark.parametrize("state", [H.RTL, H.LANDING, H.MANUAL, H.READY, H.TAKEOFF])
 def test_low_battery_does_not_reroute_a_vehicle_already_coming_down(state: HlcState) -> None:
     h = hlc_in(state)
-    snapshot = flying(battery=5.0, mode=h.autopilot.mode if h.autopilot else "")
+    snapshot = flying(battery=5.0, mode=h.vehicle.mode if h.vehicle else "")
     if state is H.MANUAL:
         snapshot = replace(snapshot, autonomous=False, flight_mode=FlightMode.MANUAL)
     if state in (H.READY, H.TAKEOFF):
         snapshot = replace(GROUND, battery=5.0)
-    assert h.on_autopilot(snapshot, T0 + 30).transition is None
+    assert h.on_vehicle(snapshot, T0 + 30).transition is None
     assert h.state is state
 
 
@@ -510,7 +510,7 @@ def test_mc_land_and_rtl_are_level_triggered() -> None:
     """A LAND first heard while the HLC could not act is honoured in the next state."""
     h = hlc_in(H.GAINING_ALTITUDE)
     h.on_mc_state(M.TAKEOFF, T0 + 2)
-    h.on_autopilot(FLYING, T0 + 3)
+    h.on_vehicle(FLYING, T0 + 3)
     assert h.state is H.AIRBORNE
     assert h.on_mc_state(M.LAND, T0 + 4).actions == (Action.LAND,)
     assert h.on_mc_state(M.LAND, T0 + 4.2) == HlcOutcome()  # already LANDING: no repeat
@@ -529,7 +529,7 @@ def test_an_mc_state_republished_since_before_a_failsafe_does_not_override_it(mc
     h = hlc_in(H.AIRBORNE)
     h.on_mc_state(mc_state, T0 + 10)
     assert h.state in (H.RTL, H.LANDING)
-    assert h.on_autopilot(FS_HOLD, T0 + 11).transition is not None
+    assert h.on_vehicle(FS_HOLD, T0 + 11).transition is not None
     assert state_of(h) is H.HOLD
     for i in range(5):
         assert h.on_mc_state(mc_state, T0 + 11.1 + i * 0.2) == HlcOutcome()
@@ -541,7 +541,7 @@ def test_an_mc_state_republished_since_before_a_failsafe_does_not_override_it(mc
 
 def test_a_failsafe_rtl_then_the_operators_land() -> None:
     h = hlc_in(H.AIRBORNE)
-    outcome = h.on_autopilot(FS_RTL, T0 + 10)
+    outcome = h.on_vehicle(FS_RTL, T0 + 10)
     assert h.state is H.RTL
     assert [(e.code, e.severity) for e in outcome.errors] == [
         (ErrorCode.AUTOPILOT_FAILSAFE, Severity.WARNING)
@@ -557,26 +557,26 @@ def test_no_takeover_without_armed_vehicle_or_in_takeoff() -> None:
     h = hlc_in(H.GAINING_ALTITUDE)
     # A stale snapshot from before arming (disarmed, pilot mode) is not a takeover.
     stale = replace(GROUND, mode="STABILIZE", autonomous=False, armed=True, in_air=False)
-    assert h.on_autopilot(replace(stale, armed=False), T0 + 2).transition is None
+    assert h.on_vehicle(replace(stale, armed=False), T0 + 2).transition is None
     h = hlc_in(H.TAKEOFF)
-    assert h.on_autopilot(stale, T0 + 2).transition is None
+    assert h.on_vehicle(stale, T0 + 2).transition is None
     assert h.state is H.TAKEOFF
 
 
 def test_landed_in_manual_returns_to_ready_even_in_a_pilot_mode() -> None:
     h = hlc_in(H.MANUAL)
-    outcome = h.on_autopilot(replace(GROUND, mode="LOITER", autonomous=False), T0 + 30)
+    outcome = h.on_vehicle(replace(GROUND, mode="LOITER", autonomous=False), T0 + 30)
     assert h.state is H.READY and outcome.errors == ()
 
 
 def test_llc_down_waits_while_the_link_is_stale_and_commands_nothing() -> None:
     h = hlc_in(H.AIRBORNE)
-    outcome = h.on_autopilot(LOST, T0 + 20)
+    outcome = h.on_vehicle(LOST, T0 + 20)
     assert h.state is H.LLC_DOWN
     assert outcome.errors[0].severity is Severity.CRITICAL and "3.0 s" in outcome.errors[0].text
     for age in (3.0, 10.0, float("inf")):
-        assert h.on_autopilot(flying(link_age=age), T0 + 30) == HlcOutcome()
-    assert h.on_autopilot(replace(FLYING, connected=False), T0 + 30) == HlcOutcome()
+        assert h.on_vehicle(flying(link_age=age), T0 + 30) == HlcOutcome()
+    assert h.on_vehicle(replace(FLYING, connected=False), T0 + 30) == HlcOutcome()
     for mc_state in McState:
         assert h.on_mc_state(mc_state, T0 + 31) == HlcOutcome()
     assert h.on_action_result(ActionKind.ARM, True, T0 + 32) == HlcOutcome()
@@ -586,8 +586,8 @@ def test_llc_down_waits_while_the_link_is_stale_and_commands_nothing() -> None:
 
 def test_link_regained_in_guided_holds_then_follows_the_mc() -> None:
     h = hlc_in(H.AIRBORNE)
-    h.on_autopilot(LOST, T0 + 20)
-    outcome = h.on_autopilot(flying(link_age=0.2), T0 + 25)
+    h.on_vehicle(LOST, T0 + 20)
+    outcome = h.on_vehicle(flying(link_age=0.2), T0 + 25)
     assert h.state is H.HOLD and outcome.actions == (Action.HOVER,)
     assert outcome.errors[0].severity is Severity.WARNING and "GUIDED" in outcome.errors[0].text
     assert "link regained" in h.reason
@@ -599,8 +599,8 @@ def test_link_regained_in_guided_holds_then_follows_the_mc() -> None:
 def test_state_raising_is_a_stale_link_with_the_fault_as_reason() -> None:
     h = hlc_in(H.AIRBORNE)
     fault = "autopilot sim state() raised RuntimeError: boom"
-    assert h.on_autopilot(flying(link_age=1.0), T0 + 20, fault=fault).transition is None
-    outcome = h.on_autopilot(flying(link_age=3.1), T0 + 22, fault=fault)
+    assert h.on_vehicle(flying(link_age=1.0), T0 + 20, fault=fault).transition is None
+    outcome = h.on_vehicle(flying(link_age=3.1), T0 + 22, fault=fault)
     assert h.state is H.LLC_DOWN
     assert "boom" in outcome.reason and "boom" in outcome.errors[0].text and "boom" in h.reason
 
@@ -609,7 +609,7 @@ def test_reason_is_the_last_transitions() -> None:
     h = HighLevelControl()
     assert h.reason  # says what INIT waits for
     h.on_mc_state(M.STANDBY, T0)
-    outcome = h.on_autopilot(GROUND, T0)
+    outcome = h.on_vehicle(GROUND, T0)
     assert h.reason == outcome.reason and "connected" in h.reason
     h.on_mc_state(M.TAKEOFF, T0 + 1)
     assert "arming" in h.reason
@@ -617,8 +617,8 @@ def test_reason_is_the_last_transitions() -> None:
 
 def test_link_timeout_is_a_parameter() -> None:
     h = hlc_in(H.AIRBORNE, HlcParams(link_timeout=1.0))
-    assert h.on_autopilot(flying(link_age=0.99), T0 + 20).transition is None
-    assert h.on_autopilot(flying(link_age=1.0), T0 + 21).transition is not None
+    assert h.on_vehicle(flying(link_age=0.99), T0 + 20).transition is None
+    assert h.on_vehicle(flying(link_age=1.0), T0 + 21).transition is not None
 
 
 def test_failed_non_arm_action_reports_an_error_only() -> None:
@@ -710,7 +710,7 @@ class Loop:
             self._mc(self.mc.on_hlc_state(self.hlc.state, now))
             self._mc(self.mc.tick(now))
             self._hlc(self.hlc.on_mc_state(self.mc.state, now, takeoff_altitude=self.mc.takeoff_altitude))
-            self._hlc(self.hlc.on_autopilot(self.sim.state(), now))
+            self._hlc(self.hlc.on_vehicle(self.sim.state(), now))
             self._hlc(self.hlc.tick(now))
             self.clock.t += dt
 
@@ -854,7 +854,7 @@ def test_classify() -> None:
 )
 def test_low_battery_reason_says_which(snapshot: VehicleState, words: str) -> None:
     h = hlc_in(H.AIRBORNE)
-    outcome = h.on_autopilot(snapshot, T0 + 20)
+    outcome = h.on_vehicle(snapshot, T0 + 20)
     assert h.state is H.LOW_BATTERY
     assert words in outcome.reason and words in outcome.errors[0].text
 
@@ -866,12 +866,12 @@ def test_low_battery_reason_says_which(snapshot: VehicleState, words: str) -> No
 )
 def test_unknown_or_healthy_voltage_is_not_low(snapshot: VehicleState) -> None:
     h = hlc_in(H.AIRBORNE)
-    assert h.on_autopilot(snapshot, T0 + 20).transition is None
+    assert h.on_vehicle(snapshot, T0 + 20).transition is None
 
 
 def test_takeoff_refused_on_low_cell_voltage_says_so() -> None:
     h = hlc_in(H.READY, HlcParams(low_cell_voltage=3.7))
-    h.on_autopilot(replace(GROUND, voltage=14.6, cells=4), T0 + 1)  # 3.65 V per cell
+    h.on_vehicle(replace(GROUND, voltage=14.6, cells=4), T0 + 1)  # 3.65 V per cell
     outcome = h.on_mc_state(M.TAKEOFF, T0 + 2)
     assert h.state is H.READY and outcome.errors[0].code is ErrorCode.TAKEOFF_REFUSED_LOW_BATTERY
     assert "V per cell" in outcome.errors[0].text

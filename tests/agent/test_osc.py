@@ -34,8 +34,8 @@ from tests.conftest import Probe
 from tests.harness.agents import AgentProcesses, agent_config
 from tests.harness.netns import NetNamespace
 from tests.harness.polling import wait_for
+from tests.harness.tls import make_tls
 from tests.station.test_station import API_KEYS, AUTH, OPERATOR_KEY
-from tests.tls import make_tls
 
 
 def make_osc(

@@ -3,7 +3,7 @@
 8 simulated agents fly ``gathering`` and ``flocking`` with the same config (only the bus URL differs)
 in one process, over two processes (``--processes 2``), one agent per host on a simulated LAN, and
 over a Zenoh router; each flight is recorded by ``lcm-logger`` and judged from its telemetry only
-(tests/swarm_flight.py): every agent's peer sensor named all 7 peers, the gathering ends within a
+(tests/agent/swarm_flight.py): every agent's peer sensor named all 7 peers, the gathering ends within a
 5 m radius with no two agents ever nearer than the configured 3 m, the flock's polarisation exceeds
 0.9. Every flight runs with a swarm key, and no agent may log a replayed message: its own telemetry
 reaches it once.
@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from antalate_lcm.runtime.cli import native_lcm_tool
-from tests import swarm_flight as sf
+from tests.agent import swarm_flight as sf
 from tests.conftest import MCAST_URL
 from tests.harness.netns import NetNamespace, netns_unavailable
 from tests.lan.conftest import lan_reason

@@ -1,5 +1,5 @@
 """Every example of the README, docs/behaviors.md, experiments.md, simulator.md and tutorial.md runs
-(tests/doc_snippets.py).
+(tests/architecture/doc_snippets.py).
 
 - Python blocks are imported as modules: every behavior class they define must pass the config
   loader's checks as a plugin (``module:Class``), and every ``test_*`` function they define is run.
@@ -41,7 +41,7 @@ from antalate_lcm.core.behavior import Behavior
 from antalate_lcm.core.config import load_config
 from antalate_lcm.runtime.agent import validate
 from antalate_lcm.runtime.script import load_script
-from tests.doc_snippets import Block, blocks, check_antalate, commands, is_antalate
+from tests.architecture.doc_snippets import Block, blocks, check_antalate, commands, is_antalate
 
 DOCS = ["README.md", "docs/behaviors.md", "docs/experiments.md", "docs/simulator.md"]
 TUTORIAL = "docs/tutorial.md"
@@ -230,7 +230,7 @@ def tutorial_script(python: str) -> str:
         elif block.lang == "sh" and block.note.startswith("check:"):
             for words in commands(block.text):
                 assert is_antalate(words), f"{block.id}: only antalate commands can be checked"
-                lines.append(f"{python} -m tests.doc_snippets {shlex.join(words)}")
+                lines.append(f"{python} -m tests.architecture.doc_snippets {shlex.join(words)}")
         elif block.lang == "sh":
             for line in block.text.splitlines():
                 if m := re.match(r"\s*pip install -e (\S+)", line):

@@ -23,8 +23,8 @@ from antalate_lcm.tools import codegen as _codegen
 from tests.harness.netns import private_netns
 from tests.harness.polling import wait_for
 from tests.harness.process import stop_process
+from tests.harness.wheel_support import build_wheel
 from tests.tools.test_spy import _marked_processes, require_spy_window, spy_window
-from tests.wheel_support import build_wheel
 
 #: The set-up builds the wheel and pip-installs it with its dependencies into a fresh venv (the pip
 #: step alone may take its own 600 s): the suite's 120 s default cut it off at load 11, when eight

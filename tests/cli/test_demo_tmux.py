@@ -13,7 +13,7 @@ import pytest
 
 from tests.harness.netns import NetNamespace
 from tests.harness.polling import wait_for
-from tests.tmux import Tmux, fly_one_sortie
+from tests.harness.tmux import Tmux, fly_one_sortie
 
 pytestmark = pytest.mark.netns
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from antalate_lcm.core.config import parse_config
 from operator_tui.app import OperatorApp
-from tests.synthetic_logs import square_swarm
+from tests.harness.synthetic_logs import square_swarm
 
 
 async def test_console_reads_a_log_as_if_live(tmp_path: Path) -> None:

@@ -3,7 +3,7 @@
 The server's own rules run in-process against the real aiohttp app (sign-in, cookies, origin check,
 a page that loads nothing from outside). The whole path runs in a private namespace: a swarm of
 two simulated agents, the web console, and Debian's headless Chromium driven through its DevTools
-protocol (tests/cdp_console.py): the page shows both agents, ``T`` + ``y`` takes them off, a
+protocol (tests/console/cdp_console.py): the page shows both agents, ``T`` + ``y`` takes them off, a
 screenshot is written, and the page requested nothing outside 127.0.0.1.
 """
 
@@ -318,7 +318,7 @@ def test_web_console_in_chromium_shows_the_swarm_and_takes_it_off(
             [
                 sys.executable,
                 "-m",
-                "tests.cdp_console",
+                "tests.console.cdp_console",
                 http,
                 f"http://127.0.0.1:{port}/",
                 str(key_file),

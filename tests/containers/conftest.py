@@ -22,7 +22,7 @@ import pytest
 
 from tests.containers.support import Podman, load_build_module, podman_unavailable
 from tests.harness.netns import NetNamespace
-from tests.wheel_support import build_wheel
+from tests.harness.wheel_support import build_wheel
 
 
 @dataclass

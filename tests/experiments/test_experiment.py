@@ -234,7 +234,7 @@ def test_run_with_the_console_in_a_real_terminal(tmp_path: Path, config: Path) -
     import shutil
 
     from tests.harness.polling import wait_for
-    from tests.tmux import Tmux, fly_one_sortie
+    from tests.harness.tmux import Tmux, fly_one_sortie
 
     if shutil.which("tmux") is None:
         pytest.skip("tmux is not installed (Debian/Ubuntu: apt-get install tmux)")

@@ -7,9 +7,13 @@ command (`run_antalate`, `antalate_argv`), a child's environment, reading its ou
 sides of a JSON-lines child; ``agents``: the one config builder (`agent_config`, `swarm_config`) and the
 agent runner across processes (`AgentProcesses`); ``inprocess``: the runner of nodes in the test's own
 process (`InProcess`); ``timeline``: the event timeline of a child that reports JSON lines;
-``cases``: refusal tables kept as TOML; ``clock``: `FakeClock`; ``lifecycle``: `Started`, a set-up
-that closes what it started when its start fails; ``messages``: messages put on a bus by hand.
+``bma``: the BMA's in-process `Harness` and the behaviors tests name in configs; ``memory_agent``: a
+whole agent in the test's process; ``cases``: refusal tables kept as TOML; ``clock``: `FakeClock`;
+``lifecycle``: `Started`, a set-up that closes what it started when its start fails; ``messages``:
+messages put on a bus by hand; ``synthetic_logs``: LCM logs of made-up flights; ``lcm_tables``:
+lcm-gen's field tables, typed; ``tmux``, ``tls``, ``wheel_support``: a real terminal, a throw-away CA,
+the wheel as a user builds it; ``scheduling``: the suite's order under xdist (``module_times.json``).
 
-The modules they came from (``tests.netns``, ``tests.polling``, ``tests.jsonl``,
-``tests.agent_harness``) still import the same names for one release, with a DeprecationWarning.
+``tests.polling`` and ``tests.bma_support``, which docs/behaviors.md once showed, still import the same
+names for one release, with a DeprecationWarning.
 """

@@ -4,7 +4,7 @@
 ``swarm_config``: the TOML text of an experiment's agent (``antalate run`` copies it into a swarm: the
 simulator at its own speeds, every topic on the one bus, one BMA); ``AgentProcesses``: an agent's
 nodes, each its own ``antalate`` process in a namespace. The agents of one process are
-``tests.memory_agent``'s; whole swarms across hosts are ``tests.lan.swarm``'s.
+``tests.harness.memory_agent``'s; whole swarms across hosts are ``tests.lan.swarm``'s.
 """
 
 from __future__ import annotations
@@ -33,12 +33,16 @@ def agent_config(
     bus: str = MCAST_URL,
     fast: bool = True,
     autopilot: str = "sim",
-    takeoff: float = 3.0,
+    takeoff: float | None = 3.0,
     **sections: Any,
 ) -> dict[str, Any]:
-    """``sim`` adds to (``fast``) or replaces the simulator's speed-ups; ``sections`` are the config's
-    other tables (``hlc`` merged into the one built here)."""
-    hlc = {"autopilot": autopilot, "default_takeoff_altitude": takeoff, **sections.pop("hlc", {})}
+    """``sim`` adds to (``fast``) or replaces the simulator's speed-ups (the adapter's params, whatever
+    the ``autopilot``); ``takeoff`` None leaves the config's default; ``sections`` are the config's other
+    tables (``hlc`` merged into the one built here)."""
+    hlc: dict[str, Any] = {"autopilot": autopilot}
+    if takeoff is not None:
+        hlc["default_takeoff_altitude"] = takeoff
+    hlc.update(sections.pop("hlc", {}))
     params = {**(FAST_SIM if fast else {}), **(sim or {})}
     if params:
         hlc["autopilot_params"] = params

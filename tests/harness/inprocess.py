@@ -1,9 +1,9 @@
 """Nodes in the test's own process: one context (the config's buses, a started executor) and the
 nodes a test adds to it, stopped newest first, then the context, whatever happens.
 
-The agent runner in one process: the BMA tests' `Harness` (tests/bma_support.py) and the signing
+The agent runner in one process: the BMA tests' `Harness` (tests/harness/bma.py) and the signing
 tests' `Swarm` (tests/core/test_security_node.py) are this with their own probes and attackers; a whole
-agent assembled as ``antalate agent`` does is `tests.memory_agent.MemoryAgent`.
+agent assembled as ``antalate agent`` does is `tests.harness.memory_agent.MemoryAgent`, an `InProcess` too.
 """
 
 from __future__ import annotations

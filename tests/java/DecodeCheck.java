@@ -69,7 +69,7 @@ public final class DecodeCheck {
         } else if (value instanceof String) {
             out.append(quote((String) value));
         } else if (value instanceof byte[]) {
-            // byte arrays as hex, the way tests/probe.py shows them
+            // byte arrays as hex, the way tests/children/probe.py shows them
             StringBuilder hex = new StringBuilder();
             for (byte b : (byte[]) value) {
                 hex.append(String.format("%02x", b & 0xff));

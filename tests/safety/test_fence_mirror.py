@@ -61,7 +61,7 @@ def test_the_hlc_mirrors_its_fence_before_flying_and_says_so() -> None:
     from antalate_lcm.msgs import hlc_error_t
     from antalate_lcm.msgs import mc_state_t as M
     from tests.emulators.mavlink_vehicle import BRISK
-    from tests.memory_agent import MemoryAgent
+    from tests.harness.memory_agent import MemoryAgent
     from tests.vehicles.test_mavlink_e2e import AP, AUTO_OPERATOR
 
     vehicle = MavlinkVehicle("127.0.0.1", 0, **BRISK).start()

@@ -83,7 +83,7 @@ def config(
                 "name": "attack",
                 "behaviors": [
                     {
-                        "plugin": "tests.adversarial_behaviors:FlyAt",
+                        "plugin": "tests.harness.bma:FlyAt",
                         "activate_on": ["MISSION"],
                         "params": {"lat": target[0], "lon": target[1], "speed": 5.0},
                     }

@@ -34,7 +34,7 @@ from tests.harness.jsonl import JsonLinesProcess
 from tests.harness.netns import NetNamespace
 from tests.harness.polling import wait_for
 from tests.harness.process import stop_process
-from tests.tls import make_tls
+from tests.harness.tls import make_tls
 
 LAN = "udpm://239.255.76.67:7667?ttl=0"
 LOCAL = "udpm://239.255.76.68:7668?ttl=0"

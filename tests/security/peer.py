@@ -38,8 +38,8 @@ import lcm
 
 from antalate_lcm.wire.security import sign, verify
 from antalate_lcm.wire.topics import MESSAGE_TYPES
+from tests.children.probe import matches, to_dict
 from tests.harness.jsonl import serve
-from tests.probe import matches, to_dict
 
 
 def fill(msg: Any, fields: dict[str, Any]) -> Any:

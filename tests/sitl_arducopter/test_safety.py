@@ -62,7 +62,7 @@ def fly_at_centroid() -> list[dict[str, Any]]:
             "name": "attack",
             "behaviors": [
                 {
-                    "plugin": "tests.adversarial_behaviors:FlyAt",
+                    "plugin": "tests.harness.bma:FlyAt",
                     "activate_on": ["MISSION"],
                     "params": {"lat": lat, "lon": lon, "speed": SPEED},
                 }

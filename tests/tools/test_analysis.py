@@ -25,7 +25,7 @@ from antalate_lcm.base.errors import AntalateError
 from antalate_lcm.base.geo import offset
 from antalate_lcm.cli import main
 from antalate_lcm.msgs import mc_state_t, velocity_cmd_t
-from tests.synthetic_logs import CORNERS, LAT0, LON0, LogWriter, square_swarm
+from tests.harness.synthetic_logs import CORNERS, LAT0, LON0, LogWriter, square_swarm
 
 
 # ----------------------------------------------------------------------------- reading

@@ -14,7 +14,7 @@ from antalate_lcm.apps.analysis.safety import event_kind
 from antalate_lcm.base.safety.geofence import Geofence
 from antalate_lcm.cli import main
 from antalate_lcm.msgs import mc_state_t
-from tests.synthetic_logs import LAT0, LON0, LogWriter
+from tests.harness.synthetic_logs import LAT0, LON0, LogWriter
 
 FENCE = Geofence(((-20.0, -20.0), (-20.0, 20.0), (20.0, 20.0), (20.0, -20.0)), 0.0, 30.0, 2.0)
 

@@ -18,7 +18,7 @@ from tests.conftest import MCAST_URL, Probe
 from tests.harness.agents import agent_config
 from tests.harness.netns import NetNamespace
 from tests.harness.process import stop_process
-from tests.npm_tools import node_modules
+from tests.tools.npm_tools import node_modules
 
 CLIENT = Path(__file__).parent.parent / "node" / "foxglove_client.mjs"
 PORT = 8765  # inside the test's own network namespace: no other server can hold it

@@ -40,8 +40,8 @@ from antalate_lcm.msgs import (
 )
 from antalate_lcm.wire import lcm_json
 from antalate_lcm.wire.topics import MESSAGE_TYPES
-from tests.npm_tools import run_node
-from tests.synthetic_logs import LAT0, LON0, T0, LogWriter
+from tests.harness.synthetic_logs import LAT0, LON0, T0, LogWriter
+from tests.tools.npm_tools import run_node
 
 MCAP_CHECK = Path(__file__).parent.parent / "node" / "mcap_check.mjs"
 
@@ -256,7 +256,7 @@ def test_raw_keeps_the_lcm_bytes_and_reads_back_as_the_log(tmp_path: Path) -> No
         assert got.directions == want.directions
     assert read_log(out).undecodable == want.undecodable == {"a-2/TELEMETRY": 1}
     # plot reads it too, and names its PNG after the MCAP file
-    from tests.synthetic_logs import square_swarm
+    from tests.harness.synthetic_logs import square_swarm
 
     swarm = tmp_path / "swarm.mcap"
     assert main(["export", str(square_swarm().write(tmp_path / "swarm.lcm")), "-o", str(swarm)]) == 0

@@ -30,10 +30,10 @@ from antalate_lcm.msgs import header_t, mc_state_t, telemetry_t
 from antalate_lcm.tools import codegen as _codegen
 from antalate_lcm.wire.topics import Message
 from tests import REPO
+from tests.harness.lcm_tables import dimensions, fingerprint, slots, typenames
 from tests.harness.netns import private_netns, require_netns
 from tests.harness.polling import wait_for
 from tests.harness.process import OutputLines, group_members, stop_process
-from tests.lcm_tables import dimensions, fingerprint, slots, typenames
 
 JAVA_SRC = Path(__file__).resolve().parent.parent / "java" / "DecodeCheck.java"
 MCAST_URL = "udpm://239.255.76.67:7667?ttl=0"

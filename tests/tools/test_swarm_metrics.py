@@ -1,7 +1,7 @@
 """Swarm metrics for any algorithm (antalate_lcm/apps/analysis/swarm.py, geometry.py, phases.py) against
 synthetic trajectories whose answers are worked out by hand in each test.
 
-The logs are written with ``lcm.EventLog`` as ``lcm-logger`` writes them (tests/synthetic_logs.py),
+The logs are written with ``lcm.EventLog`` as ``lcm-logger`` writes them (tests/harness/synthetic_logs.py),
 so the whole path -- reading, the local frame, sampling, the metrics -- is the one a user's log takes.
 """
 
@@ -26,7 +26,7 @@ from antalate_lcm.apps.analysis.swarm import sample_times
 from antalate_lcm.cli import main
 from antalate_lcm.msgs import mc_state_t
 from tests import REPO
-from tests.synthetic_logs import CORNERS, LogWriter
+from tests.harness.synthetic_logs import CORNERS, LogWriter
 
 R0 = 10 * math.sqrt(2)  # a corner's distance to the centre of the 20 m square
 

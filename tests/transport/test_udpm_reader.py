@@ -32,8 +32,23 @@ def test_own_reader_and_liblcm_on_one_group(netns: NetNamespace) -> None:
     assert r["open_before_close"] == 3 and r["open_after_close"] == 0, r  # Buses.close() closes its socket
 
 
+#: A liblcm listener in a process of its own (argv: URL, channel, count): prints "ready", then the
+#: messages it heard, as a JSON list of strings, once it has ``count`` or 10 s have passed.
+_LISTENER = r"""
+import json, sys, time
+import lcm
+lc = lcm.LCM(sys.argv[1])
+heard = []
+lc.subscribe(sys.argv[2], lambda ch, d: heard.append(d.decode())).set_queue_capacity(10000)
+print("ready", flush=True)
+end = time.time() + 10
+while len(heard) < int(sys.argv[3]) and time.time() < end:
+    lc.handle_timeout(50)
+print(json.dumps(heard), flush=True)
+"""
+
 _OWN_SCRIPT = r"""
-import json, os, socket, struct, sys, time
+import json, os, socket, struct, subprocess, sys, time
 import lcm
 from pathlib import Path
 from antalate_lcm.core.bus import Buses
@@ -63,6 +78,9 @@ peer.subscribe("a", "OUT", None, lambda ch, d: got["peer"].append(d))
 heard = []
 lc = lcm.LCM(A)
 lc.subscribe("OUT", lambda ch, d: heard.append(d)).set_queue_capacity(1000)
+# another process on the host, as lcm-spy or lcm-logger: a liblcm instance of its own
+other = subprocess.Popen([sys.executable, "-c", LISTENER, A, "OUT", "20"], stdout=subprocess.PIPE, text=True)
+assert other.stdout.readline().strip() == "ready"
 time.sleep(0.2)
 before = drops(own)
 for i in range(20):
@@ -72,6 +90,7 @@ while len(heard) < 20 and time.time() < end:
     lc.handle_timeout(50)
 out["liblcm_hears_all"] = heard == [b"o%d" % i for i in range(20)]
 out["another_bus_of_the_process_hears_all"] = until(lambda: len(got["peer"]) == 20)
+out["another_process_hears_all"] = json.loads(other.communicate(timeout=20)[0]) == [f"o{i}" for i in range(20)]
 # the own socket's copies went no further than its filter (the kernel counts them as dropped)
 out["own_copies_dropped_in_the_kernel"] = until(lambda: drops(own) - before == 20)
 peer.publish("a", "IN", b"from peer")
@@ -109,8 +128,69 @@ def test_a_process_drops_its_own_datagrams_until_it_subscribes_to_them(netns: Ne
     subscription of the bus wants them, heard by everyone else, and heard again (for good) once the
     process subscribes to a channel it publishes on. Other processes' channels whose last part no
     subscription has are dropped in the kernel as well; a damaged datagram does not stop reception."""
-    proc = netns.python("-c", _OWN_SCRIPT, GROUP_A, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = netns.python(
+        "-c",
+        f"LISTENER = {_LISTENER!r}\n{_OWN_SCRIPT}",
+        GROUP_A,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err
     r = json.loads(out.strip().splitlines()[-1])
     assert all(r.values()), r
+
+
+_REFUSED_SCRIPT = r"""
+import json, logging, socket, sys, time
+from antalate_lcm.core.bus import Buses
+
+logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(name)s %(message)s")
+A = sys.argv[1]
+
+def until(cond, timeout=5.0):
+    end = time.time() + timeout
+    while not cond() and time.time() < end:
+        time.sleep(0.01)
+    return cond()
+
+own, peer = Buses({"a": A}), Buses({"a": A})
+conn = own._connection("a")
+conn._receiver = conn._open_receiver()
+# SO_LOCK_FILTER (asm-generic/socket.h): the kernel now refuses to attach a filter to this socket
+conn._receiver.sock.setsockopt(socket.SOL_SOCKET, 44, 1)
+got = {"in": [], "peer": []}
+own.subscribe("a", "IN", None, lambda ch, d: got["in"].append(d))
+own.subscribe("a", "IN2", None, lambda ch, d: got["in"].append(d))
+peer.subscribe("a", "OUT", None, lambda ch, d: got["peer"].append(d))
+time.sleep(0.2)
+for i in range(5):
+    own.publish("a", "OUT", b"o%d" % i)
+    own.publish("a", "x/IN", b"not a subscribed channel")
+peer.publish("a", "IN", b"from peer")
+peer.publish("a", "IN2", b"from peer 2")
+out = {
+    "others_heard": until(lambda: got["in"] == [b"from peer", b"from peer 2"]),
+    "peer_heard_all": until(lambda: len(got["peer"]) == 5),
+}
+time.sleep(0.2)
+out["own_not_delivered"] = got["in"] == [b"from peer", b"from peer 2"]
+out["unfiltered"] = conn._unfiltered and conn._filter == (None, None)
+for b in (own, peer):
+    b.close()
+print(json.dumps(out), flush=True)
+"""
+
+
+def test_a_socket_that_refuses_a_filter_is_read_in_full(netns: NetNamespace) -> None:
+    """Where the kernel will not attach the socket filter (here a filter lock, SO_LOCK_FILTER), the
+    bus says so once in a log line and reads every datagram: the process's own and other channels'
+    are dropped by channel, everyone else's are delivered, and nothing is raised."""
+    proc = netns.python("-c", _REFUSED_SCRIPT, GROUP_A, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    r = json.loads(out.strip().splitlines()[-1])
+    assert all(r.values()), (r, err)
+    said = [line for line in err.splitlines() if "cannot filter datagrams" in line]
+    assert len(said) == 1 and said[0].startswith("INFO antalate.bus"), err
+    assert "Traceback" not in err, err

@@ -16,7 +16,7 @@ import pytest
 
 from antalate_lcm.msgs import hlc_state_t as H
 from antalate_lcm.msgs import mc_state_t as M
-from tests.memory_agent import MemoryAgent
+from tests.harness.memory_agent import MemoryAgent
 
 pytest.importorskip("cflib")
 

@@ -37,9 +37,9 @@ from antalate_lcm.vehicles.mavlink import LinkOpener, MavlinkAdapter
 from tests.conftest import MCAST_URL, Probe
 from tests.emulators.mavlink_vehicle import BRISK, MavlinkVehicle
 from tests.harness.agents import AgentProcesses
+from tests.harness.memory_agent import MemoryAgent
 from tests.harness.netns import NetNamespace
 from tests.harness.process import stop_process
-from tests.memory_agent import MemoryAgent
 
 AP: dict[str, Any] = {
     "stream_rate_hz": 20.0,

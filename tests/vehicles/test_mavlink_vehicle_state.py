@@ -57,7 +57,7 @@ def test_heartbeat_sets_mode_and_arming_and_drops_the_setpoint_out_of_guided() -
     assert v.heartbeats == 1 and v.heartbeat_at == 1.0 and v.heartbeat_msg == 1
     assert v.update(heartbeat(LOITER, armed=True), 1.5).drop_setpoint  # a pilot's switch
     assert v.update(heartbeat(GUIDED, armed=False), 2.0).drop_setpoint  # disarmed
-    state = v.autopilot_state(2.5)
+    state = v.vehicle_state(2.5)
     assert state.link_age == pytest.approx(0.5) and not state.armed
 
 
@@ -73,9 +73,9 @@ def test_a_mode_we_commanded_is_no_failsafe_and_loiter_is_a_pilot() -> None:
     v.update(heartbeat(GUIDED, armed=True), 0.0)
     v.commanded = ("RTL", 1.0)
     v.update(heartbeat(RTL, armed=True), 2.0)
-    assert v.autopilot_state(2.0).flight_mode is FlightMode.RTL and v.failsafes.reason == ""
+    assert v.vehicle_state(2.0).flight_mode is FlightMode.RTL and v.failsafes.reason == ""
     v.update(heartbeat(LOITER, armed=True), 3.0)
-    assert v.autopilot_state(3.0).flight_mode is FlightMode.MANUAL
+    assert v.vehicle_state(3.0).flight_mode is FlightMode.MANUAL
 
 
 def test_fence_status_names_the_failsafe_of_a_mode_change() -> None:
@@ -83,7 +83,7 @@ def test_fence_status_names_the_failsafe_of_a_mode_change() -> None:
     v.update(heartbeat(GUIDED, armed=True), 0.0)
     v.update(mav.MAVLink_fence_status_message(1, 1, mav.FENCE_BREACH_MAXALT, 0, 0), 0.5)
     v.update(heartbeat(RTL, armed=True), 1.0)
-    state = v.autopilot_state(1.0)
+    state = v.vehicle_state(1.0)
     assert v.fence_breached and state.failsafe == "fence breach" and state.autonomous
 
 
@@ -105,7 +105,7 @@ def test_position_battery_and_params() -> None:
     v.update(mav.MAVLink_global_position_int_message(0, 0, 0, 0, 1500, 0, 0, 0, 65535), 0.0)
     assert math.isnan(v.lat) and v.alt == 1.5 and v.heading is None  # no fix yet: lat/lon 0
     v.update(mav.MAVLink_attitude_message(0, 0, 0, -math.pi / 2, 0, 0, 0), 0.0)
-    assert v.autopilot_state(0.0).heading == pytest.approx(270.0)
+    assert v.vehicle_state(0.0).heading == pytest.approx(270.0)
     cells = [4100, 4100, 4100, 4100] + [0xFFFF] * 6
     v.update(
         mav.MAVLink_battery_status_message(
@@ -113,7 +113,7 @@ def test_position_battery_and_params() -> None:
         ),
         1.0,
     )
-    state = v.autopilot_state(1.0)
+    state = v.vehicle_state(1.0)
     assert state.cells == 4 and state.voltage == pytest.approx(16.4) and state.battery == 42
     assert state.battery_warning == "low" and "battery failsafe" in v.failsafes.active
     v.update(mav.MAVLink_param_value_message(b"FS_GCS_ENABLE", 1.0, mav.MAV_PARAM_TYPE_INT8, 1, 0), 1.0)
@@ -150,7 +150,7 @@ def test_a_battery_not_yet_reported_is_unknown_never_low() -> None:
     v = Vehicle()
     v.update(heartbeat(0, status=mav.MAV_STATE_BOOT), 0.0)
     v.update(sys_status(False, 0, -1), 0.1)
-    state = v.autopilot_state(0.1)
+    state = v.vehicle_state(0.1)
     assert (
         state.battery_warning == ""
         and not state.battery_known
@@ -158,7 +158,7 @@ def test_a_battery_not_yet_reported_is_unknown_never_low() -> None:
     )
     assert any("battery unknown" in r for r in v.not_ready())
     v.update(sys_status(True, 12600, 100), 0.2)
-    state = v.autopilot_state(0.2)
+    state = v.vehicle_state(0.2)
     assert state.battery_warning == "" and state.battery == 100 and state.voltage == pytest.approx(12.6)
     assert not any("battery" in r for r in v.not_ready())
 
@@ -167,15 +167,15 @@ def test_the_health_bit_is_a_level_and_a_healthy_report_clears_a_kept_warning() 
     v = Vehicle()
     v.update(heartbeat(GUIDED, armed=True, status=mav.MAV_STATE_ACTIVE), 0.0)
     v.update(sys_status(False, 10200, 20), 1.0)  # read, and failsafed (has_failsafed)
-    assert v.autopilot_state(1.0).battery_warning == "failsafe" and "battery failsafe" in v.failsafes.active
+    assert v.vehicle_state(1.0).battery_warning == "failsafe" and "battery failsafe" in v.failsafes.active
     v.update(mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, b"Battery 1 is low 10.20V", 0, 0), 1.1)
-    assert v.autopilot_state(1.1).battery_warning == "low"
+    assert v.vehicle_state(1.1).battery_warning == "low"
     # the vehicle reports its battery healthy and not failsafed (a fresh pack, a monitor reset): nothing stays
     v.update(sys_status(True, 12500, 95), 2.0)
-    assert v.autopilot_state(2.0).battery_warning == "" and "battery failsafe" not in v.failsafes.active
+    assert v.vehicle_state(2.0).battery_warning == "" and "battery failsafe" not in v.failsafes.active
     # a monitor that stops reading in flight is unknown, not low
     v.update(sys_status(False, 0, -1), 3.0)
-    assert v.autopilot_state(3.0).battery_warning == "" and any("battery unknown" in r for r in v.not_ready())
+    assert v.vehicle_state(3.0).battery_warning == "" and any("battery unknown" in r for r in v.not_ready())
 
 
 def test_radio_failsafe_names_the_rtl_and_clears_with_the_radio() -> None:
@@ -195,7 +195,7 @@ def test_radio_failsafe_names_the_rtl_and_clears_with_the_radio() -> None:
     v.update(mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, b"Radio Failsafe", 0, 0), 1.0)
     v.update(heartbeat(RTL, armed=True, status=mav.MAV_STATE_CRITICAL), 1.05)
     v.update(status(False), 1.1)
-    state = v.autopilot_state(1.1)
+    state = v.vehicle_state(1.1)
     assert state.failsafe == "RC failsafe" and state.flight_mode is FlightMode.RTL and state.autonomous
     v.update(mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, b"Radio Failsafe Cleared", 0, 0), 9.0)
     v.update(status(True), 9.1)
@@ -216,4 +216,4 @@ def test_a_command_is_spent_once_the_vehicle_leaves_for_another_mode() -> None:
     assert v.failsafes.reason == "battery failsafe"
     v.update(mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, b"Battery Failsafe", 0, 0), 3.0)
     v.update(heartbeat(land, armed=True), 3.1)
-    assert v.failsafes.reason == "battery failsafe" and v.autopilot_state(3.1).failsafe == "battery failsafe"
+    assert v.failsafes.reason == "battery failsafe" and v.vehicle_state(3.1).failsafe == "battery failsafe"

@@ -121,7 +121,7 @@ def test_our_takeoff_ends_in_our_hold_and_our_offboard_is_ours() -> None:
     v.commanded = ("AUTO.TAKEOFF", 1.0)
     v.update(heartbeat(TAKEOFF), 1.5)
     v.update(heartbeat(HOLD), 9.0)  # PX4 switched by itself, long after the command
-    assert v.ours and v.autopilot_state(9.0).flight_mode is FlightMode.GUIDED
+    assert v.ours and v.vehicle_state(9.0).flight_mode is FlightMode.GUIDED
     v.commanded = ("OFFBOARD", 10.0)
     v.update(heartbeat(OFFBOARD), 10.2)
     assert v.ours and v.flying_guided
@@ -143,16 +143,16 @@ def test_an_adapter_restarted_in_flight_takes_px4s_hold_and_offboard_as_its_own(
     v = Px4Vehicle()
     v.update(in_air(), 0.0)
     v.update(heartbeat(mode, armed, status), 0.0)  # the first HEARTBEAT this adapter hears
-    assert v.autopilot_state(0.0).flight_mode is expected
+    assert v.vehicle_state(0.0).flight_mode is expected
     assert v.ours is (expected is FlightMode.GUIDED)
     v.update(heartbeat(POSCTL, armed, status), 1.0)  # the pilot's next mode change is still a pilot's
-    assert v.autopilot_state(1.0).flight_mode is not FlightMode.GUIDED
+    assert v.vehicle_state(1.0).flight_mode is not FlightMode.GUIDED
 
 
 def test_a_pilots_mode_change_is_manual_and_drops_the_setpoint() -> None:
     v = flying(OFFBOARD)
     update = v.update(heartbeat(HOLD), 2.0)  # another ground station's Hold, no failsafe flag
-    state = v.autopilot_state(2.0)
+    state = v.vehicle_state(2.0)
     assert update.drop_setpoint and not state.autonomous and state.flight_mode is FlightMode.MANUAL
     assert state.failsafe == ""
 
@@ -160,15 +160,15 @@ def test_a_pilots_mode_change_is_manual_and_drops_the_setpoint() -> None:
 def test_leaving_offboard_with_the_failsafe_flag_is_offboard_loss_and_its_action_keeps_the_reason() -> None:
     v = flying(OFFBOARD)
     v.update(heartbeat(HOLD, status=mav.MAV_STATE_CRITICAL), 2.0)
-    state = v.autopilot_state(2.0)
+    state = v.vehicle_state(2.0)
     assert (state.flight_mode, state.autonomous, state.failsafe) == (
         FlightMode.HOLD,
         True,
         failsafe.OFFBOARD_LOSS,
     )
     v.update(heartbeat(RTL, status=mav.MAV_STATE_CRITICAL), 7.0)  # COM_FAIL_ACT_T later: the action
-    assert v.autopilot_state(7.0).failsafe == failsafe.OFFBOARD_LOSS
-    assert v.autopilot_state(7.0).flight_mode is FlightMode.RTL
+    assert v.vehicle_state(7.0).failsafe == failsafe.OFFBOARD_LOSS
+    assert v.vehicle_state(7.0).flight_mode is FlightMode.RTL
 
 
 def test_battery_evidence_names_the_failsafe() -> None:
@@ -178,7 +178,7 @@ def test_battery_evidence_names_the_failsafe() -> None:
     )
     v.update(low, 1.0)
     v.update(heartbeat(RTL, status=mav.MAV_STATE_CRITICAL), 1.5)
-    state = v.autopilot_state(1.5)
+    state = v.vehicle_state(1.5)
     assert state.failsafe == "battery failsafe" and state.flight_mode is FlightMode.RTL
     assert state.battery_warning == "low"
 
@@ -188,7 +188,7 @@ def test_a_long_silence_before_the_failsafe_is_the_data_link() -> None:
     v.datalink_loss_after = 3.0
     v.update(heartbeat(HOLD), 1.0)
     v.update(heartbeat(RTL, status=mav.MAV_STATE_CRITICAL), 5.0)  # 4 s of nothing, then RTL
-    assert v.autopilot_state(5.0).failsafe == "GCS failsafe"
+    assert v.vehicle_state(5.0).failsafe == "GCS failsafe"
 
 
 def test_failsafe_priority_and_texts() -> None:

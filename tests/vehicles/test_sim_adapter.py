@@ -93,7 +93,7 @@ def test_initial_state_at_home() -> None:
         s.alt = 3.0  # type: ignore[misc]
 
 
-def test_snapshot_is_a_whole_autopilot_state() -> None:
+def test_snapshot_is_a_whole_vehicle_state() -> None:
     """The sim builds its 20-a-second snapshots without the dataclass's __init__ (sim.telemetry._state_of): each
     holds every field, the same state the constructor makes, and stays frozen and hashable."""
     sim, clock = make(cells=4, battery_warning_at=99.99)
@@ -120,7 +120,7 @@ def test_default_clock_is_monotonic() -> None:
     assert sim.clock is time.monotonic
 
 
-def test_autopilot_state_defaults_and_derivations() -> None:
+def test_vehicle_state_defaults_and_derivations() -> None:
     empty = VehicleState()
     assert not empty.connected and empty.link_age == math.inf and empty.battery == -1.0
     assert not empty.battery_known and empty.landed

@@ -21,7 +21,7 @@ from antalate_lcm.vehicles.base import AutopilotError
 from antalate_lcm.vehicles.tello import MemoryLink, Params, TelloAdapter
 from antalate_lcm.vehicles.tello.link import parse_state
 from tests.emulators.tello_emulator import TelloEmulator
-from tests.memory_agent import MemoryAgent
+from tests.harness.memory_agent import MemoryAgent
 from tests.vehicles.test_tello_e2e import config
 
 EMU: dict[str, Any] = {"takeoff_time": 0.5, "land_speed": 2.0, "max_vertical_speed": 1.5}

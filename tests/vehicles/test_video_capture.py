@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 
 from behaviors.video_capture import VideoCapture
-from tests.bma_support import AGENT, harness, make_config
+from tests.harness.bma import AGENT, harness, make_config
 from tests.harness.polling import wait_for
 
 needs_ffmpeg = pytest.mark.skipif(

@@ -11,7 +11,7 @@ import pytest
 
 from antalate_lcm.tools import codegen as _codegen
 from antalate_lcm.wire.topics import MESSAGE_TYPES
-from tests.lcm_tables import dimensions, slots, typenames
+from tests.harness.lcm_tables import dimensions, slots, typenames
 
 
 def test_generated_code_is_fresh() -> None:

@@ -1,6 +1,6 @@
-"""What the HLC machine asks of its node (docs/design.md §6): the autopilot `Action` s to perform, the
-``hlc_error_t`` s to publish (`HlcError`, codes `ErrorCode`), and the `HlcOutcome` of one input that
-carries them with the transition, if any. Pure values, shared by the table
+"""What the HLC machine asks of its node (docs/design.md §6): the `Action` s to perform on the vehicle
+adapter, the ``hlc_error_t`` s to publish (`HlcError`, codes `ErrorCode`), and the `HlcOutcome` of one
+input that carries them with the transition, if any. Pure values, shared by the table
 (:mod:`antalate_lcm.agent.hlc.table`), the machine and the node."""
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ class ActionKind(enum.Enum):
 
 @dataclass(frozen=True)
 class Action:
-    """One autopilot call; `altitude` is only meaningful for TAKEOFF (metres above home)."""
+    """One call on the vehicle adapter; `altitude` is only meaningful for TAKEOFF (metres above home)."""
 
     kind: ActionKind
     altitude: float = 0.0

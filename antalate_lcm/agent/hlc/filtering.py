@@ -1,10 +1,10 @@
 """What the HLC does with the separation and fence filter (docs/safety.md), apart from the node that
-polls the autopilot: the swarm picture one process shares, each set-point through the filter, the last
+polls the vehicle adapter: the swarm picture one process shares, each set-point through the filter, the last
 wish re-filtered as peers move, the filtered return leg, the filter's reports and policy, and the fence
 mirrored into the autopilot's own.
 
 :class:`SafetyDriver` belongs to one :class:`~antalate_lcm.agent.hlc.node.HlcNode` (built only with
-``[safety] enabled``) and acts through it: its autopilot calls, its hlc_error_t reports, its sends.
+``[safety] enabled``) and acts through it: its adapter calls, its hlc_error_t reports, its sends.
 """
 
 from __future__ import annotations

@@ -3,12 +3,12 @@
 Pure logic: no I/O, no clock. The HLC node feeds it three kinds of input and performs what comes out:
 
 * `HighLevelControl.on_mc_state(state, now, takeoff_altitude=...)` -- every ``mc_state_t`` heard;
-* `HighLevelControl.on_autopilot(snapshot, now)` -- every `VehicleState` polled (10 Hz or more);
+* `HighLevelControl.on_vehicle(snapshot, now)` -- every `VehicleState` polled (10 Hz or more);
 * `HighLevelControl.on_action_result(kind, ok, now)` -- the result of an `Action` the node performed;
 * `HighLevelControl.tick(now)` -- periodically, for timeouts.
 
 Each call returns an `HlcOutcome`: at most one `HlcTransition`, the `Action` s to perform on the
-autopilot, in order, and the `HlcError` s to publish as ``hlc_error_t``.
+vehicle adapter, in order, and the `HlcError` s to publish as ``hlc_error_t``.
 
 How inputs become events
 ------------------------
@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from antalate_lcm.agent.hlc.effects import (
     NOTHING,
@@ -45,6 +46,7 @@ from antalate_lcm.agent.hlc.effects import (
 )
 from antalate_lcm.agent.hlc.events import FAILSAFE_MODES, Control, HlcEvent, classify, pilot_in_control
 from antalate_lcm.agent.hlc.table import HLC_TABLE, HlcRow, HlcView
+from antalate_lcm.base.deprecation import renamed_attribute
 from antalate_lcm.base.state_machine import Table
 from antalate_lcm.vehicles.base import FlightMode, VehicleState, altitude_reached
 from antalate_lcm.wire.vocabulary import HlcState, McState, Severity
@@ -89,6 +91,10 @@ _MC_TAKEOFF, _MC_LAND, _MC_RTL, _MC_HOLD = McState.TAKEOFF, McState.LAND, McStat
 class HighLevelControl:
     """The HLC machine. Read `state`; feed observations; perform the returned actions."""
 
+    if not TYPE_CHECKING:  # the old names, one release (issue #26's vocabulary); mypy sees only the new
+        autopilot = renamed_attribute("vehicle")
+        on_autopilot = renamed_attribute("on_vehicle")
+
     def __init__(
         self,
         params: HlcParams | None = None,
@@ -100,7 +106,7 @@ class HighLevelControl:
         self.state: HlcState = HlcState.INIT
         self.entered_at: float | None = None  # `now` of the last transition
         self.mc_state: int | None = None  # last MC state heard (an McState value), None = never
-        self.autopilot: VehicleState | None = None  # last snapshot
+        self.vehicle: VehicleState | None = None  # the last snapshot of the vehicle
         self.mc_state_at_entry: int | None = None  # the MC's state when `state` began
         self.low_battery_handled = False  # LOW_BATTERY was entered since the last READY
         self.mc_moved = False  # the MC has been in another state than `mc_state_at_entry` since
@@ -128,7 +134,7 @@ class HighLevelControl:
     def battery_low_reason(self) -> str:
         """Why the battery counts as low ("" if it does not): percentage, volts per cell or the vehicle's
         own warning, whichever comes first. Unknown values (-1 %, NaN V) are never low."""
-        ap, p = self.autopilot, self.params
+        ap, p = self.vehicle, self.params
         if ap is None:
             return ""
         if ap.battery_known and ap.battery <= p.low_battery:
@@ -166,14 +172,14 @@ class HighLevelControl:
         # 5 a second (the MC's republished state): nearly all with no event.
         return self._fire(events, now) if events else NOTHING
 
-    def on_autopilot(self, snapshot: VehicleState, now: float, *, fault: str = "") -> HlcOutcome:
-        """An autopilot snapshot (the node polls `VehicleAdapter.state()`).
+    def on_vehicle(self, snapshot: VehicleState, now: float, *, fault: str = "") -> HlcOutcome:
+        """A snapshot of the vehicle (the node polls `VehicleAdapter.state()`).
 
         `fault` says why the snapshot is not fresh when the node knows (``state()`` raised: the node
         passes the last good snapshot with its `link_age` grown); it goes into the LLC_DOWN reason.
         """
-        self.autopilot = snapshot
-        events = self._autopilot_events(snapshot, fault)
+        self.vehicle = snapshot
+        events = self._vehicle_events(snapshot, fault)
         return self._fire(events, now) if events else NOTHING  # 20 a second, nearly all with none
 
     def on_action_result(self, kind: ActionKind, ok: bool, now: float, detail: str = "") -> HlcOutcome:
@@ -208,7 +214,7 @@ class HighLevelControl:
     # ----------------------------------------------------------------- event derivation
 
     def _takeoff_detail(self) -> str:
-        ap = self.autopilot
+        ap = self.vehicle
         battery = f"{ap.battery:.1f}%" if ap is not None and ap.battery_known else "unknown"
         low = self.battery_low_reason()
         return f"MC TAKEOFF to {self._requested_altitude():g} m, " + (
@@ -219,7 +225,7 @@ class HighLevelControl:
         return ap.connected and ap.link_age < self.params.link_timeout
 
     def _init_events(self) -> list[tuple[HlcEvent, str]]:
-        ap = self.autopilot
+        ap = self.vehicle
         if self.state is not HlcState.INIT or ap is None or not self.mc_heard or not self._link_fresh(ap):
             return []
         control = classify(ap)
@@ -252,7 +258,7 @@ class HighLevelControl:
         failsafe = f", failsafe: {ap.failsafe}" if ap.failsafe else ""
         return f"vehicle armed and in air, mode {ap.mode or '?'} at {ap.alt:.1f} m{failsafe}"
 
-    def _autopilot_events(self, ap: VehicleState, fault: str = "") -> list[tuple[HlcEvent, str]]:
+    def _vehicle_events(self, ap: VehicleState, fault: str = "") -> list[tuple[HlcEvent, str]]:
         p = self.params
         if ap.link_age >= p.link_timeout:
             # Nothing else the snapshot says can be trusted.

@@ -1,6 +1,6 @@
-"""The High-Level Control node: wires `HighLevelControl` and `VelocityGuard` to the bus and an autopilot.
+"""The High-Level Control node: wires `HighLevelControl` and `VelocityGuard` to the bus and a vehicle adapter.
 
-A control loop polls the autopilot at ``control_hz`` and feeds the machine; the actions it returns are
+A control loop polls the adapter at ``control_hz`` and feeds the machine; the actions it returns are
 performed in order, on a worker thread when the adapter's commands may block (see
 `VehicleAdapter.blocking`), and their results fed back. Telemetry goes out at ``telemetry_hz``.
 
@@ -205,7 +205,7 @@ class HlcNode(Node):
 
         self.run_call(self.adapter.connect, done)
 
-    # ------------------------------------------------------------------ running autopilot calls
+    # ------------------------------------------------------------------ running adapter calls
     def run_call(self, call: Any, done: Any) -> None:
         """Run ``call()``; then ``done(ok, detail)`` on the executor thread (inline for non-blocking adapters)."""
 
@@ -269,7 +269,7 @@ class HlcNode(Node):
     # ------------------------------------------------------------------ inputs
     def _on_mc_state(self, msg: mc_state_t) -> None:
         if not self.started:
-            return  # delivered after stop(): the autopilot is closed
+            return  # delivered after stop(): the adapter is closed
         self.mc_state = msg.state
         alt = (
             msg.takeoff_altitude if math.isfinite(msg.takeoff_altitude) and msg.takeoff_altitude > 0 else 0.0
@@ -322,7 +322,7 @@ class HlcNode(Node):
         self._polled_at = now
         machine = self.machine
         # 20 times a second per agent: most outcomes are NOTHING, checked here rather than in a call.
-        outcome = machine.on_autopilot(snapshot, now, fault=self._state_fault)
+        outcome = machine.on_vehicle(snapshot, now, fault=self._state_fault)
         if outcome is not NOTHING:
             self._handle(outcome)
         outcome = machine.tick(now)
@@ -416,8 +416,5 @@ class HlcNode(Node):
         self.publish("TELEMETRY", msg)
 
 
-#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
-_DEPRECATED_NAMES = {"make_autopilot": "make_adapter"}
-
-if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)
+if not TYPE_CHECKING:  # the old names (base.deprecation.RENAMED_NAMES), unseen by mypy
+    __getattr__ = renamed_names(__name__)

@@ -20,12 +20,13 @@ import threading
 import time
 from dataclasses import dataclass, field
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from antalate_lcm.apps.gcs.view import GcsRefusal, GcsView, OperatorRequest
+from antalate_lcm.base.deprecation import renamed_attribute
 from antalate_lcm.base.errors import AntalateError
 from antalate_lcm.core.config import Config
 from antalate_lcm.core.node import Context, Node, TopicMatch
@@ -61,19 +62,24 @@ class GcsStats:
 class GcsNode(Node):
     kind = "gcs"
 
+    if not TYPE_CHECKING:  # the old name, one release (issue #26's vocabulary); mypy sees only `ground`
+        link = renamed_attribute("ground")
+
     def __init__(
         self,
         config: Config,
         context: Context,
         view: GcsView,
-        link: Any,
+        ground: Any,
         *,
         commands: bool,
         clock: Any = time.monotonic,
     ) -> None:
         super().__init__(config, context)
         self.view = view
-        self.link = link
+        #: The pymavlink connection to the ground station(s): not a "link" (docs/architecture.md,
+        #: "Vocabulary": that is an adapter's I/O with its vehicle), the GCS's side of the picture.
+        self.ground = ground
         self.commands = commands
         self.clock = clock
         self.stats = GcsStats()
@@ -90,7 +96,7 @@ class GcsNode(Node):
     def _send(self, sysid: int, msg: Any) -> None:
         encoder = self._encoders.get(sysid)
         if encoder is None:
-            encoder = self._encoders[sysid] = mav.MAVLink(self.link, srcSystem=sysid, srcComponent=1)
+            encoder = self._encoders[sysid] = mav.MAVLink(self.ground, srcSystem=sysid, srcComponent=1)
         try:
             encoder.send(msg)
         except OSError as exc:  # no ground station yet (udpin before its first packet), or a dead route
@@ -174,11 +180,11 @@ class GcsNode(Node):
         )
 
 
-def _reader(link: Any, node: GcsNode, stop: threading.Event) -> None:
+def _reader(ground: Any, node: GcsNode, stop: threading.Event) -> None:
     """The ground station's packets (on this thread); commands go to the node's thread."""
     while not stop.is_set():
         try:
-            msg = link.recv_match(blocking=True, timeout=0.5)
+            msg = ground.recv_match(blocking=True, timeout=0.5)
         except Exception as exc:  # noqa: BLE001 - a hostile packet must not end the reader
             node.stats.bad_packets += 1
             log.debug("unreadable packet from the ground station: %s", exc)
@@ -222,7 +228,7 @@ def serve(
     except ValueError as exc:
         raise AntalateError(str(exc)) from None
     try:
-        link = mavutil.mavlink_connection(endpoint, source_system=255, dialect="ardupilotmega")
+        ground = mavutil.mavlink_connection(endpoint, source_system=255, dialect="ardupilotmega")
     except OSError as exc:
         raise AntalateError(f"cannot open {endpoint}: {exc.strerror or exc}") from None
     signalled: list[int] = []
@@ -232,9 +238,9 @@ def serve(
 
     previous = signal.signal(signal.SIGTERM, on_signal)
     context = Context.create(config)
-    node = GcsNode(config, context, view, link, commands=commands)
+    node = GcsNode(config, context, view, ground, commands=commands)
     stop = threading.Event()
-    reader = threading.Thread(target=_reader, args=(link, node, stop), name="gcs-reader", daemon=True)
+    reader = threading.Thread(target=_reader, args=(ground, node, stop), name="gcs-reader", daemon=True)
     try:
         context.bus.open()
         context.executor.start()
@@ -256,7 +262,7 @@ def serve(
         context.close()
         if reader.is_alive():
             reader.join(timeout=2)
-        link.close()
+        ground.close()
         signal.signal(signal.SIGTERM, previous)
     print(
         f"vehicles: {', '.join(f'{v.name}={v.sysid}' for v in view.vehicles.values()) or 'none heard'}",

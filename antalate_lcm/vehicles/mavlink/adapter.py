@@ -279,7 +279,7 @@ class MavlinkAdapter(MavlinkCommands):
         with self._cond:
             if not self._connected:
                 return VehicleState(connected=False, link_age=math.inf)
-            return self._v.autopilot_state(self.clock(), self._p.cells)
+            return self._v.vehicle_state(self.clock(), self._p.cells)
 
     # ----------------------------------------------------------------- extras (tools, tests)
 
@@ -307,8 +307,5 @@ class MavlinkAdapter(MavlinkCommands):
             return self._v.not_ready()
 
 
-#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
-_DEPRECATED_NAMES = {"MavlinkAutopilot": "MavlinkAdapter"}
-
-if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)
+if not TYPE_CHECKING:  # the old names (base.deprecation.RENAMED_NAMES), unseen by mypy
+    __getattr__ = renamed_names(__name__)

@@ -12,10 +12,11 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from antalate_lcm.base.deprecation import renamed_attribute
 from antalate_lcm.base.geo import wrap_360
 from antalate_lcm.vehicles.base import VehicleState
 from antalate_lcm.vehicles.mavlink import failsafe as fs
@@ -195,7 +196,10 @@ class Vehicle:
     def summary(self) -> str:
         return f"mode {self.mode}, {status_name(self.system_status)}, {'armed' if self.armed else 'disarmed'}"
 
-    def autopilot_state(self, now: float, cells: int = 0) -> VehicleState:
+    if not TYPE_CHECKING:  # the old name, one release (issue #26's vocabulary); mypy sees only the new
+        autopilot_state = renamed_attribute("vehicle_state")
+
+    def vehicle_state(self, now: float, cells: int = 0) -> VehicleState:
         """The HLC's view at `now` (``cells`` from the config, 0 = as counted from BATTERY_STATUS)."""
         link_age = math.inf if self.heartbeat_at is None else max(0.0, now - self.heartbeat_at)
         mode = self.mode

@@ -1,4 +1,4 @@
-"""The ``px4`` autopilot adapter: PX4 through the MAVLink adapter's link, threads and rules, split by job:
+"""The ``px4`` vehicle adapter: PX4 through the MAVLink adapter's link, threads and rules, split by job:
 
 * `adapter` -- `Px4Adapter`: PX4's commands, the OFFBOARD hand-over, the vehicle checks;
 * `modes` -- PX4's (main, sub) modes, their names and what they mean to the HLC (pure);
@@ -20,8 +20,5 @@ from antalate_lcm.vehicles.px4.params import PX4_DEFAULTS, Px4Params
 __all__ = ["PX4_DEFAULTS", "Px4Adapter", "Px4Params"]
 
 
-#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
-_DEPRECATED_NAMES = {"Px4Autopilot": "Px4Adapter"}
-
-if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)
+if not TYPE_CHECKING:  # the old names (base.deprecation.RENAMED_NAMES), unseen by mypy
+    __getattr__ = renamed_names(__name__)

@@ -130,8 +130,8 @@ class Px4Vehicle(Vehicle):
     def latest_prearm(self) -> str:
         return next((t for _, _, t in reversed(self.texts) if t.startswith(("Preflight", "Arming"))), "")
 
-    def autopilot_state(self, now: float, cells: int = 0) -> VehicleState:
-        base = super().autopilot_state(now, cells)
+    def vehicle_state(self, now: float, cells: int = 0) -> VehicleState:
+        base = super().vehicle_state(now, cells)
         flight_mode, autonomous, failsafe = modes.classify(
             self.mode, ours=self.ours, failsafe=self.px4_failsafe
         )

@@ -1,6 +1,6 @@
 """Drive the web console in headless Chromium through its DevTools protocol (run inside a namespace).
 
-``python -m tests.cdp_console DEVTOOLS_HTTP PAGE_URL KEY_FILE SCREENSHOT AGENT [AGENT ...]``: open the
+``python -m tests.console.cdp_console DEVTOOLS_HTTP PAGE_URL KEY_FILE SCREENSHOT AGENT [AGENT ...]``: open the
 page, sign in with the key, wait until the console's terminal output names every agent, press ``T``
 (take off all) and ``y`` (confirm), take a screenshot, and print one JSON line: the URLs the page
 requested and what it saw. The test checks the rest (the agents' states on the bus).

@@ -7,7 +7,7 @@ several hosts). Commands that are only checked are parsed by antalate's own pars
 name is checked the way the command itself would before doing anything: a config is loaded and
 validated with its plugins, ``antalate run`` runs its whole pre-flight check (``prepare``).
 
-Run as ``python -m tests.doc_snippets antalate ARGS...`` it checks one command line in the current
+Run as ``python -m tests.architecture.doc_snippets antalate ARGS...`` it checks one command line in the current
 folder (the tutorial's test uses it for its ``check`` blocks, inside the tutorial's folder).
 """
 
@@ -147,6 +147,6 @@ def check_antalate(args: list[str], cwd: Path, *, parse_only: bool = False) -> N
 
 if __name__ == "__main__":
     if sys.argv[1:2] != ["antalate"]:
-        sys.exit("usage: python -m tests.doc_snippets antalate ARGS...")
+        sys.exit("usage: python -m tests.architecture.doc_snippets antalate ARGS...")
     check_antalate(sys.argv[2:], Path.cwd())
     print(f"checked: antalate {shlex.join(sys.argv[2:])}")

@@ -4,7 +4,7 @@ The suite mostly waits (vehicles climbing, firmware booting, links timing out), 
 workers than cores. What then bounds it is the tail: with xdist's default order (the modules with the
 most tests first) the real-firmware modules, each a few long tests, came last and ran on after the rest
 had finished. Here the modules go out longest first (a greedy longest-processing-time schedule) from
-the times measured in ``tests/module_times.json``; a module not in it counts as `DEFAULT_S`.
+the times measured in ``tests/harness/module_times.json``; a module not in it counts as `DEFAULT_S`.
 
 The real-firmware modules form two units (`SITL_UNITS`), each run module after module on one worker,
 so that at most two of them fly at once: the modules that fly three vehicles at once with PX4's own
@@ -15,7 +15,7 @@ together had starved each other's simulators before. The swarm modules' file loc
 (`one_sitl_swarm_at_a_time`) still keeps them apart when the suite is run some other way.
 
 ``ANTALATE_MODULE_TIMES=FILE pytest ...`` writes the run's own times per module to FILE, in the format
-of ``tests/module_times.json``, to refresh it.
+of ``tests/harness/module_times.json``, to refresh it.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""One agent in the test process (MC + HLC + an ``auto_operator`` BMA on ``memq://``) for any autopilot.
+"""One agent in the test process (MC + HLC + an ``auto_operator`` BMA on ``memq://``) for any autopilot,
+run by `InProcess` (the one runner of nodes in the test's own process).
 
 What the memory-link tests of the Tello and Crazyflie adapters share: the agent is assembled by
 `agent_nodes` from a config, as ``antalate agent`` does, and the HLC's adapter can be the test's own
@@ -13,13 +14,13 @@ from dataclasses import dataclass
 from typing import Any, TypeVar
 
 from antalate_lcm.agent.hlc.node import HlcNode
-from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import parse_config
-from antalate_lcm.core.executor import Executor
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Node
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.vehicles.base import VehicleAdapter
+from tests.harness.agents import agent_config
+from tests.harness.inprocess import InProcess
 from tests.harness.polling import wait_for
 
 
@@ -33,7 +34,7 @@ class Seen:
 Agent = TypeVar("Agent", bound="MemoryAgent")
 
 
-class MemoryAgent:
+class MemoryAgent(InProcess):
     """An agent flying `autopilot` (a name and its params), optionally through the test's `adapter`."""
 
     def __init__(
@@ -47,49 +48,49 @@ class MemoryAgent:
         name: str = "memory",
         safety: dict[str, Any] | None = None,
     ) -> None:
-        doc = {
-            "agent": {"name": name},
-            "buses": {"lan": "memq://"},
-            "hlc": {"autopilot": autopilot, **(hlc or {}), "autopilot_params": params},
-            "safety": safety or {},
-            "bma": [
-                {
-                    "name": "operator",
-                    "behaviors": [
-                        {
-                            "plugin": "auto_operator",
-                            "activate_on": ["STANDBY", "MISSION"],
-                            "params": {"max_flights": 1, "retry": 0.5, **(operator or {})},
-                        }
-                    ],
-                }
-            ],
+        auto_operator = {
+            "plugin": "auto_operator",
+            "activate_on": ["STANDBY", "MISSION"],
+            "params": {"max_flights": 1, "retry": 0.5, **(operator or {})},
         }
-        self.config = parse_config(doc, f"{name}.toml")
-        self.context = Context(Buses(self.config.buses), Executor())
-        self.mc: list[Seen] = []
-        self.hlc: list[Seen] = []
-        self.errors: list[hlc_error_t] = []
-        self.probe = Node(self.config, self.context, name="probe")
-        self.nodes = agent_nodes(self.config, self.context)
-        if adapter is not None:  # the HLC comes first in agent_nodes
-            assert isinstance(self.nodes[0], HlcNode)
-            self.nodes[0] = HlcNode(self.config, self.context, adapter)
+        doc = agent_config(
+            name,
+            bus="memq://",
+            autopilot=autopilot,
+            sim=params,
+            fast=False,
+            takeoff=None,
+            hlc=hlc or {},
+            safety=safety or {},
+            bma=[{"name": "operator", "behaviors": [auto_operator]}],
+        )
+        super().__init__(parse_config(doc, f"{name}.toml"))
+        try:
+            self.mc: list[Seen] = []
+            self.hlc: list[Seen] = []
+            self.errors: list[hlc_error_t] = []
+            self.probe = Node(self.config, self.context, name="probe")
+            #: the agent's nodes as ``antalate agent`` assembles them, started by `start`
+            self.assembled = agent_nodes(self.config, self.context)
+            if adapter is not None:  # the HLC comes first in agent_nodes
+                assert isinstance(self.assembled[0], HlcNode)
+                self.assembled[0] = HlcNode(self.config, self.context, adapter)
+        except BaseException:
+            self.close()  # the executor InProcess started
+            raise
 
     def start(self: Agent) -> Agent:
-        self.context.executor.start()
-        self.probe.start()
+        self.add(self.probe)
         self.probe.subscribe("MC_STATE", lambda m: self._seen(self.mc, m))
         self.probe.subscribe("HLC_STATE", lambda m: self._seen(self.hlc, m))
         self.probe.subscribe("HLC_ERROR", self.errors.append)
-        for node in self.nodes:
-            node.start()
+        for node in self.assembled:
+            self.add(node)
         return self
 
     def stop(self) -> None:
-        for node in reversed([self.probe, *self.nodes]):
-            node.stop()
-        self.context.close()
+        """The agent's nodes, then the probe, then the context (`InProcess.close`)."""
+        self.close()
 
     @staticmethod
     def _seen(into: list[Seen], msg: mc_state_t | hlc_state_t) -> None:

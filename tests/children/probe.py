@@ -1,4 +1,5 @@
-"""A scriptable LCM peer that tests run inside a network namespace, driven by JSON lines on stdin.
+"""A scriptable LCM peer that tests run inside a network namespace, driven by JSON lines on stdin
+(``python -m tests.children.probe URL``; its client is the `probe` fixture of tests/conftest.py).
 
 Requests (one JSON object a line) and one JSON reply line each:
 - ``{"op": "publish", "channel": C, "type": "operator_cmd_t", "fields": {...}}``
@@ -10,7 +11,6 @@ Requests (one JSON object a line) and one JSON reply line each:
 
 from __future__ import annotations
 
-import json
 import re
 import sys
 import threading
@@ -20,6 +20,7 @@ from typing import Any
 import lcm
 
 from antalate_lcm.wire.topics import MESSAGE_TYPES
+from tests.harness.jsonl import serve
 
 
 def to_dict(msg: Any) -> Any:
@@ -88,45 +89,40 @@ def main() -> None:
                 out.append((i, d))
         return out
 
-    print(json.dumps({"ok": True, "ready": True}), flush=True)
-    for line in sys.stdin:
-        req = json.loads(line)
+    def handle(req: dict[str, Any]) -> dict[str, Any]:
         op = req["op"]
-        reply: dict[str, Any]
         if op == "publish":
             msg = fill(MESSAGE_TYPES[req["type"]](), req.get("fields", {}))
             lc.publish(req["channel"], msg.encode())
-            reply = {"ok": True}
-        elif op == "raw":
+            return {"ok": True}
+        if op == "raw":
             lc.publish(req["channel"], bytes.fromhex(req["hex"]))
-            reply = {"ok": True}
-        elif op == "wait":
+            return {"ok": True}
+        if op == "wait":
             pattern = re.compile(req["channel"])
             deadline = time.time() + req.get("timeout", 10)
             start = req.get("since", 0)
-            reply = {"ok": False}
             with cond:
                 while True:
                     hits = [
                         d for _, d in decoded(pattern, req["type"], start) if matches(d, req.get("where", {}))
                     ]
                     if hits:
-                        reply = {"ok": True, "msg": hits[0]}
-                        break
+                        return {"ok": True, "msg": hits[0]}
                     remaining = deadline - time.time()
                     if remaining <= 0:
-                        break
+                        return {"ok": False}
                     cond.wait(min(remaining, 0.2))
-        elif op == "history":
+        if op == "history":
             with cond:
                 recorded = decoded(re.compile(req["channel"]), req["type"], req.get("since", 0))
-                reply = {"ok": True, "msgs": [d for _, d in recorded]}
-        elif op == "mark":
+                return {"ok": True, "msgs": [d for _, d in recorded]}
+        if op == "mark":
             with cond:
-                reply = {"ok": True, "index": len(seen)}
-        else:
-            reply = {"ok": False, "error": f"unknown op {op}"}
-        print(json.dumps(reply), flush=True)
+                return {"ok": True, "index": len(seen)}
+        return {"ok": False, "error": f"unknown op {op}"}
+
+    serve(handle)
     stop.set()
 
 

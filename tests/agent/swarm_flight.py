@@ -22,7 +22,7 @@ from antalate_lcm.base import geo
 from antalate_lcm.msgs import mc_state_t, peer_scan_t, telemetry_t
 from antalate_lcm.vehicles.sim import DEFAULTS as SIM_DEFAULTS
 from antalate_lcm.wire.vocabulary import McState
-from tests.harness.agents import FAST_SIM
+from tests.harness.agents import agent_config
 
 AGENTS = 8
 BASE = "sw"
@@ -53,16 +53,17 @@ def config_doc(
     behavior: str, bus_url: str, state_dir: Path, *, name: str = BASE, index: int | None = None
 ) -> dict[str, Any]:
     """One agent's config (``index`` set: that agent's own name and home; else the base of --agents 8)."""
-    sim: dict[str, Any] = dict(FAST_SIM)
+    home_at: dict[str, Any] = {}
     if index is not None:
-        sim["home_lat"], sim["home_lon"] = home(index)
+        home_at["home_lat"], home_at["home_lon"] = home(index)
         name = NAMES[index]
-    return {
-        "agent": {"name": name},
-        "buses": {"lan": bus_url},
-        "hlc": {"autopilot": "sim", "default_takeoff_altitude": ALTITUDE, "autopilot_params": sim},
-        "security": {"swarm_key": KEY, "state_dir": str(state_dir)},
-        "bma": [
+    return agent_config(
+        name,
+        sim=home_at,
+        bus=bus_url,
+        takeoff=ALTITUDE,
+        security={"swarm_key": KEY, "state_dir": str(state_dir)},
+        bma=[
             {
                 "name": "operator",
                 "behaviors": [
@@ -80,7 +81,7 @@ def config_doc(
                 ],
             },
         ],
-    }
+    )
 
 
 def write_config(path: Path, doc: dict[str, Any]) -> Path:

@@ -17,6 +17,8 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from antalate_lcm.base.deprecation import renamed_names as _renamed_names
+
 __version__ = "0.1.0"
 
 _EXPORTS = {
@@ -57,22 +59,12 @@ if TYPE_CHECKING:
     from antalate_lcm.vehicles import VehicleAdapter, VehicleState
 
 
-#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
-_DEPRECATED_NAMES = {"Autopilot": "VehicleAdapter", "AutopilotState": "VehicleState", "Bus": "Buses"}
-
-
-def __getattr__(name: str) -> Any:
-    if name in _DEPRECATED_NAMES:  # an old name (docs/architecture.md, Vocabulary)
-        import warnings
-
-        new = _DEPRECATED_NAMES[name]
-        warnings.warn(
-            f"{__name__}.{name} is deprecated: use {__name__}.{new} (the old name goes in the next release)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return globals()[new] if new in globals() else __getattr__(new)
+def _export(name: str) -> Any:
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'antalate_lcm' has no attribute {name!r}")
     return getattr(importlib.import_module(module), name)
+
+
+if not TYPE_CHECKING:  # the old names (base.deprecation.RENAMED_NAMES), unseen by mypy
+    __getattr__ = _renamed_names(__name__, otherwise=_export)

@@ -4,5 +4,5 @@ users to forge test datagrams with it, so it keeps working, with a warning, for 
 from antalate_lcm.base.deprecation import moved_module
 from antalate_lcm.transports.datagram import Reassembler, channel_problem, fragments, short_datagram
 
-__getattr__ = moved_module(__name__, "antalate_lcm.transports.datagram")
+__getattr__ = moved_module(__name__)
 __all__ = ["Reassembler", "channel_problem", "fragments", "short_datagram"]

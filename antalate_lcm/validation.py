@@ -5,4 +5,4 @@ docs imported it, so it keeps working, with a warning, for one release (:mod:`an
 from antalate_lcm.base.deprecation import moved_module
 from antalate_lcm.wire.validation import *  # noqa: F403 - the old name offers what the new one does
 
-__getattr__ = moved_module(__name__, "antalate_lcm.wire.validation")
+__getattr__ = moved_module(__name__)

@@ -186,7 +186,7 @@ def checker() -> Authenticator:
 def make_node(agent: str, api: str = "node") -> Any:
     """A bare node (no key: unsigned like raw lcm) with its own context, its loop running."""
     from antalate_lcm.core.config import parse_config
-    from antalate_lcm.core.node import Context, Node
+    from antalate_lcm.core.node import Context, Node, NodeSettings
 
     # insecure: TELEMETRY is an agent-internal topic, and this compares transports, not keys
     config = parse_config(
@@ -195,7 +195,7 @@ def make_node(agent: str, api: str = "node") -> Any:
     context = Context.create(config)
     context.bus.open()
     context.executor.start()
-    node = Node(config, context, name="bench")
+    node = Node(NodeSettings.from_config(config), context, name="bench")
     node.start()
     return node
 

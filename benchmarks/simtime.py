@@ -16,6 +16,11 @@ RTL), seed 1:
 - the wall clock: the real seconds of the same flight and the share of a core it took (above 100 %
   the process cannot keep up: its timers run late, as ``benchmarks/agents.py`` shows).
 
+Beside each, ``us/ag-s``: the CPU microseconds per agent and simulated (or, on the wall clock,
+real) second. On the same machine at the same moment the two are what simulated time costs over
+the agents' own work (its loop, timer grid and held start and stop): 2x real time for 1,000 agents
+on one core needs 500 us per agent-second.
+
 The metrics of ``antalate run`` are skipped (their analysis is not the flight). The machine is
 shared, so its load average is printed beside the figures (docs/design.md §12).
 
@@ -35,6 +40,11 @@ over two processes 17.6x and 14.1x (3.2x and 3.5x before) with 40 rounds per sim
 instead of 1,802. 1,000 agents: one process 1.0x and 1.5x at load 1.8-2.7 (1.3x and 1.1x before:
 the agents' own work dominates), two processes 1.1x and 1.4x (1.0x and 0.7x before) with 40 rounds
 instead of 2,000 and a third less CPU. Goal met for 100 agents at low load; not for 1,000 (2x).
+
+Measured 2026-11-27 later, load 2-6, main alternated with the run's stop in C (docs/experiments.md,
+"Where a simulated second of 1,000 agents goes"): 100 agents 16.4-18.6x (main 8.4-13.7x), simulated
+time 508-644 us of CPU per agent-second against the wall clock's 1,112-1,456; 1,000 agents 0.6-0.8x
+(main 0.4-0.6x), 863-954 us per agent-second: 2x on one core needs 500, the agents' own work.
 """
 
 from __future__ import annotations
@@ -152,7 +162,7 @@ def main() -> None:
         (tmp / "script.toml").write_text(SCRIPT.format(mission=args.mission))
         print(
             f"{'agents':>6}  {'procs':>5}  {'simulated':>9}  {'real':>7}  {'speed-up':>8}  {'cpu':>7}  "
-            f"{'sim/cpu':>7}   wall clock: real, core   load   rounds/sim s"
+            f"{'sim/cpu':>7}  {'us/ag-s':>7}   wall clock: real, core, us/ag-s   load   rounds/sim s"
         )
         for n in args.sizes:
             load_before = os.getloadavg()[0]
@@ -166,12 +176,13 @@ def main() -> None:
                 w = (
                     "-"
                     if wall is None or p > 1
-                    else f"{wall['real_s']:7.1f} s, {100 * wall['cpu_s'] / wall['real_s']:4.0f} %"
+                    else f"{wall['real_s']:7.1f} s, {100 * wall['cpu_s'] / wall['real_s']:4.0f} %, "
+                    f"{1e6 * wall['cpu_s'] / (n * wall['real_s']):4.0f}"
                 )
                 rounds = "-" if sim.get("rounds") is None else f"{sim['rounds'] / s:.0f}"
                 print(
                     f"{n:>6}  {p:>5}  {s:>7.1f} s  {r:>5.1f} s  {s / r:>7.1f}x  {c:>5.1f} s  {s / c:>6.1f}x"
-                    f"   {w}   {load}   {rounds}",
+                    f"  {1e6 * c / (n * s):>7.0f}   {w}   {load}   {rounds}",
                     flush=True,
                 )
 

@@ -34,7 +34,7 @@ MAX_DRIFT_ERROR_DEG = 20.0
 
 def fly(agents: int, mission_time: float, azimuth: float, speed: float) -> tuple[bool, str]:
     """The demo's headless flight, with an operator timeout long enough for a long mission."""
-    from antalate_lcm.core.node import Node
+    from antalate_lcm.core.node import Node, NodeSettings
     from antalate_lcm.runtime.agent import agent_nodes
     from antalate_lcm.runtime.demo import DEMO_URL, build_swarm, open_context, start_station
     from antalate_lcm.runtime.launch import run_until_signal
@@ -46,7 +46,7 @@ def fly(agents: int, mission_time: float, azimuth: float, speed: float) -> tuple
         configs = build_swarm(agents, url, station=station.url)
         nodes: list[Node] = [node for cfg in configs for node in agent_nodes(cfg, context)]
         operator = ScriptedOperator(
-            configs[0].with_agent_name("operator"),
+            NodeSettings.from_config(configs[0], agent="operator"),
             context,
             expected_agents=agents,
             mission_time=mission_time,

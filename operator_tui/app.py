@@ -30,7 +30,7 @@ from textual.screen import Screen
 from textual.widgets import Footer
 
 from antalate_lcm.core.config import Config
-from antalate_lcm.core.node import Context
+from antalate_lcm.core.node import Context, NodeSettings
 from antalate_lcm.wire.vocabulary import Severity
 from operator_tui.board import SwarmBoard
 from operator_tui.commands import CommandTracker, CommandUpdate, DirectionControl, Status, applies
@@ -186,7 +186,7 @@ class OperatorApp(App[None]):
     ) -> None:
         super().__init__()
         self.settings = settings or ConsoleSettings()
-        self.config = config.with_agent_name(name)
+        self.config = config
         self._own_context = context is None
         self.context = context if context is not None else Context.create(self.config)
         self.clock = clock
@@ -194,7 +194,9 @@ class OperatorApp(App[None]):
         self.time_format = time_format
         self.exit_after = exit_after
         s = self.settings
-        self.node = OperatorNode(self.config, self.context, clock=clock, wallclock=wallclock)
+        self.node = OperatorNode(
+            NodeSettings.from_config(config, agent=name), self.context, clock=clock, wallclock=wallclock
+        )
         self.board = SwarmBoard(stale_after=s.stale_after)
         self.tracker = CommandTracker(
             resend_interval=s.resend_interval, timeout=s.command_timeout, first_seq=s.first_seq

@@ -47,5 +47,5 @@ def cmd_tui(args: argparse.Namespace) -> int:
         )
     import operator_tui
 
-    config = load_config(args.config) if args.config else load_config(None).with_agent_name("operator")
-    return operator_tui.run(config, name=args.name or config.agent.name)
+    config = load_config(args.config)  # the swarm's buses, topics and key (None: the defaults')
+    return operator_tui.run(config, name=args.name or (config.agent.name if args.config else "operator"))

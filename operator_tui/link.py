@@ -4,4 +4,4 @@
 from antalate_lcm.base.deprecation import moved_module
 from operator_tui.node import *  # noqa: F403 - the old name offers what the new one does
 
-__getattr__ = moved_module(__name__, "operator_tui.node")
+__getattr__ = moved_module(__name__)

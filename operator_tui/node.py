@@ -29,8 +29,7 @@ from typing import Any
 
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.bus import Subscription
-from antalate_lcm.core.config import Config
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Context, Node, NodeSettings
 from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
 from antalate_lcm.wire.topics import Message, channel_regex
 from operator_tui.board import WATCHED_TOPICS
@@ -78,25 +77,27 @@ class Incoming:
 
 
 class OperatorNode(Node):
-    """Watches MC_STATE, HLC_STATE, TELEMETRY, HLC_ERROR and ARBITER of every agent; sends commands."""
+    """Watches MC_STATE, HLC_STATE, TELEMETRY, HLC_ERROR and ARBITER of every agent; sends commands.
+
+    ``settings``: the swarm's buses, topics and key under the console's own name
+    (`NodeSettings.from_config` with ``agent``): a node of its own, not an agent."""
 
     kind = "operator"
 
     def __init__(
         self,
-        config: Config,
+        settings: NodeSettings,
         context: Context,
         *,
         clock: Callable[[], float] = time.monotonic,
         wallclock: Callable[[], float] = time.time,
     ) -> None:
-        super().__init__(config, context, watcher=True)  # it watches agents, flies none
+        super().__init__(settings, context, watcher=True)  # it watches agents, flies none
         self.clock = clock
         self.wallclock = wallclock
         #: Events in arrival order, and the newest sample per channel (written on the loop thread).
         self.inbox: deque[tuple[str, bytes, float]] = deque()
         self.latest: dict[str, tuple[bytes, float]] = {}
-        self.swarm_key = config.security.swarm_key
         #: With a swarm key, what the console shows and counts as an acknowledgement must be signed
         #: by a swarm member: a forged mc_state_t would otherwise stop the resends of a command the
         #: MC never accepted. Checked (`NodeAdmission.check_datagram`) only on what is decoded (a state
@@ -121,7 +122,7 @@ class OperatorNode(Node):
         for topic in WATCHED_TOPICS:
             spec = self.topic_spec(topic)
             self._decoders[topic] = (spec.msg_type, re.compile(channel_regex(spec.channel)))
-            by_bus.setdefault(self.config.topic_buses(topic)[0], []).append(topic)
+            by_bus.setdefault(self.settings.topic_buses(topic)[0], []).append(topic)
         for bus, topics in by_bus.items():
             # One regex per bus, not one per topic: the bus matches every datagram against every
             # pattern subscription; which topic a channel is gets worked out once per channel.
@@ -273,5 +274,5 @@ class OperatorNode(Node):
 
     def bus_summary(self) -> str:
         """'lan=udpm://…' for the topics the console watches (shown in the status bar)."""
-        names = sorted({b for t in WATCHED_TOPICS for b in self.config.topic_buses(t)[:1]})
-        return ", ".join(f"{n}={self.config.buses[n]}" for n in names)
+        names = sorted({self.settings.topic_buses(t)[0] for t in WATCHED_TOPICS})
+        return ", ".join(f"{n}={self.settings.buses[n]}" for n in names)

@@ -15,9 +15,11 @@ from types import ModuleType
 from typing import Any
 
 from antalate_lcm import vehicles as _moved
+from antalate_lcm.base.deprecation import MOVED_MODULES
 from antalate_lcm.vehicles import *  # noqa: F403 - the old name offers what the new one does
 
-_OLD, _NEW = "antalate_lcm.autopilot", "antalate_lcm.vehicles"
+_OLD = __name__
+_NEW = MOVED_MODULES[_OLD]
 
 warnings.warn(
     f"{_OLD} is deprecated: import {_NEW} (the old name goes in the next release)",

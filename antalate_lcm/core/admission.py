@@ -7,7 +7,8 @@ which buses the network reaches, the warnings said once per bus, where replay me
 gets its :class:`NodeAdmission` from it (:meth:`Admission.for_node`), and so do the two places that are
 not plain publish/subscribe: the OSC relaying what an operator signed (:meth:`NodeAdmission.vet_relay`,
 through ``Node.relay``), and the operator console checking raw datagrams it decodes itself
-(:meth:`NodeAdmission.check_datagram`).
+(:meth:`NodeAdmission.check_datagram`). What is signed is signed by :func:`sealer`'s encoder, the nodes'
+and the station client's (``antalate_lcm.station.client``, an operator's commands) alike.
 
 A node's admission is built once and read on every message of the node's hot path:
 :attr:`NodeAdmission.seal` is the encoder itself (no branch per message), :meth:`NodeAdmission.admit`
@@ -25,7 +26,8 @@ from typing import Any, Protocol
 
 from antalate_lcm.base.errors import InsecureBus
 from antalate_lcm.base.ratelimit import RateLimitedLog
-from antalate_lcm.core.config import Config, SecurityConfig
+from antalate_lcm.core.config import SecurityConfig
+from antalate_lcm.core.node_settings import NodeSettings
 from antalate_lcm.wire import validation
 from antalate_lcm.wire.fastcodec import encode as fast_encode
 from antalate_lcm.wire.security import (
@@ -45,6 +47,13 @@ from antalate_lcm.wire.topics import OPERATOR_INPUTS, PERSISTED_TYPES, Message, 
 INSECURE_REMINDER = 60.0
 
 
+def sealer(key: str) -> Callable[[Message], bytes]:
+    """The encoder of a stamped message sent under ``key``: it signs (fills ``header.mac``, the one
+    signing code of antalate) and returns the bytes; without a key, it only encodes. Chosen once, so
+    a publish pays no branch for it."""
+    return functools.partial(signed_bytes, key=key) if key else fast_encode
+
+
 @dataclass(frozen=True, slots=True)
 class RelayRefusal:
     """Why a relayed message was not published: ``reason`` is the counter's key (``unsigned``,
@@ -62,10 +71,14 @@ class Owner(Protocol):
     agent: str
     name: str
     kind: str
-    config: Config
+    settings: NodeSettings
     log: logging.Logger
     #: Read when the authenticator is first needed: a node may set its own after it was built.
     wallclock: Callable[[], float]
+
+    def create_timer(self, period: float, fn: Callable[[], Any], *, first_delay: float | None = None) -> Any:
+        """A periodic timer of the node's (an insecure node's reminders), cancelled when it stops."""
+        ...
 
 
 class Admission:
@@ -84,7 +97,7 @@ class Admission:
         self.open_warned: set[str] = set()
 
     def for_node(self, node: Owner, *, watcher: bool = False) -> NodeAdmission:
-        """The pipeline of one node, with the ``[security]`` settings and buses of its config.
+        """The pipeline of one node, with the ``[security]`` section and buses of its settings.
         ``watcher``: the node watches agents rather than flying one (the operator console, the
         scripted operator), so it may read agents' state from a network bus without a swarm key."""
         return NodeAdmission(self, node, watcher)
@@ -112,17 +125,14 @@ class NodeAdmission:
         self.node = node
         self.agent = node.agent
         self.kind = node.kind
-        security = self.settings = node.config.security
+        security = self.settings = node.settings.security
         self.log = log = node.log
         self.watcher = watcher
         self.policy = SecurityPolicy(security.swarm_key, tuple(security.previous_keys), security.window)
         #: Whether what this node publishes is signed (it has a swarm key).
         self.signs = bool(self.policy.key)
-        #: The bytes of a stamped message: signed with the swarm key if there is one. The encoder
-        #: itself, chosen once, so a publish pays no branch for it.
-        self.seal: Callable[[Message], bytes] = (
-            functools.partial(signed_bytes, key=self.policy.key) if self.signs else fast_encode
-        )
+        #: The bytes of a stamped message: signed with the swarm key if there is one (`sealer`).
+        self.seal = sealer(self.policy.key)
         #: Every key a signed message may carry, for the console's datagram check (empty: no check).
         self._datagram_keys = tuple(k for k in self.policy.keys if k)
         self._auth: Authenticator | None = None
@@ -139,7 +149,7 @@ class NodeAdmission:
         if self._auth is None and self.policy.enabled:
             store = None
             node = self.node  # its name and clock as they are now (a node may set its own clock)
-            state_dir = self.admission.state_dir(self.settings, node.config.buses)
+            state_dir = self.admission.state_dir(self.settings, node.settings.buses)
             if state_dir is not None:
                 store = HighWaterStore(state_dir / f"{self.agent}.{node.name}.replay.json")
             self._auth = Authenticator(
@@ -183,13 +193,13 @@ class NodeAdmission:
         self._insecure.clear()
         self._open_inputs.clear()
 
-    def check_exposure(self, topic: str, bus: str) -> bool:
+    def check_exposure(self, topic: str, bus: str) -> None:
         """Refuse (raise :class:`InsecureBus`) or, with ``insecure``, loudly accept an unauthenticated
-        input from the network. True when this is the node's first insecure input: the node then
-        runs :meth:`warn_insecure` every :data:`INSECURE_REMINDER` s on its timers."""
+        input from the network (what a node subscribes to, before it does). The node's first insecure
+        input warns at once, then every :data:`INSECURE_REMINDER` s on the node's timers."""
         url = self.admission.urls.get(bus, "")
         if self.policy.enabled or not network_reachable(url):
-            return False
+            return
         if topic in OPERATOR_INPUTS:
             warned = self.admission.open_warned
             if bus not in warned:
@@ -205,9 +215,9 @@ class NodeAdmission:
             elif not self._open_inputs:
                 self.log.debug("no [security] swarm_key: bus %r can command %s", bus, self.agent)
             self._open_inputs[topic] = bus
-            return False
+            return
         if self.watcher or not is_internal(topic):
-            return False
+            return
         if not self.settings.insecure:
             raise InsecureBus(
                 f"{self.kind} of {self.agent} would take {topic} from bus {bus!r} ({url}), which any host on "
@@ -219,7 +229,7 @@ class NodeAdmission:
         self._insecure[topic] = bus
         if first:
             self.warn_insecure()
-        return first
+            self.node.create_timer(INSECURE_REMINDER, self.warn_insecure, first_delay=INSECURE_REMINDER)
 
     def warn_insecure(self) -> None:
         where = ", ".join(f"{t} on {b!r}" for t, b in sorted(self._insecure.items()))

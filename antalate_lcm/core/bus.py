@@ -205,8 +205,5 @@ class Buses:
 __all__ = ["DEFAULT_QUEUE_CAPACITY", "UDPM_READER_ENV", "Buses", "Handler", "Subscription"]
 
 
-#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
-_DEPRECATED_NAMES = {"Bus": "Buses"}
-
-if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)
+if not TYPE_CHECKING:  # the old names (base.deprecation.RENAMED_NAMES), unseen by mypy
+    __getattr__ = renamed_names(__name__)

@@ -9,6 +9,8 @@ socket's kernel filter.
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import logging
 import re
 import threading
@@ -105,7 +107,10 @@ class BusConnection:
         self._hear_own = False
         #: (own address, topics) the receive socket's filter drops by (see _own_filter).
         self._filter: tuple[tuple[str, int] | None, frozenset[str] | None] = (None, None)
-        #: The kernel refused a socket filter: every datagram is read, as liblcm's thread reads it.
+        #: The kernel refused a filter by topics (too large for the socket's option memory): only the
+        #: own datagrams are filtered, for good.
+        self._by_topics = True
+        #: The kernel refused any socket filter: every datagram is read, as liblcm's thread reads it.
         self._unfiltered = False
         #: The last ``/``-part of every channel ever subscribed exactly (what the filter lets through).
         self._topics: frozenset[str] = frozenset()
@@ -190,22 +195,46 @@ class BusConnection:
         if not self._patterns:
             if self._sender is not None and not self._hear_own:
                 own = self._sender.address
-            if self._topics:
+            if self._topics and self._by_topics:
                 topics = self._topics
         if (own, topics) == self._filter:
             return
         try:
-            if not receiver.filter(own, topics):  # too many topics for one filter: own ones only
+            if topics is not None and not receiver.filter(own, topics):  # too many topics for one filter
                 topics = None
+            if topics is None:
                 receiver.filter(own, None)
         except OSError as exc:
-            # A kernel without socket filters, or a filter locked (SO_LOCK_FILTER): every datagram
-            # is read and dropped by channel here, as liblcm's thread would. Said once, not raised.
-            log.info("cannot filter datagrams on %s in the kernel (%s): reading all of them", self.url, exc)
-            self._unfiltered = True
+            self._filter_refused(receiver, own, topics, exc)
             return
         self._filter = (own, topics)
         self._ignoring = own is not None
+
+    def _filter_refused(
+        self, receiver: UdpmReceiver, own: tuple[str, int] | None, topics: frozenset[str] | None, exc: OSError
+    ) -> None:
+        """Under the lock: the kernel refused a filter. A filter by topics larger than the socket's option
+        memory (ENOMEM: ``net.core.optmem_max``, 20 KiB in a fresh network namespace) falls back to the
+        own datagrams only; any other refusal (no socket filters, SO_LOCK_FILTER) to none. Never is an
+        earlier, narrower filter left on the socket: it would drop what a later subscription wants."""
+        if topics is not None and exc.errno == errno.ENOMEM:
+            self._by_topics = False
+            log.info("cannot filter datagrams on %s by topic in the kernel (%s): only its own", self.url, exc)
+            try:
+                receiver.filter(own, None)
+            except OSError as again:
+                exc = again
+            else:
+                self._filter = (own, None)
+                self._ignoring = own is not None
+                return
+        log.info("cannot filter datagrams on %s in the kernel (%s): reading all of them", self.url, exc)
+        self._unfiltered = True
+        self._ignoring = False
+        # Off with any filter an earlier call attached (a locked one stays: not ours to change).
+        with contextlib.suppress(OSError):
+            receiver.filter(None, None)
+        self._filter = (None, None)
 
     def _hear_own_messages(self) -> None:
         """Under the lock: the receive socket hears this process's own datagrams again, for good."""
@@ -228,7 +257,11 @@ class BusConnection:
                     route.retired = True  # a late datagram must not reach a re-subscribed channel twice
                     if route.lcm_sub is not None:
                         self._retire.append(route.lcm_sub)
-                    self._routes = {k: v for k, v in self._routes.items() if v is not route}
+                    # A copy without it (C's dict copy: a thousand agents' nodes stopping one by
+                    # one rebuilt the table in Python per subscription, seconds of the run's end).
+                    routes = self._routes.copy()
+                    del routes[sub.channel]
+                    self._routes = routes
             else:
                 self._patterns = tuple(s for s in self._patterns if s is not sub)
                 if not self._patterns and self._star is not None:

@@ -1,11 +1,13 @@
 """The node base class: an explicit lifecycle, typed topics by name, timers on the executor.
 
-A node never talks to LCM directly. It names topics (``"MC_STATE"``); the config says which bus and
-channel each topic uses, so moving a node to another machine is a config change (the paper's proxies).
+A node never talks to LCM directly. It names topics (``"MC_STATE"``); its settings
+(:class:`~antalate_lcm.core.node_settings.NodeSettings`, from the config) say which bus and channel each
+topic uses, so moving a node to another machine is a config change (the paper's proxies). A hot path
+keeps a topic's :class:`Publisher` (:meth:`Node.publisher`) and calls its ``publish``.
 
 Security is not here but in the context's admission pipeline (:mod:`antalate_lcm.core.admission`,
 docs/security.md), which each node holds its :class:`~antalate_lcm.core.admission.NodeAdmission` of: with a swarm
-key, :meth:`Node.publish` has its admission sign every message after stamping its header, and every message
+key, every publish has its admission sign the message after stamping its header, and every message
 a node consumes through :meth:`Node.subscribe` / :meth:`Node.subscribe_all` passes its admission
 (MAC, window, sender, replay, then :mod:`antalate_lcm.wire.validation`) on the executor thread before
 the handler sees it; every input subscribed to passes the exposure policy first.
@@ -28,15 +30,15 @@ from antalate_lcm.base.errors import InsecureBus as InsecureBus
 from antalate_lcm.core.admission import INSECURE_REMINDER as INSECURE_REMINDER
 from antalate_lcm.core.admission import RelayRefusal
 from antalate_lcm.core.bus import Subscription
-from antalate_lcm.core.config import Config
 from antalate_lcm.core.context import INPROC_BUS as INPROC_BUS
 from antalate_lcm.core.context import Context as Context
 from antalate_lcm.core.context import shared_params as shared_params
 from antalate_lcm.core.context import shared_value as shared_value
 from antalate_lcm.core.executor import Timer
-from antalate_lcm.core.routes import Routes
+from antalate_lcm.core.node_settings import NodeSettings as NodeSettings
+from antalate_lcm.core.routes import Destination, Routes
 from antalate_lcm.core.timers import Ticker, divides, phase_delay
-from antalate_lcm.wire.security import Authenticator, SecurityPolicy
+from antalate_lcm.wire.security import SecurityPolicy
 from antalate_lcm.wire.topics import Message, TopicSpec, channel_regex, is_internal
 
 M = TypeVar("M")
@@ -67,16 +69,72 @@ class TopicMatch:
     fields: dict[str, str] = field(default_factory=dict)
 
 
+class Publisher:
+    """One topic's publisher on a node (:meth:`Node.publisher`): kept by a hot path, whose every
+    message then costs no lookup of its topic. Its ``seq`` is the topic's counter (`Node.publish`
+    counts on the same one)."""
+
+    __slots__ = ("topic", "channel", "buses", "seq", "_node", "_senders", "_seal")
+
+    def __init__(self, node: Node, topic: str, destination: Destination) -> None:
+        self.topic = topic
+        self.channel = destination.channel
+        self.buses = destination.buses
+        #: The last ``header.seq`` this publisher counted.
+        self.seq = 0
+        self._node = node
+        self._senders = destination.senders
+        #: The node's admission's encoder (`NodeAdmission.seal`: signing with a key).
+        self._seal = node.admission.seal
+
+    def publish(self, msg: Message, seq: int | None = None) -> bool:
+        """Stamp ``msg.header`` (time, agent, the next seq), have the node's admission sign it, send
+        it on every bus of the topic; False when a bus refused it (logged by the bus).
+
+        ``seq`` overrides the counter (a resend must carry the seq of the original: it is the
+        acknowledgement key; its ``utime`` is fresh, so the receivers' replay guard lets it through).
+        The admission signs (`NodeAdmission.seal`, the one place antalate signs): the MAC covers the
+        final header.
+        """
+        node = self._node
+        if seq is None:
+            self.seq += 1
+            seq = self.seq
+        # Strictly increasing per node, so two messages in one microsecond are not a "replay".
+        utime = int(node.wallclock() * 1_000_000)
+        if utime <= node._last_utime:
+            utime = node._last_utime + 1
+        node._last_utime = utime
+        header = msg.header
+        header.utime = utime
+        header.agent = node.agent
+        header.seq = seq
+        if node.interference is not None:
+            return node.interference.send(node, self.topic, msg, self.buses, self.channel)
+        data = self._seal(msg)
+        channel = self.channel
+        ok = True
+        for bus, send in self._senders:
+            try:
+                send(channel, data)
+            except OSError as exc:
+                ok = node.context.bus.publish_failed(bus, channel, exc) and ok
+        return ok
+
+
 class Node:
     """Base class of MC, HLC, BMA, OSC and the operator console.
 
     Lifecycle: construct (no I/O) → :meth:`start` (subscribe, start timers, ``on_start``) →
     :meth:`stop` (cancel timers, unsubscribe, then ``on_stop``). Callbacks run on the executor thread.
 
+    ``settings``: what the node reads of the configuration (its name on the buses, its topics' channels
+    and buses, its ``[security]``); an agent's node keeps its whole config for its own logic itself.
     Signing, verification, validation and the exposure policy are the context's admission
-    pipeline; :attr:`admission` is this node's (`Context.admission`). ``watcher``: the node watches
-    agents rather than flying one (the operator console, the scripted operator): it may consume
-    agents' state from a network bus without a swarm key (what it reads moves no vehicle).
+    pipeline; :attr:`admission` is this node's (`Context.admission`), :attr:`routes` its topics'
+    channels and buses. ``watcher``: the node watches agents rather than flying one (the operator
+    console, the scripted operator): it may consume agents' state from a network bus without a swarm
+    key (what it reads moves no vehicle).
     """
 
     kind = "node"
@@ -86,18 +144,19 @@ class Node:
     wallclock: Callable[[], float] = staticmethod(time.time)
 
     def __init__(
-        self, config: Config, context: Context, *, name: str | None = None, watcher: bool = False
+        self, settings: NodeSettings, context: Context, *, name: str | None = None, watcher: bool = False
     ) -> None:
-        self.config = config
+        self.settings = settings
         self.context = context
-        self.agent = config.agent.name
+        self.agent = settings.agent
         self.name = name or self.kind
         self.log = logging.getLogger(f"antalate.{self.kind}.{self.agent}")
         if context.executor.sim is not None:  # simulated time: headers and the replay window on it
             self.wallclock = context.executor.wallclock
-        #: The topics' channels and buses (`Routes`); its publishers, read on every publish.
-        self.routes = Routes(config, context, self.agent)
-        self._publishers = self.routes.publishers
+        #: The topics' channels and buses (`Routes`).
+        self.routes = Routes(settings, context)
+        #: `Node.publisher`'s handles by topic (and template fields), read by every `publish`.
+        self._publishers: dict[Any, Publisher] = {}
         self._subs: list[Subscription] = []
         #: subscribe_all's pattern subscription -> its own-channel subscription (unsubscribed together).
         self._companions: dict[Subscription, Subscription] = {}
@@ -107,8 +166,6 @@ class Node:
         self.started = False
         self._last_utime = 0
         self.admission = context.admission.for_node(self, watcher=watcher)
-        #: The admission's encoder (signing with a key), read on every publish.
-        self._seal = self.admission.seal
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -155,22 +212,6 @@ class Node:
         """The node's ``[security]`` keys and window."""
         return self.admission.policy
 
-    @property
-    def authenticator(self) -> Authenticator | None:
-        """The checks every consumed message passes with a swarm key (None without one)."""
-        return self.admission.authenticator
-
-    @property
-    def invalid(self) -> int:
-        """Messages dropped by input validation (the authenticator counts its own rejections)."""
-        return self.admission.invalid
-
-    def _check_exposure(self, topic: str, bus: str) -> None:
-        """The exposure policy on an input (`NodeAdmission.check_exposure`), its reminders on this node's timers."""
-        if self.admission.check_exposure(topic, bus):
-            warn = self.admission.warn_insecure
-            self.create_timer(INSECURE_REMINDER, warn, first_delay=INSECURE_REMINDER)
-
     def on_stop(self) -> None:
         """Release what ``on_start`` acquired beyond subscriptions and timers."""
 
@@ -181,11 +222,14 @@ class Node:
     def channel(self, topic: str, **fields: str) -> str:
         return self.routes.channel(topic, **fields)
 
-    def _publish_buses(self, topic: str) -> list[str]:
-        return self.routes.publish_buses(topic)
-
-    def _subscribe_bus(self, topic: str) -> str:
-        return self.routes.subscribe_bus(topic)
+    def publisher(self, topic: str, **fields: str) -> Publisher:
+        """The publisher of ``topic`` (its channel with ``fields``): made on first use, the same
+        handle afterwards (and the one :meth:`publish` uses, so they count one ``seq``)."""
+        key = (topic, tuple(sorted(fields.items()))) if fields else topic
+        pub = self._publishers.get(key)
+        if pub is None:
+            pub = self._publishers[key] = Publisher(self, topic, self.routes.destination(topic, fields))
+        return pub
 
     def publish(
         self,
@@ -196,38 +240,11 @@ class Node:
         **fields: str,
     ) -> bool:
         """Stamp ``msg.header`` (time, agent, per-topic seq), sign it with the swarm key, send it on
-        every bus of the topic.
-
-        ``seq`` overrides the counter (a resend must carry the seq of the original: it is the
-        acknowledgement key; its ``utime`` is fresh, so the receivers' replay guard lets it through).
-        The admission signs (`NodeAdmission.seal`, the one place antalate signs): the MAC covers the final header.
-        """
+        every bus of the topic: :meth:`Publisher.publish` of the topic's :meth:`publisher`."""
         pub = self._publishers.get((topic, tuple(sorted(fields.items()))) if fields else topic)
         if pub is None:
-            pub = self.routes.publisher(topic, fields)
-        if seq is None:
-            pub.seq += 1
-            seq = pub.seq
-        # Strictly increasing per node, so two messages in one microsecond are not a "replay".
-        utime = int(self.wallclock() * 1_000_000)
-        if utime <= self._last_utime:
-            utime = self._last_utime + 1
-        self._last_utime = utime
-        header = msg.header
-        header.utime = utime
-        header.agent = self.agent
-        header.seq = seq
-        if self.interference is not None:
-            return self.interference.send(self, topic, msg, pub.buses, pub.channel)
-        data = self._seal(msg)
-        channel = pub.channel
-        ok = True
-        for bus, send in pub.senders:
-            try:
-                send(channel, data)
-            except OSError as exc:
-                ok = self.context.bus.publish_failed(bus, channel, exc) and ok
-        return ok
+            pub = self.publisher(topic, **fields)
+        return pub.publish(msg, seq)
 
     def outgoing(self, msg_type: type[M]) -> M:
         """A message of ``msg_type`` to fill and hand to :meth:`publish` at once: the context's one
@@ -241,10 +258,6 @@ class Node:
                 msg = scratch[msg_type] = msg_type()
             return msg
         return msg_type()
-
-    def seal(self, msg: Message) -> bytes:
-        """The bytes of a stamped message: signed with the swarm key if there is one."""
-        return self._seal(msg)
 
     def relay(self, topic: str, msg: Any, *, signed: bool, seq: int | None = None) -> RelayRefusal | None:
         """Publish an operator's command that reached this agent another way (the station, through
@@ -261,7 +274,7 @@ class Node:
             return None
         data = msg.encode()
         channel = self.channel(topic)
-        for bus in self._publish_buses(topic):
+        for bus in self.routes.publish_buses(topic):
             self.context.bus.publish(bus, channel, data)
         return None
 
@@ -271,8 +284,8 @@ class Node:
         if self.interference is not None:
             handler = self.interference.receiving(self, topic, handler)
         spec = self.topic_spec(topic)
-        bus = self._subscribe_bus(topic)
-        self._check_exposure(topic, bus)
+        bus = self.routes.subscribe_bus(topic)
+        self.admission.check_exposure(topic, bus)
         channel = self.channel(topic, **fields)
         sender = fields.get("agent", self.agent) if is_internal(topic) and "{agent}" in spec.channel else None
         if not self.admission.needs_admission(spec.msg_type):
@@ -307,8 +320,8 @@ class Node:
         if self.interference is not None:
             handler = self.interference.receiving(self, topic, handler)
         spec = self.topic_spec(topic)
-        bus = self.config.topic_buses(topic)[0]
-        self._check_exposure(topic, bus)
+        bus = self.settings.topic_buses(topic)[0]
+        self.admission.check_exposure(topic, bus)
         pattern = re.compile(channel_regex(spec.channel, **fields))
         bound = is_internal(topic) and "{agent}" in spec.channel
         own = self.channel(topic, **fields) if "{agent}" in spec.channel else None
@@ -335,9 +348,9 @@ class Node:
         if own is not None:
             m = pattern.fullmatch(own)
             own_match = TopicMatch(own, m.groupdict() if m else {})
-            own_bus = self._subscribe_bus(topic)
+            own_bus = self.routes.subscribe_bus(topic)
             if own_bus != bus:
-                self._check_exposure(topic, own_bus)
+                self.admission.check_exposure(topic, own_bus)
             sender = self.agent if bound else None
 
             def deliver_own(_channel: str, msg: Any) -> None:  # on the executor's loop thread
@@ -405,15 +418,10 @@ class Node:
         returned function every ``1/hz`` s itself, from a timer it already has (see `ticker`).
         """
 
-        if fields:
+        publish = self.publisher(topic, **fields).publish
 
-            def publish_now() -> None:
-                self.publish(topic, build(), seq=None, **fields)
-
-        else:  # the agents' MC and HLC states, 10 a second per agent: no keyword dict to build
-
-            def publish_now() -> None:
-                self.publish(topic, build())
+        def publish_now() -> None:
+            publish(build())
 
         if periodic:
             self.create_timer(1.0 / hz, publish_now, first_delay=self.first_delay(1.0 / hz))

@@ -1,7 +1,8 @@
-"""Where a node's topics travel: each topic's channel, bus(es) and publisher, from its config and context.
+"""Where a node's topics travel: each topic's channel, bus(es) and destination, from its settings and context.
 
-The config names each topic's buses and channel template, so moving a node to another machine is a
-config change; an agent's internal topics also travel on the context's in-process bus
+The node's settings (:class:`~antalate_lcm.core.node_settings.NodeSettings`, from the config) name each
+topic's buses and channel template, so moving a node to another machine is a config change; an agent's
+internal topics also travel on the context's in-process bus
 (:meth:`~antalate_lcm.core.context.Context.in_process`), so its own nodes never take them from the
 network. :class:`~antalate_lcm.core.node.Node` holds one :class:`Routes`.
 """
@@ -10,37 +11,30 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
-from antalate_lcm.core.config import Config
 from antalate_lcm.core.context import Context
+from antalate_lcm.core.node_settings import NodeSettings
 from antalate_lcm.wire.topics import TopicSpec, is_internal
 
 
-@dataclass
-class Publisher:
+@dataclass(frozen=True, slots=True)
+class Destination:
+    """Where one topic's messages (its channel with given template fields) are sent."""
+
     buses: list[str]
     channel: str
     #: Each bus's send function (`Buses.sender`), resolved once: 20 publishes a second per agent.
     senders: list[tuple[str, Callable[[str, bytes], None]]]
-    seq: int = 0
-
-
-def publisher_key(topic: str, fields: dict[str, str]) -> Any:
-    """The key of a topic's publisher in :attr:`Routes.publishers` (the topic alone without fields)."""
-    return (topic, tuple(sorted(fields.items()))) if fields else topic
 
 
 class Routes:
-    """The topics of ``agent``'s node: their channels, the buses each is published to and taken from."""
+    """A node's topics: their channels, the buses each is published to and taken from."""
 
-    def __init__(self, config: Config, context: Context, agent: str) -> None:
-        self.config = config
+    def __init__(self, settings: NodeSettings, context: Context) -> None:
+        self.settings = settings
         self.context = context
-        self.agent = agent
-        self.specs = config.topic_specs()
-        #: `publisher_key` -> the topic's publisher, made by the first publish.
-        self.publishers: dict[Any, Publisher] = {}
+        self.agent = settings.agent
+        self.specs = settings.topics
 
     def spec(self, topic: str) -> TopicSpec:
         try:
@@ -51,25 +45,24 @@ class Routes:
     def channel(self, topic: str, **fields: str) -> str:
         return self.spec(topic).channel.format(**{"agent": self.agent, **fields})
 
-    def publisher(self, topic: str, fields: dict[str, str]) -> Publisher:
-        """The topic's publisher (its channel with ``fields``), made and kept on first use; the
-        context's publishers on the same buses share their send functions."""
+    def destination(self, topic: str, fields: dict[str, str]) -> Destination:
+        """Where the topic (its channel with ``fields``) is sent; the context's publishers on the
+        same buses share their send functions."""
+        channel = self.channel(topic, **fields)
         buses = self.publish_buses(topic)
         bus = self.context.bus
         shared = self.context.senders
         senders = shared.get(tuple(buses))
         if senders is None:
             senders = shared[tuple(buses)] = [(name, bus.sender(name)) for name in buses]
-        pub = Publisher(buses, self.channel(topic, **fields), senders)
-        self.publishers[publisher_key(topic, fields)] = pub
-        return pub
+        return Destination(buses, channel, senders)
 
     def publish_buses(self, topic: str) -> list[str]:
         """The topic's buses (plus the in-process bus for an internal topic), one per distinct URL."""
-        names = self.config.topic_buses(topic)
+        names = self.settings.topic_buses(topic)
         inproc = self.context.inproc_bus
         if inproc is not None and is_internal(topic):
-            names = [inproc, *names]
+            names = (inproc, *names)
         out: list[str] = []
         seen: set[str] = set()
         for name in names:
@@ -85,4 +78,4 @@ class Routes:
         inproc = self.context.inproc_bus
         if inproc is not None and is_internal(topic):
             return inproc
-        return self.config.topic_buses(topic)[0]
+        return self.settings.topic_buses(topic)[0]

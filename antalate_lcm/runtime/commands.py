@@ -4,4 +4,4 @@
 from antalate_lcm.base.deprecation import moved_module
 from antalate_lcm.runtime.cli import *  # noqa: F403 - the old name offers what the new one does
 
-__getattr__ = moved_module(__name__, "antalate_lcm.runtime.cli")
+__getattr__ = moved_module(__name__)

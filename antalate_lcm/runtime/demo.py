@@ -14,7 +14,7 @@ from typing import Any
 from antalate_lcm.base.errors import MulticastUnavailable
 from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config, parse_config
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Context, Node, NodeSettings
 from antalate_lcm.runtime.agent import agent_nodes, swarm_configs, validate
 from antalate_lcm.runtime.launch import run_until_signal
 from antalate_lcm.runtime.scripted_operator import Phase, ScriptedOperator
@@ -139,7 +139,7 @@ def _fly_headless(
     configs = build_swarm(n, url, station=station, swarm_key=swarm_key)
     nodes: list[Node] = [node for cfg in configs for node in agent_nodes(cfg, context)]
     operator = ScriptedOperator(
-        configs[0].with_agent_name("operator"),
+        NodeSettings.from_config(configs[0], agent="operator"),
         context,
         expected_agents=n,
         mission_time=mission_time,

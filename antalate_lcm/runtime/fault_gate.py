@@ -120,7 +120,7 @@ class FaultGate:
         agent = node.agent
         bus = node.context.bus
         if _watches(node) or not self.active.get(agent):
-            data = node.seal(msg)
+            data = node.admission.seal(msg)
             return all([bus.publish(b, channel, data) for b in buses])
         if self.silenced(agent):
             return False
@@ -129,13 +129,13 @@ class FaultGate:
         inproc = node.context.inproc_bus
         local = [b for b in buses if b == inproc]
         network = [b for b in buses if b != inproc]
-        if not network and node.config.topic_buses(topic):
+        if not network and node.settings.topic_buses(topic):
             # The topic's configured bus is the in-process one (a memq:// swarm bus): the agent's
             # own nodes and the network are one bus, so what the network loses they lose too.
             local, network = [], local
         ok = True
         if local:
-            data = node.seal(msg)
+            data = node.admission.seal(msg)
             ok = all([bus.publish(b, channel, data) for b in local])
         if not network:
             return ok
@@ -161,7 +161,7 @@ class FaultGate:
             self._truth[(agent, channel, int(header.seq), int(header.utime))] = honest
             if len(self._truth) > _REMEMBERED:
                 del self._truth[next(iter(self._truth))]
-        data = node.seal(msg)
+        data = node.admission.seal(msg)
         for fault in self._of(agent, "packet_loss"):
             step = fault.step
             if topic in step.topics and step.direction != "in" and fault.over_cap("out", len(data), node.now):

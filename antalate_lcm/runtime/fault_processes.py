@@ -21,7 +21,7 @@ from collections.abc import Callable
 from typing import Any
 
 from antalate_lcm.core.config import Config
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Context, Node, NodeSettings
 from antalate_lcm.msgs import payload_t
 from antalate_lcm.runtime.faults import FaultGate, FaultInjector, agents_gate
 from antalate_lcm.runtime.script import Script
@@ -35,7 +35,7 @@ MISSION_KIND = "mission"
 
 def read_record(node: Node, msg: payload_t, channel: str) -> dict[str, Any] | None:
     """A fault record heard on the bus, if it is one and (with a swarm key) validly signed."""
-    auth = node.authenticator
+    auth = node.admission.authenticator
     if auth is not None and auth.check(msg, channel) is not None:
         return None
     if msg.content_type != FAULT_CONTENT_TYPE:
@@ -50,8 +50,8 @@ def read_record(node: Node, msg: payload_t, channel: str) -> dict[str, Any] | No
 class ShardFaults(FaultInjector):
     """The faults of one agent process's agents, timed from the operator's "mission start" record."""
 
-    def __init__(self, config: Config, context: Context, **kwargs: Any) -> None:
-        super().__init__(config, context, mission_start=lambda: self.mission_heard, **kwargs)
+    def __init__(self, settings: NodeSettings, context: Context, **kwargs: Any) -> None:
+        super().__init__(settings, context, mission_start=lambda: self.mission_heard, **kwargs)
         #: When this process heard the operator's "mission start" (its clock), None before.
         self.mission_heard: float | None = None
 
@@ -81,7 +81,7 @@ def shard_faults(
     from antalate_lcm.agent.hlc.node import HlcNode
 
     return ShardFaults(
-        configs[0].with_agent_name(name),
+        NodeSettings.from_config(configs[0], agent=name),
         context,
         script=script,
         agents=[c.agent.name for c in configs],
@@ -100,7 +100,7 @@ class FaultRelay(FaultInjector):
 
     def __init__(
         self,
-        config: Config,
+        settings: NodeSettings,
         context: Context,
         *,
         script: Script,
@@ -109,7 +109,7 @@ class FaultRelay(FaultInjector):
         excuse: Callable[[str], None],
     ) -> None:
         super().__init__(
-            config,
+            settings,
             context,
             script=script,
             agents=[],

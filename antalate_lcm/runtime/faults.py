@@ -43,7 +43,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Context, Node, NodeSettings
 from antalate_lcm.msgs import payload_t
 from antalate_lcm.runtime.fault_gate import (
     BROADCAST_TOPICS,
@@ -96,7 +96,7 @@ class FaultInjector(Node):
 
     def __init__(
         self,
-        config: Any,
+        settings: NodeSettings,
         context: Context,
         *,
         script: Script,
@@ -107,7 +107,7 @@ class FaultInjector(Node):
         excuse: Callable[[str], None],
         vehicles: Mapping[str, Any],
     ) -> None:
-        super().__init__(config, context, name="faults")
+        super().__init__(settings, context, name="faults")
         self.gate = gate
         self.planned = plan(script, agents)
         self.seed = script.seed
@@ -231,7 +231,7 @@ class FaultInjector(Node):
         msg.header.utime = int(self.wallclock() * 1_000_000)
         msg.header.agent = self.agent  # one sender per process: each has its own seq
         msg.header.seq = self._seq
-        self.context.bus.publish(self._bus, FAULT_CHANNEL, self.seal(msg))
+        self.context.bus.publish(self._bus, FAULT_CHANNEL, self.admission.seal(msg))
 
     def summarize(self) -> None:
         """Write what each agent heard of the broadcasts (at the end of the script: once the nodes

@@ -88,8 +88,8 @@ def run_until_signal(
         gc.freeze()
         if started_all is not None:
             started_all()
-        while not (signalled or stop.is_set()):
-            time.sleep(0.2)
+        # Waiting on the event (never set by the handler) wakes the moment another thread sets it.
+        while not (signalled or stop.wait(0.2)):
             if poll is not None and poll():
                 break
         if signalled:

@@ -12,8 +12,7 @@ import lcm
 
 from antalate_lcm.base.errors import AntalateError
 from antalate_lcm.core.bus import Subscription
-from antalate_lcm.core.config import Config
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Context, Node, NodeSettings
 
 
 class LogRecorder(Node):
@@ -22,8 +21,8 @@ class LogRecorder(Node):
 
     kind = "recorder"
 
-    def __init__(self, config: Config, context: Context, *, bus: str, path: str) -> None:
-        super().__init__(config, context, name="recorder")
+    def __init__(self, settings: NodeSettings, context: Context, *, bus: str, path: str) -> None:
+        super().__init__(settings, context, name="recorder")
         self.bus = bus
         self.path = path
         self.events = 0

@@ -13,8 +13,7 @@ import enum
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from antalate_lcm.core.config import Config
-from antalate_lcm.core.node import Context, Node, TopicMatch
+from antalate_lcm.core.node import Context, Node, NodeSettings, TopicMatch
 from antalate_lcm.msgs import direction_cmd_t, mc_state_t, operator_cmd_t
 from antalate_lcm.wire.vocabulary import Command, McState
 
@@ -59,11 +58,14 @@ class Timeline:
 
 
 class ScriptedOperator(Node):
+    """The operator of a headless run: a node of its own (``settings``: the swarm's buses, topics
+    and key under the operator's name, `NodeSettings.from_config` with ``agent``), not an agent."""
+
     kind = "operator"
 
     def __init__(
         self,
-        config: Config,
+        settings: NodeSettings,
         context: Context,
         *,
         expected_agents: int,
@@ -73,7 +75,7 @@ class ScriptedOperator(Node):
         timeout: float = 180.0,
         directions: Sequence[DirectionAt] = (),
     ) -> None:
-        super().__init__(config, context, watcher=True)  # it watches agents, flies none
+        super().__init__(settings, context, watcher=True)  # it watches agents, flies none
         self.expected_agents = expected_agents
         self.mission_time = mission_time
         self.altitude = altitude

@@ -345,6 +345,10 @@ class TimeCoordinator:
             log.debug("cannot send to process %s", index)
 
 
+if not TYPE_CHECKING:  # the old names (base.deprecation.RENAMED_NAMES), unseen by mypy
+    __getattr__ = renamed_names(__name__)
+
+
 __all__ = [
     "DEFAULT_STALL",
     "ClockClient",
@@ -355,15 +359,3 @@ __all__ = [
     "join",
     "simulated_buses",
 ]
-
-
-#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
-_DEPRECATED_NAMES = {
-    "ClockLink": "ClockClient",
-    "LocalLink": "LocalClockClient",
-    "SimulatedBus": "SimulatedBuses",
-    "SocketLink": "SocketClockClient",
-}
-
-if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)

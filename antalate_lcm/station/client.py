@@ -10,7 +10,9 @@ the agents' window. The swarm key stays with the operator and the agents.
         c.direction(270.0, 1.5)
         c.agents()
 
-Without a swarm key the commands go unsigned (for swarms that run without one).
+Without a swarm key the commands go unsigned (for swarms that run without one). With one, they are
+signed by the code that signs what every node publishes (``core.admission.sealer``), so antalate signs
+in one place.
 """
 
 from __future__ import annotations
@@ -23,8 +25,8 @@ from typing import Any, get_args
 import httpx
 
 from antalate_lcm.base.errors import StationClientError as StationClientError
+from antalate_lcm.core.admission import sealer
 from antalate_lcm.msgs import direction_cmd_t, operator_cmd_t
-from antalate_lcm.wire.security import sign
 from antalate_lcm.wire.vocabulary import Command, CommandName
 
 COMMANDS: tuple[CommandName, ...] = get_args(CommandName)
@@ -72,7 +74,7 @@ def build_operator_cmd(
     msg.target = target
     msg.altitude = float(altitude)
     if key:
-        sign(msg, key)
+        sealer(key)(msg)  # fills header.mac: the nodes' own signing code (core/admission.py)
     return msg
 
 
@@ -94,7 +96,7 @@ def build_direction_cmd(
     msg.header.utime, msg.header.agent, msg.header.seq = utime, sender, seq
     msg.active, msg.azimuth, msg.speed, msg.target = active, wrap_azimuth(azimuth), float(speed), target
     if key:
-        sign(msg, key)
+        sealer(key)(msg)  # fills header.mac: the nodes' own signing code (core/admission.py)
     return msg
 
 

@@ -275,7 +275,11 @@ def _attach(sock: socket.socket, own: tuple[str, int] | None, topics: frozenset[
     """Filter ``sock`` as `_program` says (both None: no filter); False when the program would be
     too long for the kernel (too many topics) and nothing was changed."""
     if own is None and topics is None:
-        sock.setsockopt(socket.SOL_SOCKET, _SO_DETACH_FILTER, b"\0" * 4)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, _SO_DETACH_FILTER, b"\0" * 4)
+        except OSError as exc:
+            if exc.errno != errno.ENOENT:  # ENOENT: no filter was attached, which is what is asked
+                raise
         return True
     code = _program(own, topics)
     if len(code) > _MAX_CODE or any(jt > 255 or jf > 255 for _, jt, jf, _ in code):

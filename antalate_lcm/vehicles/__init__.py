@@ -65,14 +65,5 @@ def load_adapter(name: str) -> type[VehicleAdapter]:
     return cls
 
 
-#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
-_DEPRECATED_NAMES = {
-    "Autopilot": "VehicleAdapter",
-    "AutopilotState": "VehicleState",
-    "UnknownAutopilotError": "UnknownAdapterError",
-    "available_autopilots": "available_adapters",
-    "load_autopilot": "load_adapter",
-}
-
-if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)
+if not TYPE_CHECKING:  # the old names (base.deprecation.RENAMED_NAMES), unseen by mypy
+    __getattr__ = renamed_names(__name__)

@@ -19,7 +19,7 @@ from antalate_lcm.core.behavior import Behavior
 from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config, parse_config
 from antalate_lcm.core.executor import Executor
-from antalate_lcm.core.node import Context, Node, TopicMatch
+from antalate_lcm.core.node import Context, Node, NodeSettings, TopicMatch
 from antalate_lcm.msgs import mc_state_t, telemetry_t
 from antalate_lcm.wire.peers import PeerTable
 from behaviors.swarm_rules.behavior import Flocking
@@ -83,8 +83,10 @@ def _state(value: int) -> mc_state_t:
 
 def test_a_behavior_that_declares_uses_peers_gets_every_other_agent(context: Context) -> None:
     cfg = _config("a1")
-    nodes: list[Node] = [Node(_config(n), context, name="hlc") for n in ("a1", "b", "c")]
-    forger = Node(_config("x", key="another-key"), context, name="hlc")
+    nodes: list[Node] = [
+        Node(NodeSettings.from_config(_config(n)), context, name="hlc") for n in ("a1", "b", "c")
+    ]
+    forger = Node(NodeSettings.from_config(_config("x", key="another-key")), context, name="hlc")
     bma = BmaNode(cfg, context, cfg.bma[0])
     for node in [*nodes, forger, bma]:
         context.executor.run_sync(node.start)
@@ -120,7 +122,7 @@ def test_a_behavior_that_declares_uses_peers_gets_every_other_agent(context: Con
     got = context.executor.run_sync(snapshot)
     assert got["me"] == "a1"
     assert got["peers"] == {"b": (10.0, 0.0, 5.0, "MISSION"), "c": (0.0, -6.0, 7.0, None)}
-    auth = bma.authenticator
+    auth = bma.admission.authenticator
     assert auth is not None and auth.rejected and all(r.value != "replayed" for r in auth.rejected)
 
 
@@ -128,7 +130,7 @@ def test_reading_peers_without_declaring_them_fails_the_behavior(context: Contex
     cfg = _config("a1", plugin="tests.agent.test_bma_peers:Undeclared")
     bma = BmaNode(cfg, context, cfg.bma[0])
     assert bma.peers is None  # nobody declared uses_peers: the BMA does not listen
-    hlc = Node(cfg, context, name="hlc")
+    hlc = Node(NodeSettings.from_config(cfg), context, name="hlc")
     for node in (hlc, bma):
         context.executor.run_sync(node.start)
     context.executor.run_sync(lambda: hlc.publish("MC_STATE", _state(mc_state_t.STANDBY)))
@@ -143,7 +145,8 @@ def test_an_agents_own_telemetry_reaches_its_node_once_with_a_swarm_key(context:
     apart), and the replay guard logged "dropped telemetry_t ... replayed or out of order".
     """
     cfg = _config("a1")
-    hlc, bma = Node(cfg, context, name="hlc"), Node(cfg, context, name="bma")
+    settings = NodeSettings.from_config(cfg)
+    hlc, bma = Node(settings, context, name="hlc"), Node(settings, context, name="bma")
     own: list[int] = []
     everyone: list[tuple[str, int]] = []
 
@@ -161,13 +164,14 @@ def test_an_agents_own_telemetry_reaches_its_node_once_with_a_swarm_key(context:
     assert wait_for(lambda: len(own) == 20 and len(everyone) == 20, 5), (len(own), len(everyone))
     context.executor.run_sync(lambda: None)
     assert own == list(range(1, 21)) and everyone == [("a1", s) for s in range(1, 21)]
-    auth = bma.authenticator
+    auth = bma.admission.authenticator
     assert auth is not None and auth.rejected == {} and auth.accepted == 40
 
 
 def test_unsubscribing_subscribe_all_drops_its_own_channel_half(context: Context) -> None:
     cfg = _config("a1")
-    hlc, bma = Node(cfg, context, name="hlc"), Node(cfg, context, name="bma")
+    settings = NodeSettings.from_config(cfg)
+    hlc, bma = Node(settings, context, name="hlc"), Node(settings, context, name="bma")
     got: list[TopicMatch] = []
     for node in (hlc, bma):
         context.executor.run_sync(node.start)

@@ -4,32 +4,19 @@ release, with a DeprecationWarning, and give the same objects as the new names (
 
 from __future__ import annotations
 
+import ast
+import re
 import subprocess
 import sys
 
 import pytest
 
+from antalate_lcm.base.deprecation import MOVED_MODULES, RENAMED_NAMES
 from tests import REPO
+from tests.architecture.doc_tables import section_rows, section_table
 
-SHIMS = [
-    ("antalate_lcm.behavior", "antalate_lcm.core.behavior"),
-    ("antalate_lcm.geo", "antalate_lcm.base.geo"),
-    ("antalate_lcm.peers", "antalate_lcm.wire.peers"),
-    ("antalate_lcm.ratelimit", "antalate_lcm.base.ratelimit"),
-    ("antalate_lcm.security", "antalate_lcm.wire.security"),
-    ("antalate_lcm.validation", "antalate_lcm.wire.validation"),
-    ("antalate_lcm.analysis", "antalate_lcm.apps.analysis"),
-    ("antalate_lcm.autopilot", "antalate_lcm.vehicles"),
-    ("operator_tui.link", "operator_tui.node"),
-    ("operator_tui.model", "operator_tui.board"),
-    ("antalate_lcm.apps.analysis.model", "antalate_lcm.apps.analysis.records"),
-    ("antalate_lcm.runtime.commands", "antalate_lcm.runtime.cli"),
-    ("antalate_lcm.runtime.clock_link", "antalate_lcm.runtime.clock_client"),
-]
-#: Deprecated names with a test of their own (they re-export only what users imported).
-OTHERS = [
-    "antalate_lcm.lcm_datagram",
-]
+#: The moved modules (old, new), from the one table (base.deprecation.MOVED_MODULES).
+SHIMS = list(MOVED_MODULES.items())
 
 
 @pytest.mark.parametrize(("old", "new"), SHIMS)
@@ -97,7 +84,6 @@ def test_nothing_in_the_project_imports_an_old_name() -> None:
             "-c",
             WALK,
             *(old for old, _ in SHIMS),
-            *OTHERS,
             *(f"{m}.{o}" for m, o, _ in RENAMED),
         ],
         capture_output=True,
@@ -108,44 +94,66 @@ def test_nothing_in_the_project_imports_an_old_name() -> None:
     assert int(proc.stdout) > 100  # the walk saw the packages
 
 
-#: Names renamed to the vocabulary (docs/architecture.md, "Vocabulary"): (module, old, new).
-RENAMED = [
-    ("antalate_lcm", "Autopilot", "VehicleAdapter"),
-    ("antalate_lcm", "AutopilotState", "VehicleState"),
-    ("antalate_lcm", "Bus", "Buses"),
-    ("antalate_lcm.vehicles", "Autopilot", "VehicleAdapter"),
-    ("antalate_lcm.vehicles", "AutopilotState", "VehicleState"),
-    ("antalate_lcm.vehicles", "UnknownAutopilotError", "UnknownAdapterError"),
-    ("antalate_lcm.vehicles", "available_autopilots", "available_adapters"),
-    ("antalate_lcm.vehicles", "load_autopilot", "load_adapter"),
-    ("antalate_lcm.base.errors", "UnknownAutopilotError", "UnknownAdapterError"),
-    ("antalate_lcm.agent.plan", "AutopilotPlan", "AdapterPlan"),
-    ("antalate_lcm.agent.plan", "plan_autopilot", "plan_adapter"),
-    ("antalate_lcm.agent.hlc.node", "make_autopilot", "make_adapter"),
-    ("antalate_lcm.vehicles.base", "Autopilot", "VehicleAdapter"),
-    ("antalate_lcm.vehicles.base", "AutopilotState", "VehicleState"),
-    ("antalate_lcm.vehicles.crazyflie", "CrazyflieAutopilot", "CrazyflieAdapter"),
-    ("antalate_lcm.vehicles.crazyflie.adapter", "CrazyflieAutopilot", "CrazyflieAdapter"),
-    ("antalate_lcm.vehicles.mavlink", "MavlinkAutopilot", "MavlinkAdapter"),
-    ("antalate_lcm.vehicles.mavlink.adapter", "MavlinkAutopilot", "MavlinkAdapter"),
-    ("antalate_lcm.vehicles.px4", "Px4Autopilot", "Px4Adapter"),
-    ("antalate_lcm.vehicles.px4.adapter", "Px4Autopilot", "Px4Adapter"),
-    ("antalate_lcm.vehicles.sim", "SimAutopilot", "SimAdapter"),
-    ("antalate_lcm.vehicles.sim.adapter", "SimAutopilot", "SimAdapter"),
-    ("antalate_lcm.vehicles.tello", "TelloAutopilot", "TelloAdapter"),
-    ("antalate_lcm.vehicles.tello.adapter", "TelloAutopilot", "TelloAdapter"),
-    ("antalate_lcm.cli", "commands", "subcommands"),
-    ("antalate_lcm.core.bus", "Bus", "Buses"),
-    ("antalate_lcm.runtime.clock_client", "ClockLink", "ClockClient"),
-    ("antalate_lcm.runtime.clock_client", "SimulatedBus", "SimulatedBuses"),
-    ("antalate_lcm.runtime.clock_client", "SocketLink", "SocketClockClient"),
-    ("antalate_lcm.runtime.time_coordinator", "ClockLink", "ClockClient"),
-    ("antalate_lcm.runtime.time_coordinator", "LocalLink", "LocalClockClient"),
-    ("antalate_lcm.runtime.time_coordinator", "SimulatedBus", "SimulatedBuses"),
-    ("antalate_lcm.runtime.time_coordinator", "SocketLink", "SocketClockClient"),
-    ("operator_tui.board", "SwarmModel", "SwarmBoard"),
-    ("operator_tui.web", "ConsoleLink", "BrowserTab"),
-]
+#: Names renamed to the vocabulary (docs/architecture.md, "Vocabulary"): (module, old, new), from the one
+#: table (base.deprecation.RENAMED_NAMES).
+RENAMED = [(module, old, new) for module, names in RENAMED_NAMES.items() for old, new in names.items()]
+
+DOC = REPO / "docs" / "architecture.md"
+
+
+def test_the_docs_table_lists_exactly_the_deprecated_modules_and_names() -> None:
+    """docs/architecture.md's "Deprecated names" tells users what to import instead: each of its module and
+    name rows is a moved module or a renamed name of base.deprecation, and each of those is a row (the
+    attribute rows, which name a class, are `renamed_attribute`'s: the next test)."""
+    doc = {
+        old: new.strip("`")
+        for old, new in section_table(DOC.read_text("utf-8"), "### Deprecated names").items()
+    }
+    code = dict(MOVED_MODULES) | {f"{m}.{old}": f"{m}.{new}" for m, old, new in RENAMED}
+    assert {old: new for old, new in doc.items() if old not in code} == {}, "in the doc, not in the code"
+    assert {old: new for old, new in code.items() if old not in doc} == {}, "in the code, not in the doc"
+    assert doc == code
+
+
+def renamed_attributes() -> set[str]:
+    """``Class.old`` for every `renamed_attribute` in the packages' class bodies, read from the source."""
+    found = set()
+    for package in ("antalate_lcm", "operator_tui", "behaviors"):
+        for path in sorted((REPO / package).rglob("*.py")):
+            for cls in ast.walk(ast.parse(path.read_text("utf-8"), str(path))):
+                if not isinstance(cls, ast.ClassDef):
+                    continue
+                body = [n for top in cls.body for n in (top.body if isinstance(top, ast.If) else [top])]
+                found |= {
+                    f"{cls.name}.{target.id}"
+                    for node in body
+                    if isinstance(node, ast.Assign)
+                    and isinstance(node.value, ast.Call)
+                    and isinstance(node.value.func, ast.Name)
+                    and node.value.func.id == "renamed_attribute"
+                    for target in node.targets
+                    if isinstance(target, ast.Name)
+                }
+    return found
+
+
+def test_the_docs_table_lists_exactly_the_renamed_attributes() -> None:
+    """The table's attribute rows name ``Class.old`` (and ``.old`` for a second one of the same class):
+    they are exactly the `renamed_attribute` class attributes of the source."""
+    in_doc = set()
+    for first, *_ in section_rows(DOC.read_text("utf-8"), "### Deprecated names"):
+        owner = ""
+        for span in re.findall(r"`([^`]+)`", first):
+            name = span.removesuffix("()")
+            if name[:1].isupper() and "." in name:
+                owner = name.split(".")[0]
+                in_doc.add(name)
+            elif name.startswith(".") and owner:
+                in_doc.add(owner + name)
+    in_code = renamed_attributes()
+    assert in_doc - in_code == set(), "in the doc, not in the code"
+    assert in_code - in_doc == set(), "in the code, not in the doc"
+    assert len(in_code) >= 6  # the reader sees them (HlcNode.autopilot, AgentPlan.autopilot, ...)
 
 
 @pytest.mark.parametrize(("module", "old", "new"), RENAMED)
@@ -217,13 +225,13 @@ def test_the_gcs_nodes_old_link_is_its_ground_station_connection() -> None:
     from antalate_lcm.apps.gcs.server import GcsNode
     from antalate_lcm.apps.gcs.view import GcsView
     from antalate_lcm.core.config import parse_config
-    from antalate_lcm.core.node import Context
+    from antalate_lcm.core.node import Context, NodeSettings
 
     config = parse_config({"agent": {"name": "gcs"}, "buses": {"lan": "memq://"}}, "<deprecated>")
     context = Context.in_process({"lan": "memq://"})
     ground = mavutil.mavlink_connection("udpout:127.0.0.1:14550", source_system=255)
     try:
-        node = GcsNode(config, context, GcsView(), ground, commands=False)
+        node = GcsNode(NodeSettings.from_config(config), context, GcsView(), ground, commands=False)
         with pytest.warns(
             DeprecationWarning, match=r"server\.GcsNode\.link is deprecated: use .*GcsNode\.ground"
         ):

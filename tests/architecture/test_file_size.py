@@ -7,9 +7,8 @@ unlisted fails, and so does a listed file that was split).
 
 from __future__ import annotations
 
-import re
-
 from tests import REPO
+from tests.architecture.doc_tables import section_table
 
 #: Lines a product file may have (``wc -l``).
 LIMIT = 500
@@ -22,10 +21,7 @@ SECTION = "## Files over 500 lines"
 
 def listed(doc: str) -> dict[str, str]:
     """The section's table (file -> why it stays whole), from ``doc``'s text."""
-    start = doc.index(SECTION)
-    end = doc.find("\n## ", start + len(SECTION))
-    section = doc[start : end if end >= 0 else len(doc)]
-    return {m.group(1): m.group(2).strip() for m in re.finditer(r"^\| `([^`]+)` \|(.*)\|\s*$", section, re.M)}
+    return section_table(doc, SECTION)
 
 
 def line_counts() -> dict[str, int]:

@@ -15,4 +15,4 @@ def test_unknown_name_is_an_attribute_error() -> None:
     import pytest
 
     with pytest.raises(AttributeError, match="no attribute 'Nope'"):
-        antalate_lcm.Nope  # noqa: B018
+        antalate_lcm.Nope  # type: ignore[attr-defined]  # noqa: B018

@@ -20,7 +20,7 @@ from typing import Any
 
 from antalate_lcm.agent.hlc.machine import ErrorCode
 from antalate_lcm.core.config import Config, parse_config
-from antalate_lcm.core.node import Context, Node, TopicMatch
+from antalate_lcm.core.node import Context, Node, NodeSettings, TopicMatch
 from antalate_lcm.msgs import direction_cmd_t
 from antalate_lcm.runtime.agent import agent_nodes, shared_buses, validate
 from antalate_lcm.runtime.scripted_operator import ScriptedOperator
@@ -35,9 +35,9 @@ class Recorder(Node):
     kind = "recorder"
 
     def __init__(
-        self, config: Config, context: Context, names: list[str], emus: list[CrazyflieEmulator]
+        self, settings: NodeSettings, context: Context, names: list[str], emus: list[CrazyflieEmulator]
     ) -> None:
-        super().__init__(config, context)
+        super().__init__(settings, context)
         self.names = names
         self.emus = emus
         self.last: dict[tuple[str, str], str] = {}
@@ -110,12 +110,12 @@ def main(spec: dict[str, Any]) -> None:
     names = [c.agent.name for c in configs]
 
     context = Context.in_process(shared_buses(configs))
-    recorder = Recorder(configs[0].with_agent_name("recorder"), context, names, emus)
+    recorder = Recorder(NodeSettings.from_config(configs[0], agent="recorder"), context, names, emus)
     nodes: list[Node] = [recorder] + [n for c in configs for n in agent_nodes(c, context)]
     operator = None
     if spec.get("operator"):
         operator = ScriptedOperator(
-            configs[0].with_agent_name("operator"),
+            NodeSettings.from_config(configs[0], agent="operator"),
             context,
             expected_agents=len(configs),
             mission_time=spec["operator"]["mission_time"],

@@ -17,7 +17,7 @@ from typing import Any
 
 from antalate_lcm.agent.hlc.machine import ErrorCode
 from antalate_lcm.core.config import Config, parse_config
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Context, Node, NodeSettings
 from antalate_lcm.msgs import direction_cmd_t
 from antalate_lcm.runtime.agent import agent_nodes, validate
 from antalate_lcm.wire.vocabulary import HlcState, McState
@@ -30,7 +30,7 @@ class Recorder(Node):
     kind = "recorder"
 
     def __init__(self, config: Config, context: Context) -> None:
-        super().__init__(config, context)
+        super().__init__(NodeSettings.from_config(config), context)
         self.last: dict[str, str] = {}
         self.telemetry_at = 0.0
 

@@ -10,7 +10,7 @@ import pytest
 from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import parse_config
 from antalate_lcm.core.executor import Executor
-from antalate_lcm.core.node import Context
+from antalate_lcm.core.node import Context, NodeSettings
 from antalate_lcm.msgs import hlc_error_t, mc_state_t, telemetry_t
 from operator_tui.node import OperatorNode
 from tests.harness.polling import wait_for
@@ -20,7 +20,7 @@ from tests.harness.polling import wait_for
 def node() -> Iterator[OperatorNode]:
     ctx = Context(Buses({"lan": "memq://"}), Executor())
     ctx.executor.start()
-    op = OperatorNode(parse_config({"buses": {"lan": "memq://"}, "agent": {"name": "op"}}), ctx)
+    op = OperatorNode(NodeSettings.from_config(parse_config({"buses": {"lan": "memq://"}}), agent="op"), ctx)
     op.start()
     yield op
     op.stop()

@@ -10,9 +10,9 @@ from typing import Any
 import pytest
 
 from antalate_lcm.core.bus import Buses
-from antalate_lcm.core.config import Config, parse_config
+from antalate_lcm.core.config import parse_config
 from antalate_lcm.core.executor import Executor
-from antalate_lcm.core.node import Context, InsecureBus, Node
+from antalate_lcm.core.node import Context, InsecureBus, Node, NodeSettings
 from antalate_lcm.msgs import operator_cmd_t
 from antalate_lcm.wire.security import Reason, sign, signed_bytes
 from antalate_lcm.wire.vocabulary import Command
@@ -21,8 +21,11 @@ KEY = "admission test key"
 UDPM = "udpm://239.255.76.67:7667?ttl=0"
 
 
-def _config(name: str = "a-1", **security: Any) -> Config:
-    return parse_config({"agent": {"name": name}, "buses": {"lan": UDPM}, "security": security}, "agent.toml")
+def _settings(name: str = "a-1", **security: Any) -> NodeSettings:
+    config = parse_config(
+        {"agent": {"name": name}, "buses": {"lan": UDPM}, "security": security}, "agent.toml"
+    )
+    return NodeSettings.from_config(config)
 
 
 def _command(
@@ -48,7 +51,7 @@ def context() -> Any:
 
 
 def test_relay_checks_target_then_signature_then_fields(context: Context) -> None:
-    vet = Node(_config(swarm_key=KEY), context, name="osc").admission.vet_relay
+    vet = Node(_settings(swarm_key=KEY), context, name="osc").admission.vet_relay
     channel = "a-1/OPERATOR_CMD"
     # Signed for another agent: refused before any MAC is computed (and not counted as forged).
     refused = vet(_command("a-2", key=KEY), signed=True, channel=channel)
@@ -74,14 +77,14 @@ def test_relay_checks_target_then_signature_then_fields(context: Context) -> Non
 
 
 def test_a_keyless_agent_relays_unsigned_commands_only_when_valid(context: Context) -> None:
-    vet = Node(_config(), context, name="osc").admission.vet_relay
+    vet = Node(_settings(), context, name="osc").admission.vet_relay
     assert vet(_command("a-1"), signed=False, channel="a-1/OPERATOR_CMD") is None
     refused = vet(_command("a-1", altitude=-3.0), signed=False, channel="a-1/OPERATOR_CMD")
     assert refused is not None and refused.reason == "invalid"
 
 
 def test_the_console_check_verifies_the_datagram_with_the_nodes_keys(context: Context) -> None:
-    keyed = Node(_config("console", swarm_key=KEY, previous_keys=["old key"]), context, watcher=True)
+    keyed = Node(_settings("console", swarm_key=KEY, previous_keys=["old key"]), context, watcher=True)
     msg = _command("")
     now = msg.header.utime / 1e6
     assert keyed.admission.checks_datagrams
@@ -91,12 +94,14 @@ def test_the_console_check_verifies_the_datagram_with_the_nodes_keys(context: Co
     assert forged is not None and forged.reason is Reason.FORGED
     stale = keyed.admission.check_datagram(signed_bytes(msg, KEY), now + 60)
     assert stale is not None and stale.reason is Reason.STALE
-    keyless = Node(_config("console"), context, watcher=True)
+    keyless = Node(_settings("console"), context, watcher=True)
     assert not keyless.admission.checks_datagrams
     assert keyless.admission.check_datagram(b"anything", now) is None
 
 
 def test_only_a_watcher_may_read_internal_topics_from_the_network_without_a_key(context: Context) -> None:
-    Node(_config("console"), context, watcher=True)._check_exposure("MC_STATE", "lan")  # no refusal
+    Node(_settings("console"), context, watcher=True).admission.check_exposure(
+        "MC_STATE", "lan"
+    )  # no refusal
     with pytest.raises(InsecureBus):
-        Node(_config("a-1"), context)._check_exposure("MC_STATE", "lan")
+        Node(_settings("a-1"), context).admission.check_exposure("MC_STATE", "lan")

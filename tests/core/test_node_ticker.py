@@ -16,7 +16,7 @@ import pytest
 from antalate_lcm.agent.hlc.node import HlcNode
 from antalate_lcm.agent.mc.node import McNode
 from antalate_lcm.core.config import AgentConfig, Config
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Context, Node, NodeSettings
 from antalate_lcm.core.timers import Ticker
 from antalate_lcm.runtime.agent import agent_nodes
 from tests.harness.polling import wait_for
@@ -33,7 +33,9 @@ def context() -> Iterator[Context]:
 
 
 def _node(context: Context, name: str = "ticker") -> Node:
-    return Node(Config(agent=AgentConfig(name=name), buses={"lan": "memq://"}), context)
+    return Node(
+        NodeSettings.from_config(Config(agent=AgentConfig(name=name), buses={"lan": "memq://"})), context
+    )
 
 
 def test_divisor_rates_share_one_timer_and_run_at_their_rates(context: Context) -> None:

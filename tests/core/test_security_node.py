@@ -21,10 +21,11 @@ import pytest
 from antalate_lcm.agent.bma import BmaNode
 from antalate_lcm.agent.hlc.node import HlcNode
 from antalate_lcm.agent.mc.node import McNode
+from antalate_lcm.core.admission import INSECURE_REMINDER
 from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config, parse_config
 from antalate_lcm.core.executor import Executor
-from antalate_lcm.core.node import Context, InsecureBus, Node
+from antalate_lcm.core.node import Context, InsecureBus, Node, NodeSettings
 from antalate_lcm.msgs import (
     direction_cmd_t,
     hlc_state_t,
@@ -71,7 +72,9 @@ class Swarm(InProcess):
     def __init__(self, cfg: Config) -> None:
         super().__init__(cfg)
         self.cfg = cfg
-        self.operator = self.add(Node(cfg.with_agent_name("console"), self.context, name="console"))
+        self.operator = self.add(
+            Node(NodeSettings.from_config(cfg, agent="console"), self.context, name="console")
+        )
 
     def stop(self, node: Node) -> None:
         node.stop()
@@ -109,7 +112,8 @@ def swarm(cfg: Config) -> Swarm:
 
 
 def rejected(node: Node, reason: Reason) -> Callable[[], int]:
-    return lambda: node.authenticator.rejected.get(reason, 0) if node.authenticator else 0
+    auth = node.admission
+    return lambda: auth.authenticator.rejected.get(reason, 0) if auth.authenticator else 0
 
 
 def ready(s: Swarm) -> tuple[HlcNode, McNode]:
@@ -170,7 +174,9 @@ def test_injected_and_replayed_velocity_commands_fly_nowhere() -> None:
     with swarm(config()) as s:
         hlc, _ = fly(s)
         wire = s.capture(f"{AGENT}/VELOCITY_CMD")
-        behavior = s.add(Node(s.cfg, s.context, name="behavior"))  # the agent's own publisher of velocity
+        behavior = s.add(
+            Node(NodeSettings.from_config(s.cfg), s.context, name="behavior")
+        )  # the agent's own publisher of velocity
         hover = velocity_cmd_t()
         hover.frame = velocity_cmd_t.NED
         behavior.publish("VELOCITY_CMD", hover)
@@ -256,7 +262,9 @@ def test_infinite_and_nan_inputs_are_rejected_and_the_behavior_lives_on(
         behavior: Any = bma.behavior("dovrat_swarm")  # the plugin class, with its own attributes
         got: list[velocity_cmd_t] = []
         s.operator.subscribe("VELOCITY_CMD", got.append, agent=AGENT)
-        mc_stand_in = s.add(Node(s.cfg, s.context, name="mc"))  # the agent's MC says MISSION
+        mc_stand_in = s.add(
+            Node(NodeSettings.from_config(s.cfg), s.context, name="mc")
+        )  # the agent's MC says MISSION
         mc_stand_in.publish("MC_STATE", _mc_state(mc_state_t.MISSION))
         assert wait_for(lambda: bma.active() == ["dovrat_swarm"], 5)
         payload = payload_t()
@@ -266,7 +274,9 @@ def test_infinite_and_nan_inputs_are_rejected_and_the_behavior_lives_on(
         s.operator.publish("OPERATOR_PAYLOAD", payload, agent=AGENT)
         s.operator.publish("SWARM_DIRECTION_CMD", _direction(math.inf, 1.0))
         s.operator.publish("SWARM_DIRECTION_CMD", _direction(45.0, math.nan))
-        assert wait_for(lambda: bma.invalid == 3, 5)  # signed nonsense: authentic, and still refused
+        assert wait_for(
+            lambda: bma.admission.invalid == 3, 5
+        )  # signed nonsense: authentic, and still refused
         assert bma.failures() == {} and bma.active() == ["dovrat_swarm"]
         assert behavior.direction is None
         n = len(got)
@@ -283,7 +293,7 @@ def test_unsigned_nonsense_without_a_key_is_refused_too() -> None:
         cmd.command, cmd.altitude = operator_cmd_t.TAKEOFF, math.inf
         hlc, mc = ready(s)
         s.send("SWARM/OPERATOR_CMD", cmd, agent="anyone")
-        assert wait_for(lambda: bma.invalid == 1 and mc.invalid == 1, 5)
+        assert wait_for(lambda: bma.admission.invalid == 1 and mc.admission.invalid == 1, 5)
         assert mc.state is McState.STANDBY and hlc.state is HlcState.READY
 
 
@@ -326,11 +336,16 @@ def test_insecure_true_starts_and_says_so(caplog: pytest.LogCaptureFixture) -> N
     try:
         node = McNode(cfg, context)
         with caplog.at_level(logging.WARNING):
-            node._check_exposure("HLC_STATE", "lan")  # what subscribe() runs first
+            node.admission.check_exposure("HLC_STATE", "lan")  # what subscribe() runs first
+            node.admission.check_exposure("VELOCITY_CMD", "lan")
         assert "INSECURE" in caplog.text and "HLC_STATE on 'lan'" in caplog.text
         assert "launch it" in caplog.text
+        # Said once at once, then reminded on the node's timers: one reminder for all its inputs.
+        assert caplog.text.count("INSECURE") == 1
+        reminders = [t for t in node._timers if t.fn == node.admission.warn_insecure]
+        assert [t.period for t in reminders] == [INSECURE_REMINDER]
         with pytest.raises(InsecureBus):
-            McNode(_udpm_config(), context)._check_exposure("HLC_STATE", "lan")
+            McNode(_udpm_config(), context).admission.check_exposure("HLC_STATE", "lan")
     finally:
         context.close()
 
@@ -354,10 +369,10 @@ def test_an_open_command_bus_is_said_once_per_process_and_bus(caplog: pytest.Log
         with caplog.at_level(logging.DEBUG):
             for i in range(5):
                 mc = McNode(keyless(f"a-{i}"), first)
-                mc._check_exposure("OPERATOR_CMD", "lan")
-                mc._check_exposure("SWARM_OPERATOR_CMD", "lan")
-            McNode(keyless("a-9"), first)._check_exposure("OPERATOR_CMD", "wan")
-            McNode(keyless("b-0"), second)._check_exposure("OPERATOR_CMD", "lan")
+                mc.admission.check_exposure("OPERATOR_CMD", "lan")
+                mc.admission.check_exposure("SWARM_OPERATOR_CMD", "lan")
+            McNode(keyless("a-9"), first).admission.check_exposure("OPERATOR_CMD", "wan")
+            McNode(keyless("b-0"), second).admission.check_exposure("OPERATOR_CMD", "lan")
         warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
         assert len(warnings) == 3, warnings
         assert "bus 'lan'" in warnings[0] and "command a-0, and every other agent" in warnings[0]
@@ -378,11 +393,11 @@ def test_in_process_context_keeps_internal_topics_off_the_network_bus() -> None:
     cfg = _udpm_config()
     context = Context.in_process(cfg.buses)
     try:
-        node = Node(cfg, context, name="probe")
-        assert node._subscribe_bus("HLC_STATE") == "_inproc"
-        assert node._subscribe_bus("OPERATOR_CMD") == "lan"
-        assert node._publish_buses("MC_STATE") == ["_inproc", "lan"]  # the operator still sees it
-        assert node._publish_buses("SWARM_OPERATOR_CMD") == ["lan"]
+        routes = Node(NodeSettings.from_config(cfg), context, name="probe").routes
+        assert routes.subscribe_bus("HLC_STATE") == "_inproc"
+        assert routes.subscribe_bus("OPERATOR_CMD") == "lan"
+        assert routes.publish_buses("MC_STATE") == ["_inproc", "lan"]  # the operator still sees it
+        assert routes.publish_buses("SWARM_OPERATOR_CMD") == ["lan"]
     finally:
         context.close()
 

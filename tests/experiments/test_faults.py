@@ -29,7 +29,7 @@ from antalate_lcm.base.geo import FlatFrame
 from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import load_config
 from antalate_lcm.core.executor import Executor
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Context, Node, NodeSettings
 from antalate_lcm.msgs import mc_state_t, operator_cmd_t, peer_scan_t, telemetry_t
 from antalate_lcm.runtime.experiment import Experiment, Outcome, run
 from antalate_lcm.runtime.faults import BroadcastReception, FaultGate, plan
@@ -267,8 +267,8 @@ def _gate_with(tmp_path: Path, fault: dict[str, Any]) -> tuple[FaultGate, Node, 
     gate.activate(planned.step, 0, "e-01", seed=1)
     return (
         gate,
-        Node(config.with_agent_name("e-01"), context),
-        Node(config.with_agent_name("operator"), context, watcher=True),
+        Node(NodeSettings.from_config(config, agent="e-01"), context),
+        Node(NodeSettings.from_config(config, agent="operator"), context, watcher=True),
     )
 
 
@@ -711,7 +711,9 @@ def test_only_signed_fault_records_are_believed(tmp_path: Path) -> None:
     config = load_config(
         _write(tmp_path / "k.toml", CONFIG + f'[security]\nswarm_key = "{generate_key()}"\n')
     )
-    node = Node(config.with_agent_name("faults-0of2"), Context(Buses({"lan": "memq://"}), Executor()))
+    node = Node(
+        NodeSettings.from_config(config, agent="faults-0of2"), Context(Buses({"lan": "memq://"}), Executor())
+    )
     record = {"agent": "operator", "kind": "mission", "event": "start", "at": 0.0}
 
     def message(seq: int, content_type: str = FAULT_CONTENT_TYPE, data: bytes | None = None) -> payload_t:
@@ -725,11 +727,11 @@ def test_only_signed_fault_records_are_believed(tmp_path: Path) -> None:
 
     forged = message(1)
     assert read_record(node, payload_t.decode(forged.encode()), FAULT_CHANNEL) is None
-    signed = payload_t.decode(node.seal(message(2)))
+    signed = payload_t.decode(node.admission.seal(message(2)))
     assert read_record(node, signed, FAULT_CHANNEL) == record
-    other = payload_t.decode(node.seal(message(3, content_type="text/plain")))
+    other = payload_t.decode(node.admission.seal(message(3, content_type="text/plain")))
     assert read_record(node, other, FAULT_CHANNEL) is None
-    garbage = payload_t.decode(node.seal(message(4, data=b"{not json")))
+    garbage = payload_t.decode(node.admission.seal(message(4, data=b"{not json")))
     assert read_record(node, garbage, FAULT_CHANNEL) is None
 
 
@@ -754,7 +756,7 @@ def test_the_operators_process_acts_on_the_agent_processes_records(tmp_path: Pat
     )
     excused: list[str] = []
     relay = FaultRelay(
-        config.with_agent_name("faults"),
+        NodeSettings.from_config(config, agent="faults"),
         Context(Buses({"lan": "memq://"}), Executor()),
         script=script,
         gate=FaultGate(),

@@ -18,7 +18,7 @@ from antalate_lcm.agent.bma import BmaNode
 from antalate_lcm.base.geo import local_ne
 from antalate_lcm.core.behavior import Behavior, BehaviorContext
 from antalate_lcm.core.config import Config, parse_config
-from antalate_lcm.core.node import Node
+from antalate_lcm.core.node import Node, NodeSettings
 from antalate_lcm.msgs import behavior_state_t, mc_state_t, telemetry_t, velocity_cmd_t
 from tests.harness.inprocess import InProcess
 
@@ -36,7 +36,7 @@ class Harness(InProcess):
 
     def __init__(self, config: Config) -> None:
         super().__init__(config)
-        self.probe = self.add(Node(config, self.context, name="probe"))
+        self.probe = self.add(Node(NodeSettings.from_config(config), self.context, name="probe"))
 
     def bma(self, name: str) -> BmaNode:
         spec = next(b for b in self.config.bma if b.name == name)

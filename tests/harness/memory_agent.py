@@ -15,7 +15,7 @@ from typing import Any, TypeVar
 
 from antalate_lcm.agent.hlc.node import HlcNode
 from antalate_lcm.core.config import parse_config
-from antalate_lcm.core.node import Node
+from antalate_lcm.core.node import Node, NodeSettings
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.vehicles.base import VehicleAdapter
@@ -69,7 +69,7 @@ class MemoryAgent(InProcess):
             self.mc: list[Seen] = []
             self.hlc: list[Seen] = []
             self.errors: list[hlc_error_t] = []
-            self.probe = Node(self.config, self.context, name="probe")
+            self.probe = Node(NodeSettings.from_config(self.config), self.context, name="probe")
             #: the agent's nodes as ``antalate agent`` assembles them, started by `start`
             self.assembled = agent_nodes(self.config, self.context)
             if adapter is not None:  # the HLC comes first in agent_nodes

@@ -25,8 +25,8 @@ import json
 import sys
 from typing import Any
 
-from antalate_lcm.core.config import Config, load_config
-from antalate_lcm.core.node import Context
+from antalate_lcm.core.config import load_config
+from antalate_lcm.core.node import Context, NodeSettings
 from operator_tui.board import SwarmBoard
 from operator_tui.commands import CommandTracker, DirectionControl, Status
 from operator_tui.node import OperatorNode
@@ -37,8 +37,8 @@ class LanOperator(OperatorNode):
     and sends (signed), :class:`~operator_tui.board.SwarmBoard` says who is stale, the tracker and
     the direction control resend. Its refresh runs on the executor's timer instead of the UI's."""
 
-    def __init__(self, config: Config, context: Context, *, stale_after: float = 2.0) -> None:
-        super().__init__(config, context)
+    def __init__(self, settings: NodeSettings, context: Context, *, stale_after: float = 2.0) -> None:
+        super().__init__(settings, context)
         self.board = SwarmBoard(stale_after=stale_after)
         self.tracker = CommandTracker(resend_interval=1.0, timeout=30.0)
         self.direction = DirectionControl(repeat_interval=1.0)
@@ -135,7 +135,7 @@ def main() -> int:
     context = Context.create(config)
     context.bus.open()
     context.executor.start()
-    node = LanOperator(config, context, stale_after=args.stale_after)
+    node = LanOperator(NodeSettings.from_config(config), context, stale_after=args.stale_after)
     node.start()
     run = context.executor.run_sync
     print(json.dumps({"ready": True}), flush=True)

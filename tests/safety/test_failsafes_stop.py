@@ -18,7 +18,7 @@ import pytest
 from antalate_lcm.agent.hlc.node import HlcNode
 from antalate_lcm.agent.mc.node import McNode
 from antalate_lcm.core.config import AgentConfig, Config, HlcConfig
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Context, Node, NodeSettings
 from antalate_lcm.msgs import operator_cmd_t
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.runtime.launch import run_until_signal
@@ -72,7 +72,7 @@ def _fly_and_stop(i: int) -> None:
         assert wait_for(lambda: mc.state is McState.STANDBY, 10), f"run {i}: MC {mc.state.name}"
         cmd = operator_cmd_t()
         cmd.command = operator_cmd_t.TAKEOFF
-        Node(config, context, name="operator").publish("OPERATOR_CMD", cmd)
+        Node(NodeSettings.from_config(config), context, name="operator").publish("OPERATOR_CMD", cmd)
         assert wait_for(lambda: hlc.state is HlcState.AIRBORNE and mc.state is McState.MISSION, 10), (
             f"run {i}: HLC {hlc.state.name}, MC {mc.state.name}"
         )

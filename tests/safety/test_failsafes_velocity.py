@@ -21,7 +21,7 @@ from antalate_lcm.agent.hlc.velocity_guard import (
 )
 from antalate_lcm.agent.mc.node import McNode
 from antalate_lcm.core.config import AgentConfig, Config, HlcConfig, McConfig
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Context, Node, NodeSettings
 from antalate_lcm.msgs import operator_cmd_t, velocity_cmd_t
 from antalate_lcm.vehicles.base import Frame
 from antalate_lcm.vehicles.sim import SimAdapter
@@ -87,7 +87,7 @@ def test_an_agent_sends_no_setpoint_over_a_stale_link_in_llc_down_or_in_hold() -
     hlc = HlcNode(config, context, adapter=sim)
     sim.node = hlc
     mc = McNode(config, context)
-    behavior = Node(config, context, name="behavior")
+    behavior = Node(NodeSettings.from_config(config), context, name="behavior")
     streaming = threading.Event()
     done = threading.Event()
 
@@ -109,7 +109,7 @@ def test_an_agent_sends_no_setpoint_over_a_stale_link_in_llc_down_or_in_hold() -
         assert wait_for(lambda: mc.state is McState.STANDBY, 10)
         takeoff = operator_cmd_t()
         takeoff.command = operator_cmd_t.TAKEOFF
-        Node(config, context, name="operator").publish("OPERATOR_CMD", takeoff)
+        Node(NodeSettings.from_config(config), context, name="operator").publish("OPERATOR_CMD", takeoff)
         assert wait_for(lambda: mc.state is McState.MISSION, 10)
         streaming.set()
         assert wait_for(lambda: any(vx == 2.0 for vx, _, _ in sim.calls), 5)  # mission flight: passes

@@ -30,7 +30,7 @@ from antalate_lcm.base.safety.separation import separation
 from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config, parse_config
 from antalate_lcm.core.executor import Executor
-from antalate_lcm.core.node import Context, Node, TopicMatch
+from antalate_lcm.core.node import Context, Node, NodeSettings, TopicMatch
 from antalate_lcm.msgs import hlc_error_t, mc_state_t, operator_cmd_t
 from antalate_lcm.runtime.agent import agent_nodes
 from antalate_lcm.runtime.recorder import LogRecorder
@@ -99,8 +99,12 @@ def swarm(
     configs: list[Config], fence: Geofence | None, log: Path | None = None
 ) -> Iterator[tuple[Flight, Node, list[HlcNode]]]:
     context = Context(Buses({"lan": "memq://"}), Executor())
-    probe = Node(configs[0].with_agent_name("probe"), context, name="probe")
-    recorder = LogRecorder(configs[0], context, bus="lan", path=str(log)) if log is not None else None
+    probe = Node(NodeSettings.from_config(configs[0], agent="probe"), context, name="probe")
+    recorder = (
+        LogRecorder(NodeSettings.from_config(configs[0]), context, bus="lan", path=str(log))
+        if log is not None
+        else None
+    )
     nodes = [node for cfg in configs for node in agent_nodes(cfg, context)]
     hlcs = [n for n in nodes if isinstance(n, HlcNode)]
     flight = Flight(FlatFrame(LAT0, LON0), fence)

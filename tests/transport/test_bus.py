@@ -256,6 +256,23 @@ def test_unsubscribe_from_another_thread_releases_the_channel(bus: Buses) -> Non
     assert got == [1]
 
 
+def test_releasing_one_channel_of_many_leaves_the_others_delivered(bus: Buses) -> None:
+    """A thousand agents' nodes stop one subscription at a time: each release drops its own
+    channel's route and no other (the table is copied without it, not rebuilt)."""
+    got: list[str] = []
+    subs = {
+        agent: bus.subscribe("test", f"{agent}/MC_STATE", mc_state_t, lambda ch, m: got.append(ch))
+        for agent in ("a", "b", "c")
+    }
+    bus.unsubscribe(subs["b"])
+    for agent in ("a", "b", "c"):
+        bus.publish("test", f"{agent}/MC_STATE", mc_state(1))
+    assert wait_for(lambda: len(got) == 2, 2)
+    time.sleep(0.1)
+    assert got == ["a/MC_STATE", "c/MC_STATE"]
+    assert sorted(bus._by_name["test"]._routes) == ["a/MC_STATE", "c/MC_STATE"]
+
+
 def test_memq_drops_what_nobody_in_the_process_subscribes_to_and_delivers_the_rest() -> None:
     """memq:// is private to its instance: a channel without subscribers goes nowhere, and one
     with a subscriber (exact or pattern) is delivered as before, on

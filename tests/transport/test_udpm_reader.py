@@ -194,3 +194,64 @@ def test_a_socket_that_refuses_a_filter_is_read_in_full(netns: NetNamespace) -> 
     said = [line for line in err.splitlines() if "cannot filter datagrams" in line]
     assert len(said) == 1 and said[0].startswith("INFO antalate.bus"), err
     assert "Traceback" not in err, err
+
+
+_OPTMEM_SCRIPT = r"""
+import json, logging, sys, time
+from antalate_lcm.core.bus import Buses
+
+logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(name)s %(message)s")
+A = sys.argv[1]
+# The socket option memory a filter is charged to (per namespace): one topic's filter fits, ten do not.
+with open("/proc/sys/net/core/optmem_max", "w") as f:
+    f.write("32768")
+
+def until(cond, timeout=5.0):
+    end = time.time() + timeout
+    while not cond() and time.time() < end:
+        time.sleep(0.01)
+    return cond()
+
+own, peer = Buses({"a": A}), Buses({"a": A})
+conn = own._connection("a")
+got = {}
+def keep(ch, d):
+    got.setdefault(ch, []).append(d)
+own.subscribe("a", "IN", None, keep)
+own.publish("a", "OUT", b"opens the sender: its own datagrams are filtered from now on")
+time.sleep(0.1)
+narrow = conn._filter[1]
+late = [f"TOPIC_{i}" for i in range(9)]
+for channel in late:
+    own.subscribe("a", channel, None, keep)
+time.sleep(0.2)
+for channel in ["IN", *late]:
+    peer.publish("a", channel, b"from peer")
+for i in range(5):
+    own.publish("a", "OUT", b"own: the kernel drops it")
+out = {
+    "a topic filter was attached first": narrow == frozenset({"IN"}),
+    "every channel heard": until(lambda: all(got.get(c) == [b"from peer"] for c in ["IN", *late])),
+    "own only now": conn._filter == (conn._sender.address, None) and not conn._unfiltered,
+}
+time.sleep(0.2)
+out["nothing twice"] = all(len(v) == 1 for v in got.values()) and sorted(got) == sorted(["IN", *late])
+for b in (own, peer):
+    b.close()
+print(json.dumps(out), flush=True)
+"""
+
+
+def test_a_topic_filter_too_large_for_the_socket_falls_back_to_the_own_datagrams(netns: NetNamespace) -> None:
+    """A filter by topics can outgrow the socket's option memory (``net.core.optmem_max``: ENOMEM; a
+    vehicle's BMA in the LAN test met it). The bus then filters only its own datagrams, says so once,
+    and never leaves the earlier, narrower filter on the socket: that one dropped, in the kernel, the
+    channels subscribed after it (the LAN test's cut-off vehicle heard no direction and did not move)."""
+    proc = netns.python("-c", _OPTMEM_SCRIPT, GROUP_A, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    r = json.loads(out.strip().splitlines()[-1])
+    assert all(r.values()), (r, err)
+    said = [line for line in err.splitlines() if "cannot filter datagrams" in line]
+    assert len(said) == 1 and "by topic" in said[0] and said[0].startswith("INFO antalate.bus"), err
+    assert "Traceback" not in err, err

@@ -16,7 +16,7 @@ from antalate_lcm.agent.bma.plan import PEER_TOPICS, BehaviorPlan, BmaPlan, chec
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.behavior import Behavior, BehaviorContext, failure_reason
 from antalate_lcm.core.config import BmaConfig, Config
-from antalate_lcm.core.node import Context, Node, TopicMatch
+from antalate_lcm.core.node import Context, Node, NodeSettings, TopicMatch
 from antalate_lcm.msgs import arbiter_status_t, mc_state_t, telemetry_t
 from antalate_lcm.wire.peers import PeerTable
 from antalate_lcm.wire.vocabulary import McState, name_of
@@ -50,7 +50,7 @@ class BmaNode(Node):
     kind = "bma"
 
     def __init__(self, config: Config, context: Context, bma: BmaConfig, plan: BmaPlan | None = None) -> None:
-        super().__init__(config, context, name=bma.name)
+        super().__init__(NodeSettings.from_config(config), context, name=bma.name)
         self.bma = bma
         self.plan = plan if plan is not None else plan_bma(config, bma)
         self.log = logging.getLogger(f"antalate.bma.{self.agent}.{bma.name}")

@@ -16,7 +16,7 @@ from antalate_lcm.agent.hlc.machine import ErrorCode, HlcError
 from antalate_lcm.agent.hlc.safety import Filtered, SafetyLayer, describe, new_picture
 from antalate_lcm.agent.hlc.velocity_guard import Velocity, mission_flight
 from antalate_lcm.core.config import Config
-from antalate_lcm.core.node import Context, Node, TopicMatch
+from antalate_lcm.core.node import Context, Node, NodeSettings, TopicMatch
 from antalate_lcm.msgs import telemetry_t
 from antalate_lcm.vehicles import AutopilotError, Frame, VehicleState
 from antalate_lcm.wire.vocabulary import HlcState, Severity
@@ -38,7 +38,7 @@ class SharedPicture:
 
     def __init__(self, config: Config, context: Context) -> None:
         self.picture = new_picture(config)
-        self.feeder = Node(config, context, name="safety-picture")
+        self.feeder = Node(NodeSettings.from_config(config), context, name="safety-picture")
         self.users = 0
 
     def join(self) -> None:

@@ -48,7 +48,7 @@ from antalate_lcm.agent.plan import plan_adapter
 from antalate_lcm.base.deprecation import renamed_attribute, renamed_names
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.config import Config
-from antalate_lcm.core.node import Context, Node, shared_params
+from antalate_lcm.core.node import Context, Node, NodeSettings, shared_params
 from antalate_lcm.msgs import hlc_error_t, hlc_state_t, mc_state_t, telemetry_t, velocity_cmd_t
 from antalate_lcm.vehicles import AutopilotError, Frame, VehicleAdapter, VehicleState
 from antalate_lcm.wire.vocabulary import HlcState, Severity
@@ -93,7 +93,9 @@ class HlcNode(Node):
         autopilot = renamed_attribute("adapter")
 
     def __init__(self, config: Config, context: Context, adapter: VehicleAdapter | None = None) -> None:
-        super().__init__(config, context)
+        super().__init__(NodeSettings.from_config(config), context)
+        #: The agent's whole config, for this node's own logic (the base node reads only its settings).
+        self.config = config
         h = config.hlc
         #: The vehicle adapter the config's ``[hlc] autopilot`` names (or the one given).
         self.adapter = adapter or make_adapter(config, context)
@@ -158,6 +160,7 @@ class HlcNode(Node):
         if self._shared is not None:
             self._shared.join()
         h = self.config.hlc
+        self._telemetry = self.publisher("TELEMETRY")  # its hot path: no topic lookup per message
         self._publish_state = self.state_publisher(
             "HLC_STATE", self._state_msg, h.republish_hz, periodic=False
         )
@@ -417,11 +420,8 @@ class HlcNode(Node):
         msg.lat, msg.lon, msg.alt = s.lat, s.lon, s.alt
         msg.heading, msg.vn, msg.ve, msg.vd = s.heading, s.vn, s.ve, s.vd
         msg.battery, msg.armed, msg.in_air, msg.mode = s.battery, s.armed, s.in_air, s.mode
-        self.publish("TELEMETRY", msg)
+        self._telemetry.publish(msg)
 
 
-#: Old names (issue #26's vocabulary, docs/architecture.md): they keep working for one release.
-_DEPRECATED_NAMES = {"make_autopilot": "make_adapter"}
-
-if not TYPE_CHECKING:  # mypy sees only the new names, so nothing in the project can use an old one
-    __getattr__ = renamed_names(__name__, _DEPRECATED_NAMES)
+if not TYPE_CHECKING:  # the old names (base.deprecation.RENAMED_NAMES), unseen by mypy
+    __getattr__ = renamed_names(__name__)

@@ -14,7 +14,7 @@ from typing import Any
 from antalate_lcm.agent.mc.machine import McOutcome, McParams, MissionControl
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.config import Config
-from antalate_lcm.core.node import Context, Node, shared_params
+from antalate_lcm.core.node import Context, Node, NodeSettings, shared_params
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, operator_cmd_t
 from antalate_lcm.wire.vocabulary import Command, McState, name_of
 
@@ -27,7 +27,9 @@ class McNode(Node):
     __slots__ = ("machine", "_publish_state", "_reject_log", "_clock")
 
     def __init__(self, config: Config, context: Context) -> None:
-        super().__init__(config, context)
+        super().__init__(NodeSettings.from_config(config), context)
+        #: The agent's whole config, for this node's own logic (the base node reads only its settings).
+        self.config = config
         m = config.mc
         self.machine = MissionControl(
             shared_params(McParams, m, "takeoff_ack_timeout", "hlc_timeout", "on_link_regained")

@@ -33,7 +33,7 @@ from antalate_lcm.base.errors import ConfigError
 from antalate_lcm.base.errors import ServerProblem as ServerProblem
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.config import Config
-from antalate_lcm.core.node import Context, Node
+from antalate_lcm.core.node import Context, Node, NodeSettings
 from antalate_lcm.msgs import hlc_state_t, mc_state_t, payload_t, telemetry_t
 
 # httpx logs every request at INFO: one line per report per agent would drown an agent's log.
@@ -66,7 +66,9 @@ class OscNode(Node):
     def __init__(
         self, config: Config, context: Context, *, transport: httpx.AsyncBaseTransport | None = None
     ) -> None:
-        super().__init__(config, context)
+        super().__init__(NodeSettings.from_config(config), context)
+        #: The agent's whole config, for this node's own logic (the base node reads only its settings).
+        self.config = config
         self.osc = config.osc
         self.url = self.osc.server.rstrip("/") + "/api/report"
         try:

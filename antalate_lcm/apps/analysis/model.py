@@ -4,4 +4,4 @@
 from antalate_lcm.apps.analysis.records import *  # noqa: F403 - the old name offers what the new one does
 from antalate_lcm.base.deprecation import moved_module
 
-__getattr__ = moved_module(__name__, "antalate_lcm.apps.analysis.records")
+__getattr__ = moved_module(__name__)

@@ -29,7 +29,7 @@ from antalate_lcm.apps.gcs.view import GcsRefusal, GcsView, OperatorRequest
 from antalate_lcm.base.deprecation import renamed_attribute
 from antalate_lcm.base.errors import AntalateError
 from antalate_lcm.core.config import Config
-from antalate_lcm.core.node import Context, Node, TopicMatch
+from antalate_lcm.core.node import Context, Node, NodeSettings, TopicMatch
 from antalate_lcm.msgs import mc_state_t, operator_cmd_t
 
 log = logging.getLogger("antalate.gcs")
@@ -67,7 +67,7 @@ class GcsNode(Node):
 
     def __init__(
         self,
-        config: Config,
+        settings: NodeSettings,
         context: Context,
         view: GcsView,
         ground: Any,
@@ -75,7 +75,7 @@ class GcsNode(Node):
         commands: bool,
         clock: Any = time.monotonic,
     ) -> None:
-        super().__init__(config, context)
+        super().__init__(settings, context)
         self.view = view
         #: The pymavlink connection to the ground station(s): not a "link" (docs/architecture.md,
         #: "Vocabulary": that is an adapter's I/O with its vehicle), the GCS's side of the picture.
@@ -238,7 +238,7 @@ def serve(
 
     previous = signal.signal(signal.SIGTERM, on_signal)
     context = Context.create(config)
-    node = GcsNode(config, context, view, ground, commands=commands)
+    node = GcsNode(NodeSettings.from_config(config), context, view, ground, commands=commands)
     stop = threading.Event()
     reader = threading.Thread(target=_reader, args=(ground, node, stop), name="gcs-reader", daemon=True)
     try:

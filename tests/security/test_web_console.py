@@ -360,7 +360,7 @@ def test_the_real_process_refuses_a_rebinding_request(tmp_path: Path) -> None:
             text=True,
         )
         try:
-            assert wait_for(lambda: "serving the console" in log_path.read_text(), 30), log_path.read_text()
+            assert wait_for(lambda: "serving the console" in log_path.read_text(), 60), log_path.read_text()
 
             def raw(host: str) -> str:
                 with socket.create_connection(("127.0.0.1", port), timeout=10) as s:

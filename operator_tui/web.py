@@ -73,6 +73,8 @@ SIGN_IN_EVERY_S = 6.0
 KEYS_POLL_S = 1.0
 #: Sign-ins are logged once per address and outcome per this period (s), with a count of the rest.
 LOG_PERIOD_S = 60.0
+#: How long a console has to quit when its browser leaves or the server stops before it is killed.
+CONSOLE_QUIT_S = 5.0
 
 
 def console_command(config: str | None, name: str) -> str:
@@ -142,6 +144,25 @@ def make_server(
     refusals = RateLimitedLog(log, period=LOG_PERIOD_S, clock=clock)
     #: session token -> the consoles it opened, ended when its key is removed
     consoles: dict[str, set[BrowserTab]] = {}
+    #: every console process not yet reaped (a server shutting down ends them: on_cleanup)
+    running: set[AppService] = set()
+
+    async def end_console(app_service: AppService) -> None:
+        """Quit a console and reap its process while the loop runs. textual-serve's ``stop`` does
+        not wait for the process; one reaped after the loop closed is an error in asyncio's waitpid
+        thread, and a server stopping with consoles open (or a handler cancelled mid-stop) left
+        them running."""
+        try:
+            await app_service.stop()
+        finally:
+            process = app_service._process  # textual-serve keeps its process private
+            if process is not None and process.returncode is None:
+                try:
+                    await asyncio.wait_for(process.wait(), CONSOLE_QUIT_S)
+                except asyncio.TimeoutError:
+                    process.kill()
+                    await process.wait()
+            running.discard(app_service)
 
     async def relay(websocket: web.WebSocketResponse, app_service: AppService) -> None:
         """The browser's keystrokes, resizes and focus changes to its console, until the browser leaves."""
@@ -303,6 +324,7 @@ def make_server(
                     download_manager=self.download_manager,
                     debug=False,
                 )
+                running.add(app_service)
                 log.info("console %s opened from %s", tab_name, request.remote)
                 await app_service.start(width, height)
                 if tab.ending is None:
@@ -328,7 +350,8 @@ def make_server(
                     if not mine:
                         del consoles[token]
                 if app_service is not None:
-                    await app_service.stop()
+                    # shielded: a server closing cancels this handler, and on_cleanup then reaps it too
+                    await asyncio.shield(end_console(app_service))
                 log.info("console %s closed", tab_name)
             return websocket
 
@@ -367,6 +390,7 @@ def make_server(
                 watcher.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
                     await watcher
+            await asyncio.gather(*(end_console(s) for s in list(running)), return_exceptions=True)
 
     return ConsoleServer(
         command=console_command(config, name),

@@ -9,8 +9,6 @@ socket's kernel filter.
 
 from __future__ import annotations
 
-import contextlib
-import errno
 import logging
 import re
 import threading
@@ -105,13 +103,6 @@ class BusConnection:
         #: Once a subscription of this connection could want the process's own messages (a pattern, or a
         #: channel it publishes), they are heard again, for good.
         self._hear_own = False
-        #: (own address, topics) the receive socket's filter drops by (see _own_filter).
-        self._filter: tuple[tuple[str, int] | None, frozenset[str] | None] = (None, None)
-        #: The kernel refused a filter by topics (too large for the socket's option memory): only the
-        #: own datagrams are filtered, for good.
-        self._by_topics = True
-        #: The kernel refused any socket filter: every datagram is read, as liblcm's thread reads it.
-        self._unfiltered = False
         #: The last ``/``-part of every channel ever subscribed exactly (what the filter lets through).
         self._topics: frozenset[str] = frozenset()
         self._damaged_seen = 0
@@ -188,53 +179,17 @@ class BusConnection:
         simulated agents read their own 20,000 datagrams a second and every other agent process's
         only to drop them by channel."""
         receiver = self._receiver
-        if receiver is None or self._unfiltered:
+        if receiver is None:
             return
         own: tuple[str, int] | None = None
         topics: frozenset[str] | None = None
         if not self._patterns:
             if self._sender is not None and not self._hear_own:
                 own = self._sender.address
-            if self._topics and self._by_topics:
+            if self._topics:
                 topics = self._topics
-        if (own, topics) == self._filter:
-            return
-        try:
-            if topics is not None and not receiver.filter(own, topics):  # too many topics for one filter
-                topics = None
-            if topics is None:
-                receiver.filter(own, None)
-        except OSError as exc:
-            self._filter_refused(receiver, own, topics, exc)
-            return
-        self._filter = (own, topics)
-        self._ignoring = own is not None
-
-    def _filter_refused(
-        self, receiver: UdpmReceiver, own: tuple[str, int] | None, topics: frozenset[str] | None, exc: OSError
-    ) -> None:
-        """Under the lock: the kernel refused a filter. A filter by topics larger than the socket's option
-        memory (ENOMEM: ``net.core.optmem_max``, 20 KiB in a fresh network namespace) falls back to the
-        own datagrams only; any other refusal (no socket filters, SO_LOCK_FILTER) to none. Never is an
-        earlier, narrower filter left on the socket: it would drop what a later subscription wants."""
-        if topics is not None and exc.errno == errno.ENOMEM:
-            self._by_topics = False
-            log.info("cannot filter datagrams on %s by topic in the kernel (%s): only its own", self.url, exc)
-            try:
-                receiver.filter(own, None)
-            except OSError as again:
-                exc = again
-            else:
-                self._filter = (own, None)
-                self._ignoring = own is not None
-                return
-        log.info("cannot filter datagrams on %s in the kernel (%s): reading all of them", self.url, exc)
-        self._unfiltered = True
-        self._ignoring = False
-        # Off with any filter an earlier call attached (a locked one stays: not ours to change).
-        with contextlib.suppress(OSError):
-            receiver.filter(None, None)
-        self._filter = (None, None)
+        receiver.narrow(own, topics)
+        self._ignoring = receiver.drops_own
 
     def _hear_own_messages(self) -> None:
         """Under the lock: the receive socket hears this process's own datagrams again, for good."""

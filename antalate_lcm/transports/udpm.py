@@ -27,9 +27,11 @@ process's telemetry and state.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import errno
 import ipaddress
+import logging
 import socket
 import struct
 from collections.abc import Callable, Sequence
@@ -38,6 +40,9 @@ from typing import ClassVar
 from antalate_lcm.base.errors import AntalateError, MulticastUnavailable
 from antalate_lcm.transports.base import LcmUrl, OptionCheck, Transport, int_option, port_problem
 from antalate_lcm.transports.datagram import MAX_CHANNEL_LENGTH, SHORT_MAGIC_BYTES, Reassembler
+
+#: The bus's logger: what a connection says of its socket is said in its name.
+log = logging.getLogger("antalate.bus")
 
 DEFAULT_UDPM = "239.255.76.67:7667"
 _MULTICAST = ipaddress.IPv4Network("224.0.0.0/4")
@@ -162,7 +167,59 @@ class UdpmReceiver:
 
     def __init__(self, url: str, reassembler: Reassembler | None = None) -> None:
         self.sock = udpm_socket(url)
+        self.url = url
         self.reassembler = reassembler or Reassembler()
+        #: (own address, topics) the socket's filter drops by (see :meth:`narrow`).
+        self.applied: tuple[tuple[str, int] | None, frozenset[str] | None] = (None, None)
+        #: False once the kernel refused a filter by topics: only the own datagrams are filtered, for good.
+        self.by_topics = True
+        #: The kernel refused any socket filter: every datagram is read, as liblcm's thread reads it.
+        self.unfiltered = False
+
+    @property
+    def drops_own(self) -> bool:
+        """The kernel drops this process's own datagrams (the reader need not)."""
+        return self.applied[0] is not None
+
+    def narrow(self, own: tuple[str, int] | None, topics: frozenset[str] | None) -> None:
+        """Filter as :meth:`filter` says, as far as the kernel lets us: too many topics for one filter,
+        or a filter by topics larger than the socket's option memory (ENOMEM: ``net.core.optmem_max``,
+        charged by successive large filters), filters the own datagrams only; any other refusal (no
+        socket filters, SO_LOCK_FILTER), none, said once. Never is an earlier, narrower filter left on
+        the socket: it would drop, in the kernel, what a later subscription wants."""
+        if self.unfiltered:
+            return
+        if not self.by_topics:
+            topics = None
+        if (own, topics) == self.applied:
+            return
+        try:
+            if topics is not None and not self.filter(own, topics):
+                topics = None
+            if topics is None:
+                self.filter(own, None)
+        except OSError as exc:
+            self._refused(own, topics, exc)
+            return
+        self.applied = (own, topics)
+
+    def _refused(self, own: tuple[str, int] | None, topics: frozenset[str] | None, exc: OSError) -> None:
+        if topics is not None and exc.errno == errno.ENOMEM:
+            self.by_topics = False
+            log.info("cannot filter datagrams on %s by topic in the kernel (%s): only its own", self.url, exc)
+            try:
+                self.filter(own, None)
+            except OSError as again:
+                exc = again
+            else:
+                self.applied = (own, None)
+                return
+        log.info("cannot filter datagrams on %s in the kernel (%s): reading all of them", self.url, exc)
+        self.unfiltered = True
+        # Off with any filter an earlier call attached (a locked one stays: not ours to change).
+        with contextlib.suppress(OSError):
+            self.filter(None, None)
+        self.applied = (None, None)
 
     def fileno(self) -> int:
         return self.sock.fileno()

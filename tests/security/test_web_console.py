@@ -11,6 +11,7 @@ what the attacker thinks happened.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import os
 import socket
@@ -296,6 +297,32 @@ async def test_a_browser_behind_on_reading_still_gets_the_removed_key_close_code
         await c.server.close()
 
 
+def _children() -> set[int]:
+    """This process's child processes (Linux: /proc/PID/task/TID/children)."""
+    pids: set[int] = set()
+    for task in Path(f"/proc/{os.getpid()}/task").iterdir():
+        with contextlib.suppress(OSError):
+            pids.update(int(p) for p in (task / "children").read_text().split())
+    return pids
+
+
+async def test_a_console_process_is_reaped_before_the_server_has_stopped(tmp_path: Path) -> None:
+    """A console's process is reaped while the server's loop runs (here: its browser left, then the
+    server stopped). textual-serve's stop does not wait for it: the process outlived the server, and
+    asyncio's waitpid thread later failed on a closed loop ("Event loop is closed"), its traceback
+    formatted beside the main thread's parsing, which broke CPython 3.11's AST state for the worker."""
+    before = _children()
+    c = await serve(None, config=operator_config(tmp_path))
+    async with aiohttp.ClientSession() as session:
+        ws = await session.ws_connect(f"ws://127.0.0.1:{c.port}/ws?width=80&height=24")
+        first = await asyncio.wait_for(ws.receive(), 30)
+        assert first.type in (aiohttp.WSMsgType.BINARY, aiohttp.WSMsgType.TEXT), first
+        assert _children() - before, "the console runs as a child process"
+        await ws.close()  # the browser leaves: its console quits
+    await c.server.close()
+    assert _children() - before == set()
+
+
 async def _eventually(call: object, status: int, timeout: float = 10.0) -> bool:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -333,7 +360,7 @@ def test_the_real_process_refuses_a_rebinding_request(tmp_path: Path) -> None:
             text=True,
         )
         try:
-            assert wait_for(lambda: "serving the console" in log_path.read_text(), 30), log_path.read_text()
+            assert wait_for(lambda: "serving the console" in log_path.read_text(), 60), log_path.read_text()
 
             def raw(host: str) -> str:
                 with socket.create_connection(("127.0.0.1", port), timeout=10) as s:

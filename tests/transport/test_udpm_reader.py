@@ -175,7 +175,7 @@ out = {
 }
 time.sleep(0.2)
 out["own_not_delivered"] = got["in"] == [b"from peer", b"from peer 2"]
-out["unfiltered"] = conn._unfiltered and conn._filter == (None, None)
+out["unfiltered"] = conn._receiver.unfiltered and conn._receiver.applied == (None, None)
 for b in (own, peer):
     b.close()
 print(json.dumps(out), flush=True)
@@ -220,7 +220,7 @@ def keep(ch, d):
 own.subscribe("a", "IN", None, keep)
 own.publish("a", "OUT", b"opens the sender: its own datagrams are filtered from now on")
 time.sleep(0.1)
-narrow = conn._filter[1]
+narrow = conn._receiver.applied[1]
 late = [f"TOPIC_{i}" for i in range(9)]
 for channel in late:
     own.subscribe("a", channel, None, keep)
@@ -232,7 +232,7 @@ for i in range(5):
 out = {
     "a topic filter was attached first": narrow == frozenset({"IN"}),
     "every channel heard": until(lambda: all(got.get(c) == [b"from peer"] for c in ["IN", *late])),
-    "own only now": conn._filter == (conn._sender.address, None) and not conn._unfiltered,
+    "own only now": conn._receiver.applied == (conn._sender.address, None) and not conn._receiver.unfiltered,
 }
 time.sleep(0.2)
 out["nothing twice"] = all(len(v) == 1 for v in got.values()) and sorted(got) == sorted(["IN", *late])

@@ -239,6 +239,68 @@ def test_velocity_setpoint_expires_like_arducopter() -> None:
     assert abs(run(sim, clock, 4.0).vn) < 0.01
 
 
+class _AlwaysSteps(SimAdapter):
+    """The sim without its hovering shortcut: every GUIDED poll through `_step`."""
+
+    __slots__ = ()
+
+    def _hover(self, dt: float) -> bool:
+        return False
+
+
+class _CountsHovers(SimAdapter):
+    __slots__ = ("hovers",)
+
+    def _hover(self, dt: float) -> bool:
+        taken = super()._hover(dt)
+        self.hovers = getattr(self, "hovers", 0) + taken
+        return taken
+
+
+_COMPARED = (
+    "north",
+    "east",
+    "alt",
+    "vn",
+    "ve",
+    "vd",
+    "heading",
+    "battery",
+    "mode",
+    "in_air",
+    "armed",
+    "sim_time",
+)
+
+
+@pytest.mark.parametrize("north", [0.0, -0.0, 12.5])
+def test_hovering_shortcut_is_the_step_it_skips(north: float) -> None:
+    """A still, uncommanded hover skips `_step` (its lag from zero to zero): bit for bit the same
+    vehicle, poll after poll, through a set-point that starts and expires, an uneven poll interval
+    and the battery running out in the air."""
+    sims: list[tuple[SimAdapter, FakeClock]] = []
+    classes: tuple[type[SimAdapter], ...] = (_CountsHovers, _AlwaysSteps)
+    for cls in classes:
+        clock = FakeClock(T0)
+        made = cls({"battery": 2.0, "drain_flying": 3.0}, clock=clock)
+        made.connect()
+        made.north = north
+        assert made.arm()
+        made.takeoff(5.0)
+        sims.append((made, clock))
+    for i in range(1000):
+        seen = []
+        for sim, clock in sims:
+            if i == 200:
+                sim.set_velocity(0.5, 0.0, 0.0, 0.0, Frame.NED)
+            clock.advance(0.051 if i % 3 else 0.049)
+            seen.append((sim.state(), [repr(getattr(sim, name)) for name in _COMPARED]))
+        assert seen[0] == seen[1], i
+    shortcut = sims[0][0]
+    assert isinstance(shortcut, _CountsHovers) and shortcut.hovers > 100  # the hover before the set-point
+    assert shortcut.battery == 0.0 and not shortcut.in_air  # and the battery ran out: LAND, alike
+
+
 def test_descending_to_the_ground_in_guided_touches_down_then_auto_disarms() -> None:
     sim, clock = airborne(alt=2.0, auto_disarm_delay=10.0)
     for _ in range(5):

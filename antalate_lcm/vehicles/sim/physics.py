@@ -210,6 +210,8 @@ class Quadcopter:
         if phase is M_GROUND or (phase is M_GUIDED and self._one_step(dt)):
             # Nothing moves, or the set-point is followed exactly in one step (`_lag`): the HLC
             # polls at 20 Hz, a period just over ``max_step``, which cut each poll in two steps.
+            if phase is M_GUIDED and not (self.vn or self.ve or self.vd) and self._hover(dt):
+                return
             self._step(dt)
             return
         while dt > 0.0:
@@ -240,6 +242,24 @@ class Quadcopter:
             return False
         # The lag never descends faster than the faster of the current and the largest target rate.
         return self.alt > max(self.vd, self._descent_rate) * dt
+
+    def _hover(self, dt: float) -> bool:
+        """`_step` of ``dt`` s hovering (GUIDED, still, no set-point in force after the step, and
+        `_one_step` true: no empty battery, no touchdown), when it is one; False, nothing done, else.
+
+        A swarm in MISSION without a behavior hovers, 20 polls a second per agent: the lag toward
+        zero from zero leaves every velocity 0.0 and the position where it is (``+ 0.0`` below is
+        that arithmetic's one effect, a -0.0 made 0.0), so the step is the battery's drain alone.
+        """
+        t = self._sim_time + dt
+        if self._cmd is not None and t - self._cmd_time <= self._velocity_hold:
+            return False
+        self._sim_time = t
+        self.battery = max(0.0, self.battery - self._drain[self.in_air] * dt / 60.0)
+        self.vn = self.ve = self.vd = 0.0
+        self.north += 0.0
+        self.east += 0.0
+        return True
 
     def _step(self, h: float) -> None:
         p = self._p

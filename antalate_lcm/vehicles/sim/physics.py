@@ -24,7 +24,8 @@ Time
 The simulation advances lazily: whenever `state()` or a command is called, it integrates from the
 previous call to ``clock()`` (scaled by ``time_scale``) in steps of at most ``max_step`` seconds
 (in one go while idle on the ground, and in GUIDED flight when no set-point expiry, empty battery or
-touchdown can fall inside the interval: the lag is exact for any step, see ``_one_step``). Nothing
+touchdown can fall inside the interval: the lag is exact for any step, see ``_one_step``; a still,
+uncommanded hover is that step's battery drain alone, ``_hover``). Nothing
 runs between calls, so hundreds of sims cost nothing while idle, and tests drive time with a fake
 clock. Autopilot timers (auto-disarm, velocity hold, ...) run on simulated time;
 `VehicleState.link_age` is in real (clock) seconds, as the HLC perceives it.

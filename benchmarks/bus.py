@@ -193,7 +193,8 @@ def make_node(agent: str, api: str = "node") -> Any:
         {"agent": {"name": agent}, "buses": {"lan": url(api)}, "security": {"insecure": True}}
     )
     context = Context.create(config)
-    context.bus.open()
+    buses = getattr(context, "buses", None)  # None: a --tree checkout from before issue 26 named it `bus`
+    (context.bus if buses is None else buses).open()
     context.executor.start()
     node = Node(NodeSettings.from_config(config), context, name="bench")
     node.start()

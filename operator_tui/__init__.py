@@ -70,7 +70,7 @@ def run(
 
     context = Context.create(config)
     try:
-        context.bus.open()
+        context.buses.open()
         context.executor.start()
         app = OperatorApp(
             config, context=context, name=name, settings=settings, exit_after=headless_exit_after

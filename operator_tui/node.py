@@ -127,11 +127,13 @@ class OperatorNode(Node):
             # One regex per bus, not one per topic: the bus matches every datagram against every
             # pattern subscription; which topic a channel is gets worked out once per channel.
             combined = "|".join(f"(?:{_any_fields(self.topic_spec(t).channel)})" for t in topics)
-            self._raw_subs.append(self.context.bus.subscribe(bus, combined, None, self._enqueue, regex=True))
+            self._raw_subs.append(
+                self.context.buses.subscribe(bus, combined, None, self._enqueue, regex=True)
+            )
 
     def on_stop(self) -> None:
         for sub in self._raw_subs:
-            self.context.bus.unsubscribe(sub)
+            self.context.buses.unsubscribe(sub)
         self._raw_subs.clear()
 
     def _enqueue(self, channel: str, data: bytes) -> None:

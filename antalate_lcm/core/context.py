@@ -7,8 +7,9 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
+from antalate_lcm.base.deprecation import renamed_attribute
 from antalate_lcm.base.errors import AntalateError
 from antalate_lcm.core.admission import Admission
 from antalate_lcm.core.bus import Buses
@@ -52,7 +53,7 @@ class Context:
     of this process (see :meth:`in_process`); None when each node runs in its own process.
     """
 
-    bus: Buses
+    buses: Buses
     executor: Executor
     inproc_bus: str | None = None
     #: Every agent of the swarm runs in this process (``antalate agent`` without ``--processes``,
@@ -75,9 +76,12 @@ class Context:
     #: The one place this process signs and admits messages (every node's `NodeAdmission` comes from it).
     admission: Admission = field(init=False, repr=False)
 
+    if not TYPE_CHECKING:  # the old name, one release (issue #26's vocabulary); mypy sees only `buses`
+        bus = renamed_attribute("buses")
+
     def __post_init__(self) -> None:
-        self.bus.attach(self.executor)  # the bus's descriptors are read on the nodes' loop
-        self.admission = Admission(self.bus.urls, simulated=self.executor.sim is not None)
+        self.buses.attach(self.executor)  # the bus's descriptors are read on the nodes' loop
+        self.admission = Admission(self.buses.urls, simulated=self.executor.sim is not None)
 
     @classmethod
     def create(cls, config: Config) -> Context:
@@ -105,4 +109,4 @@ class Context:
 
     def close(self) -> None:
         self.executor.stop()
-        self.bus.close()
+        self.buses.close()

@@ -118,7 +118,7 @@ class Publisher:
             try:
                 send(channel, data)
             except OSError as exc:
-                ok = node.context.bus.publish_failed(bus, channel, exc) and ok
+                ok = node.context.buses.publish_failed(bus, channel, exc) and ok
         return ok
 
 
@@ -195,7 +195,7 @@ class Node:
                 if not any(timer is t for t in shared):
                     timer.cancel()
             for sub in self._subs:
-                self.context.bus.unsubscribe(sub)
+                self.context.buses.unsubscribe(sub)
             self._timers.clear()
             self._subs.clear()
             self._companions.clear()
@@ -275,7 +275,7 @@ class Node:
         data = msg.encode()
         channel = self.channel(topic)
         for bus in self.routes.publish_buses(topic):
-            self.context.bus.publish(bus, channel, data)
+            self.context.buses.publish(bus, channel, data)
         return None
 
     def subscribe(self, topic: str, handler: Callable[[Any], None], **fields: str) -> Subscription:
@@ -301,7 +301,7 @@ class Node:
                 if admit(channel, msg, sender):
                     handler(msg)
 
-        sub = self.context.bus.subscribe(bus, channel, spec.msg_type, deliver)
+        sub = self.context.buses.subscribe(bus, channel, spec.msg_type, deliver)
         self._subs.append(sub)
         return sub
 
@@ -343,7 +343,7 @@ class Node:
             if admit(channel, msg, match.fields.get("agent") if bound else None):
                 handler(msg, match)
 
-        sub = self.context.bus.subscribe(bus, pattern.pattern, spec.msg_type, deliver, regex=True)
+        sub = self.context.buses.subscribe(bus, pattern.pattern, spec.msg_type, deliver, regex=True)
         self._subs.append(sub)
         if own is not None:
             m = pattern.fullmatch(own)
@@ -357,7 +357,7 @@ class Node:
                 if admit(own_match.channel, msg, sender):
                     handler(msg, own_match)
 
-            companion = self.context.bus.subscribe(own_bus, own, spec.msg_type, deliver_own)
+            companion = self.context.buses.subscribe(own_bus, own, spec.msg_type, deliver_own)
             self._subs.append(companion)
             self._companions[sub] = companion
         return sub
@@ -366,7 +366,7 @@ class Node:
         companion = self._companions.pop(sub, None)
         if companion is not None:  # subscribe_all's own-channel half goes with it
             self.unsubscribe(companion)
-        self.context.bus.unsubscribe(sub)
+        self.context.buses.unsubscribe(sub)
         if sub in self._subs:
             self._subs.remove(sub)
 

@@ -50,7 +50,7 @@ class Routes:
         same buses share their send functions."""
         channel = self.channel(topic, **fields)
         buses = self.publish_buses(topic)
-        bus = self.context.bus
+        bus = self.context.buses
         shared = self.context.senders
         senders = shared.get(tuple(buses))
         if senders is None:
@@ -66,7 +66,7 @@ class Routes:
         out: list[str] = []
         seen: set[str] = set()
         for name in names:
-            url = self.context.bus.urls.get(name, name)
+            url = self.context.buses.urls.get(name, name)
             if url not in seen:  # two names for one URL are one LCM instance: send once
                 seen.add(url)
                 out.append(name)

@@ -223,8 +223,8 @@ def run(exp: Experiment) -> Outcome:
     )
     if clock is not None or exp.seed is not None:
         context.seed = script.seed
-    if coordinator is not None and clock is not None and isinstance(context.bus, SimulatedBuses):
-        coordinator.serve(clock, context.bus, context.executor, crossing)
+    if coordinator is not None and clock is not None and isinstance(context.buses, SimulatedBuses):
+        coordinator.serve(clock, context.buses, context.executor, crossing)
     recorder = LogRecorder(NodeSettings.from_config(configs[0], agent="recorder"), context, bus=bus, path=out)
     nodes: list[Node] = [recorder]
     if processes == 1:
@@ -372,7 +372,7 @@ def _console(config: Config, context: Context, nodes: list[Node]) -> int:
 
     started: list[Node] = []
     try:
-        context.bus.open()
+        context.buses.open()
         context.executor.start()
         for node in nodes:
             node.start()

@@ -118,7 +118,7 @@ class FaultGate:
     # --------------------------------------------------------------------- sending
     def send(self, node: Node, topic: str, msg: Message, buses: list[str], channel: str) -> bool:
         agent = node.agent
-        bus = node.context.bus
+        bus = node.context.buses
         if _watches(node) or not self.active.get(agent):
             data = node.admission.seal(msg)
             return all([bus.publish(b, channel, data) for b in buses])

@@ -57,7 +57,7 @@ class ShardFaults(FaultInjector):
 
     def on_start(self) -> None:
         super().on_start()
-        self.context.bus.subscribe(self._bus, FAULT_CHANNEL, payload_t, self._heard)
+        self.context.buses.subscribe(self._bus, FAULT_CHANNEL, payload_t, self._heard)
 
     def _heard(self, channel: str, msg: payload_t) -> None:
         record = read_record(self, msg, channel)
@@ -124,7 +124,7 @@ class FaultRelay(FaultInjector):
 
     def on_start(self) -> None:
         super().on_start()
-        self.context.bus.subscribe(self._bus, FAULT_CHANNEL, payload_t, self._heard)
+        self.context.buses.subscribe(self._bus, FAULT_CHANNEL, payload_t, self._heard)
 
     def _step(self) -> None:
         if self._script.fault and not self._marked and self.mission_start() is not None:

@@ -231,7 +231,7 @@ class FaultInjector(Node):
         msg.header.utime = int(self.wallclock() * 1_000_000)
         msg.header.agent = self.agent  # one sender per process: each has its own seq
         msg.header.seq = self._seq
-        self.context.bus.publish(self._bus, FAULT_CHANNEL, self.admission.seal(msg))
+        self.context.buses.publish(self._bus, FAULT_CHANNEL, self.admission.seal(msg))
 
     def summarize(self) -> None:
         """Write what each agent heard of the broadcasts (at the end of the script: once the nodes

@@ -69,7 +69,7 @@ def run_until_signal(
             previous[sig] = signal.signal(sig, on_signal)
     started: list[Node] = []
     try:
-        context.bus.open()
+        context.buses.open()
         context.executor.start()
 
         # A hop to the loop per batch of nodes, not per node: a thousand agents' nodes each waited

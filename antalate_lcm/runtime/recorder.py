@@ -34,7 +34,7 @@ class LogRecorder(Node):
             self._log = lcm.EventLog(self.path, "w", overwrite=True)
         except (OSError, RuntimeError, ValueError) as exc:
             raise AntalateError(f"cannot write the log {self.path}: {exc}") from None
-        self._sub = self.context.bus.subscribe(self.bus, ".*", None, self._write, regex=True)
+        self._sub = self.context.buses.subscribe(self.bus, ".*", None, self._write, regex=True)
 
     def _write(self, channel: str, data: bytes) -> None:  # on the executor's loop thread
         if self._log is not None:
@@ -43,7 +43,7 @@ class LogRecorder(Node):
 
     def on_stop(self) -> None:
         if self._sub is not None:
-            self.context.bus.unsubscribe(self._sub)
+            self.context.buses.unsubscribe(self._sub)
             self._sub = None
         if self._log is not None:
             self._log.close()

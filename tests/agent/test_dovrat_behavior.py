@@ -54,7 +54,7 @@ def _direction(
     msg.active, msg.azimuth, msg.speed, msg.target = active, azimuth, speed, target
     if unsigned:  # what an attacker without the key can send: a fresh header, no MAC
         msg.header.utime, msg.header.agent, msg.header.seq = int(time.time() * 1e6), "attacker", 1
-        h.context.bus.publish("lan", h.probe.channel(topic), msg.encode())
+        h.context.buses.publish("lan", h.probe.channel(topic), msg.encode())
     else:
         h.probe.publish(topic, msg)
 

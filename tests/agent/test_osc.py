@@ -59,9 +59,9 @@ def make_osc(
     ctx = Context(Buses(cfg.buses), Executor())
     ctx.executor.start()
     got: dict[str, list[Any]] = {"cmd": [], "dir": [], "payload": []}
-    ctx.bus.subscribe("lan", "alpha/OPERATOR_CMD", operator_cmd_t, lambda c, m: got["cmd"].append(m))
-    ctx.bus.subscribe("lan", "alpha/DIRECTION_CMD", direction_cmd_t, lambda c, m: got["dir"].append(m))
-    ctx.bus.subscribe("lan", "alpha/OPERATOR_PAYLOAD", payload_t, lambda c, m: got["payload"].append(m))
+    ctx.buses.subscribe("lan", "alpha/OPERATOR_CMD", operator_cmd_t, lambda c, m: got["cmd"].append(m))
+    ctx.buses.subscribe("lan", "alpha/DIRECTION_CMD", direction_cmd_t, lambda c, m: got["dir"].append(m))
+    ctx.buses.subscribe("lan", "alpha/OPERATOR_PAYLOAD", payload_t, lambda c, m: got["payload"].append(m))
     node = OscNode(cfg, ctx)
     node.start()
     return node, ctx, got
@@ -70,11 +70,11 @@ def make_osc(
 def feed_state(ctx: Context, lat: float = 32.0, heading: float = 0.0) -> None:
     mc = mc_state_t()
     mc.state = mc_state_t.MISSION
-    ctx.bus.publish("lan", "alpha/MC_STATE", mc)
+    ctx.buses.publish("lan", "alpha/MC_STATE", mc)
     t = telemetry_t()
     t.header.agent = "alpha"
     t.lat, t.lon, t.heading, t.battery, t.mode = lat, 35.0, heading, 80.0, "SIM"
-    ctx.bus.publish("lan", "alpha/TELEMETRY", t)
+    ctx.buses.publish("lan", "alpha/TELEMETRY", t)
 
 
 @pytest.fixture

@@ -213,6 +213,10 @@ def test_an_old_attribute_warns_and_is_the_new_one() -> None:
         with pytest.warns(DeprecationWarning, match=warned):
             hlc.autopilot = other  # type: ignore[attr-defined]
         assert hlc.adapter is other
+        with pytest.warns(
+            DeprecationWarning, match=r"core\.context\.Context\.bus is deprecated: use .*Context\.buses"
+        ):
+            assert context.bus is context.buses  # type: ignore[attr-defined]
     finally:
         context.close()
 

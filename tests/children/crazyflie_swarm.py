@@ -122,7 +122,7 @@ def main(spec: dict[str, Any]) -> None:
             timeout=120.0,
         )
         nodes.append(operator)
-    context.bus.open()
+    context.buses.open()
     context.executor.start()
     for node in nodes:
         node.start()

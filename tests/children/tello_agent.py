@@ -75,7 +75,7 @@ def main(doc: dict[str, Any]) -> None:
     validate(config)
     context = Context.create(config)
     nodes: list[Node] = [Recorder(config, context), *agent_nodes(config, context)]  # first: it hears INIT
-    context.bus.open()
+    context.buses.open()
     context.executor.start()
     for node in nodes:
         node.start()

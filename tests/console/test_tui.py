@@ -153,7 +153,7 @@ def context() -> Iterator[Context]:
 
 @pytest.fixture
 def swarm(context: Context) -> FakeSwarm:
-    return FakeSwarm(context.bus)
+    return FakeSwarm(context.buses)
 
 
 @pytest.fixture
@@ -644,7 +644,7 @@ async def test_garbage_on_a_watched_channel_is_reported_not_fatal(
     two_agents: tuple[OperatorApp, Any], context: Context
 ) -> None:
     app, pilot = two_agents
-    context.bus.publish("lan", "alpha/MC_STATE", b"\x00garbage")
+    context.buses.publish("lan", "alpha/MC_STATE", b"\x00garbage")
     await until(pilot, app, lambda: any("not a valid mc_state_t" in e.text for e in app.board.events))
     assert app.node.decode_errors == 1 and app.is_running
 

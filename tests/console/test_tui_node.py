@@ -40,7 +40,7 @@ def _error(agent: str, code: int) -> bytes:
 
 
 def test_newest_state_per_channel_and_every_event(node: OperatorNode) -> None:
-    bus = node.context.bus
+    bus = node.context.buses
     for ack in range(1, 11):
         bus.publish(
             "lan", "a/MC_STATE", _mc("a", mc_state_t.TAKEOFF if ack < 10 else mc_state_t.MISSION, ack)
@@ -74,7 +74,7 @@ def test_newest_state_per_channel_and_every_event(node: OperatorNode) -> None:
 
 
 def test_garbage_in_the_newest_slot_is_counted_not_fatal(node: OperatorNode) -> None:
-    bus = node.context.bus
+    bus = node.context.buses
     bus.publish("lan", "a/MC_STATE", _mc("a", mc_state_t.STANDBY, 0))
     bus.publish("lan", "a/MC_STATE", b"\x00garbage")
     assert wait_for(lambda: node.received == 2, 2)
@@ -86,7 +86,7 @@ def test_garbage_in_the_newest_slot_is_counted_not_fatal(node: OperatorNode) -> 
 
 
 def test_a_state_republished_unchanged_is_not_decoded_again(node: OperatorNode) -> None:
-    bus = node.context.bus
+    bus = node.context.buses
     bus.publish("lan", "a/MC_STATE", _mc("a", mc_state_t.STANDBY, 3))
     assert wait_for(lambda: node.received == 1, 2)
     first = node.drain()[0].msg

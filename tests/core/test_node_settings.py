@@ -71,7 +71,7 @@ def test_a_node_of_its_own_speaks_under_its_name_on_the_swarms_buses_and_key(con
     assert console.routes.channel("MC_STATE") == "operator/mc"
     assert console.routes.channel("OPERATOR_CMD", agent="a-1") == "a-1/OPERATOR_CMD"
     got: list[bytes] = []
-    context.bus.subscribe("lan", "a-1/OPERATOR_CMD", None, lambda _ch, data: got.append(data))
+    context.buses.subscribe("lan", "a-1/OPERATOR_CMD", None, lambda _ch, data: got.append(data))
     cmd = operator_cmd_t()
     cmd.command, cmd.target = int(Command.TAKEOFF), "a-1"
     context.executor.run_sync(lambda: console.publish("OPERATOR_CMD", cmd, seq=3, agent="a-1"))
@@ -97,7 +97,7 @@ def test_an_unknown_topic_is_named_with_the_known_ones(context: Context) -> None
 def test_a_publisher_handle_is_the_topics_one_and_counts_the_seq_with_publish(context: Context) -> None:
     node = Node(NodeSettings.from_config(_local()), context, name="hlc")
     heard: list[telemetry_t] = []
-    context.bus.subscribe("lan", "a-1/TELEMETRY", telemetry_t, lambda _ch, m: heard.append(m))
+    context.buses.subscribe("lan", "a-1/TELEMETRY", telemetry_t, lambda _ch, m: heard.append(m))
     pub = node.publisher("TELEMETRY")
     assert node.publisher("TELEMETRY") is pub and pub.channel == "a-1/TELEMETRY" and pub.buses == ["lan"]
 

@@ -89,15 +89,15 @@ class Swarm(InProcess):
         if key:
             sign(msg, key)
         data: bytes = msg.encode()
-        self.context.bus.publish("lan", channel, data)
+        self.context.buses.publish("lan", channel, data)
         return data
 
     def raw(self, channel: str, data: bytes) -> None:
-        self.context.bus.publish("lan", channel, data)
+        self.context.buses.publish("lan", channel, data)
 
     def capture(self, channel: str) -> list[bytes]:
         got: list[bytes] = []
-        self.context.bus.subscribe("lan", channel, None, lambda _ch, data: got.append(data))
+        self.context.buses.subscribe("lan", channel, None, lambda _ch, data: got.append(data))
         return got
 
     def command(self, name: str, seq: int, target: str = AGENT) -> None:

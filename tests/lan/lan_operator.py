@@ -133,7 +133,7 @@ def main() -> int:
     args = parser.parse_args()
     config = load_config(args.config)
     context = Context.create(config)
-    context.bus.open()
+    context.buses.open()
     context.executor.start()
     node = LanOperator(NodeSettings.from_config(config), context, stale_after=args.stale_after)
     node.start()

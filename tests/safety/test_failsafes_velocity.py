@@ -100,7 +100,7 @@ def test_an_agent_sends_no_setpoint_over_a_stale_link_in_llc_down_or_in_hold() -
             time.sleep(0.05)
 
     streamer = threading.Thread(target=stream)
-    context.bus.open()
+    context.buses.open()
     context.executor.start()
     try:
         hlc.start()

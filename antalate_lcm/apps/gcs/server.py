@@ -242,7 +242,7 @@ def serve(
     stop = threading.Event()
     reader = threading.Thread(target=_reader, args=(ground, node, stop), name="gcs-reader", daemon=True)
     try:
-        context.bus.open()
+        context.buses.open()
         context.executor.start()
         node.start()
         reader.start()

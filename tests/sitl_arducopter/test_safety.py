@@ -24,6 +24,7 @@ from typing import Any
 
 import pytest
 
+from antalate_lcm.apps.analysis.logfile import read_log
 from antalate_lcm.base.geo import FlatFrame, offset
 from antalate_lcm.base.safety.geofence import Geofence
 from antalate_lcm.base.safety.separation import separation
@@ -162,6 +163,30 @@ class Sampler:
         assert not self._thread.is_alive(), "the sampler is stuck on a gcs call"
 
 
+def _log_shows_all_landed(log: Path) -> bool:
+    """Whether the log being written ends, for every vehicle, in STANDBY and on the ground: the
+    analysis's "back in STANDBY on the ground at the end" (the logger flushes every 100 ms; a
+    partly written last event is left out by read_log)."""
+    agents = read_log(log).agents
+    for name in HOMES:
+        rec = agents.get(name)
+        if rec is None or not rec.mc_states or rec.mc_states[-1].state != "STANDBY":
+            return False
+        if not rec.telemetry or rec.telemetry[-1].in_air:
+            return False
+    return True
+
+
+def _log_tail(log: Path) -> str:
+    """Each vehicle's last state and telemetry in the log, for a failure's message."""
+    agents = read_log(log).agents
+    return "; ".join(
+        f"{name}: last MC state {rec.mc_states[-1].state if rec.mc_states else None}, "
+        f"in_air {rec.telemetry[-1].in_air if rec.telemetry else None}"
+        for name, rec in sorted(agents.items())
+    )
+
+
 def test_three_arducopters_commanded_at_their_centroid_keep_apart_with_the_fence_in_the_vehicle(
     copters: dict[str, Copter], sitl_probe: Probe, sitl_netns: NetNamespace, sitl_dir: Path
 ) -> None:
@@ -200,6 +225,10 @@ def test_three_arducopters_commanded_at_their_centroid_keep_apart_with_the_fence
         swarm_command(probe, O.RTL)
         all_mc(probe, M.STANDBY, timeout=150, since=rtl)
         assert wait_for(lambda: not any(sampler.latest[n]["armed"] for n in HOMES), 30, 0.5)
+        # The logger reads the bus beside the probe, and may still be behind it (a loaded machine):
+        # stopped now, the log can end before an agent's last state or telemetry. Stopped once the
+        # log itself shows every agent in STANDBY on the ground, what the analysis below reads.
+        assert wait_for(lambda: _log_shows_all_landed(log), 60, 0.5), _log_tail(log)
     landed = time.monotonic()
     stop_process(logger)  # SIGTERM reaches lcm-logger itself: the file is complete
     analysis = subprocess.run(

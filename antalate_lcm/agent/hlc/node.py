@@ -38,7 +38,6 @@ from antalate_lcm.agent.hlc.safety import SafetyLayer
 from antalate_lcm.agent.hlc.velocity_guard import (
     GuardDecision,
     Velocity,
-    VelocityCommand,
     VelocityGuard,
     VelocityLimits,
     Verdict,
@@ -55,6 +54,7 @@ from antalate_lcm.wire.vocabulary import HlcState, Severity
 
 _CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
 _GAINING_ALTITUDE = HlcState.GAINING_ALTITUDE  # bound once: read on every control tick
+_REJECT, _HOVER = Verdict.REJECT, Verdict.HOVER  # and these on every velocity command applied
 
 
 def make_adapter(config: Config, context: Context) -> VehicleAdapter:
@@ -285,11 +285,20 @@ class HlcNode(Node):
     def _on_velocity(self, msg: velocity_cmd_t) -> None:
         if not self.started:
             return
-        cmd = VelocityCommand(msg.vx, msg.vy, msg.vz, msg.yaw_rate, msg.frame, self.now)
-        decision = self.velocity_guard.on_command(
-            cmd, self.now, self.machine.state, self.mc_state, self.link_age()
+        # 10-20 a second per agent in mission flight: one clock read, the link's age (`link_age`)
+        # inline, and no decision built around a command passed on as it came.
+        now = self._clock()
+        polled = self._polled_at
+        link_age = math.inf if polled is None else self.snapshot.link_age + max(0.0, now - polled)
+        verdict = self.velocity_guard.on_velocity(
+            msg.vx, msg.vy, msg.vz, msg.yaw_rate, msg.frame, now, self.machine.state, self.mc_state, link_age
         )
-        self._apply(decision, msg.header.agent)
+        if isinstance(verdict, Velocity):
+            if self._filter is not None:
+                verdict = self._filter.wished(verdict)
+            self.send_velocity(verdict)
+        else:
+            self._apply(verdict, msg.header.agent)
 
     def link_age(self) -> float:
         """The link's age now: the last snapshot's, plus the time since it was taken (20 Hz is coarse)."""
@@ -344,7 +353,7 @@ class HlcNode(Node):
 
     # ------------------------------------------------------------------ outputs
     def _apply(self, decision: GuardDecision, source: str) -> None:
-        if decision.verdict is Verdict.REJECT:
+        if decision.verdict is _REJECT:
             # Outside mission flight a velocity command is expected (a behavior's last "stop"),
             # so it is noted; a malformed one in flight is a warning.
             in_mission = mission_flight(self.machine.state, self.mc_state)
@@ -357,7 +366,7 @@ class HlcNode(Node):
             )
             return
         v = decision.send or Velocity.hover()
-        if decision.verdict is Verdict.HOVER:
+        if decision.verdict is _HOVER:
             self.log.info("hover: %s", decision.reason)
         elif decision.clamped:
             self._reject_log.log(("clamp",), logging.INFO, "velocity command clamped: %s", decision.reason)
@@ -367,7 +376,10 @@ class HlcNode(Node):
 
     def send_velocity(self, v: Velocity) -> None:
         try:
-            self.adapter.set_velocity(v.vx, v.vy, v.vz, v.yaw_rate, Frame(v.frame))
+            frame = v.frame
+            if type(frame) is not Frame:  # the guard's set-points carry a Frame already
+                frame = Frame(frame)
+            self.adapter.set_velocity(v.vx, v.vy, v.vz, v.yaw_rate, frame)
         except Exception as exc:
             self._reject_log.log(("set_velocity",), logging.WARNING, "set_velocity failed: %s", exc)
 

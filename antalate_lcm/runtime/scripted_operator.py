@@ -30,6 +30,10 @@ class DirectionAt:
     active: bool = True
 
 
+#: McState by wire value, for the state messages of the whole swarm.
+_MC_STATES: dict[int, McState] = {int(state): state for state in McState}
+
+
 class Phase(enum.Enum):
     WAITING = "waiting for every agent in STANDBY"
     TAKING_OFF = "taking off"
@@ -112,12 +116,19 @@ class ScriptedOperator(Node):
         return self.now - self._t0
 
     def _on_mc_state(self, msg: mc_state_t, match: TopicMatch) -> None:
+        # Every agent's state, 5 a second each: nearly always the one its timeline ends with.
+        state = _MC_STATES.get(msg.state)  # McState(value), without the enum's call
+        if state is None:
+            try:
+                state = McState(msg.state)
+            except ValueError:
+                return
         agent = match.fields.get("agent", msg.header.agent)
-        try:
-            state = McState(msg.state)
-        except ValueError:
-            return
-        self.timelines.setdefault(agent, Timeline()).add(self.elapsed, state)
+        timeline = self.timelines.get(agent)
+        if timeline is None:
+            timeline = self.timelines[agent] = Timeline()
+        if timeline.current is not state:
+            timeline.add(self.elapsed, state)
 
     def _states(self) -> list[McState | None]:
         return [t.current for a, t in self.timelines.items() if a not in self.excused]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import Any
 
@@ -168,3 +169,53 @@ def test_default_limits() -> None:
 def test_limits_validated(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         VelocityLimits(**{field: value})
+
+
+ON_VELOCITY_CASES = list(
+    itertools.product(
+        [(1.0, 0.0), (3.0, -4.0), (6.0, 8.0), (-0.0, 0.0), (math.nan, 0.0), (0.0, math.inf)],
+        [0.0, -0.0, 1.0, 2.0, -3.0, math.nan],
+        [0.0, -0.0, 45.0, 90.0, -120.0, -math.inf],
+        [Frame.BODY, Frame.NED, 1, 1.0, True, 7],
+    )
+)
+
+
+@pytest.mark.parametrize(
+    "limits", [LIMITS, VelocityLimits(max_horizontal=0.0, max_vertical=0.0, max_yaw_rate=0.0)]
+)
+@pytest.mark.parametrize("states", [OK, (HlcState.LANDING, McState.LAND)])
+@pytest.mark.parametrize("link_age", [0.1, 3.0, math.nan])
+def test_the_hlc_path_decides_what_on_command_does(
+    limits: VelocityLimits, states: tuple[HlcState, McState], link_age: float
+) -> None:
+    """`VelocityGuard.on_velocity` (the HLC's path: the values, no VelocityCommand, the Velocity
+    itself when it passes unchanged) decides exactly what `on_command` decides for a command received
+    now, a zero's sign included (`repr`), and leaves the guard in the same state."""
+    for (vx, vy), vz, yaw, frame in ON_VELOCITY_CASES:
+        by_command, by_values = VelocityGuard(limits), VelocityGuard(limits)
+        by_command.last_received = by_values.last_received = 1.0
+        expected = by_command.on_command(
+            VelocityCommand(vx, vy, vz, yaw, frame, 100.0), 100.0, *states, link_age
+        )
+        got = by_values.on_velocity(vx, vy, vz, yaw, frame, 100.0, *states, link_age)
+        if isinstance(got, Velocity):
+            assert expected.verdict is Verdict.SEND and not expected.clamped and expected.reason == ""
+            got = GuardDecision(Verdict.SEND, got)
+        assert repr(got) == repr(expected), (vx, vy, vz, yaw, frame)
+        assert type(got.send.frame if got.send else None) is type(
+            expected.send.frame if expected.send else None
+        )
+        assert (by_values.last_received, by_values._hovering) == (
+            by_command.last_received,
+            by_command._hovering,
+        )
+
+
+def test_a_zero_limit_clamps_to_the_same_signed_zero_as_before() -> None:
+    """``max(-limit, min(limit, value))`` with a limit of 0: the clamp's own zero (-0.0), kept."""
+    limits = VelocityLimits(max_vertical=0.0, max_yaw_rate=0.0)
+    d = check_velocity(VelocityCommand(0.0, 0.0, 0.0, -0.0, Frame.NED, 1.0), 1.0, *OK, limits)
+    assert d.send is not None and d.verdict is Verdict.SEND and not d.clamped
+    assert math.copysign(1.0, d.send.vz) == math.copysign(1.0, max(-0.0, min(0.0, 0.0)))
+    assert math.copysign(1.0, d.send.yaw_rate) == math.copysign(1.0, max(-0.0, min(0.0, -0.0)))

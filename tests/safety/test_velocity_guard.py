@@ -176,7 +176,8 @@ ON_VELOCITY_CASES = list(
         [(1.0, 0.0), (3.0, -4.0), (6.0, 8.0), (-0.0, 0.0), (math.nan, 0.0), (0.0, math.inf)],
         [0.0, -0.0, 1.0, 2.0, -3.0, math.nan],
         [0.0, -0.0, 45.0, 90.0, -120.0, -math.inf],
-        [Frame.BODY, Frame.NED, 1, 1.0, True, 7],
+        # A float or a bool from a hand-made message is looked up as the enum would (1.0 is NED).
+        list[Any]([Frame.BODY, Frame.NED, 1, 1.0, True, 7]),
     )
 )
 

@@ -190,19 +190,26 @@ ON_VELOCITY_CASES = list(
 def test_the_hlc_path_decides_what_on_command_does(
     limits: VelocityLimits, states: tuple[HlcState, McState], link_age: float
 ) -> None:
-    """`VelocityGuard.on_velocity` (the HLC's path: the values, no VelocityCommand, the Velocity
-    itself when it passes unchanged) decides exactly what `on_command` decides for a command received
-    now, a zero's sign included (`repr`), and leaves the guard in the same state."""
+    """`VelocityGuard.passes` (the HLC's path: the values, nothing built when the command passes as
+    it came) then, when it says None, `on_command`, decide exactly what `on_command` alone decides
+    for a command received now, a zero's sign included (`repr`), and leave the guard in the same
+    state; `passes` remembers nothing when it says None."""
     for (vx, vy), vz, yaw, frame in ON_VELOCITY_CASES:
         by_command, by_values = VelocityGuard(limits), VelocityGuard(limits)
         by_command.last_received = by_values.last_received = 1.0
+        by_values._hovering = by_command._hovering = True
         expected = by_command.on_command(
             VelocityCommand(vx, vy, vz, yaw, frame, 100.0), 100.0, *states, link_age
         )
-        got = by_values.on_velocity(vx, vy, vz, yaw, frame, 100.0, *states, link_age)
-        if isinstance(got, Velocity):
+        known = by_values.passes(vx, vy, vz, yaw, frame, 100.0, *states, link_age)
+        if known is None:
+            assert (by_values.last_received, by_values._hovering) == (1.0, True)
+            got = by_values.on_command(
+                VelocityCommand(vx, vy, vz, yaw, frame, 100.0), 100.0, *states, link_age
+            )
+        else:
             assert expected.verdict is Verdict.SEND and not expected.clamped and expected.reason == ""
-            got = GuardDecision(Verdict.SEND, got)
+            got = GuardDecision(Verdict.SEND, Velocity(vx, vy, vz, yaw, known))
         assert repr(got) == repr(expected), (vx, vy, vz, yaw, frame)
         assert type(got.send.frame if got.send else None) is type(
             expected.send.frame if expected.send else None
@@ -211,6 +218,8 @@ def test_the_hlc_path_decides_what_on_command_does(
             by_command.last_received,
             by_command._hovering,
         )
+    fast = VelocityGuard(limits)
+    assert (fast.passes(1.0, -0.0, 0.0, -0.0, 1, 5.0, *OK, 0.1) is Frame.NED) == (limits is LIMITS)
 
 
 def test_a_zero_limit_clamps_to_the_same_signed_zero_as_before() -> None:

@@ -38,6 +38,7 @@ from antalate_lcm.agent.hlc.safety import SafetyLayer
 from antalate_lcm.agent.hlc.velocity_guard import (
     GuardDecision,
     Velocity,
+    VelocityCommand,
     VelocityGuard,
     VelocityLimits,
     Verdict,
@@ -286,19 +287,23 @@ class HlcNode(Node):
         if not self.started:
             return
         # 10-20 a second per agent in mission flight: one clock read, the link's age (`link_age`)
-        # inline, and no decision built around a command passed on as it came.
+        # inline, and nothing built around a command that passes as it came (`VelocityGuard.passes`).
         now = self._clock()
         polled = self._polled_at
         link_age = math.inf if polled is None else self.snapshot.link_age + max(0.0, now - polled)
-        verdict = self.velocity_guard.on_velocity(
-            msg.vx, msg.vy, msg.vz, msg.yaw_rate, msg.frame, now, self.machine.state, self.mc_state, link_age
-        )
-        if isinstance(verdict, Velocity):
-            if self._filter is not None:
-                verdict = self._filter.wished(verdict)
-            self.send_velocity(verdict)
+        vx, vy, vz, yaw_rate, frame = msg.vx, msg.vy, msg.vz, msg.yaw_rate, msg.frame
+        guard, state, mc_state = self.velocity_guard, self.machine.state, self.mc_state
+        known = guard.passes(vx, vy, vz, yaw_rate, frame, now, state, mc_state, link_age)
+        if known is None:  # rejected, clamped or stale: the guard's decision, logged by _apply
+            cmd = VelocityCommand(vx, vy, vz, yaw_rate, frame, now)
+            self._apply(guard.on_command(cmd, now, state, mc_state, link_age), msg.header.agent)
+        elif self._filter is not None:
+            self.send_velocity(self._filter.wished(Velocity(vx, vy, vz, yaw_rate, known)))
         else:
-            self._apply(verdict, msg.header.agent)
+            try:  # `send_velocity`, inline
+                self.adapter.set_velocity(vx, vy, vz, yaw_rate, known)
+            except Exception as exc:
+                self._reject_log.log(("set_velocity",), logging.WARNING, "set_velocity failed: %s", exc)
 
     def link_age(self) -> float:
         """The link's age now: the last snapshot's, plus the time since it was taken (20 Hz is coarse)."""

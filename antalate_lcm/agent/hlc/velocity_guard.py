@@ -247,7 +247,7 @@ class VelocityGuard:
         self._note(decision, cmd.received_at, hlc_state, mc_state)
         return decision
 
-    def on_velocity(
+    def passes(
         self,
         vx: float,
         vy: float,
@@ -258,16 +258,39 @@ class VelocityGuard:
         hlc_state: HlcState | int,
         mc_state: McState | int | None,
         link_age: float,
-    ) -> Velocity | GuardDecision:
-        """`on_command` of a command received ``now`` (the HLC's hot path: no `VelocityCommand`
-        built), with the `Velocity` itself when it passes unchanged, else the decision."""
-        verdict = _verdict(vx, vy, vz, yaw_rate, frame, now, now, hlc_state, mc_state, self.limits, link_age)
-        if isinstance(verdict, Velocity):
-            self.last_received = now
-            self._hovering = False
-        else:
-            self._note(verdict, now, hlc_state, mc_state)
-        return verdict
+    ) -> Frame | None:
+        """The HLC's hot path for a command received ``now``: the `Frame` to send its values in when
+        it passes as it came (nearly every command of a flight: no `VelocityCommand`, `Velocity` or
+        decision is built), remembered as `on_command` would; None when it does not, and
+        `on_command` decides (nothing remembered here then). Every check of `_verdict` is made, the
+        clamps' as "inside the limits" (a command at a limit exactly goes to `on_command`)."""
+        limits = self.limits
+        if not (
+            hlc_state == _AIRBORNE
+            and mc_state == _MISSION
+            and link_age < limits.max_link_age
+            and isfinite(vx)
+            and isfinite(vy)
+            and isfinite(vz)
+            and isfinite(yaw_rate)
+        ):
+            return None
+        try:
+            known = _FRAMES.get(frame)
+        except TypeError:
+            return None
+        vertical, yaw = limits.max_vertical, limits.max_yaw_rate
+        if (
+            known is None
+            or not -vertical < vz < vertical
+            or not -yaw < yaw_rate < yaw
+            or hypot(vx, vy) > limits.max_horizontal
+            or limits.velocity_timeout < 0.0  # received now: never stale (`__post_init__` says >= 0)
+        ):
+            return None
+        self.last_received = now
+        self._hovering = False
+        return known
 
     def _note(
         self,

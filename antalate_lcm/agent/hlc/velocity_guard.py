@@ -120,38 +120,7 @@ def check_velocity(
 
     `link_age` is the age of the autopilot's last snapshot (`VehicleState.link_age`).
     """
-    verdict = _verdict(
-        cmd.vx,
-        cmd.vy,
-        cmd.vz,
-        cmd.yaw_rate,
-        cmd.frame,
-        cmd.received_at,
-        now,
-        hlc_state,
-        mc_state,
-        limits,
-        link_age,
-    )
-    return GuardDecision(_SEND, verdict) if isinstance(verdict, Velocity) else verdict
-
-
-def _verdict(
-    vx: float,
-    vy: float,
-    vz: float,
-    yaw_rate: float,
-    frame_value: Frame | int,
-    received_at: float,
-    now: float,
-    hlc_state: HlcState | int,
-    mc_state: McState | int | None,
-    limits: VelocityLimits,
-    link_age: float,
-) -> GuardDecision | Velocity:
-    """`check_velocity` of a command's values: the `Velocity` itself when it is passed on as it
-    came (what nearly every command of a flight is: the HLC's 10-20 a second per agent then build no
-    decision around it), else the decision."""
+    vx, vy, vz, yaw_rate, frame_value = cmd.vx, cmd.vy, cmd.vz, cmd.yaw_rate, cmd.frame
     if not (hlc_state == _AIRBORNE and mc_state == _MISSION):  # mission_flight, inline
         return GuardDecision(
             _REJECT,
@@ -179,7 +148,7 @@ def _verdict(
             frame = Frame(frame_value)
         except ValueError:
             return GuardDecision(_REJECT, None, f"velocity rejected: unknown frame {frame_value!r}")
-    age = now - received_at
+    age = now - cmd.received_at
     if age > limits.velocity_timeout:
         return GuardDecision(
             _HOVER,
@@ -207,7 +176,7 @@ def _verdict(
             notes.append(f"yaw rate {yaw_rate:.1f} -> {clamped:g} deg/s")
         yaw_rate = clamped
     if not notes:
-        return Velocity(vx, vy, vz, yaw_rate, frame)
+        return GuardDecision(_SEND, Velocity(vx, vy, vz, yaw_rate, frame))
     return GuardDecision(
         _SEND, Velocity(vx, vy, vz, yaw_rate, frame), f"velocity clamped: {'; '.join(notes)}", clamped=True
     )
@@ -215,7 +184,7 @@ def _verdict(
 
 # Bound once, like _AIRBORNE: an enum member's attribute read costs a descriptor call in 3.11.
 _SEND, _HOVER, _REJECT = Verdict.SEND, Verdict.HOVER, Verdict.REJECT
-#: Frame's members by value (and by member: an IntEnum hashes as its value), for `_verdict`.
+#: Frame's members by value (and by member: an IntEnum hashes as its value), for `check_velocity` and `VelocityGuard.passes`.
 _FRAMES: dict[object, Frame] = {frame.value: frame for frame in Frame}
 
 
@@ -262,7 +231,7 @@ class VelocityGuard:
         """The HLC's hot path for a command received ``now``: the `Frame` to send its values in when
         it passes as it came (nearly every command of a flight: no `VelocityCommand`, `Velocity` or
         decision is built), remembered as `on_command` would; None when it does not, and
-        `on_command` decides (nothing remembered here then). Every check of `_verdict` is made, the
+        `on_command` decides (nothing remembered here then). Every check of `check_velocity` is made, the
         clamps' as "inside the limits" (a command at a limit exactly goes to `on_command`)."""
         limits = self.limits
         if not (

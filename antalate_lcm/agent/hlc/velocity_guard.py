@@ -281,14 +281,15 @@ class VelocityGuard:
         self, now: float, hlc_state: HlcState | int, mc_state: McState | int | None, link_age: float = 0.0
     ) -> GuardDecision | None:
         """Call periodically: returns a HOVER decision once after the last command went stale."""
-        if self.last_received is None:
+        last = self.last_received
+        if last is None:
             return None  # no command passed on since the last flight (or ever): nothing to go stale
-        if not mission_flight(hlc_state, mc_state):
+        if not (hlc_state == _AIRBORNE and mc_state == _MISSION):  # mission_flight, inline (20 Hz)
             self.last_received = None
             return None
-        if self.last_received is None or self._hovering or not link_age < self.limits.max_link_age:
+        if self._hovering or not link_age < self.limits.max_link_age:
             return None
-        age = now - self.last_received
+        age = now - last
         if age <= self.limits.velocity_timeout:
             return None
         self._hovering = True

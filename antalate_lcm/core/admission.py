@@ -162,7 +162,9 @@ class NodeAdmission:
 
     def admit(self, channel: str, msg: Any, expected_sender: str | None) -> bool:
         """Authenticate (with a key) and validate one consumed message; False = dropped, logged."""
-        auth = self.authenticator
+        auth = self._auth
+        if auth is None and self.signs:  # `authenticator`, made on the first message that needs it
+            auth = self.authenticator
         if auth is not None and auth.check(msg, channel, expected_sender=expected_sender) is not None:
             return False
         problem = validation.problem(msg)

@@ -109,6 +109,8 @@ class BehaviorContext:
         peers: PeerTable | None = None,
     ) -> None:
         self._node = node
+        #: The executor's clock, bound once: `now` is read on every tick and many a message.
+        self._clock: Callable[[], float] = node.context.executor.clock
         self._peers = peers
         self._topics = dict(topics)
         #: The behavior's topic (published without template fields) -> its node's publisher and the
@@ -144,7 +146,7 @@ class BehaviorContext:
     @property
     def now(self) -> float:
         """Monotonic seconds on the executor's clock; use it for every timeout and rate."""
-        return self._node.now
+        return self._clock()
 
     @property
     def state(self) -> str:
@@ -197,11 +199,16 @@ class BehaviorContext:
         """
         scoped = self._active
         gen = self._generation
+        where = f"handler for {topic}"
+        on_error = self._on_error
 
         def deliver(msg: Any) -> None:
             if self._closed or (scoped and gen != self._generation):
                 return
-            self.contain(f"handler for {topic}", handler, msg)
+            try:  # `contain`, inline: every message a behavior hears passes here
+                handler(msg)
+            except Exception as exc:  # noqa: BLE001 - a plugin's failure is contained
+                on_error(where, exc)
 
         sub = self._node.subscribe(self.topic(topic), deliver, **fields)
         (self._scoped_subs if scoped else self._persistent_subs).append(sub)
@@ -248,13 +255,17 @@ class BehaviorContext:
         scoped = self._active
         gen = self._generation
         owner = self._scoped_timers if scoped else self._persistent_timers
+        on_error = self._on_error
 
         def run() -> None:
             if oneshot and timer in owner:
                 owner.remove(timer)
             if self._closed or (scoped and gen != self._generation):
                 return
-            self.contain(where, fn)
+            try:  # `contain`, inline: a behavior's tick (10 a second) passes here
+                fn()
+            except Exception as exc:  # noqa: BLE001 - a plugin's failure is contained
+                on_error(where, exc)
 
         timer = make(run)
         owner.append(timer)

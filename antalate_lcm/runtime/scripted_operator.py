@@ -30,6 +30,10 @@ class DirectionAt:
     active: bool = True
 
 
+#: McState by wire value, for the state messages of the whole swarm.
+_MC_STATES: dict[int, McState] = {int(state): state for state in McState}
+
+
 class Phase(enum.Enum):
     WAITING = "waiting for every agent in STANDBY"
     TAKING_OFF = "taking off"
@@ -112,12 +116,19 @@ class ScriptedOperator(Node):
         return self.now - self._t0
 
     def _on_mc_state(self, msg: mc_state_t, match: TopicMatch) -> None:
+        # Every agent's state, 5 a second each: nearly always the one its timeline ends with.
+        state = _MC_STATES.get(msg.state)  # McState(value), without the enum's call
+        if state is None:
+            try:
+                state = McState(msg.state)
+            except ValueError:
+                return
         agent = match.fields.get("agent", msg.header.agent)
-        try:
-            state = McState(msg.state)
-        except ValueError:
-            return
-        self.timelines.setdefault(agent, Timeline()).add(self.elapsed, state)
+        timeline = self.timelines.get(agent)
+        if timeline is None:
+            timeline = self.timelines[agent] = Timeline()
+        if timeline.current is not state:
+            timeline.add(self.elapsed, state)
 
     def _states(self) -> list[McState | None]:
         return [t.current for a, t in self.timelines.items() if a not in self.excused]
@@ -152,22 +163,24 @@ class ScriptedOperator(Node):
             self.reason = f"timed out after {self.timeout:g} s in phase '{self.phase.value}'"
             self._enter(Phase.FAILED)
             return
+        # Every agent's state, 10 times a second: asked with the list's own (C) `in` and `count`,
+        # equal to `is` here (every entry is an McState member).
         states = self._states()
-        if any(s is McState.ERROR for s in states):
+        if McState.ERROR in states:
             self.reason = "an agent is in ERROR"
             self._enter(Phase.FAILED)
             return
         if self.phase is Phase.WAITING:
             # an agent the script crashed before the take-off is waited for no more
-            if len(states) >= self.expected_agents - len(self.excused) and all(
-                s is McState.STANDBY for s in states
-            ):
+            if len(states) >= self.expected_agents - len(self.excused) and states.count(
+                McState.STANDBY
+            ) == len(states):
                 self._enter(Phase.TAKING_OFF)
         elif self.phase is Phase.TAKING_OFF:
-            if all(s is McState.MISSION for s in states):
+            if states.count(McState.MISSION) == len(states):
                 self._enter(Phase.MISSION)
                 self._steer()
-            elif any(s is McState.STANDBY for s in states):
+            elif McState.STANDBY in states:
                 self._broadcast(Command.TAKEOFF)
         elif self.phase is Phase.MISSION:
             if self.now - self._phase_at >= self.mission_time:
@@ -175,9 +188,9 @@ class ScriptedOperator(Node):
             else:
                 self._steer()
         elif self.phase is Phase.RETURNING:
-            if all(s is McState.STANDBY for s in states):
+            if states.count(McState.STANDBY) == len(states):
                 self._enter(Phase.DONE)
-            elif any(s in (McState.MISSION, McState.TAKEOFF) for s in states):
+            elif McState.MISSION in states or McState.TAKEOFF in states:
                 self._broadcast(Command.RTL)
 
     def _steer(self) -> None:

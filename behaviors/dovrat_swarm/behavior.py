@@ -143,7 +143,10 @@ class DovratSwarm(Behavior):
 
     def tick(self, dt: float) -> None:
         now = self.ctx.now
-        command = swarm_command(self.heading(), self.detections.detected(now), self.direction, self.params)
+        heading = self._heading  # `heading()` at this `now`, inline: 10 ticks a second per agent
+        if heading is not None and now - self._heading_at > self.params.telemetry_timeout:
+            heading = None
+        command = swarm_command(heading, self.detections.detected(now), self.direction, self.params)
         self.last_command = command
         self._publish(command.vx, command.vy, command.yaw_rate)
 

@@ -61,6 +61,41 @@ def test_failed_behavior_is_blocked_until_the_state_leaves_its_activate_on() -> 
     assert arb.failures() == {}
 
 
+def test_a_settled_state_is_one_to_skip_until_a_standing_changes() -> None:
+    """The node skips a state message the arbiter has settled (the MC republishes its state 5 times a
+    second): only while `on_state` would decide nothing, and `version` moves with every change the
+    status reports, so the node rebuilds its status exactly then."""
+    arb = Arbiter({"a": ActivationRule.of(["MISSION"])})
+    assert not arb.settled("") and not arb.settled("MISSION")  # nothing decided yet
+    v = arb.version
+    assert arb.on_state("MISSION").activate == ["a"]
+    assert not arb.settled("MISSION") and arb.version > v  # a decision the node carries out
+    arb.activated("a")
+    v = arb.version
+    d = arb.on_state("MISSION")
+    assert (d.activate, d.deactivate, d.notify, d.unblocked, d.state_changed) == ([], [], [], [], False)
+    assert arb.settled("MISSION") and not arb.settled("RTL") and arb.version == v
+    arb.failed("a", "boom")  # any outcome: decide afresh
+    assert not arb.settled("MISSION") and arb.version > v
+    assert arb.on_state("MISSION").activate == [] and arb.settled("MISSION")  # blocked: nothing to do
+    v = arb.version
+    d = arb.on_state("RTL")
+    assert d.unblocked == ["a"] and not arb.settled("RTL") and arb.version > v
+    assert arb.on_state("RTL").unblocked == [] and arb.settled("RTL")
+    arb.state = "MISSION"  # set from outside: not the state it settled
+    assert not arb.settled("RTL")
+    v = arb.version
+    assert arb.on_state("MISSION").activate == ["a"]
+    arb.activated("a")
+    arb.on_state("MISSION")
+    arb.deactivated("a")
+    assert not arb.settled("MISSION") and arb.version > v
+    arb.failed("a", "again")
+    arb.on_state("MISSION")
+    v = arb.version
+    assert arb.retry("a") and not arb.settled("MISSION") and arb.version > v
+
+
 def test_permanent_failure_is_never_retried() -> None:
     arb = Arbiter({"a": ActivationRule.of(["MISSION"])})
     arb.failed("a", "cannot construct", permanent=True)

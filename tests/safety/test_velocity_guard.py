@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import Any
 
@@ -168,3 +169,63 @@ def test_default_limits() -> None:
 def test_limits_validated(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         VelocityLimits(**{field: value})
+
+
+ON_VELOCITY_CASES = list(
+    itertools.product(
+        [(1.0, 0.0), (3.0, -4.0), (6.0, 8.0), (-0.0, 0.0), (math.nan, 0.0), (0.0, math.inf)],
+        [0.0, -0.0, 1.0, 2.0, -3.0, math.nan],
+        [0.0, -0.0, 45.0, 90.0, -120.0, -math.inf],
+        # A float or a bool from a hand-made message is looked up as the enum would (1.0 is NED).
+        list[Any]([Frame.BODY, Frame.NED, 1, 1.0, True, 7]),
+    )
+)
+
+
+@pytest.mark.parametrize(
+    "limits", [LIMITS, VelocityLimits(max_horizontal=0.0, max_vertical=0.0, max_yaw_rate=0.0)]
+)
+@pytest.mark.parametrize("states", [OK, (HlcState.LANDING, McState.LAND)])
+@pytest.mark.parametrize("link_age", [0.1, 3.0, math.nan])
+def test_the_hlc_path_decides_what_on_command_does(
+    limits: VelocityLimits, states: tuple[HlcState, McState], link_age: float
+) -> None:
+    """`VelocityGuard.passes` (the HLC's path: the values, nothing built when the command passes as
+    it came) then, when it says None, `on_command`, decide exactly what `on_command` alone decides
+    for a command received now, a zero's sign included (`repr`), and leave the guard in the same
+    state; `passes` remembers nothing when it says None."""
+    for (vx, vy), vz, yaw, frame in ON_VELOCITY_CASES:
+        by_command, by_values = VelocityGuard(limits), VelocityGuard(limits)
+        by_command.last_received = by_values.last_received = 1.0
+        by_values._hovering = by_command._hovering = True
+        expected = by_command.on_command(
+            VelocityCommand(vx, vy, vz, yaw, frame, 100.0), 100.0, *states, link_age
+        )
+        known = by_values.passes(vx, vy, vz, yaw, frame, 100.0, *states, link_age)
+        if known is None:
+            assert (by_values.last_received, by_values._hovering) == (1.0, True)
+            got = by_values.on_command(
+                VelocityCommand(vx, vy, vz, yaw, frame, 100.0), 100.0, *states, link_age
+            )
+        else:
+            assert expected.verdict is Verdict.SEND and not expected.clamped and expected.reason == ""
+            got = GuardDecision(Verdict.SEND, Velocity(vx, vy, vz, yaw, known))
+        assert repr(got) == repr(expected), (vx, vy, vz, yaw, frame)
+        assert type(got.send.frame if got.send else None) is type(
+            expected.send.frame if expected.send else None
+        )
+        assert (by_values.last_received, by_values._hovering) == (
+            by_command.last_received,
+            by_command._hovering,
+        )
+    fast = VelocityGuard(limits)
+    assert (fast.passes(1.0, -0.0, 0.0, -0.0, 1, 5.0, *OK, 0.1) is Frame.NED) == (limits is LIMITS)
+
+
+def test_a_zero_limit_clamps_to_the_same_signed_zero_as_before() -> None:
+    """``max(-limit, min(limit, value))`` with a limit of 0: the clamp's own zero (-0.0), kept."""
+    limits = VelocityLimits(max_vertical=0.0, max_yaw_rate=0.0)
+    d = check_velocity(VelocityCommand(0.0, 0.0, 0.0, -0.0, Frame.NED, 1.0), 1.0, *OK, limits)
+    assert d.send is not None and d.verdict is Verdict.SEND and not d.clamped
+    assert math.copysign(1.0, d.send.vz) == math.copysign(1.0, max(-0.0, min(0.0, 0.0)))
+    assert math.copysign(1.0, d.send.yaw_rate) == math.copysign(1.0, max(-0.0, min(0.0, -0.0)))

@@ -71,9 +71,21 @@ class Arbiter:
     def __init__(self, rules: Mapping[str, ActivationRule]) -> None:
         self._standings: dict[str, _Standing] = {name: _Standing(rule) for name, rule in rules.items()}
         self.state: str = ""
+        #: Bumped by every change of the state or of a standing: what the node's status reports is
+        #: unchanged while it is (the node then republishes the message it built last).
+        self.version = 0
+        #: The state whose last `on_state` decided nothing, None once a standing changed since: the
+        #: same state again (the MC's periodic republication, 5 a second) would decide nothing again.
+        self._settled: str | None = None
+
+    def settled(self, state: str) -> bool:
+        """Whether `on_state` would decide nothing for ``state`` (a state message the node may skip)."""
+        return state == self._settled and state == self.state
 
     def on_state(self, state: str) -> Decision:
         decision = Decision(state_changed=state != self.state)
+        if decision.state_changed:
+            self.version += 1
         self.state = state
         for name, standing in self._standings.items():
             if standing.blocked and not standing.permanent and state not in standing.rule.activate_on:
@@ -86,16 +98,33 @@ class Arbiter:
                 decision.activate.append(name)
             elif standing.active and decision.state_changed:
                 decision.notify.append(name)
+        quiet = not (
+            decision.state_changed
+            or decision.deactivate
+            or decision.activate
+            or decision.notify
+            or decision.unblocked
+        )
+        self._settled = state if quiet else None
+        if decision.unblocked:
+            self.version += 1
         return decision
+
+    def _changed(self) -> None:
+        """A standing changed: the next state message decides afresh, the status is new."""
+        self._settled = None
+        self.version += 1
 
     # ------------------------------------------------------------------ outcomes
     def activated(self, name: str) -> None:
         standing = self._standings[name]
         standing.active = True
         standing.failed = None
+        self._changed()
 
     def deactivated(self, name: str) -> None:
         self._standings[name].active = False
+        self._changed()
 
     def failed(self, name: str, reason: str, *, permanent: bool = False) -> None:
         """``name`` raised: it is inactive, reported, and blocked (see the module docstring)."""
@@ -106,6 +135,7 @@ class Arbiter:
         # on_deactivate, or in a hold state) is retried at the next activating state anyway.
         standing.blocked = permanent or self.state in standing.rule.activate_on
         standing.permanent = standing.permanent or permanent
+        self._changed()
 
     def retry(self, name: str) -> bool:
         """Lift a failure block while the state still activates ``name``; True if it should start now."""
@@ -118,6 +148,7 @@ class Arbiter:
         ):
             return False
         standing.blocked = False
+        self._changed()
         return True
 
     # ------------------------------------------------------------------ views

@@ -19,13 +19,15 @@ from antalate_lcm.core.config import BmaConfig, Config
 from antalate_lcm.core.node import Context, Node, NodeSettings, TopicMatch
 from antalate_lcm.msgs import arbiter_status_t, mc_state_t, telemetry_t
 from antalate_lcm.wire.peers import PeerTable
-from antalate_lcm.wire.vocabulary import McState, name_of
+from antalate_lcm.wire.vocabulary import McState
 
 #: s: the longest restart back-off, and how long a behavior must run for its failures to be forgotten.
 _MAX_BACKOFF = 60.0
 _STREAK_RESET = 60.0
 #: s between two sweeps of the peer table for agents no longer heard.
 _PEER_SWEEP = 5.0
+#: `name_of(McState, value)` for every defined value (a state message's, 5 a second).
+_MC_NAMES: dict[int, str] = {int(state): state.name for state in McState}
 
 
 class _Slot:
@@ -59,6 +61,9 @@ class BmaNode(Node):
         self._reading_mc = self.plan.state_type is mc_state_t
         self._bad_state_log = RateLimitedLog(self.log)
         self._publish_status: Callable[[], None] = lambda: None
+        #: The last status built, reused while the arbiter's `version` is the one it was built at.
+        self._status_msg: arbiter_status_t | None = None
+        self._status_version = -1
         #: Per behavior: failures in a row and when it last started (a restart back-off doubles per
         #: failure, and forgets them once the behavior has run for ``_STREAK_RESET`` s).
         self._streak: dict[str, int] = {}
@@ -155,7 +160,7 @@ class BmaNode(Node):
     # ------------------------------------------------------------------ state
     def _on_state_msg(self, msg: Any) -> None:
         if self._reading_mc:
-            state = name_of(McState, msg.state)
+            state = _MC_NAMES.get(msg.state)  # name_of(McState, ...), without the enum's call
             if state is None:
                 self._bad_state_log.log(
                     ("state", msg.state),
@@ -167,6 +172,8 @@ class BmaNode(Node):
                 return
         else:
             state = msg.state
+        if self._arbiter.settled(state):
+            return  # the state republished (5 a second), nothing to decide: `apply_state` would do nothing
         self.apply_state(state)
 
     def apply_state(self, state: str) -> None:
@@ -210,10 +217,11 @@ class BmaNode(Node):
             self._start_ticking(ctx, behavior, slot.plan.tick_hz)
 
     def _start_ticking(self, ctx: BehaviorContext, behavior: Behavior, hz: float) -> None:
-        last = [self.now]
+        clock = self.context.executor.clock  # `now`, bound: read on every tick
+        last = [clock()]
 
         def tick() -> None:
-            now = self.now
+            now = clock()
             dt, last[0] = now - last[0], now
             behavior.tick(dt)
 
@@ -276,6 +284,11 @@ class BmaNode(Node):
 
     # ------------------------------------------------------------------ status
     def _status(self) -> arbiter_status_t:
+        arbiter = self._arbiter
+        if arbiter.version == self._status_version and self._status_msg is not None:
+            # Unchanged since it was built: the periodic republication sends it again (publish
+            # stamps a fresh header). Not with an experiment's interference, which may hold on to it.
+            return self._status_msg
         msg = arbiter_status_t()
         msg.arbiter = self.bma.name
         msg.state = self._arbiter.state
@@ -283,4 +296,6 @@ class BmaNode(Node):
         msg.n = len(msg.active)
         msg.failed = [f"{name}: {reason}" for name, reason in self._arbiter.failures().items()]
         msg.n_failed = len(msg.failed)
+        if self.interference is None:
+            self._status_msg, self._status_version = msg, arbiter.version
         return msg

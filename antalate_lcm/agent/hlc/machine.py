@@ -122,6 +122,36 @@ def _deaf_states(table: Table[HlcState, HlcEvent, HlcView, HlcRow]) -> frozenset
     return deaf
 
 
+#: Per state, whether some row takes (LANDED, PILOT_TAKEOVER, AUTOPILOT_LAND, AUTOPILOT_RTL,
+#: LOW_BATTERY, ALTITUDE_REACHED): what `_vehicle_events` asks on every snapshot of a flight, where a
+#: set's ``in`` would hash the `HlcEvent` in Python (``Enum.__hash__``, ~150 ns each).
+_Takes = tuple[bool, bool, bool, bool, bool, bool]
+#: id(table) -> (the table, as in `_DEAF`; its `_Takes` per state).
+_TAKES: dict[int, tuple[object, dict[HlcState, _Takes]]] = {}
+
+
+def _takes_by_state(table: Table[HlcState, HlcEvent, HlcView, HlcRow]) -> dict[HlcState, _Takes]:
+    """`_Takes` of every state of ``table``, worked out once per table."""
+    known = _TAKES.get(id(table))
+    if known is not None and known[0] is table:
+        return known[1]
+    events = (
+        _E_LANDED,
+        _E_PILOT_TAKEOVER,
+        _E_AUTOPILOT_LAND,
+        _E_AUTOPILOT_RTL,
+        _E_LOW_BATTERY,
+        _E_ALTITUDE_REACHED,
+    )
+    by_state: dict[HlcState, _Takes] = {}
+    for state in HlcState:
+        taken = table.events_taken(state)
+        a, b, c, d, e, f = (event in taken for event in events)
+        by_state[state] = (a, b, c, d, e, f)
+    _TAKES[id(table)] = (table, by_state)
+    return by_state
+
+
 class HighLevelControl:
     """The HLC machine. Read `state`; feed observations; perform the returned actions."""
 
@@ -141,6 +171,7 @@ class HighLevelControl:
         "_mc_takeoff_altitude",
         "_target_altitude",
         "_deaf",
+        "_takes",
     )
 
     if not TYPE_CHECKING:  # the old names, one release (issue #26's vocabulary); mypy sees only the new
@@ -167,6 +198,8 @@ class HighLevelControl:
         self._target_altitude = 0.0
         #: The states in which no row takes an event a fresh snapshot can make (`_deaf_states`).
         self._deaf = _deaf_states(table)
+        #: What the rows of each state take of the snapshot's events (`_takes_by_state`).
+        self._takes = _takes_by_state(table)
 
     # ----------------------------------------------------------------- queries
 
@@ -330,12 +363,12 @@ class HighLevelControl:
             return self._regained_events(ap) if self._link_fresh(ap) else []
         # Only events a row of this state takes are derived (`Table.events_taken`): the rest would be
         # passed over by `_fire` anyway, and their reasons cost more than the rest of the tick.
-        takes = self._table.events_taken(self.state)
+        landed, pilot, autopilot_land, autopilot_rtl, low_battery, altitude = self._takes[self.state]
         events: list[tuple[HlcEvent, str]] = []
-        if _E_LANDED in takes and not ap.in_air and not ap.armed:  # `VehicleState.landed`, inline
+        if landed and not ap.in_air and not ap.armed:  # `VehicleState.landed`, inline
             events.append((HlcEvent.LANDED, f"on the ground and disarmed (mode {ap.mode or '?'})"))
         if (
-            _E_PILOT_TAKEOVER in takes
+            pilot
             and ap.armed
             and not (ap.autonomous and ap.flight_mode is _F_GUIDED)  # ours: no pilot, no call
             and pilot_in_control(ap)
@@ -357,13 +390,13 @@ class HighLevelControl:
                     f"{ap.failsafe}; autopilot switched to {ap.mode or ap.flight_mode.name}",
                 )
             )
-        if ap.flight_mode is _F_LANDING and _E_AUTOPILOT_LAND in takes:
+        if ap.flight_mode is _F_LANDING and autopilot_land:
             events.append((HlcEvent.AUTOPILOT_LAND, f"autopilot switched to {ap.mode or 'LAND'}"))
-        if ap.flight_mode is _F_RTL and _E_AUTOPILOT_RTL in takes:
+        if ap.flight_mode is _F_RTL and autopilot_rtl:
             events.append((HlcEvent.AUTOPILOT_RTL, f"autopilot switched to {ap.mode or 'RTL'}"))
         # Well above every threshold (the flight's every tick), `battery_low_reason` is not asked:
         # a NaN or unknown value, or a voltage at or below the cells' threshold, asks it.
-        if _E_LOW_BATTERY in takes and not (
+        if low_battery and not (
             ap.battery > p.low_battery
             and not ap.battery_warning
             and not ap.cells * p.low_cell_voltage >= ap.voltage
@@ -371,9 +404,7 @@ class HighLevelControl:
             low = self.battery_low_reason()
             if low:
                 events.append((HlcEvent.LOW_BATTERY, low))
-        if _E_ALTITUDE_REACHED in takes and altitude_reached(
-            ap.alt, self._target_altitude, p.airborne_fraction
-        ):
+        if altitude and altitude_reached(ap.alt, self._target_altitude, p.airborne_fraction):
             events.append(
                 (
                     HlcEvent.ALTITUDE_REACHED,

@@ -55,6 +55,7 @@ from antalate_lcm.wire.vocabulary import HlcState, Severity
 
 _CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
 _GAINING_ALTITUDE = HlcState.GAINING_ALTITUDE  # bound once: read on every control tick
+_REJECT, _HOVER = Verdict.REJECT, Verdict.HOVER  # and these on every velocity command applied
 
 
 def make_adapter(config: Config, context: Context) -> VehicleAdapter:
@@ -285,11 +286,24 @@ class HlcNode(Node):
     def _on_velocity(self, msg: velocity_cmd_t) -> None:
         if not self.started:
             return
-        cmd = VelocityCommand(msg.vx, msg.vy, msg.vz, msg.yaw_rate, msg.frame, self.now)
-        decision = self.velocity_guard.on_command(
-            cmd, self.now, self.machine.state, self.mc_state, self.link_age()
-        )
-        self._apply(decision, msg.header.agent)
+        # 10-20 a second per agent in mission flight: one clock read, the link's age (`link_age`)
+        # inline, and nothing built around a command that passes as it came (`VelocityGuard.passes`).
+        now = self._clock()
+        polled = self._polled_at
+        link_age = math.inf if polled is None else self.snapshot.link_age + max(0.0, now - polled)
+        vx, vy, vz, yaw_rate, frame = msg.vx, msg.vy, msg.vz, msg.yaw_rate, msg.frame
+        guard, state, mc_state = self.velocity_guard, self.machine.state, self.mc_state
+        known = guard.passes(vx, vy, vz, yaw_rate, frame, now, state, mc_state, link_age)
+        if known is None:  # rejected, clamped or stale: the guard's decision, logged by _apply
+            cmd = VelocityCommand(vx, vy, vz, yaw_rate, frame, now)
+            self._apply(guard.on_command(cmd, now, state, mc_state, link_age), msg.header.agent)
+        elif self._filter is not None:
+            self.send_velocity(self._filter.wished(Velocity(vx, vy, vz, yaw_rate, known)))
+        else:
+            try:  # `send_velocity`, inline
+                self.adapter.set_velocity(vx, vy, vz, yaw_rate, known)
+            except Exception as exc:
+                self._reject_log.log(("set_velocity",), logging.WARNING, "set_velocity failed: %s", exc)
 
     def link_age(self) -> float:
         """The link's age now: the last snapshot's, plus the time since it was taken (20 Hz is coarse)."""
@@ -344,7 +358,7 @@ class HlcNode(Node):
 
     # ------------------------------------------------------------------ outputs
     def _apply(self, decision: GuardDecision, source: str) -> None:
-        if decision.verdict is Verdict.REJECT:
+        if decision.verdict is _REJECT:
             # Outside mission flight a velocity command is expected (a behavior's last "stop"),
             # so it is noted; a malformed one in flight is a warning.
             in_mission = mission_flight(self.machine.state, self.mc_state)
@@ -357,7 +371,7 @@ class HlcNode(Node):
             )
             return
         v = decision.send or Velocity.hover()
-        if decision.verdict is Verdict.HOVER:
+        if decision.verdict is _HOVER:
             self.log.info("hover: %s", decision.reason)
         elif decision.clamped:
             self._reject_log.log(("clamp",), logging.INFO, "velocity command clamped: %s", decision.reason)
@@ -367,7 +381,10 @@ class HlcNode(Node):
 
     def send_velocity(self, v: Velocity) -> None:
         try:
-            self.adapter.set_velocity(v.vx, v.vy, v.vz, v.yaw_rate, Frame(v.frame))
+            frame = v.frame
+            if type(frame) is not Frame:  # the guard's set-points carry a Frame already
+                frame = Frame(frame)
+            self.adapter.set_velocity(v.vx, v.vy, v.vz, v.yaw_rate, frame)
         except Exception as exc:
             self._reject_log.log(("set_velocity",), logging.WARNING, "set_velocity failed: %s", exc)
 

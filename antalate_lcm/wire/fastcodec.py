@@ -110,38 +110,67 @@ def _compile(cls: type) -> Encoder | None:
         "_pack": struct.pack,
         "_strings": _strings,
     }
+    runs = list(_runs(fields))
     lines = [
         "def encode(msg):",
         "    h = msg.header",
         "    a = h.agent.encode('utf-8')",
         "    m = h.mac_len",
     ]
-    parts = [
-        "_fp",
-        "_head(h.utime, len(a) + 1)",
-        "a",
-        "b'\\0'",
-        "_seq(h.seq, m)",
-        "(bytes(h.mac[:m]) if m else b'')",
-    ]
-    for i, (packer, run) in enumerate(_runs(fields)):
+    parts: list[list[str]] = []
+    for i, (packer, run) in enumerate(runs):
         kind, name, typename, count = run[0]
         if packer is not None:
             env[f"_p{i}"] = packer.pack
-            parts.append(f"_p{i}({', '.join(f'msg.{f[1]}' for f in run)})")
+            parts.append([f"_p{i}({', '.join(f'msg.{f[1]}' for f in run)})"])
         elif kind == "string":
             lines.append(f"    s{i} = msg.{name}.encode('utf-8')")
-            parts.extend((f"_len(len(s{i}) + 1)", f"s{i}", "b'\\0'"))
+            parts.append([f"_len(len(s{i}) + 1)", f"s{i}", "b'\\0'"])
         elif kind == "array":  # lcm-gen's expression, its errors included (a short list, a negative count)
-            parts.append(f"_pack('>%d{_FORMAT[typename]}' % msg.{count}, *msg.{name}[:msg.{count}])")
+            parts.append([f"_pack('>%d{_FORMAT[typename]}' % msg.{count}, *msg.{name}[:msg.{count}])"])
         elif kind == "bytes":
-            parts.append(f"bytearray(msg.{name}[:msg.{count}])")
+            parts.append([f"bytearray(msg.{name}[:msg.{count}])"])
         else:
-            parts.append(f"_strings(msg.{name}, msg.{count})")
-    lines.append(f"    return b''.join(({', '.join(parts)}))")
+            parts.append([f"_strings(msg.{name}, msg.{count})"])
+    head = ["_fp", "_head(h.utime, len(a) + 1)", "a", "b'\\0'"]
+    # Without a MAC (unsigned), seq and mac_len, the first run of primitives and the first string's
+    # length lie side by side: one struct packs them.
+    fused, args, k = _fused(runs)
+    env["_fused"] = fused.pack
+    first = [f"_fused(h.seq, m, {', '.join(args)})" if args else "_fused(h.seq, m)"]
+    if k and runs[k - 1][0] is None:  # the string whose length was packed: its bytes and NUL
+        first += parts[k - 1][1:]
+    fast = [*head, *first, *(p for group in parts[k:] for p in group)]
+    general = [
+        *head,
+        "_seq(h.seq, m)",
+        "(bytes(h.mac[:m]) if m else b'')",
+        *(p for group in parts for p in group),
+    ]
+    lines.append("    if m == 0:")
+    lines.append(f"        return b''.join(({', '.join(fast)}))")
+    lines.append(f"    return b''.join(({', '.join(general)}))")
     exec("\n".join(lines), env)  # noqa: S102 - source built above from the type's own field table
     fn: Encoder = env["encode"]
     return fn
+
+
+def _fused(runs: list[tuple[struct.Struct | None, list[Field]]]) -> tuple[struct.Struct, list[str], int]:
+    """The header's seq and mac_len, then the first run of primitives if one comes first, then the
+    length of the string that follows if one does: one ``struct``, the field expressions after
+    seq and mac_len, and how many of ``runs`` it covers (strings' lengths as ``s{i}``'s)."""
+    fmt, args, k = ">ih", [], 0
+    if k < len(runs) and runs[k][0] is not None:
+        packer, run = runs[k]
+        assert packer is not None
+        fmt += packer.format[1:]
+        args += [f"msg.{f[1]}" for f in run]
+        k += 1
+    if k < len(runs) and runs[k][0] is None and runs[k][1][0][0] == "string":
+        fmt += "I"
+        args.append(f"len(s{k}) + 1")
+        k += 1
+    return struct.Struct(fmt), args, k
 
 
 def decoder(cls: type) -> Decoder:
@@ -220,7 +249,12 @@ def _compile_decoder(cls: type) -> Decoder | None:
         "_unpack": struct.unpack,
         "_strings": _read_strings,
     }
-    # As lcm-gen's header_t._decode_one; a negative mac_len reads the rest (BytesIO.read(-n)).
+    runs = list(_runs(fields))
+    for i, (packer, _) in enumerate(runs):
+        if packer is not None:
+            env[f"_p{i}"] = packer.unpack_from
+    fused, _, k = _fused(runs)
+    env["_fused"] = fused.unpack_from
     lines = [
         "def decode(data):",
         "    if data[:8] != _fp:",
@@ -229,6 +263,26 @@ def _compile_decoder(cls: type) -> Decoder | None:
         "    h.utime, n = _head(data, 8)",
         "    o = 20 + n",
         "    h.agent = data[20:o][:-1].decode('utf-8', 'replace')",
+        "    msg = _new(_C)",
+        "    msg.header = h",
+        # Without a MAC (unsigned) and with the bytes there: seq, mac_len, the first run of
+        # primitives and the first string's length in one unpack (what the encoder fused).
+        f"    if len(data) >= o + {fused.size}:",
+        "        v = _fused(data, o)",
+        "        if v[1] == 0:",
+        "            h.seq, h.mac_len, h.mac = v[0], 0, b''",
+    ]
+    at = 2
+    if k and runs[0][0] is not None:
+        lines += _assign(runs[0][1], "v", at, 12)
+        at += len(runs[0][1])
+    lines.append(f"            o += {fused.size}")
+    if k and runs[k - 1][0] is None:  # the string whose length came with the rest
+        lines += _read(runs[k - 1][1][0], k - 1, 12, length=f"v[{at}]")
+    lines += [line for i in range(k, len(runs)) for line in _read(runs[i][1][0], i, 12, run=runs[i])]
+    lines += [
+        "            return msg",
+        # As lcm-gen's header_t._decode_one; a negative mac_len reads the rest (BytesIO.read(-n)).
         "    h.seq, m = _seq(data, o)",
         "    o += 6",
         "    h.mac_len = m",
@@ -238,38 +292,57 @@ def _compile_decoder(cls: type) -> Decoder | None:
         "    else:",
         "        h.mac = data[o:o + m]",
         "        o += m",
-        "    msg = _new(_C)",
-        "    msg.header = h",
     ]
     # Past a truncated string or MAC, ``o`` may lie beyond the end: a slice there is empty, as
     # lcm-gen's read at the end of its BytesIO, and unpack_from raises struct.error, as its unpack
     # of a short read. An array of primitives is unpacked from a slice (lcm-gen's read), so an
     # empty one decodes even there; a negative count fails on its format, as lcm-gen's.
-    for i, (packer, run) in enumerate(_runs(fields)):
-        kind, name, typename, count = run[0]
-        if packer is not None:
-            env[f"_p{i}"] = packer.unpack_from
-            lines.append(f"    v = _p{i}(data, o)")
-            for k, (_, field, scalar, _) in enumerate(run):
-                lines.append(f"    msg.{field} = {f'bool(v[{k}])' if scalar == 'boolean' else f'v[{k}]'}")
-            lines.append(f"    o += {packer.size}")
-        elif kind == "string":
-            lines.append("    n = _len(data, o)[0]")
-            lines.append("    o += 4")
-            lines.append(f"    msg.{name} = data[o:o + n][:-1].decode('utf-8', 'replace')")
-            lines.append("    o += n")
-        elif kind == "array":
-            char = _FORMAT[typename]
-            lines.append(f"    n = msg.{count} * {struct.calcsize('>' + char)}")
-            lines.append(f"    msg.{name} = _unpack('>%d{char}' % msg.{count}, data[o:o + n])")
-            lines.append("    o += n")
-        elif kind == "bytes":
-            lines.append(f"    n = msg.{count}")
-            lines.append(f"    msg.{name} = v = data[o:o + n] if n >= 0 else data[o:]")
-            lines.append("    o += len(v)")
-        else:
-            lines.append(f"    msg.{name}, o = _strings(data, o, msg.{count})")
+    lines += [line for i, item in enumerate(runs) for line in _read(item[1][0], i, 4, run=item)]
     lines.append("    return msg")
     exec("\n".join(lines), env)  # noqa: S102 - source built above from the type's own field table
     fn: Decoder = env["decode"]
     return fn
+
+
+def _assign(run: list[Field], values: str, at: int, indent: int) -> list[str]:
+    """A run of primitives' fields from ``values[at:]`` (a boolean as ``bool``, as lcm-gen's)."""
+    pad = " " * indent
+    return [
+        f"{pad}msg.{name} = {f'bool({values}[{at + j}])' if typename == 'boolean' else f'{values}[{at + j}]'}"
+        for j, (_, name, typename, _) in enumerate(run)
+    ]
+
+
+def _read(
+    field: Field,
+    i: int,
+    indent: int,
+    *,
+    run: tuple[struct.Struct | None, list[Field]] | None = None,
+    length: str | None = None,
+) -> list[str]:
+    """The decoder's lines for item ``i`` of the runs (``run``), or for a string whose ``length``
+    was already read."""
+    pad = " " * indent
+    kind, name, typename, count = field
+    if run is not None and run[0] is not None:
+        return [f"{pad}v = _p{i}(data, o)", *_assign(run[1], "v", 0, indent), f"{pad}o += {run[0].size}"]
+    if kind == "string":
+        head = (
+            [f"{pad}n = {length}"] if length is not None else [f"{pad}n = _len(data, o)[0]", f"{pad}o += 4"]
+        )
+        return [*head, f"{pad}msg.{name} = data[o:o + n][:-1].decode('utf-8', 'replace')", f"{pad}o += n"]
+    if kind == "array":
+        char = _FORMAT[typename]
+        return [
+            f"{pad}n = msg.{count} * {struct.calcsize('>' + char)}",
+            f"{pad}msg.{name} = _unpack('>%d{char}' % msg.{count}, data[o:o + n])",
+            f"{pad}o += n",
+        ]
+    if kind == "bytes":
+        return [
+            f"{pad}n = msg.{count}",
+            f"{pad}msg.{name} = v = data[o:o + n] if n >= 0 else data[o:]",
+            f"{pad}o += len(v)",
+        ]
+    return [f"{pad}msg.{name}, o = _strings(data, o, msg.{count})"]

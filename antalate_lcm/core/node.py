@@ -173,6 +173,7 @@ class Node:
         self._tickers: list[Ticker] = []
         self.started = False
         self._last_utime = 0
+        self._now: Callable[[], float] = context.executor.clock  # `now` without two lookups
         self.admission = context.admission.for_node(self, watcher=watcher)
 
     # ------------------------------------------------------------------ lifecycle
@@ -414,7 +415,7 @@ class Node:
     @property
     def now(self) -> float:
         """Monotonic seconds on the executor's clock (what state machines are given)."""
-        return self.context.executor.clock()
+        return self._now()
 
     def state_publisher(
         self, topic: str, build: Callable[[], Any], hz: float, *, periodic: bool = True, **fields: str

@@ -8,10 +8,11 @@ needed) and misses nothing at the start: the subscription exists before the firs
 The events are written here rather than through ``lcm.EventLog.write_event``: liblcm's
 ``lcm_eventlog_write_event`` (lcm/eventlog.c) writes each event as a 28-byte big-endian head (the
 magic ``0xEDA1DA01``, the event number counted from 0, the timestamp, the channel's and the data's
-lengths), the channel's bytes and the data, in seven ``fwrite`` calls. A thousand simulated agents
-record 40,000 events a second; one ``struct.pack`` into a buffer, with the channel's bytes kept
-per channel, costs a third of that call (tests/experiments/test_recorder.py reads the file back with
-``lcm.EventLog`` and compares it with one ``write_event`` wrote).
+lengths), the channel's bytes and the data, one ``fwrite`` per field. A thousand simulated agents
+record 40,000 events a second; one ``struct.pack`` into a 64 KiB buffer, with the channel's bytes
+kept per channel, costs 8-20 % less than that call (docs/simulator.md, issue 32's fifth pass);
+tests/experiments/test_recorder.py reads the file back with ``lcm.EventLog`` and compares it with
+what ``write_event`` writes. A process killed without stopping loses the buffer's events.
 """
 
 from __future__ import annotations

@@ -295,7 +295,7 @@ class BusConnection:
                 if route is not None:
                     on_exact(route, channel, data)
                 if patterns:
-                    on_pattern(channel, data)
+                    on_pattern(channel, data, route is None or route.retired)
             except Exception:  # as the loop's own handles: logged, and the next message goes on
                 log.exception("delivering %s on %s failed; the bus carries on", channel, self.url)
 
@@ -356,7 +356,7 @@ class BusConnection:
         if route is not None:
             self._on_exact(route, channel, data)
         if self._patterns:
-            self._on_pattern(channel, data)
+            self._on_pattern(channel, data, route is None or route.retired)
 
     @property
     def damaged(self) -> int:
@@ -402,7 +402,7 @@ class BusConnection:
                 except Exception:
                     log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 
-    def _on_pattern(self, channel: str, data: bytes) -> None:
+    def _on_pattern(self, channel: str, data: bytes, count: bool | None = None) -> None:
         # The matching subscribers of a channel, remembered until the patterns change: a console
         # watching 1,000 agents would otherwise run its regexes on every datagram.
         patterns = self._patterns
@@ -415,8 +415,10 @@ class BusConnection:
                 self._matched[channel] = subs
         if not subs:
             return
-        # A channel that also has an exact route is counted there: one datagram, one count.
-        count = channel not in self._routes
+        # A channel that also has an exact route is counted there: one datagram, one count
+        # (``count``: the caller knows whether it has one).
+        if count is None:
+            count = channel not in self._routes
         sub = subs[0]
         if len(subs) == 1 and sub.msg_type is None and sub.active:
             # One raw subscriber (the console's 15,000 datagrams a second): no decode table.

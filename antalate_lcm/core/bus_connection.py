@@ -79,9 +79,8 @@ class _Route:
 
     def set_subs(self, subs: tuple[Subscription, ...]) -> None:
         """Under the connection's lock: the subscribers, and their decoder if they share one."""
-        types = {sub.msg_type for sub in subs}
-        shared = types.pop() if len(types) == 1 else None
-        self.decode = None if shared is None else decoder(shared)
+        one_type = len({sub.msg_type for sub in subs}) == 1
+        self.decode = subs[0].decode if one_type else None
         self.subs = subs
 
 

@@ -68,12 +68,20 @@ def lcm_literal(channel: str) -> str:
 class _Route:
     """The subscribers of one exact channel and the LCM subscription that feeds them."""
 
-    __slots__ = ("subs", "lcm_sub", "retired")
+    __slots__ = ("subs", "decode", "lcm_sub", "retired")
 
     def __init__(self) -> None:
         self.subs: tuple[Subscription, ...] = ()
+        #: The subscribers' one decoder (one subscriber, or several of one type), else None.
+        self.decode: Callable[[bytes], Any] | None = None
         self.lcm_sub: Any = None
         self.retired = False
+
+    def set_subs(self, subs: tuple[Subscription, ...]) -> None:
+        """Under the connection's lock: the subscribers, and their decoder if they share one."""
+        one_type = len({sub.msg_type for sub in subs}) == 1
+        self.decode = subs[0].decode if one_type else None
+        self.subs = subs
 
 
 class BusConnection:
@@ -148,7 +156,7 @@ class BusConnection:
                     topic = sub.channel.rsplit("/", 1)[-1]
                     if topic not in self._topics:
                         self._topics = self._topics | {topic}
-                route.subs = (*route.subs, sub)
+                route.set_subs((*route.subs, sub))
             else:
                 self._patterns = (*self._patterns, sub)
                 if own:  # it may match anything, this process's own datagrams included
@@ -207,7 +215,7 @@ class BusConnection:
                 route = self._routes.get(sub.channel)
                 if route is None:
                     return
-                route.subs = tuple(s for s in route.subs if s is not sub)
+                route.set_subs(tuple(s for s in route.subs if s is not sub))
                 if not route.subs:
                     route.retired = True  # a late datagram must not reach a re-subscribed channel twice
                     if route.lcm_sub is not None:
@@ -286,7 +294,7 @@ class BusConnection:
                 if route is not None:
                     on_exact(route, channel, data)
                 if patterns:
-                    on_pattern(channel, data)
+                    on_pattern(channel, data, route is None or route.retired)
             except Exception:  # as the loop's own handles: logged, and the next message goes on
                 log.exception("delivering %s on %s failed; the bus carries on", channel, self.url)
 
@@ -347,7 +355,7 @@ class BusConnection:
         if route is not None:
             self._on_exact(route, channel, data)
         if self._patterns:
-            self._on_pattern(channel, data)
+            self._on_pattern(channel, data, route is None or route.retired)
 
     @property
     def damaged(self) -> int:
@@ -371,29 +379,29 @@ class BusConnection:
     def _on_exact(self, route: _Route, channel: str, data: bytes) -> None:
         if route.retired:
             return
-        subs = route.subs
-        if len(subs) != 1:
+        subs, decode = route.subs, route.decode
+        if decode is None and len(subs) != 1:
             self._deliver(channel, data, subs)
             return
-        # One subscriber (the common case): _deliver's work without its per-datagram table.
+        # One subscriber (the common case), or several of one type (an agent's MC state to its HLC
+        # and BMA): `_deliver`'s work without its per-datagram table. Several get the one message
+        # (as from `_deliver`: a handler must not change what it is given).
         self.received += 1
-        sub = subs[0]
-        if not sub.active:
-            return
         msg: Any = data
-        decode = sub.decode
         if decode is not None:
             try:
                 msg = decode(data)
             except Exception as exc:  # noqa: BLE001 - any garbage must not kill the node
-                self._count_decode_error(channel, sub.msg_type, data, exc)  # type: ignore[arg-type]
+                self._count_decode_error(channel, subs[0].msg_type, data, exc)  # type: ignore[arg-type]
                 return
-        try:
-            sub.handler(channel, msg)
-        except Exception:
-            log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
+        for sub in subs:
+            if sub.active:
+                try:
+                    sub.handler(channel, msg)
+                except Exception:
+                    log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 
-    def _on_pattern(self, channel: str, data: bytes) -> None:
+    def _on_pattern(self, channel: str, data: bytes, count: bool | None = None) -> None:
         # The matching subscribers of a channel, remembered until the patterns change: a console
         # watching 1,000 agents would otherwise run its regexes on every datagram.
         patterns = self._patterns
@@ -406,8 +414,10 @@ class BusConnection:
                 self._matched[channel] = subs
         if not subs:
             return
-        # A channel that also has an exact route is counted there: one datagram, one count.
-        count = channel not in self._routes
+        # A channel that also has an exact route is counted there: one datagram, one count
+        # (``count``: the caller knows whether it has one).
+        if count is None:
+            count = channel not in self._routes
         sub = subs[0]
         if len(subs) == 1 and sub.msg_type is None and sub.active:
             # One raw subscriber (the console's 15,000 datagrams a second): no decode table.

@@ -38,6 +38,7 @@ from antalate_lcm.core.executor import Timer
 from antalate_lcm.core.node_settings import NodeSettings as NodeSettings
 from antalate_lcm.core.routes import Destination, Routes
 from antalate_lcm.core.timers import Ticker, divides, phase_delay
+from antalate_lcm.wire import fastcodec
 from antalate_lcm.wire.security import SecurityPolicy
 from antalate_lcm.wire.topics import Message, TopicSpec, channel_regex, is_internal
 
@@ -74,7 +75,7 @@ class Publisher:
     message then costs no lookup of its topic. Its ``seq`` is the topic's counter (`Node.publish`
     counts on the same one)."""
 
-    __slots__ = ("topic", "channel", "buses", "seq", "_node", "_senders", "_seal")
+    __slots__ = ("topic", "channel", "buses", "seq", "_node", "_senders", "_seal", "_type", "_encode")
 
     def __init__(self, node: Node, topic: str, destination: Destination) -> None:
         self.topic = topic
@@ -86,6 +87,9 @@ class Publisher:
         self._senders = destination.senders
         #: The node's admission's encoder (`NodeAdmission.seal`: signing with a key).
         self._seal = node.admission.seal
+        #: Unsigned only: the type last published and its encoder (one lookup and call less).
+        self._type: type | None = None
+        self._encode: Callable[[Any], bytes] = self._seal
 
     def publish(self, msg: Message, seq: int | None = None) -> bool:
         """Stamp ``msg.header`` (time, agent, the next seq), have the node's admission sign it, send
@@ -98,8 +102,7 @@ class Publisher:
         """
         node = self._node
         if seq is None:
-            self.seq += 1
-            seq = self.seq
+            seq = self.seq = self.seq + 1
         # Strictly increasing per node, so two messages in one microsecond are not a "replay".
         utime = int(node.wallclock() * 1_000_000)
         if utime <= node._last_utime:
@@ -111,7 +114,12 @@ class Publisher:
         header.seq = seq
         if node.interference is not None:
             return node.interference.send(node, self.topic, msg, self.buses, self.channel)
-        data = self._seal(msg)
+        if type(msg) is self._type:
+            data = self._encode(msg)
+        else:
+            data = self._seal(msg)
+            if self._seal is fastcodec.encode:  # the plain encoder, never a key's seal (it signs)
+                self._type, self._encode = type(msg), fastcodec.encoder(type(msg))
         channel = self.channel
         ok = True
         for bus, send in self._senders:
@@ -165,6 +173,7 @@ class Node:
         self._tickers: list[Ticker] = []
         self.started = False
         self._last_utime = 0
+        self._now: Callable[[], float] = context.executor.clock  # `now` without two lookups
         self.admission = context.admission.for_node(self, watcher=watcher)
 
     # ------------------------------------------------------------------ lifecycle
@@ -406,7 +415,7 @@ class Node:
     @property
     def now(self) -> float:
         """Monotonic seconds on the executor's clock (what state machines are given)."""
-        return self.context.executor.clock()
+        return self._now()
 
     def state_publisher(
         self, topic: str, build: Callable[[], Any], hz: float, *, periodic: bool = True, **fields: str

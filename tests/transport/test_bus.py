@@ -273,6 +273,30 @@ def test_releasing_one_channel_of_many_leaves_the_others_delivered(bus: Buses) -
     assert sorted(bus._by_name["test"]._routes) == ["a/MC_STATE", "c/MC_STATE"]
 
 
+def test_subscribers_of_one_type_get_one_decoded_message_and_a_raw_one_the_bytes(bus: Buses) -> None:
+    """Two subscribers of a channel and type share one decode (one message object, as documented:
+    a handler must not change what it is given); a raw subscriber beside them gets the bytes; after
+    the others leave, the last one still gets every message."""
+    got: list[tuple[str, object]] = []
+    one = bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: got.append(("one", m)))
+    bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: got.append(("two", m)))
+    bus.publish("test", "a/MC_STATE", mc_state(3, 5))
+    assert wait_for(lambda: len(got) == 2, 2)
+    assert [who for who, _ in got] == ["one", "two"] and got[0][1] is got[1][1]
+    assert isinstance(got[0][1], mc_state_t) and got[0][1].state == 3 and got[0][1].header.seq == 5
+    raw = bus.subscribe("test", "a/MC_STATE", None, lambda ch, d: got.append(("raw", d)))
+    got.clear()
+    bus.publish("test", "a/MC_STATE", mc_state(4, 6))
+    assert wait_for(lambda: len(got) == 3, 2)
+    assert [who for who, _ in got] == ["one", "two", "raw"] and isinstance(got[2][1], bytes)
+    bus.unsubscribe(one)
+    bus.unsubscribe(raw)
+    got.clear()
+    bus.publish("test", "a/MC_STATE", mc_state(5, 7))
+    assert wait_for(lambda: got, 2) and [who for who, _ in got] == ["two"]
+    assert bus.decode_errors() == {}
+
+
 def test_memq_drops_what_nobody_in_the_process_subscribes_to_and_delivers_the_rest() -> None:
     """memq:// is private to its instance: a channel without subscribers goes nowhere, and one
     with a subscriber (exact or pattern) is delivered as before, on

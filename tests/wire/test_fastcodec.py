@@ -31,17 +31,23 @@ _VALUES = {
 
 
 def _fill(msg: Any, r: random.Random) -> None:
-    """Random header and fields; a type with arrays keeps its defaults beyond the header (its
-    counts and arrays must agree, and it is encoded by lcm-gen anyway)."""
-    flat = all(d is None for d in msg.__dimensions__)
-    for name, typename in zip(msg.__slots__, msg.__typenames__, strict=True):
+    """Random header and fields; an array's length field is set first (it precedes the array) and
+    the array gets that many random elements (as a list, or bytes for a byte array); arrays that
+    share a length field share its value."""
+    counts: dict[str, int] = {}
+    for name, typename, dim in zip(msg.__slots__, msg.__typenames__, msg.__dimensions__, strict=True):
         if name == "header":
             h = msg.header
             h.utime, h.seq = r.randint(0, 2**62), r.randint(0, 2**31 - 1)
             h.agent = r.choice(["", "b-001", "agent ünïcode"])
             h.mac_len = r.choice([0, 32])
             h.mac = bytes(r.randint(0, 255) for _ in range(h.mac_len))
-        elif flat and typename in _VALUES:
+        elif dim is not None:
+            count = counts.setdefault(dim[0], r.choice([0, 1, 3, 17]))
+            setattr(msg, dim[0], count)
+            values = [_VALUES[typename](r) for _ in range(count)]
+            setattr(msg, name, bytes(values) if typename == "byte" else values)
+        elif typename in _VALUES:
             setattr(msg, name, _VALUES[typename](r))
 
 
@@ -55,13 +61,51 @@ def test_fast_encoding_is_lcm_gens_byte_for_byte(cls: type) -> None:
         assert type(msg).decode(encode(msg)).encode() == msg.encode()
 
 
-def test_flat_types_are_compiled_and_the_rest_keep_lcm_gen() -> None:
-    """A type with arrays or nested types other than the header (or no header: header_t itself)
-    keeps its own encode; every flat one the node publishes per tick gets the fast one."""
-    for flat in (msgs.telemetry_t, msgs.hlc_state_t, msgs.mc_state_t, msgs.velocity_cmd_t):
-        assert encoder(flat) is not flat.encode
-    for kept in (msgs.header_t, msgs.payload_t, msgs.peer_scan_t):
-        assert encoder(kept) is kept.encode
+def test_every_message_type_is_compiled_and_others_keep_lcm_gen() -> None:
+    """Every type of lcmtypes/ that starts with the header (all but header_t itself) gets the fast
+    encoder and decoder, its arrays included; a type the compiler does not cover (no header, a
+    nested type, a fixed-size array) keeps lcm-gen's own."""
+    for cls in TYPES:
+        if cls is msgs.header_t:
+            assert encoder(cls) is cls.encode and decoder(cls) is cls.decode
+        else:
+            assert encoder(cls) is not cls.encode and decoder(cls) is not cls.decode, cls
+
+    class fixed_t(msgs.telemetry_t):  # noqa: N801 - as lcm-gen names its classes
+        __dimensions__ = [None, None, None, None, None, None, None, None, None, ["3"], None, None]
+
+    class nested_t(msgs.telemetry_t):  # noqa: N801
+        __typenames__ = [*msgs.telemetry_t.__typenames__[:-1], "antalate_lcm.msgs.header_t"]
+
+    for kept in (fixed_t, nested_t):
+        assert encoder(kept) is kept.encode and decoder(kept) is kept.decode
+
+
+def test_an_array_that_disagrees_with_its_count_fails_as_lcm_gen_fails() -> None:
+    """Fewer elements than the count, or a negative count: the fast encoder raises what lcm-gen's
+    raises, or writes the same bytes (a byte array is cut short by both, a string array of a
+    negative count is empty in both)."""
+    cases: list[tuple[Any, str, Any, str, int]] = [
+        (msgs.arbiter_status_t(), "active", ["a", "b"], "n", 3),
+        (msgs.arbiter_status_t(), "failed", ["a"], "n_failed", -2),
+        (msgs.peer_scan_t(), "range", [1.0], "n", 2),
+        (msgs.peer_scan_t(), "range", [], "n", -1),
+        (msgs.payload_t(), "data", b"abc", "size", 5),
+        (msgs.payload_t(), "data", b"abcdef", "size", -2),
+        (msgs.payload_t(), "data", "text", "size", 4),
+    ]
+    for msg, name, values, count, n in cases:
+        setattr(msg, name, values)
+        setattr(msg, count, n)
+        try:
+            expected: Any = msg.encode()
+        except Exception as exc:  # noqa: BLE001 - its type is what is compared
+            expected = type(exc)
+        try:
+            got: Any = encode(msg)
+        except Exception as exc:  # noqa: BLE001
+            got = type(exc)
+        assert got == expected, (type(msg).__name__, name, n)
 
 
 def test_a_bad_field_fails_as_lcm_gen_fails() -> None:
@@ -100,25 +144,43 @@ def test_fast_decoding_gives_lcm_gens_fields(cls: Any) -> None:
         assert _fields(decoder(cls)(data + b"trailing")) == _fields(cls.decode(data + b"trailing"))
 
 
-@pytest.mark.parametrize("cls", [msgs.telemetry_t, msgs.mc_state_t, msgs.hlc_state_t, msgs.operator_cmd_t])
-def test_a_damaged_message_fails_or_decodes_as_lcm_gens(cls: Any) -> None:
-    """Every truncation, a wrong fingerprint and a negative or oversized MAC length: the same
-    exception type as lcm-gen's decode, or the same fields where lcm-gen's reads what is there."""
+def _same_outcome(cls: Any, bad: bytes) -> None:
+    try:
+        expected: Any = _fields(cls.decode(bad))
+    except Exception as exc:  # noqa: BLE001 - its type is what is compared
+        expected = type(exc)
+    try:
+        got: Any = _fields(decoder(cls)(bad))
+    except Exception as exc:  # noqa: BLE001
+        got = type(exc)
+    assert repr(got) == repr(expected), (cls.__name__, len(bad), bad)  # repr: NaN equals NaN
+
+
+@pytest.mark.parametrize("mac", [b"", b"\x01\x02\x03\x04"], ids=["unsigned", "signed"])
+@pytest.mark.parametrize("cls", [c for c in TYPES if c is not msgs.header_t], ids=lambda c: c.__name__)
+def test_a_damaged_message_fails_or_decodes_as_lcm_gens(cls: Any, mac: bytes) -> None:
+    """Every truncation, a wrong fingerprint, a negative or oversized MAC length, and every 2-byte
+    and 4-byte field overwritten with hostile values (negative and huge array counts and string
+    lengths): the same exception type as lcm-gen's decode, or the same fields where lcm-gen's
+    reads what is there. Unsigned (no MAC: the decoder reads the header's end and the fields after
+    it at once) and signed."""
     assert decoder(cls) is not cls.decode
+    r = random.Random("damaged " + cls.__name__)
     msg = cls()
-    msg.header.agent, msg.header.mac_len, msg.header.mac = "b-001", 4, b"\x01\x02\x03\x04"
+    _fill(msg, r)
+    msg.header.agent, msg.header.mac_len, msg.header.mac = "b-001", len(mac), mac
     data = msg.encode()
     at = 8 + 8 + 4 + len("b-001") + 1 + 4  # the header's mac_len
     damaged = [data[:n] for n in range(len(data))]
     damaged += [b"\0" * 8 + data[8:], data[:at] + struct.pack(">h", -3) + data[at + 2 :]]
     damaged += [data[:at] + struct.pack(">h", 30_000) + data[at + 2 :]]
+    damaged += [data[:at] + struct.pack(">h", n) + data[at + 2 :] for n in (0, 1, 4)]
+    for offset in range(at - 4, len(data) - 1):
+        for value in (b"\xff\xff", b"\x80\x00", b"\x7f\xff", b"\x00\x00", b"\x00\x05"):
+            damaged.append(data[:offset] + value + data[offset + 2 :])
+        for value in (b"\xff\xff\xff\xff", b"\x00\x00\x00\x00", b"\x00\x00\x00\x03"):
+            damaged.append(data[:offset] + value + data[offset + 4 :])
+    damaged += [bytes(r.randint(0, 255) for _ in range(len(data))) for _ in range(50)]
+    damaged += [data[:8] + bytes(r.randint(0, 255) for _ in range(len(data) - 8)) for _ in range(200)]
     for bad in damaged:
-        try:
-            expected: Any = _fields(cls.decode(bad))
-        except Exception as exc:  # noqa: BLE001 - its type is what is compared
-            expected = type(exc)
-        try:
-            got: Any = _fields(decoder(cls)(bad))
-        except Exception as exc:  # noqa: BLE001
-            got = type(exc)
-        assert got == expected, (len(bad), bad)
+        _same_outcome(cls, bad)

@@ -9,10 +9,12 @@ The events are written here rather than through ``lcm.EventLog.write_event``: li
 ``lcm_eventlog_write_event`` (lcm/eventlog.c) writes each event as a 28-byte big-endian head (the
 magic ``0xEDA1DA01``, the event number counted from 0, the timestamp, the channel's and the data's
 lengths), the channel's bytes and the data, one ``fwrite`` per field. A thousand simulated agents
-record 40,000 events a second; one ``struct.pack`` into a 64 KiB buffer, with the channel's bytes
-kept per channel, costs 8-20 % less than that call (docs/simulator.md, issue 32's fifth pass);
+record 40,000 events a second; one ``struct.pack`` into a buffer, with the channel's bytes kept
+per channel, costs 8-20 % less than that call (docs/simulator.md, issue 32's fifth pass);
 tests/experiments/test_recorder.py reads the file back with ``lcm.EventLog`` and compares it with
-what ``write_event`` writes. A process killed without stopping loses the buffer's events.
+what ``write_event`` writes. The buffer goes to the kernel at 4 KiB, unbuffered by Python (what
+liblcm's ``FILE`` holds): a process killed without stopping loses no more of its log than
+``lcm-logger`` would.
 """
 
 from __future__ import annotations
@@ -28,8 +30,19 @@ from antalate_lcm.core.node import Context, Node, NodeSettings
 #: An event's head in liblcm's log (lcm/eventlog.c): magic, event number, utime, channel and data lengths.
 _EVENT = struct.Struct(">IqqII")
 _MAGIC = 0xEDA1DA01
-#: Bytes buffered before they are written to the file (a thousand agents' 50 ms).
-_FLUSH_AT = 1 << 16
+#: Bytes buffered before they are written to the file: glibc's buffer of liblcm's ``FILE`` (a
+#: page), so a killed process loses what ``lcm-logger`` killed would.
+_FLUSH_AT = 1 << 12
+
+
+def write_all(write: Callable[[bytearray | memoryview], int | None], data: bytearray) -> None:
+    """``data`` through an unbuffered file's ``write``, which may take less than all of it."""
+    view = memoryview(data)
+    while view:
+        n = write(view)
+        if not n:  # a blocking file takes at least a byte or raises: never spin
+            raise OSError("the log file took none of the bytes written to it")
+        view = view[n:]
 
 
 class LogRecorder(Node):
@@ -54,7 +67,8 @@ class LogRecorder(Node):
 
     def on_start(self) -> None:
         try:
-            self._file = open(self.path, "wb")  # noqa: SIM115 - closed in on_stop
+            # Unbuffered: _buffer is the one buffer (a second one would hold more back from the disk).
+            self._file = open(self.path, "wb", buffering=0)  # noqa: SIM115 - closed in on_stop
         except OSError as exc:
             raise AntalateError(f"cannot write the log {self.path}: {exc}") from None
         self._sub = self.context.buses.subscribe(self.bus, ".*", None, self._writer(self._file), regex=True)
@@ -80,7 +94,7 @@ class LogRecorder(Node):
             buf += data
             n += 1
             if len(buf) >= _FLUSH_AT:
-                write(buf)
+                write_all(write, buf)
                 buf.clear()
 
         self._count = lambda: n
@@ -92,6 +106,6 @@ class LogRecorder(Node):
             self._sub = None
         file, self._file = self._file, None
         if file is not None:
-            file.write(self._buffer)
+            write_all(file.write, self._buffer)
             self._buffer.clear()
             file.close()

@@ -43,9 +43,26 @@ def _direction(msg: direction_cmd_t) -> str | None:
     )
 
 
+#: The frames a velocity command may name.
+_FRAMES = (velocity_cmd_t.BODY, velocity_cmd_t.NED)
+
+
 def _velocity(msg: velocity_cmd_t) -> str | None:
-    if msg.frame not in (velocity_cmd_t.BODY, velocity_cmd_t.NED):
+    if msg.frame not in _FRAMES:
         return f"frame {msg.frame} is neither BODY nor NED"
+    # Every field within its bounds (so finite: NaN fails every comparison), the common case, in
+    # one expression (10 Hz per simulated agent); anything else, or a field that is not a number
+    # (as ``float`` then, never here), is told by the checks below.
+    try:
+        if (
+            -MAX_VELOCITY <= msg.vx <= MAX_VELOCITY
+            and -MAX_VELOCITY <= msg.vy <= MAX_VELOCITY
+            and -MAX_VELOCITY <= msg.vz <= MAX_VELOCITY
+            and -MAX_YAW_RATE <= msg.yaw_rate <= MAX_YAW_RATE
+        ):
+            return None
+    except TypeError:
+        pass
     for name in ("vx", "vy", "vz"):
         problem = _finite(name, float(getattr(msg, name)), -MAX_VELOCITY, MAX_VELOCITY)
         if problem:

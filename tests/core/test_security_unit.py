@@ -203,6 +203,32 @@ def test_operator_altitude_and_velocity_bounds() -> None:
     assert "frame 7" in (validation.problem(vel) or "")
 
 
+@pytest.mark.parametrize("field", ["vx", "vy", "vz", "yaw_rate"])
+def test_every_velocity_field_is_checked_for_nan_inf_and_its_bounds(field: str) -> None:
+    """The in-bounds case is told in one expression (`validation._velocity`): each field still
+    refuses NaN, both infinities and one step past its bound, and accepts the bound itself."""
+    bound = validation.MAX_YAW_RATE if field == "yaw_rate" else validation.MAX_VELOCITY
+    vel = velocity_cmd_t()
+    vel.frame = velocity_cmd_t.BODY
+    for bad, expected in (
+        (math.nan, f"{field} is nan"),
+        (math.inf, f"{field} is inf"),
+        (-math.inf, f"{field} is -inf"),
+        (math.nextafter(bound, math.inf), f"{field} {bound:g} is outside"),
+        (-math.nextafter(bound, math.inf), f"{field} {-bound:g} is outside"),
+    ):
+        setattr(vel, field, bad)
+        assert expected in (validation.problem(vel) or ""), (field, bad)
+    for good in (bound, -bound, 0.0, 1):
+        setattr(vel, field, good)
+        assert validation.problem(vel) is None, (field, good)
+    setattr(vel, field, "50")  # not a number on the wire, but as `float` has it: as before
+    assert validation.problem(vel) is None
+    setattr(vel, field, "a lot")
+    with pytest.raises(ValueError):
+        validation.problem(vel)
+
+
 def test_payload_size_must_match_and_other_content_types_pass() -> None:
     msg = _payload(b"\x00\x01binary", "application/octet-stream")
     assert validation.problem(msg) is None

@@ -327,3 +327,61 @@ def test_memq_drops_what_nobody_in_the_process_subscribes_to_and_delivers_the_re
     finally:
         ex.stop()
         b.close()
+
+
+def test_a_memq_channel_sender_follows_every_change_of_the_channels_subscribers() -> None:
+    """A publisher's send function for one memq:// channel keeps the channel's route: a subscriber
+    added or removed after it was made is honoured from the next message, on the loop and from
+    another thread, in publish order with the bus's own publish; past the bus's close it raises."""
+    from antalate_lcm.core.executor import Executor
+
+    ex = Executor()
+    b = Buses({"test": "memq://"})
+    b.attach(ex)
+    send = b.sender("test", "a/MC_STATE")
+    got: list[tuple[str, int]] = []
+
+    def on_loop(*seqs: int) -> None:  # published on the loop thread, as a node's timers do
+        done = threading.Event()
+
+        def publish() -> None:
+            for seq in seqs:
+                send("a/MC_STATE", mc_state(1, seq).encode())
+            done.set()
+
+        ex.call_soon(publish)
+        assert done.wait(2)
+
+    try:
+        ex.start()
+        send("a/MC_STATE", mc_state(1, 1).encode())  # nobody subscribes yet: goes nowhere
+        one = b.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: got.append(("one", m.header.seq)))
+        on_loop(2)
+        assert wait_for(lambda: got == [("one", 2)], 2)
+        two = b.subscribe("test", "a/MC_STATE", None, lambda ch, d: got.append(("two", len(d))))
+        got.clear()
+        send("a/MC_STATE", mc_state(1, 3).encode())  # another thread: a loop handle of its own
+        b.publish("test", "a/MC_STATE", mc_state(1, 4))
+        assert wait_for(lambda: len(got) == 4, 2)
+        assert [who for who, _ in got] == ["one", "two", "one", "two"] and got[2] == ("one", 4)
+        b.unsubscribe(one)
+        b.unsubscribe(two)
+        got.clear()
+        on_loop(5)
+        b.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: got.append(("three", m.header.seq)))
+        on_loop(6)
+        b.subscribe("test", r"a/.*", None, lambda ch, d: got.append(("pattern", len(d))), regex=True)
+        on_loop(7, 8)
+        assert wait_for(lambda: len(got) == 5, 2)
+        assert [(who, seq if who == "three" else 0) for who, seq in got] == [
+            ("three", 6),
+            ("three", 7),
+            ("pattern", 0),
+            ("three", 8),
+            ("pattern", 0),
+        ], "the removed subscribers never saw 5; the new ones each message once"
+    finally:
+        ex.stop()
+        b.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        send("a/MC_STATE", mc_state(1, 9).encode())

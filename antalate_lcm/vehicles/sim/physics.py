@@ -64,21 +64,7 @@ M_DESCEND, M_PILOT, M_HOLD = Motion.DESCEND, Motion.PILOT, Motion.HOLD
 _BODY = Frame.BODY
 
 #: What a vehicle keeps across a restart of the software that flies it (`persistence`), with its motion.
-PERSISTED = (
-    "north",
-    "east",
-    "alt",
-    "vn",
-    "ve",
-    "vd",
-    "heading",
-    "battery",
-    "armed",
-    "in_air",
-    "mode",
-    "_takeoff_alt",
-    "_failsafe",
-)
+PERSISTED = tuple("north east alt vn ve vd heading battery armed in_air mode _takeoff_alt _failsafe".split())
 
 
 class Quadcopter:
@@ -269,9 +255,16 @@ class Quadcopter:
         if cmd is not None:  # `_follow_setpoint`'s arithmetic of what the step does not change
             vx, vy, vz, yaw, frame = cmd
             body = frame is _BODY
-            td0 = max(-self._climb_rate, min(self._descent_rate, vz))
-            max_yaw = self._max_yaw_rate
-            yaw0 = max(-max_yaw, min(max_yaw, yaw))
+            # max(-limit, min(limit, x)) without the calls: each keeps its first argument unless
+            # the second is strictly beyond it (the same float, signed zeros included).
+            limit = self._descent_rate
+            td0 = vz if vz < limit else limit
+            limit = -self._climb_rate
+            td0 = td0 if td0 > limit else limit
+            limit = self._max_yaw_rate
+            yaw0 = yaw if yaw < limit else limit
+            limit = -limit
+            yaw0 = yaw0 if yaw0 > limit else limit
             if body:
                 # A rotation keeps the length to a few ulps: far below the limit no clamp can apply.
                 may_clamp = math.hypot(vx, vy) > max_speed * (1.0 - 1e-9)

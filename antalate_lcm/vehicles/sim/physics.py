@@ -64,7 +64,21 @@ M_DESCEND, M_PILOT, M_HOLD = Motion.DESCEND, Motion.PILOT, Motion.HOLD
 _BODY = Frame.BODY
 
 #: What a vehicle keeps across a restart of the software that flies it (`persistence`), with its motion.
-PERSISTED = tuple("north east alt vn ve vd heading battery armed in_air mode _takeoff_alt _failsafe".split())
+PERSISTED = (
+    "north",
+    "east",
+    "alt",
+    "vn",
+    "ve",
+    "vd",
+    "heading",
+    "battery",
+    "armed",
+    "in_air",
+    "mode",
+    "_takeoff_alt",
+    "_failsafe",
+)
 
 
 class Quadcopter:
@@ -239,19 +253,13 @@ class Quadcopter:
         the battery is left to `_step` (its LAND); one that touches down calls `_touchdown` as
         `_step` does. tests/vehicles/test_sim_snapshot.py runs it beside `_step` bit for bit.
         """
-        tau = self._tau
-        hold = self._velocity_hold
-        max_speed = self._max_speed
-        drain = self._drain[True]
-        t = self._sim_time
-        battery = self.battery
+        tau, hold, max_speed = self._tau, self._velocity_hold, self._max_speed
+        drain, t, battery = self._drain[True], self._sim_time, self.battery
         north, east, alt = self.north, self.east, self.alt
         vn, ve, vd = self.vn, self.ve, self.vd
-        heading = self.heading
-        cmd = self._cmd
+        heading, cmd, cmd_time = self.heading, self._cmd, self._cmd_time
         body = may_clamp = False
         vx = vy = tn0 = te0 = td0 = yaw0 = 0.0
-        cmd_time = self._cmd_time
         if cmd is not None:  # `_follow_setpoint`'s arithmetic of what the step does not change
             vx, vy, vz, yaw, frame = cmd
             body = frame is _BODY
@@ -316,11 +324,9 @@ class Quadcopter:
             if alt <= 0.0:
                 touchdown = True
                 break
-        self._sim_time = t
-        self.battery = battery
+        self._sim_time, self.battery, self.heading = t, battery, heading
         self.north, self.east, self.alt = north, east, alt
         self.vn, self.ve, self.vd = vn, ve, vd
-        self.heading = heading
         if touchdown:
             self._touchdown()
         return dt

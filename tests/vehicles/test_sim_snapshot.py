@@ -30,7 +30,7 @@ class _Counted(SimAdapter):
     def state(self) -> VehicleState:
         key = self._snapshot_of
         state = super().state()
-        if not state.in_air and key is not None and self._snapshot_of is key:  # built anew: a new key
+        if not state.in_air and self._snapshot_of is key:  # built anew on the ground: a new key
             self.copies = getattr(self, "copies", 0) + 1
         return state
 
@@ -44,7 +44,7 @@ class _FullPath(SimAdapter):
         return dt  # nothing flown: `_advance` steps all of ``dt`` with `_step`
 
     def state(self) -> VehicleState:
-        self._snapshot_of = None
+        self._snapshot_of = (None,) * 12
         return super().state()
 
 

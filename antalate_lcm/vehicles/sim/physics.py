@@ -43,6 +43,7 @@ from antalate_lcm.vehicles.sim.params import Params
 __all__ = ["PERSISTED", "Motion", "Quadcopter"]
 
 _HOME_RADIUS = 0.05  # m: close enough to home to start the RTL descent
+_RADIANS = math.pi / 180.0  # per degree: what `math.radians` multiplies by (Modules/mathmodule.c)
 
 
 class Motion(enum.Enum):
@@ -173,7 +174,7 @@ class Quadcopter:
         #: snapshot's values and the objects they were made of.
         self._latlon_n = self._latlon_e = math.nan
         self._latlon = (0.0, 0.0)
-        self._snapshot_of: tuple[object, ...] | None = None
+        self._snapshot_of: tuple[object, ...] = (None,) * 12  # what no value is
         self._snapshot: dict[str, object] = {}
 
     @property
@@ -294,7 +295,7 @@ class Quadcopter:
             if cmd is not None and t - cmd_time <= hold:
                 td, yaw_rate = td0, yaw0
                 if body:  # `body_to_ne`
-                    psi = math.radians(heading)
+                    psi = heading * _RADIANS  # math.radians(heading), float for float
                     c, s = math.cos(psi), math.sin(psi)
                     tn, te = vx * c - vy * s, vx * s + vy * c
                     if may_clamp:

@@ -43,30 +43,29 @@ def snapshot(v: Quadcopter) -> VehicleState:
     cells, sag, warn_at = battery_params
     north = v.north
     east = v.east
-    key = v._snapshot_of
     # A vehicle on the ground reports the same values poll after poll but for its battery: those
     # come from a copy of the last ground snapshot's dict when every value it was made of is the
     # same object now (an object is its value: no write can make the copy stale), a third of the
     # cost of building the dict anew (tests/vehicles/test_sim_snapshot.py checks it bit for bit).
+    n0, e0, alt0, heading0, vn0, ve0, vd0, armed0, in_air0, mode0, failsafe0, params0 = v._snapshot_of
     if (
-        key is not None
-        and north is key[0]
-        and east is key[1]
-        and v.alt is key[2]
-        and v.heading is key[3]
-        and v.vn is key[4]
-        and v.ve is key[5]
-        and v.vd is key[6]
-        and v.armed is key[7]
-        and v.in_air is key[8]
-        and v.mode is key[9]
-        and v._failsafe is key[10]
-        and battery_params is key[11]
+        north is n0
+        and east is e0
+        and v.alt is alt0
+        and v.heading is heading0
+        and v.vn is vn0
+        and v.ve is ve0
+        and v.vd is vd0
+        and v.armed is armed0
+        and v.in_air is in_air0
+        and v.mode is mode0
+        and v._failsafe is failsafe0
+        and battery_params is params0
     ):
         values = v._snapshot.copy()
         values["battery"] = battery
         if cells:
-            if not key[8]:
+            if not in_air0:
                 sag = 0.0
             values["voltage"] = cells * (_CELL_EMPTY + (_CELL_FULL - _CELL_EMPTY) * battery / 100.0 - sag)
         if warn_at:

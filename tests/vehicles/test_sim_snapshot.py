@@ -30,7 +30,9 @@ class _Counted(SimAdapter):
     def state(self) -> VehicleState:
         key = self._snapshot_of
         state = super().state()
-        if not state.in_air and self._snapshot_of is key:  # built anew on the ground: a new key
+        if self._snapshot_of is key and not (
+            state.vn or state.ve or state.vd
+        ):  # a still one built anew: a new key
             self.copies = getattr(self, "copies", 0) + 1
         return state
 

@@ -170,10 +170,8 @@ class Quadcopter:
         self._battery_params = (p.cells, p.voltage_sag, p.battery_warning_at)
         #: %/min drained on the ground and in the air (indexed by `in_air`: read every step).
         self._drain = (p.drain_idle, p.drain_flying)
-        #: `telemetry.snapshot`'s: the last lat/lon and the (north, east) it is of; the last ground
-        #: snapshot's values and the objects they were made of.
-        self._latlon_n = self._latlon_e = math.nan
-        self._latlon = (0.0, 0.0)
+        #: `telemetry.snapshot`'s: the last lat/lon, the (north, east) it is of; a still snapshot's values.
+        self._latlon_n, self._latlon_e, self._latlon = math.nan, math.nan, (0.0, 0.0)
         self._snapshot_of: tuple[object, ...] = (None,) * 12  # what no value is
         self._snapshot: dict[str, object] = {}
 
@@ -246,13 +244,11 @@ class Quadcopter:
             dt -= h
 
     def _fly(self, dt: float, max_step: float) -> float:
-        """``dt`` s of GUIDED flight in the air in steps of at most ``max_step``: each step `_step`'s,
-        float for float, on local variables; the seconds left when a step meets an event.
-
-        A swarm flies this 20 times a second per agent (a turning body-frame set-point: two steps
-        a poll on simulated time's grid, ``dt`` a hair over ``max_step``). A step that would empty
-        the battery is left to `_step` (its LAND); one that touches down calls `_touchdown` as
-        `_step` does. tests/vehicles/test_sim_snapshot.py runs it beside `_step` bit for bit.
+        """``dt`` s of GUIDED flight in the air in steps of at most ``max_step``, each `_step`'s float
+        for float on local variables (a swarm's 20 polls a second per agent: a turning body-frame
+        set-point, two steps a poll on simulated time's grid); the seconds left at an event: a step
+        that would empty the battery is left to `_step` (its LAND), a touchdown calls `_touchdown`.
+        tests/vehicles/test_sim_snapshot.py runs it beside `_step` bit for bit.
         """
         tau, hold, max_speed = self._tau, self._velocity_hold, self._max_speed
         drain, t, battery = self._drain[True], self._sim_time, self.battery
@@ -357,18 +353,21 @@ class Quadcopter:
         """`_step` of ``dt`` s hovering (GUIDED, still, no set-point in force after the step, and
         `_one_step` true: no empty battery, no touchdown), when it is one; False, nothing done, else.
 
-        A swarm in MISSION without a behavior hovers, 20 polls a second per agent: the lag toward
-        zero from zero leaves every velocity 0.0 and the position where it is (``+ 0.0`` below is
-        that arithmetic's one effect, a -0.0 made 0.0), so the step is the battery's drain alone.
+        A swarm in MISSION without a behavior hovers, 20 polls a second per agent: the lag toward zero
+        from zero leaves the velocities 0.0 and the position as it is but for a -0.0 made 0.0 (by its
+        ``+ 0.0``; any other float kept, the object the snapshot's copy compares): the battery's drain.
         """
         t = self._sim_time + dt
         if self._cmd is not None and t - self._cmd_time <= self._velocity_hold:
             return False
         self._sim_time = t
-        self.battery = max(0.0, self.battery - self._drain[self.in_air] * dt / 60.0)
+        battery = self.battery - self._drain[self.in_air] * dt / 60.0
+        self.battery = battery if battery > 0.0 else 0.0  # max(0.0, battery)
         self.vn = self.ve = self.vd = 0.0
-        self.north += 0.0
-        self.east += 0.0
+        if self.north == 0.0:
+            self.north = 0.0
+        if self.east == 0.0:
+            self.east = 0.0
         return True
 
     def _step(self, h: float) -> None:

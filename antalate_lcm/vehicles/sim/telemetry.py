@@ -43,8 +43,8 @@ def snapshot(v: Quadcopter) -> VehicleState:
     cells, sag, warn_at = battery_params
     north = v.north
     east = v.east
-    # A vehicle on the ground reports the same values poll after poll but for its battery: those
-    # come from a copy of the last ground snapshot's dict when every value it was made of is the
+    # A vehicle on the ground or hovering reports the same values poll after poll but for its
+    # battery: those come from a copy of the last still snapshot's dict when every value it was made of is the
     # same object now (an object is its value: no write can make the copy stale), a third of the
     # cost of building the dict anew (tests/vehicles/test_sim_snapshot.py checks it bit for bit).
     n0, e0, alt0, heading0, vn0, ve0, vd0, armed0, in_air0, mode0, failsafe0, params0 = v._snapshot_of
@@ -118,7 +118,7 @@ def snapshot(v: Quadcopter) -> VehicleState:
         "cells": cells,
         "battery_warning": warning,
     }
-    if not in_air:  # in flight the vehicle moves every poll: no copy would be reused
+    if not (vn or ve or vd):  # on the ground or hovering; a vehicle that moves makes no copy
         v._snapshot_of = (
             north,
             east,

@@ -43,10 +43,11 @@ def snapshot(v: Quadcopter) -> VehicleState:
     cells, sag, warn_at = battery_params
     north = v.north
     east = v.east
-    # A vehicle on the ground or hovering reports the same values poll after poll but for its
-    # battery: those come from a copy of the last still snapshot's dict when every value it was made of is the
-    # same object now (an object is its value: no write can make the copy stale), a third of the
-    # cost of building the dict anew (tests/vehicles/test_sim_snapshot.py checks it bit for bit).
+    # A vehicle on the ground or hovering still reports the same values poll after poll but for
+    # its battery: they come from a copy of the last still snapshot's dict when every value it was
+    # made of is the same object now (an object is its value: no write can make the copy stale),
+    # about half the work of building the dict anew (docs/simulator.md, "Issue 32, fifth pass";
+    # tests/vehicles/test_sim_snapshot.py checks it bit for bit).
     n0, e0, alt0, heading0, vn0, ve0, vd0, armed0, in_air0, mode0, failsafe0, params0 = v._snapshot_of
     if (
         north is n0

@@ -107,7 +107,7 @@ def _sim_grid(period: float) -> int:
 class Timer:
     """A periodic (or one-shot) callback; :meth:`cancel` stops it (from any thread)."""
 
-    __slots__ = ("period", "fn", "oneshot", "cancelled", "due", "quantum", "step")
+    __slots__ = ("period", "fn", "oneshot", "cancelled", "due", "quantum", "step", "skips")
 
     def __init__(
         self, period: float, fn: Callable[[], Any], *, oneshot: bool = False, lockstep: bool = False
@@ -127,6 +127,8 @@ class Timer:
         #: On simulated time, its period in whole ms (0: not whole, or the wall clock): its next slot
         #: is this many after the last, counted in integers, so float sums never push a run a step late.
         self.step = _whole_ms(period) if lockstep else 0
+        #: Runs it fell a period or more behind and skipped (a `Ticker` then re-reads its due times).
+        self.skips = 0
 
     def cancel(self) -> None:
         # A flag, checked before each run: asyncio's handles are not thread-safe, and a cancelled
@@ -268,6 +270,7 @@ class Executor:
             nxt = due + timer.period
             if nxt <= now:  # fell behind: skip missed runs rather than burst
                 nxt = now + timer.period
+                timer.skips += 1
             timer.due = nxt
             if timer.step:
                 k = slot + timer.step

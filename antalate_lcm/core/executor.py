@@ -237,7 +237,9 @@ class Executor:
         self._slots[slot] = [timer]
 
     def _run_slot(self, slot: int) -> None:
-        # Runs ~50 timers per simulated agent-second: the timer's run and its re-arm are inlined.
+        # Runs ~50 timers per simulated agent-second: the timer's run and its re-arm are inlined,
+        # and what every timer of the slot shares is read once (the lag is written once, the
+        # slot most of them go to next is kept at hand).
         timers = self._slots.pop(slot, [])
         if self.sim is not None and len(timers) > 1:
             timers.sort(key=_DUE)  # an instant of the grid: in the order of their exact times
@@ -246,6 +248,9 @@ class Executor:
         now = loop.time()
         urgent = self._urgent if len(timers) > _POLL_EVERY else ()
         n = 0
+        lag = self.max_timer_lag
+        ceil = math.ceil
+        last, same = -1, timers  # (no slot is -1: the first timer sets both)
         for timer in timers:
             if urgent:
                 n += 1
@@ -256,8 +261,8 @@ class Executor:
             if timer.cancelled:
                 continue
             due = timer.due
-            if now - due > self.max_timer_lag:
-                self.max_timer_lag = now - due
+            if now - due > lag:
+                lag = now - due
             try:
                 timer.fn()
             except Exception:
@@ -272,17 +277,21 @@ class Executor:
                 nxt = now + timer.period
                 timer.skips += 1
             timer.due = nxt
-            if timer.step:
-                k = slot + timer.step
+            step = timer.step
+            if step:
+                k = slot + step
             else:
                 q = timer.quantum
-                k = -(-math.ceil(nxt * _SLOTS_PER_S) // q) * q
-            same = slots.get(k)
-            if same is not None:
-                same.append(timer)
-            else:
-                slots[k] = [timer]
-                loop.call_at(k / _SLOTS_PER_S, self._run_slot, k)
+                k = -(-ceil(nxt * _SLOTS_PER_S) // q) * q
+            if k != last:
+                last = k
+                found = slots.get(k)
+                if found is None:
+                    found = slots[k] = []
+                    loop.call_at(k / _SLOTS_PER_S, self._run_slot, k)
+                same = found
+            same.append(timer)
+        self.max_timer_lag = lag
 
     def run_sync(self, fn: Callable[[], T], timeout: float = 10.0) -> T:
         """Run ``fn`` on the loop thread and return its result (for set-up, tests and shutdown)."""

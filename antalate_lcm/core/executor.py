@@ -59,6 +59,11 @@ _SIM_SLACK_MS = 1e-3
 _POLL_EVERY = 64
 #: A timer's due time, read in C (a slot of a thousand agents' timers is sorted by it).
 _DUE = operator.attrgetter("due")
+#: One float object per period of the periodic timers (a few: the agents' rates), so a slot of a
+#: thousand agents' timers adds the same object to each due time, read once into the caches, not a
+#: thousand copies of it each out of them; bounded, as periods could be made up.
+_PERIODS: dict[float, float] = {}
+_MAX_PERIODS = 256
 #: s the coroutines left on a stopping loop have to unwind once cancelled (see _finish_tasks).
 _UNWIND_S = 2.0
 T = TypeVar("T")
@@ -112,6 +117,8 @@ class Timer:
     def __init__(
         self, period: float, fn: Callable[[], Any], *, oneshot: bool = False, lockstep: bool = False
     ) -> None:
+        if not oneshot and len(_PERIODS) < _MAX_PERIODS:
+            period = _PERIODS.setdefault(float(period), float(period))
         self.period = period
         self.fn = fn
         self.oneshot = oneshot

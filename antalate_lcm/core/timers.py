@@ -64,14 +64,16 @@ class Ticker:
     when the cycle begins and run in turn with no due time looked at (a thousand agents' groups
     and their due times were 20 to 40 objects a run, each out of the caches by the agent's next
     run). After a skip, or a change of jobs, the due times are what they would be had they been
-    kept, and a new cycle begins from them. A run at a ``now`` of the caller's goes by the due times.
+    kept, and a new cycle begins from them (after a skip, once a cycle's length of runs came with
+    no other: a timer of a loop that keeps falling behind goes by its due times, with no cycle made
+    for a run or two). A run at a ``now`` of the caller's goes by the due times.
     """
 
     # The first five are what a run of the cycle reads: one cache line of the object.
     __slots__ = (
         "cycle", "phase", "timer", "skips", "last",
         "hz", "period", "slack", "base", "base_owner", "base_log", "groups", "next_due", "length",
-        "synced",
+        "synced", "calm",
     )  # fmt: skip
 
     def __init__(self, hz: float) -> None:
@@ -102,6 +104,8 @@ class Ticker:
         #: The cycle's first run's time, and per group its first run in the cycle and its due time
         #: after that run.
         self.synced: tuple[float, list[tuple[int, float]]] = (0.0, [])
+        #: Runs by the due times still to come, without a skip, before a cycle is made again.
+        self.calm = 0
 
     def takes(self, jobs: list[tuple[float, Callable[[], Any]]]) -> bool:
         """Whether every one of ``jobs`` can run at its rate on this timer."""
@@ -162,13 +166,20 @@ class Ticker:
     def _resync(self, now: float | None) -> tuple[Jobs, ...] | None:
         """A run off the cycle: the cycle that begins with it (None: run by the due times)."""
         self._unsync()
-        if now is not None or not self.length:
-            self._run_due(self.timer.due if now is None else now)
-            return None
         timer = self.timer
-        self.skips = timer.skips
+        if now is not None or not self.length:
+            self._run_due(timer.due if now is None else now)
+            return None
+        if timer.skips is not self.skips:
+            self.skips = timer.skips
+            self.calm = self.length
+        if self.calm:  # a timer that skips runs often goes on by the due times, with no cycle made
+            self.calm -= 1
+            self._run_due(timer.due)
+            return None
         cycle = self._sync(timer.due)
         if cycle is None:
+            self.calm = self.length
             self._run_due(timer.due)
         return cycle
 
@@ -190,6 +201,8 @@ class Ticker:
                 # As the executor re-arms a timer: the next period, or a period from now if behind.
                 due = group[1] = due + period if now < due + period else now + period
                 for fn, log, _owner in jobs:
+                    if group[2] is not jobs and not self._holds(fn):
+                        continue  # its node stopped during this run
                     try:
                         fn()
                     except Exception:

@@ -228,28 +228,35 @@ def test_the_cycle_runs_what_the_due_times_would_through_skips_and_changes() -> 
         timer.due = due + 0.05 if late < 0.05 else due + late + 0.05
         timer.skips += late >= 0.05
     assert seen["cycle"] == seen["due"]
-    assert cycles >= 50  # the cycle ran all but the runs after a change or a skip
+    assert cycles >= 30  # all but the runs after a change, and a cycle's worth after a skip
     assert ("hlc@20", 40) in [(n, r) for r, n in seen["cycle"]] and all(
         not n.startswith("hlc") for r, n in seen["cycle"] if r >= 41
     )
 
 
-def test_a_node_stopped_by_a_job_of_the_run_runs_none_of_its_jobs_after() -> None:
+@pytest.mark.parametrize(("tick", "on_cycle"), [(1, False), (3, True)])
+def test_a_node_stopped_by_a_job_of_the_run_runs_none_of_its_jobs_after(tick: int, on_cycle: bool) -> None:
+    """The MC's ``tick``-th tick stops the HLC: on the first run by the due times, the third on the cycle."""
     log = logging.getLogger("test.ticker")
     ticker = Ticker(20.0)
     ticker.timer = _Timer(1000.0)
     runs: list[str] = []
+    cycling: list[bool] = []
     hlc, mc = object(), object()
 
     def mc_tick() -> None:
         runs.append("mc tick")
-        ticker.remove(hlc)
+        if runs.count("mc tick") == tick:
+            cycling.append(ticker.cycle is not None)
+            ticker.remove(hlc)
 
     ticker.add(mc, [(10.0, mc_tick)], log)
     ticker.add(hlc, [(20.0, lambda: runs.append("control")), (10.0, lambda: runs.append("telemetry"))], log)
-    for _ in range(4):
+    for _ in range(2 * tick + 2):
         ticker.run()
         ticker.timer.due += 0.05
-    # Control, then the MC's tick, which stops the HLC: the HLC's telemetry of that run, next in
-    # the tick's group, does not run, nor anything of the HLC's after; the MC's tick goes on.
-    assert runs == ["control", "mc tick", "mc tick"]
+    # Control, then the MC's tick, which stops the HLC: the HLC's telemetry of that run, after the
+    # tick in their group, does not run, nor anything of the HLC's after; the MC's tick goes on.
+    before = ["control", "mc tick", "telemetry", "control"] * (tick - 1)
+    assert cycling == [on_cycle]
+    assert runs == [*before, "control", "mc tick", "mc tick"]

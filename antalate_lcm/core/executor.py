@@ -59,6 +59,11 @@ _SIM_SLACK_MS = 1e-3
 _POLL_EVERY = 64
 #: A timer's due time, read in C (a slot of a thousand agents' timers is sorted by it).
 _DUE = operator.attrgetter("due")
+#: One float object per period of the periodic timers (a few: the agents' rates), so a slot of a
+#: thousand agents' timers adds the same object to each due time, read once into the caches, not a
+#: thousand copies of it each out of them; bounded, as periods could be made up.
+_PERIODS: dict[float, float] = {}
+_MAX_PERIODS = 256
 #: s the coroutines left on a stopping loop have to unwind once cancelled (see _finish_tasks).
 _UNWIND_S = 2.0
 T = TypeVar("T")
@@ -107,11 +112,13 @@ def _sim_grid(period: float) -> int:
 class Timer:
     """A periodic (or one-shot) callback; :meth:`cancel` stops it (from any thread)."""
 
-    __slots__ = ("period", "fn", "oneshot", "cancelled", "due", "quantum", "step")
+    __slots__ = ("period", "fn", "oneshot", "cancelled", "due", "quantum", "step", "skips")
 
     def __init__(
         self, period: float, fn: Callable[[], Any], *, oneshot: bool = False, lockstep: bool = False
     ) -> None:
+        if not oneshot and len(_PERIODS) < _MAX_PERIODS:
+            period = _PERIODS.setdefault(float(period), float(period))
         self.period = period
         self.fn = fn
         self.oneshot = oneshot
@@ -127,6 +134,8 @@ class Timer:
         #: On simulated time, its period in whole ms (0: not whole, or the wall clock): its next slot
         #: is this many after the last, counted in integers, so float sums never push a run a step late.
         self.step = _whole_ms(period) if lockstep else 0
+        #: Runs it fell a period or more behind and skipped (a `Ticker` then re-reads its due times).
+        self.skips = 0
 
     def cancel(self) -> None:
         # A flag, checked before each run: asyncio's handles are not thread-safe, and a cancelled
@@ -235,7 +244,9 @@ class Executor:
         self._slots[slot] = [timer]
 
     def _run_slot(self, slot: int) -> None:
-        # Runs ~50 timers per simulated agent-second: the timer's run and its re-arm are inlined.
+        # Runs ~50 timers per simulated agent-second: the timer's run and its re-arm are inlined,
+        # and what every timer of the slot shares is read once (the lag is written once, the
+        # slot most of them go to next is kept at hand).
         timers = self._slots.pop(slot, [])
         if self.sim is not None and len(timers) > 1:
             timers.sort(key=_DUE)  # an instant of the grid: in the order of their exact times
@@ -244,6 +255,9 @@ class Executor:
         now = loop.time()
         urgent = self._urgent if len(timers) > _POLL_EVERY else ()
         n = 0
+        lag = self.max_timer_lag
+        ceil = math.ceil
+        last, same = -1, timers  # (no slot is -1: the first timer sets both)
         for timer in timers:
             if urgent:
                 n += 1
@@ -254,8 +268,8 @@ class Executor:
             if timer.cancelled:
                 continue
             due = timer.due
-            if now - due > self.max_timer_lag:
-                self.max_timer_lag = now - due
+            if now - due > lag:
+                lag = now - due
             try:
                 timer.fn()
             except Exception:
@@ -268,18 +282,23 @@ class Executor:
             nxt = due + timer.period
             if nxt <= now:  # fell behind: skip missed runs rather than burst
                 nxt = now + timer.period
+                timer.skips += 1
             timer.due = nxt
-            if timer.step:
-                k = slot + timer.step
+            step = timer.step
+            if step:
+                k = slot + step
             else:
                 q = timer.quantum
-                k = -(-math.ceil(nxt * _SLOTS_PER_S) // q) * q
-            same = slots.get(k)
-            if same is not None:
-                same.append(timer)
-            else:
-                slots[k] = [timer]
-                loop.call_at(k / _SLOTS_PER_S, self._run_slot, k)
+                k = -(-ceil(nxt * _SLOTS_PER_S) // q) * q
+            if k != last:
+                last = k
+                found = slots.get(k)
+                if found is None:
+                    found = slots[k] = []
+                    loop.call_at(k / _SLOTS_PER_S, self._run_slot, k)
+                same = found
+            same.append(timer)
+        self.max_timer_lag = lag
 
     def run_sync(self, fn: Callable[[], T], timeout: float = 10.0) -> T:
         """Run ``fn`` on the loop thread and return its result (for set-up, tests and shutdown)."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import random
 
 import pytest
 
@@ -98,3 +99,17 @@ def test_flat_frame_across_the_antimeridian() -> None:
     assert lon < 0.0  # wrapped into [-180, 180)
     n, e = frame.to_ne(lat, lon)
     assert e == pytest.approx(200.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("lat0, lon0", POINTS)
+def test_flat_frame_to_latlon_is_math_degrees_float_for_float(lat0: float, lon0: float) -> None:
+    """`FlatFrame.to_latlon` multiplies by 180/pi where it called `math.degrees`: the same floats."""
+    frame = geo.FlatFrame(lat0, lon0)
+    per_lat, per_lon = geo.metres_per_radian(lat0)
+    r = random.Random(lat0)
+    for _ in range(20_000):
+        north, east = (r.choice([-1.0, 1.0]) * 10 ** r.uniform(-9.0, 5.0) for _ in range(2))
+        lon = lon0 + math.degrees(east / per_lon)
+        expected = (lat0 + math.degrees(north / per_lat), lon if -180.0 <= lon < 180.0 else geo.wrap_180(lon))
+        assert frame.to_latlon(north, east) == expected, (north, east)
+    assert [repr(x) for x in frame.to_latlon(-0.0, -0.0)] == [repr(lat0 + -0.0), repr(lon0 + -0.0)]

@@ -182,3 +182,81 @@ def test_the_mc_keeps_its_jobs_when_its_hlc_stops_and_the_hlc_joins_again(contex
         for n in reversed(nodes):
             n.stop()
     assert not context.tickers and ticker.timer.cancelled
+
+
+class _Timer:
+    """The executor's side of a ticker's timer, by hand: its due time and its skips (Timer)."""
+
+    def __init__(self, due: float) -> None:
+        self.due = due
+        self.skips = 0
+
+
+def test_the_cycle_runs_what_the_due_times_would_through_skips_and_changes() -> None:
+    """A ticker on its timer runs its jobs from a cycle; one given ``now`` by the due times alone:
+    the same runs through skipped runs, a node joining and one leaving."""
+    log = logging.getLogger("test.ticker")
+    seen: dict[str, list[tuple[int, str]]] = {"cycle": [], "due": []}
+    run = [0]
+
+    def job(way: str, name: str) -> Callable[[], None]:
+        return lambda: seen[way].append((run[0], name))
+
+    def jobs(way: str, node: str, rates: tuple[float, ...]) -> list[tuple[float, Callable[[], None]]]:
+        return [(rate, job(way, f"{node}@{rate:g}")) for rate in rates]
+
+    cycled, by_due = Ticker(20.0), Ticker(20.0)
+    hlc, mc = object(), object()
+    for ticker, way in ((cycled, "cycle"), (by_due, "due")):
+        ticker.add(hlc, jobs(way, "hlc", (20.0, 10.0, 5.0)), log)
+    timer = cycled.timer = _Timer(1000.0)
+    cycles = 0
+    for k in range(60):
+        run[0] = k
+        if k == 7:  # the MC joins on an odd run
+            cycled.add(mc, jobs("cycle", "mc", (10.0, 5.0, 2.5)), log)
+            by_due.add(mc, jobs("due", "mc", (10.0, 5.0, 2.5)), log)
+        if k == 41:
+            cycled.remove(hlc)
+            by_due.remove(hlc)
+        due = timer.due
+        cycled.run()
+        by_due.run(due)
+        cycles += cycled.cycle is not None
+        # As Executor._run_slot re-arms it: runs 13-14 and 30 come over a period late (skipped).
+        late = {13: 0.06, 14: 0.12, 30: 0.051}.get(k, 0.0)
+        timer.due = due + 0.05 if late < 0.05 else due + late + 0.05
+        timer.skips += late >= 0.05
+    assert seen["cycle"] == seen["due"]
+    assert cycles >= 30  # all but the runs after a change, and a cycle's worth after a skip
+    assert ("hlc@20", 40) in [(n, r) for r, n in seen["cycle"]] and all(
+        not n.startswith("hlc") for r, n in seen["cycle"] if r >= 41
+    )
+
+
+@pytest.mark.parametrize(("tick", "on_cycle"), [(1, False), (3, True)])
+def test_a_node_stopped_by_a_job_of_the_run_runs_none_of_its_jobs_after(tick: int, on_cycle: bool) -> None:
+    """The MC's ``tick``-th tick stops the HLC: on the first run by the due times, the third on the cycle."""
+    log = logging.getLogger("test.ticker")
+    ticker = Ticker(20.0)
+    ticker.timer = _Timer(1000.0)
+    runs: list[str] = []
+    cycling: list[bool] = []
+    hlc, mc = object(), object()
+
+    def mc_tick() -> None:
+        runs.append("mc tick")
+        if runs.count("mc tick") == tick:
+            cycling.append(ticker.cycle is not None)
+            ticker.remove(hlc)
+
+    ticker.add(mc, [(10.0, mc_tick)], log)
+    ticker.add(hlc, [(20.0, lambda: runs.append("control")), (10.0, lambda: runs.append("telemetry"))], log)
+    for _ in range(2 * tick + 2):
+        ticker.run()
+        ticker.timer.due += 0.05
+    # Control, then the MC's tick, which stops the HLC: the HLC's telemetry of that run, after the
+    # tick in their group, does not run, nor anything of the HLC's after; the MC's tick goes on.
+    before = ["control", "mc tick", "telemetry", "control"] * (tick - 1)
+    assert cycling == [on_cycle]
+    assert runs == [*before, "control", "mc tick", "mc tick"]

@@ -43,6 +43,7 @@ from antalate_lcm.vehicles.sim.params import Params
 __all__ = ["PERSISTED", "Motion", "Quadcopter"]
 
 _HOME_RADIUS = 0.05  # m: close enough to home to start the RTL descent
+_RADIANS = math.pi / 180.0  # per degree: what `math.radians` multiplies by (Modules/mathmodule.c)
 
 
 class Motion(enum.Enum):
@@ -104,6 +105,7 @@ class Quadcopter:
         "_climb_rate",
         "_descent_rate",
         "_max_yaw_rate",
+        "_step_lag",
         "_phase",
         "_cmd",
         "_cmd_time",
@@ -116,8 +118,11 @@ class Quadcopter:
         "_airborne_since",
         "_battery_params",
         "_drain",
-        "_latlon_of",
+        "_latlon_n",
+        "_latlon_e",
         "_latlon",
+        "_snapshot_of",
+        "_snapshot",
     )
     clock: Clock
 
@@ -134,6 +139,9 @@ class Quadcopter:
         self._climb_rate = p.climb_rate
         self._descent_rate = p.descent_rate
         self._max_yaw_rate = p.max_yaw_rate
+        #: `_lag`'s decay and distance factor over a step of ``max_step`` (`_fly`'s usual step).
+        decay = math.exp(-p.max_step / p.tau)
+        self._step_lag = (p.max_step, decay, p.tau * (1.0 - decay))
         # Vehicle state (local frame: metres north/east of home, altitude above home).
         self.north = 0.0
         self.east = 0.0
@@ -162,8 +170,10 @@ class Quadcopter:
         self._battery_params = (p.cells, p.voltage_sag, p.battery_warning_at)
         #: %/min drained on the ground and in the air (indexed by `in_air`: read every step).
         self._drain = (p.drain_idle, p.drain_flying)
-        self._latlon_of: tuple[float, float] | None = None  # (north, east) of `_latlon`
-        self._latlon = (0.0, 0.0)
+        #: `telemetry.snapshot`'s: the last lat/lon, the (north, east) it is of; a still snapshot's values.
+        self._latlon_n, self._latlon_e, self._latlon = math.nan, math.nan, (0.0, 0.0)
+        self._snapshot_of: tuple[object, ...] = (None,) * 12  # what no value is
+        self._snapshot: dict[str, object] = {}
 
     @property
     def sim_time(self) -> float:
@@ -196,8 +206,11 @@ class Quadcopter:
 
     def _advance(self) -> None:
         now = self.clock()
-        dt = max(0.0, now - self._t_last) * self._time_scale
+        dt = now - self._t_last
         self._t_last = now
+        if not dt > 0.0:  # (``max(0.0, dt)`` scaled: a clock that stood still or ran back)
+            return
+        dt *= self._time_scale
         if dt <= 0.0:
             return
         phase = self._phase
@@ -205,7 +218,8 @@ class Quadcopter:
             # Disarmed on the ground (20 polls a second, most of a swarm's life): `_step`'s work
             # there is the battery's idle drain and nothing moving.
             self._sim_time += dt
-            self.battery = max(0.0, self.battery - self._drain[False] * dt / 60.0)
+            battery = self.battery - self._drain[False] * dt / 60.0
+            self.battery = battery if battery > 0.0 else 0.0  # max(0.0, battery), as `_step`
             self.vn = self.ve = self.vd = 0.0
             return
         if phase is M_GROUND or (phase is M_GUIDED and self._one_step(dt)):
@@ -213,8 +227,14 @@ class Quadcopter:
             # polls at 20 Hz, a period just over ``max_step``, which cut each poll in two steps.
             if phase is M_GUIDED and not (self.vn or self.ve or self.vd) and self._hover(dt):
                 return
+            if phase is M_GUIDED and self.in_air:
+                dt = self._fly(dt, dt)
+                if dt <= 0.0:
+                    return
             self._step(dt)
             return
+        if phase is M_GUIDED and self.in_air:
+            dt = self._fly(dt, self._max_step)
         while dt > 0.0:
             if self._phase is M_GROUND:
                 self._step(dt)  # nothing moves: one step, however long
@@ -222,6 +242,91 @@ class Quadcopter:
             h = min(dt, self._max_step)
             self._step(h)
             dt -= h
+
+    def _fly(self, dt: float, max_step: float) -> float:
+        """``dt`` s of GUIDED flight in the air in steps of at most ``max_step``, each `_step`'s float
+        for float on local variables (a swarm's 20 polls a second per agent: a turning body-frame
+        set-point, two steps a poll on simulated time's grid); the seconds left at an event: a step
+        that would empty the battery is left to `_step` (its LAND), a touchdown calls `_touchdown`.
+        tests/vehicles/test_sim_snapshot.py runs it beside `_step` bit for bit.
+        """
+        tau, hold, max_speed = self._tau, self._velocity_hold, self._max_speed
+        drain, t, battery = self._drain[True], self._sim_time, self.battery
+        north, east, alt = self.north, self.east, self.alt
+        vn, ve, vd = self.vn, self.ve, self.vd
+        heading, cmd, cmd_time = self.heading, self._cmd, self._cmd_time
+        body = may_clamp = False
+        vx = vy = tn0 = te0 = td0 = yaw0 = 0.0
+        if cmd is not None:  # `_follow_setpoint`'s arithmetic of what the step does not change
+            vx, vy, vz, yaw, frame = cmd
+            body = frame is _BODY
+            # max(-limit, min(limit, x)) without the calls: each keeps its first argument unless
+            # the second is strictly beyond it (the same float, signed zeros included).
+            limit = self._descent_rate
+            td0 = vz if vz < limit else limit
+            limit = -self._climb_rate
+            td0 = td0 if td0 > limit else limit
+            limit = self._max_yaw_rate
+            yaw0 = yaw if yaw < limit else limit
+            limit = -limit
+            yaw0 = yaw0 if yaw0 > limit else limit
+            if body:
+                # A rotation keeps the length to a few ulps: far below the limit no clamp can apply.
+                may_clamp = math.hypot(vx, vy) > max_speed * (1.0 - 1e-9)
+            else:
+                tn0, te0 = vx, vy
+                speed = math.hypot(vx, vy)
+                if speed > max_speed:
+                    tn0, te0 = vx * max_speed / speed, vy * max_speed / speed
+        step, step_decay, step_keep = self._step_lag
+        touchdown = False
+        while dt > 0.0:
+            h = max_step if max_step < dt else dt  # min(dt, max_step)
+            left = battery - drain * h / 60.0
+            if not left > 0.0:
+                break  # the battery runs out: `_step`'s failsafe LAND
+            battery = left
+            t += h
+            tn = te = td = yaw_rate = 0.0
+            if cmd is not None and t - cmd_time <= hold:
+                td, yaw_rate = td0, yaw0
+                if body:  # `body_to_ne`
+                    psi = heading * _RADIANS  # math.radians(heading), float for float
+                    c, s = math.cos(psi), math.sin(psi)
+                    tn, te = vx * c - vy * s, vx * s + vy * c
+                    if may_clamp:
+                        speed = math.hypot(tn, te)
+                        if speed > max_speed:
+                            tn, te = tn * max_speed / speed, te * max_speed / speed
+                else:
+                    tn, te = tn0, te0
+            if h == step:
+                decay, keep = step_decay, step_keep
+            else:
+                decay = math.exp(-h / tau)
+                keep = tau * (1.0 - decay)
+            north += tn * h + (vn - tn) * keep
+            east += te * h + (ve - te) * keep
+            down = alt - (td * h + (vd - td) * keep)
+            alt = down if down > 0.0 else 0.0  # max(0.0, down)
+            vn = tn + (vn - tn) * decay
+            ve = te + (ve - te) * decay
+            vd = td + (vd - td) * decay
+            if yaw_rate:  # `wrap_360`
+                turned = math.fmod(heading + yaw_rate * h, 360.0)
+                if turned < 0.0:
+                    turned += 360.0
+                heading = 0.0 if turned >= 360.0 else turned
+            dt -= h
+            if alt <= 0.0:
+                touchdown = True
+                break
+        self._sim_time, self.battery, self.heading = t, battery, heading
+        self.north, self.east, self.alt = north, east, alt
+        self.vn, self.ve, self.vd = vn, ve, vd
+        if touchdown:
+            self._touchdown()
+        return dt
 
     def _one_step(self, dt: float) -> bool:
         """Whether ``dt`` s of GUIDED flight integrate in one step to what steps of ``max_step`` give.
@@ -248,18 +353,21 @@ class Quadcopter:
         """`_step` of ``dt`` s hovering (GUIDED, still, no set-point in force after the step, and
         `_one_step` true: no empty battery, no touchdown), when it is one; False, nothing done, else.
 
-        A swarm in MISSION without a behavior hovers, 20 polls a second per agent: the lag toward
-        zero from zero leaves every velocity 0.0 and the position where it is (``+ 0.0`` below is
-        that arithmetic's one effect, a -0.0 made 0.0), so the step is the battery's drain alone.
+        A swarm in MISSION without a behavior hovers, 20 polls a second per agent: the lag toward zero
+        from zero leaves the velocities 0.0 and the position as it is but for a -0.0 made 0.0 (by its
+        ``+ 0.0``; any other float kept, the object the snapshot's copy compares): the battery's drain.
         """
         t = self._sim_time + dt
         if self._cmd is not None and t - self._cmd_time <= self._velocity_hold:
             return False
         self._sim_time = t
-        self.battery = max(0.0, self.battery - self._drain[self.in_air] * dt / 60.0)
+        battery = self.battery - self._drain[self.in_air] * dt / 60.0
+        self.battery = battery if battery > 0.0 else 0.0  # max(0.0, battery)
         self.vn = self.ve = self.vd = 0.0
-        self.north += 0.0
-        self.east += 0.0
+        if self.north == 0.0:
+            self.north = 0.0
+        if self.east == 0.0:
+            self.east = 0.0
         return True
 
     def _step(self, h: float) -> None:

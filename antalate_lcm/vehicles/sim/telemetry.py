@@ -34,50 +34,107 @@ _set = object.__setattr__
 
 def snapshot(v: Quadcopter) -> VehicleState:
     """What `v`'s autopilot reports now (connected, the link fresh: `faults` ages a lost one)."""
-    # lat/lon are recomputed only when the vehicle moved. The state is built without the frozen
-    # dataclass's ``__init__``: its per-field ``object.__setattr__`` took two thirds of a snapshot,
-    # and the sim makes 20 a second per agent; the fresh dict below becomes the instance's own
-    # (copying it in took half the rest). Equal to ``VehicleState(**values)``
+    # The state is built without the frozen dataclass's ``__init__``: its per-field
+    # ``object.__setattr__`` took two thirds of a snapshot, and the sim makes 20 a second per agent;
+    # the fresh dict below becomes the instance's own. Equal to ``VehicleState(**values)``
     # (tests/vehicles/test_sim_adapter.py checks it).
-    ne = (v.north, v.east)
-    if ne != v._latlon_of:
-        v._latlon_of = ne
-        v._latlon = v.home.to_latlon(v.north, v.east)
+    battery = v.battery
+    battery_params = v._battery_params
+    cells, sag, warn_at = battery_params
+    north = v.north
+    east = v.east
+    # A vehicle on the ground or hovering still reports the same values poll after poll but for
+    # its battery: they come from a copy of the last still snapshot's dict when every value it was
+    # made of is the same object now (an object is its value: no write can make the copy stale),
+    # about half the work of building the dict anew (docs/simulator.md, "Issue 32, fifth pass";
+    # tests/vehicles/test_sim_snapshot.py checks it bit for bit).
+    n0, e0, alt0, heading0, vn0, ve0, vd0, armed0, in_air0, mode0, failsafe0, params0 = v._snapshot_of
+    if (
+        north is n0
+        and east is e0
+        and v.alt is alt0
+        and v.heading is heading0
+        and v.vn is vn0
+        and v.ve is ve0
+        and v.vd is vd0
+        and v.armed is armed0
+        and v.in_air is in_air0
+        and v.mode is mode0
+        and v._failsafe is failsafe0
+        and battery_params is params0
+    ):
+        values = v._snapshot.copy()
+        values["battery"] = battery
+        if cells:
+            if not in_air0:
+                sag = 0.0
+            values["voltage"] = cells * (_CELL_EMPTY + (_CELL_FULL - _CELL_EMPTY) * battery / 100.0 - sag)
+        if warn_at:
+            values["battery_warning"] = (
+                f"battery low ({battery:.0f}% <= {warn_at:g}%)" if battery <= warn_at else ""
+            )
+        state = _new(VehicleState)
+        _set(state, "__dict__", values)
+        return state
+    # lat/lon are recomputed only when the vehicle moved.
+    if north != v._latlon_n or east != v._latlon_e:
+        v._latlon_n = north
+        v._latlon_e = east
+        v._latlon = v.home.to_latlon(north, east)
     lat, lon = v._latlon
     mode = v.mode
     flight_mode = _AUTONOMOUS_MODES.get(mode, _MANUAL)
-    cells, sag, warn_at = v._battery_params
-    battery = v.battery
+    in_air = v.in_air
     voltage = math.nan
     if cells:
-        if not v.in_air:
+        if not in_air:
             sag = 0.0
         voltage = cells * (_CELL_EMPTY + (_CELL_FULL - _CELL_EMPTY) * battery / 100.0 - sag)
     warning = f"battery low ({battery:.0f}% <= {warn_at:g}%)" if warn_at and battery <= warn_at else ""
+    alt = v.alt
+    heading = v.heading
+    vn = v.vn
+    ve = v.ve
+    vd = v.vd
+    armed = v.armed
+    failsafe = v._failsafe
+    values = {
+        "connected": True,
+        "link_age": 0.0,
+        "lat": lat,
+        "lon": lon,
+        "alt": alt,
+        "heading": heading,
+        "vn": vn,
+        "ve": ve,
+        "vd": vd,
+        "battery": battery,
+        "armed": armed,
+        "in_air": in_air,
+        "autonomous": flight_mode is not _MANUAL,
+        "mode": mode,
+        "flight_mode": flight_mode,
+        "failsafe": failsafe,
+        "voltage": voltage,
+        "cells": cells,
+        "battery_warning": warning,
+    }
+    if not (vn or ve or vd):  # on the ground or hovering; a vehicle that moves makes no copy
+        v._snapshot_of = (
+            north,
+            east,
+            alt,
+            heading,
+            vn,
+            ve,
+            vd,
+            armed,
+            in_air,
+            mode,
+            failsafe,
+            battery_params,
+        )
+        v._snapshot = values.copy()
     state = _new(VehicleState)
-    _set(
-        state,
-        "__dict__",
-        {
-            "connected": True,
-            "link_age": 0.0,
-            "lat": lat,
-            "lon": lon,
-            "alt": v.alt,
-            "heading": v.heading,
-            "vn": v.vn,
-            "ve": v.ve,
-            "vd": v.vd,
-            "battery": battery,
-            "armed": v.armed,
-            "in_air": v.in_air,
-            "autonomous": flight_mode is not _MANUAL,
-            "mode": mode,
-            "flight_mode": flight_mode,
-            "failsafe": v._failsafe,
-            "voltage": voltage,
-            "cells": cells,
-            "battery_warning": warning,
-        },
-    )
+    _set(state, "__dict__", values)
     return state

@@ -88,16 +88,14 @@ class _ChannelSend:
     def send(self, channel: str, data: bytes) -> None:
         """As `BusConnection.publish` on memq://, ``channel`` being this sender's."""
         conn = self._conn
-        cache = self._cache
-        if cache[0] is not conn._routes or cache[1] is not conn._patterns:
+        routes, table, route, patterns, ex = self._cache
+        if routes is not conn._routes or table is not conn._patterns:
             resolved = self._resolve()
             if resolved is None:
                 return
-            cache = resolved
-        route, patterns = cache[2], cache[3]
+            routes, table, route, patterns, ex = resolved
         if route is None and not patterns:
             return
-        ex = cache[4]
         if not ex.on_loop():  # another thread: a loop handle of its own (thread-safe)
             if route is not None:
                 ex.call_soon(conn._on_exact, route, channel, data)

@@ -35,7 +35,7 @@ def _node(key: str) -> tuple[Node, Context]:
     buses: Any = getattr(context, "buses", None)  # None: a checkout from before issue 26 named it `bus`
     if buses is None:
         buses = context.bus
-    buses.sender = lambda _name, _channel=None: lambda _channel, _data: None
+    buses.sender = lambda _name: lambda _channel, _data: None
     settings: Any = getattr(node_module, "NodeSettings", None)  # None: a checkout from before it
     first: Any = settings.from_config(config) if settings is not None else config
     node = Node(first, context, name="bench")

@@ -58,56 +58,6 @@ UDPM_READER_ENV = "ANTALATE_UDPM_READER"
 DEFAULT_QUEUE_CAPACITY = 10_000
 
 
-class _ChannelSend:
-    """One channel's memq:// send (`BusConnection.publish`'s in-process branch) with the channel's
-    route resolved once per routing table: a connection's tables are replaced, never mutated, so
-    the same ``_routes`` and ``_patterns`` objects mean the same subscribers (a subscription added
-    or removed replaces them: honoured from the next message). 1,000 simulated agents publish
-    10,000 messages a second on their in-process bus: a dict lookup and two tests less each."""
-
-    __slots__ = ("_conn", "_channel", "_cache")
-
-    def __init__(self, conn: BusConnection, channel: str) -> None:
-        self._conn = conn
-        self._channel = channel
-        #: (routes, patterns, route, whether patterns, the loop), replaced as one (other threads
-        #: publish too); a fresh dict, so the first message resolves.
-        self._cache: tuple[Any, ...] = ({}, (), None, False, None)
-
-    def _resolve(self) -> tuple[Any, ...] | None:
-        """The channel's route in the connection's tables now; None while nothing may receive it."""
-        conn = self._conn
-        if conn._lcm is None:  # kept past the bus's close: as Bus.publish then
-            raise RuntimeError("bus is closed")
-        routes, patterns, watched = conn._routes, conn._patterns, conn._watched
-        if watched is None:  # no subscriber yet (or not yet watched: not remembered, asked again)
-            return None
-        cache = self._cache = (routes, patterns, routes.get(self._channel), bool(patterns), watched[0])
-        return cache
-
-    def send(self, channel: str, data: bytes) -> None:
-        """As `BusConnection.publish` on memq://, ``channel`` being this sender's."""
-        conn = self._conn
-        routes, table, route, patterns, ex = self._cache
-        if routes is not conn._routes or table is not conn._patterns:
-            resolved = self._resolve()
-            if resolved is None:
-                return
-            routes, table, route, patterns, ex = resolved
-        if route is None and not patterns:
-            return
-        if not ex.on_loop():  # another thread: a loop handle of its own (thread-safe)
-            if route is not None:
-                ex.call_soon(conn._on_exact, route, channel, data)
-            if patterns:
-                ex.call_soon(conn._on_pattern, channel, data)
-            return
-        pending = conn._pending
-        if not pending:
-            ex.call_soon(conn._deliver_pending)
-        pending.append((route, channel, data, patterns))
-
-
 class Buses:
     """Named LCM buses of a process (the paper's proxies). Thread-safe; share one per process.
 
@@ -194,17 +144,11 @@ class Buses:
             return self.publish_failed(bus, channel, exc)
         return True
 
-    def sender(self, bus: str, channel: str | None = None) -> Callable[[str, bytes], None]:
+    def sender(self, bus: str) -> Callable[[str, bytes], None]:
         """The send function of ``bus`` for encoded bytes, looked up once (a node's publisher keeps
         it: 20 messages a second per simulated agent, a lookup and two calls less each). It raises
-        what ``publish`` would log: the caller reports an OSError through :meth:`publish_failed`.
-
-        With ``channel`` (the only channel it is then called with), a memq:// bus's function also
-        keeps that channel's route until the bus's routing table changes (:class:`_ChannelSend`)."""
-        conn = self._connection(bus)
-        if channel is None or not conn._private:
-            return conn.publish
-        return _ChannelSend(conn, channel).send
+        what ``publish`` would log: the caller reports an OSError through :meth:`publish_failed`."""
+        return self._connection(bus).publish
 
     def publish_failed(self, bus: str, channel: str, exc: OSError) -> bool:
         """Count and log (rate-limited) a send that failed with ``exc``; False, what publish returns."""

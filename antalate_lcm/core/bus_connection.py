@@ -371,8 +371,8 @@ class BusConnection:
                 lc.unsubscribe(lcm_sub)
 
     def _unwatch(self) -> None:
-        with self._lock:  # a new table (same routes): a publisher's kept route is asked again
-            watched, self._watched, self._routes = self._watched, None, self._routes.copy()
+        with self._lock:
+            watched, self._watched = self._watched, None
         if watched is not None:
             watched[0].remove_reader(watched[1])
 

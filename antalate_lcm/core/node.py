@@ -84,8 +84,7 @@ class Publisher:
         #: The last ``header.seq`` this publisher counted.
         self.seq = 0
         self._node = node
-        #: Each bus's send function for this channel (memq://: keeping the channel's route).
-        self._senders = [(bus, node.context.buses.sender(bus, self.channel)) for bus in destination.buses]
+        self._senders = destination.senders
         #: The node's admission's encoder (`NodeAdmission.seal`: signing with a key).
         self._seal = node.admission.seal
         #: Unsigned only: the type last published and its encoder (one lookup and call less).

@@ -128,7 +128,7 @@ class FlatFrame:
         # for float: the sim converts 20 positions a second per flying agent without its calls.
         lat = self.lat0 + north_m / self._m_per_rad_lat * _DEGREES
         lon = self.lon0 + east_m / self._m_per_rad_lon * _DEGREES
-        return lat, (lon if -180.0 <= lon < 180.0 else wrap_180(lon))  # `_wrap_lon`
+        return lat, _wrap_lon(lon)
 
     def to_ne(self, lat: float, lon: float) -> tuple[float, float]:
         """Metres north/east of the reference point for a lat/lon."""

@@ -35,7 +35,7 @@ _MAGIC = 0xEDA1DA01
 _FLUSH_AT = 1 << 12
 
 
-def write_all(write: Callable[[bytearray | memoryview], int | None], data: bytearray) -> None:
+def _write_all(write: Callable[[bytearray | memoryview], int | None], data: bytearray) -> None:
     """``data`` through an unbuffered file's ``write``, which may take less than all of it."""
     view = memoryview(data)
     while view:
@@ -94,7 +94,7 @@ class LogRecorder(Node):
             buf += data
             n += 1
             if len(buf) >= _FLUSH_AT:
-                write_all(write, buf)
+                _write_all(write, buf)
                 buf.clear()
 
         self._count = lambda: n
@@ -106,6 +106,6 @@ class LogRecorder(Node):
             self._sub = None
         file, self._file = self._file, None
         if file is not None:
-            write_all(file.write, self._buffer)
+            _write_all(file.write, self._buffer)
             self._buffer.clear()
             file.close()

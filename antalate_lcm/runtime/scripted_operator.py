@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 from antalate_lcm.core.node import Context, Node, NodeSettings, TopicMatch
 from antalate_lcm.msgs import direction_cmd_t, mc_state_t, operator_cmd_t
-from antalate_lcm.wire.vocabulary import Command, McState
+from antalate_lcm.wire.vocabulary import Command, McState, member_of
 
 _RESEND = 1.0  # s between repeats of a broadcast command while some agent has not followed
 
@@ -28,10 +28,6 @@ class DirectionAt:
     azimuth: float
     speed: float
     active: bool = True
-
-
-#: McState by wire value, for the state messages of the whole swarm.
-_MC_STATES: dict[int, McState] = {int(state): state for state in McState}
 
 
 class Phase(enum.Enum):
@@ -116,19 +112,14 @@ class ScriptedOperator(Node):
         return self.now - self._t0
 
     def _on_mc_state(self, msg: mc_state_t, match: TopicMatch) -> None:
-        # Every agent's state, 5 a second each: nearly always the one its timeline ends with.
-        state = _MC_STATES.get(msg.state)  # McState(value), without the enum's call
+        state = member_of(McState, msg.state)
         if state is None:
-            try:
-                state = McState(msg.state)
-            except ValueError:
-                return
+            return
         agent = match.fields.get("agent", msg.header.agent)
         timeline = self.timelines.get(agent)
-        if timeline is None:
+        if timeline is None:  # (no Timeline built per message, 5 a second for each agent)
             timeline = self.timelines[agent] = Timeline()
-        if timeline.current is not state:
-            timeline.add(self.elapsed, state)
+        timeline.add(self.elapsed, state)
 
     def _states(self) -> list[McState | None]:
         return [t.current for a, t in self.timelines.items() if a not in self.excused]

@@ -129,8 +129,12 @@ class DovratSwarm(Behavior):
         self.detections.update(detection, self.ctx.now)
 
     # ------------------------------------------------------------------ control
-    def heading(self) -> float | None:
-        if self._heading is None or self.ctx.now - self._heading_at > self.params.telemetry_timeout:
+    def heading(self, now: float | None = None) -> float | None:
+        """The last heard heading, None once it is older than ``telemetry_timeout`` at ``now``
+        (default: the context's now)."""
+        if now is None:
+            now = self.ctx.now
+        if self._heading is None or now - self._heading_at > self.params.telemetry_timeout:
             return None
         return self._heading
 
@@ -143,10 +147,7 @@ class DovratSwarm(Behavior):
 
     def tick(self, dt: float) -> None:
         now = self.ctx.now
-        heading = self._heading  # `heading()` at this `now`, inline: 10 ticks a second per agent
-        if heading is not None and now - self._heading_at > self.params.telemetry_timeout:
-            heading = None
-        command = swarm_command(heading, self.detections.detected(now), self.direction, self.params)
+        command = swarm_command(self.heading(now), self.detections.detected(now), self.direction, self.params)
         self.last_command = command
         self._publish(command.vx, command.vy, command.yaw_rate)
 

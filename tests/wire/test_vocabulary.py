@@ -16,6 +16,7 @@ from antalate_lcm.wire.vocabulary import (
     McState,
     McStateName,
     Severity,
+    member_of,
     name_of,
     names,
 )
@@ -58,6 +59,19 @@ def test_name_of_copes_with_undefined_values() -> None:
     assert name_of(McState, 99) is None  # a newer agent's state, or a corrupt message
     assert name_of(McState, -1) is None
     assert name_of(HlcState, None) is None  # nothing heard yet
+
+
+@pytest.mark.parametrize("kind", [McState, HlcState, Command, Severity])
+@pytest.mark.parametrize("value", [*range(-2, 20), None, 3.0, 3.5, True, "3", b"\x03", (3,), [3], {3: 3}])
+def test_member_of_is_the_enums_own_answer(kind: type[enum.IntEnum], value: object) -> None:
+    """A wire value's member from a table, as ``kind(value)`` gives it, None where that raises
+    (an unhashable value too): what the BMA, the MC and the scripted operator ask per message."""
+    try:
+        expected: enum.IntEnum | None = kind(value)  # type: ignore[arg-type]  # any value a message may carry
+    except (ValueError, TypeError):
+        expected = None
+    assert member_of(kind, value) is expected
+    assert name_of(kind, value) == (None if expected is None else expected.name)  # type: ignore[arg-type]
 
 
 def test_names_are_in_wire_order() -> None:

@@ -19,15 +19,13 @@ from antalate_lcm.core.config import BmaConfig, Config
 from antalate_lcm.core.node import Context, Node, NodeSettings, TopicMatch
 from antalate_lcm.msgs import arbiter_status_t, mc_state_t, telemetry_t
 from antalate_lcm.wire.peers import PeerTable
-from antalate_lcm.wire.vocabulary import McState
+from antalate_lcm.wire.vocabulary import McState, name_of
 
 #: s: the longest restart back-off, and how long a behavior must run for its failures to be forgotten.
 _MAX_BACKOFF = 60.0
 _STREAK_RESET = 60.0
 #: s between two sweeps of the peer table for agents no longer heard.
 _PEER_SWEEP = 5.0
-#: `name_of(McState, value)` for every defined value (a state message's, 5 a second).
-_MC_NAMES: dict[int, str] = {int(state): state.name for state in McState}
 
 
 class _Slot:
@@ -160,7 +158,7 @@ class BmaNode(Node):
     # ------------------------------------------------------------------ state
     def _on_state_msg(self, msg: Any) -> None:
         if self._reading_mc:
-            state = _MC_NAMES.get(msg.state)  # name_of(McState, ...), without the enum's call
+            state = name_of(McState, msg.state)
             if state is None:
                 self._bad_state_log.log(
                     ("state", msg.state),

@@ -55,7 +55,6 @@ from antalate_lcm.wire.vocabulary import HlcState, Severity
 
 _CONNECT_RETRY = 2.0  # s between attempts to open the autopilot link
 _GAINING_ALTITUDE = HlcState.GAINING_ALTITUDE  # bound once: read on every control tick
-_REJECT, _HOVER = Verdict.REJECT, Verdict.HOVER  # and these on every velocity command applied
 
 
 def make_adapter(config: Config, context: Context) -> VehicleAdapter:
@@ -286,11 +285,10 @@ class HlcNode(Node):
     def _on_velocity(self, msg: velocity_cmd_t) -> None:
         if not self.started:
             return
-        # 10-20 a second per agent in mission flight: one clock read, the link's age (`link_age`)
-        # inline, and nothing built around a command that passes as it came (`VelocityGuard.passes`).
+        # 10-20 a second per agent in mission flight: one clock read, and nothing built around a
+        # command that passes as it came (`VelocityGuard.passes`).
         now = self._clock()
-        polled = self._polled_at
-        link_age = math.inf if polled is None else self.snapshot.link_age + max(0.0, now - polled)
+        link_age = self.link_age(now)
         vx, vy, vz, yaw_rate, frame = msg.vx, msg.vy, msg.vz, msg.yaw_rate, msg.frame
         guard, state, mc_state = self.velocity_guard, self.machine.state, self.mc_state
         known = guard.passes(vx, vy, vz, yaw_rate, frame, now, state, mc_state, link_age)
@@ -300,16 +298,14 @@ class HlcNode(Node):
         elif self._filter is not None:
             self.send_velocity(self._filter.wished(Velocity(vx, vy, vz, yaw_rate, known)))
         else:
-            try:  # `send_velocity`, inline
-                self.adapter.set_velocity(vx, vy, vz, yaw_rate, known)
-            except Exception as exc:
-                self._reject_log.log(("set_velocity",), logging.WARNING, "set_velocity failed: %s", exc)
+            self._set_velocity(vx, vy, vz, yaw_rate, known)
 
-    def link_age(self) -> float:
-        """The link's age now: the last snapshot's, plus the time since it was taken (20 Hz is coarse)."""
+    def link_age(self, now: float | None = None) -> float:
+        """The link's age at ``now`` (default: now): the last snapshot's, plus the time since it was
+        taken (20 Hz is coarse)."""
         if self._polled_at is None:
             return math.inf
-        return self.snapshot.link_age + max(0.0, self.now - self._polled_at)
+        return self.snapshot.link_age + max(0.0, (self.now if now is None else now) - self._polled_at)
 
     def _stale(self, now: float, exc: Exception) -> VehicleState:
         """``state()`` raised ``exc``: the last good snapshot, its link aged by the time since."""
@@ -358,7 +354,7 @@ class HlcNode(Node):
 
     # ------------------------------------------------------------------ outputs
     def _apply(self, decision: GuardDecision, source: str) -> None:
-        if decision.verdict is _REJECT:
+        if decision.verdict is Verdict.REJECT:
             # Outside mission flight a velocity command is expected (a behavior's last "stop"),
             # so it is noted; a malformed one in flight is a warning.
             in_mission = mission_flight(self.machine.state, self.mc_state)
@@ -371,7 +367,7 @@ class HlcNode(Node):
             )
             return
         v = decision.send or Velocity.hover()
-        if decision.verdict is _HOVER:
+        if decision.verdict is Verdict.HOVER:
             self.log.info("hover: %s", decision.reason)
         elif decision.clamped:
             self._reject_log.log(("clamp",), logging.INFO, "velocity command clamped: %s", decision.reason)
@@ -380,11 +376,14 @@ class HlcNode(Node):
         self.send_velocity(v)
 
     def send_velocity(self, v: Velocity) -> None:
+        self._set_velocity(v.vx, v.vy, v.vz, v.yaw_rate, v.frame)
+
+    def _set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame | int) -> None:
+        """The adapter's `set_velocity`; what it raises is logged (rate-limited), never raised."""
         try:
-            frame = v.frame
             if type(frame) is not Frame:  # the guard's set-points carry a Frame already
                 frame = Frame(frame)
-            self.adapter.set_velocity(v.vx, v.vy, v.vz, v.yaw_rate, frame)
+            self.adapter.set_velocity(vx, vy, vz, yaw_rate, frame)
         except Exception as exc:
             self._reject_log.log(("set_velocity",), logging.WARNING, "set_velocity failed: %s", exc)
 

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from math import hypot, isfinite
 
 from antalate_lcm.vehicles.base import Frame
-from antalate_lcm.wire.vocabulary import HlcState, McState, name_of
+from antalate_lcm.wire.vocabulary import HlcState, McState, member_of, name_of
 
 
 @dataclass(frozen=True)
@@ -120,10 +120,9 @@ def check_velocity(
 
     `link_age` is the age of the autopilot's last snapshot (`VehicleState.link_age`).
     """
-    vx, vy, vz, yaw_rate, frame_value = cmd.vx, cmd.vy, cmd.vz, cmd.yaw_rate, cmd.frame
-    if not (hlc_state == _AIRBORNE and mc_state == _MISSION):  # mission_flight, inline
+    if not mission_flight(hlc_state, mc_state):
         return GuardDecision(
-            _REJECT,
+            Verdict.REJECT,
             None,
             f"velocity ignored: HLC {name_of(HlcState, hlc_state) or repr(hlc_state)},"
             f" MC {name_of(McState, mc_state) or repr(mc_state)}"
@@ -131,61 +130,45 @@ def check_velocity(
         )
     if not link_age < limits.max_link_age:  # NaN is stale too
         return GuardDecision(
-            _REJECT,
+            Verdict.REJECT,
             None,
             f"velocity withheld: autopilot link {link_age:.1f} s old >= {limits.max_link_age:g} s",
         )
-    if not (isfinite(vx) and isfinite(vy) and isfinite(vz) and isfinite(yaw_rate)):
-        components = {"vx": vx, "vy": vy, "vz": vz, "yaw_rate": yaw_rate}
-        bad = [f"{name}={value!r}" for name, value in components.items() if not isfinite(value)]
-        return GuardDecision(_REJECT, None, f"velocity rejected: non-finite {', '.join(bad)}")
+    components = {"vx": cmd.vx, "vy": cmd.vy, "vz": cmd.vz, "yaw_rate": cmd.yaw_rate}
+    bad = [f"{name}={value!r}" for name, value in components.items() if not math.isfinite(value)]
+    if bad:
+        return GuardDecision(Verdict.REJECT, None, f"velocity rejected: non-finite {', '.join(bad)}")
     try:
-        frame = _FRAMES.get(frame_value)  # what Frame(frame_value) returns, without the enum's call
-    except TypeError:  # unhashable: Frame() searches its members and refuses it
-        frame = None
-    if frame is None:
-        try:
-            frame = Frame(frame_value)
-        except ValueError:
-            return GuardDecision(_REJECT, None, f"velocity rejected: unknown frame {frame_value!r}")
+        frame = Frame(cmd.frame)
+    except ValueError:
+        return GuardDecision(Verdict.REJECT, None, f"velocity rejected: unknown frame {cmd.frame!r}")
     age = now - cmd.received_at
     if age > limits.velocity_timeout:
         return GuardDecision(
-            _HOVER,
+            Verdict.HOVER,
             Velocity.hover(),
             f"velocity stale: {age:.2f} s old > velocity_timeout {limits.velocity_timeout:g} s: hover",
         )
 
     notes: list[str] = []
-    horizontal = hypot(vx, vy)
-    max_horizontal = limits.max_horizontal
-    if horizontal > max_horizontal:
-        scale = max_horizontal / horizontal
+    vx, vy = cmd.vx, cmd.vy
+    horizontal = math.hypot(vx, vy)
+    if horizontal > limits.max_horizontal:
+        scale = limits.max_horizontal / horizontal
         vx, vy = vx * scale, vy * scale
-        notes.append(f"horizontal {horizontal:.2f} -> {max_horizontal:g} m/s")
-    limit = limits.max_vertical
-    if not -limit < vz < limit:  # inside, `_clamp` returns vz itself
-        clamped = _clamp(vz, limit)
-        if clamped != vz:
-            notes.append(f"vertical {vz:.2f} -> {clamped:g} m/s")
-        vz = clamped
-    limit = limits.max_yaw_rate
-    if not -limit < yaw_rate < limit:
-        clamped = _clamp(yaw_rate, limit)
-        if clamped != yaw_rate:
-            notes.append(f"yaw rate {yaw_rate:.1f} -> {clamped:g} deg/s")
-        yaw_rate = clamped
-    if not notes:
-        return GuardDecision(_SEND, Velocity(vx, vy, vz, yaw_rate, frame))
-    return GuardDecision(
-        _SEND, Velocity(vx, vy, vz, yaw_rate, frame), f"velocity clamped: {'; '.join(notes)}", clamped=True
-    )
+        notes.append(f"horizontal {horizontal:.2f} -> {limits.max_horizontal:g} m/s")
+    vz = _clamp(cmd.vz, limits.max_vertical)
+    if vz != cmd.vz:
+        notes.append(f"vertical {cmd.vz:.2f} -> {vz:g} m/s")
+    yaw_rate = _clamp(cmd.yaw_rate, limits.max_yaw_rate)
+    if yaw_rate != cmd.yaw_rate:
+        notes.append(f"yaw rate {cmd.yaw_rate:.1f} -> {yaw_rate:g} deg/s")
+    reason = f"velocity clamped: {'; '.join(notes)}" if notes else ""
+    return GuardDecision(Verdict.SEND, Velocity(vx, vy, vz, yaw_rate, frame), reason, clamped=bool(notes))
 
 
 # Bound once, like _AIRBORNE: an enum member's attribute read costs a descriptor call in 3.11.
 _SEND, _HOVER, _REJECT = Verdict.SEND, Verdict.HOVER, Verdict.REJECT
-#: Frame's members by value (and by member: an IntEnum hashes as its value), for `check_velocity` and `VelocityGuard.passes`.
-_FRAMES: dict[object, Frame] = {frame.value: frame for frame in Frame}
 
 
 def _clamp(value: float, limit: float) -> float:
@@ -235,8 +218,7 @@ class VelocityGuard:
         clamps' as "inside the limits" (a command at a limit exactly goes to `on_command`)."""
         limits = self.limits
         if not (
-            hlc_state == _AIRBORNE
-            and mc_state == _MISSION
+            mission_flight(hlc_state, mc_state)
             and link_age < limits.max_link_age
             and isfinite(vx)
             and isfinite(vy)
@@ -244,10 +226,7 @@ class VelocityGuard:
             and isfinite(yaw_rate)
         ):
             return None
-        try:
-            known = _FRAMES.get(frame)
-        except TypeError:
-            return None
+        known = member_of(Frame, frame)
         vertical, yaw = limits.max_vertical, limits.max_yaw_rate
         if (
             known is None
@@ -284,7 +263,7 @@ class VelocityGuard:
         last = self.last_received
         if last is None:
             return None  # no command passed on since the last flight (or ever): nothing to go stale
-        if not (hlc_state == _AIRBORNE and mc_state == _MISSION):  # mission_flight, inline (20 Hz)
+        if not mission_flight(hlc_state, mc_state):
             self.last_received = None
             return None
         if self._hovering or not link_age < self.limits.max_link_age:

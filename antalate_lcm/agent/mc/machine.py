@@ -64,7 +64,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from antalate_lcm.base.state_machine import Row, Table, Transition
-from antalate_lcm.wire.vocabulary import Command, HlcState, McState
+from antalate_lcm.wire.vocabulary import Command, HlcState, McState, member_of
 
 
 class McEvent(enum.Enum):
@@ -98,8 +98,6 @@ class McEvent(enum.Enum):
 
 #: HLC state -> the event its hlc_state_t is (HLC_<name>).
 _OF_HLC = {state: McEvent[f"HLC_{state.name}"] for state in HlcState}
-#: The HLC's states by value: a lookup, not ``HlcState(value)`` (the enum's call), per hlc_state_t heard.
-_HLC_STATES: dict[int, HlcState] = {int(state): state for state in HlcState}
 #: Members read per hlc_state_t heard and per tick, bound once (in CPython 3.11 ``McState.TAKEOFF``
 #: calls the enum's descriptor, ~125 ns).
 _TAKEOFF, _HLC_READY = McState.TAKEOFF, HlcState.READY
@@ -379,7 +377,7 @@ class MissionControl:
 
     def on_hlc_state(self, state: HlcState | int, now: float) -> McOutcome:
         """An ``hlc_state_t`` was heard (republished at 5 Hz: most observations change nothing)."""
-        hlc = _HLC_STATES.get(state)
+        hlc = member_of(HlcState, state)  # a lookup, not the enum's call: per hlc_state_t heard
         if hlc is None:
             return McOutcome(False, reason=f"unknown HLC state {state!r}")
         self.hlc_changed = hlc is not self.hlc_state

@@ -168,7 +168,11 @@ class Buses:
         return sub
 
     def unsubscribe(self, sub: Subscription) -> None:
-        """Stop delivery; safe from inside a handler (the current delivery completes, no further one)."""
+        """Stop delivery; safe from inside a handler (the current delivery completes, no further one).
+        Again on the same subscription: nothing (a stopping BMA's behaviors hand back subscriptions
+        the node already dropped)."""
+        if not sub.active:
+            return
         sub.active = False
         conn = self._by_name.get(sub.bus)
         if conn is not None:

@@ -10,24 +10,21 @@ socket's kernel filter.
 from __future__ import annotations
 
 import logging
-import re
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
 
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.executor import Executor
+from antalate_lcm.core.subscription import Handler, Route, Subscription, lcm_literal
 from antalate_lcm.transports import Transport, transport_for
 from antalate_lcm.transports.udpm import Udpm, UdpmReceiver, UdpmSender
 from antalate_lcm.wire.fastcodec import decoder
 from antalate_lcm.wire.topics import Message
 
 log = logging.getLogger("antalate.bus")
-
-Handler = Callable[[str, Any], None]
 
 #: Marks a type that failed to decode this datagram (so later subscribers skip it silently).
 _UNDECODABLE = object()
@@ -36,52 +33,6 @@ _UNDECODABLE = object()
 _BATCH = 64
 #: s a readable descriptor may keep the loop beyond the first batch while messages still wait.
 _DRAIN_BUDGET = 0.02
-
-
-@dataclass(eq=False)
-class Subscription:
-    """A handle returned by :meth:`Buses.subscribe`; pass it to :meth:`Buses.unsubscribe`."""
-
-    bus: str
-    channel: str
-    msg_type: type[Message] | None
-    handler: Handler
-    regex: re.Pattern[str] | None = None
-    active: bool = field(default=True)
-    #: ``msg_type``'s decoder (antalate_lcm.wire.fastcodec: lcm-gen's fields, a third of its time).
-    decode: Callable[[bytes], Any] | None = field(default=None, init=False, repr=False, compare=False)
-
-    def __post_init__(self) -> None:
-        if self.msg_type is not None:
-            self.decode = decoder(self.msg_type)
-
-
-#: Characters with a meaning in LCM's channel regular expressions.
-_REGEX_SPECIAL = re.compile(r"([.^$*+?()\[\]{}|\\])")
-
-
-def lcm_literal(channel: str) -> str:
-    """An LCM channel regex matching exactly ``channel``."""
-    return _REGEX_SPECIAL.sub(r"\\\1", channel)
-
-
-class _Route:
-    """The subscribers of one exact channel and the LCM subscription that feeds them."""
-
-    __slots__ = ("subs", "decode", "lcm_sub", "retired")
-
-    def __init__(self) -> None:
-        self.subs: tuple[Subscription, ...] = ()
-        #: The subscribers' one decoder (one subscriber, or several of one type), else None.
-        self.decode: Callable[[bytes], Any] | None = None
-        self.lcm_sub: Any = None
-        self.retired = False
-
-    def set_subs(self, subs: tuple[Subscription, ...]) -> None:
-        """Under the connection's lock: the subscribers, and their decoder if they share one."""
-        one_type = len({sub.msg_type for sub in subs}) == 1
-        self.decode = subs[0].decode if one_type else None
-        self.subs = subs
 
 
 class BusConnection:
@@ -115,8 +66,9 @@ class BusConnection:
         self._topics: frozenset[str] = frozenset()
         self._damaged_seen = 0
         self._capacity = queue_capacity
-        # Routing tables are replaced, never mutated, so the loop reads them without a lock.
-        self._routes: dict[str, _Route] = {}
+        # The loop reads the routing tables without a lock: the channels' table by single lookups
+        # (atomic), each route's and the patterns' subscribers as tuples that are replaced.
+        self._routes: dict[str, Route] = {}
         self._patterns: tuple[Subscription, ...] = ()
         self._matched: dict[str, tuple[Subscription, ...]] = {}
         self._matched_for: tuple[Subscription, ...] = ()
@@ -131,11 +83,9 @@ class BusConnection:
         #: (An agent's in-process bus carries TELEMETRY at 10 Hz that no node of the process reads.)
         self._private = transport.in_process
         #: memq:// messages published on the loop thread, waiting for their one delivering handle.
-        self._pending: list[tuple[_Route | None, str, bytes, bool]] = []
+        self._pending: list[tuple[Route | None, str, bytes, bool]] = []
         self._decode_log = decode_log
         self.decode_errors: dict[str, int] = {}
-        #: Datagrams delivered to at least one subscriber.
-        self.received = 0
 
     def add(self, sub: Subscription) -> None:
         lc = self._lcm
@@ -148,21 +98,23 @@ class BusConnection:
             if sub.regex is None:
                 route = self._routes.get(sub.channel)
                 if route is None:
-                    route = _Route()
-                    if not own:
+                    route = Route()
+                    if not own and not self._private:
                         route.lcm_sub = lc.subscribe(lcm_literal(sub.channel), partial(self._on_exact, route))
                         route.lcm_sub.set_queue_capacity(self._capacity)
-                    self._routes = {**self._routes, sub.channel: route}
+                    # In place (nothing iterates it; a copy per channel made 1,000 agents' start
+                    # and stop quadratic).
+                    self._routes[sub.channel] = route
                     topic = sub.channel.rsplit("/", 1)[-1]
                     if topic not in self._topics:
                         self._topics = self._topics | {topic}
-                route.set_subs((*route.subs, sub))
+                route.add(sub)
             else:
                 self._patterns = (*self._patterns, sub)
                 if own:  # it may match anything, this process's own datagrams included
                     self._hear_own = True
                     self._own_filter()
-                if self._star is None and not own:
+                if self._star is None and not own and not self._private:
                     self._star = lc.subscribe(".*", self._on_pattern)
                     self._star.set_queue_capacity(self._capacity)
             watch = self._watched is None
@@ -215,16 +167,12 @@ class BusConnection:
                 route = self._routes.get(sub.channel)
                 if route is None:
                     return
-                route.set_subs(tuple(s for s in route.subs if s is not sub))
+                route.discard(sub)
                 if not route.subs:
                     route.retired = True  # a late datagram must not reach a re-subscribed channel twice
                     if route.lcm_sub is not None:
                         self._retire.append(route.lcm_sub)
-                    # A copy without it (C's dict copy: a thousand agents' nodes stopping one by
-                    # one rebuilt the table in Python per subscription, seconds of the run's end).
-                    routes = self._routes.copy()
-                    del routes[sub.channel]
-                    self._routes = routes
+                    del self._routes[sub.channel]
             else:
                 self._patterns = tuple(s for s in self._patterns if s is not sub)
                 if not self._patterns and self._star is not None:
@@ -376,7 +324,7 @@ class BusConnection:
         if watched is not None:
             watched[0].remove_reader(watched[1])
 
-    def _on_exact(self, route: _Route, channel: str, data: bytes) -> None:
+    def _on_exact(self, route: Route, channel: str, data: bytes) -> None:
         if route.retired:
             return
         subs, decode = route.subs, route.decode
@@ -386,7 +334,6 @@ class BusConnection:
         # One subscriber (the common case), or several of one type (an agent's MC state to its HLC
         # and BMA): `_deliver`'s work without its per-datagram table. Several get the one message
         # (as from `_deliver`: a handler must not change what it is given).
-        self.received += 1
         msg: Any = data
         if decode is not None:
             try:
@@ -414,27 +361,21 @@ class BusConnection:
                 self._matched[channel] = subs
         if not subs:
             return
-        # A channel that also has an exact route is counted there: one datagram, one count
-        # (``count``: the caller knows whether it has one).
-        if count is None:
-            count = channel not in self._routes
         sub = subs[0]
         if len(subs) == 1 and sub.msg_type is None and sub.active:
             # One raw subscriber (the console's 15,000 datagrams a second): no decode table.
-            if count:
-                self.received += 1
             try:
                 sub.handler(channel, data)
             except Exception:
                 log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
             return
-        self._deliver(channel, data, subs, count=count)
+        # A channel that also has an exact route counts its decode errors there: one datagram,
+        # one count (``count``: the caller knows whether it has one).
+        self._deliver(channel, data, subs, count=channel not in self._routes if count is None else count)
 
     def _deliver(
         self, channel: str, data: bytes, subs: tuple[Subscription, ...], *, count: bool = True
     ) -> None:
-        if count:
-            self.received += 1
         # One decode per type per datagram, failures included: a bad datagram is one decode error
         # however many subscribers the channel has.
         decoded: dict[type, Any] = {}

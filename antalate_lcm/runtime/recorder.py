@@ -12,9 +12,16 @@ lengths), the channel's bytes and the data, one ``fwrite`` per field. A thousand
 record 40,000 events a second; one ``struct.pack`` into a buffer, with the channel's bytes kept
 per channel, costs 8-20 % less than that call (docs/simulator.md, issue 32's fifth pass);
 tests/experiments/test_recorder.py reads the file back with ``lcm.EventLog`` and compares it with
-what ``write_event`` writes. The buffer goes to the kernel at 4 KiB, unbuffered by Python (what
-liblcm's ``FILE`` holds): a process killed without stopping loses no more of its log than
-``lcm-logger`` would.
+what ``write_event`` writes.
+
+What a process killed without stopping may lose is bounded the way ``lcm-logger`` bounds it: by
+time. lcm-logger flushes its file (``fflush``, then ``fdatasync``) after writing an event stamped
+more than ``--flush-interval`` (100 ms by default) after its last flush (lcm-logger/lcm_logger.c,
+``needs_flushed``; ``fflush_interval_ms = 100`` in ``main``); between two, its stdio buffer and its
+write queue (up to ``--max-unwritten-mb``, 100 MB) hold what it received. Here the buffer goes to
+the kernel on the same rule, on the events' own stamps, and at 64 KiB at the latest: a killed
+process's log holds every event stamped more than 100 ms before its last one. At 4 KiB (the stdio
+buffer's size) a thousand simulated agents' 40,000 events a second were 1,500 writes a second.
 """
 
 from __future__ import annotations
@@ -30,9 +37,11 @@ from antalate_lcm.core.node import Context, Node, NodeSettings
 #: An event's head in liblcm's log (lcm/eventlog.c): magic, event number, utime, channel and data lengths.
 _EVENT = struct.Struct(">IqqII")
 _MAGIC = 0xEDA1DA01
-#: Bytes buffered before they are written to the file: glibc's buffer of liblcm's ``FILE`` (a
-#: page), so a killed process loses what ``lcm-logger`` killed would.
-_FLUSH_AT = 1 << 12
+#: µs of events held back at most: lcm-logger's default ``--flush-interval`` (module docstring).
+FLUSH_INTERVAL_US = 100_000
+#: Bytes buffered at most before they are written; a buffer that stays in the core's cache (4 KiB:
+#: 1.4x the CPU per event, 256 KiB: 1.3x; docs/simulator.md, issue 32's sixth pass).
+FLUSH_AT = 1 << 16
 
 
 def _write_all(write: Callable[[bytearray | memoryview], int | None], data: bytearray) -> None:
@@ -80,22 +89,25 @@ class LogRecorder(Node):
         write = file.write
         names: dict[str, bytes] = {}
         n = 0
+        due = -1  # the first event is written at once (and the file's head with it)
 
         def record(channel: str, data: bytes) -> None:  # on the executor's loop thread
-            nonlocal n
+            nonlocal n, due
             name = names.get(channel)
             if name is None:
                 name = names[channel] = channel.encode("utf-8")
                 if len(names) > 100_000:  # bounded: channel names come from the network
                     names.clear()
             buf = buffer  # (a local name: += on the closure's own would make it local)
-            buf += head(_MAGIC, n, int(self.wallclock() * 1e6), len(name), len(data))
+            utime = int(self.wallclock() * 1e6)
+            buf += head(_MAGIC, n, utime, len(name), len(data))
             buf += name
             buf += data
             n += 1
-            if len(buf) >= _FLUSH_AT:
+            if utime > due or len(buf) >= FLUSH_AT:
                 _write_all(write, buf)
                 buf.clear()
+                due = utime + FLUSH_INTERVAL_US
 
         self._count = lambda: n
         return record

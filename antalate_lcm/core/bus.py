@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING, Any
 
 from antalate_lcm.base.deprecation import renamed_names
 from antalate_lcm.base.ratelimit import RateLimitedLog
-from antalate_lcm.core.bus_connection import BusConnection, Handler, Subscription
+from antalate_lcm.core.bus_connection import BusConnection, ChannelSender, Handler, Subscription
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.wire.topics import Message
 
@@ -144,11 +144,12 @@ class Buses:
             return self.publish_failed(bus, channel, exc)
         return True
 
-    def sender(self, bus: str) -> Callable[[str, bytes], None]:
-        """The send function of ``bus`` for encoded bytes, looked up once (a node's publisher keeps
-        it: 20 messages a second per simulated agent, a lookup and two calls less each). It raises
-        what ``publish`` would log: the caller reports an OSError through :meth:`publish_failed`."""
-        return self._connection(bus).publish
+    def sender(self, bus: str, channel: str) -> ChannelSender:
+        """What sends encoded bytes on ``channel`` of ``bus`` (its ``publish``), looked up once (a node's
+        publisher keeps it: 20 messages a second per simulated agent, no lookup of the bus, nor on
+        memq:// of the channel's subscribers). It raises what ``publish`` would log: the caller
+        reports an OSError through :meth:`publish_failed`."""
+        return self._connection(bus).sender_of(channel)
 
     def publish_failed(self, bus: str, channel: str, exc: OSError) -> bool:
         """Count and log (rate-limited) a send that failed with ``exc``; False, what publish returns."""
@@ -157,13 +158,25 @@ class Buses:
         return False
 
     def subscribe(
-        self, bus: str, channel: str, msg_type: type[Message] | None, handler: Handler, *, regex: bool = False
+        self,
+        bus: str,
+        channel: str,
+        msg_type: type[Message] | None,
+        handler: Handler | Callable[[Any], None],
+        *,
+        regex: bool = False,
+        msg_only: bool = False,
     ) -> Subscription:
         """Deliver every ``channel`` message, decoded as ``msg_type`` (raw bytes if None), to ``handler``.
 
         With ``regex=True`` the channel is a regular expression that must match the whole name.
+        With ``msg_only=True`` (an exact channel) the handler is given the message alone.
         """
-        sub = Subscription(bus, channel, msg_type, handler, re.compile(channel) if regex else None)
+        if regex and msg_only:
+            raise ValueError("msg_only is for an exact channel: a pattern's handler needs the channel")
+        sub = Subscription(
+            bus, channel, msg_type, handler, re.compile(channel) if regex else None, msg_only=msg_only
+        )
         self._connection(bus).add(sub)
         return sub
 

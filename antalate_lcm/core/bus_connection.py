@@ -18,7 +18,14 @@ from typing import Any
 
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.executor import Executor
-from antalate_lcm.core.subscription import Handler, Route, Subscription, lcm_literal
+from antalate_lcm.core.subscription import (
+    ChannelSender,
+    DirectSender,
+    Handler,
+    Route,
+    Subscription,
+    lcm_literal,
+)
 from antalate_lcm.transports import Transport, transport_for
 from antalate_lcm.transports.udpm import Udpm, UdpmReceiver, UdpmSender
 from antalate_lcm.wire.fastcodec import decoder
@@ -33,6 +40,51 @@ _UNDECODABLE = object()
 _BATCH = 64
 #: s a readable descriptor may keep the loop beyond the first batch while messages still wait.
 _DRAIN_BUDGET = 0.02
+
+
+def _matching(patterns: tuple[Subscription, ...], channel: str) -> tuple[Subscription, ...]:
+    return tuple(s for s in patterns if s.regex is not None and s.regex.fullmatch(channel))
+
+
+class _Lane:
+    """One channel of a memq:// connection as its publishers send on it: its route and pattern
+    subscribers held here, so a message costs no lookup in the connection's tables of every
+    channel (8,000 at 1,000 agents: a cache miss each, 5 % of the simtime loop)."""
+
+    __slots__ = ("conn", "channel", "route", "matched", "matched_for")
+
+    def __init__(self, conn: BusConnection, channel: str, route: Route | None) -> None:
+        self.conn, self.channel = conn, channel
+        self.route = route  #: while the channel has one (set under the connection's lock)
+        self.matched: tuple[Subscription, ...] = ()
+        self.matched_for: tuple[Subscription, ...] | None = None
+
+    def publish(self, data: bytes) -> None:
+        """Queued on the one loop that reads this instance's subscribers, in publish order, never run
+        in the publisher's call (liblcm's memq: a copy, a notify pipe's write, a handle() each)."""
+        conn = self.conn
+        watched = conn._watched
+        if watched is None:
+            if conn._lcm is None:  # a sender kept past the bus's close: as Bus.publish then
+                raise RuntimeError("bus is closed")
+            return  # no subscriber yet
+        route = self.route
+        lane = self if conn._patterns else None
+        if route is None and lane is None:
+            return
+        ex = watched[0]
+        if not ex.on_loop():  # another thread: a loop handle of its own (thread-safe)
+            if route is not None:
+                ex.call_soon(conn._on_exact, route, self.channel, data)
+            if lane is not None:
+                ex.call_soon(conn._on_pattern, self.channel, data)
+            return
+        # On the loop: queued for one handle that delivers every message published until it runs
+        # (a thousand agents' state in a tick is one handle, not a thousand).
+        pending = conn._pending
+        if not pending:
+            ex.call_soon(conn._deliver_pending)
+        pending.append((route, self.channel, data, lane))
 
 
 class BusConnection:
@@ -83,7 +135,9 @@ class BusConnection:
         #: (An agent's in-process bus carries TELEMETRY at 10 Hz that no node of the process reads.)
         self._private = transport.in_process
         #: memq:// messages published on the loop thread, waiting for their one delivering handle.
-        self._pending: list[tuple[Route | None, str, bytes, bool]] = []
+        self._pending: list[tuple[Route | None, str, bytes, _Lane | None]] = []
+        #: memq:// channels by name, as their publishers send on them (`sender_of`).
+        self._lanes: dict[str, _Lane] = {}
         self._decode_log = decode_log
         self.decode_errors: dict[str, int] = {}
 
@@ -105,6 +159,9 @@ class BusConnection:
                     # In place (nothing iterates it; a copy per channel made 1,000 agents' start
                     # and stop quadratic).
                     self._routes[sub.channel] = route
+                    lane = self._lanes.get(sub.channel)
+                    if lane is not None:
+                        lane.route = route
                     topic = sub.channel.rsplit("/", 1)[-1]
                     if topic not in self._topics:
                         self._topics = self._topics | {topic}
@@ -173,6 +230,9 @@ class BusConnection:
                     if route.lcm_sub is not None:
                         self._retire.append(route.lcm_sub)
                     del self._routes[sub.channel]
+                    lane = self._lanes.get(sub.channel)
+                    if lane is not None:
+                        lane.route = None
             else:
                 self._patterns = tuple(s for s in self._patterns if s is not sub)
                 if not self._patterns and self._star is not None:
@@ -184,33 +244,10 @@ class BusConnection:
 
     def publish(self, channel: str, data: bytes) -> None:
         lc = self._lcm
-        if lc is None:  # a sender (Bus.sender) kept past the bus's close: as Bus.publish then
+        if lc is None:  # a sender (Buses.sender) kept past the bus's close: as Buses.publish then
             raise RuntimeError("bus is closed")
-        if self._private:
-            # memq:// reaches only this instance's subscribers, all read on one loop: the message
-            # is queued on that loop directly (liblcm's memq would copy it, write its notify pipe
-            # and wait for a handle() of its own: a system call per message, 10,000 a second for
-            # 1,000 agents' state), in publish order, never run inside the publisher's call.
-            watched = self._watched
-            if watched is None:
-                return  # no subscriber yet
-            route = self._routes.get(channel)
-            patterns = bool(self._patterns)
-            if route is None and not patterns:
-                return
-            ex = watched[0]
-            if not ex.on_loop():  # another thread: a loop handle of its own (thread-safe)
-                if route is not None:
-                    ex.call_soon(self._on_exact, route, channel, data)
-                if patterns:
-                    ex.call_soon(self._on_pattern, channel, data)
-                return
-            # On the loop: queued for one handle that delivers every message published until it
-            # runs (a thousand agents' state in a tick is one handle, not a thousand).
-            pending = self._pending
-            if not pending:
-                ex.call_soon(self._deliver_pending)
-            pending.append((route, channel, data, patterns))
+        if self._private:  # memq://: through the channel's lane (`_Lane.publish`)
+            (self._lanes.get(channel) or self.lane(channel)).publish(data)
             return
         sender = self._sender
         if sender is None:
@@ -225,6 +262,20 @@ class BusConnection:
         if not sender.publish(channel, data):
             lc.publish(channel, data)  # too large for one datagram: liblcm fragments it
 
+    def lane(self, channel: str) -> _Lane:
+        """``channel``'s lane on this memq:// connection (made once; a publisher keeps its send)."""
+        with self._lock:
+            lane = self._lanes.get(channel)
+            if lane is None:
+                lane = _Lane(self, channel, self._routes.get(channel))
+                if len(self._lanes) < 100_000:  # bounded: a tool may publish on ever new channels
+                    self._lanes[channel] = lane
+            return lane
+
+    def sender_of(self, channel: str) -> ChannelSender:
+        """What sends ``data`` on ``channel`` (as `publish`), looked up once by its publisher."""
+        return self.lane(channel) if self._private else DirectSender(self.publish, channel)
+
     def _open_sender(self) -> UdpmSender:
         with self._lock:
             if self._sender is None:
@@ -237,12 +288,12 @@ class BusConnection:
         """On the loop thread: the memq:// messages published on it since the last call, in order."""
         pending, self._pending = self._pending, []
         on_exact, on_pattern = self._on_exact, self._on_pattern
-        for route, channel, data, patterns in pending:
+        for route, channel, data, lane in pending:
             try:
                 if route is not None:
                     on_exact(route, channel, data)
-                if patterns:
-                    on_pattern(channel, data, route is None or route.retired)
+                if lane is not None:
+                    on_pattern(channel, data, route is None or route.retired, lane)
             except Exception:  # as the loop's own handles: logged, and the next message goes on
                 log.exception("delivering %s on %s failed; the bus carries on", channel, self.url)
 
@@ -344,21 +395,33 @@ class BusConnection:
         for sub in subs:
             if sub.active:
                 try:
-                    sub.handler(channel, msg)
+                    if sub.msg_only:
+                        sub.handler(msg)
+                    else:
+                        sub.handler(channel, msg)
                 except Exception:
                     log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 
-    def _on_pattern(self, channel: str, data: bytes, count: bool | None = None) -> None:
+    def _on_pattern(
+        self, channel: str, data: bytes, count: bool | None = None, lane: _Lane | None = None
+    ) -> None:
         # The matching subscribers of a channel, remembered until the patterns change: a console
-        # watching 1,000 agents would otherwise run its regexes on every datagram.
+        # watching 1,000 agents would otherwise run its regexes on every datagram. A memq://
+        # channel's are kept on its lane (no lookup in a table of every channel).
         patterns = self._patterns
-        if self._matched_for is not patterns:
-            self._matched, self._matched_for = {}, patterns
-        subs = self._matched.get(channel)
-        if subs is None:
-            subs = tuple(s for s in patterns if s.regex is not None and s.regex.fullmatch(channel))
-            if len(self._matched) < 100_000:  # bounded: channel names come from the network
-                self._matched[channel] = subs
+        if lane is not None:
+            if lane.matched_for is not patterns:
+                lane.matched, lane.matched_for = _matching(patterns, channel), patterns
+            subs = lane.matched
+        else:
+            if self._matched_for is not patterns:
+                self._matched, self._matched_for = {}, patterns
+            found = self._matched.get(channel)
+            if found is None:
+                found = _matching(patterns, channel)
+                if len(self._matched) < 100_000:  # bounded: channel names come from the network
+                    self._matched[channel] = found
+            subs = found
         if not subs:
             return
         sub = subs[0]
@@ -397,7 +460,10 @@ class BusConnection:
                 elif msg is _UNDECODABLE:
                     continue
             try:
-                sub.handler(channel, msg)
+                if sub.msg_only:
+                    sub.handler(msg)
+                else:
+                    sub.handler(channel, msg)
             except Exception:
                 log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 
@@ -429,4 +495,4 @@ class BusConnection:
             lc.close()  # a Zenoh session is closed explicitly (its links and threads)
 
 
-__all__ = ["BusConnection", "Handler", "Subscription", "lcm_literal"]
+__all__ = ["BusConnection", "ChannelSender", "Handler", "Subscription", "lcm_literal"]

@@ -1,12 +1,14 @@
-"""A subscription to one bus (:meth:`~antalate_lcm.core.bus.Buses.subscribe`) and the subscribers of
-one exact channel as a :class:`~antalate_lcm.core.bus_connection.BusConnection` keeps them for its loop."""
+"""A subscription to one bus (:meth:`~antalate_lcm.core.bus.Buses.subscribe`), the subscribers of one
+exact channel as a :class:`~antalate_lcm.core.bus_connection.BusConnection` keeps them for its loop,
+and what a publisher sends one channel with (:meth:`~antalate_lcm.core.bus.Buses.sender`)."""
 
 from __future__ import annotations
 
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from functools import partial
+from typing import Any, Protocol
 
 from antalate_lcm.wire.fastcodec import decoder
 from antalate_lcm.wire.topics import Message
@@ -21,15 +23,33 @@ class Subscription:
     bus: str
     channel: str
     msg_type: type[Message] | None
-    handler: Handler
+    #: ``handler(channel, msg)``, or ``handler(msg)`` with ``msg_only`` (an exact channel's: a node's
+    #: handler called by the bus itself, no closure in between on every message).
+    handler: Callable[..., None]
     regex: re.Pattern[str] | None = None
     active: bool = field(default=True)
+    msg_only: bool = False
     #: ``msg_type``'s decoder (antalate_lcm.wire.fastcodec: lcm-gen's fields, a third of its time).
     decode: Callable[[bytes], Any] | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.msg_type is not None:
             self.decode = decoder(self.msg_type)
+
+
+class ChannelSender(Protocol):
+    """One channel's sends on one bus (`Buses.sender`): ``publish(data)`` as `BusConnection.publish`."""
+
+    def publish(self, data: bytes, /) -> None: ...
+
+
+class DirectSender:
+    """A channel's sends on a connection that is not memq://: its ``publish``, the channel bound."""
+
+    __slots__ = ("publish",)
+
+    def __init__(self, publish: Callable[[str, bytes], None], channel: str) -> None:
+        self.publish: Callable[[bytes], None] = partial(publish, channel)
 
 
 #: Characters with a meaning in LCM's channel regular expressions.
@@ -82,4 +102,4 @@ class Route:
         self.subs = rest
 
 
-__all__ = ["Handler", "Route", "Subscription", "lcm_literal"]
+__all__ = ["ChannelSender", "DirectSender", "Handler", "Route", "Subscription", "lcm_literal"]

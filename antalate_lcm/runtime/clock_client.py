@@ -57,9 +57,16 @@ class SimulatedBuses(Buses):
         self.new_interest: list[tuple[str, str, bool]] = []
 
     def subscribe(
-        self, bus: str, channel: str, msg_type: Any, handler: Handler, *, regex: bool = False
+        self,
+        bus: str,
+        channel: str,
+        msg_type: Any,
+        handler: Handler | Callable[[Any], None],
+        *,
+        regex: bool = False,
+        msg_only: bool = False,
     ) -> Subscription:
-        sub = super().subscribe(bus, channel, msg_type, handler, regex=regex)
+        sub = super().subscribe(bus, channel, msg_type, handler, regex=regex, msg_only=msg_only)
         if bus in self._crossing:
             self.new_interest.append((bus, channel, regex))
         return sub

@@ -28,7 +28,6 @@ from antalate_lcm.core.subscription import (
 )
 from antalate_lcm.transports import Transport, transport_for
 from antalate_lcm.transports.udpm import Udpm, UdpmReceiver, UdpmSender
-from antalate_lcm.wire.fastcodec import decoder
 from antalate_lcm.wire.topics import Message
 
 log = logging.getLogger("antalate.bus")
@@ -446,12 +445,12 @@ class BusConnection:
             if not sub.active:
                 continue
             msg: Any = data
-            msg_type = sub.msg_type
-            if msg_type is not None:
+            msg_type, decode = sub.msg_type, sub.decode
+            if decode is not None and msg_type is not None:
                 msg = decoded.get(msg_type)
                 if msg is None:
                     try:
-                        msg = decoded[msg_type] = decoder(msg_type)(data)
+                        msg = decoded[msg_type] = decode(data)
                     except Exception as exc:  # noqa: BLE001 - any garbage must not kill the node
                         decoded[msg_type] = _UNDECODABLE
                         if count:

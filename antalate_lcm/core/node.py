@@ -306,8 +306,7 @@ class Node:
         channel = self.channel(topic, **fields)
         sender = fields.get("agent", self.agent) if is_internal(topic) and "{agent}" in spec.channel else None
         if not self.admission.needs_admission(spec.msg_type):
-            # Nothing to admit (no key, a type with no input check): the bus calls the handler
-            # itself, no call between on every message of a node's hot path.
+            # Nothing to admit (no key, a type with no input check): the bus calls the handler itself.
             sub = self.context.buses.subscribe(bus, channel, spec.msg_type, handler, msg_only=True)
         else:
             admit = self.admission.admit
@@ -344,7 +343,8 @@ class Node:
             own = None
         # Channel -> match, so a steady stream of known channels costs no regex per message.
         matches: dict[str, TopicMatch] = {}
-        admit = self.admission.admit
+        # Nothing to admit (no key, a type with no input check): `admit` could only say yes.
+        admit = self.admission.admit if self.admission.needs_admission(spec.msg_type) else None
 
         def deliver(channel: str, msg: Any) -> None:  # on the executor's loop thread
             if channel == own:
@@ -355,7 +355,7 @@ class Node:
                 match = TopicMatch(channel, m.groupdict() if m else {})
                 if len(matches) < 100_000:
                     matches[channel] = match
-            if admit(channel, msg, match.fields.get("agent") if bound else None):
+            if admit is None or admit(channel, msg, match.fields.get("agent") if bound else None):
                 handler(msg, match)
 
         sub = self.context.buses.subscribe(bus, pattern.pattern, spec.msg_type, deliver, regex=True)
@@ -369,7 +369,7 @@ class Node:
             sender = self.agent if bound else None
 
             def deliver_own(_channel: str, msg: Any) -> None:  # on the executor's loop thread
-                if admit(own_match.channel, msg, sender):
+                if admit is None or admit(own_match.channel, msg, sender):
                     handler(msg, own_match)
 
             companion = self.context.buses.subscribe(own_bus, own, spec.msg_type, deliver_own)

@@ -9,8 +9,8 @@ The events are written here rather than through ``lcm.EventLog.write_event``: li
 ``lcm_eventlog_write_event`` (lcm/eventlog.c) writes each event as a 28-byte big-endian head (the
 magic ``0xEDA1DA01``, the event number counted from 0, the timestamp, the channel's and the data's
 lengths), the channel's bytes and the data, one ``fwrite`` per field. A thousand simulated agents
-record 40,000 events a second; one ``struct.pack`` into a buffer, with the channel's bytes kept
-per channel, costs 8-20 % less than that call (docs/simulator.md, issue 32's fifth pass);
+record 40,000 events a second; one ``struct.pack`` into a buffer and the channel's bytes costs
+8-20 % less than that call (docs/simulator.md, issue 32's fifth pass);
 tests/experiments/test_recorder.py reads the file back with ``lcm.EventLog`` and compares it with
 what ``write_event`` writes.
 
@@ -87,17 +87,14 @@ class LogRecorder(Node):
         buffer = self._buffer
         head = _EVENT.pack
         write = file.write
-        names: dict[str, bytes] = {}
         n = 0
         due = -1  # the first event is written at once (and the file's head with it)
 
         def record(channel: str, data: bytes) -> None:  # on the executor's loop thread
             nonlocal n, due
-            name = names.get(channel)
-            if name is None:
-                name = names[channel] = channel.encode("utf-8")
-                if len(names) > 100_000:  # bounded: channel names come from the network
-                    names.clear()
+            # Encoded each time: a table of 8,000 channels' bytes (1,000 agents) was a cache miss
+            # or two per event, a third more than the copy (docs/simulator.md, sixth pass).
+            name = channel.encode()
             buf = buffer  # (a local name: += on the closure's own would make it local)
             utime = int(self.wallclock() * 1e6)
             buf += head(_MAGIC, n, utime, len(name), len(data))

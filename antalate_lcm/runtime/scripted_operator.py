@@ -119,7 +119,8 @@ class ScriptedOperator(Node):
         timeline = self.timelines.get(agent)
         if timeline is None:  # (no Timeline built per message, 5 a second for each agent)
             timeline = self.timelines[agent] = Timeline()
-        timeline.add(self.elapsed, state)
+        if timeline.current is not state:  # the time read only for a new state (most repeat it)
+            timeline.add(self.elapsed, state)
 
     def _states(self) -> list[McState | None]:
         return [t.current for a, t in self.timelines.items() if a not in self.excused]

@@ -19,8 +19,6 @@ from typing import Any
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.subscription import (
-    ChannelSender,
-    DirectSender,
     Handler,
     Route,
     Subscription,
@@ -45,7 +43,7 @@ def _matching(patterns: tuple[Subscription, ...], channel: str) -> tuple[Subscri
     return tuple(s for s in patterns if s.regex is not None and s.regex.fullmatch(channel))
 
 
-class _Lane:
+class Lane:
     """One channel of a memq:// connection as its publishers send on it: its route and pattern
     subscribers held here, so a message costs no lookup in the connection's tables of every
     channel (8,000 at 1,000 agents: a cache miss each, 5 % of the simtime loop)."""
@@ -132,11 +130,11 @@ class BusConnection:
         self._ready_means_message = transport.ready_means_message
         #: memq:// is private to this instance: a datagram nobody here subscribes to goes nowhere.
         #: (An agent's in-process bus carries TELEMETRY at 10 Hz that no node of the process reads.)
-        self._private = transport.in_process
+        self.private = transport.in_process
         #: memq:// messages published on the loop thread, waiting for their one delivering handle.
-        self._pending: list[tuple[Route | None, str, bytes, _Lane | None]] = []
+        self._pending: list[tuple[Route | None, str, bytes, Lane | None]] = []
         #: memq:// channels by name, as their publishers send on them (`sender_of`).
-        self._lanes: dict[str, _Lane] = {}
+        self._lanes: dict[str, Lane] = {}
         self._decode_log = decode_log
         self.decode_errors: dict[str, int] = {}
 
@@ -152,7 +150,7 @@ class BusConnection:
                 route = self._routes.get(sub.channel)
                 if route is None:
                     route = Route()
-                    if not own and not self._private:
+                    if not own and not self.private:
                         route.lcm_sub = lc.subscribe(lcm_literal(sub.channel), partial(self._on_exact, route))
                         route.lcm_sub.set_queue_capacity(self._capacity)
                     # In place (nothing iterates it; a copy per channel made 1,000 agents' start
@@ -170,7 +168,7 @@ class BusConnection:
                 if own:  # it may match anything, this process's own datagrams included
                     self._hear_own = True
                     self._own_filter()
-                if self._star is None and not own and not self._private:
+                if self._star is None and not own and not self.private:
                     self._star = lc.subscribe(".*", self._on_pattern)
                     self._star.set_queue_capacity(self._capacity)
             watch = self._watched is None
@@ -245,7 +243,7 @@ class BusConnection:
         lc = self._lcm
         if lc is None:  # a sender (Buses.sender) kept past the bus's close: as Buses.publish then
             raise RuntimeError("bus is closed")
-        if self._private:  # memq://: through the channel's lane (`_Lane.publish`)
+        if self.private:  # memq://: through the channel's lane (`Lane.publish`)
             (self._lanes.get(channel) or self.lane(channel)).publish(data)
             return
         sender = self._sender
@@ -261,19 +259,15 @@ class BusConnection:
         if not sender.publish(channel, data):
             lc.publish(channel, data)  # too large for one datagram: liblcm fragments it
 
-    def lane(self, channel: str) -> _Lane:
+    def lane(self, channel: str) -> Lane:
         """``channel``'s lane on this memq:// connection (made once; a publisher keeps its send)."""
         with self._lock:
             lane = self._lanes.get(channel)
             if lane is None:
-                lane = _Lane(self, channel, self._routes.get(channel))
+                lane = Lane(self, channel, self._routes.get(channel))
                 if len(self._lanes) < 100_000:  # bounded: a tool may publish on ever new channels
                     self._lanes[channel] = lane
             return lane
-
-    def sender_of(self, channel: str) -> ChannelSender:
-        """What sends ``data`` on ``channel`` (as `publish`), looked up once by its publisher."""
-        return self.lane(channel) if self._private else DirectSender(self.publish, channel)
 
     def _open_sender(self) -> UdpmSender:
         with self._lock:
@@ -402,7 +396,7 @@ class BusConnection:
                     log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 
     def _on_pattern(
-        self, channel: str, data: bytes, count: bool | None = None, lane: _Lane | None = None
+        self, channel: str, data: bytes, count: bool | None = None, lane: Lane | None = None
     ) -> None:
         # The matching subscribers of a channel, remembered until the patterns change: a console
         # watching 1,000 agents would otherwise run its regexes on every datagram. A memq://
@@ -494,4 +488,4 @@ class BusConnection:
             lc.close()  # a Zenoh session is closed explicitly (its links and threads)
 
 
-__all__ = ["BusConnection", "ChannelSender", "Handler", "Subscription", "lcm_literal"]
+__all__ = ["BusConnection", "Lane", "Handler", "Subscription", "lcm_literal"]

@@ -67,6 +67,10 @@ class Context:
     #: refills it and publish encodes it at once, on the loop's one thread, so a thousand agents'
     #: 20 messages a second touch one object (hot in the cache), not a thousand of their own.
     scratch: dict[type, Any] = field(default_factory=dict, repr=False)
+    #: Buses -> their (name, send) pairs, shared by every publisher of the context on those buses.
+    senders: dict[tuple[str, ...], list[tuple[str, Callable[[str, bytes], None]]]] = field(
+        default_factory=dict, repr=False
+    )
     #: Agent name -> the timer its nodes' periodic jobs share (`Node.ticker`): the HLC's and the MC's.
     tickers: dict[str, Ticker] = field(default_factory=dict, repr=False)
     #: The one place this process signs and admits messages (every node's `NodeAdmission` comes from it).

@@ -85,8 +85,8 @@ class Publisher:
         self.seq = 0
         self._node = node
         self._senders = destination.senders
-        #: The one bus's sender (most topics): no list, no tuple to read per message.
-        self._one = destination.senders[0][1] if len(destination.senders) == 1 else None
+        #: Its one bus's lane when that is memq:// (most topics in one process): no list, no lookup.
+        self._one = destination.lane
         #: The node's admission's encoder (`NodeAdmission.seal`: signing with a key).
         self._seal = node.admission.seal
         #: Unsigned only: the type last published and its encoder (one lookup and call less).
@@ -122,19 +122,17 @@ class Publisher:
             data = self._seal(msg)
             if self._seal is fastcodec.encode:  # the plain encoder, never a key's seal (it signs)
                 self._type, self._encode = type(msg), fastcodec.encoder(type(msg))
-        one = self._one
-        if one is not None:
-            try:
-                one.publish(data)
-            except OSError as exc:
-                return node.context.buses.publish_failed(self._senders[0][0], self.channel, exc)
+        lane = self._one
+        if lane is not None:  # memq:// (never an OSError)
+            lane.publish(data)
             return True
+        channel = self.channel
         ok = True
-        for bus, sender in self._senders:
+        for bus, send in self._senders:
             try:
-                sender.publish(data)
+                send(channel, data)
             except OSError as exc:
-                ok = node.context.buses.publish_failed(bus, self.channel, exc) and ok
+                ok = node.context.buses.publish_failed(bus, channel, exc) and ok
         return ok
 
 

@@ -9,9 +9,10 @@ network. :class:`~antalate_lcm.core.node.Node` holds one :class:`Routes`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
-from antalate_lcm.core.bus_connection import ChannelSender
+from antalate_lcm.core.bus_connection import Lane
 from antalate_lcm.core.context import Context
 from antalate_lcm.core.node_settings import NodeSettings
 from antalate_lcm.wire.topics import TopicSpec, is_internal
@@ -23,9 +24,10 @@ class Destination:
 
     buses: list[str]
     channel: str
-    #: Each bus's sender of the channel (`Buses.sender`), resolved once: 20 publishes a second per
-    #: agent.
-    senders: list[tuple[str, ChannelSender]]
+    #: Each bus's send function (`Buses.sender`), resolved once: 20 publishes a second per agent.
+    senders: list[tuple[str, Callable[[str, bytes], None]]]
+    #: The channel's lane when its one bus is memq:// (`Buses.lane`: most topics in one process).
+    lane: Lane | None = None
 
 
 class Routes:
@@ -47,11 +49,16 @@ class Routes:
         return self.spec(topic).channel.format(**{"agent": self.agent, **fields})
 
     def destination(self, topic: str, fields: dict[str, str]) -> Destination:
-        """Where the topic (its channel with ``fields``) is sent."""
+        """Where the topic (its channel with ``fields``) is sent; the context's publishers on the
+        same buses share their send functions."""
         channel = self.channel(topic, **fields)
         buses = self.publish_buses(topic)
         bus = self.context.buses
-        return Destination(buses, channel, [(name, bus.sender(name, channel)) for name in buses])
+        shared = self.context.senders
+        senders = shared.get(tuple(buses))
+        if senders is None:
+            senders = shared[tuple(buses)] = [(name, bus.sender(name)) for name in buses]
+        return Destination(buses, channel, senders, bus.lane(buses[0], channel) if len(buses) == 1 else None)
 
     def publish_buses(self, topic: str) -> list[str]:
         """The topic's buses (plus the in-process bus for an internal topic), one per distinct URL."""

@@ -1,14 +1,12 @@
-"""A subscription to one bus (:meth:`~antalate_lcm.core.bus.Buses.subscribe`), the subscribers of one
-exact channel as a :class:`~antalate_lcm.core.bus_connection.BusConnection` keeps them for its loop,
-and what a publisher sends one channel with (:meth:`~antalate_lcm.core.bus.Buses.sender`)."""
+"""A subscription to one bus (:meth:`~antalate_lcm.core.bus.Buses.subscribe`) and the subscribers of
+one exact channel as a :class:`~antalate_lcm.core.bus_connection.BusConnection` keeps them for its loop."""
 
 from __future__ import annotations
 
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import partial
-from typing import Any, Protocol
+from typing import Any
 
 from antalate_lcm.wire.fastcodec import decoder
 from antalate_lcm.wire.topics import Message
@@ -35,21 +33,6 @@ class Subscription:
     def __post_init__(self) -> None:
         if self.msg_type is not None:
             self.decode = decoder(self.msg_type)
-
-
-class ChannelSender(Protocol):
-    """One channel's sends on one bus (`Buses.sender`): ``publish(data)`` as `BusConnection.publish`."""
-
-    def publish(self, data: bytes, /) -> None: ...
-
-
-class DirectSender:
-    """A channel's sends on a connection that is not memq://: its ``publish``, the channel bound."""
-
-    __slots__ = ("publish",)
-
-    def __init__(self, publish: Callable[[str, bytes], None], channel: str) -> None:
-        self.publish: Callable[[bytes], None] = partial(publish, channel)
 
 
 #: Characters with a meaning in LCM's channel regular expressions.
@@ -102,4 +85,4 @@ class Route:
         self.subs = rest
 
 
-__all__ = ["ChannelSender", "DirectSender", "Handler", "Route", "Subscription", "lcm_literal"]
+__all__ = ["Handler", "Route", "Subscription", "lcm_literal"]

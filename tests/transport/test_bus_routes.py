@@ -13,9 +13,9 @@ import pytest
 
 from antalate_lcm.base.ratelimit import RateLimitedLog
 from antalate_lcm.core.bus import Buses
-from antalate_lcm.core.bus_connection import BusConnection, _Lane
+from antalate_lcm.core.bus_connection import BusConnection, Lane
 from antalate_lcm.core.executor import Executor
-from antalate_lcm.core.subscription import ChannelSender, DirectSender, Route, Subscription
+from antalate_lcm.core.subscription import Route, Subscription
 from antalate_lcm.msgs import mc_state_t, telemetry_t
 from tests.harness.messages import mc_state
 
@@ -82,13 +82,10 @@ def test_releases_in_any_order_leave_the_channel_delivered_to_the_rest() -> None
 
 class _LookedUp(BusConnection):
     """The memq:// path before lanes: every message looks its channel's route up in the table of
-    every channel, and its pattern subscribers are matched again (what `_Lane` keeps instead)."""
+    every channel, and its pattern subscribers are matched again (what `Lane` keeps instead)."""
 
-    def lane(self, channel: str) -> _Lane:
-        return _Lane(self, channel, self._routes.get(channel))  # fresh: nothing kept
-
-    def sender_of(self, channel: str) -> ChannelSender:
-        return DirectSender(self.publish, channel)
+    def lane(self, channel: str) -> Lane:
+        return Lane(self, channel, self._routes.get(channel))  # fresh: nothing kept
 
 
 def _play(seed: int, looked_up: bool) -> list[tuple[int, str, object]]:
@@ -107,7 +104,7 @@ def _play(seed: int, looked_up: bool) -> list[tuple[int, str, object]]:
     live: list[Subscription] = []
     channels = ["a/MC_STATE", "b/MC_STATE", "a/TELEMETRY", "SWARM/X"]
     patterns = [r"(?P<agent>[^/]+)/MC_STATE", ".*", r"a/.*"]
-    senders: dict[str, ChannelSender] = {}
+    lanes: dict[str, Lane | None] = {}
     made = 0
 
     def record(i: int, channel: str, msg: object) -> None:
@@ -128,12 +125,14 @@ def _play(seed: int, looked_up: bool) -> list[tuple[int, str, object]]:
             else:
                 channel = rng.choice(channels)
                 data = mc_state(1, rng.randrange(1000)).encode() if rng.random() < 0.8 else b"junk"
-                if rng.random() < 0.5:
+                if rng.random() < 0.5 or looked_up:  # (the reference: every message looked up)
                     b.publish("test", channel, data)
-                else:
-                    if channel not in senders:
-                        senders[channel] = b.sender("test", channel)
-                    senders[channel].publish(data)
+                else:  # as a publisher does, its lane kept from the first message
+                    if channel not in lanes:
+                        lanes[channel] = b.lane("test", channel)
+                    lane = lanes[channel]
+                    assert lane is not None
+                    lane.publish(data)
 
     try:
         for _ in range(150):

@@ -85,7 +85,7 @@ class Publisher:
         self.seq = 0
         self._node = node
         self._senders = destination.senders
-        #: Its one bus's lane when that is memq:// (most topics in one process): no list, no lookup.
+        #: Its first bus's lane when that is memq:// (`Destination.lane`); the rest in `_senders`.
         self._one = destination.lane
         #: The node's admission's encoder (`NodeAdmission.seal`: signing with a key).
         self._seal = node.admission.seal
@@ -125,7 +125,6 @@ class Publisher:
         lane = self._one
         if lane is not None:  # memq:// (never an OSError)
             lane.publish(data)
-            return True
         channel = self.channel
         ok = True
         for bus, send in self._senders:

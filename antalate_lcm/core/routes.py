@@ -24,9 +24,10 @@ class Destination:
 
     buses: list[str]
     channel: str
-    #: Each bus's send function (`Buses.sender`), resolved once: 20 publishes a second per agent.
+    #: The send function (`Buses.sender`) of each bus but the lane's, resolved once: 20 publishes a
+    #: second per agent.
     senders: list[tuple[str, Callable[[str, bytes], None]]]
-    #: The channel's lane when its one bus is memq:// (`Buses.lane`: most topics in one process).
+    #: The channel's lane when the first bus is memq:// (`Buses.lane`: no lookup per message).
     lane: Lane | None = None
 
 
@@ -49,16 +50,19 @@ class Routes:
         return self.spec(topic).channel.format(**{"agent": self.agent, **fields})
 
     def destination(self, topic: str, fields: dict[str, str]) -> Destination:
-        """Where the topic (its channel with ``fields``) is sent; the context's publishers on the
-        same buses share their send functions."""
+        """Where the topic (its channel with ``fields``) is sent: its first bus's lane if that is
+        memq:// (an agent's in-process bus, where an internal topic goes first), and the send
+        functions of the rest, shared by the context's publishers on the same buses."""
         channel = self.channel(topic, **fields)
         buses = self.publish_buses(topic)
         bus = self.context.buses
+        lane = bus.lane(buses[0], channel) if buses else None
+        rest = tuple(buses[1:] if lane is not None else buses)
         shared = self.context.senders
-        senders = shared.get(tuple(buses))
+        senders = shared.get(rest)
         if senders is None:
-            senders = shared[tuple(buses)] = [(name, bus.sender(name)) for name in buses]
-        return Destination(buses, channel, senders, bus.lane(buses[0], channel) if len(buses) == 1 else None)
+            senders = shared[rest] = [(name, bus.sender(name)) for name in rest]
+        return Destination(buses, channel, senders, lane)
 
     def publish_buses(self, topic: str) -> list[str]:
         """The topic's buses (plus the in-process bus for an internal topic), one per distinct URL."""

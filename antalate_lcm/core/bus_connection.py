@@ -62,7 +62,7 @@ class Lane:
         conn = self.conn
         watched = conn._watched
         if watched is None:
-            if conn._lcm is None:  # a sender kept past the bus's close: as Bus.publish then
+            if conn._lcm is None:  # a lane kept past the bus's close: as Buses.publish then
                 raise RuntimeError("bus is closed")
             return  # no subscriber yet
         route = self.route
@@ -133,7 +133,7 @@ class BusConnection:
         self.private = transport.in_process
         #: memq:// messages published on the loop thread, waiting for their one delivering handle.
         self._pending: list[tuple[Route | None, str, bytes, Lane | None]] = []
-        #: memq:// channels by name, as their publishers send on them (`sender_of`).
+        #: memq:// channels by name, as their publishers send on them (`lane`).
         self._lanes: dict[str, Lane] = {}
         self._decode_log = decode_log
         self.decode_errors: dict[str, int] = {}
@@ -488,4 +488,4 @@ class BusConnection:
             lc.close()  # a Zenoh session is closed explicitly (its links and threads)
 
 
-__all__ = ["BusConnection", "Lane", "Handler", "Subscription", "lcm_literal"]
+__all__ = ["BusConnection", "Handler", "Lane", "Subscription", "lcm_literal"]

@@ -13,6 +13,7 @@ import pytest
 
 from antalate_lcm.vehicles import AutopilotError, Frame, VehicleState
 from antalate_lcm.vehicles.sim import SimAdapter
+from antalate_lcm.vehicles.sim.params import shared
 from tests.harness.clock import FakeClock
 
 #: Near the simulated clock's start (core/simclock.py): its slots' differences are a hair off 50 ms.
@@ -169,3 +170,22 @@ def test_a_turn_through_north_by_a_sliver_of_a_step_wraps_as_wrap_360() -> None:
         clock.t = math.nextafter(3.05, 4.0)  # a step of 0.05 s to heading 0.0, then a sliver
         states.append(sim.state())
     assert [repr(s.heading) for s in states] == ["0.0", "0.0"]
+
+
+def test_sims_of_one_config_read_one_tuple_of_parameters_to_the_bit() -> None:
+    """`params.shared`: the poll's parameter tuples are one object across sims of one config, and
+    equal to the tuples a sim of its own builds; a value equal but not the same (-0.0, 1 and 1.0)
+    keeps a tuple of its own."""
+    clock = FakeClock(T0)
+    one, two = SimAdapter({"home_lat": 1.0}, clock=clock), SimAdapter({"home_lat": 2.0}, clock=clock)
+    for name in ("_step_lag", "_drain", "_battery_params"):
+        assert getattr(one, name) is getattr(two, name)
+    p = one._p
+    decay = math.exp(-p.max_step / p.tau)
+    assert one._step_lag == (p.max_step, decay, p.tau * (1.0 - decay))
+    assert one._drain == (p.drain_idle, p.drain_flying)
+    assert one._battery_params == (p.cells, p.voltage_sag, p.battery_warning_at)
+    sag = one._battery_params  # (4, 0.0, 0.0)
+    minus = shared((4, -0.0, 0.0))
+    assert minus == sag and minus is not sag and repr(minus[1]) == "-0.0"
+    assert shared((1.0, 2.0)) is shared((1.0, 2.0)) and shared((1, 2.0)) is not shared((1.0, 2.0))

@@ -39,7 +39,7 @@ from typing import Any
 
 from antalate_lcm.base.geo import FlatFrame, body_to_ne, wrap_360
 from antalate_lcm.vehicles.base import Clock, Frame
-from antalate_lcm.vehicles.sim.params import Params
+from antalate_lcm.vehicles.sim.params import Params, shared
 
 __all__ = ["PERSISTED", "Motion", "Quadcopter"]
 
@@ -142,7 +142,7 @@ class Quadcopter:
         self._max_yaw_rate = p.max_yaw_rate
         #: `_lag`'s decay and distance factor over a step of ``max_step`` (`_fly`'s usual step).
         decay = math.exp(-p.max_step / p.tau)
-        self._step_lag = (p.max_step, decay, p.tau * (1.0 - decay))
+        self._step_lag = shared((p.max_step, decay, p.tau * (1.0 - decay)))
         # Vehicle state (local frame: metres north/east of home, altitude above home).
         self.north = self.east = self.alt = 0.0
         self.vn = self.ve = self.vd = 0.0
@@ -164,9 +164,9 @@ class Quadcopter:
         self._t_last = now
         self._airborne_since: float | None = None  # sim time of the last takeoff
         #: cells, voltage sag per cell in the air, warning level (%): read by every `telemetry.snapshot`.
-        self._battery_params = (p.cells, p.voltage_sag, p.battery_warning_at)
+        self._battery_params = shared((p.cells, p.voltage_sag, p.battery_warning_at))
         #: %/min drained on the ground and in the air (indexed by `in_air`: read every step).
-        self._drain = (p.drain_idle, p.drain_flying)
+        self._drain = shared((p.drain_idle, p.drain_flying))
         #: `telemetry.snapshot`'s: the last lat/lon, the (north, east) it is of; a kept snapshot's values.
         self._latlon_n, self._latlon_e, self._latlon = math.nan, math.nan, (0.0, 0.0)
         self._snapshot_of: tuple[Any, ...] = (None,) * 13  # what no value is

@@ -175,6 +175,8 @@ class Node:
         self._last_utime = 0
         self._now: Callable[[], float] = context.executor.clock  # `now` without two lookups
         self.admission = context.admission.for_node(self, watcher=watcher)
+        #: `outgoing`'s: the context's scratch messages, None for a signing node (fixed with its key).
+        self._scratch: dict[type, Any] | None = None if self.admission.signs else context.scratch
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -260,8 +262,10 @@ class Node:
         (see `Context.scratch`), or a fresh one for a signing node (the MAC goes into its header;
         an HMAC costs more than the message) and where an experiment's interference may hold on to
         what is sent. Its fields keep what the last user wrote: fill every one."""
-        if self.interference is None and not self.admission.signs:
-            scratch = self.context.scratch
+        # The node's own `_scratch`, not its admission's and context's: 20 a second per flying
+        # agent (telemetry, both states), each of those objects out of the cache by the next.
+        scratch = self._scratch
+        if scratch is not None and self.interference is None:
             msg = scratch.get(msg_type)
             if msg is None:
                 msg = scratch[msg_type] = msg_type()

@@ -421,9 +421,10 @@ class HlcNode(Node):
 
     def _state_msg(self) -> hlc_state_t:
         msg = self.outgoing(hlc_state_t)  # refilled, every field, as the telemetry is
-        msg.state = int(self.machine.state)
+        machine = self.machine
+        msg.state = int(machine.state)
         msg.autopilot = self.adapter.name
-        msg.reason = self.machine.reason
+        msg.reason = machine.reason
         return msg
 
     def _publish_telemetry(self) -> None:

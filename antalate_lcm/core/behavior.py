@@ -116,6 +116,12 @@ class BehaviorContext:
         #: The behavior's topic (published without template fields) -> its node's publisher and the
         #: type it carries: a behavior's commands (10-20 a second) look neither up again.
         self._publishers: dict[str, tuple[Publisher, type]] = {}
+        #: The topic last published without fields (the same string object), its publisher and type:
+        #: a behavior's 10 Hz command reads them here, with the context's other attributes, not from
+        #: a dict and its entry out of the cache (a thousand agents' behaviors).
+        self._last_topic: str | None = None
+        self._last_pub: Publisher | None = None
+        self._last_type: type = object
         self._state = state
         self._on_error = on_error
         self.name = name
@@ -179,13 +185,19 @@ class BehaviorContext:
     def publish(self, topic: str, msg: Message, **fields: str) -> bool:
         """Publish on the behavior's ``topic``; the header is stamped (and, with a swarm key, the
         message signed) by the node, so a behavior acting as an operator works under authentication."""
-        entry = None if fields else self._publishers.get(topic)
-        if entry is None:
-            mapped = self.topic(topic)
-            entry = (self._node.publisher(mapped, **fields), self._node.topic_spec(mapped).msg_type)
+        pub = self._last_pub
+        if topic is self._last_topic and pub is not None and not fields:
+            expected = self._last_type
+        else:
+            entry = None if fields else self._publishers.get(topic)
+            if entry is None:
+                mapped = self.topic(topic)
+                entry = (self._node.publisher(mapped, **fields), self._node.topic_spec(mapped).msg_type)
+                if not fields:
+                    self._publishers[topic] = entry
+            pub, expected = entry
             if not fields:
-                self._publishers[topic] = entry
-        pub, expected = entry
+                self._last_topic, self._last_pub, self._last_type = topic, pub, expected
         if not isinstance(msg, expected):
             raise TypeError(f"topic {pub.topic!r} carries {expected.__name__}, not {type(msg).__name__}")
         return pub.publish(msg)

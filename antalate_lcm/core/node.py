@@ -180,6 +180,8 @@ class Node:
         self._last_utime = 0
         self._now: Callable[[], float] = context.executor.clock  # `now` without two lookups
         self.admission = context.admission.for_node(self, watcher=watcher)
+        #: `outgoing`'s: the context's scratch messages (None: a signing node), read with no lookup.
+        self._scratch: dict[type, Any] | None = None if self.admission.signs else context.scratch
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -265,8 +267,8 @@ class Node:
         (see `Context.scratch`), or a fresh one for a signing node (the MAC goes into its header;
         an HMAC costs more than the message) and where an experiment's interference may hold on to
         what is sent. Its fields keep what the last user wrote: fill every one."""
-        if self.interference is None and not self.admission.signs:
-            scratch = self.context.scratch
+        scratch = self._scratch
+        if scratch is not None and self.interference is None:
             msg = scratch.get(msg_type)
             if msg is None:
                 msg = scratch[msg_type] = msg_type()
@@ -430,10 +432,10 @@ class Node:
         returned function every ``1/hz`` s itself, from a timer it already has (see `ticker`).
         """
 
-        publish = self.publisher(topic, **fields).publish
+        publisher = self.publisher(topic, **fields)
 
         def publish_now() -> None:
-            publish(build())
+            publisher.publish(build())
 
         if periodic:
             self.create_timer(1.0 / hz, publish_now, first_delay=self.first_delay(1.0 / hz))

@@ -9,7 +9,7 @@ import pytest
 
 from antalate_lcm.agent.bma import ActivationRule, Arbiter
 from antalate_lcm.core.config import Config
-from antalate_lcm.msgs import arbiter_status_t, mc_state_t, telemetry_t
+from antalate_lcm.msgs import arbiter_status_t, behavior_state_t, mc_state_t, telemetry_t
 from tests.harness.bma import AGENT, Recorder, harness, make_config
 from tests.harness.polling import wait_for
 
@@ -419,6 +419,30 @@ def test_published_message_type_is_checked() -> None:
         beh = h.sync(lambda: node.behavior("ModeSwitcher"))
         with pytest.raises(TypeError, match="carries behavior_state_t"):
             h.sync(lambda: beh.ctx.publish("MODE", arbiter_status_t()))
+
+
+def test_a_topic_published_again_goes_where_the_lookup_sends_it() -> None:
+    """`BehaviorContext.publish` keeps the topic it last published without fields: the topic's
+    string again reaches the publisher the lookup gives (its seq counted on), an equal string
+    object of another making and a topic with fields take the lookup, and the type is still checked."""
+    config = make_config([_bma([_switcher()])], topics=SWARM_MODE)
+    with harness(config) as h:
+        node = h.bma("main")
+        ctx = h.sync(lambda: node.behavior("ModeSwitcher")).ctx
+        looked_up = h.sync(lambda: node.publisher(ctx.topic("MODE")))
+
+        def publish(topic: str) -> tuple[Any, int]:
+            msg = behavior_state_t()
+            msg.state = "SEARCH"
+            ctx.publish(topic, msg)
+            return ctx._last_pub, msg.header.seq
+
+        first, seq = h.sync(lambda: publish("MODE"))
+        again, next_seq = h.sync(lambda: publish("MODE"))
+        equal, last_seq = h.sync(lambda: publish("".join(["MO", "DE"])))  # equal, not the same object
+        assert first is again is equal is looked_up and (next_seq, last_seq) == (seq + 1, seq + 2)
+        with pytest.raises(TypeError, match="carries behavior_state_t"):
+            h.sync(lambda: ctx.publish("MODE", arbiter_status_t()))
 
 
 def test_timers_of_an_activation_are_cancelled_with_it_and_one_shots_are_forgotten() -> None:

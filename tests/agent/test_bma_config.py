@@ -6,12 +6,16 @@ import contextlib
 from typing import Any
 
 import pytest
+from pydantic import BaseModel, ConfigDict
 
 from antalate_lcm.agent.bma import BmaNode, plan_bma, validate_bma_config
+from antalate_lcm.agent.bma.plan import shared_params_model
 from antalate_lcm.base.errors import ConfigError
+from antalate_lcm.base.strict import validate_strict
 from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.executor import Executor
 from antalate_lcm.core.node import Context
+from behaviors.dovrat_swarm.behavior import DovratSwarm
 from tests.harness.bma import make_config
 
 REC = "tests.harness.bma:Recorder"
@@ -278,3 +282,32 @@ def test_bma_node_refuses_a_bad_config_at_construction() -> None:
         pytest.raises(ConfigError, match=r"bma\[0\].behaviors\[0\].plugin"),
     ):
         BmaNode(config, context, config.bma[0])
+
+
+def test_equal_frozen_params_are_one_object_and_nothing_else_is_shared() -> None:
+    """`shared_params_model`: agents planned from one config read one params object; the model it
+    stands in for is the one validated (equal, the same fields set), and a model that differs in a
+    bit (-0.0), in the fields set, or is not frozen or hashable, stays the behavior's own."""
+    bma = [{"name": "swarm", "behaviors": [{"plugin": "dovrat_swarm", "params": {"forward_speed": 3.0}}]}]
+    first, second = (plan_bma(c, c.bma[0]).behaviors[0].params for c in (make_config(bma), make_config(bma)))
+    assert first is second
+    own = validate_strict(DovratSwarm.Params, {"forward_speed": 3.0})
+    assert own == first and own.model_fields_set == first.model_fields_set and own is not first
+
+    def shared(model: type[BaseModel], **values: Any) -> BaseModel:
+        return shared_params_model(model(**values))
+
+    P = DovratSwarm.Params
+    assert shared(P, max_speed=1.0) is shared(P, max_speed=1.0)
+    assert shared(P, max_speed=0.0) is not shared(P, max_speed=-0.0)  # equal, not the same bits
+    assert shared(P, forward_speed=2.0) is not shared(P)  # equal, but one says it was set
+
+    class Loose(BaseModel):
+        speeds: list[float] = [1.0]
+
+    class FrozenList(BaseModel):
+        model_config = ConfigDict(frozen=True)
+        speeds: list[float] = [1.0]
+
+    assert shared(Loose) is not shared(Loose)
+    assert shared(FrozenList) is not shared(FrozenList)

@@ -105,3 +105,22 @@ def test_only_a_watcher_may_read_internal_topics_from_the_network_without_a_key(
     )  # no refusal
     with pytest.raises(InsecureBus):
         Node(_settings("a-1"), context).admission.check_exposure("MC_STATE", "lan")
+
+
+def test_outgoing_is_the_contexts_scratch_only_for_a_node_that_neither_signs_nor_is_interfered(
+    context: Context,
+) -> None:
+    """`Node.outgoing` reads the node's own `_scratch`: the same answer as asking its admission and
+    interference, as before, for a plain node, a signing one and one an experiment interferes with."""
+
+    def before(node: Node) -> bool:  # the path it replaces: whether the context's scratch is used
+        return node.interference is None and not node.admission.signs
+
+    plain, signing = Node(_settings(), context), Node(_settings(swarm_key=KEY), context, name="s")
+    interfered = Node(_settings(name="a-2"), context)
+    interfered.interference = object()  # type: ignore[assignment]  # set before start, as the runs do
+    for node in (plain, signing, interfered):
+        first, second = node.outgoing(operator_cmd_t), node.outgoing(operator_cmd_t)
+        shared = first is second
+        assert shared is before(node) is (node is plain)
+        assert (first is context.scratch.get(operator_cmd_t)) is shared

@@ -1,6 +1,7 @@
-"""The sim's two shortcuts against the full path, poll after poll and bit for bit: the ground
-snapshot copied from the last one (`telemetry.snapshot`) and GUIDED flight's steps on local
-variables (`Quadcopter._fly`), across set-points, uneven polls, battery edges and mode changes."""
+"""The sim's shortcuts against the full path, poll after poll and bit for bit: the ground snapshot
+copied from the last one and a moving one from the swarm's shared dict (`telemetry.snapshot`),
+GUIDED flight's steps on local variables (`Quadcopter._fly`) and a still vehicle's brake
+(`Quadcopter._brake`), across set-points, uneven polls, battery edges and mode changes."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import pytest
 
 from antalate_lcm.vehicles import AutopilotError, Frame, VehicleState
 from antalate_lcm.vehicles.sim import SimAdapter
+from antalate_lcm.vehicles.sim.params import shared
 from tests.harness.clock import FakeClock
 
 #: Near the simulated clock's start (core/simclock.py): its slots' differences are a hair off 50 ms.
@@ -21,7 +23,7 @@ T0 = 100_000.0
 class _Counted(SimAdapter):
     """The sim as shipped, counting the polls its shortcuts took."""
 
-    __slots__ = ("flights", "copies")
+    __slots__ = ("flights", "copies", "moving")
 
     def _fly(self, dt: float, max_step: float) -> float:
         self.flights = getattr(self, "flights", 0) + 1
@@ -34,11 +36,13 @@ class _Counted(SimAdapter):
             state.vn or state.ve or state.vd
         ):  # a still one built anew: a new key
             self.copies = getattr(self, "copies", 0) + 1
+        elif self._snapshot_of is key and state.connected:  # a moving one copied
+            self.moving = getattr(self, "moving", 0) + 1
         return state
 
 
 class _FullPath(SimAdapter):
-    """The sim without either shortcut: every step through `_step`, every snapshot built anew."""
+    """The sim without the shortcuts: every step through `_step`, every snapshot built anew."""
 
     __slots__ = ()
 
@@ -46,8 +50,14 @@ class _FullPath(SimAdapter):
         return dt  # nothing flown: `_advance` steps all of ``dt`` with `_step`
 
     def state(self) -> VehicleState:
-        self._snapshot_of = (None,) * 12
+        self._snapshot_of = (None,) * 13
         return super().state()
+
+    def _brake(self, h: float) -> None:  # the lag of both axes, still or not
+        self.vn, dn = self._lag(self.vn, 0.0, h)
+        self.ve, de = self._lag(self.ve, 0.0, h)
+        self.north += dn
+        self.east += de
 
 
 def _bits(sim: SimAdapter, state: VehicleState) -> list[str]:
@@ -122,6 +132,7 @@ def test_shortcuts_are_the_full_path_bit_for_bit(params: dict[str, Any], grid: b
     flew = params.get("battery", 100.0) > 1.0  # else empty on the ground before the takeoff
     assert getattr(shortcut, "copies", 0) > 10
     assert getattr(shortcut, "flights", 0) > (100 if flew else -1)
+    assert getattr(shortcut, "moving", 0) > (100 if flew else -1)
 
 
 def test_a_copied_snapshot_is_a_whole_vehicle_state_of_its_own() -> None:
@@ -159,3 +170,22 @@ def test_a_turn_through_north_by_a_sliver_of_a_step_wraps_as_wrap_360() -> None:
         clock.t = math.nextafter(3.05, 4.0)  # a step of 0.05 s to heading 0.0, then a sliver
         states.append(sim.state())
     assert [repr(s.heading) for s in states] == ["0.0", "0.0"]
+
+
+def test_sims_of_one_config_read_one_tuple_of_parameters_to_the_bit() -> None:
+    """`params.shared`: the poll's parameter tuples are one object across sims of one config, and
+    equal to the tuples a sim of its own builds; a value equal but not the same (-0.0, 1 and 1.0)
+    keeps a tuple of its own."""
+    clock = FakeClock(T0)
+    one, two = SimAdapter({"home_lat": 1.0}, clock=clock), SimAdapter({"home_lat": 2.0}, clock=clock)
+    for name in ("_step_lag", "_drain", "_battery_params"):
+        assert getattr(one, name) is getattr(two, name)
+    p = one._p
+    decay = math.exp(-p.max_step / p.tau)
+    assert one._step_lag == (p.max_step, decay, p.tau * (1.0 - decay))
+    assert one._drain == (p.drain_idle, p.drain_flying)
+    assert one._battery_params == (p.cells, p.voltage_sag, p.battery_warning_at)
+    sag = one._battery_params  # (4, 0.0, 0.0)
+    minus = shared((4, -0.0, 0.0))
+    assert minus == sag and minus is not sag and repr(minus[1]) == "-0.0"
+    assert shared((1.0, 2.0)) is shared((1.0, 2.0)) and shared((1, 2.0)) is not shared((1.0, 2.0))

@@ -216,11 +216,12 @@ class BmaNode(Node):
 
     def _start_ticking(self, ctx: BehaviorContext, behavior: Behavior, hz: float) -> None:
         clock = self.context.executor.clock  # `now`, bound: read on every tick
-        last = [clock()]
+        last = clock()
 
         def tick() -> None:
+            nonlocal last  # (a cell: no list to read from memory on every tick)
             now = clock()
-            dt, last[0] = now - last[0], now
+            dt, last = now - last, now
             behavior.tick(dt)
 
         ctx.create_timer(1.0 / hz, tick, where="tick")

@@ -59,10 +59,11 @@ class McNode(Node):
         # The context's one mc_state_t, refilled (every field) at every publish: 5 a second and on
         # every change; publish stamps its header and encodes it at once (Node.outgoing).
         msg = self.outgoing(mc_state_t)
-        msg.state = int(self.machine.state)
-        msg.last_command_seq = self.machine.last_command_seq
-        msg.takeoff_altitude = float(self.machine.takeoff_altitude)
-        msg.reason = self.machine.reason
+        machine = self.machine
+        msg.state = int(machine.state)
+        msg.last_command_seq = machine.last_command_seq
+        msg.takeoff_altitude = float(machine.takeoff_altitude)
+        msg.reason = machine.reason
         return msg
 
     # ------------------------------------------------------------------ inputs

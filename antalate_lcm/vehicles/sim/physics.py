@@ -35,10 +35,11 @@ from __future__ import annotations
 
 import enum
 import math
+from typing import Any
 
 from antalate_lcm.base.geo import FlatFrame, body_to_ne, wrap_360
 from antalate_lcm.vehicles.base import Clock, Frame
-from antalate_lcm.vehicles.sim.params import Params
+from antalate_lcm.vehicles.sim.params import Params, shared
 
 __all__ = ["PERSISTED", "Motion", "Quadcopter"]
 
@@ -141,14 +142,10 @@ class Quadcopter:
         self._max_yaw_rate = p.max_yaw_rate
         #: `_lag`'s decay and distance factor over a step of ``max_step`` (`_fly`'s usual step).
         decay = math.exp(-p.max_step / p.tau)
-        self._step_lag = (p.max_step, decay, p.tau * (1.0 - decay))
+        self._step_lag = shared((p.max_step, decay, p.tau * (1.0 - decay)))
         # Vehicle state (local frame: metres north/east of home, altitude above home).
-        self.north = 0.0
-        self.east = 0.0
-        self.alt = 0.0
-        self.vn = 0.0
-        self.ve = 0.0
-        self.vd = 0.0
+        self.north = self.east = self.alt = 0.0
+        self.vn = self.ve = self.vd = 0.0
         self.heading = wrap_360(p.heading)
         self.battery = self._check_battery(p.battery)
         self.armed = False
@@ -167,12 +164,12 @@ class Quadcopter:
         self._t_last = now
         self._airborne_since: float | None = None  # sim time of the last takeoff
         #: cells, voltage sag per cell in the air, warning level (%): read by every `telemetry.snapshot`.
-        self._battery_params = (p.cells, p.voltage_sag, p.battery_warning_at)
+        self._battery_params = shared((p.cells, p.voltage_sag, p.battery_warning_at))
         #: %/min drained on the ground and in the air (indexed by `in_air`: read every step).
-        self._drain = (p.drain_idle, p.drain_flying)
-        #: `telemetry.snapshot`'s: the last lat/lon, the (north, east) it is of; a still snapshot's values.
+        self._drain = shared((p.drain_idle, p.drain_flying))
+        #: `telemetry.snapshot`'s: the last lat/lon, the (north, east) it is of; a kept snapshot's values.
         self._latlon_n, self._latlon_e, self._latlon = math.nan, math.nan, (0.0, 0.0)
-        self._snapshot_of: tuple[object, ...] = (None,) * 12  # what no value is
+        self._snapshot_of: tuple[Any, ...] = (None,) * 13  # what no value is
         self._snapshot: dict[str, object] = {}
 
     @property
@@ -411,15 +408,18 @@ class Quadcopter:
             self._touchdown()
 
     def _lag(self, v0: float, target: float, h: float) -> tuple[float, float]:
-        """Velocity after `h` s and distance covered, following `target` with the time constant.
-
-        Exact for a set-point held constant over the step, so results do not depend on the step size.
-        """
+        """Velocity after `h` s and distance covered, following `target` with the time constant: exact
+        for a set-point held constant over the step, so results do not depend on the step size."""
         decay = math.exp(-h / self._tau)
         v1 = target + (v0 - target) * decay
         return v1, target * h + (v0 - target) * self._tau * (1.0 - decay)
 
     def _brake(self, h: float) -> None:
+        if not (self.vn or self.ve):  # still (a climb, a descent): no exponential needed
+            self.vn = self.ve = 0.0  # `_lag` toward 0.0 from a zero, and its distance 0.0 added
+            self.north += 0.0  # (a -0.0 made 0.0)
+            self.east += 0.0
+            return
         self.vn, dn = self._lag(self.vn, 0.0, h)
         self.ve, de = self._lag(self.ve, 0.0, h)
         self.north += dn

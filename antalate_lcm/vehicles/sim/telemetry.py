@@ -48,7 +48,7 @@ def snapshot(v: Quadcopter) -> VehicleState:
     # made of is the same object now (an object is its value: no write can make the copy stale),
     # about half the work of building the dict anew (docs/simulator.md, "Issue 32, fifth pass";
     # tests/vehicles/test_sim_snapshot.py checks it bit for bit).
-    n0, e0, alt0, heading0, vn0, ve0, vd0, armed0, in_air0, mode0, failsafe0, params0 = v._snapshot_of
+    n0, e0, alt0, heading0, vn0, ve0, vd0, armed0, in_air0, mode0, failsafe0, params0, moving = v._snapshot_of
     if (
         north is n0
         and east is e0
@@ -82,9 +82,45 @@ def snapshot(v: Quadcopter) -> VehicleState:
         v._latlon_e = east
         v._latlon = v.home.to_latlon(north, east)
     lat, lon = v._latlon
-    mode = v.mode
-    flight_mode = _AUTONOMOUS_MODES.get(mode, _MANUAL)
+    armed = v.armed
     in_air = v.in_air
+    mode = v.mode
+    failsafe = v._failsafe
+    if (
+        armed is armed0
+        and in_air is in_air0
+        and mode is mode0
+        and failsafe is failsafe0
+        and battery_params is params0
+    ):
+        # Moving (a swarm in flight, 20 polls a second per agent): the last kept snapshot's dict
+        # has the ten values that come from these five objects alone (connected, link_age, armed,
+        # in_air, autonomous, mode, flight_mode, failsafe, cells, and battery_warning rewritten
+        # below); the nine that move are written over a copy, which costs half the dict built
+        # anew (docs/simulator.md, "Issue 32, sixth pass").
+        values = moving.copy()
+        values["lat"] = lat
+        values["lon"] = lon
+        values["alt"] = v.alt
+        values["heading"] = v.heading
+        values["vn"] = vn = v.vn
+        values["ve"] = ve = v.ve
+        values["vd"] = vd = v.vd
+        values["battery"] = battery
+        if cells:
+            if not in_air:
+                sag = 0.0
+            values["voltage"] = cells * (_CELL_EMPTY + (_CELL_FULL - _CELL_EMPTY) * battery / 100.0 - sag)
+        if warn_at:
+            values["battery_warning"] = (
+                f"battery low ({battery:.0f}% <= {warn_at:g}%)" if battery <= warn_at else ""
+            )
+        if not (vn or ve or vd):  # stopped (a hover): the still copy from the next poll on
+            _keep(v, values, north, east, battery_params)
+        state = _new(VehicleState)
+        _set(state, "__dict__", values)
+        return state
+    flight_mode = _AUTONOMOUS_MODES.get(mode, _MANUAL)
     voltage = math.nan
     if cells:
         if not in_air:
@@ -96,8 +132,6 @@ def snapshot(v: Quadcopter) -> VehicleState:
     vn = v.vn
     ve = v.ve
     vd = v.vd
-    armed = v.armed
-    failsafe = v._failsafe
     values = {
         "connected": True,
         "link_age": 0.0,
@@ -119,22 +153,44 @@ def snapshot(v: Quadcopter) -> VehicleState:
         "cells": cells,
         "battery_warning": warning,
     }
-    if not (vn or ve or vd):  # on the ground or hovering; a vehicle that moves makes no copy
-        v._snapshot_of = (
-            north,
-            east,
-            alt,
-            heading,
-            vn,
-            ve,
-            vd,
-            armed,
-            in_air,
-            mode,
-            failsafe,
-            battery_params,
-        )
-        v._snapshot = values.copy()
+    # Kept for the copies above: one of these five changed (a takeoff, a mode change: now and then).
+    _keep(v, values, north, east, battery_params)
     state = _new(VehicleState)
     _set(state, "__dict__", values)
     return state
+
+
+def _keep(v: Quadcopter, values: dict[str, object], north: float, east: float, params: object) -> None:
+    """Keep a copy of ``values`` and what they were made of, for `snapshot`'s two copies."""
+    v._snapshot_of = (
+        north,
+        east,
+        values["alt"],
+        values["heading"],
+        values["vn"],
+        values["ve"],
+        values["vd"],
+        values["armed"],
+        values["in_air"],
+        values["mode"],
+        values["failsafe"],
+        params,
+        _moving(values, params),
+    )
+    v._snapshot = values.copy()
+
+
+#: (armed, in_air, mode, failsafe, battery parameters) -> a snapshot's values with them: what a
+#: moving snapshot copies, one dict for a whole swarm in flight (a thousand agents' copies of one
+#: cached dict, not a thousand dicts read from memory).
+_MOVING: dict[tuple[object, ...], dict[str, object]] = {}
+
+
+def _moving(values: dict[str, object], params: object) -> dict[str, object]:
+    key = (values["armed"], values["in_air"], values["mode"], values["failsafe"], params)
+    moving = _MOVING.get(key)
+    if moving is None:
+        moving = values.copy()
+        if len(_MOVING) < 1000:  # a few in any run: the modes, failsafes and packs of a swarm
+            _MOVING[key] = moving
+    return moving

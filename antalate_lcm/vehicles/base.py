@@ -186,6 +186,9 @@ class VehicleAdapter(ABC):
     #: Why the last `arm` returned False (e.g. ArduCopter's PreArm text), "" when the adapter cannot
     #: say: the HLC puts it into its ``hlc_error_t``. An adapter sets it before refusing.
     last_refusal: str = ""
+    # No __slots__ of its own beyond this: an adapter that declares none (every one but the sim)
+    # has a __dict__ as ever; the sim lists ``params`` and ``clock`` in its own (vehicles/sim).
+    __slots__ = ()
 
     @classmethod
     def validate_params(cls, params: Mapping[str, Any] | None) -> BaseModel | None:
@@ -200,8 +203,8 @@ class VehicleAdapter(ABC):
         return validate_strict(cls.params_model, dict(params or {}))
 
     def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
-        self.params: dict[str, Any] = dict(params or {})
-        self.clock: Clock = clock
+        self.params: dict[str, Any] = dict(params or {})  # type: ignore[misc]  # a subclass's __dict__, or its slot
+        self.clock: Clock = clock  # type: ignore[misc]
 
     @abstractmethod
     def connect(self) -> None:

@@ -157,13 +157,24 @@ class Buses:
         return False
 
     def subscribe(
-        self, bus: str, channel: str, msg_type: type[Message] | None, handler: Handler, *, regex: bool = False
+        self,
+        bus: str,
+        channel: str,
+        msg_type: type[Message] | None,
+        handler: Handler,
+        *,
+        regex: bool = False,
+        on_message: Callable[[Any], None] | None = None,
     ) -> Subscription:
         """Deliver every ``channel`` message, decoded as ``msg_type`` (raw bytes if None), to ``handler``.
 
         With ``regex=True`` the channel is a regular expression that must match the whole name.
+        ``on_message`` (an exact channel only): called with the message alone instead of ``handler``.
         """
+        if regex and on_message is not None:
+            raise ValueError("on_message is for an exact channel (a pattern's handler needs the channel)")
         sub = Subscription(bus, channel, msg_type, handler, re.compile(channel) if regex else None)
+        sub.on_message = on_message
         self._connection(bus).add(sub)
         return sub
 

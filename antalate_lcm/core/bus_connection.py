@@ -50,6 +50,9 @@ class Subscription:
     handler: Handler
     regex: re.Pattern[str] | None = None
     active: bool = field(default=True)
+    #: Called with the message alone in place of ``handler`` (exact channels only): a node's handler
+    #: that needs no channel and no admission, with no closure to call in between (`Node.subscribe`).
+    on_message: Callable[[Any], None] | None = field(default=None, repr=False)
     #: ``msg_type``'s decoder (antalate_lcm.wire.fastcodec: lcm-gen's fields, a third of its time).
     decode: Callable[[bytes], Any] | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -399,7 +402,11 @@ class BusConnection:
         for sub in subs:
             if sub.active:
                 try:
-                    sub.handler(channel, msg)
+                    on_message = sub.on_message
+                    if on_message is not None:
+                        on_message(msg)
+                    else:
+                        sub.handler(channel, msg)
                 except Exception:
                     log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 
@@ -458,7 +465,10 @@ class BusConnection:
                 elif msg is _UNDECODABLE:
                     continue
             try:
-                sub.handler(channel, msg)
+                if sub.on_message is not None:
+                    sub.on_message(msg)
+                else:
+                    sub.handler(channel, msg)
             except Exception:
                 log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 

@@ -57,9 +57,16 @@ class SimulatedBuses(Buses):
         self.new_interest: list[tuple[str, str, bool]] = []
 
     def subscribe(
-        self, bus: str, channel: str, msg_type: Any, handler: Handler, *, regex: bool = False
+        self,
+        bus: str,
+        channel: str,
+        msg_type: Any,
+        handler: Handler,
+        *,
+        regex: bool = False,
+        on_message: Callable[[Any], None] | None = None,
     ) -> Subscription:
-        sub = super().subscribe(bus, channel, msg_type, handler, regex=regex)
+        sub = super().subscribe(bus, channel, msg_type, handler, regex=regex, on_message=on_message)
         if bus in self._crossing:
             self.new_interest.append((bus, channel, regex))
         return sub

@@ -402,11 +402,7 @@ class BusConnection:
         for sub in subs:
             if sub.active:
                 try:
-                    on_message = sub.on_message
-                    if on_message is not None:
-                        on_message(msg)
-                    else:
-                        sub.handler(channel, msg)
+                    sub.handler(channel, msg) if sub.on_message is None else sub.on_message(msg)
                 except Exception:
                     log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 
@@ -465,10 +461,7 @@ class BusConnection:
                 elif msg is _UNDECODABLE:
                     continue
             try:
-                if sub.on_message is not None:
-                    sub.on_message(msg)
-                else:
-                    sub.handler(channel, msg)
+                sub.handler(channel, msg) if sub.on_message is None else sub.on_message(msg)
             except Exception:
                 log.exception("handler for %s on %s raised; the bus carries on", channel, self.url)
 

@@ -105,11 +105,12 @@ def _wrap_lon(lon: float) -> float:
     return wrap_180(lon) if not -180.0 <= lon < 180.0 else lon
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class FlatFrame:
     """A local north/east plane tangent at (lat0, lon0): fast, approximate conversions.
 
     The radii of curvature are computed once, so each conversion is a handful of multiplications.
+    Slotted: the sim's home, read by every snapshot of a flying agent (`vehicles.sim.telemetry`).
     """
 
     lat0: float

@@ -14,9 +14,11 @@ from antalate_lcm.wire.topics import Message
 Handler = Callable[[str, Any], None]
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, slots=True)
 class Subscription:
-    """A handle returned by :meth:`Buses.subscribe`; pass it to :meth:`Buses.unsubscribe`."""
+    """A handle returned by :meth:`Buses.subscribe`; pass it to :meth:`Buses.unsubscribe`.
+
+    Slotted: every delivery reads its ``active`` and ``handler`` (5 per agent, a thousand agents)."""
 
     bus: str
     channel: str

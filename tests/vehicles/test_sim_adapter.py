@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import time
+import weakref
 from dataclasses import FrozenInstanceError, asdict, fields
 from typing import Any
 
@@ -100,7 +101,8 @@ def test_snapshot_is_a_whole_vehicle_state() -> None:
     assert sim.arm()
     sim.takeoff(5.0)
     for s in (sim.state(), run(sim, clock, 1.0), run(sim, clock, 3.0)):
-        assert set(vars(s)) == {f.name for f in fields(VehicleState)}
+        assert type(s) is VehicleState and not hasattr(s, "__dict__")
+        assert all(hasattr(s, f.name) for f in fields(VehicleState))
         rebuilt = VehicleState(**asdict(s))
         assert rebuilt == s and hash(rebuilt) == hash(s) and repr(rebuilt) == repr(s)
     assert s.in_air and s.battery_warning and math.isfinite(s.voltage)
@@ -694,3 +696,52 @@ def test_unknown_name_lists_the_available_ones() -> None:
 def test_bad_module_paths(target: str, match: str) -> None:
     with pytest.raises(UnknownAdapterError, match=match):
         load_adapter(target)
+
+
+def test_an_adapter_of_a_user_keeps_its_dict_weakrefs_and_mixins() -> None:
+    """`VehicleAdapter` declares empty slots (the sim lists its attributes in its own): an adapter a
+    user writes, with a mixin and attributes of its own, has a __dict__ and weakrefs as ever, and so
+    does a subclass of the sim."""
+
+    class Tagged:
+        def tag(self) -> str:
+            return f"{self.name}:{self.serial}"  # type: ignore[attr-defined]
+
+    class Mine(Tagged, VehicleAdapter):
+        name = "mine"
+
+        def __init__(self) -> None:
+            super().__init__({"port": 1})
+            self.serial = "A1"
+            self.last_refusal = "not yet"
+
+        def connect(self) -> None: ...
+        def close(self) -> None: ...
+        def arm(self) -> bool:
+            return False
+
+        def disarm(self) -> None: ...
+        def takeoff(self, alt: float) -> None: ...
+        def land(self) -> None: ...
+        def rtl(self) -> None: ...
+        def set_velocity(self, vx: float, vy: float, vz: float, yaw_rate: float, frame: Frame) -> None: ...
+        def state(self) -> VehicleState:
+            return VehicleState()
+
+    mine = Mine()
+    assert vars(mine) == {
+        "params": {"port": 1},
+        "clock": time.monotonic,
+        "serial": "A1",
+        "last_refusal": "not yet",
+    }
+    assert mine.tag() == "mine:A1" and weakref.ref(mine)() is mine
+
+    class MySim(SimAdapter):
+        pass
+
+    sim = MySim(clock=FakeClock(0.0))
+    sim.notes = "mine"  # type: ignore[attr-defined]
+    assert vars(sim) == {"notes": "mine"} and weakref.ref(sim)() is sim
+    sim.connect()
+    assert sim.state().connected and SimAdapter().params == {}

@@ -19,7 +19,7 @@ from __future__ import annotations
 import logging
 import math
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
@@ -135,14 +135,7 @@ class Px4Vehicle(Vehicle):
         flight_mode, autonomous, failsafe = modes.classify(
             self.mode, ours=self.ours, failsafe=self.px4_failsafe
         )
-        return VehicleState(
-            **{
-                **base.__dict__,
-                "flight_mode": flight_mode,
-                "autonomous": autonomous,
-                "failsafe": failsafe,
-            }
-        )
+        return replace(base, flight_mode=flight_mode, autonomous=autonomous, failsafe=failsafe)
 
     # ------------------------------------------------------------------ updates
 

@@ -40,7 +40,9 @@ class SimAdapter(FaultInjection, VehicleAdapter):
     name = "sim"
     blocking = False  # in-process: every command returns at once
     params_model = Params
-    __slots__ = ("_state_file",)
+    # With `VehicleAdapter`'s two attributes, the sim has no __dict__: its ``clock``, read by every
+    # poll and command, is a slot as the model's state (a subclass may add attributes freely).
+    __slots__ = ("_state_file", "params", "clock")
 
     def __init__(self, params: Mapping[str, Any] | None = None, *, clock: Clock = time.monotonic) -> None:
         super().__init__(params, clock=clock)

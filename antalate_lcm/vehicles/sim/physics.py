@@ -122,8 +122,6 @@ class Quadcopter:
         "_latlon_n",
         "_latlon_e",
         "_latlon",
-        "_snapshot_of",
-        "_snapshot",
     )
     clock: Clock
 
@@ -167,10 +165,8 @@ class Quadcopter:
         self._battery_params = shared((p.cells, p.voltage_sag, p.battery_warning_at))
         #: %/min drained on the ground and in the air (indexed by `in_air`: read every step).
         self._drain = shared((p.drain_idle, p.drain_flying))
-        #: `telemetry.snapshot`'s: the last lat/lon, the (north, east) it is of; a kept snapshot's values.
+        #: `telemetry.snapshot`'s: the last lat/lon and the (north, east) it is of.
         self._latlon_n, self._latlon_e, self._latlon = math.nan, math.nan, (0.0, 0.0)
-        self._snapshot_of: tuple[Any, ...] = (None,) * 13  # what no value is
-        self._snapshot: dict[str, object] = {}
 
     @property
     def sim_time(self) -> float:

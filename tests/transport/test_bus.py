@@ -329,32 +329,29 @@ def test_memq_drops_what_nobody_in_the_process_subscribes_to_and_delivers_the_re
         b.close()
 
 
-def test_on_message_gets_what_the_handler_would_without_the_channel(bus: Buses) -> None:
-    """`Subscription.on_message` (a node's handler with nothing to admit, `Node.subscribe`) against
-    the two-argument handler it stands in for: the same decoded messages, alone and beside
-    subscribers of another type (`_deliver`), a raising one contained, and no pattern may have one."""
+def test_msg_only_gets_what_the_handler_would_without_the_channel(bus: Buses) -> None:
+    """``msg_only`` (a node's handler with nothing to admit, `Node.subscribe`) against the
+    two-argument handler it stands in for: the same decoded messages, alone and beside subscribers
+    of another type (`_deliver`), a raising one contained, and no pattern may have one."""
     via_handler: list[object] = []
     via_message: list[object] = []
-    unused: list[object] = []
     bus.subscribe("test", "a/MC_STATE", mc_state_t, lambda ch, m: via_handler.append(m))
-    bus.subscribe(
-        "test", "a/MC_STATE", mc_state_t, lambda ch, m: unused.append(m), on_message=via_message.append
-    )
+    bus.subscribe("test", "a/MC_STATE", mc_state_t, via_message.append, msg_only=True)
     bus.publish("test", "a/MC_STATE", mc_state(3, 5))
     assert wait_for(lambda: len(via_message) == 1 and len(via_handler) == 1, 2)
-    assert via_message[0] is via_handler[0] and unused == []
+    assert via_message[0] is via_handler[0]
     raw = bus.subscribe("test", "a/MC_STATE", None, lambda ch, d: via_handler.append(d))  # mixed types
     bus.publish("test", "a/MC_STATE", mc_state(4, 6))
     assert wait_for(lambda: len(via_handler) == 3 and len(via_message) == 2, 2)
-    assert via_message[1] is via_handler[1] and isinstance(via_handler[2], bytes) and unused == []
+    assert via_message[1] is via_handler[1] and isinstance(via_handler[2], bytes)
     bus.unsubscribe(raw)
 
     def boom(msg: object) -> None:
         raise RuntimeError("handler bug")
 
-    bus.subscribe("test", "b/MC_STATE", mc_state_t, lambda ch, m: unused.append(m), on_message=boom)
+    bus.subscribe("test", "b/MC_STATE", mc_state_t, boom, msg_only=True)
     bus.subscribe("test", "b/MC_STATE", mc_state_t, lambda ch, m: via_handler.append(m))
     bus.publish("test", "b/MC_STATE", mc_state(5, 7))
-    assert wait_for(lambda: len(via_handler) == 4, 2) and unused == []
+    assert wait_for(lambda: len(via_handler) == 4, 2)
     with pytest.raises(ValueError, match="exact channel"):
-        bus.subscribe("test", r".*", mc_state_t, lambda ch, m: None, regex=True, on_message=print)
+        bus.subscribe("test", r".*", mc_state_t, print, regex=True, msg_only=True)

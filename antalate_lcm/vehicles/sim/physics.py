@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import enum
 import math
-from typing import Any
 
 from antalate_lcm.base.geo import FlatFrame, body_to_ne, wrap_360
 from antalate_lcm.vehicles.base import Clock, Frame

@@ -82,6 +82,7 @@ import argparse
 import contextlib
 import importlib
 import json
+import math
 import os
 import statistics
 import subprocess
@@ -926,7 +927,8 @@ def inside(args: argparse.Namespace) -> int:
                 tp_ratio >= targets["throughput ratio"],
             ),
         ):
-            print(f"  {name:22s} {value:8.2f}   target {target:8s} {'met' if ok else 'MISSED'}")
+            verdict = "not measured" if math.isnan(value) else "met" if ok else "MISSED"  # (--only)
+            print(f"  {name:22s} {value:8.2f}   target {target:8s} {verdict}")
     print(f"({time.monotonic() - start:.1f} s; load average {os.getloadavg()[0]:.2f} at the end)")
     if args.json:
         print(json.dumps({"round_trip": rt, "throughput": tp, "signing": cost}))

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from antalate_lcm.base.deprecation import renamed_attribute
 from antalate_lcm.base.errors import AntalateError
+from antalate_lcm.base.shared import shared_value as shared_value
 from antalate_lcm.core.admission import Admission
 from antalate_lcm.core.bus import Buses
 from antalate_lcm.core.config import Config
@@ -20,17 +21,6 @@ from antalate_lcm.core.timers import Ticker
 #: The bus name of :meth:`Context.in_process` (memq://, one per process).
 INPROC_BUS = "_inproc"
 M = TypeVar("M")
-
-
-#: Equal immutable values (a node's machine parameters) -> the one instance of them (`shared_value`).
-_SHARED: dict[Any, Any] = {}
-
-
-def shared_value(value: M) -> M:
-    """The process's one instance equal to ``value`` (hashable, immutable): a thousand agents with one
-    config read the same parameters object on every tick, one object in the cache instead of a
-    thousand copies."""
-    return _SHARED.setdefault(value, value)  # type: ignore[no-any-return]
 
 
 def shared_params(params: Callable[..., M], section: Any, *names: str, **renamed: str) -> M:

@@ -164,7 +164,7 @@ def test_a_turn_through_north_by_a_sliver_of_a_step_wraps_as_wrap_360() -> None:
 
 
 def test_sims_of_one_config_read_one_tuple_of_parameters_to_the_bit() -> None:
-    """`params.shared`: the poll's parameter tuples are one object across sims of one config, and
+    """`params.shared` (`base.shared.shared_value` keyed by repr): the poll's parameter tuples are one object across sims of one config, and
     equal to the tuples a sim of its own builds; a value equal but not the same (-0.0, 1 and 1.0)
     keeps a tuple of its own."""
     clock = FakeClock(T0)

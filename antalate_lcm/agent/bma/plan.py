@@ -16,10 +16,10 @@ from pydantic import BaseModel
 from antalate_lcm.agent.bma.arbiter import ActivationRule
 from antalate_lcm.base.errors import ConfigError, PluginNotFound
 from antalate_lcm.base.plugins import BEHAVIORS, load_plugin
+from antalate_lcm.base.shared import shared_value
 from antalate_lcm.base.strict import StrictError, validate_strict
 from antalate_lcm.core.behavior import Behavior
 from antalate_lcm.core.config import BehaviorConfig, BmaConfig, Config
-from antalate_lcm.core.context import shared_value
 from antalate_lcm.msgs import behavior_state_t, mc_state_t
 from antalate_lcm.transports import transport_for
 from antalate_lcm.wire.vocabulary import McState, names
@@ -202,12 +202,10 @@ def shared_params_model(params: BaseModel) -> BaseModel:
     not frozen, or holds a value with no hash (a list), is the behavior's own as before."""
     if not params.model_config.get("frozen"):
         return params  # its behavior may write it
-    key = (params, frozenset(params.model_fields_set), repr(vars(params)))
     try:
-        shared: BaseModel = shared_value(key)[0]
+        return shared_value(params, key=(params, frozenset(params.model_fields_set), repr(vars(params))))
     except TypeError:  # a value with no hash: mutable, kept apart
         return params
-    return shared
 
 
 def _plan_topics(config: Config, cls: type[Behavior], beh: BehaviorConfig, fail: Any) -> dict[str, str]:

@@ -12,11 +12,12 @@ from typing import Any, Literal, TypeVar
 
 from pydantic import Field
 
+from antalate_lcm.base.shared import shared_value
 from antalate_lcm.vehicles.kit.params import AdapterParams, defaults
 
-__all__ = ["DEFAULTS", "Params", "shared"]
-
 T = TypeVar("T", bound=tuple[Any, ...])
+
+__all__ = ["DEFAULTS", "Params", "shared"]
 
 
 class Params(AdapterParams):
@@ -73,14 +74,7 @@ class Params(AdapterParams):
 DEFAULTS: dict[str, Any] = defaults(Params)
 
 
-#: The tuples of parameters the sims read on every poll, one per value to the bit (its repr).
-_SHARED: dict[str, Any] = {}
-
-
 def shared(values: T) -> T:
-    """The process's one tuple equal to ``values`` to the bit (-0.0 is not 0.0, 1 is not 1.0):
-    a thousand sims of one config read one object, kept in the cache, on every poll instead of a
-    thousand (docs/simulator.md, "Issue 32, sixth pass")."""
-    if len(_SHARED) >= 10_000:  # a sweep of that many configurations in one process: no more kept
-        return _SHARED.get(repr(values), values)  # type: ignore[no-any-return]
-    return _SHARED.setdefault(repr(values), values)  # type: ignore[no-any-return]
+    """The process's one tuple of these parameters to the bit (-0.0 is not 0.0, 1 is not 1.0): a
+    thousand sims of one config read one object on every poll (`shared_value`, keyed by repr)."""
+    return shared_value(values, key=(tuple, repr(values)))

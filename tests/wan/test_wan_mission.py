@@ -81,6 +81,16 @@ def events(path: Path, channel_suffix: str) -> list[tuple[float, str]]:
         log.close()
 
 
+def _log_ends_in(log: Path, state: str) -> bool:
+    """Whether the log being written ends in ``state`` for every vehicle (a partly written last
+    event is left out by read_log)."""
+    agents = read_log(log).agents
+    return all(
+        name in agents and agents[name].mc_states[-1:] and agents[name].mc_states[-1].state == state
+        for name in VEHICLES
+    )
+
+
 def stop_loggers(wan: Wan) -> None:
     from tests.harness.process import stop_process
 
@@ -184,6 +194,11 @@ def test_operator_at_site_a_flies_the_agents_of_site_b_through_the_router(tmp_pa
                 f"packets dropped on B's uplink: {dropped}; sends per command: "
                 f"{ {c['command']: c['sends'] for c in status['commands']} }"
             )
+            # A's logger hears the agents beside the operator and flushes every 100 ms: it is stopped
+            # once its file shows every agent home, which is what is checked below.
+            deadline = time.monotonic() + 30
+            while not _log_ends_in(log_a, "STANDBY") and time.monotonic() < deadline:
+                time.sleep(0.2)
         finally:
             op.quit()
             stop_loggers(wan)
